@@ -1,0 +1,235 @@
+"""Automatic annotation of the 36 wireframe vertices on a canonical car mesh.
+
+All landmarks are read off the left-side :class:`~wirescene.cad.sideview.SideView`
+(rays cast from +z), then mirrored to the right side so that every exemplar is exactly
+left/right symmetric (``X[MIRROR] == X * (1, 1, -1)``). Definitions (heights are above
+the ground, d = 10 cm):
+
+- ``nose_top`` / ``nose_bottom``: upper end of the lowest silhouette run (``top``) and
+  lowest skin pixel at ``d`` behind the front-most silhouette column; ``tail_*`` the
+  same ``d`` in front of the rear-most column.
+- ``headlight`` / ``taillight``: on the front (rear) face, half-way between the nose
+  (tail) top and bottom, at 60 % of the nose-top half-width, x from a ray along the
+  length axis.
+- Wheel arches: see :func:`wirescene.cad.sideview.find_arches`. ``*_arch_front/rear``
+  are the run ends at the sill / bumper height just outside the run. The wheel centre
+  x is the middle of the run; the wheels are not part of the TORCS meshes, so the tyre
+  is assumed to touch the ground and to leave 4 cm below the arch top: radius
+  ``(arch_top - 0.04) / 2`` clipped to 0.25..0.40 m. ``*_wheel_ground`` lies below the
+  centre at y = 0. Hub z: 3 cm inside the body side at the arch; contact point 10 cm further in
+  (half a tyre width).
+- Greenhouse: the upper profile between ``nose_top`` and ``tail_top`` is fitted by a
+  continuous 5-segment polyline (pieces at least 20 cm long) (bonnet, windscreen, roof, rear window, boot) with
+  least squares over all breakpoint positions (dynamic programming); its 4 inner
+  breakpoints are ``windscreen_bottom``, ``windscreen_top``, ``rear_window_top`` and
+  ``rear_window_bottom``. z is the silhouette depth 4 cm inside the profile.
+
+Known limits: a fastback's rear window and boot form one slope, so the rear-window
+bottom breakpoint is weakly determined; rear wings connected to the body by broad
+mounting plates raise ``tail_top``. Such cases are fixed per car in
+``wirescene/data/landmark_corrections.json`` ({car: {vertex name: [x, y, z]}}), which
+:func:`annotate` applies after the automatic step; a corrected vertex also fixes its
+mirror partner.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from wirescene.cad.sideview import SideView, find_arches, side_view
+from wirescene.errors import InputError
+from wirescene.wireframe import MIRROR, N_PER_SIDE, PART_NAMES, VERTEX_INDEX, VERTEX_NAMES
+
+__all__ = ["annotate", "auto_landmarks", "load_corrections", "apply_corrections",
+           "symmetrize", "CORRECTIONS_PATH"]
+
+CORRECTIONS_PATH = Path(__file__).resolve().parent.parent / "data" / "landmark_corrections.json"
+
+END_INSET = 0.10
+WHEEL_GAP = 0.04
+WHEEL_RADIUS_RANGE = (0.25, 0.40)
+HALF_TYRE = 0.10
+MIN_SEGMENT = 0.2
+
+
+def _polyline_breaks(x: np.ndarray, y: np.ndarray, n_segments: int, min_len: int) -> list[int]:
+    """Indices of the inner breakpoints of the least-squares continuous polyline with
+    ``n_segments`` pieces whose vertices are samples of (x, y) and whose ends are the
+    first and last sample."""
+    n = len(x)
+    cost = np.full((n, n), np.inf)
+    for i in range(n - 1):
+        j = np.arange(i + min_len, n)
+        if len(j) == 0:
+            continue
+        k = np.arange(i, n)
+        # chord from i to each j, evaluated at all k in [i, j]
+        t = (x[k][None, :] - x[i]) / (x[j] - x[i])[:, None]
+        chord = y[i] + t * (y[j] - y[i])[:, None]
+        r2 = (y[k][None, :] - chord) ** 2
+        r2[k[None, :] > j[:, None]] = 0.0
+        cost[i, j] = r2.sum(axis=1)
+    best = np.full((n_segments + 1, n), np.inf)
+    arg = np.zeros((n_segments + 1, n), dtype=int)
+    best[0, 0] = 0.0
+    for s in range(1, n_segments + 1):
+        total = best[s - 1][:, None] + cost
+        arg[s] = np.argmin(total, axis=0)
+        best[s] = total[arg[s], np.arange(n)]
+    breaks, j = [], n - 1
+    for s in range(n_segments, 0, -1):
+        j = arg[s, j]
+        breaks.append(int(j))
+    return sorted(breaks)[1:]
+
+
+def auto_landmarks(vertices, faces, *, res: float = 0.01, view: SideView | None = None) -> np.ndarray:
+    """Automatic 36 landmarks (see the module docstring) of an object-frame car mesh.
+
+    Returns
+    -------
+    (36, 3) array, exactly left/right symmetric.
+
+    Raises
+    ------
+    InputError
+        If no wheel arch or no silhouette can be found (not a car-like mesh).
+    """
+    import trimesh
+
+    sv = view if view is not None else side_view(vertices, faces, res=res)
+    v = np.asarray(vertices, dtype=float)
+    if sv.front_col - sv.rear_col < 10:
+        raise InputError("mesh has no usable side silhouette")
+    left = {}
+
+    def put(name, x, h, z):
+        left[name] = (float(x), -float(h), float(z))
+
+    # Ends of the car.
+    inset = int(round(END_INSET / sv.res))
+    front_col, rear_col = sv.front_col - inset, sv.rear_col + inset
+    for prefix, c in (("nose", front_col), ("tail", rear_col)):
+        x = sv.xs[c]
+        h_top, h_bot = sv.top[c], sv.low_skin[c]
+        if not np.isfinite(h_bot):
+            h_bot = sv.hs[int(np.argmax(sv.silhouette[:, c]))]
+        put(f"{prefix}_top", x, h_top, sv.z_near(x, h_top - 0.03))
+        put(f"{prefix}_bottom", x, h_bot, sv.z_near(x, h_bot + 0.03))
+
+    # Head/tail lights: rays along the length axis onto the front/rear face.
+    mesh = trimesh.Trimesh(v, np.asarray(faces), process=False)
+    for light, prefix, sign in (("headlight", "nose", 1.0), ("taillight", "tail", -1.0)):
+        top, bot = left[f"{prefix}_top"], left[f"{prefix}_bottom"]
+        y = 0.5 * (top[1] + bot[1])
+        z = 0.6 * top[2]
+        origin = np.array([[sign * (np.abs(v[:, 0]).max() + 1.0), y, z]])
+        loc, _, _ = mesh.ray.intersects_location(origin, np.array([[-sign, 0.0, 0.0]]), multiple_hits=False)
+        x = loc[0, 0] if len(loc) else top[0]
+        left[light] = (float(x), float(y), float(z))
+
+    # Wheels and arches.
+    front, rear, sill = find_arches(sv)
+    for axle, run in (("front", front), ("rear", rear)):
+        if run is None:
+            raise InputError(f"no {axle} wheel arch found in the side silhouette")
+        a, b = run
+        cx = 0.5 * (sv.xs[a] + sv.xs[b - 1])
+        arch_top = float(np.nanmax(sv.low_skin[a:b]))
+        r = float(np.clip((arch_top - WHEEL_GAP) / 2, *WHEEL_RADIUS_RANGE))
+        # Hub: just inside the body side at the top of the arch.
+        z_side = sv.z_near(cx, arch_top + 0.03, toward=(cx, sv.hs[-1]))
+        z_hub = z_side - 0.03
+        put(f"{axle}_wheel_center", cx, r, z_hub)
+        put(f"{axle}_wheel_ground", cx, 0.0, z_hub - HALF_TYRE)
+        for name, c in (("arch_front", min(b, len(sv.xs) - 1)), ("arch_rear", max(a - 1, 0))):
+            h = sv.low_skin[c]
+            h = sill if not np.isfinite(h) else h
+            put(f"{axle}_{name}", sv.xs[c], h, sv.z_near(sv.xs[c], h + 0.03))
+
+    # Greenhouse from the upper profile between tail_top and nose_top.
+    step = max(1, int(round(0.02 / sv.res)))
+    idx = np.arange(rear_col, front_col + 1, step)
+    idx = idx[np.isfinite(sv.top[idx])]
+    breaks = _polyline_breaks(sv.xs[idx], sv.top[idx], 5, min_len=max(2, int(MIN_SEGMENT / (step * sv.res))))
+    names = ("rear_window_bottom", "rear_window_top", "windscreen_top", "windscreen_bottom")
+    roof_mid = 0.5 * (sv.xs[idx[breaks[1]]] + sv.xs[idx[breaks[2]]])
+    for name, k in zip(names, breaks):
+        x, h = sv.xs[idx[k]], sv.top[idx[k]]
+        put(name, x, h, sv.z_near(x, h - 0.04, toward=(roof_mid, 0.0), max_dist=0.3))
+
+    X = np.zeros((len(VERTEX_NAMES), 3))
+    for i, p in enumerate(PART_NAMES):
+        X[i] = left[p]
+    X[N_PER_SIDE:] = X[:N_PER_SIDE] * (1, 1, -1)
+    return X
+
+
+def symmetrize(X: np.ndarray) -> np.ndarray:
+    """Average a wireframe with its mirror image (exact left/right symmetry)."""
+    X = np.asarray(X, dtype=float)
+    return 0.5 * (X + X[..., MIRROR, :] * np.array([1.0, 1.0, -1.0]))
+
+
+def load_corrections(path=None) -> dict:
+    """Manual landmark corrections ``{car: {vertex name: [x, y, z]}}`` (object frame).
+
+    ``path`` defaults to the package's ``data/landmark_corrections.json``; a missing
+    default file means no corrections."""
+    p = CORRECTIONS_PATH if path is None else Path(path)
+    if not p.exists():
+        if path is None:
+            return {}
+        raise InputError("landmark corrections file not found", path=p)
+    try:
+        data = json.loads(p.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise InputError(f"cannot read landmark corrections ({e})", path=p) from None
+    if not isinstance(data, dict):
+        raise InputError("landmark corrections must be a JSON object {car: {vertex: [x, y, z]}}", path=p)
+    for car, fixes in data.items():
+        if car.startswith("_"):
+            continue  # comments
+        for name, xyz in fixes.items():
+            if name not in VERTEX_INDEX:
+                raise InputError(f"unknown vertex name {name!r} for car {car!r}", path=p)
+            if len(xyz) != 3:
+                raise InputError(f"correction of {car}/{name} must be [x, y, z]", path=p)
+    return data
+
+
+def apply_corrections(name: str, X: np.ndarray, corrections: dict) -> np.ndarray:
+    """Overwrite vertices of car ``name`` from ``corrections`` and set each corrected
+    vertex's mirror partner to its mirror image."""
+    X = np.array(X, dtype=float)
+    for vname, xyz in corrections.get(name, {}).items():
+        i = VERTEX_INDEX[vname]
+        X[i] = xyz
+        X[MIRROR[i]] = np.array(xyz, dtype=float) * (1, 1, -1)
+    return X
+
+
+def annotate(vertices, faces, *, name: str | None = None, corrections: dict | None = None,
+             res: float = 0.01) -> np.ndarray:
+    """36 landmarks of an object-frame car mesh: automatic, then manual corrections.
+
+    Parameters
+    ----------
+    vertices : (N, 3) array
+    faces : (F, 3) int array
+    name : str, optional
+        Car name looked up in ``corrections``.
+    corrections : dict, optional
+        Defaults to :func:`load_corrections` ().
+
+    Returns
+    -------
+    (36, 3) array
+    """
+    X = auto_landmarks(vertices, faces, res=res)
+    if name is not None:
+        X = apply_corrections(name, X, load_corrections() if corrections is None else corrections)
+    return X

@@ -1,0 +1,42 @@
+"""Typed errors. Every user-facing failure is one of these, with a one-line message
+that names the offending file (if any) and the problem."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class WiresceneError(Exception):
+    """Base class of all errors raised on purpose by wirescene."""
+
+    def __init__(self, message: str, *, path: str | Path | None = None):
+        self.path = None if path is None else Path(path)
+        self.problem = message
+        super().__init__(f"{self.path}: {message}" if self.path is not None else message)
+
+
+class InputError(WiresceneError):
+    """A file given by the user is missing, unreadable or malformed."""
+
+
+class ShapeError(WiresceneError, ValueError):
+    """An array does not satisfy the documented shape contract of a function."""
+
+
+def check_shape(name: str, array, shape: tuple) -> None:
+    """Check ``array.shape`` against ``shape``; ``None`` entries match any size.
+
+    A leading ``...`` in ``shape`` matches any number of leading dimensions.
+    """
+    actual = tuple(getattr(array, "shape", ()))
+    want = tuple(shape)
+    if want and want[0] is Ellipsis:
+        tail = want[1:]
+        ok = len(actual) >= len(tail) and all(
+            w is None or w == a for w, a in zip(tail, actual[len(actual) - len(tail):])
+        )
+    else:
+        ok = len(actual) == len(want) and all(w is None or w == a for w, a in zip(want, actual))
+    if not ok:
+        pretty = "(" + ", ".join("..." if w is Ellipsis else ("*" if w is None else str(w)) for w in want) + ")"
+        raise ShapeError(f"{name} must have shape {pretty}, got {actual}")

@@ -1,0 +1,178 @@
+"""Glue between the stages: run a variant over a dataset, turn estimates into KITTI
+labels and evaluation records, and write the outputs of one fit."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from .camera import Camera
+from .datasets.kitti import FrameLabels, KittiDataset, Label, write_labels
+from .detect import detections_from_labels, read_detections
+from .errors import InputError
+from .evaluate import EvaluationReport, FrameResult, evaluate
+from .scene.fit import FitOptions, fit_scene
+from .scene.lifting import lift_table
+from .scene.hypotheses import Detections, SceneEstimate
+from .viz import birds_eye, overlay, save_figure
+
+
+def estimate_to_labels(estimate: SceneEstimate, *, type_: str = "Car") -> list[Label]:
+    """KITTI label rows (with score) for the objects of a scene estimate."""
+    return [
+        Label(
+            type=type_,
+            truncated=-1.0,
+            occluded=-1,
+            alpha=o.alpha,
+            box=o.box2d,
+            dims=o.dims,
+            location=o.location,
+            rotation_y=o.rotation_y,
+            score=o.score,
+        )
+        for o in estimate.objects
+    ]
+
+
+def frame_result(frame_id: str, gt: FrameLabels, detections: Detections, estimate: SceneEstimate) -> FrameResult:
+    """Evaluation record of one frame (estimates aligned with detections)."""
+    objs = sorted(estimate.objects, key=lambda o: o.detection_index)
+    if [o.detection_index for o in objs] != list(range(len(detections))):
+        raise ValueError("estimate must hold exactly one object per detection")
+    return FrameResult(
+        frame_id=frame_id,
+        gt=gt.objects,
+        det_boxes=detections.boxes,
+        det_alpha=detections.alpha,
+        det_scores=detections.scores,
+        est_location=np.array([o.location for o in objs]).reshape(-1, 3),
+        est_dims=np.array([o.dims for o in objs]).reshape(-1, 3),
+        est_rotation_y=np.array([o.rotation_y for o in objs]),
+        est_alpha=np.array([o.alpha for o in objs]),
+    )
+
+
+@dataclass(frozen=True)
+class DetectionSource:
+    """Where pre-detections come from: ``"gt"`` (label boxes, noisy viewpoint bins) or
+    a directory of per-frame detection files (``FRAME.json``, ``.csv`` or ``.txt``)."""
+
+    spec: str = "gt"
+    viewpoint_noise_deg: float = 0.0
+
+    def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator) -> Detections:
+        if self.spec == "gt":
+            return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
+        folder = Path(self.spec)
+        if not folder.is_dir():
+            raise InputError("detections must be 'gt' or a directory of per-frame files", path=folder)
+        for ext in (".json", ".csv", ".txt"):
+            path = folder / f"{frame_id}{ext}"
+            if path.is_file():
+                try:
+                    return read_detections(path)
+                except InputError as exc:
+                    if exc.problem == "no car detections in file":
+                        return Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0), str(path))
+                    raise
+        return Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0), str(folder))
+
+
+def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
+    """A generator that depends only on the run seed and the frame, so results do not
+    depend on the order (or the process) in which frames are processed."""
+    digits = int("".join(ch for ch in frame_id if ch.isdigit()) or 0)
+    return np.random.default_rng([seed, digits])
+
+
+def evaluate_dataset(
+    dataset: KittiDataset,
+    variants: Iterable[str],
+    *,
+    frames: Iterable[str] | None = None,
+    source: DetectionSource = DetectionSource(),
+    options: FitOptions = FitOptions(),
+    predictions_dir: Path | None = None,
+    progress: Callable[[Iterable], Iterable] = lambda it: it,
+) -> dict[str, EvaluationReport]:
+    """Fit every variant on every frame and evaluate with the paper's protocol.
+
+    With ``predictions_dir``, KITTI label files of each variant are written to
+    ``predictions_dir/VARIANT/FRAME.txt``.
+    """
+    if not dataset.has_labels:
+        raise InputError("evaluation needs label_2/ ground truth", path=dataset.split_dir)
+    variants = list(variants)
+    frame_ids = list(frames) if frames is not None else dataset.frame_ids()
+    results: dict[str, list[FrameResult]] = {v: [] for v in variants}
+    for frame_id in progress(frame_ids):
+        gt = dataset.labels(frame_id)
+        detections = source.for_frame(dataset, frame_id, frame_seed(options.seed, frame_id))
+        camera = dataset.camera(frame_id)
+        lifted = lift_table(camera, detections, options=options.lifting) if len(detections) else None
+        for v in variants:
+            estimate = fit_scene(camera, detections, variant=v, options=options, lifted=lifted)
+            results[v].append(frame_result(frame_id, gt, detections, estimate))
+            if predictions_dir is not None:
+                write_labels(Path(predictions_dir) / v / f"{frame_id}.txt", estimate_to_labels(estimate))
+    return {v: evaluate(results[v]) for v in variants}
+
+
+def _write_atomic_text(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_fit_outputs(
+    out_dir: Path,
+    stem: str,
+    *,
+    image: np.ndarray,
+    camera: Camera,
+    estimate: SceneEstimate,
+    detections: Detections,
+    gt: list[Label] = (),
+    edges: np.ndarray | None = None,
+) -> dict[str, Path]:
+    """Write ``STEM.txt`` (KITTI labels), ``STEM.json``, ``STEM_overlay.png`` and
+    ``STEM_bev.png``. Everything is rendered in memory first; if any write fails the
+    files already written by this call are removed, so no partial result remains."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
+    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=detections, title=f"{stem}  {estimate.variant}", edges=edges)
+    fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=f"{stem}  {estimate.variant}")
+    paths = {
+        "labels": out_dir / f"{stem}.txt",
+        "json": out_dir / f"{stem}.json",
+        "overlay": out_dir / f"{stem}_overlay.png",
+        "bev": out_dir / f"{stem}_bev.png",
+    }
+    written: list[Path] = []
+    try:
+        write_labels(paths["labels"], estimate_to_labels(estimate))
+        written.append(paths["labels"])
+        _write_atomic_text(paths["json"], payload)
+        written.append(paths["json"])
+        save_figure(fig_overlay, paths["overlay"])
+        written.append(paths["overlay"])
+        save_figure(fig_bev, paths["bev"])
+        written.append(paths["bev"])
+    except BaseException:
+        for p in written:
+            p.unlink(missing_ok=True)
+        raise
+    return paths

@@ -1,0 +1,49 @@
+"""The model variants of the paper (Sec. 5.2) as configuration of one inference routine.
+
+Only variants whose stages exist are registered; each names the switches it turns on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Variant:
+    """Switches of the scene model.
+
+    Attributes
+    ----------
+    name : str
+        Name used on the command line and in tables (paper notation).
+    shared_plane : bool
+        All objects stand on one ground plane (``+gp``).
+    fine : bool
+        Fit the deformable wireframe (``fg``) instead of stopping at coarse 3D boxes.
+    searched_occluder : bool
+        Search occluder masks from missing part evidence (``+so``).
+    deterministic_occlusion : bool
+        Derive inter-object occlusion by ray casting (``+do``).
+    """
+
+    name: str
+    shared_plane: bool
+    fine: bool = False
+    searched_occluder: bool = False
+    deterministic_occlusion: bool = False
+
+
+VARIANTS: dict[str, Variant] = {
+    v.name: v
+    for v in (
+        Variant("coarse", shared_plane=False),
+        Variant("coarse+gp", shared_plane=True),
+    )
+}
+
+
+def get_variant(name: str) -> Variant:
+    try:
+        return VARIANTS[name]
+    except KeyError:
+        raise ValueError(f"unknown variant {name!r}; available: {', '.join(VARIANTS)}") from None

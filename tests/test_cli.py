@@ -1,0 +1,111 @@
+"""End-to-end command-line behaviour: outputs, JSON keys, clean failures on bad input."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from conftest import KITTI_ROOT
+from wirescene.cli import main
+from wirescene.detect import read_detections
+from wirescene.errors import InputError
+
+SPLIT = KITTI_ROOT / "training"
+
+
+def run(*args):
+    result = CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+    return result
+
+
+def test_eval_prints_table_and_writes_json(tmp_path):
+    out = tmp_path / "m.json"
+    r = run("eval", KITTI_ROOT, "--variant", "coarse+gp", "--detections", "gt", "--frames", "000002,000010", "--json", out)
+    assert r.exit_code == 0, r.output
+    assert "coarse+gp" in r.output and "<1m" in r.output
+    data = json.loads(out.read_text())
+    for key in ("loc_1m", "loc_1_5m", "az_5", "az_10", "median_az3d", "median_az2d", "n_tp"):
+        assert key in data
+    assert data["n_tp"] == 9  # 1 + 8 cars, GT boxes with their true viewpoint bins
+
+
+def test_fit_writes_all_outputs(tmp_path):
+    out = tmp_path / "out"
+    r = run(
+        "fit", SPLIT / "image_2" / "000010.png", "--calib", SPLIT / "calib" / "000010.txt",
+        "--detections", SPLIT / "label_2" / "000010.txt", "--gt", SPLIT / "label_2" / "000010.txt",
+        "--variant", "coarse", "--out", out,
+    )
+    assert r.exit_code == 0, r.output
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["000010.json", "000010.txt", "000010_bev.png", "000010_overlay.png"]
+    rows = (out / "000010.txt").read_text().splitlines()
+    assert len(rows) == 8 and all(len(r.split()) == 16 for r in rows)
+    js = json.loads((out / "000010.json").read_text())
+    assert len(js["objects"]) == 8 and js["variant"] == "coarse"
+
+
+@pytest.mark.parametrize(
+    "case, problem",
+    [
+        ("missing_calib", "calibration file not found"),
+        ("corrupt_image", "000010.png"),
+        ("malformed_label", "line 1"),
+        ("empty_detections", "no car detections"),
+    ],
+)
+def test_bad_input_is_one_line_error_without_partial_output(tmp_path, case, problem):
+    image = tmp_path / "000010.png"
+    calib = tmp_path / "calib.txt"
+    dets = tmp_path / "dets.txt"
+    shutil.copy(SPLIT / "image_2" / "000010.png", image)
+    shutil.copy(SPLIT / "calib" / "000010.txt", calib)
+    shutil.copy(SPLIT / "label_2" / "000010.txt", dets)
+    if case == "missing_calib":
+        calib.unlink()
+    elif case == "corrupt_image":
+        image.write_bytes(image.read_bytes()[:500])
+    elif case == "malformed_label":
+        dets.write_text("Car 0.0 0 1.0 10 20 30\n")
+    elif case == "empty_detections":
+        dets.write_text("Pedestrian 0.00 0 -0.20 712.40 143.00 810.73 307.92 1.89 0.48 1.20 1.84 1.47 8.41 0.01\n")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["fit", str(image), "--calib", str(calib), "--detections", str(dets), "--out", str(out)])
+    assert r.exit_code == 2
+    err = r.stderr if hasattr(r, "stderr") else r.output
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("wirescene: error:"), err
+    assert problem in lines[0]
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_eval_on_missing_root_fails_cleanly(tmp_path):
+    r = CliRunner().invoke(main, ["eval", str(tmp_path / "nope")])
+    assert r.exit_code == 2 and "KITTI root directory not found" in r.output
+
+
+def test_detection_formats(tmp_path):
+    j = tmp_path / "d.json"
+    j.write_text(json.dumps({"detections": [
+        {"box": [10, 20, 110, 80], "score": 0.9, "viewpoint_bin": 2},
+        {"bbox": [5, 5, 50, 40], "score": 0.5, "category": "car"},
+        {"box": [0, 0, 10, 10], "category": "person"},
+    ]}))
+    d = read_detections(j)
+    assert len(d) == 2
+    np.testing.assert_allclose(d.boxes[1], [5, 5, 55, 45])
+    assert np.isclose(d.alpha[0], np.pi / 2) and np.isnan(d.alpha[1])
+    c = tmp_path / "d.csv"
+    c.write_text("x1,y1,x2,y2,score,alpha\n10,20,110,80,0.8,0.1\n")
+    assert len(read_detections(c)) == 1
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"detections": [{"box": [10, 20, 5, 80]}]}')
+    with pytest.raises(InputError, match="x2 <= x1"):
+        read_detections(bad)
+    bad.write_text("{not json")
+    with pytest.raises(InputError, match="not valid JSON"):
+        read_detections(bad)
+    with pytest.raises(InputError, match="no car detections"):
+        read_detections(c, min_score=0.9)

@@ -1,0 +1,242 @@
+"""The paper's evaluation protocol (Sec. 5.3/5.4) on hand-made cases."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from conftest import assert_close
+from wirescene.datasets import KittiDataset, Label
+from wirescene.evaluate import FrameResult, evaluate, format_table, match_detections
+from wirescene.errors import ShapeError
+from wirescene.viewpoints import bin_center, viewpoint_bin
+
+
+def car(box, *, x=0.0, z=20.0, ry=0.0, alpha=None, occluded=0, type="Car", h=1.5):
+    alpha = ry - math.atan2(x, z) if alpha is None else alpha
+    return Label(type, 0.0, occluded, alpha, box, [h, 1.6, 4.0], [x, 1.65, z], ry)
+
+
+def frame(gt, dets, *, frame_id="f", **extra):
+    """``dets``: list of dicts with box, score and optional est overrides (default: the
+    matched ground truth of ``gt_for`` copied exactly, coarse viewpoint = its bin)."""
+    rows = []
+    for d in dets:
+        ref = gt[d.get("gt_for", 0)]
+        rows.append(
+            dict(
+                box=d.get("box", ref.box),
+                alpha=d.get("det_alpha", float(bin_center(viewpoint_bin(ref.alpha)))),
+                score=d.get("score", 1.0),
+                loc=d.get("loc", ref.location),
+                dims=d.get("dims", ref.dims),
+                ry=d.get("ry", ref.rotation_y),
+                est_alpha=d.get("est_alpha", ref.alpha),
+            )
+        )
+    col = lambda k, shape: np.array([r[k] for r in rows], float).reshape(shape)  # noqa: E731
+    return FrameResult(
+        frame_id, gt, col("box", (-1, 4)), col("alpha", (-1,)), col("score", (-1,)),
+        col("loc", (-1, 3)), col("dims", (-1, 3)), col("ry", (-1,)), col("est_alpha", (-1,)), **extra,
+    )
+
+
+B1 = [100.0, 100.0, 200.0, 200.0]
+B2 = [400.0, 100.0, 500.0, 200.0]
+
+
+def test_perfect_estimates_give_100_percent(kitti_root):
+    ds = KittiDataset(kitti_root)
+    frames = []
+    for fid in ds:
+        gt = ds.labels(fid).objects
+        cars = [i for i, o in enumerate(gt) if o.type == "Car"]
+        frames.append(frame(gt, [dict(gt_for=i, score=1.0 - 0.01 * i) for i in cars], frame_id=fid))
+    rep = evaluate(frames)
+    m = rep["all"]
+    assert m["n_tp"] == m["n_gt"] == 15
+    for k in ("loc_1m", "loc_1_5m", "az_5", "az_10"):
+        assert m[k] == 100.0
+    assert m["median_az3d"] == 0.0 and m["median_az2d"] == 0.0 and m["median_loc"] == 0.0
+    assert rep.occlusion_source == "kitti_flag" and rep.viewpoint_check == "applied"
+    # KITTI flags of these 15 cars: 7 with occluded >= 1, 4 with occluded >= 2
+    assert (rep["occ>0"]["n_gt"], rep["occ>3"]["n_gt"]) == (7, 4)
+    assert (rep["occ>0"]["n_tp"], rep["occ>3"]["n_tp"]) == (7, 4)
+
+
+def test_localisation_thresholds_and_centroid():
+    gt = [car(B1, x=1.0, z=20.0, ry=0.3), car(B2, x=-3.0, z=15.0), car([600, 100, 700, 200], z=30.0)]
+    dets = [
+        dict(gt_for=0, loc=[1.0 + 1.2, 1.65, 20.0]),  # 1.2 m: within 1.5 m, not 1 m
+        dict(gt_for=1, loc=[-3.0, 1.65, 15.0 + 0.6]),  # 0.6 m
+        # same bottom centre but 1 m taller: centroid 0.5 m higher -> 0.5 m error
+        dict(gt_for=2, dims=[2.5, 1.6, 4.0]),
+    ]
+    rep = evaluate([frame(gt, dets)])
+    errs = sorted(r.loc_error for r in rep.records)
+    assert_close(errs, [0.5, 0.6, 1.2])
+    m = rep["all"]
+    assert_close(m["loc_1m"], 200 / 3)
+    assert m["loc_1_5m"] == 100.0
+    assert_close(m["median_loc"], 0.6)
+
+
+def test_wrong_viewpoint_bin_excludes_tp_but_consumes_gt():
+    gt = [car(B1, alpha=0.1, ry=0.1)]
+    wrong = float(bin_center(2))  # 90 deg away from alpha = 0.1 rad
+    rep = evaluate([frame(gt, [dict(det_alpha=wrong, score=0.9), dict(score=0.5)])])
+    assert rep["all"]["n_tp"] == 0 and rep["all"]["n_gt"] == 1
+    assert rep.counts["viewpoint_rejected"] == 1 and rep.counts["matched"] == 1
+    assert math.isnan(rep["all"]["loc_1m"]) and math.isnan(rep["all"]["median_az3d"])
+    # neighbouring bin (45 deg centre, 42 deg from alpha) is still within 45 deg
+    rep = evaluate([frame(gt, [dict(det_alpha=float(bin_center(1)))])])
+    assert rep["all"]["n_tp"] == 1
+
+
+def test_unknown_viewpoint_skips_check_and_says_so():
+    gt = [car(B1, alpha=0.1, ry=0.1), car(B2, alpha=2.0, ry=2.0)]
+    rep = evaluate([frame(gt, [dict(gt_for=0, det_alpha=np.nan), dict(gt_for=1, det_alpha=-1.0)])])
+    assert rep["all"]["n_tp"] == 1 and rep.viewpoint_check == "partial"
+    assert rep.records[0].viewpoint_checked is False
+    rep = evaluate([frame(gt, [dict(gt_for=0, det_alpha=np.nan)])])
+    assert rep.viewpoint_check == "skipped"
+    assert "skipped" in format_table({"v": rep})
+
+
+def test_iou_threshold():
+    gt = [car([0.0, 0.0, 100.0, 100.0])]
+    # shifted box: overlap w*100 / (2*100*100 - w*100) = 0.49 -> w = 65.77...
+    w = 2 * 100 * 0.49 / 1.49
+    for overlap, n_tp in ((w, 0), (w + 2.0, 1)):
+        box = [100.0 - overlap, 0.0, 200.0 - overlap, 100.0]
+        rep = evaluate([frame(gt, [dict(box=box)])])
+        assert rep["all"]["n_tp"] == n_tp
+    m, iou = match_detections([[100.0 - w, 0, 200.0 - w, 100]], [1.0], [[0.0, 0, 100, 100]])
+    assert m[0] == -1 and abs(match_detections([[100.0 - w - 2, 0, 200.0 - w - 2, 100]], [1.0], [[0.0, 0, 100, 100]])[1][0] - 0.5) < 0.02
+
+
+def test_one_to_one_greedy_by_score():
+    gt = [car(B1, x=0.0), car(B2, x=5.0)]
+    dup = dict(gt_for=0, loc=[3.0, 1.65, 20.0])
+    # the higher-scoring duplicate takes the car; the exact one is then a false positive
+    rep = evaluate([frame(gt, [dict(gt_for=0, score=0.2), dict(dup, score=0.9)])])
+    assert rep["all"]["n_tp"] == 1 and rep.records[0].det_index == 1
+    assert_close(rep.records[0].loc_error, 3.0)
+    match, _ = match_detections([B1, B1, B2], [0.5, 0.9, 0.1], [B1, B2])
+    assert list(match) == [-1, 0, 1]
+    # a detection takes the car it overlaps most; the next one falls back to the free car
+    match, iou = match_detections([[118, 100, 218, 200], [115, 100, 215, 200]], [0.9, 0.8],
+                                  [[100, 100, 200, 200], [120, 100, 220, 200]])
+    assert list(match) == [1, 0]
+    assert_close(iou, [98 / 102, 85 / 115])
+
+
+def test_other_classes_and_dontcare_are_ignored():
+    gt = [car(B1), car(B2, type="Van"), car([600, 100, 700, 200], type="DontCare")]
+    dets = [dict(gt_for=0), dict(gt_for=1), dict(gt_for=2)]
+    rep = evaluate([frame(gt, dets)])
+    assert rep["all"]["n_gt"] == 1 and rep["all"]["n_tp"] == 1 and rep.counts["matched"] == 1
+
+
+def test_angle_wraparound_and_medians():
+    d179, d_179 = np.deg2rad(179.0), np.deg2rad(-179.0)
+    gt = [car(B1, ry=d179, alpha=d179), car(B2, x=4, ry=0.0, alpha=0.0), car([600, 100, 700, 200], x=8, ry=1.0, alpha=1.0)]
+    dets = [
+        dict(gt_for=0, ry=d_179, est_alpha=d_179),  # 2 deg across the +-180 seam
+        dict(gt_for=1, ry=np.deg2rad(7.0), est_alpha=np.deg2rad(1.0)),
+        dict(gt_for=2, ry=1.0 + np.deg2rad(30.0), est_alpha=1.0 + np.deg2rad(3.0)),
+    ]
+    rep = evaluate([frame(gt, dets)])
+    by_gt = {r.gt_index: r for r in rep.records}
+    assert_close(by_gt[0].az3d_error, 2.0)
+    assert_close(by_gt[0].az2d_error, 2.0)
+    m = rep["all"]
+    assert_close(m["median_az3d"], 7.0)
+    assert_close(m["median_az2d"], 2.0)
+    assert_close(m["az_5"], 100 / 3)
+    assert_close(m["az_10"], 200 / 3)
+
+
+def test_subsets_kitti_flag_vs_vertex_gt():
+    gt = [car(B1, occluded=0), car(B2, occluded=1), car([600, 100, 700, 200], occluded=2)]
+    dets = [dict(gt_for=i, loc=[0.0, 1.65, 20.0 + 0.5 * i]) for i in range(3)]  # errors 0, 0.5, 1.0
+    rep = evaluate([frame(gt, dets)])
+    assert rep.occlusion_source == "kitti_flag"
+    assert [rep[s]["n_tp"] for s in ("all", "occ>0", "occ>3")] == [3, 2, 1]
+    assert rep["occ>3"]["loc_1m"] == 0.0 and rep["occ>0"]["loc_1m"] == 50.0
+    # synthetic part counts override the flag: 0, 4 and 2 occluded parts
+    rep = evaluate([frame(gt, dets, gt_occluded_parts=[0, 4, 2])])
+    assert rep.occlusion_source == "vertex_gt"
+    assert [rep[s]["n_gt"] for s in ("all", "occ>0", "occ>3")] == [3, 2, 1]
+    assert rep["occ>3"]["loc_1m"] == 100.0 and rep["occ>3"]["n_tp"] == 1
+    j = rep.to_json_dict()
+    assert j["subsets"]["occ>3"]["n_tp"] == 1 and j["occlusion_source"] == "vertex_gt"
+    # part counts derived from per-vertex ground truth when no count is given
+    vis = [np.ones(6, bool), np.array([0, 0, 1, 1, 1, 1], bool), np.array([0, 0, 0, 0, 1, 1], bool)]
+    selfocc = [None, None, np.array([1, 0, 0, 0, 0, 0], bool)]
+    rep = evaluate([frame(gt, dets, gt_vertex_visible=vis, gt_self_occluded=selfocc)])
+    assert [r.occluded_parts for r in rep.records] == [0, 2, 3]
+    assert [rep[s]["n_tp"] for s in ("all", "occ>0", "occ>3")] == [3, 2, 0]
+    mixed = evaluate([frame(gt, dets, gt_occluded_parts=[0, None, 5])])
+    assert mixed.occlusion_source == "mixed"
+
+
+def test_2d_part_metrics():
+    gt = [car([0.0, 0.0, 500.0, 170.0])]  # threshold 0.04 * 500 = 20 px
+    V = 10
+    gt_uv = np.stack([np.linspace(0, 450, V), np.full(V, 80.0)], -1)
+    visible = np.ones(V, bool)
+    visible[:2] = False  # 2 occluded parts
+    est_uv = gt_uv.copy()
+    est_uv[2:4, 0] += 25.0  # 2 visible parts off by 25 px > 20 px
+    est_occ = np.zeros((1, V), bool)
+    est_occ[0, 0] = True  # one of two occlusions predicted
+    rep = evaluate([frame(gt, [dict()], est_occluded=est_occ, est_vertices_2d=est_uv[None],
+                          gt_vertices_2d=[gt_uv], gt_vertex_visible=[visible])])
+    m = rep["all"]
+    assert_close(m["occ_pred_acc"], 90.0)
+    # 6 of 10 parts localised (< 70%) -> car not counted; eligible since 8/10 visible
+    assert m["n_parts_70_eligible"] == 1 and m["parts_70"] == 0.0
+    est_uv[2, 0] = gt_uv[2, 0] + 19.0
+    rep = evaluate([frame(gt, [dict()], est_occluded=est_occ, est_vertices_2d=est_uv[None],
+                          gt_vertices_2d=[gt_uv], gt_vertex_visible=[visible])])
+    assert rep["all"]["parts_70"] == 100.0  # 7 of 10
+
+
+def test_empty_inputs_report_nan_and_dash():
+    gt = [car(B1)]
+    empty = FrameResult("e", gt, np.zeros((0, 4)), [], [], np.zeros((0, 3)), np.zeros((0, 3)), [], [])
+    rep = evaluate([empty])
+    assert rep["all"]["n_tp"] == 0 and rep["all"]["n_gt"] == 1
+    assert math.isnan(rep["all"]["az_5"])
+    j = rep.to_json_dict()
+    json.dumps(j, allow_nan=False)
+    for key in ("loc_1m", "loc_1_5m", "az_5", "az_10", "median_az3d", "median_az2d", "n_tp"):
+        assert key in j
+    assert j["loc_1m"] is None and j["n_tp"] == 0 and set(j["subsets"]) == {"occ>0", "occ>3"}
+    none = evaluate([])
+    table = format_table({"(i) fg": rep, "(v) full": none})
+    assert "(i) fg" in table and "(v) full" in table and " - " in table and "0/1" in table
+    assert "Table 1" in table and "Table 2" in table
+
+
+def test_format_table_layout():
+    gt = [car(B1, occluded=2), car(B2, x=4.0)]
+    rep = evaluate([frame(gt, [dict(gt_for=0), dict(gt_for=1, loc=[4.0, 1.65, 21.2])])])
+    table = format_table({"fg+gp": rep})
+    row = next(line for line in table.splitlines() if line.startswith("| fg+gp") and "2/2" in line)
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells == ["fg+gp", "50%", "100%", "2/2", "100%", "100%", "1/1", "100%", "100%", "1/1"]
+    assert "KITTI's occluded flag" in table
+
+
+def test_shape_contracts():
+    with pytest.raises(ShapeError, match="est_location"):
+        FrameResult("x", [], np.zeros((2, 4)), np.zeros(2), np.zeros(2), np.zeros((3, 3)),
+                    np.zeros((2, 3)), np.zeros(2), np.zeros(2))
+    with pytest.raises(ShapeError, match="gt_occluded_parts"):
+        FrameResult("x", [car(B1)], np.zeros((0, 4)), [], [], np.zeros((0, 3)), np.zeros((0, 3)), [], [],
+                    gt_occluded_parts=[1, 2])

@@ -1,0 +1,183 @@
+"""KITTI label / image / calibration I/O and dataset discovery."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from conftest import assert_close
+from wirescene.datasets import (
+    CAR_TYPES,
+    KittiDataset,
+    Label,
+    car_indices,
+    read_image,
+    read_labels,
+    select_cars,
+    write_labels,
+)
+from wirescene.errors import InputError
+
+GOOD = "Car 0.00 0 1.95 354.43 185.52 549.52 294.49 1.43 1.70 3.95 -2.39 1.66 11.80 1.76"
+
+
+def labels_of(kitti_root, frame="000010"):
+    return read_labels(kitti_root / "training" / "label_2" / f"{frame}.txt")
+
+
+def one_line(exc: pytest.ExceptionInfo) -> str:
+    msg = str(exc.value)
+    assert "\n" not in msg
+    return msg
+
+
+def test_read_labels_known_values(kitti_root):
+    frame = labels_of(kitti_root)
+    cars = frame.of_type(*CAR_TYPES)
+    assert len(cars) == 8  # 8 Car lines in KITTI training/label_2/000010.txt
+    assert len(frame.dontcare) == 4
+    assert all(o.type != "DontCare" for o in frame.objects)
+    assert [o.type for o in frame.objects].count("Pedestrian") == 1
+    first = cars[0]
+    assert first.type == "Car" and first.occluded == 0 and first.score is None
+    assert_close(first.truncated, 0.80)
+    assert_close(first.alpha, -2.09)
+    assert_close(first.box, [1013.39, 182.46, 1241.00, 374.00])
+    assert_close(first.dims, [1.57, 1.65, 3.35])
+    assert_close(first.location, [4.43, 1.65, 5.20])
+    assert_close(first.rotation_y, -1.42)
+    # centroid: bottom centre raised by h/2 (camera y points down)
+    assert_close(first.centroid, [4.43, 1.65 - 1.57 / 2, 5.20])
+    assert [o.occluded for o in cars] == [0, 0, 0, 2, 0, 2, 1, 1]
+
+
+def test_select_cars(kitti_root):
+    frame = labels_of(kitti_root)
+    idx = car_indices(frame)
+    assert len(idx) == 8 and frame.objects[2].type == "Pedestrian" and 2 not in idx
+    tall = select_cars(frame, min_height=50)
+    assert all(c.height_px >= 50 for c in tall) and 0 < len(tall) < 8
+    assert len(select_cars(frame, max_occluded=1)) == 6
+
+
+def test_empty_and_blank_lines(tmp_path):
+    p = tmp_path / "empty.txt"
+    p.write_text("")
+    frame = read_labels(p)
+    assert frame.objects == [] and frame.dontcare == []
+    p.write_text("\n" + GOOD + "\n\n")
+    assert len(read_labels(p).objects) == 1
+
+
+def test_round_trip_with_score(tmp_path, kitti_root):
+    frame = labels_of(kitti_root)
+    for i, o in enumerate(frame.objects):
+        o.score = 0.5 + i * 1e-3
+    frame.objects[0].rotation_y = 0.123456789  # angles keep more than the devkit's 2 decimals
+    out = tmp_path / "sub" / "000010.txt"
+    write_labels(out, frame)
+    back = read_labels(out)
+    assert len(out.read_text().splitlines()[0].split()) == 16
+    assert len(back.objects) == len(frame.objects) and len(back.dontcare) == 4
+    for a, b in zip(frame.objects + frame.dontcare, back.objects + back.dontcare):
+        assert a.type == b.type and a.occluded == b.occluded
+        assert_close(b.box, a.box, atol=5e-3)
+        assert_close(b.location, a.location, atol=1e-6)
+        assert_close(b.dims, a.dims, atol=1e-6)
+        assert_close(b.rotation_y, a.rotation_y, atol=1e-6)
+        assert_close(b.alpha, a.alpha, atol=1e-6)
+    assert_close([o.score for o in back.objects], [o.score for o in frame.objects], atol=1e-6)
+    assert back.dontcare[0].score == 0.0  # ground truth without score written as 0
+    write_labels(out, frame.objects, with_score=False)
+    assert all(len(line.split()) == 15 for line in out.read_text().splitlines())
+    assert read_labels(out).objects[0].score is None
+
+
+def test_write_is_atomic(tmp_path):
+    out = tmp_path / "det.txt"
+    out.write_text(GOOD + "\n")
+    bad = Label("Car", 0, 0, np.nan, [0, 0, 1, 1], [1, 1, 1], [0, 0, 5], 0.0, 0.9)
+    ok = Label("Car", 0, 0, 0.1, [0, 0, 1, 1], [1, 1, 1], [0, 0, 5], 0.0, 0.9)
+    with pytest.raises(ValueError):
+        write_labels(out, [ok, bad])
+    assert out.read_text() == GOOD + "\n"  # old file untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["det.txt"]  # no temp file left
+
+
+@pytest.mark.parametrize(
+    "line, expect",
+    [
+        ("Car 0.00 0 1.95 354.43 185.52 549.52 294.49 1.43 1.70 3.95 -2.39 1.66 11.80", "line 2: expected 15 columns"),
+        (GOOD + " 0.9 7", "got 17"),
+        (GOOD.replace("185.52", "abc"), "line 2: column 6 (y1) is not a number: 'abc'"),
+        (GOOD.replace(" 0 1.95", " 0.5 1.95"), "line 2: column 3 (occluded) must be an integer"),
+        (GOOD.replace("11.80", "nan"), "line 2: column 14 (z) is not finite"),
+    ],
+)
+def test_malformed_lines(tmp_path, line, expect):
+    p = tmp_path / "000000.txt"
+    p.write_text(GOOD + "\n" + line + "\n")
+    with pytest.raises(InputError) as exc:
+        read_labels(p)
+    msg = one_line(exc)
+    assert msg.startswith(f"{p}: ") and expect in msg
+
+
+def test_missing_label_file(tmp_path):
+    with pytest.raises(InputError, match="label file not found") as exc:
+        read_labels(tmp_path / "nope.txt")
+    assert str(tmp_path / "nope.txt") in one_line(exc)
+
+
+def test_read_image(kitti_root, tmp_path):
+    img = read_image(kitti_root / "training" / "image_2" / "000010.png")
+    assert img.shape == (375, 1242, 3) and img.dtype == np.uint8 and img.std() > 10
+    data = (kitti_root / "training" / "image_2" / "000010.png").read_bytes()
+    truncated = tmp_path / "truncated.png"
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match="corrupt or truncated image") as exc:
+        read_image(truncated)
+    assert one_line(exc).startswith(str(truncated))
+    text = tmp_path / "text.png"
+    text.write_text("hello, I am not an image\n")
+    with pytest.raises(InputError, match="not an image file") as exc:
+        read_image(text)
+    assert one_line(exc).startswith(str(text))
+    with pytest.raises(InputError, match="image file not found"):
+        read_image(tmp_path / "missing.png")
+
+
+def test_dataset_from_root_and_split_dir(kitti_root):
+    for root in (kitti_root, kitti_root / "training"):
+        ds = KittiDataset(root)
+        assert ds.has_labels
+        assert ds.frame_ids() == ["000002", "000010", "001545"]
+        assert ds.image_path(10) == kitti_root / "training" / "image_2" / "000010.png"
+        assert len(ds.labels("000010").objects) == 9
+    cam = ds.camera("000010")
+    assert cam.image_size == (1242, 375)
+    P2 = ds.calib("000010").P2
+    assert P2.shape == (3, 4)
+    assert_close(P2[0], [7.215377e02, 0.0, 6.095593e02, 4.485728e01])
+    assert_close(cam.P, P2)
+    assert ds.image("000002").shape[:2] == (375, 1242)
+
+
+def test_dataset_without_labels_and_bad_roots(kitti_root, tmp_path):
+    split = tmp_path / "testing"
+    for sub in ("image_2", "calib"):
+        shutil.copytree(kitti_root / "training" / sub, split / sub)
+    ds = KittiDataset(tmp_path, split="testing")
+    assert not ds.has_labels and ds.frame_ids() == ["000002", "000010", "001545"]
+    with pytest.raises(InputError, match="no label_2"):
+        ds.labels("000002")
+    with pytest.raises(InputError, match="not found"):
+        KittiDataset(tmp_path / "nothing")
+    with pytest.raises(InputError, match="not a KITTI object directory") as exc:
+        KittiDataset(tmp_path)  # no training/ here
+    assert one_line(exc).startswith(str(tmp_path))
+    shutil.rmtree(split / "calib")
+    with pytest.raises(InputError, match="no calib/ directory"):
+        KittiDataset(split)

@@ -1,0 +1,119 @@
+import numpy as np
+import pytest
+
+from conftest import KITTI_ROOT, assert_close
+from wirescene.boxes import MEAN_CAR_DIMS, box_corners, project_points_to_box
+from wirescene.datasets.kitti import KittiDataset
+from wirescene.detect import detections_from_labels
+from wirescene.groundplane import object_pose, rotation_y
+from wirescene.scene.fit import fit_scene
+from wirescene.scene.hypotheses import Detections
+from wirescene.scene.lifting import LiftingOptions, lift_detections, lift_table, select_particles, solve_positions
+from wirescene.viewpoints import angle_difference, bin_center, viewpoint_bin
+
+
+@pytest.fixture(scope="module")
+def dataset():
+    return KittiDataset(KITTI_ROOT)
+
+
+def _synthetic_boxes(camera, poses, dims=MEAN_CAR_DIMS):
+    """2D boxes of mean-size cars placed at (x, z, azimuth) on a pitched plane."""
+    boxes, alphas = [], []
+    for x, z, az, pitch, roll in poses:
+        loc, R = object_pose(x, z, az, pitch, roll)
+        boxes.append(project_points_to_box(camera, box_corners(dims, loc, R)))
+        alphas.append(az - np.arctan2(x, z))
+    return np.array(boxes), np.array(alphas)
+
+
+def test_solve_positions_exact_when_model_is_exact(dataset):
+    """With the true plane and azimuth the position solve recovers the car exactly."""
+    camera = dataset.camera("000010")
+    poses = [(-3.0, 12.0, 0.4, 0.01, 0.005), (4.0, 25.0, -1.5, 0.01, 0.005), (1.0, 40.0, 2.5, 0.01, 0.005)]
+    boxes, alpha = _synthetic_boxes(camera, poses)
+    x, z, az, cost = solve_positions(
+        camera, boxes, alpha, np.full(3, 0.01), np.full(3, 0.005), np.broadcast_to(MEAN_CAR_DIMS, (3, 3)),
+        iterations=20,
+    )
+    truth = np.array(poses)
+    assert_close(x, truth[:, 0], atol=0.05)
+    assert_close(z, truth[:, 1], atol=0.2)
+    assert np.all(cost < 1e-6)
+
+
+def test_shared_plane_recovers_synthetic_scene(dataset):
+    camera = dataset.camera("000010")
+    pitch, roll = np.deg2rad(1.0), np.deg2rad(-0.5)
+    poses = [(-4.0, 10.0, 0.3, pitch, roll), (3.0, 18.0, -1.6, pitch, roll), (5.0, 30.0, 1.5, pitch, roll), (-2.0, 22.0, 3.0, pitch, roll)]
+    boxes, alpha = _synthetic_boxes(camera, poses)
+    dets = Detections(boxes, 1.0, bin_center(viewpoint_bin(alpha)))
+    particles = lift_detections(camera, dets, shared_plane=True)
+    best = int(np.argmin(particles.cost))
+    assert np.all(particles.pitch[best] == particles.pitch[best, 0])  # one plane per particle
+    assert abs(particles.pitch[best, 0] - pitch) <= np.deg2rad(0.25) + 1e-9
+    truth = np.array(poses)
+    assert np.all(np.abs(particles.x[best] - truth[:, 0]) < 0.3)
+    assert np.all(np.abs(particles.z[best] - truth[:, 1]) < 0.1 * truth[:, 1])
+    # A 2D box barely constrains the yaw of a car seen from straight behind or ahead
+    # (the reason the paper's coarse baselines have 10-13 deg median error), so only the
+    # search window (the viewpoint bin +- its half width) is guaranteed.
+    assert np.all(angle_difference(particles.azimuth[best], truth[:, 2]) < np.deg2rad(22.5 + 22.5))
+    assert np.all(particles.object_cost[best] < 1e-3)
+
+
+def test_lifting_gt_boxes_recovers_kitti_centres(dataset):
+    """Lifting the GT 2D boxes of real KITTI cars (with the true viewpoint bin) puts the
+    unoccluded, untruncated ones near their labelled 3D centre."""
+    errors = []
+    for frame in ("000010", "001545"):
+        labels = dataset.labels(frame)
+        dets = detections_from_labels(labels)
+        est = fit_scene(dataset.camera(frame), dets, variant="coarse+gp")
+        cars = labels.of_type("Car")
+        for o in est.objects:
+            g = cars[o.detection_index]
+            if g.occluded == 0 and g.truncated == 0:
+                errors.append(np.linalg.norm(o.centroid - g.centroid) / g.location[2])
+    errors = np.array(errors)
+    assert len(errors) >= 5
+    # Measured: 2-12% of the distance (median ~4%); boxes alone leave depth ambiguous.
+    assert errors.max() < 0.15, errors
+    assert np.median(errors) < 0.05, errors
+
+
+def test_particles_sorted_and_configurable(dataset):
+    camera = dataset.camera("001545")
+    dets = detections_from_labels(dataset.labels("001545"))
+    opts = LiftingOptions(n_particles=40)
+    table = lift_table(camera, dets, options=opts)
+    for shared in (False, True):
+        p = select_particles(table, shared_plane=shared, n_particles=40)
+        assert p.n_particles == 40 and p.n_objects == len(dets)
+        if shared:
+            assert np.all(np.diff(np.minimum(p.object_cost, 0.05).sum(1) + 1e-3 * p.cost) >= -1e-12)
+        else:
+            assert np.all(np.diff(p.object_cost, axis=0) >= 0)
+    # Independent objects fit their boxes at least as well as objects sharing a plane.
+    indep = select_particles(table, shared_plane=False).cost[0]
+    shared = select_particles(table, shared_plane=True).cost[0]
+    assert indep <= shared + 1e-12
+
+
+def test_unknown_viewpoint_searches_full_circle(dataset):
+    camera = dataset.camera("000010")
+    poses = [(3.0, 15.0, 2.0, 0.0, 0.0)]
+    boxes, alpha = _synthetic_boxes(camera, poses)
+    dets = Detections(boxes, 1.0, np.nan)
+    p = lift_detections(camera, dets, shared_plane=True)
+    # The box alone is ambiguous front/back, so accept either heading, but it must be one of them.
+    err = angle_difference(p.azimuth[0, 0], 2.0)
+    assert min(err, np.pi - err) < np.deg2rad(10)
+
+
+def test_fit_is_deterministic(dataset):
+    camera = dataset.camera("000010")
+    dets = detections_from_labels(dataset.labels("000010"))
+    a = fit_scene(camera, dets, variant="coarse")
+    b = fit_scene(camera, dets, variant="coarse")
+    assert_close([o.location for o in a.objects], [o.location for o in b.objects], atol=0)
