@@ -57,6 +57,11 @@ def test_buffers_are_consistent(scene):
     rows, cols = np.nonzero(r.mask)
     rays = view.camera.rays(np.stack([cols, rows], -1).astype(float))
     assert np.all(np.einsum("ri,ri->r", r.normals[rows, cols], rays) < 0)
+    # Face orientation does not matter (CAD meshes are rarely consistently oriented).
+    flipped = render(v, f[:, ::-1], view.camera, view.location, view.R)
+    assert_close(flipped.normals, r.normals)
+    assert np.array_equal(flipped.mask, r.mask) and np.array_equal(flipped.edges, r.edges)
+    assert_close(flipped.depth[r.mask], r.depth[r.mask], atol=1e-9)
 
 
 def test_landmark_projection_agrees_with_camera_and_depth_buffer(scene):

@@ -34,7 +34,7 @@ import numpy as np
 from .camera import Camera
 from .errors import ShapeError, check_shape
 from .groundplane import rotation_x, rotation_y
-from .raycast import first_hit_distance, mesh_intersector
+from .raycast import first_hit_distance
 
 DEFAULT_CREASE_ANGLE_DEG = 35.0
 DEFAULT_DEPTH_JUMP = 0.01
@@ -205,7 +205,7 @@ def _edges(dist, face, obj, normals, dirs, *, crease_angle_deg, depth_jump):
         silhouette = obj[a] != obj[b]
         same = (~silhouette) & (obj[a] >= 0) & (face[a] != face[b])
         na, nb = normals[a], normals[b]
-        crease = same & False & (np.einsum("...i,...i->...", na, nb) < cos_crease)
+        crease = same & (np.einsum("...i,...i->...", na, nb) < cos_crease)
         # Distance along b's ray to a's face plane, n_a . (o + t d_b) = n_a . X_a, with
         # X_a = o + dist_a d_a: t = dist_a (n_a . d_a) / (n_a . d_b).
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
