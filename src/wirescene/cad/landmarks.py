@@ -18,11 +18,16 @@ the ground, d = 10 cm):
   ``(arch_top - 0.04) / 2`` clipped to 0.25..0.40 m. ``*_wheel_ground`` lies below the
   centre at y = 0. Hub z: 3 cm inside the body side at the arch; contact point 10 cm further in
   (half a tyre width).
-- Greenhouse: the upper profile between ``nose_top`` and ``tail_top`` is fitted by a
-  continuous 5-segment polyline (pieces at least 20 cm long) (bonnet, windscreen, roof, rear window, boot) with
-  least squares over all breakpoint positions (dynamic programming); its 4 inner
-  breakpoints are ``windscreen_bottom``, ``windscreen_top``, ``rear_window_top`` and
-  ``rear_window_bottom``. z is the silhouette depth 4 cm inside the profile.
+- Greenhouse: on the upper profile between ``tail_top`` and ``nose_top`` the roof is the
+  stretch within 5 cm of the highest point; its ends are ``rear_window_top`` and
+  ``windscreen_top``. ``windscreen_bottom`` is the most concave point of the profile
+  between ``windscreen_top`` and ``nose_top`` (largest second difference
+  ``h(x - 20 cm) + h(x + 20 cm) - 2 h(x)``: the steep windscreen meets the flatter
+  bonnet; the nose's convex rounding scores negative), ``rear_window_bottom`` likewise
+  between ``tail_top`` and ``rear_window_top``. z is the silhouette depth 4 cm
+  inside the profile (for the two lower corners read 12 cm up the glass, since at the
+  corner itself a side ray meets the wider wing) -- the first surface a ray from the
+  side meets, so on a rounded greenhouse it may lie inboard of the true pillar.
 
 Known limits: a fastback's rear window and boot form one slope, so the rear-window
 bottom breakpoint is weakly determined; rear wings connected to the body by broad
@@ -52,38 +57,9 @@ END_INSET = 0.10
 WHEEL_GAP = 0.04
 WHEEL_RADIUS_RANGE = (0.25, 0.40)
 HALF_TYRE = 0.10
-MIN_SEGMENT = 0.2
-
-
-def _polyline_breaks(x: np.ndarray, y: np.ndarray, n_segments: int, min_len: int) -> list[int]:
-    """Indices of the inner breakpoints of the least-squares continuous polyline with
-    ``n_segments`` pieces whose vertices are samples of (x, y) and whose ends are the
-    first and last sample."""
-    n = len(x)
-    cost = np.full((n, n), np.inf)
-    for i in range(n - 1):
-        j = np.arange(i + min_len, n)
-        if len(j) == 0:
-            continue
-        k = np.arange(i, n)
-        # chord from i to each j, evaluated at all k in [i, j]
-        t = (x[k][None, :] - x[i]) / (x[j] - x[i])[:, None]
-        chord = y[i] + t * (y[j] - y[i])[:, None]
-        r2 = (y[k][None, :] - chord) ** 2
-        r2[k[None, :] > j[:, None]] = 0.0
-        cost[i, j] = r2.sum(axis=1)
-    best = np.full((n_segments + 1, n), np.inf)
-    arg = np.zeros((n_segments + 1, n), dtype=int)
-    best[0, 0] = 0.0
-    for s in range(1, n_segments + 1):
-        total = best[s - 1][:, None] + cost
-        arg[s] = np.argmin(total, axis=0)
-        best[s] = total[arg[s], np.arange(n)]
-    breaks, j = [], n - 1
-    for s in range(n_segments, 0, -1):
-        j = arg[s, j]
-        breaks.append(int(j))
-    return sorted(breaks)[1:]
+CORNER_SCALE = 0.2
+PILLAR_STEP = 0.12
+ROOF_DROP = 0.05
 
 
 def auto_landmarks(vertices, faces, *, res: float = 0.01, view: SideView | None = None) -> np.ndarray:
@@ -150,16 +126,36 @@ def auto_landmarks(vertices, faces, *, res: float = 0.01, view: SideView | None 
             h = sill if not np.isfinite(h) else h
             put(f"{axle}_{name}", sv.xs[c], h, sv.z_near(sv.xs[c], h + 0.03))
 
-    # Greenhouse from the upper profile between tail_top and nose_top.
+    # Greenhouse from the upper profile: the roof is where the profile is within
+    # ROOF_DROP of its peak; the glass meets bonnet / boot at the concave corners.
     step = max(1, int(round(0.02 / sv.res)))
     idx = np.arange(rear_col, front_col + 1, step)
     idx = idx[np.isfinite(sv.top[idx])]
-    breaks = _polyline_breaks(sv.xs[idx], sv.top[idx], 5, min_len=max(2, int(MIN_SEGMENT / (step * sv.res))))
-    names = ("rear_window_bottom", "rear_window_top", "windscreen_top", "windscreen_bottom")
-    roof_mid = 0.5 * (sv.xs[idx[breaks[1]]] + sv.xs[idx[breaks[2]]])
-    for name, k in zip(names, breaks):
-        x, h = sv.xs[idx[k]], sv.top[idx[k]]
-        put(name, x, h, sv.z_near(x, h - 0.04, toward=(roof_mid, 0.0), max_dist=0.3))
+    prof = sv.top[idx]
+    roof = np.flatnonzero(prof >= np.nanmax(prof) - ROOF_DROP)
+    r0, r1 = int(roof[0]), int(roof[-1])
+    w = max(1, int(round(CORNER_SCALE / (step * sv.res))))
+    corners = {"rear_window_top": r0, "windscreen_top": r1}
+    for name, lo, hi in (("rear_window_bottom", 0, r0), ("windscreen_bottom", r1, len(idx) - 1)):
+        k = np.arange(lo + w, hi - w + 1)
+        if len(k):
+            # Concave corner (steep glass meets flatter bonnet / boot): largest second
+            # difference at the scale of CORNER_SCALE.
+            corners[name] = int(k[np.argmax(prof[k - w] + prof[k + w] - 2 * prof[k])])
+        else:
+            corners[name] = (lo + hi) // 2
+    roof_mid = 0.5 * (sv.xs[idx[r0]] + sv.xs[idx[r1]])
+    up_to = {"windscreen_bottom": "windscreen_top", "rear_window_bottom": "rear_window_top"}
+    for name, k in corners.items():
+        x, h = sv.xs[idx[k]], prof[k]
+        zx, zh = x, h
+        if name in up_to:
+            # Read the pillar's z a little way up the glass: at the corner itself the
+            # side ray meets the (wider) wing / fender.
+            k2 = corners[up_to[name]]
+            d = np.array([sv.xs[idx[k2]] - x, prof[k2] - h])
+            zx, zh = np.array([x, h]) + PILLAR_STEP * d / max(np.linalg.norm(d), 1e-9)
+        put(name, x, h, sv.z_near(zx, zh - 0.04, toward=(roof_mid, 0.0), max_dist=0.3))
 
     X = np.zeros((len(VERTEX_NAMES), 3))
     for i, p in enumerate(PART_NAMES):

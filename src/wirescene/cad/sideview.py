@@ -18,8 +18,8 @@ grid; each pixel keeps the z of the first surface hit. From that image:
   again -- rear wings, spoiler mounts -- is not body;
 - the body's front and rear ends are the extreme silhouette columns below 55 % of the
   height (a wing may overhang the tail higher up);
-- the overhang clearance (:func:`overhang_clearance`) is the lowest silhouette pixel
-  between an end of the car and its wheel arch, the larger of front and rear;
+- the approach clearance (:func:`approach_clearance`) is the lowest silhouette pixel
+  between the front end of the car and its front wheel arch;
 - wheel arches (:func:`find_arches`) are the runs of columns whose lowest skin pixel is
   more than 15 cm above the sill (median lowest skin in the middle 20 % of the length),
   the longest run in each half of the car.
@@ -186,14 +186,17 @@ def _arch_runs(xs, low):
     return pick(front), pick(rear), sill
 
 
-def overhang_clearance(sv: SideView) -> float:
-    """Largest of the front and rear overhang clearances: the lowest silhouette pixel
-    between the car's end and its wheel arch (approach / departure clearance), in
-    metres. NaN if no arches are found."""
-    front, rear, _ = find_arches(sv)
-    if front is None or rear is None:
+def approach_clearance(sv: SideView) -> float:
+    """Front overhang (approach) clearance: the lowest silhouette pixel between the
+    front end of the car and its front wheel arch, in metres; NaN without a front arch.
+
+    Only the front is used: race cars' rear diffusers lift the rear overhang as much as
+    an off-road body does."""
+    front, _, _ = find_arches(sv)
+    if front is None:
         return float("nan")
-    any_row = sv.silhouette.any(axis=0)
-    low_sil = np.where(any_row, sv.hs[np.argmax(sv.silhouette, axis=0)], np.nan)
-    ends = [low_sil[front[1]:sv.front_col + 1], low_sil[sv.rear_col:rear[0] + 1]]
-    return float(max(np.nanmin(e) if np.isfinite(e).any() else np.inf for e in ends))
+    cols = slice(front[1], sv.front_col + 1)
+    sil = sv.silhouette[:, cols]
+    if not sil.any():
+        return float("nan")
+    return float(np.min(sv.hs[np.argmax(sil, axis=0)][sil.any(axis=0)]))
