@@ -109,3 +109,20 @@ def test_detection_formats(tmp_path):
         read_detections(bad)
     with pytest.raises(InputError, match="no car detections"):
         read_detections(c, min_score=0.9)
+
+
+def test_gt_command_draws_frame(tmp_path):
+    out = tmp_path / "gt.png"
+    r = run("gt", KITTI_ROOT, "000010", "--out", out)
+    assert r.exit_code == 0, r.output
+    from PIL import Image
+
+    assert Image.open(out).size == (1242, 375)
+
+
+def test_train_and_cad_commands_are_registered():
+    r = run("--help")
+    assert "train" in r.output and "cad" in r.output
+    r = run("cad", "list", "--cad-dir", KITTI_ROOT.parent / "cad")
+    assert r.exit_code == 0, r.output
+    assert "road" in r.output

@@ -170,6 +170,37 @@ def demo_cmd(out):
     click.echo(f"\ndone in {time.perf_counter() - t0:.1f} s")
 
 
+@main.command("gt")
+@click.argument("kitti_root", type=click.Path(path_type=Path))
+@click.argument("frame")
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Output PNG.")
+@click.option("--split", default="training", show_default=True)
+def gt_cmd(kitti_root, frame, out, split):
+    """Draw a frame's ground truth with the mean wireframe at every GT car pose
+    (self-occluded vertices in blue): a check of geometry, shape model and labels."""
+    from .datasets.kitti import KittiDataset
+    from .groundplane import rotation_y, transform
+    from .occlusion import self_occlusion
+    from .scene.hypotheses import ObjectEstimate, SceneEstimate
+    from .shape import load_default
+    from .viz import overlay, save_figure
+    from .wireframe import EDGES, FACES
+
+    dataset = KittiDataset(kitti_root, split=split)
+    camera = dataset.camera(frame)
+    cars = dataset.labels(frame).of_type("Car")
+    mean = load_default().mean
+    objects = []
+    for i, g in enumerate(cars):
+        R = rotation_y(g.rotation_y)
+        vertices = transform(mean, g.location, R)
+        hidden = self_occlusion(vertices, FACES, camera.center)
+        objects.append(ObjectEstimate(i, g.box, 1.0, g.location, R, g.dims, 0.0, vertices=vertices, visibility=~hidden))
+    fig = overlay(dataset.image(frame), camera, SceneEstimate("gt", objects), gt=cars, edges=EDGES,
+                  title=f"{frame}: mean wireframe at GT poses")
+    click.echo(save_figure(fig, out))
+
+
 def _register_optional_commands():
     """Attach the sub-commands of stages that define their own CLI pieces."""
     try:
