@@ -126,3 +126,14 @@ def test_train_and_cad_commands_are_registered():
     r = run("cad", "list", "--cad-dir", KITTI_ROOT.parent / "cad")
     assert r.exit_code == 0, r.output
     assert "road" in r.output
+
+
+def test_eval_runs_unchanged_on_synth_and_uses_vertex_ground_truth(tmp_path):
+    r = run("synth", tmp_path / "syn", "--scenes", 2, "--seed", 3)
+    assert r.exit_code == 0, r.output
+    out = tmp_path / "m.json"
+    r = run("eval", tmp_path / "syn", "--variant", "coarse+gp", "--json", out)
+    assert r.exit_code == 0, r.output
+    data = json.loads(out.read_text())
+    assert data["occlusion_source"] == "vertex_gt"
+    assert data["n_tp"] >= 3

@@ -207,6 +207,9 @@ def _register_optional_commands():
         from .cad.commands import cad, shape
     except ImportError:  # stage not installed in this build
         return
+    from .synth.commands import synth
+
+    main.add_command(synth)
     main.add_command(cad)
     train = click.Group("train", help="Train the model's artefacts from documented data.")
     train.add_command(shape)

@@ -14,6 +14,7 @@ import numpy as np
 
 from .camera import Camera
 from .datasets.kitti import FrameLabels, KittiDataset, Label, write_labels
+from .datasets.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
 from .detect import detections_from_labels, read_detections
 from .errors import InputError
 from .evaluate import EvaluationReport, FrameResult, evaluate
@@ -41,8 +42,11 @@ def estimate_to_labels(estimate: SceneEstimate, *, type_: str = "Car") -> list[L
     ]
 
 
-def frame_result(frame_id: str, gt: FrameLabels, detections: Detections, estimate: SceneEstimate) -> FrameResult:
-    """Evaluation record of one frame (estimates aligned with detections)."""
+def frame_result(
+    frame_id: str, gt: FrameLabels, detections: Detections, estimate: SceneEstimate, vertex_gt: WireframeGT | None = None
+) -> FrameResult:
+    """Evaluation record of one frame (estimates aligned with detections); with
+    ``vertex_gt`` (synthetic data) the occlusion subsets use true part counts."""
     objs = sorted(estimate.objects, key=lambda o: o.detection_index)
     if [o.detection_index for o in objs] != list(range(len(detections))):
         raise ValueError("estimate must hold exactly one object per detection")
@@ -56,6 +60,10 @@ def frame_result(frame_id: str, gt: FrameLabels, detections: Detections, estimat
         est_dims=np.array([o.dims for o in objs]).reshape(-1, 3),
         est_rotation_y=np.array([o.rotation_y for o in objs]),
         est_alpha=np.array([o.alpha for o in objs]),
+        gt_occluded_parts=None if vertex_gt is None else vertex_gt.occluded_parts,
+        gt_vertices_2d=None if vertex_gt is None else vertex_gt.vertices_2d,
+        gt_vertex_visible=None if vertex_gt is None else vertex_gt.visible,
+        gt_self_occluded=None if vertex_gt is None else vertex_gt.self_occluded,
     )
 
 
@@ -114,12 +122,14 @@ def evaluate_dataset(
     results: dict[str, list[FrameResult]] = {v: [] for v in variants}
     for frame_id in progress(frame_ids):
         gt = dataset.labels(frame_id)
+        gt_path = wireframe_gt_path(dataset.split_dir, frame_id)
+        vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
         detections = source.for_frame(dataset, frame_id, frame_seed(options.seed, frame_id))
         camera = dataset.camera(frame_id)
         lifted = lift_table(camera, detections, options=options.lifting) if len(detections) else None
         for v in variants:
             estimate = fit_scene(camera, detections, variant=v, options=options, lifted=lifted)
-            results[v].append(frame_result(frame_id, gt, detections, estimate))
+            results[v].append(frame_result(frame_id, gt, detections, estimate, vertex_gt))
             if predictions_dir is not None:
                 write_labels(Path(predictions_dir) / v / f"{frame_id}.txt", estimate_to_labels(estimate))
     return {v: evaluate(results[v]) for v in variants}

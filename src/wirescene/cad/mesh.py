@@ -284,3 +284,23 @@ def road_car_check(car: CarMesh, *, view=None) -> tuple[bool, str]:
     if not clearance < MAX_ROAD_CLEARANCE:
         return False, f"{facts}: approach clearance not below {MAX_ROAD_CLEARANCE} m (off-road body, or no front arch)"
     return True, f"{facts}: road car"
+
+
+def body_extent(vertices, faces, *, quantile: float = 0.0005) -> tuple[np.ndarray, np.ndarray]:
+    """Robust axis-aligned extent ``(lo, hi)`` ``(3,)`` of a mesh's surface.
+
+    The bounds are area-weighted quantiles of the face centroids, so thin parts with
+    almost no surface -- antennas, mirrors' stalks, wing struts -- do not count: a
+    KITTI box is drawn around the body, and an image box spans what is visible.
+    """
+    v = np.asarray(vertices, dtype=float)
+    tri = v[np.asarray(faces)]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    centre = tri.mean(axis=1)
+    lo, hi = np.empty(3), np.empty(3)
+    for k in range(3):
+        order = np.argsort(centre[:, k])
+        cdf = np.cumsum(area[order]) / area.sum()
+        lo[k] = centre[order[np.searchsorted(cdf, quantile)], k]
+        hi[k] = centre[order[min(np.searchsorted(cdf, 1.0 - quantile), len(order) - 1)], k]
+    return lo, hi
