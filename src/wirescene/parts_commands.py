@@ -1,0 +1,42 @@
+"""``wirescene train parts``: train the part detector (see :mod:`wirescene.parts_training`)."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from .parts import DEFAULT_MODEL_PATH
+
+
+@click.command("parts")
+@click.option("--out", type=click.Path(dir_okay=False), default=str(DEFAULT_MODEL_PATH), show_default=True,
+              help="Model .npz to write.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--n-views", type=int, default=144, show_default=True, help="Views per car (2 elevations).")
+@click.option("--n-trees", type=int, default=30, show_default=True)
+@click.option("--max-depth", type=int, default=13, show_default=True)
+@click.option("--kind", type=click.Choice(["sc", "hog"]), default="sc", show_default=True, help="Descriptor.")
+@click.option("--n-aug", type=int, default=2, show_default=True, help="Renderings per view (first unaugmented).")
+@click.option("--heldout", type=int, default=0, show_default=True,
+              help="First evaluate with this many CAD models held out.")
+@click.option("--compare-hog/--no-compare-hog", default=False, help="Also evaluate HOG held-out.")
+@click.option("--kitti-background", type=click.Path(file_okay=False), default=None,
+              help="KITTI root whose car-free regions add background patches (off by default).")
+@click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
+def parts(out, seed, n_views, n_trees, max_depth, kind, n_aug, heldout, compare_hog, kitti_background, report):
+    """Train the 37-class part detector on CAD renderings."""
+    from .parts_training import train_part_detector
+
+    _, rep = train_part_detector(out, seed=seed, n_views=n_views, n_trees=n_trees, max_depth=max_depth, kind=kind,
+                                 n_aug=n_aug, heldout=heldout, compare_kinds=("hog",) if compare_hog else (),
+                                 kitti_background=kitti_background, progress=click.echo)
+    if report:
+        def conv(o):
+            if isinstance(o, dict):
+                return {k: conv(v) for k, v in o.items() if not str(k).startswith("_")}
+            return o.tolist() if hasattr(o, "tolist") else o
+
+        with open(report, "w") as f:
+            json.dump(conv(rep), f, indent=1)
+    click.echo(f"train accuracy {rep['train_acc']:.3f}")

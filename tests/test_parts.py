@@ -1,0 +1,180 @@
+"""Part detector: descriptors, numpy forest, retraining, response maps, shipped model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wirescene import features as feat
+from wirescene.parts import BACKGROUND, N_CLASSES, N_PARTS, PartDetector, load_default, response_maps
+
+from conftest import KITTI_ROOT, assert_close
+
+
+def _pattern(shape=(80, 100), seed=0):
+    rng = np.random.default_rng(seed)
+    e = np.zeros(shape, np.float32)
+    e[20, 10:60] = 1
+    e[10:50, 40] = 1
+    e[rng.integers(0, shape[0], 40), rng.integers(0, shape[1], 40)] = 1
+    return e
+
+
+# ------------------------------------------------------------------ features
+
+def test_feature_shapes():
+    e = _pattern()
+    pts = np.array([[10, 10], [40, 50], [79, 99]])
+    for kind in feat.KINDS:
+        x = feat.extract(e, kind, points=pts)
+        assert x.shape == (3, feat.feature_dim(kind)) and x.dtype == np.float32
+        assert np.isfinite(x).all()
+    patches = feat.extract_patches(e, pts)
+    assert patches.shape == (3, feat.PATCH, feat.PATCH)
+    assert feat.extract(e, "sc").shape == e.shape + (feat.feature_dim("sc"),)
+    with pytest.raises(ValueError):
+        feat.extract(e, "nope")
+
+
+def test_dense_sc_equals_sparse():
+    e = _pattern()
+    d = feat.extract(e, "sc")
+    pts = np.array([[0, 0], [20, 40], [79, 99], [33, 7]])
+    assert_close(d[pts[:, 0], pts[:, 1]], feat.extract(e, "sc", points=pts), atol=1e-5)
+
+
+def test_shape_context_translation_equivariance():
+    e = _pattern()
+    shifted = np.zeros((100, 130), np.float32)
+    shifted[13:93, 21:121] = e
+    d0, d1 = feat.extract(e, "sc"), feat.extract(shifted, "sc")
+    # away from the borders (patch radius) the dense map is translated as well
+    r = feat.RADIUS
+    assert_close(d1[13 + r:93 - r, 21 + r:121 - r], d0[r:-r, r:-r], atol=1e-5)
+    # and a histogram actually sees the lines (not all-empty)
+    assert d0[20, 40, -1] > 2.0
+
+
+def test_canonical_edges_preserve_line_length():
+    e = np.zeros((200, 200), np.float32)
+    e[100, 20:180] = 1  # 160 px line
+    for z in (0.5, 0.8, 1.6):
+        assert abs(feat.canonical_edges(e, z).sum() - 160 * z) < 0.1 * 160 * z
+
+
+# ------------------------------------------------------------------ numpy forest
+
+@pytest.fixture(scope="module")
+def sk_forest():
+    from sklearn.ensemble import RandomForestClassifier
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(3000, 12)).astype(np.float32)
+    y = (np.abs(X[:, :3]).sum(1) * 6).astype(int) % N_CLASSES
+    y[:N_CLASSES] = np.arange(N_CLASSES)
+    return RandomForestClassifier(n_estimators=7, max_depth=9, random_state=0).fit(X, y)
+
+
+def test_numpy_forest_equals_sklearn(sk_forest, tmp_path):
+    X = np.random.default_rng(1).normal(size=(2000, 12)).astype(np.float32)
+    exact = PartDetector.from_sklearn(sk_forest, kind="sc", quantize=False)
+    assert_close(exact.predict_proba(X), sk_forest.predict_proba(X), atol=1e-12)
+    q = PartDetector.load(PartDetector.from_sklearn(sk_forest, kind="sc").save(tmp_path / "m.npz"))
+    p = q.predict_proba(X)
+    assert_close(p, sk_forest.predict_proba(X), atol=0.01)
+    assert np.mean(p.argmax(1) == sk_forest.predict(X)) > 0.99
+
+
+# ------------------------------------------------------------------ tiny retraining
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    from wirescene.parts_training import train_part_detector
+
+    path = tmp_path_factory.mktemp("parts") / "tiny.npz"
+    det, rep = train_part_detector(path, seed=3, n_views=8, n_trees=3, max_depth=10,
+                                   cars=["acura-nsx-sz", "car1-stock1"])
+    return path, rep
+
+
+def test_tiny_retraining_loads_and_learns(tiny):
+    path, rep = tiny
+    det = PartDetector.load(path)
+    data = rep["_data"]
+    assert len(data) > 500 and (data.y < N_PARTS).sum() > 200 and (data.y == BACKGROUND).sum() > 200
+    acc = np.mean(det.predict(data.X["sc"]) == data.y)
+    assert acc > 0.5  # chance (uniform) is 1/37, majority class below 0.5
+    assert det.meta["n_trees"] == "3"
+
+
+def test_training_is_deterministic(tiny):
+    from wirescene.parts_training import make_patch_data
+
+    a = make_patch_data(seed=3, n_azimuth=2, cars=["acura-nsx-sz"], n_real_bg=60)
+    b = make_patch_data(seed=3, n_azimuth=2, cars=["acura-nsx-sz"], n_real_bg=60)
+    assert np.array_equal(a.y, b.y) and np.array_equal(a.X["sc"], b.X["sc"])
+
+
+@pytest.fixture(scope="module")
+def kitti_frame():
+    from wirescene.datasets.kitti import KittiDataset
+
+
+    ds = KittiDataset(KITTI_ROOT)
+    fid = "000010"
+    return ds.image(fid), np.array([o.box for o in ds.labels(fid).of_type("Car")])
+
+
+def test_response_lookup_matches_patch_classification(tiny, kitti_frame):
+    det = PartDetector.load(tiny[0])
+    img, boxes = kitti_frame
+    box = boxes[1:2]
+    R = response_maps(img, box, detector=det, scales=(1.0,), stride=3.0)
+    b = R.boxes[0]
+    # direct classification of the same patches
+    x1, y1, x2, y2 = box[0]
+    bh = y2 - y1
+    z = feat.CANONICAL_HEIGHT / bh
+    margin = feat.RADIUS / z + 2
+    cx0, cy0 = int(np.floor(b.region[0] - margin)), int(np.floor(b.region[1] - margin))
+    cx1, cy1 = int(np.ceil(b.region[2] + margin)), int(np.ceil(b.region[3] + margin))
+    cmap = feat.canonical_edges(feat.image_edges(img[cy0:cy1, cx0:cx1]), z)
+    guv = b.grid_uv()
+    for i, j in [(3, 4), (10, 20), (b.probs.shape[1] // 2, b.probs.shape[2] // 2)]:
+        u, v = guv[i, j]
+        rc = np.rint(feat.to_canonical(np.array([u - cx0, v - cy0]), z)).astype(int)
+        p = det.classify_patches(feat.extract_patches(cmap, rc[None]))[0]
+        assert_close(b.probs[0, i, j], p, atol=2e-3)
+        uv = np.broadcast_to(guv[i, j], (N_PARTS, 2))
+        pc = np.clip(p, R.eps, 1)
+        assert_close(R.log_ratio(uv, 0), np.log(pc[:N_PARTS] / pc[BACKGROUND]), atol=2e-2)
+
+
+def test_log_ratio_vectorised_and_outside(tiny, kitti_frame):
+    det = PartDetector.load(tiny[0])
+    img, boxes = kitti_frame
+    R = response_maps(img, boxes[:2], detector=det)
+    rng = np.random.default_rng(0)
+    uv = rng.uniform(boxes[0, :2], boxes[0, 2:], size=(5, 7, N_PARTS, 2))
+    bi = np.zeros((5, 7), int)
+    bi[:, 3:] = 1
+    out = R.log_ratio(uv, bi)
+    assert out.shape == (5, 7, N_PARTS) and out.dtype == np.float32
+    assert_close(out[:, :3], R.log_ratio(uv[:, :3], 0))
+    far = np.full((2, N_PARTS, 2), -1e4)
+    assert np.all(R.log_ratio(far, 0) == R.floor)
+    assert np.all(R.log_ratio(far, 0, outside=-1.5) == -1.5)
+    assert np.all(np.abs(out) <= -R.floor + 1e-5)
+
+
+# ------------------------------------------------------------------ shipped model
+
+def test_committed_model_on_real_kitti_box(kitti_frame):
+    det = load_default()
+    assert det.n_trees >= 10 and det.kind in feat.KINDS
+    img, boxes = kitti_frame
+    R = response_maps(img, boxes[1:2], detector=det)
+    c = (boxes[1, :2] + boxes[1, 2:]) / 2
+    lr = R.log_ratio(np.broadcast_to(c, (N_PARTS, 2)), 0)
+    assert lr.shape == (N_PARTS,) and np.isfinite(lr).all()
+    assert R.boxes[0].probs.shape[-1] == N_CLASSES
