@@ -1,0 +1,219 @@
+"""Pre-detection: AP protocol, clustering, bank storage, retraining, shipped bank on KITTI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wirescene.datasets.kitti import FrameLabels, Label, read_image
+from wirescene.predetect.ap import FrameGT, average_precision, evaluate_detections, frame_gt
+from wirescene.predetect.bank import DetectorBank, cluster_activations, detect_cars, load_default_bank, nms
+from wirescene.predetect.configurations import Configuration, connected_subsets, mirror_bin
+from wirescene.predetect.hog import N_FEAT, crop_features, hog_cells
+from wirescene.scene.hypotheses import Detections
+from wirescene.viewpoints import bin_center
+from wirescene.wireframe import EDGES
+
+from conftest import KITTI_ROOT
+
+
+def _label(box, type_="Car", occluded=0, truncated=0.0, alpha=0.0):
+    return Label(type_, truncated, occluded, alpha, box, [1.5, 1.6, 3.9], [0, 1.6, 10], 0.0)
+
+
+def _gt(*boxes):
+    return FrameGT(np.array(boxes, float).reshape(-1, 4), np.zeros(len(boxes)), np.zeros((0, 4)), np.zeros((0, 4)))
+
+
+def _dets(boxes, scores):
+    return Detections(np.array(boxes, float).reshape(-1, 4), np.array(scores, float), np.zeros(len(scores)))
+
+
+# ------------------------------------------------------------------ AP protocol
+
+def test_ap_perfect_detections():
+    gts = [_gt([10, 10, 110, 80], [200, 20, 300, 100]), _gt([0, 0, 60, 60])]
+    dets = [_dets(gts[0].boxes, [0.9, 0.8]), _dets(gts[1].boxes, [0.7])]
+    res = evaluate_detections(dets, gts)
+    assert res["ap"] == pytest.approx(1.0) and res["n_tp"] == 3 and res["viewpoint_bin_acc"] == 1.0
+
+
+def test_ap_false_positive_above_all_true_positives():
+    gt = _gt([10, 10, 110, 80], [200, 20, 300, 100])
+    det = _dets([[500, 10, 600, 90], [10, 10, 110, 80], [200, 20, 300, 100]], [0.95, 0.8, 0.7])
+    res = evaluate_detections([det], [gt])
+    assert res["ap"] == pytest.approx(2 / 3)
+    # a duplicate detection of a matched car is a false positive too
+    det2 = _dets([[10, 10, 110, 80], [12, 10, 110, 80], [200, 20, 300, 100]], [0.9, 0.85, 0.7])
+    assert evaluate_detections([det2], [gt])["ap"] == pytest.approx(0.5 + 0.5 * 2 / 3)
+    assert average_precision(np.array([0.5, 1.0]), np.array([1.0, 1.0])) == pytest.approx(1.0)
+
+
+def test_ap_ignored_objects_and_regions():
+    labels = FrameLabels()
+    labels.objects = [
+        _label([10, 10, 110, 80]),  # counted
+        _label([300, 100, 340, 130]),  # 30 px high: ignored
+        _label([400, 20, 500, 100], occluded=3),  # unknown occlusion: ignored
+        _label([600, 20, 700, 100], type_="Van"),  # neighbouring class: ignored
+        _label([800, 20, 900, 100], type_="Pedestrian"),  # other class: not ignored
+    ]
+    labels.dontcare = [_label([1000, 0, 1200, 200], type_="DontCare")]
+    gt = frame_gt(labels)
+    assert len(gt.boxes) == 1 and len(gt.ignore) == 3 and len(gt.dontcare) == 1
+    det = _dets([[300, 100, 340, 130], [400, 20, 500, 100], [600, 20, 700, 100], [1050, 50, 1150, 150],
+                 [10, 10, 110, 80]], [0.99, 0.98, 0.97, 0.96, 0.5])
+    res = evaluate_detections([det], [gt])
+    assert res["ap"] == pytest.approx(1.0) and res["n_det"] == 1
+    det_fp = _dets([[800, 20, 900, 100], [10, 10, 110, 80]], [0.9, 0.5])
+    assert evaluate_detections([det_fp], [gt])["ap"] == pytest.approx(0.5)
+    # synthetic rule: visible fraction from the wireframes json
+    wire = {"cars": [{"occluded_fraction": 0.85, "truncated": 0.0}] + [{"occluded_fraction": 0.0, "truncated": 0.0}] * 4}
+    np.testing.assert_array_equal(frame_gt(labels, wireframes=wire).boxes, [[400, 20, 500, 100]])
+
+
+def test_viewpoint_accuracy_of_true_positives():
+    gt = FrameGT(np.array([[0, 0, 100, 60], [200, 0, 300, 60]], float), np.array([0.1, np.pi / 2]),
+                 np.zeros((0, 4)), np.zeros((0, 4)))
+    det = Detections(gt.boxes, [1.0, 0.9], [bin_center(0), bin_center(3)])
+    res = evaluate_detections([det], [gt])
+    assert res["viewpoint_bin_acc"] == pytest.approx(0.5) and res["viewpoint_within_45"] == pytest.approx(1.0)
+
+
+# ------------------------------------------------------------------ clustering, NMS, configurations
+
+def test_clustering_merges_same_viewpoint_only():
+    boxes = np.array([[100, 100, 200, 150], [104, 102, 206, 152], [98, 99, 198, 149],  # bin 2, one car
+                      [100, 100, 200, 150],  # same place, bin 3
+                      [500, 100, 600, 150]], float)  # bin 2, elsewhere
+    scores = np.array([0.5, 0.9, 0.1, 0.7, 0.3])
+    bins = np.array([2, 2, 2, 3, 2])
+    b, s, v, n = cluster_activations(boxes, scores, bins)
+    assert len(b) == 3
+    k = int(np.flatnonzero((v == 2) & (n == 3))[0])
+    np.testing.assert_allclose(b[k], boxes[:3].mean(0))
+    assert s[k] == pytest.approx(0.9)
+    assert sorted(zip(v.tolist(), s.round(3).tolist())) == [(2, 0.3), (2, 0.9), (3, 0.7)]
+    # different scales are not merged
+    b2, *_ = cluster_activations(np.array([[0, 0, 100, 50], [0, 0, 200, 100]], float), [1, 1], [0, 0])
+    assert len(b2) == 2
+
+
+def test_nms_and_configuration_topology():
+    keep = nms(np.array([[0, 0, 10, 10], [1, 0, 11, 10], [50, 50, 60, 60]], float), np.array([0.5, 0.9, 0.1]))
+    assert keep.tolist() == [1, 2]
+    edges = {tuple(sorted(e)) for e in EDGES.tolist()}
+    subsets = connected_subsets()
+    assert all(len(s) in (3, 4) for s in subsets) and len(set(subsets)) == len(subsets)
+    for s in subsets[::50]:  # connected: a spanning walk over the edges reaches every vertex
+        seen, todo = {s[0]}, [s[0]]
+        while todo:
+            a = todo.pop()
+            for b in s:
+                if b not in seen and tuple(sorted((a, b))) in edges:
+                    seen.add(b)
+                    todo.append(b)
+        assert seen == set(s)
+    assert mirror_bin(np.arange(8)).tolist() == [4, 3, 2, 1, 0, 7, 6, 5]
+
+
+def test_hog_crop_matches_sliding_window():
+    rng = np.random.default_rng(0)
+    g = rng.random((96, 128)).astype(np.float32)
+    f = hog_cells(g)
+    assert f.shape == (12, 16, N_FEAT) and np.all(f >= 0)
+    c = crop_features(g, [16, 24, 64, 64], 5, 6)  # exactly cells (3..8, 2..8)
+    np.testing.assert_allclose(c, f[3:8, 2:8], atol=0.02)
+
+
+# ------------------------------------------------------------------ storage
+
+def _random_bank(seed=0):
+    rng = np.random.default_rng(seed)
+    configs = [Configuration(2, tuple(range(36)), (4, 6), np.zeros(4), np.ones(2), 1.0, 10),
+               Configuration(5, (0, 1, 2), (5, 3), np.array([-0.2, -0.1, 1.5, 0.4]), np.array([0.4, 0.7]), 0.28, 7)]
+    weights = [rng.normal(size=(*c.template, N_FEAT)).astype(np.float32) for c in configs]
+    return DetectorBank(configs, weights, np.array([-1.0, 0.5], np.float32), 0.25, {"seed": seed})
+
+
+def test_bank_npz_round_trip(tmp_path):
+    bank = _random_bank()
+    path = bank.save(tmp_path / "bank.npz")
+    with np.load(path, allow_pickle=False) as z:  # plain arrays only
+        assert int(z["format_version"]) == 1
+    back = DetectorBank.load(path)
+    assert back.threshold == 0.25 and back.meta == {"seed": 0} and len(back) == 2
+    for a, b in zip(bank.configs, back.configs):
+        assert (a.bin, a.vertices, a.template, a.name) == (b.bin, b.vertices, b.template, b.name)
+        np.testing.assert_allclose(a.offsets, b.offsets, atol=1e-6)
+    for a, b in zip(bank.weights, back.weights):
+        np.testing.assert_array_equal(a, b)
+
+
+# ------------------------------------------------------------------ retraining
+
+def test_retrain_tiny_bank_finds_cars(tmp_path):
+    from wirescene.boxes import iou_2d
+    from wirescene.predetect.training import train_detector_bank
+    from wirescene.synth.generate import generate_scene
+    from wirescene.viewpoints import viewpoint_bin
+
+    bank, rep = train_detector_bank(tmp_path / "tiny.npz", seed=3, n_scenes=8, n_partial=1, bins=[2, 6],
+                                    mining_images=4, neg_per_image=20, n_val=0, cars=(4, 8))
+    assert len(bank) == 4 and (tmp_path / "tiny.npz").is_file()
+    rng = np.random.default_rng(0)
+    hits = rand_hits = n = 0
+    for i in range(2):
+        sc = generate_scene(99, i, cars=(4, 8))
+        cars = np.array([o.box for o in sc.labels.objects
+                         if viewpoint_bin(o.alpha) in (2, 6) and o.box[3] - o.box[1] > 40]).reshape(-1, 4)
+        if not len(cars):
+            continue
+        det = detect_cars(sc.image, bank=bank, threshold=-np.inf)
+        top = det.boxes[:5]
+        n += len(top)
+        hits += int((iou_2d(top[:, None], cars[None]) > 0.5).any(1).sum())
+        H, W = sc.image.shape[:2]
+        wh = top[:, 2:] - top[:, :2]
+        xy = rng.uniform(0, 1, size=wh.shape) * (np.array([W, H]) - wh)
+        rnd = np.concatenate([xy, xy + wh], 1)
+        rand_hits += int((iou_2d(rnd[:, None], cars[None]) > 0.5).any(1).sum())
+    assert n > 0 and hits >= 1 and hits > rand_hits
+
+
+# ------------------------------------------------------------------ shipped bank on real KITTI
+
+def test_detect_cars_on_kitti_image_well_formed():
+    bank = load_default_bank()
+    assert len(bank) >= 8 and sorted(set(bank.bins.tolist())) == list(range(8))
+    img = read_image(KITTI_ROOT / "training" / "image_2" / "000010.png")
+    det = detect_cars(img, bank=bank, threshold=-np.inf)
+    H, W = img.shape[:2]
+    assert isinstance(det, Detections) and det.boxes.shape == (len(det), 4) and len(det) > 0
+    assert np.all(np.isfinite(det.boxes)) and np.all(det.boxes[:, 2] > det.boxes[:, 0])
+    assert np.all(det.boxes[:, 3] > det.boxes[:, 1])
+    assert det.boxes[:, [0, 2]].min() >= 0 and det.boxes[:, [0, 2]].max() <= W - 1
+    assert det.boxes[:, [1, 3]].min() >= 0 and det.boxes[:, [1, 3]].max() <= H - 1
+    assert np.all(np.diff(det.scores) <= 0)
+    assert np.all(np.isin(np.round(np.rad2deg(det.alpha)) % 45, [0]))
+    thr = detect_cars(img, bank=bank)
+    assert np.all(thr.scores > bank.threshold) and len(thr) <= len(det)
+
+
+def test_detect_command_writes_readable_files(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from wirescene.detect import read_detections
+    from wirescene.predetect.commands import detect
+
+    res = CliRunner().invoke(detect, [str(KITTI_ROOT), "--frames", "000010", "--out", str(tmp_path / "dets"),
+                                      "--json", str(tmp_path / "ap.json"), "--pr-curve", str(tmp_path / "pr.png"),
+                                      "--threshold", "-0.5"])
+    assert res.exit_code == 0, res.output
+    assert "AP" in res.output and (tmp_path / "pr.png").stat().st_size > 0
+    out = json.loads((tmp_path / "ap.json").read_text())
+    assert 0.0 <= out["ap"]["ap"] <= 1.0 and out["seconds_per_frame"] > 0
+    dets = read_detections(tmp_path / "dets" / "000010.json")
+    assert len(dets) > 0 and np.all(np.isfinite(dets.alpha))
