@@ -11,7 +11,7 @@ import click
 import numpy as np
 
 from . import __version__
-from .errors import WiresceneError
+from .errors import InputError, WiresceneError
 
 
 class _Group(click.Group):
@@ -42,11 +42,22 @@ def _progress(desc: str):
     return lambda it: tqdm(list(it), desc=desc, unit="frame", leave=False, file=sys.stderr)
 
 
-def _fit_options(particles: int, seed: int):
+def _fit_options(particles: int, seed: int, **inference):
     from .scene.fit import FitOptions
+    from .scene.inference import InferenceOptions
     from .scene.lifting import LiftingOptions
 
-    return FitOptions(lifting=LiftingOptions(n_particles=particles), seed=seed)
+    inference = {k: v for k, v in inference.items() if v is not None}
+    return FitOptions(lifting=LiftingOptions(n_particles=particles), inference=InferenceOptions(**inference), seed=seed)
+
+
+def _inference_options(f):
+    """Options of the fine-grained inference stage, shared by `eval` and `fit`."""
+    f = click.option("--iterations", type=int, default=None, help="Inference iterations (Algorithm 1).")(f)
+    f = click.option("--samples", type=int, default=None, help="Samples per object and iteration.")(f)
+    f = click.option("--box-weight", type=float, default=None,
+                     help="Weight of the detection box in the fine objective (0: the paper's part likelihood only).")(f)
+    return f
 
 
 _variant_choice = None
@@ -56,6 +67,12 @@ def _variants():
     from .scene.variants import VARIANTS
 
     return list(VARIANTS)
+
+
+def _is_fine(variant: str) -> bool:
+    from .scene.variants import get_variant
+
+    return get_variant(variant).fine
 
 
 def _write_json_atomic(path: Path, data: dict) -> None:
@@ -68,7 +85,8 @@ def _write_json_atomic(path: Path, data: dict) -> None:
 @main.command("eval")
 @click.argument("kitti_root", type=click.Path(path_type=Path))
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()), help="Model variant(s); default: all available.")
-@click.option("--detections", default="gt", show_default=True, help="'gt' (label boxes) or a directory of per-frame detection files.")
+@click.option("--detections", default="gt", show_default=True,
+              help="'gt' (label boxes), 'bank' (our pre-detection from raw pixels) or a directory of per-frame detection files.")
 @click.option("--viewpoint-noise", default=0.0, show_default=True, help="Std. dev. (deg) of noise on the GT viewpoint before binning.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all labelled frames).")
 @click.option("--particles", default=250, show_default=True, help="Scene particles kept by the coarse stage.")
@@ -76,7 +94,11 @@ def _write_json_atomic(path: Path, data: dict) -> None:
 @click.option("--split", default="training", show_default=True)
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the metrics as JSON.")
 @click.option("--predictions", type=click.Path(path_type=Path), default=None, help="Write KITTI label files per variant here.")
-def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions):
+@click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
+              help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
+@_inference_options
+def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
+             iterations, samples, box_weight):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from .datasets.kitti import KittiDataset
     from .evaluate import format_table
@@ -90,11 +112,12 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
         variants,
         frames=frame_ids,
         source=DetectionSource(detections, viewpoint_noise),
-        options=_fit_options(particles, seed),
+        options=_fit_options(particles, seed, iterations=iterations, samples=samples, box_weight=box_weight),
         predictions_dir=predictions,
+        evidence=evidence,
         progress=_progress("eval"),
     )
-    click.echo(format_table(reports))
+    click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if any(_is_fine(v) for v in variants) else ("3d", "viewpoint")))
     if json_out is not None:
         data = {v: r.to_json_dict(include_records=True) for v, r in reports.items()}
         if len(variants) == 1:
@@ -106,14 +129,16 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
 @main.command("fit")
 @click.argument("image", type=click.Path(path_type=Path))
 @click.option("--calib", type=click.Path(path_type=Path), required=True, help="KITTI calibration file (P2 is used).")
-@click.option("--detections", type=click.Path(path_type=Path), required=True,
-              help="2D car detections: .json, .csv or KITTI label .txt (see `wirescene.detect.read_detections`).")
+@click.option("--detections", type=click.Path(path_type=Path), default=None,
+              help="2D car detections: .json, .csv or KITTI label .txt (see `wirescene.detect.read_detections`); "
+                   "default: our own pre-detection from raw pixels.")
 @click.option("--gt", type=click.Path(path_type=Path), default=None, help="KITTI label file drawn in green for comparison.")
 @click.option("--variant", type=click.Choice(_variants()), default="coarse+gp", show_default=True)
 @click.option("--particles", default=250, show_default=True)
 @click.option("--seed", default=0, show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
-def fit_cmd(image, calib, detections, gt, variant, particles, seed, out):
+@_inference_options
+def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, box_weight):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from .camera import read_kitti_calib
     from .datasets.kitti import read_image, read_labels
@@ -123,9 +148,17 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out):
 
     img = read_image(image)
     camera = read_kitti_calib(calib).camera((img.shape[1], img.shape[0]))
-    dets = read_detections(detections)
+    if detections is not None:
+        dets = read_detections(detections)
+    else:
+        from .predetect import detect_cars
+
+        dets = detect_cars(img)
+        if len(dets) == 0:
+            raise InputError("pre-detection found no car in the image", path=image)
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
-    estimate = fit_scene(camera, dets, variant=variant, options=_fit_options(particles, seed))
+    options = _fit_options(particles, seed, iterations=iterations, samples=samples, box_weight=box_weight)
+    estimate = fit_scene(camera, dets, variant=variant, options=options, image=img)
     paths = write_fit_outputs(out, Path(image).stem, image=img, camera=camera, estimate=estimate, detections=dets, gt=gt_objs)
     for kind, p in paths.items():
         click.echo(f"{kind:8s} {p}")
@@ -213,6 +246,12 @@ def _register_optional_commands():
     main.add_command(cad)
     train = click.Group("train", help="Train the model's artefacts from documented data.")
     train.add_command(shape)
+    from .parts_commands import parts
+    from .predetect.commands import detect, detector
+
+    train.add_command(parts)
+    train.add_command(detector)
+    main.add_command(detect)
     main.add_command(train)
 
 

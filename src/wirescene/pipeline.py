@@ -19,9 +19,12 @@ from .detect import detections_from_labels, read_detections
 from .errors import InputError
 from .evaluate import EvaluationReport, FrameResult, evaluate
 from .scene.fit import FitOptions, fit_scene
+from .scene.evidence import oracle_evidence, part_evidence
 from .scene.lifting import lift_table
+from .scene.variants import get_variant
 from .scene.hypotheses import Detections, SceneEstimate
 from .viz import birds_eye, overlay, save_figure
+from .wireframe import EDGES
 
 
 def estimate_to_labels(estimate: SceneEstimate, *, type_: str = "Car") -> list[Label]:
@@ -43,13 +46,19 @@ def estimate_to_labels(estimate: SceneEstimate, *, type_: str = "Car") -> list[L
 
 
 def frame_result(
-    frame_id: str, gt: FrameLabels, detections: Detections, estimate: SceneEstimate, vertex_gt: WireframeGT | None = None
+    frame_id: str,
+    gt: FrameLabels,
+    detections: Detections,
+    estimate: SceneEstimate,
+    vertex_gt: WireframeGT | None = None,
+    camera: Camera | None = None,
 ) -> FrameResult:
     """Evaluation record of one frame (estimates aligned with detections); with
     ``vertex_gt`` (synthetic data) the occlusion subsets use true part counts."""
     objs = sorted(estimate.objects, key=lambda o: o.detection_index)
     if [o.detection_index for o in objs] != list(range(len(detections))):
         raise ValueError("estimate must hold exactly one object per detection")
+    fine = camera is not None and objs and all(o.vertices is not None for o in objs)
     return FrameResult(
         frame_id=frame_id,
         gt=gt.objects,
@@ -60,6 +69,8 @@ def frame_result(
         est_dims=np.array([o.dims for o in objs]).reshape(-1, 3),
         est_rotation_y=np.array([o.rotation_y for o in objs]),
         est_alpha=np.array([o.alpha for o in objs]),
+        est_occluded=np.array([~o.visibility for o in objs]) if fine else None,
+        est_vertices_2d=np.array([camera.project(o.vertices) for o in objs]) if fine else None,
         gt_occluded_parts=None if vertex_gt is None else vertex_gt.occluded_parts,
         gt_vertices_2d=None if vertex_gt is None else vertex_gt.vertices_2d,
         gt_vertex_visible=None if vertex_gt is None else vertex_gt.visible,
@@ -69,8 +80,9 @@ def frame_result(
 
 @dataclass(frozen=True)
 class DetectionSource:
-    """Where pre-detections come from: ``"gt"`` (label boxes, noisy viewpoint bins) or
-    a directory of per-frame detection files (``FRAME.json``, ``.csv`` or ``.txt``)."""
+    """Where pre-detections come from: ``"gt"`` (label boxes, noisy viewpoint bins),
+    ``"bank"`` (our part-configuration detector bank on the raw image) or a directory of
+    per-frame detection files (``FRAME.json``, ``.csv`` or ``.txt``)."""
 
     spec: str = "gt"
     viewpoint_noise_deg: float = 0.0
@@ -78,9 +90,13 @@ class DetectionSource:
     def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator) -> Detections:
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
+        if self.spec == "bank":
+            from .predetect import detect_cars
+
+            return detect_cars(dataset.image(frame_id))
         folder = Path(self.spec)
         if not folder.is_dir():
-            raise InputError("detections must be 'gt' or a directory of per-frame files", path=folder)
+            raise InputError("detections must be 'gt', 'bank' or a directory of per-frame files", path=folder)
         for ext in (".json", ".csv", ".txt"):
             path = folder / f"{frame_id}{ext}"
             if path.is_file():
@@ -108,13 +124,19 @@ def evaluate_dataset(
     source: DetectionSource = DetectionSource(),
     options: FitOptions = FitOptions(),
     predictions_dir: Path | None = None,
+    evidence: str = "parts",
     progress: Callable[[Iterable], Iterable] = lambda it: it,
 ) -> dict[str, EvaluationReport]:
     """Fit every variant on every frame and evaluate with the paper's protocol.
 
     With ``predictions_dir``, KITTI label files of each variant are written to
-    ``predictions_dir/VARIANT/FRAME.txt``.
+    ``predictions_dir/VARIANT/FRAME.txt``. ``evidence`` selects what the fine-grained
+    variants fit to: ``"parts"`` (the part detectors, the real system) or ``"oracle"``
+    (true vertex positions of synthetic scenes; needs ``wireframes/`` ground truth).
     """
+    if evidence not in ("parts", "oracle"):
+        raise ValueError(f"evidence must be 'parts' or 'oracle', got {evidence!r}")
+    needs_evidence = any(get_variant(v).fine for v in variants)
     if not dataset.has_labels:
         raise InputError("evaluation needs label_2/ ground truth", path=dataset.split_dir)
     variants = list(variants)
@@ -127,9 +149,17 @@ def evaluate_dataset(
         detections = source.for_frame(dataset, frame_id, frame_seed(options.seed, frame_id))
         camera = dataset.camera(frame_id)
         lifted = lift_table(camera, detections, options=options.lifting) if len(detections) else None
+        frame_evidence = None
+        if needs_evidence and len(detections):
+            if evidence == "oracle":
+                if vertex_gt is None:
+                    raise InputError("oracle evidence needs wireframes/ ground truth (synthetic scenes)", path=gt_path)
+                frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
+            else:
+                frame_evidence = part_evidence(dataset.image(frame_id), detections)
         for v in variants:
-            estimate = fit_scene(camera, detections, variant=v, options=options, lifted=lifted)
-            results[v].append(frame_result(frame_id, gt, detections, estimate, vertex_gt))
+            estimate = fit_scene(camera, detections, variant=v, options=options, lifted=lifted, evidence=frame_evidence)
+            results[v].append(frame_result(frame_id, gt, detections, estimate, vertex_gt, camera))
             if predictions_dir is not None:
                 write_labels(Path(predictions_dir) / v / f"{frame_id}.txt", estimate_to_labels(estimate))
     return {v: evaluate(results[v]) for v in variants}
@@ -155,7 +185,6 @@ def write_fit_outputs(
     estimate: SceneEstimate,
     detections: Detections,
     gt: list[Label] = (),
-    edges: np.ndarray | None = None,
 ) -> dict[str, Path]:
     """Write ``STEM.txt`` (KITTI labels), ``STEM.json``, ``STEM_overlay.png`` and
     ``STEM_bev.png``. Everything is rendered in memory first; if any write fails the
@@ -163,7 +192,7 @@ def write_fit_outputs(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
-    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=detections, title=f"{stem}  {estimate.variant}", edges=edges)
+    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=detections, title=f"{stem}  {estimate.variant}", edges=EDGES)
     fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=f"{stem}  {estimate.variant}")
     paths = {
         "labels": out_dir / f"{stem}.txt",

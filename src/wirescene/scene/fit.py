@@ -8,7 +8,9 @@ import numpy as np
 
 from ..camera import Camera
 from .hypotheses import Detections, SceneEstimate
+from .inference import InferenceOptions, estimate_from_refined, refine_particles
 from .lifting import LiftingOptions, LiftingTable, lift_table, select_particles
+from .likelihood import PartEvidence
 from .variants import Variant, get_variant
 
 
@@ -17,6 +19,7 @@ class FitOptions:
     """Options of every stage of :func:`fit_scene`."""
 
     lifting: LiftingOptions = field(default_factory=LiftingOptions)
+    inference: InferenceOptions = field(default_factory=InferenceOptions)
     seed: int = 0
 
 
@@ -27,6 +30,8 @@ def fit_scene(
     variant: str | Variant = "coarse+gp",
     options: FitOptions = FitOptions(),
     lifted: LiftingTable | None = None,
+    image: np.ndarray | None = None,
+    evidence: PartEvidence | None = None,
 ) -> SceneEstimate:
     """Estimate the 3D scene behind ``detections``.
 
@@ -56,6 +61,20 @@ def fit_scene(
         lifted, shared_plane=v.shared_plane, n_particles=options.lifting.n_particles,
         robust_cost=options.lifting.robust_cost,
     )
-    best = int(np.argmin(particles.cost))
-    estimate = SceneEstimate.from_particle(particles, best, detections, variant=v.name)
-    return estimate
+    if not v.fine:
+        best = int(np.argmin(particles.cost))
+        return SceneEstimate.from_particle(particles, best, detections, variant=v.name)
+    if evidence is None:
+        if image is None:
+            raise ValueError(f"variant {v.name!r} needs the image (or precomputed evidence)")
+        from .evidence import part_evidence
+
+        evidence = part_evidence(image, detections)
+    from ..shape import load_default
+
+    shape_model = load_default()
+    rng = np.random.default_rng([options.seed, len(detections)])
+    refined = refine_particles(
+        camera, particles, evidence, shape_model, options=options.inference, rng=rng, boxes=detections.boxes
+    )
+    return estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)

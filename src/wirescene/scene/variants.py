@@ -38,6 +38,8 @@ VARIANTS: dict[str, Variant] = {
     for v in (
         Variant("coarse", shared_plane=False),
         Variant("coarse+gp", shared_plane=True),
+        Variant("fg", shared_plane=False, fine=True),
+        Variant("fg+gp", shared_plane=True, fine=True),
     )
 }
 
