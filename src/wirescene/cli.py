@@ -166,35 +166,30 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
 
 @main.command("demo")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("wirescene_demo"), show_default=True)
-def demo_cmd(out):
-    """Run fit and evaluation on the bundled real KITTI frames and write pictures."""
+@click.option("--particles", default=100, show_default=True, help="Scene particles (the paper used 250; fewer keep the demo short).")
+def demo_cmd(out, particles):
+    """Fit every model variant to the bundled real KITTI frames, evaluate, write pictures."""
     import time
 
     from .datasets.kitti import KittiDataset
-    from .detect import detections_from_labels
     from .evaluate import format_table
     from .pipeline import DetectionSource, evaluate_dataset, write_fit_outputs
-    from .scene.fit import fit_scene
-    from .scene.lifting import lift_table
 
     t0 = time.perf_counter()
     dataset = KittiDataset(sample_root())
-    options = _fit_options(250, 0)
-    frame = dataset.frame_ids()[0]
-    labels = dataset.labels(frame)
-    dets = detections_from_labels(labels)
-    camera = dataset.camera(frame)
+    first = dataset.frame_ids()[0]
     written = []
-    lifted = lift_table(camera, dets, options=options.lifting)
-    for variant in _variants():
-        estimate = fit_scene(camera, dets, variant=variant, options=options, lifted=lifted)
-        paths = write_fit_outputs(
-            out / variant, frame, image=dataset.image(frame), camera=camera,
-            estimate=estimate, detections=dets, gt=labels.of_type("Car"),
-        )
-        written += list(paths.values())
-    reports = evaluate_dataset(dataset, _variants(), source=DetectionSource("gt"), options=options, progress=_progress("demo eval"))
-    click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} (GT boxes as pre-detections)\n")
+
+    def draw(frame_id, variant, estimate, camera, detections, gt):
+        if frame_id == first:
+            paths = write_fit_outputs(out / variant, frame_id, image=dataset.image(frame_id), camera=camera,
+                                      estimate=estimate, detections=detections, gt=gt.of_type("Car"))
+            written.extend(paths.values())
+
+    reports = evaluate_dataset(dataset, _variants(), source=DetectionSource("gt"), options=_fit_options(particles, 0),
+                               progress=_progress("demo"), on_estimate=draw)
+    click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
+               f"(GT boxes as pre-detections, {particles} particles)\n")
     click.echo(format_table(reports))
     _write_json_atomic(out / "eval.json", {v: r.to_json_dict(include_records=False) for v, r in reports.items()})
     click.echo("\nwritten:")

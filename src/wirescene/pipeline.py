@@ -126,6 +126,7 @@ def evaluate_dataset(
     predictions_dir: Path | None = None,
     evidence: str = "parts",
     progress: Callable[[Iterable], Iterable] = lambda it: it,
+    on_estimate: Callable[..., None] | None = None,
 ) -> dict[str, EvaluationReport]:
     """Fit every variant on every frame and evaluate with the paper's protocol.
 
@@ -133,6 +134,8 @@ def evaluate_dataset(
     ``predictions_dir/VARIANT/FRAME.txt``. ``evidence`` selects what the fine-grained
     variants fit to: ``"parts"`` (the part detectors, the real system) or ``"oracle"``
     (true vertex positions of synthetic scenes; needs ``wireframes/`` ground truth).
+    ``on_estimate(frame_id, variant, estimate, camera, detections, gt)`` is called for
+    every fit, e.g. to draw it.
     """
     if evidence not in ("parts", "oracle"):
         raise ValueError(f"evidence must be 'parts' or 'oracle', got {evidence!r}")
@@ -160,6 +163,8 @@ def evaluate_dataset(
         for v in variants:
             estimate = fit_scene(camera, detections, variant=v, options=options, lifted=lifted, evidence=frame_evidence)
             results[v].append(frame_result(frame_id, gt, detections, estimate, vertex_gt, camera))
+            if on_estimate is not None:
+                on_estimate(frame_id, v, estimate, camera, detections, gt)
             if predictions_dir is not None:
                 write_labels(Path(predictions_dir) / v / f"{frame_id}.txt", estimate_to_labels(estimate))
     return {v: evaluate(results[v]) for v in variants}
