@@ -244,8 +244,11 @@ def _register_optional_commands():
     from .parts_commands import parts
     from .predetect.commands import detect, detector
 
+    from .occlusion_commands import occlusion
+
     train.add_command(parts)
     train.add_command(detector)
+    train.add_command(occlusion)
     main.add_command(detect)
     main.add_command(train)
 

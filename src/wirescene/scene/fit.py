@@ -75,6 +75,7 @@ def fit_scene(
     shape_model = load_default()
     rng = np.random.default_rng([options.seed, len(detections)])
     refined = refine_particles(
-        camera, particles, evidence, shape_model, options=options.inference, rng=rng, boxes=detections.boxes
+        camera, particles, evidence, shape_model, options=options.inference, rng=rng, boxes=detections.boxes,
+        searched_occluder=v.searched_occluder, deterministic_occlusion=v.deterministic_occlusion,
     )
     return estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)

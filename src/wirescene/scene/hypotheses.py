@@ -124,6 +124,7 @@ class ObjectEstimate:
     vertices: np.ndarray | None = None  # (36, 3) camera frame
     visibility: np.ndarray | None = None  # (36,) bool
     exemplar: str | None = None
+    occluder_mask: int | None = None  # index into wirescene.masks.occluder_masks()
 
     @property
     def rotation_y(self) -> float:
@@ -157,6 +158,8 @@ class ObjectEstimate:
             d["visibility"] = [bool(v) for v in self.visibility]
         if self.exemplar is not None:
             d["exemplar"] = self.exemplar
+        if self.occluder_mask is not None:
+            d["occluder_mask"] = int(self.occluder_mask)
         return d
 
 

@@ -21,7 +21,7 @@ and an axis-aligned Gaussian samples them efficiently.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,7 +30,11 @@ from ..groundplane import wrap_angle
 from ..shape import ShapeModel
 from .hypotheses import SceneParticles
 from .lifting import box_residual
-from .likelihood import PartEvidence, instantiate_wireframes, wireframe_likelihood
+from ..occlusion_training import load_occluded_score
+from ..masks import all_mask_hidden, fit_mask, mask_hidden
+from ..occlusion import inter_object_occlusion
+from ..wireframe import FACES
+from .likelihood import PartEvidence, instantiate_wireframes, object_likelihood, wireframe_likelihood
 
 
 @dataclass(frozen=True)
@@ -54,7 +58,9 @@ class InferenceOptions:
     max_sigma_ratio: float = 3.0
     shape_limit: float = 3.0
     block_sampling: bool = True  # alternate pose and shape samples (halves the dimension per step)
-    occluded_score: float = -0.5  # the paper's c: log-ratio charged to occluded parts
+    # The paper's c, the log ratio charged to occluded parts, chosen on held-out
+    # synthetic scenes by `wirescene train occlusion` (wirescene.occlusion_training).
+    occluded_score: float = field(default_factory=load_occluded_score)
     # Weight of the pre-detection box as evidence (not in the paper, whose objective is
     # the part likelihood alone). 0, the paper's objective, is the default: boxes span
     # only the visible part of occluded cars, and on synthetic scenes with perfect part
@@ -65,13 +71,19 @@ class InferenceOptions:
 @dataclass
 class RefinedParticles:
     """Result of :func:`refine_particles`: the particles' final parameters (``x``, ``z``,
-    ``azimuth`` ``(P, N)``, ``shape`` ``(P, N, K)``) and likelihoods ``score`` ``(P, N)``
-    (higher is better), with the coarse particles' planes."""
+    ``azimuth`` ``(P, N)``, ``shape`` ``(P, N, K)``), likelihoods ``score`` ``(P, N)``
+    (higher is better), occluder ``mask`` indices ``(P, N)`` and deterministic
+    inter-object occlusion ``gamma`` ``(P, N, 36)``, with the coarse particles' planes.
+    ``coupled`` says whether objects depend on each other (shared plane or
+    deterministic occlusion), so that only whole particles can be compared."""
 
     particles: SceneParticles
     shape: np.ndarray
     score: np.ndarray
     history: np.ndarray  # (iterations + 1,) best scene objective per iteration
+    mask: np.ndarray
+    gamma: np.ndarray
+    coupled: bool
 
     def best_per_object(self) -> np.ndarray:
         """(N,) particle index with the highest likelihood for each object."""
@@ -80,6 +92,11 @@ class RefinedParticles:
     def best_scene(self) -> int:
         """Particle with the highest scene objective (sum of object likelihoods)."""
         return int(np.argmax(self.score.sum(axis=1)))
+
+    def best_rows(self) -> np.ndarray:
+        """(N,) particle of each object in the MAP estimate."""
+        N = self.score.shape[1]
+        return np.full(N, self.best_scene()) if self.coupled else self.best_per_object()
 
 
 def _to_viewing(x, z, azimuth):
@@ -92,21 +109,33 @@ def _from_viewing(theta):
     return rng_ * np.sin(phi), rng_ * np.cos(phi), wrap_angle(alpha + phi)
 
 
-def _evaluate(camera, shape_model, evidence, particles, theta, n_shape, c, boxes=None, box_weight=0.0):
-    """Objective of viewing parameters ``theta`` ``(P, N, M, 3 + K)`` -> ``(P, N, M)``:
-    the likelihood, minus ``box_weight`` times the squared normalised misfit between the
-    projected wireframe's box and the detection ``boxes`` ``(N, 4)``."""
-    P, N = particles.x.shape
+def _geometry(camera, shape_model, particles, theta, n_shape):
+    """Placed wireframes of viewing parameters ``theta`` ``(P, N, M, 3 + K)``."""
     expand = lambda a: np.asarray(a)[:, :, None]  # noqa: E731
     x, z, az = _from_viewing(theta)
-    batch = instantiate_wireframes(
-        camera, shape_model,
-        x=x, z=z, azimuth=az,
+    return instantiate_wireframes(
+        camera, shape_model, x=x, z=z, azimuth=az,
         pitch=expand(particles.pitch), roll=expand(particles.roll),
         shape=theta[..., 3:3 + n_shape], height=particles.height,
     )
+
+
+def _evaluate(camera, shape_model, evidence, particles, theta, n_shape, c, boxes=None, box_weight=0.0,
+              mask=None, gamma=None):
+    """Objective of viewing parameters ``theta`` ``(P, N, M, 3 + K)`` -> ``(P, N, M)``:
+    the likelihood with vertices hidden by each object's occluder ``mask`` ``(P, N)``
+    and by ``gamma`` ``(P, N, 36)``, minus ``box_weight`` times the squared normalised
+    misfit between the projected wireframe's box and the detection ``boxes`` ``(N, 4)``."""
+    N = particles.x.shape[1]
+    batch = _geometry(camera, shape_model, particles, theta, n_shape)
+    hidden = None
+    if mask is not None:
+        hidden = mask_hidden(batch.uv, np.asarray(mask)[:, :, None])
+    if gamma is not None:
+        g = np.asarray(gamma)[:, :, None, :]
+        hidden = g if hidden is None else hidden | g
     obj = np.broadcast_to(np.arange(N)[None, :, None], theta.shape[:-1])
-    value = wireframe_likelihood(batch, evidence, obj, c=c)
+    value = wireframe_likelihood(batch, evidence, obj, c=c, mask_hidden=hidden)
     if box_weight and boxes is not None:
         projected = np.concatenate([batch.uv.min(axis=-2), batch.uv.max(axis=-2)], axis=-1)
         if camera.image_size is not None:
@@ -115,6 +144,40 @@ def _evaluate(camera, shape_model, evidence, particles, theta, n_shape, c, boxes
         r = box_residual(projected, boxes[None, :, None, :], batch.depth.min(axis=-1))
         value = value - box_weight * np.sum(r**2, axis=-1)
     return value
+
+
+def update_occlusion(camera, shape_model, evidence, particles, theta, n_shape, c, *, searched: bool, deterministic: bool):
+    """Step 2 of Algorithm 1 for the current parameters ``theta`` ``(P, N, D)``.
+
+    * deterministic only (``fg+do``): ``gamma`` by ray casting against the other
+      objects, and the mask that best represents it (occluded vertices weigh double);
+      the mask alone then defines the occlusion;
+    * searched only (``fg+so``): exhaustive search of the mask maximising the
+      likelihood, occluded parts scoring ``c``;
+    * both (``full``): the searched mask is combined with ``gamma``, so every
+      deterministically occluded vertex stays occluded whatever the mask (the paper's
+      domain restriction).
+
+    Returns ``mask`` ``(P, N)`` and ``gamma`` ``(P, N, 36)`` (None where unused).
+    """
+    P, N = theta.shape[:2]
+    batch = _geometry(camera, shape_model, particles, theta[:, :, None], n_shape)
+    uv = batch.uv[:, :, 0]
+    self_hidden = batch.self_hidden[:, :, 0] | (batch.depth[:, :, 0] <= 0.1)
+    gamma = None
+    if deterministic:
+        gamma = inter_object_occlusion(batch.vertices[:, :, 0], FACES, camera.center) & ~self_hidden
+    if searched:
+        obj = np.broadcast_to(np.arange(N)[None, :], (P, N))
+        e = evidence.log_ratio(uv, obj, batch.scale[:, :, 0])  # (P, N, 36)
+        hidden = all_mask_hidden(uv)  # (P, N, A, 36)
+        if gamma is not None:
+            hidden = hidden | gamma[:, :, None, :]
+        L = object_likelihood(e[:, :, None, :], self_hidden[:, :, None, :], hidden, c=c)
+        return np.argmax(L, axis=-1), gamma
+    if deterministic:
+        return fit_mask(uv, gamma, ~self_hidden), None
+    return None, None
 
 
 def refine_particles(
@@ -126,8 +189,10 @@ def refine_particles(
     options: InferenceOptions = InferenceOptions(),
     rng: np.random.Generator | None = None,
     boxes: np.ndarray | None = None,
+    searched_occluder: bool = False,
+    deterministic_occlusion: bool = False,
 ) -> RefinedParticles:
-    """Run Algorithm 1 (without occluder masks) on every particle.
+    """Run Algorithm 1 on every particle.
 
     Parameters
     ----------
@@ -137,6 +202,9 @@ def refine_particles(
         Per-vertex image evidence; object ``j`` of the particles is detection ``j``.
     boxes : (N, 4) array, optional
         Detection boxes, used with ``options.box_weight``.
+    searched_occluder, deterministic_occlusion : bool
+        The ``+so`` and ``+do`` switches (see :func:`update_occlusion`). Masks start
+        empty (``a0``) and are updated after every sampling step.
     """
     rng = np.random.default_rng(0) if rng is None else rng
     P, N = particles.x.shape
@@ -150,13 +218,19 @@ def refine_particles(
     sigma0[..., 2] = np.deg2rad(options.sigma_azimuth_deg)
     sigma0[..., 3:] = options.sigma_shape
     sigma = sigma0.copy()
-    evaluate = lambda th: _evaluate(  # noqa: E731
-        camera, shape_model, evidence, particles, th, K, options.occluded_score, boxes, options.box_weight
-    )
+    occlusion = searched_occluder or deterministic_occlusion
+    mask = np.zeros((P, N), dtype=int) if occlusion else None
+    gamma = None
+
+    def evaluate(th):
+        return _evaluate(camera, shape_model, evidence, particles, th, K, options.occluded_score, boxes,
+                         options.box_weight, mask, gamma)
+
     score = evaluate(theta[:, :, None])[..., 0]
     history = [score.sum(axis=1).max()]
     blocks = [np.arange(3), np.arange(3, D)] if options.block_sampling and K else [np.arange(D)]
     for it in range(options.iterations):
+        # 1. sample pose or shape of every object with its occlusion fixed
         block = blocks[it % len(blocks)]
         noise = np.zeros((P, N, options.samples, D))
         noise[..., block] = rng.standard_normal((P, N, options.samples, len(block)))
@@ -168,7 +242,7 @@ def refine_particles(
         values = evaluate(cand)
         best = np.argmax(values, axis=2)
         new_theta = np.take_along_axis(cand, best[..., None, None], axis=2)[:, :, 0]
-        # Smoothing-based variance update around the previous value.
+        # 3. smoothing-based variance update around the previous value
         spread = values.std(axis=2, keepdims=True) + 1e-9
         w = np.exp((values - values.max(axis=2, keepdims=True)) / spread)
         w /= w.sum(axis=2, keepdims=True)
@@ -179,13 +253,23 @@ def refine_particles(
         sigma[..., block] = updated[..., block]
         theta = new_theta
         score = np.take_along_axis(values, best[..., None], axis=2)[..., 0]
+        # 2. occlusion update for the new shapes and poses
+        if occlusion:
+            mask, gamma = update_occlusion(camera, shape_model, evidence, particles, theta, K, options.occluded_score,
+                                           searched=searched_occluder, deterministic=deterministic_occlusion)
+            score = evaluate(theta[:, :, None])[..., 0]
         history.append(score.sum(axis=1).max())
     x, z, azimuth = _from_viewing(theta)
     refined = SceneParticles(
         pitch=particles.pitch, roll=particles.roll, x=x, z=z, azimuth=azimuth,
         object_cost=-score, dims=particles.dims, height=particles.height, shared_plane=particles.shared_plane,
     )
-    return RefinedParticles(refined, theta[..., 3:], score, np.array(history))
+    return RefinedParticles(
+        refined, theta[..., 3:], score, np.array(history),
+        mask=np.zeros((P, N), dtype=int) if mask is None else mask,
+        gamma=np.zeros((P, N, 36), dtype=bool) if gamma is None else gamma,
+        coupled=particles.shared_plane or deterministic_occlusion,
+    )
 
 
 def estimate_from_refined(
@@ -208,7 +292,7 @@ def estimate_from_refined(
 
     p = refined.particles
     N = p.n_objects
-    rows = np.full(N, refined.best_scene()) if p.shared_plane else refined.best_per_object()
+    rows = refined.best_rows()
     cols = np.arange(N)
     shape = refined.shape[rows, cols]
     batch = instantiate_wireframes(
@@ -221,6 +305,7 @@ def estimate_from_refined(
     bottom_centre = np.stack([(lo[:, 0] + hi[:, 0]) / 2, np.zeros(N), (lo[:, 2] + hi[:, 2]) / 2], axis=1)
     location = batch.location + np.einsum("nij,nj->ni", batch.R, bottom_centre)
     _, names, _ = shape_model.nearest_exemplar(X_obj)
+    occluded = refined.gamma[rows, cols] | mask_hidden(batch.uv, refined.mask[rows, cols])
     objects = [
         ObjectEstimate(
             detection_index=j,
@@ -234,8 +319,9 @@ def estimate_from_refined(
             roll=float(p.roll[rows[j], j]),
             shape=shape[j],
             vertices=batch.vertices[j],
-            visibility=~batch.self_hidden[j],
+            visibility=~(batch.self_hidden[j] | occluded[j]),
             exemplar=str(names[j]),
+            occluder_mask=int(refined.mask[rows[j], j]),
         )
         for j in range(N)
     ]

@@ -39,7 +39,10 @@ VARIANTS: dict[str, Variant] = {
         Variant("coarse", shared_plane=False),
         Variant("coarse+gp", shared_plane=True),
         Variant("fg", shared_plane=False, fine=True),
+        Variant("fg+so", shared_plane=False, fine=True, searched_occluder=True),
+        Variant("fg+do", shared_plane=False, fine=True, deterministic_occlusion=True),
         Variant("fg+gp", shared_plane=True, fine=True),
+        Variant("full", shared_plane=True, fine=True, searched_occluder=True, deterministic_occlusion=True),
     )
 }
 
