@@ -25,7 +25,7 @@ def _pattern(shape=(80, 100), seed=0):
 def test_feature_shapes():
     e = _pattern()
     pts = np.array([[10, 10], [40, 50], [79, 99]])
-    for kind in feat.KINDS:
+    for kind in ("sc", "hog"):
         x = feat.extract(e, kind, points=pts)
         assert x.shape == (3, feat.feature_dim(kind)) and x.dtype == np.float32
         assert np.isfinite(x).all()
@@ -34,6 +34,27 @@ def test_feature_shapes():
     assert feat.extract(e, "sc").shape == e.shape + (feat.feature_dim("sc"),)
     with pytest.raises(ValueError):
         feat.extract(e, "nope")
+    img = (np.random.default_rng(0).random((60, 90, 3)) * 255).astype(np.uint8)
+    for kind in feat.KINDS:
+        x = feat.describe(feat.canonical_inputs(img, 1.3, kind), pts, kind)
+        assert x.shape == (3, feat.feature_dim(kind)) and x.dtype == np.float32 and np.isfinite(x).all()
+
+
+def test_ghog_sees_orientation_and_is_translation_equivariant():
+    g = np.zeros((80, 100), np.float32)
+    g[:, 50:] = 1.0  # vertical step edge at column 49.5
+    cells = feat.orientation_cells(g)
+    # gradient along x -> orientation 0 -> bins 0 and 8 (the vote is split around 0)
+    assert cells[40, 50, [0, 8]].sum() > 0.95 * cells[40, 50].sum() > 0
+    shifted = np.zeros((100, 130), np.float32)
+    shifted[13:93, 21:121] = g
+    shifted[13:93, 121:] = 1.0
+    pts = np.array([[30, 40], [40, 50], [50, 60]])
+    d0 = feat.ghog_at(cells, pts)
+    d1 = feat.ghog_at(feat.orientation_cells(shifted), pts + [13, 21])
+    assert_close(d0, d1, atol=1e-5)
+    # a blank patch: no structure, zero mass
+    assert np.all(feat.ghog_at(cells, np.array([[40, 10]])) == 0)
 
 
 def test_dense_sc_equals_sparse():
@@ -92,8 +113,8 @@ def tiny(tmp_path_factory):
     from wirescene.parts_training import train_part_detector
 
     path = tmp_path_factory.mktemp("parts") / "tiny.npz"
-    det, rep = train_part_detector(path, seed=3, n_views=8, n_trees=3, max_depth=10,
-                                   cars=["acura-nsx-sz", "car1-stock1"])
+    det, rep = train_part_detector(path, seed=3, n_views=8, n_trees=3, max_depth=10, kind="sc", synth_scenes=0,
+                                   class_weight=None, cars=["acura-nsx-sz", "car1-stock1"])
     return path, rep
 
 
@@ -125,29 +146,81 @@ def kitti_frame():
     return ds.image(fid), np.array([o.box for o in ds.labels(fid).of_type("Car")])
 
 
+def _check_lookup_matches_box_descriptors(det, img, box):
+    from wirescene.parts import box_descriptors
+
+    R = response_maps(img, box, detector=det, scales=(1.0,), stride=3.0)
+    b = R.boxes[0]
+    guv = b.grid_uv()
+    ij = [(3, 4), (10, 20), (b.probs.shape[1] // 2, b.probs.shape[2] // 2)]
+    uv = np.array([guv[i, j] for i, j in ij])
+    # the training path (box_descriptors) describes a point exactly as the dense maps do
+    p = det.predict_proba(box_descriptors(img, box[0], uv, det.kind, scale=1.0))
+    for k, (i, j) in enumerate(ij):
+        assert_close(b.probs[0, i, j], p[k], atol=2e-3)
+        pc = np.clip(p[k], R.eps, 1)
+        assert_close(R.log_ratio(np.broadcast_to(guv[i, j], (N_PARTS, 2)), 0),
+                     np.log(pc[:N_PARTS] / pc[BACKGROUND]), atol=2e-2)
+
+
 def test_response_lookup_matches_patch_classification(tiny, kitti_frame):
     det = PartDetector.load(tiny[0])
     img, boxes = kitti_frame
     box = boxes[1:2]
+    _check_lookup_matches_box_descriptors(det, img, box)
+    # and the patch path of the edge descriptors agrees with the dense shape context
+    from wirescene.parts import box_crop
+
     R = response_maps(img, box, detector=det, scales=(1.0,), stride=3.0)
     b = R.boxes[0]
-    # direct classification of the same patches
-    x1, y1, x2, y2 = box[0]
-    bh = y2 - y1
-    z = feat.CANONICAL_HEIGHT / bh
-    margin = feat.RADIUS / z + 2
-    cx0, cy0 = int(np.floor(b.region[0] - margin)), int(np.floor(b.region[1] - margin))
-    cx1, cy1 = int(np.ceil(b.region[2] + margin)), int(np.ceil(b.region[3] + margin))
+    _, (cx0, cy0, cx1, cy1), (z,) = box_crop(box[0], img.shape[1::-1], (1.0,))
     cmap = feat.canonical_edges(feat.image_edges(img[cy0:cy1, cx0:cx1]), z)
-    guv = b.grid_uv()
-    for i, j in [(3, 4), (10, 20), (b.probs.shape[1] // 2, b.probs.shape[2] // 2)]:
-        u, v = guv[i, j]
-        rc = np.rint(feat.to_canonical(np.array([u - cx0, v - cy0]), z)).astype(int)
-        p = det.classify_patches(feat.extract_patches(cmap, rc[None]))[0]
-        assert_close(b.probs[0, i, j], p, atol=2e-3)
-        uv = np.broadcast_to(guv[i, j], (N_PARTS, 2))
-        pc = np.clip(p, R.eps, 1)
-        assert_close(R.log_ratio(uv, 0), np.log(pc[:N_PARTS] / pc[BACKGROUND]), atol=2e-2)
+    i, j = 10, 20
+    u, v = b.grid_uv()[i, j]
+    rc = np.rint(feat.to_canonical(np.array([u - cx0, v - cy0]), z)).astype(int)
+    assert_close(b.probs[0, i, j], det.classify_patches(feat.extract_patches(cmap, rc[None]))[0], atol=2e-3)
+
+
+# ------------------------------------------------------------------ synthetic shaded training
+
+@pytest.fixture(scope="module")
+def tiny_synth():
+    from sklearn.ensemble import RandomForestClassifier
+
+    from wirescene.parts_training import make_synth_patch_data
+    from wirescene.synth.generate import generate_scene
+
+    data = make_synth_patch_data(n_scenes=3, seed=1000, kinds=("ghog",))
+    rf = RandomForestClassifier(n_estimators=8, max_depth=14, random_state=0, class_weight="balanced",
+                                min_samples_leaf=2).fit(data.X["ghog"], data.y)
+    scenes = [generate_scene(1000, i) for i in range(3)]
+    return PartDetector.from_sklearn(rf, kind="ghog"), data, scenes
+
+
+def test_synth_patch_data_deterministic_and_seed_guard(tiny_synth):
+    from wirescene.parts_training import make_synth_patch_data
+
+    _, data, _ = tiny_synth
+    assert (data.y < N_PARTS).sum() > 200 and (data.y == BACKGROUND).sum() > 200
+    again = make_synth_patch_data(n_scenes=1, seed=1000, kinds=("ghog",))
+    n = len(again.y)
+    assert np.array_equal(again.y, data.y[:n]) and np.array_equal(again.X["ghog"], data.X["ghog"][:n])
+    with pytest.raises(ValueError):
+        make_synth_patch_data(n_scenes=1, seed=1, kinds=("ghog",))  # evaluation stream
+
+
+def test_synth_trained_detector_localises_its_training_vertices(tiny_synth, kitti_frame):
+    from wirescene.parts_training import localisation, scene_frames
+
+    det, _, scenes = tiny_synth
+    r = localisation(det, scene_frames(scenes, min_box_h=30, clean=False))
+    assert r["n_vertices"] > 50
+    # far better than chance (a random grid location: ~0.04 within 10%, rank 0.5)
+    assert r["hits"][0.1] > max(0.4, 5 * r["chance"][0.1])
+    assert r["rank"] > 0.85
+    # grey-image kind: dense maps == the training path
+    img, boxes = kitti_frame
+    _check_lookup_matches_box_descriptors(det, img, boxes[1:2])
 
 
 def test_log_ratio_vectorised_and_outside(tiny, kitti_frame):
@@ -172,6 +245,7 @@ def test_log_ratio_vectorised_and_outside(tiny, kitti_frame):
 def test_committed_model_on_real_kitti_box(kitti_frame):
     det = load_default()
     assert det.n_trees >= 10 and det.kind in feat.KINDS
+    assert int(det.meta.get("synth_scenes", 0)) > 0  # trained on synthetic shaded scenes
     img, boxes = kitti_frame
     R = response_maps(img, boxes[1:2], detector=det)
     c = (boxes[1, :2] + boxes[1, 2:]) / 2

@@ -167,8 +167,10 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
 @main.command("demo")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("wirescene_demo"), show_default=True)
 @click.option("--particles", default=100, show_default=True, help="Scene particles (the paper used 250; fewer keep the demo short).")
-def demo_cmd(out, particles):
-    """Fit every model variant to the bundled real KITTI frames, evaluate, write pictures."""
+@click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()),
+              default=("coarse", "coarse+gp", "fg+gp", "full"), show_default=True)
+def demo_cmd(out, particles, variants):
+    """Fit model variants to the bundled real KITTI frames, evaluate, write pictures."""
     import time
 
     from .datasets.kitti import KittiDataset
@@ -186,7 +188,7 @@ def demo_cmd(out, particles):
                                       estimate=estimate, detections=detections, gt=gt.of_type("Car"))
             written.extend(paths.values())
 
-    reports = evaluate_dataset(dataset, _variants(), source=DetectionSource("gt"), options=_fit_options(particles, 0),
+    reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=_fit_options(particles, 0),
                                progress=_progress("demo"), on_estimate=draw)
     click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
                f"(GT boxes as pre-detections, {particles} particles)\n")

@@ -23,6 +23,20 @@ Descriptors (``extract(..., kind=...)``):
     the sparse path (patches @ kernels) gives the same numbers.
 ``"hog"`` -- :func:`skimage.feature.hog` of the (32 x 32) patch, 8-pixel cells, 2 x 2
     blocks, 9 orientations: 324 numbers. Only patch-wise (dense HOG maps are patch loops).
+``"ghog"`` -- gradient-orientation histograms of the *grey image* (not of an edge map),
+    resampled to the same canonical scale (:func:`canonical_grey`): unsigned orientation
+    in :data:`GHOG_BINS` bins (linear vote split between the two nearest bins, weighted by
+    the gradient magnitude), summed over a 4 x 4 grid of 8 x 8-pixel cells covering the
+    32 x 32 patch (:func:`orientation_cells`: one box filter per bin, so every pixel's
+    cells cost O(1)), L2-Hys normalised, plus ``log1p(total gradient mass)``: 145 numbers.
+    Dense and sparse evaluation are the same gather (:func:`ghog_at`). Transfers from
+    synthetic shaded scenes to real images much better than Canny-based shape context.
+``"ghog_sc"`` -- ``"ghog"`` and ``"sc"`` concatenated (182 numbers).
+
+Grey-image kinds need the canonical grey image as well as (for ``"sc"``) the edge map:
+:func:`canonical_inputs` builds what a kind needs from a native image crop, and
+:func:`describe` evaluates any kind at points of those inputs (this is what both the
+training and :func:`wirescene.parts.response_maps` call).
 """
 
 from __future__ import annotations
@@ -35,7 +49,8 @@ from .errors import ShapeError
 __all__ = [
     "CANONICAL_HEIGHT", "RADIUS", "PATCH", "SC_RING_EDGES", "SC_N_ANGLES", "KINDS",
     "sc_kernels", "canonical_edges", "to_canonical", "image_edges", "extract_patches", "extract", "dense_sc",
-    "feature_dim",
+    "feature_dim", "GHOG_BINS", "GHOG_CELL", "GHOG_OFFSETS", "image_grey", "canonical_grey",
+    "orientation_cells", "ghog_at", "canonical_inputs", "describe",
 ]
 
 CANONICAL_HEIGHT = 64
@@ -44,7 +59,13 @@ RADIUS = 16
 PATCH = 2 * RADIUS + 1
 SC_RING_EDGES = (0.0, 4.5, 9.5, RADIUS + 0.5)
 SC_N_ANGLES = 12
-KINDS = ("sc", "hog")
+KINDS = ("sc", "hog", "ghog", "ghog_sc")
+GHOG_BINS = 9
+GHOG_CELL = 8
+GHOG_OFFSETS = (-12, -4, 4, 12)
+GHOG_EPS = 1.0
+"""L2 normalisation floor (gradient mass units: grey in [0, 1] per canonical pixel): a
+low-contrast patch (sensor noise, road) is not blown up to a strong pattern."""
 
 _KERNELS = None
 
@@ -77,6 +98,10 @@ def feature_dim(kind: str) -> int:
         return sc_kernels().shape[0] + 1
     if kind == "hog":
         return 324
+    if kind == "ghog":
+        return len(GHOG_OFFSETS) ** 2 * GHOG_BINS + 1
+    if kind == "ghog_sc":
+        return feature_dim("ghog") + feature_dim("sc")
     raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
 
 
@@ -193,6 +218,121 @@ def _hog(patches: np.ndarray) -> np.ndarray:
     return out
 
 
+def image_grey(image) -> np.ndarray:
+    """Grey ``(H, W)`` float32 in [0, 1] of an RGB ``(H, W, 3)`` or grey image."""
+    img = np.asarray(image)
+    integer = np.issubdtype(img.dtype, np.integer)
+    if img.ndim == 3:
+        img = img[..., :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
+    elif img.ndim != 2:
+        raise ShapeError(f"image must be (H, W) or (H, W, 3), got {img.shape}")
+    img = img.astype(np.float32)
+    if integer or (img.size and img.max() > 1.5):
+        img = img / np.float32(255.0)
+    return img
+
+
+def canonical_grey(grey, z: float) -> np.ndarray:
+    """Resample a native grey image by ``z`` (same grid as :func:`canonical_edges`), with
+    a Gaussian pre-filter of sigma ``0.5 / z`` when downsampling."""
+    from skimage.transform import resize
+
+    g = np.asarray(grey, dtype=np.float32)
+    if g.ndim != 2:
+        raise ShapeError(f"grey must be (H, W), got {g.shape}")
+    if z <= 0:
+        raise ValueError(f"z must be positive, got {z}")
+    shape = (max(1, int(round(g.shape[0] * z))), max(1, int(round(g.shape[1] * z))))
+    if shape == g.shape:
+        return g.copy()
+    if z < 1:
+        g = gaussian_filter(g, 0.5 / z, mode="nearest")
+    return resize(g, shape, order=1, mode="edge", anti_aliasing=False, preserve_range=True).astype(np.float32)
+
+
+def orientation_cells(grey_map) -> np.ndarray:
+    """``(H, W, GHOG_BINS)`` float32: gradient-magnitude-weighted unsigned orientation
+    votes summed over the ``GHOG_CELL``-pixel square window at every pixel (window
+    ``[i - 4, i + 3]``; zero gradient outside the map)."""
+    from scipy.ndimage import uniform_filter
+
+    g = np.asarray(grey_map, dtype=np.float32)
+    if g.ndim != 2:
+        raise ShapeError(f"grey_map must be (H, W), got {g.shape}")
+    gx = np.zeros_like(g)
+    gy = np.zeros_like(g)
+    gx[:, 1:-1] = (g[:, 2:] - g[:, :-2]) * 0.5
+    gy[1:-1, :] = (g[2:, :] - g[:-2, :]) * 0.5
+    mag = np.hypot(gx, gy)
+    pos = np.mod(np.arctan2(gy, gx), np.pi) * (GHOG_BINS / np.pi) - 0.5
+    fl = np.floor(pos)
+    w1 = (pos - fl).astype(np.float32)
+    b0 = np.mod(fl.astype(np.int64), GHOG_BINS)
+    b1 = np.mod(b0 + 1, GHOG_BINS)
+    out = np.empty(g.shape + (GHOG_BINS,), np.float32)
+    a0 = mag * (1 - w1)
+    a1 = mag * w1
+    area = float(GHOG_CELL * GHOG_CELL)
+    for b in range(GHOG_BINS):
+        vote = np.where(b0 == b, a0, 0) + np.where(b1 == b, a1, 0)
+        out[..., b] = uniform_filter(vote.astype(np.float32), GHOG_CELL, mode="constant") * area
+    return out
+
+
+def ghog_at(cells, points) -> np.ndarray:
+    """``"ghog"`` descriptors ``(N, 145)`` at integer canonical ``points (N, 2) = (row,
+    col)`` of a map of :func:`orientation_cells` (cells outside the map are empty)."""
+    c = np.asarray(cells, dtype=np.float32)
+    p = np.asarray(points).reshape(-1, 2).astype(np.int64)
+    H, W, B = c.shape
+    off = np.asarray(GHOG_OFFSETS)
+    rows = p[:, 0, None, None] + off[None, :, None]
+    cols = p[:, 1, None, None] + off[None, None, :]
+    ok = (rows >= 0) & (cols >= 0) & (rows < H) & (cols < W)
+    v = c[np.clip(rows, 0, H - 1), np.clip(cols, 0, W - 1)]  # (N, 4, 4, B)
+    v = np.where(ok[..., None], v, 0).reshape(len(p), -1).astype(np.float64)
+    total = v.sum(1, keepdims=True)
+    n = v / np.sqrt((v * v).sum(1, keepdims=True) + GHOG_EPS ** 2)
+    n = np.minimum(n, 0.2)
+    n = n / np.sqrt((n * n).sum(1, keepdims=True) + 1e-6)
+    return np.concatenate([n, np.log1p(total)], axis=1).astype(np.float32)
+
+
+def canonical_inputs(image, z: float, kind: str, *, edges=None) -> dict:
+    """What :func:`describe` needs for ``kind`` from a native image (crop) resampled by
+    ``z``: ``{"edges": canonical edge map}`` and/or ``{"cells": orientation cells}``.
+    ``edges``: precomputed :func:`image_edges` of the same crop."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
+    out = {}
+    if kind in ("sc", "hog", "ghog_sc"):
+        e = image_edges(image) if edges is None else np.asarray(edges)
+        out["edges"] = canonical_edges(e, z)
+    if kind in ("ghog", "ghog_sc"):
+        out["cells"] = orientation_cells(canonical_grey(image_grey(image), z))
+    return out
+
+
+def describe(inputs: dict, points, kind: str) -> np.ndarray:
+    """Descriptors ``(N, feature_dim(kind))`` at integer canonical ``points (N, 2)`` of
+    :func:`canonical_inputs` (any points: outside the map the input is empty)."""
+    p = np.asarray(points).reshape(-1, 2).astype(np.int64)
+    if kind == "ghog":
+        return ghog_at(inputs["cells"], p)
+    if kind == "ghog_sc":
+        return np.concatenate([describe(inputs, p, "ghog"), describe(inputs, p, "sc")], axis=1)
+    e = inputs["edges"]
+    if kind == "sc" and len(p) > 0.05 * e.size:
+        d = dense_sc(e)
+        inside = (p[:, 0] >= 0) & (p[:, 1] >= 0) & (p[:, 0] < e.shape[0]) & (p[:, 1] < e.shape[1])
+        X = np.empty((len(p), d.shape[-1]), dtype=np.float32)
+        X[inside] = d[p[inside, 0], p[inside, 1]]
+        if (~inside).any():
+            X[~inside] = extract(e, "sc", points=p[~inside])
+        return X
+    return extract(e, kind, points=p)
+
+
 def extract(x, kind: str = "sc", *, points=None) -> np.ndarray:
     """Descriptors of patches or of a canonical edge map.
 
@@ -210,6 +350,8 @@ def extract(x, kind: str = "sc", *, points=None) -> np.ndarray:
     """
     if kind not in KINDS:
         raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
+    if kind in ("ghog", "ghog_sc"):
+        raise ValueError(f"kind {kind!r} describes grey images: use canonical_inputs() and describe()")
     x = np.asarray(x)
     if x.ndim == 3:
         if x.shape[1:] != (PATCH, PATCH):

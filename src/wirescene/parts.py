@@ -29,7 +29,8 @@ from .errors import InputError, ShapeError, check_shape
 
 __all__ = [
     "N_PARTS", "BACKGROUND", "N_CLASSES", "MODEL_FORMAT", "DEFAULT_MODEL_PATH", "DEFAULT_SCALES",
-    "PartDetector", "BoxResponses", "PartResponses", "response_maps", "log_ratio", "load_default",
+    "PartDetector", "BoxResponses", "PartResponses", "response_maps", "box_crop", "box_descriptors", "log_ratio",
+    "load_default",
 ]
 
 N_PARTS = 36
@@ -154,7 +155,7 @@ class PartDetector:
     def n_trees(self) -> int:
         return len(self.roots)
 
-    def predict_proba(self, X, *, chunk: int = 65536) -> np.ndarray:
+    def predict_proba(self, X, *, chunk: int = 16384) -> np.ndarray:
         """``(N, 37)`` class probabilities (mean of the trees' leaf distributions)."""
         X = np.asarray(X, dtype=np.float32)
         check_shape("X", X, (None, self.n_features))
@@ -163,20 +164,38 @@ class PartDetector:
             out[s:s + chunk] = self._predict(X[s:s + chunk])
         return out
 
+    def _tables(self):
+        """Traversal tables (cached): ``child (N, 2)`` (leaves point to themselves),
+        ``feature`` (0 at leaves), float32 thresholds equivalent to the float64 ones for
+        float32 inputs (the largest float32 <= the threshold), float32 leaf values."""
+        t = self.__dict__.get("_tab")
+        if t is None:
+            idx = np.arange(len(self.left), dtype=np.int32)
+            leaf = self.left < 0
+            child = np.stack([np.where(leaf, idx, self.left), np.where(leaf, idx, self.right)], 1).astype(np.int32)
+            thr = self.threshold.astype(np.float32)
+            over = thr.astype(np.float64) > self.threshold
+            thr[over] = np.nextafter(thr[over], np.float32(-np.inf))
+            vals = self.values.astype(np.float32) / np.float32(self.value_scale * self.n_trees)
+            t = (child, np.maximum(self.feature, 0).astype(np.intp), thr, vals)
+            self.__dict__["_tab"] = t
+        return t
+
     def _predict(self, X):
+        child, feature, thr, vals = self._tables()
         n = len(X)
         node = np.broadcast_to(self.roots[None, :], (n, self.n_trees)).copy()
-        rows = np.arange(n)[:, None]
+        flat = np.ascontiguousarray(X).ravel()
+        rows = (np.arange(n) * X.shape[1])[:, None]
+        child = child.ravel()
         for _ in range(self.max_depth):
-            left = self.left[node]
-            inner = left >= 0
-            if not inner.any():
-                break
-            f = np.maximum(self.feature[node], 0)
-            go_left = X[rows, f].astype(np.float64) <= self.threshold[node]
-            node = np.where(inner, np.where(go_left, left, self.right[node]), node)
-        v = self.values[self.leaf[node]].astype(np.float64)  # (n, T, C)
-        p = v.sum(axis=1) / (self.value_scale * self.n_trees)
+            go_right = flat[rows + feature[node]] > thr[node]
+            node = child[2 * node + go_right]
+        leaves = self.leaf[node]
+        p = np.zeros((n, N_CLASSES), np.float32)
+        for t in range(self.n_trees):
+            p += vals[leaves[:, t]]
+        p = p.astype(np.float64)
         if self.value_scale != 1.0:
             p /= np.maximum(p.sum(axis=1, keepdims=True), 1e-12)
         return p
@@ -304,6 +323,37 @@ def _auto_stride(box_h: float) -> float:
     return float(np.clip(box_h / 32.0, 1.0, 4.0))
 
 
+def box_crop(box, image_size, scales=DEFAULT_SCALES, *, pad: float = 0.1):
+    """The padded region ``(rx0, ry0, rx1, ry1)`` that :func:`response_maps` scores for
+    ``box`` and the integer native crop ``(cx0, cy0, cx1, cy1)`` it describes (the region
+    plus room for the largest patch). ``image_size = (W, H)``."""
+    W, H = image_size
+    x1, y1, x2, y2 = np.asarray(box, dtype=float)
+    bw, bh = max(x2 - x1, 1.0), max(y2 - y1, 1.0)
+    region = np.array([x1 - pad * bw, y1 - pad * bh, x2 + pad * bw, y2 + pad * bh])
+    zs = [feat.CANONICAL_HEIGHT / (s * bh) for s in scales]
+    margin = feat.RADIUS / min(zs) + 2
+    cx0 = int(np.clip(np.floor(region[0] - margin), 0, W - 1))
+    cy0 = int(np.clip(np.floor(region[1] - margin), 0, H - 1))
+    cx1 = int(np.clip(np.ceil(region[2] + margin), cx0 + 1, W))
+    cy1 = int(np.clip(np.ceil(region[3] + margin), cy0 + 1, H))
+    return region, (cx0, cy0, cx1, cy1), zs
+
+
+def box_descriptors(image, box, uv, kind: str, *, scale: float = 1.0, pad: float = 0.1, edges=None) -> np.ndarray:
+    """Descriptors ``(N, D)`` at native points ``uv (N, 2)`` exactly as
+    :func:`response_maps` computes them for ``box`` at one ``scale`` (used by training).
+    ``edges``: precomputed full-image :func:`wirescene.features.image_edges`."""
+    img = np.asarray(image)
+    H, W = img.shape[:2]
+    _, (cx0, cy0, cx1, cy1), (z,) = box_crop(box, (W, H), (scale,), pad=pad)
+    e = None if edges is None else np.asarray(edges)[cy0:cy1, cx0:cx1]
+    inp = feat.canonical_inputs(img[cy0:cy1, cx0:cx1], z, kind, edges=e)
+    uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+    rc = np.rint(feat.to_canonical(uv - [cx0, cy0], z)).astype(np.int64)
+    return feat.describe(inp, rc, kind)
+
+
 def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=DEFAULT_SCALES,
                   stride: float | None = None, pad: float = 0.1, eps: float = DEFAULT_EPS,
                   edges: np.ndarray | None = None) -> PartResponses:
@@ -319,6 +369,7 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
     pad : float -- the grid covers the box grown by ``pad`` x its size on every side
     eps : float -- probabilities are clipped to ``[eps, 1]`` before the log ratio
     edges : (H, W) bool, optional -- precomputed :func:`wirescene.features.image_edges`
+        (ignored by grey-image descriptors)
 
     Returns
     -------
@@ -335,39 +386,23 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
         raise ValueError("scales must be positive")
     out = []
     for box in boxes:
-        x1, y1, x2, y2 = box
-        bw, bh = max(x2 - x1, 1.0), max(y2 - y1, 1.0)
+        bh = max(box[3] - box[1], 1.0)
         st = _auto_stride(bh) if stride is None else float(stride)
-        rx0, ry0, rx1, ry1 = x1 - pad * bw, y1 - pad * bh, x2 + pad * bw, y2 + pad * bh
+        (rx0, ry0, rx1, ry1), (cx0, cy0, cx1, cy1), zs = box_crop(box, (W, H), scales, pad=pad)
         gw = int(np.floor((rx1 - rx0) / st)) + 1
         gh = int(np.floor((ry1 - ry0) / st)) + 1
         gu = rx0 + st * np.arange(gw)
         gv = ry0 + st * np.arange(gh)
         uu, vv = np.meshgrid(gu, gv)
-        # native crop with room for the largest patch (smallest z)
-        zs = [feat.CANONICAL_HEIGHT / (s * bh) for s in scales]
-        margin = feat.RADIUS / min(zs) + 2
-        cx0 = int(np.clip(np.floor(rx0 - margin), 0, W - 1))
-        cy0 = int(np.clip(np.floor(ry0 - margin), 0, H - 1))
-        cx1 = int(np.clip(np.ceil(rx1 + margin), cx0 + 1, W))
-        cy1 = int(np.clip(np.ceil(ry1 + margin), cy0 + 1, H))
-        if edges is None:
-            e = feat.image_edges(img[cy0:cy1, cx0:cx1])
-        else:
-            e = np.asarray(edges)[cy0:cy1, cx0:cx1]
+        crop = img[cy0:cy1, cx0:cx1]
+        e = None if edges is None else np.asarray(edges)[cy0:cy1, cx0:cx1]
+        if e is None and detector.kind in ("sc", "hog", "ghog_sc"):
+            e = feat.image_edges(crop)
         probs = np.empty((len(scales), gh, gw, N_CLASSES), dtype=np.float32)
         for k, z in enumerate(zs):
-            cmap = feat.canonical_edges(e, z)
+            inp = feat.canonical_inputs(crop, z, detector.kind, edges=e)
             rc = np.rint(feat.to_canonical(np.stack([uu - cx0, vv - cy0], -1), z)).astype(np.int64).reshape(-1, 2)
-            if detector.kind == "sc":
-                d = feat.dense_sc(cmap)
-                inside = (rc[:, 0] >= 0) & (rc[:, 1] >= 0) & (rc[:, 0] < cmap.shape[0]) & (rc[:, 1] < cmap.shape[1])
-                X = np.empty((len(rc), d.shape[-1]), dtype=np.float32)
-                X[inside] = d[rc[inside, 0], rc[inside, 1]]
-                if (~inside).any():
-                    X[~inside] = feat.extract(cmap, "sc", points=rc[~inside])
-            else:
-                X = feat.extract(cmap, detector.kind, points=rc)
+            X = feat.describe(inp, rc, detector.kind)
             probs[k] = detector.predict_proba(X).reshape(gh, gw, N_CLASSES)
         pc = np.clip(probs, eps, 1.0)
         lr = (np.log(pc[..., :N_PARTS]) - np.log(pc[..., N_PARTS:])).max(axis=0)

@@ -1,6 +1,15 @@
-"""Training of the part detector from non-photorealistic CAD renderings (paper Sec. 5.1).
+"""Training of the part detector (paper Sec. 5.1) and its localisation benchmark.
 
-Data (all deterministic given ``seed``):
+Two data sources (all deterministic given ``seed``):
+
+* **Synthetic shaded scenes** (default, :func:`make_synth_patch_data`): patches of
+  ``wirescene synth`` scenes of the training stream (seed >= :data:`SYNTH_TRAIN_SEED`),
+  described exactly as at test time (:func:`wirescene.parts.box_descriptors`: the full
+  image, the car's 2D box, box-relative scale), positives at visible GT vertices,
+  background in the padded car boxes away from vertices and outside the cars. With the
+  grey-image descriptor ``"ghog"`` this is the shipped model: it transfers to shaded and
+  real images, where the CAD edge-rendering model below localised at chance level.
+* **CAD edge renderings** (``n_views > 0``; edge-map descriptors only), as follows.
 
 * **Part patches** -- every road-car CAD model (:func:`wirescene.cad.training.load_cad_meshes`)
   rendered (:func:`wirescene.render.render`, edge images) from ``n_azimuth`` azimuths x
@@ -18,7 +27,10 @@ Data (all deterministic given ``seed``):
   default: the bundled KITTI frames are also the evaluation frames.
 
 Evaluation: leave-models-out (``heldout`` cars, never seen in training), per-part
-accuracy of the 37-way classification.
+accuracy of the 37-way classification; and :func:`localisation` (the metric that
+matters): does the arg-max of ``log(S_j / S_b)`` in the box land on the vertex, on
+held-out synthetic scenes (:func:`synth_eval_frames`) and real KITTI frames
+(:func:`kitti_eval_frames`, evaluation only) -- see ``benchmarks/bench_parts.py``.
 """
 
 from __future__ import annotations
@@ -28,11 +40,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
 from . import features as feat
 from .parts import BACKGROUND, DEFAULT_MODEL_PATH, N_CLASSES, N_PARTS, PartDetector
 
-__all__ = ["PatchData", "render_views", "make_patch_data", "heldout_accuracy", "train_part_detector"]
+__all__ = ["PatchData", "render_views", "make_patch_data", "make_synth_patch_data", "heldout_accuracy",
+           "localisation", "scene_frames", "synth_eval_frames", "kitti_eval_frames", "train_part_detector",
+           "SYNTH_TRAIN_SEED"]
 
 RENDER_SIZE = (320, 256)
 RENDER_FIELD_WIDTH = 7.25  # metres across the image at 10 m: car height ~ 80 px
@@ -271,11 +286,11 @@ def make_patch_data(*, seed: int = 0, n_azimuth: int = 72, elevations=ELEVATIONS
                      names=all_names)
 
 
-def _fit(X, y, *, n_trees, max_depth, seed, n_jobs=1):
+def _fit(X, y, *, n_trees, max_depth, seed, n_jobs=1, class_weight=None, min_samples_leaf=2):
     from sklearn.ensemble import RandomForestClassifier
 
     rf = RandomForestClassifier(n_estimators=n_trees, max_depth=max_depth, random_state=seed, n_jobs=n_jobs,
-                                min_samples_leaf=2, max_features="sqrt")
+                                min_samples_leaf=min_samples_leaf, max_features="sqrt", class_weight=class_weight)
     rf.fit(X, y)
     return rf
 
@@ -312,41 +327,292 @@ def heldout_accuracy(data: PatchData, heldout_names, *, kind="sc", n_trees=30, m
             "n_test": int(test.sum()), "n_train": int(train.sum())}
 
 
-def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: int = 144, n_trees: int = 30,
-                        max_depth: int = 13, kind: str = "sc", n_aug: int = 2, cars=None, heldout: int = 0,
-                        compare_kinds=(), kitti_background=None, n_jobs: int = 1, progress=None):
+SYNTH_TRAIN_SEED = 1000
+"""Synthetic scene streams with seed >= 1000 are for training; evaluation uses seeds < 1000."""
+
+
+def _visible_uv(car):
+    uv = np.asarray(car["vertices_2d"], dtype=float)
+    vis = np.array([r == "visible" for r in car["visibility"]])
+    return uv, vis
+
+
+def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=("ghog",), sample_seed: int = 0,
+                          scale_samples: int = 2, n_jitter: int = 2, jitter: float = 2.0, bg_per_car: int = 40,
+                          bg_boxes: int = 4, bg_per_box: int = 15, min_box_h: float = 20.0, min_dist: float = 6.0,
+                          augment: bool = False, progress=None) -> PatchData:
+    """Patches of synthetic *shaded* scenes (:func:`wirescene.synth.generate.generate_scene`
+    ``(seed, i)``, ``i < n_scenes``), described exactly as at test time
+    (:func:`wirescene.parts.box_descriptors`: the car's 2D label box, box-relative scale):
+
+    * parts: every visible vertex (``visibility == "visible"``) of every car whose box is
+      at least ``min_box_h`` px high, at ``scale_samples`` scales ``s ~ exp(U(-0.2, 0.2))``
+      (assumed object height ``s x`` box height, as the test-time scales), plus
+      ``n_jitter`` copies displaced by up to ``jitter`` canonical px;
+    * background in the box: ``bg_per_car`` points of the padded box at least
+      ``min_dist`` canonical px from every visible vertex of every car;
+    * background outside cars: ``bg_boxes`` random box-like windows (height 25..150 px,
+      aspect 2.5) per scene, ``bg_per_box`` points each outside every padded car box.
+
+    ``augment``: photometric augmentation of each scene image before description (with
+    probability 0.7: Gaussian blur sigma 0.3..1.2 px, gamma, contrast, extra sensor noise)
+    towards real camera images.
+
+    ``group`` is the scene index. Deterministic given ``seed``, ``sample_seed``.
+    """
+    from .parts import box_descriptors
+    from .synth.generate import load_car_library, generate_scene
+
+    if seed < SYNTH_TRAIN_SEED:
+        raise ValueError(f"synthetic training scenes must use seeds >= {SYNTH_TRAIN_SEED} (lower ones are evaluation)")
+    library = load_car_library()
+    Xs = {k: [] for k in kinds}
+    ys, gs = [], []
+    t0 = time.time()
+
+    def add(image, box, pts, y, scale, edges, g):
+        if len(pts) == 0:
+            return
+        for k in kinds:
+            Xs[k].append(box_descriptors(image, box, pts, k, scale=scale, edges=edges if k != "ghog" else None))
+        ys.append(np.broadcast_to(np.asarray(y, dtype=np.int64), (len(pts),)).copy())
+        gs.append(np.full(len(pts), g, dtype=np.int64))
+
+    for i in range(int(n_scenes)):
+        sc = generate_scene(seed, i, library=library)
+        img = sc.image
+        H, W = img.shape[:2]
+        rng = _rng(sample_seed, 5, seed, i)
+        if augment:
+            img = _photometric(img, _rng(sample_seed, 6, seed, i))
+        edges = feat.image_edges(img) if any(k != "ghog" for k in kinds) else None
+        cars = sc.wireframes["cars"]
+        all_vis = [_visible_uv(c) for c in cars]
+        vis_pts = np.concatenate([uv[v] for uv, v in all_vis] + [np.zeros((0, 2))])
+        boxes = np.array([c["box"] for c in cars]).reshape(-1, 4)
+        for c, (uv, vis), box in zip(cars, all_vis, boxes):
+            bw, bh = box[2] - box[0], box[3] - box[1]
+            if bh < min_box_h:
+                continue
+            j = np.nonzero(vis)[0]
+            for _ in range(scale_samples):
+                s = float(np.exp(rng.uniform(-0.2, 0.2)))
+                z = feat.CANONICAL_HEIGHT / (s * bh)
+                if len(j):
+                    pts = [uv[j]] + [uv[j] + rng.uniform(-jitter, jitter, (len(j), 2)) / z for _ in range(n_jitter)]
+                    add(img, box, np.concatenate(pts), np.tile(j, 1 + n_jitter), s, edges, i)
+                lo = box[:2] - 0.1 * np.array([bw, bh])
+                hi = box[2:] + 0.1 * np.array([bw, bh])
+                cand = rng.uniform(lo, hi, size=(bg_per_car * 3, 2))
+                if len(vis_pts):
+                    d = np.linalg.norm(cand[:, None] - vis_pts[None], axis=-1).min(1)
+                    cand = cand[d * z >= min_dist]
+                add(img, box, cand[:bg_per_car], BACKGROUND, s, edges, i)
+        # background outside the cars
+        grown = np.concatenate([boxes[:, :2] - 0.1 * (boxes[:, 2:] - boxes[:, :2]),
+                                boxes[:, 2:] + 0.1 * (boxes[:, 2:] - boxes[:, :2])], axis=1)
+        for _ in range(bg_boxes):
+            h = float(np.exp(rng.uniform(np.log(25), np.log(150))))
+            cx, cy = rng.uniform(0, W), rng.uniform(0, H)
+            fake = np.array([cx - 1.25 * h, cy - h / 2, cx + 1.25 * h, cy + h / 2])
+            cand = rng.uniform(fake[:2], fake[2:], size=(bg_per_box * 3, 2))
+            cand = cand[(cand[:, 0] >= 0) & (cand[:, 1] >= 0) & (cand[:, 0] < W) & (cand[:, 1] < H)]
+            if len(grown):
+                inside = ((cand[:, None, 0] >= grown[None, :, 0]) & (cand[:, None, 0] <= grown[None, :, 2])
+                          & (cand[:, None, 1] >= grown[None, :, 1]) & (cand[:, None, 1] <= grown[None, :, 3])).any(1)
+                cand = cand[~inside]
+            add(img, fake, cand[:bg_per_box], BACKGROUND, 1.0, edges, i)
+        if progress and (i + 1) % 50 == 0:
+            progress(f"synthetic scenes: {i + 1}/{n_scenes} in {time.time() - t0:.0f} s")
+    X = {k: np.concatenate(v).astype(np.float32) for k, v in Xs.items()}
+    return PatchData(X=X, y=np.concatenate(ys), group=np.concatenate(gs), names=[])
+
+
+def _photometric(img, rng):
+    if rng.random() >= 0.7:
+        return img
+    x = img.astype(np.float32) / 255.0
+    x = gaussian_filter(x, (rng.uniform(0.3, 1.2),) * 2 + (0,))
+    x = np.clip(x, 0, 1) ** float(np.exp(rng.uniform(-0.3, 0.3)))
+    x = 0.5 + (x - 0.5) * rng.uniform(0.6, 1.1)
+    x = x + rng.normal(0, rng.uniform(0, 4) / 255.0, x.shape)
+    return np.clip(np.rint(x * 255), 0, 255).astype(np.uint8)
+
+
+def _merge(a: PatchData, b: PatchData) -> PatchData:
+    kinds = [k for k in a.X if k in b.X]
+    return PatchData(X={k: np.concatenate([a.X[k], b.X[k]]) for k in kinds}, y=np.concatenate([a.y, b.y]),
+                     group=np.concatenate([a.group, np.full(len(b.y), -2)]), names=a.names)
+
+
+def localisation(detector, frames, *, radii=(0.04, 0.10), **response_kwargs) -> dict:
+    """Localisation of the part evidence (the metric that matters for the likelihood).
+
+    ``frames``: iterable of ``(image, cars)``, ``cars`` a list of ``(box (4,), uv (36, 2),
+    visible (36,) bool)``. For every visible vertex inside its box: is the top-scoring grid
+    location of ``log(S_j / S_b)`` inside the box within ``r`` x the car's projected length
+    (max extent of the 36 projected vertices) of the vertex, for ``r`` in ``radii``; chance
+    = a uniformly random grid location of the box; and the percentile rank of the vertex
+    location's score among the box's locations (chance 0.5).
+
+    Returns ``{"hits": {r: frac}, "chance": {r: frac}, "rank": float, "n_vertices", "n_cars",
+    "t_maps_s"}``.
+    """
+    from .parts import response_maps
+
+    hits = {r: [] for r in radii}
+    chance = {r: [] for r in radii}
+    ranks, n_cars, t_maps = [], 0, 0.0
+    for image, cars in frames:
+        if not cars:
+            continue
+        t = time.perf_counter()
+        R = response_maps(image, np.array([c[0] for c in cars], dtype=float), detector=detector, **response_kwargs)
+        t_maps += time.perf_counter() - t
+        for bi, (box, uv, visible) in enumerate(cars):
+            x1, y1, x2, y2 = box
+            inbox = (uv[:, 0] >= x1) & (uv[:, 0] <= x2) & (uv[:, 1] >= y1) & (uv[:, 1] <= y2)
+            vis = np.asarray(visible, bool) & inbox
+            length = max(np.ptp(uv[:, 0]), np.ptp(uv[:, 1]))
+            b = R.boxes[bi]
+            g = b.grid_uv().reshape(-1, 2)
+            m = (g[:, 0] >= x1) & (g[:, 0] <= x2) & (g[:, 1] >= y1) & (g[:, 1] <= y2)
+            g = g[m]
+            lr = b.log_ratio.reshape(-1, N_PARTS)[m]
+            n_cars += 1
+            at_all = R.log_ratio(uv, bi)
+            for j in np.nonzero(vis)[0]:
+                best = g[np.argmax(lr[:, j])]
+                d_all = np.linalg.norm(g - uv[j], axis=1)
+                for r in radii:
+                    hits[r].append(np.linalg.norm(best - uv[j]) <= r * length)
+                    chance[r].append(np.mean(d_all <= r * length))
+                at = at_all[j]
+                ranks.append(np.mean(lr[:, j] < at) + 0.5 * np.mean(lr[:, j] == at))
+    mean = lambda v: float(np.mean(v)) if len(v) else float("nan")  # noqa: E731
+    return {"hits": {r: mean(v) for r, v in hits.items()}, "chance": {r: mean(v) for r, v in chance.items()},
+            "rank": mean(ranks), "n_vertices": len(ranks), "n_cars": n_cars, "t_maps_s": t_maps}
+
+
+def _clean_cars(wire_cars, min_box_h, clean):
+    cars = []
+    for c in wire_cars:
+        box = np.asarray(c["box"], float)
+        if box[3] - box[1] < min_box_h or (clean and (c["occluded"] != 0 or c["truncated"] > 1e-9)):
+            continue
+        cars.append((box, np.asarray(c["vertices_2d"], float), np.array([r == "visible" for r in c["visibility"]])))
+    return cars
+
+
+def scene_frames(scenes, *, min_box_h: float = 40.0, clean: bool = True):
+    """``(image, cars)`` of in-memory :class:`wirescene.synth.generate.SyntheticScene` s
+    for :func:`localisation` (same selection as :func:`synth_eval_frames`)."""
+    for sc in scenes:
+        yield sc.image, _clean_cars(sc.wireframes["cars"], min_box_h, clean)
+
+
+def synth_eval_frames(root, *, split: str = "training", min_box_h: float = 40.0, clean: bool = True):
+    """``(image, cars)`` of a ``wirescene synth`` output directory for :func:`localisation`:
+    cars with ``occluded == 0``, ``truncated == 0`` and box height >= ``min_box_h``
+    (``clean``), visible = visibility ``"visible"``."""
+    import json
+
+    from PIL import Image
+
+    d = Path(root) / split
+    for img_path in sorted((d / "image_2").glob("*.png")):
+        fid = img_path.stem
+        wf = json.loads((d / "wireframes" / f"{fid}.json").read_text())
+        cars = _clean_cars(wf["cars"], min_box_h, clean)
+        yield np.asarray(Image.open(img_path).convert("RGB")), cars
+
+
+def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True):
+    """``(image, cars)`` of real KITTI frames for :func:`localisation`: the mean wireframe
+    placed at each ``Car`` label's pose (location = the label's bottom centre), visibility
+    by :func:`wirescene.occlusion.self_occlusion`. EVALUATION ONLY: never train on these."""
+    from . import wireframe
+    from .datasets.kitti import KittiDataset
+    from .groundplane import rotation_y, transform
+    from .occlusion import self_occlusion
+    from .shape import load_default
+
+    ds = KittiDataset(root)
+    mean = load_default().mean
+    for fid in ds.frame_ids():
+        cam = ds.camera(fid)
+        cars = []
+        for o in ds.labels(fid).of_type("Car"):
+            box = np.asarray(o.box, float)
+            if box[3] - box[1] < min_box_h or (clean and (o.occluded != 0 or o.truncated > 1e-9)):
+                continue
+            X = transform(mean, np.asarray(o.location, float), rotation_y(o.rotation_y))
+            uv = cam.project(X)
+            cars.append((box, uv, ~self_occlusion(X, wireframe.FACES, cam.center)))
+        yield ds.image(fid), cars
+
+
+GREY_KINDS = ("ghog", "ghog_sc")
+
+
+def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: int = 0, n_trees: int = 30,
+                        max_depth: int = 13, kind: str = "ghog", n_aug: int = 2, cars=None, heldout: int = 0,
+                        compare_kinds=(), kitti_background=None, synth_scenes: int = 300,
+                        synth_seed: int = SYNTH_TRAIN_SEED, class_weight: str | None = "balanced",
+                        min_samples_leaf: int = 2, augment: bool = False, n_jobs: int = 1, progress=None):
     """Generate training patches, optionally evaluate leave-models-out, fit the forest
-    on all cars and write the model ``.npz``.
+    on all data and write the model ``.npz``.
 
     Parameters
     ----------
     out_path : path or None (do not write)
     seed : int -- drives augmentation, background sampling, forest
-    n_views : int -- total views, split evenly over the 2 elevations (144: the paper's 72 x 2)
+    n_views : int -- CAD edge renderings: total views per car, split evenly over the 2
+        elevations (144: the paper's 72 x 2); 0: none (edge-map kinds only)
     n_trees, max_depth : forest size (paper: 30, 13)
-    kind : descriptor of the written model ("sc" or "hog")
+    kind : descriptor of the written model (see :mod:`wirescene.features`)
     n_aug : renderings per view (the first unaugmented)
     cars : list of CAD names, optional (default: all road cars)
     heldout : int -- evaluate with the last ``heldout`` cars (sorted) held out first
     compare_kinds : extra descriptor kinds evaluated held-out as well
     kitti_background : path, optional -- KITTI root for car-free background patches
+    synth_scenes : int -- synthetic shaded scenes ``generate_scene(synth_seed, i)`` whose
+        patches are added (:func:`make_synth_patch_data`)
+    synth_seed : int >= 1000 (training stream)
+    augment : photometric augmentation of the synthetic scenes (see :func:`make_synth_patch_data`)
+    class_weight : "balanced", "balanced_subsample" or None -- forest class weights; a
+        balanced forest keeps ``S_j`` well above the clipping floor where part ``j`` is
+        plausible, so ``log(S_j / S_b)`` peaks at the part (the background's share of the
+        data no longer swamps the parts)
 
     Returns
     -------
     (PartDetector, report dict)
     """
     say = progress or (lambda s: None)
-    n_az = max(1, int(n_views) // len(ELEVATIONS))
+    n_az = max(1, int(n_views) // len(ELEVATIONS)) if n_views else 0
     kinds = tuple(dict.fromkeys((kind,) + tuple(compare_kinds)))
+    if n_az and any(k in GREY_KINDS for k in kinds):
+        raise ValueError(f"CAD edge renderings have no grey image: use n_views=0 with kinds {GREY_KINDS}")
+    if not n_az and not synth_scenes:
+        raise ValueError("no training data: n_views and synth_scenes are both 0")
     t0 = time.time()
-    data = make_patch_data(seed=seed, n_azimuth=n_az, cars=cars, kinds=kinds, n_aug=n_aug,
-                           kitti_background=kitti_background, progress=progress)
+    data = None
+    report = {"cars": []}
+    if n_az:
+        data = make_patch_data(seed=seed, n_azimuth=n_az, cars=cars, kinds=kinds, n_aug=n_aug,
+                               kitti_background=kitti_background, progress=progress)
+        report["cars"] = sorted(set(data.names[g] for g in data.group[data.group >= 0]))
+    if synth_scenes:
+        sd = make_synth_patch_data(n_scenes=synth_scenes, seed=synth_seed, kinds=kinds, sample_seed=seed,
+                                   augment=augment, progress=progress)
+        data = sd if data is None else _merge(data, sd)
     t_data = time.time() - t0
     n_part = int((data.y < N_PARTS).sum())
     say(f"patches: {len(data)} ({n_part} part, {len(data) - n_part} background) in {t_data:.0f} s")
-    report = {"n_patches": len(data), "n_part": n_part, "n_background": len(data) - n_part, "t_data_s": t_data,
-              "n_azimuth": n_az, "cars": sorted(set(data.names[g] for g in data.group[data.group >= 0]))}
-    if heldout:
+    report.update({"n_patches": len(data), "n_part": n_part, "n_background": len(data) - n_part, "t_data_s": t_data,
+                   "n_azimuth": n_az})
+    if heldout and n_az:
         names = report["cars"]
         held = names[-int(heldout):]
         report["heldout_cars"] = held
@@ -358,11 +624,14 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
             say(f"held-out {k}: mean part acc {r['mean_part']:.3f} (mirror-tolerant {r['mean_part_mirror']:.3f}), "
                 f"background {r['background']:.3f} [{time.time() - t1:.0f} s]")
     t1 = time.time()
-    rf = _fit(data.X[kind], data.y, n_trees=n_trees, max_depth=max_depth, seed=seed, n_jobs=n_jobs)
+    rf = _fit(data.X[kind], data.y, n_trees=n_trees, max_depth=max_depth, seed=seed, n_jobs=n_jobs,
+              class_weight=class_weight, min_samples_leaf=min_samples_leaf)
     report["t_fit_s"] = time.time() - t1
     meta = {"seed": seed, "n_views": n_az * len(ELEVATIONS), "n_trees": n_trees, "max_depth": max_depth,
             "n_aug": n_aug, "n_patches": len(data), "n_part": n_part, "cars": ",".join(report["cars"]),
-            "kitti_background": str(kitti_background is not None)}
+            "kitti_background": str(kitti_background is not None), "synth_scenes": synth_scenes,
+            "synth_seed": synth_seed, "class_weight": str(class_weight), "min_samples_leaf": min_samples_leaf,
+            "augment": str(augment)}
     det = PartDetector.from_sklearn(rf, kind=kind, meta=meta)
     report["train_acc"] = float(np.mean(det.predict(data.X[kind]) == data.y))
     if out_path is not None:
