@@ -137,3 +137,14 @@ def test_eval_runs_unchanged_on_synth_and_uses_vertex_ground_truth(tmp_path):
     data = json.loads(out.read_text())
     assert data["occlusion_source"] == "vertex_gt"
     assert data["n_tp"] >= 3
+
+
+def test_demo_runs_end_to_end(tmp_path):
+    r = run("demo", "--out", tmp_path / "demo", "--particles", 4, "--variant", "coarse+gp", "--variant", "full")
+    assert r.exit_code == 0, r.output
+    assert "coarse+gp" in r.output and "raw-pixel mode" in r.output
+    for variant in ("coarse+gp", "full"):
+        assert (tmp_path / "demo" / variant / "000010_overlay.png").is_file()
+    js = json.loads((tmp_path / "demo" / "full" / "000010.json").read_text())
+    assert all(len(o["vertices"]) == 36 and "exemplar" in o for o in js["objects"])
+    assert (tmp_path / "demo" / "eval.json").is_file()

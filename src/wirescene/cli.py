@@ -190,6 +190,18 @@ def demo_cmd(out, particles, variants):
 
     reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=_fit_options(particles, 0),
                                progress=_progress("demo"), on_estimate=draw)
+    # Raw-pixel mode: our own pre-detection instead of label boxes, then the full model.
+    from .predetect import detect_cars
+    from .scene.fit import fit_scene
+
+    image = dataset.image(first)
+    raw = detect_cars(image)
+    if len(raw):
+        estimate = fit_scene(dataset.camera(first), raw, variant="full", options=_fit_options(particles, 0), image=image)
+        written.extend(write_fit_outputs(out / "raw-pixels", first, image=image, camera=dataset.camera(first),
+                                         estimate=estimate, detections=raw, gt=dataset.labels(first).of_type("Car")).values())
+    click.echo(f"raw-pixel mode on {first}: the detector bank found {len(raw)} cars "
+               f"({len(dataset.labels(first).of_type('Car'))} labelled)\n")
     click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
                f"(GT boxes as pre-detections, {particles} particles)\n")
     click.echo(format_table(reports))
