@@ -5,7 +5,7 @@ from conftest import KITTI_ROOT, assert_close
 from wirescene.boxes import MEAN_CAR_DIMS, box_corners, project_points_to_box
 from wirescene.datasets.kitti import KittiDataset
 from wirescene.detect import detections_from_labels
-from wirescene.groundplane import object_pose, rotation_y
+from wirescene.groundplane import object_pose
 from wirescene.scene.fit import fit_scene
 from wirescene.scene.hypotheses import Detections
 from wirescene.scene.lifting import LiftingOptions, lift_detections, lift_table, select_particles, solve_positions

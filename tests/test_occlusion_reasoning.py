@@ -4,7 +4,7 @@ from conftest import KITTI_ROOT
 from wirescene.datasets.kitti import KittiDataset
 from wirescene.masks import all_mask_hidden, fit_mask, mask_hidden, normalised_coordinates, occluder_masks
 from wirescene.occlusion_training import occlusion_accuracy_by_c
-from wirescene.scene.inference import InferenceOptions, update_occlusion
+from wirescene.scene.inference import update_occlusion
 from wirescene.scene.hypotheses import SceneParticles
 from wirescene.scene.inference import _to_viewing
 from wirescene.shape import load_default

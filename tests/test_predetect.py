@@ -159,8 +159,9 @@ def test_retrain_tiny_bank_finds_cars(tmp_path):
     from wirescene.viewpoints import viewpoint_bin
 
     bank, rep = train_detector_bank(tmp_path / "tiny.npz", seed=3, n_scenes=8, n_partial=1, bins=[2, 6],
-                                    mining_images=4, neg_per_image=20, n_val=0, cars=(4, 8))
+                                    mining_images=4, neg_per_image=20, n_val=1, cars=(4, 8))
     assert len(bank) == 4 and (tmp_path / "tiny.npz").is_file()
+    assert rep["validation"]["n_scenes"] == 1 and "ap" in rep["validation"]
     rng = np.random.default_rng(0)
     hits = rand_hits = n = 0
     for i in range(2):

@@ -8,7 +8,6 @@ from importlib import resources
 from pathlib import Path
 
 import click
-import numpy as np
 
 from . import __version__
 from .errors import InputError, WiresceneError
@@ -76,10 +75,9 @@ def _is_fine(variant: str) -> bool:
 
 
 def _write_json_atomic(path: Path, data: dict) -> None:
-    from .pipeline import _write_atomic_text
+    from .atomic import write_text
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _write_atomic_text(path, json.dumps(data, indent=1))
+    write_text(path, json.dumps(data, indent=1))
 
 
 @main.command("eval")

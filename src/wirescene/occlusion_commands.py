@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 import click
@@ -19,16 +17,13 @@ def occlusion(seed, scenes, out):
     """Choose the likelihood's occluded-part score c on held-out synthetic scenes."""
     from tqdm import tqdm
 
+    from .atomic import write_text
     from .occlusion_training import DEFAULT_PATH, calibrate_occluded_score
 
     result = calibrate_occluded_score(seed=seed, n_scenes=scenes,
                                       progress=lambda it: tqdm(it, desc="scenes", leave=False, file=sys.stderr))
     out = DEFAULT_PATH if out is None else out
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(result, fh, indent=1)
-    os.replace(tmp, out)
+    write_text(out, json.dumps(result, indent=1))
     for c, a in zip(result["grid"], result["accuracy"]):
         click.echo(f"c = {c:+.2f}  occlusion accuracy {100 * a:.1f}%")
     click.echo(f"chosen c = {result['c']} ({result['n_cars']} cars; all-visible baseline "

@@ -43,7 +43,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from . import features as feat
-from .parts import BACKGROUND, DEFAULT_MODEL_PATH, N_CLASSES, N_PARTS, PartDetector
+from .parts import BACKGROUND, DEFAULT_MODEL_PATH, N_PARTS, PartDetector
 
 __all__ = ["PatchData", "render_views", "make_patch_data", "make_synth_patch_data", "heldout_accuracy",
            "localisation", "scene_frames", "synth_eval_frames", "kitti_eval_frames", "train_part_detector",

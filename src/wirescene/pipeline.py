@@ -4,14 +4,13 @@ labels and evaluation records, and write the outputs of one fit."""
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable
 
 import numpy as np
 
+from .atomic import write_text
 from .camera import Camera
 from .datasets.kitti import FrameLabels, KittiDataset, Label, write_labels
 from .datasets.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
@@ -170,17 +169,6 @@ def evaluate_dataset(
     return {v: evaluate(results[v]) for v in variants}
 
 
-def _write_atomic_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_fit_outputs(
     out_dir: Path,
     stem: str,
@@ -209,7 +197,7 @@ def write_fit_outputs(
     try:
         write_labels(paths["labels"], estimate_to_labels(estimate))
         written.append(paths["labels"])
-        _write_atomic_text(paths["json"], payload)
+        write_text(paths["json"], payload)
         written.append(paths["json"])
         save_figure(fig_overlay, paths["overlay"])
         written.append(paths["overlay"])

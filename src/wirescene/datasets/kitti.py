@@ -13,8 +13,6 @@ kept apart from the objects, since every evaluation ignores them.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -24,6 +22,7 @@ from PIL import Image, UnidentifiedImageError
 
 from ..boxes import box_centers
 from ..camera import Camera, KittiCalib, read_kitti_calib
+from ..atomic import write_text
 from ..errors import InputError
 from ..groundplane import rotation_y as _rotation_y_matrix
 
@@ -220,18 +219,7 @@ def write_labels(
     path = Path(path)
     items = list(labels.objects) + list(labels.dontcare) if isinstance(labels, FrameLabels) else list(labels)
     text = "".join(format_label(lab, with_score=with_score) + "\n" for lab in items)  # fails before touching disk
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    write_text(path, text)
 
 
 def car_indices(

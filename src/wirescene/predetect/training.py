@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..viewpoints import N_BINS
+from .ap import summary
 from .bank import DetectorBank, detect_cars, score_pyramid
 from .configurations import (
     FULL,

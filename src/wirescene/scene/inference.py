@@ -28,7 +28,7 @@ import numpy as np
 from ..camera import Camera
 from ..groundplane import wrap_angle
 from ..shape import ShapeModel
-from .hypotheses import SceneParticles
+from .hypotheses import ObjectEstimate, SceneEstimate, SceneParticles
 from .lifting import box_residual
 from ..occlusion_training import load_occluded_score
 from ..masks import all_mask_hidden, fit_mask, mask_hidden
@@ -279,7 +279,7 @@ def estimate_from_refined(
     shape_model: ShapeModel,
     *,
     variant: str,
-) -> "SceneEstimate":
+) -> SceneEstimate:
     """The MAP scene of refined particles: the particle with the best scene objective
     when objects share a plane (the plane couples them), otherwise each object's own
     best particle (independent objects: the per-object maxima form the joint maximum).
@@ -288,7 +288,6 @@ def estimate_from_refined(
     axis-aligned extent in the object frame; visibility is the complement of
     self-occlusion; ``exemplar`` is the nearest CAD exemplar (paper Sec. 5.4).
     """
-    from .hypotheses import ObjectEstimate, SceneEstimate
 
     p = refined.particles
     N = p.n_objects

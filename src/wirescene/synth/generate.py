@@ -45,8 +45,6 @@ from __future__ import annotations
 
 import io
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
@@ -59,6 +57,7 @@ from ..camera import Camera, read_kitti_calib, write_kitti_calib
 from ..datasets.kitti import FrameLabels, Label, write_labels
 from ..errors import InputError
 from ..groundplane import alpha_from_rotation_y, rotation_y_of
+from ..atomic import atomic_path, write_bytes
 from ..cad.mesh import body_extent
 from ..raycast import first_hit_distance, mesh_intersector
 from ..render import render_scene
@@ -541,21 +540,6 @@ def _round(x, nd=6):
 # --------------------------------------------------------------------------- writing
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
 def _png_bytes(array: np.ndarray) -> bytes:
     buf = io.BytesIO()
     Image.fromarray(array).save(buf, format="PNG", compress_level=1)
@@ -565,21 +549,13 @@ def _png_bytes(array: np.ndarray) -> bytes:
 def write_scene(out_dir, frame_id: str, scene: SyntheticScene) -> None:
     """Write one scene in KITTI layout under ``out_dir/training`` (each file atomically)."""
     split = Path(out_dir) / "training"
-    _atomic_write(split / "image_2" / f"{frame_id}.png", _png_bytes(scene.image))
-    _atomic_write(split / "edges_2" / f"{frame_id}.png", _png_bytes(scene.edges.astype(np.uint8) * 255))
+    write_bytes(split / "image_2" / f"{frame_id}.png", _png_bytes(scene.image))
+    write_bytes(split / "edges_2" / f"{frame_id}.png", _png_bytes(scene.edges.astype(np.uint8) * 255))
     calib = split / "calib" / f"{frame_id}.txt"
-    calib.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{calib.name}.", suffix=".tmp", dir=calib.parent)
-    os.close(fd)
-    try:
+    with atomic_path(calib) as tmp:
         write_kitti_calib(tmp, scene.camera.P)
-        os.replace(tmp, calib)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     write_labels(split / "label_2" / f"{frame_id}.txt", scene.labels, with_score=False)
-    _atomic_write(split / "wireframes" / f"{frame_id}.json",
+    write_bytes(split / "wireframes" / f"{frame_id}.json",
                   (json.dumps(scene.wireframes, indent=1) + "\n").encode())
 
 
