@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from importlib import resources
 from pathlib import Path
@@ -35,10 +36,10 @@ def sample_root() -> Path:
     return Path(str(resources.files("wirescene") / "data" / "sample" / "kitti"))
 
 
-def _progress(desc: str):
+def _progress(desc: str, total: int | None = None):
     from tqdm import tqdm
 
-    return lambda it: tqdm(list(it), desc=desc, unit="frame", leave=False, file=sys.stderr)
+    return lambda it: tqdm(it, desc=desc, unit="frame", total=total, leave=False, file=sys.stderr)
 
 
 def _fit_options(particles: int, seed: int, **inference):
@@ -94,9 +95,10 @@ def _write_json_atomic(path: Path, data: dict) -> None:
 @click.option("--predictions", type=click.Path(path_type=Path), default=None, help="Write KITTI label files per variant here.")
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
               help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
+@click.option("--workers", type=int, default=None, help="Processes fitting frames in parallel (default: all cores).")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
-             iterations, samples, box_weight):
+             workers, iterations, samples, box_weight):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from .datasets.kitti import KittiDataset
     from .evaluate import format_table
@@ -113,7 +115,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
         options=_fit_options(particles, seed, iterations=iterations, samples=samples, box_weight=box_weight),
         predictions_dir=predictions,
         evidence=evidence,
-        progress=_progress("eval"),
+        workers=workers or os.cpu_count() or 1,
+        progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
     )
     click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if any(_is_fine(v) for v in variants) else ("3d", "viewpoint")))
     if json_out is not None:

@@ -115,6 +115,39 @@ def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
     return np.random.default_rng([seed, digits])
 
 
+@dataclass(frozen=True)
+class _FrameJob:
+    """Everything a (possibly separate) process needs to fit all variants on one frame."""
+
+    dataset: KittiDataset
+    variants: tuple
+    source: DetectionSource
+    options: FitOptions
+    evidence: str
+
+    def __call__(self, frame_id: str):
+        dataset = self.dataset
+        gt = dataset.labels(frame_id)
+        gt_path = wireframe_gt_path(dataset.split_dir, frame_id)
+        vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
+        detections = self.source.for_frame(dataset, frame_id, frame_seed(self.options.seed, frame_id))
+        camera = dataset.camera(frame_id)
+        lifted = lift_table(camera, detections, options=self.options.lifting) if len(detections) else None
+        frame_evidence = None
+        if any(get_variant(v).fine for v in self.variants) and len(detections):
+            if self.evidence == "oracle":
+                if vertex_gt is None:
+                    raise InputError("oracle evidence needs wireframes/ ground truth (synthetic scenes)", path=gt_path)
+                frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
+            else:
+                frame_evidence = part_evidence(dataset.image(frame_id), detections)
+        fits = {}
+        for v in self.variants:
+            estimate = fit_scene(camera, detections, variant=v, options=self.options, lifted=lifted, evidence=frame_evidence)
+            fits[v] = (estimate, frame_result(frame_id, gt, detections, estimate, vertex_gt, camera))
+        return frame_id, camera, detections, gt, fits
+
+
 def evaluate_dataset(
     dataset: KittiDataset,
     variants: Iterable[str],
@@ -124,6 +157,7 @@ def evaluate_dataset(
     options: FitOptions = FitOptions(),
     predictions_dir: Path | None = None,
     evidence: str = "parts",
+    workers: int = 1,
     progress: Callable[[Iterable], Iterable] = lambda it: it,
     on_estimate: Callable[..., None] | None = None,
 ) -> dict[str, EvaluationReport]:
@@ -133,39 +167,37 @@ def evaluate_dataset(
     ``predictions_dir/VARIANT/FRAME.txt``. ``evidence`` selects what the fine-grained
     variants fit to: ``"parts"`` (the part detectors, the real system) or ``"oracle"``
     (true vertex positions of synthetic scenes; needs ``wireframes/`` ground truth).
+    ``workers > 1`` fits frames in that many processes; every frame draws its random
+    numbers from (seed, frame id) alone, so the results equal the serial run's.
     ``on_estimate(frame_id, variant, estimate, camera, detections, gt)`` is called for
     every fit, e.g. to draw it.
     """
     if evidence not in ("parts", "oracle"):
         raise ValueError(f"evidence must be 'parts' or 'oracle', got {evidence!r}")
-    needs_evidence = any(get_variant(v).fine for v in variants)
     if not dataset.has_labels:
         raise InputError("evaluation needs label_2/ ground truth", path=dataset.split_dir)
-    variants = list(variants)
+    variants = [get_variant(v).name for v in variants]
     frame_ids = list(frames) if frames is not None else dataset.frame_ids()
+    job = _FrameJob(dataset, tuple(variants), source, options, evidence)
     results: dict[str, list[FrameResult]] = {v: [] for v in variants}
-    for frame_id in progress(frame_ids):
-        gt = dataset.labels(frame_id)
-        gt_path = wireframe_gt_path(dataset.split_dir, frame_id)
-        vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
-        detections = source.for_frame(dataset, frame_id, frame_seed(options.seed, frame_id))
-        camera = dataset.camera(frame_id)
-        lifted = lift_table(camera, detections, options=options.lifting) if len(detections) else None
-        frame_evidence = None
-        if needs_evidence and len(detections):
-            if evidence == "oracle":
-                if vertex_gt is None:
-                    raise InputError("oracle evidence needs wireframes/ ground truth (synthetic scenes)", path=gt_path)
-                frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
-            else:
-                frame_evidence = part_evidence(dataset.image(frame_id), detections)
-        for v in variants:
-            estimate = fit_scene(camera, detections, variant=v, options=options, lifted=lifted, evidence=frame_evidence)
-            results[v].append(frame_result(frame_id, gt, detections, estimate, vertex_gt, camera))
-            if on_estimate is not None:
-                on_estimate(frame_id, v, estimate, camera, detections, gt)
-            if predictions_dir is not None:
-                write_labels(Path(predictions_dir) / v / f"{frame_id}.txt", estimate_to_labels(estimate))
+    if workers > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        pool = ProcessPoolExecutor(max_workers=workers)
+        outputs = pool.map(job, frame_ids)
+    else:
+        pool, outputs = None, map(job, frame_ids)
+    try:
+        for frame_id, camera, detections, gt, fits in progress(outputs):
+            for v, (estimate, result) in fits.items():
+                results[v].append(result)
+                if on_estimate is not None:
+                    on_estimate(frame_id, v, estimate, camera, detections, gt)
+                if predictions_dir is not None:
+                    write_labels(Path(predictions_dir) / v / f"{frame_id}.txt", estimate_to_labels(estimate))
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
     return {v: evaluate(results[v]) for v in variants}
 
 
