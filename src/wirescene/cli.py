@@ -9,6 +9,7 @@ from importlib import resources
 from pathlib import Path
 
 import click
+import numpy as np
 
 from . import __version__
 from .errors import InputError, WiresceneError
