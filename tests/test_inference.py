@@ -75,3 +75,14 @@ def test_fine_fit_on_real_frame_is_deterministic():
     assert a.objects[0].shape.shape == (5,)
     h, w, l = a.objects[0].dims
     assert 1.0 < h < 2.0 and 1.3 < w < 2.2 and 3.0 < l < 5.5
+
+
+def test_viewpoint_from_evidence_recovers_bins(synthetic_scene):
+    from wirescene.scene.evidence import viewpoint_from_evidence
+
+    camera, model, truth, dets, evidence = synthetic_scene
+    unknown = Detections(dets.boxes, dets.scores, np.array([np.nan, dets.alpha[1], np.nan, np.nan]))
+    out = viewpoint_from_evidence(camera, unknown, evidence, model)
+    assert out.alpha[1] == dets.alpha[1]  # a known viewpoint is kept
+    assert np.all(np.isfinite(out.alpha))
+    assert np.all(angle_difference(out.alpha, dets.alpha) <= np.deg2rad(45) + 1e-9)

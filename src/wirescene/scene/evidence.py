@@ -48,3 +48,28 @@ def oracle_evidence(detections: Detections, gt_boxes: np.ndarray, vertex_gt: Wir
                 uv[j] = vertex_gt.vertices_2d[g]
                 visible[j] = vertex_gt.visible[g]
     return GaussianVertexEvidence(uv, visible, **kwargs)
+
+
+def viewpoint_from_evidence(camera, detections: Detections, evidence, shape_model, *, c: float = 0.0) -> Detections:
+    """Detections whose unknown viewpoints (NaN ``alpha``, e.g. boxes of an external
+    detector) are set to the bin whose mean-shape wireframe, lifted onto a level ground
+    plane at that viewpoint, best explains the part evidence; known viewpoints are kept."""
+    from ..viewpoints import N_BINS, bin_center
+    from .lifting import LiftingOptions, solve_positions
+    from .likelihood import instantiate_wireframes, wireframe_likelihood
+
+    unknown = np.flatnonzero(~np.isfinite(detections.alpha))
+    if len(unknown) == 0:
+        return detections
+    boxes = detections.boxes[unknown][:, None, :]  # (U, 1, 4)
+    alpha = bin_center(np.arange(N_BINS))[None, :]  # (1, 8)
+    dims = np.broadcast_to(np.array([1.53, 1.63, 3.88]), (len(unknown), N_BINS, 3))
+    opts = LiftingOptions()
+    x, z, az, _ = solve_positions(camera, boxes, alpha, 0.0, 0.0, dims, height=opts.camera_height,
+                                  iterations=opts.iterations)
+    batch = instantiate_wireframes(camera, shape_model, x=x, z=z, azimuth=az, pitch=np.zeros_like(x),
+                                   roll=np.zeros_like(x), shape=np.zeros(x.shape + (1,)), height=opts.camera_height)
+    score = wireframe_likelihood(batch, evidence, np.broadcast_to(unknown[:, None], x.shape), c=c)
+    out = detections.alpha.copy()
+    out[unknown] = bin_center(np.argmax(score, axis=1))
+    return Detections(detections.boxes, detections.scores, out, detections.source)

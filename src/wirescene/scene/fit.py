@@ -55,6 +55,15 @@ def fit_scene(
     v = get_variant(variant) if isinstance(variant, str) else variant
     if len(detections) == 0:
         return SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane)
+    if v.fine and lifted is None and not np.all(np.isfinite(detections.alpha)):
+        # Boxes without a viewpoint (external detectors): take it from the part evidence.
+        from ..shape import load_default
+        from .evidence import part_evidence, viewpoint_from_evidence
+
+        if evidence is None and image is not None:
+            evidence = part_evidence(image, detections)
+        if evidence is not None:
+            detections = viewpoint_from_evidence(camera, detections, evidence, load_default())
     if lifted is None:
         lifted = lift_table(camera, detections, options=options.lifting)
     particles = select_particles(
