@@ -1,0 +1,91 @@
+"""Speed of the fine-grained model on a real KITTI frame (plain script, not a test).
+
+1. Likelihood evaluations per second: the batched implementation (one call for
+   particles x objects x samples) against a naive loop calling it once per hypothesis,
+   measured side by side in this run, reported as a ratio.
+2. One full fit per variant, per stage (lifting, part evidence, inference), and the peak
+   resident memory of the process.
+
+Usage: python benchmarks/bench_fit.py [--root ../shared/data/kitti] [--frame 000010] [--particles 250]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import argparse  # noqa: E402
+import resource  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from wirescene.datasets.kitti import KittiDataset  # noqa: E402
+from wirescene.detect import detections_from_labels  # noqa: E402
+from wirescene.scene.evidence import part_evidence  # noqa: E402
+from wirescene.scene.fit import FitOptions, fit_scene  # noqa: E402
+from wirescene.scene.inference import InferenceOptions  # noqa: E402
+from wirescene.scene.lifting import LiftingOptions, lift_table, select_particles  # noqa: E402
+from wirescene.scene.likelihood import instantiate_wireframes, wireframe_likelihood  # noqa: E402
+from wirescene.shape import load_default  # noqa: E402
+
+
+def likelihood_batch(camera, model, evidence, x, z, az, s, obj, c):
+    b = instantiate_wireframes(camera, model, x=x, z=z, azimuth=az, pitch=np.zeros_like(x), roll=np.zeros_like(x),
+                               shape=s, height=1.65)
+    return wireframe_likelihood(b, evidence, obj, c=c)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--root", default="../shared/data/kitti")
+    ap.add_argument("--frame", default="000010")
+    ap.add_argument("--particles", type=int, default=250)
+    ap.add_argument("--variants", nargs="+", default=["fg", "fg+gp", "full"])
+    args = ap.parse_args()
+    ds = KittiDataset(args.root)
+    camera, image = ds.camera(args.frame), ds.image(args.frame)
+    dets = detections_from_labels(ds.labels(args.frame))
+    model = load_default()
+    c = InferenceOptions().occluded_score
+
+    t = time.perf_counter()
+    lifted = lift_table(camera, dets, options=LiftingOptions(n_particles=args.particles))
+    t_lift = time.perf_counter() - t
+    t = time.perf_counter()
+    evidence = part_evidence(image, dets)
+    t_parts = time.perf_counter() - t
+
+    # 1. batched vs naive likelihood on the same hypotheses
+    p = select_particles(lifted, shared_plane=True, n_particles=args.particles)
+    rng = np.random.default_rng(0)
+    H = p.x.size
+    x, z, az = p.x.ravel(), p.z.ravel(), p.azimuth.ravel()
+    s = rng.standard_normal((H, 5)) * 0.5
+    obj = np.tile(np.arange(p.n_objects), p.n_particles)
+    t = time.perf_counter()
+    batched = likelihood_batch(camera, model, evidence, x, z, az, s, obj, c)
+    t_batch = time.perf_counter() - t
+    n_naive = min(H, 300)
+    t = time.perf_counter()
+    naive = np.array([likelihood_batch(camera, model, evidence, x[i:i + 1], z[i:i + 1], az[i:i + 1], s[i:i + 1],
+                                       obj[i:i + 1], c)[0] for i in range(n_naive)])
+    t_naive = (time.perf_counter() - t) * H / n_naive
+    assert np.allclose(naive, batched[:n_naive])
+    print(f"{args.frame}: {len(dets)} cars, {p.n_particles} particles -> {H} hypotheses")
+    print(f"likelihood: batched {H / t_batch:,.0f} hyp/s, naive {H / t_naive:,.0f} hyp/s, ratio {t_naive / t_batch:.1f}x")
+
+    # 2. full fits, per stage
+    print(f"lifting (once per frame) {t_lift:.2f} s, part response maps {t_parts:.2f} s")
+    opts = FitOptions(lifting=LiftingOptions(n_particles=args.particles))
+    for v in args.variants:
+        t = time.perf_counter()
+        fit_scene(camera, dets, variant=v, options=opts, lifted=lifted, evidence=evidence)
+        print(f"{v:6s} inference {time.perf_counter() - t:.2f} s")
+    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+
+
+if __name__ == "__main__":
+    main()
