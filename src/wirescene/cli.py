@@ -164,7 +164,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
 
 @main.command("demo")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("wirescene_demo"), show_default=True)
-@click.option("--particles", default=100, show_default=True, help="Scene particles (the paper used 250; fewer keep the demo short).")
+@click.option("--particles", default=50, show_default=True, help="Scene particles (the paper used 250; fewer keep the demo short).")
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()),
               default=("coarse", "coarse+gp", "fg+gp", "full"), show_default=True)
 def demo_cmd(out, particles, variants):
