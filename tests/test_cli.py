@@ -148,3 +148,19 @@ def test_demo_runs_end_to_end(tmp_path):
     js = json.loads((tmp_path / "demo" / "full" / "000010.json").read_text())
     assert all(len(o["vertices"]) == 36 and "exemplar" in o for o in js["objects"])
     assert (tmp_path / "demo" / "eval.json").is_file()
+
+
+def test_eval_with_external_boxes_without_viewpoint(tmp_path):
+    from wirescene.datasets.kitti import read_labels
+
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    labels = read_labels(SPLIT / "label_2" / "000010.txt").of_type("Car")
+    (dets / "000010.json").write_text(json.dumps([{"box": list(map(float, o.box)), "score": 0.9} for o in labels]))
+    out = tmp_path / "m.json"
+    r = run("eval", KITTI_ROOT, "--frames", "000010", "--variant", "coarse+gp", "--detections", dets, "--json", out)
+    assert r.exit_code == 0, r.output
+    data = json.loads(out.read_text())
+    # Viewpoints came from the part evidence, so the 45-degree criterion was applied to every box.
+    assert data["viewpoint_check"] == "applied"
+    assert 3 <= data["n_tp"] <= 8

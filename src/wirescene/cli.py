@@ -61,9 +61,6 @@ def _inference_options(f):
     return f
 
 
-_variant_choice = None
-
-
 def _variants():
     from .scene.variants import VARIANTS
 

@@ -36,7 +36,7 @@ def detections_from_labels(
     """
     objs = labels.of_type(*types)
     if not objs:
-        return Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0), source)
+        return Detections.empty(source)
     alpha = np.array([o.alpha for o in objs])
     if viewpoint_noise_deg > 0:
         rng = np.random.default_rng(0) if rng is None else rng

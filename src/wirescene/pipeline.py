@@ -18,9 +18,10 @@ from .detect import detections_from_labels, read_detections
 from .errors import InputError
 from .evaluate import EvaluationReport, FrameResult, evaluate
 from .scene.fit import FitOptions, fit_scene
-from .scene.evidence import oracle_evidence, part_evidence
+from .scene.evidence import oracle_evidence, part_evidence, viewpoint_from_evidence
 from .scene.lifting import lift_table
 from .scene.variants import get_variant
+from .shape import load_default as load_shape_model
 from .scene.hypotheses import Detections, SceneEstimate
 from .viz import birds_eye, overlay, save_figure
 from .wireframe import EDGES
@@ -103,9 +104,9 @@ class DetectionSource:
                     return read_detections(path)
                 except InputError as exc:
                     if exc.problem == "no car detections in file":
-                        return Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0), str(path))
+                        return Detections.empty(str(path))
                     raise
-        return Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0), str(folder))
+        return Detections.empty(str(folder))
 
 
 def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
@@ -132,15 +133,18 @@ class _FrameJob:
         vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
         detections = self.source.for_frame(dataset, frame_id, frame_seed(self.options.seed, frame_id))
         camera = dataset.camera(frame_id)
-        lifted = lift_table(camera, detections, options=self.options.lifting) if len(detections) else None
+        unknown_viewpoint = not np.all(np.isfinite(detections.alpha))
         frame_evidence = None
-        if any(get_variant(v).fine for v in self.variants) and len(detections):
+        if (unknown_viewpoint or any(get_variant(v).fine for v in self.variants)) and len(detections):
             if self.evidence == "oracle":
                 if vertex_gt is None:
                     raise InputError("oracle evidence needs wireframes/ ground truth (synthetic scenes)", path=gt_path)
                 frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
             else:
                 frame_evidence = part_evidence(dataset.image(frame_id), detections)
+        if unknown_viewpoint and frame_evidence is not None:
+            detections = viewpoint_from_evidence(camera, detections, frame_evidence, load_shape_model())
+        lifted = lift_table(camera, detections, options=self.options.lifting) if len(detections) else None
         fits = {}
         for v in self.variants:
             estimate = fit_scene(camera, detections, variant=v, options=self.options, lifted=lifted, evidence=frame_evidence)

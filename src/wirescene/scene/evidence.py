@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..boxes import iou_2d
+from ..boxes import MEAN_CAR_DIMS, iou_2d
 from ..datasets.wireframes import WireframeGT
 from .hypotheses import Detections
 from .likelihood import GaussianVertexEvidence
@@ -63,7 +63,7 @@ def viewpoint_from_evidence(camera, detections: Detections, evidence, shape_mode
         return detections
     boxes = detections.boxes[unknown][:, None, :]  # (U, 1, 4)
     alpha = bin_center(np.arange(N_BINS))[None, :]  # (1, 8)
-    dims = np.broadcast_to(np.array([1.53, 1.63, 3.88]), (len(unknown), N_BINS, 3))
+    dims = np.broadcast_to(MEAN_CAR_DIMS, (len(unknown), N_BINS, 3))
     opts = LiftingOptions()
     x, z, az, _ = solve_positions(camera, boxes, alpha, 0.0, 0.0, dims, height=opts.camera_height,
                                   iterations=opts.iterations)

@@ -55,8 +55,9 @@ def fit_scene(
     v = get_variant(variant) if isinstance(variant, str) else variant
     if len(detections) == 0:
         return SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane)
-    if v.fine and lifted is None and not np.all(np.isfinite(detections.alpha)):
-        # Boxes without a viewpoint (external detectors): take it from the part evidence.
+    if lifted is None and not np.all(np.isfinite(detections.alpha)):
+        # Boxes without a viewpoint (external detectors): take it from the part evidence,
+        # for every variant, so that all variants start from the same pre-detections.
         from ..shape import load_default
         from .evidence import part_evidence, viewpoint_from_evidence
 

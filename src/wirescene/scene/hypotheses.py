@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..boxes import MEAN_CAR_DIMS, box_centers
+from ..boxes import box_centers
 from ..errors import check_shape
 from ..groundplane import (
     KITTI_CAMERA_HEIGHT,
@@ -51,6 +51,10 @@ class Detections:
 
     def __len__(self) -> int:
         return len(self.boxes)
+
+    @staticmethod
+    def empty(source: str = "") -> "Detections":
+        return Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0), source)
 
     def subset(self, index) -> "Detections":
         return Detections(self.boxes[index], self.scores[index], self.alpha[index], self.source)
@@ -211,7 +215,3 @@ class SceneEstimate:
             n_particles=particles.n_particles,
         )
 
-
-def default_dims(n_particles: int, n_objects: int) -> np.ndarray:
-    """Mean car box size for every object of every particle, ``(P, N, 3)``."""
-    return np.broadcast_to(MEAN_CAR_DIMS, (n_particles, n_objects, 3)).copy()

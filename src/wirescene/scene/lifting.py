@@ -99,9 +99,7 @@ def _initial_position(camera: Camera, boxes, pitch, roll, height, dims):
     n = plane_normal(pitch, roll)
     c = camera.center
     denom = np.sum(n * ray, axis=-1)
-    t = (height - n @ c if np.ndim(n) == 1 else height - np.sum(n * c, axis=-1)) / np.where(
-        np.abs(denom) < 1e-6, 1e-6, denom
-    )
+    t = (height - np.sum(n * c, axis=-1)) / np.where(np.abs(denom) < 1e-6, 1e-6, denom)
     hit = c + t[..., None] * ray
     box_h = np.maximum(boxes[..., 3] - boxes[..., 1], 1.0)
     z_from_height = camera.focal * dims[..., 0] / box_h
