@@ -105,6 +105,24 @@ def feature_dim(kind: str) -> int:
     raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
 
 
+def _resample(a: np.ndarray, z: float, *, name: str, filter_mode: str, resize_mode: str) -> np.ndarray:
+    """Bilinear resampling of a 2D float32 map by ``z`` to ``round(shape * z)``, after a
+    Gaussian of sigma ``0.5 / z`` when downsampling (so a 1-px line keeps its mass
+    whatever its phase w.r.t. the new grid). Returns ``a`` itself when the shape stays."""
+    from skimage.transform import resize
+
+    if a.ndim != 2:
+        raise ShapeError(f"{name} must be (H, W), got {a.shape}")
+    if z <= 0:
+        raise ValueError(f"z must be positive, got {z}")
+    shape = (max(1, int(round(a.shape[0] * z))), max(1, int(round(a.shape[1] * z))))
+    if shape == a.shape:
+        return a
+    if z < 1:
+        a = gaussian_filter(a, 0.5 / z, mode=filter_mode)
+    return resize(a, shape, order=1, mode=resize_mode, anti_aliasing=False, preserve_range=True).astype(np.float32)
+
+
 def canonical_edges(edges, z: float, *, blur: float = 0.0) -> np.ndarray:
     """Resample a native-resolution edge map by ``z`` (canonical px per native px).
 
@@ -112,24 +130,10 @@ def canonical_edges(edges, z: float, *, blur: float = 0.0) -> np.ndarray:
     canonical pixels (see module docstring); ``blur`` (canonical px) is an optional
     Gaussian (mass-preserving).
     """
-    from skimage.transform import resize
-
     e = np.asarray(edges, dtype=np.float32)
-    if e.ndim != 2:
-        raise ShapeError(f"edges must be (H, W), got {e.shape}")
-    if z <= 0:
-        raise ValueError(f"z must be positive, got {z}")
-    shape = (max(1, int(round(e.shape[0] * z))), max(1, int(round(e.shape[1] * z))))
-    if shape != e.shape:
-        # Downsampling: a Gaussian of sigma = half the sampling step first, so a 1-px line
-        # keeps its mass whatever its phase w.r.t. the new grid.
-        aa = 0.5 / z if z < 1 else 0.0
-        if aa:
-            e = gaussian_filter(e, aa, mode="constant")
-        out = resize(e, shape, order=1, mode="constant", anti_aliasing=False, preserve_range=True)
-        out = out.astype(np.float32) / np.float32(z)
-    else:
-        out = e.copy()
+    # Edge mass is line length: dividing by z keeps it in canonical pixels.
+    out = _resample(e, z, name="edges", filter_mode="constant", resize_mode="constant")
+    out = e.copy() if out is e else out / np.float32(z)
     if blur > 0:
         out = gaussian_filter(out, blur).astype(np.float32)
     return out
@@ -235,19 +239,9 @@ def image_grey(image) -> np.ndarray:
 def canonical_grey(grey, z: float) -> np.ndarray:
     """Resample a native grey image by ``z`` (same grid as :func:`canonical_edges`), with
     a Gaussian pre-filter of sigma ``0.5 / z`` when downsampling."""
-    from skimage.transform import resize
-
     g = np.asarray(grey, dtype=np.float32)
-    if g.ndim != 2:
-        raise ShapeError(f"grey must be (H, W), got {g.shape}")
-    if z <= 0:
-        raise ValueError(f"z must be positive, got {z}")
-    shape = (max(1, int(round(g.shape[0] * z))), max(1, int(round(g.shape[1] * z))))
-    if shape == g.shape:
-        return g.copy()
-    if z < 1:
-        g = gaussian_filter(g, 0.5 / z, mode="nearest")
-    return resize(g, shape, order=1, mode="edge", anti_aliasing=False, preserve_range=True).astype(np.float32)
+    out = _resample(g, z, name="grey", filter_mode="nearest", resize_mode="edge")
+    return g.copy() if out is g else out
 
 
 def orientation_cells(grey_map) -> np.ndarray:
