@@ -1,8 +1,8 @@
 import numpy as np
 
-from conftest import KITTI_ROOT
+from conftest import KITTI_ROOT, assert_close
 from wirescene.datasets.kitti import KittiDataset
-from wirescene.masks import all_mask_hidden, fit_mask, mask_hidden, normalised_coordinates, occluder_masks
+from wirescene.masks import all_mask_hidden, fit_mask, mask_hidden, mask_weight_sums, normalised_coordinates, occluder_masks
 from wirescene.occlusion_training import occlusion_accuracy_by_c
 from wirescene.scene.inference import update_occlusion
 from wirescene.scene.hypotheses import SceneParticles
@@ -62,3 +62,12 @@ def test_deterministic_occlusion_hides_the_car_behind():
     assert not gamma[0, 0].any()  # nothing hides the near car
     mask_do, gamma_do = update_occlusion(camera, model, _Flat(), p, theta, 5, -0.5, searched=False, deterministic=True)
     assert gamma_do is None and mask_do[0, 1] != 0 and mask_do[0, 0] == 0
+
+
+def test_mask_weight_sums_equal_the_explicit_sums_over_all_masks():
+    rng = np.random.default_rng(3)
+    uv = rng.uniform(0, 300, size=(4, 3, 36, 2))
+    w = rng.normal(size=(4, 3, 36))
+    explicit = (all_mask_hidden(uv) * w[..., None, :]).sum(axis=-1)
+    assert explicit.shape == (4, 3, len(occluder_masks()))
+    assert_close(mask_weight_sums(uv, w), explicit, atol=1e-9)

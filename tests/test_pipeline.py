@@ -1,20 +1,196 @@
+import json
+import shutil
+import sys
+
 import numpy as np
+import pytest
+from click.testing import CliRunner
 
 from conftest import KITTI_ROOT
-from wirescene.datasets.kitti import KittiDataset
-from wirescene.pipeline import evaluate_dataset
+from wirescene.cli import main
+from wirescene.datasets.kitti import KittiDataset, Label
+from wirescene.evaluate import FrameResult
+from wirescene.pipeline import RECORDS_DIR, DetectionSource, _FrameJob, evaluate_dataset
 from wirescene.scene.fit import FitOptions
 from wirescene.scene.inference import InferenceOptions
 from wirescene.scene.lifting import LiftingOptions
 
+# Few particles and iterations keep every run of the two frames at a few seconds.
+OPTS = FitOptions(lifting=LiftingOptions(n_particles=6), inference=InferenceOptions(iterations=2, samples=4), seed=1)
+VARIANTS = ["coarse+gp", "fg"]  # a coarse one, and a fine one with per-vertex estimates
+FRAMES = ["000002", "001545"]
 
-def test_parallel_evaluation_equals_serial():
-    ds = KittiDataset(KITTI_ROOT)
-    opts = FitOptions(lifting=LiftingOptions(n_particles=6), inference=InferenceOptions(iterations=2, samples=4), seed=1)
-    kw = dict(frames=["000002", "001545"], options=opts)
-    serial = evaluate_dataset(ds, ["coarse+gp", "fg"], workers=1, **kw)
-    parallel = evaluate_dataset(ds, ["coarse+gp", "fg"], workers=2, **kw)
+
+def _reports_json(reports):
+    # to_json_dict turns NaN into None, so equal reports compare equal (NaN != NaN).
+    return {v: r.to_json_dict(include_records=True) for v, r in reports.items()}
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The uninterrupted serial run, with its predictions directory."""
+    pred = tmp_path_factory.mktemp("reference") / "pred"
+    reports = evaluate_dataset(KittiDataset(KITTI_ROOT), VARIANTS, frames=FRAMES, options=OPTS, predictions_dir=pred)
+    return reports, pred
+
+
+def _collecting_progress(seen):
+    def progress(items):
+        for item in items:
+            seen.append(item)
+            yield item
+
+    return progress
+
+
+def test_parallel_evaluation_equals_serial(reference):
+    serial, _ = reference
+    parallel = evaluate_dataset(KittiDataset(KITTI_ROOT), VARIANTS, frames=FRAMES, options=OPTS, workers=2)
     for v in serial:
         a = [r.loc_error for r in serial[v].records]
         b = [r.loc_error for r in parallel[v].records]
         assert len(a) == 7 and np.array_equal(a, b)
+    assert _reports_json(parallel) == _reports_json(serial)
+
+
+def _assert_frame_results_equal(a: FrameResult, b: FrameResult):
+    def same(x, y, name):
+        if isinstance(x, np.ndarray):
+            assert isinstance(y, np.ndarray) and x.dtype == y.dtype and x.shape == y.shape, name
+            assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), name
+        elif isinstance(x, (list, tuple)):
+            assert isinstance(y, list) and len(x) == len(y), name
+            for i, (xi, yi) in enumerate(zip(x, y)):
+                same(xi, yi, f"{name}[{i}]")
+        elif isinstance(x, Label):
+            for k in vars(x):
+                same(getattr(x, k), getattr(y, k), f"{name}.{k}")
+        else:
+            assert type(x) is type(y) and x == y, name
+
+    for k in vars(a):
+        same(getattr(a, k), getattr(b, k), k)
+
+
+def _round_trip(result: FrameResult) -> FrameResult:
+    return FrameResult.from_dict(json.loads(json.dumps(result.to_dict())))
+
+
+def test_frame_result_round_trip_is_exact():
+    rng = np.random.default_rng(0)
+    gt = [Label("Car", 0.1, 1, 0.3, [1.5, 2.25, 100.125, 80.0], [1.5, 1.6, 3.9], [1.0, 1.7, 20.0], 0.1 + 0.2),
+          Label("DontCare", -1, -1, -10, [0, 0, 5, 5], [-1, -1, -1], [-1000, -1000, -1000], -10, score=0.5)]
+    full = FrameResult(
+        frame_id="000007",
+        gt=gt,
+        det_boxes=rng.random((2, 4)) * 100,
+        det_alpha=[np.nan, 1 / 3],
+        det_scores=[1.0, 0.1],
+        est_location=rng.normal(size=(2, 3)),
+        est_dims=rng.random((2, 3)),
+        est_rotation_y=[np.pi, -1e-300],
+        est_alpha=[np.inf, 0.0],
+        est_occluded=rng.random((2, 36)) < 0.5,
+        est_vertices_2d=rng.normal(size=(2, 36, 2)) * 1e3,
+        gt_occluded_parts=[3, None],
+        gt_vertices_2d=[np.full((36, 2), np.nan), None],
+        gt_vertex_visible=[rng.random(36) < 0.5, None],
+        gt_self_occluded=np.zeros((2, 36), bool),  # an array, not a list: stays an array
+    )
+    empty = FrameResult("000008", [], np.zeros((0, 4)), [], [], np.zeros((0, 3)), np.zeros((0, 3)), [], [])
+    for result in (full, empty):
+        _assert_frame_results_equal(result, _round_trip(result))
+    # The records of real fits too (the fine variant has per-vertex estimates).
+    job = _FrameJob(KittiDataset(KITTI_ROOT), tuple(VARIANTS), DetectionSource(), OPTS, "parts")
+    for _, result in job("000002")[4].values():
+        _assert_frame_results_equal(result, _round_trip(result))
+    with pytest.raises(ValueError, match="not a FrameResult record"):
+        FrameResult.from_dict({"frame_id": "1"})
+
+
+def test_resume_reuses_finished_frames_and_equals_uninterrupted_run(reference, tmp_path):
+    ref_reports, ref_dir = reference
+    pred = tmp_path / "pred"
+    shutil.copytree(ref_dir, pred)
+    (pred / RECORDS_DIR / "001545.json").unlink()  # interrupted before this frame was complete
+    (pred / "fg" / "000002.txt").unlink()  # a lost label file of a complete frame comes back
+    fitted, seen, notes = set(), [], []
+    resumed = evaluate_dataset(
+        KittiDataset(KITTI_ROOT), VARIANTS, frames=FRAMES, options=OPTS, predictions_dir=pred, resume=True,
+        progress=_collecting_progress(seen), on_estimate=lambda frame_id, *_: fitted.add(frame_id), notify=notes.append,
+    )
+    assert fitted == {"001545"}
+    assert len(seen) == 2  # the reused frame is counted by the progress bar too
+    assert notes == [f"resuming: 1 of 2 frames already done in {pred}"]
+    assert _reports_json(resumed) == _reports_json(ref_reports)
+    ref_files = sorted(p.relative_to(ref_dir) for p in ref_dir.rglob("*") if p.is_file())
+    assert sorted(p.relative_to(pred) for p in pred.rglob("*") if p.is_file()) == ref_files  # no temporary leftovers
+    for rel in ref_files:
+        assert (pred / rel).read_text() == (ref_dir / rel).read_text(), rel
+
+
+def test_record_of_another_configuration_is_refit(reference, tmp_path):
+    _, ref_dir = reference
+    pred = tmp_path / "pred"
+    shutil.copytree(ref_dir, pred)
+    record = pred / RECORDS_DIR / "000002.json"
+    other = FitOptions(lifting=OPTS.lifting, inference=OPTS.inference, seed=2)
+    fitted, notes = set(), []
+    kw = dict(frames=["000002"], predictions_dir=pred, on_estimate=lambda frame_id, *_: fitted.add(frame_id))
+    refit = evaluate_dataset(KittiDataset(KITTI_ROOT), VARIANTS, options=other, resume=True, notify=notes.append, **kw)
+    assert fitted == {"000002"}
+    assert len(notes) == 1 and str(record) in notes[0] and "different configuration (options.seed)" in notes[0]
+    assert json.loads(record.read_text())["config"]["options"]["seed"] == 2
+    fresh = evaluate_dataset(KittiDataset(KITTI_ROOT), VARIANTS, frames=["000002"], options=other)
+    assert _reports_json(refit) == _reports_json(fresh)
+    # An unreadable record (not written by us: ours are atomic) is refit as well.
+    record.write_text('{"format": ')
+    fitted.clear()
+    notes.clear()
+    evaluate_dataset(KittiDataset(KITTI_ROOT), VARIANTS, options=other, resume=True, notify=notes.append, **kw)
+    assert fitted == {"000002"} and len(notes) == 1 and "unreadable" in notes[0]
+
+
+def test_dask_cluster_equals_serial(reference, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    ref_reports, ref_dir = reference
+    seen = []
+    # Worker processes, so the job crosses a process boundary as on a real cluster
+    # (about 10 s here, 3 s with processes=False).
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        reports = evaluate_dataset(
+            KittiDataset(KITTI_ROOT), VARIANTS, frames=FRAMES, options=OPTS, predictions_dir=tmp_path / "pred",
+            workers=4, dask_client=cluster.scheduler_address, progress=_collecting_progress(seen),
+        )
+    assert len(seen) == 2
+    assert _reports_json(reports) == _reports_json(ref_reports)
+    for path in (p for p in ref_dir.rglob("*") if p.is_file()):
+        assert (tmp_path / "pred" / path.relative_to(ref_dir)).read_text() == path.read_text()
+
+
+def _run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_eval_cli_resume(tmp_path):
+    args = ["eval", KITTI_ROOT, "--variant", "coarse+gp", "--frames", "000002", "--particles", 6, "--iterations", 2,
+            "--samples", 4, "--seed", 1, "--predictions", tmp_path / "pred"]
+    first = _run(*args, "--json", tmp_path / "a.json")
+    assert first.exit_code == 0, first.output
+    again = _run(*args, "--resume", "--json", tmp_path / "b.json")
+    assert again.exit_code == 0, again.output
+    assert "wirescene: resuming: 1 of 1 frames already done" in again.stderr
+    assert json.loads((tmp_path / "a.json").read_text()) == json.loads((tmp_path / "b.json").read_text())
+    stale = _run(*args[:-4], "--seed", 2, "--predictions", tmp_path / "pred", "--resume")
+    assert stale.exit_code == 0, stale.output
+    assert "refitting 1 frame(s)" in stale.stderr and "000002.json" in stale.stderr
+
+
+def test_eval_cli_resume_needs_predictions_and_dask_needs_distributed(monkeypatch):
+    r = _run("eval", KITTI_ROOT, "--frames", "000002", "--resume")
+    assert r.exit_code == 2 and "--resume needs --predictions DIR" in r.output
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import fails as if not installed
+    r = _run("eval", KITTI_ROOT, "--frames", "000002", "--dask", "tcp://127.0.0.1:8786")
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert r.exit_code == 1
+    assert lines == ["Error: --dask needs the 'distributed' package: pip install wirescene[dask]"]

@@ -187,3 +187,23 @@ def test_inter_object_occlusion_matches_embree_on_random_scenes():
             assert np.array_equal(hidden[s, i][~tie], want[~tie]), (s, i)
             n_checked += (~tie).sum()
     assert n_checked > 0.99 * S * N * len(v)
+
+
+def test_inter_object_occlusion_pair_culling_is_exact():
+    """Only image-overlapping, depth-compatible object pairs are ray cast; the result
+    must equal testing every vertex against every other object's faces, also for
+    objects beside or behind the camera, where the culling projection does not apply."""
+    rng = np.random.default_rng(5)
+    v, f, _ = random_hull(rng)
+    S, N = 30, 5
+    # Crowded scenes (many overlaps), some objects straddling or behind the camera plane.
+    location, R = object_pose(rng.uniform(-4, 4, (S, N)), rng.uniform(-3, 15, (S, N)), rng.uniform(-np.pi, np.pi, (S, N)))
+    X = transform(np.broadcast_to(v, (S, N) + v.shape), location, R)
+    center = np.array([0.06, -0.1, 0.0])
+    hidden = inter_object_occlusion(X, f, center)
+    others = np.stack([np.concatenate([X[:, j][:, f] for j in range(N) if j != i], axis=1) for i in range(N)], axis=1)
+    brute = segment_blocked(center, X, others)
+    assert np.array_equal(hidden, brute)
+    assert 0.05 < hidden.mean() < 0.6
+    behind = (X[..., 2] <= center[2]).any(-1)
+    assert behind.any() and (~behind).any()

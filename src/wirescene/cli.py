@@ -49,13 +49,36 @@ def _fit_options(particles: int, seed: int, **inference):
     from .scene.lifting import LiftingOptions
 
     inference = {k: v for k, v in inference.items() if v is not None}
+    if "device" in inference:
+        inference["device"] = _resolve_device(inference["device"])
     return FitOptions(lifting=LiftingOptions(n_particles=particles), inference=InferenceOptions(**inference), seed=seed)
+
+
+def _resolve_device(name: str) -> str:
+    """The inference device for ``--device``: ``numpy``, or a PyTorch device name.
+    ``auto`` takes a CUDA GPU when PyTorch and one are there, else numpy (PyTorch is
+    imported only to look for the GPU, and only if it is installed)."""
+    from . import torch_backend
+
+    key = name.strip().lower()
+    if key == "numpy":
+        return "numpy"
+    if key == "auto":
+        if not torch_backend.available():
+            return "numpy"
+        return "cuda" if torch_backend.resolve_device("auto").type == "cuda" else "numpy"
+    return str(torch_backend.resolve_device(key))
 
 
 def _inference_options(f):
     """Options of the fine-grained inference stage, shared by `eval` and `fit`."""
+    f = click.option("--device", default="auto", show_default=True,
+                     help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
+                          "(optional: pip install torch). auto: a CUDA GPU if PyTorch sees one, else numpy.")(f)
     f = click.option("--iterations", type=int, default=None, help="Inference iterations (Algorithm 1).")(f)
     f = click.option("--samples", type=int, default=None, help="Samples per object and iteration.")(f)
+    f = click.option("--prune-after", type=int, default=None,
+                     help="Keep only the best quarter of the particles after this many iterations (default 4; 0: never).")(f)
     f = click.option("--box-weight", type=float, default=None,
                      help="Weight of the detection box in the fine objective (0: the paper's part likelihood only).")(f)
     return f
@@ -73,6 +96,20 @@ def _write_json_atomic(path: Path, data: dict) -> None:
     write_text(path, json.dumps(data, indent=1))
 
 
+def _dask_client(address: str):
+    """A client of the Dask scheduler at ``address``; a missing package or an unreachable
+    scheduler is a one-line error before any frame is fitted."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise click.ClickException("--dask needs the 'distributed' package: pip install wirescene[dask]") from None
+    try:
+        return Client(address, set_as_default=False)
+    except (OSError, ValueError, TypeError) as exc:
+        detail = " ".join(str(exc).split())
+        raise click.ClickException(f"--dask: cannot connect to the Dask scheduler at {address} ({detail})") from None
+
+
 @main.command("eval")
 @click.argument("kitti_root", type=click.Path(path_type=Path))
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()), help="Model variant(s); default: all available.")
@@ -88,28 +125,55 @@ def _write_json_atomic(path: Path, data: dict) -> None:
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
               help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
 @click.option("--workers", type=int, default=None, help="Processes fitting frames in parallel (default: all cores).")
+@click.option("--resume/--no-resume", default=False, show_default=True,
+              help="Reuse the frames already finished in --predictions DIR (recorded in DIR/.frames/) and fit only the "
+                   "rest; a record written with other settings is fitted again.")
+@click.option("--dask", "dask_address", metavar="ADDRESS", default=None,
+              help="Fit frames on this running Dask scheduler (e.g. tcp://host:8786) instead of local processes "
+                   "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
-             workers, iterations, samples, box_weight):
+             workers, resume, dask_address, iterations, samples, prune_after, box_weight, device):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from .datasets.kitti import KittiDataset
     from .evaluate import format_table
     from .pipeline import DetectionSource, evaluate_dataset
 
+    if resume and predictions is None:
+        raise click.UsageError("--resume needs --predictions DIR, where finished frames are recorded")
+    if dask_address is not None:
+        # Dask workers may run elsewhere (another working directory): give them absolute paths.
+        kitti_root = kitti_root.resolve()
+        if detections not in ("gt", "bank"):
+            detections = str(Path(detections).resolve())
     dataset = KittiDataset(kitti_root, split=split)
     variants = list(variants) or _variants()
     frame_ids = [f.strip() for f in frames.split(",")] if frames else None
-    reports = evaluate_dataset(
-        dataset,
-        variants,
-        frames=frame_ids,
-        source=DetectionSource(detections, viewpoint_noise),
-        options=_fit_options(particles, seed, iterations=iterations, samples=samples, box_weight=box_weight),
-        predictions_dir=predictions,
-        evidence=evidence,
-        workers=workers or os.cpu_count() or 1,
-        progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
-    )
+    options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
+                           box_weight=box_weight, device=device)
+    on_gpu = options.inference.device.startswith("cuda")
+    if on_gpu and (workers or 1) > 1:
+        # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
+        raise click.UsageError("--device cuda fits frames in one process: drop --workers (or use --dask, one worker per GPU)")
+    client = _dask_client(dask_address) if dask_address is not None else None
+    try:
+        reports = evaluate_dataset(
+            dataset,
+            variants,
+            frames=frame_ids,
+            source=DetectionSource(detections, viewpoint_noise),
+            options=options,
+            predictions_dir=predictions,
+            resume=resume,
+            evidence=evidence,
+            workers=1 if on_gpu else workers or os.cpu_count() or 1,
+            dask_client=client,
+            progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
+            notify=lambda message: click.echo(f"wirescene: {message}", err=True),
+        )
+    finally:
+        if client is not None:
+            client.close()
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())
     click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if has_parts else ("3d", "viewpoint")))
@@ -133,7 +197,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
 @click.option("--seed", default=0, show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
 @_inference_options
-def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, box_weight):
+def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, prune_after, box_weight,
+            device):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from .camera import read_kitti_calib
     from .datasets.kitti import read_image, read_labels
@@ -152,7 +217,8 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
         if len(dets) == 0:
             raise InputError("pre-detection found no car in the image", path=image)
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
-    options = _fit_options(particles, seed, iterations=iterations, samples=samples, box_weight=box_weight)
+    options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
+                           box_weight=box_weight, device=device)
     estimate = fit_scene(camera, dets, variant=variant, options=options, image=img)
     paths = write_fit_outputs(out, Path(image).stem, image=img, camera=camera, estimate=estimate, detections=dets, gt=gt_objs)
     for kind, p in paths.items():

@@ -44,7 +44,7 @@ Protocol
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -145,6 +145,78 @@ class FrameResult:
     @property
     def n_detections(self) -> int:
         return len(self.det_boxes)
+
+    def to_dict(self) -> dict:
+        """Everything needed to rebuild this record, as plain JSON-ready values.
+
+        :meth:`from_dict` inverts it exactly: arrays keep their dtype and shape (empty
+        ones too), floats go through ``repr`` (exact in JSON), ``None`` stays ``None``.
+        NaN and infinities are kept as floats, so serialise with :func:`json.dumps`'
+        default ``allow_nan=True`` (the output is then read back by Python's ``json``,
+        not necessarily by strict JSON parsers).
+        """
+        out: dict = {"frame_id": self.frame_id, "gt": [_label_to_dict(g) for g in self.gt]}
+        for f in fields(self):
+            if f.name not in out:
+                out[f.name] = _encode(getattr(self, f.name))
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "FrameResult":
+        """Rebuild a record written by :meth:`to_dict`.
+
+        Raises
+        ------
+        ValueError
+            If ``data`` is not such a record (missing or unknown keys, bad arrays).
+        """
+        names = [f.name for f in fields(cls)]
+        if not isinstance(data, dict) or set(data) != set(names):
+            got = sorted(data) if isinstance(data, dict) else type(data).__name__
+            raise ValueError(f"not a FrameResult record: expected keys {names}, got {got}")
+        values = {k: _decode(v) for k, v in data.items() if k != "gt"}
+        try:
+            gt = [Label(**g) for g in data["gt"]]
+        except TypeError as exc:
+            raise ValueError(f"malformed ground-truth label in record ({exc})") from None
+        return cls(gt=gt, **values)
+
+
+def _label_to_dict(label: Label) -> dict:
+    # Label.__post_init__ turns the lists back into float arrays, so plain lists are exact.
+    out = {}
+    for f in fields(label):
+        value = getattr(label, f.name)
+        out[f.name] = value.tolist() if isinstance(value, np.ndarray) else value
+    return out
+
+
+def _encode(value):
+    """Plain JSON values for ``None``, numbers, strings, arrays and (nested) sequences;
+    arrays become ``{"dtype", "shape", "data"}`` so that :func:`_decode` restores them
+    exactly (a plain nested list loses the dtype and the shape of empty arrays)."""
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "biuf":
+            raise TypeError(f"cannot serialise an array of dtype {value.dtype}")
+        return {"dtype": value.dtype.str, "shape": list(value.shape), "data": value.tolist()}
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (list, tuple)):
+        return [_encode(v) for v in value]
+    raise TypeError(f"cannot serialise {type(value).__name__}")
+
+
+def _decode(value):
+    if isinstance(value, dict):
+        try:
+            return np.array(value["data"], dtype=np.dtype(value["dtype"])).reshape(value["shape"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"malformed array record ({exc})") from None
+    if isinstance(value, list):
+        return [_decode(v) for v in value]
+    return value
 
 
 @dataclass

@@ -16,6 +16,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .arrays import point_bounds
 from .errors import check_shape
 
 
@@ -46,8 +47,8 @@ def normalised_coordinates(uv: np.ndarray) -> np.ndarray:
     """Vertex projections ``(..., V, 2)`` in coordinates of their own 2D extent."""
     uv = np.asarray(uv, dtype=float)
     check_shape("uv", uv, (..., None, 2))
-    lo, hi = uv.min(axis=-2, keepdims=True), uv.max(axis=-2, keepdims=True)
-    return (uv - lo) / np.maximum(hi - lo, 1e-9)
+    lo, hi = point_bounds(uv)
+    return (uv - lo[..., None, :]) / np.maximum(hi - lo, 1e-9)[..., None, :]
 
 
 def mask_hidden(uv: np.ndarray, mask_index, *, masks: np.ndarray | None = None) -> np.ndarray:
@@ -70,6 +71,43 @@ def all_mask_hidden(uv: np.ndarray, *, masks: np.ndarray | None = None) -> np.nd
     )
 
 
+@lru_cache(maxsize=1)
+def _factorised_masks():
+    """The mask set as products of x- and y-intervals: ``(x_intervals (I, 2),
+    y_intervals (J, 2), i (A,), j (A,), nonempty (A,))``."""
+    m = occluder_masks()
+    xs, i = np.unique(m[:, [0, 2]], axis=0, return_inverse=True)
+    ys, j = np.unique(m[:, [1, 3]], axis=0, return_inverse=True)
+    return xs, ys, i.ravel(), j.ravel(), m[:, 2] > m[:, 0]
+
+
+def mask_weight_sums(uv: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``sum_v hidden_a(v) * weights_v`` for every mask ``a``: ``(..., A)``.
+
+    Parameters
+    ----------
+    uv : (..., V, 2) array
+        Vertex projections.
+    weights : (..., V) array
+
+    Notes
+    -----
+    Equal to ``(all_mask_hidden(uv) * weights[..., None, :]).sum(-1)`` but never builds
+    the ``(..., A, V)`` flags: every mask is a product of one of I x-intervals and one
+    of J y-intervals (I, J << A), so the sums for all masks are the entries of the
+    ``(I, J)`` matrix ``X diag(w) Y^T`` -- one small batched matrix product.
+    """
+    xs, ys, i, j, nonempty = _factorised_masks()
+    q = normalised_coordinates(uv)
+    w = np.asarray(weights, dtype=float)
+    check_shape("weights", w, q.shape[:-1])
+    qx, qy = q[..., None, :, 0], q[..., None, :, 1]
+    X = ((qx >= xs[:, :1]) & (qx <= xs[:, 1:])) * w[..., None, :]  # (..., I, V)
+    Y = ((qy >= ys[:, :1]) & (qy <= ys[:, 1:])).astype(float)  # (..., J, V)
+    sums = np.matmul(X, np.swapaxes(Y, -1, -2))  # (..., I, J)
+    return np.where(nonempty, sums[..., i, j], 0.0)
+
+
 def fit_mask(uv: np.ndarray, occluded: np.ndarray, candidates: np.ndarray, *, weight_occluded: float = 2.0) -> np.ndarray:
     """Index ``(...)`` of the mask that best represents a set of occluded vertices.
 
@@ -84,8 +122,9 @@ def fit_mask(uv: np.ndarray, occluded: np.ndarray, candidates: np.ndarray, *, we
     candidates : (..., V) bool array
         The vertices that count (not self-occluded).
     """
-    hidden = all_mask_hidden(uv)  # (..., A, V)
-    occ = np.asarray(occluded, bool)[..., None, :]
-    cand = np.asarray(candidates, bool)[..., None, :]
-    score = (weight_occluded * (hidden & occ) + (~hidden & ~occ)) * cand
-    return np.argmax(score.sum(axis=-1), axis=-1)
+    occ = np.asarray(occluded, bool)
+    cand = np.asarray(candidates, bool)
+    # sum_v cand (w_o H occ + (1 - H)(1 - occ)) = sum_v cand (1 - occ) + sum_v H u_v; the
+    # first term does not depend on the mask.
+    u = cand * np.where(occ, weight_occluded, -1.0)
+    return np.argmax(mask_weight_sums(uv, np.broadcast_to(u, np.shape(uv)[:-1])), axis=-1)

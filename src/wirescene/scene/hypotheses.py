@@ -103,8 +103,14 @@ class SceneParticles:
         return object_pose(self.x, self.z, self.azimuth, self.pitch, self.roll, self.height)
 
     def take(self, index) -> "SceneParticles":
-        """The particles selected by ``index`` along the particle axis."""
-        pick = lambda a: np.asarray(a)[index]  # noqa: E731
+        """The particles selected by ``index`` along the particle axis: ``(k,)`` rows,
+        or ``(k, N)`` a row per object (regrouping objects of different particles)."""
+        index = np.asarray(index)
+        if index.ndim == 2:
+            cols = np.arange(self.n_objects)
+            pick = lambda a: np.asarray(a)[index, cols]  # noqa: E731
+        else:
+            pick = lambda a: np.asarray(a)[index]  # noqa: E731
         return SceneParticles(
             pick(self.pitch), pick(self.roll), pick(self.x), pick(self.z), pick(self.azimuth),
             pick(self.object_cost), pick(self.dims), self.height, self.shared_plane,

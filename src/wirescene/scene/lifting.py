@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..arrays import point_bounds
 from ..boxes import MEAN_CAR_DIMS, box_corners_object
 from ..camera import Camera
 from ..groundplane import (
@@ -70,12 +71,13 @@ def _symmetric_range(half: float, step: float) -> np.ndarray:
     return np.arange(-n, n + 1) * step
 
 
-def project_boxes(camera: Camera, dims, location, R) -> tuple[np.ndarray, np.ndarray]:
-    """2D boxes ``(..., 4)`` of 3D boxes (clipped to the image when its size is known) and
-    the minimum corner depth ``(...)`` (<= 0 means the box reaches behind the camera)."""
-    corners = np.einsum("...ij,...vj->...vi", R, box_corners_object(dims)) + location[..., None, :]
-    uv, depth = camera.project_with_depth(corners)
-    box = np.concatenate([uv.min(axis=-2), uv.max(axis=-2)], axis=-1)
+def project_boxes(camera: Camera, corners_obj, location, R) -> tuple[np.ndarray, np.ndarray]:
+    """2D boxes ``(..., 4)`` of 3D boxes with object-frame corners ``corners_obj``
+    ``(..., 8, 3)`` (see :func:`wirescene.boxes.box_corners_object`), clipped to the
+    image when its size is known, and the minimum corner depth ``(...)`` (<= 0 means the
+    box reaches behind the camera)."""
+    uv, depth = camera.project_placed(corners_obj, location, R)
+    box = np.concatenate(point_bounds(uv), axis=-1)
     if camera.image_size is not None:
         w, h = camera.image_size
         box = np.clip(box, 0.0, [w - 1, h - 1, w - 1, h - 1])
@@ -133,6 +135,7 @@ def solve_positions(
     """
     shape = np.broadcast_shapes(boxes.shape[:-1], np.shape(alpha), np.shape(pitch), np.shape(roll), dims.shape[:-1])
     boxes = np.broadcast_to(boxes, shape + (4,))
+    corners = box_corners_object(dims)  # before broadcasting: once per distinct size
     dims = np.broadcast_to(dims, shape + (3,))
     alpha = np.broadcast_to(alpha, shape)
     R_gp = np.broadcast_to(plane_rotation(pitch, roll), shape + (3, 3))
@@ -144,7 +147,7 @@ def solve_positions(
         az = wrap_angle(alpha + np.arctan2(x, z))
         loc = point_on_plane(x, z, pitch, roll, height)
         R = R_gp @ rotation_y(az)
-        proj, min_depth = project_boxes(camera, dims, loc, R)
+        proj, min_depth = project_boxes(camera, corners, loc, R)
         return box_residual(proj, boxes, min_depth)
 
     x, z = _initial_position(camera, boxes, pitch, roll, height, dims)

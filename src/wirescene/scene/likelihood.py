@@ -67,17 +67,19 @@ def instantiate_wireframes(
     shape_model: ShapeModel,
     *,
     x, z, azimuth, pitch, roll, shape, height: float,
+    device: str = "numpy",
 ) -> WireframeBatch:
     """Place shape-model wireframes with coefficients ``shape`` ``(..., K)`` at
     ``(x, z, azimuth)`` on planes ``(pitch, roll)`` (all ``(...)``), project them and
-    compute self-occlusion by ray casting against the wireframe's own faces."""
+    compute self-occlusion by ray casting against the wireframe's own faces (on
+    ``device``, see :func:`wirescene.occlusion.self_occlusion`)."""
     shape = np.asarray(shape, dtype=float)
     check_shape("shape", shape, (..., None))
     X_obj = shape_model.instantiate(shape)
     location, R = object_pose(x, z, azimuth, pitch, roll, height)
     vertices = transform(X_obj, location, R)
     uv, depth = camera.project_with_depth(vertices)
-    hidden = self_occlusion(vertices, FACES, camera.center)
+    hidden = self_occlusion(vertices, FACES, camera.center, device=device)
     # The projected car length sets the part-detector scale.
     length = np.ptp(X_obj[..., 0], axis=-1)
     scale = camera.focal * length / np.maximum(np.linalg.norm(location - camera.center, axis=-1), 0.5)
