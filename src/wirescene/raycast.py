@@ -2,12 +2,13 @@
 
 Two paths, for two different workloads:
 
-* :func:`segment_blocked` -- pure numpy, a batched ray/triangle test for the inference
-  hot path: a few dozen wireframe vertices tested against a few dozen wireframe
-  triangles, for thousands of hypotheses (particles x objects) at once. All rays of one
-  batch element share their origin (the camera centre), so Moller-Trumbore's
-  barycentric and distance tests can be rewritten with per-triangle vectors only; the
-  per-(ray, triangle) work reduces to one batched matrix product and four comparisons.
+* :func:`segment_blocked` and :func:`mesh_vertices_blocked` -- pure numpy, a batched
+  ray/triangle test for the inference hot path: a few dozen wireframe vertices tested
+  against a few dozen wireframe triangles, for thousands of hypotheses (particles x
+  objects x samples) at once. All rays of one batch element share their origin (the
+  camera centre), so Moller-Trumbore's barycentric tests become three dot products with
+  per-triangle vectors: one float32 batched matrix product and three comparisons per
+  (ray, triangle) pair, then a float64 depth test of the few pairs that pass.
 * :func:`first_hit_distance` -- Embree (via trimesh) for large meshes, e.g. one ray per
   pixel against a 10k-triangle CAD model in the renderer.
 """
