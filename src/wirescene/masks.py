@@ -108,6 +108,34 @@ def mask_weight_sums(uv: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.where(nonempty, sums[..., i, j], 0.0)
 
 
+def best_mask(uv: np.ndarray, evidence: np.ndarray, self_hidden: np.ndarray, *, c: float, hidden=None) -> np.ndarray:
+    """The searched occluder mask (paper Sec. 4.3): the index ``(...)`` maximising the
+    object likelihood (Eq. 2) over the whole mask set.
+
+    Parameters
+    ----------
+    uv : (..., V, 2) array
+    evidence : (..., V) array
+        Part evidence ``log(S_j / S_b)`` at the vertices.
+    self_hidden : (..., V) bool array
+    c : float
+        The score charged to occluded parts.
+    hidden : (..., V) bool array, optional
+        Vertices occluded whatever the mask (e.g. the deterministic ``Gamma``).
+
+    Notes
+    -----
+    With ``H_a`` the vertices hidden by mask ``a`` or by ``hidden``, Eq. 2's numerator is
+    ``sum_{visible0} e - sum_{visible0 & H_a} (e - c)`` and its denominator does not
+    depend on ``a``, so the best mask minimises the sum of ``e - c`` over the visible0
+    vertices it hides beyond ``hidden``: one :func:`mask_weight_sums` call.
+    """
+    loss = np.where(self_hidden, 0.0, np.asarray(evidence, dtype=float) - c)
+    if hidden is not None:
+        loss = np.where(hidden, 0.0, loss)
+    return np.argmin(mask_weight_sums(uv, loss), axis=-1)
+
+
 def fit_mask(uv: np.ndarray, occluded: np.ndarray, candidates: np.ndarray, *, weight_occluded: float = 2.0) -> np.ndarray:
     """Index ``(...)`` of the mask that best represents a set of occluded vertices.
 

@@ -19,8 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .masks import all_mask_hidden
-from .scene.likelihood import object_likelihood
+from .masks import best_mask, mask_hidden
 
 DEFAULT_PATH = Path(__file__).resolve().parent / "data" / "occlusion.json"
 FALLBACK_C = -0.5
@@ -32,12 +31,10 @@ def occlusion_accuracy_by_c(evidence, self_hidden, visible_gt, uv, grid) -> np.n
     ``evidence``, ``self_hidden``, ``visible_gt`` are ``(M, 36)``, ``uv`` ``(M, 36, 2)``
     for ``M`` cars at their true poses.
     """
-    hidden = all_mask_hidden(uv)  # (M, A, 36)
     cand = ~self_hidden
     acc = []
     for c in grid:
-        L = object_likelihood(evidence[:, None, :], self_hidden[:, None, :], hidden, c=c)
-        pred = hidden[np.arange(len(uv)), np.argmax(L, axis=1)]  # (M, 36) predicted occluded
+        pred = mask_hidden(uv, best_mask(uv, evidence, self_hidden, c=c))  # (M, 36) predicted occluded
         correct = (pred == ~visible_gt) & cand
         acc.append(correct.sum() / max(cand.sum(), 1))
     return np.array(acc)

@@ -17,7 +17,7 @@ import numpy as np
 from . import __version__
 from .atomic import write_text
 from .camera import Camera
-from .datasets.kitti import FrameLabels, KittiDataset, Label, format_label, write_labels
+from .datasets.kitti import FrameLabels, KittiDataset, Label, format_labels, write_labels
 from .datasets.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
 from .detect import detections_from_labels, read_detections
 from .errors import InputError
@@ -271,11 +271,6 @@ class _FrameRecords:
                 write_text(path, labels)
 
 
-def _labels_text(estimate: SceneEstimate) -> str:
-    # The content write_labels would write; kept in the record to restore lost files.
-    return "".join(format_label(lab) + "\n" for lab in estimate_to_labels(estimate))
-
-
 def _fit_frames(
     job: _FrameJob, frame_ids: list[str], *, workers: int, dask_client: str | Client | None, stack: ExitStack
 ) -> Iterator:
@@ -440,7 +435,8 @@ def evaluate_dataset(
                 for v, (estimate, _) in fits.items():
                     on_estimate(frame_id, v, estimate, camera, detections, gt)
             if records is not None:
-                records.save(frame_id, {v: (_labels_text(estimate), result) for v, (estimate, result) in fits.items()})
+                labels = {v: format_labels(estimate_to_labels(estimate)) for v, (estimate, _) in fits.items()}
+                records.save(frame_id, {v: (labels[v], result) for v, (_, result) in fits.items()})
     # Frames finish in any order; the reports list them in the given order.
     return {v: evaluate([by_frame[f][v] for f in frame_ids]) for v in variants}
 

@@ -120,15 +120,9 @@ def segment_blocked(
     the occluding mesh itself (cheaper: no triangle array is materialised).
     """
     origins, targets, triangles, batch = _segment_inputs(origins, targets, triangles, eps)
-    P, F = targets.shape[-2], triangles.shape[-3]
-    if P == 0 or F == 0 or 0 in batch:
-        return np.zeros(batch + (P,), dtype=bool)
-    B = int(np.prod(batch, dtype=int))
-    o = np.broadcast_to(origins, batch + (3,)).reshape(B, 3)
-    x = np.broadcast_to(targets, batch + (P, 3)).reshape(B, P, 3)
-    tri = np.broadcast_to(triangles, batch + (F, 3, 3)).reshape(B, F, 3, 3)
-    out = _run_chunks(o, x, lambda d, sl: tri[sl] - o[sl, None, None, :], F, eps, _ignore_rows(ignore, batch, P, F), chunk)
-    return out.reshape(batch + (P,))
+    F = triangles.shape[-3]
+    tri = np.broadcast_to(triangles, batch + (F, 3, 3)).reshape((int(np.prod(batch, dtype=int)), F, 3, 3))
+    return _run_chunks(origins, targets, batch, F, lambda d, o, sl: tri[sl] - o[:, None, None, :], eps, ignore, chunk)
 
 
 def mesh_vertices_blocked(
@@ -170,21 +164,21 @@ def mesh_vertices_blocked(
     check_shape("vertices", vertices, (..., None, 3))
     check_shape("faces", faces, (None, 3))
     _check_eps(eps)
-    P, F = vertices.shape[-2], len(faces)
     batch = _batch_shape(origins.shape[:-1], vertices.shape[:-2])
+    return _run_chunks(origins, vertices, batch, len(faces), lambda d, o, sl: d[:, faces], eps, ignore, chunk)
+
+
+def _run_chunks(origins, targets, batch, F, triangles_of, eps, ignore, chunk):
+    """:func:`_blocked_chunk` over the flattened ``batch``, a chunk of rows at a time;
+    returns ``(*batch, P)``. ``triangles_of(d, o, sl)`` gives the ``F`` triangles of
+    rows ``sl`` relative to their origins ``o``, ``d`` being the targets relative to them."""
+    P = targets.shape[-2]
     if P == 0 or F == 0 or 0 in batch:
         return np.zeros(batch + (P,), dtype=bool)
     B = int(np.prod(batch, dtype=int))
     o = np.broadcast_to(origins, batch + (3,)).reshape(B, 3)
-    x = np.broadcast_to(vertices, batch + (P, 3)).reshape(B, P, 3)
-    out = _run_chunks(o, x, lambda d, sl: d[:, faces], F, eps, _ignore_rows(ignore, batch, P, F), chunk)
-    return out.reshape(batch + (P,))
-
-
-def _run_chunks(o, x, triangles_of, F, eps, ignore, chunk):
-    """Chunked :func:`_blocked_chunk`; ``triangles_of(d, sl)`` gives the triangles of
-    rows ``sl`` relative to their origins, ``d`` being the targets relative to them."""
-    B, P = x.shape[:2]
+    x = np.broadcast_to(targets, batch + (P, 3)).reshape(B, P, 3)
+    ignore = _ignore_rows(ignore, batch, P, F)
     keep = None if ignore is None else ~ignore
     out = np.empty((B, P), dtype=bool)
     step = max(1, int(chunk) // max(1, P * F))
@@ -192,8 +186,8 @@ def _run_chunks(o, x, triangles_of, F, eps, ignore, chunk):
         sl = slice(start, min(B, start + step))
         rows = None if keep is None else (keep if keep.shape[0] == 1 else keep[sl])
         d = x[sl] - o[sl, None, :]
-        out[sl] = _blocked_chunk(d, triangles_of(d, sl), eps, rows)
-    return out
+        out[sl] = _blocked_chunk(d, triangles_of(d, o[sl], sl), eps, rows)
+    return out.reshape(batch + (P,))
 
 
 def _blocked_chunk(d, t, eps, keep):

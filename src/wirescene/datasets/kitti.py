@@ -216,10 +216,13 @@ def write_labels(
     moved into place with :func:`os.replace`, so an error never leaves a partial file.
     See :func:`format_label` for the number formats.
     """
-    path = Path(path)
+    write_text(Path(path), format_labels(labels, with_score=with_score))  # formatting fails before touching disk
+
+
+def format_labels(labels: FrameLabels | Iterable[Label], *, with_score: bool = True) -> str:
+    """The text of a KITTI label file (see :func:`write_labels`)."""
     items = list(labels.objects) + list(labels.dontcare) if isinstance(labels, FrameLabels) else list(labels)
-    text = "".join(format_label(lab, with_score=with_score) + "\n" for lab in items)  # fails before touching disk
-    write_text(path, text)
+    return "".join(format_label(lab, with_score=with_score) + "\n" for lab in items)
 
 
 def car_indices(

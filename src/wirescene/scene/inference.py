@@ -38,7 +38,7 @@ from ..shape import ShapeModel
 from .hypotheses import ObjectEstimate, SceneEstimate, SceneParticles
 from .lifting import box_residual
 from ..occlusion_training import load_occluded_score
-from ..masks import fit_mask, mask_hidden, mask_weight_sums
+from ..masks import best_mask, fit_mask, mask_hidden
 from ..occlusion import inter_object_occlusion
 from ..wireframe import FACES
 from .likelihood import PartEvidence, instantiate_wireframes, object_likelihood
@@ -225,14 +225,7 @@ def _occlusion_of(camera, terms: _Terms, c, *, searched: bool, deterministic: bo
     if deterministic:
         gamma = inter_object_occlusion(terms.vertices[:, :, 0], FACES, camera.center, device=device) & ~self_hidden
     if searched:
-        # Eq. 2 for every mask a at once: with H_a the vertices hidden by a or by gamma,
-        # the numerator is sum_{visible0} e - sum_{visible0 & H_a} (e - c) and the
-        # denominator does not depend on a, so the best mask minimises the sum of
-        # (e - c) over the visible0 vertices it hides beyond gamma.
-        loss = np.where(self_hidden, 0.0, terms.evidence[:, :, 0] - c)  # (P, N, 36)
-        if gamma is not None:
-            loss = np.where(gamma, 0.0, loss)
-        return np.argmin(mask_weight_sums(uv, loss), axis=-1), gamma
+        return best_mask(uv, terms.evidence[:, :, 0], self_hidden, c=c, hidden=gamma), gamma
     if deterministic:
         return fit_mask(uv, gamma, ~self_hidden), None
     return None, None
