@@ -23,14 +23,14 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.datasets.kitti import KittiDataset  # noqa: E402
-from wirescene.detect import detections_from_labels  # noqa: E402
-from wirescene.scene.evidence import part_evidence  # noqa: E402
-from wirescene.scene.fit import FitOptions, fit_scene  # noqa: E402
-from wirescene.scene.inference import InferenceOptions  # noqa: E402
-from wirescene.scene.lifting import LiftingOptions, lift_table, select_particles  # noqa: E402
-from wirescene.scene.likelihood import instantiate_wireframes, wireframe_likelihood  # noqa: E402
-from wirescene.shape import load_default  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
+from wirescene.io.detections import detections_from_labels  # noqa: E402
+from wirescene.infer.evidence import part_evidence  # noqa: E402
+from wirescene.fitting.scene import FitOptions, fit_scene  # noqa: E402
+from wirescene.infer.inference import InferenceOptions  # noqa: E402
+from wirescene.lift import LiftingOptions, lift_table, select_particles  # noqa: E402
+from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood  # noqa: E402
+from wirescene.core.shape import load_default  # noqa: E402
 
 
 def likelihood_batch(camera, model, evidence, x, z, az, s, obj, c):

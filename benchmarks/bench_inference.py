@@ -22,14 +22,14 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.datasets.kitti import KittiDataset  # noqa: E402
-from wirescene.datasets.wireframes import read_wireframe_gt, wireframe_gt_path  # noqa: E402
-from wirescene.detect import detections_from_labels  # noqa: E402
-from wirescene.scene.evidence import oracle_evidence, part_evidence  # noqa: E402
-from wirescene.scene.inference import InferenceOptions, _evaluate, _to_viewing, refine_particles  # noqa: E402
-from wirescene.scene.lifting import lift_table, select_particles  # noqa: E402
-from wirescene.shape import load_default  # noqa: E402
-from wirescene.viewpoints import angle_difference  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
+from wirescene.io.wireframes import read_wireframe_gt, wireframe_gt_path  # noqa: E402
+from wirescene.io.detections import detections_from_labels  # noqa: E402
+from wirescene.infer.evidence import oracle_evidence, part_evidence  # noqa: E402
+from wirescene.infer.inference import InferenceOptions, _evaluate, _to_viewing, refine_particles  # noqa: E402
+from wirescene.lift import lift_table, select_particles  # noqa: E402
+from wirescene.core.shape import load_default  # noqa: E402
+from wirescene.core.viewpoints import angle_difference  # noqa: E402
 
 
 def cma_refine(camera, particles, evidence, model, options, seed):

@@ -1,4 +1,4 @@
-"""Micro-benchmark of vertex occlusion by ray casting (wirescene.occlusion).
+"""Micro-benchmark of vertex occlusion by ray casting (wirescene.infer.occlusion).
 
 Times the batched implementation against two naive baselines measured in the same run
 on the same data:
@@ -28,10 +28,10 @@ import argparse
 import numpy as np
 
 from timing import best_of
-from wirescene.groundplane import object_pose, transform
-from wirescene.occlusion import incidence, inter_object_occlusion, self_occlusion
-from wirescene.shape import load_default
-from wirescene.wireframe import FACES
+from wirescene.core.groundplane import object_pose, transform
+from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
+from wirescene.core.shape import load_default
+from wirescene.core.wireframe import FACES
 
 
 def dense_reference_blocked(origin, targets, triangles, ignore=None, eps=1e-6, chunk=1 << 17):

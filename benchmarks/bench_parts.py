@@ -2,7 +2,7 @@
 scenes and on the real KITTI frames (plain script).
 
 1. Time: response maps of one KITTI frame restricted to its GT car boxes, one thread.
-2. Localisation (:func:`wirescene.parts_training.localisation`): for every visible vertex
+2. Localisation (:func:`wirescene.training.parts.localisation`): for every visible vertex
    of a car (inside its box), is the top-scoring grid location of its log-ratio map inside
    the box within 4% / 10% of the car's projected length (max extent of the projected
    wireframe) of the vertex? Chance = a uniformly random grid location of the box. Also
@@ -12,7 +12,7 @@ scenes and on the real KITTI frames (plain script).
    (a) synthetic: ``wirescene synth ROOT --scenes 20 --seed 1`` (seed < 1000: never used
        for training; generated into ``--synth-root`` if missing), exact GT vertices and
        ray-cast visibility;
-   (b) real KITTI: the mean wireframe (``wirescene.shape.load_default().mean``) placed at
+   (b) real KITTI: the mean wireframe (``wirescene.core.shape.load_default().mean``) placed at
        the label pose (``groundplane.rotation_y``, location = the label's bottom centre),
        self-occlusion by ``occlusion.self_occlusion``. The "GT" vertices come from the
        *mean* shape, so they are themselves off by a few percent of the car length. These
@@ -35,9 +35,9 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.datasets.kitti import KittiDataset  # noqa: E402
-from wirescene.parts import PartDetector, response_maps  # noqa: E402
-from wirescene.parts_training import kitti_eval_frames, localisation, synth_eval_frames  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
+from wirescene.parts.detector import PartDetector, response_maps  # noqa: E402
+from wirescene.training.parts import kitti_eval_frames, localisation, synth_eval_frames  # noqa: E402
 
 
 def _line(name, r, radii):

@@ -24,7 +24,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.datasets.kitti import KittiDataset  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import evaluate_detections, frame_gt, load_frame_gt, plot_pr, summary  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank  # noqa: E402
 

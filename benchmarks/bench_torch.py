@@ -1,4 +1,4 @@
-"""Numpy vs the optional PyTorch backend (wirescene.torch_backend) on the inference hot
+"""Numpy vs the optional PyTorch backend (wirescene.infer.torch_backend) on the inference hot
 path, side by side in one run on the same data:
 
 * self-occlusion of 250 particles x 5 objects x 12 samples = 15000 placed wireframes
@@ -45,12 +45,12 @@ for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 import numpy as np
 
 from timing import best_of
-from wirescene import torch_backend as tb
-from wirescene.groundplane import KITTI_CAMERA_HEIGHT, object_pose, transform
-from wirescene.occlusion import inter_object_occlusion, self_occlusion
-from wirescene.scene.likelihood import object_likelihood
-from wirescene.shape import load_default
-from wirescene.wireframe import FACES
+from wirescene.infer import torch_backend as tb
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, object_pose, transform
+from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion
+from wirescene.infer.likelihood import object_likelihood
+from wirescene.core.shape import load_default
+from wirescene.core.wireframe import FACES
 
 CENTER = np.array([0.06, 0.0, 0.0])  # KITTI P2's optical centre is slightly off the origin
 

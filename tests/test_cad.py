@@ -13,8 +13,8 @@ from conftest import DATA, assert_close
 from wirescene.cad.ac3d import parse_ac3d, read_ac3d
 from wirescene.cad.landmarks import annotate, apply_corrections, auto_landmarks, load_corrections
 from wirescene.cad.mesh import canonicalize, load_car, road_car_check
-from wirescene.errors import InputError
-from wirescene.wireframe import MIRROR, VERTEX_INDEX
+from wirescene.core.errors import InputError
+from wirescene.core.wireframe import MIRROR, VERTEX_INDEX
 
 CAD = DATA / "cad"
 ROAD = ("acura-nsx-sz", "155-DTM", "car1-stock2")
@@ -180,7 +180,7 @@ def test_corrections_applied_with_mirror(tmp_path, cars):
 def test_cli_list_and_show(tmp_path):
     from click.testing import CliRunner
 
-    from wirescene.cad.commands import cad
+    from wirescene.cli.cad import cad
 
     r = CliRunner().invoke(cad, ["list", "--cad-dir", str(CAD)])
     assert r.exit_code == 0, r.output

@@ -8,9 +8,9 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import KITTI_ROOT
-from wirescene.cli import main
-from wirescene.detect import read_detections
-from wirescene.errors import InputError
+from wirescene.cli.main import main
+from wirescene.io.detections import read_detections
+from wirescene.core.errors import InputError
 
 SPLIT = KITTI_ROOT / "training"
 
@@ -151,7 +151,7 @@ def test_demo_runs_end_to_end(tmp_path):
 
 
 def test_eval_with_external_boxes_without_viewpoint(tmp_path):
-    from wirescene.datasets.kitti import read_labels
+    from wirescene.io.kitti import read_labels
 
     dets = tmp_path / "dets"
     dets.mkdir()
@@ -167,8 +167,8 @@ def test_eval_with_external_boxes_without_viewpoint(tmp_path):
 
 
 def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gpu(tmp_path):
-    from wirescene import torch_backend
-    from wirescene.cli import _resolve_device
+    from wirescene.infer import torch_backend
+    from wirescene.cli.main import _resolve_device
 
     r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "fg", "--frames", "000002", "--device", "tpu"])
     assert r.exit_code == 2 and "unknown device 'tpu'" in r.output and len(r.output.strip().splitlines()) == 1

@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, assert_close
-from wirescene.boxes import MEAN_CAR_DIMS, box_centers, box_corners, iou_2d, project_points_to_box
-from wirescene.camera import Camera, read_kitti_calib, write_kitti_calib
-from wirescene.errors import InputError, ShapeError
-from wirescene.groundplane import (
+from wirescene.core.boxes import MEAN_CAR_DIMS, box_centers, box_corners, iou_2d, project_points_to_box
+from wirescene.core.camera import Camera, read_kitti_calib, write_kitti_calib
+from wirescene.core.errors import InputError, ShapeError
+from wirescene.core.groundplane import (
     GroundPlane,
     alpha_from_rotation_y,
     object_pose,
@@ -16,7 +16,7 @@ from wirescene.groundplane import (
     rotation_y_of,
     wrap_angle,
 )
-from wirescene.viewpoints import angle_difference, bin_center, viewpoint_bin
+from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
 
 CALIB = KITTI_ROOT / "training" / "calib" / "000010.txt"
 

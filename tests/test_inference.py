@@ -2,15 +2,15 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, assert_close
-from wirescene.datasets.kitti import KittiDataset
-from wirescene.groundplane import alpha_from_rotation_y
-from wirescene.scene.fit import FitOptions, fit_scene
-from wirescene.scene.hypotheses import Detections
-from wirescene.scene.inference import InferenceOptions, estimate_from_refined, refine_particles
-from wirescene.scene.lifting import LiftingOptions, lift_table, select_particles
-from wirescene.scene.likelihood import GaussianVertexEvidence, instantiate_wireframes, object_likelihood
-from wirescene.shape import load_default
-from wirescene.viewpoints import angle_difference, bin_center, viewpoint_bin
+from wirescene.io.kitti import KittiDataset
+from wirescene.core.groundplane import alpha_from_rotation_y
+from wirescene.fitting.scene import FitOptions, fit_scene
+from wirescene.core.types import Detections
+from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
+from wirescene.lift import LiftingOptions, lift_table, select_particles
+from wirescene.infer.likelihood import GaussianVertexEvidence, instantiate_wireframes, object_likelihood
+from wirescene.core.shape import load_default
+from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
 
 
 def test_object_likelihood_matches_equation():
@@ -65,7 +65,7 @@ def test_inference_with_perfect_evidence_beats_coarse(synthetic_scene, shared):
 def test_fine_fit_on_real_frame_is_deterministic():
     ds = KittiDataset(KITTI_ROOT)
     labels = ds.labels("000002")
-    from wirescene.detect import detections_from_labels
+    from wirescene.io.detections import detections_from_labels
 
     dets = detections_from_labels(labels)
     opts = FitOptions(lifting=LiftingOptions(n_particles=10), inference=InferenceOptions(iterations=3, samples=6), seed=5)
@@ -78,7 +78,7 @@ def test_fine_fit_on_real_frame_is_deterministic():
 
 
 def test_viewpoint_from_evidence_recovers_bins(synthetic_scene):
-    from wirescene.scene.evidence import viewpoint_from_evidence
+    from wirescene.infer.evidence import viewpoint_from_evidence
 
     camera, model, truth, dets, evidence = synthetic_scene
     unknown = Detections(dets.boxes, dets.scores, np.array([np.nan, dets.alpha[1], np.nan, np.nan]))
@@ -109,7 +109,7 @@ def test_pruning_keeps_the_best_particles_and_never_loses_the_objective(syntheti
 
 
 def test_best_rows_for_coupled_and_independent_objects():
-    from wirescene.scene.inference import _best_rows
+    from wirescene.infer.inference import _best_rows
 
     score = np.array([[3.0, 0.0], [1.0, 5.0], [2.0, 1.0]])
     assert_close(_best_rows(score, 2, coupled=True), [[1, 1], [0, 0]], atol=0)  # scene sums 3, 6, 3

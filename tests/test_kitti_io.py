@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_close
-from wirescene.datasets import (
+from wirescene.io import (
     CAR_TYPES,
     KittiDataset,
     Label,
@@ -18,7 +18,7 @@ from wirescene.datasets import (
     select_cars,
     write_labels,
 )
-from wirescene.errors import InputError
+from wirescene.core.errors import InputError
 
 GOOD = "Car 0.00 0 1.95 354.43 185.52 549.52 294.49 1.43 1.70 3.95 -2.39 1.66 11.80 1.76"
 

@@ -2,14 +2,14 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, assert_close
-from wirescene.boxes import MEAN_CAR_DIMS, box_corners, project_points_to_box
-from wirescene.datasets.kitti import KittiDataset
-from wirescene.detect import detections_from_labels
-from wirescene.groundplane import object_pose
-from wirescene.scene.fit import fit_scene
-from wirescene.scene.hypotheses import Detections
-from wirescene.scene.lifting import LiftingOptions, lift_detections, lift_table, select_particles, solve_positions
-from wirescene.viewpoints import angle_difference, bin_center, viewpoint_bin
+from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners, project_points_to_box
+from wirescene.io.kitti import KittiDataset
+from wirescene.io.detections import detections_from_labels
+from wirescene.core.groundplane import object_pose
+from wirescene.fitting.scene import fit_scene
+from wirescene.core.types import Detections
+from wirescene.lift import LiftingOptions, lift_detections, lift_table, select_particles, solve_positions
+from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wirescene import features as feat
-from wirescene.parts import BACKGROUND, N_CLASSES, N_PARTS, PartDetector, load_default, response_maps
+from wirescene.parts import features as feat
+from wirescene.parts.detector import BACKGROUND, N_CLASSES, N_PARTS, PartDetector, load_default, response_maps
 
 from conftest import KITTI_ROOT, assert_close
 
@@ -110,7 +110,7 @@ def test_numpy_forest_equals_sklearn(sk_forest, tmp_path):
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    from wirescene.parts_training import train_part_detector
+    from wirescene.training.parts import train_part_detector
 
     path = tmp_path_factory.mktemp("parts") / "tiny.npz"
     det, rep = train_part_detector(path, seed=3, n_views=8, n_trees=3, max_depth=10, kind="sc", synth_scenes=0,
@@ -129,7 +129,7 @@ def test_tiny_retraining_loads_and_learns(tiny):
 
 
 def test_training_is_deterministic(tiny):
-    from wirescene.parts_training import make_patch_data
+    from wirescene.training.parts import make_patch_data
 
     a = make_patch_data(seed=3, n_azimuth=2, cars=["acura-nsx-sz"], n_real_bg=60)
     b = make_patch_data(seed=3, n_azimuth=2, cars=["acura-nsx-sz"], n_real_bg=60)
@@ -138,7 +138,7 @@ def test_training_is_deterministic(tiny):
 
 @pytest.fixture(scope="module")
 def kitti_frame():
-    from wirescene.datasets.kitti import KittiDataset
+    from wirescene.io.kitti import KittiDataset
 
 
     ds = KittiDataset(KITTI_ROOT)
@@ -147,7 +147,7 @@ def kitti_frame():
 
 
 def _check_lookup_matches_box_descriptors(det, img, box):
-    from wirescene.parts import box_descriptors
+    from wirescene.parts.detector import box_descriptors
 
     R = response_maps(img, box, detector=det, scales=(1.0,), stride=3.0)
     b = R.boxes[0]
@@ -169,7 +169,7 @@ def test_response_lookup_matches_patch_classification(tiny, kitti_frame):
     box = boxes[1:2]
     _check_lookup_matches_box_descriptors(det, img, box)
     # and the patch path of the edge descriptors agrees with the dense shape context
-    from wirescene.parts import box_crop
+    from wirescene.parts.detector import box_crop
 
     R = response_maps(img, box, detector=det, scales=(1.0,), stride=3.0)
     b = R.boxes[0]
@@ -187,7 +187,7 @@ def test_response_lookup_matches_patch_classification(tiny, kitti_frame):
 def tiny_synth():
     from sklearn.ensemble import RandomForestClassifier
 
-    from wirescene.parts_training import make_synth_patch_data
+    from wirescene.training.parts import make_synth_patch_data
     from wirescene.synth.generate import generate_scene
 
     data = make_synth_patch_data(n_scenes=3, seed=1000, kinds=("ghog",))
@@ -198,7 +198,7 @@ def tiny_synth():
 
 
 def test_synth_patch_data_deterministic_and_seed_guard(tiny_synth):
-    from wirescene.parts_training import make_synth_patch_data
+    from wirescene.training.parts import make_synth_patch_data
 
     _, data, _ = tiny_synth
     assert (data.y < N_PARTS).sum() > 200 and (data.y == BACKGROUND).sum() > 200
@@ -210,7 +210,7 @@ def test_synth_patch_data_deterministic_and_seed_guard(tiny_synth):
 
 
 def test_synth_trained_detector_localises_its_training_vertices(tiny_synth, kitti_frame):
-    from wirescene.parts_training import localisation, scene_frames
+    from wirescene.training.parts import localisation, scene_frames
 
     det, _, scenes = tiny_synth
     r = localisation(det, scene_frames(scenes, min_box_h=30, clean=False))

@@ -7,13 +7,13 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import KITTI_ROOT
-from wirescene.cli import main
-from wirescene.datasets.kitti import KittiDataset, Label
-from wirescene.evaluate import FrameResult
-from wirescene.pipeline import RECORDS_DIR, DetectionSource, _FrameJob, evaluate_dataset
-from wirescene.scene.fit import FitOptions
-from wirescene.scene.inference import InferenceOptions
-from wirescene.scene.lifting import LiftingOptions
+from wirescene.cli.main import main
+from wirescene.io.kitti import KittiDataset, Label
+from wirescene.eval.metrics import FrameResult
+from wirescene.eval.runner import RECORDS_DIR, DetectionSource, _FrameJob, evaluate_dataset
+from wirescene.fitting.scene import FitOptions
+from wirescene.infer.inference import InferenceOptions
+from wirescene.lift import LiftingOptions
 
 # Few particles and iterations keep every run of the two frames at a few seconds.
 OPTS = FitOptions(lifting=LiftingOptions(n_particles=6), inference=InferenceOptions(iterations=2, samples=4), seed=1)

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wirescene.datasets.kitti import FrameLabels, Label, read_image
+from wirescene.io.kitti import FrameLabels, Label, read_image
 from wirescene.predetect.ap import FrameGT, average_precision, evaluate_detections, frame_gt
 from wirescene.predetect.bank import DetectorBank, cluster_activations, detect_cars, load_default_bank, nms
 from wirescene.predetect.configurations import Configuration, connected_subsets, mirror_bin
 from wirescene.predetect.hog import N_FEAT, crop_features, hog_cells
-from wirescene.scene.hypotheses import Detections
-from wirescene.viewpoints import bin_center
-from wirescene.wireframe import EDGES
+from wirescene.core.types import Detections
+from wirescene.core.viewpoints import bin_center
+from wirescene.core.wireframe import EDGES
 
 from conftest import KITTI_ROOT
 
@@ -153,10 +153,10 @@ def test_bank_npz_round_trip(tmp_path):
 # ------------------------------------------------------------------ retraining
 
 def test_retrain_tiny_bank_finds_cars(tmp_path):
-    from wirescene.boxes import iou_2d
-    from wirescene.predetect.training import train_detector_bank
+    from wirescene.core.boxes import iou_2d
+    from wirescene.training.detector import train_detector_bank
     from wirescene.synth.generate import generate_scene
-    from wirescene.viewpoints import viewpoint_bin
+    from wirescene.core.viewpoints import viewpoint_bin
 
     bank, rep = train_detector_bank(tmp_path / "tiny.npz", seed=3, n_scenes=8, n_partial=1, bins=[2, 6],
                                     mining_images=4, neg_per_image=20, n_val=1, cars=(4, 8))
@@ -206,8 +206,8 @@ def test_detect_command_writes_readable_files(tmp_path):
 
     from click.testing import CliRunner
 
-    from wirescene.detect import read_detections
-    from wirescene.predetect.commands import detect
+    from wirescene.io.detections import read_detections
+    from wirescene.cli.detect import detect
 
     res = CliRunner().invoke(detect, [str(KITTI_ROOT), "--frames", "000010", "--out", str(tmp_path / "dets"),
                                       "--json", str(tmp_path / "ap.json"), "--pr-curve", str(tmp_path / "pr.png"),

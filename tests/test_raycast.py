@@ -1,4 +1,4 @@
-"""Ray/triangle occlusion (wirescene.raycast) and vertex occlusion (wirescene.occlusion)
+"""Ray/triangle occlusion (wirescene.core.raycast) and vertex occlusion (wirescene.infer.occlusion)
 against Embree ray casting and analytic ground truth."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ import trimesh
 from scipy.spatial import ConvexHull
 
 from conftest import assert_close
-from wirescene.errors import ShapeError
-from wirescene.groundplane import object_pose, transform
-from wirescene.occlusion import incidence, inter_object_occlusion, self_occlusion
-from wirescene.raycast import first_hit_distance, segment_blocked
+from wirescene.core.errors import ShapeError
+from wirescene.core.groundplane import object_pose, transform
+from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
+from wirescene.core.raycast import first_hit_distance, segment_blocked
 
 
 def embree_blocked(mesh_vertices, mesh_faces, origin, targets):

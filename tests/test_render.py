@@ -8,9 +8,9 @@ import trimesh
 from scipy.ndimage import binary_erosion
 
 from conftest import assert_close
-from wirescene.camera import Camera
-from wirescene.errors import ShapeError
-from wirescene.groundplane import transform
+from wirescene.core.camera import Camera
+from wirescene.core.errors import ShapeError
+from wirescene.core.groundplane import transform
 from wirescene.render import (
     Rendering,
     iter_views,

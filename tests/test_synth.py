@@ -11,8 +11,8 @@ import pytest
 
 pytest.importorskip("embreex")
 
-from wirescene.boxes import box_corners, iou_2d, project_points_to_box  # noqa: E402
-from wirescene.datasets.kitti import KittiDataset  # noqa: E402
+from wirescene.core.boxes import box_corners, iou_2d, project_points_to_box  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.synth import OCCLUSION_THRESHOLDS, generate_dataset, generate_scene, write_scene  # noqa: E402
 from wirescene.synth.layout import CarPlacement, Occluder, polygons_overlap  # noqa: E402
 
@@ -144,7 +144,7 @@ def test_deterministic(tmp_path):
 def test_cli_errors(tmp_path):
     from click.testing import CliRunner
 
-    from wirescene.synth.commands import synth
+    from wirescene.cli.synth import synth
 
     r = CliRunner().invoke(synth, [str(tmp_path / "o"), "--scenes", "1", "--cars-per-scene", "5-2"])
     assert r.exit_code == 2 and "A <= B" in r.output

@@ -1,4 +1,4 @@
-"""The optional PyTorch backend (wirescene.torch_backend) against the numpy reference.
+"""The optional PyTorch backend (wirescene.infer.torch_backend) against the numpy reference.
 
 Everything that needs torch asks for the ``torch`` fixture (skipped without it); the
 import-isolation test and the "PyTorch missing" message test run without torch.
@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from conftest import assert_close
 
-from wirescene import torch_backend as tb
-from wirescene.errors import ShapeError, WiresceneError
-from wirescene.groundplane import KITTI_CAMERA_HEIGHT, object_pose, transform
-from wirescene.occlusion import incidence, inter_object_occlusion, self_occlusion
-from wirescene.raycast import segment_blocked
-from wirescene.scene.likelihood import object_likelihood
-from wirescene.shape import load_default
-from wirescene.wireframe import FACES, N_VERTICES
+from wirescene.infer import torch_backend as tb
+from wirescene.core.errors import ShapeError, WiresceneError
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, object_pose, transform
+from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
+from wirescene.core.raycast import segment_blocked
+from wirescene.infer.likelihood import object_likelihood
+from wirescene.core.shape import load_default
+from wirescene.core.wireframe import FACES, N_VERTICES
 
 CENTER = np.array([0.06, 0.0, 0.0])  # KITTI P2's optical centre is slightly off the origin
 AGREEMENT = 0.9999  # float32 vs float64 occlusion flags, fraction of vertices
@@ -62,7 +62,7 @@ def disagreement(a, b):
 
 
 def test_importing_the_backend_does_not_import_torch():
-    code = "import wirescene, wirescene.torch_backend, sys; assert 'torch' not in sys.modules"
+    code = "import wirescene, wirescene.infer.torch_backend, sys; assert 'torch' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True)
 
 

@@ -3,7 +3,7 @@
 Part detectors are trained on line drawings of CAD models in the style of Stark et al.
 (BMVC 2010): silhouette and crease edges only, no texture or shading. Rendering casts
 one ray per pixel through the pixel centre (Embree via trimesh, see
-:mod:`wirescene.raycast`), which yields depth, face and object ids and face normals;
+:mod:`wirescene.core.raycast`), which yields depth, face and object ids and face normals;
 edges are then found between 4-neighbouring pixels:
 
 * silhouette -- the two pixels see different objects (or one sees background);
@@ -17,7 +17,7 @@ The edge is drawn on the nearer pixel of the pair, so lines are one pixel wide a
 on the occluding surface. No OpenGL or display is needed.
 
 Pixel convention: integer coordinates ``(u, v) = (column, row)`` are pixel centres, as
-in :meth:`wirescene.camera.Camera.project`.
+in :meth:`wirescene.core.camera.Camera.project`.
 
 Also here: viewing-sphere cameras for training-data generation (:func:`view_camera`,
 :func:`iter_views`, the paper's 72 azimuths x 2 elevations) and Lambertian shading for
@@ -31,10 +31,10 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from .camera import Camera
-from .errors import ShapeError, check_shape
-from .groundplane import rotation_x, rotation_y
-from .raycast import first_hit_distance
+from wirescene.core.camera import Camera
+from wirescene.core.errors import ShapeError, check_shape
+from wirescene.core.groundplane import rotation_x, rotation_y
+from wirescene.core.raycast import first_hit_distance
 
 DEFAULT_CREASE_ANGLE_DEG = 35.0
 DEFAULT_DEPTH_JUMP = 0.01
@@ -300,7 +300,7 @@ def project_landmarks(
         arithmetic; it is exact ray casting, not a depth-buffer lookup, so it does not
         depend on pixel sampling.
     intersector : optional
-        A :func:`wirescene.raycast.mesh_intersector` of the mesh *in the camera frame*,
+        A :func:`wirescene.core.raycast.mesh_intersector` of the mesh *in the camera frame*,
         to reuse across calls.
 
     Returns
@@ -361,7 +361,7 @@ def view_camera(
     azimuth_deg : float
         The object's ``rotation_y``; as the object is on the optical axis this equals
         KITTI's observation angle ``alpha`` (the 2D viewpoint of
-        :mod:`wirescene.viewpoints`). 0 is a side view with the car's front pointing
+        :mod:`wirescene.core.viewpoints`). 0 is a side view with the car's front pointing
         to the image's right; 90 shows the front.
     elevation_deg : float
         Angle of the viewing direction above the ground (positive: seen from above).

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.errors import InputError
+from wirescene.core.errors import InputError
 
 __all__ = ["AC3DMesh", "read_ac3d", "parse_ac3d"]
 

@@ -45,13 +45,14 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.cad.sideview import SideView, find_arches, side_view
-from wirescene.errors import InputError
-from wirescene.wireframe import MIRROR, N_PER_SIDE, PART_NAMES, VERTEX_INDEX, VERTEX_NAMES
+from wirescene.core.errors import InputError
+from wirescene.core.wireframe import MIRROR, N_PER_SIDE, PART_NAMES, VERTEX_INDEX, VERTEX_NAMES
+from wirescene.core.resources import DATA_DIR
 
 __all__ = ["annotate", "auto_landmarks", "load_corrections", "apply_corrections",
            "symmetrize", "CORRECTIONS_PATH"]
 
-CORRECTIONS_PATH = Path(__file__).resolve().parent.parent / "data" / "landmark_corrections.json"
+CORRECTIONS_PATH = DATA_DIR / "landmark_corrections.json"
 
 END_INSET = 0.10
 WHEEL_GAP = 0.04

@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from wirescene.errors import InputError
+from wirescene.core.errors import InputError
 
 __all__ = [
     "CarMesh",

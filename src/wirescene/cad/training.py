@@ -2,7 +2,7 @@
 
 ``train_shape_model`` loads every mesh, canonicalises it (:mod:`wirescene.cad.mesh`),
 keeps the road cars, landmarks them (:mod:`wirescene.cad.landmarks`, with the manual
-corrections), fits the PCA (:func:`wirescene.shape.fit_shape_model`) and writes
+corrections), fits the PCA (:func:`wirescene.core.shape.fit_shape_model`) and writes
 
 - the shape model (``.npz``),
 - ``cad_landmarks.json``: per car name, source file, dimensions (l, w, h of the mesh),
@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.errors import InputError
-from wirescene.shape import DEFAULT_MODEL_PATH, ShapeModel, fit_shape_model
-from wirescene.wireframe import VERTEX_NAMES
+from wirescene.core.errors import InputError
+from wirescene.core.shape import DEFAULT_MODEL_PATH, ShapeModel, fit_shape_model
+from wirescene.core.wireframe import VERTEX_NAMES
+from wirescene.core.resources import DATA_DIR
 
 __all__ = ["train_shape_model", "load_cad_meshes", "load_cad_landmarks", "DEFAULT_AUGMENT"]
 
-DATA_DIR = Path(__file__).resolve().parent.parent / "data"
 DEFAULT_AUGMENT = 100
 
 

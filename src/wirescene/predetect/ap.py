@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..boxes import iou_2d
-from ..viewpoints import angle_difference, viewpoint_bin
+from wirescene.core.boxes import iou_2d
+from wirescene.core.viewpoints import angle_difference, viewpoint_bin
 
 NEIGHBOUR_TYPES = ("Van",)
 
@@ -111,7 +111,7 @@ def average_precision(recall: np.ndarray, precision: np.ndarray) -> float:
 def evaluate_detections(detections, gts, *, iou: float = 0.5, min_height: float = 50.0) -> dict:
     """AP, PR curve and viewpoint accuracy over frames.
 
-    ``detections``: per frame a :class:`~wirescene.scene.hypotheses.Detections` (or any
+    ``detections``: per frame a :class:`~wirescene.core.types.Detections` (or any
     object with ``boxes``, ``scores``, ``alpha``); ``gts``: per frame a :class:`FrameGT`."""
     all_s, all_t, vp_err = [], [], []
     n_gt = 0
@@ -175,7 +175,7 @@ def plot_pr(results: dict, path, *, title: str = "Car pre-detection") -> Path:
 
 def load_frame_gt(split_dir, frame_id: str, **kw) -> FrameGT:
     """GT of one frame of a KITTI-layout split (uses ``wireframes/`` when present)."""
-    from ..datasets.kitti import read_labels
+    from wirescene.io.kitti import read_labels
 
     split_dir = Path(split_dir)
     labels = read_labels(split_dir / "label_2" / f"{frame_id}.txt")

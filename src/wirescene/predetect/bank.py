@@ -16,21 +16,21 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from ..boxes import iou_2d
-from ..errors import InputError
-from ..scene.hypotheses import Detections
-from ..viewpoints import bin_center
-from ..wireframe import N_VERTICES
-from .configurations import Configuration
-from .hog import CELL, N_FEAT, feature_pyramid, pyramid_scales
+from wirescene.core.boxes import iou_2d
+from wirescene.core.errors import InputError
+from wirescene.core.types import Detections
+from wirescene.core.viewpoints import bin_center
+from wirescene.core.wireframe import N_VERTICES
+from wirescene.core.resources import DATA_DIR
+from wirescene.predetect.configurations import Configuration
+from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales
 
 FORMAT_VERSION = 1
-DEFAULT_BANK_PATH = Path(str(resources.files("wirescene") / "data" / "detector_bank.npz"))
+DEFAULT_BANK_PATH = DATA_DIR / "detector_bank.npz"
 
 
 @dataclass

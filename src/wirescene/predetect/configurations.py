@@ -1,5 +1,5 @@
 """Semi-local part configurations (paper Sec. 3.4): sets of 3-4 wireframe vertices that
-are adjacent in :data:`wirescene.wireframe.EDGES`, visible from a coarse viewpoint (one of
+are adjacent in :data:`wirescene.core.wireframe.EDGES`, visible from a coarse viewpoint (one of
 8 bins of the observation angle) and cover at least ~20% of the car's 2D box, plus one
 full-car configuration per viewpoint.
 
@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..boxes import iou_2d
-from ..viewpoints import N_BINS
-from ..wireframe import EDGES, MIRROR, N_VERTICES, VERTEX_NAMES
+from wirescene.core.boxes import iou_2d
+from wirescene.core.viewpoints import N_BINS
+from wirescene.core.wireframe import EDGES, MIRROR, N_VERTICES, VERTEX_NAMES
 
 MARGIN = 0.08
 MIN_SIZE = 0.3
@@ -123,7 +123,7 @@ class CarExample:
 
 def examples_from_wireframes(wire: dict, labels, image_index: int, width: int, *, flips: bool = True) -> list:
     """Car examples (and their mirror images) of one synthetic scene."""
-    from ..viewpoints import viewpoint_bin
+    from wirescene.core.viewpoints import viewpoint_bin
 
     out = []
     for lab, car in zip(labels.objects, wire["cars"]):

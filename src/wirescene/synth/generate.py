@@ -53,16 +53,16 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from ..camera import Camera, read_kitti_calib, write_kitti_calib
-from ..datasets.kitti import FrameLabels, Label, write_labels
-from ..errors import InputError
-from ..groundplane import alpha_from_rotation_y, rotation_y_of
-from ..atomic import atomic_path, write_bytes
-from ..cad.mesh import body_extent
-from ..raycast import first_hit_distance, mesh_intersector
-from ..render import render_scene
-from ..wireframe import VERTEX_NAMES
-from .layout import Occluder, SceneLayout, place, sample_layout
+from wirescene.core.camera import Camera, read_kitti_calib, write_kitti_calib
+from wirescene.io.kitti import FrameLabels, Label, write_labels
+from wirescene.core.errors import InputError
+from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y_of
+from wirescene.core.atomic import atomic_path, write_bytes
+from wirescene.cad.mesh import body_extent
+from wirescene.core.raycast import first_hit_distance, mesh_intersector
+from wirescene.render import render_scene
+from wirescene.core.wireframe import VERTEX_NAMES
+from wirescene.synth.layout import Occluder, SceneLayout, place, sample_layout
 
 IMAGE_SIZE = (1242, 375)
 OCCLUSION_THRESHOLDS = (0.10, 0.40)  # hidden silhouette fraction -> KITTI occluded 0 / 1 / 2
@@ -111,7 +111,7 @@ def resized(model: CarModel, dims_hwl) -> CarModel:
 @lru_cache(maxsize=2)
 def load_car_library(meshes_path=None, landmarks_path=None) -> dict:
     """``{name: CarModel}`` of the road cars with both a mesh and 36 landmarks."""
-    from ..cad.training import load_cad_landmarks, load_cad_meshes
+    from wirescene.cad.training import load_cad_landmarks, load_cad_meshes
 
     meshes = load_cad_meshes(meshes_path)
     marks = load_cad_landmarks(landmarks_path)
@@ -134,7 +134,7 @@ def load_car_library(meshes_path=None, landmarks_path=None) -> dict:
 
 @lru_cache(maxsize=1)
 def _shape_model():
-    from ..shape import load_default
+    from wirescene.core.shape import load_default
 
     try:
         return load_default()

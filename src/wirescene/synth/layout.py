@@ -8,7 +8,7 @@ Pure geometry (numpy only, no rendering). Coordinates:
   Lanes, kerbs, footprints and occluders are laid out in its ``(x, z)``.
 * A car at street position ``(x, z)`` with azimuth ``a`` stands on the plane at the
   camera-frame bottom centre ``location = R_gp @ (x, height, z)`` with rotation ``R =
-  R_gp @ R_y(a)`` (:func:`place`), i.e. :func:`wirescene.groundplane.object_pose`
+  R_gp @ R_y(a)`` (:func:`place`), i.e. :func:`wirescene.core.groundplane.object_pose`
   with the plane-aligned ``(x, z)`` instead of the camera's. On a level plane the two
   coincide and ``a`` is KITTI's ``rotation_y``.
 
@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..camera import Camera
-from ..groundplane import KITTI_CAMERA_HEIGHT, GroundPlane, plane_rotation, rotation_y
+from wirescene.core.camera import Camera
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, GroundPlane, plane_rotation, rotation_y
 
 LANE_WIDTH = 3.5
 PARKING_LANE_WIDTH = 2.2
@@ -153,7 +153,7 @@ def polygons_overlap(a: np.ndarray, b: np.ndarray) -> bool:
 def inside_fraction(camera: Camera, dims, location, R) -> float:
     """Fraction of the (unclipped) projected 3D box's area inside the image (0 if any
     corner is behind the camera)."""
-    from ..boxes import box_corners
+    from wirescene.core.boxes import box_corners
 
     uv, depth = camera.project_with_depth(box_corners(dims, location, R))
     if np.any(depth <= 0.1):
@@ -213,7 +213,7 @@ def kitti_car_size(rng: np.random.Generator) -> tuple:
     The TORCS exemplars are race cars (4.4-5.1 m long, 1.1-1.5 m high); every car
     instance is resized to a KITTI-like size so that the synthetic scenes have the size
     distribution of the real data the shape model is built for."""
-    from ..shape import KITTI_CAR_SIZE
+    from wirescene.core.shape import KITTI_CAR_SIZE
 
     mean, std = np.array(KITTI_CAR_SIZE["mean"]), np.array(KITTI_CAR_SIZE["std"])  # (l, w, h)
     l, w, h = mean + std * np.clip(rng.standard_normal(3), -2.0, 2.0)

@@ -1,0 +1,132 @@
+"""Click commands for the CAD exemplars and shape-model training, registered by the
+main CLI: the group ``cad`` (``list``, ``show``) and the command ``shape`` (meant as
+``wirescene train shape``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from wirescene.core.errors import InputError
+
+__all__ = ["cad", "shape", "draw_car"]
+
+
+def _cad_dir(value) -> Path:
+    from wirescene.cad.mesh import default_cad_dir
+
+    d = Path(value) if value else default_cad_dir()
+    if not d.is_dir():
+        raise InputError("CAD directory not found (pass --cad-dir or set WIRESCENE_CAD_DIR)", path=d)
+    return d
+
+
+def _find(cad_dir: Path, name: str) -> Path:
+    from wirescene.cad.mesh import list_cad_files
+
+    files = list_cad_files(cad_dir)
+    for f in files:
+        if f.stem == name or f.name == name:
+            return f
+    raise InputError(f"no CAD model named {name!r} (have: {', '.join(f.stem for f in files)})", path=cad_dir)
+
+
+def draw_car(vertices, faces, X, *, title: str = "", out=None):
+    """Three orthographic views (side, top, front) of a mesh with the 36 landmarks, their
+    names and the wireframe edges. Returns the matplotlib figure (Agg backend)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    from wirescene.core.wireframe import EDGES, N_PER_SIDE, VERTEX_NAMES
+
+    fig, axes = plt.subplots(3, 1, figsize=(14, 16), gridspec_kw={"height_ratios": [1.0, 1.4, 1.0]})
+    # (horizontal axis, vertical axis, sign of vertical) in object coordinates
+    views = (("side (left, x fwd)", 0, 1, -1.0, 2), ("top (x fwd, z left up)", 0, 2, 1.0, 1),
+             ("front (z left, looking from the front at the car)", 2, 1, -1.0, 0))
+    for ax, (label, a, b, sb, depth_axis) in zip(axes, views):
+        h_sign = -1.0 if a == 2 else 1.0  # front view: the car's left appears on the right
+        tri = np.stack([h_sign * vertices[faces][..., a], sb * vertices[faces][..., b]], axis=-1)
+        ax.add_collection(PolyCollection(tri, facecolor="none", edgecolor="0.7", linewidths=0.2))
+        P = np.stack([h_sign * X[:, a], sb * X[:, b]], axis=1)
+        near = X[:, depth_axis] >= 0 if depth_axis == 2 else np.ones(len(X), bool)
+        if depth_axis == 0:
+            near = X[:, 0] >= np.median(X[:, 0])
+        ax.add_collection(LineCollection(P[EDGES], colors="tab:blue", linewidths=1.0))
+        ax.scatter(P[~near, 0], P[~near, 1], s=14, c="tab:orange", zorder=3)
+        ax.scatter(P[near, 0], P[near, 1], s=18, c="tab:red", zorder=4)
+        for i in range(len(X)):
+            if near[i] and (depth_axis != 1 or i < N_PER_SIDE):
+                ax.annotate(VERTEX_NAMES[i].replace("_left", "").replace("_right", ""), P[i], fontsize=7,
+                            xytext=(3, 3), textcoords="offset points")
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        ax.set_title(label, fontsize=9)
+        ax.grid(alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    if out is not None:
+        fig.savefig(out, dpi=90)
+        plt.close(fig)
+    return fig
+
+
+@click.group("cad")
+def cad():
+    """CAD car exemplars: list them, show their annotated wireframes."""
+
+
+@cad.command("list")
+@click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
+              help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
+def list_cmd(cad_dir):
+    """Names, dimensions (l, w, h) and road / non-road decision with its reason."""
+    from wirescene.cad.mesh import list_cad_files, load_car, road_car_check
+
+    for path in list_cad_files(_cad_dir(cad_dir)):
+        car = load_car(path)
+        is_road, reason = road_car_check(car)
+        click.echo(f"{car.name:16s} {'road    ' if is_road else 'NON-ROAD'} {reason}")
+
+
+@cad.command("show")
+@click.argument("name")
+@click.option("--out", type=click.Path(dir_okay=False), default=None, help="PNG to write (default: NAME.png).")
+@click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
+              help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
+def show_cmd(name, out, cad_dir):
+    """Picture of one car: three orthographic views with the 36 annotated vertices."""
+    from wirescene.cad.landmarks import annotate
+    from wirescene.cad.mesh import load_car, road_car_check
+
+    car = load_car(_find(_cad_dir(cad_dir), name))
+    is_road, reason = road_car_check(car)
+    X = annotate(car.vertices, car.faces, name=car.name)
+    out = out or f"{car.name}.png"
+    draw_car(car.vertices, car.faces, X, title=f"{car.name}: {reason}", out=out)
+    click.echo(out)
+
+
+@click.command("shape")
+@click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
+              help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Shape model .npz (default: the package's data/shape_model.npz); "
+                   "cad_landmarks.json and cad_meshes.npz are written next to it.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the size augmentation.")
+@click.option("--augment", type=int, default=None, help="Size-augmented copies per exemplar (default 100).")
+def shape(cad_dir, out, seed, augment):
+    """Train the metric PCA wireframe shape model from CAD meshes."""
+    from wirescene.cad.training import DEFAULT_AUGMENT, train_shape_model
+    from wirescene.core.shape import DEFAULT_MODEL_PATH
+
+    out = Path(out) if out else DEFAULT_MODEL_PATH
+    model = train_shape_model(_cad_dir(cad_dir), out, seed=seed,
+                              augment=DEFAULT_AUGMENT if augment is None else augment, progress=click.echo)
+    ev = ", ".join(f"{v:.3f}" for v in model.explained_variance_ratio[:8])
+    click.echo(f"{out}: {len(model.exemplar_names)} exemplars, {model.n_components} components; "
+               f"explained variance {ev} ...")

@@ -1,0 +1,53 @@
+"""``wirescene train parts``: train the part detector (see :mod:`wirescene.training.parts`)."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from wirescene.parts.detector import DEFAULT_MODEL_PATH
+
+
+@click.command("parts")
+@click.option("--out", type=click.Path(dir_okay=False), default=str(DEFAULT_MODEL_PATH), show_default=True,
+              help="Model .npz to write.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--n-views", type=int, default=0, show_default=True,
+              help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog only).")
+@click.option("--n-trees", type=int, default=30, show_default=True)
+@click.option("--max-depth", type=int, default=13, show_default=True)
+@click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc"]), default="ghog", show_default=True,
+              help="Descriptor (ghog: gradient-orientation histograms of the grey image).")
+@click.option("--synth-scenes", type=int, default=300, show_default=True,
+              help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
+@click.option("--synth-seed", type=int, default=1000, show_default=True,
+              help="Synthetic scene stream (>= 1000; lower seeds are evaluation scenes).")
+@click.option("--class-weight", type=click.Choice(["balanced", "balanced_subsample", "none"]), default="balanced",
+              show_default=True, help="Forest class weights.")
+@click.option("--n-aug", type=int, default=2, show_default=True, help="Renderings per view (first unaugmented).")
+@click.option("--heldout", type=int, default=0, show_default=True,
+              help="First evaluate with this many CAD models held out.")
+@click.option("--compare-hog/--no-compare-hog", default=False, help="Also evaluate HOG held-out.")
+@click.option("--kitti-background", type=click.Path(file_okay=False), default=None,
+              help="KITTI root whose car-free regions add background patches (off by default).")
+@click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
+def parts(out, seed, n_views, n_trees, max_depth, kind, synth_scenes, synth_seed, class_weight, n_aug, heldout,
+          compare_hog, kitti_background, report):
+    """Train the 37-class part detector on synthetic shaded scenes (and/or CAD renderings)."""
+    from wirescene.training.parts import train_part_detector
+
+    _, rep = train_part_detector(out, seed=seed, n_views=n_views, n_trees=n_trees, max_depth=max_depth, kind=kind,
+                                 n_aug=n_aug, heldout=heldout, synth_scenes=synth_scenes, synth_seed=synth_seed,
+                                 class_weight=None if class_weight == "none" else class_weight,
+                                 compare_kinds=("hog",) if compare_hog else (),
+                                 kitti_background=kitti_background, progress=click.echo)
+    if report:
+        def conv(o):
+            if isinstance(o, dict):
+                return {k: conv(v) for k, v in o.items() if not str(k).startswith("_")}
+            return o.tolist() if hasattr(o, "tolist") else o
+
+        with open(report, "w") as f:
+            json.dump(conv(rep), f, indent=1)
+    click.echo(f"train accuracy {rep['train_acc']:.3f}")

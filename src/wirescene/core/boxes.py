@@ -1,0 +1,64 @@
+"""3D boxes of objects on the ground and their 2D image boxes.
+
+A 3D box is given by KITTI dimensions ``(h, w, l)``, the bottom-centre ``location``
+and the object-to-camera rotation ``R``; in the object frame it spans
+``x in [-l/2, l/2]``, ``y in [-h, 0]``, ``z in [-w/2, w/2]``. 2D boxes are
+``(x1, y1, x2, y2)`` in pixels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wirescene.core.camera import Camera
+from wirescene.core.errors import check_shape
+from wirescene.core.groundplane import transform
+
+# Mean KITTI car size (h, w, l) in metres, from the statistics of the KITTI training split.
+MEAN_CAR_DIMS = np.array([1.53, 1.63, 3.88])
+
+_UNIT_CORNERS = np.array(
+    [[sx, sy, sz] for sx in (0.5, -0.5) for sy in (0.0, -1.0) for sz in (0.5, -0.5)]
+)
+
+
+def box_corners_object(dims) -> np.ndarray:
+    """Corners ``(..., 8, 3)`` in the object frame of boxes with ``dims`` ``(..., 3)`` = (h, w, l)."""
+    dims = np.asarray(dims, dtype=float)
+    check_shape("dims", dims, (..., 3))
+    scale = np.stack([dims[..., 2], dims[..., 0], dims[..., 1]], axis=-1)  # (l, h, w) per axis
+    return _UNIT_CORNERS * scale[..., None, :]
+
+
+def box_corners(dims, location, R) -> np.ndarray:
+    """Camera-frame corners ``(..., 8, 3)`` of boxes placed at ``location`` with rotation ``R``."""
+    return transform(box_corners_object(dims), np.asarray(location, float), np.asarray(R, float))
+
+
+def box_centers(dims, location, R) -> np.ndarray:
+    """3D centroids ``(..., 3)`` of the boxes (half a height above the bottom centre)."""
+    dims = np.asarray(dims, dtype=float)
+    up = -np.asarray(R, float)[..., :, 1]
+    return np.asarray(location, float) + 0.5 * dims[..., 0:1] * up
+
+
+def project_points_to_box(camera: Camera, points: np.ndarray, *, clip: bool = True) -> np.ndarray:
+    """Tight 2D boxes ``(..., 4)`` around the projections of ``points`` ``(..., V, 3)``,
+    clipped to the image if the camera knows its size and ``clip`` is set."""
+    uv = camera.project(points)
+    box = np.concatenate([uv.min(axis=-2), uv.max(axis=-2)], axis=-1)
+    if clip and camera.image_size is not None:
+        w, h = camera.image_size
+        box = np.clip(box, 0.0, [w - 1, h - 1, w - 1, h - 1])
+    return box
+
+
+def iou_2d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Intersection over union of 2D boxes ``(..., 4)`` (broadcasting)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    iw = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
+    ih = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
+    inter = iw * ih
+    area = lambda x: np.clip(x[..., 2] - x[..., 0], 0, None) * np.clip(x[..., 3] - x[..., 1], 0, None)  # noqa: E731
+    union = area(a) + area(b) - inter
+    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)

@@ -1,0 +1,177 @@
+"""Pinhole camera: projection, back-projection and rays; KITTI calibration parsing.
+
+The camera frame is KITTI's rectified reference frame (x right, y down, z forward,
+metres). A :class:`Camera` wraps a full 3x4 projection matrix such as KITTI's ``P2``,
+whose fourth column encodes the small offset of the colour camera from the reference
+camera, so the optical centre is not exactly at the origin.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wirescene.core.errors import InputError, check_shape
+
+KITTI_CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam")
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera given by a 3x4 projection matrix ``P`` (pixels from metres).
+
+    Parameters
+    ----------
+    P : (3, 4) array
+        Projection matrix, ``uvw = P @ [X, 1]``.
+    image_size : (width, height) or None
+        Image size in pixels, used for clipping boxes and truncation tests.
+    """
+
+    P: np.ndarray
+    image_size: tuple[int, int] | None = None
+
+    def __post_init__(self):
+        P = np.asarray(self.P, dtype=float)
+        check_shape("P", P, (3, 4))
+        object.__setattr__(self, "P", P)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) intrinsic matrix."""
+        return self.P[:, :3]
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) optical centre in the camera frame (the null space of ``P``)."""
+        return -np.linalg.solve(self.K, self.P[:, 3])
+
+    @property
+    def focal(self) -> float:
+        """Horizontal focal length in pixels."""
+        return float(self.P[0, 0])
+
+    def project(self, X: np.ndarray) -> np.ndarray:
+        """Project points ``(..., 3)`` to pixels ``(..., 2)``."""
+        uv, _ = self.project_with_depth(X)
+        return uv
+
+    def project_with_depth(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project points ``(..., 3)``; return pixels ``(..., 2)`` and depth ``(...)``.
+
+        Depth is the third homogeneous coordinate (z relative to the optical centre).
+        Points at or behind the camera get depth <= 0 and non-finite pixels are avoided
+        by clamping the divisor; callers must test the depth themselves.
+        """
+        X = np.asarray(X, dtype=float)
+        check_shape("X", X, (..., 3))
+        uvw = X @ self.P[:, :3].T + self.P[:, 3]
+        w = uvw[..., 2]
+        safe = np.where(np.abs(w) < 1e-9, 1e-9, w)
+        return uvw[..., :2] / safe[..., None], w
+
+    def project_placed(self, points_obj: np.ndarray, location: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`project_with_depth` of object-frame points ``(..., V, 3)`` placed at
+        ``location`` ``(..., 3)`` with rotation ``R`` ``(..., 3, 3)``.
+
+        Composes the placement with the projection (one ``3 x 3`` product per object
+        instead of one pass over the points), for the lifting's grid search.
+        """
+        M = self.P[:, :3] @ np.asarray(R, dtype=float)  # (..., 3, 3)
+        offset = np.asarray(location, dtype=float) @ self.P[:, :3].T + self.P[:, 3]
+        uvw = np.matmul(np.asarray(points_obj, dtype=float), np.swapaxes(M, -1, -2)) + offset[..., None, :]
+        w = uvw[..., 2]
+        safe = np.where(np.abs(w) < 1e-9, 1e-9, w)
+        return uvw[..., :2] / safe[..., None], w
+
+    def rays(self, uv: np.ndarray) -> np.ndarray:
+        """Unit viewing directions ``(..., 3)`` through pixels ``uv`` ``(..., 2)``."""
+        uv = np.asarray(uv, dtype=float)
+        check_shape("uv", uv, (..., 2))
+        homog = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
+        d = homog @ np.linalg.inv(self.K).T
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def backproject(self, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """Points ``(..., 3)`` seen at pixels ``uv`` ``(..., 2)`` with depth ``(...)``.
+
+        Inverse of :meth:`project_with_depth`.
+        """
+        uv = np.asarray(uv, dtype=float)
+        check_shape("uv", uv, (..., 2))
+        depth = np.asarray(depth, dtype=float)
+        homog = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1) * depth[..., None]
+        return (homog - self.P[:, 3]) @ np.linalg.inv(self.K).T
+
+    def with_image_size(self, width: int, height: int) -> "Camera":
+        return Camera(self.P, (int(width), int(height)))
+
+
+@dataclass(frozen=True)
+class KittiCalib:
+    """The matrices of a KITTI object calibration file (all as float arrays)."""
+
+    P0: np.ndarray
+    P1: np.ndarray
+    P2: np.ndarray
+    P3: np.ndarray
+    R0_rect: np.ndarray = field(default_factory=lambda: np.eye(3))
+    Tr_velo_to_cam: np.ndarray = field(default_factory=lambda: np.eye(4)[:3])
+
+    def camera(self, image_size: tuple[int, int] | None = None) -> Camera:
+        """The left colour camera (``P2``) used by every KITTI object label."""
+        return Camera(self.P2, image_size)
+
+
+def read_kitti_calib(path: str | Path) -> KittiCalib:
+    """Parse a KITTI object calibration file.
+
+    Raises
+    ------
+    InputError
+        If the file is missing, a line is malformed or ``P2`` is absent.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("calibration file not found", path=path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read calibration file ({exc.__class__.__name__})", path=path) from exc
+    values: dict[str, np.ndarray] = {}
+    for lineno, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        key, sep, rest = line.partition(":")
+        if not sep:
+            raise InputError(f"line {lineno}: expected 'KEY: numbers'", path=path)
+        try:
+            values[key.strip()] = np.array([float(v) for v in rest.split()])
+        except ValueError as exc:
+            raise InputError(f"line {lineno}: non-numeric value in {key.strip()}", path=path) from exc
+    if "P2" not in values:
+        raise InputError("calibration has no P2 matrix", path=path)
+    shapes = {"P0": (3, 4), "P1": (3, 4), "P2": (3, 4), "P3": (3, 4), "R0_rect": (3, 3), "Tr_velo_to_cam": (3, 4)}
+    out = {}
+    for key, shape in shapes.items():
+        if key not in values:
+            continue
+        if values[key].size != shape[0] * shape[1]:
+            raise InputError(f"{key} has {values[key].size} numbers, expected {shape[0] * shape[1]}", path=path)
+        out[key] = values[key].reshape(shape)
+    for key in ("P0", "P1", "P3"):
+        out.setdefault(key, out["P2"])
+    return KittiCalib(**out)
+
+
+def write_kitti_calib(path: str | Path, P2: np.ndarray) -> None:
+    """Write a minimal KITTI calibration file whose P0..P3 are ``P2`` and R0 is identity."""
+    P2 = np.asarray(P2, dtype=float)
+    check_shape("P2", P2, (3, 4))
+    fmt = lambda a: " ".join(f"{v:.12e}" for v in np.asarray(a).ravel())  # noqa: E731
+    lines = [f"P{i}: {fmt(P2)}" for i in range(4)]
+    lines.append(f"R0_rect: {fmt(np.eye(3))}")
+    lines.append(f"Tr_velo_to_cam: {fmt(np.eye(4)[:3])}")
+    Path(path).write_text("\n".join(lines) + "\n")

@@ -1,0 +1,223 @@
+"""Detections, batched scene particles and the final scene estimate.
+
+One representation for a batch of scene hypotheses: :class:`SceneParticles` stores
+``P`` particles of ``N`` objects as arrays, every object with its own ground-plane
+pitch/roll column so that the variants with and without a shared plane use the same
+code (with a shared plane all columns of a particle are equal).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wirescene.core.boxes import box_centers
+from wirescene.core.errors import check_shape
+from wirescene.core.groundplane import (
+    KITTI_CAMERA_HEIGHT,
+    alpha_from_rotation_y,
+    object_pose,
+    rotation_y_of,
+)
+
+
+@dataclass
+class Detections:
+    """2D pre-detections of one image.
+
+    Attributes
+    ----------
+    boxes : (D, 4) float array
+        ``x1, y1, x2, y2`` in pixels.
+    scores : (D,) float array
+    alpha : (D,) float array
+        Coarse viewpoint (observation angle, radians) of each detection, typically the
+        centre of one of 8 bins; NaN where the detector gives no viewpoint.
+    source : str
+        Where the detections came from (``"gt"``, a file name, ...).
+    """
+
+    boxes: np.ndarray
+    scores: np.ndarray
+    alpha: np.ndarray
+    source: str = ""
+
+    def __post_init__(self):
+        self.boxes = np.asarray(self.boxes, dtype=float).reshape(-1, 4)
+        n = len(self.boxes)
+        self.scores = np.broadcast_to(np.asarray(self.scores, dtype=float), (n,)).copy()
+        self.alpha = np.broadcast_to(np.asarray(self.alpha, dtype=float), (n,)).copy()
+
+    def __len__(self) -> int:
+        return len(self.boxes)
+
+    @staticmethod
+    def empty(source: str = "") -> "Detections":
+        return Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0), source)
+
+    def subset(self, index) -> "Detections":
+        return Detections(self.boxes[index], self.scores[index], self.alpha[index], self.source)
+
+
+@dataclass
+class SceneParticles:
+    """A batch of ``P`` scene hypotheses over the same ``N`` detections.
+
+    All arrays are ``(P, N)``: ground plane ``pitch``/``roll`` per object (equal across a
+    row when the plane is shared), position ``x``/``z`` on that plane, ``azimuth`` about
+    the plane normal, and the per-object ``cost`` (lower is better) of the stage that
+    made them. ``dims`` ``(P, N, 3)`` holds each object's box size (h, w, l).
+    """
+
+    pitch: np.ndarray
+    roll: np.ndarray
+    x: np.ndarray
+    z: np.ndarray
+    azimuth: np.ndarray
+    object_cost: np.ndarray
+    dims: np.ndarray
+    height: float = KITTI_CAMERA_HEIGHT
+    shared_plane: bool = False
+
+    def __post_init__(self):
+        for name in ("pitch", "roll", "x", "z", "azimuth", "object_cost"):
+            check_shape(name, getattr(self, name), self.x.shape)
+        check_shape("dims", self.dims, self.x.shape + (3,))
+
+    @property
+    def n_particles(self) -> int:
+        return self.x.shape[0]
+
+    @property
+    def n_objects(self) -> int:
+        return self.x.shape[1]
+
+    @property
+    def cost(self) -> np.ndarray:
+        """(P,) scene cost: the sum of object costs."""
+        return self.object_cost.sum(axis=1)
+
+    def poses(self):
+        """Bottom-centre ``location`` ``(P, N, 3)`` and rotation ``R`` ``(P, N, 3, 3)``."""
+        return object_pose(self.x, self.z, self.azimuth, self.pitch, self.roll, self.height)
+
+    def take(self, index) -> "SceneParticles":
+        """The particles selected by ``index`` along the particle axis: ``(k,)`` rows,
+        or ``(k, N)`` a row per object (regrouping objects of different particles)."""
+        index = np.asarray(index)
+        if index.ndim == 2:
+            cols = np.arange(self.n_objects)
+            pick = lambda a: np.asarray(a)[index, cols]  # noqa: E731
+        else:
+            pick = lambda a: np.asarray(a)[index]  # noqa: E731
+        return SceneParticles(
+            pick(self.pitch), pick(self.roll), pick(self.x), pick(self.z), pick(self.azimuth),
+            pick(self.object_cost), pick(self.dims), self.height, self.shared_plane,
+        )
+
+
+@dataclass
+class ObjectEstimate:
+    """One car of a scene estimate (camera frame, metres, radians)."""
+
+    detection_index: int
+    box2d: np.ndarray
+    score: float
+    location: np.ndarray  # (3,) bottom centre
+    R: np.ndarray  # (3, 3) object-to-camera
+    dims: np.ndarray  # (3,) h, w, l
+    cost: float
+    pitch: float = 0.0
+    roll: float = 0.0
+    shape: np.ndarray | None = None  # (K,) shape coefficients
+    vertices: np.ndarray | None = None  # (36, 3) camera frame
+    visibility: np.ndarray | None = None  # (36,) bool
+    exemplar: str | None = None
+    occluder_mask: int | None = None  # index into wirescene.infer.masks.occluder_masks()
+
+    @property
+    def rotation_y(self) -> float:
+        return float(rotation_y_of(self.R))
+
+    @property
+    def alpha(self) -> float:
+        return float(alpha_from_rotation_y(self.rotation_y, self.location[0], self.location[2]))
+
+    @property
+    def centroid(self) -> np.ndarray:
+        return box_centers(self.dims, self.location, self.R)
+
+    def to_dict(self) -> dict:
+        d = {
+            "detection_index": int(self.detection_index),
+            "box2d": [float(v) for v in self.box2d],
+            "score": float(self.score),
+            "location": [float(v) for v in self.location],
+            "rotation_y": self.rotation_y,
+            "alpha": self.alpha,
+            "dimensions_hwl": [float(v) for v in self.dims],
+            "ground_plane": {"pitch": float(self.pitch), "roll": float(self.roll)},
+            "cost": float(self.cost),
+        }
+        if self.shape is not None:
+            d["shape"] = [float(v) for v in self.shape]
+        if self.vertices is not None:
+            d["vertices"] = np.round(self.vertices, 4).tolist()
+        if self.visibility is not None:
+            d["visibility"] = [bool(v) for v in self.visibility]
+        if self.exemplar is not None:
+            d["exemplar"] = self.exemplar
+        if self.occluder_mask is not None:
+            d["occluder_mask"] = int(self.occluder_mask)
+        return d
+
+
+@dataclass
+class SceneEstimate:
+    """The result of fitting a scene: the chosen particle, as per-object estimates."""
+
+    variant: str
+    objects: list[ObjectEstimate]
+    camera_height: float = KITTI_CAMERA_HEIGHT
+    shared_plane: bool = False
+    n_particles: int = 0
+    extras: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {
+            "variant": self.variant,
+            "camera_height": float(self.camera_height),
+            "shared_plane": bool(self.shared_plane),
+            "n_particles": int(self.n_particles),
+            "objects": [o.to_dict() for o in self.objects],
+            **self.extras,
+        }
+
+    @staticmethod
+    def from_particle(
+        particles: SceneParticles, index: int, detections: Detections, *, variant: str
+    ) -> "SceneEstimate":
+        location, R = particles.poses()
+        objects = [
+            ObjectEstimate(
+                detection_index=j,
+                box2d=detections.boxes[j],
+                score=float(detections.scores[j]),
+                location=location[index, j],
+                R=R[index, j],
+                dims=particles.dims[index, j],
+                cost=float(particles.object_cost[index, j]),
+                pitch=float(particles.pitch[index, j]),
+                roll=float(particles.roll[index, j]),
+            )
+            for j in range(particles.n_objects)
+        ]
+        return SceneEstimate(
+            variant=variant,
+            objects=objects,
+            camera_height=particles.height,
+            shared_plane=particles.shared_plane,
+            n_particles=particles.n_particles,
+        )
+

@@ -1,0 +1,75 @@
+"""Sources of per-vertex image evidence for the likelihood (:class:`PartEvidence`).
+
+* :class:`ResponseEvidence` -- the part detectors' response maps (the paper's model);
+* :func:`oracle_evidence` -- evidence peaked at the true projected vertices of
+  synthetic scenes, an upper bound that separates inference errors from part-detector
+  errors.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wirescene.core.boxes import MEAN_CAR_DIMS, iou_2d
+from wirescene.io.wireframes import WireframeGT
+from wirescene.core.types import Detections
+from wirescene.infer.likelihood import GaussianVertexEvidence
+
+
+class ResponseEvidence:
+    """Adapter of :class:`wirescene.parts.detector.PartResponses` (one map per detection box,
+    already maximised over detector scale) to the likelihood's evidence interface."""
+
+    def __init__(self, responses):
+        self.responses = responses
+
+    def log_ratio(self, uv, obj, scale):
+        return self.responses.log_ratio(uv, obj).astype(float)
+
+
+def part_evidence(image: np.ndarray, detections: Detections, *, detector=None) -> ResponseEvidence:
+    """Response maps of the part detectors inside the detection boxes of ``image``."""
+    from wirescene.parts.detector import response_maps
+
+    return ResponseEvidence(response_maps(image, detections.boxes, detector=detector))
+
+
+def oracle_evidence(detections: Detections, gt_boxes: np.ndarray, vertex_gt: WireframeGT, **kwargs) -> GaussianVertexEvidence:
+    """Evidence at the true vertices of the ground-truth car best overlapping each
+    detection (no evidence at all for a detection overlapping none)."""
+    n = len(detections)
+    uv = np.zeros((n, 36, 2))
+    visible = np.zeros((n, 36), bool)
+    if len(gt_boxes):
+        iou = iou_2d(detections.boxes[:, None, :], np.asarray(gt_boxes)[None, :, :])
+        for j in range(n):
+            g = int(np.argmax(iou[j]))
+            if iou[j, g] > 0.5:
+                uv[j] = vertex_gt.vertices_2d[g]
+                visible[j] = vertex_gt.visible[g]
+    return GaussianVertexEvidence(uv, visible, **kwargs)
+
+
+def viewpoint_from_evidence(camera, detections: Detections, evidence, shape_model, *, c: float = 0.0) -> Detections:
+    """Detections whose unknown viewpoints (NaN ``alpha``, e.g. boxes of an external
+    detector) are set to the bin whose mean-shape wireframe, lifted onto a level ground
+    plane at that viewpoint, best explains the part evidence; known viewpoints are kept."""
+    from wirescene.core.viewpoints import N_BINS, bin_center
+    from wirescene.lift import LiftingOptions, solve_positions
+    from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood
+
+    unknown = np.flatnonzero(~np.isfinite(detections.alpha))
+    if len(unknown) == 0:
+        return detections
+    boxes = detections.boxes[unknown][:, None, :]  # (U, 1, 4)
+    alpha = bin_center(np.arange(N_BINS))[None, :]  # (1, 8)
+    dims = np.broadcast_to(MEAN_CAR_DIMS, (len(unknown), N_BINS, 3))
+    opts = LiftingOptions()
+    x, z, az, _ = solve_positions(camera, boxes, alpha, 0.0, 0.0, dims, height=opts.camera_height,
+                                  iterations=opts.iterations)
+    batch = instantiate_wireframes(camera, shape_model, x=x, z=z, azimuth=az, pitch=np.zeros_like(x),
+                                   roll=np.zeros_like(x), shape=np.zeros(x.shape + (1,)), height=opts.camera_height)
+    score = wireframe_likelihood(batch, evidence, np.broadcast_to(unknown[:, None], x.shape), c=c)
+    out = detections.alpha.copy()
+    out[unknown] = bin_center(np.argmax(score, axis=1))
+    return Detections(detections.boxes, detections.scores, out, detections.source)

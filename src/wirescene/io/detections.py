@@ -1,0 +1,152 @@
+"""2D pre-detections: from ground-truth labels (with controllable viewpoint noise) and
+adapters for boxes of any external detector (JSON, CSV, KITTI label files with scores).
+
+Every source yields a :class:`~wirescene.core.types.Detections` whose ``alpha`` is
+the centre of the coarse viewpoint bin (8 bins, paper Sec. 3.4), or NaN when the source
+has no viewpoint; the lifting stage then searches all azimuths.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from wirescene.io.kitti import CAR_TYPES, FrameLabels, read_labels
+from wirescene.core.errors import InputError
+from wirescene.core.types import Detections
+from wirescene.core.viewpoints import bin_center, viewpoint_bin
+
+
+def detections_from_labels(
+    labels: FrameLabels,
+    *,
+    types=CAR_TYPES,
+    viewpoint_noise_deg: float = 0.0,
+    rng: np.random.Generator | None = None,
+    source: str = "gt",
+) -> Detections:
+    """Ground-truth boxes as pre-detections (the paper's oracle initialisation).
+
+    The viewpoint is the bin of the true observation angle after adding zero-mean
+    Gaussian noise of ``viewpoint_noise_deg`` (so bins can be wrong, as a detector's
+    would); the score is 1, or the label's score if it has one.
+    """
+    objs = labels.of_type(*types)
+    if not objs:
+        return Detections.empty(source)
+    alpha = np.array([o.alpha for o in objs])
+    if viewpoint_noise_deg > 0:
+        rng = np.random.default_rng(0) if rng is None else rng
+        alpha = alpha + np.deg2rad(viewpoint_noise_deg) * rng.standard_normal(len(alpha))
+    scores = np.array([1.0 if o.score is None else o.score for o in objs])
+    return Detections(np.stack([o.box for o in objs]), scores, bin_center(viewpoint_bin(alpha)), source)
+
+
+def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
+    if entry.get("viewpoint_bin") not in (None, ""):
+        try:
+            b = int(entry["viewpoint_bin"])
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: viewpoint_bin must be an integer 0..7", path=path) from None
+        if not 0 <= b < 8:
+            raise InputError(f"{where}: viewpoint_bin must be in 0..7, got {b}", path=path)
+        return float(bin_center(b))
+    if entry.get("alpha") not in (None, ""):
+        try:
+            return float(bin_center(viewpoint_bin(float(entry["alpha"]))))
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: alpha must be a number (radians)", path=path) from None
+    return float("nan")
+
+
+def _box_of(entry: dict, path: Path, where: str) -> list[float]:
+    if "box" in entry:
+        box = entry["box"]
+    elif "bbox" in entry:  # COCO: x, y, width, height
+        b = entry["bbox"]
+        if not isinstance(b, (list, tuple)) or len(b) != 4:
+            raise InputError(f"{where}: bbox must be [x, y, width, height]", path=path)
+        box = [b[0], b[1], float(b[0]) + float(b[2]), float(b[1]) + float(b[3])]
+    else:
+        box = [entry.get(k) for k in ("x1", "y1", "x2", "y2")]
+    try:
+        box = [float(v) for v in box]
+    except (TypeError, ValueError):
+        raise InputError(f"{where}: box must be four numbers x1 y1 x2 y2", path=path) from None
+    if len(box) != 4 or not np.all(np.isfinite(box)):
+        raise InputError(f"{where}: box must be four finite numbers x1 y1 x2 y2", path=path)
+    if box[2] <= box[0] or box[3] <= box[1]:
+        raise InputError(f"{where}: box has x2 <= x1 or y2 <= y1", path=path)
+    return box
+
+
+def _from_entries(entries: list, path: Path) -> Detections:
+    boxes, scores, alpha = [], [], []
+    for i, entry in enumerate(entries):
+        where = f"detection {i}"
+        if not isinstance(entry, dict):
+            raise InputError(f"{where}: expected an object with a box", path=path)
+        if "category" in entry and str(entry["category"]).lower() not in ("car", "3"):
+            continue
+        boxes.append(_box_of(entry, path, where))
+        try:
+            scores.append(float(entry.get("score", 1.0)))
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: score must be a number", path=path) from None
+        alpha.append(_viewpoint_of(entry, path, where))
+    return Detections(np.array(boxes).reshape(-1, 4), np.array(scores), np.array(alpha), str(path))
+
+
+def read_detections(path: str | Path, *, min_score: float = -np.inf) -> Detections:
+    """Read 2D car detections of one image.
+
+    Formats, by extension:
+
+    * ``.json``: a list of objects, or ``{"detections": [...]}``; each object has
+      ``box`` ``[x1, y1, x2, y2]`` (or COCO ``bbox`` ``[x, y, w, h]``, or keys
+      ``x1 y1 x2 y2``), optional ``score``, optional ``viewpoint_bin`` (0..7) or
+      ``alpha`` (radians) and optional ``category`` (non-car entries are skipped).
+    * ``.csv``: a header with ``x1,y1,x2,y2`` and optional ``score``, ``viewpoint_bin``,
+      ``alpha``.
+    * ``.txt``: a KITTI label file (15 or 16 columns); Car rows are used, with their
+      ``alpha`` binned and their score (16th column) if present.
+
+    Raises
+    ------
+    InputError
+        Missing or malformed file, or a file without any detection.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("detections file not found", path=path)
+    suffix = path.suffix.lower()
+    if suffix == ".txt":
+        dets = detections_from_labels(read_labels(path), source=str(path))
+    elif suffix == ".json":
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(f"not valid JSON ({exc.__class__.__name__}: {exc})".splitlines()[0], path=path) from None
+        entries = data.get("detections") if isinstance(data, dict) else data
+        if not isinstance(entries, list):
+            raise InputError("expected a list of detections or {'detections': [...]}", path=path)
+        dets = _from_entries(entries, path)
+    elif suffix == ".csv":
+        try:
+            with path.open(newline="") as fh:
+                rows = list(csv.DictReader(fh))
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"not a readable CSV file ({exc})", path=path) from None
+        if rows and not {"x1", "y1", "x2", "y2"} <= set(rows[0]):
+            raise InputError("CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha)", path=path)
+        dets = _from_entries(rows, path)
+    else:
+        raise InputError(f"unknown detections format {suffix!r} (use .json, .csv or a KITTI .txt)", path=path)
+    keep = dets.scores >= min_score
+    dets = dets.subset(keep)
+    if len(dets) == 0:
+        raise InputError("no car detections in file", path=path)
+    return dets

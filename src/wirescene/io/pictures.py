@@ -1,0 +1,161 @@
+"""Pictures of what the model did: image overlays and bird's-eye views.
+
+Estimates are drawn in red, ground truth in green, as in the paper's figures. All
+functions draw into a new matplotlib figure (Agg backend, no display needed) and
+return it; :func:`save_figure` writes it atomically.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from wirescene.core.atomic import atomic_path  # noqa: E402
+from wirescene.core.boxes import box_corners  # noqa: E402
+from wirescene.core.camera import Camera  # noqa: E402
+from wirescene.core.groundplane import rotation_y  # noqa: E402
+
+EST_COLOR = "#e8302a"
+GT_COLOR = "#2fbf40"
+DET_COLOR = "#f5d90a"
+# Box edges as corner index pairs for the corner order of boxes.box_corners_object.
+_BOX_EDGES = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)]
+_FRONT_FACE = [(0, 3), (1, 2)]  # cross on the front face marks the heading
+
+
+def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float = 1.5):
+    uv, depth = camera.project_with_depth(corners)
+    if np.any(depth <= 0.1):
+        return
+    for i, j in _BOX_EDGES + _FRONT_FACE:
+        ax.plot(uv[[i, j], 0], uv[[i, j], 1], color=color, lw=lw if (i, j) not in _FRONT_FACE else lw * 0.6)
+
+
+def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR):
+    """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``; hidden vertices in blue."""
+    uv = camera.project(vertices)
+    for i, j in edges:
+        ax.plot(uv[[i, j], 0], uv[[i, j], 1], color=color, lw=1.0)
+    vis = np.ones(len(uv), bool) if visible is None else np.asarray(visible, bool)
+    ax.scatter(uv[vis, 0], uv[vis, 1], s=10, c=color, zorder=3)
+    ax.scatter(uv[~vis, 0], uv[~vis, 1], s=10, c="#2f6fe8", zorder=3)
+
+
+def overlay(
+    image: np.ndarray,
+    camera: Camera,
+    estimate=None,
+    *,
+    gt: Sequence = (),
+    detections=None,
+    title: str | None = None,
+    edges: np.ndarray | None = None,
+):
+    """Image with detections (yellow), estimated 3D boxes or wireframes (red) and
+    ground-truth 3D boxes (green).
+
+    Parameters
+    ----------
+    image : (H, W, 3) uint8 array
+    estimate : SceneEstimate, optional
+    gt : sequence of kitti ``Label``
+    detections : Detections, optional
+    edges : (E, 2) int array, optional
+        Wireframe edges, used for objects that carry ``vertices``.
+    """
+    h, w = image.shape[:2]
+    fig = plt.figure(figsize=(w / 100, h / 100), dpi=100)
+    ax = fig.add_axes([0, 0, 1, 1])
+    ax.imshow(image)
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    ax.axis("off")
+    if detections is not None:
+        for b in detections.boxes:
+            ax.add_patch(plt.Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
+    for g in gt:
+        _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0)
+    if estimate is not None:
+        for o in estimate.objects:
+            if o.vertices is not None and edges is not None:
+                draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility)
+            else:
+                _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), EST_COLOR)
+    if title:
+        ax.text(5, 15, title, color="white", fontsize=10, bbox=dict(facecolor="black", alpha=0.5, lw=0))
+    return fig
+
+
+def _footprint(dims, location, R):
+    c = box_corners(dims, location, R)
+    return c[[0, 1, 5, 4, 0]][:, [0, 2]]  # bottom face outline in x-z (corner order of boxes.py)
+
+
+def birds_eye(
+    estimate=None,
+    *,
+    gt: Sequence = (),
+    camera: Camera | None = None,
+    extent: tuple[float, float, float, float] | None = None,
+    title: str | None = None,
+):
+    """Top-down view (x right, z up the page) of estimated (red) and GT (green) cars,
+    with the camera's field of view."""
+    fig, ax = plt.subplots(figsize=(5, 6), dpi=100)
+    pts = [np.zeros(2)]
+
+    def draw(dims, location, R, color):
+        fp = _footprint(dims, location, R)
+        ax.plot(fp[:, 0], fp[:, 1], color=color, lw=1.5)
+        front = fp[[0, 1]].mean(axis=0)  # corners 0 and 1 are the front face
+        ax.plot([location[0], front[0]], [location[2], front[1]], color=color, lw=1.0)
+        pts.append(fp)
+
+    for g in gt:
+        draw(g.dims, g.location, rotation_y(g.rotation_y), GT_COLOR)
+    if estimate is not None:
+        for o in estimate.objects:
+            draw(o.dims, o.location, o.R, EST_COLOR)
+    allp = np.vstack([np.atleast_2d(p) for p in pts])
+    if extent is None:
+        xmin, zmax = allp[:, 0].min() - 3, max(allp[:, 1].max() + 3, 10)
+        xmax = allp[:, 0].max() + 3
+        half = max(abs(xmin), abs(xmax), 8)
+        extent = (-half, half, -2, zmax)
+    if camera is not None and camera.image_size is not None:
+        w = camera.image_size[0]
+        for u in (0, w - 1):
+            d = camera.rays(np.array([u, camera.K[1, 2]], float))
+            t = extent[3] / max(d[2], 1e-3)
+            ax.plot([0, d[0] * t], [0, d[2] * t], color="0.6", lw=0.8, ls=":")
+    ax.plot([0], [0], marker="^", color="black")
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("z [m]")
+    ax.grid(alpha=0.3)
+    ax.plot([], [], color=EST_COLOR, label="estimate")
+    ax.plot([], [], color=GT_COLOR, label="ground truth")
+    ax.legend(loc="upper right", fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def save_figure(fig, path: str | Path) -> Path:
+    """Save ``fig`` as PNG atomically (temporary file, then rename) and close it."""
+    path = Path(path)
+    try:
+        with atomic_path(path, suffix=".png") as tmp:
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)
+    return path

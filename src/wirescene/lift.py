@@ -1,0 +1,297 @@
+"""Coarse 3D geometry (paper Sec. 4.3): lift 2D pre-detections to 3D boxes of mean car
+size standing on a ground plane, by a grid search over ground-plane pitch and roll and
+object azimuth, with the object's position on the plane solved for each grid cell so
+that the projected box matches the detected 2D box.
+
+The search is one vectorised computation over (detections x planes x azimuths): for every
+cell a few damped Gauss-Newton steps on (x, log z) minimise the squared difference of the
+projected and detected box sides, normalised by the detection's diagonal. Two variants:
+
+* ``shared_plane=False`` (``coarse``): every object chooses its own plane, i.e. objects
+  are lifted independently;
+* ``shared_plane=True`` (``coarse+gp``): one plane for the whole image, chosen by the
+  consensus of all objects (sum of robustified per-object costs).
+
+In both cases many scene particles are kept (default 250), ranked by cost.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wirescene.core.arrays import point_bounds
+from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners_object
+from wirescene.core.camera import Camera
+from wirescene.core.groundplane import (
+    KITTI_CAMERA_HEIGHT,
+    plane_normal,
+    plane_rotation,
+    point_on_plane,
+    rotation_y,
+    wrap_angle,
+)
+from wirescene.core.types import Detections, SceneParticles
+
+
+@dataclass(frozen=True)
+class LiftingOptions:
+    """Options of the coarse lifting stage (all angles in degrees)."""
+
+    # KITTI's camera is rigidly mounted; road surfaces seen from it tilt by a few
+    # degrees in pitch (slopes, braking) and much less in roll (road camber).
+    pitch_range: float = 3.0
+    pitch_step: float = 0.25
+    roll_range: float = 1.5
+    roll_step: float = 0.25
+    azimuth_halfwidth: float = 22.5  # search +- this around the detection's viewpoint
+    azimuth_step: float = 2.5
+    unknown_viewpoint_step: float = 5.0  # full circle when the detector gives none
+    iterations: int = 8
+    robust_cost: float = 0.05  # per-object cost cap when objects vote for a shared plane
+    camera_height: float = KITTI_CAMERA_HEIGHT
+    n_particles: int = 250
+
+    def plane_grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """Flattened pitch and roll grids (radians), shape ``(G,)`` each."""
+        pitch = np.deg2rad(_symmetric_range(self.pitch_range, self.pitch_step))
+        roll = np.deg2rad(_symmetric_range(self.roll_range, self.roll_step))
+        pp, rr = np.meshgrid(pitch, roll, indexing="ij")
+        return pp.ravel(), rr.ravel()
+
+    def alpha_offsets(self, known: bool) -> np.ndarray:
+        if known:
+            return np.deg2rad(_symmetric_range(self.azimuth_halfwidth, self.azimuth_step))
+        return np.deg2rad(np.arange(-180.0, 180.0, self.unknown_viewpoint_step))
+
+
+def _symmetric_range(half: float, step: float) -> np.ndarray:
+    n = int(round(half / step))
+    return np.arange(-n, n + 1) * step
+
+
+def project_boxes(camera: Camera, corners_obj, location, R) -> tuple[np.ndarray, np.ndarray]:
+    """2D boxes ``(..., 4)`` of 3D boxes with object-frame corners ``corners_obj``
+    ``(..., 8, 3)`` (see :func:`wirescene.core.boxes.box_corners_object`), clipped to the
+    image when its size is known, and the minimum corner depth ``(...)`` (<= 0 means the
+    box reaches behind the camera)."""
+    uv, depth = camera.project_placed(corners_obj, location, R)
+    box = np.concatenate(point_bounds(uv), axis=-1)
+    if camera.image_size is not None:
+        w, h = camera.image_size
+        box = np.clip(box, 0.0, [w - 1, h - 1, w - 1, h - 1])
+    return box, depth.min(axis=-1)
+
+
+def box_residual(projected: np.ndarray, detected: np.ndarray, min_depth: np.ndarray) -> np.ndarray:
+    """Side differences ``(..., 4)`` normalised by the detection diagonal; boxes that
+    reach behind the camera get a large constant residual."""
+    diag = np.hypot(detected[..., 2] - detected[..., 0], detected[..., 3] - detected[..., 1])
+    r = (projected - detected) / np.maximum(diag, 1.0)[..., None]
+    return np.where((min_depth > 0.5)[..., None], r, 10.0)
+
+
+def _initial_position(camera: Camera, boxes, pitch, roll, height, dims):
+    """Start each search where the ray through the bottom-centre of the 2D box meets the
+    plane, pushed back by a quarter car length (the box bottom is the nearest part of the
+    car); above-horizon rays fall back to the depth implied by the box height."""
+    uv = np.stack([(boxes[..., 0] + boxes[..., 2]) / 2, boxes[..., 3]], axis=-1)
+    ray = camera.rays(uv)
+    n = plane_normal(pitch, roll)
+    c = camera.center
+    denom = np.sum(n * ray, axis=-1)
+    t = (height - np.sum(n * c, axis=-1)) / np.where(np.abs(denom) < 1e-6, 1e-6, denom)
+    hit = c + t[..., None] * ray
+    box_h = np.maximum(boxes[..., 3] - boxes[..., 1], 1.0)
+    z_from_height = camera.focal * dims[..., 0] / box_h
+    ok = (t > 0) & (hit[..., 2] > 1.0) & (hit[..., 2] < 150.0)
+    z = np.where(ok, hit[..., 2] + 0.25 * dims[..., 2], z_from_height)
+    x = np.where(ok, hit[..., 0], (uv[..., 0] - camera.K[0, 2]) * z / camera.focal)
+    return x, z
+
+
+def solve_positions(
+    camera: Camera,
+    boxes: np.ndarray,
+    alpha: np.ndarray,
+    pitch: np.ndarray,
+    roll: np.ndarray,
+    dims: np.ndarray,
+    *,
+    height: float = KITTI_CAMERA_HEIGHT,
+    iterations: int = 8,
+):
+    """Positions on the plane whose projected boxes best match ``boxes``.
+
+    All inputs broadcast to one batch shape ``B``: ``boxes (B..., 4)``, observation angle
+    ``alpha``, plane ``pitch``/``roll``, ``dims (B..., 3)``. The object's azimuth follows
+    from its observation angle and position (``rotation_y = alpha + atan2(x, z)``).
+
+    Returns
+    -------
+    x, z, azimuth, cost : arrays of shape ``B``
+        ``cost`` is the squared normalised box residual (0 = perfect fit).
+    """
+    shape = np.broadcast_shapes(boxes.shape[:-1], np.shape(alpha), np.shape(pitch), np.shape(roll), dims.shape[:-1])
+    boxes = np.broadcast_to(boxes, shape + (4,))
+    corners = box_corners_object(dims)  # before broadcasting: once per distinct size
+    dims = np.broadcast_to(dims, shape + (3,))
+    alpha = np.broadcast_to(alpha, shape)
+    R_gp = np.broadcast_to(plane_rotation(pitch, roll), shape + (3, 3))
+    pitch = np.broadcast_to(pitch, shape)
+    roll = np.broadcast_to(roll, shape)
+
+    def residual(x, logz):
+        z = np.exp(logz)
+        az = wrap_angle(alpha + np.arctan2(x, z))
+        loc = point_on_plane(x, z, pitch, roll, height)
+        R = R_gp @ rotation_y(az)
+        proj, min_depth = project_boxes(camera, corners, loc, R)
+        return box_residual(proj, boxes, min_depth)
+
+    x, z = _initial_position(camera, boxes, pitch, roll, height, dims)
+    logz = np.log(np.maximum(z, 1.0))
+    lam = np.full(shape, 1e-2)
+    r = residual(x, logz)
+    cost = np.sum(r**2, axis=-1)
+    hx, hz = 1e-3, 1e-4
+    for _ in range(iterations):
+        jx = (residual(x + hx, logz) - r) / hx
+        jz = (residual(x, logz + hz) - r) / hz
+        a11 = np.sum(jx * jx, -1)
+        a12 = np.sum(jx * jz, -1)
+        a22 = np.sum(jz * jz, -1)
+        g1 = np.sum(jx * r, -1)
+        g2 = np.sum(jz * r, -1)
+        a11d, a22d = a11 * (1 + lam) + 1e-12, a22 * (1 + lam) + 1e-12
+        det = a11d * a22d - a12**2
+        det = np.where(np.abs(det) < 1e-18, 1e-18, det)
+        dx = -(a22d * g1 - a12 * g2) / det
+        dz = -(a11d * g2 - a12 * g1) / det
+        dz = np.clip(dz, -0.5, 0.5)
+        dx = np.clip(dx, -5.0, 5.0)
+        r_new = residual(x + dx, logz + dz)
+        cost_new = np.sum(r_new**2, axis=-1)
+        better = cost_new < cost
+        x = np.where(better, x + dx, x)
+        logz = np.where(better, logz + dz, logz)
+        r = np.where(better[..., None], r_new, r)
+        cost = np.where(better, cost_new, cost)
+        lam = np.where(better, lam * 0.3, lam * 10.0)
+    z = np.exp(logz)
+    return x, z, wrap_angle(alpha + np.arctan2(x, z)), cost
+
+
+@dataclass(frozen=True)
+class LiftingTable:
+    """Best coarse fit of every detection on every grid plane, arrays ``(N, G)``
+    (the azimuth already chosen per cell); shared by the ``coarse`` and ``coarse+gp``
+    particle selections so the grid search runs once per image."""
+
+    pitch: np.ndarray  # (G,)
+    roll: np.ndarray  # (G,)
+    x: np.ndarray
+    z: np.ndarray
+    azimuth: np.ndarray
+    cost: np.ndarray
+    dims: np.ndarray  # (N, 3)
+    height: float
+
+
+def lift_table(
+    camera: Camera,
+    detections: Detections,
+    *,
+    options: LiftingOptions = LiftingOptions(),
+    dims: np.ndarray | None = None,
+) -> LiftingTable:
+    """Grid search of the coarse stage: for every detection, plane and azimuth solve the
+    position, then keep the best azimuth per (detection, plane).
+
+    ``detections.alpha`` restricts the azimuth search to the viewpoint bin
+    (+- ``options.azimuth_halfwidth``); NaN searches the full circle. ``dims`` ``(N, 3)``
+    defaults to the mean KITTI car.
+    """
+    n = len(detections)
+    if n == 0:
+        raise ValueError("lifting needs at least one detection")
+    dims = np.broadcast_to(MEAN_CAR_DIMS if dims is None else np.asarray(dims, float), (n, 3))
+    pitch_g, roll_g = options.plane_grid()  # (G,)
+    known = np.isfinite(detections.alpha)
+    offsets_known = options.alpha_offsets(True)
+    offsets_unknown = options.alpha_offsets(False)
+    # Pad the azimuth axis to a common length so all detections are solved in one batch;
+    # padded cells repeat the last offset and cannot win over their original.
+    n_az = max(len(offsets_known) if known.any() else 0, len(offsets_unknown) if (~known).any() else 0)
+    alpha = np.empty((n, n_az))
+    for j in range(n):
+        off = offsets_known if known[j] else offsets_unknown
+        base = detections.alpha[j] if known[j] else 0.0
+        alpha[j] = base + np.concatenate([off, np.full(n_az - len(off), off[-1])])
+    x, z, az, cost = solve_positions(
+        camera,
+        detections.boxes[:, None, None, :],
+        alpha[:, None, :],
+        pitch_g[None, :, None],
+        roll_g[None, :, None],
+        dims[:, None, None, :],
+        height=options.camera_height,
+        iterations=options.iterations,
+    )
+    best_a = np.argmin(cost, axis=2)[..., None]  # (N, G, 1)
+    take = lambda a: np.take_along_axis(a, best_a, axis=2)[..., 0]  # noqa: E731
+    return LiftingTable(pitch_g, roll_g, take(x), take(z), take(az), take(cost), np.array(dims), options.camera_height)
+
+
+def select_particles(
+    table: LiftingTable, *, shared_plane: bool, n_particles: int = 250, robust_cost: float = 0.05
+) -> SceneParticles:
+    """Scene particles from a lifting table, best first.
+
+    With ``shared_plane`` (``coarse+gp``) particle ``k`` is the ``k``-th best plane by
+    the sum of per-object costs, each capped at ``robust_cost`` so one bad detection
+    cannot veto a plane; without (``coarse``) particle ``k`` gives every object its own
+    ``k``-th best plane.
+    """
+    n, G = table.cost.shape
+    k = min(n_particles, G)
+    if shared_plane:
+        total = np.minimum(table.cost, robust_cost).sum(axis=0) + 1e-3 * table.cost.sum(axis=0)
+        order = np.argsort(total, kind="stable")[:k]
+        cols = np.broadcast_to(order[:, None], (k, n))  # (P, N) plane index per object
+    else:
+        cols = np.argsort(table.cost, axis=1, kind="stable")[:, :k].T
+    rows = np.broadcast_to(np.arange(n)[None, :], (k, n))
+    return SceneParticles(
+        pitch=table.pitch[cols],
+        roll=table.roll[cols],
+        x=table.x[rows, cols],
+        z=table.z[rows, cols],
+        azimuth=table.azimuth[rows, cols],
+        object_cost=table.cost[rows, cols],
+        dims=np.broadcast_to(table.dims, (k, n, 3)).copy(),
+        height=table.height,
+        shared_plane=shared_plane,
+    )
+
+
+def lift_detections(
+    camera: Camera,
+    detections: Detections,
+    *,
+    shared_plane: bool,
+    options: LiftingOptions = LiftingOptions(),
+    dims: np.ndarray | None = None,
+) -> SceneParticles:
+    """Coarse 3D scene particles for the detections of one image
+    (:func:`lift_table` then :func:`select_particles`).
+
+    ``shared_plane=True`` gives ``coarse+gp`` (one plane for all objects), ``False``
+    gives ``coarse``. Returns ``min(options.n_particles, grid planes)`` particles
+    sorted by cost.
+    """
+    table = lift_table(camera, detections, options=options, dims=dims)
+    return select_particles(
+        table, shared_plane=shared_plane, n_particles=options.n_particles, robust_cost=options.robust_cost
+    )

@@ -1,0 +1,413 @@
+"""Part detectors: a 37-class random forest on edge-map descriptors (paper Sec. 3.2).
+
+Classes ``0..35`` are the wireframe vertices (:data:`wirescene.core.wireframe.VERTEX_NAMES`),
+class 36 (:data:`BACKGROUND`) is background. Training lives in
+:mod:`wirescene.training.parts`; this module holds inference:
+
+* :class:`PartDetector` -- the forest as plain numpy arrays (exported from scikit-learn,
+  saved as a versioned ``.npz`` without pickle) and a vectorised numpy traversal, so a
+  saved model loads and predicts without scikit-learn or a matching version.
+* :func:`response_maps` -- dense multi-scale part probability maps ``S_j`` and background
+  ``S_b`` inside (padded) detection boxes, and :meth:`PartResponses.log_ratio` -- the O(1)
+  lookup of ``log(S_j / S_b)`` (max over scales) at projected vertices, vectorised over
+  any batch of hypotheses (the likelihood's hot path).
+
+Scale convention: a box of height ``h`` px is resampled so that an object of height
+``s * h`` becomes :data:`wirescene.parts.features.CANONICAL_HEIGHT` px, for each ``s`` in
+``scales``; patches are then ``PATCH`` canonical px wide (about half the car height).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wirescene.parts import features as feat
+from wirescene.core.errors import InputError, ShapeError, check_shape
+from wirescene.core.resources import DATA_DIR
+
+__all__ = [
+    "N_PARTS", "BACKGROUND", "N_CLASSES", "MODEL_FORMAT", "DEFAULT_MODEL_PATH", "DEFAULT_SCALES",
+    "PartDetector", "BoxResponses", "PartResponses", "response_maps", "box_crop", "box_descriptors", "log_ratio",
+    "load_default",
+]
+
+N_PARTS = 36
+BACKGROUND = 36
+N_CLASSES = 37
+MODEL_FORMAT = "wirescene-parts-forest/1"
+DEFAULT_MODEL_PATH = DATA_DIR / "parts_model.npz"
+DEFAULT_SCALES = (0.85, 1.0, 1.2)
+DEFAULT_EPS = 1e-3
+
+
+@dataclass
+class PartDetector:
+    """A random forest stored as flat numpy arrays (all trees concatenated).
+
+    Attributes
+    ----------
+    roots : (T,) int32 -- node index of each tree's root
+    left, right : (N,) int32 -- global child indices, -1 at leaves
+    feature : (N,) int16 -- split feature (-1 at leaves)
+    threshold : (N,) float64 -- go left if ``float32(x[feature]) <= threshold``
+    leaf : (N,) int32 -- row of ``values`` for leaves, -1 at inner nodes
+    values : (L, C) uint8 (quantised, ``/ scale``) or float -- leaf class distributions
+    value_scale : float -- divide ``values`` by this to get probabilities
+    kind : str -- descriptor (see :func:`wirescene.parts.features.extract`)
+    max_depth : int
+    meta : dict of str -- provenance (training parameters), saved with the model
+    """
+
+    roots: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    feature: np.ndarray
+    threshold: np.ndarray
+    leaf: np.ndarray
+    values: np.ndarray
+    value_scale: float
+    kind: str
+    max_depth: int
+    n_features: int
+    meta: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_sklearn(cls, forest, *, kind: str, quantize: bool = True, meta: dict | None = None) -> "PartDetector":
+        """Export a fitted :class:`sklearn.ensemble.RandomForestClassifier` whose classes
+        are ``0..36``. ``quantize``: leaf distributions as uint8 (x255) instead of float64."""
+        classes = np.asarray(forest.classes_)
+        n_classes = N_CLASSES
+        roots, L, R, Fe, Th, Lf, Va = [], [], [], [], [], [], []
+        offset, leaf_off = 0, 0
+        depth = 0
+        for est in forest.estimators_:
+            t = est.tree_
+            n = t.node_count
+            is_leaf = t.children_left < 0
+            roots.append(offset)
+            L.append(np.where(is_leaf, -1, t.children_left + offset))
+            R.append(np.where(is_leaf, -1, t.children_right + offset))
+            Fe.append(np.where(is_leaf, -1, t.feature))
+            Th.append(np.where(is_leaf, 0.0, t.threshold))
+            li = np.full(n, -1, dtype=np.int64)
+            li[is_leaf] = np.arange(is_leaf.sum()) + leaf_off
+            Lf.append(li)
+            v = t.value[is_leaf, 0, :].astype(float)
+            v = v / np.maximum(v.sum(axis=1, keepdims=True), 1e-300)
+            full = np.zeros((len(v), n_classes))
+            full[:, classes.astype(int)] = v
+            Va.append(full)
+            offset += n
+            leaf_off += int(is_leaf.sum())
+            depth = max(depth, int(t.max_depth))
+        values = np.concatenate(Va)
+        if quantize:
+            values, scale = np.round(values * 255).astype(np.uint8), 255.0
+        else:
+            scale = 1.0
+        return cls(
+            roots=np.asarray(roots, np.int32), left=np.concatenate(L).astype(np.int32),
+            right=np.concatenate(R).astype(np.int32), feature=np.concatenate(Fe).astype(np.int16),
+            threshold=np.concatenate(Th).astype(np.float64), leaf=np.concatenate(Lf).astype(np.int32),
+            values=values, value_scale=scale, kind=kind, max_depth=depth,
+            n_features=int(forest.n_features_in_), meta=dict(meta or {}),
+        )
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path) -> Path:
+        """Write a compressed ``.npz`` (no pickled objects)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        meta = {str(k): str(v) for k, v in self.meta.items()}
+        np.savez_compressed(
+            path, format=np.array(MODEL_FORMAT), kind=np.array(self.kind), roots=self.roots,
+            left=self.left, right=self.right, feature=self.feature, threshold=self.threshold,
+            leaf=self.leaf, values=self.values, value_scale=np.array(self.value_scale),
+            max_depth=np.array(self.max_depth), n_features=np.array(self.n_features),
+            canonical_height=np.array(feat.CANONICAL_HEIGHT), radius=np.array(feat.RADIUS),
+            meta_keys=np.array(list(meta.keys()), dtype=str), meta_values=np.array(list(meta.values()), dtype=str),
+        )
+        return path
+
+    @classmethod
+    def load(cls, path=None) -> "PartDetector":
+        """Load a model written by :meth:`save` (default: the package's model)."""
+        path = DEFAULT_MODEL_PATH if path is None else Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                fmt = str(z["format"])
+                if fmt != MODEL_FORMAT:
+                    raise InputError(f"unsupported part model format {fmt!r} (expected {MODEL_FORMAT!r})", path=path)
+                if int(z["canonical_height"]) != feat.CANONICAL_HEIGHT or int(z["radius"]) != feat.RADIUS:
+                    raise InputError("part model was trained with other canonical patch geometry", path=path)
+                d = {k: z[k] for k in ("roots", "left", "right", "feature", "threshold", "leaf", "values")}
+                meta = dict(zip(z["meta_keys"].tolist(), z["meta_values"].tolist()))
+                return cls(**d, value_scale=float(z["value_scale"]), kind=str(z["kind"]),
+                           max_depth=int(z["max_depth"]), n_features=int(z["n_features"]), meta=meta)
+        except (OSError, KeyError, ValueError) as e:
+            raise InputError(f"cannot read part model ({e})", path=path) from None
+
+    # ------------------------------------------------------------------ prediction
+    @property
+    def n_trees(self) -> int:
+        return len(self.roots)
+
+    def predict_proba(self, X, *, chunk: int = 16384) -> np.ndarray:
+        """``(N, 37)`` class probabilities (mean of the trees' leaf distributions)."""
+        X = np.asarray(X, dtype=np.float32)
+        check_shape("X", X, (None, self.n_features))
+        out = np.empty((len(X), N_CLASSES), dtype=np.float64)
+        for s in range(0, len(X), chunk):
+            out[s:s + chunk] = self._predict(X[s:s + chunk])
+        return out
+
+    def _tables(self):
+        """Traversal tables (cached): ``child (N, 2)`` (leaves point to themselves),
+        ``feature`` (0 at leaves), float32 thresholds equivalent to the float64 ones for
+        float32 inputs (the largest float32 <= the threshold), float32 leaf values."""
+        t = self.__dict__.get("_tab")
+        if t is None:
+            idx = np.arange(len(self.left), dtype=np.int32)
+            leaf = self.left < 0
+            child = np.stack([np.where(leaf, idx, self.left), np.where(leaf, idx, self.right)], 1).astype(np.int32)
+            thr = self.threshold.astype(np.float32)
+            over = thr.astype(np.float64) > self.threshold
+            thr[over] = np.nextafter(thr[over], np.float32(-np.inf))
+            vals = self.values.astype(np.float32) / np.float32(self.value_scale * self.n_trees)
+            t = (child, np.maximum(self.feature, 0).astype(np.intp), thr, vals)
+            self.__dict__["_tab"] = t
+        return t
+
+    def _predict(self, X):
+        child, feature, thr, vals = self._tables()
+        n = len(X)
+        node = np.broadcast_to(self.roots[None, :], (n, self.n_trees)).copy()
+        flat = np.ascontiguousarray(X).ravel()
+        rows = (np.arange(n) * X.shape[1])[:, None]
+        child = child.ravel()
+        for _ in range(self.max_depth):
+            go_right = flat[rows + feature[node]] > thr[node]
+            node = child[2 * node + go_right]
+        leaves = self.leaf[node]
+        p = np.zeros((n, N_CLASSES), np.float32)
+        for t in range(self.n_trees):
+            p += vals[leaves[:, t]]
+        p = p.astype(np.float64)
+        if self.value_scale != 1.0:
+            p /= np.maximum(p.sum(axis=1, keepdims=True), 1e-12)
+        return p
+
+    def predict(self, X) -> np.ndarray:
+        return np.argmax(self.predict_proba(X), axis=1)
+
+    def classify_patches(self, patches) -> np.ndarray:
+        """``(N, 37)`` probabilities of canonical ``(N, PATCH, PATCH)`` edge patches."""
+        return self.predict_proba(feat.extract(np.asarray(patches), self.kind))
+
+
+_DEFAULT = None
+
+
+def load_default() -> PartDetector:
+    """The package's trained model (cached)."""
+    global _DEFAULT
+    if _DEFAULT is None:
+        _DEFAULT = PartDetector.load()
+    return _DEFAULT
+
+
+# ---------------------------------------------------------------------- response maps
+
+
+@dataclass
+class BoxResponses:
+    """Responses inside one (padded) box, on an image grid
+    ``u = origin[0] + stride * j``, ``v = origin[1] + stride * i``.
+
+    probs : (n_scales, Gh, Gw, 37) float16 -- ``S_j`` (columns 0..35) and ``S_b`` (36)
+    log_ratio : (Gh, Gw, 36) float32 -- ``max_s log(clip(S_j) / clip(S_b))``
+    """
+
+    box: np.ndarray
+    region: np.ndarray
+    origin: np.ndarray
+    stride: float
+    scales: tuple
+    probs: np.ndarray
+    log_ratio: np.ndarray
+
+    def grid_uv(self) -> np.ndarray:
+        """``(Gh, Gw, 2)`` image coordinates of the grid points."""
+        gh, gw = self.log_ratio.shape[:2]
+        u = self.origin[0] + self.stride * np.arange(gw)
+        v = self.origin[1] + self.stride * np.arange(gh)
+        return np.stack(np.meshgrid(u, v), axis=-1)
+
+
+@dataclass
+class PartResponses:
+    """Response maps of all boxes of an image (see :func:`response_maps`)."""
+
+    boxes: list
+    eps: float
+    _stack: tuple | None = None
+
+    def __len__(self):
+        return len(self.boxes)
+
+    @property
+    def floor(self) -> float:
+        """Lowest possible log ratio, ``log(eps / 1)``."""
+        return float(np.log(self.eps))
+
+    def _stacked(self):
+        if self._stack is None:
+            gh = max((b.log_ratio.shape[0] for b in self.boxes), default=1)
+            gw = max((b.log_ratio.shape[1] for b in self.boxes), default=1)
+            lr = np.full((max(len(self.boxes), 1), gh, gw, N_PARTS), self.floor, dtype=np.float32)
+            shape = np.zeros((max(len(self.boxes), 1), 2), dtype=np.int64)
+            origin = np.zeros((max(len(self.boxes), 1), 2))
+            stride = np.ones(max(len(self.boxes), 1))
+            for i, b in enumerate(self.boxes):
+                h, w = b.log_ratio.shape[:2]
+                lr[i, :h, :w] = b.log_ratio
+                shape[i] = (h, w)
+                origin[i] = b.origin
+                stride[i] = b.stride
+            self._stack = (lr, shape, origin, stride)
+        return self._stack
+
+    def log_ratio(self, uv, box_index, *, outside: float | None = None) -> np.ndarray:
+        """``log(S_j / S_b)`` of part ``j`` at ``uv[..., j, :]`` (nearest grid point, max
+        over scales).
+
+        Parameters
+        ----------
+        uv : (..., 36, 2) array -- image coordinates of the 36 projected vertices
+        box_index : int or int array broadcastable to ``uv.shape[:-2]``
+        outside : float, optional -- value outside the box's grid (default :attr:`floor`)
+
+        Returns
+        -------
+        (..., 36) float32
+        """
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.ndim < 2 or uv.shape[-2:] != (N_PARTS, 2):
+            raise ShapeError(f"uv must be (..., {N_PARTS}, 2), got {uv.shape}")
+        if not self.boxes:
+            raise ShapeError("no boxes in these responses")
+        lr, shape, origin, stride = self._stacked()
+        b = np.broadcast_to(np.asarray(box_index, dtype=np.int64), uv.shape[:-2])[..., None]
+        if b.size and (b.min() < 0 or b.max() >= len(self.boxes)):
+            raise ShapeError(f"box_index out of range [0, {len(self.boxes)})")
+        s = stride[b]
+        j = np.rint((uv[..., 0] - origin[b, 0]) / s)
+        i = np.rint((uv[..., 1] - origin[b, 1]) / s)
+        ok = (i >= 0) & (j >= 0) & (i < shape[b, 0]) & (j < shape[b, 1])
+        ii = np.where(ok, i, 0).astype(np.int64)
+        jj = np.where(ok, j, 0).astype(np.int64)
+        part = np.arange(N_PARTS)
+        out = lr[b, ii, jj, part]
+        return np.where(ok, out, np.float32(self.floor if outside is None else outside)).astype(np.float32)
+
+
+def log_ratio(responses: PartResponses, uv, box_index, **kwargs) -> np.ndarray:
+    """Function form of :meth:`PartResponses.log_ratio`."""
+    return responses.log_ratio(uv, box_index, **kwargs)
+
+
+def _auto_stride(box_h: float) -> float:
+    return float(np.clip(box_h / 32.0, 1.0, 4.0))
+
+
+def box_crop(box, image_size, scales=DEFAULT_SCALES, *, pad: float = 0.1):
+    """The padded region ``(rx0, ry0, rx1, ry1)`` that :func:`response_maps` scores for
+    ``box`` and the integer native crop ``(cx0, cy0, cx1, cy1)`` it describes (the region
+    plus room for the largest patch). ``image_size = (W, H)``."""
+    W, H = image_size
+    x1, y1, x2, y2 = np.asarray(box, dtype=float)
+    bw, bh = max(x2 - x1, 1.0), max(y2 - y1, 1.0)
+    region = np.array([x1 - pad * bw, y1 - pad * bh, x2 + pad * bw, y2 + pad * bh])
+    zs = [feat.CANONICAL_HEIGHT / (s * bh) for s in scales]
+    margin = feat.RADIUS / min(zs) + 2
+    cx0 = int(np.clip(np.floor(region[0] - margin), 0, W - 1))
+    cy0 = int(np.clip(np.floor(region[1] - margin), 0, H - 1))
+    cx1 = int(np.clip(np.ceil(region[2] + margin), cx0 + 1, W))
+    cy1 = int(np.clip(np.ceil(region[3] + margin), cy0 + 1, H))
+    return region, (cx0, cy0, cx1, cy1), zs
+
+
+def box_descriptors(image, box, uv, kind: str, *, scale: float = 1.0, pad: float = 0.1, edges=None) -> np.ndarray:
+    """Descriptors ``(N, D)`` at native points ``uv (N, 2)`` exactly as
+    :func:`response_maps` computes them for ``box`` at one ``scale`` (used by training).
+    ``edges``: precomputed full-image :func:`wirescene.parts.features.image_edges`."""
+    img = np.asarray(image)
+    H, W = img.shape[:2]
+    _, (cx0, cy0, cx1, cy1), (z,) = box_crop(box, (W, H), (scale,), pad=pad)
+    e = None if edges is None else np.asarray(edges)[cy0:cy1, cx0:cx1]
+    inp = feat.canonical_inputs(img[cy0:cy1, cx0:cx1], z, kind, edges=e)
+    uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+    rc = np.rint(feat.to_canonical(uv - [cx0, cy0], z)).astype(np.int64)
+    return feat.describe(inp, rc, kind)
+
+
+def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=DEFAULT_SCALES,
+                  stride: float | None = None, pad: float = 0.1, eps: float = DEFAULT_EPS,
+                  edges: np.ndarray | None = None) -> PartResponses:
+    """Dense multi-scale part responses inside detection boxes.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) array
+    boxes : (B, 4) array -- ``x1 y1 x2 y2`` pixels
+    detector : PartDetector, optional -- default :func:`load_default`
+    scales : sequence of float -- assumed object height = ``scale * box height``
+    stride : float, optional -- grid step in image px (default ``clip(h / 32, 1, 4)``)
+    pad : float -- the grid covers the box grown by ``pad`` x its size on every side
+    eps : float -- probabilities are clipped to ``[eps, 1]`` before the log ratio
+    edges : (H, W) bool, optional -- precomputed :func:`wirescene.parts.features.image_edges`
+        (ignored by grey-image descriptors)
+
+    Returns
+    -------
+    PartResponses
+    """
+    detector = load_default() if detector is None else detector
+    img = np.asarray(image)
+    if img.ndim not in (2, 3):
+        raise ShapeError(f"image must be (H, W) or (H, W, 3), got {img.shape}")
+    H, W = img.shape[:2]
+    boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
+    scales = tuple(float(s) for s in scales)
+    if not scales or min(scales) <= 0:
+        raise ValueError("scales must be positive")
+    out = []
+    for box in boxes:
+        bh = max(box[3] - box[1], 1.0)
+        st = _auto_stride(bh) if stride is None else float(stride)
+        (rx0, ry0, rx1, ry1), (cx0, cy0, cx1, cy1), zs = box_crop(box, (W, H), scales, pad=pad)
+        gw = int(np.floor((rx1 - rx0) / st)) + 1
+        gh = int(np.floor((ry1 - ry0) / st)) + 1
+        gu = rx0 + st * np.arange(gw)
+        gv = ry0 + st * np.arange(gh)
+        uu, vv = np.meshgrid(gu, gv)
+        crop = img[cy0:cy1, cx0:cx1]
+        e = None if edges is None else np.asarray(edges)[cy0:cy1, cx0:cx1]
+        if e is None and detector.kind in ("sc", "hog", "ghog_sc"):
+            e = feat.image_edges(crop)
+        probs = np.empty((len(scales), gh, gw, N_CLASSES), dtype=np.float32)
+        for k, z in enumerate(zs):
+            inp = feat.canonical_inputs(crop, z, detector.kind, edges=e)
+            rc = np.rint(feat.to_canonical(np.stack([uu - cx0, vv - cy0], -1), z)).astype(np.int64).reshape(-1, 2)
+            X = feat.describe(inp, rc, detector.kind)
+            probs[k] = detector.predict_proba(X).reshape(gh, gw, N_CLASSES)
+        pc = np.clip(probs, eps, 1.0)
+        lr = (np.log(pc[..., :N_PARTS]) - np.log(pc[..., N_PARTS:])).max(axis=0)
+        out.append(BoxResponses(box=box.copy(), region=np.array([rx0, ry0, rx1, ry1]), origin=np.array([rx0, ry0]),
+                                stride=st, scales=scales, probs=probs.astype(np.float16),
+                                log_ratio=lr.astype(np.float32)))
+    return PartResponses(boxes=out, eps=float(eps))

@@ -1,0 +1,363 @@
+"""Patch descriptors on edge maps for the part detectors (paper Sec. 3.2, 5.1).
+
+Train and test live in one domain: *edge maps at a canonical scale*.
+
+* Training: non-photorealistic renderings (:func:`wirescene.render.render`, 1-pixel
+  silhouette/crease lines). Test: Canny edges of the grey image
+  (:func:`image_edges`). Both are 1-pixel binary line maps at their native resolution.
+* :func:`canonical_edges` resamples such a map by a factor ``z`` so that the object's 2D
+  box height becomes :data:`CANONICAL_HEIGHT` pixels, dividing by ``z`` so that the
+  map's mass stays "edge length in canonical pixels" whatever ``z`` is (a resampled
+  1-pixel line keeps unit mass per unit length).
+* A patch is the ``PATCH x PATCH`` window (``PATCH = 2 * RADIUS + 1``) of the canonical
+  map around a point, i.e. about half the box height (about 15% of a side-viewed car's
+  length, the paper's "~10% of the object width" up to the larger context that the shape
+  context needs).
+
+Descriptors (``extract(..., kind=...)``):
+
+``"sc"`` -- shape context (Belongie et al.): a log-polar histogram of edge mass around
+    the patch centre, 3 rings (radii 4.5, 9.5, 16.5 px) x 12 angular sectors, L1-normalised, plus
+    ``log1p(total mass)``: 37 numbers. Every bin is a fixed linear kernel on the patch, so
+    the descriptor of *every* pixel of a map is 36 FFT correlations (:func:`dense_sc`);
+    the sparse path (patches @ kernels) gives the same numbers.
+``"hog"`` -- :func:`skimage.feature.hog` of the (32 x 32) patch, 8-pixel cells, 2 x 2
+    blocks, 9 orientations: 324 numbers. Only patch-wise (dense HOG maps are patch loops).
+``"ghog"`` -- gradient-orientation histograms of the *grey image* (not of an edge map),
+    resampled to the same canonical scale (:func:`canonical_grey`): unsigned orientation
+    in :data:`GHOG_BINS` bins (linear vote split between the two nearest bins, weighted by
+    the gradient magnitude), summed over a 4 x 4 grid of 8 x 8-pixel cells covering the
+    32 x 32 patch (:func:`orientation_cells`: one box filter per bin, so every pixel's
+    cells cost O(1)), L2-Hys normalised, plus ``log1p(total gradient mass)``: 145 numbers.
+    Dense and sparse evaluation are the same gather (:func:`ghog_at`). Transfers from
+    synthetic shaded scenes to real images much better than Canny-based shape context.
+``"ghog_sc"`` -- ``"ghog"`` and ``"sc"`` concatenated (182 numbers).
+
+Grey-image kinds need the canonical grey image as well as (for ``"sc"``) the edge map:
+:func:`canonical_inputs` builds what a kind needs from a native image crop, and
+:func:`describe` evaluates any kind at points of those inputs (this is what both the
+training and :func:`wirescene.parts.detector.response_maps` call).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from wirescene.core.errors import ShapeError
+
+__all__ = [
+    "CANONICAL_HEIGHT", "RADIUS", "PATCH", "SC_RING_EDGES", "SC_N_ANGLES", "KINDS",
+    "sc_kernels", "canonical_edges", "to_canonical", "image_edges", "extract_patches", "extract", "dense_sc",
+    "feature_dim", "GHOG_BINS", "GHOG_CELL", "GHOG_OFFSETS", "image_grey", "canonical_grey",
+    "orientation_cells", "ghog_at", "canonical_inputs", "describe",
+]
+
+CANONICAL_HEIGHT = 64
+"""2D box height of the object in canonical pixels."""
+RADIUS = 16
+PATCH = 2 * RADIUS + 1
+SC_RING_EDGES = (0.0, 4.5, 9.5, RADIUS + 0.5)
+SC_N_ANGLES = 12
+KINDS = ("sc", "hog", "ghog", "ghog_sc")
+GHOG_BINS = 9
+GHOG_CELL = 8
+GHOG_OFFSETS = (-12, -4, 4, 12)
+GHOG_EPS = 1.0
+"""L2 normalisation floor (gradient mass units: grey in [0, 1] per canonical pixel): a
+low-contrast patch (sensor noise, road) is not blown up to a strong pattern."""
+
+_KERNELS = None
+
+
+def sc_kernels() -> np.ndarray:
+    """``(n_bins, PATCH, PATCH)`` float indicator kernels of the log-polar bins.
+
+    Bin ``ring * SC_N_ANGLES + sector``; angle measured in image coordinates
+    (``atan2(dy, dx)``, y down); the centre pixel belongs to ring 0, sector 0.
+    """
+    global _KERNELS
+    if _KERNELS is None:
+        d = np.arange(PATCH, dtype=float) - RADIUS
+        dy, dx = np.meshgrid(d, d, indexing="ij")
+        r = np.hypot(dx, dy)
+        a = np.mod(np.arctan2(dy, dx), 2 * np.pi)
+        sector = np.minimum((a / (2 * np.pi) * SC_N_ANGLES).astype(int), SC_N_ANGLES - 1)
+        ring = np.searchsorted(np.asarray(SC_RING_EDGES[1:-1]), r, side="right")
+        inside = r <= SC_RING_EDGES[-1]
+        n_rings = len(SC_RING_EDGES) - 1
+        k = np.zeros((n_rings * SC_N_ANGLES, PATCH, PATCH))
+        idx = ring * SC_N_ANGLES + sector
+        k[idx[inside], np.nonzero(inside)[0], np.nonzero(inside)[1]] = 1.0
+        _KERNELS = k
+    return _KERNELS
+
+
+def feature_dim(kind: str) -> int:
+    if kind == "sc":
+        return sc_kernels().shape[0] + 1
+    if kind == "hog":
+        return 324
+    if kind == "ghog":
+        return len(GHOG_OFFSETS) ** 2 * GHOG_BINS + 1
+    if kind == "ghog_sc":
+        return feature_dim("ghog") + feature_dim("sc")
+    raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
+
+
+def _resample(a: np.ndarray, z: float, *, name: str, filter_mode: str, resize_mode: str) -> np.ndarray:
+    """Bilinear resampling of a 2D float32 map by ``z`` to ``round(shape * z)``, after a
+    Gaussian of sigma ``0.5 / z`` when downsampling (so a 1-px line keeps its mass
+    whatever its phase w.r.t. the new grid). Returns ``a`` itself when the shape stays."""
+    from skimage.transform import resize
+
+    if a.ndim != 2:
+        raise ShapeError(f"{name} must be (H, W), got {a.shape}")
+    if z <= 0:
+        raise ValueError(f"z must be positive, got {z}")
+    shape = (max(1, int(round(a.shape[0] * z))), max(1, int(round(a.shape[1] * z))))
+    if shape == a.shape:
+        return a
+    if z < 1:
+        a = gaussian_filter(a, 0.5 / z, mode=filter_mode)
+    return resize(a, shape, order=1, mode=resize_mode, anti_aliasing=False, preserve_range=True).astype(np.float32)
+
+
+def canonical_edges(edges, z: float, *, blur: float = 0.0) -> np.ndarray:
+    """Resample a native-resolution edge map by ``z`` (canonical px per native px).
+
+    Returns a float32 map of shape ``round(shape * z)`` whose mass is edge length in
+    canonical pixels (see module docstring); ``blur`` (canonical px) is an optional
+    Gaussian (mass-preserving).
+    """
+    e = np.asarray(edges, dtype=np.float32)
+    # Edge mass is line length: dividing by z keeps it in canonical pixels.
+    out = _resample(e, z, name="edges", filter_mode="constant", resize_mode="constant")
+    out = e.copy() if out is e else out / np.float32(z)
+    if blur > 0:
+        out = gaussian_filter(out, blur).astype(np.float32)
+    return out
+
+
+def image_edges(image, *, sigma: float = 1.0, low: float = 0.05, high: float = 0.12) -> np.ndarray:
+    """Canny edges (bool ``(H, W)``) of an RGB ``(H, W, 3)`` or grey ``(H, W)`` image.
+
+    ``low``/``high`` are hysteresis thresholds on the gradient magnitude of the grey
+    image scaled to [0, 1].
+    """
+    from skimage.feature import canny
+
+    img = np.asarray(image)
+    if img.ndim == 3:
+        img = img[..., :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
+    elif img.ndim != 2:
+        raise ShapeError(f"image must be (H, W) or (H, W, 3), got {img.shape}")
+    img = img.astype(np.float32)
+    if img.size and img.max() > 1.5:
+        img = img / 255.0
+    return canny(img, sigma=sigma, low_threshold=low, high_threshold=high, mode="nearest")
+
+
+def to_canonical(uv, z: float) -> np.ndarray:
+    """Native pixel coordinates ``(..., 2) = (u, v)`` to canonical ``(row, col)`` floats
+    for a map made by :func:`canonical_edges` with factor ``z`` (pixel centres align as
+    in :func:`skimage.transform.resize`)."""
+    uv = np.asarray(uv, dtype=float)
+    c = (uv + 0.5) * z - 0.5
+    return c[..., ::-1]
+
+
+def extract_patches(edge_map, points) -> np.ndarray:
+    """``(N, PATCH, PATCH)`` windows of a canonical map centred at integer
+    ``points (N, 2) = (row, col)``; zero outside the map."""
+    e = np.asarray(edge_map, dtype=np.float32)
+    p = np.asarray(points).reshape(-1, 2).astype(int)
+    padded = np.pad(e, RADIUS)
+    d = np.arange(PATCH)
+    rows = p[:, 0, None, None] + d[None, :, None]
+    cols = p[:, 1, None, None] + d[None, None, :]
+    rows = np.clip(rows, 0, padded.shape[0] - 1)
+    cols = np.clip(cols, 0, padded.shape[1] - 1)
+    out = padded[rows, cols]
+    # points far outside the map: clipping would repeat the border; zero those.
+    bad = (p[:, 0] < -RADIUS) | (p[:, 1] < -RADIUS) | (p[:, 0] >= e.shape[0] + RADIUS) | (p[:, 1] >= e.shape[1] + RADIUS)
+    out[bad] = 0
+    return out
+
+
+def _sc_from_hist(h: np.ndarray) -> np.ndarray:
+    total = h.sum(axis=-1, keepdims=True)
+    norm = h / np.maximum(total, 1e-6)
+    return np.concatenate([norm, np.log1p(np.maximum(total, 0))], axis=-1).astype(np.float32)
+
+
+def dense_sc(edge_map) -> np.ndarray:
+    """Shape context of every pixel of a canonical map: ``(H, W, 37)`` float32.
+
+    Equals ``extract(extract_patches(edge_map, all pixels), "sc")`` up to FFT rounding.
+    """
+    e = np.asarray(edge_map, dtype=np.float64)
+    if e.ndim != 2:
+        raise ShapeError(f"edge_map must be (H, W), got {e.shape}")
+    k = sc_kernels()
+    H, W = e.shape
+    # correlation == convolution with the flipped kernel; crop the 'same' part.
+    sh = (H + PATCH - 1, W + PATCH - 1)
+    fe = np.fft.rfft2(e, sh)
+    fk = np.fft.rfft2(k[:, ::-1, ::-1], sh)
+    full = np.fft.irfft2(fk * fe[None], sh)
+    h = full[:, RADIUS:RADIUS + H, RADIUS:RADIUS + W]
+    h = np.maximum(np.moveaxis(h, 0, -1), 0.0)
+    h[h < 1e-9] = 0.0
+    return _sc_from_hist(h)
+
+
+def _hog(patches: np.ndarray) -> np.ndarray:
+    from skimage.feature import hog
+
+    out = np.empty((len(patches), 324), dtype=np.float32)
+    for i, p in enumerate(patches):
+        out[i] = hog(p[:32, :32], orientations=9, pixels_per_cell=(8, 8), cells_per_block=(2, 2),
+                     block_norm="L2-Hys", feature_vector=True)
+    return out
+
+
+def image_grey(image) -> np.ndarray:
+    """Grey ``(H, W)`` float32 in [0, 1] of an RGB ``(H, W, 3)`` or grey image."""
+    img = np.asarray(image)
+    integer = np.issubdtype(img.dtype, np.integer)
+    if img.ndim == 3:
+        img = img[..., :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
+    elif img.ndim != 2:
+        raise ShapeError(f"image must be (H, W) or (H, W, 3), got {img.shape}")
+    img = img.astype(np.float32)
+    if integer or (img.size and img.max() > 1.5):
+        img = img / np.float32(255.0)
+    return img
+
+
+def canonical_grey(grey, z: float) -> np.ndarray:
+    """Resample a native grey image by ``z`` (same grid as :func:`canonical_edges`), with
+    a Gaussian pre-filter of sigma ``0.5 / z`` when downsampling."""
+    g = np.asarray(grey, dtype=np.float32)
+    out = _resample(g, z, name="grey", filter_mode="nearest", resize_mode="edge")
+    return g.copy() if out is g else out
+
+
+def orientation_cells(grey_map) -> np.ndarray:
+    """``(H, W, GHOG_BINS)`` float32: gradient-magnitude-weighted unsigned orientation
+    votes summed over the ``GHOG_CELL``-pixel square window at every pixel (window
+    ``[i - 4, i + 3]``; zero gradient outside the map)."""
+    from scipy.ndimage import uniform_filter
+
+    g = np.asarray(grey_map, dtype=np.float32)
+    if g.ndim != 2:
+        raise ShapeError(f"grey_map must be (H, W), got {g.shape}")
+    gx = np.zeros_like(g)
+    gy = np.zeros_like(g)
+    gx[:, 1:-1] = (g[:, 2:] - g[:, :-2]) * 0.5
+    gy[1:-1, :] = (g[2:, :] - g[:-2, :]) * 0.5
+    mag = np.hypot(gx, gy)
+    pos = np.mod(np.arctan2(gy, gx), np.pi) * (GHOG_BINS / np.pi) - 0.5
+    fl = np.floor(pos)
+    w1 = (pos - fl).astype(np.float32)
+    b0 = np.mod(fl.astype(np.int64), GHOG_BINS)
+    b1 = np.mod(b0 + 1, GHOG_BINS)
+    out = np.empty(g.shape + (GHOG_BINS,), np.float32)
+    a0 = mag * (1 - w1)
+    a1 = mag * w1
+    area = float(GHOG_CELL * GHOG_CELL)
+    for b in range(GHOG_BINS):
+        vote = np.where(b0 == b, a0, 0) + np.where(b1 == b, a1, 0)
+        out[..., b] = uniform_filter(vote.astype(np.float32), GHOG_CELL, mode="constant") * area
+    return out
+
+
+def ghog_at(cells, points) -> np.ndarray:
+    """``"ghog"`` descriptors ``(N, 145)`` at integer canonical ``points (N, 2) = (row,
+    col)`` of a map of :func:`orientation_cells` (cells outside the map are empty)."""
+    c = np.asarray(cells, dtype=np.float32)
+    p = np.asarray(points).reshape(-1, 2).astype(np.int64)
+    H, W, B = c.shape
+    off = np.asarray(GHOG_OFFSETS)
+    rows = p[:, 0, None, None] + off[None, :, None]
+    cols = p[:, 1, None, None] + off[None, None, :]
+    ok = (rows >= 0) & (cols >= 0) & (rows < H) & (cols < W)
+    v = c[np.clip(rows, 0, H - 1), np.clip(cols, 0, W - 1)]  # (N, 4, 4, B)
+    v = np.where(ok[..., None], v, 0).reshape(len(p), -1).astype(np.float64)
+    total = v.sum(1, keepdims=True)
+    n = v / np.sqrt((v * v).sum(1, keepdims=True) + GHOG_EPS ** 2)
+    n = np.minimum(n, 0.2)
+    n = n / np.sqrt((n * n).sum(1, keepdims=True) + 1e-6)
+    return np.concatenate([n, np.log1p(total)], axis=1).astype(np.float32)
+
+
+def canonical_inputs(image, z: float, kind: str, *, edges=None) -> dict:
+    """What :func:`describe` needs for ``kind`` from a native image (crop) resampled by
+    ``z``: ``{"edges": canonical edge map}`` and/or ``{"cells": orientation cells}``.
+    ``edges``: precomputed :func:`image_edges` of the same crop."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
+    out = {}
+    if kind in ("sc", "hog", "ghog_sc"):
+        e = image_edges(image) if edges is None else np.asarray(edges)
+        out["edges"] = canonical_edges(e, z)
+    if kind in ("ghog", "ghog_sc"):
+        out["cells"] = orientation_cells(canonical_grey(image_grey(image), z))
+    return out
+
+
+def describe(inputs: dict, points, kind: str) -> np.ndarray:
+    """Descriptors ``(N, feature_dim(kind))`` at integer canonical ``points (N, 2)`` of
+    :func:`canonical_inputs` (any points: outside the map the input is empty)."""
+    p = np.asarray(points).reshape(-1, 2).astype(np.int64)
+    if kind == "ghog":
+        return ghog_at(inputs["cells"], p)
+    if kind == "ghog_sc":
+        return np.concatenate([describe(inputs, p, "ghog"), describe(inputs, p, "sc")], axis=1)
+    e = inputs["edges"]
+    if kind == "sc" and len(p) > 0.05 * e.size:
+        d = dense_sc(e)
+        inside = (p[:, 0] >= 0) & (p[:, 1] >= 0) & (p[:, 0] < e.shape[0]) & (p[:, 1] < e.shape[1])
+        X = np.empty((len(p), d.shape[-1]), dtype=np.float32)
+        X[inside] = d[p[inside, 0], p[inside, 1]]
+        if (~inside).any():
+            X[~inside] = extract(e, "sc", points=p[~inside])
+        return X
+    return extract(e, kind, points=p)
+
+
+def extract(x, kind: str = "sc", *, points=None) -> np.ndarray:
+    """Descriptors of patches or of a canonical edge map.
+
+    Parameters
+    ----------
+    x : (N, PATCH, PATCH) patches, or (H, W) canonical edge map
+    kind : "sc" or "hog"
+    points : (N, 2) int (row, col), optional
+        With a map: describe only these pixels (``(N, D)``). Without: every pixel
+        (``(H, W, D)``; ``"sc"`` only, via FFT).
+
+    Returns
+    -------
+    (N, D) or (H, W, D) float32
+    """
+    if kind not in KINDS:
+        raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
+    if kind in ("ghog", "ghog_sc"):
+        raise ValueError(f"kind {kind!r} describes grey images: use canonical_inputs() and describe()")
+    x = np.asarray(x)
+    if x.ndim == 3:
+        if x.shape[1:] != (PATCH, PATCH):
+            raise ShapeError(f"patches must be (N, {PATCH}, {PATCH}), got {x.shape}")
+        if kind == "sc":
+            h = np.einsum("nij,bij->nb", x.astype(np.float64), sc_kernels())
+            return _sc_from_hist(h)
+        return _hog(x.astype(np.float32))
+    if x.ndim != 2:
+        raise ShapeError(f"expected patches (N, P, P) or a map (H, W), got {x.shape}")
+    if points is not None:
+        return extract(extract_patches(x, points), kind)
+    if kind != "sc":
+        raise ValueError("dense maps are implemented for kind='sc' only; pass points= for HOG")
+    return dense_sc(x)

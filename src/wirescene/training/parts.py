@@ -1,0 +1,643 @@
+"""Training of the part detector (paper Sec. 5.1) and its localisation benchmark.
+
+Two data sources (all deterministic given ``seed``):
+
+* **Synthetic shaded scenes** (default, :func:`make_synth_patch_data`): patches of
+  ``wirescene synth`` scenes of the training stream (seed >= :data:`SYNTH_TRAIN_SEED`),
+  described exactly as at test time (:func:`wirescene.parts.detector.box_descriptors`: the full
+  image, the car's 2D box, box-relative scale), positives at visible GT vertices,
+  background in the padded car boxes away from vertices and outside the cars. With the
+  grey-image descriptor ``"ghog"`` this is the shipped model: it transfers to shaded and
+  real images, where the CAD edge-rendering model below localised at chance level.
+* **CAD edge renderings** (``n_views > 0``; edge-map descriptors only), as follows.
+
+* **Part patches** -- every road-car CAD model (:func:`wirescene.cad.training.load_cad_meshes`)
+  rendered (:func:`wirescene.render.render`, edge images) from ``n_azimuth`` azimuths x
+  the paper's 2 elevations (72 x 2 by default); patches around the projected *visible*
+  annotated vertices (:func:`wirescene.render.project_landmarks`). The rendering is
+  resampled so that the car's 2D box height is ``CANONICAL_HEIGHT`` px
+  (:mod:`wirescene.parts.features`). ``n_aug`` augmented copies per view: scale jitter
+  (+-15%), rotation (+-6 deg), Gaussian blur, edge dropout and random clutter lines.
+* **Background patches** -- (a) rendered non-part patches: points near the car whose
+  distance to every visible vertex is at least 0.2 x the car height; (b) real image
+  patches from scikit-image's bundled sample photographs (no cars, no download), Canny
+  edges at random scales; (c) procedural street-like line drawings (long horizontal /
+  vertical lines, rectangles, arcs, specks); (d) optionally car-free regions of KITTI
+  frames (``kitti_background``: a KITTI root), outside every labelled box. Off by
+  default: the bundled KITTI frames are also the evaluation frames.
+
+Evaluation: leave-models-out (``heldout`` cars, never seen in training), per-part
+accuracy of the 37-way classification; and :func:`localisation` (the metric that
+matters): does the arg-max of ``log(S_j / S_b)`` in the box land on the vertex, on
+held-out synthetic scenes (:func:`synth_eval_frames`) and real KITTI frames
+(:func:`kitti_eval_frames`, evaluation only) -- see ``benchmarks/bench_parts.py``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from wirescene.parts import features as feat
+from wirescene.parts.detector import BACKGROUND, DEFAULT_MODEL_PATH, N_PARTS, PartDetector
+
+__all__ = ["PatchData", "render_views", "make_patch_data", "make_synth_patch_data", "heldout_accuracy",
+           "localisation", "scene_frames", "synth_eval_frames", "kitti_eval_frames", "train_part_detector",
+           "SYNTH_TRAIN_SEED"]
+
+RENDER_SIZE = (320, 256)
+RENDER_FIELD_WIDTH = 7.25  # metres across the image at 10 m: car height ~ 80 px
+ELEVATIONS = (7.5, 15.0)
+REAL_BG_IMAGES = ("camera", "astronaut", "coffee", "chelsea", "rocket", "brick", "grass", "gravel",
+                  "page", "text", "coins", "moon")
+
+
+@dataclass
+class PatchData:
+    """Descriptors per kind ``{kind: (N, D)}``, labels ``y (N,)`` (36 = background),
+    ``group (N,)``: CAD model index, -1 for non-rendered background."""
+
+    X: dict
+    y: np.ndarray
+    group: np.ndarray
+    names: list
+
+    def __len__(self):
+        return len(self.y)
+
+
+def _rng(seed, *keys):
+    return np.random.default_rng(np.random.SeedSequence([int(seed)] + [int(k) for k in keys]))
+
+
+def render_views(names, meshes, landmarks, views, progress=None):
+    """Yield ``(car index, view index, edges (H, W) bool, uv (36, 2), visible (36,), bbox)``."""
+    from wirescene.render import project_landmarks, render
+
+    for ci, name in enumerate(names):
+        V, F = meshes[name]
+        t0 = time.time()
+        for vi, view in enumerate(views):
+            r = render(V, F, view.camera, view.location, view.R)
+            if not r.mask.any():
+                continue
+            uv, _, vis = project_landmarks(landmarks[name], V, F, view.camera, view.location, view.R)
+            rows = np.nonzero(r.mask.any(1))[0]
+            cols = np.nonzero(r.mask.any(0))[0]
+            bbox = np.array([cols[0], rows[0], cols[-1] + 1, rows[-1] + 1], dtype=float)
+            yield ci, vi, r.edges, uv, vis, bbox
+        if progress:
+            progress(f"rendered {name}: {len(views)} views in {time.time() - t0:.1f} s")
+
+
+def _augment_map(edges, z, rng, *, rotate=True):
+    """Canonical map of a native edge image with dropout, clutter, rotation, blur.
+    Returns (map, transform uv_native -> (row, col) canonical)."""
+    from skimage.draw import line
+    from skimage.transform import rotate as sk_rotate
+
+    e = edges.astype(np.float32).copy()
+    H, W = e.shape
+    # edge dropout
+    if rng.random() < 0.5:
+        e *= rng.random(e.shape) > rng.uniform(0.0, 0.25)
+    # clutter: random short lines
+    for _ in range(rng.integers(0, 6)):
+        r0, c0 = rng.integers(0, H), rng.integers(0, W)
+        ang, ln = rng.uniform(0, np.pi), rng.uniform(5, 40)
+        r1 = int(np.clip(r0 + ln * np.sin(ang), 0, H - 1))
+        c1 = int(np.clip(c0 + ln * np.cos(ang), 0, W - 1))
+        rr, cc = line(r0, c0, r1, c1)
+        e[rr, cc] = 1.0
+    cmap = feat.canonical_edges(e, z, blur=float(rng.uniform(0.0, 0.8)) if rng.random() < 0.5 else 0.0)
+    theta = float(rng.uniform(-6, 6)) if rotate else 0.0
+    ch, cw = cmap.shape
+    centre = np.array([(ch - 1) / 2, (cw - 1) / 2])
+    if theta:
+        cmap = sk_rotate(cmap, theta, order=1, mode="constant", preserve_range=True).astype(np.float32)
+    # skimage rotates counter-clockwise by theta (in the displayed image, y down)
+    t = np.deg2rad(theta)
+    # point (row, col) -> rotated: in (x=col, y=row) coordinates a CCW rotation on screen
+    rot = np.array([[np.cos(t), np.sin(t)], [-np.sin(t), np.cos(t)]])  # acting on (x, y - centre)
+
+    def to_map(uv):
+        rc = feat.to_canonical(uv, z)
+        xy = np.stack([rc[..., 1] - centre[1], rc[..., 0] - centre[0]], -1)
+        xy = xy @ rot.T
+        return np.stack([xy[..., 1] + centre[0], xy[..., 0] + centre[1]], -1)
+
+    return cmap, to_map
+
+
+def _describe(cmap, points, kinds):
+    pts = np.rint(points).astype(np.int64)
+    patches = feat.extract_patches(cmap, pts)
+    return {k: feat.extract(patches, k) for k in kinds}
+
+
+def _real_bg_images():
+    import skimage.data as sd
+
+    out = []
+    for name in REAL_BG_IMAGES:
+        try:
+            im = getattr(sd, name)()
+        except Exception:  # pragma: no cover - sample missing in this scikit-image
+            continue
+        out.append(feat.image_edges(im))
+    return out
+
+
+def _procedural_bg(rng, size=(240, 320)):
+    from skimage.draw import circle_perimeter_aa, line, rectangle_perimeter
+
+    H, W = size
+    e = np.zeros(size, dtype=np.float32)
+    for _ in range(rng.integers(2, 12)):
+        kind = rng.integers(0, 4)
+        if kind == 0:  # long near-horizontal / vertical line
+            if rng.random() < 0.5:
+                r0 = rng.integers(0, H); r1 = int(np.clip(r0 + rng.normal(0, 15), 0, H - 1))
+                rr, cc = line(r0, 0, r1, W - 1)
+            else:
+                c0 = rng.integers(0, W); c1 = int(np.clip(c0 + rng.normal(0, 8), 0, W - 1))
+                rr, cc = line(0, c0, H - 1, c1)
+            e[rr, cc] = 1
+        elif kind == 1:  # rectangle
+            r0, c0 = rng.integers(0, H - 10), rng.integers(0, W - 10)
+            rr, cc = rectangle_perimeter((r0, c0), extent=(rng.integers(5, 80), rng.integers(5, 120)), shape=size)
+            e[rr, cc] = 1
+        elif kind == 2:  # arc / circle
+            rr, cc, _ = circle_perimeter_aa(rng.integers(0, H), rng.integers(0, W), rng.integers(3, 50), shape=size)
+            e[rr, cc] = 1
+        else:  # random oblique segment
+            r0, c0, r1, c1 = rng.integers(0, H), rng.integers(0, W), rng.integers(0, H), rng.integers(0, W)
+            rr, cc = line(r0, c0, r1, c1)
+            e[rr, cc] = 1
+    e[rng.random(size) < rng.uniform(0, 0.02)] = 1  # specks
+    return e
+
+
+def _kitti_bg(root, rng, n, kinds):
+    from wirescene.io.kitti import KittiDataset
+
+    ds = KittiDataset(root)
+    out = []
+    ids = ds.frame_ids()
+    per = int(np.ceil(n / max(len(ids), 1)))
+    for fid in ids:
+        img = ds.image(fid)
+        edges = feat.image_edges(img)
+        H, W = edges.shape
+        blocked = np.zeros((H, W), bool)
+        lab = ds.labels(fid)
+        for o in list(lab.objects) + list(lab.dontcare):
+            x1, y1, x2, y2 = o.box
+            blocked[int(max(y1, 0)):int(min(np.ceil(y2), H)), int(max(x1, 0)):int(min(np.ceil(x2), W))] = True
+        for _ in range(max(1, per // 20)):
+            z = feat.CANONICAL_HEIGHT / rng.uniform(30, 150)
+            cmap = feat.canonical_edges(edges, z)
+            rad = int(np.ceil(feat.RADIUS / z)) + 1
+            from scipy.ndimage import binary_dilation
+            bad = binary_dilation(blocked, iterations=rad) if blocked.any() else blocked
+            cand = np.argwhere(~bad[rad:H - rad, rad:W - rad]) + rad
+            if not len(cand):
+                continue
+            pick = cand[rng.choice(len(cand), size=min(20, len(cand)), replace=False)]
+            pts = feat.to_canonical(pick[:, ::-1].astype(float), z)
+            out.append(_describe(cmap, pts, kinds))
+    return out
+
+
+def make_patch_data(*, seed: int = 0, n_azimuth: int = 72, elevations=ELEVATIONS, cars=None, kinds=("sc",),
+                    n_aug: int = 2, bg_per_map: int = 6, n_real_bg: int | None = None,
+                    kitti_background=None, progress=None) -> PatchData:
+    """Generate descriptors of part and background patches (see module docstring)."""
+    from wirescene.cad.training import load_cad_landmarks, load_cad_meshes
+    from wirescene.render import view_camera
+
+    meshes = load_cad_meshes()
+    landmarks = load_cad_landmarks()
+    names = sorted(meshes) if cars is None else list(cars)
+    views = [view_camera(360.0 * k / n_azimuth, float(el), image_size=RENDER_SIZE, field_width=RENDER_FIELD_WIDTH)
+             for el in elevations for k in range(int(n_azimuth))]
+    Xs = {k: [] for k in kinds}
+    ys, gs = [], []
+    min_dist = 0.2 * feat.CANONICAL_HEIGHT
+
+    def add(d, y, g):
+        n = len(y)
+        if n == 0:
+            return
+        for k in kinds:
+            Xs[k].append(d[k])
+        ys.append(np.asarray(y, dtype=np.int16))
+        gs.append(np.full(n, g, dtype=np.int16))
+
+    all_names = sorted(meshes)
+    for ci, vi, edges, uv, vis, bbox in render_views(names, meshes, landmarks, views, progress):
+        gidx = all_names.index(names[ci])
+        rng = _rng(seed, 1, gidx, vi)
+        h = bbox[3] - bbox[1]
+        for a in range(n_aug):
+            z = feat.CANONICAL_HEIGHT / h * float(np.exp(rng.uniform(-0.15, 0.15))) if a else feat.CANONICAL_HEIGHT / h
+            cmap, to_map = _augment_map(edges, z, rng, rotate=a > 0)
+            pts = to_map(uv)
+            ok = vis & (pts[:, 0] >= 0) & (pts[:, 1] >= 0) & (pts[:, 0] < cmap.shape[0]) & (pts[:, 1] < cmap.shape[1])
+            j = np.nonzero(ok)[0]
+            add(_describe(cmap, pts[j], kinds), j, gidx)
+            # rendered non-part background near the car
+            corners = to_map(np.array([[bbox[0], bbox[1]], [bbox[2], bbox[3]]]))
+            lo = np.maximum(corners.min(0) - feat.RADIUS, 0)
+            hi = np.minimum(corners.max(0) + feat.RADIUS, np.array(cmap.shape) - 1)
+            cand = rng.uniform(lo, hi, size=(bg_per_map * 4, 2))
+            if len(j):
+                dist = np.linalg.norm(cand[:, None] - pts[None, j], axis=-1).min(1)
+                cand = cand[dist >= min_dist]
+            cand = cand[:bg_per_map]
+            add(_describe(cmap, cand, kinds), np.full(len(cand), BACKGROUND), gidx)
+    n_part = int(sum((y < N_PARTS).sum() for y in ys))
+    n_real = int(0.5 * n_part) if n_real_bg is None else int(n_real_bg)
+    # real photographs (skimage samples) and procedural drawings, half each
+    rng = _rng(seed, 2)
+    real = _real_bg_images()
+    per_map = 30
+    n_done = 0
+    while n_done < n_real:
+        if real and rng.random() < 0.5:
+            e = real[rng.integers(len(real))].astype(np.float32)
+            z = float(np.exp(rng.uniform(np.log(0.3), np.log(1.5))))
+        else:
+            e = _procedural_bg(rng)
+            z = float(np.exp(rng.uniform(np.log(0.5), np.log(1.5))))
+        cmap = feat.canonical_edges(e, z)
+        pts = rng.uniform([0, 0], np.array(cmap.shape) - 1, size=(per_map, 2))
+        add(_describe(cmap, pts, kinds), np.full(per_map, BACKGROUND), -1)
+        n_done += per_map
+    if kitti_background is not None:
+        for d in _kitti_bg(kitti_background, _rng(seed, 3), max(n_real // 4, 100), kinds):
+            add(d, np.full(len(next(iter(d.values()))), BACKGROUND), -1)
+    X = {k: np.concatenate(v).astype(np.float32) for k, v in Xs.items()}
+    return PatchData(X=X, y=np.concatenate(ys).astype(np.int64), group=np.concatenate(gs).astype(np.int64),
+                     names=all_names)
+
+
+def _fit(X, y, *, n_trees, max_depth, seed, n_jobs=1, class_weight=None, min_samples_leaf=2):
+    from sklearn.ensemble import RandomForestClassifier
+
+    rf = RandomForestClassifier(n_estimators=n_trees, max_depth=max_depth, random_state=seed, n_jobs=n_jobs,
+                                min_samples_leaf=min_samples_leaf, max_features="sqrt", class_weight=class_weight)
+    rf.fit(X, y)
+    return rf
+
+
+def heldout_accuracy(data: PatchData, heldout_names, *, kind="sc", n_trees=30, max_depth=13, seed=0,
+                     n_jobs=1) -> dict:
+    """Leave-models-out accuracy: train on all cars but ``heldout_names`` (+ 80% of the
+    non-rendered background), test on the held-out cars' patches (+ the other 20%).
+
+    Returns ``{"per_part": (36,), "background": float, "mean_part": float,
+    "mean_part_mirror": float (left/right confusions forgiven), "n_test": int}``.
+    """
+    from wirescene.core.wireframe import MIRROR
+
+    hold = [data.names.index(n) for n in heldout_names]
+    rng = _rng(seed, 4)
+    other = data.group < 0
+    test_other = other & (rng.random(len(data.y)) < 0.2)
+    test = np.isin(data.group, hold) | test_other
+    train = ~test
+    rf = _fit(data.X[kind][train], data.y[train], n_trees=n_trees, max_depth=max_depth, seed=seed, n_jobs=n_jobs)
+    det = PartDetector.from_sklearn(rf, kind=kind)
+    pred = det.predict(data.X[kind][test])
+    yt = data.y[test]
+    per_part = np.array([np.mean(pred[yt == j] == j) if (yt == j).any() else np.nan for j in range(N_PARTS)])
+    mirror = np.append(np.asarray(MIRROR), BACKGROUND)
+    ok_m = (pred == yt) | (pred == mirror[yt])
+    per_part_m = np.array([np.mean(ok_m[yt == j]) if (yt == j).any() else np.nan for j in range(N_PARTS)])
+    bg = yt == BACKGROUND
+    return {"per_part": per_part, "per_part_mirror": per_part_m, "background": float(np.mean(pred[bg] == BACKGROUND)),
+            "bg_rendered": float(np.mean(pred[bg & (data.group[test] >= 0)] == BACKGROUND)),
+            "part_as_bg": float(np.mean(pred[~bg] == BACKGROUND)),
+            "mean_part": float(np.nanmean(per_part)), "mean_part_mirror": float(np.nanmean(per_part_m)),
+            "n_test": int(test.sum()), "n_train": int(train.sum())}
+
+
+SYNTH_TRAIN_SEED = 1000
+"""Synthetic scene streams with seed >= 1000 are for training; evaluation uses seeds < 1000."""
+
+
+def _visible_uv(car):
+    uv = np.asarray(car["vertices_2d"], dtype=float)
+    vis = np.array([r == "visible" for r in car["visibility"]])
+    return uv, vis
+
+
+def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=("ghog",), sample_seed: int = 0,
+                          scale_samples: int = 2, n_jitter: int = 2, jitter: float = 2.0, bg_per_car: int = 40,
+                          bg_boxes: int = 4, bg_per_box: int = 15, min_box_h: float = 20.0, min_dist: float = 6.0,
+                          augment: bool = False, progress=None) -> PatchData:
+    """Patches of synthetic *shaded* scenes (:func:`wirescene.synth.generate.generate_scene`
+    ``(seed, i)``, ``i < n_scenes``), described exactly as at test time
+    (:func:`wirescene.parts.detector.box_descriptors`: the car's 2D label box, box-relative scale):
+
+    * parts: every visible vertex (``visibility == "visible"``) of every car whose box is
+      at least ``min_box_h`` px high, at ``scale_samples`` scales ``s ~ exp(U(-0.2, 0.2))``
+      (assumed object height ``s x`` box height, as the test-time scales), plus
+      ``n_jitter`` copies displaced by up to ``jitter`` canonical px;
+    * background in the box: ``bg_per_car`` points of the padded box at least
+      ``min_dist`` canonical px from every visible vertex of every car;
+    * background outside cars: ``bg_boxes`` random box-like windows (height 25..150 px,
+      aspect 2.5) per scene, ``bg_per_box`` points each outside every padded car box.
+
+    ``augment``: photometric augmentation of each scene image before description (with
+    probability 0.7: Gaussian blur sigma 0.3..1.2 px, gamma, contrast, extra sensor noise)
+    towards real camera images.
+
+    ``group`` is the scene index. Deterministic given ``seed``, ``sample_seed``.
+    """
+    from wirescene.parts.detector import box_descriptors
+    from wirescene.synth.generate import load_car_library, generate_scene
+
+    if seed < SYNTH_TRAIN_SEED:
+        raise ValueError(f"synthetic training scenes must use seeds >= {SYNTH_TRAIN_SEED} (lower ones are evaluation)")
+    library = load_car_library()
+    Xs = {k: [] for k in kinds}
+    ys, gs = [], []
+    t0 = time.time()
+
+    def add(image, box, pts, y, scale, edges, g):
+        if len(pts) == 0:
+            return
+        for k in kinds:
+            Xs[k].append(box_descriptors(image, box, pts, k, scale=scale, edges=edges if k != "ghog" else None))
+        ys.append(np.broadcast_to(np.asarray(y, dtype=np.int64), (len(pts),)).copy())
+        gs.append(np.full(len(pts), g, dtype=np.int64))
+
+    for i in range(int(n_scenes)):
+        sc = generate_scene(seed, i, library=library)
+        img = sc.image
+        H, W = img.shape[:2]
+        rng = _rng(sample_seed, 5, seed, i)
+        if augment:
+            img = _photometric(img, _rng(sample_seed, 6, seed, i))
+        edges = feat.image_edges(img) if any(k != "ghog" for k in kinds) else None
+        cars = sc.wireframes["cars"]
+        all_vis = [_visible_uv(c) for c in cars]
+        vis_pts = np.concatenate([uv[v] for uv, v in all_vis] + [np.zeros((0, 2))])
+        boxes = np.array([c["box"] for c in cars]).reshape(-1, 4)
+        for c, (uv, vis), box in zip(cars, all_vis, boxes):
+            bw, bh = box[2] - box[0], box[3] - box[1]
+            if bh < min_box_h:
+                continue
+            j = np.nonzero(vis)[0]
+            for _ in range(scale_samples):
+                s = float(np.exp(rng.uniform(-0.2, 0.2)))
+                z = feat.CANONICAL_HEIGHT / (s * bh)
+                if len(j):
+                    pts = [uv[j]] + [uv[j] + rng.uniform(-jitter, jitter, (len(j), 2)) / z for _ in range(n_jitter)]
+                    add(img, box, np.concatenate(pts), np.tile(j, 1 + n_jitter), s, edges, i)
+                lo = box[:2] - 0.1 * np.array([bw, bh])
+                hi = box[2:] + 0.1 * np.array([bw, bh])
+                cand = rng.uniform(lo, hi, size=(bg_per_car * 3, 2))
+                if len(vis_pts):
+                    d = np.linalg.norm(cand[:, None] - vis_pts[None], axis=-1).min(1)
+                    cand = cand[d * z >= min_dist]
+                add(img, box, cand[:bg_per_car], BACKGROUND, s, edges, i)
+        # background outside the cars
+        grown = np.concatenate([boxes[:, :2] - 0.1 * (boxes[:, 2:] - boxes[:, :2]),
+                                boxes[:, 2:] + 0.1 * (boxes[:, 2:] - boxes[:, :2])], axis=1)
+        for _ in range(bg_boxes):
+            h = float(np.exp(rng.uniform(np.log(25), np.log(150))))
+            cx, cy = rng.uniform(0, W), rng.uniform(0, H)
+            fake = np.array([cx - 1.25 * h, cy - h / 2, cx + 1.25 * h, cy + h / 2])
+            cand = rng.uniform(fake[:2], fake[2:], size=(bg_per_box * 3, 2))
+            cand = cand[(cand[:, 0] >= 0) & (cand[:, 1] >= 0) & (cand[:, 0] < W) & (cand[:, 1] < H)]
+            if len(grown):
+                inside = ((cand[:, None, 0] >= grown[None, :, 0]) & (cand[:, None, 0] <= grown[None, :, 2])
+                          & (cand[:, None, 1] >= grown[None, :, 1]) & (cand[:, None, 1] <= grown[None, :, 3])).any(1)
+                cand = cand[~inside]
+            add(img, fake, cand[:bg_per_box], BACKGROUND, 1.0, edges, i)
+        if progress and (i + 1) % 50 == 0:
+            progress(f"synthetic scenes: {i + 1}/{n_scenes} in {time.time() - t0:.0f} s")
+    X = {k: np.concatenate(v).astype(np.float32) for k, v in Xs.items()}
+    return PatchData(X=X, y=np.concatenate(ys), group=np.concatenate(gs), names=[])
+
+
+def _photometric(img, rng):
+    if rng.random() >= 0.7:
+        return img
+    x = img.astype(np.float32) / 255.0
+    x = gaussian_filter(x, (rng.uniform(0.3, 1.2),) * 2 + (0,))
+    x = np.clip(x, 0, 1) ** float(np.exp(rng.uniform(-0.3, 0.3)))
+    x = 0.5 + (x - 0.5) * rng.uniform(0.6, 1.1)
+    x = x + rng.normal(0, rng.uniform(0, 4) / 255.0, x.shape)
+    return np.clip(np.rint(x * 255), 0, 255).astype(np.uint8)
+
+
+def _merge(a: PatchData, b: PatchData) -> PatchData:
+    kinds = [k for k in a.X if k in b.X]
+    return PatchData(X={k: np.concatenate([a.X[k], b.X[k]]) for k in kinds}, y=np.concatenate([a.y, b.y]),
+                     group=np.concatenate([a.group, np.full(len(b.y), -2)]), names=a.names)
+
+
+def localisation(detector, frames, *, radii=(0.04, 0.10), **response_kwargs) -> dict:
+    """Localisation of the part evidence (the metric that matters for the likelihood).
+
+    ``frames``: iterable of ``(image, cars)``, ``cars`` a list of ``(box (4,), uv (36, 2),
+    visible (36,) bool)``. For every visible vertex inside its box: is the top-scoring grid
+    location of ``log(S_j / S_b)`` inside the box within ``r`` x the car's projected length
+    (max extent of the 36 projected vertices) of the vertex, for ``r`` in ``radii``; chance
+    = a uniformly random grid location of the box; and the percentile rank of the vertex
+    location's score among the box's locations (chance 0.5).
+
+    Returns ``{"hits": {r: frac}, "chance": {r: frac}, "rank": float, "n_vertices", "n_cars",
+    "t_maps_s"}``.
+    """
+    from wirescene.parts.detector import response_maps
+
+    hits = {r: [] for r in radii}
+    chance = {r: [] for r in radii}
+    ranks, n_cars, t_maps = [], 0, 0.0
+    for image, cars in frames:
+        if not cars:
+            continue
+        t = time.perf_counter()
+        R = response_maps(image, np.array([c[0] for c in cars], dtype=float), detector=detector, **response_kwargs)
+        t_maps += time.perf_counter() - t
+        for bi, (box, uv, visible) in enumerate(cars):
+            x1, y1, x2, y2 = box
+            inbox = (uv[:, 0] >= x1) & (uv[:, 0] <= x2) & (uv[:, 1] >= y1) & (uv[:, 1] <= y2)
+            vis = np.asarray(visible, bool) & inbox
+            length = max(np.ptp(uv[:, 0]), np.ptp(uv[:, 1]))
+            b = R.boxes[bi]
+            g = b.grid_uv().reshape(-1, 2)
+            m = (g[:, 0] >= x1) & (g[:, 0] <= x2) & (g[:, 1] >= y1) & (g[:, 1] <= y2)
+            g = g[m]
+            lr = b.log_ratio.reshape(-1, N_PARTS)[m]
+            n_cars += 1
+            at_all = R.log_ratio(uv, bi)
+            for j in np.nonzero(vis)[0]:
+                best = g[np.argmax(lr[:, j])]
+                d_all = np.linalg.norm(g - uv[j], axis=1)
+                for r in radii:
+                    hits[r].append(np.linalg.norm(best - uv[j]) <= r * length)
+                    chance[r].append(np.mean(d_all <= r * length))
+                at = at_all[j]
+                ranks.append(np.mean(lr[:, j] < at) + 0.5 * np.mean(lr[:, j] == at))
+    mean = lambda v: float(np.mean(v)) if len(v) else float("nan")  # noqa: E731
+    return {"hits": {r: mean(v) for r, v in hits.items()}, "chance": {r: mean(v) for r, v in chance.items()},
+            "rank": mean(ranks), "n_vertices": len(ranks), "n_cars": n_cars, "t_maps_s": t_maps}
+
+
+def _clean_cars(wire_cars, min_box_h, clean):
+    cars = []
+    for c in wire_cars:
+        box = np.asarray(c["box"], float)
+        if box[3] - box[1] < min_box_h or (clean and (c["occluded"] != 0 or c["truncated"] > 1e-9)):
+            continue
+        cars.append((box, np.asarray(c["vertices_2d"], float), np.array([r == "visible" for r in c["visibility"]])))
+    return cars
+
+
+def scene_frames(scenes, *, min_box_h: float = 40.0, clean: bool = True):
+    """``(image, cars)`` of in-memory :class:`wirescene.synth.generate.SyntheticScene` s
+    for :func:`localisation` (same selection as :func:`synth_eval_frames`)."""
+    for sc in scenes:
+        yield sc.image, _clean_cars(sc.wireframes["cars"], min_box_h, clean)
+
+
+def synth_eval_frames(root, *, split: str = "training", min_box_h: float = 40.0, clean: bool = True):
+    """``(image, cars)`` of a ``wirescene synth`` output directory for :func:`localisation`:
+    cars with ``occluded == 0``, ``truncated == 0`` and box height >= ``min_box_h``
+    (``clean``), visible = visibility ``"visible"``."""
+    import json
+
+    from PIL import Image
+
+    d = Path(root) / split
+    for img_path in sorted((d / "image_2").glob("*.png")):
+        fid = img_path.stem
+        wf = json.loads((d / "wireframes" / f"{fid}.json").read_text())
+        cars = _clean_cars(wf["cars"], min_box_h, clean)
+        yield np.asarray(Image.open(img_path).convert("RGB")), cars
+
+
+def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True):
+    """``(image, cars)`` of real KITTI frames for :func:`localisation`: the mean wireframe
+    placed at each ``Car`` label's pose (location = the label's bottom centre), visibility
+    by :func:`wirescene.infer.occlusion.self_occlusion`. EVALUATION ONLY: never train on these."""
+    from wirescene.core import wireframe
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.core.groundplane import rotation_y, transform
+    from wirescene.infer.occlusion import self_occlusion
+    from wirescene.core.shape import load_default
+
+    ds = KittiDataset(root)
+    mean = load_default().mean
+    for fid in ds.frame_ids():
+        cam = ds.camera(fid)
+        cars = []
+        for o in ds.labels(fid).of_type("Car"):
+            box = np.asarray(o.box, float)
+            if box[3] - box[1] < min_box_h or (clean and (o.occluded != 0 or o.truncated > 1e-9)):
+                continue
+            X = transform(mean, np.asarray(o.location, float), rotation_y(o.rotation_y))
+            uv = cam.project(X)
+            cars.append((box, uv, ~self_occlusion(X, wireframe.FACES, cam.center)))
+        yield ds.image(fid), cars
+
+
+GREY_KINDS = ("ghog", "ghog_sc")
+
+
+def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: int = 0, n_trees: int = 30,
+                        max_depth: int = 13, kind: str = "ghog", n_aug: int = 2, cars=None, heldout: int = 0,
+                        compare_kinds=(), kitti_background=None, synth_scenes: int = 300,
+                        synth_seed: int = SYNTH_TRAIN_SEED, class_weight: str | None = "balanced",
+                        min_samples_leaf: int = 2, augment: bool = False, n_jobs: int = 1, progress=None):
+    """Generate training patches, optionally evaluate leave-models-out, fit the forest
+    on all data and write the model ``.npz``.
+
+    Parameters
+    ----------
+    out_path : path or None (do not write)
+    seed : int -- drives augmentation, background sampling, forest
+    n_views : int -- CAD edge renderings: total views per car, split evenly over the 2
+        elevations (144: the paper's 72 x 2); 0: none (edge-map kinds only)
+    n_trees, max_depth : forest size (paper: 30, 13)
+    kind : descriptor of the written model (see :mod:`wirescene.parts.features`)
+    n_aug : renderings per view (the first unaugmented)
+    cars : list of CAD names, optional (default: all road cars)
+    heldout : int -- evaluate with the last ``heldout`` cars (sorted) held out first
+    compare_kinds : extra descriptor kinds evaluated held-out as well
+    kitti_background : path, optional -- KITTI root for car-free background patches
+    synth_scenes : int -- synthetic shaded scenes ``generate_scene(synth_seed, i)`` whose
+        patches are added (:func:`make_synth_patch_data`)
+    synth_seed : int >= 1000 (training stream)
+    augment : photometric augmentation of the synthetic scenes (see :func:`make_synth_patch_data`)
+    class_weight : "balanced", "balanced_subsample" or None -- forest class weights; a
+        balanced forest keeps ``S_j`` well above the clipping floor where part ``j`` is
+        plausible, so ``log(S_j / S_b)`` peaks at the part (the background's share of the
+        data no longer swamps the parts)
+
+    Returns
+    -------
+    (PartDetector, report dict)
+    """
+    say = progress or (lambda s: None)
+    n_az = max(1, int(n_views) // len(ELEVATIONS)) if n_views else 0
+    kinds = tuple(dict.fromkeys((kind,) + tuple(compare_kinds)))
+    if n_az and any(k in GREY_KINDS for k in kinds):
+        raise ValueError(f"CAD edge renderings have no grey image: use n_views=0 with kinds {GREY_KINDS}")
+    if not n_az and not synth_scenes:
+        raise ValueError("no training data: n_views and synth_scenes are both 0")
+    t0 = time.time()
+    data = None
+    report = {"cars": []}
+    if n_az:
+        data = make_patch_data(seed=seed, n_azimuth=n_az, cars=cars, kinds=kinds, n_aug=n_aug,
+                               kitti_background=kitti_background, progress=progress)
+        report["cars"] = sorted(set(data.names[g] for g in data.group[data.group >= 0]))
+    if synth_scenes:
+        sd = make_synth_patch_data(n_scenes=synth_scenes, seed=synth_seed, kinds=kinds, sample_seed=seed,
+                                   augment=augment, progress=progress)
+        data = sd if data is None else _merge(data, sd)
+    t_data = time.time() - t0
+    n_part = int((data.y < N_PARTS).sum())
+    say(f"patches: {len(data)} ({n_part} part, {len(data) - n_part} background) in {t_data:.0f} s")
+    report.update({"n_patches": len(data), "n_part": n_part, "n_background": len(data) - n_part, "t_data_s": t_data,
+                   "n_azimuth": n_az})
+    if heldout and n_az:
+        names = report["cars"]
+        held = names[-int(heldout):]
+        report["heldout_cars"] = held
+        for k in kinds:
+            t1 = time.time()
+            report[f"heldout_{k}"] = heldout_accuracy(data, held, kind=k, n_trees=n_trees, max_depth=max_depth,
+                                                      seed=seed, n_jobs=n_jobs)
+            r = report[f"heldout_{k}"]
+            say(f"held-out {k}: mean part acc {r['mean_part']:.3f} (mirror-tolerant {r['mean_part_mirror']:.3f}), "
+                f"background {r['background']:.3f} [{time.time() - t1:.0f} s]")
+    t1 = time.time()
+    rf = _fit(data.X[kind], data.y, n_trees=n_trees, max_depth=max_depth, seed=seed, n_jobs=n_jobs,
+              class_weight=class_weight, min_samples_leaf=min_samples_leaf)
+    report["t_fit_s"] = time.time() - t1
+    meta = {"seed": seed, "n_views": n_az * len(ELEVATIONS), "n_trees": n_trees, "max_depth": max_depth,
+            "n_aug": n_aug, "n_patches": len(data), "n_part": n_part, "cars": ",".join(report["cars"]),
+            "kitti_background": str(kitti_background is not None), "synth_scenes": synth_scenes,
+            "synth_seed": synth_seed, "class_weight": str(class_weight), "min_samples_leaf": min_samples_leaf,
+            "augment": str(augment)}
+    det = PartDetector.from_sklearn(rf, kind=kind, meta=meta)
+    report["train_acc"] = float(np.mean(det.predict(data.X[kind]) == data.y))
+    if out_path is not None:
+        det.save(out_path)
+        report["model_bytes"] = Path(out_path).stat().st_size
+        say(f"wrote {out_path} ({report['model_bytes'] / 1e6:.1f} MB), fit {report['t_fit_s']:.0f} s")
+    report["_data"] = data
+    report["_sklearn"] = rf
+    return det, report
