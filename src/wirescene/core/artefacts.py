@@ -1,0 +1,74 @@
+"""One convention for every trained artefact and record file: a ``format`` tag
+``"wirescene-KIND/VERSION"`` stored with the data (a 0-d string array in ``.npz``, a
+top-level key in JSON), checked on load. A missing, unreadable, corrupt or mismatched
+file is an :class:`~wirescene.core.errors.InputError` naming the file; nothing falls
+back silently. Arrays are loaded without pickle.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from wirescene.core.atomic import write_bytes, write_text
+from wirescene.core.errors import InputError
+
+
+def format_tag(kind: str, version: int) -> str:
+    """``"wirescene-KIND/VERSION"``."""
+    return f"wirescene-{kind}/{int(version)}"
+
+
+def _check(found, kind: str, version: int, path: Path) -> None:
+    want = format_tag(kind, version)
+    if found != want:
+        raise InputError(f"format {found!r}, expected {want!r} (retrain or reinstall it)", path=path)
+
+
+def save_npz(path: str | Path, arrays: dict, *, kind: str, version: int) -> Path:
+    """Write ``arrays`` (no object arrays) with their format tag, atomically."""
+    buf = io.BytesIO()
+    np.savez_compressed(buf, format=np.array(format_tag(kind, version)), **arrays)
+    write_bytes(Path(path), buf.getvalue())
+    return Path(path)
+
+
+def load_npz(path: str | Path, *, kind: str, version: int) -> dict[str, np.ndarray]:
+    """Arrays of an artefact written by :func:`save_npz` (format checked)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("artefact file is missing (run the training command that makes it)", path=path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"corrupt artefact file ({exc.__class__.__name__})", path=path) from None
+    found = arrays.pop("format", None)
+    _check(None if found is None else str(found), kind, version, path)
+    return arrays
+
+
+def save_json(path: str | Path, record: dict, *, kind: str, version: int, indent: int | None = 1) -> Path:
+    """Write a JSON record with its format tag first, atomically."""
+    write_text(Path(path), json.dumps({"format": format_tag(kind, version), **record}, indent=indent))
+    return Path(path)
+
+
+def load_json(path: str | Path, *, kind: str, version: int) -> dict:
+    """A JSON record written by :func:`save_json` (format checked), without the tag."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("artefact file is missing (run the training command that makes it)", path=path)
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"corrupt JSON file ({exc.__class__.__name__})", path=path) from None
+    if not isinstance(record, dict):
+        raise InputError("corrupt JSON file (not an object)", path=path)
+    record = dict(record)
+    _check(record.pop("format", None), kind, version, path)
+    return record
