@@ -25,6 +25,7 @@ import numpy as np
 from wirescene.core.errors import InputError
 from wirescene.core.shape import DEFAULT_MODEL_PATH, ShapeModel, fit_shape_model
 from wirescene.core.wireframe import VERTEX_NAMES
+from wirescene.core.artefacts import load_json, load_npz, save_json, save_npz
 from wirescene.core.resources import DATA_DIR
 
 __all__ = ["train_shape_model", "load_cad_meshes", "load_cad_landmarks", "DEFAULT_AUGMENT"]
@@ -86,18 +87,18 @@ def train_shape_model(cad_dir, out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, au
     model.save(out_path)
     if landmarks_path is not False:
         lp = Path(landmarks_path) if landmarks_path else out_path.parent / "cad_landmarks.json"
-        lp.write_text(json.dumps({"format": 1, "frame": "object (x forward, y down, z left; metres)",
-                                  "cars": records}, indent=1) + "\n")
+        save_json(lp, {"frame": "object (x forward, y down, z left; metres)", "cars": records},
+                  kind="cad-landmarks", version=1)
     if meshes_path is not False:
         mp = Path(meshes_path) if meshes_path else out_path.parent / "cad_meshes.npz"
         nv = np.cumsum([0] + [len(m.vertices) for m in meshes])
         nf = np.cumsum([0] + [len(m.faces) for m in meshes])
-        np.savez_compressed(
-            mp, version=np.int64(1), names=np.array([m.name for m in meshes], dtype=str),
+        save_npz(mp, dict(
+            names=np.array([m.name for m in meshes], dtype=str),
             vertex_offsets=nv.astype(np.int64), face_offsets=nf.astype(np.int64),
             vertices=np.concatenate([m.vertices for m in meshes]).astype(np.float32),
             faces=np.concatenate([m.faces for m in meshes]).astype(np.int32),
-        )
+        ), kind="cad-meshes", version=1)
     return model
 
 
@@ -105,20 +106,17 @@ def load_cad_meshes(path=None) -> dict:
     """Canonical road-car meshes ``{name: (vertices (N, 3) float32, faces (F, 3) int32)}``
     written by :func:`train_shape_model` (default: the package's ``cad_meshes.npz``)."""
     path = DATA_DIR / "cad_meshes.npz" if path is None else Path(path)
+    z = load_npz(path, kind="cad-meshes", version=1)
     try:
-        with np.load(path, allow_pickle=False) as z:
-            names, nv, nf = z["names"], z["vertex_offsets"], z["face_offsets"]
-            V, F = z["vertices"], z["faces"]
-    except (OSError, KeyError, ValueError) as e:
-        raise InputError(f"cannot read CAD meshes ({e})", path=path) from None
+        names, nv, nf = z["names"], z["vertex_offsets"], z["face_offsets"]
+        V, F = z["vertices"], z["faces"]
+    except KeyError as e:
+        raise InputError(f"not a CAD mesh file (missing {e})", path=path) from None
     return {str(n): (V[nv[i]:nv[i + 1]], F[nf[i]:nf[i + 1]]) for i, n in enumerate(names)}
 
 
 def load_cad_landmarks(path=None) -> dict:
     """``cad_landmarks.json`` as ``{name: (36, 3) array}`` for the road cars."""
     path = DATA_DIR / "cad_landmarks.json" if path is None else Path(path)
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise InputError(f"cannot read CAD landmarks ({e})", path=path) from None
+    data = load_json(path, kind="cad-landmarks", version=1)
     return {c["name"]: np.array([c["vertices"][n] for n in VERTEX_NAMES]) for c in data["cars"] if c.get("road_car")}

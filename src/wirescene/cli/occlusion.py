@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -17,13 +16,13 @@ def occlusion(seed, scenes, out):
     """Choose the likelihood's occluded-part score c on held-out synthetic scenes."""
     from tqdm import tqdm
 
-    from wirescene.core.atomic import write_text
-    from wirescene.training.occlusion import DEFAULT_PATH, calibrate_occluded_score
+    from wirescene.infer.occluded_score import DEFAULT_PATH, save_occluded_score
+    from wirescene.training.occlusion import calibrate_occluded_score
 
     result = calibrate_occluded_score(seed=seed, n_scenes=scenes,
                                       progress=lambda it: tqdm(it, desc="scenes", leave=False, file=sys.stderr))
     out = DEFAULT_PATH if out is None else out
-    write_text(out, json.dumps(result, indent=1))
+    save_occluded_score(out, result)
     for c, a in zip(result["grid"], result["accuracy"]):
         click.echo(f"c = {c:+.2f}  occlusion accuracy {100 * a:.1f}%")
     click.echo(f"chosen c = {result['c']} ({result['n_cars']} cars; all-visible baseline "

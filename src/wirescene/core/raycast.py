@@ -19,6 +19,7 @@ import warnings
 
 import numpy as np
 
+from wirescene.core.arrays import point_bounds
 from wirescene.core.errors import ShapeError, check_shape
 
 # Default relative tolerance on the segment parameter t (0 at the origin, 1 at the
@@ -38,7 +39,7 @@ DEFAULT_CHUNK = 1 << 17
 _NEXT_CORNER = np.array([1, 2, 0])
 
 
-def _check_eps(eps: float) -> None:
+def check_eps(eps: float) -> None:
     if not 0 <= eps < 0.5:
         raise ValueError(f"eps must be in [0, 0.5), got {eps}")
 
@@ -50,7 +51,7 @@ def _batch_shape(*shapes) -> tuple:
         raise ShapeError(f"batch dimensions do not broadcast: {' '.join(map(str, shapes))}") from exc
 
 
-def _segment_inputs(origins, targets, triangles, eps):
+def segment_inputs(origins, targets, triangles, eps):
     """Checked float arrays of :func:`segment_blocked`'s inputs and their broadcast batch shape."""
     origins = np.asarray(origins, dtype=float)
     targets = np.asarray(targets, dtype=float)
@@ -58,7 +59,7 @@ def _segment_inputs(origins, targets, triangles, eps):
     check_shape("origins", origins, (..., 3))
     check_shape("targets", targets, (..., None, 3))
     check_shape("triangles", triangles, (..., None, 3, 3))
-    _check_eps(eps)
+    check_eps(eps)
     return origins, targets, triangles, _batch_shape(origins.shape[:-1], targets.shape[:-2], triangles.shape[:-3])
 
 
@@ -119,7 +120,7 @@ def segment_blocked(
     triangle. See :func:`mesh_vertices_blocked` for targets that are the vertices of
     the occluding mesh itself (cheaper: no triangle array is materialised).
     """
-    origins, targets, triangles, batch = _segment_inputs(origins, targets, triangles, eps)
+    origins, targets, triangles, batch = segment_inputs(origins, targets, triangles, eps)
     F = triangles.shape[-3]
     tri = np.broadcast_to(triangles, batch + (F, 3, 3)).reshape((int(np.prod(batch, dtype=int)), F, 3, 3))
     return _run_chunks(origins, targets, batch, F, lambda d, o, sl: tri[sl] - o[:, None, None, :], eps, ignore, chunk)
@@ -163,7 +164,7 @@ def mesh_vertices_blocked(
     check_shape("origins", origins, (..., 3))
     check_shape("vertices", vertices, (..., None, 3))
     check_shape("faces", faces, (None, 3))
-    _check_eps(eps)
+    check_eps(eps)
     batch = _batch_shape(origins.shape[:-1], vertices.shape[:-2])
     return _run_chunks(origins, vertices, batch, len(faces), lambda d, o, sl: d[:, faces], eps, ignore, chunk)
 
@@ -334,3 +335,48 @@ def first_hit_distance(mesh_vertices, mesh_faces, origins, directions, *, inters
         t[bad] = np.einsum("ri,ri->r", c - origins[hit][bad], d) / np.einsum("ri,ri->r", d, d)
     distance[hit] = t
     return distance, face
+
+
+def check_faces(faces, n_vertices: int) -> np.ndarray:
+    """``faces`` as an ``(F, 3)`` integer array indexing ``n_vertices`` vertices (else ShapeError)."""
+    faces = np.asarray(faces)
+    check_shape("faces", faces, (None, 3))
+    if not np.issubdtype(faces.dtype, np.integer):
+        raise ShapeError(f"faces must be integer indices, got dtype {faces.dtype}")
+    if faces.size and (faces.min() < 0 or faces.max() >= n_vertices):
+        raise ShapeError(f"faces index vertices outside [0, {n_vertices})")
+    return faces
+
+
+def incidence(faces, n_vertices: int) -> np.ndarray:
+    """``(V, F)`` bool: True where vertex ``v`` is a corner of face ``f``."""
+    faces = check_faces(faces, n_vertices)
+    inc = np.zeros((n_vertices, len(faces)), dtype=bool)
+    inc[faces, np.arange(len(faces))[:, None]] = True
+    return inc
+
+
+def interaction_candidates(rel) -> np.ndarray:
+    """Which (target object ``i``, occluder object ``j != i``) pairs of each scene can
+    interact: ``(S, N, N)`` bool for vertices ``rel`` ``(S, N, V, 3)`` relative to the
+    camera centre.
+
+    An exact prefilter of :func:`inter_object_occlusion`: in a street scene most cars do
+    not overlap in the image. A segment from the camera to a vertex of ``i`` hits a
+    triangle of ``j`` only where the central projections of both overlap, and only at a
+    depth between ``j``'s nearest point and the target's depth. The projection onto
+    ``z = 1`` is used where every vertex of both objects lies in front of that plane;
+    other pairs are always kept.
+    """
+    rel = np.asarray(rel, dtype=float)
+    check_shape("rel", rel, (None, None, None, 3))
+    N = rel.shape[1]
+    z = rel[..., 2]
+    front = (z > 1e-6).all(axis=-1)  # (S, N)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = rel[..., :2] / z[..., None]
+    lo, hi = point_bounds(p)  # (S, N, 2); meaningless where not front, masked below
+    overlap = np.all((lo[:, :, None] <= hi[:, None, :]) & (lo[:, None, :] <= hi[:, :, None]), axis=-1)
+    nearer = z.min(axis=-1)[:, None, :] < z.max(axis=-1)[:, :, None]  # occluder j starts before i ends
+    candidate = ~(front[:, :, None] & front[:, None, :]) | (overlap & nearer)
+    return candidate & ~np.eye(N, dtype=bool)

@@ -16,12 +16,14 @@ import numpy as np
 
 from wirescene.core.errors import InputError, check_shape
 from wirescene.core.wireframe import N_VERTICES
+from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.resources import DATA_DIR
 
 __all__ = ["ShapeModel", "fit_shape_model", "augment_to_kitti_sizes", "load_default",
            "FORMAT_VERSION", "DEFAULT_MODEL_PATH", "KITTI_CAR_SIZE"]
 
 FORMAT_VERSION = 1
+ARTEFACT_KIND = "shape-model"
 DEFAULT_MODEL_PATH = DATA_DIR / "shape_model.npz"
 
 KITTI_CAR_SIZE = {"mean": (3.88, 1.63, 1.53), "std": (0.43, 0.10, 0.14)}
@@ -112,38 +114,27 @@ class ShapeModel:
         return self.instantiate(rng.standard_normal((int(n), k)))
 
     def save(self, path) -> None:
-        """Write a versioned ``.npz`` (no pickled objects)."""
-        np.savez_compressed(
-            path,
-            version=np.int64(self.version),
+        """Write a versioned ``.npz`` (no pickled objects; :mod:`wirescene.core.artefacts`)."""
+        save_npz(path, dict(
             mean=self.mean, components=self.components, stds=self.stds,
             explained_variance_ratio=self.explained_variance_ratio,
             exemplar_names=np.asarray(self.exemplar_names, dtype=str),
             exemplars=self.exemplars,
-        )
+        ), kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
     @staticmethod
     def load(path) -> "ShapeModel":
-        """Read a model written by :meth:`save`; :class:`InputError` if unreadable or of
-        another format version."""
-        path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as e:
-            raise InputError(f"cannot read shape model ({e})", path=path) from None
-        missing = {"version", "mean", "components", "stds", "explained_variance_ratio",
-                   "exemplar_names", "exemplars"} - set(data)
+        """Read a model written by :meth:`save`; :class:`InputError` if missing,
+        unreadable or of another format version."""
+        data = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
+        missing = {"mean", "components", "stds", "explained_variance_ratio", "exemplar_names", "exemplars"} - set(data)
         if missing:
             raise InputError(f"not a shape model file (missing {', '.join(sorted(missing))})", path=path)
-        version = int(data["version"])
-        if version != FORMAT_VERSION:
-            raise InputError(f"shape model format version {version}, this wirescene reads {FORMAT_VERSION}", path=path)
         return ShapeModel(
             mean=data["mean"], components=data["components"], stds=data["stds"],
             explained_variance_ratio=data["explained_variance_ratio"],
             exemplar_names=tuple(str(n) for n in data["exemplar_names"]),
-            exemplars=data["exemplars"], version=version,
+            exemplars=data["exemplars"], version=FORMAT_VERSION,
         )
 
 

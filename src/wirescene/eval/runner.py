@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 import numpy as np
 
 from wirescene import __version__
+from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_text
 from wirescene.core.camera import Camera
 from wirescene.io.kitti import FrameLabels, KittiDataset, Label, format_labels, write_labels
@@ -163,7 +164,7 @@ class _FrameJob:
 #: Where :func:`evaluate_dataset` keeps the record of each finished frame, under the
 #: predictions directory (hidden, so KITTI tools that list ``VARIANT/*.txt`` ignore it).
 RECORDS_DIR = ".frames"
-_RECORD_FORMAT = "wirescene-frame-record/1"
+_RECORD_FORMAT = format_tag("frame-record", 1)
 
 
 def run_config(

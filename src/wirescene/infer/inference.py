@@ -37,7 +37,7 @@ from wirescene.core.groundplane import wrap_angle
 from wirescene.core.shape import ShapeModel
 from wirescene.core.types import ObjectEstimate, SceneEstimate, SceneParticles
 from wirescene.lift import box_residual
-from wirescene.training.occlusion import load_occluded_score
+from wirescene.infer.occluded_score import load_occluded_score
 from wirescene.infer.masks import best_mask, fit_mask, mask_hidden
 from wirescene.infer.occlusion import inter_object_occlusion
 from wirescene.core.wireframe import FACES

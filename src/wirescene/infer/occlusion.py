@@ -22,27 +22,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from wirescene.core.arrays import point_bounds
-from wirescene.core.errors import ShapeError, check_shape
-from wirescene.core.raycast import DEFAULT_EPS, mesh_vertices_blocked, segment_blocked
+from wirescene.core.errors import check_shape
+from wirescene.core.raycast import (
+    DEFAULT_EPS,
+    check_faces,
+    incidence,
+    interaction_candidates,
+    mesh_vertices_blocked,
+    segment_blocked,
+)
 
-
-def _check_faces(faces, n_vertices: int) -> np.ndarray:
-    faces = np.asarray(faces)
-    check_shape("faces", faces, (None, 3))
-    if not np.issubdtype(faces.dtype, np.integer):
-        raise ShapeError(f"faces must be integer indices, got dtype {faces.dtype}")
-    if faces.size and (faces.min() < 0 or faces.max() >= n_vertices):
-        raise ShapeError(f"faces index vertices outside [0, {n_vertices})")
-    return faces
-
-
-def incidence(faces, n_vertices: int) -> np.ndarray:
-    """``(V, F)`` bool: True where vertex ``v`` is a corner of face ``f``."""
-    faces = _check_faces(faces, n_vertices)
-    inc = np.zeros((n_vertices, len(faces)), dtype=bool)
-    inc[faces, np.arange(len(faces))[:, None]] = True
-    return inc
+__all__ = ["self_occlusion", "inter_object_occlusion", "incidence", "interaction_candidates"]
 
 
 def self_occlusion(vertices, faces, camera_center, *, eps: float = DEFAULT_EPS, device: str = "numpy") -> np.ndarray:
@@ -75,34 +65,8 @@ def self_occlusion(vertices, faces, camera_center, *, eps: float = DEFAULT_EPS, 
         return torch_backend.self_occlusion(vertices, faces, camera_center, eps=eps, device=device)
     vertices = np.asarray(vertices, dtype=float)
     check_shape("vertices", vertices, (..., None, 3))
-    faces = _check_faces(faces, vertices.shape[-2])
+    faces = check_faces(faces, vertices.shape[-2])
     return mesh_vertices_blocked(camera_center, vertices, faces, eps=eps, ignore=incidence(faces, vertices.shape[-2]))
-
-
-def interaction_candidates(rel) -> np.ndarray:
-    """Which (target object ``i``, occluder object ``j != i``) pairs of each scene can
-    interact: ``(S, N, N)`` bool for vertices ``rel`` ``(S, N, V, 3)`` relative to the
-    camera centre.
-
-    An exact prefilter of :func:`inter_object_occlusion`: in a street scene most cars do
-    not overlap in the image. A segment from the camera to a vertex of ``i`` hits a
-    triangle of ``j`` only where the central projections of both overlap, and only at a
-    depth between ``j``'s nearest point and the target's depth. The projection onto
-    ``z = 1`` is used where every vertex of both objects lies in front of that plane;
-    other pairs are always kept.
-    """
-    rel = np.asarray(rel, dtype=float)
-    check_shape("rel", rel, (None, None, None, 3))
-    N = rel.shape[1]
-    z = rel[..., 2]
-    front = (z > 1e-6).all(axis=-1)  # (S, N)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        p = rel[..., :2] / z[..., None]
-    lo, hi = point_bounds(p)  # (S, N, 2); meaningless where not front, masked below
-    overlap = np.all((lo[:, :, None] <= hi[:, None, :]) & (lo[:, None, :] <= hi[:, :, None]), axis=-1)
-    nearer = z.min(axis=-1)[:, None, :] < z.max(axis=-1)[:, :, None]  # occluder j starts before i ends
-    candidate = ~(front[:, :, None] & front[:, None, :]) | (overlap & nearer)
-    return candidate & ~np.eye(N, dtype=bool)
 
 
 def inter_object_occlusion(vertices, faces, camera_center, *, eps: float = DEFAULT_EPS, device: str = "numpy") -> np.ndarray:
@@ -138,7 +102,7 @@ def inter_object_occlusion(vertices, faces, camera_center, *, eps: float = DEFAU
     vertices = np.asarray(vertices, dtype=float)
     check_shape("vertices", vertices, (..., None, None, 3))
     N, V = vertices.shape[-3], vertices.shape[-2]
-    faces = _check_faces(faces, V)
+    faces = check_faces(faces, V)
     if N < 2:
         return np.zeros(vertices.shape[:-1], dtype=bool)
     center = np.asarray(camera_center, dtype=float)

@@ -45,8 +45,7 @@ import os
 import numpy as np
 
 from wirescene.core.errors import ShapeError, WiresceneError, check_shape
-from wirescene.infer.occlusion import _check_faces
-from wirescene.core.raycast import DEFAULT_EPS, _check_eps, _segment_inputs
+from wirescene.core.raycast import DEFAULT_EPS, check_eps, check_faces, incidence, interaction_candidates, segment_inputs
 
 # Upper bound on (ray x triangle) pairs per chunk. The pair temporaries are the
 # (rays, 4F) matrix of dot products and two (rays, F) minima, 6 values per pair, so
@@ -331,7 +330,7 @@ def segment_blocked(
     input is never materialised for the whole batch.
     """
     torch, dev, dt, chunk = _setup(device, dtype, chunk)
-    origins, targets, triangles, batch = _segment_inputs(origins, targets, triangles, eps)
+    origins, targets, triangles, batch = segment_inputs(origins, targets, triangles, eps)
     P, F = targets.shape[-2], triangles.shape[-3]
     if P == 0 or F == 0 or 0 in batch:
         return np.zeros(batch + (P,), dtype=bool)
@@ -419,14 +418,13 @@ def self_occlusion(vertices, faces, camera_center, *, eps: float = DEFAULT_EPS, 
     never tested against it. ``device``, ``dtype``, ``chunk``: see
     :func:`segment_blocked`.
     """
-    from wirescene.infer.occlusion import incidence
 
     torch, dev, dt, chunk = _setup(device, dtype, chunk)
-    _check_eps(eps)
+    check_eps(eps)
     vertices = np.asarray(vertices, dtype=float)
     check_shape("vertices", vertices, (..., None, 3))
     V = vertices.shape[-2]
-    faces = _check_faces(faces, V)
+    faces = check_faces(faces, V)
     batch, rel = _relative_vertices(vertices, camera_center, 2)
     if V == 0 or len(faces) == 0 or 0 in batch:
         return np.zeros(batch + (V,), dtype=bool)
@@ -451,11 +449,11 @@ def inter_object_occlusion(vertices, faces, camera_center, *, eps: float = DEFAU
     ``chunk``: see :func:`segment_blocked`.
     """
     torch, dev, dt, chunk = _setup(device, dtype, chunk)
-    _check_eps(eps)
+    check_eps(eps)
     vertices = np.asarray(vertices, dtype=float)
     check_shape("vertices", vertices, (..., None, None, 3))
     N, V = vertices.shape[-3], vertices.shape[-2]
-    faces = _check_faces(faces, V)
+    faces = check_faces(faces, V)
     F = len(faces)
     batch, rel = _relative_vertices(vertices, camera_center, 3)
     if N < 2 or V == 0 or F == 0 or 0 in batch:
@@ -463,7 +461,6 @@ def inter_object_occlusion(vertices, faces, camera_center, *, eps: float = DEFAU
     Bn = int(np.prod(batch, dtype=int))
     q = rel.reshape(Bn, N, V, 3)
     if cull:
-        from wirescene.infer.occlusion import interaction_candidates
 
         candidate = interaction_candidates(q)
     else:

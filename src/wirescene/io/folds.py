@@ -23,10 +23,11 @@ mapping files as listed in ``shared/data/kitti/SOURCES.md``; frames of other dri
 
 from __future__ import annotations
 
-import json
 from functools import lru_cache
-from importlib import resources
 from typing import Iterable
+
+from wirescene.core.artefacts import load_json
+from wirescene.core.resources import DATA_DIR
 
 N_FOLDS = 4
 
@@ -46,10 +47,7 @@ DRIVE_FOLDS: dict[str, int] = {
 @lru_cache(maxsize=1)
 def frame_drives() -> dict[str, str]:
     """``{frame id: drive}`` of the labelled real frames the project knows."""
-    path = resources.files("wirescene") / "data" / "kitti_drives.json"
-    record = json.loads(path.read_text())
-    if record.get("format") != "wirescene-kitti-drives/1":
-        raise ValueError(f"{path}: unknown format {record.get('format')!r}")
+    record = load_json(DATA_DIR / "kitti_drives.json", kind="kitti-drives", version=1)
     return {f: d.removesuffix("_sync") for f, d in record["drives"].items()}
 
 

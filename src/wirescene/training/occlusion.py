@@ -14,16 +14,10 @@ grid. Result: ``data/occlusion.json``.
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 
 from wirescene.infer.masks import best_mask, mask_hidden
-from wirescene.core.resources import DATA_DIR
 
-DEFAULT_PATH = DATA_DIR / "occlusion.json"
-FALLBACK_C = -0.5
 
 
 def occlusion_accuracy_by_c(evidence, self_hidden, visible_gt, uv, grid) -> np.ndarray:
@@ -68,7 +62,6 @@ def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None,
     best = np.flatnonzero(acc >= acc.max() - 1e-12)
     c = float(grid[best[len(best) // 2]])
     return {
-        "format": "wirescene-occlusion-v1",
         "c": c,
         "grid": grid.tolist(),
         "accuracy": [float(a) for a in acc],
@@ -77,12 +70,3 @@ def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None,
         "seed": int(seed),
         "n_scenes": int(n_scenes),
     }
-
-
-def load_occluded_score(path: str | Path | None = None) -> float:
-    """The calibrated ``c`` (``FALLBACK_C`` if no calibration file is installed)."""
-    path = DEFAULT_PATH if path is None else Path(path)
-    try:
-        return float(json.loads(path.read_text())["c"])
-    except (OSError, KeyError, ValueError):
-        return FALLBACK_C
