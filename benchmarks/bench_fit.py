@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.io.detections import detections_from_labels  # noqa: E402
 from wirescene.infer.evidence import part_evidence  # noqa: E402
-from wirescene.fitting.scene import FitOptions, fit_scene  # noqa: E402
+from wirescene.fitting.pipeline import FitOptions, fit_scene  # noqa: E402
 from wirescene.infer.inference import InferenceOptions  # noqa: E402
 from wirescene.lift import LiftingOptions, lift_table, select_particles  # noqa: E402
 from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood  # noqa: E402

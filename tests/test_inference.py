@@ -4,7 +4,7 @@ import pytest
 from conftest import KITTI_ROOT, assert_close
 from wirescene.io.kitti import KittiDataset
 from wirescene.core.groundplane import alpha_from_rotation_y
-from wirescene.fitting.scene import FitOptions, fit_scene
+from wirescene.fitting.pipeline import FitOptions, fit_scene
 from wirescene.core.types import Detections
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
 from wirescene.lift import LiftingOptions, lift_table, select_particles

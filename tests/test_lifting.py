@@ -6,7 +6,7 @@ from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners, project_points_to_b
 from wirescene.io.kitti import KittiDataset
 from wirescene.io.detections import detections_from_labels
 from wirescene.core.groundplane import object_pose
-from wirescene.fitting.scene import fit_scene
+from wirescene.fitting.pipeline import fit_scene
 from wirescene.core.types import Detections
 from wirescene.lift import LiftingOptions, lift_detections, lift_table, select_particles, solve_positions
 from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin

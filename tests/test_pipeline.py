@@ -10,8 +10,10 @@ from conftest import KITTI_ROOT
 from wirescene.cli.main import main
 from wirescene.io.kitti import KittiDataset, Label
 from wirescene.eval.metrics import FrameResult
-from wirescene.eval.runner import RECORDS_DIR, DetectionSource, _FrameJob, evaluate_dataset
-from wirescene.fitting.scene import FitOptions
+from wirescene.eval.records import RECORDS_DIR
+from wirescene.eval.runner import _FrameJob, evaluate_dataset
+from wirescene.eval.sources import DetectionSource
+from wirescene.fitting.pipeline import FitOptions
 from wirescene.infer.inference import InferenceOptions
 from wirescene.lift import LiftingOptions
 

@@ -17,7 +17,6 @@ augmentation).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np

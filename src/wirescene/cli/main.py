@@ -44,7 +44,7 @@ def _progress(desc: str, total: int | None = None):
 
 
 def _fit_options(particles: int, seed: int, **inference):
-    from wirescene.fitting.scene import FitOptions
+    from wirescene.fitting.pipeline import FitOptions
     from wirescene.infer.inference import InferenceOptions
     from wirescene.lift import LiftingOptions
 
@@ -137,7 +137,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.io.kitti import KittiDataset
     from wirescene.eval.metrics import format_table
-    from wirescene.eval.runner import DetectionSource, evaluate_dataset
+    from wirescene.eval.runner import evaluate_dataset
+    from wirescene.eval.sources import DetectionSource
 
     if resume and predictions is None:
         raise click.UsageError("--resume needs --predictions DIR, where finished frames are recorded")
@@ -200,27 +201,23 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, prune_after, box_weight,
             device):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
+    from wirescene.api import fit
     from wirescene.core.camera import read_kitti_calib
-    from wirescene.io.kitti import read_image, read_labels
     from wirescene.io.detections import read_detections
-    from wirescene.eval.runner import write_fit_outputs
-    from wirescene.fitting.scene import fit_scene
+    from wirescene.io.kitti import read_image, read_labels
+    from wirescene.io.outputs import write_fit_outputs
 
     img = read_image(image)
     camera = read_kitti_calib(calib).camera((img.shape[1], img.shape[0]))
-    if detections is not None:
-        dets = read_detections(detections)
-    else:
-        from wirescene.predetect import detect_cars
-
-        dets = detect_cars(img)
-        if len(dets) == 0:
-            raise InputError("pre-detection found no car in the image", path=image)
+    dets = read_detections(detections) if detections is not None else None
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
                            box_weight=box_weight, device=device)
-    estimate = fit_scene(camera, dets, variant=variant, options=options, image=img)
-    paths = write_fit_outputs(out, Path(image).stem, image=img, camera=camera, estimate=estimate, detections=dets, gt=gt_objs)
+    estimate = fit(img, camera, dets, variant=variant, options=options)
+    if not estimate.cars and dets is None:
+        raise InputError("pre-detection found no car in the image", path=image)
+    paths = write_fit_outputs(out, Path(image).stem, image=img, camera=camera, estimate=estimate,
+                              detections=estimate.detections, gt=gt_objs)
     for kind, p in paths.items():
         click.echo(f"{kind:8s} {p}")
 
@@ -236,7 +233,10 @@ def demo_cmd(out, particles, variants):
 
     from wirescene.io.kitti import KittiDataset
     from wirescene.eval.metrics import format_table
-    from wirescene.eval.runner import DetectionSource, evaluate_dataset, write_fit_outputs
+    from wirescene.api import fit
+    from wirescene.eval.runner import evaluate_dataset
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.io.outputs import write_fit_outputs
 
     t0 = time.perf_counter()
     dataset = KittiDataset(sample_root())
@@ -252,13 +252,10 @@ def demo_cmd(out, particles, variants):
     reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=_fit_options(particles, 0),
                                progress=_progress("demo"), on_estimate=draw)
     # Raw-pixel mode: our own pre-detection instead of label boxes, then the full model.
-    from wirescene.predetect import detect_cars
-    from wirescene.fitting.scene import fit_scene
-
     image = dataset.image(first)
-    raw = detect_cars(image)
+    estimate = fit(image, dataset.camera(first), None, variant="full", options=_fit_options(particles, 0))
+    raw = estimate.detections
     if len(raw):
-        estimate = fit_scene(dataset.camera(first), raw, variant="full", options=_fit_options(particles, 0), image=image)
         written.extend(write_fit_outputs(out / "raw-pixels", first, image=image, camera=dataset.camera(first),
                                          estimate=estimate, detections=raw, gt=dataset.labels(first).of_type("Car")).values())
     click.echo(f"raw-pixel mode on {first}: the detector bank found {len(raw)} cars "
@@ -304,31 +301,26 @@ def gt_cmd(kitti_root, frame, out, split):
     click.echo(save_figure(fig, out))
 
 
-def _register_optional_commands():
-    """Attach the sub-commands of stages that define their own CLI pieces."""
-    try:
-        from wirescene.cli.cad import cad, shape
-    except ImportError:  # stage not installed in this build
-        return
+def _register_commands():
+    """Attach the command groups that live in their own modules. Their imports are
+    plain: a broken module fails ``wirescene --help`` (and the CLI tests) loudly instead
+    of silently dropping commands."""
+    from wirescene.cli.cad import cad, shape
+    from wirescene.cli.detect import detect, detector
+    from wirescene.cli.occlusion import occlusion
+    from wirescene.cli.parts import parts
     from wirescene.cli.synth import synth
 
     main.add_command(synth)
     main.add_command(cad)
-    train = click.Group("train", help="Train the model's artefacts from documented data.")
-    train.add_command(shape)
-    from wirescene.cli.parts import parts
-    from wirescene.cli.detect import detect, detector
-
-    from wirescene.cli.occlusion import occlusion
-
-    train.add_command(parts)
-    train.add_command(detector)
-    train.add_command(occlusion)
     main.add_command(detect)
+    train = click.Group("train", help="Train the model's artefacts from documented data.")
+    for command in (shape, parts, detector, occlusion):
+        train.add_command(command)
     main.add_command(train)
 
 
-_register_optional_commands()
+_register_commands()
 
 if __name__ == "__main__":  # pragma: no cover
     main()

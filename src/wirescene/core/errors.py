@@ -23,6 +23,15 @@ class ShapeError(WiresceneError, ValueError):
     """An array does not satisfy the documented shape contract of a function."""
 
 
+class ArgumentError(WiresceneError, ValueError):
+    """An argument of the Python API (or an option of the CLI) has a wrong type, shape
+    or value; the message starts with the argument's name."""
+
+    def __init__(self, name: str, problem: str):
+        self.name = name
+        super().__init__(f"{name}: {problem}")
+
+
 def check_shape(name: str, array, shape: tuple) -> None:
     """Check ``array.shape`` against ``shape``; ``None`` entries match any size.
 

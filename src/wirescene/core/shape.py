@@ -10,7 +10,6 @@ and standard deviations ``sigma_k``, all in metres in the object frame
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 

@@ -13,9 +13,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wirescene.core.boxes import box_centers
+from wirescene.core.labels import Label, format_labels
 from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import (
     KITTI_CAMERA_HEIGHT,
+    GroundPlane,
     alpha_from_rotation_y,
     object_pose,
     rotation_y_of,
@@ -138,7 +140,35 @@ class ObjectEstimate:
 
     @property
     def rotation_y(self) -> float:
+        """Azimuth about the camera's y axis (KITTI ``rotation_y``), radians."""
         return float(rotation_y_of(self.R))
+
+    # The public names of the API (``wirescene.fit(...).cars[i].dimensions`` etc.).
+    @property
+    def dimensions(self) -> np.ndarray:
+        """(3,) box size ``h, w, l`` in metres (KITTI order)."""
+        return self.dims
+
+    @property
+    def box(self) -> np.ndarray:
+        """(4,) the pre-detection box ``x1, y1, x2, y2`` this car was fitted to."""
+        return self.box2d
+
+    @property
+    def visible(self) -> np.ndarray | None:
+        """(36,) bool: vertices neither self-occluded nor occluded (fine variants)."""
+        return self.visibility
+
+    @property
+    def cad_model(self) -> str | None:
+        """Name of the nearest CAD exemplar of the fitted shape (fine variants)."""
+        return self.exemplar
+
+    def to_label(self, type_: str = "Car") -> Label:
+        """The KITTI label row of this car (with its score; truncation and occlusion
+        are not estimated and written as -1, as KITTI detection files do)."""
+        return Label(type=type_, truncated=-1.0, occluded=-1, alpha=self.alpha, box=self.box2d, dims=self.dims,
+                     location=self.location, rotation_y=self.rotation_y, score=self.score)
 
     @property
     def alpha(self) -> float:
@@ -183,6 +213,30 @@ class SceneEstimate:
     shared_plane: bool = False
     n_particles: int = 0
     extras: dict = field(default_factory=dict)
+    # The pre-detections the scene was fitted to (viewpoints completed), one per car.
+    detections: Detections | None = None
+
+    @property
+    def cars(self) -> list[ObjectEstimate]:
+        """The estimated cars, one per pre-detection, in detection order."""
+        return sorted(self.objects, key=lambda o: o.detection_index)
+
+    @property
+    def ground_plane(self) -> GroundPlane | None:
+        """The scene's shared ground plane (``+gp`` variants), else ``None`` (every car
+        then has its own ``pitch`` / ``roll``)."""
+        if not self.shared_plane or not self.objects:
+            return None
+        o = self.objects[0]
+        return GroundPlane(pitch=o.pitch, roll=o.roll, height=self.camera_height)
+
+    def to_labels(self, type_: str = "Car") -> list[Label]:
+        """KITTI label rows of the cars (with scores)."""
+        return [o.to_label(type_) for o in self.cars]
+
+    def to_kitti(self) -> str:
+        """The text of a KITTI label file (16 columns, with scores) for these cars."""
+        return format_labels(self.to_labels())
 
     def to_dict(self) -> dict:
         return {

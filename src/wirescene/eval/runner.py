@@ -1,57 +1,34 @@
-"""Glue between the stages: run a variant over a dataset, turn estimates into KITTI
-labels and evaluation records, and write the outputs of one fit."""
+"""Fit model variants over a dataset and evaluate them with the paper's protocol:
+where each frame's pre-detections come from, the per-frame job (one call of
+:func:`wirescene.fitting.pipeline.fit_frame`), serial / process-pool / Dask
+scheduling, and resuming from the records of :mod:`wirescene.eval.records`."""
 
 from __future__ import annotations
 
 import itertools
-import json
 import sys
 import uuid
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 import numpy as np
 
-from wirescene import __version__
-from wirescene.core.artefacts import format_tag
-from wirescene.core.atomic import write_text
 from wirescene.core.camera import Camera
-from wirescene.io.kitti import FrameLabels, KittiDataset, Label, format_labels, write_labels
-from wirescene.io.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
-from wirescene.io.detections import detections_from_labels, read_detections
 from wirescene.core.errors import InputError
-from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
-from wirescene.fitting.scene import FitOptions, fit_scene
-from wirescene.infer.evidence import oracle_evidence, part_evidence, viewpoint_from_evidence
-from wirescene.lift import lift_table
-from wirescene.fitting.variants import get_variant
-from wirescene.core.shape import load_default as load_shape_model
 from wirescene.core.types import Detections, SceneEstimate
-from wirescene.io.pictures import birds_eye, overlay, save_figure
-from wirescene.core.wireframe import EDGES
+from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
+from wirescene.eval.records import FrameRecords, StaleRecord, run_config
+from wirescene.eval.sources import DetectionSource, frame_seed
+from wirescene.fitting.pipeline import FitOptions, fit_frame, needs_evidence
+from wirescene.fitting.variants import get_variant
+from wirescene.infer.evidence import oracle_evidence
+from wirescene.io.kitti import FrameLabels, KittiDataset
+from wirescene.io.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
 
 if TYPE_CHECKING:  # an optional dependency, imported where dask mode runs
     from distributed import Client
-
-
-def estimate_to_labels(estimate: SceneEstimate, *, type_: str = "Car") -> list[Label]:
-    """KITTI label rows (with score) for the objects of a scene estimate."""
-    return [
-        Label(
-            type=type_,
-            truncated=-1.0,
-            occluded=-1,
-            alpha=o.alpha,
-            box=o.box2d,
-            dims=o.dims,
-            location=o.location,
-            rotation_y=o.rotation_y,
-            score=o.score,
-        )
-        for o in estimate.objects
-    ]
 
 
 def frame_result(
@@ -88,44 +65,6 @@ def frame_result(
 
 
 @dataclass(frozen=True)
-class DetectionSource:
-    """Where pre-detections come from: ``"gt"`` (label boxes, noisy viewpoint bins),
-    ``"bank"`` (our part-configuration detector bank on the raw image) or a directory of
-    per-frame detection files (``FRAME.json``, ``.csv`` or ``.txt``)."""
-
-    spec: str = "gt"
-    viewpoint_noise_deg: float = 0.0
-
-    def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator) -> Detections:
-        if self.spec == "gt":
-            return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
-        if self.spec == "bank":
-            from wirescene.predetect import detect_cars
-
-            return detect_cars(dataset.image(frame_id))
-        folder = Path(self.spec)
-        if not folder.is_dir():
-            raise InputError("detections must be 'gt', 'bank' or a directory of per-frame files", path=folder)
-        for ext in (".json", ".csv", ".txt"):
-            path = folder / f"{frame_id}{ext}"
-            if path.is_file():
-                try:
-                    return read_detections(path)
-                except InputError as exc:
-                    if exc.problem == "no car detections in file":
-                        return Detections.empty(str(path))
-                    raise
-        return Detections.empty(str(folder))
-
-
-def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
-    """A generator that depends only on the run seed and the frame, so results do not
-    depend on the order (or the process) in which frames are processed."""
-    digits = int("".join(ch for ch in frame_id if ch.isdigit()) or 0)
-    return np.random.default_rng([seed, digits])
-
-
-@dataclass(frozen=True)
 class _FrameJob:
     """Everything a (possibly separate) process needs to fit all variants on one frame."""
 
@@ -142,135 +81,18 @@ class _FrameJob:
         vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
         detections = self.source.for_frame(dataset, frame_id, frame_seed(self.options.seed, frame_id))
         camera = dataset.camera(frame_id)
-        unknown_viewpoint = not np.all(np.isfinite(detections.alpha))
-        frame_evidence = None
-        if (unknown_viewpoint or any(get_variant(v).fine for v in self.variants)) and len(detections):
+        image = evidence = None
+        if needs_evidence(detections, self.variants):
             if self.evidence == "oracle":
                 if vertex_gt is None:
                     raise InputError("oracle evidence needs wireframes/ ground truth (synthetic scenes)", path=gt_path)
-                frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
+                evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
             else:
-                frame_evidence = part_evidence(dataset.image(frame_id), detections)
-        if unknown_viewpoint and frame_evidence is not None:
-            detections = viewpoint_from_evidence(camera, detections, frame_evidence, load_shape_model())
-        lifted = lift_table(camera, detections, options=self.options.lifting) if len(detections) else None
-        fits = {}
-        for v in self.variants:
-            estimate = fit_scene(camera, detections, variant=v, options=self.options, lifted=lifted, evidence=frame_evidence)
-            fits[v] = (estimate, frame_result(frame_id, gt, detections, estimate, vertex_gt, camera))
-        return frame_id, camera, detections, gt, fits
-
-
-#: Where :func:`evaluate_dataset` keeps the record of each finished frame, under the
-#: predictions directory (hidden, so KITTI tools that list ``VARIANT/*.txt`` ignore it).
-RECORDS_DIR = ".frames"
-_RECORD_FORMAT = format_tag("frame-record", 1)
-
-
-def run_config(
-    dataset: KittiDataset, variants: Iterable[str], source: DetectionSource, options: FitOptions, evidence: str
-) -> dict:
-    """Everything that determines a frame's fits, as stored in its resume record.
-
-    Two runs with equal configurations give equal per-frame results (every frame draws
-    its random numbers from the seed and its id alone), so a record is reused only when
-    its configuration equals the current one. The package version stands in for the
-    code; the content of a detections directory is not included.
-    """
-    spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
-    config = {
-        "wirescene": __version__,
-        "dataset": str(Path(dataset.split_dir).resolve()),
-        # Per-variant fits do not depend on the order of the variants (fit_scene seeds
-        # itself per call), but the set decides whether part evidence is computed.
-        "variants": sorted(variants),
-        "detections": {"spec": spec, "viewpoint_noise_deg": float(source.viewpoint_noise_deg)},
-        "evidence": evidence,
-        "options": asdict(options),
-    }
-    # Normalised through JSON (tuples become lists; anything else JSON cannot hold, as
-    # its str) so that it compares equal to a stored one.
-    return json.loads(json.dumps(config, default=str))
-
-
-def _config_difference(stored, current, prefix: str = "") -> list[str]:
-    """Dotted names of the settings in which two configurations differ."""
-    if isinstance(stored, dict) and isinstance(current, dict):
-        out = []
-        for key in sorted(set(stored) | set(current), key=str):
-            out += _config_difference(stored.get(key), current.get(key), f"{prefix}{key}.")
-        return out
-    return [] if stored == current else [prefix.rstrip(".")]
-
-
-class _StaleRecord(Exception):
-    """A frame record that cannot be reused (the message says why)."""
-
-
-class _FrameRecords:
-    """The resume records of one predictions directory: ``DIR/.frames/FRAME.json`` holds
-    the configuration and, per variant, the frame's :class:`FrameResult` and its KITTI
-    label text. A record is written (atomically) only after the frame's label files, so
-    its presence means the frame is complete."""
-
-    def __init__(self, predictions_dir: Path, config: dict):
-        self.root = Path(predictions_dir)
-        self.config = config
-
-    def path(self, frame_id: str) -> Path:
-        return self.root / RECORDS_DIR / f"{frame_id}.json"
-
-    def labels_path(self, variant: str, frame_id: str) -> Path:
-        return self.root / variant / f"{frame_id}.txt"
-
-    def save(self, frame_id: str, fits: dict[str, tuple[str, FrameResult]]) -> None:
-        """Write the label files of every variant, then the record."""
-        for v, (labels, _) in fits.items():
-            write_text(self.labels_path(v, frame_id), labels)
-        record = {
-            "format": _RECORD_FORMAT,
-            "frame": frame_id,
-            "config": self.config,
-            "variants": {v: {"labels": labels, "result": result.to_dict()} for v, (labels, result) in fits.items()},
-        }
-        write_text(self.path(frame_id), json.dumps(record))
-
-    def load(self, frame_id: str) -> dict[str, tuple[str, FrameResult]] | None:
-        """The frame's label text and result per variant; ``None`` without a record.
-
-        Raises
-        ------
-        _StaleRecord
-            If the record is unreadable, of another frame or format, or was written with
-            a different configuration.
-        """
-        path = self.path(frame_id)
-        if not path.is_file():
-            return None
-        try:
-            record = json.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise _StaleRecord(f"unreadable ({exc.__class__.__name__})") from None
-        if not isinstance(record, dict) or record.get("format") != _RECORD_FORMAT or record.get("frame") != frame_id:
-            raise _StaleRecord("not a record of this frame")
-        if record.get("config") != self.config:
-            changed = _config_difference(record.get("config"), self.config)
-            raise _StaleRecord(f"written with a different configuration ({', '.join(changed) or 'config'})")
-        try:
-            variants = record["variants"]
-            fits = {v: (str(variants[v]["labels"]), FrameResult.from_dict(variants[v]["result"]))
-                    for v in self.config["variants"]}
-        except (KeyError, TypeError, ValueError) as exc:
-            raise _StaleRecord(f"malformed ({' '.join(str(exc).split())})") from None
-        return fits
-
-    def restore_labels(self, frame_id: str, fits: dict[str, tuple[str, FrameResult]]) -> None:
-        """Rewrite label files of a reused frame that have gone missing since."""
-        for v, (labels, _) in fits.items():
-            path = self.labels_path(v, frame_id)
-            if not path.is_file():
-                write_text(path, labels)
-
+                image = dataset.image(frame_id)
+        fitted = fit_frame(camera, detections, self.variants, image=image, evidence=evidence, options=self.options)
+        fits = {v: (estimate, frame_result(frame_id, gt, fitted.detections, estimate, vertex_gt, camera))
+                for v, estimate in fitted.estimates.items()}
+        return frame_id, camera, fitted.detections, gt, fits
 
 def _fit_frames(
     job: _FrameJob, frame_ids: list[str], *, workers: int, dask_client: str | Client | None, stack: ExitStack
@@ -326,8 +148,8 @@ def evaluate_dataset(
     variants: Iterable[str],
     *,
     frames: Iterable[str] | None = None,
-    source: DetectionSource = DetectionSource(),
-    options: FitOptions = FitOptions(),
+    source: DetectionSource | None = None,
+    options: FitOptions | None = None,
     predictions_dir: Path | None = None,
     resume: bool = False,
     evidence: str = "parts",
@@ -388,6 +210,8 @@ def evaluate_dataset(
         frame id) alone and the reports list frames in the order of ``frames``, so
         serial, process, Dask and resumed runs give identical reports.
     """
+    source = DetectionSource() if source is None else source
+    options = FitOptions() if options is None else options
     if evidence not in ("parts", "oracle"):
         raise ValueError(f"evidence must be 'parts' or 'oracle', got {evidence!r}")
     if resume and predictions_dir is None:
@@ -401,7 +225,7 @@ def evaluate_dataset(
     job = _FrameJob(dataset, tuple(variants), source, options, evidence)
     records = None
     if predictions_dir is not None:
-        records = _FrameRecords(Path(predictions_dir), run_config(dataset, variants, source, options, evidence))
+        records = FrameRecords(Path(predictions_dir), run_config(dataset, variants, source, options, evidence))
     by_frame: dict[str, dict[str, FrameResult]] = {}
     reused: dict[str, dict[str, tuple[str, FrameResult]]] = {}
     if resume:
@@ -409,7 +233,7 @@ def evaluate_dataset(
         for frame_id in frame_ids:
             try:
                 fits = records.load(frame_id)
-            except _StaleRecord as exc:
+            except StaleRecord as exc:
                 stale.append((records.path(frame_id), str(exc)))
                 continue
             if fits is not None:
@@ -436,7 +260,7 @@ def evaluate_dataset(
                 for v, (estimate, _) in fits.items():
                     on_estimate(frame_id, v, estimate, camera, detections, gt)
             if records is not None:
-                labels = {v: format_labels(estimate_to_labels(estimate)) for v, (estimate, _) in fits.items()}
+                labels = {v: estimate.to_kitti() for v, (estimate, _) in fits.items()}
                 records.save(frame_id, {v: (labels[v], result) for v, (_, result) in fits.items()})
     # Frames finish in any order; the reports list them in the given order.
     return {v: evaluate([by_frame[f][v] for f in frame_ids]) for v in variants}
@@ -444,44 +268,3 @@ def evaluate_dataset(
 
 def _notify_stderr(message: str) -> None:
     print(f"wirescene: {message}", file=sys.stderr)
-
-
-def write_fit_outputs(
-    out_dir: Path,
-    stem: str,
-    *,
-    image: np.ndarray,
-    camera: Camera,
-    estimate: SceneEstimate,
-    detections: Detections,
-    gt: list[Label] = (),
-) -> dict[str, Path]:
-    """Write ``STEM.txt`` (KITTI labels), ``STEM.json``, ``STEM_overlay.png`` and
-    ``STEM_bev.png``. Everything is rendered in memory first; if any write fails the
-    files already written by this call are removed, so no partial result remains."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
-    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=detections, title=f"{stem}  {estimate.variant}", edges=EDGES)
-    fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=f"{stem}  {estimate.variant}")
-    paths = {
-        "labels": out_dir / f"{stem}.txt",
-        "json": out_dir / f"{stem}.json",
-        "overlay": out_dir / f"{stem}_overlay.png",
-        "bev": out_dir / f"{stem}_bev.png",
-    }
-    written: list[Path] = []
-    try:
-        write_labels(paths["labels"], estimate_to_labels(estimate))
-        written.append(paths["labels"])
-        write_text(paths["json"], payload)
-        written.append(paths["json"])
-        save_figure(fig_overlay, paths["overlay"])
-        written.append(paths["overlay"])
-        save_figure(fig_bev, paths["bev"])
-        written.append(paths["bev"])
-    except BaseException:
-        for p in written:
-            p.unlink(missing_ok=True)
-        raise
-    return paths

@@ -248,7 +248,7 @@ def refine_particles(
     evidence: PartEvidence,
     shape_model: ShapeModel,
     *,
-    options: InferenceOptions = InferenceOptions(),
+    options: InferenceOptions | None = None,
     rng: np.random.Generator | None = None,
     boxes: np.ndarray | None = None,
     searched_occluder: bool = False,
@@ -268,6 +268,7 @@ def refine_particles(
         The ``+so`` and ``+do`` switches (see :func:`update_occlusion`). Masks start
         empty (``a0``) and are updated after every sampling step.
     """
+    options = InferenceOptions() if options is None else options
     rng = np.random.default_rng(0) if rng is None else rng
     P, N = particles.x.shape
     K = options.n_shape

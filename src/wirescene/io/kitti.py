@@ -13,103 +13,26 @@ kept apart from the objects, since every evaluation ignores them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from wirescene.core.boxes import box_centers
 from wirescene.core.camera import Camera, KittiCalib, read_kitti_calib
 from wirescene.core.atomic import write_text
 from wirescene.core.errors import InputError
-from wirescene.core.groundplane import rotation_y as _rotation_y_matrix
-
-CAR_TYPES = ("Car",)
-DONTCARE = "DontCare"
-
-_COLUMNS = (
-    "type", "truncated", "occluded", "alpha", "x1", "y1", "x2", "y2",
-    "h", "w", "l", "x", "y", "z", "rotation_y", "score",
+from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label types live in core)
+    COLUMNS,
+    CAR_TYPES,
+    DONTCARE,
+    FrameLabels,
+    Label,
+    car_indices,
+    format_label,
+    format_labels,
+    select_cars,
 )
-
-
-@dataclass
-class Label:
-    """One object of a KITTI label file.
-
-    Attributes
-    ----------
-    type : str
-        Object class (``Car``, ``Van``, ``Pedestrian``, ``DontCare``, ...).
-    truncated : float
-        Fraction of the object outside the image, 0..1 (-1 for DontCare).
-    occluded : int
-        0 fully visible, 1 partly occluded, 2 largely occluded, 3 unknown (-1 DontCare).
-    alpha : float
-        Observation angle in radians, ``[-pi, pi]``.
-    box : (4,) array
-        2D box ``x1 y1 x2 y2`` in pixels.
-    dims : (3,) array
-        3D size ``h w l`` in metres.
-    location : (3,) array
-        Bottom centre of the 3D box in the camera frame, metres.
-    rotation_y : float
-        Azimuth about the camera y axis, radians.
-    score : float or None
-        Detection confidence (16th column); ``None`` for ground truth.
-    """
-
-    type: str
-    truncated: float
-    occluded: int
-    alpha: float
-    box: np.ndarray
-    dims: np.ndarray
-    location: np.ndarray
-    rotation_y: float
-    score: float | None = None
-
-    def __post_init__(self):
-        self.box = np.asarray(self.box, dtype=float).reshape(4)
-        self.dims = np.asarray(self.dims, dtype=float).reshape(3)
-        self.location = np.asarray(self.location, dtype=float).reshape(3)
-        self.truncated = float(self.truncated)
-        self.occluded = int(self.occluded)
-        self.alpha = float(self.alpha)
-        self.rotation_y = float(self.rotation_y)
-        self.score = None if self.score is None else float(self.score)
-
-    @property
-    def centroid(self) -> np.ndarray:
-        """(3,) centre of the 3D box: the bottom centre raised by ``h / 2`` (level box)."""
-        return box_centers(self.dims, self.location, _rotation_y_matrix(self.rotation_y))
-
-    @property
-    def height_px(self) -> float:
-        """Height of the 2D box in pixels."""
-        return float(self.box[3] - self.box[1])
-
-    @property
-    def is_dontcare(self) -> bool:
-        return self.type == DONTCARE
-
-
-@dataclass
-class FrameLabels:
-    """The labels of one frame: real objects, and DontCare regions kept apart."""
-
-    objects: list[Label] = field(default_factory=list)
-    dontcare: list[Label] = field(default_factory=list)
-
-    def __len__(self) -> int:
-        return len(self.objects)
-
-    def of_type(self, *types: str) -> list[Label]:
-        """Objects whose type is one of ``types``."""
-        return [o for o in self.objects if o.type in types]
-
 
 # --------------------------------------------------------------------------- labels
 
@@ -126,10 +49,10 @@ def _parse_label_line(tokens: list[str], lineno: int, path: Path) -> Label:
             v = float(tok)
         except ValueError:
             raise InputError(
-                f"line {lineno}: column {col + 1} ({_COLUMNS[col]}) is not a number: {tok!r}", path=path
+                f"line {lineno}: column {col + 1} ({COLUMNS[col]}) is not a number: {tok!r}", path=path
             ) from None
         if not np.isfinite(v):
-            raise InputError(f"line {lineno}: column {col + 1} ({_COLUMNS[col]}) is not finite: {tok!r}", path=path)
+            raise InputError(f"line {lineno}: column {col + 1} ({COLUMNS[col]}) is not finite: {tok!r}", path=path)
         values.append(v)
     occluded = values[1]
     if occluded != int(occluded):
@@ -176,36 +99,6 @@ def read_labels(path: str | Path) -> FrameLabels:
     return out
 
 
-def format_label(label: Label, *, with_score: bool = True) -> str:
-    """One KITTI label line (no newline).
-
-    Precision: ``truncated`` and the 2D box use 2 decimals as the KITTI devkit does;
-    dimensions, location and both angles use 6 decimals (the devkit's 2 decimals would
-    lose up to 0.3 deg of azimuth and 5 mm of position, which matters for the 5 deg /
-    1 m metrics of the paper); the score is written with 6 significant digits. KITTI's
-    own readers parse any of these with ``%f``. ``with_score`` writes the 16th column
-    (a label without a score gets 0).
-    """
-    numbers = [label.alpha, *label.box, *label.dims, *label.location, label.rotation_y]
-    if not np.all(np.isfinite([label.truncated, *numbers])):
-        raise ValueError(f"label of type {label.type!r} has non-finite values; KITTI files cannot hold them")
-    if not label.type or any(c.isspace() for c in label.type):
-        raise ValueError(f"object type {label.type!r} must be one word")
-    parts = [
-        label.type,
-        f"{label.truncated:.2f}",
-        f"{int(label.occluded):d}",
-        f"{label.alpha:.6f}",
-        *(f"{v:.2f}" for v in label.box),
-        *(f"{v:.6f}" for v in label.dims),
-        *(f"{v:.6f}" for v in label.location),
-        f"{label.rotation_y:.6f}",
-    ]
-    if with_score:
-        parts.append(f"{0.0 if label.score is None else label.score:.6g}")
-    return " ".join(parts)
-
-
 def write_labels(
     path: str | Path, labels: FrameLabels | Iterable[Label], *, with_score: bool = True
 ) -> None:
@@ -217,41 +110,6 @@ def write_labels(
     See :func:`format_label` for the number formats.
     """
     write_text(Path(path), format_labels(labels, with_score=with_score))  # formatting fails before touching disk
-
-
-def format_labels(labels: FrameLabels | Iterable[Label], *, with_score: bool = True) -> str:
-    """The text of a KITTI label file (see :func:`write_labels`)."""
-    items = list(labels.objects) + list(labels.dontcare) if isinstance(labels, FrameLabels) else list(labels)
-    return "".join(format_label(lab, with_score=with_score) + "\n" for lab in items)
-
-
-def car_indices(
-    labels: FrameLabels | Sequence[Label],
-    *,
-    types: Sequence[str] = CAR_TYPES,
-    min_height: float = 0.0,
-    max_truncated: float = 1.0,
-    max_occluded: int = 3,
-) -> list[int]:
-    """Indices (into ``labels.objects`` or the list) of the evaluation cars.
-
-    Defaults select every ``Car`` (the paper annotates all cars of its test frames);
-    ``min_height`` (pixels), ``max_truncated`` and ``max_occluded`` (KITTI flag) give
-    KITTI-style difficulty filters, e.g. the paper's pre-detection protocol uses cars
-    taller than 50 px.
-    """
-    objects = labels.objects if isinstance(labels, FrameLabels) else list(labels)
-    return [
-        i
-        for i, o in enumerate(objects)
-        if o.type in types and o.height_px >= min_height and o.truncated <= max_truncated and o.occluded <= max_occluded
-    ]
-
-
-def select_cars(labels: FrameLabels | Sequence[Label], **filters) -> list[Label]:
-    """The evaluation cars themselves; see :func:`car_indices` for the filters."""
-    objects = labels.objects if isinstance(labels, FrameLabels) else list(labels)
-    return [objects[i] for i in car_indices(objects, **filters)]
 
 
 # --------------------------------------------------------------------------- images

@@ -45,6 +45,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from wirescene.core.errors import ShapeError
+from wirescene.core.image import to_grey
 
 __all__ = [
     "CANONICAL_HEIGHT", "RADIUS", "PATCH", "SC_RING_EDGES", "SC_N_ANGLES", "KINDS",
@@ -147,14 +148,7 @@ def image_edges(image, *, sigma: float = 1.0, low: float = 0.05, high: float = 0
     """
     from skimage.feature import canny
 
-    img = np.asarray(image)
-    if img.ndim == 3:
-        img = img[..., :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
-    elif img.ndim != 2:
-        raise ShapeError(f"image must be (H, W) or (H, W, 3), got {img.shape}")
-    img = img.astype(np.float32)
-    if img.size and img.max() > 1.5:
-        img = img / 255.0
+    img = to_grey(image)
     return canny(img, sigma=sigma, low_threshold=low, high_threshold=high, mode="nearest")
 
 
@@ -223,17 +217,8 @@ def _hog(patches: np.ndarray) -> np.ndarray:
 
 
 def image_grey(image) -> np.ndarray:
-    """Grey ``(H, W)`` float32 in [0, 1] of an RGB ``(H, W, 3)`` or grey image."""
-    img = np.asarray(image)
-    integer = np.issubdtype(img.dtype, np.integer)
-    if img.ndim == 3:
-        img = img[..., :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
-    elif img.ndim != 2:
-        raise ShapeError(f"image must be (H, W) or (H, W, 3), got {img.shape}")
-    img = img.astype(np.float32)
-    if integer or (img.size and img.max() > 1.5):
-        img = img / np.float32(255.0)
-    return img
+    """Grey ``(H, W)`` float32 in [0, 1] (:func:`wirescene.core.image.to_grey`)."""
+    return to_grey(image)
 
 
 def canonical_grey(grey, z: float) -> np.ndarray:

@@ -10,6 +10,8 @@ image, no Python loops over pixels.
 from __future__ import annotations
 
 import numpy as np
+
+from wirescene.core.image import to_grey
 from PIL import Image
 
 CELL = 8
@@ -18,12 +20,8 @@ _N_ORIENT = 18
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
-    """(H, W) float32 luminance in [0, 1] from a (H, W, 3) uint8 or (H, W) image."""
-    im = np.asarray(image)
-    if im.ndim == 3:
-        im = im[..., :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
-    im = im.astype(np.float32)
-    return im / 255.0 if np.asarray(image).dtype == np.uint8 else im
+    """(H, W) float32 luminance in [0, 1] (:func:`wirescene.core.image.to_grey`)."""
+    return to_grey(image)
 
 
 def hog_cells(gray: np.ndarray, cell: int = CELL) -> np.ndarray:

@@ -1,0 +1,58 @@
+"""Image arrays: one conversion to RGB uint8 and one to grey, used by every stage.
+
+Integer images are scaled by their type's range (uint8 /255, uint16 /65535: a 16-bit
+PNG is not all white); float images are taken as [0, 1] when their maximum is at most
+1, else as [0, 255].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wirescene.core.errors import ShapeError
+
+_LUMA = np.array([0.299, 0.587, 0.114], np.float32)
+
+
+def _unit_scale(img: np.ndarray) -> np.ndarray:
+    """``img`` as float32 scaled to [0, 1] by its dtype's range."""
+    if img.dtype == bool:
+        return img.astype(np.float32)
+    if np.issubdtype(img.dtype, np.integer):
+        top = 255.0 if img.dtype.itemsize == 1 else float(np.iinfo(img.dtype).max)
+        if img.dtype.itemsize > 2 and (img.size == 0 or img.max() <= 255):
+            top = 255.0  # int32/int64 arrays holding 8-bit values (e.g. from arithmetic)
+        return img.astype(np.float32) / np.float32(top)
+    if not np.issubdtype(img.dtype, np.floating):
+        raise ShapeError(f"image must have a numeric dtype, got {img.dtype}")
+    img = img.astype(np.float32)
+    if img.size and not np.all(np.isfinite(img)):
+        raise ShapeError("image has non-finite values")
+    if img.size and img.max() > 1.0 + 1e-6:
+        img = img / np.float32(255.0)
+    return img
+
+
+def _channels(img: np.ndarray) -> np.ndarray:
+    if img.ndim == 2:
+        return img[..., None]
+    if img.ndim == 3 and img.shape[-1] in (1, 3, 4):
+        return img if img.shape[-1] != 4 else img[..., :3]  # alpha dropped
+    raise ShapeError(f"image must be (H, W), (H, W, 1), (H, W, 3) or (H, W, 4), got {img.shape}")
+
+
+def to_grey(image) -> np.ndarray:
+    """Grey ``(H, W)`` float32 in [0, 1] (ITU-R 601 luma of RGB)."""
+    img = _channels(np.asarray(image))
+    unit = _unit_scale(img)
+    return unit[..., 0] if unit.shape[-1] == 1 else unit @ _LUMA
+
+
+def to_rgb_uint8(image) -> np.ndarray:
+    """``(H, W, 3)`` uint8 RGB of any supported image array (grey is replicated)."""
+    img = np.asarray(image)
+    if img.dtype == np.uint8 and img.ndim == 3 and img.shape[-1] == 3:
+        return img
+    unit = _unit_scale(_channels(img))
+    rgb = np.broadcast_to(unit, unit.shape[:2] + (3,))
+    return np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8)

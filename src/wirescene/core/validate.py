@@ -1,0 +1,70 @@
+"""Checks of values that cross a boundary (files, CLI options, API arguments), written
+once: each returns the problem as a short phrase, or None, and the caller names the
+file, option or argument it came from (``InputError`` with a path, ``ArgumentError``
+with a name, a click ``BadParameter``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Focal lengths outside this range (pixels) are not a street camera: KITTI's is ~720.
+FOCAL_RANGE = (10.0, 1e5)
+
+
+def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | None:
+    """What is wrong with a 3x4 projection matrix as a street camera, if anything.
+
+    It must be finite, with an upper-triangular intrinsic part ``K`` (the camera frame
+    is the rectified frame: no rotation), positive ``K[2, 2]``, focal lengths in
+    :data:`FOCAL_RANGE` and, when the image size is known, a principal point within
+    the image widened by half its size on each side.
+    """
+    P = np.asarray(P)
+    if P.shape != (3, 4):
+        return f"projection matrix must be 3x4, got shape {P.shape}"
+    if not np.issubdtype(P.dtype, np.number) or not np.all(np.isfinite(P.astype(float))):
+        return "projection matrix has non-finite values"
+    P = P.astype(float)
+    K = P[:, :3]
+    if K[2, 2] <= 0 or np.any(np.abs(K[[1, 2, 2], [0, 0, 1]]) > 1e-9 * max(abs(K[2, 2]), 1.0)):
+        return "projection matrix is not a rectified pinhole camera (K must be upper triangular with K[2,2] > 0)"
+    K = K / K[2, 2]
+    fx, fy = K[0, 0], K[1, 1]
+    lo, hi = FOCAL_RANGE
+    if not (lo <= fx <= hi and lo <= fy <= hi):
+        return f"implausible focal length (fx={fx:g}, fy={fy:g} px; expected {lo:g}..{hi:g})"
+    if image_size is not None:
+        w, h = image_size
+        cx, cy = K[0, 2], K[1, 2]
+        if not (-0.5 * w <= cx <= 1.5 * w and -0.5 * h <= cy <= 1.5 * h):
+            return f"principal point ({cx:g}, {cy:g}) is far outside the {w}x{h} image"
+    return None
+
+
+def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | None:
+    """What is wrong with 2D boxes ``(N, 4)`` ``x1 y1 x2 y2``, if anything: finite,
+    ``x1 < x2`` and ``y1 < y2``, and (with the image size) overlapping the image and
+    within ten image sizes of it."""
+    b = np.asarray(boxes)
+    if b.ndim != 2 or b.shape[1] != 4:
+        return f"boxes must have shape (N, 4), got {b.shape}"
+    if not np.issubdtype(b.dtype, np.number):
+        return f"boxes must be numbers, got dtype {b.dtype}"
+    b = b.astype(float)
+    bad = ~np.all(np.isfinite(b), axis=1)
+    if bad.any():
+        return f"box {int(np.flatnonzero(bad)[0])} has non-finite coordinates"
+    bad = (b[:, 2] <= b[:, 0]) | (b[:, 3] <= b[:, 1])
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        return f"box {i} is empty or inverted (x1 y1 x2 y2 = {' '.join(f'{v:g}' for v in b[i])})"
+    if image_size is not None and len(b):
+        w, h = image_size
+        outside = (b[:, 2] <= 0) | (b[:, 0] >= w) | (b[:, 3] <= 0) | (b[:, 1] >= h)
+        if outside.any():
+            i = int(np.flatnonzero(outside)[0])
+            return f"box {i} lies entirely outside the {w}x{h} image"
+        huge = np.any(np.abs(b) > 10 * max(w, h), axis=1)
+        if huge.any():
+            return f"box {int(np.flatnonzero(huge)[0])} extends absurdly far beyond the {w}x{h} image"
+    return None

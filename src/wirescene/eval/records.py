@@ -1,0 +1,130 @@
+"""Resume records of an evaluation run: one JSON file per finished frame under the
+predictions directory, holding the run's configuration and each variant's result."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING, Iterable
+
+from wirescene import __version__
+from wirescene.core.artefacts import format_tag
+from wirescene.core.atomic import write_text
+from wirescene.eval.metrics import FrameResult
+from wirescene.io.kitti import KittiDataset
+
+if TYPE_CHECKING:
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.fitting.pipeline import FitOptions
+
+
+#: Where :func:`evaluate_dataset` keeps the record of each finished frame, under the
+#: predictions directory (hidden, so KITTI tools that list ``VARIANT/*.txt`` ignore it).
+RECORDS_DIR = ".frames"
+RECORD_FORMAT = format_tag("frame-record", 1)
+
+
+def run_config(
+    dataset: KittiDataset, variants: Iterable[str], source: DetectionSource, options: FitOptions, evidence: str
+) -> dict:
+    """Everything that determines a frame's fits, as stored in its resume record.
+
+    Two runs with equal configurations give equal per-frame results (every frame draws
+    its random numbers from the seed and its id alone), so a record is reused only when
+    its configuration equals the current one. The package version stands in for the
+    code; the content of a detections directory is not included.
+    """
+    spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
+    config = {
+        "wirescene": __version__,
+        "dataset": str(Path(dataset.split_dir).resolve()),
+        # Per-variant fits do not depend on the order of the variants (fit_scene seeds
+        # itself per call), but the set decides whether part evidence is computed.
+        "variants": sorted(variants),
+        "detections": {"spec": spec, "viewpoint_noise_deg": float(source.viewpoint_noise_deg)},
+        "evidence": evidence,
+        "options": asdict(options),
+    }
+    # Normalised through JSON (tuples become lists; anything else JSON cannot hold, as
+    # its str) so that it compares equal to a stored one.
+    return json.loads(json.dumps(config, default=str))
+
+
+def _config_difference(stored, current, prefix: str = "") -> list[str]:
+    """Dotted names of the settings in which two configurations differ."""
+    if isinstance(stored, dict) and isinstance(current, dict):
+        out = []
+        for key in sorted(set(stored) | set(current), key=str):
+            out += _config_difference(stored.get(key), current.get(key), f"{prefix}{key}.")
+        return out
+    return [] if stored == current else [prefix.rstrip(".")]
+
+
+class StaleRecord(Exception):
+    """A frame record that cannot be reused (the message says why)."""
+
+
+class FrameRecords:
+    """The resume records of one predictions directory: ``DIR/.frames/FRAME.json`` holds
+    the configuration and, per variant, the frame's :class:`FrameResult` and its KITTI
+    label text. A record is written (atomically) only after the frame's label files, so
+    its presence means the frame is complete."""
+
+    def __init__(self, predictions_dir: Path, config: dict):
+        self.root = Path(predictions_dir)
+        self.config = config
+
+    def path(self, frame_id: str) -> Path:
+        return self.root / RECORDS_DIR / f"{frame_id}.json"
+
+    def labels_path(self, variant: str, frame_id: str) -> Path:
+        return self.root / variant / f"{frame_id}.txt"
+
+    def save(self, frame_id: str, fits: dict[str, tuple[str, FrameResult]]) -> None:
+        """Write the label files of every variant, then the record."""
+        for v, (labels, _) in fits.items():
+            write_text(self.labels_path(v, frame_id), labels)
+        record = {
+            "format": RECORD_FORMAT,
+            "frame": frame_id,
+            "config": self.config,
+            "variants": {v: {"labels": labels, "result": result.to_dict()} for v, (labels, result) in fits.items()},
+        }
+        write_text(self.path(frame_id), json.dumps(record))
+
+    def load(self, frame_id: str) -> dict[str, tuple[str, FrameResult]] | None:
+        """The frame's label text and result per variant; ``None`` without a record.
+
+        Raises
+        ------
+        StaleRecord
+            If the record is unreadable, of another frame or format, or was written with
+            a different configuration.
+        """
+        path = self.path(frame_id)
+        if not path.is_file():
+            return None
+        try:
+            record = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise StaleRecord(f"unreadable ({exc.__class__.__name__})") from None
+        if not isinstance(record, dict) or record.get("format") != RECORD_FORMAT or record.get("frame") != frame_id:
+            raise StaleRecord("not a record of this frame")
+        if record.get("config") != self.config:
+            changed = _config_difference(record.get("config"), self.config)
+            raise StaleRecord(f"written with a different configuration ({', '.join(changed) or 'config'})")
+        try:
+            variants = record["variants"]
+            fits = {v: (str(variants[v]["labels"]), FrameResult.from_dict(variants[v]["result"]))
+                    for v in self.config["variants"]}
+        except (KeyError, TypeError, ValueError) as exc:
+            raise StaleRecord(f"malformed ({' '.join(str(exc).split())})") from None
+        return fits
+
+    def restore_labels(self, frame_id: str, fits: dict[str, tuple[str, FrameResult]]) -> None:
+        """Rewrite label files of a reused frame that have gone missing since."""
+        for v, (labels, _) in fits.items():
+            path = self.labels_path(v, frame_id)
+            if not path.is_file():
+                write_text(path, labels)

@@ -1,0 +1,167 @@
+"""The per-frame pipeline, written once: detect -> parts -> lift -> infer -> estimate.
+
+:func:`fit_frame` is the only place where the stages are composed. The Python API
+(:func:`wirescene.fit`), ``wirescene fit``, ``wirescene demo`` and ``wirescene eval``
+(every frame, in any process) all call it, so they cannot drift apart. It does no file
+I/O: inputs are arrays and typed objects, outputs a :class:`FrameFit`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable
+
+import numpy as np
+
+from wirescene.core.camera import Camera
+from wirescene.core.shape import load_default as load_shape_model
+from wirescene.core.types import Detections, SceneEstimate
+from wirescene.fitting.variants import Variant, get_variant
+from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
+from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
+from wirescene.infer.likelihood import PartEvidence
+from wirescene.lift import LiftingOptions, LiftingTable, lift_table, select_particles
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Options of every stage of :func:`fit_frame`, with the run's seed."""
+
+    lifting: LiftingOptions = field(default_factory=LiftingOptions)
+    inference: InferenceOptions = field(default_factory=InferenceOptions)
+    seed: int = 0
+
+
+@dataclass
+class FrameFit:
+    """What :func:`fit_frame` produced for one image.
+
+    Attributes
+    ----------
+    detections : Detections
+        The pre-detections the variants were fitted to, with unknown viewpoints
+        completed from the part evidence.
+    estimates : dict of str to SceneEstimate
+        One estimate per requested variant, in the requested order.
+    evidence : PartEvidence or None
+        The part evidence the fine variants used (None if no variant needed it).
+    """
+
+    detections: Detections
+    estimates: dict[str, SceneEstimate]
+    evidence: PartEvidence | None = None
+
+
+def _variant(v: str | Variant) -> Variant:
+    return get_variant(v) if isinstance(v, str) else v
+
+
+def needs_evidence(detections: Detections, variants: Iterable[str | Variant]) -> bool:
+    """Whether :func:`fit_frame` needs part evidence (hence the image) for these
+    detections: a fine variant, or a detection without a viewpoint."""
+    if len(detections) == 0:
+        return False
+    return any(_variant(v).fine for v in variants) or not np.all(np.isfinite(detections.alpha))
+
+
+def fit_frame(
+    camera: Camera,
+    detections: Detections | None,
+    variants: Iterable[str | Variant],
+    *,
+    image: np.ndarray | None = None,
+    evidence: PartEvidence | None = None,
+    options: FitOptions | None = None,
+    lifted: LiftingTable | None = None,
+) -> FrameFit:
+    """Fit model variants to one image.
+
+    Parameters
+    ----------
+    camera : Camera
+        Calibrated camera with ``image_size`` set.
+    detections : Detections or None
+        2D pre-detections; ``None`` runs our own pre-detection on ``image`` (stage 1).
+    variants : iterable of str or Variant
+        See :data:`wirescene.fitting.variants.VARIANTS`.
+    image : (H, W, 3) uint8 array, optional
+        Needed for pre-detection and for the part evidence, unless ``evidence`` is given.
+    evidence : PartEvidence, optional
+        Per-vertex evidence to use instead of the part detectors' response maps
+        (e.g. the oracle evidence of synthetic scenes).
+    options : FitOptions, optional
+        Options of every stage; default ``FitOptions()``.
+    lifted : LiftingTable, optional
+        The coarse lifting of ``detections`` if already computed (benchmarks time the
+        stages apart); it must belong to these detections with known viewpoints.
+
+    Returns
+    -------
+    FrameFit
+        The estimates per variant; every variant starts from the same detections and
+        the same coarse lifting, which does not depend on the variant.
+    """
+    options = FitOptions() if options is None else options
+    variants = [_variant(v) for v in variants]
+    if detections is None:
+        if image is None:
+            raise ValueError("image is needed to detect the cars (or pass detections)")
+        from wirescene.predetect import detect_cars
+
+        detections = detect_cars(image)
+    if len(detections) == 0:
+        return FrameFit(detections, {v.name: SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane,
+                                                           detections=detections) for v in variants})
+    unknown_viewpoint = not np.all(np.isfinite(detections.alpha))
+    if evidence is None and needs_evidence(detections, variants):
+        if image is None:
+            raise ValueError("image is needed for the part evidence of fine variants and unknown viewpoints")
+        evidence = part_evidence(image, detections)
+    if unknown_viewpoint:
+        # Boxes without a viewpoint (external detectors): take it from the part evidence,
+        # for every variant, so that all variants start from the same pre-detections.
+        detections = viewpoint_from_evidence(camera, detections, evidence, load_shape_model())
+    if lifted is None:
+        lifted = lift_table(camera, detections, options=options.lifting)
+    estimates = {v.name: _fit_variant(camera, detections, v, lifted, evidence, options) for v in variants}
+    for estimate in estimates.values():
+        estimate.detections = detections
+    return FrameFit(detections, estimates, evidence)
+
+
+def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: LiftingTable,
+                 evidence: PartEvidence | None, options: FitOptions) -> SceneEstimate:
+    """Stages 4-5 for one variant: scene particles from the lifting table, then (fine
+    variants) Algorithm 1 on every particle and the MAP scene."""
+    particles = select_particles(
+        lifted, shared_plane=v.shared_plane, n_particles=options.lifting.n_particles,
+        robust_cost=options.lifting.robust_cost,
+    )
+    if not v.fine:
+        best = int(np.argmin(particles.cost))
+        return SceneEstimate.from_particle(particles, best, detections, variant=v.name)
+    shape_model = load_shape_model()
+    # Seeded per call from the run seed and the scene size alone, so a variant's fit does
+    # not depend on which other variants are fitted with it.
+    rng = np.random.default_rng([options.seed, len(detections)])
+    refined = refine_particles(
+        camera, particles, evidence, shape_model, options=options.inference, rng=rng, boxes=detections.boxes,
+        searched_occluder=v.searched_occluder, deterministic_occlusion=v.deterministic_occlusion,
+    )
+    return estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)
+
+
+def fit_scene(
+    camera: Camera,
+    detections: Detections,
+    *,
+    variant: str | Variant = "coarse+gp",
+    options: FitOptions | None = None,
+    image: np.ndarray | None = None,
+    evidence: PartEvidence | None = None,
+    lifted: LiftingTable | None = None,
+) -> SceneEstimate:
+    """One variant of :func:`fit_frame` (same arguments): the estimate alone."""
+    v = _variant(variant)
+    return fit_frame(camera, detections, [v], image=image, evidence=evidence, options=options,
+                     lifted=lifted).estimates[v.name]

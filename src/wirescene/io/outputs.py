@@ -1,0 +1,57 @@
+"""The files of one fitted image: KITTI labels, JSON, wireframe overlay and bird's-eye view."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from wirescene.core.atomic import write_text
+from wirescene.core.camera import Camera
+from wirescene.core.labels import Label
+from wirescene.core.types import Detections, SceneEstimate
+from wirescene.core.wireframe import EDGES
+from wirescene.io.kitti import write_labels
+from wirescene.io.pictures import birds_eye, overlay, save_figure
+
+
+def write_fit_outputs(
+    out_dir: Path,
+    stem: str,
+    *,
+    image: np.ndarray,
+    camera: Camera,
+    estimate: SceneEstimate,
+    detections: Detections,
+    gt: list[Label] = (),
+) -> dict[str, Path]:
+    """Write ``STEM.txt`` (KITTI labels), ``STEM.json``, ``STEM_overlay.png`` and
+    ``STEM_bev.png``. Everything is rendered in memory first; if any write fails the
+    files already written by this call are removed, so no partial result remains."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
+    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=detections, title=f"{stem}  {estimate.variant}", edges=EDGES)
+    fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=f"{stem}  {estimate.variant}")
+    paths = {
+        "labels": out_dir / f"{stem}.txt",
+        "json": out_dir / f"{stem}.json",
+        "overlay": out_dir / f"{stem}_overlay.png",
+        "bev": out_dir / f"{stem}_bev.png",
+    }
+    written: list[Path] = []
+    try:
+        write_labels(paths["labels"], estimate.to_labels())
+        written.append(paths["labels"])
+        write_text(paths["json"], payload)
+        written.append(paths["json"])
+        save_figure(fig_overlay, paths["overlay"])
+        written.append(paths["overlay"])
+        save_figure(fig_bev, paths["bev"])
+        written.append(paths["bev"])
+    except BaseException:
+        for p in written:
+            p.unlink(missing_ok=True)
+        raise
+    return paths

@@ -1,0 +1,153 @@
+"""The Python API: arrays in, a SceneEstimate out, argument errors that name the argument,
+the same result as the CLI, and a package that reads nothing at import time and keeps
+its layers."""
+
+import doctest
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import wirescene
+import wirescene.api
+from conftest import KITTI_ROOT, assert_close
+from wirescene.cli.main import main
+from wirescene.io.detections import read_detections
+from wirescene.io.kitti import KittiDataset
+
+SPLIT = KITTI_ROOT / "training"
+FRAME = "000010"
+P2 = np.array([[721.5377, 0, 609.5593, 44.85728], [0, 721.5377, 172.854, 0.2163791], [0, 0, 1, 0.002745884]])
+
+
+@pytest.fixture(scope="module")
+def frame():
+    ds = KittiDataset(KITTI_ROOT)
+    return ds.image(FRAME), ds.camera(FRAME), ds.labels(FRAME)
+
+
+def test_doctest_examples_run():
+    result = doctest.testmod(wirescene.api, optionflags=doctest.ELLIPSIS)
+    assert result.attempted >= 3 and result.failed == 0
+
+
+def test_fit_on_arrays_gives_the_scene_contract(frame):
+    image, camera, labels = frame
+    boxes = np.array([o.box for o in labels.of_type("Car")])[:3]
+    scene = wirescene.fit(image, camera.P, boxes, variant="fg+gp", particles=20)
+    assert isinstance(scene, wirescene.SceneEstimate) and len(scene.cars) == 3
+    for car, box in zip(scene.cars, boxes):
+        assert car.location.shape == (3,) and car.dimensions.shape == (3,) and np.isfinite(car.rotation_y)
+        assert car.vertices.shape == (36, 3) and car.visible.shape == (36,) and car.visible.dtype == bool
+        assert_close(car.box, box) and car.score == 1.0 and isinstance(car.cad_model, str)
+    assert scene.ground_plane is not None and abs(scene.ground_plane.pitch) < 0.2
+    rows = scene.to_kitti().splitlines()
+    assert len(rows) == 3 and all(r.split()[0] == "Car" and len(r.split()) == 16 for r in rows)
+    assert len(json.loads(json.dumps(scene.to_dict()))["objects"]) == 3
+
+
+def test_image_encodings_and_calib_forms_agree(frame, tmp_path):
+    image, camera, labels = frame
+    boxes = np.array([o.box for o in labels.of_type("Car")])[:2]
+    ref = wirescene.fit(image, camera, boxes, variant="coarse+gp", particles=10)
+    # A path, float [0, 1] and uint16 encodings of the same pixels, a calib file and a P matrix.
+    for img, calib in (
+        (SPLIT / "image_2" / f"{FRAME}.png", SPLIT / "calib" / f"{FRAME}.txt"),
+        (image / 255.0, camera.P),
+        (image.astype(np.uint16) * 257, camera),
+    ):
+        other = wirescene.fit(img, calib, boxes, variant="coarse+gp", particles=10)
+        for a, b in zip(ref.cars, other.cars):
+            assert_close(a.location, b.location, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(image=np.zeros((5, 5, 3), np.uint8)), "image"),
+        (dict(image=np.zeros((100, 100, 2), np.uint8)), "image"),
+        (dict(image="not an image"), None),  # a path that does not exist: InputError naming it
+        (dict(calib=np.zeros((3, 4))), "calib"),
+        (dict(calib=np.full((3, 4), np.nan)), "calib"),
+        (dict(calib=P2 * [[-1], [1], [1]]), "calib"),
+        (dict(calib=np.eye(3)), "calib"),
+        (dict(calib=42), "calib"),
+        (dict(boxes=[[10, 10, 5, 50]]), "boxes"),
+        (dict(boxes=[[10, 10, np.inf, 50]]), "boxes"),
+        (dict(boxes=[[5000, 10, 5100, 50]]), "boxes"),
+        (dict(boxes=np.zeros((2, 3))), "boxes"),
+        (dict(boxes="1 2 3 4"), "boxes"),
+        (dict(variant="fancy"), "variant"),
+        (dict(particles=0), "particles"),
+        (dict(particles=2.5), "particles"),
+        (dict(seed=-1), "seed"),
+    ],
+)
+def test_bad_arguments_raise_value_errors_that_name_them(kwargs, name):
+    args = dict(image=np.zeros((375, 1242, 3), np.uint8), calib=P2, boxes=[[300, 180, 520, 300]], variant="coarse")
+    args.update(kwargs)
+    image, calib, boxes = args.pop("image"), args.pop("calib"), args.pop("boxes")
+    if name is None:
+        with pytest.raises(wirescene.InputError, match="not an image"):
+            wirescene.fit(image, calib, boxes, **args)
+        return
+    with pytest.raises(ValueError) as info:
+        wirescene.fit(image, calib, boxes, **args)
+    assert isinstance(info.value, wirescene.ArgumentError)
+    assert str(info.value).startswith(f"{name}: ")
+
+
+def test_cli_fit_and_api_fit_give_identical_results(tmp_path, frame):
+    image, camera, _ = frame
+    dets = read_detections(SPLIT / "label_2" / f"{FRAME}.txt")
+    out = tmp_path / "cli"
+    r = CliRunner().invoke(main, ["fit", str(SPLIT / "image_2" / f"{FRAME}.png"), "--calib",
+                                  str(SPLIT / "calib" / f"{FRAME}.txt"), "--detections",
+                                  str(SPLIT / "label_2" / f"{FRAME}.txt"), "--variant", "fg+gp", "--particles", "15",
+                                  "--seed", "3", "--device", "numpy", "--out", str(out)], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    api = wirescene.fit(image, camera, dets, variant="fg+gp", particles=15, seed=3)
+    assert (out / f"{FRAME}.txt").read_text() == api.to_kitti()
+    cli_objects = json.loads((out / f"{FRAME}.json").read_text())["objects"]
+    for a, b in zip(cli_objects, api.to_dict()["objects"]):
+        assert_close(a["vertices"], b["vertices"], atol=0)
+
+
+def test_importing_the_package_reads_no_data_file():
+    code = (
+        "import sys\n"
+        "opened = []\n"
+        "sys.addaudithook(lambda ev, args: opened.append(str(args[0])) if ev == 'open' else None)\n"
+        "import wirescene, wirescene.cli.main\n"
+        "print([p for p in opened if '/wirescene/data/' in p])\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+# The dependency rule: a module may import its own layer or lower ones only. training,
+# synth, cad and render may use anything, but no runtime layer imports them.
+LAYERS = {"core": 0, "io": 1, "predetect": 2, "parts": 2, "lift": 3, "infer": 4, "fitting": 5, "eval": 6,
+          "api": 7, "cli": 8, "training": 9, "synth": 9, "cad": 9, "render": 9}
+
+
+def test_lower_layers_never_import_higher_ones():
+    root = Path(wirescene.__file__).parent
+    violations = []
+    for path in root.rglob("*.py"):
+        rel = path.relative_to(root)
+        room = rel.parts[0].removesuffix(".py")
+        if room not in LAYERS or LAYERS[room] == 9:
+            continue
+        for lineno, line in enumerate(path.read_text().splitlines(), 1):
+            m = re.match(r"\s*(?:from|import) wirescene\.(\w+)", line)
+            if m and LAYERS.get(m.group(1), -1) > LAYERS[room]:
+                violations.append(f"{rel}:{lineno}: {line.strip()}")
+    # cli is the one layer that runs the training commands.
+    violations = [v for v in violations if not v.startswith("cli/")]
+    assert violations == []
