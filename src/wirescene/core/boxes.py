@@ -15,7 +15,10 @@ from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import transform
 
 # Mean KITTI car size (h, w, l) in metres, from the statistics of the KITTI training split.
-MEAN_CAR_DIMS = np.array([1.53, 1.63, 3.88])
+#: KITTI 'Car' size statistics in metres, in (l, w, h) order (mean and standard deviation).
+KITTI_CAR_SIZE = {"mean": (3.88, 1.63, 1.53), "std": (0.43, 0.10, 0.14)}
+#: The mean car as a KITTI box size ``(h, w, l)``, derived from :data:`KITTI_CAR_SIZE`.
+MEAN_CAR_DIMS = np.array(KITTI_CAR_SIZE["mean"][::-1])
 
 _UNIT_CORNERS = np.array(
     [[sx, sy, sz] for sx in (0.5, -0.5) for sy in (0.0, -1.0) for sz in (0.5, -0.5)]

@@ -16,6 +16,9 @@ import numpy as np
 from wirescene.core.errors import InputError, check_shape
 
 KITTI_CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam")
+#: Points closer than this (metres, along the optical axis) are treated as behind the
+#: camera: their projection is meaningless.
+NEAR_PLANE = 0.1
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wirescene.core.boxes import KITTI_CAR_SIZE
 from wirescene.core.errors import InputError, check_shape
 from wirescene.core.wireframe import N_VERTICES
 from wirescene.core.artefacts import load_npz, save_npz
@@ -25,8 +26,6 @@ FORMAT_VERSION = 1
 ARTEFACT_KIND = "shape-model"
 DEFAULT_MODEL_PATH = DATA_DIR / "shape_model.npz"
 
-KITTI_CAR_SIZE = {"mean": (3.88, 1.63, 1.53), "std": (0.43, 0.10, 0.14)}
-"""KITTI 'Car' (l, w, h) statistics in metres (mean and standard deviation)."""
 
 
 @dataclass(frozen=True)

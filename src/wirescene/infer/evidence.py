@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from wirescene.core.boxes import MEAN_CAR_DIMS, iou_2d
+from wirescene.core.wireframe import N_VERTICES
 from wirescene.io.wireframes import WireframeGT
 from wirescene.core.types import Detections
 from wirescene.infer.likelihood import GaussianVertexEvidence
@@ -38,8 +39,8 @@ def oracle_evidence(detections: Detections, gt_boxes: np.ndarray, vertex_gt: Wir
     """Evidence at the true vertices of the ground-truth car best overlapping each
     detection (no evidence at all for a detection overlapping none)."""
     n = len(detections)
-    uv = np.zeros((n, 36, 2))
-    visible = np.zeros((n, 36), bool)
+    uv = np.zeros((n, N_VERTICES, 2))
+    visible = np.zeros((n, N_VERTICES), bool)
     if len(gt_boxes):
         iou = iou_2d(detections.boxes[:, None, :], np.asarray(gt_boxes)[None, :, :])
         for j in range(n):

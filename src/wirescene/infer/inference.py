@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wirescene.core.camera import Camera
+from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.groundplane import wrap_angle
 from wirescene.core.shape import ShapeModel
 from wirescene.core.types import ObjectEstimate, SceneEstimate, SceneParticles
@@ -40,7 +40,7 @@ from wirescene.lift import box_residual
 from wirescene.infer.occluded_score import load_occluded_score
 from wirescene.infer.masks import best_mask, fit_mask, mask_hidden
 from wirescene.infer.occlusion import inter_object_occlusion
-from wirescene.core.wireframe import FACES
+from wirescene.core.wireframe import FACES, N_VERTICES
 from wirescene.infer.likelihood import PartEvidence, instantiate_wireframes, object_likelihood
 
 
@@ -188,7 +188,7 @@ def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None,
             projected = np.clip(projected, 0.0, [w - 1, h - 1, w - 1, h - 1])
         r = box_residual(projected, boxes[None, :, None, :], batch.depth.min(axis=-1))
         penalty = box_weight * np.sum(r**2, axis=-1)
-    self_hidden = batch.self_hidden | (batch.depth <= 0.1)
+    self_hidden = batch.self_hidden | (batch.depth <= NEAR_PLANE)
     return _Terms(batch.uv, batch.vertices, self_hidden, e, penalty)
 
 
@@ -349,7 +349,7 @@ def refine_particles(
     return RefinedParticles(
         refined, theta[..., 3:], score, np.array(history),
         mask=np.zeros((P, N), dtype=int) if mask is None else mask,
-        gamma=np.zeros((P, N, 36), dtype=bool) if gamma is None else gamma,
+        gamma=np.zeros((P, N, N_VERTICES), dtype=bool) if gamma is None else gamma,
         coupled=particles.shared_plane or deterministic_occlusion,
     )
 

@@ -18,7 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
-from wirescene.core.camera import Camera
+from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import object_pose, transform
 from wirescene.infer.occlusion import self_occlusion
@@ -97,7 +97,7 @@ def wireframe_likelihood(
     """Object likelihood ``(...)`` of placed wireframes against image evidence.
     Vertices behind the camera count as hidden."""
     check_shape("uv", batch.uv, (..., N_VERTICES, 2))
-    self_hidden = batch.self_hidden | (batch.depth <= 0.1)
+    self_hidden = batch.self_hidden | (batch.depth <= NEAR_PLANE)
     e = evidence.log_ratio(batch.uv, np.broadcast_to(obj, batch.scale.shape), batch.scale)
     return object_likelihood(e, self_hidden, mask_hidden, c=c)
 

@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 
 from wirescene.core.atomic import atomic_path  # noqa: E402
 from wirescene.core.boxes import box_corners  # noqa: E402
-from wirescene.core.camera import Camera  # noqa: E402
+from wirescene.core.camera import NEAR_PLANE, Camera  # noqa: E402
 from wirescene.core.groundplane import rotation_y  # noqa: E402
 
 EST_COLOR = "#e8302a"
@@ -31,7 +31,7 @@ _FRONT_FACE = [(0, 3), (1, 2)]  # cross on the front face marks the heading
 
 def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float = 1.5):
     uv, depth = camera.project_with_depth(corners)
-    if np.any(depth <= 0.1):
+    if np.any(depth <= NEAR_PLANE):
         return
     for i, j in _BOX_EDGES + _FRONT_FACE:
         ax.plot(uv[[i, j], 0], uv[[i, j], 1], color=color, lw=lw if (i, j) not in _FRONT_FACE else lw * 0.6)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wirescene.core.camera import Camera
+from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, GroundPlane, plane_rotation, rotation_y
 
 LANE_WIDTH = 3.5
@@ -156,7 +156,7 @@ def inside_fraction(camera: Camera, dims, location, R) -> float:
     from wirescene.core.boxes import box_corners
 
     uv, depth = camera.project_with_depth(box_corners(dims, location, R))
-    if np.any(depth <= 0.1):
+    if np.any(depth <= NEAR_PLANE):
         return 0.0
     x1, y1 = uv.min(0)
     x2, y2 = uv.max(0)
@@ -213,7 +213,7 @@ def kitti_car_size(rng: np.random.Generator) -> tuple:
     The TORCS exemplars are race cars (4.4-5.1 m long, 1.1-1.5 m high); every car
     instance is resized to a KITTI-like size so that the synthetic scenes have the size
     distribution of the real data the shape model is built for."""
-    from wirescene.core.shape import KITTI_CAR_SIZE
+    from wirescene.core.boxes import KITTI_CAR_SIZE
 
     mean, std = np.array(KITTI_CAR_SIZE["mean"]), np.array(KITTI_CAR_SIZE["std"])  # (l, w, h)
     l, w, h = mean + std * np.clip(rng.standard_normal(3), -2.0, 2.0)
