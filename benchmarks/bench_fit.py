@@ -6,7 +6,7 @@
 2. One full fit per variant, per stage (lifting, part evidence, inference), and the peak
    resident memory of the process.
 
-Usage: python benchmarks/bench_fit.py [--root ../shared/data/kitti] [--frame 000010] [--cars 5] [--particles 250]
+Usage: python benchmarks/bench_fit.py [--root tests/data/kitti] [--frame 000010] [--cars 5] [--particles 250]
        [--variants fg fg+gp full]
 """
 
@@ -18,6 +18,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
+from pathlib import Path  # noqa: E402
 import resource  # noqa: E402
 import time  # noqa: E402
 
@@ -41,7 +42,8 @@ def likelihood_batch(camera, model, evidence, x, z, az, s, obj, c):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--root", default="../shared/data/kitti")
+    # The real frames the repository itself carries, so that a fresh clone can run it.
+    ap.add_argument("--root", default=str(Path(__file__).resolve().parents[1] / "tests" / "data" / "kitti"))
     ap.add_argument("--frame", default="000010")
     ap.add_argument("--particles", type=int, default=250)
     ap.add_argument("--cars", type=int, default=None, help="use only the first N labelled cars of the frame")

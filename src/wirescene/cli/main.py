@@ -13,16 +13,42 @@ import numpy as np
 
 from wirescene import __version__
 from wirescene.core.errors import InputError, WiresceneError
+from wirescene.cli.options import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_FLOAT,
+    POSITIVE,
+    check_output_dir,
+    check_output_file,
+    parse_frames,
+)
+
+
+def _usage_message(exc: click.UsageError) -> str:
+    """``--option: problem`` for a bad option value, click's message otherwise."""
+    if isinstance(exc, click.BadParameter):
+        hint = exc.param_hint
+        if hint is None and exc.param is not None:
+            hint = "/".join(getattr(exc.param, "opts", None) or [exc.param.name or "?"])
+        if isinstance(hint, (list, tuple)):
+            hint = "/".join(hint)
+        if hint:
+            return f"{str(hint).strip(chr(39) + chr(34))}: {exc.message}"
+    return " ".join(exc.format_message().split())
 
 
 class _Group(click.Group):
-    """Turns our typed errors into one clean line and exit code 2."""
+    """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
+    on standard error and exit code 2, without a traceback (typed errors of the package,
+    bad option values and usage errors alike)."""
 
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
         except WiresceneError as exc:
             click.echo(f"wirescene: error: {exc}", err=True)
+            sys.exit(2)
+        except click.UsageError as exc:
+            click.echo(f"wirescene: error: {_usage_message(exc)}", err=True)
             sys.exit(2)
 
 
@@ -75,11 +101,12 @@ def _inference_options(f):
     f = click.option("--device", default="auto", show_default=True,
                      help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
                           "(optional: pip install torch). auto: a CUDA GPU if PyTorch sees one, else numpy.")(f)
-    f = click.option("--iterations", type=int, default=None, help="Inference iterations (Algorithm 1).")(f)
-    f = click.option("--samples", type=int, default=None, help="Samples per object and iteration.")(f)
-    f = click.option("--prune-after", type=int, default=None,
+    f = click.option("--iterations", type=NON_NEGATIVE, default=None, help="Inference iterations (Algorithm 1).")(f)
+    f = click.option("--samples", type=click.IntRange(min=2), default=None,
+                     help="Samples per object and iteration (the current value among them).")(f)
+    f = click.option("--prune-after", type=NON_NEGATIVE, default=None,
                      help="Keep only the best quarter of the particles after this many iterations (default 4; 0: never).")(f)
-    f = click.option("--box-weight", type=float, default=None,
+    f = click.option("--box-weight", type=NON_NEGATIVE_FLOAT, default=None,
                      help="Weight of the detection box in the fine objective (0: the paper's part likelihood only).")(f)
     return f
 
@@ -115,16 +142,20 @@ def _dask_client(address: str):
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()), help="Model variant(s); default: all available.")
 @click.option("--detections", default="gt", show_default=True,
               help="'gt' (label boxes), 'bank' (our pre-detection from raw pixels) or a directory of per-frame detection files.")
-@click.option("--viewpoint-noise", default=0.0, show_default=True, help="Std. dev. (deg) of noise on the GT viewpoint before binning.")
+@click.option("--viewpoint-noise", type=NON_NEGATIVE_FLOAT, default=0.0, show_default=True,
+              help="Std. dev. (deg) of noise on the GT viewpoint before binning.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all labelled frames).")
-@click.option("--particles", default=250, show_default=True, help="Scene particles kept by the coarse stage.")
-@click.option("--seed", default=0, show_default=True)
+@click.option("--particles", type=POSITIVE, default=250, show_default=True, help="Scene particles kept by the coarse stage.")
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--split", default="training", show_default=True)
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the metrics as JSON.")
 @click.option("--predictions", type=click.Path(path_type=Path), default=None, help="Write KITTI label files per variant here.")
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
               help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
-@click.option("--workers", type=int, default=None, help="Processes fitting frames in parallel (default: all cores).")
+@click.option("--workers", type=POSITIVE, default=None, help="Processes fitting frames in parallel (default: all cores).")
+@click.option("--allow-missing-detections", is_flag=True, default=False,
+              help="With --detections DIR: frames without a detection file count as frames without detections "
+                   "(their number is reported) instead of an error.")
 @click.option("--resume/--no-resume", default=False, show_default=True,
               help="Reuse the frames already finished in --predictions DIR (recorded in DIR/.frames/) and fit only the "
                    "rest; a record written with other settings is fitted again.")
@@ -133,7 +164,8 @@ def _dask_client(address: str):
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
-             workers, resume, dask_address, iterations, samples, prune_after, box_weight, device):
+             workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
+             device):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.io.kitti import KittiDataset
     from wirescene.eval.metrics import format_table
@@ -147,11 +179,14 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
         kitti_root = kitti_root.resolve()
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())
+    check_output_file(json_out, "--json")
+    check_output_dir(predictions, "--predictions")
     dataset = KittiDataset(kitti_root, split=split)
     variants = list(variants) or _variants()
-    frame_ids = [f.strip() for f in frames.split(",")] if frames else None
+    frame_ids = parse_frames(frames, dataset.frame_ids())
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
                            box_weight=box_weight, device=device)
+    source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections)
     on_gpu = options.inference.device.startswith("cuda")
     if on_gpu and (workers or 1) > 1:
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
@@ -162,7 +197,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
             dataset,
             variants,
             frames=frame_ids,
-            source=DetectionSource(detections, viewpoint_noise),
+            source=source,
             options=options,
             predictions_dir=predictions,
             resume=resume,
@@ -194,8 +229,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
                    "default: our own pre-detection from raw pixels.")
 @click.option("--gt", type=click.Path(path_type=Path), default=None, help="KITTI label file drawn in green for comparison.")
 @click.option("--variant", type=click.Choice(_variants()), default="coarse+gp", show_default=True)
-@click.option("--particles", default=250, show_default=True)
-@click.option("--seed", default=0, show_default=True)
+@click.option("--particles", type=POSITIVE, default=250, show_default=True)
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
 @_inference_options
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, prune_after, box_weight,
@@ -207,9 +242,10 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
     from wirescene.io.kitti import read_image, read_labels
     from wirescene.io.outputs import write_fit_outputs
 
+    check_output_dir(out, "--out")
     img = read_image(image)
     camera = read_kitti_calib(calib).camera((img.shape[1], img.shape[0]))
-    dets = read_detections(detections) if detections is not None else None
+    dets = read_detections(detections, image_size=(img.shape[1], img.shape[0])) if detections is not None else None
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
                            box_weight=box_weight, device=device)
@@ -224,7 +260,8 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
 
 @main.command("demo")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("wirescene_demo"), show_default=True)
-@click.option("--particles", default=50, show_default=True, help="Scene particles (the paper used 250; fewer keep the demo short).")
+@click.option("--particles", type=POSITIVE, default=50, show_default=True,
+              help="Scene particles (the paper used 250; fewer keep the demo short).")
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()),
               default=("coarse", "coarse+gp", "fg+gp", "full"), show_default=True)
 def demo_cmd(out, particles, variants):
@@ -238,6 +275,7 @@ def demo_cmd(out, particles, variants):
     from wirescene.eval.sources import DetectionSource
     from wirescene.io.outputs import write_fit_outputs
 
+    check_output_dir(out, "--out")
     t0 = time.perf_counter()
     dataset = KittiDataset(sample_root())
     first = dataset.frame_ids()[0]

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import re
+import shutil
 import sys
+from pathlib import Path
 
 import click
 
@@ -23,14 +25,16 @@ def _parse_range(value: str) -> tuple[int, int]:
 
 @click.command("synth")
 @click.argument("out_dir", type=click.Path(file_okay=False))
-@click.option("--scenes", default=10, show_default=True, type=click.IntRange(min=0), help="Number of scenes.")
+@click.option("--scenes", default=10, show_default=True, type=click.IntRange(min=1), help="Number of scenes.")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Random seed; scene i is drawn from (seed, i).")
 @click.option("--cars-per-scene", "cars", default="2-8", show_default=True,
               help="Number of cars per scene, A-B (fewer only if the street has no room).")
 @click.option("--occluders/--no-occluders", default=True, show_default=True,
               help="Add 0-3 unmodelled occluders (poles, boxes, bushes) per scene.")
-def synth(out_dir, scenes, seed, cars, occluders):
+@click.option("--overwrite", is_flag=True, default=False,
+              help="Replace the scenes already in OUT_DIR/training (otherwise a non-empty one is an error).")
+def synth(out_dir, scenes, seed, cars, occluders, overwrite):
     """Generate synthetic KITTI-layout scenes in OUT_DIR/training: image_2, label_2,
     calib, edges_2 (edge renderings) and wireframes (per-car 36-vertex ground truth with
     per-vertex visibility)."""
@@ -39,6 +43,12 @@ def synth(out_dir, scenes, seed, cars, occluders):
     from wirescene.synth.generate import generate_dataset
 
     rng_cars = _parse_range(cars)
+    split = Path(out_dir) / "training"
+    if split.is_dir() and any(split.iterdir()):
+        if not overwrite:
+            raise click.BadParameter(f"{split} already holds scenes; stale ones would mix with new ones "
+                                     "(use --overwrite or another directory)", param_hint="OUT_DIR")
+        shutil.rmtree(split)
     try:
         ids = generate_dataset(
             out_dir, scenes, seed, cars=rng_cars, occluders=occluders,

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.errors import InputError, check_shape
+from wirescene.core.validate import projection_problem
 
 KITTI_CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam")
 #: Points closer than this (metres, along the optical axis) are treated as behind the
@@ -122,9 +123,14 @@ class KittiCalib:
     P3: np.ndarray
     R0_rect: np.ndarray = field(default_factory=lambda: np.eye(3))
     Tr_velo_to_cam: np.ndarray = field(default_factory=lambda: np.eye(4)[:3])
+    source: str | None = None  # the file it was read from, named in errors
 
     def camera(self, image_size: tuple[int, int] | None = None) -> Camera:
-        """The left colour camera (``P2``) used by every KITTI object label."""
+        """The left colour camera (``P2``) used by every KITTI object label; with the
+        image size, its principal point is checked to lie near the image."""
+        problem = projection_problem(self.P2, image_size)
+        if problem:
+            raise InputError(f"P2: {problem}", path=self.source)
         return Camera(self.P2, image_size)
 
 
@@ -150,10 +156,13 @@ def read_kitti_calib(path: str | Path) -> KittiCalib:
         key, sep, rest = line.partition(":")
         if not sep:
             raise InputError(f"line {lineno}: expected 'KEY: numbers'", path=path)
+        key = key.strip()
+        if key in values:
+            raise InputError(f"line {lineno}: {key} is given twice", path=path)
         try:
-            values[key.strip()] = np.array([float(v) for v in rest.split()])
+            values[key] = np.array([float(v) for v in rest.split()])
         except ValueError as exc:
-            raise InputError(f"line {lineno}: non-numeric value in {key.strip()}", path=path) from exc
+            raise InputError(f"line {lineno}: non-numeric value in {key}", path=path) from exc
     if "P2" not in values:
         raise InputError("calibration has no P2 matrix", path=path)
     shapes = {"P0": (3, 4), "P1": (3, 4), "P2": (3, 4), "P3": (3, 4), "R0_rect": (3, 3), "Tr_velo_to_cam": (3, 4)}
@@ -164,9 +173,12 @@ def read_kitti_calib(path: str | Path) -> KittiCalib:
         if values[key].size != shape[0] * shape[1]:
             raise InputError(f"{key} has {values[key].size} numbers, expected {shape[0] * shape[1]}", path=path)
         out[key] = values[key].reshape(shape)
+    problem = projection_problem(out["P2"])
+    if problem:
+        raise InputError(f"P2: {problem}", path=path)
     for key in ("P0", "P1", "P3"):
         out.setdefault(key, out["P2"])
-    return KittiCalib(**out)
+    return KittiCalib(**out, source=str(path))
 
 
 def write_kitti_calib(path: str | Path, P2: np.ndarray) -> None:

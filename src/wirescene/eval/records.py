@@ -42,7 +42,8 @@ def run_config(
         # Per-variant fits do not depend on the order of the variants (fit_scene seeds
         # itself per call), but the set decides whether part evidence is computed.
         "variants": sorted(variants),
-        "detections": {"spec": spec, "viewpoint_noise_deg": float(source.viewpoint_noise_deg)},
+        "detections": {"spec": spec, "viewpoint_noise_deg": float(source.viewpoint_noise_deg),
+                       "allow_missing": bool(source.allow_missing)},
         "evidence": evidence,
         "options": asdict(options),
     }

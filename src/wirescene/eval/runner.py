@@ -6,7 +6,11 @@ scheduling, and resuming from the records of :mod:`wirescene.eval.records`."""
 from __future__ import annotations
 
 import itertools
+import os
+import signal
 import sys
+import threading
+import time
 import uuid
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -94,6 +98,28 @@ class _FrameJob:
                 for v, estimate in fitted.estimates.items()}
         return frame_id, camera, fitted.detections, gt, fits
 
+def _die_with_parent(parent: int) -> None:
+    """Worker initializer: end this worker when the process that started it is gone,
+    even if it was killed (SIGKILL leaves no chance to shut the pool down). Linux gets
+    the kernel's parent-death signal; elsewhere a daemon thread polls the parent id."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        PR_SET_PDEATHSIG = 1
+        if libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0 and os.getppid() == parent:
+            return
+    except (OSError, AttributeError):
+        pass
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="wirescene-parent-watch").start()
+
+
 def _fit_frames(
     job: _FrameJob, frame_ids: list[str], *, workers: int, dask_client: str | Client | None, stack: ExitStack
 ) -> Iterator:
@@ -107,7 +133,8 @@ def _fit_frames(
     if workers > 1 and len(frame_ids) > 1:
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(frame_ids)))
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(frame_ids)), initializer=_die_with_parent,
+                                   initargs=(os.getpid(),))
         stack.callback(pool.shutdown, cancel_futures=True)
         # As completed rather than in order: a finished frame is recorded at once, so an
         # interrupted run loses only the frames still being fitted.
@@ -222,6 +249,10 @@ def evaluate_dataset(
         notify = _notify_stderr
     variants = [get_variant(v).name for v in variants]
     frame_ids = list(frames) if frames is not None else dataset.frame_ids()
+    missing = source.missing_frames(frame_ids)
+    if missing:
+        notify(f"{len(missing)} of {len(frame_ids)} frames have no detection file in {source.folder} "
+               f"and are evaluated without detections (e.g. {missing[0]})")
     job = _FrameJob(dataset, tuple(variants), source, options, evidence)
     records = None
     if predictions_dir is not None:

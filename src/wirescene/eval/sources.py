@@ -18,10 +18,45 @@ from wirescene.io.kitti import KittiDataset
 class DetectionSource:
     """Where pre-detections come from: ``"gt"`` (label boxes, noisy viewpoint bins),
     ``"bank"`` (our part-configuration detector bank on the raw image) or a directory of
-    per-frame detection files (``FRAME.json``, ``.csv`` or ``.txt``)."""
+    per-frame detection files (``FRAME.json``, ``.csv`` or ``.txt``).
+
+    A frame without a detection file in the directory is an error, unless
+    ``allow_missing`` (then it has no detections, and :meth:`missing_frames` counts it).
+    """
 
     spec: str = "gt"
     viewpoint_noise_deg: float = 0.0
+    allow_missing: bool = False
+
+    @property
+    def folder(self) -> Path | None:
+        """The detections directory, or None for ``gt`` / ``bank``."""
+        if self.spec in ("gt", "bank"):
+            return None
+        folder = Path(self.spec)
+        if not folder.is_dir():
+            raise InputError("detections must be 'gt', 'bank' or a directory of per-frame files", path=folder)
+        return folder
+
+    def detection_file(self, frame_id: str) -> Path | None:
+        """The frame's file in the detections directory (None if it has none)."""
+        for ext in (".json", ".csv", ".txt"):
+            path = self.folder / f"{frame_id}{ext}"
+            if path.is_file():
+                return path
+        return None
+
+    def missing_frames(self, frame_ids: list[str]) -> list[str]:
+        """Frames without a detection file; an :class:`InputError` naming the directory
+        if there are any and ``allow_missing`` is off."""
+        if self.folder is None:
+            return []
+        missing = [f for f in frame_ids if self.detection_file(f) is None]
+        if missing and not self.allow_missing:
+            what = "none of the" if len(missing) == len(frame_ids) else f"{len(missing)} of {len(frame_ids)}"
+            raise InputError(f"{what} frames have a detection file (e.g. no {missing[0]}.json, .csv or .txt); "
+                             "--allow-missing-detections treats such frames as having none", path=self.folder)
+        return missing
 
     def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator) -> Detections:
         if self.spec == "gt":
@@ -30,19 +65,17 @@ class DetectionSource:
             from wirescene.predetect import detect_cars
 
             return detect_cars(dataset.image(frame_id))
-        folder = Path(self.spec)
-        if not folder.is_dir():
-            raise InputError("detections must be 'gt', 'bank' or a directory of per-frame files", path=folder)
-        for ext in (".json", ".csv", ".txt"):
-            path = folder / f"{frame_id}{ext}"
-            if path.is_file():
-                try:
-                    return read_detections(path)
-                except InputError as exc:
-                    if exc.problem == "no car detections in file":
-                        return Detections.empty(str(path))
-                    raise
-        return Detections.empty(str(folder))
+        path = self.detection_file(frame_id)
+        if path is None:
+            if not self.allow_missing:
+                raise InputError(f"no detection file for frame {frame_id}", path=self.folder)
+            return Detections.empty(str(self.folder))
+        try:
+            return read_detections(path, image_size=dataset.image_size(frame_id))
+        except InputError as exc:
+            if exc.problem == "no car detections in file":
+                return Detections.empty(str(path))
+            raise
 
 
 def frame_seed(seed: int, frame_id: str) -> np.random.Generator:

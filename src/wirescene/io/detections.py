@@ -17,6 +17,7 @@ import numpy as np
 from wirescene.io.kitti import CAR_TYPES, FrameLabels, read_labels
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
+from wirescene.core.validate import boxes_problem
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
 
 
@@ -49,16 +50,19 @@ def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
     if entry.get("viewpoint_bin") not in (None, ""):
         try:
             b = int(entry["viewpoint_bin"])
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise InputError(f"{where}: viewpoint_bin must be an integer 0..7", path=path) from None
         if not 0 <= b < 8:
             raise InputError(f"{where}: viewpoint_bin must be in 0..7, got {b}", path=path)
         return float(bin_center(b))
     if entry.get("alpha") not in (None, ""):
         try:
-            return float(bin_center(viewpoint_bin(float(entry["alpha"]))))
-        except (TypeError, ValueError):
+            alpha = float(entry["alpha"])
+        except (TypeError, ValueError, OverflowError):
             raise InputError(f"{where}: alpha must be a number (radians)", path=path) from None
+        if not np.isfinite(alpha):
+            raise InputError(f"{where}: alpha must be finite (radians), got {alpha}", path=path)
+        return float(bin_center(viewpoint_bin(alpha)))
     return float("nan")
 
 
@@ -67,14 +71,20 @@ def _box_of(entry: dict, path: Path, where: str) -> list[float]:
         box = entry["box"]
     elif "bbox" in entry:  # COCO: x, y, width, height
         b = entry["bbox"]
-        if not isinstance(b, (list, tuple)) or len(b) != 4:
-            raise InputError(f"{where}: bbox must be [x, y, width, height]", path=path)
-        box = [b[0], b[1], float(b[0]) + float(b[2]), float(b[1]) + float(b[3])]
+        try:
+            if not isinstance(b, (list, tuple)) or len(b) != 4 or any(isinstance(v, (str, bool)) for v in b):
+                raise TypeError
+            x, y, w, h = (float(v) for v in b)
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"{where}: bbox must be four numbers [x, y, width, height]", path=path) from None
+        box = [x, y, x + w, y + h]
     else:
         box = [entry.get(k) for k in ("x1", "y1", "x2", "y2")]
     try:
+        if not isinstance(box, (list, tuple)) or any(isinstance(v, bool) for v in box):
+            raise TypeError
         box = [float(v) for v in box]
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"{where}: box must be four numbers x1 y1 x2 y2", path=path) from None
     if len(box) != 4 or not np.all(np.isfinite(box)):
         raise InputError(f"{where}: box must be four finite numbers x1 y1 x2 y2", path=path)
@@ -93,14 +103,19 @@ def _from_entries(entries: list, path: Path) -> Detections:
             continue
         boxes.append(_box_of(entry, path, where))
         try:
-            scores.append(float(entry.get("score", 1.0)))
-        except (TypeError, ValueError):
+            score = entry.get("score", 1.0)
+            score = 1.0 if score in (None, "") else float(score)
+        except (TypeError, ValueError, OverflowError):
             raise InputError(f"{where}: score must be a number", path=path) from None
+        if not np.isfinite(score):
+            raise InputError(f"{where}: score must be finite, got {score}", path=path)
+        scores.append(score)
         alpha.append(_viewpoint_of(entry, path, where))
     return Detections(np.array(boxes).reshape(-1, 4), np.array(scores), np.array(alpha), str(path))
 
 
-def read_detections(path: str | Path, *, min_score: float = -np.inf) -> Detections:
+def read_detections(path: str | Path, *, min_score: float = -np.inf,
+                    image_size: tuple[int, int] | None = None) -> Detections:
     """Read 2D car detections of one image.
 
     Formats, by extension:
@@ -114,10 +129,14 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf) -> Detectio
     * ``.txt``: a KITTI label file (15 or 16 columns); Car rows are used, with their
       ``alpha`` binned and their score (16th column) if present.
 
+    With ``image_size`` (width, height), every box must overlap the image
+    (:func:`wirescene.core.validate.boxes_problem`).
+
     Raises
     ------
     InputError
-        Missing or malformed file, or a file without any detection.
+        Missing or malformed file, a file without any detection, or (with
+        ``image_size``) a box outside the image.
     """
     path = Path(path)
     if not path.is_file():
@@ -127,18 +146,23 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf) -> Detectio
         dets = detections_from_labels(read_labels(path), source=str(path))
     elif suffix == ".json":
         try:
-            data = json.loads(path.read_text())
+            data = json.loads(path.read_text(encoding="utf-8-sig"))
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise InputError(f"not valid JSON ({exc.__class__.__name__}: {exc})".splitlines()[0], path=path) from None
+        except RecursionError:
+            raise InputError("not a detections file (JSON nested too deeply)", path=path) from None
+        except ValueError as exc:  # e.g. an integer of thousands of digits
+            raise InputError(f"not a usable JSON file ({' '.join(str(exc).split())[:80]})", path=path) from None
         entries = data.get("detections") if isinstance(data, dict) else data
         if not isinstance(entries, list):
             raise InputError("expected a list of detections or {'detections': [...]}", path=path)
         dets = _from_entries(entries, path)
     elif suffix == ".csv":
         try:
-            with path.open(newline="") as fh:
+            # utf-8-sig: spreadsheets write a byte-order mark before the header.
+            with path.open(newline="", encoding="utf-8-sig") as fh:
                 rows = list(csv.DictReader(fh))
-        except (csv.Error, UnicodeDecodeError) as exc:
+        except (csv.Error, UnicodeDecodeError, OSError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", path=path) from None
         if rows and not {"x1", "y1", "x2", "y2"} <= set(rows[0]):
             raise InputError("CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha)", path=path)
@@ -149,4 +173,7 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf) -> Detectio
     dets = dets.subset(keep)
     if len(dets) == 0:
         raise InputError("no car detections in file", path=path)
+    problem = boxes_problem(dets.boxes, image_size)
+    if problem:
+        raise InputError(problem, path=path)
     return dets

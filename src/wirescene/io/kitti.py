@@ -13,6 +13,7 @@ kept apart from the objects, since every evaluation ignores them.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Iterable
 
@@ -21,7 +22,8 @@ from PIL import Image, UnidentifiedImageError
 
 from wirescene.core.camera import Camera, KittiCalib, read_kitti_calib
 from wirescene.core.atomic import write_text
-from wirescene.core.errors import InputError
+from wirescene.core.errors import InputError, ShapeError
+from wirescene.core.image import to_rgb_uint8
 from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label types live in core)
     COLUMNS,
     CAR_TYPES,
@@ -35,6 +37,24 @@ from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label
 )
 
 # --------------------------------------------------------------------------- labels
+
+
+def _object_problem(values: list[float]) -> str | None:
+    """What is impossible in the numbers of a (non-DontCare) label row, if anything.
+    ``-1`` marks a quantity that is not estimated (truncation and occlusion of
+    predictions, all three dimensions of a 2D-only detector), as in KITTI files."""
+    truncated, occluded, _alpha = values[0:3]
+    x1, y1, x2, y2 = values[3:7]
+    dims = values[7:10]
+    if not (truncated == -1 or 0.0 <= truncated <= 1.0):
+        return f"truncation {truncated:g} is outside [0, 1] (or -1 for unknown)"
+    if occluded not in (-1, 0, 1, 2, 3):
+        return f"occlusion state {occluded:g} is not one of 0, 1, 2, 3 (or -1 for unknown)"
+    if not (x1 < x2 and y1 < y2):
+        return f"2D box is empty or inverted (x1 y1 x2 y2 = {x1:g} {y1:g} {x2:g} {y2:g})"
+    if dims != [-1.0, -1.0, -1.0] and min(dims) <= 0:
+        return f"dimensions must be positive (h w l = {' '.join(f'{d:g}' for d in dims)})"
+    return None
 
 
 def _parse_label_line(tokens: list[str], lineno: int, path: Path) -> Label:
@@ -57,6 +77,10 @@ def _parse_label_line(tokens: list[str], lineno: int, path: Path) -> Label:
     occluded = values[1]
     if occluded != int(occluded):
         raise InputError(f"line {lineno}: column 3 (occluded) must be an integer, got {tokens[2]!r}", path=path)
+    if tokens[0] != DONTCARE:
+        problem = _object_problem(values)
+        if problem:
+            raise InputError(f"line {lineno}: {problem}", path=path)
     return Label(
         type=tokens[0],
         truncated=values[0],
@@ -119,7 +143,13 @@ def _open_image(path: Path) -> Image.Image:
     if not path.is_file():
         raise InputError("image file not found" if not path.exists() else "image path is not a file", path=path)
     try:
-        return Image.open(path)
+        with warnings.catch_warnings():
+            # Pillow only warns between 1x and 2x its pixel limit: refuse those too.
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            return Image.open(path)
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning):
+        raise InputError(f"image is too large (more than {Image.MAX_IMAGE_PIXELS} pixels: a decompression bomb?)",
+                         path=path) from None
     except UnidentifiedImageError:
         raise InputError("not an image file (unrecognised format)", path=path) from None
     except OSError as exc:
@@ -129,18 +159,25 @@ def _open_image(path: Path) -> Image.Image:
 def read_image(path: str | Path) -> np.ndarray:
     """Read an image as an ``(H, W, 3)`` uint8 RGB array.
 
+    16-bit and float images are scaled by their range (:func:`wirescene.core.image.to_rgb_uint8`),
+    not clipped; palette, grey and alpha images are converted to RGB.
+
     Raises
     ------
     InputError
-        If the file is missing, not an image, or corrupt / truncated.
+        If the file is missing, not an image, too large, or corrupt / truncated.
     """
     path = Path(path)
     img = _open_image(path)
     try:
         with img:
             img.load()
+            if img.mode.startswith("I"):  # 16-bit (or 32-bit integer) grey
+                return to_rgb_uint8(np.clip(np.asarray(img), 0, 65535).astype(np.uint16))
+            if img.mode == "F":
+                return to_rgb_uint8(np.asarray(img, dtype=np.float32))
             rgb = img.convert("RGB")
-    except (OSError, ValueError, SyntaxError) as exc:
+    except (OSError, ValueError, SyntaxError, ShapeError) as exc:
         raise InputError(f"corrupt or truncated image ({' '.join(str(exc).split())})", path=path) from None
     return np.asarray(rgb, dtype=np.uint8)
 

@@ -1,0 +1,298 @@
+"""Bad input never crashes and never passes silently: every case of the issue's list,
+table-driven through the CLI (exit code 2, one line ``wirescene: error: ...``, no output
+left behind), and property-based fuzzing of the parsers and the option ranges."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import zlib
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from conftest import KITTI_ROOT
+from wirescene.cli.main import main
+from wirescene.core.camera import read_kitti_calib
+from wirescene.core.errors import InputError
+from wirescene.io.detections import read_detections
+from wirescene.io.kitti import read_image, read_labels
+
+SPLIT = KITTI_ROOT / "training"
+FRAME = "000010"
+CALIB_TEXT = (SPLIT / "calib" / f"{FRAME}.txt").read_text()
+P2_LINE = next(ln for ln in CALIB_TEXT.splitlines() if ln.startswith("P2:"))
+CAR = "Car 0.00 0 1.95 354.43 185.52 549.52 294.49 1.43 1.70 3.95 -2.39 1.66 11.80 1.76"
+
+
+def _with_p2(values: str) -> str:
+    return CALIB_TEXT.replace(P2_LINE, f"P2: {values}")
+
+
+def _png_header(width: int, height: int) -> bytes:
+    """A PNG whose header claims ``width`` x ``height`` (a decompression bomb's shape)."""
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    chunk = lambda kind, data: struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))  # noqa: E731
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 16)) + chunk(b"IEND", b"")
+
+
+def _fit_case(tmp, *, calib=None, dets=None, image=None, extra=()):
+    img = tmp / f"{FRAME}.png"
+    shutil.copy(SPLIT / "image_2" / f"{FRAME}.png", img)
+    if image is not None:
+        image(img)
+    c = tmp / "calib.txt"
+    c.write_text(CALIB_TEXT if calib is None else calib)
+    d = tmp / ("dets" + (dets[0] if dets else ".txt"))
+    d.write_text(CAR + "\n" if dets is None else dets[1])
+    return ["fit", img, "--calib", c, "--detections", d, "--out", tmp / "out", "--variant", "coarse", *extra]
+
+
+def _eval_case(tmp, *extra):
+    return ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", FRAME, "--workers", "1", *extra]
+
+
+def _write_16bit(path):
+    from PIL import Image
+
+    Image.fromarray((np.arange(375 * 1242).reshape(375, 1242) % 65536).astype(np.uint16)).save(path)
+
+
+def _file(tmp, name, text="x"):
+    path = tmp / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return path
+
+
+def _dets_dir(tmp, files):
+    d = tmp / "dets"
+    d.mkdir()
+    for name, text in files.items():
+        (d / name).write_text(text)
+    return d
+
+
+CASES = {
+    # calibration
+    "calib NaN P2": (lambda t: _fit_case(t, calib=_with_p2(" ".join(["nan"] * 12))), "not a number|non-finite"),
+    "calib all-zero P2": (lambda t: _fit_case(t, calib=_with_p2(" ".join(["0"] * 12))), "P2:"),
+    "calib duplicate P2": (lambda t: _fit_case(t, calib=CALIB_TEXT + P2_LINE + "\n"), "P2 is given twice"),
+    "calib inf focal": (lambda t: _fit_case(t, calib=_with_p2("inf 0 609 44 0 721 172 0.2 0 0 1 0.003")), "non-finite"),
+    "calib huge focal": (lambda t: _fit_case(t, calib=_with_p2("1e308 0 609 44 0 721 172 0.2 0 0 1 0.003")),
+                         "implausible focal"),
+    "calib negative focal": (lambda t: _fit_case(t, calib=_with_p2("-721 0 609 44 0 721 172 0.2 0 0 1 0.003")),
+                             "implausible focal"),
+    "calib tiny focal": (lambda t: _fit_case(t, calib=_with_p2("1e-12 0 609 44 0 1e-12 172 0.2 0 0 1 0.003")),
+                         "implausible focal"),
+    "calib far principal point": (lambda t: _fit_case(t, calib=_with_p2("721 0 90000 44 0 721 172 0.2 0 0 1 0.003")),
+                                  "principal point"),
+    # labels and detections
+    "txt x2 < x1": (lambda t: _fit_case(t, dets=(".txt", CAR.replace("354.43 185.52 549.52", "549.52 185.52 354.43"))),
+                    "empty or inverted"),
+    "box at x2 = 1e30": (lambda t: _fit_case(t, dets=(".txt", CAR.replace("549.52", "1e30"))), "absurdly far"),
+    "box outside the image": (lambda t: _fit_case(t, dets=(".json", json.dumps([{"box": [5000, 10, 5100, 60]}]))),
+                              "entirely outside"),
+    "negative dimensions": (lambda t: _fit_case(t, dets=(".txt", CAR.replace("1.43 1.70 3.95", "-1.43 1.70 3.95"))),
+                            "dimensions must be positive"),
+    "truncation 5.0": (lambda t: _fit_case(t, dets=(".txt", CAR.replace("Car 0.00", "Car 5.00"))), "truncation"),
+    "COCO bbox strings": (lambda t: _fit_case(t, dets=(".json", '[{"bbox": ["a", 1, 2, 3]}]')), "bbox must be"),
+    "COCO bbox null": (lambda t: _fit_case(t, dets=(".json", '[{"bbox": null}]')), "bbox must be"),
+    "deeply nested JSON": (lambda t: _fit_case(t, dets=(".json", "[" * 100000 + "]" * 100000)), "nested too deeply"),
+    "5001-digit number": (lambda t: _fit_case(t, dets=(".json", '[{"box": [' + "9" * 5001 + ", 1, 2, 3]}]")),
+                          "not a usable JSON"),
+    "score NaN": (lambda t: _fit_case(t, dets=(".json", '[{"box": [300, 180, 520, 300], "score": NaN}]')),
+                  "score must be finite"),
+    # images
+    "16-bit image is fine": None,  # behaviour test below
+    "decompression bomb": (lambda t: _fit_case(t, image=lambda p: p.write_bytes(_png_header(100000, 100000))),
+                           "too large"),
+    "10 x 10 image, boxes to x = 1241": (
+        lambda t: _fit_case(t, image=lambda p: __import__("PIL.Image").Image.new("RGB", (10, 10)).save(p)),
+        "principal point|entirely outside|absurdly far"),
+    # options
+    "--particles 0": (lambda t: _fit_case(t, extra=("--particles", "0")), "--particles"),
+    "--particles -5": (lambda t: _fit_case(t, extra=("--particles", "-5")), "--particles"),
+    "--samples 0": (lambda t: _fit_case(t, extra=("--samples", "0")), "--samples"),
+    "eval --seed -1": (lambda t: _eval_case(t, "--seed", "-1"), "--seed"),
+    "--box-weight nan": (lambda t: _fit_case(t, extra=("--box-weight", "nan")), "--box-weight"),
+    "--iterations -1": (lambda t: _fit_case(t, extra=("--iterations", "-1")), "--iterations"),
+    "--workers 0": (lambda t: _eval_case(t, "--workers", "0"), "--workers"),
+    "--prune-after -2": (lambda t: _fit_case(t, extra=("--prune-after", "-2")), "--prune-after"),
+    "--viewpoint-noise nan": (lambda t: _eval_case(t, "--viewpoint-noise", "nan"), "--viewpoint-noise"),
+    "--frames twice": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", f"{FRAME},{FRAME}"], "listed twice"),
+    "--frames unknown": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "424242"], "no frame 424242"),
+    # outputs, refused before any fitting
+    "--json is a directory": (lambda t: _eval_case(t, "--json", t), "is a directory"),
+    "--json under a file": (lambda t: _eval_case(t, "--json", _file(t, "f") / "m.json"), "is a file"),
+    "--predictions is a file": (lambda t: _eval_case(t, "--predictions", _file(t, "f")), "is a file"),
+    "fit --out is a file": (lambda t: [*_fit_case(t), "--out", _file(t, "o")], "is a file"),
+    "demo --out is a file": (lambda t: ["demo", "--out", _file(t, "o")], "is a file"),
+    # detection directories
+    "eval detections match no frame": (lambda t: _eval_case(t, "--detections", _dets_dir(t, {"10.csv": "x1,y1,x2,y2\n1,2,3,4\n"})),
+                                       "none of the frames"),
+    # synthetic scenes
+    "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],
+                                         "already holds scenes"),
+}
+
+
+@pytest.mark.parametrize("case", [c for c, v in CASES.items() if v is not None])
+def test_bad_input_ends_in_one_line_and_exit_code_2(tmp_path, case):
+    make, pattern = CASES[case]
+    args = [str(a) for a in make(tmp_path)]
+    before = {p for p in tmp_path.rglob("*")}
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2, (case, r.output, r.exception)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("wirescene: error: "), r.stderr
+    import re
+
+    assert re.search(pattern, lines[0]), lines[0]
+    after = {p for p in tmp_path.rglob("*")}
+    assert after <= before, f"{case} left {sorted(after - before)}"
+
+
+def test_sixteen_bit_images_are_scaled_not_clipped(tmp_path):
+    path = tmp_path / "g16.png"
+    _write_16bit(path)
+    rgb = read_image(path)
+    assert rgb.dtype == np.uint8 and rgb.shape == (375, 1242, 3)
+    assert 100 < rgb.mean() < 156 and rgb.min() == 0 and rgb.max() == 255
+
+
+def test_csv_with_a_byte_order_mark_is_read(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_bytes("x1,y1,x2,y2,score\n300,180,520,300,0.9\n".encode("utf-8-sig"))
+    dets = read_detections(path)
+    assert len(dets) == 1 and dets.scores[0] == pytest.approx(0.9)
+
+
+def test_missing_detection_files_are_allowed_only_when_asked(tmp_path):
+    d = _dets_dir(tmp_path, {"000002.json": json.dumps([{"box": [600, 170, 680, 230]}])})
+    args = ["eval", str(KITTI_ROOT), "--variant", "coarse", "--frames", f"000002,{FRAME}", "--workers", "1",
+            "--detections", str(d)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2 and "1 of 2 frames" in r.stderr
+    r = CliRunner().invoke(main, args + ["--allow-missing-detections"])
+    assert r.exit_code == 0, r.output
+    assert "1 of 2 frames have no detection file" in r.stderr
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process tree inspection via /proc")
+def test_worker_processes_die_with_their_parent(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "wirescene.cli.main", "eval", str(KITTI_ROOT), "--variant", "full",
+                             "--workers", "2", "--particles", "30"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def children():
+        out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(proc.pid)], capture_output=True, text=True).stdout
+        return [int(p) for p in out.split()]
+
+    deadline = time.time() + 60
+    kids = []
+    while time.time() < deadline and len(kids) < 2:
+        time.sleep(0.5)
+        kids = children()
+    assert len(kids) >= 2, "the pool did not start"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.time() + 15
+    while time.time() < deadline and any(Path(f"/proc/{k}").exists() and _alive(k) for k in kids):
+        time.sleep(0.2)
+    assert not any(Path(f"/proc/{k}").exists() and _alive(k) for k in kids)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"  # a zombie has exited; init reaps it
+
+
+# --------------------------------------------------------------------------- fuzzing
+
+FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+def _only_input_errors(fn, path):
+    """The parser either returns or raises InputError naming the file: nothing else."""
+    try:
+        return fn(path)
+    except InputError as exc:
+        assert str(path) in str(exc)
+        return None
+
+
+@FUZZ
+@given(st.lists(st.one_of(st.text(max_size=12), st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                          st.integers().map(str)), min_size=0, max_size=18))
+def test_label_parser_never_crashes(tmp_path, tokens):
+    path = tmp_path / "l.txt"
+    path.write_text(" ".join(tokens).replace("\x00", "") + "\n", errors="surrogatepass")
+    labels = _only_input_errors(read_labels, path)
+    if labels is not None:
+        for o in labels.objects:
+            assert np.all(np.isfinite(o.box)) and o.box[2] > o.box[0] and o.box[3] > o.box[1]
+
+
+@FUZZ
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=12, max_size=12),
+       st.sampled_from(["P2", "P0", "R0_rect"]))
+def test_calib_parser_accepts_only_sane_cameras(tmp_path, values, key):
+    path = tmp_path / "c.txt"
+    path.write_text(CALIB_TEXT.replace(P2_LINE, f"{key}: " + " ".join(repr(v) for v in values)))
+    calib = _only_input_errors(read_kitti_calib, path)
+    if calib is not None:
+        K = calib.P2[:, :3] / calib.P2[2, 2]
+        assert np.all(np.isfinite(calib.P2)) and 10 <= K[0, 0] <= 1e5 and 10 <= K[1, 1] <= 1e5
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.floats(allow_nan=True, allow_infinity=True) | st.integers() | st.text(max_size=5),
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(
+        st.sampled_from(["box", "bbox", "score", "alpha", "viewpoint_bin", "category", "x1", "y1", "x2", "y2"]),
+        inner, max_size=6),
+    max_leaves=20,
+)
+
+
+@FUZZ
+@given(json_values)
+def test_json_detection_reader_never_crashes(tmp_path, data):
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps(data))
+    dets = _only_input_errors(lambda p: read_detections(p, image_size=(1242, 375)), path)
+    if dets is not None:
+        assert len(dets) > 0 and np.all(np.isfinite(dets.boxes)) and np.all(np.isfinite(dets.scores))
+
+
+@FUZZ
+@given(st.lists(st.lists(st.one_of(st.text(max_size=6), st.floats().map(repr)), min_size=1, max_size=6),
+                max_size=5))
+def test_csv_detection_reader_never_crashes(tmp_path, rows):
+    path = tmp_path / "d.csv"
+    path.write_text("x1,y1,x2,y2,score\n" + "\n".join(",".join(r).replace("\x00", "") for r in rows) + "\n")
+    dets = _only_input_errors(read_detections, path)
+    if dets is not None:
+        assert np.all(dets.boxes[:, 2] > dets.boxes[:, 0]) and np.all(dets.boxes[:, 3] > dets.boxes[:, 1])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from(["--particles", "--samples", "--iterations", "--prune-after", "--box-weight", "--seed"]),
+       st.one_of(st.integers(-10**6, 0), st.sampled_from(["nan", "inf", "-inf", "x", "", "1e999"])))
+def test_fit_options_out_of_range_are_refused_before_any_work(option, value):
+    if option in ("--iterations", "--prune-after", "--seed", "--box-weight") and value == 0:
+        return  # 0 is a valid value of these
+    r = CliRunner().invoke(main, ["fit", "nowhere.png", "--calib", "nowhere.txt", "--out", "nowhere", option, str(value)])
+    assert r.exit_code == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith(f"wirescene: error: {option}"), r.stderr
