@@ -200,3 +200,27 @@ def test_eval_with_the_torch_backend_equals_numpy(tmp_path):
     # edge within rounding, which these 8 cars do not hit.
     for key in ("loc_1m", "loc_1_5m", "az_5", "az_10", "median_az3d", "n_tp"):
         assert data["cpu"][key] == pytest.approx(data["numpy"][key], abs=1e-9), key
+
+
+def test_eval_report_is_one_page_with_its_pictures(tmp_path):
+    import re
+    import shutil as sh
+    import subprocess
+
+    out = tmp_path / "report"
+    r = run("eval", KITTI_ROOT, "--variant", "coarse+gp", "--variant", "fg+gp", "--frames", "000002,000010",
+            "--particles", 20, "--workers", 1, "--device", "numpy", "--report", out)
+    assert r.exit_code == 0, r.output
+    page = (out / "index.html").read_text()
+    images = re.findall(r'src="([^"]+\.png)"', page)
+    assert {"error_vs_depth.png", "error_cdf.png", "azimuth_hist.png"} <= set(images)
+    assert any(i.startswith("best_") for i in images) and any(i.startswith("worst_") for i in images)
+    for name in images:
+        assert (out / name).stat().st_size > 1000, name
+    chromium = sh.which("chromium") or sh.which("chromium-browser")
+    if chromium:  # the page renders in a real browser
+        shot = tmp_path / "shot.png"
+        subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                        "--no-first-run", f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}",
+                        "--window-size=1280,1600", (out / "index.html").as_uri()], capture_output=True, timeout=120)
+        assert shot.stat().st_size > 20000

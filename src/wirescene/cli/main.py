@@ -152,6 +152,8 @@ def _dask_client(address: str):
 @click.option("--predictions", type=click.Path(path_type=Path), default=None, help="Write KITTI label files per variant here.")
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
               help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
+@click.option("--report", "report_dir", type=click.Path(path_type=Path), default=None,
+              help="Write an HTML report with plots and a gallery of the best and worst frames to this directory.")
 @click.option("--workers", type=POSITIVE, default=None, help="Processes fitting frames in parallel (default: all cores).")
 @click.option("--allow-missing-detections", is_flag=True, default=False,
               help="With --detections DIR: frames without a detection file count as frames without detections "
@@ -164,7 +166,7 @@ def _dask_client(address: str):
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
-             workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
+             report_dir, workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
              device):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.io.kitti import KittiDataset
@@ -181,6 +183,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
             detections = str(Path(detections).resolve())
     check_output_file(json_out, "--json")
     check_output_dir(predictions, "--predictions")
+    check_output_dir(report_dir, "--report")
     dataset = KittiDataset(kitti_root, split=split)
     variants = list(variants) or _variants()
     frame_ids = parse_frames(frames, dataset.frame_ids())
@@ -192,6 +195,11 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
         raise click.UsageError("--device cuda fits frames in one process: drop --workers (or use --dask, one worker per GPU)")
     client = _dask_client(dask_address) if dask_address is not None else None
+    gallery = None
+    if report_dir is not None:
+        from wirescene.eval.report import Gallery
+
+        gallery = Gallery()
     try:
         reports = evaluate_dataset(
             dataset,
@@ -206,6 +214,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
             dask_client=client,
             progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
             notify=lambda message: click.echo(f"wirescene: {message}", err=True),
+            on_estimate=None if gallery is None else gallery.add,
         )
     finally:
         if client is not None:
@@ -219,6 +228,12 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
             data = data[variants[0]]
         _write_json_atomic(json_out, data)
         click.echo(f"metrics written to {json_out}")
+    if report_dir is not None:
+        from wirescene.eval.report import write_report
+
+        page = write_report(report_dir, reports, gallery=gallery, image_of=dataset.image,
+                            title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})")
+        click.echo(f"report written to {page}")
 
 
 @main.command("fit")

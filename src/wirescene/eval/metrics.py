@@ -237,6 +237,7 @@ class TPRecord:
     occ_total: int | None = None
     parts_70_eligible: bool | None = None
     parts_localised_frac: float | None = None
+    gt_depth: float | None = None  # z of the ground-truth car (m), for error-vs-distance plots
 
 
 @dataclass
@@ -496,6 +497,7 @@ def evaluate(
                     occluded_parts=car_subsets[g][0],
                     kitti_occluded=int(gt.occluded),
                     **_part_metrics(frame, int(d), g, gt, part_threshold),
+                    gt_depth=float(gt.location[2]),
                 )
             )
     member = [_subsets_of(r.occluded_parts, r.kitti_occluded) for r in records]

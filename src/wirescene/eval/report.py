@@ -1,0 +1,200 @@
+"""An evaluation run as one HTML page with PNG plots (``wirescene eval --report DIR``).
+
+* localisation error against ground-truth depth, with the physical limit of a
+  monocular estimate: a car's depth comes from where it touches the ground in the image,
+  so one pixel of error there moves it by ``z**2 / (f * H)`` metres (camera height ``H``);
+* the distribution of localisation errors (fraction of true positives within d metres)
+  and a histogram of 3D azimuth errors, per variant;
+* a gallery of the best and worst frames (mean localisation error of the first fine
+  variant, else the first variant) with overlays and bird's-eye views.
+
+Everything is written atomically into one directory; the page references its PNGs by
+relative path, so the directory can be moved or served as it is.
+"""
+
+from __future__ import annotations
+
+import html
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wirescene.core.atomic import write_text
+from wirescene.core.camera import Camera
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+from wirescene.core.labels import Label
+from wirescene.core.types import Detections, SceneEstimate
+from wirescene.core.wireframe import EDGES
+from wirescene.eval.metrics import EvaluationReport
+from wirescene.fitting.variants import get_variant
+from wirescene.io.pictures import birds_eye, overlay, plt, save_figure
+
+
+@dataclass
+class Gallery:
+    """Estimates kept for the report's gallery: ``frames[frame_id] = (camera, gt cars,
+    detections, {variant: estimate})``; images are read again when drawn."""
+
+    frames: dict[str, tuple[Camera, list[Label], Detections, dict[str, SceneEstimate]]] = field(default_factory=dict)
+
+    def add(self, frame_id, variant, estimate, camera, detections, gt) -> None:
+        """An ``on_estimate`` callback of :func:`wirescene.eval.runner.evaluate_dataset`."""
+        entry = self.frames.setdefault(frame_id, (camera, gt.of_type("Car"), detections, {}))
+        entry[3][variant] = estimate
+
+
+def depth_error_per_pixel(z, focal: float, camera_height: float = KITTI_CAMERA_HEIGHT):
+    """Depth change (m) of a ground contact point at depth ``z`` moved by one pixel."""
+    z = np.asarray(z, float)
+    return z**2 / (focal * camera_height)
+
+
+def _plot_error_vs_depth(reports, focal, path):
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=100)
+    zmax = 5.0
+    for name, rep in reports.items():
+        z = np.array([np.nan if r.gt_depth is None else r.gt_depth for r in rep.records], float)
+        err = np.array([r.loc_error for r in rep.records], float)
+        ok = np.isfinite(z)
+        ax.scatter(z[ok], err[ok], s=12, alpha=0.7, label=f"{name} ({ok.sum()} TP)")
+        if ok.any():
+            zmax = max(zmax, float(z[ok].max()))
+    zz = np.linspace(0, zmax * 1.05, 100)
+    for px, style in ((1, "-"), (3, "--")):
+        ax.plot(zz, px * depth_error_per_pixel(zz, focal), "k" + style, lw=1,
+                label=f"{px} px of ground-contact error: z²/(f·H)" if px == 1 else f"{px} px")
+    ax.axhline(1.0, color="grey", lw=0.8, ls=":")
+    ax.set_xlabel("ground-truth depth z (m)")
+    ax.set_ylabel("localisation error (m)")
+    ax.set_ylim(0, max(4.0, ax.get_ylim()[1] if ax.get_ylim()[1] < 10 else 10))
+    ax.legend(fontsize=7, loc="upper left")
+    ax.set_title("Localisation error vs distance (paper threshold 1 m dotted)")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def _plot_error_cdf(reports, path):
+    fig, ax = plt.subplots(figsize=(5.5, 4.2), dpi=100)
+    d = np.linspace(0, 5, 201)
+    for name, rep in reports.items():
+        err = np.sort([r.loc_error for r in rep.records])
+        n_gt = rep.metrics["all"].get("n_gt", len(err)) or max(len(err), 1)
+        ax.plot(d, np.searchsorted(err, d, side="right") / n_gt * 100, label=name)
+    ax.axvline(1.0, color="grey", lw=0.8, ls=":")
+    ax.set_xlabel("localisation error d (m)")
+    ax.set_ylabel("% of ground-truth cars within d")
+    ax.set_ylim(0, 100)
+    ax.legend(fontsize=8)
+    ax.set_title("Cars localised within d metres")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def _plot_azimuth_histogram(reports, path):
+    fig, ax = plt.subplots(figsize=(5.5, 4.2), dpi=100)
+    bins = np.concatenate([np.arange(0, 30, 2.5), [30, 90, 180]])
+    for name, rep in reports.items():
+        err = np.array([r.az3d_error for r in rep.records])
+        counts, _ = np.histogram(np.clip(err, 0, 179.9), bins=bins)
+        ax.step(np.arange(len(counts)), counts / max(len(err), 1) * 100, where="mid", label=name)
+    ax.set_xticks(np.arange(len(bins) - 1))
+    ax.set_xticklabels([f"{b:g}" for b in bins[:-1]], rotation=60, fontsize=7)
+    ax.set_xlabel("3D azimuth error (deg, bin start)")
+    ax.set_ylabel("% of true positives")
+    ax.legend(fontsize=8)
+    ax.set_title("Azimuth error")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def _frame_errors(report: EvaluationReport) -> dict[str, float]:
+    per: dict[str, list[float]] = {}
+    for r in report.records:
+        per.setdefault(r.frame_id, []).append(r.loc_error)
+    return {f: float(np.mean(v)) for f, v in per.items()}
+
+
+def _metrics_table(reports) -> str:
+    cols = [("n_gt", "GT cars", "{:.0f}"), ("n_tp", "TP", "{:.0f}"), ("loc_1m", "&lt;1 m", "{:.0f}%"),
+            ("loc_1_5m", "&lt;1.5 m", "{:.0f}%"), ("median_loc", "median loc. (m)", "{:.2f}"),
+            ("az_5", "az &lt;5°", "{:.0f}%"), ("median_az3d", "median az (°)", "{:.1f}")]
+    head = "".join(f"<th>{c[1]}</th>" for c in cols)
+    rows = []
+    for name, rep in reports.items():
+        m = rep.metrics["all"]
+        cells = []
+        for key, _, fmt in cols:
+            v = m.get(key)
+            if key == "median_loc" and v is None:
+                errs = [r.loc_error for r in rep.records]
+                v = float(np.median(errs)) if errs else None
+            cells.append("–" if v is None or not np.isfinite(v) else fmt.format(v))
+        rows.append(f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    return f"<table><tr><th>variant</th>{head}</tr>{''.join(rows)}</table>"
+
+
+def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gallery, image_of, title: str = "",
+                 n_gallery: int = 3) -> Path:
+    """Write ``out_dir/index.html`` and its PNGs; returns the page's path.
+
+    Parameters
+    ----------
+    reports : dict
+        ``{variant: EvaluationReport}`` of one run.
+    gallery : Gallery
+        The run's estimates (see :meth:`Gallery.add`).
+    image_of : callable
+        ``image_of(frame_id)`` -> ``(H, W, 3)`` uint8 image, for the overlays.
+    n_gallery : int
+        Number of best and of worst frames shown.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    focal = next((c.focal for c, *_ in gallery.frames.values()), 721.5)
+    plots = {
+        "error_vs_depth.png": _plot_error_vs_depth(reports, focal, out / "error_vs_depth.png"),
+        "error_cdf.png": _plot_error_cdf(reports, out / "error_cdf.png"),
+        "azimuth_hist.png": _plot_azimuth_histogram(reports, out / "azimuth_hist.png"),
+    }
+    fine = [v for v in reports if get_variant(v).fine]
+    lead = fine[0] if fine else next(iter(reports))
+    errors = _frame_errors(reports[lead])
+    ranked = sorted(errors, key=errors.get)
+    k = min(n_gallery, max(1, len(ranked) // 2))  # best and worst never share a frame
+    picks = [("best", f) for f in ranked[:k]] + [("worst", f) for f in ranked[::-1][:min(n_gallery, len(ranked) - k)]]
+    seen, cards = set(), []
+    for kind, frame_id in picks:
+        if frame_id in seen or frame_id not in gallery.frames:
+            continue
+        seen.add(frame_id)
+        camera, cars, dets, estimates = gallery.frames[frame_id]
+        estimate = estimates[lead]
+        stem = f"{kind}_{frame_id}"
+        save_figure(overlay(image_of(frame_id), camera, estimate, gt=cars, detections=dets, edges=EDGES,
+                            title=f"{frame_id}  {lead}"), out / f"{stem}_overlay.png")
+        save_figure(birds_eye(estimate, gt=cars, camera=camera, title=f"{frame_id}  {lead}"), out / f"{stem}_bev.png")
+        cards.append(f'<figure><figcaption>{kind}: {html.escape(frame_id)} — mean localisation error '
+                     f'{errors[frame_id]:.2f} m ({lead})</figcaption><img class="wide" src="{stem}_overlay.png">'
+                     f'<img class="bev" src="{stem}_bev.png"></figure>')
+    n_frames = len(gallery.frames) or max((r.counts.get("frames", 0) for r in reports.values()), default=0)
+    page = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>wirescene report {html.escape(title)}</title>
+<style>
+body {{ font-family: sans-serif; margin: 1.5em; color: #222; }}
+table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: right; }}
+td:first-child {{ text-align: left; }} .plots img {{ max-width: 32%; }} figure {{ margin: 1em 0; }}
+img.wide {{ max-width: 70%; vertical-align: top; }} img.bev {{ max-width: 25%; vertical-align: top; }}
+</style></head><body>
+<h1>wirescene evaluation report</h1>
+<p>{html.escape(title)} — {n_frames} frames; the paper's protocol (true-positive initialisations, IoU &gt; 0.5,
+viewpoint within 45°).</p>
+{_metrics_table(reports)}
+<div class="plots">{''.join(f'<img src="{name}" alt="{name}">' for name in plots)}</div>
+<h2>Gallery ({html.escape(lead)}): best and worst frames</h2>
+<p>Red: estimate (wireframe, hidden vertices faded); green: ground truth; yellow: pre-detections.</p>
+{''.join(cards)}
+</body></html>
+"""
+    write_text(out / "index.html", page)
+    return out / "index.html"
