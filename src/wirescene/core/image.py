@@ -14,23 +14,21 @@ from wirescene.core.errors import ShapeError
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 
 
-def _unit_scale(img: np.ndarray) -> np.ndarray:
-    """``img`` as float32 scaled to [0, 1] by its dtype's range."""
+def _values_and_range(img: np.ndarray) -> tuple[np.ndarray, float]:
+    """``img`` as float32 and the value that maps to 1 (its dtype's range)."""
     if img.dtype == bool:
-        return img.astype(np.float32)
+        return img.astype(np.float32), 1.0
     if np.issubdtype(img.dtype, np.integer):
         top = 255.0 if img.dtype.itemsize == 1 else float(np.iinfo(img.dtype).max)
         if img.dtype.itemsize > 2 and (img.size == 0 or img.max() <= 255):
             top = 255.0  # int32/int64 arrays holding 8-bit values (e.g. from arithmetic)
-        return img.astype(np.float32) / np.float32(top)
+        return img.astype(np.float32), top
     if not np.issubdtype(img.dtype, np.floating):
         raise ShapeError(f"image must have a numeric dtype, got {img.dtype}")
     img = img.astype(np.float32)
     if img.size and not np.all(np.isfinite(img)):
         raise ShapeError("image has non-finite values")
-    if img.size and img.max() > 1.0 + 1e-6:
-        img = img / np.float32(255.0)
-    return img
+    return img, (255.0 if img.size and img.max() > 1.0 + 1e-6 else 1.0)
 
 
 def _channels(img: np.ndarray) -> np.ndarray:
@@ -43,9 +41,11 @@ def _channels(img: np.ndarray) -> np.ndarray:
 
 def to_grey(image) -> np.ndarray:
     """Grey ``(H, W)`` float32 in [0, 1] (ITU-R 601 luma of RGB)."""
-    img = _channels(np.asarray(image))
-    unit = _unit_scale(img)
-    return unit[..., 0] if unit.shape[-1] == 1 else unit @ _LUMA
+    values, top = _values_and_range(_channels(np.asarray(image)))
+    grey = values[..., 0] if values.shape[-1] == 1 else values @ _LUMA
+    # Luma first, then the scaling: the float32 rounding of every stage's features
+    # depends on this order.
+    return grey / np.float32(top) if top != 1.0 else grey
 
 
 def to_rgb_uint8(image) -> np.ndarray:
@@ -53,6 +53,6 @@ def to_rgb_uint8(image) -> np.ndarray:
     img = np.asarray(image)
     if img.dtype == np.uint8 and img.ndim == 3 and img.shape[-1] == 3:
         return img
-    unit = _unit_scale(_channels(img))
-    rgb = np.broadcast_to(unit, unit.shape[:2] + (3,))
+    values, top = _values_and_range(_channels(img))
+    rgb = np.broadcast_to(values / np.float32(top), values.shape[:2] + (3,))
     return np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8)
