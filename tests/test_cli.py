@@ -224,3 +224,23 @@ def test_eval_report_is_one_page_with_its_pictures(tmp_path):
                         "--no-first-run", f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}",
                         "--window-size=1280,1600", (out / "index.html").as_uri()], capture_output=True, timeout=120)
         assert shot.stat().st_size > 20000
+
+
+def test_predict_writes_one_label_file_per_image_and_resumes(tmp_path):
+    out = tmp_path / "pred"
+    args = ["predict", KITTI_ROOT, "--split", "training", "--out", out, "--variant", "coarse+gp",
+            "--detections", "gt", "--frames", "000002,000010", "--particles", 20, "--workers", 1]
+    r = run(*args)
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in out.glob("*.txt")) == ["000002.txt", "000010.txt"]
+    rows = (out / "000010.txt").read_text().splitlines()
+    assert len(rows) == 8 and all(len(row.split()) == 16 for row in rows)
+    first = (out / "000010.txt").read_text()
+    (out / "000002.txt").unlink()  # as if interrupted before this frame
+    r = CliRunner().invoke(main, [str(a) for a in args])
+    assert r.exit_code == 2 and "--resume" in r.stderr
+    r = run(*args, "--resume")
+    assert r.exit_code == 0 and "1 frames fitted, 1 kept" in r.output
+    assert (out / "000010.txt").read_text() == first and (out / "000002.txt").is_file()
+    r = CliRunner().invoke(main, [str(a) for a in args] + ["--particles", "21", "--resume"])
+    assert r.exit_code == 2 and "other settings" in r.stderr

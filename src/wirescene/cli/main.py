@@ -236,6 +236,56 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
         click.echo(f"report written to {page}")
 
 
+@main.command("predict")
+@click.argument("kitti_root", type=click.Path(path_type=Path))
+@click.option("--split", default="testing", show_default=True)
+@click.option("--out", type=click.Path(path_type=Path), required=True,
+              help="Directory of KITTI label files, one FRAME.txt per image (the benchmark's submission layout).")
+@click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True)
+@click.option("--detections", default="bank", show_default=True,
+              help="'bank' (our pre-detection), 'gt' (label boxes; labelled splits only) or a directory of "
+                   "per-frame detection files.")
+@click.option("--allow-missing-detections", is_flag=True, default=False,
+              help="With --detections DIR: images without a detection file get an empty label file.")
+@click.option("--frames", default=None, help="Comma-separated frame ids (default: every image).")
+@click.option("--particles", type=POSITIVE, default=250, show_default=True)
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
+@click.option("--workers", type=POSITIVE, default=None, help="Processes fitting frames in parallel (default: all cores).")
+@click.option("--resume/--no-resume", default=False, show_default=True,
+              help="Continue an interrupted run in --out (same settings): fit only the images without a label file.")
+@click.option("--dask", "dask_address", metavar="ADDRESS", default=None,
+              help="Fit frames on this running Dask scheduler instead of local processes.")
+@_inference_options
+def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, frames, particles, seed, workers,
+                resume, dask_address, iterations, samples, prune_after, box_weight, device):
+    """Write KITTI label files (with scores) for every image of a split, labelled or not."""
+    from wirescene.eval.predict import predict_dataset
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
+
+    check_output_dir(out, "--out")
+    if dask_address is not None:
+        kitti_root = kitti_root.resolve()
+        if detections not in ("gt", "bank"):
+            detections = str(Path(detections).resolve())
+    dataset = KittiDataset(kitti_root, split=split)
+    frame_ids = parse_frames(frames, dataset.image_ids())
+    options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
+                           box_weight=box_weight, device=device)
+    on_gpu = options.inference.device.startswith("cuda")
+    client = _dask_client(dask_address) if dask_address is not None else None
+    total = len(frame_ids) if frame_ids else len(dataset.image_ids())
+    try:
+        fitted = predict_dataset(dataset, out, variant=variant, options=options, frames=frame_ids, resume=resume,
+                                 source=DetectionSource(detections, allow_missing=allow_missing_detections),
+                                 workers=1 if on_gpu else workers or os.cpu_count() or 1, dask_client=client,
+                                 progress=_progress("predict", total))
+    finally:
+        if client is not None:
+            client.close()
+    click.echo(f"{len(fitted)} frames fitted, {total - len(fitted)} kept from an earlier run; labels in {out}")
+
+
 @main.command("fit")
 @click.argument("image", type=click.Path(path_type=Path))
 @click.option("--calib", type=click.Path(path_type=Path), required=True, help="KITTI calibration file (P2 is used).")

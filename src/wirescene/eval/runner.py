@@ -120,8 +120,8 @@ def _die_with_parent(parent: int) -> None:
     threading.Thread(target=watch, daemon=True, name="wirescene-parent-watch").start()
 
 
-def _fit_frames(
-    job: _FrameJob, frame_ids: list[str], *, workers: int, dask_client: str | Client | None, stack: ExitStack
+def fit_frames(
+    job: Callable, frame_ids: list[str], *, workers: int, dask_client: str | Client | None, stack: ExitStack
 ) -> Iterator:
     """Outputs of ``job`` on ``frame_ids`` as the frames finish: serially, in ``workers``
     processes, or on a Dask cluster (``dask_client``: its address or a
@@ -142,7 +142,7 @@ def _fit_frames(
     return map(job, frame_ids)
 
 
-def _fit_frames_dask(job: _FrameJob, frame_ids: list[str], dask_client: str | Client, stack: ExitStack) -> Iterator:
+def _fit_frames_dask(job, frame_ids: list[str], dask_client: str | Client, stack: ExitStack) -> Iterator:
     try:
         from distributed import Client, as_completed
     except ImportError:
@@ -277,7 +277,7 @@ def evaluate_dataset(
     todo = [f for f in frame_ids if f not in reused]
 
     with ExitStack() as stack:
-        fitted = _fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
+        fitted = fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
         # Reused frames go through `progress` too, so a bar counts every frame.
         items = itertools.chain(((f, None) for f in reused), ((out[0], out) for out in fitted))
         for frame_id, output in progress(items):

@@ -243,6 +243,10 @@ class KittiDataset:
             self._ids = sorted(ids)
         return list(self._ids)
 
+    def image_ids(self) -> list[str]:
+        """Sorted ids of every image in ``image_2`` (labelled or not)."""
+        return sorted(p.stem for p in (self.split_dir / "image_2").glob("*.png"))
+
     def __len__(self) -> int:
         return len(self.frame_ids())
 

@@ -1,0 +1,112 @@
+"""KITTI label files for every image of a split, labelled or not (``wirescene predict``):
+the file set the KITTI benchmark server expects, one ``FRAME.txt`` per image with a
+score per car. Frames are fitted serially, in processes or on Dask, like ``eval``, and
+an interrupted run resumes: ``OUT/.predict.json`` records the settings, and a frame
+whose label file exists (written atomically) is not fitted again under the same
+settings."""
+
+from __future__ import annotations
+
+import json
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable, Iterable
+
+from wirescene import __version__
+from wirescene.core.artefacts import format_tag
+from wirescene.core.atomic import write_text
+from wirescene.core.errors import InputError
+from wirescene.eval.runner import fit_frames
+from wirescene.eval.sources import DetectionSource, frame_seed
+from wirescene.fitting.pipeline import FitOptions, fit_frame
+from wirescene.fitting.variants import get_variant
+from wirescene.io.kitti import KittiDataset
+
+CONFIG_FILE = ".predict.json"
+
+
+@dataclass(frozen=True)
+class _PredictJob:
+    dataset: KittiDataset
+    variant: str
+    source: DetectionSource
+    options: FitOptions
+
+    def __call__(self, frame_id: str) -> tuple[str, str]:
+        camera = self.dataset.camera(frame_id)
+        detections = self.source.for_frame(self.dataset, frame_id, frame_seed(self.options.seed, frame_id))
+        image = self.dataset.image(frame_id)
+        fitted = fit_frame(camera, detections, [self.variant], image=image, options=self.options)
+        return frame_id, fitted.estimates[self.variant].to_kitti()
+
+
+def _config(dataset: KittiDataset, variant: str, source: DetectionSource, options: FitOptions) -> dict:
+    spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
+    config = {"format": format_tag("predict-config", 1), "wirescene": __version__,
+              "dataset": str(Path(dataset.split_dir).resolve()), "variant": variant,
+              "detections": {"spec": spec, "allow_missing": source.allow_missing}, "options": asdict(options)}
+    return json.loads(json.dumps(config, default=str))
+
+
+def predict_dataset(
+    dataset: KittiDataset,
+    out_dir,
+    *,
+    variant: str = "full",
+    source: DetectionSource | None = None,
+    options: FitOptions | None = None,
+    frames: Iterable[str] | None = None,
+    resume: bool = False,
+    workers: int = 1,
+    dask_client=None,
+    progress: Callable[[Iterable], Iterable] = lambda it: it,
+) -> list[str]:
+    """Write ``out_dir/FRAME.txt`` (KITTI labels with scores) for every image.
+
+    Parameters
+    ----------
+    dataset : KittiDataset
+        Any split; labels are not needed unless ``source`` is ``"gt"``.
+    variant : str
+        The model variant written.
+    source : DetectionSource
+        Pre-detections; default our own (``"bank"``).
+    resume : bool
+        Keep the label files of a previous run with the same settings and fit only the
+        missing frames. Without it, ``out_dir`` must not hold label files already.
+
+    Returns
+    -------
+    list of str
+        The frames fitted by this call (not those kept from a previous run).
+    """
+    source = DetectionSource("bank") if source is None else source
+    options = FitOptions() if options is None else options
+    variant = get_variant(variant).name
+    out = Path(out_dir)
+    frame_ids = list(frames) if frames is not None else dataset.image_ids()
+    source.missing_frames(frame_ids)
+    config = _config(dataset, variant, source, options)
+    config_path = out / CONFIG_FILE
+    existing = sorted(out.glob("*.txt")) if out.is_dir() else []
+    if existing:
+        if not resume:
+            raise InputError(f"already holds {len(existing)} label files; use --resume to continue that run "
+                             "or choose an empty directory", path=out)
+        try:
+            stored = json.loads(config_path.read_text())
+        except (OSError, ValueError):
+            stored = None
+        if stored != config:
+            raise InputError(f"label files were written with other settings (or {CONFIG_FILE} is missing): "
+                             "cannot resume into this directory", path=out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_text(config_path, json.dumps(config, indent=1))
+    done = {p.stem for p in existing}
+    todo = [f for f in frame_ids if f not in done]
+    job = _PredictJob(dataset, variant, source, options)
+    with ExitStack() as stack:
+        for frame_id, text in progress(fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)):
+            write_text(out / f"{frame_id}.txt", text)
+    return todo
