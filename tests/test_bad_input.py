@@ -3,7 +3,6 @@ table-driven through the CLI (exit code 2, one line ``wirescene: error: ...``, n
 left behind), and property-based fuzzing of the parsers and the option ranges."""
 
 import json
-import os
 import shutil
 import signal
 import subprocess
