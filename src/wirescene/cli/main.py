@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import sys
@@ -152,6 +153,8 @@ def _dask_client(address: str):
 @click.option("--predictions", type=click.Path(path_type=Path), default=None, help="Write KITTI label files per variant here.")
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
               help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
+@click.option("--raw-scores", is_flag=True, default=False,
+              help="Write the pre-detection scores instead of calibrated confidences (the data of `train scores`).")
 @click.option("--report", "report_dir", type=click.Path(path_type=Path), default=None,
               help="Write an HTML report with plots and a gallery of the best and worst frames to this directory.")
 @click.option("--workers", type=POSITIVE, default=None, help="Processes fitting frames in parallel (default: all cores).")
@@ -166,7 +169,7 @@ def _dask_client(address: str):
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
-             report_dir, workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
+             raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
              device):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.io.kitti import KittiDataset
@@ -189,6 +192,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
     frame_ids = parse_frames(frames, dataset.frame_ids())
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
                            box_weight=box_weight, device=device)
+    if raw_scores:
+        options = dataclasses.replace(options, calibrate_scores=False)
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections)
     on_gpu = options.inference.device.startswith("cuda")
     if on_gpu and (workers or 1) > 1:
@@ -412,13 +417,14 @@ def _register_commands():
     from wirescene.cli.detect import detect, detector
     from wirescene.cli.occlusion import occlusion
     from wirescene.cli.parts import parts
+    from wirescene.cli.scores import scores
     from wirescene.cli.synth import synth
 
     main.add_command(synth)
     main.add_command(cad)
     main.add_command(detect)
     train = click.Group("train", help="Train the model's artefacts from documented data.")
-    for command in (shape, parts, detector, occlusion):
+    for command in (shape, parts, detector, occlusion, scores):
         train.add_command(command)
     main.add_command(train)
 

@@ -137,6 +137,9 @@ class ObjectEstimate:
     visibility: np.ndarray | None = None  # (36,) bool
     exemplar: str | None = None
     occluder_mask: int | None = None  # index into wirescene.infer.masks.occluder_masks()
+    # The pre-detection's own score; ``score`` is then the calibrated confidence of the
+    # estimate (wirescene.fitting.confidence), written as KITTI's 16th column.
+    detection_score: float | None = None
 
     @property
     def rotation_y(self) -> float:
@@ -183,6 +186,7 @@ class ObjectEstimate:
             "detection_index": int(self.detection_index),
             "box2d": [float(v) for v in self.box2d],
             "score": float(self.score),
+            "detection_score": None if self.detection_score is None else float(self.detection_score),
             "location": [float(v) for v in self.location],
             "rotation_y": self.rotation_y,
             "alpha": self.alpha,

@@ -104,6 +104,10 @@ class FrameResult:
         Ground-truth visibility per vertex (``False``: occluded or self-occluded).
     gt_self_occluded : sequence of (V,) bool arrays or None, optional
         Ground-truth self-occlusion per vertex; absent means no vertex is self-occluded.
+    est_cost : (D,) array, optional
+        The fit's objective per car (lower is better), a feature of the confidence.
+    est_score : (D,) array, optional
+        The confidence written with each car (KITTI's 16th column).
     """
 
     frame_id: str
@@ -121,6 +125,8 @@ class FrameResult:
     gt_vertices_2d: Sequence[np.ndarray | None] | None = None
     gt_vertex_visible: Sequence[np.ndarray | None] | None = None
     gt_self_occluded: Sequence[np.ndarray | None] | None = None
+    est_cost: np.ndarray | None = None
+    est_score: np.ndarray | None = None
 
     def __post_init__(self):
         self.frame_id = str(self.frame_id)
@@ -137,6 +143,9 @@ class FrameResult:
             self.est_occluded = _array("est_occluded", self.est_occluded, (D, None), dtype=bool)
         if self.est_vertices_2d is not None:
             self.est_vertices_2d = _array("est_vertices_2d", self.est_vertices_2d, (D, None, 2))
+        for name in ("est_cost", "est_score"):
+            if getattr(self, name) is not None:
+                setattr(self, name, _array(name, getattr(self, name), (D,)))
         for name in ("gt_occluded_parts", "gt_vertices_2d", "gt_vertex_visible", "gt_self_occluded"):
             value = getattr(self, name)
             if value is not None and len(value) != len(self.gt):

@@ -65,6 +65,8 @@ def frame_result(
         gt_vertices_2d=None if vertex_gt is None else vertex_gt.vertices_2d,
         gt_vertex_visible=None if vertex_gt is None else vertex_gt.visible,
         gt_self_occluded=None if vertex_gt is None else vertex_gt.self_occluded,
+        est_cost=np.array([o.cost for o in objs]),
+        est_score=np.array([o.score for o in objs]),
     )
 
 

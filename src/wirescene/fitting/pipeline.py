@@ -16,6 +16,7 @@ import numpy as np
 from wirescene.core.camera import Camera
 from wirescene.core.shape import load_default as load_shape_model
 from wirescene.core.types import Detections, SceneEstimate
+from wirescene.fitting.confidence import apply_confidence
 from wirescene.fitting.variants import Variant, get_variant
 from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
@@ -30,6 +31,9 @@ class FitOptions:
     lifting: LiftingOptions = field(default_factory=LiftingOptions)
     inference: InferenceOptions = field(default_factory=InferenceOptions)
     seed: int = 0
+    # Write calibrated confidences (wirescene.fitting.confidence) as the cars' scores;
+    # False keeps the pre-detection scores (used to collect the calibration's own data).
+    calibrate_scores: bool = True
 
 
 @dataclass
@@ -139,7 +143,8 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
     )
     if not v.fine:
         best = int(np.argmin(particles.cost))
-        return SceneEstimate.from_particle(particles, best, detections, variant=v.name)
+        estimate = SceneEstimate.from_particle(particles, best, detections, variant=v.name)
+        return apply_confidence(estimate, fine=False) if options.calibrate_scores else estimate
     shape_model = load_shape_model()
     # Seeded per call from the run seed and the scene size alone, so a variant's fit does
     # not depend on which other variants are fitted with it.
@@ -148,7 +153,8 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
         camera, particles, evidence, shape_model, options=options.inference, rng=rng, boxes=detections.boxes,
         searched_occluder=v.searched_occluder, deterministic_occlusion=v.deterministic_occlusion,
     )
-    return estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)
+    estimate = estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)
+    return apply_confidence(estimate, fine=True) if options.calibrate_scores else estimate
 
 
 def fit_scene(

@@ -1,0 +1,88 @@
+"""Fitting the confidence model of :mod:`wirescene.fitting.confidence` from the frame
+records of an evaluation run on labelled real frames (``wirescene eval ...
+--predictions DIR --raw-scores`` writes them to ``DIR/.frames``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from wirescene.core.errors import InputError
+from wirescene.core.labels import CAR_TYPES
+from wirescene.eval.metrics import FrameResult, match_detections
+from wirescene.eval.records import RECORDS_DIR
+from wirescene.fitting.confidence import FEATURES, STAGES, confidence_features
+from wirescene.fitting.variants import get_variant
+
+
+def _centroid(location, dims):
+    return np.asarray(location, float) - [0.0, float(dims[0]) / 2, 0.0]
+
+
+def labelled_features(result: FrameResult, *, max_error_m: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Features ``(D, 3)`` of a frame's estimates and whether each is right: its
+    detection matches a ground-truth car (IoU > 0.5, greedy by score) and the estimated
+    3D centre is within ``max_error_m`` of the car's."""
+    if result.est_cost is None:
+        raise ValueError(f"record of frame {result.frame_id} has no fit objective (est_cost)")
+    feats = confidence_features(result.det_scores, result.est_cost, result.det_boxes)
+    cars = [g for g in result.gt if g.type in CAR_TYPES]
+    gt_boxes = np.array([g.box for g in cars]).reshape(-1, 4)
+    match, _ = match_detections(result.det_boxes, result.det_scores, gt_boxes)
+    right = np.zeros(len(feats), bool)
+    for d in np.flatnonzero(match >= 0):
+        g = cars[match[d]]
+        err = np.linalg.norm(_centroid(result.est_location[d], result.est_dims[d]) - _centroid(g.location, g.dims))
+        right[d] = err < max_error_m
+    return feats, right
+
+
+def read_run_records(predictions_dir, frames: Iterable[str] | None = None) -> dict[str, list[FrameResult]]:
+    """``{variant: [FrameResult, ...]}`` from ``predictions_dir/.frames/*.json``."""
+    folder = Path(predictions_dir) / RECORDS_DIR
+    paths = sorted(folder.glob("*.json"))
+    if frames is not None:
+        keep = set(frames)
+        paths = [p for p in paths if p.stem in keep]
+    if not paths:
+        raise InputError("no frame records (run `wirescene eval ... --predictions DIR` first)", path=folder)
+    out: dict[str, list[FrameResult]] = {}
+    for path in paths:
+        try:
+            record = json.loads(path.read_text())
+            for variant, entry in record["variants"].items():
+                out.setdefault(variant, []).append(FrameResult.from_dict(entry["result"]))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise InputError(f"unreadable frame record ({' '.join(str(exc).split())[:100]})", path=path) from None
+    return out
+
+
+def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1.0) -> dict:
+    """A logistic model per stage (coarse / fine variants) on the records' estimates."""
+    from sklearn.linear_model import LogisticRegression
+
+    data = {stage: ([], []) for stage in STAGES}
+    for variant, results in records.items():
+        stage = "fine" if get_variant(variant).fine else "coarse"
+        for r in results:
+            if r.n_detections:
+                x, y = labelled_features(r)
+                data[stage][0].append(x)
+                data[stage][1].append(y)
+    out = {"features": list(FEATURES), "criterion": "detection IoU > 0.5 with a Car and 3D centre within 1 m"}
+    for stage, (xs, ys) in data.items():
+        if not xs:
+            raise InputError(f"no {stage} variant in the records: evaluate at least one coarse and one fine variant",
+                             path=None)
+        X, y = np.concatenate(xs), np.concatenate(ys)
+        if y.all() or not y.any():
+            raise InputError(f"{stage} estimates are all {'right' if y.all() else 'wrong'}: nothing to calibrate")
+        mean, scale = X.mean(axis=0), X.std(axis=0)
+        scale = np.where(scale > 1e-9, scale, 1.0)
+        model = LogisticRegression(C=C).fit((X - mean) / scale, y)
+        out[stage] = {"mean": mean.tolist(), "scale": scale.tolist(), "weights": model.coef_[0].tolist(),
+                      "bias": float(model.intercept_[0]), "n": int(len(y)), "positive_rate": float(y.mean())}
+    return out
