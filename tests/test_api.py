@@ -151,3 +151,16 @@ def test_lower_layers_never_import_higher_ones():
     # cli is the one layer that runs the training commands.
     violations = [v for v in violations if not v.startswith("cli/")]
     assert violations == []
+
+
+def test_detect_and_evaluate_entry_points(frame):
+    image, camera, _ = frame
+    dets = wirescene.detect(image, camera.P)
+    assert isinstance(dets, wirescene.Detections) and dets.boxes.shape[1] == 4
+    assert np.all(np.isfinite(dets.scores)) and np.all((dets.scores >= 0) & (dets.scores <= 1))
+    reports = wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000002"], particles=10)
+    assert list(reports) == ["coarse"] and reports["coarse"].metrics["all"]["n_tp"] == 1
+    with pytest.raises(wirescene.ArgumentError, match="^frames: "):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["424242"])
+    with pytest.raises(wirescene.ArgumentError, match="^variants: "):
+        wirescene.evaluate(KITTI_ROOT, variants=["coarse", "nope"])

@@ -10,24 +10,27 @@ from wirescene.cli.options import check_output_file
 
 
 @click.command("scores")
-@click.argument("predictions_dir", type=click.Path(path_type=Path))
+@click.argument("predictions_dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--frames", default=None, help="Comma-separated frame ids to train on (default: every record).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Default: the packaged data/score_calibration.json.")
-def scores(predictions_dir, frames, out):
-    """Fit the confidence model on the frame records of an evaluation run on labelled
+def scores(predictions_dirs, frames, out):
+    """Fit the confidence model on the frame records of evaluation runs on labelled
     real frames (`wirescene eval ROOT --variant coarse+gp --variant full --raw-scores
-    --predictions DIR`)."""
+    --predictions DIR`; e.g. one run with label boxes and one with `--detections bank`)."""
     from wirescene.fitting.confidence import DEFAULT_PATH, save_score_calibration
     from wirescene.training.scores import fit_score_calibration, read_run_records
 
     out = DEFAULT_PATH if out is None else out
     check_output_file(out, "--out")
     frame_ids = None if frames is None else [f.strip() for f in frames.split(",") if f.strip()]
-    records = read_run_records(predictions_dir, frame_ids)
+    records: dict = {}
+    for folder in predictions_dirs:
+        for variant, results in read_run_records(folder, frame_ids).items():
+            records.setdefault(variant, []).extend(results)
     result = fit_score_calibration(records)
-    result["trained_on"] = {"predictions": str(predictions_dir), "frames": sorted({r.frame_id for rs in records.values()
-                                                                                  for r in rs})}
+    result["trained_on"] = {"runs": [str(d) for d in predictions_dirs],
+                            "frames": sorted({r.frame_id for rs in records.values() for r in rs})}
     save_score_calibration(out, result)
     for stage in ("coarse", "fine"):
         m = result[stage]
