@@ -244,3 +244,19 @@ def test_predict_writes_one_label_file_per_image_and_resumes(tmp_path):
     assert (out / "000010.txt").read_text() == first and (out / "000002.txt").is_file()
     r = CliRunner().invoke(main, [str(a) for a in args] + ["--particles", "21", "--resume"])
     assert r.exit_code == 2 and "other settings" in r.stderr
+
+
+def test_model_files_can_be_chosen_per_run(tmp_path):
+    """Cross-validation evaluates each fold with its own models: --parts-model and --bank
+    load those files (here the shipped ones, so the result must equal the default)."""
+    from wirescene.core.resources import DATA_DIR
+
+    common = ["eval", KITTI_ROOT, "--variant", "fg", "--frames", "000002", "--particles", 10, "--workers", 1,
+              "--device", "numpy", "--detections", "bank"]
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    assert run(*common, "--json", a).exit_code == 0
+    r = run(*common, "--json", b, "--parts-model", DATA_DIR / "parts_model.npz", "--bank", DATA_DIR / "detector_bank.npz")
+    assert r.exit_code == 0, r.output
+    assert json.loads(a.read_text()) == json.loads(b.read_text())
+    r = CliRunner().invoke(main, [str(x) for x in common] + ["--parts-model", str(tmp_path / "none.npz")])
+    assert r.exit_code == 2 and "--parts-model" in r.stderr

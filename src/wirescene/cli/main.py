@@ -75,10 +75,12 @@ def _fit_options(particles: int, seed: int, **inference):
     from wirescene.infer.inference import InferenceOptions
     from wirescene.lift import LiftingOptions
 
+    models = {k: None if inference.get(k) is None else str(inference.pop(k)) for k in ("parts_model", "detector_bank")}
     inference = {k: v for k, v in inference.items() if v is not None}
     if "device" in inference:
         inference["device"] = _resolve_device(inference["device"])
-    return FitOptions(lifting=LiftingOptions(n_particles=particles), inference=InferenceOptions(**inference), seed=seed)
+    return FitOptions(lifting=LiftingOptions(n_particles=particles), inference=InferenceOptions(**inference), seed=seed,
+                      **models)
 
 
 def _resolve_device(name: str) -> str:
@@ -98,7 +100,12 @@ def _resolve_device(name: str) -> str:
 
 
 def _inference_options(f):
-    """Options of the fine-grained inference stage, shared by `eval` and `fit`."""
+    """Options of the fine-grained inference stage (and the trained models it uses),
+    shared by `eval`, `fit` and `predict`."""
+    f = click.option("--parts-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+                     help="Part detector file (default: the shipped model), e.g. a cross-validation fold's.")(f)
+    f = click.option("--bank", "detector_bank", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                     default=None, help="Detector bank file for our own pre-detection (default: the shipped bank).")(f)
     f = click.option("--device", default="auto", show_default=True,
                      help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
                           "(optional: pip install torch). auto: a CUDA GPU if PyTorch sees one, else numpy.")(f)
@@ -170,7 +177,7 @@ def _dask_client(address: str):
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
              raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
-             device):
+             device, parts_model, detector_bank):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.io.kitti import KittiDataset
     from wirescene.eval.metrics import format_table
@@ -191,10 +198,12 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
     variants = list(variants) or _variants()
     frame_ids = parse_frames(frames, dataset.frame_ids())
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, device=device)
+                           box_weight=box_weight, device=device, parts_model=parts_model,
+                           detector_bank=detector_bank)
     if raw_scores:
         options = dataclasses.replace(options, calibrate_scores=False)
-    source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections)
+    source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections,
+                             bank=options.detector_bank)
     on_gpu = options.inference.device.startswith("cuda")
     if on_gpu and (workers or 1) > 1:
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
@@ -262,7 +271,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
               help="Fit frames on this running Dask scheduler instead of local processes.")
 @_inference_options
 def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, frames, particles, seed, workers,
-                resume, dask_address, iterations, samples, prune_after, box_weight, device):
+                resume, dask_address, iterations, samples, prune_after, box_weight, device, parts_model, detector_bank):
     """Write KITTI label files (with scores) for every image of a split, labelled or not."""
     from wirescene.eval.predict import predict_dataset
     from wirescene.eval.sources import DetectionSource
@@ -276,13 +285,15 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     dataset = KittiDataset(kitti_root, split=split)
     frame_ids = parse_frames(frames, dataset.image_ids())
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, device=device)
+                           box_weight=box_weight, device=device, parts_model=parts_model,
+                           detector_bank=detector_bank)
     on_gpu = options.inference.device.startswith("cuda")
     client = _dask_client(dask_address) if dask_address is not None else None
     total = len(frame_ids) if frame_ids else len(dataset.image_ids())
     try:
         fitted = predict_dataset(dataset, out, variant=variant, options=options, frames=frame_ids, resume=resume,
-                                 source=DetectionSource(detections, allow_missing=allow_missing_detections),
+                                 source=DetectionSource(detections, allow_missing=allow_missing_detections,
+                                                        bank=options.detector_bank),
                                  workers=1 if on_gpu else workers or os.cpu_count() or 1, dask_client=client,
                                  progress=_progress("predict", total))
     finally:
@@ -304,7 +315,7 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
 @_inference_options
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, prune_after, box_weight,
-            device):
+            device, parts_model, detector_bank):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from wirescene.api import fit
     from wirescene.core.camera import read_kitti_calib
@@ -318,7 +329,8 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
     dets = read_detections(detections, image_size=(img.shape[1], img.shape[0])) if detections is not None else None
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, device=device)
+                           box_weight=box_weight, device=device, parts_model=parts_model,
+                           detector_bank=detector_bank)
     estimate = fit(img, camera, dets, variant=variant, options=options)
     if not estimate.cars and dets is None:
         raise InputError("pre-detection found no car in the image", path=image)

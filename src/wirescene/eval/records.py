@@ -43,7 +43,8 @@ def run_config(
         # itself per call), but the set decides whether part evidence is computed.
         "variants": sorted(variants),
         "detections": {"spec": spec, "viewpoint_noise_deg": float(source.viewpoint_noise_deg),
-                       "allow_missing": bool(source.allow_missing)},
+                       "allow_missing": bool(source.allow_missing),
+                       "bank": None if source.bank is None else str(Path(source.bank).resolve())},
         "evidence": evidence,
         "options": asdict(options),
     }

@@ -9,6 +9,7 @@ I/O: inputs are arrays and typed objects, outputs a :class:`FrameFit`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Iterable
 
 import numpy as np
@@ -34,6 +35,26 @@ class FitOptions:
     # Write calibrated confidences (wirescene.fitting.confidence) as the cars' scores;
     # False keeps the pre-detection scores (used to collect the calibration's own data).
     calibrate_scores: bool = True
+    # Part detector file (None: the shipped model), e.g. a cross-validation fold's model
+    # so that real frames are scored by a model that never saw their drive.
+    parts_model: str | None = None
+    # Detector bank file for our own pre-detection (None: the shipped bank).
+    detector_bank: str | None = None
+
+
+@lru_cache(maxsize=4)
+def _part_detector(path: str | None):
+    from wirescene.parts.detector import PartDetector, load_default
+
+    return load_default() if path is None else PartDetector.load(path)
+
+
+@lru_cache(maxsize=4)
+def detector_bank(path: str | None):
+    """The detector bank at ``path`` (None: the shipped one), loaded once per process."""
+    from wirescene.predetect import DetectorBank, load_default_bank
+
+    return load_default_bank() if path is None else DetectorBank.load(path)
 
 
 @dataclass
@@ -112,7 +133,7 @@ def fit_frame(
             raise ValueError("image is needed to detect the cars (or pass detections)")
         from wirescene.predetect import detect_cars
 
-        detections = detect_cars(image)
+        detections = detect_cars(image, bank=detector_bank(options.detector_bank))
     if len(detections) == 0:
         return FrameFit(detections, {v.name: SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane,
                                                            detections=detections) for v in variants})
@@ -120,7 +141,7 @@ def fit_frame(
     if evidence is None and needs_evidence(detections, variants):
         if image is None:
             raise ValueError("image is needed for the part evidence of fine variants and unknown viewpoints")
-        evidence = part_evidence(image, detections)
+        evidence = part_evidence(image, detections, detector=_part_detector(options.parts_model))
     if unknown_viewpoint:
         # Boxes without a viewpoint (external detectors): take it from the part evidence,
         # for every variant, so that all variants start from the same pre-detections.
