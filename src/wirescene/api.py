@@ -46,28 +46,20 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
 
 def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Camera:
     """The camera of a KITTI calibration path (``P2``), a ``(3, 4)`` projection matrix or
-    a :class:`Camera`, with ``image_size`` ``(width, height)`` set; checked for sanity."""
+    a :class:`Camera`, with ``image_size`` ``(width, height)`` set; checked for sanity
+    (:func:`wirescene.core.validate.projection_problem`)."""
     if isinstance(calib, (str, Path)):
-        camera = read_kitti_calib(calib).camera(image_size)
-        where = str(calib)
-    elif isinstance(calib, Camera):
-        camera, where = calib.with_image_size(*image_size), None
+        return read_kitti_calib(calib).camera(image_size)  # InputError naming the file
+    if isinstance(calib, Camera):
+        P = calib.P
     elif isinstance(calib, (np.ndarray, list, tuple)):
         P = np.asarray(calib)
-        problem = projection_problem(P)
-        if problem:
-            raise ArgumentError(name, problem)
-        camera, where = Camera(P.astype(float), image_size), None
     else:
         raise ArgumentError(name, f"expected a calibration path, a (3, 4) matrix or a Camera, got {type(calib).__name__}")
-    problem = projection_problem(camera.P, image_size)
+    problem = projection_problem(P, image_size)
     if problem:
-        if where is not None:
-            from wirescene.core.errors import InputError
-
-            raise InputError(problem, path=where)
         raise ArgumentError(name, problem)
-    return camera
+    return Camera(P.astype(float), image_size)
 
 
 def as_detections(boxes, image_size: tuple[int, int], *, name: str = "boxes") -> Detections:
