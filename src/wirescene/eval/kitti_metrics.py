@@ -1,0 +1,661 @@
+"""The KITTI object benchmark's evaluation (2D AP, AOS, bird's-eye-view AP, 3D AP) in numpy.
+
+This re-implements the rules of the official KITTI object development kit
+(``devkit_object/readme.txt`` and ``cpp/evaluate_object.cpp`` of the 3D object benchmark,
+http://www.cvlibs.net/datasets/kitti/eval_object.php), vectorised over all frames so that a
+3,769-frame validation split takes seconds on one core. The rules, per class (here: Car),
+difficulty and metric:
+
+Difficulty (:data:`MIN_HEIGHT`, :data:`MAX_OCCLUSION`, :data:`MAX_TRUNCATION`)
+    easy / moderate / hard admit ground truth with 2D box height ``y2 - y1 >= 40 / 25 / 25``
+    px, occlusion flag ``<= 0 / 1 / 2`` and truncation ``<= 0.15 / 0.30 / 0.50``; the
+    levels are nested (moderate contains easy).
+Ground truth
+    A ``Car`` inside the difficulty counts (recall denominator). A ``Car`` outside it and
+    every ``Van`` (the neighbouring class) is *ignored*: it may absorb a detection, which
+    then is neither TP nor FP, and missing it is no FN. Other classes play no part.
+    Type names compare case-insensitively.
+Detections
+    Only ``Car`` detections are evaluated, except that *any* detection whose 2D box is lower
+    than the difficulty's minimum height (``|y2 - y1| < MIN_HEIGHT``) is an ignored
+    detection: it may be assigned to a ground truth (which then is neither TP nor FN) and
+    is never an FP. (That this also holds for detections of other classes is a quirk of
+    the devkit, kept.)
+Matching (per frame, ground truth in file order)
+    A pair is a candidate if its overlap is strictly greater than the minimum overlap
+    (Car: 0.7 for 2D, BEV and 3D). To collect score thresholds every ground truth takes
+    the unassigned candidate with the highest score (ties: first in the file); for the
+    precision/recall points it takes, among unassigned candidates scoring at least the
+    threshold, the non-ignored one of largest overlap (ties: first), else the first
+    ignored one.
+DontCare
+    Unassigned detections overlapping a ``DontCare`` region by more than the minimum
+    overlap, measured as intersection over the *detection's* area, are not FPs. The
+    devkit tests this with the metric's own overlap function; KITTI's DontCare rows have
+    no 3D box (location -1000 m, size -1), so it only ever acts in the 2D/AOS evaluation,
+    which is where it is applied here.
+Thresholds (41 sample points)
+    The scores of the TPs of the first pass are sorted (descending) and, walking along
+    them, a score is kept whenever its recall ``(i + 1) / n_gt`` is the closest to the next
+    of the recall steps 0, 1/40, 2/40, ... (the devkit's ``getThresholds``), giving at most
+    41 thresholds. At each threshold TP, FP and FN are counted over all frames;
+    precision ``TP / (TP + FP)`` and orientation similarity ``sum_TP (1 + cos(dalpha)) / 2
+    / (TP + FP)`` (FPs contribute 0) are made monotone by taking the maximum over this and
+    all later thresholds; missing points are 0.
+AP
+    R40 (KITTI's rule since 2019): the mean of the 40 points 1..40 (recall 0 excluded);
+    R11 (before 2019): the mean of the 11 points 0, 4, ..., 40. In percent.
+Overlaps
+    2D: box intersection over union (no +1 pixel). BEV: area IoU of the rotated
+    ``l x w`` footprints in the camera's x-z plane (exact convex-polygon intersection).
+    3D: footprint intersection times the overlap of the vertical extents ``[y - h, y]``
+    (y points down, ``y`` is the bottom), over the union of the volumes.
+AOS
+    Computed with the 2D evaluation, and only if no detection row has ``alpha == -10``
+    (the devkit's "no orientation" marker).
+
+Where the devkit prints no figure this module gives ``None``: a metric is evaluated for a
+class only if at least one detection of the class has a valid 2D box (``x1 >= 0``, for 2D
+and AOS) or location (``!= -1000``, for BEV and 3D), and an AP needs ground truth of the
+difficulty (the devkit would print 0 there, a division by zero in its recall).
+
+Two things go beyond the official devkit, which evaluates Car at IoU 0.7 only: the
+``"iou_0.5"`` block evaluates all four metrics at 0.5 (the common secondary setting of
+monocular 3D papers; note that OpenPCDet's "AP@0.70, 0.50, 0.50" keeps 2D and AOS at 0.7,
+which equal our ``iou_0.7`` figures), and a frame without a prediction file counts as a
+frame without detections (the official devkit refuses to evaluate then).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..datasets.kitti import FrameLabels, Label, read_labels
+from ..errors import InputError, check_shape
+
+DIFFICULTIES = ("easy", "moderate", "hard")
+#: Minimum 2D box height (pixels) per difficulty, of ground truth and detections.
+MIN_HEIGHT = (40.0, 25.0, 25.0)
+#: Maximum occlusion flag of counted ground truth per difficulty.
+MAX_OCCLUSION = (0, 1, 2)
+#: Maximum truncation of counted ground truth per difficulty.
+MAX_TRUNCATION = (0.15, 0.3, 0.5)
+#: Sampled recall steps of the precision curve (the devkit's ``N_SAMPLE_PTS``).
+N_SAMPLE_PTS = 41
+#: Neighbouring classes: ignored ground truth, neither FN nor FP when matched.
+NEIGHBOURS = {"car": ("van",), "pedestrian": ("person_sitting",), "cyclist": ()}
+#: The devkit's minimum overlap per class (2D, BEV and 3D alike).
+MIN_OVERLAP = {"car": 0.7, "pedestrian": 0.5, "cyclist": 0.5}
+METRICS = ("2d", "bev", "3d")
+
+# The devkit's placeholders for "not given".
+_NO_ALPHA = -10.0
+_NO_LOCATION = -1000.0
+
+
+# --------------------------------------------------------------------------- overlaps
+
+
+def box_overlap_2d(a: np.ndarray, b: np.ndarray, *, criterion: str = "union") -> np.ndarray:
+    """Overlap of 2D boxes ``(..., 4)`` (``x1 y1 x2 y2``, broadcasting), the devkit's way.
+
+    ``criterion="union"`` gives intersection over union, ``"a"`` intersection over the
+    area of ``a`` (the DontCare test, ``a`` the detection). Boxes that do not intersect
+    (zero or negative width or height of the intersection) give 0.
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    check_shape("a", a, (..., 4))
+    check_shape("b", b, (..., 4))
+    w = np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0])
+    h = np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1])
+    hit = (w > 0) & (h > 0)
+    inter = np.where(hit, w * h, 0.0)
+    area_a = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1])
+    if criterion == "union":
+        denom = area_a + (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1]) - inter
+    elif criterion == "a":
+        denom = area_a
+    else:
+        raise ValueError(f"criterion must be 'union' or 'a', got {criterion!r}")
+    return np.where(hit, inter / np.where(hit & (denom != 0), denom, 1.0), 0.0)
+
+
+def bev_corners(location: np.ndarray, dims: np.ndarray, rotation_y: np.ndarray) -> np.ndarray:
+    """Footprints ``(N, 4, 2)`` (camera ``x``, ``z``) of KITTI boxes, counter-clockwise in
+    the x-z plane: the object's length ``l`` along ``(cos ry, -sin ry)``, its width ``w``
+    across, as in the devkit (and :func:`wirescene.boxes.box_corners`)."""
+    location = np.asarray(location, dtype=float).reshape(-1, 3)
+    dims = np.asarray(dims, dtype=float).reshape(-1, 3)
+    ry = np.asarray(rotation_y, dtype=float).reshape(-1)
+    c, s = np.cos(ry), np.sin(ry)
+    half_l, half_w = dims[:, 2] / 2, dims[:, 1] / 2
+    # object-frame (x, z) corners, then rotated by R_y: x' = c x + s z, z' = -s x + c z
+    ox = np.stack([half_l, half_l, -half_l, -half_l], axis=1)
+    oz = np.stack([half_w, -half_w, -half_w, half_w], axis=1)
+    x = location[:, 0:1] + c[:, None] * ox + s[:, None] * oz
+    z = location[:, 2:3] - s[:, None] * ox + c[:, None] * oz
+    return np.stack([x, z], axis=-1)
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def _signed_area(poly: np.ndarray) -> np.ndarray:
+    return 0.5 * _cross(poly, np.roll(poly, -1, axis=-2)).sum(axis=-1)
+
+
+def convex_intersection_area(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Exact area of the intersection of convex quadrilaterals ``p``, ``q`` ``(N, 4, 2)``
+    (either orientation).
+
+    The intersection polygon is the convex hull of the vertices of each polygon inside
+    the other and of the crossings of their edges; these points are ordered by angle
+    about their mean and their area summed with the shoelace formula, all as array
+    operations over the ``N`` pairs.
+    """
+    p, q = np.asarray(p, dtype=float), np.asarray(q, dtype=float)
+    check_shape("p", p, (None, 4, 2))
+    check_shape("q", q, (None, 4, 2))
+    n = p.shape[0]
+    if n == 0:
+        return np.zeros(0)
+    # A relative tolerance lets shared corners and collinear edges count as inside.
+    scale = np.maximum(np.abs(p).max(axis=(1, 2)), np.abs(q).max(axis=(1, 2))) + 1.0
+    eps = 1e-9 * scale[:, None, None]
+    sp = np.sign(_signed_area(p))[:, None, None]
+    sq = np.sign(_signed_area(q))[:, None, None]
+
+    def inside(points, poly, sign):
+        # points (N, K, 2) inside poly (N, 4, 2): on the inner side of every edge
+        edges = np.roll(poly, -1, axis=1) - poly  # (N, 4, 2)
+        rel = points[:, :, None, :] - poly[:, None, :, :]  # (N, K, 4, 2)
+        return (sign * _cross(edges[:, None, :, :], rel) >= -eps).all(axis=2)
+
+    p_in_q = inside(p, q, sq)
+    q_in_p = inside(q, p, sp)
+    # edge i of p against edge j of q: p_i + t r_i = q_j + u s_j
+    r = np.roll(p, -1, axis=1) - p
+    s = np.roll(q, -1, axis=1) - q
+    rr, ss = r[:, :, None, :], s[:, None, :, :]
+    qp = q[:, None, :, :] - p[:, :, None, :]
+    denom = _cross(rr, ss)
+    parallel = np.abs(denom) <= 1e-12 * scale[:, None, None] ** 2
+    safe = np.where(parallel, 1.0, denom)
+    t = _cross(qp, ss) / safe
+    u = _cross(qp, rr) / safe
+    tol = 1e-9
+    crossing = ~parallel & (t >= -tol) & (t <= 1 + tol) & (u >= -tol) & (u <= 1 + tol)
+    cross_pts = p[:, :, None, :] + t[..., None] * rr  # (N, 4, 4, 2)
+    points = np.concatenate([p, q, cross_pts.reshape(n, 16, 2)], axis=1)  # (N, 24, 2)
+    valid = np.concatenate([p_in_q, q_in_p, crossing.reshape(n, 16)], axis=1)
+    count = valid.sum(axis=1)
+    centre = (points * valid[..., None]).sum(axis=1) / np.maximum(count, 1)[:, None]
+    angle = np.arctan2(points[..., 1] - centre[:, None, 1], points[..., 0] - centre[:, None, 0])
+    order = np.argsort(np.where(valid, angle, np.inf), axis=1, kind="stable")
+    ring = np.take_along_axis(points, order[..., None], axis=1)
+    ring_valid = np.take_along_axis(valid, order, axis=1)
+    # Unused slots repeat the first point: zero-length edges add nothing to the shoelace sum.
+    ring = np.where(ring_valid[..., None], ring, ring[:, :1, :])
+    area = np.abs(_signed_area(ring))
+    return np.where(count >= 3, area, 0.0)
+
+
+def _footprint_intersection(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry) -> np.ndarray:
+    """Intersection areas of the BEV footprints of paired boxes; pairs whose bounding
+    circles are apart are not clipped (area 0)."""
+    a_loc, b_loc = np.asarray(a_loc, float).reshape(-1, 3), np.asarray(b_loc, float).reshape(-1, 3)
+    a_dims, b_dims = np.asarray(a_dims, float).reshape(-1, 3), np.asarray(b_dims, float).reshape(-1, 3)
+    radius_a = 0.5 * np.hypot(a_dims[:, 1], a_dims[:, 2])
+    radius_b = 0.5 * np.hypot(b_dims[:, 1], b_dims[:, 2])
+    dist = np.hypot(a_loc[:, 0] - b_loc[:, 0], a_loc[:, 2] - b_loc[:, 2])
+    near = np.flatnonzero(dist < radius_a + radius_b)
+    inter = np.zeros(len(a_loc))
+    if len(near):
+        a_ry, b_ry = np.asarray(a_ry, float).reshape(-1), np.asarray(b_ry, float).reshape(-1)
+        inter[near] = convex_intersection_area(
+            bev_corners(a_loc[near], a_dims[near], a_ry[near]), bev_corners(b_loc[near], b_dims[near], b_ry[near])
+        )
+    return inter
+
+
+def _bev_from_intersection(inter, a_dims, b_dims) -> np.ndarray:
+    union = a_dims[:, 1] * a_dims[:, 2] + b_dims[:, 1] * b_dims[:, 2] - inter
+    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+
+
+def _3d_from_intersection(inter, a_loc, a_dims, b_loc, b_dims) -> np.ndarray:
+    top = np.maximum(a_loc[:, 1] - a_dims[:, 0], b_loc[:, 1] - b_dims[:, 0])
+    bottom = np.minimum(a_loc[:, 1], b_loc[:, 1])
+    inter_vol = inter * np.maximum(0.0, bottom - top)
+    union = a_dims.prod(axis=1) + b_dims.prod(axis=1) - inter_vol
+    return np.where(union > 0, inter_vol / np.where(union > 0, union, 1.0), 0.0)
+
+
+def _paired(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry):
+    a_loc, b_loc = np.asarray(a_loc, float), np.asarray(b_loc, float)
+    a_dims, b_dims = np.asarray(a_dims, float), np.asarray(b_dims, float)
+    a_ry, b_ry = np.asarray(a_ry, float), np.asarray(b_ry, float)
+    n = a_ry.reshape(-1).shape[0]
+    for name, arr, shape in (("a_loc", a_loc, (n, 3)), ("a_dims", a_dims, (n, 3)), ("b_loc", b_loc, (n, 3)),
+                             ("b_dims", b_dims, (n, 3)), ("b_ry", b_ry.reshape(-1), (n,))):
+        check_shape(name, arr, shape)
+    return a_loc, a_dims, a_ry.reshape(-1), b_loc, b_dims, b_ry.reshape(-1)
+
+
+def iou_bev(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry) -> np.ndarray:
+    """Bird's-eye-view IoU of paired KITTI boxes: ``location (N, 3)``, ``dims (N, 3)`` =
+    ``h w l``, ``rotation_y (N,)`` each; the rotated ``l x w`` footprints in the x-z plane."""
+    a_loc, a_dims, a_ry, b_loc, b_dims, b_ry = _paired(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry)
+    return _bev_from_intersection(_footprint_intersection(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry), a_dims, b_dims)
+
+
+def iou_3d(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry) -> np.ndarray:
+    """3D IoU of paired KITTI boxes (arguments as :func:`iou_bev`): footprint intersection
+    times the overlap of the vertical extents ``[y - h, y]`` (y down, the location is the
+    bottom centre), over the union of the volumes."""
+    a_loc, a_dims, a_ry, b_loc, b_dims, b_ry = _paired(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry)
+    inter = _footprint_intersection(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry)
+    return _3d_from_intersection(inter, a_loc, a_dims, b_loc, b_dims)
+
+
+# --------------------------------------------------------------------------- label arrays
+
+
+@dataclass
+class _Rows:
+    """Label rows of all frames as flat arrays, frame by frame in file order."""
+
+    frame: np.ndarray  # (N,) int
+    type: np.ndarray  # (N,) lower-case str
+    truncated: np.ndarray
+    occluded: np.ndarray
+    alpha: np.ndarray
+    box: np.ndarray  # (N, 4)
+    dims: np.ndarray  # (N, 3) h w l
+    location: np.ndarray  # (N, 3)
+    rotation_y: np.ndarray
+    score: np.ndarray
+
+    @classmethod
+    def of(cls, frames: Sequence[Sequence[Label]]) -> "_Rows":
+        rows = [lab for f in frames for lab in f]
+        n = len(rows)
+        scalars = np.array(
+            [(lab.truncated, lab.occluded, lab.alpha, lab.rotation_y, np.nan if lab.score is None else lab.score)
+             for lab in rows], dtype=float,
+        ).reshape(n, 5)
+        vectors = np.array([np.concatenate([lab.box, lab.dims, lab.location]) for lab in rows]).reshape(n, 10)
+        num = np.concatenate([scalars[:, :3], vectors, scalars[:, 3:]], axis=1)
+        return cls(
+            frame=np.repeat(np.arange(len(frames)), [len(f) for f in frames]),
+            type=np.array([lab.type.lower() for lab in rows], dtype=object),
+            truncated=num[:, 0],
+            occluded=num[:, 1],
+            alpha=num[:, 2],
+            box=num[:, 3:7],
+            dims=num[:, 7:10],
+            location=num[:, 10:13],
+            rotation_y=num[:, 13],
+            score=num[:, 14],
+        )
+
+    def take(self, index: np.ndarray) -> "_Rows":
+        return _Rows(**{k: v[index] for k, v in vars(self).items()})
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+
+def _rows_of(frame: FrameLabels | Sequence[Label]) -> list[Label]:
+    """All rows of a frame, DontCare regions included, in file order as far as known."""
+    if isinstance(frame, FrameLabels):
+        return list(frame.objects) + list(frame.dontcare)
+    return list(frame)
+
+
+def _pairs(frame_a: np.ndarray, frame_b: np.ndarray, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """All index pairs ``(i, j)`` with ``frame_a[i] == frame_b[j]`` (both sorted by frame),
+    grouped by ``i`` and in order of ``j``."""
+    b_count = np.bincount(frame_b, minlength=n_frames)
+    b_start = np.concatenate([[0], np.cumsum(b_count)[:-1]])
+    per_a = b_count[frame_a]
+    ia = np.repeat(np.arange(len(frame_a)), per_a)
+    offset = np.arange(len(ia)) - np.repeat(np.cumsum(per_a) - per_a, per_a)
+    return ia, b_start[frame_a[ia]] + offset
+
+
+# --------------------------------------------------------------------------- matching
+
+
+def _greedy(pg, pd, rank, priority_keys, available):
+    """The devkit's greedy assignment for every threshold at once.
+
+    Parameters
+    ----------
+    pg, pd : (P,) int
+        Candidate pairs (ground truth, detection), overlap above the minimum.
+    rank : (G,) int
+        Position of each ground truth in its frame (the devkit visits them in order).
+    priority_keys : list of (P,) arrays
+        ``np.lexsort`` keys (last = primary) ordering each ground truth's candidates by
+        preference; the first available one is taken.
+    available : (D, T) bool
+        Whether a detection takes part at threshold ``t`` (score high enough).
+
+    Returns
+    -------
+    chosen : (G, T) int
+        The detection assigned to each ground truth (-1: none).
+    assigned : (D, T) bool
+        Detections assigned to some ground truth.
+    """
+    n_gt, n_t = len(rank), available.shape[1]
+    chosen = np.full((n_gt, n_t), -1)
+    assigned = np.zeros_like(available)
+    if len(pg) == 0:
+        return chosen, assigned
+    order = np.lexsort([*priority_keys, pg, rank[pg]])
+    pg, pd = pg[order], pd[order]
+    pr = rank[pg]
+    bounds = np.flatnonzero(np.diff(pr)) + 1
+    # One step per rank: the ground truth of one rank lie in different frames, so they
+    # never compete for a detection; earlier ranks' assignments are already made.
+    for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(pr)]])):
+        g, d = pg[lo:hi], pd[lo:hi]
+        free = available[d] & ~assigned[d]  # (p, T)
+        starts = np.concatenate([[0], np.flatnonzero(np.diff(g)) + 1])
+        m = len(g)
+        pos = np.where(free, np.arange(m)[:, None], m)
+        first = np.minimum.reduceat(pos, starts, axis=0)  # (groups, T)
+        hit = first < m
+        det = d[np.where(hit, first, 0)]
+        chosen[g[starts]] = np.where(hit, det, -1)
+        rows, cols = np.nonzero(hit)
+        assigned[det[rows, cols], cols] = True
+    return chosen, assigned
+
+
+def _thresholds(scores: np.ndarray, n_gt: int) -> np.ndarray:
+    """The devkit's score thresholds for evenly spaced recall (``getThresholds``)."""
+    v = np.sort(np.asarray(scores, dtype=float))[::-1]
+    out = []
+    current = 0.0
+    step = 1.0 / (N_SAMPLE_PTS - 1.0)
+    last = len(v) - 1
+    for i, score in enumerate(v):
+        left = (i + 1) / n_gt
+        right = (i + 2) / n_gt if i < last else left
+        if (right - current) < (current - left) and i < last:
+            continue
+        out.append(score)
+        current += step
+    return np.asarray(out, dtype=float)
+
+
+@dataclass
+class _Curve:
+    precision: np.ndarray  # (41,)
+    orientation: np.ndarray  # (41,) orientation similarity
+    n_gt: int
+
+
+def _evaluate(gt: _Rows, det: _Rows, dc_hit: np.ndarray | None, overlap: np.ndarray, pg, pd, *,
+              class_name: str, difficulty: int, min_overlap: float) -> _Curve:
+    """Precision and orientation-similarity curves of one class, difficulty and metric.
+
+    ``gt`` holds the rows of the class and its neighbours, ``det`` the detections that
+    may take part; ``(pg, pd)`` are all same-frame pairs with their ``overlap``;
+    ``dc_hit`` (D,) the largest DontCare overlap of each detection (2D only)."""
+    height = gt.box[:, 3] - gt.box[:, 1]
+    hard = (gt.occluded > MAX_OCCLUSION[difficulty]) | (gt.truncated > MAX_TRUNCATION[difficulty]) | (
+        height < MIN_HEIGHT[difficulty])
+    counted = (gt.type == class_name) & ~hard  # ignored_gt == 0; everything else here is 1
+    n_gt = int(counted.sum())
+    det_height = np.trunc(np.abs(det.box[:, 1] - det.box[:, 3]))  # an int32 in the devkit
+    det_ignored = det_height < MIN_HEIGHT[difficulty]
+    det_valid = ~det_ignored & (det.type == class_name)  # ignored_det == 0
+    det_active = det_valid | det_ignored  # ignored_det != -1
+    cand = (overlap > min_overlap) & det_active[pd]
+    cg, cd, cov = pg[cand], pd[cand], overlap[cand]
+    rank = np.zeros(len(gt), dtype=int)
+    if len(gt):
+        starts = np.concatenate([[0], np.flatnonzero(np.diff(gt.frame)) + 1])
+        rank = np.arange(len(gt)) - np.repeat(starts, np.diff(np.concatenate([starts, [len(gt)]])))
+    score = det.score
+
+    # Pass 1: highest-scoring candidate, no threshold; TP scores define the thresholds.
+    chosen, _ = _greedy(cg, cd, rank, [cd, -score[cd]], np.ones((len(det), 1), dtype=bool))
+    c = chosen[:, 0]
+    tp1 = counted & (c >= 0) & det_valid[np.maximum(c, 0)]
+    thresholds = _thresholds(score[c[tp1]], n_gt) if n_gt else np.zeros(0)
+
+    precision = np.zeros(N_SAMPLE_PTS)
+    orientation = np.zeros(N_SAMPLE_PTS)
+    if len(thresholds):
+        available = score[:, None] >= thresholds[None, :]
+        # Pass 2: non-ignored candidate of largest overlap, else the first ignored one.
+        ignored_key = det_ignored[cd].astype(int)
+        chosen, assigned = _greedy(cg, cd, rank, [cd, np.where(det_ignored[cd], 0.0, -cov), ignored_key], available)
+        safe = np.maximum(chosen, 0)
+        tp_mask = counted[:, None] & (chosen >= 0) & det_valid[safe]
+        tp = tp_mask.sum(axis=0)
+        not_dc = np.ones(len(det), dtype=bool) if dc_hit is None else ~(dc_hit > min_overlap)
+        fp = ((det_valid & not_dc)[:, None] & available & ~assigned).sum(axis=0)
+        similarity = np.where(tp_mask, (1.0 + np.cos(gt.alpha[:, None] - det.alpha[safe])) / 2.0, 0.0).sum(axis=0)
+        denom = tp + fp
+        with np.errstate(invalid="ignore", divide="ignore"):
+            prec = np.where(denom > 0, tp / np.maximum(denom, 1), 0.0)
+            sim = np.where(denom > 0, similarity / np.maximum(denom, 1), 0.0)
+        precision[: len(thresholds)] = prec
+        orientation[: len(thresholds)] = sim
+        precision = np.maximum.accumulate(precision[::-1])[::-1]
+        orientation = np.maximum.accumulate(orientation[::-1])[::-1]
+    return _Curve(precision, orientation, n_gt)
+
+
+def average_precision(curve: np.ndarray, *, recall_points: int = 40) -> float:
+    """AP in percent from a 41-point precision (or orientation-similarity) curve: R40
+    averages points 1..40, R11 points 0, 4, ..., 40."""
+    curve = np.asarray(curve, dtype=float)
+    check_shape("curve", curve, (N_SAMPLE_PTS,))
+    if recall_points == 40:
+        return float(curve[1:].sum() / 40.0 * 100.0)
+    if recall_points == 11:
+        return float(curve[::4].sum() / 11.0 * 100.0)
+    raise ValueError(f"recall_points must be 40 or 11, got {recall_points}")
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+def kitti_curves(
+    gt_frames: Sequence[FrameLabels | Sequence[Label]],
+    pred_frames: Sequence[FrameLabels | Sequence[Label]],
+    *,
+    class_name: str = "car",
+    min_overlaps: Sequence[float] | None = None,
+) -> dict:
+    """Precision curves of one class at each minimum overlap (default: the devkit's).
+
+    Returns
+    -------
+    dict
+        ``{min_overlap: {metric: {difficulty: curve or None}, "aos_valid": bool}}`` with
+        metrics ``2d`` (whose curve also holds the orientation similarity), ``bev`` and
+        ``3d``; a curve has ``precision`` and ``orientation`` (41 points) and ``n_gt``;
+        ``None`` where the devkit does not evaluate (see the module docstring).
+    """
+    if len(gt_frames) != len(pred_frames):
+        raise ValueError(f"{len(gt_frames)} ground-truth frames but {len(pred_frames)} prediction frames")
+    class_name = class_name.lower()
+    if class_name not in NEIGHBOURS:
+        raise ValueError(f"class must be one of {sorted(NEIGHBOURS)}, got {class_name!r}")
+    thresholds = [MIN_OVERLAP[class_name]] if min_overlaps is None else [float(t) for t in min_overlaps]
+    n_frames = len(gt_frames)
+    gt_all = _Rows.of([_rows_of(f) for f in gt_frames])
+    det_all = _Rows.of([_rows_of(f) for f in pred_frames])
+    gt = gt_all.take(np.isin(gt_all.type, (class_name, *NEIGHBOURS[class_name])))
+    dontcare = gt_all.take(gt_all.type == "dontcare")
+    is_class = det_all.type == class_name
+    # Detections of other classes matter only while lower than a minimum height.
+    det = det_all.take(is_class | (np.abs(det_all.box[:, 3] - det_all.box[:, 1]) < max(MIN_HEIGHT)))
+    det_is_class = det.type == class_name
+    if np.isnan(det.score[det_is_class]).any():
+        raise ValueError(f"every {class_name} prediction needs a score (16th column)")
+    det.score = np.nan_to_num(det.score, nan=-np.inf)
+
+    pg, pd = _pairs(gt.frame, det.frame, n_frames)
+    footprint = _footprint_intersection(det.location[pd], det.dims[pd], det.rotation_y[pd],
+                                        gt.location[pg], gt.dims[pg], gt.rotation_y[pg])
+    overlaps = {
+        "2d": box_overlap_2d(det.box[pd], gt.box[pg]),
+        "bev": _bev_from_intersection(footprint, det.dims[pd], gt.dims[pg]),
+        "3d": _3d_from_intersection(footprint, det.location[pd], det.dims[pd], gt.location[pg], gt.dims[pg]),
+    }
+    dj, dk = _pairs(det.frame, dontcare.frame, n_frames)
+    dc_hit = np.zeros(len(det))
+    if len(dj):
+        np.maximum.at(dc_hit, dj, box_overlap_2d(det.box[dj], dontcare.box[dk], criterion="a"))
+    evaluated = {
+        "2d": bool((det_is_class & (det.box[:, 0] >= 0)).any()),
+        "bev": bool((det_is_class & (det.location[:, 0] != _NO_LOCATION)).any()),
+        "3d": bool((det_is_class & (det.location[:, 1] != _NO_LOCATION)).any()),
+    }
+    aos_valid = not bool((det_all.alpha == _NO_ALPHA).any())
+    out = {}
+    for thr in thresholds:
+        curves: dict = {"aos_valid": aos_valid}
+        for metric in METRICS:
+            curves[metric] = {
+                name: _evaluate(gt, det, dc_hit if metric == "2d" else None, overlaps[metric], pg, pd,
+                                class_name=class_name, difficulty=d, min_overlap=thr) if evaluated[metric] else None
+                for d, name in enumerate(DIFFICULTIES)
+            }
+        out[thr] = curves
+    return out
+
+
+def _aps(curves: dict, recall_points: int) -> dict:
+    def ap(curve, field):
+        if curve is None or curve.n_gt == 0:
+            return None
+        return average_precision(getattr(curve, field), recall_points=recall_points)
+
+    return {
+        "2d": {d: ap(curves["2d"][d], "precision") for d in DIFFICULTIES},
+        "aos": {d: ap(curves["2d"][d], "orientation") if curves["aos_valid"] else None for d in DIFFICULTIES},
+        "bev": {d: ap(curves["bev"][d], "precision") for d in DIFFICULTIES},
+        "3d": {d: ap(curves["3d"][d], "precision") for d in DIFFICULTIES},
+    }
+
+
+def kitti_metrics(
+    gt_frames: Sequence[FrameLabels | Sequence[Label]],
+    pred_frames: Sequence[FrameLabels | Sequence[Label]],
+) -> dict:
+    """KITTI object-benchmark figures for Car.
+
+    Parameters
+    ----------
+    gt_frames : sequence of FrameLabels or lists of Label
+        Ground truth per frame (DontCare rows included, as :func:`read_labels` gives them).
+    pred_frames : sequence of FrameLabels or lists of Label
+        Predictions of the same frames, in the same order; every ``Car`` row needs a score.
+
+    Returns
+    -------
+    dict
+        ``{"car": {"2d"|"aos"|"bev"|"3d": {"easy", "moderate", "hard"}}, "recall_points":
+        40, "r11": {"car": ...}, "iou_0.5": {"car": ...}, "min_overlap": ..., "n_gt":
+        {"car": {difficulty: count}}, "n_frames": N}``: APs in percent with KITTI's rules
+        (see the module docstring); the top level is R40 at the devkit's IoU 0.7, ``r11``
+        the same at 11 recall points, ``iou_0.5`` R40 with every overlap threshold at 0.5.
+        ``None`` where the devkit gives no figure.
+    """
+    curves = kitti_curves(gt_frames, pred_frames, class_name="car", min_overlaps=(MIN_OVERLAP["car"], 0.5))
+    strict, loose = curves[MIN_OVERLAP["car"]], curves[0.5]
+    return {
+        "car": _aps(strict, 40),
+        "recall_points": 40,
+        "r11": {"car": _aps(strict, 11)},
+        "iou_0.5": {"car": _aps(loose, 40)},
+        "min_overlap": {"car": MIN_OVERLAP["car"], "iou_0.5": 0.5},
+        "n_gt": {"car": {d: _count_gt(gt_frames, d) for d in DIFFICULTIES}},
+        "n_frames": len(gt_frames),
+    }
+
+
+def difficulty_of(label: Label) -> str | None:
+    """The easiest KITTI difficulty whose limits a ground-truth object meets (``None``:
+    beyond *hard*, ignored in every evaluation)."""
+    for d, name in enumerate(DIFFICULTIES):
+        if (label.occluded <= MAX_OCCLUSION[d] and label.truncated <= MAX_TRUNCATION[d]
+                and label.box[3] - label.box[1] >= MIN_HEIGHT[d]):
+            return name
+    return None
+
+
+def _count_gt(gt_frames, difficulty: str) -> int:
+    order = DIFFICULTIES.index(difficulty)
+    return sum(
+        1
+        for f in gt_frames
+        for lab in _rows_of(f)
+        if lab.type.lower() == "car" and (lv := difficulty_of(lab)) is not None and DIFFICULTIES.index(lv) <= order
+    )
+
+
+# --------------------------------------------------------------------------- files and table
+
+
+def read_label_dirs(
+    gt_dir: str | Path, pred_dir: str | Path, *, frames: Iterable[str] | None = None
+) -> tuple[list[str], list[FrameLabels], list[FrameLabels]]:
+    """Ground truth and predictions of KITTI label directories (``FRAME.txt`` each).
+
+    Frames are those given, else every ``*.txt`` of ``gt_dir`` (sorted). A frame without
+    a prediction file has no detections.
+
+    Raises
+    ------
+    InputError
+        If a directory is missing, or a ground-truth file of a frame is missing or any
+        file is unreadable or malformed (see :func:`wirescene.datasets.kitti.read_labels`).
+    """
+    gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
+    if not gt_dir.is_dir():
+        raise InputError("ground-truth label directory not found", path=gt_dir)
+    if not pred_dir.is_dir():
+        raise InputError("prediction directory not found", path=pred_dir)
+    ids = sorted(p.stem for p in gt_dir.glob("*.txt")) if frames is None else [str(f) for f in frames]
+    if not ids:
+        raise InputError("no ground-truth label files (*.txt)", path=gt_dir)
+    gts = [read_labels(gt_dir / f"{f}.txt") for f in ids]
+    preds = [read_labels(p) if (p := pred_dir / f"{f}.txt").exists() else FrameLabels() for f in ids]
+    return ids, gts, preds
+
+
+def _fmt(v) -> str:
+    return "-" if v is None else f"{v:.2f}"
+
+
+def format_kitti_table(result: dict, *, title: str = "") -> str:
+    """Plain-text table of :func:`kitti_metrics`: rows 2d / aos / bev / 3d at IoU 0.7,
+    then at 0.5, columns easy / moderate / hard (R40), and the R11 figures at 0.7."""
+    n = result["n_gt"]["car"]
+    head = (f"KITTI Car AP (%), {result['n_frames']} frames, cars easy/moderate/hard: "
+            f"{n['easy']}/{n['moderate']}/{n['hard']}")
+    lines = [title, head] if title else [head]
+    lines.append(f"{'metric':<7} {'IoU':>4} {'points':>6} {'easy':>8} {'moderate':>9} {'hard':>8}")
+    blocks = (("0.7", "R40", result["car"]), ("0.5", "R40", result["iou_0.5"]["car"]), ("0.7", "R11", result["r11"]["car"]))
+    for iou, points, figures in blocks:
+        for metric in ("2d", "aos", "bev", "3d"):
+            row = figures[metric]
+            lines.append(f"{metric:<7} {iou:>4} {points:>6} {_fmt(row['easy']):>8} {_fmt(row['moderate']):>9} "
+                         f"{_fmt(row['hard']):>8}")
+    return "\n".join(lines)
