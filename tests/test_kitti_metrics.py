@@ -438,7 +438,7 @@ def test_read_label_dirs(tmp_path):
     ids = sorted(p.stem for p in gt_dir.glob("*.txt"))[:3]
     pred = tmp_path / "pred"
     pred.mkdir()
-    (pred / f"{ids[0]}.txt").write_text((gt_dir / f"{ids[0]}.txt").read_text())
+    (pred / f"{ids[0]}.txt").write_text("".join(ln + " 0.5\n" for ln in (gt_dir / f"{ids[0]}.txt").read_text().splitlines()))
     frames, gts, preds = read_label_dirs(gt_dir, pred, frames=ids)
     assert frames == ids and len(gts) == 3
     assert len(preds[0].objects) == len(read_labels(gt_dir / f"{ids[0]}.txt").objects)
@@ -449,3 +449,98 @@ def test_read_label_dirs(tmp_path):
     (tmp_path / "bad" / "000001.txt").write_text("Car 0 0\n")
     with pytest.raises(InputError, match="line 1"):
         read_label_dirs(tmp_path / "bad", pred)
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def _cli(*args):
+    from click.testing import CliRunner
+
+    from wirescene.cli import main
+
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def _one_line_error(result):
+    err = result.stderr if hasattr(result, "stderr") else result.output
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith("wirescene: error:"), err
+    return lines[0]
+
+
+def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
+    import json
+
+    from wirescene.datasets.kitti import write_labels
+
+    gt_dir = KITTI_ROOT / "training" / "label_2"
+    pred = tmp_path / "pred"
+    pred.mkdir()
+    for f in ("000002", "000010"):  # GT rows as predictions with score 1; 001545 has no file
+        labels = read_labels(gt_dir / f"{f}.txt")
+        for o in labels.objects:
+            o.score = 1.0
+        write_labels(pred / f"{f}.txt", labels.objects)
+    out = tmp_path / "k.json"
+    r = _cli("kitti-eval", gt_dir, pred, "--json", out)
+    assert r.exit_code == 0, r.output
+    assert "KITTI Car AP" in r.output and "moderate" in r.output
+    rows = [ln.split() for ln in r.output.splitlines() if ln.split()[:1] in (["2d"], ["aos"], ["bev"], ["3d"])]
+    assert len(rows) == 12
+    data = json.loads(out.read_text())
+    assert set(data["car"]) == {"2d", "aos", "bev", "3d"} and data["recall_points"] == 40
+    gts = [read_labels(gt_dir / f"{f}.txt") for f in ("000002", "000010", "001545")]
+    preds = [read_labels(pred / "000002.txt"), read_labels(pred / "000010.txt"), FrameLabels()]
+    assert data["car"] == kitti_metrics(gts, preds)["car"]
+    # only the frames given: with every car found exactly, precision is 1 at each threshold
+    r = _cli("kitti-eval", gt_dir, pred, "--frames", "000010", "--json", out)
+    assert r.exit_code == 0, r.output
+    one = json.loads(out.read_text())
+    n = one["n_gt"]["car"]["moderate"]
+    assert one["n_frames"] == 1 and one["car"]["3d"]["moderate"] == pytest.approx((n - 1) / 40 * 100)
+
+
+@pytest.mark.parametrize("case, problem", [("no_gt_dir", "not found"), ("bad_gt", "line 1"),
+                                           ("no_score", "score"), ("unknown_frame", "label file not found")])
+def test_cli_kitti_eval_bad_input_is_one_line_error(tmp_path, case, problem):
+    gt_dir = tmp_path / "gt"
+    pred = tmp_path / "pred"
+    gt_dir.mkdir()
+    pred.mkdir()
+    (gt_dir / "000001.txt").write_text((KITTI_ROOT / "training" / "label_2" / "000010.txt").read_text())
+    args = []
+    if case == "no_gt_dir":
+        gt_dir = tmp_path / "missing"
+    elif case == "bad_gt":
+        (gt_dir / "000001.txt").write_text("Car 0.0 0 1.0 10 20 30\n")
+    elif case == "no_score":
+        (pred / "000001.txt").write_text((gt_dir / "000001.txt").read_text())
+    else:
+        args = ["--frames", "000009"]
+    line = _one_line_error(_cli("kitti-eval", gt_dir, pred, *args))
+    assert problem in line
+
+
+def test_cli_eval_adds_kitti_figures(tmp_path):
+    import json
+
+    out = tmp_path / "m.json"
+    pred = tmp_path / "pred"
+    r = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", "1",
+             "--json", out, "--predictions", pred)
+    assert r.exit_code == 0, r.output
+    assert "KITTI Car AP R40" in r.output
+    kitti = json.loads(out.read_text())["kitti"]
+    # the figures are those of the label files it wrote
+    r2 = _cli("kitti-eval", KITTI_ROOT / "training" / "label_2", pred / "coarse", "--frames", "000010",
+              "--json", tmp_path / "k.json")
+    assert r2.exit_code == 0, r2.output
+    # (equal up to the rounding of the written files: 2D boxes 0.01 px, angles 1e-6 rad)
+    def flat(d, prefix=""):
+        return {k2: v2 for k, v in d.items()
+                for k2, v2 in (flat(v, f"{prefix}{k}.").items() if isinstance(v, dict) else [(prefix + k, v)])}
+
+    assert flat(json.loads((tmp_path / "k.json").read_text())) == pytest.approx(flat(kitti), rel=1e-5)
+    # 000010: 8 cars; 3 easy, 2 more occluded 1 (28.8 and 42 px), 2 more occluded 2, one truncated 0.8
+    assert kitti["n_gt"]["car"] == {"easy": 3, "moderate": 5, "hard": 7}

@@ -179,10 +179,11 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
              raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
              device, parts_model, detector_bank):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
-    from wirescene.io.kitti import KittiDataset
+    from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
 
     if resume and predictions is None:
         raise click.UsageError("--resume needs --predictions DIR, where finished frames are recorded")
@@ -214,6 +215,13 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
         from wirescene.eval.report import Gallery
 
         gallery = Gallery()
+    kitti_rows: dict = {}  # {variant: {frame: label rows}} for the KITTI benchmark figures
+
+    def on_estimate(frame_id, variant, estimate, *rest):
+        kitti_rows.setdefault(variant, {})[frame_id] = estimate.to_labels()
+        if gallery is not None:
+            gallery.add(frame_id, variant, estimate, *rest)
+
     try:
         reports = evaluate_dataset(
             dataset,
@@ -228,7 +236,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
             dask_client=client,
             progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
             notify=lambda message: click.echo(f"wirescene: {message}", err=True),
-            on_estimate=None if gallery is None else gallery.add,
+            on_estimate=on_estimate,
         )
     finally:
         if client is not None:
@@ -236,8 +244,10 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())
     click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if has_parts else ("3d", "viewpoint")))
+    kitti = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions)
+    click.echo("\n" + format_kitti_summary(kitti))
     if json_out is not None:
-        data = {v: r.to_json_dict(include_records=True) for v, r in reports.items()}
+        data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v]} for v, r in reports.items()}
         if len(variants) == 1:
             data = data[variants[0]]
         _write_json_atomic(json_out, data)
@@ -300,6 +310,43 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
         if client is not None:
             client.close()
     click.echo(f"{len(fitted)} frames fitted, {total - len(fitted)} kept from an earlier run; labels in {out}")
+
+
+def _kitti_figures(dataset, frame_ids, variants, rows, predictions) -> dict:
+    """KITTI benchmark figures (:func:`wirescene.eval.kitti_metrics.kitti_metrics`) of each
+    variant on the label rows it predicts (``rows[variant][frame]``; frames reused by
+    ``--resume`` have none, their rows come from the label files in ``predictions``)."""
+    from wirescene.eval.kitti_metrics import kitti_metrics
+    from wirescene.io.kitti import read_labels
+
+    frame_ids = list(frame_ids) if frame_ids else dataset.frame_ids()
+    gts = [dataset.labels(f) for f in frame_ids]
+    out = {}
+    for v in variants:
+        fitted = rows.get(v, {})
+        preds = [fitted[f] if f in fitted else read_labels(Path(predictions) / v / f"{f}.txt") for f in frame_ids]
+        out[v] = kitti_metrics(gts, preds)
+    return out
+
+
+@main.command("kitti-eval")
+@click.argument("gt_dir", type=click.Path(path_type=Path))
+@click.argument("pred_dir", type=click.Path(path_type=Path))
+@click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the figures as JSON.")
+@click.option("--frames", default=None, help="Comma-separated frame ids (default: every GT_DIR/*.txt).")
+def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames):
+    """KITTI object-benchmark AP of Car (2D, AOS, BEV, 3D; easy / moderate / hard; R40 and
+    R11; IoU 0.7 and 0.5) of the label files in PRED_DIR against GT_DIR, by the devkit's
+    rules. A frame without a prediction file has no detections."""
+    from wirescene.eval.kitti_metrics import format_kitti_table, kitti_metrics, read_label_dirs
+
+    frame_ids = [f.strip() for f in frames.split(",")] if frames else None
+    _, gts, preds = read_label_dirs(gt_dir, pred_dir, frames=frame_ids)
+    result = kitti_metrics(gts, preds)
+    click.echo(format_kitti_table(result))
+    if json_out is not None:
+        _write_json_atomic(json_out, result)
+        click.echo(f"metrics written to {json_out}")
 
 
 @main.command("fit")

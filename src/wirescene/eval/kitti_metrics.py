@@ -624,8 +624,9 @@ def read_label_dirs(
     Raises
     ------
     InputError
-        If a directory is missing, or a ground-truth file of a frame is missing or any
-        file is unreadable or malformed (see :func:`wirescene.datasets.kitti.read_labels`).
+        If a directory is missing, a ground-truth file of a frame is missing, any file is
+        unreadable or malformed (see :func:`wirescene.datasets.kitti.read_labels`), or a
+        prediction row has no score.
     """
     gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
     if not gt_dir.is_dir():
@@ -636,7 +637,12 @@ def read_label_dirs(
     if not ids:
         raise InputError("no ground-truth label files (*.txt)", path=gt_dir)
     gts = [read_labels(gt_dir / f"{f}.txt") for f in ids]
-    preds = [read_labels(p) if (p := pred_dir / f"{f}.txt").exists() else FrameLabels() for f in ids]
+    preds = []
+    for f in ids:
+        path = pred_dir / f"{f}.txt"
+        preds.append(read_labels(path) if path.exists() else FrameLabels())
+        if any(o.score is None for o in preds[-1].objects):
+            raise InputError("predictions need a score (16th column) on every row", path=path)
     return ids, gts, preds
 
 
@@ -658,4 +664,23 @@ def format_kitti_table(result: dict, *, title: str = "") -> str:
             row = figures[metric]
             lines.append(f"{metric:<7} {iou:>4} {points:>6} {_fmt(row['easy']):>8} {_fmt(row['moderate']):>9} "
                          f"{_fmt(row['hard']):>8}")
+    return "\n".join(lines)
+
+
+def format_kitti_summary(results: dict[str, dict]) -> str:
+    """One line per variant of :func:`kitti_metrics` results ``{variant: result}``: R40
+    AP at moderate difficulty, 2D / AOS / BEV / 3D at IoU 0.7 and BEV / 3D at 0.5."""
+    if not results:
+        return ""
+    first = next(iter(results.values()))
+    n = first["n_gt"]["car"]
+    name_w = max(len("variant"), *(len(v) for v in results))
+    cols = (("2d@.7", "car", "2d"), ("aos@.7", "car", "aos"), ("bev@.7", "car", "bev"), ("3d@.7", "car", "3d"),
+            ("bev@.5", "iou_0.5", "bev"), ("3d@.5", "iou_0.5", "3d"))
+    lines = [f"KITTI Car AP R40 (%), moderate ({n['moderate']} cars in {first['n_frames']} frames; "
+             f"easy {n['easy']}, hard {n['hard']} cars)",
+             f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>7}" for c in cols)]
+    for v, r in results.items():
+        cells = [(r[block] if block == "car" else r[block]["car"])[m]["moderate"] for _, block, m in cols]
+        lines.append(f"{v:<{name_w}} " + " ".join(f"{_fmt(c):>7}" for c in cells))
     return "\n".join(lines)
