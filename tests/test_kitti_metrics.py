@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, assert_close
-from wirescene.datasets.kitti import FrameLabels, Label, read_labels
-from wirescene.errors import InputError
+from wirescene.core.errors import InputError
+from wirescene.io.kitti import FrameLabels, Label, read_labels
 from wirescene.eval.kitti_metrics import (
     DIFFICULTIES,
     N_SAMPLE_PTS,
@@ -457,7 +457,7 @@ def test_read_label_dirs(tmp_path):
 def _cli(*args):
     from click.testing import CliRunner
 
-    from wirescene.cli import main
+    from wirescene.cli.main import main
 
     return CliRunner().invoke(main, [str(a) for a in args])
 
@@ -472,7 +472,7 @@ def _one_line_error(result):
 def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
     import json
 
-    from wirescene.datasets.kitti import write_labels
+    from wirescene.io.kitti import write_labels
 
     gt_dir = KITTI_ROOT / "training" / "label_2"
     pred = tmp_path / "pred"

@@ -74,8 +74,9 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..datasets.kitti import FrameLabels, Label, read_labels
-from ..errors import InputError, check_shape
+from wirescene.core.errors import InputError, check_shape
+from wirescene.core.labels import FrameLabels, Label
+from wirescene.io.kitti import read_labels
 
 DIFFICULTIES = ("easy", "moderate", "hard")
 #: Minimum 2D box height (pixels) per difficulty, of ground truth and detections.
@@ -127,7 +128,7 @@ def box_overlap_2d(a: np.ndarray, b: np.ndarray, *, criterion: str = "union") ->
 def bev_corners(location: np.ndarray, dims: np.ndarray, rotation_y: np.ndarray) -> np.ndarray:
     """Footprints ``(N, 4, 2)`` (camera ``x``, ``z``) of KITTI boxes, counter-clockwise in
     the x-z plane: the object's length ``l`` along ``(cos ry, -sin ry)``, its width ``w``
-    across, as in the devkit (and :func:`wirescene.boxes.box_corners`)."""
+    across, as in the devkit (and :func:`wirescene.core.boxes.box_corners`)."""
     location = np.asarray(location, dtype=float).reshape(-1, 3)
     dims = np.asarray(dims, dtype=float).reshape(-1, 3)
     ry = np.asarray(rotation_y, dtype=float).reshape(-1)
@@ -625,7 +626,7 @@ def read_label_dirs(
     ------
     InputError
         If a directory is missing, a ground-truth file of a frame is missing, any file is
-        unreadable or malformed (see :func:`wirescene.datasets.kitti.read_labels`), or a
+        unreadable or malformed (see :func:`wirescene.io.kitti.read_labels`), or a
         prediction row has no score.
     """
     gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
