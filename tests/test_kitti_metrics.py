@@ -544,3 +544,9 @@ def test_cli_eval_adds_kitti_figures(tmp_path):
     assert flat(json.loads((tmp_path / "k.json").read_text())) == pytest.approx(flat(kitti), rel=1e-5)
     # 000010: 8 cars; 3 easy, 2 more occluded 1 (28.8 and 42 px), 2 more occluded 2, one truncated 0.8
     assert kitti["n_gt"]["car"] == {"easy": 3, "moderate": 5, "hard": 7}
+    # --resume reuses the frame: its rows come from the label file written the first time
+    r3 = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", "1",
+              "--json", out, "--predictions", pred, "--resume")
+    assert r3.exit_code == 0, r3.output
+    assert "resuming: 1 of 1" in r3.output
+    assert flat(json.loads(out.read_text())["kitti"]) == pytest.approx(flat(kitti), rel=1e-5)
