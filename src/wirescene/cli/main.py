@@ -314,8 +314,9 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
 
 def _kitti_figures(dataset, frame_ids, variants, rows, predictions) -> dict:
     """KITTI benchmark figures (:func:`wirescene.eval.kitti_metrics.kitti_metrics`) of each
-    variant on the label rows it predicts (``rows[variant][frame]``; frames reused by
-    ``--resume`` have none, their rows come from the label files in ``predictions``)."""
+    variant: of its label files in ``predictions`` if given (so that fitted and resumed
+    frames give the same figures, and ``kitti-eval`` on those files agrees), else of the
+    label rows it predicted (``rows[variant][frame]``)."""
     from wirescene.eval.kitti_metrics import kitti_metrics
     from wirescene.io.kitti import read_labels
 
@@ -323,8 +324,10 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions) -> dict:
     gts = [dataset.labels(f) for f in frame_ids]
     out = {}
     for v in variants:
-        fitted = rows.get(v, {})
-        preds = [fitted[f] if f in fitted else read_labels(Path(predictions) / v / f"{f}.txt") for f in frame_ids]
+        if predictions is not None:
+            preds = [read_labels(Path(predictions) / v / f"{f}.txt") for f in frame_ids]
+        else:
+            preds = [rows[v][f] for f in frame_ids]
         out[v] = kitti_metrics(gts, preds)
     return out
 
