@@ -7,7 +7,8 @@ of ``--viewpoint-noise`` degrees before it is binned into the 8 coarse viewpoint
 detection files hold only the 2D box, the angle and a score of 1 (no 3D ground truth).
 Reported per setting: TP/GT (a detection is a TP initialisation if it overlaps its car
 by IoU > 0.5, the paper's rule), the % of TPs within 1 m / 1.5 m of the true position,
-and the KITTI 3D AP R40 at IoU 0.5 (moderate) of the written predictions.
+and the KITTI 3D AP R40 at IoU 0.5 (moderate) of the written predictions (raw scores:
+all 1, so that AP is about precision x recall of one operating point).
 
 Nothing here is trained on real frames (the coarse variants use the CAD shape model
 only), so all 33 frames are scored. Fine variants (``--variant fg+gp`` ...) use part
@@ -90,7 +91,7 @@ def main():
                                                     seed=args.seed)
                 t0 = time.perf_counter()
                 reports = evaluate_dataset(dataset, variants, source=DetectionSource(str(det_dir)),
-                                           options=FitOptions(seed=args.seed), predictions_dir=pred_dir, workers=1,
+                                           options=FitOptions(seed=args.seed, calibrate_scores=False), predictions_dir=pred_dir, workers=1,
                                            notify=lambda m: None)
                 seconds = time.perf_counter() - t0
                 for v, rep in reports.items():

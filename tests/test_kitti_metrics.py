@@ -502,7 +502,7 @@ def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
 
 
 @pytest.mark.parametrize("case, problem", [("no_gt_dir", "not found"), ("bad_gt", "line 1"),
-                                           ("no_score", "score"), ("unknown_frame", "label file not found")])
+                                           ("no_score", "score"), ("unknown_frame", "000009")])
 def test_cli_kitti_eval_bad_input_is_one_line_error(tmp_path, case, problem):
     gt_dir = tmp_path / "gt"
     pred = tmp_path / "pred"
@@ -527,7 +527,7 @@ def test_cli_eval_adds_kitti_figures(tmp_path):
 
     out = tmp_path / "m.json"
     pred = tmp_path / "pred"
-    r = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", "1",
+    r = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--raw-scores", "--frames", "000010", "--workers", "1",
              "--json", out, "--predictions", pred)
     assert r.exit_code == 0, r.output
     assert "KITTI Car AP R40" in r.output
@@ -540,13 +540,13 @@ def test_cli_eval_adds_kitti_figures(tmp_path):
     # 000010: 8 cars; 3 easy, 2 more occluded 1 (28.8 and 42 px), 2 more occluded 2, one truncated 0.8
     assert kitti["n_gt"]["car"] == {"easy": 3, "moderate": 5, "hard": 7}
     # --resume reuses the frame, with the same figures
-    r3 = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", "1",
+    r3 = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--raw-scores", "--frames", "000010", "--workers", "1",
               "--json", out, "--predictions", pred, "--resume")
     assert r3.exit_code == 0, r3.output
     assert "resuming: 1 of 1" in r3.output
     assert json.loads(out.read_text())["kitti"] == kitti
     # without --predictions: the figures of the rows in memory (equal up to the files' rounding)
-    r4 = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", "1", "--json", out)
+    r4 = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--raw-scores", "--frames", "000010", "--workers", "1", "--json", out)
     assert r4.exit_code == 0, r4.output
     in_memory = json.loads(out.read_text())["kitti"]
     assert in_memory["car"]["3d"] == pytest.approx(kitti["car"]["3d"], rel=1e-5)

@@ -343,7 +343,9 @@ def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames):
     rules. A frame without a prediction file has no detections."""
     from wirescene.eval.kitti_metrics import format_kitti_table, kitti_metrics, read_label_dirs
 
-    frame_ids = [f.strip() for f in frames.split(",")] if frames else None
+    check_output_file(json_out, "--json")
+    known = sorted(p.stem for p in gt_dir.glob("*.txt")) if gt_dir.is_dir() else []
+    frame_ids = parse_frames(frames, known) if known else None
     _, gts, preds = read_label_dirs(gt_dir, pred_dir, frames=frame_ids)
     result = kitti_metrics(gts, preds)
     click.echo(format_kitti_table(result))
