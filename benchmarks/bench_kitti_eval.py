@@ -57,20 +57,26 @@ def synthetic_split(n_frames: int, *, fps: float = 10.0, seed: int = 0):
             dims = np.array(SIZES[kind]) * rng.uniform(0.9, 1.1, 3)
             loc = np.array([x, 1.65, z])
             alpha = ry - np.arctan2(x, z)
+            box = _box2d(dims, loc, ry)
+            if min(box[2] - box[0], box[3] - box[1]) < 1:  # outside the image
+                continue
             gt.append(Label(kind, rng.choice([0.0, 0.0, 0.2, 0.4, 0.6]), int(rng.integers(0, 4)), alpha,
-                            _box2d(dims, loc, ry), dims, loc, ry))
+                            box, dims, loc, ry))
             if kind != "Pedestrian" and rng.random() < 0.85:
                 e = rng.normal(0, 1, 7)
                 dloc = loc + [0.3 * e[0], 0.05 * e[1], 0.03 * z * e[2]]
                 dd = dims * (1 + 0.05 * e[3:6])
                 dry = ry + 0.1 * e[6]
-                pred.append(Label("Car", -1, -1, dry - np.arctan2(dloc[0], dloc[2]), _box2d(dd, dloc, dry), dd, dloc,
-                                  dry, float(rng.uniform(0.3, 1.0))))
+                dbox = _box2d(dd, dloc, dry)
+                if min(dbox[2] - dbox[0], dbox[3] - dbox[1]) >= 1:
+                    pred.append(Label("Car", -1, -1, dry - np.arctan2(dloc[0], dloc[2]), dbox, dd, dloc, dry,
+                                      float(rng.uniform(0.3, 1.0))))
         for _ in range(rng.poisson(fps)):
             z, x, ry = rng.uniform(5, 60), rng.uniform(-16, 16), rng.uniform(-np.pi, np.pi)
             dims, loc = np.array(SIZES["Car"]), np.array([x, 1.65, z])
-            pred.append(Label("Car", -1, -1, ry - np.arctan2(x, z), _box2d(dims, loc, ry), dims, loc, ry,
-                              float(rng.uniform(0.0, 0.6))))
+            box = _box2d(dims, loc, ry)
+            if min(box[2] - box[0], box[3] - box[1]) >= 1:
+                pred.append(Label("Car", -1, -1, ry - np.arctan2(x, z), box, dims, loc, ry, float(rng.uniform(0.0, 0.6))))
         for _ in range(rng.poisson(2.5)):
             x1, y1 = rng.uniform(0, 1150), rng.uniform(120, 250)
             gt.append(Label("DontCare", -1, -1, -10, [x1, y1, x1 + rng.uniform(10, 90), y1 + rng.uniform(10, 50)],
