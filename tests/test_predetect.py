@@ -140,7 +140,7 @@ def test_bank_npz_round_trip(tmp_path):
     bank = _random_bank()
     path = bank.save(tmp_path / "bank.npz")
     with np.load(path, allow_pickle=False) as z:  # plain arrays only
-        assert int(z["format_version"]) == 1
+        assert int(z["format_version"]) == 2
     back = DetectorBank.load(path)
     assert back.threshold == 0.25 and back.meta == {"seed": 0} and len(back) == 2
     for a, b in zip(bank.configs, back.configs):
@@ -199,6 +199,9 @@ def test_detect_cars_on_kitti_image_well_formed():
     assert np.all(np.isin(np.round(np.rad2deg(det.alpha)) % 45, [0]))
     thr = detect_cars(img, bank=bank)
     assert np.all(thr.scores > bank.threshold) and len(thr) <= len(det)
+    # the shipped bank is trained on real frames and calibrated: scores are probabilities
+    assert bank.meta["trained_on"] == "real KITTI frames" and bank.calibration is not None
+    assert np.all((det.scores > 0) & (det.scores < 1)) and 0 < bank.threshold < 1
 
 
 def test_detect_command_writes_readable_files(tmp_path):
@@ -218,3 +221,149 @@ def test_detect_command_writes_readable_files(tmp_path):
     assert 0.0 <= out["ap"]["ap"] <= 1.0 and out["seconds_per_frame"] > 0
     dets = read_detections(tmp_path / "dets" / "000010.json")
     assert len(dets) > 0 and np.all(np.isfinite(dets.alpha))
+
+
+# ------------------------------------------------------------------ KITTI 2D AP (devkit rules)
+
+def _kgt(boxes, occluded=None, truncated=None, is_car=None, dontcare=()):
+    from wirescene.predetect.ap import KittiFrameGT
+
+    b = np.array(boxes, float).reshape(-1, 4)
+    n = len(b)
+    return KittiFrameGT(b, np.ones(n, bool) if is_car is None else np.array(is_car, bool),
+                        np.zeros(n, int) if occluded is None else np.array(occluded, int),
+                        np.zeros(n) if truncated is None else np.array(truncated, float), np.zeros(n),
+                        np.array(dontcare, float).reshape(-1, 4))
+
+
+def test_kitti_ap_rules():
+    from wirescene.predetect.ap import kitti_ap_2d, recall_at_fppi
+
+    gt = _kgt([[10, 10, 110, 80], [200, 20, 300, 100]])
+    assert kitti_ap_2d([_dets(gt.boxes, [0.9, 0.8])], [gt])["ap"] == pytest.approx(1.0)
+    # IoU 0.7 is required for a car: a box shifted to IoU ~0.6 is a false positive (and a miss)
+    shifted = np.array([[10, 10, 110, 80], [225, 20, 325, 100]], float)
+    r = kitti_ap_2d([_dets(shifted, [0.9, 0.8])], [gt])
+    assert r["ap"] == pytest.approx(0.5, abs=0.03) and r["n_gt"] == 2
+    assert kitti_ap_2d([_dets(shifted, [0.9, 0.8])], [gt], iou=0.5)["ap"] == pytest.approx(1.0)
+    # a false positive above both true positives: precision 1/2 at recall 1/2, 2/3 at recall 1;
+    # interpolated precision is 2/3 everywhere
+    r = kitti_ap_2d([_dets([[500, 10, 600, 90], *gt.boxes], [0.95, 0.8, 0.7])], [gt])
+    assert r["ap"] == pytest.approx(2 / 3, abs=1e-6)
+    # the false positive between the two: 1 up to recall 1/2, then 2/3
+    r = kitti_ap_2d([_dets([gt.boxes[0], [500, 10, 600, 90], gt.boxes[1]], [0.95, 0.8, 0.7])], [gt])
+    assert r["ap"] == pytest.approx(0.5 + 0.5 * 2 / 3, abs=1e-6)
+    assert recall_at_fppi(r, 1.0) == pytest.approx(1.0) and recall_at_fppi(r, 0.0) == pytest.approx(0.5)
+
+
+def test_kitti_ap_ignores_van_dontcare_small_and_hard():
+    from wirescene.predetect.ap import kitti_ap_2d
+
+    gt = _kgt([[10, 10, 110, 80],  # counted
+               [200, 20, 300, 100],  # Van: ignored
+               [400, 20, 500, 100],  # occluded 2: ignored in moderate, counted in hard
+               [600, 20, 700, 40]],  # 20 px high: ignored
+              occluded=[0, 0, 2, 0], is_car=[1, 0, 1, 1], dontcare=[[800, 0, 1000, 200]])
+    dets = _dets([[200, 20, 300, 100], [400, 20, 500, 100], [600, 20, 700, 40], [850, 50, 950, 150],
+                  [620, 200, 700, 215], [10, 10, 110, 80]], [0.99, 0.98, 0.97, 0.96, 0.95, 0.5])
+    r = kitti_ap_2d([dets], [gt], difficulty="moderate")
+    assert r["n_gt"] == 1 and r["ap"] == pytest.approx(1.0)
+    h = kitti_ap_2d([dets], [gt], difficulty="hard")
+    assert h["n_gt"] == 2 and h["ap"] == pytest.approx(1.0)
+    e = kitti_ap_2d([dets], [gt], difficulty="easy")  # 40 px minimum: the occluded car is ignored too
+    assert e["n_gt"] == 1
+    # a pedestrian-sized false positive outside DontCare does count
+    fp = _dets([[620, 150, 700, 215], [10, 10, 110, 80]], [0.9, 0.5])
+    assert kitti_ap_2d([fp], [gt])["ap"] == pytest.approx(0.5)
+
+
+def test_viewpoint_accuracy_definitions():
+    from wirescene.predetect.ap import viewpoint_accuracy
+
+    a = np.array([[bin_center(2), np.deg2rad(90)],  # same bin
+                  [bin_center(2), np.deg2rad(130)],  # adjacent bin, 40 deg off
+                  [bin_center(2), np.deg2rad(150)],  # adjacent bin, 60 deg off
+                  [bin_center(6), np.deg2rad(90)]])  # opposite
+    v = viewpoint_accuracy(a)
+    assert v == {"n": 4, "bin": 0.25, "adjacent": 0.75, "within_45": 0.5}
+
+
+# ------------------------------------------------------------------ real-data training pieces
+
+def test_platt_calibration_is_monotone_and_fits():
+    from wirescene.predetect.kitti_training import detection_labels, fit_platt
+
+    rng = np.random.default_rng(0)
+    s = np.concatenate([rng.normal(1.0, 0.5, 200), rng.normal(-1.0, 0.5, 600)])
+    y = np.concatenate([np.ones(200), np.zeros(600)])
+    a, b = fit_platt(s, y)
+    assert a > 0
+    p = 1 / (1 + np.exp(-(a * s + b)))
+    assert abs(p.mean() - y.mean()) < 0.03 and p[:200].mean() > 0.7 and p[200:].mean() < 0.2
+    y2 = detection_labels([[0, 0, 10, 10], [0, 0, 10, 10], [50, 50, 60, 60]], [[0, 0, 10, 10]])
+    assert y2.tolist() == [1, 0, 0]  # a duplicate is not a second true positive
+
+
+def test_kitti_examples_geometry_and_mirror():
+    from wirescene.core.boxes import iou_2d
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.kitti_training import load_training_frames
+    from wirescene.core.viewpoints import viewpoint_bin
+
+    ds = KittiDataset(KITTI_ROOT)
+    images, ex = load_training_frames(ds, ["000010"])
+    labels = [o for o in ds.labels("000010").objects if o.type == "Car"]
+    W = images[0].gray.shape[1]
+    assert len(images) == 2 and images[1].flipped
+    np.testing.assert_array_equal(images[1].gray, images[0].gray[:, ::-1])
+    orig = [e for e in ex if not e.flipped]
+    flip = [e for e in ex if e.flipped]
+    assert len(orig) == len(flip) == len(labels)
+    for e, f, lab in zip(orig, flip, labels):
+        assert e.bin == viewpoint_bin(lab.alpha)
+        # the mirrored car has observation angle pi - alpha
+        assert f.bin == viewpoint_bin(np.pi - lab.alpha) == (4 - e.bin) % 8
+        np.testing.assert_allclose(f.label_box[[0, 2]], (W - 1) - e.label_box[[2, 0]])
+        if lab.occluded == 0 and lab.truncated == 0:
+            # the placed mean wireframe covers the labelled car
+            assert float(np.ravel(iou_2d(e.vertex_box[None], lab.box[None]))[0]) > 0.55
+            np.testing.assert_allclose(f.vertex_box[[0, 2]], (W - 1) - e.vertex_box[[2, 0]], atol=1e-6)
+        # the vertices of the nearer side are visible, of the far side partly self-occluded
+        assert 8 <= e.geom_visible.sum() < 36
+
+
+def test_retrain_tiny_real_bank_finds_its_cars():
+    from wirescene.core.boxes import iou_2d
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.kitti_training import detect_training_image, load_training_frames, train_bank_on_frames
+
+    ds = KittiDataset(KITTI_ROOT)
+    images, ex = load_training_frames(ds, ["000010", "001545"])
+    bank = train_bank_on_frames(images, ex, n_partial=0, mining_rounds=1, neg_per_image=10, min_pos=20,
+                                min_height=40.0, max_scale=1.0)
+    assert len(bank) >= 2 and all(c.is_full for c in bank.configs)
+    det = detect_training_image(bank, images[0])
+    cars = np.array([o.box for o in ds.labels("000010").objects if o.type == "Car" and o.box[3] - o.box[1] > 40])
+    top = det.boxes[:5]
+    hits = int((iou_2d(top[:, None], cars[None]) > 0.5).any(1).sum())
+    rng = np.random.default_rng(0)
+    H, W = images[0].gray.shape
+    wh = top[:, 2:] - top[:, :2]
+    xy = rng.uniform(0, 1, size=wh.shape) * (np.array([W, H]) - wh)
+    rand = int((iou_2d(np.concatenate([xy, xy + wh], 1)[:, None], cars[None]) > 0.5).any(1).sum())
+    assert hits >= 2 and hits > rand
+
+
+def test_bank_calibration_round_trip_and_version_1(tmp_path):
+    bank = _random_bank()
+    bank.calibration = np.array([2.0, -1.0])
+    back = DetectorBank.load(bank.save(tmp_path / "cal.npz"))
+    np.testing.assert_allclose(back.calibration, [2.0, -1.0])
+    assert back.confidence(0.5) == pytest.approx(0.5) and back.margin_of(0.5) == pytest.approx(0.5)
+    # version-1 files (no calibration) still load, uncalibrated
+    with np.load(tmp_path / "cal.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files if k != "calibration"}
+    arrays["format_version"] = np.array(1)
+    np.savez(tmp_path / "v1.npz", **arrays)
+    v1 = DetectorBank.load(tmp_path / "v1.npz")
+    assert v1.calibration is None and v1.confidence(0.3) == pytest.approx(0.3)

@@ -25,25 +25,54 @@ def _single_thread():
 @click.command("detector")
 @click.option("--out", type=click.Path(dir_okay=False), default=str(DEFAULT_BANK_PATH), show_default=True,
               help="Detector bank .npz to write.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Synthetic scene stream (validation: seed+1).")
+@click.option("--kitti-root", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Train on the labelled real frames of this KITTI root (the shipped bank: all 33 frames of "
+                   "shared/data/kitti). Without it: synthetic scenes.")
+@click.option("--frames", default=None, help="With --kitti-root: comma-separated training frame ids (default all).")
+@click.option("--folds", default=None,
+              help="With --kitti-root: train only on the frames of these cross-validation folds (e.g. 0,1,3).")
+@click.option("--no-calibration", is_flag=True,
+              help="With --kitti-root: skip the held-out (leave-one-fold-out) Platt calibration; scores stay margins.")
+@click.option("--calibration", default=None,
+              help="With --kitti-root: Platt 'a,b' mapping margins to confidences, from held-out detections of the "
+                   "same recipe (printed by benchmarks/bench_predetect.py); default: leave-one-fold-out training.")
+@click.option("--threshold", type=float, default=0.5, show_default=True,
+              help="With --kitti-root and a calibration: default detection threshold (confidence).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random stream (synthetic: scenes; validation: seed+1).")
 @click.option("--scenes", "n_scenes", type=int, default=200, show_default=True, help="Synthetic training scenes.")
 @click.option("--partial", "n_partial", type=int, default=3, show_default=True,
               help="Partial configurations per viewpoint (plus one full-car configuration).")
-@click.option("--mining-rounds", type=int, default=2, show_default=True)
-@click.option("--mining-images", type=int, default=80, show_default=True)
-@click.option("--val-scenes", "n_val", type=int, default=20, show_default=True)
+@click.option("--mining-rounds", type=int, default=None, help="Hard-negative mining rounds [synthetic 2, real 3].")
+@click.option("--mining-images", type=int, default=80, show_default=True, help="Synthetic only.")
+@click.option("--val-scenes", "n_val", type=int, default=20, show_default=True, help="Synthetic only.")
 @click.option("--C", "C", type=float, default=0.01, show_default=True, help="Linear SVM regularisation.")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
-def detector(out, seed, n_scenes, n_partial, mining_rounds, mining_images, n_val, C, report):
-    """Train the part-configuration detector bank on synthetic scenes."""
-    from wirescene.training.detector import train_detector_bank
+def detector(out, kitti_root, frames, folds, no_calibration, calibration, threshold, seed, n_scenes, n_partial, mining_rounds, mining_images,
+             n_val, C, report):
+    """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
+    if kitti_root is not None:
+        from wirescene.predetect.kitti_training import train_detector_bank_kitti
 
-    with _single_thread():
-        _, rep = train_detector_bank(out, seed=seed, n_scenes=n_scenes, n_partial=n_partial, C=C,
-                                     mining_rounds=mining_rounds, mining_images=mining_images, n_val=n_val,
-                                     progress=click.echo)
+        ids = [f.strip() for f in frames.split(",") if f.strip()] if frames else None
+        fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
+        with _single_thread():
+            _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
+                                               n_partial=n_partial, calibration_folds=not no_calibration,
+                                               calibration=[float(v) for v in calibration.split(",")] if calibration
+                                               else None, threshold=threshold,
+                                               mining_rounds=3 if mining_rounds is None else mining_rounds,
+                                               progress=click.echo)
+    else:
+        if frames or folds:
+            raise click.UsageError("--frames / --folds need --kitti-root")
+        from wirescene.training.detector import train_detector_bank
+
+        with _single_thread():
+            _, rep = train_detector_bank(out, seed=seed, n_scenes=n_scenes, n_partial=n_partial, C=C,
+                                         mining_rounds=2 if mining_rounds is None else mining_rounds,
+                                         mining_images=mining_images, n_val=n_val, progress=click.echo)
     if report:
-        Path(report).write_text(json.dumps(rep, indent=1))
+        Path(report).write_text(json.dumps(rep, indent=1, default=float))
 
 
 @click.command("detect")
@@ -64,7 +93,7 @@ def detect(kitti_root, frames, split, bank_path, threshold, out_dir, pr_curve, j
 
     from wirescene.io.kitti import KittiDataset
     from wirescene.core.viewpoints import viewpoint_bin
-    from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
+    from wirescene.predetect.ap import evaluate_detections, kitti_ap_2d, kitti_frame_gt, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank
 
     ds = KittiDataset(kitti_root, split=split)
@@ -86,15 +115,19 @@ def detect(kitti_root, frames, split, bank_path, threshold, out_dir, pr_curve, j
                 (out_dir / f"{fid}.json").write_text(json.dumps({"detections": entries}, indent=1))
             dets_all.append(d)
             if ds.has_labels:
-                gts.append(load_frame_gt(ds.split_dir, fid))
+                gts.append((load_frame_gt(ds.split_dir, fid), kitti_frame_gt(ds.labels(fid))))
             click.echo(f"{fid}: {len(kept)} detections above {thr:.3f} ({times[-1]:.2f}s)")
     result = {"frames": len(ids), "threshold": thr, "seconds_per_frame": float(np.mean(times)) if times else 0.0}
     if gts:
-        res = evaluate_detections(dets_all, gts)
-        kept_res = evaluate_detections([d.subset(d.scores > thr) for d in dets_all], gts)
+        res = evaluate_detections(dets_all, [g[0] for g in gts])
+        kept_res = evaluate_detections([d.subset(d.scores > thr) for d in dets_all], [g[0] for g in gts])
+        kit = {d: kitti_ap_2d(dets_all, [g[1] for g in gts], difficulty=d) for d in ("easy", "moderate", "hard")}
         result.update(ap=summary(res), at_threshold={"recall": kept_res["max_recall"],
-                                                     "precision": float(kept_res["precision"][-1]) if len(kept_res["precision"]) else float("nan")})
-        click.echo(f"AP {100 * res['ap']:.1f}% over {res['n_gt']} cars (>50 px, >=20% visible); "
+                                                     "precision": float(kept_res["precision"][-1]) if len(kept_res["precision"]) else float("nan")},
+                      kitti_2d_ap={d: {"ap": r["ap"], "n_gt": r["n_gt"]} for d, r in kit.items()})
+        click.echo("KITTI 2D AP (Car, IoU 0.7, R40): " + ", ".join(
+            f"{d} {100 * r['ap']:.1f}% ({r['n_gt']} cars)" for d, r in kit.items()))
+        click.echo(f"AP {100 * res['ap']:.1f}% over {res['n_gt']} cars (IoU 0.5, >50 px, >=20% visible); "
                    f"max recall {res['max_recall']:.2f}; viewpoint bin accuracy of TPs {res['viewpoint_bin_acc']:.2f}, "
                    f"within 45 deg {res['viewpoint_within_45']:.2f}")
         if pr_curve is not None:

@@ -5,9 +5,13 @@ full-object boxes (paper Sec. 3.4).
 Single-component linear HOG templates trained as linear SVMs with hard-negative mining
 stand in for the paper's single-component DPMs: a single-component DPM is a root filter
 plus deformable part filters; the root filter alone is exactly this (Dalal-Triggs)
-detector, the configurations are already semi-local, and it trains in minutes on a CPU
-from the synthetic data we can generate, whereas latent-SVM DPM training needs the
-original MATLAB/C code.
+detector, the configurations are already semi-local, and it trains in minutes on a CPU,
+whereas latent-SVM DPM training needs the original MATLAB/C code.
+
+The shipped bank is trained on the real labelled KITTI frames
+(:mod:`.kitti_training`, ``wirescene train detector --kitti-root``) and carries a Platt
+calibration, so :func:`detect_cars` returns confidences (probability of a car);
+:mod:`.training` trains the older synthetic-scene bank.
 
 The bank is stored without pickle in a versioned ``.npz`` (loadable with numpy alone).
 """
@@ -29,7 +33,9 @@ from wirescene.core.resources import DATA_DIR
 from wirescene.predetect.configurations import Configuration
 from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated). Version 1 files load
+as uncalibrated banks."""
 DEFAULT_BANK_PATH = DATA_DIR / "detector_bank.npz"
 
 
@@ -38,8 +44,9 @@ class DetectorBank:
     configs: list  # [Configuration]
     weights: list  # [(th, tw, 31) float32]
     biases: np.ndarray  # (T,)
-    threshold: float = 0.0  # default detection threshold (SVM margin)
+    threshold: float = 0.0  # default detection threshold (in the units of the scores detect_cars returns)
     meta: dict = field(default_factory=dict)
+    calibration: np.ndarray | None = None  # (2,) Platt (a, b): confidence = sigmoid(a * margin + b)
 
     def __len__(self) -> int:
         return len(self.configs)
@@ -47,6 +54,23 @@ class DetectorBank:
     @property
     def bins(self) -> np.ndarray:
         return np.array([c.bin for c in self.configs], int)
+
+    def confidence(self, margin) -> np.ndarray:
+        """Scores reported for raw cluster margins: calibrated probabilities when the bank
+        carries a Platt calibration, else the margins themselves."""
+        m = np.asarray(margin, float)
+        if self.calibration is None:
+            return m
+        a, b = (float(v) for v in self.calibration)
+        return 1.0 / (1.0 + np.exp(-(a * m + b)))
+
+    def margin_of(self, score: float) -> float:
+        """Inverse of :meth:`confidence` for one score (a threshold)."""
+        if self.calibration is None or not np.isfinite(score):
+            return float(score)
+        a, b = (float(v) for v in self.calibration)
+        p = min(max(float(score), 1e-12), 1 - 1e-12)
+        return (np.log(p / (1 - p)) - b) / a
 
     # ----------------------------------------------------------------- storage
     def save(self, path) -> Path:
@@ -71,6 +95,7 @@ class DetectorBank:
             names=np.array([c.name for c in self.configs], dtype=str),
             threshold=np.array(float(self.threshold)),
             meta_json=np.array(json.dumps(self.meta, sort_keys=True)),
+            calibration=np.zeros(0, np.float64) if self.calibration is None else np.asarray(self.calibration, float),
         )
         tmp = path.with_name(path.name + ".tmp.npz")
         np.savez_compressed(tmp, **arrays)
@@ -85,7 +110,7 @@ class DetectorBank:
         try:
             with np.load(path, allow_pickle=False) as z:
                 version = int(z["format_version"])
-                if version != FORMAT_VERSION:
+                if version not in (1, FORMAT_VERSION):
                     raise InputError(f"detector bank format {version}, expected {FORMAT_VERSION}", path=path)
                 T = len(z["bins"])
                 flat = z["weights"]
@@ -101,8 +126,13 @@ class DetectorBank:
                                                  float(z["coverage"][i]), int(z["n_examples"][i])))
                 if pos != len(flat):
                     raise InputError("detector bank weights do not match the template shapes", path=path)
+                calib = z["calibration"].astype(float) if version >= 2 and "calibration" in z.files else None
+                if calib is not None and calib.shape != (2,):
+                    calib = None if calib.size == 0 else calib
+                    if calib is not None:
+                        raise InputError("detector bank calibration must hold 2 numbers", path=path)
                 return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
-                           json.loads(str(z["meta_json"])))
+                           json.loads(str(z["meta_json"])), calib)
         except (KeyError, ValueError, OSError) as exc:
             raise InputError(f"malformed detector bank ({exc.__class__.__name__}: {exc})", path=path) from None
 
@@ -217,15 +247,16 @@ def _pair_dist(b: np.ndarray, rx: float, ry: float, rs: float) -> np.ndarray:
     return np.maximum(d, np.abs(ls[:, None] - ls[None]) / rs)
 
 
-def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4, rs: float = 0.4):
+def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4, rs: float = 0.4,
+                        box_weight: float = 0.0):
     """Recursive agglomerative clustering of predicted full-object boxes (paper Sec. 3.4).
 
     Within each viewpoint bin, repeatedly merge the two nearest clusters while their
     distance in (x, y, scale) is below 1 (centre offsets below ``rx`` / ``ry`` of the mean
     width / height and log-scale difference below ``rs``; the defaults were chosen on
     held-out synthetic scenes, 0.25 gave ~5-10 AP points less). A cluster's box is the average
-    of its members' box corners, its score the highest member score. Different viewpoints
-    are never merged.
+    of its members' box corners (weighted by ``exp(box_weight * score)``: 0 = plain mean),
+    its score the highest member score. Different viewpoints are never merged.
 
     Returns ``(boxes (C, 4), scores (C,), bins (C,), support (C,))``.
     """
@@ -235,8 +266,10 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
     ob, os_, obin, osup = [], [], [], []
     for b in np.unique(bins):
         sel = np.flatnonzero(bins == b)
-        sums, cnt, sc = boxes[sel].copy(), np.ones(len(sel)), scores[sel].copy()
-        mean = sums.copy()
+        w = np.exp(box_weight * (scores[sel] - scores[sel].max())) if box_weight else np.ones(len(sel))
+        sums, cnt, sc = boxes[sel] * w[:, None], np.ones(len(sel)), scores[sel].copy()
+        wsum = w.copy()
+        mean = boxes[sel].copy()
         alive = np.ones(len(sel), bool)
         D = _pair_dist(mean, rx, ry, rs)
         np.fill_diagonal(D, np.inf)
@@ -247,8 +280,9 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
                 break
             sums[i] += sums[j]
             cnt[i] += cnt[j]
+            wsum[i] += wsum[j]
             sc[i] = max(sc[i], sc[j])
-            mean[i] = sums[i] / cnt[i]
+            mean[i] = sums[i] / wsum[i]
             alive[j] = False
             D[j, :] = D[:, j] = np.inf
             d = _pair_dist(np.vstack([mean[i][None], mean]), rx, ry, rs)[0, 1:]
@@ -268,7 +302,7 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
 
 
 def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshold: float | None = None,
-                max_scale: float = 2.0, per_octave: int = 4, min_height: float = 30.0,
+                max_scale: float | None = None, per_octave: int | None = None, min_height: float | None = None,
                 per_detector: int = 30, cross_view_nms: float | None = 0.3, source: str = "bank",
                 return_all: bool = False) -> Detections:
     """Detect cars in an (H, W, 3) uint8 image with the configuration bank.
@@ -277,8 +311,17 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     configuration boxes, best ``per_detector`` kept) -> predicted full-object boxes ->
     agglomerative clustering per viewpoint -> optional NMS across viewpoints (IoU
     ``cross_view_nms``; None to skip) -> clusters scoring above ``threshold`` (default:
-    the bank's). ``alpha`` is the centre of the viewpoint bin of the detector(s)."""
+    the bank's). ``alpha`` is the centre of the viewpoint bin of the detector(s).
+
+    Scores are the bank's calibrated confidences (probability of a car, see
+    :meth:`DetectorBank.confidence`) when it carries a calibration, else SVM margins;
+    ``threshold`` is in the same units. ``max_scale``, ``per_octave`` (pyramid levels per
+    octave) and ``min_height`` (smallest full-car height searched, px) default to the values
+    the bank was trained with (2.0, 4, 30 for banks that do not say)."""
     bank = load_default_bank() if bank is None else bank
+    max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
+    min_height = float(bank.meta.get("min_height", 30.0)) if min_height is None else min_height
+    per_octave = int(bank.meta.get("per_octave", 4)) if per_octave is None else per_octave
     thr = bank.threshold if threshold is None else float(threshold)
     image = np.asarray(image)
     if image.ndim not in (2, 3) or image.shape[0] < 16 or image.shape[1] < 16:
@@ -286,10 +329,30 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     H, W = image.shape[:2]
     scales = pyramid_scales(W, H, max_scale=max_scale, per_octave=per_octave)
     pyr = feature_pyramid(image, scales)
-    floor = min(thr, -0.5) - 0.5
-    act = score_pyramid(bank, pyr, threshold=floor, min_height=min_height, max_height=3.0 * H)
-    return merge_activations(act, bank, (W, H), threshold=None if return_all else thr, per_detector=per_detector,
-                             cross_view_nms=cross_view_nms, source=source)
+    return detect_pyramid(bank, pyr, (W, H), threshold=None if return_all else thr, min_height=min_height,
+                          per_detector=per_detector, cross_view_nms=cross_view_nms, source=source)
+
+
+def _cluster_kw(bank: DetectorBank) -> dict:
+    """Clustering options stored with the bank (``meta["box_weight"]``; old banks: plain means)."""
+    return {"box_weight": float(bank.meta.get("box_weight", 0.0))}
+
+
+def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float | None = None,
+                   calibrated: bool = True, min_height: float = 30.0, per_detector: int = 30,
+                   cross_view_nms: float | None = 0.3, source: str = "bank") -> Detections:
+    """:func:`detect_cars` on a precomputed feature pyramid of an image of ``image_size``
+    ``(W, H)``; ``threshold`` (None: keep all) in the units of the returned scores
+    (``calibrated``: :meth:`DetectorBank.confidence`, else raw margins)."""
+    W, H = image_size
+    raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
+    floor = min(raw_thr if raw_thr is not None else -0.5, -0.5) - 0.5
+    act = score_pyramid(bank, pyramid, threshold=floor, min_height=min_height, max_height=3.0 * H)
+    det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
+                            cross_view_nms=cross_view_nms, source=source, cluster_kw=_cluster_kw(bank))
+    if calibrated and bank.calibration is not None:
+        det = Detections(det.boxes, bank.confidence(det.scores), det.alpha, det.source)
+    return det
 
 
 def merge_activations(act: Activations, bank: DetectorBank, image_size, *, threshold: float | None,

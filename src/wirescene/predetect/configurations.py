@@ -243,10 +243,10 @@ def select_configurations(examples, *, n_partial: int = 3, min_coverage: float =
         scored.sort(key=lambda t: (-t[0], t[1]))
         chosen = []
         for cov, c, nb in scored:
-            if all(iou_2d(nb, o) <= max_iou for _, _, o in chosen):
-                chosen.append((cov, c, nb))
             if len(chosen) >= n_partial:
                 break
+            if all(iou_2d(nb, o) <= max_iou for _, _, o in chosen):
+                chosen.append((cov, c, nb))
         for cov, c, nb in chosen:
             out.append(make_configuration(b, c, ex, area_cells=partial_area))
     return out

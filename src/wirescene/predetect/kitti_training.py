@@ -1,0 +1,418 @@
+"""Train the configuration detector bank on real KITTI frames (deterministic).
+
+The paper's bank (Sec. 3.4) is trained on real street images; the synthetic-only bank of
+:mod:`.training` reached ~1-3% KITTI AP on real frames. This module builds the same kind
+of bank -- per viewpoint bin one full-car configuration plus part configurations, each a
+linear HOG template trained as a linear SVM -- from the labelled frames of a KITTI root:
+
+1. Car examples. Every ``Car`` label gets the mean wireframe of the shape model scaled to
+   its 3D box size and placed at its 3D pose; the 36 vertices are projected with P2.
+   Geometric visibility = not self-occluded (ray casting against the wireframe surface)
+   and inside the image; vertices that fall into the 2D box of a labelled object standing
+   nearer to the camera count as occluded (KITTI has no per-vertex visibility). Every car
+   also yields its horizontally mirrored copy (alpha -> pi - alpha, i.e. bin b -> 4 - b,
+   left and right vertices swapped), so every training image is used twice (flipped).
+2. Configurations are chosen as for synthetic data (:func:`.configurations.select_configurations`)
+   from the (scarce) real examples. Part configurations only need their own vertices to be
+   visible, so they are trained on -- and fire on -- cars truncated by the image border or
+   partly occluded; their votes predict the amodal full box, which is clipped to the image.
+3. Positives: crops warped to the template plus jittered copies (shift +-5%, scale +-7%)
+   up to ``min_pos``; a viewpoint bin with fewer than ``min_bin_examples`` cars borrows
+   the examples of its two neighbouring bins (real KITTI has almost no side views).
+4. Negatives: random windows of the training images (original and flipped) that overlap
+   no labelled object (Car, Van, Truck, Tram, Misc, DontCare; overlap <= 30% of the
+   window), then ``mining_rounds`` rounds of hard-negative mining on all training images.
+5. The bank's scores are SVM margins of the best member of each cluster of votes; a Platt
+   calibration (``a * margin + b`` -> probability that the detection is a car with IoU >=
+   0.5) fitted on *held-out* detections (:func:`fit_platt`, used by the cross-validation in
+   ``benchmarks/bench_predetect.py`` and by ``wirescene train detector --kitti-root``)
+   turns them into confidences.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wirescene.core.viewpoints import N_BINS, viewpoint_bin
+from wirescene.predetect.bank import DetectorBank, detect_pyramid, score_pyramid
+from wirescene.predetect.configurations import (
+    FULL,
+    CarExample,
+    apply_full_box,
+    config_box,
+    learn_full_box_correction,
+    mirror_bin,
+    select_configurations,
+)
+from wirescene.predetect.hog import CELL, N_FEAT, crop_features, feature_pyramid, pyramid_scales, to_gray
+from wirescene.training.detector import _fit_svm, _overlap_frac, _valid_levels
+
+BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
+"""Labelled objects no negative window may overlap (DontCare regions too)."""
+
+
+@dataclass
+class TrainImage:
+    """One training image (the original or the flipped copy of a frame)."""
+
+    frame: str
+    flipped: bool
+    gray: np.ndarray  # (H, W) uint8, already flipped if ``flipped``
+    block: np.ndarray  # (K, 4) boxes negatives must not overlap (in this image's frame)
+    pyramid: list | None = None
+
+
+def car_wireframe(label, camera, mean: np.ndarray):
+    """``(vertices (36, 3) camera frame, uv (36, 2), depth (36,))`` of the mean wireframe
+    scaled to ``label.dims`` and placed at the label's pose."""
+    from wirescene.core.groundplane import rotation_y, transform
+
+    h, w, l = (float(v) for v in label.dims)
+    ext = np.maximum(mean.max(0) - mean.min(0), 1e-6)
+    X = transform(mean * np.array([l, h, w]) / ext, label.location, rotation_y(label.rotation_y))
+    uv, depth = camera.project_with_depth(X)
+    return X, uv, depth
+
+
+def frame_examples(labels, camera, width: int, height: int, image_index: int, mean: np.ndarray, *,
+                   flips: bool = True) -> list:
+    """Car examples (and their mirror images, image ``image_index + 1``) of one labelled frame."""
+    from wirescene.infer.occlusion import self_occlusion
+    from wirescene.core.wireframe import FACES, MIRROR
+
+    objs = [o for o in labels.objects if o.type != "DontCare"]
+    out = []
+    for o in objs:
+        if o.type != "Car":
+            continue
+        X, uv, depth = car_wireframe(o, camera, mean)
+        if depth.min() < 0.5:  # partly behind the camera: no sensible projection
+            continue
+        self_hidden = self_occlusion(X, FACES, camera.center)
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] <= width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= height - 1)
+        geom = ~self_hidden & inside
+        hidden = np.zeros(len(uv), bool)
+        for p in objs:
+            if p is o or p.location[2] >= o.location[2] - 0.5:
+                continue
+            b = p.box
+            hidden |= (uv[:, 0] > b[0]) & (uv[:, 0] < b[2]) & (uv[:, 1] > b[1]) & (uv[:, 1] < b[3])
+        vis = geom & ~hidden
+        occ = float(np.mean(hidden[geom])) if geom.any() else 1.0
+        occ = max(occ, {0: 0.0, 1: 0.1, 2: 0.4}.get(o.occluded, 0.6))
+        b = int(viewpoint_bin(o.alpha))
+        kw = dict(occ_frac=occ, truncated=float(o.truncated))
+        out.append(CarExample(image_index, False, b, uv.copy(), vis, geom, o.box.copy(), **kw))
+        if flips:
+            fv = uv[MIRROR].copy()
+            fv[:, 0] = (width - 1) - fv[:, 0]
+            box = o.box.copy()
+            box[[0, 2]] = (width - 1) - o.box[[2, 0]]
+            out.append(CarExample(image_index + 1, True, int(mirror_bin(b)), fv, vis[MIRROR], geom[MIRROR], box, **kw))
+    return out
+
+
+def load_training_frames(dataset, frame_ids, *, flips: bool = True, progress=None):
+    """``(images, examples)`` of labelled KITTI frames (see the module docstring)."""
+    from wirescene.core.shape import load_default
+
+    mean = load_default().mean
+    images, examples = [], []
+    for fid in frame_ids:
+        img = dataset.image(fid)
+        H, W = img.shape[:2]
+        gray = np.round(to_gray(img) * 255).astype(np.uint8)
+        labels = dataset.labels(fid)
+        block = np.array([o.box for o in labels.objects if o.type in BLOCKING_TYPES]
+                         + [d.box for d in labels.dontcare], float).reshape(-1, 4)
+        examples += frame_examples(labels, dataset.camera(fid), W, H, len(images), mean, flips=flips)
+        images.append(TrainImage(fid, False, gray, block))
+        if flips:
+            fb = block.copy()
+            fb[:, [0, 2]] = (W - 1) - block[:, [2, 0]]
+            images.append(TrainImage(fid, True, np.ascontiguousarray(gray[:, ::-1]), fb))
+    if progress:
+        progress(f"{len(frame_ids)} frames, {len(images)} training images, {len(examples)} car examples")
+    return images, examples
+
+
+def ensure_pyramids(images, scales) -> None:
+    """Compute (once) the HOG pyramid of every training image."""
+    for im in images:
+        if im.pyramid is None:
+            im.pyramid = feature_pyramid(im.gray, scales)
+
+
+def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3, C: float = 0.01,
+                         max_pos: int = 600, min_pos: int = 120, max_jitter: int = 6, min_bin_examples: int = 5,
+                         neg_per_image: int = 40, mining_rounds: int = 3, hard_per_image: int = 15,
+                         min_height: float = 25.0, max_scale: float = 2.0, full_area: float = 48,
+                         partial_area: float = 36, label_boxes: bool = False, per_octave: int = 4, box_weight: float = 2.0,
+                         progress=None) -> DetectorBank:
+    """Train a :class:`DetectorBank` on real training images and their car examples.
+
+    ``images``/``examples`` as returned by :func:`load_training_frames` (pyramids are
+    computed on demand and kept on the images, so cross-validation folds share them).
+    Returns an uncalibrated bank (``calibration`` None, ``threshold`` 0 in margin units).
+    ``box_weight``: detections average the votes of a cluster with weights
+    ``exp(box_weight * margin)`` (stored in the bank's meta; see :func:`.bank.cluster_activations`).
+    ``label_boxes``: the full box of a car that is neither truncated nor largely occluded is
+    its labelled 2D box (else the placed wireframe's box with the learned per-bin correction).
+    """
+    say = progress or (lambda msg: None)
+    t0 = time.time()
+    rng = np.random.default_rng(seed)
+    from dataclasses import replace
+
+    corr = learn_full_box_correction(examples)
+    apply_full_box(examples, corr)
+    if label_boxes:
+        # the labelled box is the exact target where it shows the whole car (not truncated,
+        # at most partly occluded); the wireframe-derived box elsewhere (amodal extent)
+        for e in examples:
+            if e.truncated <= 0.0 and e.occ_frac < 0.4:
+                e.full_box = e.label_box.astype(float).copy()
+    per_bin = np.bincount([e.bin for e in examples], minlength=N_BINS)
+    # sparse viewpoints (side views are rare in KITTI) borrow the cars of both neighbouring bins
+    examples = list(examples) + [replace(e, bin=b) for b in range(N_BINS) if per_bin[b] < min_bin_examples
+                                 for e in examples if e.bin in ((b + 1) % N_BINS, (b - 1) % N_BINS)]
+    configs = select_configurations(examples, n_partial=n_partial, min_height=min_height, full_area=full_area,
+                                    partial_area=partial_area)
+    say(f"{len(configs)} configurations; car examples per bin {per_bin.tolist()}")
+
+    # ---- positives
+    pos = []
+    for c in configs:
+        th, tw = c.template
+        cand = []
+        for e in examples:
+            if e.bin != c.bin or e.full_box[3] - e.full_box[1] < min_height:
+                continue
+            if c.vertices == FULL:
+                if e.occ_frac >= 0.35 or e.truncated > 0.15:
+                    continue
+            elif not e.visible[list(c.vertices)].all():
+                continue
+            box = config_box(e.v2d, c.vertices, e.full_box)
+            cand.append((e, box))
+        if len(cand) > max_pos:
+            cand = [cand[k] for k in np.sort(rng.choice(len(cand), max_pos, replace=False))]
+        n_jit = min(max_jitter, int(np.ceil(min_pos / len(cand))) - 1) if cand else 0
+        feats = []
+        for e, box in cand:
+            g = images[e.image].gray.astype(np.float32) / 255.0
+            feats.append(crop_features(g, box, th, tw).ravel())
+            w, h = box[2] - box[0], box[3] - box[1]
+            for _ in range(max(n_jit, 0)):
+                cx = (box[0] + box[2]) / 2 + rng.uniform(-0.05, 0.05) * w
+                cy = (box[1] + box[3]) / 2 + rng.uniform(-0.05, 0.05) * h
+                f = np.exp(rng.uniform(-0.07, 0.07))
+                feats.append(crop_features(g, [cx - f * w / 2, cy - f * h / 2, cx + f * w / 2, cy + f * h / 2],
+                                           th, tw).ravel())
+        c.n_examples = len(cand)
+        pos.append(np.array(feats, np.float32).reshape(-1, th * tw * N_FEAT))
+    say("positives per detector: " + " ".join(str(len(p)) for p in pos) + f" [{time.time() - t0:.0f}s]")
+
+    # ---- random negatives
+    H = max(im.gray.shape[0] for im in images)
+    scales = pyramid_scales(images[0].gray.shape[1], images[0].gray.shape[0], max_scale=max_scale,
+                            per_octave=per_octave)
+    ensure_pyramids(images, scales)
+    neg = [[] for _ in configs]
+    for im in images:
+        pyr = im.pyramid
+        for t, c in enumerate(configs):
+            th, tw = c.template
+            levels = _valid_levels(c, pyr, H, min_height)
+            if not levels:
+                continue
+            got = 0
+            for _ in range(4 * neg_per_image):
+                li = levels[rng.integers(len(levels))]
+                s, F = pyr[li]
+                r, q = rng.integers(F.shape[0] - th + 1), rng.integers(F.shape[1] - tw + 1)
+                win = np.array([[q, r, q + tw, r + th]]) * CELL / s
+                if _overlap_frac(win, im.block)[0] > 0.3:
+                    continue
+                neg[t].append(F[r:r + th, q:q + tw].ravel())
+                got += 1
+                if got >= neg_per_image:
+                    break
+    say(f"random negatives: {sum(len(n) for n in neg)} [{time.time() - t0:.0f}s]")
+
+    weights, biases = [None] * len(configs), np.zeros(len(configs), np.float32)
+
+    def fit_all():
+        for t, c in enumerate(configs):
+            th, tw = c.template
+            if not len(pos[t]):
+                weights[t] = np.zeros((th, tw, N_FEAT), np.float32)
+                biases[t] = -10.0
+                continue
+            w, b = _fit_svm(pos[t], np.array(neg[t], np.float32).reshape(-1, th * tw * N_FEAT), C, seed)
+            weights[t] = w.reshape(th, tw, N_FEAT)
+            biases[t] = b
+
+    fit_all()
+    bank = DetectorBank(configs, list(weights), biases.copy())
+    for rnd in range(mining_rounds):
+        n_new = 0
+        for im in images:
+            act = score_pyramid(bank, im.pyramid, threshold=-1.0, top_k=40, min_height=min_height, max_height=3.0 * H)
+            if not len(act.det):
+                continue
+            ok = _overlap_frac(act.boxes, im.block) <= 0.3
+            for t in np.unique(act.det[ok]):
+                sel = np.flatnonzero(ok & (act.det == t))
+                sel = sel[np.argsort(-act.scores[sel])[:hard_per_image]]
+                th, tw = configs[t].template
+                for k in sel:
+                    r, q = act.cell[k]
+                    neg[t].append(im.pyramid[act.level[k]][1][r:r + th, q:q + tw].ravel())
+                n_new += len(sel)
+        fit_all()
+        bank = DetectorBank(configs, list(weights), biases.copy())
+        say(f"mining round {rnd + 1}: {n_new} hard negatives [{time.time() - t0:.0f}s]")
+    bank.meta = {
+        "trained_on": "real KITTI frames", "frames": sorted({im.frame for im in images}), "seed": int(seed),
+        "n_partial": int(n_partial), "C": C, "label_boxes": bool(label_boxes), "mining_rounds": int(mining_rounds), "min_height": min_height,
+        "max_scale": max_scale, "per_octave": int(per_octave), "box_weight": float(box_weight), "n_positives": [int(len(p)) for p in pos], "n_negatives": [int(len(n)) for n in neg],
+        "car_examples_per_bin": per_bin.tolist(), "full_box_correction": np.round(corr, 5).tolist(),
+        "train_seconds": round(time.time() - t0, 1),
+    }
+    return bank
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+def detection_labels(boxes, gt_boxes, *, iou: float = 0.5) -> np.ndarray:
+    """(D,) 1 where a detection (in descending score order) is the first to match a car
+    with IoU >= ``iou``, else 0 (duplicates are 0)."""
+    from wirescene.core.boxes import iou_2d
+
+    boxes = np.asarray(boxes, float).reshape(-1, 4)
+    gt_boxes = np.asarray(gt_boxes, float).reshape(-1, 4)
+    y = np.zeros(len(boxes), int)
+    used = np.zeros(len(gt_boxes), bool)
+    for d in range(len(boxes)):
+        if not len(gt_boxes):
+            break
+        ov = np.where(used, -1.0, iou_2d(boxes[d][None], gt_boxes))
+        j = int(np.argmax(ov))
+        if ov[j] >= iou:
+            used[j] = True
+            y[d] = 1
+    return y
+
+
+def fit_platt(scores, labels, *, reg: float = 1.0) -> np.ndarray:
+    """``(a, b)`` of ``P(car) = 1 / (1 + exp(-(a * score + b)))`` by (lightly L2-regularised)
+    logistic regression with Platt's target smoothing; ``a`` is forced positive so that
+    calibration never reorders detections."""
+    from scipy.optimize import minimize
+
+    s = np.asarray(scores, float)
+    y = np.asarray(labels, float)
+    n1, n0 = y.sum(), len(y) - y.sum()
+    t = np.where(y > 0, (n1 + 1) / (n1 + 2), 1 / (n0 + 2))
+
+    def nll(p):
+        z = p[0] * s + p[1]
+        return np.sum(np.logaddexp(0, z) - t * z) + 0.5 * reg * p[0] ** 2 * 1e-3
+
+    p = minimize(nll, np.array([1.0, 0.0]), method="L-BFGS-B", bounds=[(1e-3, None), (None, None)]).x
+    return p.astype(float)
+
+
+def kitti_gt_boxes(labels) -> np.ndarray:
+    """Boxes of a frame's ``Car`` labels."""
+    return np.array([o.box for o in labels.objects if o.type == "Car"], float).reshape(-1, 4)
+
+
+def detect_training_image(bank: DetectorBank, image: TrainImage, **kw):
+    """Raw (uncalibrated, unthresholded) detections of a training image from its cached pyramid."""
+    H, W = image.gray.shape
+    if image.pyramid is None:
+        ensure_pyramids([image], pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
+                                                per_octave=int(bank.meta.get("per_octave", 4))))
+    kw.setdefault("min_height", float(bank.meta.get("min_height", 30.0)))
+    return detect_pyramid(bank, image.pyramid, (W, H), calibrated=False, threshold=None, **kw)
+
+
+def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str = "training",
+                              seed: int = 0, calibration_folds: bool = True, calibration=None, threshold: float = 0.5,
+                              progress=None, **train_kw):
+    """``wirescene train detector --kitti-root``: train on the labelled frames of a KITTI root.
+
+    ``frames``: frame ids to train on (default all); ``folds``: restrict to the frames of
+    these :mod:`wirescene.io.folds` folds. With ``calibration_folds`` (and frames of at
+    least two folds) the Platt calibration and default threshold come from held-out
+    detections: for each fold present, a bank trained on the other folds detects on it
+    (this is the cross-validation of ``benchmarks/bench_predetect.py``); otherwise the bank
+    stays uncalibrated (scores are margins, threshold 0). ``calibration``: given Platt
+    ``(a, b)`` -- e.g. the pooled held-out fit printed by ``benchmarks/bench_predetect.py``
+    for the same recipe -- instead of the leave-one-fold-out run (saves four trainings).
+    ``threshold``: default detection threshold of a calibrated bank (probability).
+    Returns ``(bank, report)``.
+    """
+    from wirescene.io.folds import fold_of
+    from wirescene.io.kitti import KittiDataset
+
+    say = progress or (lambda msg: None)
+    t0 = time.time()
+    ds = KittiDataset(kitti_root, split=split)
+    ids = list(frames) if frames else ds.frame_ids()
+    if folds is not None:
+        ids = [f for f in ids if fold_of(f) in set(folds)]
+    if not ids:
+        raise ValueError("no training frames selected")
+    images, examples = load_training_frames(ds, ids, progress=say)
+    report = {"frames": ids}
+    fold_ids = {}
+    for f in ids:
+        try:
+            fold_ids.setdefault(fold_of(f), []).append(f)
+        except KeyError:
+            pass
+    calib = None if calibration is None else np.asarray(calibration, float).reshape(2)
+    if calib is not None:
+        report["calibration"] = {"a": float(calib[0]), "b": float(calib[1]), "source": "given"}
+    elif calibration_folds and len(fold_ids) >= 2:
+        scores, ys = [], []
+        for k in sorted(fold_ids):
+            held = set(fold_ids[k])
+            tr_idx = [i for i, im in enumerate(images) if im.frame not in held]
+            remap = {old: new for new, old in enumerate(tr_idx)}
+            tr_ex = [_reindexed(e, remap[e.image]) for e in examples if e.image in remap]
+            say(f"calibration: fold {k} held out ({len(held)} frames)")
+            b = train_bank_on_frames([images[i] for i in tr_idx], tr_ex, seed=seed, **train_kw)
+            for im in images:
+                if im.frame in held and not im.flipped:
+                    d = detect_training_image(b, im)
+                    scores.append(d.scores)
+                    ys.append(detection_labels(d.boxes, kitti_gt_boxes(ds.labels(im.frame))))
+        s, y = np.concatenate(scores), np.concatenate(ys)
+        calib = fit_platt(s, y)
+        report["calibration"] = {"a": float(calib[0]), "b": float(calib[1]), "n_detections": int(len(s)),
+                                 "n_positive": int(y.sum()), "source": "leave-one-fold-out detections"}
+    bank = train_bank_on_frames(images, examples, seed=seed, progress=say, **train_kw)
+    bank.calibration = calib
+    if calib is not None:
+        bank.threshold = float(threshold)  # probability of a true car (IoU >= 0.5)
+    bank.meta["calibration"] = report.get("calibration")
+    if out_path is not None:
+        bank.save(out_path)
+        say(f"saved {len(bank)} detectors to {out_path} ({Path(out_path).stat().st_size / 1e6:.2f} MB)")
+    report.update(n_detectors=len(bank), names=[c.name for c in bank.configs], total_seconds=round(time.time() - t0, 1))
+    return bank, report
+
+
+def _reindexed(e: CarExample, image: int) -> CarExample:
+    from dataclasses import replace
+
+    return replace(e, image=image)
