@@ -92,7 +92,8 @@ def main():
     ap.add_argument("--cv", action="store_true", help="4-fold cross-validation by drive")
     ap.add_argument("--models-dir", default=None, help="write the fold banks here (foldK.npz, calibrated)")
     ap.add_argument("--fold-models", default=None,
-                    help="score saved fold banks DIR/foldK.npz, each on its held-out fold (raw margins pooled)")
+                    help="score saved fold banks DIR/fold{k}.npz (or a path pattern with {k}), each on its "
+                         "held-out fold (raw margins pooled)")
     ap.add_argument("--save-dets", default=None, help="write the held-out detections to this .npz")
     ap.add_argument("--partial", type=int, default=3)
     ap.add_argument("--mining-rounds", type=int, default=3)
@@ -152,7 +153,8 @@ def main():
         time_bank = fold_banks[0]
         name = "cross-validated real-data bank"
     elif args.fold_models:
-        banks = {k: DetectorBank.load(Path(args.fold_models) / f"fold{k}.npz") for k in range(N_FOLDS)}
+        pattern = args.fold_models if "{k}" in args.fold_models else str(Path(args.fold_models) / "fold{k}.npz")
+        banks = {k: DetectorBank.load(pattern.format(k=k)) for k in range(N_FOLDS)}
         for b in banks.values():
             b.calibration = None  # pool raw margins, as the --cv run does
             if args.box_weight is not None:
