@@ -1,7 +1,7 @@
 """Benchmark of the part-configuration detector bank on real KITTI frames (issue 16), plain script.
 
 Protocol: 4-fold cross-validation by recording drive (:mod:`wirescene.io.folds`):
-for each fold k a bank is trained (:func:`wirescene.predetect.kitti_training.train_bank_on_frames`)
+for each fold k a bank is trained (:func:`wirescene.training.kitti_detector.train_bank_on_frames`)
 on the frames of the other three folds and detects on the frames of fold k; the held-out
 detections of all folds are pooled (33 frames, 141 cars) and scored. No figure is computed
 on a frame the scoring model was trained on. ``--bank PATH`` instead scores one given bank
@@ -45,7 +45,7 @@ from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import kitti_ap_2d, kitti_frame_gt, plot_pr, recall_at_fppi, viewpoint_accuracy  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank  # noqa: E402
-from wirescene.predetect.kitti_training import (  # noqa: E402
+from wirescene.training.kitti_detector import (  # noqa: E402
     detect_training_image,
     detection_labels,
     fit_platt,

@@ -291,7 +291,7 @@ def test_viewpoint_accuracy_definitions():
 # ------------------------------------------------------------------ real-data training pieces
 
 def test_platt_calibration_is_monotone_and_fits():
-    from wirescene.predetect.kitti_training import detection_labels, fit_platt
+    from wirescene.training.kitti_detector import detection_labels, fit_platt
 
     rng = np.random.default_rng(0)
     s = np.concatenate([rng.normal(1.0, 0.5, 200), rng.normal(-1.0, 0.5, 600)])
@@ -307,7 +307,7 @@ def test_platt_calibration_is_monotone_and_fits():
 def test_kitti_examples_geometry_and_mirror():
     from wirescene.core.boxes import iou_2d
     from wirescene.io.kitti import KittiDataset
-    from wirescene.predetect.kitti_training import load_training_frames
+    from wirescene.training.kitti_detector import load_training_frames
     from wirescene.core.viewpoints import viewpoint_bin
 
     ds = KittiDataset(KITTI_ROOT)
@@ -335,7 +335,7 @@ def test_kitti_examples_geometry_and_mirror():
 def test_retrain_tiny_real_bank_finds_its_cars():
     from wirescene.core.boxes import iou_2d
     from wirescene.io.kitti import KittiDataset
-    from wirescene.predetect.kitti_training import detect_training_image, load_training_frames, train_bank_on_frames
+    from wirescene.training.kitti_detector import detect_training_image, load_training_frames, train_bank_on_frames
 
     ds = KittiDataset(KITTI_ROOT)
     images, ex = load_training_frames(ds, ["000010", "001545"])

@@ -51,7 +51,7 @@ def detector(out, kitti_root, frames, folds, no_calibration, calibration, thresh
              n_val, C, report):
     """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
     if kitti_root is not None:
-        from wirescene.predetect.kitti_training import train_detector_bank_kitti
+        from wirescene.training.kitti_detector import train_detector_bank_kitti
 
         ids = [f.strip() for f in frames.split(",") if f.strip()] if frames else None
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None

@@ -9,7 +9,7 @@ detector, the configurations are already semi-local, and it trains in minutes on
 whereas latent-SVM DPM training needs the original MATLAB/C code.
 
 The shipped bank is trained on the real labelled KITTI frames
-(:mod:`.kitti_training`, ``wirescene train detector --kitti-root``) and carries a Platt
+(:mod:`wirescene.training.kitti_detector`, ``wirescene train detector --kitti-root``) and carries a Platt
 calibration, so :func:`detect_cars` returns confidences (probability of a car);
 :mod:`.training` trains the older synthetic-scene bank.
 

@@ -12,7 +12,7 @@ linear HOG template trained as a linear SVM -- from the labelled frames of a KIT
    nearer to the camera count as occluded (KITTI has no per-vertex visibility). Every car
    also yields its horizontally mirrored copy (alpha -> pi - alpha, i.e. bin b -> 4 - b,
    left and right vertices swapped), so every training image is used twice (flipped).
-2. Configurations are chosen as for synthetic data (:func:`.configurations.select_configurations`)
+2. Configurations are chosen as for synthetic data (:func:`wirescene.predetect.configurations.select_configurations`)
    from the (scarce) real examples. Part configurations only need their own vertices to be
    visible, so they are trained on -- and fire on -- cars truncated by the image border or
    partly occluded; their votes predict the amodal full box, which is clipped to the image.
@@ -159,7 +159,7 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     computed on demand and kept on the images, so cross-validation folds share them).
     Returns an uncalibrated bank (``calibration`` None, ``threshold`` 0 in margin units).
     ``box_weight``: detections average the votes of a cluster with weights
-    ``exp(box_weight * margin)`` (stored in the bank's meta; see :func:`.bank.cluster_activations`).
+    ``exp(box_weight * margin)`` (stored in the bank's meta; see :func:`wirescene.predetect.bank.cluster_activations`).
     ``label_boxes``: the full box of a car that is neither truncated nor largely occluded is
     its labelled 2D box (else the placed wireframe's box with the learned per-bin correction).
     """
