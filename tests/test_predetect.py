@@ -10,6 +10,7 @@ from wirescene.predetect.ap import FrameGT, average_precision, evaluate_detectio
 from wirescene.predetect.bank import DetectorBank, cluster_activations, detect_cars, load_default_bank, nms
 from wirescene.predetect.configurations import Configuration, connected_subsets, mirror_bin
 from wirescene.predetect.hog import N_FEAT, crop_features, hog_cells
+from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import EDGES
@@ -140,7 +141,7 @@ def test_bank_npz_round_trip(tmp_path):
     bank = _random_bank()
     path = bank.save(tmp_path / "bank.npz")
     with np.load(path, allow_pickle=False) as z:  # plain arrays only
-        assert int(z["format_version"]) == 2
+        assert str(z["format"]) == "wirescene-detector-bank/2"
     back = DetectorBank.load(path)
     assert back.threshold == 0.25 and back.meta == {"seed": 0} and len(back) == 2
     for a, b in zip(bank.configs, back.configs):
@@ -354,16 +355,22 @@ def test_retrain_tiny_real_bank_finds_its_cars():
     assert hits >= 2 and hits > rand
 
 
-def test_bank_calibration_round_trip_and_version_1(tmp_path):
+def test_bank_calibration_round_trip_and_foreign_files(tmp_path):
     bank = _random_bank()
     bank.calibration = np.array([2.0, -1.0])
     back = DetectorBank.load(bank.save(tmp_path / "cal.npz"))
     np.testing.assert_allclose(back.calibration, [2.0, -1.0])
     assert back.confidence(0.5) == pytest.approx(0.5) and back.margin_of(0.5) == pytest.approx(0.5)
-    # version-1 files (no calibration) still load, uncalibrated
+    # an uncalibrated bank stores an empty calibration
+    bank.calibration = None
+    plain = DetectorBank.load(bank.save(tmp_path / "plain.npz"))
+    assert plain.calibration is None and plain.confidence(0.3) == pytest.approx(0.3)
+    # 0.1's files (a bare format_version) and corrupt files are errors naming the file
     with np.load(tmp_path / "cal.npz", allow_pickle=False) as z:
-        arrays = {k: z[k] for k in z.files if k != "calibration"}
-    arrays["format_version"] = np.array(1)
-    np.savez(tmp_path / "v1.npz", **arrays)
-    v1 = DetectorBank.load(tmp_path / "v1.npz")
-    assert v1.calibration is None and v1.confidence(0.3) == pytest.approx(0.3)
+        arrays = {k: z[k] for k in z.files if k != "format"}
+    np.savez(tmp_path / "v1.npz", format_version=np.array(1), **arrays)
+    with pytest.raises(InputError, match="v1.npz: format None"):
+        DetectorBank.load(tmp_path / "v1.npz")
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(InputError, match="bad.npz: corrupt"):
+        DetectorBank.load(tmp_path / "bad.npz")

@@ -29,13 +29,14 @@ from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import N_VERTICES
+from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.resources import DATA_DIR
 from wirescene.predetect.configurations import Configuration
 from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales
 
 FORMAT_VERSION = 2
-"""2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated). Version 1 files load
-as uncalibrated banks."""
+"""2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated)."""
+ARTEFACT_KIND = "detector-bank"
 DEFAULT_BANK_PATH = DATA_DIR / "detector_bank.npz"
 
 
@@ -81,7 +82,6 @@ class DetectorBank:
         for i, c in enumerate(self.configs):
             verts[i, : len(c.vertices)] = c.vertices
         arrays = dict(
-            format_version=np.array(FORMAT_VERSION),
             bins=np.array([c.bin for c in self.configs], np.int8),
             n_vertices=np.array([len(c.vertices) for c in self.configs], np.int16),
             vertices=verts,
@@ -97,43 +97,35 @@ class DetectorBank:
             meta_json=np.array(json.dumps(self.meta, sort_keys=True)),
             calibration=np.zeros(0, np.float64) if self.calibration is None else np.asarray(self.calibration, float),
         )
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, **arrays)
-        tmp.replace(path)
-        return path
+        return save_npz(path, arrays, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
     @classmethod
     def load(cls, path) -> "DetectorBank":
         path = Path(path)
-        if not path.is_file():
-            raise InputError("detector bank not found (train it with `wirescene train detector`)", path=path)
+        z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)  # missing / corrupt / foreign: InputError
         try:
-            with np.load(path, allow_pickle=False) as z:
-                version = int(z["format_version"])
-                if version not in (1, FORMAT_VERSION):
-                    raise InputError(f"detector bank format {version}, expected {FORMAT_VERSION}", path=path)
-                T = len(z["bins"])
-                flat = z["weights"]
-                configs, weights, pos = [], [], 0
-                for i in range(T):
-                    th, tw = (int(v) for v in z["templates"][i])
-                    n = th * tw * N_FEAT
-                    weights.append(flat[pos:pos + n].reshape(th, tw, N_FEAT).astype(np.float32))
-                    pos += n
-                    nv = int(z["n_vertices"][i])
-                    configs.append(Configuration(int(z["bins"][i]), tuple(int(v) for v in z["vertices"][i, :nv]),
-                                                 (th, tw), z["offsets"][i].astype(float), z["frac"][i].astype(float),
-                                                 float(z["coverage"][i]), int(z["n_examples"][i])))
-                if pos != len(flat):
-                    raise InputError("detector bank weights do not match the template shapes", path=path)
-                calib = z["calibration"].astype(float) if version >= 2 and "calibration" in z.files else None
-                if calib is not None and calib.shape != (2,):
-                    calib = None if calib.size == 0 else calib
-                    if calib is not None:
-                        raise InputError("detector bank calibration must hold 2 numbers", path=path)
-                return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
-                           json.loads(str(z["meta_json"])), calib)
-        except (KeyError, ValueError, OSError) as exc:
+            T = len(z["bins"])
+            flat = z["weights"]
+            configs, weights, pos = [], [], 0
+            for i in range(T):
+                th, tw = (int(v) for v in z["templates"][i])
+                n = th * tw * N_FEAT
+                weights.append(flat[pos:pos + n].reshape(th, tw, N_FEAT).astype(np.float32))
+                pos += n
+                nv = int(z["n_vertices"][i])
+                configs.append(Configuration(int(z["bins"][i]), tuple(int(v) for v in z["vertices"][i, :nv]),
+                                             (th, tw), z["offsets"][i].astype(float), z["frac"][i].astype(float),
+                                             float(z["coverage"][i]), int(z["n_examples"][i])))
+            if pos != len(flat):
+                raise InputError("detector bank weights do not match the template shapes", path=path)
+            calib = z["calibration"].astype(float)
+            if calib.size == 0:
+                calib = None  # an uncalibrated bank
+            elif calib.shape != (2,):
+                raise InputError("detector bank calibration must hold 2 numbers", path=path)
+            return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
+                       json.loads(str(z["meta_json"])), calib)
+        except (KeyError, ValueError) as exc:
             raise InputError(f"malformed detector bank ({exc.__class__.__name__}: {exc})", path=path) from None
 
 
