@@ -92,7 +92,8 @@ def line(name, r, radii=(0.04, 0.10)) -> str:
     return "  ".join(parts)
 
 
-def parts_cv(root, *, kind: str = "ghog_ms", position: bool = False, context: bool = False, real: PatchData | None = None,
+def parts_cv(root, *, kind: str = "ghog_ms", position: bool = False, context: bool = False, smooth: float = 0.0,
+             real: PatchData | None = None,
              synth: PatchData | None = None,
              n_trees: int = 30, max_depth: int = 13, seed: int = 0, min_samples_leaf: int = 2,
              class_weight="balanced", detector_for_fold=None, save_dir=None, progress=print) -> dict:
@@ -128,7 +129,7 @@ def parts_cv(root, *, kind: str = "ghog_ms", position: bool = False, context: bo
                 parts.append(synth)
             data = parts[0] if len(parts) == 1 else _concat(parts[0], parts[1], kind)
             t = time.time()
-            det = fit_detector(data, kind=kind, position=position, context=context, n_trees=n_trees, max_depth=max_depth, seed=seed,
+            det = fit_detector(data, kind=kind, position=position, context=context, smooth=smooth, n_trees=n_trees, max_depth=max_depth, seed=seed,
                                min_samples_leaf=min_samples_leaf, class_weight=class_weight)
             progress(f"fold {k}: trained on {len(data)} patches in {time.time() - t:.0f} s")
             if save_dir is not None:
@@ -148,6 +149,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--root", default="/work/shared/data/kitti")
     ap.add_argument("--kind", default="ghog_ms")
+    ap.add_argument("--smooth", type=float, default=0.0, help="response-map smoothing (sigma in box heights)")
     ap.add_argument("--context", action="store_true", help="append the box's gradient layout (ghog_ms kinds)")
     ap.add_argument("--position", action="store_true", help="append the box-relative position to the descriptor")
     ap.add_argument("--synth-scenes", type=int, default=0, help="synthetic training scenes added to every fold")
@@ -181,9 +183,9 @@ def main():
     if args.synth_scenes:
         synth = _cached(cache / f"synth_{args.synth_scenes}.npz" if cache and args.kind in KINDS_CACHED else None,
                         lambda: make_synth_patch_data(n_scenes=args.synth_scenes, kinds=kinds))
-    res = parts_cv(args.root, kind=args.kind, position=args.position, context=args.context, real=real, synth=synth, n_trees=args.n_trees,
+    res = parts_cv(args.root, kind=args.kind, position=args.position, context=args.context, smooth=args.smooth, real=real, synth=synth, n_trees=args.n_trees,
                    max_depth=args.max_depth, min_samples_leaf=args.min_samples_leaf, save_dir=args.save_dir)
-    tag = f"{args.kind}{'+ctx' if args.context else ''}{'+pos' if args.position else ''} real={not args.no_real} synth={args.synth_scenes}"
+    tag = f"{args.kind}{'+ctx' if args.context else ''}{'+pos' if args.position else ''} smooth={args.smooth} real={not args.no_real} synth={args.synth_scenes}"
     for name in EVAL_SETS:
         print(line(f"POOLED {name} [{tag}]", res[name]["pooled"]))
 
@@ -195,7 +197,7 @@ def main():
         generate_dataset(synth_root, args.synth_eval_scenes, seed=1)
     parts = [p for p in (real, synth) if p is not None]
     data = parts[0] if len(parts) == 1 else _concat(parts[0], parts[1], args.kind)
-    det = fit_detector(data, kind=args.kind, position=args.position, context=args.context, n_trees=args.n_trees, max_depth=args.max_depth,
+    det = fit_detector(data, kind=args.kind, position=args.position, context=args.context, smooth=args.smooth, n_trees=args.n_trees, max_depth=args.max_depth,
                        min_samples_leaf=args.min_samples_leaf)
     print(line(f"synthetic held-out [{tag}]", localisation(det, synth_eval_frames(synth_root))))
 

@@ -245,13 +245,27 @@ def test_log_ratio_vectorised_and_outside(tiny, kitti_frame):
 def test_committed_model_on_real_kitti_box(kitti_frame):
     det = load_default()
     assert det.n_trees >= 10 and det.kind in feat.KINDS
-    assert int(det.meta.get("synth_scenes", 0)) > 0  # trained on synthetic shaded scenes
+    assert len(det.meta.get("real_frames", "").split(",")) >= 30  # trained on the labelled real frames
+    assert det.calib_scale is not None and (det.calib_scale > 0).all()
     img, boxes = kitti_frame
     R = response_maps(img, boxes[1:2], detector=det)
     c = (boxes[1, :2] + boxes[1, 2:]) / 2
     lr = R.log_ratio(np.broadcast_to(c, (N_PARTS, 2)), 0)
     assert lr.shape == (N_PARTS,) and np.isfinite(lr).all()
     assert R.boxes[0].probs.shape[-1] == N_CLASSES
+
+
+def test_response_map_smoothing(tiny, kitti_frame):
+    from scipy.ndimage import gaussian_filter
+
+    det = PartDetector.load(tiny[0])
+    img, boxes = kitti_frame
+    R0 = response_maps(img, boxes[1:2], detector=det, stride=2.0, smooth=0.0)
+    R1 = response_maps(img, boxes[1:2], detector=det, stride=2.0, smooth=0.05)
+    sig = 0.05 * (boxes[1, 3] - boxes[1, 1]) / 2.0
+    assert_close(R1.boxes[0].log_ratio, gaussian_filter(R0.boxes[0].log_ratio, (sig, sig, 0), mode="nearest"),
+                 atol=1e-5)
+    assert R1.boxes[0].log_ratio.std() < R0.boxes[0].log_ratio.std()
 
 
 # ------------------------------------------------------------------ real training data (issue 18)

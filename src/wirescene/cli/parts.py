@@ -28,6 +28,8 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
               help="Real training frames: comma-separated ids, or @FILE with one id per line (default: all).")
 @click.option("--position/--no-position", default=False, show_default=True,
               help="Append the point's position relative to the box to the descriptor.")
+@click.option("--smooth", type=float, default=0.0, show_default=True,
+              help="Default Gaussian smoothing of the response maps (sigma in box heights).")
 @click.option("--calibrate/--no-calibrate", default=False, show_default=True,
               help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root).")
 @click.option("--synth-scenes", type=int, default=300, show_default=True,
@@ -43,7 +45,7 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
 @click.option("--kitti-background", type=click.Path(file_okay=False), default=None,
               help="KITTI root whose car-free regions add background patches (off by default).")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
-def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, position, calibrate, synth_scenes,
+def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, position, smooth, calibrate, synth_scenes,
           synth_seed, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
     """Train the 37-class part detector on real KITTI frames, synthetic shaded scenes
     and/or CAD renderings."""
@@ -60,7 +62,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, posi
                                  class_weight=None if class_weight == "none" else class_weight,
                                  compare_kinds=("hog",) if compare_hog else (),
                                  kitti_background=kitti_background, kitti_root=kitti_root, frames=frames,
-                                 position=position, calibrate_real=calibrate, progress=click.echo)
+                                 position=position, calibrate_real=calibrate, smooth=smooth, progress=click.echo)
     if report:
         def conv(o):
             if isinstance(o, dict):

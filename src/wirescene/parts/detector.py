@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
 from wirescene.parts import features as feat
 from wirescene.core.errors import InputError, ShapeError, check_shape
@@ -68,6 +69,8 @@ class PartDetector:
         box (:func:`box_position`), the forest's last 2 features
     context : bool -- between descriptor and position: the box's gradient layout
         (:func:`wirescene.parts.features.box_context`, 72 features, multi-scale kinds only)
+    smooth : float -- default spatial smoothing of the log-ratio maps in
+        :func:`response_maps` (Gaussian, sigma in box heights; 0: none)
     calib_scale, calib_offset : (36,) float, optional -- the log ratio reported by
         :func:`response_maps` is ``calib_scale[j] * log(S_j / S_b) + calib_offset[j]``
         (per-class calibration on real data, see
@@ -88,6 +91,7 @@ class PartDetector:
     meta: dict = field(default_factory=dict)
     position: bool = False
     context: bool = False
+    smooth: float = 0.0
     calib_scale: np.ndarray | None = None
     calib_offset: np.ndarray | None = None
 
@@ -155,7 +159,8 @@ class PartDetector:
             max_depth=np.array(self.max_depth), n_features=np.array(self.n_features),
             canonical_height=np.array(feat.CANONICAL_HEIGHT), radius=np.array(feat.RADIUS),
             meta_keys=np.array(list(meta.keys()), dtype=str), meta_values=np.array(list(meta.values()), dtype=str),
-            position=np.array(self.position), context=np.array(self.context), **calib,
+            position=np.array(self.position), context=np.array(self.context), smooth=np.array(float(self.smooth)),
+            **calib,
         )
         return save_npz(path, arrays, kind=FORMAT_KIND, version=FORMAT_VERSION)
 
@@ -185,6 +190,7 @@ class PartDetector:
                        max_depth=int(z["max_depth"]), n_features=int(z["n_features"]), meta=meta,
                        position=bool(z["position"]) if "position" in z else False,
                        context=bool(z["context"]) if "context" in z else False,
+                       smooth=float(z["smooth"]) if "smooth" in z else 0.0,
                        calib_scale=z["calib_scale"] if has_cal else None,
                        calib_offset=z["calib_offset"] if has_cal else None)
         except (KeyError, ValueError) as e:
@@ -440,7 +446,7 @@ def _context(inp, box, crop_origin, z):
 
 def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=DEFAULT_SCALES,
                   stride: float | None = None, pad: float = 0.1, eps: float = DEFAULT_EPS,
-                  edges: np.ndarray | None = None) -> PartResponses:
+                  edges: np.ndarray | None = None, smooth: float | None = None) -> PartResponses:
     """Dense multi-scale part responses inside detection boxes.
 
     Parameters
@@ -454,6 +460,12 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
     eps : float -- probabilities are clipped to ``[eps, 1]`` before the log ratio
     edges : (H, W) bool, optional -- precomputed :func:`wirescene.parts.features.image_edges`
         (ignored by grey-image descriptors)
+    smooth : float, optional -- Gaussian smoothing of each part's log-ratio map, sigma in
+        box heights (default: the detector's ``smooth``). Neighbouring grid points see
+        overlapping patches, so their scores are correlated evidence of one location;
+        averaging them suppresses isolated false peaks (on real frames a sigma of about
+        1/16 of the box height roughly doubles the vertices whose best-scoring location
+        lies within 4% of the car length, ``benchmarks/bench_real.py``).
 
     Returns
     -------
@@ -495,6 +507,9 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
                 X = np.concatenate([X, box_position(np.stack([uu, vv], -1).reshape(-1, 2), box)], axis=1)
             probs[k] = detector.predict_proba(X).reshape(gh, gw, N_CLASSES)
         lr = detector.log_ratio_of(probs, eps=eps).max(axis=0)
+        sig = (detector.smooth if smooth is None else float(smooth)) * bh / st
+        if sig > 0:
+            lr = gaussian_filter(lr, (sig, sig, 0), mode="nearest")
         out.append(BoxResponses(box=box.copy(), region=np.array([rx0, ry0, rx1, ry1]), origin=np.array([rx0, ry0]),
                                 stride=st, scales=scales, probs=probs.astype(np.float16),
                                 log_ratio=lr.astype(np.float32)))

@@ -331,14 +331,17 @@ def design_matrix(data: PatchData, kind: str, *, position: bool = False, context
     return X
 
 
-def fit_detector(data: PatchData, *, kind: str, position: bool = False, context: bool = False, n_trees: int = 30, max_depth: int = 13,
+def fit_detector(data: PatchData, *, kind: str, position: bool = False, context: bool = False, smooth: float = 0.0,
+                 n_trees: int = 30, max_depth: int = 13,
                  seed: int = 0, min_samples_leaf: int = 2, class_weight: str | None = "balanced", n_jobs: int = 1,
                  meta: dict | None = None) -> PartDetector:
     """Fit the forest on the ``kind`` descriptors of ``data`` (plus the box position if
     ``position``) and export it."""
     rf = _fit(design_matrix(data, kind, position=position, context=context), data.y, n_trees=n_trees, max_depth=max_depth,
               seed=seed, n_jobs=n_jobs, class_weight=class_weight, min_samples_leaf=min_samples_leaf)
-    return PartDetector.from_sklearn(rf, kind=kind, meta=meta, position=position, context=context)
+    det = PartDetector.from_sklearn(rf, kind=kind, meta=meta, position=position, context=context)
+    det.smooth = float(smooth)
+    return det
 
 
 def heldout_accuracy(data: PatchData, heldout_names, *, kind="sc", n_trees=30, max_depth=13, seed=0,
@@ -692,8 +695,8 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
                         compare_kinds=(), kitti_background=None, synth_scenes: int = 300,
                         synth_seed: int = SYNTH_TRAIN_SEED, class_weight: str | None = "balanced",
                         min_samples_leaf: int = 2, augment: bool = False, kitti_root=None, frames=None,
-                        position: bool = False, context: bool = False, calibrate_real: bool = False, n_jobs: int = 1,
-                        progress=None):
+                        position: bool = False, context: bool = False, calibrate_real: bool = False,
+                        smooth: float = 0.0, n_jobs: int = 1, progress=None):
     """Generate training patches, optionally evaluate leave-models-out, fit the forest
     on all data and write the model ``.npz``.
 
@@ -724,6 +727,8 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
         ``kitti_root``)
     position : bool -- append the box-relative position to the descriptor
     context : bool -- append the box's gradient layout (multi-scale kinds)
+    smooth : float -- the model's default smoothing of its response maps (sigma in box
+        heights, see :func:`wirescene.parts.detector.response_maps`)
     calibrate_real : bool -- calibrate the log ratio per class on held-out real patches
         (:func:`heldout_calibration`; needs ``kitti_root``)
 
@@ -788,9 +793,9 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
             "n_aug": n_aug, "n_patches": len(data), "n_part": n_part, "cars": ",".join(report["cars"]),
             "kitti_background": str(kitti_background is not None), "synth_scenes": synth_scenes,
             "synth_seed": synth_seed, "class_weight": str(class_weight), "min_samples_leaf": min_samples_leaf,
-            "augment": str(augment), "real_frames": ",".join(report.get("frames", [])), "position": str(position), "context": str(context),
+            "augment": str(augment), "real_frames": ",".join(report.get("frames", [])), "position": str(position), "context": str(context), "smooth": smooth,
             "calibrated": str(cal is not None)}
-    det = fit_detector(data, kind=kind, position=position, context=context, meta=meta, **fit_kwargs)
+    det = fit_detector(data, kind=kind, position=position, context=context, smooth=smooth, meta=meta, **fit_kwargs)
     report["t_fit_s"] = time.time() - t1
     if cal is not None:
         det.calib_scale, det.calib_offset = cal[0], cal[1]
