@@ -31,18 +31,24 @@ import os
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
-import argparse  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
-from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.parts.detector import PartDetector  # noqa: E402
-from wirescene.training.parts_real import make_real_patch_data, real_frames  # noqa: E402
-from wirescene.training.parts import (PatchData, _merge, fit_detector, localisation, make_synth_patch_data,  # noqa: E402
-                                      synth_eval_frames)
+from wirescene.io.folds import N_FOLDS, fold_of
+from wirescene.io.kitti import KittiDataset
+from wirescene.parts.detector import PartDetector
+from wirescene.training.parts import (
+    PatchData,
+    _merge,
+    fit_detector,
+    localisation,
+    make_synth_patch_data,
+    synth_eval_frames,
+)
+from wirescene.training.parts_real import make_real_patch_data, real_frames
 
 KINDS_CACHED = ("ghog", "ghog_ms", "ghog_msc")
 EVAL_SETS = {"clean": dict(clean=True, min_box_h=40.0), "occ<=1": dict(clean=False, min_box_h=25.0, max_occluded=1)}
@@ -161,6 +167,8 @@ def main():
     ap.add_argument("--cache", default=None, help="directory for described patches (npz)")
     ap.add_argument("--baseline", action="store_true", help="also score the shipped model on every fold")
     ap.add_argument("--model", default=None, help="with --baseline: this model instead of the shipped one")
+    ap.add_argument("--no-synth-eval", action="store_true",
+                    help="skip the synthetic held-out row (score the shipped model with bench_parts.py instead)")
     ap.add_argument("--synth-eval-root", default="/tmp/synval")
     ap.add_argument("--synth-eval-scenes", type=int, default=20)
     args = ap.parse_args()
@@ -189,6 +197,8 @@ def main():
     for name in EVAL_SETS:
         print(line(f"POOLED {name} [{tag}]", res[name]["pooled"]))
 
+    if args.no_synth_eval:
+        return
     # synthetic held-out scenes, model trained on all real frames (+ synthetic)
     synth_root = Path(args.synth_eval_root)
     if not (synth_root / "training" / "wireframes").is_dir():

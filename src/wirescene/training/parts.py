@@ -1,14 +1,20 @@
 """Training of the part detector (paper Sec. 5.1) and its localisation benchmark.
 
-Two data sources (all deterministic given ``seed``):
+Three data sources (all deterministic given ``seed``):
 
-* **Synthetic shaded scenes** (default, :func:`make_synth_patch_data`): patches of
+* **Real KITTI frames** (``kitti_root``, :func:`wirescene.training.parts_real.make_real_patch_data`):
+  the scaled mean wireframe at each labelled pose, ray-cast visibility, mirrored copies.
+  The shipped model: real frames + 100 synthetic scenes, descriptor ``"ghog_ms"`` with the
+  box-relative position, per-part calibration on held-out real patches
+  (:func:`heldout_calibration`), response maps smoothed by 1/16 of the box height
+  (``benchmarks/bench_real.py`` measures each choice, 4-fold cross-validated by drive).
+* **Synthetic shaded scenes** (:func:`make_synth_patch_data`): patches of
   ``wirescene synth`` scenes of the training stream (seed >= :data:`SYNTH_TRAIN_SEED`),
   described exactly as at test time (:func:`wirescene.parts.detector.box_descriptors`: the full
   image, the car's 2D box, box-relative scale), positives at visible GT vertices,
   background in the padded car boxes away from vertices and outside the cars. With the
-  grey-image descriptor ``"ghog"`` this is the shipped model: it transfers to shaded and
-  real images, where the CAD edge-rendering model below localised at chance level.
+  grey-image descriptor ``"ghog"`` this was the first shipped model (synthetic only: on
+  real frames 4% / 18% of the vertices within 4% / 10% of the car length).
 * **CAD edge renderings** (``n_views > 0``; edge-map descriptors only), as follows.
 
 * **Part patches** -- every road-car CAD model (:func:`wirescene.cad.training.load_cad_meshes`)

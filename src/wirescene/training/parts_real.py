@@ -31,8 +31,14 @@ import numpy as np
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND
 
-__all__ = ["LabelledCar", "scaled_mean_shape", "kitti_car_wireframes", "real_frames", "make_real_patch_data",
-           "mirror_cars"]
+__all__ = [
+    "LabelledCar",
+    "kitti_car_wireframes",
+    "make_real_patch_data",
+    "mirror_cars",
+    "real_frames",
+    "scaled_mean_shape",
+]
 
 
 @dataclass
