@@ -289,6 +289,18 @@ def _cells_of_votes(votes, cell: int) -> np.ndarray:
     return out
 
 
+def _cells_two_sizes(votes) -> tuple[np.ndarray, np.ndarray]:
+    """:data:`GHOG_CELL` and twice-as-large cells of ``votes``: the 16-px window
+    ``[i - 8, i + 7]`` is the union of the 8-px windows centred at ``i - 4`` and ``i + 4``
+    (per axis), so four shifted sums of the small cells (computed on the map padded by 4
+    px of zero votes) replace another set of box filters."""
+    h = GHOG_CELL // 2
+    H, W = votes.shape[:2]
+    cp = _cells_of_votes(np.pad(votes, ((h, h), (h, h), (0, 0))), GHOG_CELL)
+    coarse = cp[:H, :W] + cp[:H, 2 * h:] + cp[2 * h:, :W] + cp[2 * h:, 2 * h:]
+    return np.ascontiguousarray(cp[h:h + H, h:h + W]), coarse
+
+
 def orientation_cells(grey_map, *, cell: int = GHOG_CELL) -> np.ndarray:
     """``(H, W, GHOG_BINS)`` float32: gradient-magnitude-weighted unsigned orientation
     votes summed over the ``cell``-pixel square window at every pixel (window
@@ -307,13 +319,22 @@ def ghog_at(cells, points, *, offsets=GHOG_OFFSETS) -> np.ndarray:
     rows = p[:, 0, None, None] + off[None, :, None]
     cols = p[:, 1, None, None] + off[None, None, :]
     ok = (rows >= 0) & (cols >= 0) & (rows < H) & (cols < W)
-    v = c[np.clip(rows, 0, H - 1), np.clip(cols, 0, W - 1)]  # (N, 4, 4, B)
-    v = np.where(ok[..., None], v, 0).reshape(len(p), -1).astype(np.float64)
-    total = v.sum(1, keepdims=True)
-    n = v / np.sqrt((v * v).sum(1, keepdims=True) + GHOG_EPS ** 2)
-    n = np.minimum(n, 0.2)
-    n = n / np.sqrt((n * n).sum(1, keepdims=True) + 1e-6)
-    return np.concatenate([n, np.log1p(total)], axis=1).astype(np.float32)
+    # one flat gather (float32: this is the response maps' hot path)
+    flat = c.reshape(-1)
+    idx = (np.clip(rows, 0, H - 1) * W + np.clip(cols, 0, W - 1))[..., None] * B + np.arange(B)
+    v = flat[idx]  # (N, 4, 4, B)
+    if not ok.all():
+        v *= ok[..., None]
+    v = v.reshape(len(p), -1)
+    out = np.empty((len(p), v.shape[1] + 1), np.float32)
+    total = v.sum(1, dtype=np.float64)
+    ss = np.einsum("ij,ij->i", v, v, dtype=np.float64)
+    n = v * (1.0 / np.sqrt(ss + GHOG_EPS ** 2)).astype(np.float32)[:, None]
+    np.minimum(n, np.float32(0.2), out=n)
+    ss = np.einsum("ij,ij->i", n, n, dtype=np.float64)
+    np.multiply(n, (1.0 / np.sqrt(ss + 1e-6)).astype(np.float32)[:, None], out=out[:, :-1])
+    out[:, -1] = np.log1p(total)
+    return out
 
 
 CONTEXT_GRID = (4, 8)
@@ -394,9 +415,10 @@ def canonical_inputs(image, z: float, kind: str, *, edges=None) -> dict:
         out["edges"] = canonical_edges(e, z)
     if kind in GREY_KINDS:
         votes = _orientation_votes(canonical_grey(image_grey(image), z))
-        out["cells"] = _cells_of_votes(votes, GHOG_CELL)
         if kind in ("ghog_ms", "ghog_msc"):
-            out["coarse"] = _cells_of_votes(votes, GHOG_COARSE_CELL)
+            out["cells"], out["coarse"] = _cells_two_sizes(votes)
+        else:
+            out["cells"] = _cells_of_votes(votes, GHOG_CELL)
     if kind == "ghog_msc":
         col = canonical_colour(image, z)
         out["colour"] = uniform_filter(col, (COLOUR_CELL, COLOUR_CELL, 1), mode="nearest")
