@@ -15,10 +15,13 @@ box >= 40 px) and "occ<=1" (occlusion level <= 1, any truncation, box >= 25 px).
 synthetic row scores the model trained on all real frames (+ synthetic, if used) on
 ``wirescene synth`` scenes of seed 1 (seeds < 1000 are never used for training).
 
-Usage::
+Usage (defaults = the shipped model's recipe: ghog_ms, box position, smoothing 1/16 of the
+box height, real + 100 synthetic scenes; the CV models are not calibrated, which does not
+change any arg-max)::
 
     python benchmarks/bench_real.py [--root /work/shared/data/kitti] [--kind ghog_ms]
-        [--synth-scenes 0] [--n-trees 30] [--max-depth 13] [--cache DIR] [--baseline]
+        [--no-position] [--smooth 0.0625] [--synth-scenes 100] [--context] [--n-trees 30]
+        [--max-depth 13] [--cache DIR] [--save-dir DIR] [--baseline] [--no-synth-eval]
 
 ``--baseline`` additionally scores the shipped model (trained without real frames) on every
 fold. ``--cache DIR`` keeps the described patches between runs (npz).
@@ -50,7 +53,6 @@ from wirescene.training.parts import (
 )
 from wirescene.training.parts_real import make_real_patch_data, real_frames
 
-KINDS_CACHED = ("ghog", "ghog_ms", "ghog_msc")
 EVAL_SETS = {"clean": dict(clean=True, min_box_h=40.0), "occ<=1": dict(clean=False, min_box_h=25.0, max_occluded=1)}
 
 
@@ -135,7 +137,8 @@ def parts_cv(root, *, kind: str = "ghog_ms", position: bool = False, context: bo
                 parts.append(synth)
             data = parts[0] if len(parts) == 1 else _concat(parts[0], parts[1], kind)
             t = time.time()
-            det = fit_detector(data, kind=kind, position=position, context=context, smooth=smooth, n_trees=n_trees, max_depth=max_depth, seed=seed,
+            det = fit_detector(data, kind=kind, position=position, context=context, smooth=smooth, n_trees=n_trees,
+                               max_depth=max_depth, seed=seed,
                                min_samples_leaf=min_samples_leaf, class_weight=class_weight)
             progress(f"fold {k}: trained on {len(data)} patches in {time.time() - t:.0f} s")
             if save_dir is not None:
@@ -155,10 +158,11 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--root", default="/work/shared/data/kitti")
     ap.add_argument("--kind", default="ghog_ms")
-    ap.add_argument("--smooth", type=float, default=0.0, help="response-map smoothing (sigma in box heights)")
+    ap.add_argument("--smooth", type=float, default=0.0625, help="response-map smoothing (sigma in box heights)")
     ap.add_argument("--context", action="store_true", help="append the box's gradient layout (ghog_ms kinds)")
-    ap.add_argument("--position", action="store_true", help="append the box-relative position to the descriptor")
-    ap.add_argument("--synth-scenes", type=int, default=0, help="synthetic training scenes added to every fold")
+    ap.add_argument("--position", action=argparse.BooleanOptionalAction, default=True,
+                    help="append the box-relative position to the descriptor")
+    ap.add_argument("--synth-scenes", type=int, default=100, help="synthetic training scenes added to every fold")
     ap.add_argument("--no-real", action="store_true", help="train on synthetic patches only")
     ap.add_argument("--n-trees", type=int, default=30)
     ap.add_argument("--max-depth", type=int, default=13)
@@ -182,18 +186,20 @@ def main():
         for name in EVAL_SETS:
             print(line(f"BASELINE pooled {name}", res[name]["pooled"]))
 
-    kinds = KINDS_CACHED if args.kind in KINDS_CACHED else (args.kind,)
+    kinds = (args.kind,)
     real = None
     if not args.no_real:
-        real = _cached(cache / "real_all.npz" if cache and args.kind in KINDS_CACHED else None,
+        real = _cached(cache / f"real_{args.kind}.npz" if cache else None,
                        lambda: make_real_patch_data(args.root, ids, kinds=kinds))
     synth = None
     if args.synth_scenes:
-        synth = _cached(cache / f"synth_{args.synth_scenes}.npz" if cache and args.kind in KINDS_CACHED else None,
+        synth = _cached(cache / f"synth_{args.synth_scenes}_{args.kind}.npz" if cache else None,
                         lambda: make_synth_patch_data(n_scenes=args.synth_scenes, kinds=kinds))
-    res = parts_cv(args.root, kind=args.kind, position=args.position, context=args.context, smooth=args.smooth, real=real, synth=synth, n_trees=args.n_trees,
-                   max_depth=args.max_depth, min_samples_leaf=args.min_samples_leaf, save_dir=args.save_dir)
-    tag = f"{args.kind}{'+ctx' if args.context else ''}{'+pos' if args.position else ''} smooth={args.smooth} real={not args.no_real} synth={args.synth_scenes}"
+    res = parts_cv(args.root, kind=args.kind, position=args.position, context=args.context, smooth=args.smooth,
+                   real=real, synth=synth, n_trees=args.n_trees, max_depth=args.max_depth,
+                   min_samples_leaf=args.min_samples_leaf, save_dir=args.save_dir)
+    tag = (f"{args.kind}{'+ctx' if args.context else ''}{'+pos' if args.position else ''} smooth={args.smooth} "
+           f"real={not args.no_real} synth={args.synth_scenes}")
     for name in EVAL_SETS:
         print(line(f"POOLED {name} [{tag}]", res[name]["pooled"]))
 
@@ -207,8 +213,8 @@ def main():
         generate_dataset(synth_root, args.synth_eval_scenes, seed=1)
     parts = [p for p in (real, synth) if p is not None]
     data = parts[0] if len(parts) == 1 else _concat(parts[0], parts[1], args.kind)
-    det = fit_detector(data, kind=args.kind, position=args.position, context=args.context, smooth=args.smooth, n_trees=args.n_trees, max_depth=args.max_depth,
-                       min_samples_leaf=args.min_samples_leaf)
+    det = fit_detector(data, kind=args.kind, position=args.position, context=args.context, smooth=args.smooth,
+                       n_trees=args.n_trees, max_depth=args.max_depth, min_samples_leaf=args.min_samples_leaf)
     print(line(f"synthetic held-out [{tag}]", localisation(det, synth_eval_frames(synth_root))))
 
 
