@@ -245,10 +245,117 @@ def test_log_ratio_vectorised_and_outside(tiny, kitti_frame):
 def test_committed_model_on_real_kitti_box(kitti_frame):
     det = load_default()
     assert det.n_trees >= 10 and det.kind in feat.KINDS
-    assert int(det.meta.get("synth_scenes", 0)) > 0  # trained on synthetic shaded scenes
+    assert len(det.meta.get("real_frames", "").split(",")) >= 30  # trained on the labelled real frames
+    assert det.calib_scale is not None and (det.calib_scale > 0).all()
     img, boxes = kitti_frame
     R = response_maps(img, boxes[1:2], detector=det)
     c = (boxes[1, :2] + boxes[1, 2:]) / 2
     lr = R.log_ratio(np.broadcast_to(c, (N_PARTS, 2)), 0)
     assert lr.shape == (N_PARTS,) and np.isfinite(lr).all()
     assert R.boxes[0].probs.shape[-1] == N_CLASSES
+
+
+def test_response_map_smoothing(tiny, kitti_frame):
+    from scipy.ndimage import gaussian_filter
+
+    det = PartDetector.load(tiny[0])
+    img, boxes = kitti_frame
+    R0 = response_maps(img, boxes[1:2], detector=det, stride=2.0, smooth=0.0)
+    R1 = response_maps(img, boxes[1:2], detector=det, stride=2.0, smooth=0.05)
+    sig = 0.05 * (boxes[1, 3] - boxes[1, 1]) / 2.0
+    assert_close(R1.boxes[0].log_ratio, gaussian_filter(R0.boxes[0].log_ratio, (sig, sig, 0), mode="nearest"),
+                 atol=1e-5)
+    assert R1.boxes[0].log_ratio.std() < R0.boxes[0].log_ratio.std()
+
+
+# ------------------------------------------------------------------ real training data (issue 18)
+
+def test_kitti_car_wireframes_fit_label_boxes():
+    from wirescene.core.boxes import iou_2d
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.parts_real import kitti_car_wireframes
+    from wirescene.core.wireframe import SIDE
+
+    ds = KittiDataset(KITTI_ROOT)
+    n = 0
+    for fid in ds.frame_ids():
+        img = ds.image(fid)
+        cars = kitti_car_wireframes(ds.labels(fid), ds.camera(fid), image_size=img.shape[1::-1])
+        for c in cars:
+            if c.occluded or c.truncated > 0:
+                continue
+            n += 1
+            bb = np.r_[c.uv.min(0), c.uv.max(0)]
+            assert iou_2d(bb, c.box) > 0.5  # the scaled mean wireframe covers the labelled box
+            # a car is seen from one side: never every vertex of both sides visible
+            assert 6 <= c.visible.sum() < 30
+            assert not (c.visible[SIDE > 0].all() and c.visible[SIDE < 0].all())
+    assert n >= 3
+
+
+def test_mirror_cars_swaps_sides_and_is_an_involution():
+    from wirescene.training.parts_real import mirror_cars
+    from wirescene.core.wireframe import MIRROR
+
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 255, (30, 50, 3)).astype(np.uint8)
+    box = np.array([[5.0, 3.0, 20.0, 25.0]])
+    uv = rng.uniform(5, 25, (1, N_PARTS, 2))
+    vis = rng.random((1, N_PARTS)) < 0.5
+    im2, b2, uv2, vis2 = mirror_cars(img, box, uv, vis)
+    assert np.array_equal(im2[:, 49 - 7], img[:, 7]) and np.allclose(b2, [[29, 3, 44, 25]])
+    j = 4
+    assert np.allclose(uv2[0, MIRROR[j]], [49 - uv[0, j, 0], uv[0, j, 1]]) and vis2[0, MIRROR[j]] == vis[0, j]
+    im3, b3, uv3, vis3 = mirror_cars(im2, b2, uv2, vis2)
+    assert np.array_equal(im3, img) and np.allclose(b3, box) and np.allclose(uv3, uv) and np.array_equal(vis3, vis)
+
+
+def test_calibrate_recovers_overconfident_scores():
+    from wirescene.training.parts import calibrate
+
+    rng = np.random.default_rng(0)
+    n = 4000
+    y = np.where(rng.random(n) < 0.2, 0, BACKGROUND)
+    # true log likelihood ratio of "vertex 0": +-1.5 (unit Gaussians at +-1.5, LLR = 3 x)
+    x = rng.normal(np.where(y == 0, 1.5, -1.5), 1.0)
+    r = np.zeros((n, N_PARTS))
+    r[:, 0] = 2.0 * 3.0 * x  # twice too confident
+    scale, offset = calibrate(r, y)
+    assert abs(scale[0] - 0.5) < 0.08 and abs(offset[0]) < 0.3
+    assert scale[1] == 1.0 and offset[1] == 0.0  # no positives: identity
+
+
+@pytest.fixture(scope="module")
+def tiny_real(tmp_path_factory):
+    from wirescene.training.parts import train_part_detector
+
+    path = tmp_path_factory.mktemp("parts") / "tiny_real.npz"
+    det, rep = train_part_detector(path, seed=1, n_trees=3, max_depth=8, kind="ghog_ms", synth_scenes=0,
+                                   kitti_root=KITTI_ROOT, frames=["000002", "000010"], position=True,
+                                   calibrate_real=True)
+    return path, rep
+
+
+def test_tiny_real_retraining_reproduces_the_pipeline(tiny_real, kitti_frame):
+    path, rep = tiny_real
+    det = PartDetector.load(path)
+    data = rep["_data"]
+    assert (data.y < N_PARTS).sum() > 300 and (data.y == BACKGROUND).sum() > 300
+    assert det.position and det.kind == "ghog_ms" and det.n_features == feat.feature_dim("ghog_ms") + 2
+    assert det.calib_scale.shape == (N_PARTS,) and (det.calib_scale > 0).all()
+    assert det.meta["real_frames"] == "000002,000010"
+    assert "logloss_calibrated" in rep["calibration"]
+    # response maps use the position feature and the calibration exactly as training describes
+    from wirescene.parts.detector import box_descriptors
+
+    img, boxes = kitti_frame
+    box = boxes[1:2]
+    R = response_maps(img, box, detector=det, scales=(1.0,), stride=3.0)
+    b = R.boxes[0]
+    guv = b.grid_uv()
+    ij = [(3, 4), (b.probs.shape[1] // 2, b.probs.shape[2] // 2)]
+    uv = np.array([guv[i, j] for i, j in ij])
+    p = det.predict_proba(box_descriptors(img, box[0], uv, det.kind, scale=1.0, position=True))
+    for k, (i, j) in enumerate(ij):
+        assert_close(b.probs[0, i, j], p[k], atol=2e-3)
+        assert_close(R.log_ratio(np.broadcast_to(guv[i, j], (N_PARTS, 2)), 0), det.log_ratio_of(p[k]), atol=2e-2)

@@ -17,8 +17,21 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
               help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog only).")
 @click.option("--n-trees", type=int, default=30, show_default=True)
 @click.option("--max-depth", type=int, default=13, show_default=True)
-@click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc"]), default="ghog", show_default=True,
-              help="Descriptor (ghog: gradient-orientation histograms of the grey image).")
+@click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc", "ghog_ms", "ghog_msc"]), default="ghog",
+              show_default=True,
+              help="Descriptor (ghog: gradient-orientation histograms of the grey image; ghog_ms: two cell sizes; "
+                   "ghog_msc: ghog_ms plus colour).")
+@click.option("--kitti-root", type=click.Path(file_okay=False, exists=True), default=None,
+              help="Labelled KITTI root whose frames add real part and background patches "
+                   "(the shipped model: /work/shared/data/kitti, all 33 frames).")
+@click.option("--frames", default=None,
+              help="Real training frames: comma-separated ids, or @FILE with one id per line (default: all).")
+@click.option("--position/--no-position", default=False, show_default=True,
+              help="Append the point's position relative to the box to the descriptor.")
+@click.option("--smooth", type=float, default=0.0, show_default=True,
+              help="Default Gaussian smoothing of the response maps (sigma in box heights).")
+@click.option("--calibrate/--no-calibrate", default=False, show_default=True,
+              help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root).")
 @click.option("--synth-scenes", type=int, default=300, show_default=True,
               help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
 @click.option("--synth-seed", type=int, default=1000, show_default=True,
@@ -32,16 +45,24 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
 @click.option("--kitti-background", type=click.Path(file_okay=False), default=None,
               help="KITTI root whose car-free regions add background patches (off by default).")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
-def parts(out, seed, n_views, n_trees, max_depth, kind, synth_scenes, synth_seed, class_weight, n_aug, heldout,
-          compare_hog, kitti_background, report):
-    """Train the 37-class part detector on synthetic shaded scenes (and/or CAD renderings)."""
+def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, position, smooth, calibrate, synth_scenes,
+          synth_seed, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
+    """Train the 37-class part detector on real KITTI frames, synthetic shaded scenes
+    and/or CAD renderings."""
+    from pathlib import Path
+
     from wirescene.training.parts import train_part_detector
+
+    if frames is not None:
+        text = Path(frames[1:]).read_text() if frames.startswith("@") else frames.replace(",", " ")
+        frames = text.split()
 
     _, rep = train_part_detector(out, seed=seed, n_views=n_views, n_trees=n_trees, max_depth=max_depth, kind=kind,
                                  n_aug=n_aug, heldout=heldout, synth_scenes=synth_scenes, synth_seed=synth_seed,
                                  class_weight=None if class_weight == "none" else class_weight,
                                  compare_kinds=("hog",) if compare_hog else (),
-                                 kitti_background=kitti_background, progress=click.echo)
+                                 kitti_background=kitti_background, kitti_root=kitti_root, frames=frames,
+                                 position=position, calibrate_real=calibrate, smooth=smooth, progress=click.echo)
     if report:
         def conv(o):
             if isinstance(o, dict):

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
 from wirescene.parts import features as feat
 from wirescene.core.errors import InputError, ShapeError, check_shape
@@ -30,14 +31,19 @@ from wirescene.core.resources import DATA_DIR
 
 __all__ = [
     "N_PARTS", "BACKGROUND", "N_CLASSES", "MODEL_FORMAT", "DEFAULT_MODEL_PATH", "DEFAULT_SCALES",
-    "PartDetector", "BoxResponses", "PartResponses", "response_maps", "box_crop", "box_descriptors", "log_ratio",
+    "MODEL_ENV", "PartDetector", "BoxResponses", "PartResponses", "response_maps", "box_crop", "box_descriptors", "box_position", "log_ratio",
     "load_default",
 ]
 
 N_PARTS = 36
 BACKGROUND = 36
 N_CLASSES = 37
-MODEL_FORMAT = "wirescene-parts-forest/1"
+FORMAT_KIND = "parts-forest"
+FORMAT_VERSION = 2
+MODEL_FORMAT = f"wirescene-{FORMAT_KIND}/{FORMAT_VERSION}"
+"""Version 2 adds ``position`` and ``context`` (box-relative features) and a per-class
+affine calibration of the log ratio (``calib_scale``, ``calib_offset``); version 1 files
+load with none of them."""
 DEFAULT_MODEL_PATH = DATA_DIR / "parts_model.npz"
 DEFAULT_SCALES = (0.85, 1.0, 1.2)
 DEFAULT_EPS = 1e-3
@@ -59,6 +65,16 @@ class PartDetector:
     kind : str -- descriptor (see :func:`wirescene.parts.features.extract`)
     max_depth : int
     meta : dict of str -- provenance (training parameters), saved with the model
+    position : bool -- the descriptor ends with the point's position relative to the
+        box (:func:`box_position`), the forest's last 2 features
+    context : bool -- between descriptor and position: the box's gradient layout
+        (:func:`wirescene.parts.features.box_context`, 72 features, multi-scale kinds only)
+    smooth : float -- default spatial smoothing of the log-ratio maps in
+        :func:`response_maps` (Gaussian, sigma in box heights; 0: none)
+    calib_scale, calib_offset : (36,) float, optional -- the log ratio reported by
+        :func:`response_maps` is ``calib_scale[j] * log(S_j / S_b) + calib_offset[j]``
+        (per-class calibration on real data, see
+        :func:`wirescene.training.parts.calibrate`); None: identity
     """
 
     roots: np.ndarray
@@ -73,10 +89,16 @@ class PartDetector:
     max_depth: int
     n_features: int
     meta: dict = field(default_factory=dict)
+    position: bool = False
+    context: bool = False
+    smooth: float = 0.0
+    calib_scale: np.ndarray | None = None
+    calib_offset: np.ndarray | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_sklearn(cls, forest, *, kind: str, quantize: bool = True, meta: dict | None = None) -> "PartDetector":
+    def from_sklearn(cls, forest, *, kind: str, quantize: bool = True, meta: dict | None = None,
+                     position: bool = False, context: bool = False) -> "PartDetector":
         """Export a fitted :class:`sklearn.ensemble.RandomForestClassifier` whose classes
         are ``0..36``. ``quantize``: leaf distributions as uint8 (x255) instead of float64."""
         classes = np.asarray(forest.classes_)
@@ -114,41 +136,64 @@ class PartDetector:
             right=np.concatenate(R).astype(np.int32), feature=np.concatenate(Fe).astype(np.int16),
             threshold=np.concatenate(Th).astype(np.float64), leaf=np.concatenate(Lf).astype(np.int32),
             values=values, value_scale=scale, kind=kind, max_depth=depth,
-            n_features=int(forest.n_features_in_), meta=dict(meta or {}),
+            n_features=int(forest.n_features_in_), meta=dict(meta or {}), position=bool(position),
+            context=bool(context),
         )
 
     # ------------------------------------------------------------------ persistence
     def save(self, path) -> Path:
-        """Write a compressed ``.npz`` (no pickled objects)."""
+        """Write a compressed ``.npz`` (no pickled objects; :func:`wirescene.core.artefacts.save_npz`)."""
+        from wirescene.core.artefacts import save_npz
+
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         meta = {str(k): str(v) for k, v in self.meta.items()}
-        np.savez_compressed(
-            path, format=np.array(MODEL_FORMAT), kind=np.array(self.kind), roots=self.roots,
+        calib = {}
+        if self.calib_scale is not None:
+            calib = {"calib_scale": np.asarray(self.calib_scale, np.float64).reshape(N_PARTS),
+                     "calib_offset": np.asarray(self.calib_offset, np.float64).reshape(N_PARTS)}
+        arrays = dict(
+            kind=np.array(self.kind), roots=self.roots,
             left=self.left, right=self.right, feature=self.feature, threshold=self.threshold,
             leaf=self.leaf, values=self.values, value_scale=np.array(self.value_scale),
             max_depth=np.array(self.max_depth), n_features=np.array(self.n_features),
             canonical_height=np.array(feat.CANONICAL_HEIGHT), radius=np.array(feat.RADIUS),
             meta_keys=np.array(list(meta.keys()), dtype=str), meta_values=np.array(list(meta.values()), dtype=str),
+            position=np.array(self.position), context=np.array(self.context), smooth=np.array(float(self.smooth)),
+            **calib,
         )
-        return path
+        return save_npz(path, arrays, kind=FORMAT_KIND, version=FORMAT_VERSION)
 
     @classmethod
     def load(cls, path=None) -> "PartDetector":
-        """Load a model written by :meth:`save` (default: the package's model)."""
+        """Load a model written by :meth:`save` (default: the package's model); version 1
+        files (no position, context or calibration) load too."""
+        from wirescene.core.artefacts import load_npz
+
         path = DEFAULT_MODEL_PATH if path is None else Path(path)
         try:
-            with np.load(path, allow_pickle=False) as z:
-                fmt = str(z["format"])
-                if fmt != MODEL_FORMAT:
-                    raise InputError(f"unsupported part model format {fmt!r} (expected {MODEL_FORMAT!r})", path=path)
-                if int(z["canonical_height"]) != feat.CANONICAL_HEIGHT or int(z["radius"]) != feat.RADIUS:
-                    raise InputError("part model was trained with other canonical patch geometry", path=path)
-                d = {k: z[k] for k in ("roots", "left", "right", "feature", "threshold", "leaf", "values")}
-                meta = dict(zip(z["meta_keys"].tolist(), z["meta_values"].tolist()))
-                return cls(**d, value_scale=float(z["value_scale"]), kind=str(z["kind"]),
-                           max_depth=int(z["max_depth"]), n_features=int(z["n_features"]), meta=meta)
-        except (OSError, KeyError, ValueError) as e:
+            z = load_npz(path, kind=FORMAT_KIND, version=FORMAT_VERSION)
+        except InputError:
+            try:
+                z = load_npz(path, kind=FORMAT_KIND, version=1)
+            except InputError:
+                z = None
+            if z is None:
+                raise
+        try:
+            if int(z["canonical_height"]) != feat.CANONICAL_HEIGHT or int(z["radius"]) != feat.RADIUS:
+                raise InputError("part model was trained with other canonical patch geometry", path=path)
+            d = {k: z[k] for k in ("roots", "left", "right", "feature", "threshold", "leaf", "values")}
+            meta = dict(zip(z["meta_keys"].tolist(), z["meta_values"].tolist()))
+            has_cal = "calib_scale" in z
+            return cls(**d, value_scale=float(z["value_scale"]), kind=str(z["kind"]),
+                       max_depth=int(z["max_depth"]), n_features=int(z["n_features"]), meta=meta,
+                       position=bool(z["position"]) if "position" in z else False,
+                       context=bool(z["context"]) if "context" in z else False,
+                       smooth=float(z["smooth"]) if "smooth" in z else 0.0,
+                       calib_scale=z["calib_scale"] if has_cal else None,
+                       calib_offset=z["calib_offset"] if has_cal else None)
+        except (KeyError, ValueError) as e:
             raise InputError(f"cannot read part model ({e})", path=path) from None
 
     # ------------------------------------------------------------------ prediction
@@ -206,18 +251,39 @@ class PartDetector:
 
     def classify_patches(self, patches) -> np.ndarray:
         """``(N, 37)`` probabilities of canonical ``(N, PATCH, PATCH)`` edge patches."""
+        if self.position or self.context:
+            raise ValueError("this model needs box positions: use box_descriptors / response_maps")
         return self.predict_proba(feat.extract(np.asarray(patches), self.kind))
+
+    def log_ratio_of(self, probs, *, eps: float = DEFAULT_EPS) -> np.ndarray:
+        """Calibrated ``log(S_j / S_b)`` ``(..., 36)`` of class probabilities ``(..., 37)``
+        (clipped to ``[eps, 1]`` first; calibrated values clipped to ``+-|log eps|``)."""
+        pc = np.clip(np.asarray(probs, dtype=np.float32), eps, 1.0)
+        lr = np.log(pc[..., :N_PARTS]) - np.log(pc[..., N_PARTS:])
+        if self.calib_scale is not None:
+            lr = lr * self.calib_scale.astype(np.float32) + self.calib_offset.astype(np.float32)
+            lim = np.float32(-np.log(eps))
+            lr = np.clip(lr, -lim, lim)
+        return lr
 
 
 _DEFAULT = None
 
 
+MODEL_ENV = "WIRESCENE_PARTS_MODEL"
+"""Environment variable naming a part model ``.npz`` to use instead of the package's
+(e.g. a per-fold model for cross-validated ``wirescene eval``)."""
+
+
 def load_default() -> PartDetector:
-    """The package's trained model (cached)."""
+    """The package's trained model, or the one named by ``$WIRESCENE_PARTS_MODEL`` (cached)."""
+    import os
+
     global _DEFAULT
-    if _DEFAULT is None:
-        _DEFAULT = PartDetector.load()
-    return _DEFAULT
+    path = os.environ.get(MODEL_ENV) or None
+    if _DEFAULT is None or _DEFAULT[0] != path:
+        _DEFAULT = (path, PartDetector.load(path))
+    return _DEFAULT[1]
 
 
 # ---------------------------------------------------------------------- response maps
@@ -324,16 +390,17 @@ def _auto_stride(box_h: float) -> float:
     return float(np.clip(box_h / 32.0, 1.0, 4.0))
 
 
-def box_crop(box, image_size, scales=DEFAULT_SCALES, *, pad: float = 0.1):
+def box_crop(box, image_size, scales=DEFAULT_SCALES, *, pad: float = 0.1, radius: int = feat.RADIUS):
     """The padded region ``(rx0, ry0, rx1, ry1)`` that :func:`response_maps` scores for
     ``box`` and the integer native crop ``(cx0, cy0, cx1, cy1)`` it describes (the region
-    plus room for the largest patch). ``image_size = (W, H)``."""
+    plus room for the largest patch of half-width ``radius`` canonical px, see
+    :func:`wirescene.parts.features.context_radius`). ``image_size = (W, H)``."""
     W, H = image_size
     x1, y1, x2, y2 = np.asarray(box, dtype=float)
     bw, bh = max(x2 - x1, 1.0), max(y2 - y1, 1.0)
     region = np.array([x1 - pad * bw, y1 - pad * bh, x2 + pad * bw, y2 + pad * bh])
     zs = [feat.CANONICAL_HEIGHT / (s * bh) for s in scales]
-    margin = feat.RADIUS / min(zs) + 2
+    margin = radius / min(zs) + 2
     cx0 = int(np.clip(np.floor(region[0] - margin), 0, W - 1))
     cy0 = int(np.clip(np.floor(region[1] - margin), 0, H - 1))
     cx1 = int(np.clip(np.ceil(region[2] + margin), cx0 + 1, W))
@@ -341,23 +408,45 @@ def box_crop(box, image_size, scales=DEFAULT_SCALES, *, pad: float = 0.1):
     return region, (cx0, cy0, cx1, cy1), zs
 
 
-def box_descriptors(image, box, uv, kind: str, *, scale: float = 1.0, pad: float = 0.1, edges=None) -> np.ndarray:
+def box_position(uv, box) -> np.ndarray:
+    """``(..., 2)`` float32 position of points ``uv (..., 2)`` relative to ``box``:
+    ``((u - x1) / w, (v - y1) / h)`` (0..1 inside the box)."""
+    x1, y1, x2, y2 = np.asarray(box, dtype=float)
+    uv = np.asarray(uv, dtype=float)
+    return np.stack([(uv[..., 0] - x1) / max(x2 - x1, 1.0), (uv[..., 1] - y1) / max(y2 - y1, 1.0)],
+                    axis=-1).astype(np.float32)
+
+
+def box_descriptors(image, box, uv, kind: str, *, scale: float = 1.0, pad: float = 0.1, edges=None,
+                    position: bool = False, context: bool = False) -> np.ndarray:
     """Descriptors ``(N, D)`` at native points ``uv (N, 2)`` exactly as
     :func:`response_maps` computes them for ``box`` at one ``scale`` (used by training).
-    ``edges``: precomputed full-image :func:`wirescene.parts.features.image_edges`."""
+    ``edges``: precomputed full-image :func:`wirescene.parts.features.image_edges`;
+    ``context``, ``position``: append :func:`wirescene.parts.features.box_context`, then
+    :func:`box_position` (models with ``context`` / ``position``)."""
     img = np.asarray(image)
     H, W = img.shape[:2]
-    _, (cx0, cy0, cx1, cy1), (z,) = box_crop(box, (W, H), (scale,), pad=pad)
+    _, (cx0, cy0, cx1, cy1), (z,) = box_crop(box, (W, H), (scale,), pad=pad, radius=feat.context_radius(kind))
     e = None if edges is None else np.asarray(edges)[cy0:cy1, cx0:cx1]
     inp = feat.canonical_inputs(img[cy0:cy1, cx0:cx1], z, kind, edges=e)
     uv = np.asarray(uv, dtype=float).reshape(-1, 2)
     rc = np.rint(feat.to_canonical(uv - [cx0, cy0], z)).astype(np.int64)
-    return feat.describe(inp, rc, kind)
+    X = feat.describe(inp, rc, kind)
+    if context:
+        X = np.concatenate([X, np.broadcast_to(_context(inp, box, (cx0, cy0), z), (len(X), feat.CONTEXT_DIM))], 1)
+    return np.concatenate([X, box_position(uv, box)], axis=1) if position else X
+
+
+def _context(inp, box, crop_origin, z):
+    b = np.asarray(box, dtype=float) - np.r_[crop_origin, crop_origin]
+    a = feat.to_canonical(b[:2], z)
+    c = feat.to_canonical(b[2:], z)
+    return feat.box_context(inp, (a[0], a[1], c[0], c[1]))
 
 
 def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=DEFAULT_SCALES,
                   stride: float | None = None, pad: float = 0.1, eps: float = DEFAULT_EPS,
-                  edges: np.ndarray | None = None) -> PartResponses:
+                  edges: np.ndarray | None = None, smooth: float | None = None) -> PartResponses:
     """Dense multi-scale part responses inside detection boxes.
 
     Parameters
@@ -371,6 +460,12 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
     eps : float -- probabilities are clipped to ``[eps, 1]`` before the log ratio
     edges : (H, W) bool, optional -- precomputed :func:`wirescene.parts.features.image_edges`
         (ignored by grey-image descriptors)
+    smooth : float, optional -- Gaussian smoothing of each part's log-ratio map, sigma in
+        box heights (default: the detector's ``smooth``). Neighbouring grid points see
+        overlapping patches, so their scores are correlated evidence of one location;
+        averaging them suppresses isolated false peaks (on real frames a sigma of about
+        1/16 of the box height roughly doubles the vertices whose best-scoring location
+        lies within 4% of the car length, ``benchmarks/bench_real.py``).
 
     Returns
     -------
@@ -389,7 +484,8 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
     for box in boxes:
         bh = max(box[3] - box[1], 1.0)
         st = _auto_stride(bh) if stride is None else float(stride)
-        (rx0, ry0, rx1, ry1), (cx0, cy0, cx1, cy1), zs = box_crop(box, (W, H), scales, pad=pad)
+        (rx0, ry0, rx1, ry1), (cx0, cy0, cx1, cy1), zs = box_crop(box, (W, H), scales, pad=pad,
+                                                                  radius=feat.context_radius(detector.kind))
         gw = int(np.floor((rx1 - rx0) / st)) + 1
         gh = int(np.floor((ry1 - ry0) / st)) + 1
         gu = rx0 + st * np.arange(gw)
@@ -397,16 +493,23 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
         uu, vv = np.meshgrid(gu, gv)
         crop = img[cy0:cy1, cx0:cx1]
         e = None if edges is None else np.asarray(edges)[cy0:cy1, cx0:cx1]
-        if e is None and detector.kind in ("sc", "hog", "ghog_sc"):
+        if e is None and detector.kind in feat.EDGE_KINDS:
             e = feat.image_edges(crop)
         probs = np.empty((len(scales), gh, gw, N_CLASSES), dtype=np.float32)
         for k, z in enumerate(zs):
             inp = feat.canonical_inputs(crop, z, detector.kind, edges=e)
             rc = np.rint(feat.to_canonical(np.stack([uu - cx0, vv - cy0], -1), z)).astype(np.int64).reshape(-1, 2)
             X = feat.describe(inp, rc, detector.kind)
+            if detector.context:
+                ctx = _context(inp, box, (cx0, cy0), z)
+                X = np.concatenate([X, np.broadcast_to(ctx, (len(X), feat.CONTEXT_DIM))], axis=1)
+            if detector.position:
+                X = np.concatenate([X, box_position(np.stack([uu, vv], -1).reshape(-1, 2), box)], axis=1)
             probs[k] = detector.predict_proba(X).reshape(gh, gw, N_CLASSES)
-        pc = np.clip(probs, eps, 1.0)
-        lr = (np.log(pc[..., :N_PARTS]) - np.log(pc[..., N_PARTS:])).max(axis=0)
+        lr = detector.log_ratio_of(probs, eps=eps).max(axis=0)
+        sig = (detector.smooth if smooth is None else float(smooth)) * bh / st
+        if sig > 0:
+            lr = gaussian_filter(lr, (sig, sig, 0), mode="nearest")
         out.append(BoxResponses(box=box.copy(), region=np.array([rx0, ry0, rx1, ry1]), origin=np.array([rx0, ry0]),
                                 stride=st, scales=scales, probs=probs.astype(np.float16),
                                 log_ratio=lr.astype(np.float32)))

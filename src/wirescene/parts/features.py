@@ -32,6 +32,12 @@ Descriptors (``extract(..., kind=...)``):
     Dense and sparse evaluation are the same gather (:func:`ghog_at`). Transfers from
     synthetic shaded scenes to real images much better than Canny-based shape context.
 ``"ghog_sc"`` -- ``"ghog"`` and ``"sc"`` concatenated (182 numbers).
+``"ghog_ms"`` -- two-scale ``"ghog"``: the 4 x 4 grid of 8-pixel cells and a coarse 4 x 4
+    grid of 16-pixel cells (:data:`GHOG_COARSE_OFFSETS`, a 64 x 64 window: the whole car
+    height, so the descriptor sees where in the car a point lies): 290 numbers.
+``"ghog_msc"`` -- ``"ghog_ms"`` plus colour: mean grey and two opponent-colour channels
+    over a 3 x 3 grid of 16-pixel cells (:data:`COLOUR_OFFSETS`; tyres are dark, glass
+    and lights have distinct hues): 317 numbers.
 
 Grey-image kinds need the canonical grey image as well as (for ``"sc"``) the edge map:
 :func:`canonical_inputs` builds what a kind needs from a native image crop, and
@@ -51,7 +57,8 @@ __all__ = [
     "CANONICAL_HEIGHT", "RADIUS", "PATCH", "SC_RING_EDGES", "SC_N_ANGLES", "KINDS",
     "sc_kernels", "canonical_edges", "to_canonical", "image_edges", "extract_patches", "extract", "dense_sc",
     "feature_dim", "GHOG_BINS", "GHOG_CELL", "GHOG_OFFSETS", "image_grey", "canonical_grey",
-    "orientation_cells", "ghog_at", "canonical_inputs", "describe",
+    "orientation_cells", "ghog_at", "canonical_inputs", "describe", "GREY_KINDS", "EDGE_KINDS", "context_radius",
+    "canonical_colour", "colour_at", "box_context", "CONTEXT_DIM", "GHOG_COARSE_CELL", "GHOG_COARSE_OFFSETS", "COLOUR_CELL", "COLOUR_OFFSETS",
 ]
 
 CANONICAL_HEIGHT = 64
@@ -60,10 +67,18 @@ RADIUS = 16
 PATCH = 2 * RADIUS + 1
 SC_RING_EDGES = (0.0, 4.5, 9.5, RADIUS + 0.5)
 SC_N_ANGLES = 12
-KINDS = ("sc", "hog", "ghog", "ghog_sc")
+KINDS = ("sc", "hog", "ghog", "ghog_sc", "ghog_ms", "ghog_msc")
+GREY_KINDS = ("ghog", "ghog_sc", "ghog_ms", "ghog_msc")
+"""Kinds that describe the grey (or colour) image, not only an edge map."""
+EDGE_KINDS = ("sc", "hog", "ghog_sc")
+"""Kinds that need the Canny edge map."""
 GHOG_BINS = 9
 GHOG_CELL = 8
 GHOG_OFFSETS = (-12, -4, 4, 12)
+GHOG_COARSE_CELL = 16
+GHOG_COARSE_OFFSETS = (-24, -8, 8, 24)
+COLOUR_CELL = 16
+COLOUR_OFFSETS = (-16, 0, 16)
 GHOG_EPS = 1.0
 """L2 normalisation floor (gradient mass units: grey in [0, 1] per canonical pixel): a
 low-contrast patch (sensor noise, road) is not blown up to a strong pattern."""
@@ -94,6 +109,13 @@ def sc_kernels() -> np.ndarray:
     return _KERNELS
 
 
+def context_radius(kind: str) -> int:
+    """Half-width (canonical px) of the window a descriptor of ``kind`` reads."""
+    if kind in ("ghog_ms", "ghog_msc"):
+        return GHOG_COARSE_OFFSETS[-1] + GHOG_COARSE_CELL // 2
+    return RADIUS
+
+
 def feature_dim(kind: str) -> int:
     if kind == "sc":
         return sc_kernels().shape[0] + 1
@@ -103,6 +125,10 @@ def feature_dim(kind: str) -> int:
         return len(GHOG_OFFSETS) ** 2 * GHOG_BINS + 1
     if kind == "ghog_sc":
         return feature_dim("ghog") + feature_dim("sc")
+    if kind == "ghog_ms":
+        return 2 * feature_dim("ghog")
+    if kind == "ghog_msc":
+        return feature_dim("ghog_ms") + 3 * len(COLOUR_OFFSETS) ** 2
     raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
 
 
@@ -229,12 +255,9 @@ def canonical_grey(grey, z: float) -> np.ndarray:
     return g.copy() if out is g else out
 
 
-def orientation_cells(grey_map) -> np.ndarray:
-    """``(H, W, GHOG_BINS)`` float32: gradient-magnitude-weighted unsigned orientation
-    votes summed over the ``GHOG_CELL``-pixel square window at every pixel (window
-    ``[i - 4, i + 3]``; zero gradient outside the map)."""
-    from scipy.ndimage import uniform_filter
-
+def _orientation_votes(grey_map) -> np.ndarray:
+    """``(H, W, GHOG_BINS)`` float32 gradient-magnitude-weighted unsigned orientation
+    votes of every pixel (linear split between the two nearest bins)."""
     g = np.asarray(grey_map, dtype=np.float32)
     if g.ndim != 2:
         raise ShapeError(f"grey_map must be (H, W), got {g.shape}")
@@ -251,44 +274,154 @@ def orientation_cells(grey_map) -> np.ndarray:
     out = np.empty(g.shape + (GHOG_BINS,), np.float32)
     a0 = mag * (1 - w1)
     a1 = mag * w1
-    area = float(GHOG_CELL * GHOG_CELL)
     for b in range(GHOG_BINS):
-        vote = np.where(b0 == b, a0, 0) + np.where(b1 == b, a1, 0)
-        out[..., b] = uniform_filter(vote.astype(np.float32), GHOG_CELL, mode="constant") * area
+        out[..., b] = np.where(b0 == b, a0, 0) + np.where(b1 == b, a1, 0)
     return out
 
 
-def ghog_at(cells, points) -> np.ndarray:
+def _cells_of_votes(votes, cell: int) -> np.ndarray:
+    from scipy.ndimage import uniform_filter
+
+    area = float(cell * cell)
+    out = np.empty_like(votes)
+    for b in range(votes.shape[-1]):
+        out[..., b] = uniform_filter(votes[..., b], cell, mode="constant") * area
+    return out
+
+
+def _cells_two_sizes(votes) -> tuple[np.ndarray, np.ndarray]:
+    """:data:`GHOG_CELL` and twice-as-large cells of ``votes``: the 16-px window
+    ``[i - 8, i + 7]`` is the union of the 8-px windows centred at ``i - 4`` and ``i + 4``
+    (per axis), so four shifted sums of the small cells (computed on the map padded by 4
+    px of zero votes) replace another set of box filters."""
+    h = GHOG_CELL // 2
+    H, W = votes.shape[:2]
+    cp = _cells_of_votes(np.pad(votes, ((h, h), (h, h), (0, 0))), GHOG_CELL)
+    coarse = cp[:H, :W] + cp[:H, 2 * h:] + cp[2 * h:, :W] + cp[2 * h:, 2 * h:]
+    return np.ascontiguousarray(cp[h:h + H, h:h + W]), coarse
+
+
+def orientation_cells(grey_map, *, cell: int = GHOG_CELL) -> np.ndarray:
+    """``(H, W, GHOG_BINS)`` float32: gradient-magnitude-weighted unsigned orientation
+    votes summed over the ``cell``-pixel square window at every pixel (window
+    ``[i - cell/2, i + cell/2 - 1]``; zero gradient outside the map)."""
+    return _cells_of_votes(_orientation_votes(grey_map), cell)
+
+
+def ghog_at(cells, points, *, offsets=GHOG_OFFSETS) -> np.ndarray:
     """``"ghog"`` descriptors ``(N, 145)`` at integer canonical ``points (N, 2) = (row,
-    col)`` of a map of :func:`orientation_cells` (cells outside the map are empty)."""
+    col)`` of a map of :func:`orientation_cells` (cells outside the map are empty);
+    ``offsets``: cell centres relative to the point (a 4 x 4 grid by default)."""
     c = np.asarray(cells, dtype=np.float32)
     p = np.asarray(points).reshape(-1, 2).astype(np.int64)
     H, W, B = c.shape
-    off = np.asarray(GHOG_OFFSETS)
+    off = np.asarray(offsets)
     rows = p[:, 0, None, None] + off[None, :, None]
     cols = p[:, 1, None, None] + off[None, None, :]
     ok = (rows >= 0) & (cols >= 0) & (rows < H) & (cols < W)
-    v = c[np.clip(rows, 0, H - 1), np.clip(cols, 0, W - 1)]  # (N, 4, 4, B)
-    v = np.where(ok[..., None], v, 0).reshape(len(p), -1).astype(np.float64)
-    total = v.sum(1, keepdims=True)
-    n = v / np.sqrt((v * v).sum(1, keepdims=True) + GHOG_EPS ** 2)
+    # one flat gather (float32: this is the response maps' hot path)
+    flat = c.reshape(-1)
+    idx = (np.clip(rows, 0, H - 1) * W + np.clip(cols, 0, W - 1))[..., None] * B + np.arange(B)
+    v = flat[idx]  # (N, 4, 4, B)
+    if not ok.all():
+        v *= ok[..., None]
+    v = v.reshape(len(p), -1)
+    out = np.empty((len(p), v.shape[1] + 1), np.float32)
+    total = v.sum(1, dtype=np.float64)
+    ss = np.einsum("ij,ij->i", v, v, dtype=np.float64)
+    n = v * (1.0 / np.sqrt(ss + GHOG_EPS ** 2)).astype(np.float32)[:, None]
+    np.minimum(n, np.float32(0.2), out=n)
+    ss = np.einsum("ij,ij->i", n, n, dtype=np.float64)
+    np.multiply(n, (1.0 / np.sqrt(ss + 1e-6)).astype(np.float32)[:, None], out=out[:, :-1])
+    out[:, -1] = np.log1p(total)
+    return out
+
+
+CONTEXT_GRID = (4, 8)
+"""Samples (rows, columns) of coarse cells over the box for :func:`box_context`, pooled
+2 x 2 into a 2 x 4 grid of blocks."""
+
+
+def box_context(inputs: dict, box_rc) -> np.ndarray:
+    """Gradient-orientation layout of the whole box: ``(72,)`` float32.
+
+    The coarse (16-px) orientation cells of ``inputs`` (:func:`canonical_inputs` of a
+    multi-scale kind) sampled at a 4 x 8 grid over the canonical box ``box_rc = (r0, c0,
+    r1, c1)``, summed 2 x 2 into 2 x 4 blocks of 9 bins, L2-Hys normalised. The same for
+    every point of the box: it tells a part detector which way the car faces (where in
+    the box its front wheel should be), which local patches cannot (front and rear
+    wheels look alike)."""
+    c = np.asarray(inputs["coarse"], dtype=np.float32)
+    H, W, B = c.shape
+    r0, c0, r1, c1 = (float(v) for v in box_rc)
+    nr, nc = CONTEXT_GRID
+    rows = np.rint(r0 + (np.arange(nr) + 0.5) * (r1 - r0) / nr).astype(np.int64)
+    cols = np.rint(c0 + (np.arange(nc) + 0.5) * (c1 - c0) / nc).astype(np.int64)
+    ok = ((rows >= 0) & (rows < H))[:, None] & ((cols >= 0) & (cols < W))[None, :]
+    v = c[np.clip(rows, 0, H - 1)[:, None], np.clip(cols, 0, W - 1)[None, :]]
+    v = np.where(ok[..., None], v, 0).astype(np.float64)
+    v = v.reshape(nr // 2, 2, nc // 2, 2, B).sum(axis=(1, 3)).ravel()
+    n = v / np.sqrt((v * v).sum() + GHOG_EPS ** 2)
     n = np.minimum(n, 0.2)
-    n = n / np.sqrt((n * n).sum(1, keepdims=True) + 1e-6)
-    return np.concatenate([n, np.log1p(total)], axis=1).astype(np.float32)
+    n = n / np.sqrt((n * n).sum() + 1e-6)
+    return n.astype(np.float32)
+
+
+CONTEXT_DIM = 72
+
+
+def canonical_colour(image, z: float) -> np.ndarray:
+    """``(H', W', 3)`` float32 canonical colour channels of a native RGB (or grey) image:
+    grey in [0, 1] and the opponent channels ``(R - G) / sqrt 2``, ``(R + G - 2B) / sqrt 6``,
+    each resampled by ``z`` like :func:`canonical_grey`."""
+    img = np.asarray(image)
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    rgb = img[..., :3].astype(np.float32)
+    if np.issubdtype(img.dtype, np.integer) or (rgb.size and rgb.max() > 1.5):
+        rgb = rgb / np.float32(255.0)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    chans = (0.299 * r + 0.587 * g + 0.114 * b, (r - g) / np.sqrt(2.0), (r + g - 2 * b) / np.sqrt(6.0))
+    return np.stack([canonical_grey(c.astype(np.float32), z) for c in chans], axis=-1)
+
+
+def colour_at(cmeans, points) -> np.ndarray:
+    """Colour descriptors ``(N, 27)``: the ``COLOUR_CELL``-window means of the canonical
+    colour channels (``cmeans``, window-averaged :func:`canonical_colour`) at a 3 x 3
+    grid of :data:`COLOUR_OFFSETS` around integer canonical ``points``; 0 outside."""
+    c = np.asarray(cmeans, dtype=np.float32)
+    p = np.asarray(points).reshape(-1, 2).astype(np.int64)
+    H, W, C = c.shape
+    off = np.asarray(COLOUR_OFFSETS)
+    rows = p[:, 0, None, None] + off[None, :, None]
+    cols = p[:, 1, None, None] + off[None, None, :]
+    ok = (rows >= 0) & (cols >= 0) & (rows < H) & (cols < W)
+    v = c[np.clip(rows, 0, H - 1), np.clip(cols, 0, W - 1)]
+    return np.where(ok[..., None], v, 0).reshape(len(p), -1).astype(np.float32)
 
 
 def canonical_inputs(image, z: float, kind: str, *, edges=None) -> dict:
     """What :func:`describe` needs for ``kind`` from a native image (crop) resampled by
-    ``z``: ``{"edges": canonical edge map}`` and/or ``{"cells": orientation cells}``.
+    ``z``: ``{"edges": canonical edge map}`` and/or ``{"cells": orientation cells}``
+    (plus ``"coarse"`` cells and ``"colour"`` means for the multi-scale kinds).
     ``edges``: precomputed :func:`image_edges` of the same crop."""
+    from scipy.ndimage import uniform_filter
+
     if kind not in KINDS:
         raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
     out = {}
-    if kind in ("sc", "hog", "ghog_sc"):
+    if kind in EDGE_KINDS:
         e = image_edges(image) if edges is None else np.asarray(edges)
         out["edges"] = canonical_edges(e, z)
-    if kind in ("ghog", "ghog_sc"):
-        out["cells"] = orientation_cells(canonical_grey(image_grey(image), z))
+    if kind in GREY_KINDS:
+        votes = _orientation_votes(canonical_grey(image_grey(image), z))
+        if kind in ("ghog_ms", "ghog_msc"):
+            out["cells"], out["coarse"] = _cells_two_sizes(votes)
+        else:
+            out["cells"] = _cells_of_votes(votes, GHOG_CELL)
+    if kind == "ghog_msc":
+        col = canonical_colour(image, z)
+        out["colour"] = uniform_filter(col, (COLOUR_CELL, COLOUR_CELL, 1), mode="nearest")
     return out
 
 
@@ -298,6 +431,11 @@ def describe(inputs: dict, points, kind: str) -> np.ndarray:
     p = np.asarray(points).reshape(-1, 2).astype(np.int64)
     if kind == "ghog":
         return ghog_at(inputs["cells"], p)
+    if kind == "ghog_ms":
+        return np.concatenate([ghog_at(inputs["cells"], p),
+                               ghog_at(inputs["coarse"], p, offsets=GHOG_COARSE_OFFSETS)], axis=1)
+    if kind == "ghog_msc":
+        return np.concatenate([describe(inputs, p, "ghog_ms"), colour_at(inputs["colour"], p)], axis=1)
     if kind == "ghog_sc":
         return np.concatenate([describe(inputs, p, "ghog"), describe(inputs, p, "sc")], axis=1)
     e = inputs["edges"]
@@ -329,7 +467,7 @@ def extract(x, kind: str = "sc", *, points=None) -> np.ndarray:
     """
     if kind not in KINDS:
         raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")
-    if kind in ("ghog", "ghog_sc"):
+    if kind in GREY_KINDS:
         raise ValueError(f"kind {kind!r} describes grey images: use canonical_inputs() and describe()")
     x = np.asarray(x)
     if x.ndim == 3:

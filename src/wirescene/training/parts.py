@@ -1,14 +1,20 @@
 """Training of the part detector (paper Sec. 5.1) and its localisation benchmark.
 
-Two data sources (all deterministic given ``seed``):
+Three data sources (all deterministic given ``seed``):
 
-* **Synthetic shaded scenes** (default, :func:`make_synth_patch_data`): patches of
+* **Real KITTI frames** (``kitti_root``, :func:`wirescene.training.parts_real.make_real_patch_data`):
+  the scaled mean wireframe at each labelled pose, ray-cast visibility, mirrored copies.
+  The shipped model: real frames + 100 synthetic scenes, descriptor ``"ghog_ms"`` with the
+  box-relative position, per-part calibration on held-out real patches
+  (:func:`heldout_calibration`), response maps smoothed by 1/16 of the box height
+  (``benchmarks/bench_real.py`` measures each choice, 4-fold cross-validated by drive).
+* **Synthetic shaded scenes** (:func:`make_synth_patch_data`): patches of
   ``wirescene synth`` scenes of the training stream (seed >= :data:`SYNTH_TRAIN_SEED`),
   described exactly as at test time (:func:`wirescene.parts.detector.box_descriptors`: the full
   image, the car's 2D box, box-relative scale), positives at visible GT vertices,
   background in the padded car boxes away from vertices and outside the cars. With the
-  grey-image descriptor ``"ghog"`` this is the shipped model: it transfers to shaded and
-  real images, where the CAD edge-rendering model below localised at chance level.
+  grey-image descriptor ``"ghog"`` this was the first shipped model (synthetic only: on
+  real frames 4% / 18% of the vertices within 4% / 10% of the car length).
 * **CAD edge renderings** (``n_views > 0``; edge-map descriptors only), as follows.
 
 * **Part patches** -- every road-car CAD model (:func:`wirescene.cad.training.load_cad_meshes`)
@@ -46,7 +52,7 @@ from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, DEFAULT_MODEL_PATH, N_PARTS, PartDetector
 
 __all__ = ["PatchData", "render_views", "make_patch_data", "make_synth_patch_data", "heldout_accuracy",
-           "localisation", "scene_frames", "synth_eval_frames", "kitti_eval_frames", "train_part_detector",
+           "localisation", "scene_frames", "fit_detector", "design_matrix", "calibrate", "raw_log_ratio", "synth_eval_frames", "kitti_eval_frames", "train_part_detector",
            "SYNTH_TRAIN_SEED"]
 
 RENDER_SIZE = (320, 256)
@@ -59,15 +65,36 @@ REAL_BG_IMAGES = ("camera", "astronaut", "coffee", "chelsea", "rocket", "brick",
 @dataclass
 class PatchData:
     """Descriptors per kind ``{kind: (N, D)}``, labels ``y (N,)`` (36 = background),
-    ``group (N,)``: CAD model index, -1 for non-rendered background."""
+    ``group (N,)``: CAD model index, -1 for non-rendered background; ``pos (N, 2)``:
+    position relative to the (jittered) box the patch was described in
+    (:func:`wirescene.parts.detector.box_position`), where known; ``ctx (N, 72)``: the box's
+    gradient layout (:func:`wirescene.parts.features.box_context`), where known."""
 
     X: dict
     y: np.ndarray
     group: np.ndarray
     names: list
+    pos: np.ndarray | None = None
+    ctx: np.ndarray | None = None
 
     def __len__(self):
         return len(self.y)
+
+
+def describe_in_box(image, box, pts, kinds, *, scale, edges=None):
+    """``({kind: (N, D)}, ctx (N, 72) or None, pos (N, 2))`` of native points in ``box``
+    (:func:`wirescene.parts.detector.box_descriptors`); ``ctx`` when a multi-scale kind is asked."""
+    from wirescene.parts.detector import box_descriptors, box_position
+
+    X, ctx = {}, None
+    for k in kinds:
+        e = edges if k in feat.EDGE_KINDS else None
+        if ctx is None and k in ("ghog_ms", "ghog_msc"):
+            d = box_descriptors(image, box, pts, k, scale=scale, edges=e, context=True)
+            X[k], ctx = d[:, :-feat.CONTEXT_DIM], d[:, -feat.CONTEXT_DIM:]
+        else:
+            X[k] = box_descriptors(image, box, pts, k, scale=scale, edges=e)
+    return X, ctx, box_position(pts, box)
 
 
 def _rng(seed, *keys):
@@ -295,6 +322,34 @@ def _fit(X, y, *, n_trees, max_depth, seed, n_jobs=1, class_weight=None, min_sam
     return rf
 
 
+def design_matrix(data: PatchData, kind: str, *, position: bool = False, context: bool = False) -> np.ndarray:
+    """The forest's inputs: the ``kind`` descriptors, the box context if ``context``, the
+    box position if ``position`` (the order of :func:`wirescene.parts.detector.box_descriptors`)."""
+    X = data.X[kind]
+    if context:
+        if data.ctx is None:
+            raise ValueError("these patches carry no box context")
+        X = np.concatenate([X, data.ctx.astype(np.float32)], axis=1)
+    if position:
+        if data.pos is None:
+            raise ValueError("these patches carry no box positions")
+        X = np.concatenate([X, data.pos.astype(np.float32)], axis=1)
+    return X
+
+
+def fit_detector(data: PatchData, *, kind: str, position: bool = False, context: bool = False, smooth: float = 0.0,
+                 n_trees: int = 30, max_depth: int = 13,
+                 seed: int = 0, min_samples_leaf: int = 2, class_weight: str | None = "balanced", n_jobs: int = 1,
+                 meta: dict | None = None) -> PartDetector:
+    """Fit the forest on the ``kind`` descriptors of ``data`` (plus the box position if
+    ``position``) and export it."""
+    rf = _fit(design_matrix(data, kind, position=position, context=context), data.y, n_trees=n_trees, max_depth=max_depth,
+              seed=seed, n_jobs=n_jobs, class_weight=class_weight, min_samples_leaf=min_samples_leaf)
+    det = PartDetector.from_sklearn(rf, kind=kind, meta=meta, position=position, context=context)
+    det.smooth = float(smooth)
+    return det
+
+
 def heldout_accuracy(data: PatchData, heldout_names, *, kind="sc", n_trees=30, max_depth=13, seed=0,
                      n_jobs=1) -> dict:
     """Leave-models-out accuracy: train on all cars but ``heldout_names`` (+ 80% of the
@@ -360,23 +415,25 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
 
     ``group`` is the scene index. Deterministic given ``seed``, ``sample_seed``.
     """
-    from wirescene.parts.detector import box_descriptors
     from wirescene.synth.generate import load_car_library, generate_scene
 
     if seed < SYNTH_TRAIN_SEED:
         raise ValueError(f"synthetic training scenes must use seeds >= {SYNTH_TRAIN_SEED} (lower ones are evaluation)")
     library = load_car_library()
     Xs = {k: [] for k in kinds}
-    ys, gs = [], []
+    ys, gs, ps, cs = [], [], [], []
     t0 = time.time()
 
     def add(image, box, pts, y, scale, edges, g):
         if len(pts) == 0:
             return
+        X, ctx, pos = describe_in_box(image, box, pts, kinds, scale=scale, edges=edges)
         for k in kinds:
-            Xs[k].append(box_descriptors(image, box, pts, k, scale=scale, edges=edges if k != "ghog" else None))
+            Xs[k].append(X[k])
         ys.append(np.broadcast_to(np.asarray(y, dtype=np.int64), (len(pts),)).copy())
         gs.append(np.full(len(pts), g, dtype=np.int64))
+        ps.append(pos)
+        cs.append(ctx)
 
     for i in range(int(n_scenes)):
         sc = generate_scene(seed, i, library=library)
@@ -385,7 +442,7 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
         rng = _rng(sample_seed, 5, seed, i)
         if augment:
             img = _photometric(img, _rng(sample_seed, 6, seed, i))
-        edges = feat.image_edges(img) if any(k != "ghog" for k in kinds) else None
+        edges = feat.image_edges(img) if any(k in feat.EDGE_KINDS for k in kinds) else None
         cars = sc.wireframes["cars"]
         all_vis = [_visible_uv(c) for c in cars]
         vis_pts = np.concatenate([uv[v] for uv, v in all_vis] + [np.zeros((0, 2))])
@@ -425,7 +482,8 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
         if progress and (i + 1) % 50 == 0:
             progress(f"synthetic scenes: {i + 1}/{n_scenes} in {time.time() - t0:.0f} s")
     X = {k: np.concatenate(v).astype(np.float32) for k, v in Xs.items()}
-    return PatchData(X=X, y=np.concatenate(ys), group=np.concatenate(gs), names=[])
+    return PatchData(X=X, y=np.concatenate(ys), group=np.concatenate(gs), names=[], pos=np.concatenate(ps),
+                     ctx=None if cs[0] is None else np.concatenate(cs))
 
 
 def _photometric(img, rng):
@@ -439,37 +497,48 @@ def _photometric(img, rng):
     return np.clip(np.rint(x * 255), 0, 255).astype(np.uint8)
 
 
-def _merge(a: PatchData, b: PatchData) -> PatchData:
+def _merge(a: PatchData, b: PatchData, *, group_b=None) -> PatchData:
+    """``a`` then ``b``; ``b``'s groups become ``group_b`` (default -2: "not a group of a")."""
     kinds = [k for k in a.X if k in b.X]
+    pos = None if a.pos is None or b.pos is None else np.concatenate([a.pos, b.pos])
+    ctx = None if a.ctx is None or b.ctx is None else np.concatenate([a.ctx, b.ctx])
+    gb = np.full(len(b.y), -2) if group_b is None else np.broadcast_to(group_b, (len(b.y),))
     return PatchData(X={k: np.concatenate([a.X[k], b.X[k]]) for k in kinds}, y=np.concatenate([a.y, b.y]),
-                     group=np.concatenate([a.group, np.full(len(b.y), -2)]), names=a.names)
+                     group=np.concatenate([a.group, gb]), names=a.names, pos=pos, ctx=ctx)
 
 
 def localisation(detector, frames, *, radii=(0.04, 0.10), **response_kwargs) -> dict:
     """Localisation of the part evidence (the metric that matters for the likelihood).
 
     ``frames``: iterable of ``(image, cars)``, ``cars`` a list of ``(box (4,), uv (36, 2),
-    visible (36,) bool)``. For every visible vertex inside its box: is the top-scoring grid
-    location of ``log(S_j / S_b)`` inside the box within ``r`` x the car's projected length
-    (max extent of the 36 projected vertices) of the vertex, for ``r`` in ``radii``; chance
-    = a uniformly random grid location of the box; and the percentile rank of the vertex
-    location's score among the box's locations (chance 0.5).
+    visible (36,) bool)`` or ``(box, uv, visible, tags)`` with ``tags`` a tuple of subset
+    names the car belongs to. For every visible vertex inside its box: is the top-scoring
+    grid location of ``log(S_j / S_b)`` inside the box within ``r`` x the car's projected
+    length (max extent of the 36 projected vertices) of the vertex, for ``r`` in
+    ``radii``; chance = a uniformly random grid location of the box; and the percentile
+    rank of the vertex location's score among the box's locations (chance 0.5).
 
     Returns ``{"hits": {r: frac}, "chance": {r: frac}, "rank": float, "n_vertices", "n_cars",
-    "t_maps_s"}``.
+    "t_maps_s", "by_tag": {tag: the same figures over that tag's cars}}``.
     """
     from wirescene.parts.detector import response_maps
 
-    hits = {r: [] for r in radii}
-    chance = {r: [] for r in radii}
-    ranks, n_cars, t_maps = [], 0, 0.0
+    acc = {}
+
+    def bucket(tag):
+        return acc.setdefault(tag, {"hits": {r: [] for r in radii}, "chance": {r: [] for r in radii},
+                                    "ranks": [], "n_cars": 0})
+
+    t_maps = 0.0
     for image, cars in frames:
         if not cars:
             continue
         t = time.perf_counter()
         R = response_maps(image, np.array([c[0] for c in cars], dtype=float), detector=detector, **response_kwargs)
         t_maps += time.perf_counter() - t
-        for bi, (box, uv, visible) in enumerate(cars):
+        for bi, car in enumerate(cars):
+            box, uv, visible = car[:3]
+            buckets = [bucket(None)] + [bucket(tg) for tg in (car[3] if len(car) > 3 else ())]
             x1, y1, x2, y2 = box
             inbox = (uv[:, 0] >= x1) & (uv[:, 0] <= x2) & (uv[:, 1] >= y1) & (uv[:, 1] <= y2)
             vis = np.asarray(visible, bool) & inbox
@@ -479,19 +548,29 @@ def localisation(detector, frames, *, radii=(0.04, 0.10), **response_kwargs) -> 
             m = (g[:, 0] >= x1) & (g[:, 0] <= x2) & (g[:, 1] >= y1) & (g[:, 1] <= y2)
             g = g[m]
             lr = b.log_ratio.reshape(-1, N_PARTS)[m]
-            n_cars += 1
+            for bk in buckets:
+                bk["n_cars"] += 1
             at_all = R.log_ratio(uv, bi)
             for j in np.nonzero(vis)[0]:
                 best = g[np.argmax(lr[:, j])]
                 d_all = np.linalg.norm(g - uv[j], axis=1)
-                for r in radii:
-                    hits[r].append(np.linalg.norm(best - uv[j]) <= r * length)
-                    chance[r].append(np.mean(d_all <= r * length))
                 at = at_all[j]
-                ranks.append(np.mean(lr[:, j] < at) + 0.5 * np.mean(lr[:, j] == at))
+                rank = np.mean(lr[:, j] < at) + 0.5 * np.mean(lr[:, j] == at)
+                for bk in buckets:
+                    for r in radii:
+                        bk["hits"][r].append(np.linalg.norm(best - uv[j]) <= r * length)
+                        bk["chance"][r].append(np.mean(d_all <= r * length))
+                    bk["ranks"].append(rank)
     mean = lambda v: float(np.mean(v)) if len(v) else float("nan")  # noqa: E731
-    return {"hits": {r: mean(v) for r, v in hits.items()}, "chance": {r: mean(v) for r, v in chance.items()},
-            "rank": mean(ranks), "n_vertices": len(ranks), "n_cars": n_cars, "t_maps_s": t_maps}
+
+    def summary(bk):
+        return {"hits": {r: mean(v) for r, v in bk["hits"].items()},
+                "chance": {r: mean(v) for r, v in bk["chance"].items()}, "rank": mean(bk["ranks"]),
+                "n_vertices": len(bk["ranks"]), "n_cars": bk["n_cars"], "t_maps_s": t_maps}
+
+    out = summary(bucket(None))
+    out["by_tag"] = {tg: summary(bk) for tg, bk in acc.items() if tg is not None}
+    return out
 
 
 def _clean_cars(wire_cars, min_box_h, clean):
@@ -552,14 +631,78 @@ def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True):
         yield ds.image(fid), cars
 
 
-GREY_KINDS = ("ghog", "ghog_sc")
+GREY_KINDS = feat.GREY_KINDS
+
+
+def real_folds(frame_ids) -> np.ndarray:
+    """Cross-validation fold of each frame: :func:`wirescene.io.folds.fold_of` where
+    the drive is known, else the frame's position modulo the number of folds."""
+    from wirescene.io.folds import N_FOLDS, fold_of
+
+    out = []
+    for i, f in enumerate(frame_ids):
+        try:
+            out.append(fold_of(f))
+        except KeyError:
+            out.append(i % N_FOLDS)
+    return np.asarray(out, dtype=np.int64)
+
+
+def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, position: bool = False,
+                        context: bool = False, progress=None, **fit_kwargs):
+    """Per-class calibration (:func:`calibrate`) of a forest trained on ``real`` (+
+    ``other``) from held-out scores: for each fold of the real frames
+    (:func:`real_folds`), a forest trained without that fold's real patches scores them.
+
+    Returns ``(scale, offset, report)``; the report holds the held-out balanced log loss
+    of "is vertex j" before (raw ``log(S_j / S_b)`` as logit) and after calibration
+    (each fold calibrated on the other folds' scores)."""
+    say = progress or (lambda m: None)
+    folds = real_folds(real.names)[real.group]
+    lr = np.zeros((len(real.y), N_PARTS))
+    for k in np.unique(folds):
+        m = folds != k
+        tr = PatchData(X={kind: real.X[kind][m]}, y=real.y[m], group=real.group[m], names=real.names,
+                       pos=None if real.pos is None else real.pos[m], ctx=None if real.ctx is None else real.ctx[m])
+        if other is not None:
+            tr = _merge(tr, other)
+        t = time.time()
+        det = fit_detector(tr, kind=kind, position=position, context=context, **fit_kwargs)
+        te = folds == k
+        lr[te] = raw_log_ratio(det, design_matrix(real, kind, position=position, context=context)[te])
+        say(f"calibration fold {k}: {int(te.sum())} held-out patches scored [{time.time() - t:.0f} s]")
+
+    def loss(r, y, sc, of):
+        z = r * sc + of
+        out = []
+        for j in range(N_PARTS):
+            t = y == j
+            if t.sum() < 5:
+                continue
+            out.append(0.5 * np.mean(np.logaddexp(0, -z[t, j])) + 0.5 * np.mean(np.logaddexp(0, z[~t, j])))
+        return float(np.mean(out))
+
+    cv = []
+    for k in np.unique(folds):
+        sc, of = calibrate(lr[folds != k], real.y[folds != k])
+        cv.append((loss(lr[folds == k], real.y[folds == k], 1.0, 0.0),
+                   loss(lr[folds == k], real.y[folds == k], sc, of), int((folds == k).sum())))
+    n = sum(c[2] for c in cv)
+    scale, offset = calibrate(lr, real.y)
+    report = {"logloss_raw": sum(c[0] * c[2] for c in cv) / n, "logloss_calibrated": sum(c[1] * c[2] for c in cv) / n,
+              "scale_mean": float(scale.mean()), "offset_mean": float(offset.mean())}
+    say(f"calibration: held-out balanced log loss {report['logloss_raw']:.3f} raw -> "
+        f"{report['logloss_calibrated']:.3f} calibrated; mean scale {scale.mean():.2f}, offset {offset.mean():.2f}")
+    return scale, offset, report
 
 
 def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: int = 0, n_trees: int = 30,
                         max_depth: int = 13, kind: str = "ghog", n_aug: int = 2, cars=None, heldout: int = 0,
                         compare_kinds=(), kitti_background=None, synth_scenes: int = 300,
                         synth_seed: int = SYNTH_TRAIN_SEED, class_weight: str | None = "balanced",
-                        min_samples_leaf: int = 2, augment: bool = False, n_jobs: int = 1, progress=None):
+                        min_samples_leaf: int = 2, augment: bool = False, kitti_root=None, frames=None,
+                        position: bool = False, context: bool = False, calibrate_real: bool = False,
+                        smooth: float = 0.0, n_jobs: int = 1, progress=None):
     """Generate training patches, optionally evaluate leave-models-out, fit the forest
     on all data and write the model ``.npz``.
 
@@ -584,6 +727,16 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
         balanced forest keeps ``S_j`` well above the clipping floor where part ``j`` is
         plausible, so ``log(S_j / S_b)`` peaks at the part (the background's share of the
         data no longer swamps the parts)
+    kitti_root : path, optional -- labelled KITTI frames whose real patches are added
+        (:func:`wirescene.training.parts_real.make_real_patch_data`)
+    frames : list of frame ids, optional -- the real training frames (default: all of
+        ``kitti_root``)
+    position : bool -- append the box-relative position to the descriptor
+    context : bool -- append the box's gradient layout (multi-scale kinds)
+    smooth : float -- the model's default smoothing of its response maps (sigma in box
+        heights, see :func:`wirescene.parts.detector.response_maps`)
+    calibrate_real : bool -- calibrate the log ratio per class on held-out real patches
+        (:func:`heldout_calibration`; needs ``kitti_root``)
 
     Returns
     -------
@@ -594,8 +747,10 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
     kinds = tuple(dict.fromkeys((kind,) + tuple(compare_kinds)))
     if n_az and any(k in GREY_KINDS for k in kinds):
         raise ValueError(f"CAD edge renderings have no grey image: use n_views=0 with kinds {GREY_KINDS}")
-    if not n_az and not synth_scenes:
-        raise ValueError("no training data: n_views and synth_scenes are both 0")
+    if not n_az and not synth_scenes and kitti_root is None:
+        raise ValueError("no training data: n_views and synth_scenes are both 0 and no kitti_root")
+    if calibrate_real and kitti_root is None:
+        raise ValueError("calibrate_real needs kitti_root (real labelled frames)")
     t0 = time.time()
     data = None
     report = {"cars": []}
@@ -607,11 +762,21 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
         sd = make_synth_patch_data(n_scenes=synth_scenes, seed=synth_seed, kinds=kinds, sample_seed=seed,
                                    augment=augment, progress=progress)
         data = sd if data is None else _merge(data, sd)
+    real = None
+    if kitti_root is not None:
+        from wirescene.io.kitti import KittiDataset
+        from wirescene.training.parts_real import make_real_patch_data
+
+        frames = KittiDataset(kitti_root).frame_ids() if frames is None else list(frames)
+        real = make_real_patch_data(kitti_root, frames, kinds=kinds, seed=seed, progress=progress)
+        report["frames"] = frames
+    other = data
+    data = real if data is None else (data if real is None else _merge(real, data))
     t_data = time.time() - t0
     n_part = int((data.y < N_PARTS).sum())
     say(f"patches: {len(data)} ({n_part} part, {len(data) - n_part} background) in {t_data:.0f} s")
     report.update({"n_patches": len(data), "n_part": n_part, "n_background": len(data) - n_part, "t_data_s": t_data,
-                   "n_azimuth": n_az})
+                   "n_azimuth": n_az, "n_real": 0 if real is None else len(real)})
     if heldout and n_az:
         names = report["cars"]
         held = names[-int(heldout):]
@@ -623,21 +788,85 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
             r = report[f"heldout_{k}"]
             say(f"held-out {k}: mean part acc {r['mean_part']:.3f} (mirror-tolerant {r['mean_part_mirror']:.3f}), "
                 f"background {r['background']:.3f} [{time.time() - t1:.0f} s]")
+    fit_kwargs = dict(n_trees=n_trees, max_depth=max_depth, seed=seed, n_jobs=n_jobs, class_weight=class_weight,
+                      min_samples_leaf=min_samples_leaf)
+    cal = None
+    if calibrate_real:
+        cal = heldout_calibration(real, other, kind=kind, position=position, context=context, progress=progress, **fit_kwargs)
+        report["calibration"] = cal[2]
     t1 = time.time()
-    rf = _fit(data.X[kind], data.y, n_trees=n_trees, max_depth=max_depth, seed=seed, n_jobs=n_jobs,
-              class_weight=class_weight, min_samples_leaf=min_samples_leaf)
-    report["t_fit_s"] = time.time() - t1
     meta = {"seed": seed, "n_views": n_az * len(ELEVATIONS), "n_trees": n_trees, "max_depth": max_depth,
             "n_aug": n_aug, "n_patches": len(data), "n_part": n_part, "cars": ",".join(report["cars"]),
             "kitti_background": str(kitti_background is not None), "synth_scenes": synth_scenes,
             "synth_seed": synth_seed, "class_weight": str(class_weight), "min_samples_leaf": min_samples_leaf,
-            "augment": str(augment)}
-    det = PartDetector.from_sklearn(rf, kind=kind, meta=meta)
-    report["train_acc"] = float(np.mean(det.predict(data.X[kind]) == data.y))
+            "augment": str(augment), "real_frames": ",".join(report.get("frames", [])), "position": str(position), "context": str(context), "smooth": smooth,
+            "calibrated": str(cal is not None)}
+    det = fit_detector(data, kind=kind, position=position, context=context, smooth=smooth, meta=meta, **fit_kwargs)
+    report["t_fit_s"] = time.time() - t1
+    if cal is not None:
+        det.calib_scale, det.calib_offset = cal[0], cal[1]
+    X = design_matrix(data, kind, position=position, context=context)
+    report["train_acc"] = float(np.mean(det.predict(X) == data.y))
     if out_path is not None:
         det.save(out_path)
         report["model_bytes"] = Path(out_path).stat().st_size
         say(f"wrote {out_path} ({report['model_bytes'] / 1e6:.1f} MB), fit {report['t_fit_s']:.0f} s")
     report["_data"] = data
-    report["_sklearn"] = rf
     return det, report
+
+
+def raw_log_ratio(detector: PartDetector, X, *, eps: float = 1e-3) -> np.ndarray:
+    """Uncalibrated ``log(S_j / S_b)`` ``(N, 36)`` of forest inputs ``X``."""
+    pc = np.clip(detector.predict_proba(X), eps, 1.0)
+    return np.log(pc[:, :N_PARTS]) - np.log(pc[:, N_PARTS:])
+
+
+def calibrate(log_ratio, y, *, reg: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
+    """Per-class affine calibration of the part log ratio from held-out patches.
+
+    For every part ``j`` a logistic regression of "this patch is vertex ``j``" (``y ==
+    j``) against "it is anything else" (background or another part) on the raw
+    ``log(S_j / S_b)``, with class-balanced weights, gives ``a_j * r + b_j``: with equal
+    weight on both sides the intercept carries no prior odds, so this estimates the log
+    likelihood ratio ``log p(r | vertex j) / p(r | not j)`` -- the quantity the fine
+    stage's likelihood sums -- whatever the mix of the calibration patches.
+
+    Parameters
+    ----------
+    log_ratio : (N, 36) -- raw log ratios of held-out patches (:func:`raw_log_ratio` of a
+        forest that did not see them)
+    y : (N,) int -- their labels (36 = background)
+    reg : float -- L2 penalty pulling ``(a_j, b_j)`` towards ``(1, 0)`` (rare parts)
+
+    Returns
+    -------
+    scale, offset : (36,) float arrays (``scale > 0``; identity where part ``j`` has
+        fewer than 5 patches)
+    """
+    from scipy.optimize import minimize
+
+    r = np.asarray(log_ratio, dtype=float)
+    y = np.asarray(y)
+    if r.ndim != 2 or r.shape[1] != N_PARTS or len(r) != len(y):
+        raise ValueError(f"log_ratio must be (N, {N_PARTS}) with N = len(y)")
+    scale = np.ones(N_PARTS)
+    offset = np.zeros(N_PARTS)
+    for j in range(N_PARTS):
+        t = (y == j).astype(float)
+        n1 = t.sum()
+        if n1 < 5 or n1 == len(t):
+            continue
+        x = r[:, j]
+        w = np.where(t > 0, 0.5 / n1, 0.5 / (len(t) - n1))
+
+        def nll(p):
+            z = p[0] * x + p[1]
+            ll = np.logaddexp(0.0, -z) * t + np.logaddexp(0.0, z) * (1 - t)
+            return float((w * ll).sum() + reg * (p[0] - 1.0) ** 2 + reg * p[1] ** 2)
+
+        res = minimize(nll, np.array([1.0, 0.0]), method="Nelder-Mead",
+                       options={"xatol": 1e-4, "fatol": 1e-8, "maxiter": 400})
+        a, b = res.x
+        if a > 1e-3:
+            scale[j], offset[j] = a, b
+    return scale, offset
