@@ -116,7 +116,7 @@ def parts_cv(root, *, kind: str = "ghog_ms", position: bool = False, context: bo
     detector_for_fold : callable ``fold -> PartDetector``, optional -- score this
         detector instead of training one (e.g. the shipped synthetic-only model)
     save_dir : path, optional -- write each fold's model as ``parts_fold{k}.npz`` (for
-        cross-validated ``wirescene eval`` with ``$WIRESCENE_PARTS_MODEL``)
+        cross-validated ``wirescene eval --parts-model``)
 
     Returns
     -------

@@ -31,7 +31,7 @@ from wirescene.core.resources import DATA_DIR
 
 __all__ = [
     "N_PARTS", "BACKGROUND", "N_CLASSES", "MODEL_FORMAT", "DEFAULT_MODEL_PATH", "DEFAULT_SCALES",
-    "MODEL_ENV", "PartDetector", "BoxResponses", "PartResponses", "response_maps", "box_crop", "box_descriptors", "box_position", "log_ratio",
+    "PartDetector", "BoxResponses", "PartResponses", "response_maps", "box_crop", "box_descriptors", "box_position", "log_ratio",
     "load_default",
 ]
 
@@ -270,20 +270,13 @@ class PartDetector:
 _DEFAULT = None
 
 
-MODEL_ENV = "WIRESCENE_PARTS_MODEL"
-"""Environment variable naming a part model ``.npz`` to use instead of the package's
-(e.g. a per-fold model for cross-validated ``wirescene eval``)."""
-
-
 def load_default() -> PartDetector:
-    """The package's trained model, or the one named by ``$WIRESCENE_PARTS_MODEL`` (cached)."""
-    import os
-
+    """The package's trained model (cached). Another model file is chosen per run with
+    ``FitOptions.parts_model`` (``--parts-model``), which the resume records include."""
     global _DEFAULT
-    path = os.environ.get(MODEL_ENV) or None
-    if _DEFAULT is None or _DEFAULT[0] != path:
-        _DEFAULT = (path, PartDetector.load(path))
-    return _DEFAULT[1]
+    if _DEFAULT is None:
+        _DEFAULT = PartDetector.load()
+    return _DEFAULT
 
 
 # ---------------------------------------------------------------------- response maps

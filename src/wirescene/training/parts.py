@@ -42,7 +42,6 @@ held-out synthetic scenes (:func:`synth_eval_frames`) and real KITTI frames
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +49,7 @@ from scipy.ndimage import gaussian_filter
 
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, DEFAULT_MODEL_PATH, N_PARTS, PartDetector
+from wirescene.training.patches import PatchData, _rng, describe_in_box
 
 __all__ = ["PatchData", "render_views", "make_patch_data", "make_synth_patch_data", "heldout_accuracy",
            "localisation", "scene_frames", "fit_detector", "design_matrix", "calibrate", "raw_log_ratio", "synth_eval_frames", "kitti_eval_frames", "train_part_detector",
@@ -60,45 +60,6 @@ RENDER_FIELD_WIDTH = 7.25  # metres across the image at 10 m: car height ~ 80 px
 ELEVATIONS = (7.5, 15.0)
 REAL_BG_IMAGES = ("camera", "astronaut", "coffee", "chelsea", "rocket", "brick", "grass", "gravel",
                   "page", "text", "coins", "moon")
-
-
-@dataclass
-class PatchData:
-    """Descriptors per kind ``{kind: (N, D)}``, labels ``y (N,)`` (36 = background),
-    ``group (N,)``: CAD model index, -1 for non-rendered background; ``pos (N, 2)``:
-    position relative to the (jittered) box the patch was described in
-    (:func:`wirescene.parts.detector.box_position`), where known; ``ctx (N, 72)``: the box's
-    gradient layout (:func:`wirescene.parts.features.box_context`), where known."""
-
-    X: dict
-    y: np.ndarray
-    group: np.ndarray
-    names: list
-    pos: np.ndarray | None = None
-    ctx: np.ndarray | None = None
-
-    def __len__(self):
-        return len(self.y)
-
-
-def describe_in_box(image, box, pts, kinds, *, scale, edges=None):
-    """``({kind: (N, D)}, ctx (N, 72) or None, pos (N, 2))`` of native points in ``box``
-    (:func:`wirescene.parts.detector.box_descriptors`); ``ctx`` when a multi-scale kind is asked."""
-    from wirescene.parts.detector import box_descriptors, box_position
-
-    X, ctx = {}, None
-    for k in kinds:
-        e = edges if k in feat.EDGE_KINDS else None
-        if ctx is None and k in ("ghog_ms", "ghog_msc"):
-            d = box_descriptors(image, box, pts, k, scale=scale, edges=e, context=True)
-            X[k], ctx = d[:, :-feat.CONTEXT_DIM], d[:, -feat.CONTEXT_DIM:]
-        else:
-            X[k] = box_descriptors(image, box, pts, k, scale=scale, edges=e)
-    return X, ctx, box_position(pts, box)
-
-
-def _rng(seed, *keys):
-    return np.random.default_rng(np.random.SeedSequence([int(seed)] + [int(k) for k in keys]))
 
 
 def render_views(names, meshes, landmarks, views, progress=None):

@@ -30,6 +30,7 @@ import numpy as np
 
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND
+from wirescene.training.patches import PatchData, _rng, describe_in_box
 
 __all__ = [
     "LabelledCar",
@@ -183,7 +184,6 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
     wirescene.training.parts.PatchData -- ``group`` is the frame's index in ``frame_ids``.
     """
     from wirescene.io.kitti import KittiDataset
-    from wirescene.training.parts import PatchData, _rng, describe_in_box
 
     ds = KittiDataset(root)
     frame_ids = list(frame_ids)
