@@ -76,6 +76,47 @@ def group_of(frame_id: str, synthetic: bool) -> str:
     return next(g for g, folds in GROUPS.items() if f in folds)
 
 
+def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=1, log=print):
+    """Fit ``variants`` under every configuration ``{name: options}`` on the frames of
+    ``root`` (label boxes as pre-detections; evidence and coarse grid once per frame).
+
+    Returns ``{(name, variant): [FrameResult]}`` and ``{name: seconds}`` (fitting only).
+    """
+    ds = KittiDataset(root)
+    frame_ids = ds.frame_ids()[:frames]
+    source = DetectionSource("gt")
+    results = {(c, v): [] for c in configs for v in variants}
+    seconds = dict.fromkeys(configs, 0.0)
+    t0 = time.perf_counter()
+    for fid in frame_ids:
+        gt = ds.labels(fid)
+        detections = source.for_frame(ds, fid, frame_seed(seed, fid))
+        camera = ds.camera(fid)
+        gt_path = wireframe_gt_path(ds.split_dir, fid)
+        vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
+        if not len(detections):
+            continue
+        if evidence == "oracle":
+            frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
+        else:
+            frame_evidence = part_evidence(ds.image(fid), detections)
+        lifted = lift_table(camera, detections)
+        for name, kw in configs.items():
+            kw = dict(kw)
+            ev = frame_evidence
+            if "bilinear" in kw:
+                ev = copy.copy(frame_evidence)
+                ev.bilinear = kw.pop("bilinear")
+            options = FitOptions(inference=InferenceOptions(**kw), seed=seed)
+            for v in variants:
+                t = time.perf_counter()
+                est = fit_scene(camera, detections, variant=v, options=options, lifted=lifted, evidence=ev)
+                seconds[name] += time.perf_counter() - t
+                results[(name, v)].append(frame_result(fid, gt, detections, est, vertex_gt, camera))
+        log(f"{fid} done ({time.perf_counter() - t0:.0f} s)")
+    return results, seconds, len(frame_ids)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("root")
@@ -88,38 +129,9 @@ def main():
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     configs = dict(parse_config(c) for c in args.config)
-    ds = KittiDataset(args.root)
-    frame_ids = ds.frame_ids()[: args.frames]
-    source = DetectionSource("gt")
-    results = {(c, v): [] for c in configs for v in args.variant}
-    seconds = dict.fromkeys(configs, 0.0)
-    t0 = time.perf_counter()
-    for fid in frame_ids:
-        gt = ds.labels(fid)
-        detections = source.for_frame(ds, fid, frame_seed(args.seed, fid))
-        camera = ds.camera(fid)
-        gt_path = wireframe_gt_path(ds.split_dir, fid)
-        vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
-        if not len(detections):
-            continue
-        if args.evidence == "oracle":
-            evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
-        else:
-            evidence = part_evidence(ds.image(fid), detections)
-        lifted = lift_table(camera, detections)
-        for name, kw in configs.items():
-            kw = dict(kw)
-            ev = evidence
-            if "bilinear" in kw:
-                ev = copy.copy(evidence)
-                ev.bilinear = kw.pop("bilinear")
-            options = FitOptions(inference=InferenceOptions(**kw), seed=args.seed)
-            for v in args.variant:
-                t = time.perf_counter()
-                est = fit_scene(camera, detections, variant=v, options=options, lifted=lifted, evidence=ev)
-                seconds[name] += time.perf_counter() - t
-                results[(name, v)].append(frame_result(fid, gt, detections, est, vertex_gt, camera))
-        print(f"{fid} done ({time.perf_counter() - t0:.0f} s)", flush=True)
+    results, seconds, n_frames = run_configs(args.root, args.variant, configs, evidence=args.evidence,
+                                             frames=args.frames, seed=args.seed,
+                                             log=lambda m: print(m, flush=True))
     table = {}
     for (name, v), frames in results.items():
         rep = evaluate(frames)
@@ -137,7 +149,7 @@ def main():
         print(f"{name:14s} {v:7s} {g:3s} {f['n_tp']:4d} {f['loc_1m']:6.1f} {f['loc_1_5m']:6.1f} "
               f"{f['median_az3d']:5.1f} {f['median_loc']:5.2f}{extra}")
     print("\nseconds per frame (all variants): " + ", ".join(
-        f"{n} {s / max(len(frame_ids), 1):.2f}" for n, s in seconds.items()))
+        f"{n} {s / max(n_frames, 1):.2f}" for n, s in seconds.items()))
 
     def criterion(name, g):
         rows = [table[(name, v, g)] for v in args.variant]

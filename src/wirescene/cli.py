@@ -80,7 +80,10 @@ def _inference_options(f):
     f = click.option("--prune-after", type=int, default=None,
                      help="Keep only the best quarter of the particles after this many iterations (default 4; 0: never).")(f)
     f = click.option("--box-weight", type=float, default=None,
-                     help="Weight of the detection box in the fine objective (0: the paper's part likelihood only).")(f)
+                     help="Weight of the detection box (KITTI convention) in the fine objective "
+                          "(0: the paper's part likelihood only; default: InferenceOptions).")(f)
+    f = click.option("--plane-refinement/--no-plane-refinement", default=None,
+                     help="Sample the ground plane in the fine stage (default: InferenceOptions).")(f)
     return f
 
 
@@ -133,7 +136,7 @@ def _dask_client(address: str):
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
-             workers, resume, dask_address, iterations, samples, prune_after, box_weight, device):
+             workers, resume, dask_address, iterations, samples, prune_after, box_weight, plane_refinement, device):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from .datasets.kitti import KittiDataset
     from .evaluate import format_table
@@ -150,7 +153,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
     variants = list(variants) or _variants()
     frame_ids = [f.strip() for f in frames.split(",")] if frames else None
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, device=device)
+                           box_weight=box_weight, plane_refinement=plane_refinement, device=device)
     on_gpu = options.inference.device.startswith("cuda")
     if on_gpu and (workers or 1) > 1:
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
@@ -198,7 +201,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
 @_inference_options
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, prune_after, box_weight,
-            device):
+            plane_refinement, device):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from .camera import read_kitti_calib
     from .datasets.kitti import read_image, read_labels
@@ -218,7 +221,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
             raise InputError("pre-detection found no car in the image", path=image)
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, device=device)
+                           box_weight=box_weight, plane_refinement=plane_refinement, device=device)
     estimate = fit_scene(camera, dets, variant=variant, options=options, image=img)
     paths = write_fit_outputs(out, Path(image).stem, image=img, camera=camera, estimate=estimate, detections=dets, gt=gt_objs)
     for kind, p in paths.items():

@@ -19,14 +19,14 @@ chosen samples' geometry. After ``prune_after`` iterations only the best
 scenes this halved the time with localisation and azimuth figures within +-3 points of
 refining all of them (see the closing note of the speed issue).
 
-Two additions to the paper's objective and search, both off by default in
-:class:`InferenceOptions` and switched on by the fitted defaults of
-:data:`wirescene.scene.fit.FINE_DEFAULTS` (see the notes there for how they were
-chosen): a detection-box term in KITTI's convention (``box_weight``, the coarse stage's
-lifting cost of the wireframe's 3D box, so that the fine objective includes what placed
-the car and picked its particle), and a third sampling block for the ground plane
-(``plane_refinement``: the paper's scene-level inference samples the plane too; the
-objects follow a sampled plane along their viewing rays).
+Two additions to the paper's objective and search (see :class:`InferenceOptions` for
+their defaults and how they were chosen): a detection-box term in KITTI's convention
+(``box_weight``: the coarse stage's lifting cost of the wireframe's 3D box, so that the
+fine objective contains what placed the car and picked its particle, and weak part
+evidence cannot slide a car along its viewing ray), and a third sampling block for the
+ground plane (``plane_refinement``: the paper's scene-level inference samples the plane
+too, instead of keeping the coarse grid's plane; objects follow a sampled plane along
+their viewing rays).
 
 Positions are sampled in viewing coordinates -- the bearing ``phi = atan2(x, z)``, the
 log range and the observation angle ``alpha = azimuth - phi`` -- rather than in
