@@ -72,7 +72,7 @@ def study(args):
         rows.append(dict(config=name, variant=v, cars=m["n_tp"], loc_1m=m["loc_1m"], median_az3d=m["median_az3d"],
                          median_loc=m["median_loc"], parts_70=m["parts_70"],
                          s_per_frame=seconds[name] / len(args.variant) / max(n_frames, 1)))
-    print(f"{args.evidence} evidence, {n_frames} frames; seconds per frame and variant (fitting only, this machine)")
+    print(f"{args.evidence} evidence, {n_frames} frames; CPU seconds per frame and variant (fitting only)")
     print(f"{'config':12s} {'variant':7s} {'cars':>4s} {'<1m %':>6s} {'az deg':>6s} {'loc m':>6s} {'parts70 %':>9s} {'s/frame':>8s}")
     for r in rows:
         print(f"{r['config']:12s} {r['variant']:7s} {r['cars']:4d} {r['loc_1m']:6.1f} {r['median_az3d']:6.2f} "
@@ -93,7 +93,7 @@ def study(args):
             for r in sel:
                 ax.annotate(r["config"], (r["s_per_frame"], r["loc_1m"]), fontsize=7, xytext=(3, 3),
                             textcoords="offset points")
-        ax.set_xlabel("seconds per frame (fitting, one core)")
+        ax.set_xlabel("CPU seconds per frame (fitting, one core)")
         ax.set_ylabel("% cars within 1 m")
         ax.set_title(f"fine stage, {args.evidence} evidence, {n_frames} synthetic frames")
         ax.grid(alpha=0.3)

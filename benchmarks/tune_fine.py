@@ -80,7 +80,8 @@ def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=
     """Fit ``variants`` under every configuration ``{name: options}`` on the frames of
     ``root`` (label boxes as pre-detections; evidence and coarse grid once per frame).
 
-    Returns ``{(name, variant): [FrameResult]}`` and ``{name: seconds}`` (fitting only).
+    Returns ``{(name, variant): [FrameResult]}``, ``{name: seconds}`` (CPU seconds of
+    fitting, i.e. one core's time on a shared machine) and the number of frames.
     """
     ds = KittiDataset(root)
     frame_ids = ds.frame_ids()[:frames]
@@ -109,9 +110,9 @@ def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=
                 ev.bilinear = kw.pop("bilinear")
             options = FitOptions(inference=InferenceOptions(**kw), seed=seed)
             for v in variants:
-                t = time.perf_counter()
+                t = time.process_time()
                 est = fit_scene(camera, detections, variant=v, options=options, lifted=lifted, evidence=ev)
-                seconds[name] += time.perf_counter() - t
+                seconds[name] += time.process_time() - t
                 results[(name, v)].append(frame_result(fid, gt, detections, est, vertex_gt, camera))
         log(f"{fid} done ({time.perf_counter() - t0:.0f} s)")
     return results, seconds, len(frame_ids)
