@@ -240,6 +240,25 @@ def test_log_ratio_vectorised_and_outside(tiny, kitti_frame):
     assert np.all(np.abs(out) <= -R.floor + 1e-5)
 
 
+def test_log_ratio_bilinear(tiny, kitti_frame):
+    det = PartDetector.load(tiny[0])
+    img, boxes = kitti_frame
+    R = response_maps(img, boxes[:1], detector=det)
+    b = R.boxes[0]
+    gh, gw = b.log_ratio.shape[:2]
+    grid = b.grid_uv()
+    # at grid points both lookups are the map itself
+    uv = np.broadcast_to(grid[gh // 2, gw // 2], (N_PARTS, 2))
+    assert_close(R.log_ratio(uv, 0, bilinear=True), b.log_ratio[gh // 2, gw // 2])
+    # a quarter of the way to the right neighbour: the linear mix of the two
+    uv = uv + [0.25 * b.stride, 0.0]
+    want = 0.75 * b.log_ratio[gh // 2, gw // 2] + 0.25 * b.log_ratio[gh // 2, gw // 2 + 1]
+    assert_close(R.log_ratio(uv, 0, bilinear=True), want)
+    # continuous where nearest-point lookup jumps, and the floor far outside
+    far = np.full((N_PARTS, 2), -1e4)
+    assert np.all(R.log_ratio(far, 0, bilinear=True) == R.floor)
+
+
 # ------------------------------------------------------------------ shipped model
 
 def test_committed_model_on_real_kitti_box(kitti_frame):

@@ -115,7 +115,10 @@ def _inference_options(f):
     f = click.option("--prune-after", type=NON_NEGATIVE, default=None,
                      help="Keep only the best quarter of the particles after this many iterations (default 4; 0: never).")(f)
     f = click.option("--box-weight", type=NON_NEGATIVE_FLOAT, default=None,
-                     help="Weight of the detection box in the fine objective (0: the paper's part likelihood only).")(f)
+                     help="Weight of the detection box (KITTI convention) in the fine objective "
+                          "(0: the paper's part likelihood only; default: InferenceOptions).")(f)
+    f = click.option("--plane-refinement/--no-plane-refinement", default=None,
+                     help="Sample the ground plane in the fine stage (default: InferenceOptions).")(f)
     return f
 
 
@@ -177,7 +180,7 @@ def _dask_client(address: str):
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
              raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
-             device, parts_model, detector_bank):
+             plane_refinement, device, parts_model, detector_bank):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
@@ -199,7 +202,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
     variants = list(variants) or _variants()
     frame_ids = parse_frames(frames, dataset.frame_ids())
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, device=device, parts_model=parts_model,
+                           box_weight=box_weight, plane_refinement=plane_refinement, device=device,
+                           parts_model=parts_model,
                            detector_bank=detector_bank)
     if raw_scores:
         options = dataclasses.replace(options, calibrate_scores=False)
@@ -281,7 +285,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
               help="Fit frames on this running Dask scheduler instead of local processes.")
 @_inference_options
 def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, frames, particles, seed, workers,
-                resume, dask_address, iterations, samples, prune_after, box_weight, device, parts_model, detector_bank):
+                resume, dask_address, iterations, samples, prune_after, box_weight, plane_refinement, device, parts_model,
+             detector_bank):
     """Write KITTI label files (with scores) for every image of a split, labelled or not."""
     from wirescene.eval.predict import predict_dataset
     from wirescene.eval.sources import DetectionSource
@@ -295,7 +300,8 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     dataset = KittiDataset(kitti_root, split=split)
     frame_ids = parse_frames(frames, dataset.image_ids())
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, device=device, parts_model=parts_model,
+                           box_weight=box_weight, plane_refinement=plane_refinement, device=device,
+                           parts_model=parts_model,
                            detector_bank=detector_bank)
     on_gpu = options.inference.device.startswith("cuda")
     client = _dask_client(dask_address) if dask_address is not None else None
@@ -367,7 +373,7 @@ def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames):
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
 @_inference_options
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, prune_after, box_weight,
-            device, parts_model, detector_bank):
+            plane_refinement, device, parts_model, detector_bank):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from wirescene.api import fit
     from wirescene.core.camera import read_kitti_calib
@@ -381,7 +387,8 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
     dets = read_detections(detections, image_size=(img.shape[1], img.shape[0])) if detections is not None else None
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
     options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, device=device, parts_model=parts_model,
+                           box_weight=box_weight, plane_refinement=plane_refinement, device=device,
+                           parts_model=parts_model,
                            detector_bank=detector_bank)
     estimate = fit(img, camera, dets, variant=variant, options=options)
     if not estimate.cars and dets is None:

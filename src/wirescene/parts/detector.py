@@ -340,15 +340,18 @@ class PartResponses:
             self._stack = (lr, shape, origin, stride)
         return self._stack
 
-    def log_ratio(self, uv, box_index, *, outside: float | None = None) -> np.ndarray:
-        """``log(S_j / S_b)`` of part ``j`` at ``uv[..., j, :]`` (nearest grid point, max
-        over scales).
+    def log_ratio(self, uv, box_index, *, outside: float | None = None, bilinear: bool = False) -> np.ndarray:
+        """``log(S_j / S_b)`` of part ``j`` at ``uv[..., j, :]`` (max over scales), at the
+        nearest grid point or, with ``bilinear``, interpolated between the four around it.
 
         Parameters
         ----------
         uv : (..., 36, 2) array -- image coordinates of the 36 projected vertices
         box_index : int or int array broadcastable to ``uv.shape[:-2]``
         outside : float, optional -- value outside the box's grid (default :attr:`floor`)
+        bilinear : bool -- interpolate (grid points outside the grid count as ``outside``).
+            The nearest grid point makes the objective piecewise constant on cells of a
+            stride (up to 4 px), so sub-stride moves of a hypothesis change nothing.
 
         Returns
         -------
@@ -364,14 +367,25 @@ class PartResponses:
         if b.size and (b.min() < 0 or b.max() >= len(self.boxes)):
             raise ShapeError(f"box_index out of range [0, {len(self.boxes)})")
         s = stride[b]
-        j = np.rint((uv[..., 0] - origin[b, 0]) / s)
-        i = np.rint((uv[..., 1] - origin[b, 1]) / s)
-        ok = (i >= 0) & (j >= 0) & (i < shape[b, 0]) & (j < shape[b, 1])
-        ii = np.where(ok, i, 0).astype(np.int64)
-        jj = np.where(ok, j, 0).astype(np.int64)
+        fj = (uv[..., 0] - origin[b, 0]) / s
+        fi = (uv[..., 1] - origin[b, 1]) / s
         part = np.arange(N_PARTS)
-        out = lr[b, ii, jj, part]
-        return np.where(ok, out, np.float32(self.floor if outside is None else outside)).astype(np.float32)
+        out_value = np.float32(self.floor if outside is None else outside)
+        h, w = shape[b, 0], shape[b, 1]
+
+        def at(i, j):
+            ok = (i >= 0) & (j >= 0) & (i < h) & (j < w)
+            ii = np.where(ok, i, 0).astype(np.int64)
+            jj = np.where(ok, j, 0).astype(np.int64)
+            return np.where(ok, lr[b, ii, jj, part], out_value)
+
+        if not bilinear:
+            return at(np.rint(fi), np.rint(fj)).astype(np.float32)
+        i0, j0 = np.floor(fi), np.floor(fj)
+        ti, tj = fi - i0, fj - j0
+        top = (1 - tj) * at(i0, j0) + tj * at(i0, j0 + 1)
+        bottom = (1 - tj) * at(i0 + 1, j0) + tj * at(i0 + 1, j0 + 1)
+        return ((1 - ti) * top + ti * bottom).astype(np.float32)
 
 
 def log_ratio(responses: PartResponses, uv, box_index, **kwargs) -> np.ndarray:

@@ -24,8 +24,11 @@ Ground truth
 * ``label_2``: type ``Car``; ``truncated`` = fraction of the car's full silhouette
   (rendered alone, outside the image sampled on a grid) that lies outside the image;
   ``occluded`` from the fraction ``f`` of its in-image silhouette pixels hidden by other
-  objects (cars or occluders): 0 if ``f < 0.10``, 1 if ``f < 0.40``, else 2; 2D box =
-  extent of the car's visible pixels (pixel centres, hence clipped to the image);
+  objects (cars or occluders): 0 if ``f < 0.10``, 1 if ``f < 0.40``, else 2; 2D box in
+  KITTI's convention: the projection of the label's 3D box (``dims``, ``location``,
+  ``rotation_y``) clipped to the image -- not the extent of the visible pixels, which
+  the JSON keeps as ``visible_box`` -- so that a detection-box term of the fine stage
+  means the same on synthetic and real data;
   ``dims`` = the mesh's bounding box ``h w l``; ``location`` = its bottom centre;
   ``rotation_y`` and ``alpha`` of the object rotation (on a tilted plane the car is
   tilted by the plane's pitch/roll, which the KITTI box cannot express). Cars of which
@@ -56,7 +59,8 @@ from PIL import Image
 from wirescene.core.camera import Camera, read_kitti_calib, write_kitti_calib
 from wirescene.io.kitti import FrameLabels, Label, write_labels
 from wirescene.core.errors import InputError
-from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y_of
+from wirescene.core.boxes import box_corners, project_points_to_box
+from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y, rotation_y_of
 from wirescene.core.atomic import atomic_path, write_bytes
 from wirescene.cad.mesh import body_extent
 from wirescene.core.raycast import first_hit_distance, mesh_intersector
@@ -500,7 +504,13 @@ def generate_scene(seed: int, index: int, *, cars=(2, 8), occluders: bool = True
             hidden.append(rec)
             continue
         rr, cc = np.nonzero(vis)
-        box = [float(cc.min()), float(rr.min()), float(cc.max()), float(rr.max())]
+        rec["visible_box"] = [float(cc.min()), float(rr.min()), float(cc.max()), float(rr.max())]
+        # KITTI's 2D box: the level 3D label box projected and clipped to the image (a box
+        # reaching behind the camera has no projection: its visible extent stands in).
+        corners = box_corners(np.asarray(m.dims), loc, rotation_y(ry))
+        box = rec["visible_box"]
+        if corners[:, 2].min() > 0.1:
+            box = [float(b) for b in project_points_to_box(camera, corners)]
         rec["box"] = box
         rec["scene_object_id"] = i
         labels.objects.append(Label("Car", truncated, occluded, float(alpha_from_rotation_y(ry, loc[0], loc[2])),

@@ -52,7 +52,7 @@ def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None,
         boxes = np.array([c["box"] for c in cars], float)
         R = response_maps(sc.image, boxes, detector=detector)
         uv = np.array([c["vertices_2d"] for c in cars], float)
-        ev.append(R.log_ratio(uv, np.arange(len(cars))))
+        ev.append(R.log_ratio(uv, np.arange(len(cars)), bilinear=True))  # as the likelihood reads it
         sh.append(np.array([[r == "self" for r in c["visibility"]] for c in cars]))
         vis.append(np.array([c["visible"] for c in cars], bool))
         uvs.append(uv)
