@@ -149,7 +149,7 @@ def test_deterministic(tmp_path):
 def test_cli_errors(tmp_path):
     from click.testing import CliRunner
 
-    from wirescene.cli.main.synth import synth
+    from wirescene.cli.synth import synth
 
     r = CliRunner().invoke(synth, [str(tmp_path / "o"), "--scenes", "1", "--cars-per-scene", "5-2"])
     assert r.exit_code == 2 and "A <= B" in r.output

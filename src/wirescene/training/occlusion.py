@@ -40,7 +40,7 @@ def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None,
     from wirescene.parts.detector import load_default as load_parts, response_maps
     from wirescene.synth.generate import generate_scene
 
-    grid = np.round(np.arange(-3.0, 1.01, 0.25), 2) if grid is None else np.asarray(grid, float)
+    grid = np.round(np.arange(-3.0, 3.01, 0.25), 2) if grid is None else np.asarray(grid, float)
     detector = load_parts() if detector is None else detector
     ev, sh, vis, uvs = [], [], [], []
     it = range(n_scenes) if progress is None else progress(range(n_scenes))
