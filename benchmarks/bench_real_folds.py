@@ -59,7 +59,8 @@ def kitti_with_cv_scores(records, gt, folds):
             test = [f for f in frames if folds[f] == k]
             if not test:
                 continue
-            model = fit_score_calibration({v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()})
+            model = fit_score_calibration({v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()},
+                                          stages=("fine",) if fine else ("coarse",))
             for f in test:
                 r = by_frame[f]
                 feats = confidence_features(r.det_scores, r.est_cost, r.det_boxes)
@@ -79,10 +80,17 @@ def main():
     ap.add_argument("--particles", type=int, default=250)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
+                    help="An InferenceOptions field, e.g. plane_refinement=0 or box_weight=100.")
     args = ap.parse_args()
     if not args.shipped and args.models is None:
         ap.error("give --models DIR (fold models) or --shipped")
     variants = args.variants or list(VARIANTS)
+    overrides = {}
+    for item in args.settings:
+        key, _, value = item.partition("=")
+        default = getattr(InferenceOptions(), key)
+        overrides[key] = bool(int(value)) if isinstance(default, bool) else type(default)(value)
     dataset = KittiDataset(args.root)
     frames = dataset.frame_ids()
     folds = {f: fold_of(f) for f in frames}
@@ -97,7 +105,7 @@ def main():
             for path in models.values():
                 if not Path(path).is_file():
                     sys.exit(f"missing fold model {path}")
-        options = FitOptions(lifting=LiftingOptions(n_particles=args.particles), inference=InferenceOptions(),
+        options = FitOptions(lifting=LiftingOptions(n_particles=args.particles), inference=InferenceOptions(**overrides),
                              seed=args.seed, calibrate_scores=False, **models)
         source = DetectionSource(args.detections, bank=models.get("detector_bank"))
         print(f"fold {k}: {len(test)} frames, models {models or 'shipped'}", file=sys.stderr)

@@ -60,8 +60,10 @@ def read_run_records(predictions_dir, frames: Iterable[str] | None = None) -> di
     return out
 
 
-def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1.0) -> dict:
-    """A logistic model per stage (coarse / fine variants) on the records' estimates."""
+def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1.0,
+                          stages: tuple[str, ...] = STAGES) -> dict:
+    """A logistic model per stage (coarse / fine variants) on the records' estimates;
+    every stage of ``stages`` needs records."""
     from sklearn.linear_model import LogisticRegression
 
     data = {stage: ([], []) for stage in STAGES}
@@ -73,7 +75,8 @@ def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1
                 data[stage][0].append(x)
                 data[stage][1].append(y)
     out = {"features": list(FEATURES), "criterion": "detection IoU > 0.5 with a Car and 3D centre within 1 m"}
-    for stage, (xs, ys) in data.items():
+    for stage in stages:
+        xs, ys = data[stage]
         if not xs:
             raise InputError(f"no {stage} variant in the records: evaluate at least one coarse and one fine variant",
                              path=None)
