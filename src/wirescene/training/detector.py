@@ -64,6 +64,23 @@ def _fit_svm(pos, neg, C, seed):
     return clf.coef_.ravel().astype(np.float32), float(clf.intercept_[0])
 
 
+
+def fit_svms(configs, pos, neg, *, C: float, seed: int):
+    """One linear SVM per configuration on its positive and negative descriptors (lists
+    per configuration); a configuration without positives gets zero weights and a bias of
+    -10, so it never fires. Returns ``(weights, biases)`` as :class:`DetectorBank` takes them."""
+    weights, biases = [], np.zeros(len(configs), np.float32)
+    for t, c in enumerate(configs):
+        th, tw = c.template
+        if not len(pos[t]):
+            weights.append(np.zeros((th, tw, N_FEAT), np.float32))
+            biases[t] = -10.0
+            continue
+        w, b = _fit_svm(pos[t], np.array(neg[t], np.float32).reshape(-1, th * tw * N_FEAT), C, seed)
+        weights.append(w.reshape(th, tw, N_FEAT))
+        biases[t] = b
+    return weights, biases
+
 def calibrate_threshold(bank: DetectorBank, *, seed: int, n_val: int, cars=(2, 8), max_scale: float = 2.0,
                         min_height: float = 30.0, camera=None, library=None):
     """Threshold maximising F1 on ``n_val`` synthetic scenes of stream ``seed`` (with
@@ -187,20 +204,7 @@ def train_detector_bank(out_path, *, seed: int = 0, n_scenes: int = 200, n_parti
                     break
     say("random negatives per detector: " + " ".join(str(len(n)) for n in neg) + f" [{time.time() - t0:.0f}s]")
 
-    weights, biases = [None] * len(configs), np.zeros(len(configs), np.float32)
-
-    def fit_all():
-        for t, c in enumerate(configs):
-            th, tw = c.template
-            if not len(pos[t]):
-                weights[t] = np.zeros((th, tw, N_FEAT), np.float32)
-                biases[t] = -10.0
-                continue
-            w, b = _fit_svm(pos[t], np.array(neg[t], np.float32).reshape(-1, th * tw * N_FEAT), C, seed)
-            weights[t] = w.reshape(th, tw, N_FEAT)
-            biases[t] = b
-
-    fit_all()
+    weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)
     say(f"initial SVMs trained [{time.time() - t0:.0f}s]")
     bank = DetectorBank(configs, weights, biases)
     for rnd in range(mining_rounds):
@@ -222,7 +226,7 @@ def train_detector_bank(out_path, *, seed: int = 0, n_scenes: int = 200, n_parti
                     r, q = act.cell[k]
                     neg[t].append(pyr[act.level[k]][1][r:r + th, q:q + tw].ravel())
                 n_new[t] += len(sel)
-        fit_all()
+        weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)
         bank = DetectorBank(configs, weights, biases)
         say(f"mining round {rnd + 1}: {int(n_new.sum())} hard negatives (per detector {n_new.min()}..{n_new.max()}) "
             f"[{time.time() - t0:.0f}s]")

@@ -49,7 +49,7 @@ from wirescene.predetect.configurations import (
     select_configurations,
 )
 from wirescene.predetect.hog import CELL, N_FEAT, crop_features, feature_pyramid, pyramid_scales, to_gray
-from wirescene.training.detector import _fit_svm, _overlap_frac, _valid_levels
+from wirescene.training.detector import _overlap_frac, _valid_levels, fit_svms
 
 BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
 """Labelled objects no negative window may overlap (DontCare regions too)."""
@@ -244,21 +244,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                     break
     say(f"random negatives: {sum(len(n) for n in neg)} [{time.time() - t0:.0f}s]")
 
-    weights, biases = [None] * len(configs), np.zeros(len(configs), np.float32)
-
-    def fit_all():
-        for t, c in enumerate(configs):
-            th, tw = c.template
-            if not len(pos[t]):
-                weights[t] = np.zeros((th, tw, N_FEAT), np.float32)
-                biases[t] = -10.0
-                continue
-            w, b = _fit_svm(pos[t], np.array(neg[t], np.float32).reshape(-1, th * tw * N_FEAT), C, seed)
-            weights[t] = w.reshape(th, tw, N_FEAT)
-            biases[t] = b
-
-    fit_all()
-    bank = DetectorBank(configs, list(weights), biases.copy())
+    weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)
+    bank = DetectorBank(configs, weights, biases)
     for rnd in range(mining_rounds):
         n_new = 0
         for im in images:
@@ -274,8 +261,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                     r, q = act.cell[k]
                     neg[t].append(im.pyramid[act.level[k]][1][r:r + th, q:q + tw].ravel())
                 n_new += len(sel)
-        fit_all()
-        bank = DetectorBank(configs, list(weights), biases.copy())
+        weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)
+        bank = DetectorBank(configs, weights, biases)
         say(f"mining round {rnd + 1}: {n_new} hard negatives [{time.time() - t0:.0f}s]")
     bank.meta = {
         "trained_on": "real KITTI frames", "frames": sorted({im.frame for im in images}), "seed": int(seed),

@@ -49,7 +49,7 @@ from scipy.ndimage import gaussian_filter
 
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, DEFAULT_MODEL_PATH, N_PARTS, PartDetector
-from wirescene.training.patches import PatchData, _rng, describe_in_box
+from wirescene.training.patches import PatchCollector, PatchData, _rng
 
 __all__ = ["PatchData", "render_views", "make_patch_data", "make_synth_patch_data", "heldout_accuracy",
            "localisation", "scene_frames", "fit_detector", "design_matrix", "calibrate", "raw_log_ratio", "synth_eval_frames", "kitti_eval_frames", "train_part_detector",
@@ -381,20 +381,9 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
     if seed < SYNTH_TRAIN_SEED:
         raise ValueError(f"synthetic training scenes must use seeds >= {SYNTH_TRAIN_SEED} (lower ones are evaluation)")
     library = load_car_library()
-    Xs = {k: [] for k in kinds}
-    ys, gs, ps, cs = [], [], [], []
+    patches = PatchCollector(kinds)
+    add = patches.add
     t0 = time.time()
-
-    def add(image, box, pts, y, scale, edges, g):
-        if len(pts) == 0:
-            return
-        X, ctx, pos = describe_in_box(image, box, pts, kinds, scale=scale, edges=edges)
-        for k in kinds:
-            Xs[k].append(X[k])
-        ys.append(np.broadcast_to(np.asarray(y, dtype=np.int64), (len(pts),)).copy())
-        gs.append(np.full(len(pts), g, dtype=np.int64))
-        ps.append(pos)
-        cs.append(ctx)
 
     for i in range(int(n_scenes)):
         sc = generate_scene(seed, i, library=library)
@@ -442,9 +431,7 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
             add(img, fake, cand[:bg_per_box], BACKGROUND, 1.0, edges, i)
         if progress and (i + 1) % 50 == 0:
             progress(f"synthetic scenes: {i + 1}/{n_scenes} in {time.time() - t0:.0f} s")
-    X = {k: np.concatenate(v).astype(np.float32) for k, v in Xs.items()}
-    return PatchData(X=X, y=np.concatenate(ys), group=np.concatenate(gs), names=[], pos=np.concatenate(ps),
-                     ctx=None if cs[0] is None else np.concatenate(cs))
+    return patches.data([])
 
 
 def _photometric(img, rng):

@@ -30,7 +30,7 @@ import numpy as np
 
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND
-from wirescene.training.patches import PatchData, _rng, describe_in_box
+from wirescene.training.patches import PatchCollector, _rng
 
 __all__ = [
     "LabelledCar",
@@ -187,20 +187,9 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
 
     ds = KittiDataset(root)
     frame_ids = list(frame_ids)
-    Xs = {k: [] for k in kinds}
-    ys, gs, ps, cs = [], [], [], []
+    patches = PatchCollector(kinds)
+    add = patches.add
     t0 = time.time()
-
-    def add(image, box, pts, y, scale, edges, g):
-        if len(pts) == 0:
-            return
-        X, ctx, pos = describe_in_box(image, box, pts, kinds, scale=scale, edges=edges)
-        for k in kinds:
-            Xs[k].append(X[k])
-        ys.append(np.broadcast_to(np.asarray(y, dtype=np.int64), (len(pts),)).copy())
-        gs.append(np.full(len(pts), g, dtype=np.int64))
-        ps.append(pos)
-        cs.append(ctx)
 
     for fi, fid in enumerate(frame_ids):
         img0 = ds.image(fid)
@@ -259,8 +248,6 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
                 add(img, fake, cand[:bg_per_box], BACKGROUND, 1.0, edges, fi)
         if progress:
             progress(f"real frames: {fi + 1}/{len(frame_ids)} in {time.time() - t0:.0f} s")
-    if not ys:
+    if not len(patches):
         raise ValueError("no real training patches in these frames")
-    X = {k: np.concatenate(v).astype(np.float32) for k, v in Xs.items()}
-    return PatchData(X=X, y=np.concatenate(ys), group=np.concatenate(gs), names=frame_ids, pos=np.concatenate(ps),
-                     ctx=None if cs[0] is None else np.concatenate(cs))
+    return patches.data(frame_ids)

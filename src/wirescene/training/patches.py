@@ -48,3 +48,32 @@ def describe_in_box(image, box, pts, kinds, *, scale, edges=None):
 
 def _rng(seed, *keys):
     return np.random.default_rng(np.random.SeedSequence([int(seed)] + [int(k) for k in keys]))
+
+
+class PatchCollector:
+    """Accumulates described patches of one training source into a :class:`PatchData`."""
+
+    def __init__(self, kinds):
+        self.kinds = tuple(kinds)
+        self.X = {k: [] for k in self.kinds}
+        self.y, self.group, self.pos, self.ctx = [], [], [], []
+
+    def __len__(self):
+        return len(self.y)
+
+    def add(self, image, box, pts, y, scale, edges, group):
+        """Describe points ``pts`` ``(N, 2)`` of ``image`` in ``box`` with label(s) ``y``."""
+        if len(pts) == 0:
+            return
+        X, ctx, pos = describe_in_box(image, box, pts, self.kinds, scale=scale, edges=edges)
+        for k in self.kinds:
+            self.X[k].append(X[k])
+        self.y.append(np.broadcast_to(np.asarray(y, dtype=np.int64), (len(pts),)).copy())
+        self.group.append(np.full(len(pts), group, dtype=np.int64))
+        self.pos.append(pos)
+        self.ctx.append(ctx)
+
+    def data(self, names) -> PatchData:
+        X = {k: np.concatenate(v).astype(np.float32) for k, v in self.X.items()}
+        return PatchData(X=X, y=np.concatenate(self.y), group=np.concatenate(self.group), names=list(names),
+                         pos=np.concatenate(self.pos), ctx=None if self.ctx[0] is None else np.concatenate(self.ctx))
