@@ -65,6 +65,28 @@ def _fit_svm(pos, neg, C, seed):
 
 
 
+
+def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_image, rng) -> None:
+    """Append to ``neg[t]`` up to ``per_image`` random windows of pyramid ``pyr`` for each
+    configuration ``t``, skipping windows that overlap a ``blocked`` box (cars) by more than 30%."""
+    for t, c in enumerate(configs):
+        th, tw = c.template
+        levels = _valid_levels(c, pyr, H, min_height)
+        if not levels:
+            continue
+        got = 0
+        for _ in range(4 * per_image):
+            li = levels[rng.integers(len(levels))]
+            s, F = pyr[li]
+            r, q = rng.integers(F.shape[0] - th + 1), rng.integers(F.shape[1] - tw + 1)
+            win = np.array([[q, r, q + tw, r + th]]) * CELL / s
+            if _overlap_frac(win, blocked)[0] > 0.3:
+                continue
+            neg[t].append(F[r:r + th, q:q + tw].ravel())
+            got += 1
+            if got >= per_image:
+                break
+
 def fit_svms(configs, pos, neg, *, C: float, seed: int):
     """One linear SVM per configuration on its positive and negative descriptors (lists
     per configuration); a configuration without positives gets zero weights and a bias of
@@ -185,23 +207,8 @@ def train_detector_bank(out_path, *, seed: int = 0, n_scenes: int = 200, n_parti
     rand_imgs = order[: min(n_scenes, mining_images)]
     for i in rand_imgs:
         pyr = feature_pyramid(grays[i], scales)
-        for t, c in enumerate(configs):
-            th, tw = c.template
-            levels = _valid_levels(c, pyr, H, min_height)
-            if not levels:
-                continue
-            got = 0
-            for _ in range(4 * neg_per_image):
-                li = levels[rng.integers(len(levels))]
-                s, F = pyr[li]
-                r, q = rng.integers(F.shape[0] - th + 1), rng.integers(F.shape[1] - tw + 1)
-                win = np.array([[q, r, q + tw, r + th]]) * CELL / s
-                if _overlap_frac(win, car_boxes[i])[0] > 0.3:
-                    continue
-                neg[t].append(F[r:r + th, q:q + tw].ravel())
-                got += 1
-                if got >= neg_per_image:
-                    break
+        sample_random_negatives(neg, pyr, configs, car_boxes[i], H=H, min_height=min_height,
+                                per_image=neg_per_image, rng=rng)
     say("random negatives per detector: " + " ".join(str(len(n)) for n in neg) + f" [{time.time() - t0:.0f}s]")
 
     weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)

@@ -48,8 +48,8 @@ from wirescene.predetect.configurations import (
     mirror_bin,
     select_configurations,
 )
-from wirescene.predetect.hog import CELL, N_FEAT, crop_features, feature_pyramid, pyramid_scales, to_gray
-from wirescene.training.detector import _overlap_frac, _valid_levels, fit_svms
+from wirescene.predetect.hog import N_FEAT, crop_features, feature_pyramid, pyramid_scales, to_gray
+from wirescene.training.detector import _overlap_frac, fit_svms, sample_random_negatives
 
 BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
 """Labelled objects no negative window may overlap (DontCare regions too)."""
@@ -225,23 +225,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     neg = [[] for _ in configs]
     for im in images:
         pyr = im.pyramid
-        for t, c in enumerate(configs):
-            th, tw = c.template
-            levels = _valid_levels(c, pyr, H, min_height)
-            if not levels:
-                continue
-            got = 0
-            for _ in range(4 * neg_per_image):
-                li = levels[rng.integers(len(levels))]
-                s, F = pyr[li]
-                r, q = rng.integers(F.shape[0] - th + 1), rng.integers(F.shape[1] - tw + 1)
-                win = np.array([[q, r, q + tw, r + th]]) * CELL / s
-                if _overlap_frac(win, im.block)[0] > 0.3:
-                    continue
-                neg[t].append(F[r:r + th, q:q + tw].ravel())
-                got += 1
-                if got >= neg_per_image:
-                    break
+        sample_random_negatives(neg, pyr, configs, im.block, H=H, min_height=min_height,
+                                per_image=neg_per_image, rng=rng)
     say(f"random negatives: {sum(len(n) for n in neg)} [{time.time() - t0:.0f}s]")
 
     weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)
