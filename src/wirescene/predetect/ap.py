@@ -304,7 +304,7 @@ def kitti_ap_2d(detections, gts, *, difficulty: str = "moderate", iou: float = 0
     interp = [prec[rec >= r - 1e-12].max() if np.any(rec >= r - 1e-12) else 0.0 for r in pts]
     ap = float(np.mean(interp)) if n_gt else float("nan")
     # full PR curve and viewpoints of the true positives at the lowest threshold
-    all_s, all_t, fppi = [], [], []
+    all_s, all_t = [], []
     for b, s, a, g, fl in frames:
         tp, fp, fn, sc, pairs = _kitti_frame_stats(b, s, g, fl, min_h, iou, -np.inf, True)
         tp_alpha += [(a[j], g.alpha[i]) for i, j in pairs]
