@@ -27,24 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.core.labels import Label
 from wirescene.eval.kitti_metrics import kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
 from wirescene.eval.sources import DetectionSource
-from wirescene.fitting.confidence import calibrated_confidence, confidence_features
 from wirescene.fitting.pipeline import FitOptions
-from wirescene.fitting.variants import VARIANTS, get_variant
+from wirescene.fitting.variants import VARIANTS
 from wirescene.infer.inference import InferenceOptions
 from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
-from wirescene.training.scores import fit_score_calibration, read_run_records
-
-
-def _labels(result, scores):
-    return [Label("Car", -1, -1, result.est_alpha[d], result.det_boxes[d], result.est_dims[d], result.est_location[d],
-                  result.est_rotation_y[d], float(scores[d])) for d in range(result.n_detections)]
+from wirescene.training.scores import cross_validated_confidences, read_run_records
 
 
 def kitti_with_cv_scores(records, gt, folds):
@@ -52,20 +45,9 @@ def kitti_with_cv_scores(records, gt, folds):
     frames = sorted(gt)
     out = {}
     for variant, results in records.items():
-        fine = get_variant(variant).fine
         by_frame = {r.frame_id: r for r in results}
-        scores = {}
-        for k in range(N_FOLDS):
-            test = [f for f in frames if folds[f] == k]
-            if not test:
-                continue
-            model = fit_score_calibration({v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()},
-                                          stages=("fine",) if fine else ("coarse",))
-            for f in test:
-                r = by_frame[f]
-                feats = confidence_features(r.det_scores, r.est_cost, r.det_boxes)
-                scores[f] = calibrated_confidence(feats, fine=fine, calibration=model) if len(feats) else []
-        out[variant] = kitti_metrics([gt[f] for f in frames], [_labels(by_frame[f], scores[f]) for f in frames])
+        scores = cross_validated_confidences(records, folds, variant)
+        out[variant] = kitti_metrics([gt[f] for f in frames], [by_frame[f].estimate_labels(scores[f]) for f in frames])
     return out
 
 

@@ -22,18 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.core.labels import Label
 from wirescene.eval.kitti_metrics import kitti_metrics
-from wirescene.fitting.confidence import calibrated_confidence, confidence_features
-from wirescene.fitting.variants import get_variant
 from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
-from wirescene.training.scores import fit_score_calibration, read_run_records
-
-
-def _labels(result, scores):
-    return [Label("Car", -1, -1, result.est_alpha[d], result.det_boxes[d], result.est_dims[d], result.est_location[d],
-                  result.est_rotation_y[d], float(scores[d])) for d in range(result.n_detections)]
+from wirescene.training.scores import cross_validated_confidences, read_run_records
 
 
 def main():
@@ -50,23 +42,12 @@ def main():
     print(f"{len(frames)} frames, {n_cars} cars, {N_FOLDS} folds by drive; AP in % (KITTI rules, R40)")
     print(f"{'variant':10s} {'scores':12s} {'3D mod 0.7':>10s} {'3D mod 0.5':>10s} {'BEV mod 0.5':>11s} {'2D mod':>7s}")
     for variant, results in records.items():
-        fine = get_variant(variant).fine
         by_frame = {r.frame_id: r for r in results}
-        calibrated = {}
-        for k in range(N_FOLDS):
-            test = [f for f in frames if folds[f] == k and f in by_frame]
-            if not test:
-                continue
-            train = {v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()}
-            model = fit_score_calibration(train)
-            for f in test:
-                r = by_frame[f]
-                feats = confidence_features(r.det_scores, r.est_cost, r.det_boxes)
-                calibrated[f] = calibrated_confidence(feats, fine=fine, calibration=model) if len(feats) else []
+        calibrated = cross_validated_confidences(records, folds, variant)
         for name, scores_of in (("detection", lambda f: by_frame[f].det_scores),
                                 ("objective", lambda f: -by_frame[f].est_cost),
                                 ("calibrated", lambda f: calibrated[f])):
-            preds = [_labels(by_frame[f], scores_of(f)) for f in frames]
+            preds = [by_frame[f].estimate_labels(scores_of(f)) for f in frames]
             m = kitti_metrics([gt[f] for f in frames], preds)
 
             def fmt(v):

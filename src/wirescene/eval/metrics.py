@@ -155,6 +155,12 @@ class FrameResult:
     def n_detections(self) -> int:
         return len(self.det_boxes)
 
+    def estimate_labels(self, scores) -> list[Label]:
+        """KITTI label rows (Car) of the estimates, with ``scores`` ``(D,)`` as column 16."""
+        scores = np.asarray(scores, float).reshape(-1)
+        return [Label("Car", -1, -1, self.est_alpha[d], self.det_boxes[d], self.est_dims[d], self.est_location[d],
+                      self.est_rotation_y[d], float(scores[d])) for d in range(self.n_detections)]
+
     def to_dict(self) -> dict:
         """Everything needed to rebuild this record, as plain JSON-ready values.
 

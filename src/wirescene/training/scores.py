@@ -14,7 +14,7 @@ from wirescene.core.errors import InputError
 from wirescene.core.labels import CAR_TYPES
 from wirescene.eval.metrics import FrameResult, match_detections
 from wirescene.eval.records import RECORDS_DIR
-from wirescene.fitting.confidence import FEATURES, STAGES, confidence_features
+from wirescene.fitting.confidence import FEATURES, STAGES, calibrated_confidence, confidence_features
 from wirescene.fitting.variants import get_variant
 
 
@@ -88,4 +88,22 @@ def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1
         model = LogisticRegression(C=C).fit((X - mean) / scale, y)
         out[stage] = {"mean": mean.tolist(), "scale": scale.tolist(), "weights": model.coef_[0].tolist(),
                       "bias": float(model.intercept_[0]), "n": int(len(y)), "positive_rate": float(y.mean())}
+    return out
+
+
+def cross_validated_confidences(records: dict[str, list[FrameResult]], folds: dict[str, int],
+                                variant: str) -> dict[str, np.ndarray]:
+    """``{frame: (D,) confidences}`` of ``variant``'s estimates, each fold's from a model
+    fitted on the records of the other folds only (``folds``: frame -> fold)."""
+    fine = get_variant(variant).fine
+    out = {}
+    for k in sorted(set(folds.values())):
+        test = [r for r in records[variant] if folds[r.frame_id] == k]
+        if not test:
+            continue
+        model = fit_score_calibration({v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()},
+                                      stages=("fine",) if fine else ("coarse",))
+        for r in test:
+            feats = confidence_features(r.det_scores, r.est_cost, r.det_boxes)
+            out[r.frame_id] = calibrated_confidence(feats, fine=fine, calibration=model) if len(feats) else np.zeros(0)
     return out
