@@ -126,9 +126,6 @@ def _metrics_table(reports) -> str:
         cells = []
         for key, _, fmt in cols:
             v = m.get(key)
-            if key == "median_loc" and v is None:
-                errs = [r.loc_error for r in rep.records]
-                v = float(np.median(errs)) if errs else None
             cells.append("–" if v is None or not np.isfinite(v) else fmt.format(v))
         rows.append(f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     return f"<table><tr><th>variant</th>{head}</tr>{''.join(rows)}</table>"
