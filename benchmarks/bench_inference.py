@@ -1,8 +1,8 @@
 """Fine-stage inference studies on synthetic scenes (``wirescene synth DIR --scenes 20 --seed 7``).
 
 1. Study (default): precision of the fine stage as a function of its settings --
-   iterations, samples, ground-plane sampling, box term, number of shape coefficients,
-   pruning and (with ``--evidence parts``) bilinear map lookup -- with perfect
+   iterations, samples, ground-plane sampling, box term, shape prior, polish, number of
+   shape coefficients, pruning and (with ``--evidence parts``) bilinear map lookup -- with perfect
    (``oracle``) or part-detector evidence, label boxes as pre-detections. Per setting:
    share of cars within 1 m, median 3D azimuth error, share of cars with >= 70% of their
    visible parts within 4% of the box (paper Table 3) and seconds per frame; ``--plot
@@ -45,16 +45,18 @@ from wirescene.core.viewpoints import angle_difference  # noqa: E402
 #: The settings of the study: the paper's schedule, each addition alone, then the
 #: default and its variations of budget and model.
 STUDY = [
-    "paper:box_weight=0,plane_refinement=0",
-    "paper+plane:box_weight=0,plane_refinement=1",
-    "paper+box:plane_refinement=0",
+    "paper:box_weight=0,plane_refinement=0,shape_prior=0,polish_iterations=0",
+    "paper+plane:box_weight=0,shape_prior=0,polish_iterations=0",
+    "paper+box:plane_refinement=0,shape_prior=0,polish_iterations=0",
+    "box+plane:shape_prior=0,polish_iterations=0",
+    "box+plane+prior:polish_iterations=0",
     "default:",
     "6it:iterations=6",
     "24it:iterations=24",
-    "36it:iterations=36",
     "24smp:samples=24",
-    "24it24smp:iterations=24,samples=24",
+    "polish48:polish_iterations=48",
     "shape10:n_shape=10",
+    "shape10+polish48:n_shape=10,polish_iterations=48",
     "noprune:prune_after=0",
 ]
 

@@ -34,13 +34,13 @@ def parse_args():
                     help="torch devices, comma-separated: cpu, cuda, cuda:N; auto = cpu and cuda if available")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
-    return ap.parse_args()
+    return ap.parse_args(None if __name__ == "__main__" else [])
 
 
-ARGS = parse_args()
-# Thread counts must be set before numpy/torch load their runtimes.
-for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-    os.environ[var] = str(ARGS.threads)
+ARGS = parse_args()  # at import: thread counts must be set before numpy/torch load their runtimes
+if __name__ == "__main__":
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = str(ARGS.threads)
 
 import numpy as np
 

@@ -10,8 +10,12 @@ share of cars within 1 m, pooled over the fine variants; ties: lower median 3D a
 error) is reported on group B and vice versa, so no reported figure comes from the
 frames its configuration was chosen on. ``--json`` keeps every figure.
 
-Usage: python benchmarks/tune_fine.py ROOT --variant fg+gp --variant full \\
+Usage: python benchmarks/tune_fine.py ROOT --models MODELS --variant fg+gp --variant full \\
            --config paper: --config box100:box_weight=100 --config box100gp:box_weight=100,plane_refinement=1
+On real frames the part evidence of a frame of fold k comes from ``MODELS/parts_fold{k}.npz``
+(``benchmarks/bench_real.py --save-dir MODELS``), a model that never saw the frame's drive;
+``--shipped`` uses the shipped part model (only fair on frames it was not trained on, e.g.
+synthetic scenes of an unused seed).
 (``bilinear=0`` in a configuration looks the part maps up at the nearest grid point.)
 """
 
@@ -27,6 +31,7 @@ import copy  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -34,9 +39,11 @@ from wirescene.io.folds import fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.io.wireframes import read_wireframe_gt, wireframe_gt_path  # noqa: E402
 from wirescene.eval.metrics import evaluate  # noqa: E402
-from wirescene.eval.runner import DetectionSource, frame_result, frame_seed  # noqa: E402
+from wirescene.eval.runner import frame_result  # noqa: E402
+from wirescene.eval.sources import DetectionSource, frame_seed  # noqa: E402
 from wirescene.infer.evidence import oracle_evidence, part_evidence  # noqa: E402
-from wirescene.fitting.scene import FitOptions, fit_scene  # noqa: E402
+from wirescene.fitting.pipeline import FitOptions, fit_scene  # noqa: E402
+from wirescene.parts.detector import PartDetector  # noqa: E402
 from wirescene.infer.inference import InferenceOptions  # noqa: E402
 from wirescene.lift import lift_table  # noqa: E402
 
@@ -76,7 +83,7 @@ def group_of(frame_id: str, synthetic: bool) -> str:
     return next(g for g, folds in GROUPS.items() if f in folds)
 
 
-def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=1, log=print):
+def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=1, models=None, log=print):
     """Fit ``variants`` under every configuration ``{name: options}`` on the frames of
     ``root`` (label boxes as pre-detections; evidence and coarse grid once per frame).
 
@@ -100,7 +107,8 @@ def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=
         if evidence == "oracle":
             frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
         else:
-            frame_evidence = part_evidence(ds.image(fid), detections)
+            detector = None if models is None else PartDetector.load(models / f"parts_fold{fold_of(fid)}.npz")
+            frame_evidence = part_evidence(ds.image(fid), detections, detector=detector)
         lifted = lift_table(camera, detections)
         for name, kw in configs.items():
             kw = dict(kw)
@@ -128,10 +136,14 @@ def main():
     ap.add_argument("--evidence", choices=["parts", "oracle"], default="parts")
     ap.add_argument("--synthetic", action="store_true", help="group frames by parity instead of fold")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--models", type=Path, default=None, help="fold models (parts_fold{k}.npz)")
+    ap.add_argument("--shipped", action="store_true", help="use the shipped part model")
     args = ap.parse_args()
+    if args.evidence == "parts" and not args.synthetic and not args.shipped and args.models is None:
+        ap.error("real frames need --models DIR (fold part models) or --shipped")
     configs = dict(parse_config(c) for c in args.config)
     results, seconds, n_frames = run_configs(args.root, args.variant, configs, evidence=args.evidence,
-                                             frames=args.frames, seed=args.seed,
+                                             frames=args.frames, seed=args.seed, models=args.models,
                                              log=lambda m: print(m, flush=True))
     table = {}
     for (name, v), frames in results.items():

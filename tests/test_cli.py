@@ -260,3 +260,21 @@ def test_model_files_can_be_chosen_per_run(tmp_path):
     assert json.loads(a.read_text()) == json.loads(b.read_text())
     r = CliRunner().invoke(main, [str(x) for x in common] + ["--parts-model", str(tmp_path / "none.npz")])
     assert r.exit_code == 2 and "--parts-model" in r.stderr
+
+
+def test_inference_options_reach_the_fit():
+    """Every option of the fine stage on the command line ends up in InferenceOptions."""
+    from wirescene.cli import main as cli_main
+
+    opts = cli_main._fit_options(7, 3, iterations=5, samples=4, prune_after=0, box_weight=2.5, plane_refinement=False,
+                                 shape_prior=0.0, polish_iterations=9, device="numpy", parts_model=None,
+                                 detector_bank=None)
+    inf = opts.inference
+    assert (inf.iterations, inf.samples, inf.prune_after, inf.box_weight, inf.plane_refinement, inf.shape_prior,
+            inf.polish_iterations) == (5, 4, 0, 2.5, False, 0.0, 9)
+    assert opts.lifting.n_particles == 7 and opts.seed == 3
+    from wirescene.infer.inference import InferenceOptions
+
+    unset = cli_main._fit_options(7, 3, shape_prior=None, polish_iterations=None).inference  # not given: defaults
+    assert (unset.shape_prior, unset.polish_iterations) == (InferenceOptions().shape_prior,
+                                                            InferenceOptions().polish_iterations)

@@ -82,6 +82,31 @@ def test_lifting_gt_boxes_recovers_kitti_centres(dataset):
     assert np.median(errors) < 0.05, errors
 
 
+def test_unlikely_detections_do_not_outvote_the_cars_on_the_plane(dataset):
+    """Three cars on a plane pitched by 1 deg and four false boxes that fit a plane
+    pitched by -1 deg: with equal votes the false boxes drag the shared plane away;
+    weighted by their (low) detection scores they do not."""
+    from wirescene.lift import plane_vote_weights
+
+    camera = dataset.camera("000010")
+    cars = [(-4.0, 12.0, 0.3, np.deg2rad(1.0), 0.0), (3.0, 18.0, -1.6, np.deg2rad(1.0), 0.0),
+            (5.0, 28.0, 1.5, np.deg2rad(1.0), 0.0)]
+    false = [(x, z, 0.5, np.deg2rad(-1.0), 0.0) for x, z in ((-6.0, 15.0), (6.0, 20.0), (-3.0, 25.0), (2.0, 9.0))]
+    boxes, alpha = _synthetic_boxes(camera, cars + false)
+    scores = np.array([0.9, 0.8, 0.7, 0.1, 0.1, 0.1, 0.1])
+    dets = Detections(boxes, scores, bin_center(viewpoint_bin(alpha)))
+    table = lift_table(camera, dets)
+    equal = select_particles(table, shared_plane=True, n_particles=1)
+    weighted = select_particles(table, shared_plane=True, n_particles=1, weights=plane_vote_weights(scores))
+    assert abs(equal.pitch[0, 0] - np.deg2rad(1.0)) > np.deg2rad(0.25) + 1e-9
+    assert abs(weighted.pitch[0, 0] - np.deg2rad(1.0)) <= np.deg2rad(0.25) + 1e-9
+    # The pipeline votes with the detection scores; scores on another scale vote equally.
+    assert_close(lift_detections(camera, dets, shared_plane=True).pitch[0, 0], weighted.pitch[0, 0], atol=0)
+    assert_close(plane_vote_weights(scores), scores, atol=0)
+    assert_close(plane_vote_weights(np.array([2.5, -1.0])), [1.0, 1.0], atol=0)
+    assert_close(plane_vote_weights(np.zeros(3)), np.ones(3), atol=0)
+
+
 def test_particles_sorted_and_configurable(dataset):
     camera = dataset.camera("001545")
     dets = detections_from_labels(dataset.labels("001545"))

@@ -244,20 +244,35 @@ def lift_table(
     return LiftingTable(pitch_g, roll_g, take(x), take(z), take(az), take(cost), np.array(dims), options.camera_height)
 
 
+def plane_vote_weights(scores: np.ndarray) -> np.ndarray:
+    """Weights ``(N,)`` of the detections' votes for a shared ground plane: their scores
+    when all lie in [0, 1] (probabilities that the box is a car, as our calibrated
+    pre-detections and label boxes give), else equal weights (scores on another scale,
+    e.g. an external detector's margins, say nothing comparable)."""
+    s = np.asarray(scores, dtype=float).reshape(-1)
+    if len(s) and np.all((s >= 0) & (s <= 1)) and s.sum() > 0:
+        return s
+    return np.ones(len(s))
+
+
 def select_particles(
-    table: LiftingTable, *, shared_plane: bool, n_particles: int = 250, robust_cost: float = 0.05
+    table: LiftingTable, *, shared_plane: bool, n_particles: int = 250, robust_cost: float = 0.05,
+    weights: np.ndarray | None = None,
 ) -> SceneParticles:
     """Scene particles from a lifting table, best first.
 
     With ``shared_plane`` (``coarse+gp``) particle ``k`` is the ``k``-th best plane by
-    the sum of per-object costs, each capped at ``robust_cost`` so one bad detection
-    cannot veto a plane; without (``coarse``) particle ``k`` gives every object its own
+    the ``weights``-weighted sum (default: equal; see :func:`plane_vote_weights`) of
+    per-object costs, each capped at ``robust_cost`` so one bad detection cannot veto a
+    plane, and weighted so that likely false detections, which stand anywhere, do not
+    outvote the cars; without (``coarse``) particle ``k`` gives every object its own
     ``k``-th best plane.
     """
     n, G = table.cost.shape
     k = min(n_particles, G)
     if shared_plane:
-        total = np.minimum(table.cost, robust_cost).sum(axis=0) + 1e-3 * table.cost.sum(axis=0)
+        w = np.ones(n) if weights is None else np.asarray(weights, dtype=float).reshape(n)
+        total = w @ np.minimum(table.cost, robust_cost) + 1e-3 * (w @ table.cost)
         order = np.argsort(total, kind="stable")[:k]
         cols = np.broadcast_to(order[:, None], (k, n))  # (P, N) plane index per object
     else:
@@ -293,5 +308,6 @@ def lift_detections(
     """
     table = lift_table(camera, detections, options=options, dims=dims)
     return select_particles(
-        table, shared_plane=shared_plane, n_particles=options.n_particles, robust_cost=options.robust_cost
+        table, shared_plane=shared_plane, n_particles=options.n_particles, robust_cost=options.robust_cost,
+        weights=plane_vote_weights(detections.scores),
     )

@@ -119,6 +119,11 @@ def _inference_options(f):
                           "(0: the paper's part likelihood only; default: InferenceOptions).")(f)
     f = click.option("--plane-refinement/--no-plane-refinement", default=None,
                      help="Sample the ground plane in the fine stage (default: InferenceOptions).")(f)
+    f = click.option("--shape-prior", type=NON_NEGATIVE_FLOAT, default=None,
+                     help="Weight of the shape model's Gaussian prior in the fine objective "
+                          "(0: none; default: InferenceOptions).")(f)
+    f = click.option("--polish-iterations", type=NON_NEGATIVE, default=None,
+                     help="Extra iterations on the MAP scene after Algorithm 1 (0: none; default: InferenceOptions).")(f)
     return f
 
 
@@ -179,8 +184,7 @@ def _dask_client(address: str):
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
-             raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address, iterations, samples, prune_after, box_weight,
-             plane_refinement, device, parts_model, detector_bank):
+             raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address, **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
@@ -201,10 +205,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
     dataset = KittiDataset(kitti_root, split=split)
     variants = list(variants) or _variants()
     frame_ids = parse_frames(frames, dataset.frame_ids())
-    options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, plane_refinement=plane_refinement, device=device,
-                           parts_model=parts_model,
-                           detector_bank=detector_bank)
+    options = _fit_options(particles, seed, **inference)
     if raw_scores:
         options = dataclasses.replace(options, calibrate_scores=False)
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections,
@@ -285,8 +286,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
               help="Fit frames on this running Dask scheduler instead of local processes.")
 @_inference_options
 def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, frames, particles, seed, workers,
-                resume, dask_address, iterations, samples, prune_after, box_weight, plane_refinement, device, parts_model,
-             detector_bank):
+                resume, dask_address, **inference):
     """Write KITTI label files (with scores) for every image of a split, labelled or not."""
     from wirescene.eval.predict import predict_dataset
     from wirescene.eval.sources import DetectionSource
@@ -299,10 +299,7 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
             detections = str(Path(detections).resolve())
     dataset = KittiDataset(kitti_root, split=split)
     frame_ids = parse_frames(frames, dataset.image_ids())
-    options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, plane_refinement=plane_refinement, device=device,
-                           parts_model=parts_model,
-                           detector_bank=detector_bank)
+    options = _fit_options(particles, seed, **inference)
     on_gpu = options.inference.device.startswith("cuda")
     client = _dask_client(dask_address) if dask_address is not None else None
     total = len(frame_ids) if frame_ids else len(dataset.image_ids())
@@ -372,8 +369,7 @@ def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames):
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
 @_inference_options
-def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterations, samples, prune_after, box_weight,
-            plane_refinement, device, parts_model, detector_bank):
+def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **inference):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from wirescene.api import fit
     from wirescene.core.camera import read_kitti_calib
@@ -386,10 +382,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, iterati
     camera = read_kitti_calib(calib).camera((img.shape[1], img.shape[0]))
     dets = read_detections(detections, image_size=(img.shape[1], img.shape[0])) if detections is not None else None
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
-    options = _fit_options(particles, seed, iterations=iterations, samples=samples, prune_after=prune_after,
-                           box_weight=box_weight, plane_refinement=plane_refinement, device=device,
-                           parts_model=parts_model,
-                           detector_bank=detector_bank)
+    options = _fit_options(particles, seed, **inference)
     estimate = fit(img, camera, dets, variant=variant, options=options)
     if not estimate.cars and dets is None:
         raise InputError("pre-detection found no car in the image", path=image)

@@ -22,7 +22,7 @@ from wirescene.fitting.variants import Variant, get_variant
 from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
 from wirescene.infer.likelihood import PartEvidence
-from wirescene.lift import LiftingOptions, LiftingTable, lift_table, select_particles
+from wirescene.lift import LiftingOptions, LiftingTable, lift_table, plane_vote_weights, select_particles
 
 
 @dataclass(frozen=True)
@@ -160,7 +160,7 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
     variants) Algorithm 1 on every particle and the MAP scene."""
     particles = select_particles(
         lifted, shared_plane=v.shared_plane, n_particles=options.lifting.n_particles,
-        robust_cost=options.lifting.robust_cost,
+        robust_cost=options.lifting.robust_cost, weights=plane_vote_weights(detections.scores),
     )
     if not v.fine:
         best = int(np.argmin(particles.cost))

@@ -1,0 +1,33 @@
+"""The benchmark scripts stay importable as the package's layout changes.
+
+Benchmarks are not run by the test suite (they take minutes to hours), but a script
+whose imports no longer resolve is found here rather than by the next person who needs
+its figures.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+SCRIPTS = sorted(p for p in BENCHMARKS.glob("*.py") if p.stem != "timing")  # timing.py: a helper
+
+
+def test_there_are_benchmarks():
+    assert len(SCRIPTS) >= 5
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)
+def test_benchmark_imports(script, monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    spec = importlib.util.spec_from_file_location(f"_bench_{script.stem}", script)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)  # every script guards its main with __name__
+    finally:
+        sys.modules.pop(f"_bench_{script.stem}", None)
+    assert callable(getattr(module, "main", None)), f"{script.name} has no main()"
