@@ -158,13 +158,16 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
                  evidence: PartEvidence | None, options: FitOptions) -> SceneEstimate:
     """Stages 4-5 for one variant: scene particles from the lifting table, then (fine
     variants) Algorithm 1 on every particle and the MAP scene."""
+    weights = plane_vote_weights(detections.scores)
     particles = select_particles(
         lifted, shared_plane=v.shared_plane, n_particles=options.lifting.n_particles,
-        robust_cost=options.lifting.robust_cost, weights=plane_vote_weights(detections.scores),
+        robust_cost=options.lifting.robust_cost, weights=weights,
     )
     if not v.fine:
-        best = int(np.argmin(particles.cost))
-        estimate = SceneEstimate.from_particle(particles, best, detections, variant=v.name)
+        # select_particles ranks the particles best first by its scene cost (capped and
+        # weighted by the detections' scores), not by the plain sum ``particles.cost``,
+        # which lets badly fitting (false) detections pick the shared plane.
+        estimate = SceneEstimate.from_particle(particles, 0, detections, variant=v.name)
         return apply_confidence(estimate, fine=False) if options.calibrate_scores else estimate
     shape_model = load_shape_model()
     # Seeded per call from the run seed and the scene size alone, so a variant's fit does
@@ -172,7 +175,7 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
     rng = np.random.default_rng([options.seed, len(detections)])
     refined = refine_particles(
         camera, particles, evidence, shape_model, options=options.inference, rng=rng, boxes=detections.boxes,
-        searched_occluder=v.searched_occluder, deterministic_occlusion=v.deterministic_occlusion,
+        searched_occluder=v.searched_occluder, deterministic_occlusion=v.deterministic_occlusion, weights=weights,
     )
     estimate = estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)
     return apply_confidence(estimate, fine=True) if options.calibrate_scores else estimate

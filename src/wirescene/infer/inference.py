@@ -140,7 +140,8 @@ class RefinedParticles:
     (higher is better), occluder ``mask`` indices ``(P, N)`` and deterministic
     inter-object occlusion ``gamma`` ``(P, N, 36)``, with the coarse particles' planes.
     ``coupled`` says whether objects depend on each other (shared plane or
-    deterministic occlusion), so that only whole particles can be compared."""
+    deterministic occlusion), so that only whole particles can be compared, by the
+    scene objective: the object likelihoods summed with ``weights`` ``(N,)``."""
 
     particles: SceneParticles
     shape: np.ndarray
@@ -153,6 +154,11 @@ class RefinedParticles:
     # shape...) and (P, N, 2) of (pitch, roll); see the module docstring.
     spread: np.ndarray | None = None
     plane_spread: np.ndarray | None = None
+    weights: np.ndarray | None = None  # (N,); None: all 1
+
+    def scene_score(self) -> np.ndarray:
+        """(P,) scene objective of every particle."""
+        return _scene(self.score, self.weights)
 
     def best_per_object(self) -> np.ndarray:
         """(N,) particle index with the highest likelihood for each object."""
@@ -160,7 +166,7 @@ class RefinedParticles:
 
     def best_scene(self) -> int:
         """Particle with the highest scene objective (sum of object likelihoods)."""
-        return int(np.argmax(self.score.sum(axis=1)))
+        return int(np.argmax(self.scene_score()))
 
     def best_rows(self) -> np.ndarray:
         """(N,) particle of each object in the MAP estimate."""
@@ -323,13 +329,21 @@ def _occlusion_of(camera, terms: _Terms, c, *, searched: bool, deterministic: bo
     return None, None
 
 
-def _best_rows(score: np.ndarray, k: int, *, coupled: bool) -> np.ndarray:
+def _scene(score: np.ndarray, weights: np.ndarray | None, axis: int = 1) -> np.ndarray:
+    """Scene objective: object scores summed over ``axis`` with ``weights`` (None: 1)."""
+    if weights is None:
+        return score.sum(axis=axis)
+    w = np.asarray(weights, float).reshape((-1,) + (1,) * (score.ndim - axis - 1))
+    return np.sum(score * w, axis=axis)
+
+
+def _best_rows(score: np.ndarray, k: int, *, coupled: bool, weights: np.ndarray | None = None) -> np.ndarray:
     """``(k, N)`` particle rows to keep for each object: the ``k`` best scenes (sum over
     objects) when objects are coupled, else each object's own ``k`` best particles
     (independent objects may be regrouped into new rows)."""
     N = score.shape[1]
     if coupled:
-        rows = np.argsort(-score.sum(axis=1), kind="stable")[:k]
+        rows = np.argsort(-_scene(score, weights), kind="stable")[:k]
         return np.repeat(rows[:, None], N, axis=1)
     return np.argsort(-score, axis=0, kind="stable")[:k]
 
@@ -345,6 +359,7 @@ def refine_particles(
     boxes: np.ndarray | None = None,
     searched_occluder: bool = False,
     deterministic_occlusion: bool = False,
+    weights: np.ndarray | None = None,
 ) -> RefinedParticles:
     """Run Algorithm 1 on every particle.
 
@@ -360,6 +375,11 @@ def refine_particles(
     searched_occluder, deterministic_occlusion : bool
         The ``+so`` and ``+do`` switches (see :func:`update_occlusion`). Masks start
         empty (``a0``) and are updated after every sampling step.
+    weights : (N,) array, optional
+        Weights of the objects in the scene objective that compares coupled particles
+        and shared planes (default: 1 each); the pipeline passes the detections' plane
+        votes (:func:`wirescene.lift.plane_vote_weights`), so that likely false
+        detections cannot choose the plane of the cars.
     """
     options = InferenceOptions() if options is None else options
     rng = np.random.default_rng(0) if rng is None else rng
@@ -401,7 +421,7 @@ def refine_particles(
     c = options.occluded_score
     current = terms_of(theta[:, :, None], plane)
     score = current.value(c, mask, gamma)[..., 0]
-    history = [score.sum(axis=1).max()]
+    history = [_scene(score, weights).max()]
     blocks = [np.arange(3), np.arange(3, D)] if options.block_sampling and K else [np.arange(D)]
     if options.plane_refinement:
         blocks.append(None)  # the ground plane
@@ -420,7 +440,7 @@ def refine_particles(
 
     for it in range(options.iterations + options.polish_iterations):
         if it == options.iterations:
-            keep_rows(_best_rows(score, 1, coupled=coupled))
+            keep_rows(_best_rows(score, 1, coupled=coupled, weights=weights))
         M = options.samples if it < options.iterations else options.polish_samples
         block = blocks[it % len(blocks)]
         if block is None:
@@ -435,7 +455,8 @@ def refine_particles(
                                (cand_plane[..., 0], cand_plane[..., 1]), height)
             sampled = terms_of(cand[:, :, 1:], cand_plane[:, :, 1:])
             values = np.concatenate([score[:, :, None], sampled.value(c, mask, gamma)], axis=2)
-            judged = values.sum(axis=1, keepdims=True) if shared else values  # a shared plane: the scene decides
+            # a shared plane: the scene decides
+            judged = _scene(values, weights)[:, None] if shared else values
             best = np.broadcast_to(np.argmax(judged, axis=2), (P, N))
             delta = cand_plane - plane[:, :, None]
             plane_sigma = np.broadcast_to(smoothed_spread(judged, delta, plane_sigma, plane_sigma0), (P, N, 2)).copy()
@@ -471,10 +492,11 @@ def refine_particles(
             mask, gamma = _occlusion_of(camera, current, c, searched=searched_occluder,
                                         deterministic=deterministic_occlusion, device=options.device)
             score = current.value(c, mask, gamma)[..., 0]
-        history.append(score.sum(axis=1).max())
+        history.append(_scene(score, weights).max())
         if (options.prune_after and it + 1 == options.prune_after and options.keep_fraction < 1
                 and it + 1 < options.iterations):
-            keep_rows(_best_rows(score, max(1, int(np.ceil(options.keep_fraction * P))), coupled=coupled))
+            keep_rows(_best_rows(score, max(1, int(np.ceil(options.keep_fraction * P))), coupled=coupled,
+                                 weights=weights))
     x, z, azimuth = _from_viewing(theta)
     refined = SceneParticles(
         pitch=plane[..., 0], roll=plane[..., 1], x=x, z=z, azimuth=azimuth,
@@ -485,7 +507,7 @@ def refine_particles(
         mask=np.zeros((P, N), dtype=int) if mask is None else mask,
         gamma=np.zeros((P, N, N_VERTICES), dtype=bool) if gamma is None else gamma,
         coupled=coupled,
-        spread=sigma, plane_spread=plane_sigma,
+        spread=sigma, plane_spread=plane_sigma, weights=weights,
     )
 
 
