@@ -120,7 +120,7 @@ def test_particles_sorted_and_configurable(dataset):
         p = select_particles(table, shared_plane=shared, n_particles=40)
         assert p.n_particles == 40 and p.n_objects == len(dets)
         if shared:
-            assert np.all(np.diff(np.minimum(p.object_cost, 0.05).sum(1) + 1e-3 * p.cost) >= -1e-12)
+            assert np.all(np.diff(np.minimum(p.object_cost, 0.01).sum(1) + 1e-3 * p.cost) >= -1e-12)
         else:
             assert np.all(np.diff(p.object_cost, axis=0) >= 0)
     # Independent objects fit their boxes at least as well as objects sharing a plane.

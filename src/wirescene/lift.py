@@ -49,7 +49,12 @@ class LiftingOptions:
     azimuth_step: float = 2.5
     unknown_viewpoint_step: float = 5.0  # full circle when the detector gives none
     iterations: int = 8
-    robust_cost: float = 0.05  # per-object cost cap when objects vote for a shared plane
+    # Per-object cost cap when objects vote for a shared plane, near the cost of a car
+    # that fits its box (so a box no car on the plane explains counts as an outlier).
+    # 0.01 rather than 0.05: with our pre-detections (1-2 true positives per frame
+    # among false ones) coarse+gp went from 21% to 29% of the true positives within 1 m
+    # (both fold groups gained or held), with label boxes unchanged (43%).
+    robust_cost: float = 0.01
     camera_height: float = KITTI_CAMERA_HEIGHT
     n_particles: int = 250
 
@@ -256,7 +261,7 @@ def plane_vote_weights(scores: np.ndarray) -> np.ndarray:
 
 
 def select_particles(
-    table: LiftingTable, *, shared_plane: bool, n_particles: int = 250, robust_cost: float = 0.05,
+    table: LiftingTable, *, shared_plane: bool, n_particles: int = 250, robust_cost: float = 0.01,
     weights: np.ndarray | None = None,
 ) -> SceneParticles:
     """Scene particles from a lifting table, best first.
