@@ -131,8 +131,9 @@ def test_polish_refines_only_the_map_rows_and_never_loses_the_objective(syntheti
     assert_close(polished.history[:7], plain.history, atol=0)
     rows = plain.best_rows()
     before = plain.score[rows, np.arange(4)]
-    assert np.all(polished.score[0] >= before - 1e-9)
-    assert polished.score[0].sum() > before.sum()  # 36 more samples per object found something better
+    if not shared:  # independent objects: each one's own objective never decreases
+        assert np.all(polished.score[0] >= before - 1e-9)
+    assert polished.score[0].sum() > before.sum()  # 6 more iterations found a better scene
 
 
 def test_best_rows_for_coupled_and_independent_objects():

@@ -52,8 +52,9 @@ class LiftingOptions:
     # Per-object cost cap when objects vote for a shared plane, near the cost of a car
     # that fits its box (so a box no car on the plane explains counts as an outlier).
     # 0.01 rather than 0.05: with our pre-detections (1-2 true positives per frame
-    # among false ones) coarse+gp went from 21% to 29% of the true positives within 1 m
-    # (both fold groups gained or held), with label boxes unchanged (43%).
+    # among false ones; fold models) coarse+gp placed 31% of the 36 true positives
+    # within 1 m instead of 22% (both fold groups gained or held), label boxes unchanged
+    # (43% of 141 cars; benchmarks/bench_real_folds.py).
     robust_cost: float = 0.01
     camera_height: float = KITTI_CAMERA_HEIGHT
     n_particles: int = 250
