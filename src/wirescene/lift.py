@@ -262,7 +262,7 @@ def plane_vote_weights(scores: np.ndarray) -> np.ndarray:
 
 
 def select_particles(
-    table: LiftingTable, *, shared_plane: bool, n_particles: int = 250, robust_cost: float = 0.01,
+    table: LiftingTable, *, shared_plane: bool, n_particles: int = 250, robust_cost: float | None = None,
     weights: np.ndarray | None = None,
 ) -> SceneParticles:
     """Scene particles from a lifting table, best first.
@@ -272,8 +272,9 @@ def select_particles(
     per-object costs, each capped at ``robust_cost`` so one bad detection cannot veto a
     plane, and weighted so that likely false detections, which stand anywhere, do not
     outvote the cars; without (``coarse``) particle ``k`` gives every object its own
-    ``k``-th best plane.
+    ``k``-th best plane. ``robust_cost`` defaults to ``LiftingOptions().robust_cost``.
     """
+    robust_cost = LiftingOptions().robust_cost if robust_cost is None else robust_cost
     n, G = table.cost.shape
     k = min(n_particles, G)
     if shared_plane:
