@@ -128,6 +128,61 @@ def calibrate_threshold(bank: DetectorBank, *, seed: int, n_val: int, cars=(2, 8
     return thr, val
 
 
+def positive_features(configs, examples, gray_of, rng, *, min_height, max_pos, min_pos, max_jitter,
+                      max_occluded, max_truncated, min_box_cells=None):
+    """HOG features of every configuration's positive examples.
+
+    A car example is a positive of configuration ``c`` when it is in ``c``'s viewpoint
+    bin, at least ``min_height`` px tall and, for a full-car configuration, occluded by
+    less than ``max_occluded`` and truncated by at most ``max_truncated`` (a partial
+    configuration needs all its vertices visible); with ``min_box_cells`` the
+    configuration's box must also span ``min_box_cells`` px per template cell. At most
+    ``max_pos`` are drawn at random; rare viewpoints get up to ``max_jitter`` jittered
+    copies each (shift +-5%, scale +-7%) to reach about ``min_pos``. ``gray_of(example)``
+    is its float grey image in [0, 1].
+
+    Returns the ``(n, th * tw * N_FEAT)`` feature arrays and the number of examples
+    (before jitter), one per configuration.
+    """
+    pos, counts = [], []
+    for c in configs:
+        th, tw = c.template
+        cand = []
+        for e in examples:
+            if e.bin != c.bin or e.full_box[3] - e.full_box[1] < min_height:
+                continue
+            if c.vertices == FULL:
+                if e.occ_frac >= max_occluded or e.truncated > max_truncated:
+                    continue
+            elif not e.visible[list(c.vertices)].all():
+                continue
+            box = config_box(e.v2d, c.vertices, e.full_box)
+            if min_box_cells is not None and box[3] - box[1] < th * min_box_cells:
+                continue
+            cand.append((e, box))
+        if len(cand) > max_pos:
+            cand = [cand[k] for k in np.sort(rng.choice(len(cand), max_pos, replace=False))]
+        n_jit = min(max_jitter, int(np.ceil(min_pos / len(cand))) - 1) if cand else 0
+        feats, cache = [], {}
+        for e, box in cand:
+            key = (e.image, e.flipped)
+            if key not in cache:  # examples come grouped by image: keep one image at a time
+                cache.clear()
+                cache[key] = gray_of(e)
+            g = cache[key]
+            feats.append(crop_features(g, box, th, tw).ravel())
+            w, h = box[2] - box[0], box[3] - box[1]
+            for _ in range(max(n_jit, 0)):
+                cx = (box[0] + box[2]) / 2 + rng.uniform(-0.05, 0.05) * w
+                cy = (box[1] + box[3]) / 2 + rng.uniform(-0.05, 0.05) * h
+                f = np.exp(rng.uniform(-0.07, 0.07))
+                feats.append(crop_features(g, [cx - f * w / 2, cy - f * h / 2, cx + f * w / 2, cy + f * h / 2],
+                                           th, tw).ravel())
+        pos.append(np.array(feats, np.float32).reshape(-1, th * tw * N_FEAT))
+        counts.append(len(cand))
+    return pos, counts
+
+
 def train_detector_bank(out_path, *, seed: int = 0, n_scenes: int = 200, n_partial: int = 3, bins=range(N_BINS),
                         C: float = 0.01, max_pos: int = 800, min_pos: int = 150, neg_per_image: int = 15, mining_rounds: int = 1,
                         mining_images: int = 80, hard_per_image: int = 10, n_val: int = 20,
@@ -163,41 +218,9 @@ def train_detector_bank(out_path, *, seed: int = 0, n_scenes: int = 200, n_parti
         g = grays[e.image].astype(np.float32) / 255.0
         return g[:, ::-1] if e.flipped else g
 
-    pos = []
-    for c in configs:
-        th, tw = c.template
-        feats = []
-        cand = []
-        for e in examples:
-            if e.bin != c.bin or e.full_box[3] - e.full_box[1] < min_height:
-                continue
-            if c.vertices == FULL:
-                if e.occ_frac >= 0.2 or e.truncated > 0:
-                    continue
-            elif not e.visible[list(c.vertices)].all():
-                continue
-            box = config_box(e.v2d, c.vertices, e.full_box)
-            if box[3] - box[1] < th * CELL / max_scale:
-                continue
-            cand.append((e, box))
-        if len(cand) > max_pos:
-            cand = [cand[k] for k in np.sort(rng.choice(len(cand), max_pos, replace=False))]
-        # rare viewpoints: add jittered copies (shift +-5%, scale +-7%) up to ~min_pos examples
-        n_jit = min(4, int(np.ceil(min_pos / len(cand))) - 1) if cand else 0
-        cache = {}
-        for e, box in cand:
-            key = (e.image, e.flipped)
-            if key not in cache:
-                cache.clear()
-                cache[key] = gray_of(e)
-            feats.append(crop_features(cache[key], box, th, tw).ravel())
-            for _ in range(max(n_jit, 0)):
-                w, h = box[2] - box[0], box[3] - box[1]
-                cx, cy = (box[0] + box[2]) / 2 + rng.uniform(-0.05, 0.05) * w, (box[1] + box[3]) / 2 + rng.uniform(-0.05, 0.05) * h
-                f = np.exp(rng.uniform(-0.07, 0.07))
-                jb = [cx - f * w / 2, cy - f * h / 2, cx + f * w / 2, cy + f * h / 2]
-                feats.append(crop_features(cache[key], jb, th, tw).ravel())
-        pos.append(np.array(feats, np.float32).reshape(-1, th * tw * N_FEAT))
+    pos, _ = positive_features(configs, examples, gray_of, rng, min_height=min_height, max_pos=max_pos,
+                               min_pos=min_pos, max_jitter=4, max_occluded=0.2, max_truncated=0.0,
+                               min_box_cells=CELL / max_scale)
     say("positives per detector: " + " ".join(str(len(p)) for p in pos) + f" [{time.time() - t0:.0f}s]")
 
     # ---- negatives: random windows, then hard negatives

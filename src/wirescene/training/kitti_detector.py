@@ -40,16 +40,14 @@ import numpy as np
 from wirescene.core.viewpoints import N_BINS, viewpoint_bin
 from wirescene.predetect.bank import DetectorBank, detect_pyramid, score_pyramid
 from wirescene.predetect.configurations import (
-    FULL,
     CarExample,
     apply_full_box,
-    config_box,
     learn_full_box_correction,
     mirror_bin,
     select_configurations,
 )
-from wirescene.predetect.hog import N_FEAT, crop_features, feature_pyramid, pyramid_scales, to_gray
-from wirescene.training.detector import _overlap_frac, fit_svms, sample_random_negatives
+from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
+from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, sample_random_negatives
 
 BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
 """Labelled objects no negative window may overlap (DontCare regions too)."""
@@ -185,36 +183,11 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     say(f"{len(configs)} configurations; car examples per bin {per_bin.tolist()}")
 
     # ---- positives
-    pos = []
-    for c in configs:
-        th, tw = c.template
-        cand = []
-        for e in examples:
-            if e.bin != c.bin or e.full_box[3] - e.full_box[1] < min_height:
-                continue
-            if c.vertices == FULL:
-                if e.occ_frac >= 0.35 or e.truncated > 0.15:
-                    continue
-            elif not e.visible[list(c.vertices)].all():
-                continue
-            box = config_box(e.v2d, c.vertices, e.full_box)
-            cand.append((e, box))
-        if len(cand) > max_pos:
-            cand = [cand[k] for k in np.sort(rng.choice(len(cand), max_pos, replace=False))]
-        n_jit = min(max_jitter, int(np.ceil(min_pos / len(cand))) - 1) if cand else 0
-        feats = []
-        for e, box in cand:
-            g = images[e.image].gray.astype(np.float32) / 255.0
-            feats.append(crop_features(g, box, th, tw).ravel())
-            w, h = box[2] - box[0], box[3] - box[1]
-            for _ in range(max(n_jit, 0)):
-                cx = (box[0] + box[2]) / 2 + rng.uniform(-0.05, 0.05) * w
-                cy = (box[1] + box[3]) / 2 + rng.uniform(-0.05, 0.05) * h
-                f = np.exp(rng.uniform(-0.07, 0.07))
-                feats.append(crop_features(g, [cx - f * w / 2, cy - f * h / 2, cx + f * w / 2, cy + f * h / 2],
-                                           th, tw).ravel())
-        c.n_examples = len(cand)
-        pos.append(np.array(feats, np.float32).reshape(-1, th * tw * N_FEAT))
+    pos, counts = positive_features(
+        configs, examples, lambda e: images[e.image].gray.astype(np.float32) / 255.0, rng, min_height=min_height,
+        max_pos=max_pos, min_pos=min_pos, max_jitter=max_jitter, max_occluded=0.35, max_truncated=0.15)
+    for c, n in zip(configs, counts):
+        c.n_examples = n
     say("positives per detector: " + " ".join(str(len(p)) for p in pos) + f" [{time.time() - t0:.0f}s]")
 
     # ---- random negatives
