@@ -198,8 +198,13 @@ def test_2d_part_metrics():
                           gt_vertices_2d=[gt_uv], gt_vertex_visible=[visible])])
     m = rep["all"]
     assert_close(m["occ_pred_acc"], 90.0)
-    # 6 of 10 parts localised (< 70%) -> car not counted; eligible since 8/10 visible
-    assert m["n_parts_70_eligible"] == 1 and m["parts_70"] == 0.0
+    # the occluded parts count where they project (paper: "all (not self-occluded)
+    # parts"): 8 of 10 localised; eligible since 8/10 visible
+    assert m["n_parts_70_eligible"] == 1 and m["parts_70"] == 100.0
+    est_uv[:2, 1] += 30.0  # both occluded parts off too: 6 of 10 (< 70%)
+    rep = evaluate([frame(gt, [dict()], est_occluded=est_occ, est_vertices_2d=est_uv[None],
+                          gt_vertices_2d=[gt_uv], gt_vertex_visible=[visible])])
+    assert rep["all"]["parts_70"] == 0.0
     est_uv[2, 0] = gt_uv[2, 0] + 19.0
     rep = evaluate([frame(gt, [dict()], est_occluded=est_occ, est_vertices_2d=est_uv[None],
                           gt_vertices_2d=[gt_uv], gt_vertex_visible=[visible])])

@@ -47,9 +47,9 @@ def synthetic_scene():
 @pytest.mark.parametrize("prior", [0.0, None])
 @pytest.mark.parametrize("shared", [True, False])
 def test_inference_with_perfect_evidence_beats_coarse(synthetic_scene, shared, prior):
-    """Perfect evidence of cars of random shapes: the fine stage beats its coarse start.
-    The default shape prior (chosen for the weak evidence of real part detectors) holds
-    the shape near the mean, so there only the azimuth is sure to improve."""
+    """Perfect evidence of cars of random shapes: the fine stage beats its coarse start,
+    with the default priors (chosen for the weak evidence of real part detectors) and
+    without the shape prior."""
     camera, model, truth, dets, evidence = synthetic_scene
     particles = select_particles(lift_table(camera, dets), shared_plane=shared, n_particles=30)
     coarse_err = np.hypot(particles.x[0] - truth["x"], particles.z[0] - truth["z"])
@@ -61,8 +61,7 @@ def test_inference_with_perfect_evidence_beats_coarse(synthetic_scene, shared, p
     loc = np.array([o.location for o in est.objects])
     fine_err = np.hypot(loc[:, 0] - truth["x"], loc[:, 2] - truth["z"])
     fine_az = angle_difference([o.rotation_y for o in est.objects], truth["azimuth"])
-    if prior is not None:
-        assert np.median(fine_err) < np.median(coarse_err)
+    assert np.median(fine_err) < np.median(coarse_err)
     assert np.median(fine_az) < np.median(coarse_az)
     assert np.median(fine_az) < np.deg2rad(5)
     for o in est.objects:
@@ -183,14 +182,14 @@ def test_spread_grows_on_flat_and_shrinks_at_a_peak(synthetic_scene, plane):
 def test_plane_refinement_and_box_term_recover_a_tilted_plane(synthetic_scene):
     """Started on the coarse grid, the sampled plane moves towards the true (0.7, -0.3)
     deg plane, objects following along their rays; the objective never decreases."""
-    from wirescene.infer.inference import _extent_corners
+    from wirescene.infer.inference import _extent, _extent_corners
     from wirescene.lift import project_boxes
 
     camera, model, truth, dets, evidence = synthetic_scene
     # boxes in KITTI's convention: the projected 3D box of each true wireframe
     b = instantiate_wireframes(camera, model, pitch=np.full(4, np.deg2rad(0.7)), roll=np.full(4, np.deg2rad(-0.3)),
                                height=1.65, **truth)
-    boxes, _ = project_boxes(camera, _extent_corners(b.vertices, b.location, b.R), b.location, b.R)
+    boxes, _ = project_boxes(camera, _extent_corners(*_extent(b.vertices, b.location, b.R)), b.location, b.R)
     dets = Detections(boxes, 1.0, dets.alpha)
     particles = select_particles(lift_table(camera, dets), shared_plane=True, n_particles=10)
     opts = InferenceOptions(iterations=15, plane_refinement=True, box_weight=100.0)
@@ -220,3 +219,55 @@ def test_box_cost_is_the_lifting_cost_in_kitti_convention(synthetic_scene):
     corners = box_corners_object(dims)
     vertices = np.matmul(corners, np.swapaxes(R, -1, -2)) + loc[:, None, :]
     assert_close(box_cost(camera, vertices, loc, R, dets.boxes), cost, atol=1e-9)
+
+
+
+def test_size_prior_is_the_negative_log_density_of_kitti_car_sizes(synthetic_scene):
+    """size_cost: 0 at KITTI's mean car, half the squared deviation in standard
+    deviations per dimension; the objective's penalty grows by size_prior times the
+    size_cost of each hypothesis' wireframe box, so a much shortened car costs more."""
+    from wirescene.core.boxes import KITTI_CAR_SIZE
+    from wirescene.infer.inference import _extent, _geometry, _terms, _to_viewing, size_cost
+
+    (l, w, h), (sl, _, sh) = KITTI_CAR_SIZE["mean"], KITTI_CAR_SIZE["std"]
+    lo = np.array([[-l / 2, -h, -w / 2], [-l / 2 - sl, -h - 2 * sh, -w / 2]])
+    hi = np.array([[l / 2, 0.0, w / 2], [l / 2, 0.0, w / 2]])
+    assert_close(size_cost(lo, hi), [0.0, 0.5 * (1.0 + 4.0)], atol=1e-12)
+
+    camera, model, truth, dets, evidence = synthetic_scene
+    particles = select_particles(lift_table(camera, dets), shared_plane=False, n_particles=1)
+    theta = np.zeros((1, len(dets), 2, 3 + 5))
+    theta[..., :3] = np.stack(_to_viewing(particles.x, particles.z, particles.azimuth), -1)[:, :, None]
+    theta[:, :, 1, 3] = 2.0  # first shape mode, 2 standard deviations: about 0.8 m shorter
+    plain = _terms(camera, model, evidence, particles, theta, 5)
+    priored = _terms(camera, model, evidence, particles, theta, 5, size_prior=2.0)
+    added = priored.penalty - plain.penalty
+    batch = _geometry(camera, model, (particles.pitch, particles.roll), particles.height, theta, 5)
+    lo, hi = _extent(batch.vertices, batch.location, batch.R)
+    assert_close(added, 2.0 * size_cost(lo, hi), atol=1e-6, rtol=1e-2)
+    assert np.all(added[..., 1] > added[..., 0] + 1.0)
+
+
+def test_oracle_evidence_peaks_at_the_matched_true_vertices():
+    """Oracle evidence: the detectors' scale at the true visible vertices of the ground
+    truth car a detection overlaps, falling off over ORACLE_SIGMA of the car length, and
+    the floor for occluded vertices and for a detection that overlaps no car."""
+    from wirescene.infer.evidence import ORACLE_FLOOR, ORACLE_PEAK, ORACLE_SIGMA, oracle_evidence
+    from wirescene.io.wireframes import WireframeGT
+
+    rng = np.random.default_rng(0)
+    uv = rng.uniform(100, 300, (2, 36, 2))
+    visible = np.ones((2, 36), bool)
+    visible[1, :5] = False
+    gt = WireframeGT(vertices_2d=list(uv), visible=list(visible), self_occluded=[np.zeros(36, bool)] * 2,
+                     occluded_parts=[0, 5], ground_plane={})
+    gt_boxes = np.array([[100, 100, 300, 300], [500, 100, 700, 300]], float)
+    dets = Detections(np.array([[510, 105, 700, 300], [0, 0, 50, 50]], float), 1.0, np.zeros(2))
+    ev = oracle_evidence(dets, gt_boxes, gt)
+    scale = np.full((2,), 200.0)
+    at_truth = ev.log_ratio(np.stack([uv[1], uv[1]]), np.array([0, 1]), scale)
+    assert_close(at_truth[0, 5:], ORACLE_PEAK)  # detection 0 is car 1: its visible vertices
+    assert_close(at_truth[0, :5], ORACLE_FLOOR)  # its occluded ones carry no evidence
+    assert_close(at_truth[1], ORACLE_FLOOR)  # detection 1 overlaps no car
+    shifted = ev.log_ratio(uv[1][None] + [ORACLE_SIGMA * 200.0, 0.0], np.array([0]), scale[:1])
+    assert_close(shifted[0, 5:], ORACLE_FLOOR + (ORACLE_PEAK - ORACLE_FLOOR) * np.exp(-0.5))

@@ -122,6 +122,9 @@ def _inference_options(f):
     f = click.option("--shape-prior", type=NON_NEGATIVE_FLOAT, default=None,
                      help="Weight of the shape model's Gaussian prior in the fine objective "
                           "(0: none; default: InferenceOptions).")(f)
+    f = click.option("--size-prior", type=NON_NEGATIVE_FLOAT, default=None,
+                     help="Weight of the car-size prior (KITTI's size statistics) in the fine objective "
+                          "(0: none; default: InferenceOptions).")(f)
     f = click.option("--polish-iterations", type=NON_NEGATIVE, default=None,
                      help="Extra iterations on the MAP scene after Algorithm 1 (0: none; default: InferenceOptions).")(f)
     return f
