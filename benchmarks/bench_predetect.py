@@ -52,6 +52,8 @@ from wirescene.training.kitti_detector import (  # noqa: E402
     kitti_gt_boxes,
     load_training_frames,
     train_bank_on_frames,
+    fit_box_regression,
+    training_gt_boxes,
 )
 
 
@@ -130,6 +132,8 @@ def main():
                                         mining_rounds=args.mining_rounds, min_bin_examples=args.min_bin_examples,
                                         label_boxes=args.label_boxes, per_octave=args.per_octave,
                                         progress=lambda m: print("   ", m, flush=True))
+            train_images = [images[i] for i in tr]
+            bank.meta["box_regression"] = fit_box_regression(bank, train_images, training_gt_boxes(ds, train_images))
             fold_banks[k] = bank
             for im in images:
                 if fold_of(im.frame) == k and not im.flipped:

@@ -15,7 +15,7 @@ from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import EDGES
 
-from conftest import KITTI_ROOT
+from conftest import KITTI_ROOT, assert_close
 
 
 def _label(box, type_="Car", occluded=0, truncated=0.0, alpha=0.0):
@@ -353,6 +353,42 @@ def test_retrain_tiny_real_bank_finds_its_cars():
     xy = rng.uniform(0, 1, size=wh.shape) * (np.array([W, H]) - wh)
     rand = int((iou_2d(np.concatenate([xy, xy + wh], 1)[:, None], cars[None]) > 0.5).any(1).sum())
     assert hits >= 2 and hits > rand
+    # the box regression, fitted on its own detections, moves them closer to the labels
+    from wirescene.training.kitti_detector import fit_box_regression, training_gt_boxes
+
+    gt = training_gt_boxes(ds, images)
+    assert_close(gt[1], mirrored_boxes_of(gt[0], W))  # the flipped copy's labels are mirrored
+    reg = fit_box_regression(bank, images, gt)
+    assert reg["n"] > 0 and np.asarray(reg["weights"]).shape == (14, 4)
+    bank.meta["box_regression"] = reg
+    moved = detect_training_image(bank, images[0])
+    iou_before = iou_2d(det.boxes[:, None], cars[None]).max(1)
+    iou_after = iou_2d(moved.boxes[:, None], cars[None]).max(1)
+    matched = iou_before > 0.5
+    assert matched.sum() >= 2 and iou_after[matched].mean() > iou_before[matched].mean()
+
+
+def mirrored_boxes_of(boxes, width):
+    b = np.array(boxes, float)
+    b[:, [0, 2]] = (width - 1) - b[:, [2, 0]]
+    return b
+
+
+def test_box_regression_moves_each_side_by_its_share_of_the_box():
+    """apply_box_regression: each side moves by its predicted offset in units of the box
+    width (x) or height (y); features: constant, bin one-hot, size, aspect, bottom, border."""
+    from wirescene.predetect.bank import REGRESSION_FEATURES, apply_box_regression, regression_features
+
+    boxes = np.array([[100.0, 100.0, 300.0, 200.0], [0.0, 150.0, 50.0, 190.0]])
+    f = regression_features(boxes, [2, 7], (1242, 375))
+    assert f.shape == (2, len(REGRESSION_FEATURES)) and f[0, 3] == 1 and f[1, 8] == 1
+    assert (f[:, -2] == [0, 1]).all() and (f[:, -1] == [0, 0]).all()  # only the second touches the left border
+    weights = np.zeros((len(REGRESSION_FEATURES), 4))
+    weights[0] = [-0.05, 0.0, 0.05, 0.1]  # wider by 10% of the width, 10% taller at the bottom
+    weights[-2, 0] = 0.05  # boxes at the left border: left side moves back in
+    out = apply_box_regression({"weights": weights.tolist()}, boxes, [2, 7], (1242, 375))
+    assert_close(out[0], [90.0, 100.0, 310.0, 210.0])
+    assert_close(out[1], [0.0, 150.0, 52.5, 194.0])
 
 
 def test_bank_calibration_round_trip_and_foreign_files(tmp_path):

@@ -8,6 +8,9 @@ plus deformable part filters; the root filter alone is exactly this (Dalal-Trigg
 detector, the configurations are already semi-local, and it trains in minutes on a CPU,
 whereas latent-SVM DPM training needs the original MATLAB/C code.
 
+A linear box regression (DPM's bounding-box prediction, :func:`apply_box_regression`)
+moves the clusters' boxes onto the labelled boxes' convention.
+
 The shipped bank is trained on the real labelled KITTI frames
 (:mod:`wirescene.training.kitti_detector`, ``wirescene train detector --kitti-root``) and carries a Platt
 calibration, so :func:`detect_cars` returns confidences (probability of a car);
@@ -374,8 +377,48 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     order = np.argsort(-scores, kind="stable")
     boxes, scores, bins = boxes[order], scores[order], bins[order]
     if len(boxes):
-        boxes = np.column_stack([np.clip(boxes[:, 0], 0, W - 1), np.clip(boxes[:, 1], 0, H - 1),
-                                 np.clip(boxes[:, 2], 0, W - 1), np.clip(boxes[:, 3], 0, H - 1)])
+        boxes = _clip(boxes, W, H)
+        if "box_regression" in bank.meta:
+            boxes = _clip(apply_box_regression(bank.meta["box_regression"], boxes, bins, (W, H)), W, H)
         ok = (boxes[:, 2] - boxes[:, 0] >= 2) & (boxes[:, 3] - boxes[:, 1] >= 2)
         boxes, scores, bins = boxes[ok], scores[ok], bins[ok]
     return Detections(boxes, scores, bin_center(bins) if len(bins) else np.zeros(0), source)
+
+
+def _clip(boxes: np.ndarray, W: int, H: int) -> np.ndarray:
+    return np.column_stack([np.clip(boxes[:, 0], 0, W - 1), np.clip(boxes[:, 1], 0, H - 1),
+                            np.clip(boxes[:, 2], 0, W - 1), np.clip(boxes[:, 3], 0, H - 1)])
+
+
+# --------------------------------------------------------------------------- box regression
+
+#: Names of the box-regression features (:func:`regression_features`), in order.
+REGRESSION_FEATURES = ("1",) + tuple(f"bin{b}" for b in range(8)) + (
+    "log_height", "log_aspect", "bottom", "at_left", "at_right")
+
+
+def regression_features(boxes, bins, image_size) -> np.ndarray:
+    """``(D, F)`` features of detection boxes ``(D, 4)`` (clipped to the image) for the
+    box regression: a constant, the viewpoint bin (one-hot), log height (over 100 px),
+    log aspect ratio, the bottom edge's height in the image, and whether the box touches
+    the left or right image border (a truncated car, whose label box is clipped)."""
+    W, H = image_size
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    w, h = np.maximum(b[:, 2] - b[:, 0], 1.0), np.maximum(b[:, 3] - b[:, 1], 1.0)
+    onehot = np.eye(8)[np.asarray(bins, int) % 8]
+    return np.column_stack([np.ones(len(b)), onehot, np.log(h / 100.0), np.log(w / h), b[:, 3] / H - 0.5,
+                            b[:, 0] <= 1.0, b[:, 2] >= W - 2.0]).astype(float)
+
+
+def apply_box_regression(regression: dict, boxes, bins, image_size) -> np.ndarray:
+    """Boxes ``(D, 4)`` moved by the linear box regression ``regression`` (``weights``
+    ``(F, 4)``: each side's offset in units of the box width or height, DPM's bounding-box
+    prediction), which maps the bank's cluster boxes -- averaged votes of the placed
+    wireframe's box -- onto the labelled 2D boxes."""
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    if not len(b):
+        return b
+    weights = np.asarray(regression["weights"], float)
+    t = regression_features(b, bins, image_size) @ weights  # (D, 4)
+    w, h = b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]
+    return b + t * np.column_stack([w, h, w, h])
