@@ -63,14 +63,14 @@ from wirescene.eval.runner import frame_result  # noqa: E402
 from wirescene.core.viewpoints import angle_difference  # noqa: E402
 
 #: The settings of the study: the paper's schedule, each addition alone, the previous
-#: default (shape prior 10, box 300), then the default and its variations of weights,
+#: default (shape prior 10, box 300, polish 24), then the default and its variations of weights,
 #: budget and model.
 STUDY = [
     "paper:box_weight=0,plane_refinement=0,shape_prior=0,size_prior=0,polish_iterations=0",
     "paper+plane:box_weight=0,shape_prior=0,size_prior=0,polish_iterations=0",
     "paper+box:plane_refinement=0,shape_prior=0,size_prior=0,polish_iterations=0",
     "box+plane:shape_prior=0,size_prior=0,polish_iterations=0",
-    "prior10:shape_prior=10,size_prior=0,box_weight=300",
+    "prior10:shape_prior=10,size_prior=0,box_weight=300,polish_iterations=24",
     "default:",
     "box300:box_weight=300",
     "nosize:size_prior=0",

@@ -287,10 +287,10 @@ def test_csv_detection_reader_never_crashes(tmp_path, rows):
 
 @settings(max_examples=60, deadline=None)
 @given(st.sampled_from(["--particles", "--samples", "--iterations", "--prune-after", "--box-weight", "--seed",
-                        "--shape-prior", "--polish-iterations"]),
+                        "--shape-prior", "--size-prior", "--polish-iterations"]),
        st.one_of(st.integers(-10**6, 0), st.sampled_from(["nan", "inf", "-inf", "x", "", "1e999"])))
 def test_fit_options_out_of_range_are_refused_before_any_work(option, value):
-    if option in ("--iterations", "--prune-after", "--seed", "--box-weight", "--shape-prior",
+    if option in ("--iterations", "--prune-after", "--seed", "--box-weight", "--shape-prior", "--size-prior",
                   "--polish-iterations") and value == 0:
         return  # 0 is a valid value of these
     r = CliRunner().invoke(main, ["fit", "nowhere.png", "--calib", "nowhere.txt", "--out", "nowhere", option, str(value)])

@@ -267,14 +267,15 @@ def test_inference_options_reach_the_fit():
     from wirescene.cli import main as cli_main
 
     opts = cli_main._fit_options(7, 3, iterations=5, samples=4, prune_after=0, box_weight=2.5, plane_refinement=False,
-                                 shape_prior=0.0, polish_iterations=9, device="numpy", parts_model=None,
-                                 detector_bank=None)
+                                 shape_prior=0.0, size_prior=4.0, polish_iterations=9, device="numpy",
+                                 parts_model=None, detector_bank=None)
     inf = opts.inference
     assert (inf.iterations, inf.samples, inf.prune_after, inf.box_weight, inf.plane_refinement, inf.shape_prior,
-            inf.polish_iterations) == (5, 4, 0, 2.5, False, 0.0, 9)
+            inf.size_prior, inf.polish_iterations) == (5, 4, 0, 2.5, False, 0.0, 4.0, 9)
     assert opts.lifting.n_particles == 7 and opts.seed == 3
     from wirescene.infer.inference import InferenceOptions
 
-    unset = cli_main._fit_options(7, 3, shape_prior=None, polish_iterations=None).inference  # not given: defaults
-    assert (unset.shape_prior, unset.polish_iterations) == (InferenceOptions().shape_prior,
-                                                            InferenceOptions().polish_iterations)
+    unset = cli_main._fit_options(7, 3, shape_prior=None, size_prior=None, polish_iterations=None).inference
+    defaults = InferenceOptions()  # not given: the defaults
+    assert (unset.shape_prior, unset.size_prior, unset.polish_iterations) == (
+        defaults.shape_prior, defaults.size_prior, defaults.polish_iterations)

@@ -91,11 +91,12 @@ class InferenceOptions:
     # objects, else each object's best particle) run ``polish_iterations`` more
     # iterations of the same smoothing-based search with ``polish_samples`` samples,
     # starting from the spreads they reached: about 3% of the main search's hypotheses,
-    # spent where the answer is. Chosen with shape_prior among {0, 12, 24, 36, 48}
+    # spent where the answer is. Chosen with the shape prior 10 among {0, 12, 24, 36, 48}
     # iterations across fold groups of the real frames (label boxes, fold part models,
-    # benchmarks/tune_fine.py): folds {0,1} chose 24, folds {2,3} 36; on all 141 cars
-    # fg+gp / full reached 46% / 48% within 1 m with 24 (30% / 34% without polish and
-    # prior), and 12 iterations gave 43% / 45%.
+    # benchmarks/tune_fine.py): folds {0,1} chose 24, folds {2,3} 36. With the size prior
+    # and box weight 100, 48 against 24 on the 141 real cars (bench_real_folds.py) moved
+    # fg+gp / full 48% / 54% -> 53% / 55% within 1 m but fg / fg+so 53% / 52% -> 51% / 50%
+    # and cost every fine variant 1-4 points of 3D AP@0.5, so 24 stays.
     polish_iterations: int = 24
     polish_samples: int = 24
     # The paper's c, the log ratio charged to occluded parts, chosen on held-out
@@ -110,14 +111,15 @@ class InferenceOptions:
     # no longer slide a car metres along its viewing ray or pick a particle alone.
     # 100 since the size prior (below) pins the range: 300 had been chosen among
     # {0, 100, 300, 1000} before it (fold groups chose 300 and 100). With the size prior
-    # (141 real cars, label boxes, fold part models) 100 held fg+gp within 1 m (48%) and
-    # raised full (52% -> 54%) against 300 and halved the median azimuth error (fg+gp
-    # 3.7 -> 2.0 deg, full 5.5 -> 2.9 deg; both fold groups gained in fg+gp azimuth).
-    # Its residual at the truth is not small: the label box is a box fitted to the
-    # whole car, the wireframe's extent is not exactly it (on synthetic scenes the true
-    # wireframe's box is off by 2 px per side in the median), and at 300 that misfit
-    # outweighed the part evidence (oracle evidence: 1 m 61% -> 66%, median azimuth
-    # 2.0 -> 1.5 deg with 100; benchmarks/bench_inference.py).
+    # (141 real cars, label boxes, fold part models), 100 against 300: fg+gp 52% -> 48%
+    # and full 52% -> 54% within 1 m, the median azimuth error halved (fg+gp 3.7 -> 2.0
+    # deg, full 5.5 -> 2.9 deg; in fg+gp both fold groups gained) and the previous
+    # default's 3D AP@0.5 (26 / 29) rose to 42 / 46. The box's residual at the truth is
+    # not small: the label box is fitted to the whole car, the wireframe's extent is not
+    # exactly it (on synthetic scenes the true wireframe's box is off by 2 px per side
+    # in the median), and at 300 that misfit outweighed the part evidence (oracle
+    # evidence, 119 synthetic cars: 1 m 62% -> 66%, median azimuth 1.6 -> 1.4 deg with
+    # 100; benchmarks/bench_inference.py).
     box_weight: float = 100.0
     # Scale of the box term's robust loss: ``box_robust * log(1 + cost / box_robust)``
     # instead of ``cost`` (0: plain squares). Like the coarse stage's capped vote, a
@@ -149,9 +151,9 @@ class InferenceOptions:
     # size against range, hence the shared plane (a pitched plane with every car scaled
     # along its ray explains the same image) -- and leaves the shape's details to the
     # evidence. Chosen with shape_prior on the real frames (label boxes, fold part
-    # models, benchmarks/tune_fine.py): shape prior 10 alone gave fg+gp / full 48% / 51%
-    # within 1 m, shape prior 1 + size prior 1 52% / 52% (fold group {2,3}: 37% -> 47%
-    # in fg+gp; {0,1} held), size prior 3 48% / 52%.
+    # models, benchmarks/tune_fine.py; box weight 300): shape prior 10 alone gave fg+gp /
+    # full 48% / 51% within 1 m, shape prior 1 + size prior 1 52% / 52% (fold group
+    # {2,3}: 37% -> 47% in fg+gp; {0,1} held), size prior 3 48% / 52%.
     size_prior: float = 1.0
     sigma_pitch_deg: float = 0.2
     sigma_roll_deg: float = 0.2
