@@ -94,16 +94,20 @@ def test_viewpoint_from_evidence_recovers_bins(synthetic_scene):
     assert np.all(angle_difference(out.alpha, dets.alpha) <= np.deg2rad(45) + 1e-9)
 
 
-@pytest.mark.parametrize("shared", [True, False])
-def test_pruning_keeps_the_best_particles_and_never_loses_the_objective(synthetic_scene, shared):
+def _refine_twice(synthetic_scene, shared, first: dict, second: dict):
+    """Algorithm 1 on the same 20 coarse particles with the same random numbers under two
+    sets of options, for tests that compare a schedule with and without one step."""
     camera, model, truth, dets, evidence = synthetic_scene
     particles = select_particles(lift_table(camera, dets), shared_plane=shared, n_particles=20)
+    return tuple(refine_particles(camera, particles, evidence, model, options=InferenceOptions(**opts),
+                                  rng=np.random.default_rng(0)) for opts in (first, second))
+
+
+@pytest.mark.parametrize("shared", [True, False])
+def test_pruning_keeps_the_best_particles_and_never_loses_the_objective(synthetic_scene, shared):
     base = dict(iterations=6, samples=6, polish_iterations=0)
-    full = refine_particles(camera, particles, evidence, model, options=InferenceOptions(**base, prune_after=0),
-                            rng=np.random.default_rng(0))
-    pruned = refine_particles(camera, particles, evidence, model,
-                              options=InferenceOptions(**base, prune_after=2, keep_fraction=0.25),
-                              rng=np.random.default_rng(0))
+    full, pruned = _refine_twice(synthetic_scene, shared, dict(base, prune_after=0),
+                                 dict(base, prune_after=2, keep_fraction=0.25))
     assert full.score.shape == (20, 4) and pruned.score.shape == (5, 4)
     assert np.all(np.diff(pruned.history) >= -1e-9)
     # Until the pruning step both runs are identical (same random numbers).
@@ -116,14 +120,9 @@ def test_pruning_keeps_the_best_particles_and_never_loses_the_objective(syntheti
 
 @pytest.mark.parametrize("shared", [True, False])
 def test_polish_refines_only_the_map_rows_and_never_loses_the_objective(synthetic_scene, shared):
-    camera, model, truth, dets, evidence = synthetic_scene
-    particles = select_particles(lift_table(camera, dets), shared_plane=shared, n_particles=20)
     base = dict(iterations=6, samples=6, prune_after=2)
-    plain = refine_particles(camera, particles, evidence, model, options=InferenceOptions(**base, polish_iterations=0),
-                             rng=np.random.default_rng(0))
-    polished = refine_particles(camera, particles, evidence, model,
-                                options=InferenceOptions(**base, polish_iterations=6, polish_samples=12),
-                                rng=np.random.default_rng(0))
+    plain, polished = _refine_twice(synthetic_scene, shared, dict(base, polish_iterations=0),
+                                    dict(base, polish_iterations=6, polish_samples=12))
     assert polished.score.shape == (1, 4)
     assert np.all(np.diff(polished.history) >= -1e-9)
     # Same random numbers until the polish starts, then only the MAP rows go on.
