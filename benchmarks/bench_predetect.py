@@ -44,16 +44,17 @@ import numpy as np  # noqa: E402
 from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import kitti_ap_2d, kitti_frame_gt, plot_pr, recall_at_fppi, viewpoint_accuracy  # noqa: E402
+from wirescene.core.types import Detections  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
     detect_training_image,
     detection_labels,
+    finish_bank,
     fit_platt,
+    held_out_ground_offsets,
     kitti_gt_boxes,
     load_training_frames,
     train_bank_on_frames,
-    fit_box_regression,
-    training_gt_boxes,
 )
 
 
@@ -109,6 +110,8 @@ def main():
                     help="override the banks' cluster box weighting (fold-models / bank modes)")
     ap.add_argument("--time-frames", type=int, default=5)
     ap.add_argument("--pr-curve", default=None)
+    ap.add_argument("--no-ground", action="store_true",
+                    help="score without the banks' ground prior (no camera passed; raw margins pooled)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     from threadpoolctl import threadpool_limits
@@ -133,7 +136,7 @@ def main():
                                         label_boxes=args.label_boxes, per_octave=args.per_octave,
                                         progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
-            bank.meta["box_regression"] = fit_box_regression(bank, train_images, training_gt_boxes(ds, train_images))
+            finish_bank(bank, train_images, ds, progress=lambda m: print("   ", m, flush=True))
             fold_banks[k] = bank
             for im in images:
                 if fold_of(im.frame) == k and not im.flipped:
@@ -142,39 +145,57 @@ def main():
                                                              [gts[f] for f in ids if fold_of(f) == k])).strip(),
                   flush=True)
         out["cv_seconds"] = round(time.time() - t0, 1)
-        # Platt calibration of each fold bank from the OTHER folds' held-out detections (for the
-        # saved fold models); pooled AP uses the raw margins (monotone per fold either way)
+        # Platt calibration of each fold bank from the OTHER folds' held-out detections, with
+        # their ground-prior log ratios as offsets (the ground term's weight rests on it, so
+        # no fold's calibration sees that fold's frames)
+        horizon = {im.frame: im.horizon for im in images}
         ys = {f: detection_labels(dets[f].boxes, kitti_gt_boxes(ds.labels(f))) for f in ids}
+        off = {f: held_out_ground_offsets(fold_banks[fold_of(f)], dets[f], horizon[f]) for f in ids}
         for k, bank in fold_banks.items():
             o = [f for f in ids if fold_of(f) != k]
-            bank.calibration = fit_platt(np.concatenate([dets[f].scores for f in o]), np.concatenate([ys[f] for f in o]))
+            bank.calibration = fit_platt(np.concatenate([dets[f].scores for f in o]), np.concatenate([ys[f] for f in o]),
+                                         offset=np.concatenate([off[f] for f in o]))
             bank.threshold = 0.5
             if args.models_dir:
                 bank.save(Path(args.models_dir) / f"fold{k}.npz")
-        allc = fit_platt(np.concatenate([dets[f].scores for f in ids]), np.concatenate([ys[f] for f in ids]))
+        allc = fit_platt(np.concatenate([dets[f].scores for f in ids]), np.concatenate([ys[f] for f in ids]),
+                         offset=np.concatenate([off[f] for f in ids]))
         out["pooled_platt"] = allc.tolist()
         print("Platt calibration of the pooled held-out detections (a, b):", allc.tolist())
+        if not args.no_ground:
+            # final held-out detections: calibrated confidences with the ground term
+            for im in images:
+                if not im.flipped:
+                    bank = fold_banks[fold_of(im.frame)]
+                    d = detect_training_image(bank, im, horizon=im.horizon)
+                    dets[im.frame] = Detections(d.boxes, bank.confidence(d.scores), d.alpha, d.source)
         time_bank = fold_banks[0]
         name = "cross-validated real-data bank"
     elif args.fold_models:
         pattern = args.fold_models if "{k}" in args.fold_models else str(Path(args.fold_models) / "fold{k}.npz")
         banks = {k: DetectorBank.load(pattern.format(k=k)) for k in range(N_FOLDS)}
+        ground = not args.no_ground and all(b.meta.get("ground_prior") for b in banks.values())
         for b in banks.values():
-            b.calibration = None  # pool raw margins, as the --cv run does
+            if not ground:
+                b.calibration = None  # pool raw margins (monotone per fold)
             if args.box_weight is not None:
                 b.meta["box_weight"] = args.box_weight
         for f in ids:
-            dets[f] = detect_cars(ds.image(f), bank=banks[fold_of(f)], return_all=True)
+            # with the ground term the scores are each fold bank's calibrated confidences
+            dets[f] = detect_cars(ds.image(f), bank=banks[fold_of(f)], return_all=True,
+                                  camera=ds.camera(f) if ground else None)
         time_bank = banks[0]
         name = f"fold banks {args.fold_models}"
-        ys = {f: detection_labels(dets[f].boxes, kitti_gt_boxes(ds.labels(f))) for f in ids}
-        allc = fit_platt(np.concatenate([dets[f].scores for f in ids]), np.concatenate([ys[f] for f in ids]))
-        out["pooled_platt"] = allc.tolist()
-        print("Platt calibration of the pooled held-out detections (a, b):", allc.tolist())
+        if not ground:
+            ys = {f: detection_labels(dets[f].boxes, kitti_gt_boxes(ds.labels(f))) for f in ids}
+            allc = fit_platt(np.concatenate([dets[f].scores for f in ids]), np.concatenate([ys[f] for f in ids]))
+            out["pooled_platt"] = allc.tolist()
+            print("Platt calibration of the pooled held-out detections (a, b):", allc.tolist())
     else:
         bank = DetectorBank.load(args.bank) if args.bank else load_default_bank()
         for f in ids:
-            dets[f] = detect_cars(ds.image(f), bank=bank, return_all=True)
+            dets[f] = detect_cars(ds.image(f), bank=bank, return_all=True,
+                                  camera=None if args.no_ground else ds.camera(f))
         time_bank = bank
         name = f"fixed bank {args.bank or 'shipped'}"
     if args.save_dets:
@@ -191,7 +212,8 @@ def main():
     for f in ids[: args.time_frames]:
         img = ds.image(f)
         t, c = time.perf_counter(), time.process_time()
-        detect_cars(img, bank=time_bank, return_all=True)
+        use_ground = not args.no_ground and time_bank.calibration is not None and time_bank.meta.get("ground_prior")
+        detect_cars(img, bank=time_bank, return_all=True, camera=ds.camera(f) if use_ground else None)
         times.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
     # CPU time of this single-threaded process = seconds on one free core (wall time grows

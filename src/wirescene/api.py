@@ -196,7 +196,9 @@ def detect(image, calib=None) -> Detections:
     image : path or ndarray
         As in :func:`fit`.
     calib : path, (3, 4) array or Camera, optional
-        Checked if given (the 2D detector itself does not use it).
+        The camera; when given, each detection's score also weighs how well its box's
+        height fits its position below the horizon (the bank's ground prior,
+        :mod:`wirescene.predetect.geometry`), which the shipped bank was calibrated with.
 
     Returns
     -------
@@ -206,9 +208,8 @@ def detect(image, calib=None) -> Detections:
     from wirescene.predetect import detect_cars
 
     rgb = as_image(image)
-    if calib is not None:
-        as_camera(calib, (rgb.shape[1], rgb.shape[0]))
-    return detect_cars(rgb)
+    camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
+    return detect_cars(rgb, camera=camera)
 
 
 def evaluate(

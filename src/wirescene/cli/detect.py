@@ -105,7 +105,7 @@ def detect(kitti_root, frames, split, bank_path, threshold, out_dir, pr_curve, j
         for fid in ids:
             img = ds.image(fid)
             t = time.perf_counter()
-            d = detect_cars(img, bank=bank, return_all=True, source=fid)
+            d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=ds.camera(fid))
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:

@@ -66,7 +66,7 @@ class DetectionSource:
             from wirescene.fitting.pipeline import detector_bank
             from wirescene.predetect import detect_cars
 
-            return detect_cars(dataset.image(frame_id), bank=detector_bank(self.bank))
+            return detect_cars(dataset.image(frame_id), bank=detector_bank(self.bank), camera=dataset.camera(frame_id))
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:

@@ -133,7 +133,7 @@ def fit_frame(
             raise ValueError("image is needed to detect the cars (or pass detections)")
         from wirescene.predetect import detect_cars
 
-        detections = detect_cars(image, bank=detector_bank(options.detector_bank))
+        detections = detect_cars(image, bank=detector_bank(options.detector_bank), camera=camera)
     if len(detections) == 0:
         return FrameFit(detections, {v.name: SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane,
                                                            detections=detections) for v in variants})

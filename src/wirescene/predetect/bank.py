@@ -9,7 +9,9 @@ detector, the configurations are already semi-local, and it trains in minutes on
 whereas latent-SVM DPM training needs the original MATLAB/C code.
 
 A linear box regression (DPM's bounding-box prediction, :func:`apply_box_regression`)
-moves the clusters' boxes onto the labelled boxes' convention.
+moves the clusters' boxes onto the labelled boxes' convention. Given the camera, a ground
+prior (:mod:`wirescene.predetect.geometry`) weighs each box's height against its position
+below the horizon: background windows rarely stand on the road at the size of a car.
 
 The shipped bank is trained on the real labelled KITTI frames
 (:mod:`wirescene.training.kitti_detector`, ``wirescene train detector --kitti-root``) and carries a Platt
@@ -35,10 +37,13 @@ from wirescene.core.wireframe import N_VERTICES
 from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.resources import DATA_DIR
 from wirescene.predetect.configurations import Configuration
-from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales
+from wirescene.predetect.geometry import ground_log_ratio, horizon_row
+from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales, to_gray
+from wirescene.predetect.refine import apply_box_refinement
 
-FORMAT_VERSION = 2
-"""2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated)."""
+FORMAT_VERSION = 3
+"""2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated). 3: adds the box
+refinement (``refine_mean``, ``refine_scale``, ``refine_weights``; empty when none)."""
 ARTEFACT_KIND = "detector-bank"
 DEFAULT_BANK_PATH = DATA_DIR / "detector_bank.npz"
 
@@ -51,6 +56,7 @@ class DetectorBank:
     threshold: float = 0.0  # default detection threshold (in the units of the scores detect_cars returns)
     meta: dict = field(default_factory=dict)
     calibration: np.ndarray | None = None  # (2,) Platt (a, b): confidence = sigmoid(a * margin + b)
+    refinement: dict | None = None  # image-based box refinement (wirescene.predetect.refine)
 
     def __len__(self) -> int:
         return len(self.configs)
@@ -99,6 +105,8 @@ class DetectorBank:
             threshold=np.array(float(self.threshold)),
             meta_json=np.array(json.dumps(self.meta, sort_keys=True)),
             calibration=np.zeros(0, np.float64) if self.calibration is None else np.asarray(self.calibration, float),
+            **{f"refine_{k}": (np.zeros(0, np.float32) if self.refinement is None
+                               else np.asarray(self.refinement[k], np.float32)) for k in ("mean", "scale", "weights")},
         )
         return save_npz(path, arrays, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
@@ -126,8 +134,14 @@ class DetectorBank:
                 calib = None  # an uncalibrated bank
             elif calib.shape != (2,):
                 raise InputError("detector bank calibration must hold 2 numbers", path=path)
+            refinement = {k: z[f"refine_{k}"] for k in ("mean", "scale", "weights")}
+            if refinement["weights"].size == 0:
+                refinement = None  # a bank without box refinement
+            elif not (refinement["weights"].ndim == 2 and refinement["weights"].shape[1] == 4
+                      and refinement["mean"].shape == refinement["scale"].shape == (len(refinement["weights"]) - 1,)):
+                raise InputError("detector bank refinement arrays do not match", path=path)
             return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
-                       json.loads(str(z["meta_json"])), calib)
+                       json.loads(str(z["meta_json"])), calib, refinement)
         except (KeyError, ValueError) as exc:
             raise InputError(f"malformed detector bank ({exc.__class__.__name__}: {exc})", path=path) from None
 
@@ -299,7 +313,7 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
 def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshold: float | None = None,
                 max_scale: float | None = None, per_octave: int | None = None, min_height: float | None = None,
                 per_detector: int = 30, cross_view_nms: float | None = 0.3, source: str = "bank",
-                return_all: bool = False) -> Detections:
+                return_all: bool = False, camera=None) -> Detections:
     """Detect cars in an (H, W, 3) uint8 image with the configuration bank.
 
     HOG pyramid once -> every template as a linear filter -> NMS per detector (IoU 0.5 on
@@ -312,7 +326,13 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     :meth:`DetectorBank.confidence`) when it carries a calibration, else SVM margins;
     ``threshold`` is in the same units. ``max_scale``, ``per_octave`` (pyramid levels per
     octave) and ``min_height`` (smallest full-car height searched, px) default to the values
-    the bank was trained with (2.0, 4, 30 for banks that do not say)."""
+    the bank was trained with (2.0, 4, 30 for banks that do not say).
+
+    ``camera`` (a :class:`~wirescene.core.camera.Camera`): when given and the bank carries a
+    ground prior (``meta["ground_prior"]``, :mod:`wirescene.predetect.geometry`), every
+    detection's score also weighs how well its box's height fits its position below the
+    horizon; banks trained on KITTI were calibrated with this term, so pass the camera
+    whenever it is known."""
     bank = load_default_bank() if bank is None else bank
     max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
     min_height = float(bank.meta.get("min_height", 30.0)) if min_height is None else min_height
@@ -324,8 +344,11 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     H, W = image.shape[:2]
     scales = pyramid_scales(W, H, max_scale=max_scale, per_octave=per_octave)
     pyr = feature_pyramid(image, scales)
+    gray = None if bank.refinement is None else to_gray(image)
+    horizon = None if camera is None else horizon_row(camera)
     return detect_pyramid(bank, pyr, (W, H), threshold=None if return_all else thr, min_height=min_height,
-                          per_detector=per_detector, cross_view_nms=cross_view_nms, source=source)
+                          per_detector=per_detector, cross_view_nms=cross_view_nms, source=source, horizon=horizon,
+                          gray=gray)
 
 
 def _cluster_kw(bank: DetectorBank) -> dict:
@@ -335,16 +358,20 @@ def _cluster_kw(bank: DetectorBank) -> dict:
 
 def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float | None = None,
                    calibrated: bool = True, min_height: float = 30.0, per_detector: int = 30,
-                   cross_view_nms: float | None = 0.3, source: str = "bank") -> Detections:
+                   cross_view_nms: float | None = 0.3, source: str = "bank",
+                   horizon: float | None = None, gray: np.ndarray | None = None) -> Detections:
     """:func:`detect_cars` on a precomputed feature pyramid of an image of ``image_size``
     ``(W, H)``; ``threshold`` (None: keep all) in the units of the returned scores
-    (``calibrated``: :meth:`DetectorBank.confidence`, else raw margins)."""
+    (``calibrated``: :meth:`DetectorBank.confidence`, else raw margins); ``horizon``: image
+    row of the horizon for the ground-plane consistency term (None: none); ``gray``: the
+    ``(H, W)`` float grey image, for the bank's box refinement (None: none)."""
     W, H = image_size
     raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
     floor = min(raw_thr if raw_thr is not None else -0.5, -0.5) - 0.5
     act = score_pyramid(bank, pyramid, threshold=floor, min_height=min_height, max_height=3.0 * H)
     det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
-                            cross_view_nms=cross_view_nms, source=source, cluster_kw=_cluster_kw(bank))
+                            cross_view_nms=cross_view_nms, source=source, cluster_kw=_cluster_kw(bank),
+                            horizon=horizon, gray=gray)
     if calibrated and bank.calibration is not None:
         det = Detections(det.boxes, bank.confidence(det.scores), det.alpha, det.source)
     return det
@@ -352,9 +379,13 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
 
 def merge_activations(act: Activations, bank: DetectorBank, image_size, *, threshold: float | None,
                       per_detector: int = 30, cross_view_nms: float | None = 0.3, source: str = "bank",
-                      cluster_kw: dict | None = None) -> Detections:
+                      cluster_kw: dict | None = None, horizon: float | None = None,
+                      gray: np.ndarray | None = None) -> Detections:
     """Activations -> Detections: NMS per detector, full-box votes, clustering per
-    viewpoint, optional NMS across viewpoints, threshold (None: keep all), clip to image."""
+    viewpoint, clip to image, box regression, box refinement from the grey image ``gray``
+    (None: none; :mod:`wirescene.predetect.refine`), ground-plane consistency (``horizon``: the
+    image row of the horizon, None to skip; :func:`ground_margin`), optional NMS across
+    viewpoints, threshold in margin units (None: keep all)."""
     W, H = image_size
     fb, fs, fbin = [], [], []
     for t in np.unique(act.det):
@@ -368,6 +399,17 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
                                                      **(cluster_kw or {}))
     else:
         boxes, scores, bins = np.zeros((0, 4)), np.zeros(0), np.zeros(0, int)
+    if len(boxes):
+        boxes = _clip(boxes, W, H)
+        if "box_regression" in bank.meta:
+            boxes = _clip(apply_box_regression(bank.meta["box_regression"], boxes, bins, (W, H)), W, H)
+        if bank.refinement is not None and gray is not None:
+            boxes = _clip(apply_box_refinement(bank.refinement, gray, boxes, regression_features(boxes, bins, (W, H))),
+                          W, H)
+        ok = (boxes[:, 2] - boxes[:, 0] >= 2) & (boxes[:, 3] - boxes[:, 1] >= 2)
+        boxes, scores, bins = boxes[ok], scores[ok], bins[ok]
+        if horizon is not None:
+            scores = scores + ground_margin(bank, boxes, horizon)
     if cross_view_nms is not None and len(boxes):
         keep = nms(boxes, scores, cross_view_nms)
         boxes, scores, bins = boxes[keep], scores[keep], bins[keep]
@@ -376,13 +418,20 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
         boxes, scores, bins = boxes[sel], scores[sel], bins[sel]
     order = np.argsort(-scores, kind="stable")
     boxes, scores, bins = boxes[order], scores[order], bins[order]
-    if len(boxes):
-        boxes = _clip(boxes, W, H)
-        if "box_regression" in bank.meta:
-            boxes = _clip(apply_box_regression(bank.meta["box_regression"], boxes, bins, (W, H)), W, H)
-        ok = (boxes[:, 2] - boxes[:, 0] >= 2) & (boxes[:, 3] - boxes[:, 1] >= 2)
-        boxes, scores, bins = boxes[ok], scores[ok], bins[ok]
     return Detections(boxes, scores, bin_center(bins) if len(bins) else np.zeros(0), source)
+
+
+def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:
+    """``(D,)`` margin added to detections ``boxes`` by the bank's ground prior: the log
+    ratio of :func:`wirescene.predetect.geometry.ground_log_ratio` divided by the Platt slope,
+    so that the calibrated confidence is ``sigmoid(a * margin + b + log ratio)``. Zero for
+    a bank without a ground prior."""
+    prior = bank.meta.get("ground_prior")
+    if not prior:
+        return np.zeros(len(boxes))
+    if bank.calibration is None:
+        raise ValueError("the bank's ground prior needs its Platt calibration (an uncalibrated bank scores margins)")
+    return ground_log_ratio(prior, boxes, horizon) / float(bank.calibration[0])
 
 
 def _clip(boxes: np.ndarray, W: int, H: int) -> np.ndarray:

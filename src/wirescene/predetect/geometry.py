@@ -1,0 +1,74 @@
+"""Ground-plane consistency of 2D car boxes: where a box stands says how tall it may be.
+
+A car of height ``Hc`` standing on the road at depth ``Z`` in front of a camera mounted
+``Hcam`` above the road projects to a box of height ``h = f Hc / Z`` whose bottom edge
+lies ``f Hcam / Z`` below the horizon row. Their ratio
+
+    r = (bottom - horizon) / h  =  Hcam / Hc
+
+is the same for every car of the scene, whatever its distance (about 1.1-1.2 for KITTI's
+1.65 m camera and 1.4-1.6 m cars; road slope, pitch and occlusion of the bottom spread
+it). Background windows that fire the HOG templates -- facades, trees, road texture --
+have no reason to obey it: on the real KITTI frames 95% of true cars have r in
+0.95..1.5, against 14% of the detector's top-scoring background windows. This is the
+geometric context of Hoiem, Efros and Hebert ("Putting objects in perspective", CVPR
+2006) in its simplest form, the 2D face of the paper's shared ground plane.
+
+The prior is two densities of ``r`` learned from training frames -- cars (the labelled
+boxes) and background (the bank's own detections that overlap no labelled object) --
+and a detection's score gains their log ratio (naive Bayes: the SVM margin and the
+box's position are taken as independent given car / not car). The horizon is the row
+of the camera's principal point: the KITTI camera frame's y axis is the road normal up
+to the small pitch of the rig, and the horizon of a plane with normal y is ``v = K[1, 2]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Share of real cars allowed to follow the background density of ``r`` (cars on steep
+#: slopes, boxes cut by the image's bottom edge), so no car's score collapses.
+OUTLIER_SHARE = 0.02
+MIN_SIGMA = 0.05
+
+
+def horizon_row(camera) -> float:
+    """Image row of the horizon of the KITTI camera frame's ground plane (``K[1, 2]``)."""
+    return float(np.asarray(camera.K, float)[1, 2])
+
+
+def bottom_ratio(boxes, horizon: float) -> np.ndarray:
+    """``(D,)`` ratio ``(bottom - horizon) / height`` of boxes ``(D, 4)`` (x1 y1 x2 y2)."""
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    return (b[:, 3] - float(horizon)) / np.maximum(b[:, 3] - b[:, 1], 1.0)
+
+
+def _log_normal(x, mean: float, sigma: float) -> np.ndarray:
+    s = max(float(sigma), MIN_SIGMA)
+    return -0.5 * ((x - float(mean)) / s) ** 2 - np.log(s * np.sqrt(2 * np.pi))
+
+
+def fit_ground_prior(car_ratios, background_ratios) -> dict:
+    """The prior (a JSON-able dict) from the ratios of training cars and of background
+    detections: a robust normal for cars (median, 1.4826 MAD) and a normal for the
+    background (mean, standard deviation)."""
+    rc = np.asarray(car_ratios, float)
+    rb = np.asarray(background_ratios, float)
+    rc, rb = rc[np.isfinite(rc)], rb[np.isfinite(rb)]
+    if len(rc) < 5 or len(rb) < 5:
+        raise ValueError(f"a ground prior needs >= 5 cars and >= 5 background boxes, got {len(rc)} and {len(rb)}")
+    med = float(np.median(rc))
+    return {"car": [med, max(1.4826 * float(np.median(np.abs(rc - med))), MIN_SIGMA)],
+            "background": [float(np.mean(rb)), max(float(np.std(rb)), MIN_SIGMA)],
+            "outlier_share": OUTLIER_SHARE, "n_car": int(len(rc)), "n_background": int(len(rb))}
+
+
+def ground_log_ratio(prior: dict, boxes, horizon: float) -> np.ndarray:
+    """``(D,)`` log p(r | car) - log p(r | background) of boxes ``(D, 4)``; the car density
+    is mixed with ``outlier_share`` of the background density, so the ratio is bounded
+    below by ``log(outlier_share)``."""
+    r = bottom_ratio(boxes, horizon)
+    bg = _log_normal(r, *prior["background"])
+    eps = float(prior.get("outlier_share", OUTLIER_SHARE))
+    car = np.logaddexp(np.log1p(-eps) + _log_normal(r, *prior["car"]), np.log(eps) + bg)
+    return car - bg
