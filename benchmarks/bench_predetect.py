@@ -20,6 +20,10 @@ Metrics (all on the pooled held-out detections):
 * seconds per frame of :func:`wirescene.predetect.detect_cars` on one core (whole image:
   pyramid + templates + clustering), measured on ``--time-frames`` frames.
 
+Detection passes each frame's camera, so banks with a ground prior score with it
+(:mod:`wirescene.predetect.geometry`; pooled scores are then each fold bank's calibrated
+confidences, whose calibration left that fold out); ``--no-ground`` scores without it.
+
 Usage:
   python benchmarks/bench_predetect.py --cv [--models-dir DIR] [--pr-curve pr.png] [--json out.json]
   python benchmarks/bench_predetect.py --bank src/wirescene/data/detector_bank.npz   # a fixed bank
