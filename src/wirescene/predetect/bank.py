@@ -425,12 +425,11 @@ def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:
     """``(D,)`` margin added to detections ``boxes`` by the bank's ground prior: the log
     ratio of :func:`wirescene.predetect.geometry.ground_log_ratio` divided by the Platt slope,
     so that the calibrated confidence is ``sigmoid(a * margin + b + log ratio)``. Zero for
-    a bank without a ground prior."""
+    a bank without a ground prior, and for an uncalibrated one (its scores are SVM margins,
+    on no scale a log ratio could be added to)."""
     prior = bank.meta.get("ground_prior")
-    if not prior:
+    if not prior or bank.calibration is None:
         return np.zeros(len(boxes))
-    if bank.calibration is None:
-        raise ValueError("the bank's ground prior needs its Platt calibration (an uncalibrated bank scores margins)")
     return ground_log_ratio(prior, boxes, horizon) / float(bank.calibration[0])
 
 

@@ -446,14 +446,22 @@ def finish_bank(bank: DetectorBank, images, dataset, *, progress=None) -> Detect
     say = progress or (lambda msg: None)
     bank.meta["box_regression"] = fit_box_regression(bank, images, training_gt_boxes(dataset, images))
     say(f"box regression fitted on {bank.meta['box_regression']['n']} detections")
-    refinement = fit_box_refinement(bank, images, dataset)
-    bank.meta["box_refinement"] = {"n": refinement.pop("n"), "features": int(len(refinement["mean"]))}
-    bank.refinement = refinement
-    say(f"box refinement fitted on {bank.meta['box_refinement']['n']} boxes")
-    bank.meta["ground_prior"] = fit_bank_ground_prior(bank, images, dataset)
-    gp = bank.meta["ground_prior"]
-    say(f"ground prior: cars r = {gp['car'][0]:.2f} +- {gp['car'][1]:.2f} ({gp['n_car']}), "
-        f"background {gp['background'][0]:.2f} +- {gp['background'][1]:.2f} ({gp['n_background']})")
+    # a handful of training frames may hold too few cars for either; the bank then goes without
+    try:
+        refinement = fit_box_refinement(bank, images, dataset)
+    except ValueError as exc:
+        say(f"no box refinement: {exc}")
+    else:
+        bank.meta["box_refinement"] = {"n": refinement.pop("n"), "features": int(len(refinement["mean"]))}
+        bank.refinement = refinement
+        say(f"box refinement fitted on {bank.meta['box_refinement']['n']} boxes")
+    try:
+        gp = bank.meta["ground_prior"] = fit_bank_ground_prior(bank, images, dataset)
+    except ValueError as exc:
+        say(f"no ground prior: {exc}")
+    else:
+        say(f"ground prior: cars r = {gp['car'][0]:.2f} +- {gp['car'][1]:.2f} ({gp['n_car']}), "
+            f"background {gp['background'][0]:.2f} +- {gp['background'][1]:.2f} ({gp['n_background']})")
     return bank
 
 
