@@ -55,7 +55,6 @@ from wirescene.training.kitti_detector import (  # noqa: E402
     detection_labels,
     finish_bank,
     fit_platt,
-    held_out_ground_offsets,
     kitti_gt_boxes,
     load_training_frames,
     train_bank_on_frames,
@@ -154,7 +153,7 @@ def main():
         # no fold's calibration sees that fold's frames)
         horizon = {im.frame: im.horizon for im in images}
         ys = {f: detection_labels(dets[f].boxes, kitti_gt_boxes(ds.labels(f))) for f in ids}
-        off = {f: held_out_ground_offsets(fold_banks[fold_of(f)], dets[f], horizon[f]) for f in ids}
+        off = {f: fold_banks[fold_of(f)].ground_log_ratio(dets[f].boxes, horizon[f]) for f in ids}
         for k, bank in fold_banks.items():
             o = [f for f in ids if fold_of(f) != k]
             bank.calibration = fit_platt(np.concatenate([dets[f].scores for f in o]), np.concatenate([ys[f] for f in o]),

@@ -74,6 +74,15 @@ class DetectorBank:
         a, b = (float(v) for v in self.calibration)
         return 1.0 / (1.0 + np.exp(-(a * m + b)))
 
+    def ground_log_ratio(self, boxes, horizon: float) -> np.ndarray:
+        """``(D,)`` log ratio of the bank's ground prior for ``boxes`` ``(D, 4)`` under the
+        horizon row ``horizon`` (:func:`wirescene.predetect.geometry.ground_log_ratio`);
+        zeros for a bank without a ground prior."""
+        prior = self.meta.get("ground_prior")
+        if not prior or not len(boxes):
+            return np.zeros(len(boxes))
+        return ground_log_ratio(prior, boxes, horizon)
+
     def margin_of(self, score: float) -> float:
         """Inverse of :meth:`confidence` for one score (a threshold)."""
         if self.calibration is None or not np.isfinite(score):
@@ -427,10 +436,9 @@ def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:
     so that the calibrated confidence is ``sigmoid(a * margin + b + log ratio)``. Zero for
     a bank without a ground prior, and for an uncalibrated one (its scores are SVM margins,
     on no scale a log ratio could be added to)."""
-    prior = bank.meta.get("ground_prior")
-    if not prior or bank.calibration is None:
+    if bank.calibration is None:
         return np.zeros(len(boxes))
-    return ground_log_ratio(prior, boxes, horizon) / float(bank.calibration[0])
+    return bank.ground_log_ratio(boxes, horizon) / float(bank.calibration[0])
 
 
 def _clip(boxes: np.ndarray, W: int, H: int) -> np.ndarray:

@@ -60,7 +60,7 @@ from wirescene.predetect.configurations import (
     mirror_bin,
     select_configurations,
 )
-from wirescene.predetect.geometry import bottom_ratio, fit_ground_prior, ground_log_ratio, horizon_row
+from wirescene.predetect.geometry import bottom_ratio, fit_ground_prior, horizon_row
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
 from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, sample_random_negatives
 
@@ -275,7 +275,7 @@ def fit_platt(scores, labels, *, reg: float = 1.0, offset=None) -> np.ndarray:
     """``(a, b)`` of ``P(car) = 1 / (1 + exp(-(a * score + b + offset)))`` by (lightly
     L2-regularised) logistic regression with Platt's target smoothing; ``a`` is forced
     positive so that calibration never reorders detections of equal ``offset`` (the ground
-    prior's log ratio of each detection, :func:`held_out_ground_offsets`; None: 0)."""
+    prior's log ratio of each detection, :meth:`DetectorBank.ground_log_ratio`; None: 0)."""
     from scipy.optimize import minimize
 
     s = np.asarray(scores, float)
@@ -317,6 +317,24 @@ def detect_training_image(bank: DetectorBank, image: TrainImage, **kw):
     return detect_pyramid(bank, image.pyramid, (W, H), calibrated=False, threshold=None, gray=gray, **kw)
 
 
+def _matched(boxes, gt, min_iou: float):
+    """``(keep (D,) bool, targets (k, 4))``: which of ``boxes`` ``(D, 4)`` overlap a box of
+    ``gt`` ``(K, 4)`` with IoU >= ``min_iou``, and the best-overlapping one of each."""
+    from wirescene.core.boxes import iou_2d
+
+    ov = iou_2d(boxes[:, None, :], gt[None])
+    best = np.argmax(ov, axis=1)
+    keep = ov[np.arange(len(best)), best] >= min_iou
+    return keep, gt[best[keep]]
+
+
+def _side_offsets(moved, target) -> np.ndarray:
+    """``(D, 4)`` offset of each side of boxes ``moved`` to ``target`` in units of the moved
+    box's width / height, clipped to +-0.5: the box regressions' targets."""
+    w, h = moved[:, 2] - moved[:, 0], moved[:, 3] - moved[:, 1]
+    return np.clip((target - moved) / np.column_stack([w, h, w, h]), -0.5, 0.5)
+
+
 def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.0, min_iou: float = 0.5) -> dict:
     """The bank's box regression (:func:`wirescene.predetect.bank.apply_box_regression`)
     by ridge regression on its own detections of ``images`` (``TrainImage``; without any
@@ -324,7 +342,6 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
     IoU >= ``min_iou``: targets are each side's offset to the best-overlapping box in
     units of the detection's width or height (clipped to +-0.5). ``reg`` is the ridge
     weight on everything but the constant."""
-    from wirescene.core.boxes import iou_2d
     from wirescene.predetect.bank import REGRESSION_FEATURES, regression_features
 
     from dataclasses import replace
@@ -338,14 +355,11 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
         det = detect_training_image(plain, im)
         if not len(det):
             continue
-        ov = iou_2d(det.boxes[:, None, :], gt[None])
-        best = np.argmax(ov, axis=1)
-        keep = ov[np.arange(len(best)), best] >= min_iou
+        keep, g = _matched(det.boxes, gt, min_iou)
         if not keep.any():
             continue
-        d, g = det.boxes[keep], gt[best[keep]]
-        w, h = d[:, 2] - d[:, 0], d[:, 3] - d[:, 1]
-        T.append(np.clip((g - d) / np.column_stack([w, h, w, h]), -0.5, 0.5))
+        d = det.boxes[keep]
+        T.append(_side_offsets(d, g))
         H, W = im.gray.shape
         X.append(regression_features(d, viewpoint_bin(det.alpha[keep]), (W, H)))
     F = len(REGRESSION_FEATURES)
@@ -372,7 +386,6 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     on the held-out folds (0.08-0.16 x 3e4-1e5: all gained 2.6-7.4 points of moderate AP)."""
     from dataclasses import replace
 
-    from wirescene.core.boxes import iou_2d
     from wirescene.predetect.bank import regression_features
     from wirescene.predetect.refine import fit_ridge, refinement_features
 
@@ -381,8 +394,7 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     X, T = [], []
 
     def add(gray, moved, target, bins):
-        w, h = moved[:, 2] - moved[:, 0], moved[:, 3] - moved[:, 1]
-        T.append(np.clip((target - moved) / np.column_stack([w, h, w, h]), -0.5, 0.5))
+        T.append(_side_offsets(moved, target))
         X.append(refinement_features(gray, moved, regression_features(moved, bins, gray.shape[::-1])).astype(np.float32))
 
     for im in images:
@@ -404,11 +416,9 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
         det = detect_training_image(plain, im)
         d = det.boxes[:per_image]
         if len(d) and len(boxes):
-            ov = iou_2d(d[:, None], boxes[None])
-            best = ov.argmax(1)
-            keep = ov[np.arange(len(d)), best] >= min_iou
+            keep, targets = _matched(d, boxes, min_iou)
             if keep.any():
-                add(gray, d[keep], boxes[best[keep]], viewpoint_bin(det.alpha[:per_image][keep]))
+                add(gray, d[keep], targets, viewpoint_bin(det.alpha[:per_image][keep]))
     if not X:
         raise ValueError("no training cars for the box refinement")
     out = fit_ridge(np.concatenate(X), np.concatenate(T), reg)
@@ -463,15 +473,6 @@ def finish_bank(bank: DetectorBank, images, dataset, *, progress=None) -> Detect
         say(f"ground prior: cars r = {gp['car'][0]:.2f} +- {gp['car'][1]:.2f} ({gp['n_car']}), "
             f"background {gp['background'][0]:.2f} +- {gp['background'][1]:.2f} ({gp['n_background']})")
     return bank
-
-
-def held_out_ground_offsets(bank: DetectorBank, detections, horizon: float) -> np.ndarray:
-    """``(D,)`` ground-prior log ratios of a held-out image's raw detections (0 without a
-    prior): the offsets of :func:`fit_platt`."""
-    prior = bank.meta.get("ground_prior")
-    if not prior or not len(detections):
-        return np.zeros(len(detections))
-    return ground_log_ratio(prior, detections.boxes, horizon)
 
 
 def mirrored_boxes(boxes, width: int) -> np.ndarray:
@@ -533,7 +534,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
                 if im.frame in held and not im.flipped:
                     d = detect_training_image(b, im)
                     scores.append(d.scores)
-                    offsets.append(held_out_ground_offsets(b, d, im.horizon))
+                    offsets.append(b.ground_log_ratio(d.boxes, im.horizon))
                     ys.append(detection_labels(d.boxes, kitti_gt_boxes(ds.labels(im.frame))))
         s, y = np.concatenate(scores), np.concatenate(ys)
         calib = fit_platt(s, y, offset=np.concatenate(offsets))
