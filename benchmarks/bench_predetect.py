@@ -22,12 +22,15 @@ Metrics (all on the pooled held-out detections):
 
 Detection passes each frame's camera, so banks with a ground prior score with it
 (:mod:`wirescene.predetect.geometry`; pooled scores are then each fold bank's calibrated
-confidences, whose calibration left that fold out); ``--no-ground`` scores without it.
+confidences, whose calibration left that fold out) and banks with a viewpoint prior
+(:mod:`wirescene.predetect.viewpoint_prior`) choose their viewpoints with it; ``--no-ground``
+scores without either.
 
 Usage:
   python benchmarks/bench_predetect.py --cv [--models-dir DIR] [--pr-curve pr.png] [--json out.json]
   python benchmarks/bench_predetect.py --bank src/wirescene/data/detector_bank.npz   # a fixed bank
-Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples.
+Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples,
+--per-octave, --cut-paste.
 """
 
 from __future__ import annotations
@@ -106,7 +109,9 @@ def main():
     ap.add_argument("--C", type=float, default=0.01)
     ap.add_argument("--min-bin-examples", type=int, default=5)
     ap.add_argument("--no-flips", action="store_true")
-    ap.add_argument("--per-octave", type=int, default=4, help="pyramid levels per octave")
+    ap.add_argument("--per-octave", type=int, default=6, help="pyramid levels per octave")
+    ap.add_argument("--cut-paste", type=int, default=0,
+                    help="cars pasted into a composite copy of every training frame (0: none)")
     ap.add_argument("--label-boxes", action="store_true",
                     help="labelled boxes as full-car targets of clean cars (default: placed wireframe + correction)")
     ap.add_argument("--box-weight", type=float, default=None,
@@ -137,6 +142,7 @@ def main():
             bank = train_bank_on_frames([images[i] for i in tr], ex, n_partial=args.partial, C=args.C,
                                         mining_rounds=args.mining_rounds, min_bin_examples=args.min_bin_examples,
                                         label_boxes=args.label_boxes, per_octave=args.per_octave,
+                                        cut_paste=args.cut_paste,
                                         progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
             finish_bank(bank, train_images, ds, progress=lambda m: print("   ", m, flush=True))
@@ -170,7 +176,7 @@ def main():
             for im in images:
                 if not im.flipped:
                     bank = fold_banks[fold_of(im.frame)]
-                    d = detect_training_image(bank, im, horizon=im.horizon)
+                    d = detect_training_image(bank, im, horizon=im.horizon, center_column=im.center_column)
                     dets[im.frame] = Detections(d.boxes, bank.confidence(d.scores), d.alpha, d.source)
         time_bank = fold_banks[0]
         name = "cross-validated real-data bank"

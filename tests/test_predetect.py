@@ -394,6 +394,12 @@ def test_retrain_tiny_real_bank_finds_its_cars():
     lean = finish_bank(DetectorBank(bank.configs, bank.weights, bank.biases, meta=dict(bank.meta)), one_car, ds,
                        progress=said.append)
     assert "ground_prior" not in lean.meta and any(m.startswith("no ground prior") for m in said)
+    assert "viewpoint_prior" not in lean.meta and any(m.startswith("no viewpoint prior") for m in said)
+    # the viewpoint prior counts each labelled car once (a mirrored copy swaps the traffic's sides)
+    from wirescene.training.kitti_detector import fit_bank_viewpoint_prior
+
+    n_cars = sum(o.type == "Car" for f in ("000010", "001545") for o in ds.labels(f).objects)
+    assert fit_bank_viewpoint_prior(images, ds)["n"] == n_cars
 
 
 def mirrored_boxes_of(boxes, width):

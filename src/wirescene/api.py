@@ -198,7 +198,9 @@ def detect(image, calib=None) -> Detections:
     calib : path, (3, 4) array or Camera, optional
         The camera; when given, each detection's score also weighs how well its box's
         height fits its position below the horizon (the bank's ground prior,
-        :mod:`wirescene.predetect.geometry`), which the shipped bank was calibrated with.
+        :mod:`wirescene.predetect.geometry`), which the shipped bank was calibrated with,
+        and each detection's viewpoint weighs front against back views by where the car
+        stands in the traffic (:mod:`wirescene.predetect.viewpoint_prior`).
 
     Returns
     -------

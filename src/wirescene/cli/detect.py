@@ -42,13 +42,17 @@ def _single_thread():
 @click.option("--scenes", "n_scenes", type=int, default=200, show_default=True, help="Synthetic training scenes.")
 @click.option("--partial", "n_partial", type=int, default=3, show_default=True,
               help="Partial configurations per viewpoint (plus one full-car configuration).")
+@click.option("--per-octave", type=int, default=6, show_default=True,
+              help="With --kitti-root: HOG pyramid levels per octave (stored with the bank for detection).")
+@click.option("--cut-paste", type=int, default=0, show_default=True,
+              help="With --kitti-root: cars of other frames pasted into a composite copy of every training frame.")
 @click.option("--mining-rounds", type=int, default=None, help="Hard-negative mining rounds [synthetic 2, real 3].")
 @click.option("--mining-images", type=int, default=80, show_default=True, help="Synthetic only.")
 @click.option("--val-scenes", "n_val", type=int, default=20, show_default=True, help="Synthetic only.")
 @click.option("--C", "C", type=float, default=0.01, show_default=True, help="Linear SVM regularisation.")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
-def detector(out, kitti_root, frames, folds, no_calibration, calibration, threshold, seed, n_scenes, n_partial, mining_rounds, mining_images,
-             n_val, C, report):
+def detector(out, kitti_root, frames, folds, no_calibration, calibration, threshold, seed, n_scenes, n_partial, per_octave, cut_paste,
+             mining_rounds, mining_images, n_val, C, report):
     """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
     if kitti_root is not None:
         from wirescene.training.kitti_detector import train_detector_bank_kitti
@@ -61,10 +65,10 @@ def detector(out, kitti_root, frames, folds, no_calibration, calibration, thresh
                                                calibration=[float(v) for v in calibration.split(",")] if calibration
                                                else None, threshold=threshold,
                                                mining_rounds=3 if mining_rounds is None else mining_rounds,
-                                               progress=click.echo)
+                                               per_octave=per_octave, cut_paste=cut_paste, progress=click.echo)
     else:
-        if frames or folds:
-            raise click.UsageError("--frames / --folds need --kitti-root")
+        if frames or folds or cut_paste or per_octave != 6:
+            raise click.UsageError("--frames / --folds / --per-octave / --cut-paste need --kitti-root")
         from wirescene.training.detector import train_detector_bank
 
         with _single_thread():

@@ -11,7 +11,9 @@ whereas latent-SVM DPM training needs the original MATLAB/C code.
 A linear box regression (DPM's bounding-box prediction, :func:`apply_box_regression`)
 moves the clusters' boxes onto the labelled boxes' convention. Given the camera, a ground
 prior (:mod:`wirescene.predetect.geometry`) weighs each box's height against its position
-below the horizon: background windows rarely stand on the road at the size of a car.
+below the horizon: background windows rarely stand on the road at the size of a car; and a
+viewpoint prior (:mod:`wirescene.predetect.viewpoint_prior`) weighs front against back views
+by where the car stands in the traffic.
 
 The shipped bank is trained on the real labelled KITTI frames
 (:mod:`wirescene.training.kitti_detector`, ``wirescene train detector --kitti-root``) and carries a Platt
@@ -40,6 +42,7 @@ from wirescene.predetect.configurations import Configuration
 from wirescene.predetect.geometry import ground_log_ratio, horizon_row
 from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.refine import apply_box_refinement
+from wirescene.predetect.viewpoint_prior import choose_viewpoints, lateral_position, viewpoint_log_prior
 
 FORMAT_VERSION = 3
 """2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated). 3: adds the box
@@ -341,7 +344,9 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     ground prior (``meta["ground_prior"]``, :mod:`wirescene.predetect.geometry`), every
     detection's score also weighs how well its box's height fits its position below the
     horizon; banks trained on KITTI were calibrated with this term, so pass the camera
-    whenever it is known."""
+    whenever it is known. With a viewpoint prior (``meta["viewpoint_prior"]``) the camera
+    also lets each detection's viewpoint weigh where it stands in the traffic
+    (:mod:`wirescene.predetect.viewpoint_prior`)."""
     bank = load_default_bank() if bank is None else bank
     max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
     min_height = float(bank.meta.get("min_height", 30.0)) if min_height is None else min_height
@@ -355,9 +360,10 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     pyr = feature_pyramid(image, scales)
     gray = None if bank.refinement is None else to_gray(image)
     horizon = None if camera is None else horizon_row(camera)
+    center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
     return detect_pyramid(bank, pyr, (W, H), threshold=None if return_all else thr, min_height=min_height,
                           per_detector=per_detector, cross_view_nms=cross_view_nms, source=source, horizon=horizon,
-                          gray=gray)
+                          center_column=center_column, gray=gray)
 
 
 def _cluster_kw(bank: DetectorBank) -> dict:
@@ -368,19 +374,21 @@ def _cluster_kw(bank: DetectorBank) -> dict:
 def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float | None = None,
                    calibrated: bool = True, min_height: float = 30.0, per_detector: int = 30,
                    cross_view_nms: float | None = 0.3, source: str = "bank",
-                   horizon: float | None = None, gray: np.ndarray | None = None) -> Detections:
+                   horizon: float | None = None, center_column: float | None = None,
+                   gray: np.ndarray | None = None) -> Detections:
     """:func:`detect_cars` on a precomputed feature pyramid of an image of ``image_size``
     ``(W, H)``; ``threshold`` (None: keep all) in the units of the returned scores
     (``calibrated``: :meth:`DetectorBank.confidence`, else raw margins); ``horizon``: image
-    row of the horizon for the ground-plane consistency term (None: none); ``gray``: the
-    ``(H, W)`` float grey image, for the bank's box refinement (None: none)."""
+    row of the horizon for the ground-plane consistency term (None: none);
+    ``center_column``: column of the principal point, for the viewpoint prior (None: none);
+    ``gray``: the ``(H, W)`` float grey image, for the bank's box refinement (None: none)."""
     W, H = image_size
     raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
     floor = min(raw_thr if raw_thr is not None else -0.5, -0.5) - 0.5
     act = score_pyramid(bank, pyramid, threshold=floor, min_height=min_height, max_height=3.0 * H)
     det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
                             cross_view_nms=cross_view_nms, source=source, cluster_kw=_cluster_kw(bank),
-                            horizon=horizon, gray=gray)
+                            horizon=horizon, center_column=center_column, gray=gray)
     if calibrated and bank.calibration is not None:
         det = Detections(det.boxes, bank.confidence(det.scores), det.alpha, det.source)
     return det
@@ -389,12 +397,14 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
 def merge_activations(act: Activations, bank: DetectorBank, image_size, *, threshold: float | None,
                       per_detector: int = 30, cross_view_nms: float | None = 0.3, source: str = "bank",
                       cluster_kw: dict | None = None, horizon: float | None = None,
-                      gray: np.ndarray | None = None) -> Detections:
+                      center_column: float | None = None, gray: np.ndarray | None = None) -> Detections:
     """Activations -> Detections: NMS per detector, full-box votes, clustering per
     viewpoint, clip to image, box regression, box refinement from the grey image ``gray``
     (None: none; :mod:`wirescene.predetect.refine`), ground-plane consistency (``horizon``: the
     image row of the horizon, None to skip; :func:`ground_margin`), optional NMS across
-    viewpoints, threshold in margin units (None: keep all)."""
+    viewpoints with each kept detection's viewpoint chosen by :func:`traffic_viewpoints`
+    (``center_column``: the principal point's column, None to keep the winner's), threshold
+    in margin units (None: keep all)."""
     W, H = image_size
     fb, fs, fbin = [], [], []
     for t in np.unique(act.det):
@@ -421,7 +431,11 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
             scores = scores + ground_margin(bank, boxes, horizon)
     if cross_view_nms is not None and len(boxes):
         keep = nms(boxes, scores, cross_view_nms)
-        boxes, scores, bins = boxes[keep], scores[keep], bins[keep]
+        kept_bins = bins[keep]
+        if horizon is not None and center_column is not None:
+            kept_bins = traffic_viewpoints(bank, boxes[keep], kept_bins, (boxes, scores, bins), horizon, center_column,
+                                           iou=cross_view_nms)
+        boxes, scores, bins = boxes[keep], scores[keep], kept_bins
     if threshold is not None:
         sel = scores > threshold
         boxes, scores, bins = boxes[sel], scores[sel], bins[sel]
@@ -439,6 +453,23 @@ def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:
     if bank.calibration is None:
         return np.zeros(len(boxes))
     return bank.ground_log_ratio(boxes, horizon) / float(bank.calibration[0])
+
+
+def traffic_viewpoints(bank: DetectorBank, kept, kept_bins, clusters, horizon: float, center_column: float, *,
+                       iou: float) -> np.ndarray:
+    """``(D,)`` viewpoint bins of the detections ``kept`` ``(D, 4)`` that survived the
+    cross-view NMS (at IoU ``iou``) of ``clusters`` ``(boxes (C, 4), margins (C,), bins (C,))``:
+    :func:`wirescene.predetect.viewpoint_prior.choose_viewpoints` with the bank's viewpoint
+    prior at each box's lateral position. ``kept_bins`` (the winners' own bins) unchanged
+    for a bank without that prior or without a calibration (margins of different
+    viewpoints' templates are only comparable as calibrated log-odds)."""
+    prior = bank.meta.get("viewpoint_prior")
+    if not prior or bank.calibration is None or not len(kept):
+        return np.asarray(kept_bins, int)
+    boxes, margins, bins = clusters
+    log_prior = viewpoint_log_prior(prior, lateral_position(kept, horizon, center_column))
+    return choose_viewpoints(kept, boxes, float(bank.calibration[0]) * np.asarray(margins, float), bins, log_prior,
+                             iou=iou)
 
 
 def _clip(boxes: np.ndarray, W: int, H: int) -> np.ndarray:
