@@ -100,6 +100,8 @@ def main():
     ap.add_argument("--bank", default=None, help="score this fixed bank on all frames instead of cross-validating")
     ap.add_argument("--cv", action="store_true", help="4-fold cross-validation by drive")
     ap.add_argument("--models-dir", default=None, help="write the fold banks here (foldK.npz, calibrated)")
+    ap.add_argument("--threshold", type=float, default=0.1,
+                    help="default detection threshold (confidence) stored in the saved fold banks, as the shipped bank's")
     ap.add_argument("--fold-models", default=None,
                     help="score saved fold banks DIR/fold{k}.npz (or a path pattern with {k}), each on its "
                          "held-out fold (raw margins pooled)")
@@ -164,7 +166,7 @@ def main():
             o = [f for f in ids if fold_of(f) != k]
             bank.calibration = fit_platt(np.concatenate([dets[f].scores for f in o]), np.concatenate([ys[f] for f in o]),
                                          offset=np.concatenate([off[f] for f in o]))
-            bank.threshold = 0.5
+            bank.threshold = args.threshold
             if args.models_dir:
                 bank.save(Path(args.models_dir) / f"fold{k}.npz")
         allc = fit_platt(np.concatenate([dets[f].scores for f in ids]), np.concatenate([ys[f] for f in ids]),

@@ -89,6 +89,7 @@ def test_viewpoint_prior_changes_only_the_viewpoints_of_real_detections():
     assert_close(traffic.boxes, plain.boxes)
     assert_close(traffic.scores, plain.scores)
     assert len(plain) >= 3
+    assert (traffic.alpha != plain.alpha).any()  # the prior does move some viewpoints
     # without the prior in the bank the principal column changes nothing
     from dataclasses import replace
 
