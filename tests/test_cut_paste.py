@@ -65,3 +65,21 @@ def test_pasted_cars_stand_on_the_road_of_their_new_frame():
     again_images, again = paste_cars(images, examples, per_image=3, seed=0, mirror=mirrored_image)
     assert all(np.array_equal(a.gray, b.gray) for a, b in zip(again_images, new_images))
     assert_close(np.array([e.label_box for e in again]), np.array([e.label_box for e in new_examples]))
+
+
+def test_bank_training_takes_pasted_cars_as_extra_positives():
+    from wirescene.training.kitti_detector import train_bank_on_frames
+
+    ds = KittiDataset(KITTI_ROOT)
+    kw = dict(n_partial=0, mining_rounds=0, neg_per_image=5, min_pos=1, max_jitter=0, min_height=40.0,
+              max_scale=1.0, per_octave=4)
+    images, examples = load_training_frames(ds, FRAMES)
+    plain = train_bank_on_frames(images, examples, **kw)
+    images, examples = load_training_frames(ds, FRAMES)
+    said = []
+    pasted = train_bank_on_frames(images, examples, cut_paste=3, progress=said.append, **kw)
+    assert any(m.startswith("cut and paste:") for m in said)
+    assert pasted.meta["cut_paste"] == 3 and plain.meta["cut_paste"] == 0
+    assert pasted.meta["frames"] == plain.meta["frames"] == sorted(FRAMES)  # composites are not frames
+    assert sum(pasted.meta["n_positives"]) > sum(plain.meta["n_positives"])
+    assert len(images) == 2 * len(FRAMES)  # the caller's list is left alone
