@@ -4,7 +4,7 @@ The HOG templates of a car's front and of its back look alike (a symmetric box w
 lamps and a plate): a quarter of the bank's true detections on held-out KITTI frames came
 out facing the wrong way. Traffic breaks the tie. In the lane of the ego car and to its
 right, cars drive the way the camera looks and show their backs; to its left, oncoming
-cars show their fronts (on the labelled KITTI frames 80-86% of the cars 1-6 m to the right
+cars show their fronts (on the labelled KITTI frames 79-86% of the cars 1-6 m to the right
 are seen from behind, 67-100% of those to the left from the front). This is the scene-level
 context the paper's shared ground plane stands for, learned rather than assumed: a country
 that drives on the left yields the mirrored prior when the bank is trained on its frames.
