@@ -81,8 +81,8 @@ def choose_viewpoints(kept, candidates, candidate_log_odds, candidate_bins, log_
     if not len(kept):
         return np.zeros(0, int)
     ov = iou_2d(kept[:, None], candidates[None]) >= iou  # (D, C)
+    scored = np.where(ov, np.asarray(candidate_log_odds, float)[None], -np.inf)
     best = np.full((len(kept), N_BINS), -np.inf)
-    for c in range(len(candidates)):
-        rows = ov[:, c]
-        best[rows, bins[c]] = np.maximum(best[rows, bins[c]], candidate_log_odds[c])
+    for b in np.unique(bins):
+        best[:, b] = scored[:, bins == b].max(1)
     return np.argmax(best + log_prior, axis=1)

@@ -26,6 +26,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from wirescene.training.detector import _overlap_frac
+
 #: Range of the depth scale ``s`` (new box size / donor box size), sampled log-uniformly.
 SCALE_RANGE = (0.7, 1.4)
 FEATHER_SIGMA = 1.0  # px, of the pasted silhouette's edge
@@ -43,16 +45,6 @@ def car_silhouette(v2d: np.ndarray, shape) -> np.ndarray:
     rr, cc = polygon(hull[:, 1], hull[:, 0], shape)
     mask[rr, cc] = 1.0
     return np.clip(gaussian_filter(mask, FEATHER_SIGMA), 0.0, 1.0)
-
-
-def _free(box, blocked, pad: float) -> bool:
-    """True when ``box`` grown by ``pad`` of its size touches none of ``blocked``."""
-    if not len(blocked):
-        return True
-    w, h = box[2] - box[0], box[3] - box[1]
-    g = box + pad * np.array([-w, -h, w, h])
-    b = np.asarray(blocked, float)
-    return not np.any((b[:, 0] < g[2]) & (b[:, 2] > g[0]) & (b[:, 1] < g[3]) & (b[:, 3] > g[1]))
 
 
 def paste_cars(images, examples, *, per_image: int = 3, seed: int = 0, min_height: float = 25.0,
@@ -107,7 +99,9 @@ def paste_cars(images, examples, *, per_image: int = 3, seed: int = 0, min_heigh
                 X0 = int(rng.integers(0, W - nw + 1))
                 shift = np.array([X0 - sx * x0, Y0 - sy * y0])
                 box = np.concatenate([lb[:2] * [sx, sy] + shift, lb[2:] * [sx, sy] + shift])
-                if not _free(box, blocked, 0.05):
+                w, h = box[2] - box[0], box[3] - box[1]
+                grown = box + 0.05 * np.array([-w, -h, w, h])  # keep a margin from what is there
+                if _overlap_frac(grown[None], np.array(blocked, float).reshape(-1, 4))[0] > 0:
                     continue
                 crop = src.gray[y0:y1 + 1, x0:x1 + 1].astype(np.float32)
                 mask = car_silhouette(d.v2d - [x0, y0], crop.shape)
