@@ -63,16 +63,19 @@ def main():
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
-                    help="An InferenceOptions field, e.g. plane_refinement=0 or box_weight=100.")
+                    help="An InferenceOptions field, e.g. plane_refinement=0 or box_weight=100, or a "
+                         "LiftingOptions field with the prefix lifting., e.g. lifting.road_prior=0.01.")
     args = ap.parse_args()
     if not args.shipped and args.models is None:
         ap.error("give --models DIR (fold models) or --shipped")
     variants = args.variants or list(VARIANTS)
-    overrides = {}
+    overrides: dict = {"inference": {}, "lifting": {}}
     for item in args.settings:
         key, _, value = item.partition("=")
-        default = getattr(InferenceOptions(), key)
-        overrides[key] = bool(int(value)) if isinstance(default, bool) else type(default)(value)
+        stage, _, key = key.rpartition(".")
+        stage = stage or "inference"
+        default = getattr(LiftingOptions() if stage == "lifting" else InferenceOptions(), key)
+        overrides[stage][key] = bool(int(value)) if isinstance(default, bool) else type(default)(value)
     dataset = KittiDataset(args.root)
     frames = dataset.frame_ids()
     folds = {f: fold_of(f) for f in frames}
@@ -87,7 +90,8 @@ def main():
             for path in models.values():
                 if not Path(path).is_file():
                     sys.exit(f"missing fold model {path}")
-        options = FitOptions(lifting=LiftingOptions(n_particles=args.particles), inference=InferenceOptions(**overrides),
+        options = FitOptions(lifting=LiftingOptions(n_particles=args.particles, **overrides["lifting"]),
+                             inference=InferenceOptions(**overrides["inference"]),
                              seed=args.seed, calibrate_scores=False, **models)
         source = DetectionSource(args.detections, bank=models.get("detector_bank"))
         print(f"fold {k}: {len(test)} frames, models {models or 'shipped'}", file=sys.stderr)

@@ -263,12 +263,18 @@ def test_model_files_can_be_chosen_per_run(tmp_path):
 
 
 def test_inference_options_reach_the_fit():
-    """Every option of the fine stage on the command line ends up in InferenceOptions."""
+    """Every option of the fine stage on the command line ends up in InferenceOptions,
+    and the coarse stage's road prior in LiftingOptions."""
     from wirescene.cli import main as cli_main
+    from wirescene.lift import LiftingOptions
 
+    for command in (cli_main.eval_cmd, cli_main.fit_cmd, cli_main.predict_cmd):
+        assert "--road-prior" in [o for p in command.params for o in p.opts]
     opts = cli_main._fit_options(7, 3, iterations=5, samples=4, prune_after=0, box_weight=2.5, plane_refinement=False,
                                  shape_prior=0.0, size_prior=4.0, polish_iterations=9, device="numpy",
-                                 parts_model=None, detector_bank=None)
+                                 parts_model=None, detector_bank=None, road_prior=0.5)
+    assert opts.lifting.road_prior == 0.5
+    assert cli_main._fit_options(7, 3, road_prior=None).lifting.road_prior == LiftingOptions().road_prior
     inf = opts.inference
     assert (inf.iterations, inf.samples, inf.prune_after, inf.box_weight, inf.plane_refinement, inf.shape_prior,
             inf.size_prior, inf.polish_iterations) == (5, 4, 0, 2.5, False, 0.0, 4.0, 9)

@@ -76,11 +76,12 @@ def _fit_options(particles: int, seed: int, **inference):
     from wirescene.lift import LiftingOptions
 
     models = {k: None if inference.get(k) is None else str(inference.pop(k)) for k in ("parts_model", "detector_bank")}
+    lifting = {k: inference.pop(k) for k in ("road_prior",) if inference.get(k) is not None}
     inference = {k: v for k, v in inference.items() if v is not None}
     if "device" in inference:
         inference["device"] = _resolve_device(inference["device"])
-    return FitOptions(lifting=LiftingOptions(n_particles=particles), inference=InferenceOptions(**inference), seed=seed,
-                      **models)
+    return FitOptions(lifting=LiftingOptions(n_particles=particles, **lifting), inference=InferenceOptions(**inference),
+                      seed=seed, **models)
 
 
 def _resolve_device(name: str) -> str:
@@ -100,8 +101,8 @@ def _resolve_device(name: str) -> str:
 
 
 def _inference_options(f):
-    """Options of the fine-grained inference stage (and the trained models it uses),
-    shared by `eval`, `fit` and `predict`."""
+    """Options of the coarse and fine-grained inference stages (and the trained models
+    they use), shared by `eval`, `fit` and `predict`."""
     f = click.option("--parts-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
                      help="Part detector file (default: the shipped model), e.g. a cross-validation fold's.")(f)
     f = click.option("--bank", "detector_bank", type=click.Path(exists=True, dir_okay=False, path_type=Path),
@@ -125,6 +126,9 @@ def _inference_options(f):
     f = click.option("--size-prior", type=NON_NEGATIVE_FLOAT, default=None,
                      help="Weight of the car-size prior (KITTI's size statistics) in the fine objective "
                           "(0: none; default: InferenceOptions).")(f)
+    f = click.option("--road-prior", type=NON_NEGATIVE_FLOAT, default=None,
+                     help="Weight of the coarse stage's prior that cars head along the road "
+                          "(0: none; default: LiftingOptions).")(f)
     f = click.option("--polish-iterations", type=NON_NEGATIVE, default=None,
                      help="Extra iterations on the MAP scene after Algorithm 1 (0: none; default: InferenceOptions).")(f)
     return f

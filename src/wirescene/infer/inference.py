@@ -49,7 +49,7 @@ from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.groundplane import plane_normal, point_on_plane, wrap_angle
 from wirescene.core.shape import ShapeModel
 from wirescene.core.types import ObjectEstimate, SceneEstimate, SceneParticles
-from wirescene.lift import box_residual, project_boxes
+from wirescene.lift import LiftingOptions, box_residual, project_boxes, road_alignment_cost
 from wirescene.infer.occluded_score import load_occluded_score
 from wirescene.infer.masks import best_mask, fit_mask, mask_hidden
 from wirescene.infer.occlusion import inter_object_occlusion
@@ -155,6 +155,12 @@ class InferenceOptions:
     # full 48% / 51% within 1 m, shape prior 1 + size prior 1 52% / 52% (fold group
     # {2,3}: 37% -> 47% in fg+gp; {0,1} held), size prior 3 48% / 52%.
     size_prior: float = 1.0
+    # Weight of the road-alignment prior on each car's azimuth in the fine objective
+    # (:func:`wirescene.lift.road_alignment_cost`, with the coarse stage's width); the
+    # coarse stage's own weight is ``LiftingOptions.road_prior`` in box-cost units, i.e.
+    # ``box_weight`` times it here. 0: the fine stage starts from the coarse stage's
+    # road-aligned azimuths but is free to leave them.
+    road_prior: float = 0.0
     sigma_pitch_deg: float = 0.2
     sigma_roll_deg: float = 0.2
     # Where the ray casting of the likelihood runs: "numpy", or a PyTorch device
@@ -294,12 +300,12 @@ class _Terms:
 
 
 def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None, box_weight=0.0,
-           device="numpy", plane=None, shape_prior=0.0, box_robust=0.0, size_prior=0.0) -> _Terms:
+           device="numpy", plane=None, shape_prior=0.0, box_robust=0.0, size_prior=0.0, road_prior=0.0) -> _Terms:
     """:class:`_Terms` of viewing parameters ``theta`` ``(P, N, M, 3 + K)`` on the
     particles' planes (or ``plane = (pitch, roll)``, see :func:`_geometry`); the
     penalty is ``box_weight`` times :func:`box_cost` against the detection ``boxes``
     ``(N, 4)``, plus ``shape_prior`` times half the squared norm of the shape
-    coefficients."""
+    coefficients, plus the size and road-alignment priors."""
     N = particles.x.shape[1]
     plane = (particles.pitch, particles.roll) if plane is None else plane
     batch = _geometry(camera, shape_model, plane, particles.height, theta, n_shape, device)
@@ -315,6 +321,9 @@ def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None,
         penalty = penalty + size_prior * size_cost(*extent)
     if shape_prior:
         penalty = penalty + 0.5 * shape_prior * np.sum(theta[..., 3:3 + n_shape] ** 2, axis=-1)
+    if road_prior:
+        azimuth = _from_viewing(theta)[2]
+        penalty = penalty + road_alignment_cost(azimuth, weight=road_prior, width=LiftingOptions().road_prior_width)
     self_hidden = batch.self_hidden | (batch.depth <= NEAR_PLANE)
     return _Terms(batch.uv, batch.vertices, self_hidden, e, penalty)
 
@@ -456,7 +465,7 @@ def refine_particles(
     def terms_of(th, pl):
         return _terms(camera, shape_model, evidence, particles, th, K, boxes, options.box_weight, options.device,
                       plane=(pl[..., 0], pl[..., 1]), shape_prior=options.shape_prior, box_robust=options.box_robust,
-                      size_prior=options.size_prior)
+                      size_prior=options.size_prior, road_prior=options.road_prior)
 
     def smoothed_spread(values, delta, sig, sig0):
         # Smoothing-based variance update around the previous value: samples weighted
