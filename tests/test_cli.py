@@ -266,21 +266,22 @@ def test_inference_options_reach_the_fit():
     """Every option of the fine stage on the command line ends up in InferenceOptions,
     and the coarse stage's road prior in LiftingOptions."""
     from wirescene.cli import main as cli_main
+    from wirescene.infer.inference import InferenceOptions
     from wirescene.lift import LiftingOptions
 
     for command in (cli_main.eval_cmd, cli_main.fit_cmd, cli_main.predict_cmd):
-        assert "--road-prior" in [o for p in command.params for o in p.opts]
+        assert {"--road-prior", "--fine-road-prior"} <= {o for p in command.params for o in p.opts}
     opts = cli_main._fit_options(7, 3, iterations=5, samples=4, prune_after=0, box_weight=2.5, plane_refinement=False,
                                  shape_prior=0.0, size_prior=4.0, polish_iterations=9, device="numpy",
-                                 parts_model=None, detector_bank=None, road_prior=0.5)
-    assert opts.lifting.road_prior == 0.5
-    assert cli_main._fit_options(7, 3, road_prior=None).lifting.road_prior == LiftingOptions().road_prior
+                                 parts_model=None, detector_bank=None, road_prior=0.5, fine_road_prior=2.0)
+    assert opts.lifting.road_prior == 0.5 and opts.inference.road_prior == 2.0
+    unset = cli_main._fit_options(7, 3, road_prior=None, fine_road_prior=None)
+    assert unset.lifting.road_prior == LiftingOptions().road_prior
+    assert unset.inference.road_prior == InferenceOptions().road_prior
     inf = opts.inference
     assert (inf.iterations, inf.samples, inf.prune_after, inf.box_weight, inf.plane_refinement, inf.shape_prior,
             inf.size_prior, inf.polish_iterations) == (5, 4, 0, 2.5, False, 0.0, 4.0, 9)
     assert opts.lifting.n_particles == 7 and opts.seed == 3
-    from wirescene.infer.inference import InferenceOptions
-
     unset = cli_main._fit_options(7, 3, shape_prior=None, size_prior=None, polish_iterations=None).inference
     defaults = InferenceOptions()  # not given: the defaults
     assert (unset.shape_prior, unset.size_prior, unset.polish_iterations) == (

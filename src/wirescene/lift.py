@@ -37,6 +37,11 @@ from wirescene.core.groundplane import (
 from wirescene.core.types import Detections, SceneParticles
 
 
+#: Width (degrees) of the road-alignment prior (:func:`road_alignment_cost`), shared by
+#: the coarse and the fine stage.
+ROAD_PRIOR_WIDTH = 20.0
+
+
 @dataclass(frozen=True)
 class LiftingOptions:
     """Options of the coarse lifting stage (all angles in degrees)."""
@@ -76,7 +81,7 @@ class LiftingOptions:
     # 11.4 -> 4.2 deg with our pre-detections (54 true positives).
     # 0 turns it off.
     road_prior: float = 0.03
-    road_prior_width: float = 20.0  # degrees
+    road_prior_width: float = ROAD_PRIOR_WIDTH
 
     def plane_grid(self) -> tuple[np.ndarray, np.ndarray]:
         """Flattened pitch and roll grids (radians), shape ``(G,)`` each."""

@@ -76,7 +76,9 @@ def _fit_options(particles: int, seed: int, **inference):
     from wirescene.lift import LiftingOptions
 
     models = {k: None if inference.get(k) is None else str(inference.pop(k)) for k in ("parts_model", "detector_bank")}
-    lifting = {k: inference.pop(k) for k in ("road_prior",) if inference.get(k) is not None}
+    # --road-prior is the coarse stage's weight, --fine-road-prior the fine stage's.
+    lifting = {k: v for k, v in {"road_prior": inference.pop("road_prior", None)}.items() if v is not None}
+    inference["road_prior"] = inference.pop("fine_road_prior", None)
     inference = {k: v for k, v in inference.items() if v is not None}
     if "device" in inference:
         inference["device"] = _resolve_device(inference["device"])
@@ -129,6 +131,8 @@ def _inference_options(f):
     f = click.option("--road-prior", type=NON_NEGATIVE_FLOAT, default=None,
                      help="Weight of the coarse stage's prior that cars head along the road "
                           "(0: none; default: LiftingOptions).")(f)
+    f = click.option("--fine-road-prior", "fine_road_prior", type=NON_NEGATIVE_FLOAT, default=None,
+                     help="Weight of the same prior in the fine objective (0: none; default: InferenceOptions).")(f)
     f = click.option("--polish-iterations", type=NON_NEGATIVE, default=None,
                      help="Extra iterations on the MAP scene after Algorithm 1 (0: none; default: InferenceOptions).")(f)
     return f

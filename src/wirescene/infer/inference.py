@@ -49,7 +49,7 @@ from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.groundplane import plane_normal, point_on_plane, wrap_angle
 from wirescene.core.shape import ShapeModel
 from wirescene.core.types import ObjectEstimate, SceneEstimate, SceneParticles
-from wirescene.lift import LiftingOptions, box_residual, project_boxes, road_alignment_cost
+from wirescene.lift import ROAD_PRIOR_WIDTH, box_residual, project_boxes, road_alignment_cost
 from wirescene.infer.occluded_score import load_occluded_score
 from wirescene.infer.masks import best_mask, fit_mask, mask_hidden
 from wirescene.infer.occlusion import inter_object_occlusion
@@ -156,7 +156,7 @@ class InferenceOptions:
     # {2,3}: 37% -> 47% in fg+gp; {0,1} held), size prior 3 48% / 52%.
     size_prior: float = 1.0
     # Weight of the road-alignment prior on each car's azimuth in the fine objective
-    # (:func:`wirescene.lift.road_alignment_cost` with the coarse stage's width, up to
+    # (:func:`wirescene.lift.road_alignment_cost` of width ``ROAD_PRIOR_WIDTH``, up to
     # ``road_prior`` across the road), so that weak part evidence does not turn a car off
     # the road it drives on. In box-cost units the coarse stage's weight is 0.03, i.e. 3
     # here at ``box_weight`` 100. Chosen on the real frames leaving one fold out among
@@ -328,7 +328,7 @@ def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None,
         penalty = penalty + 0.5 * shape_prior * np.sum(theta[..., 3:3 + n_shape] ** 2, axis=-1)
     if road_prior:
         azimuth = _from_viewing(theta)[2]
-        penalty = penalty + road_alignment_cost(azimuth, weight=road_prior, width=LiftingOptions().road_prior_width)
+        penalty = penalty + road_alignment_cost(azimuth, weight=road_prior, width=ROAD_PRIOR_WIDTH)
     self_hidden = batch.self_hidden | (batch.depth <= NEAR_PLANE)
     return _Terms(batch.uv, batch.vertices, self_hidden, e, penalty)
 
