@@ -74,7 +74,10 @@ def main():
         key, _, value = item.partition("=")
         stage, _, key = key.rpartition(".")
         stage = stage or "inference"
-        default = getattr(LiftingOptions() if stage == "lifting" else InferenceOptions(), key)
+        fields = LiftingOptions() if stage == "lifting" else InferenceOptions()
+        if stage not in overrides or not hasattr(fields, key):
+            ap.error(f"--set {item}: not an InferenceOptions field nor lifting.<LiftingOptions field>")
+        default = getattr(fields, key)
         overrides[stage][key] = bool(int(value)) if isinstance(default, bool) else type(default)(value)
     dataset = KittiDataset(args.root)
     frames = dataset.frame_ids()
@@ -121,7 +124,8 @@ def main():
               f"{fmt(c['3d']['moderate']):>7s} {fmt(h['bev']['moderate']):>8s} {fmt(h['3d']['moderate']):>7s}")
     summary = {v: {"paper": reports[v].to_json_dict(include_records=False), "kitti": kitti[v]} for v in variants}
     summary["_run"] = {"frames": len(frames), "cars": n_cars, "detections": args.detections, "seed": args.seed,
-                       "models": "shipped" if args.shipped else str(args.models), "seconds": elapsed}
+                       "models": "shipped" if args.shipped else str(args.models), "seconds": elapsed,
+                       "settings": args.settings}
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1, default=lambda o: None))
     print(f"\nsummary: {args.out / 'summary.json'}")
 

@@ -30,6 +30,25 @@ def fold_records(run: Path, variant: str) -> list[list]:
     return [evaluate(read_run_records(run / f"fold{k}")[variant]).records for k in range(N_FOLDS)]
 
 
+def other_folds_total(counts: dict[str, list[int]], k: int) -> dict[str, int]:
+    """Each configuration's sum of ``counts`` over every fold but ``k``."""
+    return {c: sum(n for j, n in enumerate(per_fold) if j != k) for c, per_fold in counts.items()}
+
+
+def choose_leaving_one_out(counts: dict[str, list[int]]) -> dict[int, str]:
+    """For every fold ``k`` the configuration with the largest sum of ``counts[config]``
+    over the other folds (ties: the first configuration given).
+
+    ``counts`` maps each configuration to one count per fold (e.g. cars within 1 m).
+    """
+    n_folds = len(next(iter(counts.values())))
+    chosen = {}
+    for k in range(n_folds):
+        others = other_folds_total(counts, k)
+        chosen[k] = max(counts, key=lambda c: others[c])  # max keeps the first of equals
+    return chosen
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--config", action="append", required=True, metavar="NAME=RUN[,RUN...]")
@@ -48,12 +67,12 @@ def main():
     def within_1m(records) -> int:
         return sum(t.loc_error < 1.0 for t in records)
 
-    chosen = {}
+    counts = {c: [sum(within_1m(tps[(c, i, v)][k]) for i in range(len(configs[c])) for v in args.variants)
+                  for k in range(N_FOLDS)] for c in configs}
+    chosen = choose_leaving_one_out(counts)
     for k in range(N_FOLDS):
-        score = {c: sum(within_1m(tps[(c, i, v)][j]) for i in range(len(configs[c]))
-                        for v in args.variants for j in range(N_FOLDS) if j != k) for c in configs}
-        chosen[k] = max(configs, key=lambda c: score[c])
-        ranked = ", ".join(f"{c} {score[c]}" for c in sorted(configs, key=lambda c: -score[c]))
+        others = other_folds_total(counts, k)
+        ranked = ", ".join(f"{c} {others[c]}" for c in sorted(configs, key=lambda c: -others[c]))
         print(f"fold {k}: chooses {chosen[k]} (cars within 1 m on the other folds: {ranked})")
     first = next(iter(configs))
     for i in range(len(configs[first])):

@@ -31,3 +31,15 @@ def test_benchmark_imports(script, monkeypatch):
     finally:
         sys.modules.pop(f"_bench_{script.stem}", None)
     assert callable(getattr(module, "main", None)), f"{script.name} has no main()"
+
+
+def test_choose_by_fold_never_uses_the_scored_fold(monkeypatch):
+    """Each fold's configuration is the best on the other folds, whatever it scores on its own."""
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from choose_by_fold import choose_leaving_one_out
+
+    # "a" wins overall only through fold 0; on folds 1-3 "b" leads.
+    counts = {"a": [50, 10, 10, 10], "b": [0, 12, 12, 12]}
+    assert choose_leaving_one_out(counts) == {0: "b", 1: "a", 2: "a", 3: "a"}
+    # Ties go to the first configuration given.
+    assert choose_leaving_one_out({"off": [1, 1], "on": [1, 1]}) == {0: "off", 1: "off"}
