@@ -77,7 +77,8 @@ def _fit_options(particles: int, seed: int, **inference):
 
     models = {k: None if inference.get(k) is None else str(inference.pop(k)) for k in ("parts_model", "detector_bank")}
     # --road-prior is the coarse stage's weight, --fine-road-prior the fine stage's.
-    lifting = {k: v for k, v in {"road_prior": inference.pop("road_prior", None)}.items() if v is not None}
+    road_prior = inference.pop("road_prior", None)
+    lifting = {} if road_prior is None else {"road_prior": road_prior}
     inference["road_prior"] = inference.pop("fine_road_prior", None)
     inference = {k: v for k, v in inference.items() if v is not None}
     if "device" in inference:

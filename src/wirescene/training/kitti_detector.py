@@ -178,8 +178,7 @@ def load_training_frames(dataset, frame_ids, *, flips: bool = True, progress=Non
         examples += frame_examples(labels, camera, W, H, len(images), mean, flips=flips)
         images.append(TrainImage(fid, False, gray, block, horizon=horizon, center_column=cx, occupied=occupied))
         if flips:
-            images.append(TrainImage(fid, True, np.ascontiguousarray(gray[:, ::-1]), mirrored_boxes(block, W),
-                                     horizon=horizon, center_column=(W - 1) - cx))
+            images.append(mirrored_image(images[-1], [], len(images))[0])
     if progress:
         progress(f"{len(frame_ids)} frames, {len(images)} training images, {len(examples)} car examples")
     return images, examples
@@ -500,15 +499,15 @@ def fit_bank_ground_prior(bank: DetectorBank, images, dataset, *, per_image: int
 
 def fit_bank_viewpoint_prior(images, dataset) -> dict:
     """The viewpoint prior (:mod:`wirescene.predetect.viewpoint_prior`) of the ``Car`` labels
-    of the frames of ``images`` (each frame once, never its mirrored copy: mirroring swaps
-    the sides of the traffic)."""
+    of the frames of ``images`` (their unmirrored originals, at each one's horizon and
+    principal column; never a mirrored copy: mirroring swaps the sides of the traffic)."""
     lateral, bins = [], []
-    for frame in dict.fromkeys(im.frame for im in images):
-        camera = dataset.camera(frame)
-        cars = [o for o in dataset.labels(frame).objects if o.type == "Car"]
+    for im in images:
+        if im.flipped or im.composite:
+            continue
+        cars = [o for o in dataset.labels(im.frame).objects if o.type == "Car"]
         if cars:
-            lateral.append(lateral_position(np.array([o.box for o in cars], float), horizon_row(camera),
-                                            float(camera.K[0, 2])))
+            lateral.append(lateral_position(np.array([o.box for o in cars], float), im.horizon, im.center_column))
             bins.append(viewpoint_bin(np.array([o.alpha for o in cars], float)))
     if not lateral:
         raise ValueError("no labelled cars for the viewpoint prior")
