@@ -30,7 +30,8 @@ Usage:
   python benchmarks/bench_predetect.py --cv [--models-dir DIR] [--pr-curve pr.png] [--json out.json]
   python benchmarks/bench_predetect.py --bank src/wirescene/data/detector_bank.npz   # a fixed bank
 Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples,
---per-octave, --cut-paste.
+--per-octave, --cut-paste; --train-fraction F [--subset-seed S] trains each fold bank on a share F
+of its training frames (a learning curve: held-out AP against the amount of real training data).
 """
 
 from __future__ import annotations
@@ -94,6 +95,16 @@ def public(m):
     return {k: v for k, v in m.items() if not k.startswith("_")}
 
 
+def training_subset(frames: list, fraction: float, *, seed) -> set:
+    """A share ``fraction`` of ``frames`` (at least one), drawn without replacement with
+    ``seed``; all of them at 1."""
+    if fraction >= 1:
+        return set(frames)
+    n = max(1, int(round(fraction * len(frames))))
+    rng = np.random.default_rng(list(np.atleast_1d(seed)))
+    return set(rng.choice(np.array(frames, dtype=object), size=n, replace=False).tolist())
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--root", default="/work/shared/data/kitti")
@@ -123,7 +134,13 @@ def main():
     ap.add_argument("--no-ground", action="store_true",
                     help="score without the banks' ground prior (no camera passed; raw margins pooled)")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--train-fraction", type=float, default=1.0,
+                    help="--cv: train each fold bank on this share of its training frames (a learning curve; "
+                         "the frames are drawn per fold with --subset-seed, flips follow their frames)")
+    ap.add_argument("--subset-seed", type=int, default=0)
     args = ap.parse_args()
+    if not 0 < args.train_fraction <= 1:
+        ap.error("--train-fraction must be in (0, 1]")
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
@@ -137,7 +154,9 @@ def main():
         t0 = time.time()
         images, examples = load_training_frames(ds, ids, flips=not args.no_flips, progress=print)
         for k in range(N_FOLDS):
-            tr = [i for i, im in enumerate(images) if fold_of(im.frame) != k]
+            kept = training_subset(sorted({im.frame for im in images if fold_of(im.frame) != k}),
+                                   args.train_fraction, seed=(args.subset_seed, k))
+            tr = [i for i, im in enumerate(images) if im.frame in kept]
             remap = {old: new for new, old in enumerate(tr)}
             ex = [replace(e, image=remap[e.image]) for e in examples if e.image in remap]
             print(f"--- fold {k}: training on {len(tr)} images, {len(ex)} car examples")
@@ -156,6 +175,7 @@ def main():
                                                              [gts[f] for f in ids if fold_of(f) == k])).strip(),
                   flush=True)
         out["cv_seconds"] = round(time.time() - t0, 1)
+        out["train_fraction"] = args.train_fraction
         # Platt calibration of each fold bank from the OTHER folds' held-out detections, with
         # their ground-prior log ratios as offsets (the ground term's weight rests on it, so
         # no fold's calibration sees that fold's frames)

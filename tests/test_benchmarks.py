@@ -43,3 +43,16 @@ def test_choose_by_fold_never_uses_the_scored_fold(monkeypatch):
     assert choose_leaving_one_out(counts) == {0: "b", 1: "a", 2: "a", 3: "a"}
     # Ties go to the first configuration given.
     assert choose_leaving_one_out({"off": [1, 1], "on": [1, 1]}) == {0: "off", 1: "off"}
+
+
+def test_learning_curve_subsets_are_reproducible_shares_of_the_training_frames(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_predetect import training_subset
+
+    frames = [f"{i:06d}" for i in range(24)]
+    third = training_subset(frames, 1 / 3, seed=(0, 2))
+    assert len(third) == 8 and third <= set(frames)
+    assert training_subset(frames, 1 / 3, seed=(0, 2)) == third  # same seed, same frames
+    assert training_subset(frames, 1 / 3, seed=(0, 3)) != third  # each fold draws its own
+    assert training_subset(frames, 1.0, seed=(0, 2)) == set(frames)
+    assert len(training_subset(frames, 0.01, seed=(0, 2))) == 1

@@ -270,12 +270,15 @@ def test_inference_options_reach_the_fit():
     from wirescene.lift import LiftingOptions
 
     for command in (cli_main.eval_cmd, cli_main.fit_cmd, cli_main.predict_cmd):
-        assert {"--road-prior", "--fine-road-prior"} <= {o for p in command.params for o in p.opts}
+        assert {"--road-prior", "--fine-road-prior", "--viewpoint-window"} <= {o for p in command.params for o in p.opts}
     opts = cli_main._fit_options(7, 3, iterations=5, samples=4, prune_after=0, box_weight=2.5, plane_refinement=False,
                                  shape_prior=0.0, size_prior=4.0, polish_iterations=9, device="numpy",
-                                 parts_model=None, detector_bank=None, road_prior=0.5, fine_road_prior=2.0)
+                                 parts_model=None, detector_bank=None, road_prior=0.5, fine_road_prior=2.0,
+                                 viewpoint_window_deg=30.0)
     assert opts.lifting.road_prior == 0.5 and opts.inference.road_prior == 2.0
-    unset = cli_main._fit_options(7, 3, road_prior=None, fine_road_prior=None)
+    assert opts.inference.viewpoint_window_deg == 30.0
+    unset = cli_main._fit_options(7, 3, road_prior=None, fine_road_prior=None, viewpoint_window_deg=None)
+    assert unset.inference.viewpoint_window_deg == InferenceOptions().viewpoint_window_deg
     assert unset.lifting.road_prior == LiftingOptions().road_prior
     assert unset.inference.road_prior == InferenceOptions().road_prior
     inf = opts.inference

@@ -8,8 +8,9 @@ from wirescene.io.kitti import KittiDataset
 from wirescene.core.groundplane import alpha_from_rotation_y
 from wirescene.fitting.pipeline import FitOptions, fit_scene
 from wirescene.core.types import Detections
+from wirescene.core.errors import ShapeError
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
-from wirescene.lift import LiftingOptions, lift_table, select_particles
+from wirescene.lift import LiftingOptions, lift_table, road_angle, select_particles
 from wirescene.infer.likelihood import GaussianVertexEvidence, instantiate_wireframes, object_likelihood
 from wirescene.core.shape import load_default
 from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
@@ -160,17 +161,69 @@ def test_fine_road_prior_turns_cars_towards_the_road_where_evidence_is_silent(sy
     start = select_particles(lift_table(camera, dets), shared_plane=True, n_particles=1).take([0])
     off = np.deg2rad(15.0)
     start.azimuth[:] = np.array([np.pi / 2 + off, -np.pi / 2 - off, np.pi / 2 - off, -np.pi / 2 + off])
-    angle_to_road = lambda az: np.abs(np.arcsin(np.abs(np.cos(az))))  # noqa: E731
     ends = {}
     for weight in (0.0, InferenceOptions().road_prior):
         opts = InferenceOptions(iterations=10, samples=12, prune_after=0, box_weight=0.0, road_prior=weight,
                                 polish_iterations=0)
         refined = refine_particles(camera, start, _Flat(), model, options=opts, rng=np.random.default_rng(1))
         assert np.all(np.diff(refined.history) >= -1e-12)
-        ends[weight] = np.rad2deg(angle_to_road(refined.particles.azimuth[0]))
+        ends[weight] = np.rad2deg(road_angle(refined.particles.azimuth[0]))
     # Measured: 4.1, 0.6, 0.0, 1.2 deg with the prior; 16, 22, 43, 55 deg without (a random walk).
     assert np.all(ends[InferenceOptions().road_prior] < 7.5), ends
     assert np.median(ends[0.0]) > 10.0, ends
+
+
+def test_fine_road_prior_leaves_cars_the_coarse_stage_put_across_the_road(synthetic_scene):
+    """The fine road prior acts only on cars whose coarse start heads within
+    ``ROAD_PRIOR_WIDTH`` of the road: with silent evidence, cars starting 60 deg off it
+    follow exactly the search they follow without any prior, while the cars starting 15
+    deg off are still turned onto the road. Ungated, the prior pulls the former too."""
+    camera, model, truth, dets, _ = synthetic_scene
+    start = select_particles(lift_table(camera, dets), shared_plane=True, n_particles=1).take([0])
+    near, across = np.deg2rad(15.0), np.deg2rad(60.0)
+    start.azimuth[:] = np.array([np.pi / 2 + near, -np.pi / 2 - across, np.pi / 2 - across, -np.pi / 2 + near])
+    ends = {}
+    for name, kw in (("none", dict(road_prior=0.0)), ("gated", {}), ("ungated", dict(road_prior_gated=False))):
+        # The plane stays fixed: its samples are judged by the whole scene, through which
+        # the prior on the other cars would reach these.
+        opts = InferenceOptions(iterations=10, samples=12, prune_after=0, box_weight=0.0, polish_iterations=0,
+                                plane_refinement=False, **kw)
+        refined = refine_particles(camera, start, _Flat(), model, options=opts, rng=np.random.default_rng(1))
+        ends[name] = np.rad2deg(road_angle(refined.particles.azimuth[0]))
+    assert_close(ends["gated"][[1, 2]], ends["none"][[1, 2]], atol=1e-9)
+    assert np.all(ends["gated"][[0, 3]] < 7.5), ends
+    # Measured: the cars across end 68 and 51 deg off the road with the gate (as without a
+    # prior), 0.6 and 0.3 deg ungated; the cars near it 0.1 and 0.0 deg.
+    assert np.min(ends["ungated"][[1, 2]]) < np.min(ends["none"][[1, 2]]) - 10.0, ends
+
+
+def test_fine_search_keeps_each_car_within_its_viewpoint_window(synthetic_scene):
+    """Cars starting 60 deg off the road under the ungated road prior, with silent
+    evidence: the prior turns them onto the road, except that the viewpoint window keeps
+    each car's observation angle within 45 deg of its pre-detection's viewpoint (here
+    its start); a car of unknown viewpoint (NaN) stays free."""
+    camera, model, truth, dets, _ = synthetic_scene
+    start = select_particles(lift_table(camera, dets), shared_plane=True, n_particles=1).take([0])
+    across = np.deg2rad(60.0)
+    start.azimuth[:] = np.array([np.pi / 2 + across, -np.pi / 2 - across, np.pi / 2 - across, -np.pi / 2 + across])
+    viewpoint = alpha_from_rotation_y(start.azimuth[0], start.x[0], start.z[0])
+    alpha = viewpoint.copy()
+    alpha[-1] = np.nan
+    ends = {}
+    for window in (0.0, 45.0):
+        opts = InferenceOptions(iterations=10, samples=12, prune_after=0, box_weight=0.0, polish_iterations=0,
+                                plane_refinement=False, road_prior_gated=False, viewpoint_window_deg=window)
+        refined = refine_particles(camera, start, _Flat(), model, options=opts, rng=np.random.default_rng(1),
+                                   alpha=alpha)
+        p = refined.particles
+        ends[window] = np.rad2deg(angle_difference(alpha_from_rotation_y(p.azimuth[0], p.x[0], p.z[0]), viewpoint))
+    # Measured: 58-65 deg without the window; 45 deg with it (at its edge), 65 deg for the
+    # car of unknown viewpoint.
+    assert np.all(ends[45.0][:3] <= 45.0 + 1e-6), ends
+    assert np.all(ends[0.0][:3] > 50.0), ends
+    assert ends[45.0][3] > 50.0, ends  # unknown viewpoint: no window
+    with pytest.raises(ShapeError):
+        refine_particles(camera, start, _Flat(), model, options=opts, alpha=alpha[:-1])
 
 
 @pytest.mark.parametrize("plane", [False, True])

@@ -174,6 +174,18 @@ def test_road_alignment_cost_is_zero_along_the_road_and_saturates_across_it():
     assert_close(cost(np.array(along) + 0.3, weight=0.0), [0.0, 0.0], atol=0)
 
 
+def test_road_angle_is_the_angle_the_road_cost_reads():
+    from wirescene.lift import road_angle
+
+    d = np.deg2rad(np.array([0.0, 10.0, 20.0, 45.0, 90.0]))
+    for az in (np.pi / 2 + d, -np.pi / 2 - d, np.pi / 2 - d, -np.pi / 2 + d):
+        assert_close(road_angle(az), d, atol=1e-9)
+    # the cost is a function of that angle alone
+    az = np.linspace(-np.pi, np.pi, 37)
+    expected = 0.05 * (1 - np.exp(-np.sin(road_angle(az)) ** 2 / (2 * np.sin(np.deg2rad(20.0)) ** 2)))
+    assert_close(road_alignment_cost(az, weight=0.05, width=20.0), expected, atol=1e-12)
+
+
 def test_road_prior_settles_the_yaw_that_a_box_leaves_open(dataset):
     """Cars seen from behind or ahead while heading along the road: the box barely
     constrains their yaw, the road prior recovers it; the positions stay put."""

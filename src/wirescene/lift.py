@@ -289,6 +289,12 @@ def road_alignment_cost(azimuth, *, weight: float, width: float) -> np.ndarray:
     return weight * -np.expm1(-s2)
 
 
+def road_angle(azimuth) -> np.ndarray:
+    """Angle (radians, in [0, pi/2]) between a heading of KITTI ``rotation_y``
+    ``azimuth`` and the camera's road (rotation_y = +-90 deg), front and back alike."""
+    return np.arcsin(np.minimum(np.abs(np.cos(azimuth)), 1.0))
+
+
 def plane_vote_weights(scores: np.ndarray) -> np.ndarray:
     """Weights ``(N,)`` of the detections' votes for a shared ground plane: their scores
     when all lie in [0, 1] (probabilities that the box is a car, as our calibrated

@@ -134,6 +134,9 @@ def _inference_options(f):
                           "(0: none; default: LiftingOptions).")(f)
     f = click.option("--fine-road-prior", "fine_road_prior", type=NON_NEGATIVE_FLOAT, default=None,
                      help="Weight of the same prior in the fine objective (0: none; default: InferenceOptions).")(f)
+    f = click.option("--viewpoint-window", "viewpoint_window_deg", type=NON_NEGATIVE_FLOAT, default=None,
+                     help="Degrees the fine stage may turn a car's observation angle away from its "
+                          "pre-detection's viewpoint (0: unlimited; default: InferenceOptions).")(f)
     f = click.option("--polish-iterations", type=NON_NEGATIVE, default=None,
                      help="Extra iterations on the MAP scene after Algorithm 1 (0: none; default: InferenceOptions).")(f)
     return f

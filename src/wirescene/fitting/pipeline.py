@@ -176,6 +176,7 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
     refined = refine_particles(
         camera, particles, evidence, shape_model, options=options.inference, rng=rng, boxes=detections.boxes,
         searched_occluder=v.searched_occluder, deterministic_occlusion=v.deterministic_occlusion, weights=weights,
+        alpha=detections.alpha,
     )
     estimate = estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)
     return apply_confidence(estimate, fine=True) if options.calibrate_scores else estimate
