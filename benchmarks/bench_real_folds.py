@@ -39,6 +39,9 @@ from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
 from wirescene.training.scores import cross_validated_confidences, read_run_records
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from tune_fine import option_value  # noqa: E402
+
 
 def kitti_with_cv_scores(records, gt, folds):
     """{variant: KITTI metrics} with each fold's confidences from a model of the other folds."""
@@ -74,11 +77,13 @@ def main():
         key, _, value = item.partition("=")
         stage, _, key = key.rpartition(".")
         stage = stage or "inference"
-        fields = LiftingOptions() if stage == "lifting" else InferenceOptions()
-        if stage not in overrides or not hasattr(fields, key):
+        try:
+            if stage not in overrides:
+                raise KeyError(stage)
+            overrides[stage][key] = option_value(LiftingOptions() if stage == "lifting" else InferenceOptions(), key,
+                                                 value)
+        except KeyError:
             ap.error(f"--set {item}: not an InferenceOptions field nor lifting.<LiftingOptions field>")
-        default = getattr(fields, key)
-        overrides[stage][key] = bool(int(value)) if isinstance(default, bool) else type(default)(value)
     dataset = KittiDataset(args.root)
     frames = dataset.frame_ids()
     folds = {f: fold_of(f) for f in frames}

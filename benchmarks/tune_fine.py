@@ -50,20 +50,28 @@ from wirescene.lift import lift_table  # noqa: E402
 GROUPS = {"A": (0, 1), "B": (2, 3)}
 
 
+def option_value(options, key: str, text: str):
+    """``text`` as a value of field ``key`` of the options dataclass ``options`` (an
+    instance), of its default's type; booleans are written 0 / 1. Raises ``KeyError``
+    for a key that is not a field."""
+    if key not in {f.name for f in dataclasses.fields(options)}:
+        raise KeyError(key)
+    default = getattr(options, key)
+    return bool(int(text)) if isinstance(default, bool) else type(default)(text)
+
+
 def parse_config(text: str) -> tuple[str, dict]:
     name, _, body = text.partition(":")
-    fields = {f.name: f.type for f in dataclasses.fields(InferenceOptions)}
     out = {}
     for item in filter(None, body.split(",")):
         key, _, value = item.partition("=")
         if key == "bilinear":  # evidence lookup (parts only), not an inference option
             out[key] = bool(int(value))
             continue
-        if key not in fields:
-            raise SystemExit(f"unknown option {key!r}")
-        kind = fields[key] if isinstance(fields[key], str) else fields[key].__name__
-        out[key] = bool(int(value)) if kind == "bool" else int(value) if kind == "int" else (
-            value if kind == "str" else float(value))
+        try:
+            out[key] = option_value(InferenceOptions(), key, value)
+        except KeyError:
+            raise SystemExit(f"unknown option {key!r}") from None
     return name, out
 
 
