@@ -81,6 +81,59 @@ def metrics(dets, gts) -> dict:
     return out
 
 
+HEIGHT_BANDS = (0.0, 25.0, 40.0, 60.0, np.inf)
+
+
+def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict:
+    """What the fit receives at the detection ``threshold``: how many detections, the share
+    that overlap a ``Car`` label at IoU >= ``iou`` (precision), the share of the cars found
+    (recall, also by box height: :data:`HEIGHT_BANDS` px) and the viewpoint error of the
+    detections on a car (over 45 deg; over 135 deg: front and back swapped)."""
+    from wirescene.core.boxes import iou_2d
+
+    n_det = n_on = 0
+    found, heights, dalpha = [], [], []
+    for d, lab in zip(dets, labels):
+        cars = [o for o in lab.objects if o.type == "Car"]
+        gt = np.array([o.box for o in cars], float).reshape(-1, 4)
+        keep = np.asarray(d.scores) >= threshold
+        boxes, alpha = np.asarray(d.boxes, float)[keep], np.asarray(d.alpha, float)[keep]
+        n_det += len(boxes)
+        heights.append(gt[:, 3] - gt[:, 1])
+        if not len(gt):
+            continue
+        if not len(boxes):
+            found.append(np.zeros(len(gt), bool))
+            continue
+        ov = iou_2d(boxes[:, None], gt[None])
+        on = ov.max(1) >= iou
+        n_on += int(on.sum())
+        found.append(ov.max(0) >= iou)
+        truth = np.array([o.alpha for o in cars], float)[ov.argmax(1)[on]]
+        dalpha.append(np.abs(np.angle(np.exp(1j * (alpha[on] - truth)))))
+    found = np.concatenate(found) if found else np.zeros(0, bool)
+    heights = np.concatenate(heights)
+    dalpha = np.degrees(np.concatenate(dalpha)) if dalpha else np.zeros(0)
+    band = np.digitize(heights, HEIGHT_BANDS[1:-1])
+    return {"threshold": float(threshold), "iou": float(iou), "n_detections": int(n_det), "n_on_car": int(n_on),
+            "precision": n_on / max(n_det, 1), "n_cars": int(len(found)), "recall": float(found.mean()) if len(found) else 0.0,
+            "recall_by_height": {f"{HEIGHT_BANDS[b]:.0f}-{HEIGHT_BANDS[b + 1]:.0f}px": [float(found[band == b].mean())
+                                                                                    if (band == b).any() else None,
+                                                                                    int((band == b).sum())]
+                                 for b in range(len(HEIGHT_BANDS) - 1)},
+            "viewpoint_over_45": float(np.mean(dalpha > 45)) if len(dalpha) else None,
+            "viewpoint_over_135": float(np.mean(dalpha > 135)) if len(dalpha) else None}
+
+
+def fmt_operating_point(o) -> str:
+    bands = ", ".join(f"{k} {v[0]:.2f} ({v[1]})" if v[0] is not None else f"{k} - (0)" for k, v in o["recall_by_height"].items())
+    return (f"at threshold {o['threshold']:g}: {o['n_detections']} detections, {o['n_on_car']} on a car at IoU "
+            f"{o['iou']:g} (precision {o['precision']:.2f}); cars found {o['recall']:.2f} of {o['n_cars']} "
+            f"(by height: {bands}); viewpoint of the detections on a car off by > 45 deg "
+            f"{o['viewpoint_over_45'] if o['viewpoint_over_45'] is None else round(o['viewpoint_over_45'], 2)}, "
+            f"> 135 deg {o['viewpoint_over_135'] if o['viewpoint_over_135'] is None else round(o['viewpoint_over_135'], 2)}")
+
+
 def fmt(name, m) -> str:
     e, mo, h = m["easy"], m["moderate"], m["hard"]
     v = m["viewpoint"]
@@ -138,7 +191,18 @@ def main():
                     help="--cv: train each fold bank on this share of its training frames (a learning curve; "
                          "the frames are drawn per fold with --subset-seed, flips follow their frames)")
     ap.add_argument("--subset-seed", type=int, default=0)
+    ap.add_argument("--fold", type=int, action="append", default=None,
+                    help="--cv: train only this fold's bank (repeatable) and save it uncalibrated as "
+                         "MODELS_DIR/fold{k}_raw.npz, to run the folds in parallel processes; --from-raw then scores them")
+    ap.add_argument("--from-raw", default=None,
+                    help="DIR of the four foldK_raw.npz of --cv --fold runs: detect, calibrate (and save with "
+                         "--models-dir) and score them as --cv does")
+    ap.add_argument("--operating-points", type=float, nargs="*", default=[0.05, 0.2, 0.3, 0.5],
+                    help="further confidence thresholds at which to report the operating point")
+    ap.add_argument("--min-iou", type=float, default=0.5, help="overlap at which the operating point counts a car found")
     args = ap.parse_args()
+    if args.fold and not (args.cv and args.models_dir):
+        ap.error("--fold needs --cv and --models-dir")
     if not 0 < args.train_fraction <= 1:
         ap.error("--train-fraction must be in (0, 1]")
     from threadpoolctl import threadpool_limits
@@ -150,10 +214,23 @@ def main():
     out, times = {"frames": len(ids)}, []
     dets = {}
     fold_banks = {}
+    if args.from_raw:
+        # the fold banks of earlier --cv --fold runs: detect on each one's held-out frames
+        t0 = time.time()
+        images, _ = load_training_frames(ds, ids, flips=False)
+        for k in range(N_FOLDS):
+            fold_banks[k] = DetectorBank.load(Path(args.from_raw) / f"fold{k}_raw.npz")
+        for im in images:
+            dets[im.frame] = detect_training_image(fold_banks[fold_of(im.frame)], im)
+            im.pyramid = None  # one frame's pyramid in memory at a time
+        out["cv_seconds"] = round(time.time() - t0, 1)
     if args.cv:
         t0 = time.time()
-        images, examples = load_training_frames(ds, ids, flips=not args.no_flips, progress=print)
-        for k in range(N_FOLDS):
+        train_folds = sorted(set(args.fold)) if args.fold else list(range(N_FOLDS))
+        # a --fold run loads only the frames its banks train on (memory), and the others to score
+        need = ids if not args.fold else [f for f in ids if any(fold_of(f) != k for k in train_folds)]
+        images, examples = load_training_frames(ds, need, flips=not args.no_flips, progress=print)
+        for k in train_folds:
             kept = training_subset(sorted({im.frame for im in images if fold_of(im.frame) != k}),
                                    args.train_fraction, seed=(args.subset_seed, k))
             tr = [i for i, im in enumerate(images) if im.frame in kept]
@@ -167,6 +244,10 @@ def main():
                                         progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
             finish_bank(bank, train_images, ds, progress=lambda m: print("   ", m, flush=True))
+            if args.fold:
+                bank.save(Path(args.models_dir) / f"fold{k}_raw.npz")
+                print(f"    saved {Path(args.models_dir) / f'fold{k}_raw.npz'}", flush=True)
+                continue
             fold_banks[k] = bank
             for im in images:
                 if fold_of(im.frame) == k and not im.flipped:
@@ -174,8 +255,11 @@ def main():
             print(f"    fold {k} held out: " + fmt("", metrics([dets[f] for f in ids if fold_of(f) == k],
                                                              [gts[f] for f in ids if fold_of(f) == k])).strip(),
                   flush=True)
+        if args.fold:
+            return
         out["cv_seconds"] = round(time.time() - t0, 1)
         out["train_fraction"] = args.train_fraction
+    if args.cv or args.from_raw:
         # Platt calibration of each fold bank from the OTHER folds' held-out detections, with
         # their ground-prior log ratios as offsets (the ground term's weight rests on it, so
         # no fold's calibration sees that fold's frames)
@@ -200,8 +284,12 @@ def main():
                     bank = fold_banks[fold_of(im.frame)]
                     d = detect_training_image(bank, im, horizon=im.horizon, center_column=im.center_column)
                     dets[im.frame] = Detections(d.boxes, bank.confidence(d.scores), d.alpha, d.source)
+                    if args.from_raw:
+                        im.pyramid = None
         time_bank = fold_banks[0]
         name = "cross-validated real-data bank"
+    elif args.cv:
+        pass
     elif args.fold_models:
         pattern = args.fold_models if "{k}" in args.fold_models else str(Path(args.fold_models) / "fold{k}.npz")
         banks = {k: DetectorBank.load(pattern.format(k=k)) for k in range(N_FOLDS)}
@@ -239,6 +327,13 @@ def main():
         print(fmt(f"fold {k} ({len(fk)} frames)", m))
     pooled = metrics([dets[f] for f in ids], [gts[f] for f in ids])
     print(fmt(f"POOLED {name} ({len(ids)} frames)", pooled))
+    calibrated = args.bank is not None or not args.no_ground
+    if calibrated:
+        thresholds = sorted({args.threshold, *args.operating_points})
+        pooled["operating_points"] = [operating_point([dets[f] for f in ids], [ds.labels(f) for f in ids], t,
+                                                      iou=args.min_iou) for t in thresholds]
+        for o in pooled["operating_points"]:
+            print("   ", fmt_operating_point(o))
     cpu = []
     for f in ids[: args.time_frames]:
         img = ds.image(f)
