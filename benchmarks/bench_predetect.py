@@ -84,6 +84,20 @@ def metrics(dets, gts) -> dict:
 HEIGHT_BANDS = (0.0, 25.0, 40.0, 60.0, np.inf)
 
 
+def official_2d_ap(dets, labels) -> dict:
+    """2D AP (R40, easy / moderate / hard) and AOS of ``dets`` by the devkit's rules
+    (:func:`wirescene.eval.kitti_metrics.kitti_metrics`), at IoU 0.7 and 0.5."""
+    from wirescene.core.labels import Label
+    from wirescene.eval.kitti_metrics import kitti_metrics
+
+    rows = [[Label("Car", -1, -1, float(a), b, [-1, -1, -1], [-1000, -1000, -1000], -10, float(c))
+             for b, c, a in zip(np.asarray(d.boxes, float), np.asarray(d.scores, float), np.asarray(d.alpha, float))]
+            for d in dets]
+    r = kitti_metrics(labels, rows)
+    return {"2d": r["car"]["2d"], "aos": r["car"]["aos"], "2d_iou_0.5": r["iou_0.5"]["car"]["2d"],
+            "n_gt": r["n_gt"]["car"]}
+
+
 def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict:
     """What the fit receives at the detection ``threshold``: how many detections, the share
     that overlap a ``Car`` label at IoU >= ``iou`` (precision), the share of the cars found
@@ -160,7 +174,7 @@ def training_subset(frames: list, fraction: float, *, seed) -> set:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--root", default="/work/shared/data/kitti")
+    ap.add_argument("--root", required=True, help="KITTI root with labelled frames (e.g. ../shared/data/kitti)")
     ap.add_argument("--bank", default=None, help="score this fixed bank on all frames instead of cross-validating")
     ap.add_argument("--cv", action="store_true", help="4-fold cross-validation by drive")
     ap.add_argument("--models-dir", default=None, help="write the fold banks here (foldK.npz, calibrated)")
@@ -327,6 +341,13 @@ def main():
         print(fmt(f"fold {k} ({len(fk)} frames)", m))
     pooled = metrics([dets[f] for f in ids], [gts[f] for f in ids])
     print(fmt(f"POOLED {name} ({len(ids)} frames)", pooled))
+    pooled["official"] = official_2d_ap([dets[f] for f in ids], [ds.labels(f) for f in ids])
+    o = pooled["official"]
+    print("    devkit rules (eval.kitti_metrics): 2D AP easy / moderate / hard "
+          + " / ".join(f"{o['2d'][d]:.1f}" for d in ("easy", "moderate", "hard"))
+          + f" ({' / '.join(str(o['n_gt'][d]) for d in ('easy', 'moderate', 'hard'))} cars); AOS "
+          + " / ".join(f"{o['aos'][d]:.1f}" if o['aos'][d] is not None else "-" for d in ("easy", "moderate", "hard"))
+          + "; 2D AP at IoU 0.5 " + " / ".join(f"{o['2d_iou_0.5'][d]:.1f}" for d in ("easy", "moderate", "hard")))
     calibrated = args.bank is not None or not args.no_ground
     if calibrated:
         thresholds = sorted({args.threshold, *args.operating_points})

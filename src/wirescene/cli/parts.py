@@ -23,7 +23,7 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
                    "ghog_msc: ghog_ms plus colour).")
 @click.option("--kitti-root", type=click.Path(file_okay=False, exists=True), default=None,
               help="Labelled KITTI root whose frames add real part and background patches "
-                   "(the shipped model: /work/shared/data/kitti, all 33 frames).")
+                   "(the shipped model: ../shared/data/kitti, all 72 frames).")
 @click.option("--frames", default=None,
               help="Real training frames: comma-separated ids, or @FILE with one id per line (default: all).")
 @click.option("--position/--no-position", default=False, show_default=True,
@@ -36,6 +36,9 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
               help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
 @click.option("--synth-seed", type=int, default=1000, show_default=True,
               help="Synthetic scene stream (>= 1000; lower seeds are evaluation scenes).")
+@click.option("--synth-cache", type=click.Path(file_okay=False), default=None,
+              help="Directory keeping the synthetic scenes' patches, read back by later trainings with the same "
+                   "synthetic options (e.g. one per fold).")
 @click.option("--class-weight", type=click.Choice(["balanced", "balanced_subsample", "none"]), default="balanced",
               show_default=True, help="Forest class weights.")
 @click.option("--n-aug", type=int, default=2, show_default=True, help="Renderings per view (first unaugmented).")
@@ -46,7 +49,7 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
               help="KITTI root whose car-free regions add background patches (off by default).")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
 def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, position, smooth, calibrate, synth_scenes,
-          synth_seed, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
+          synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
     """Train the 37-class part detector on real KITTI frames, synthetic shaded scenes
     and/or CAD renderings."""
     from pathlib import Path
@@ -62,7 +65,8 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, posi
                                  class_weight=None if class_weight == "none" else class_weight,
                                  compare_kinds=("hog",) if compare_hog else (),
                                  kitti_background=kitti_background, kitti_root=kitti_root, frames=frames,
-                                 position=position, calibrate_real=calibrate, smooth=smooth, progress=click.echo)
+                                 position=position, calibrate_real=calibrate, smooth=smooth, synth_cache=synth_cache,
+                                 progress=click.echo)
     if report:
         def conv(o):
             if isinstance(o, dict):

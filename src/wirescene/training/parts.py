@@ -356,7 +356,7 @@ def _visible_uv(car):
 def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=("ghog",), sample_seed: int = 0,
                           scale_samples: int = 2, n_jitter: int = 2, jitter: float = 2.0, bg_per_car: int = 40,
                           bg_boxes: int = 4, bg_per_box: int = 15, min_box_h: float = 20.0, min_dist: float = 6.0,
-                          augment: bool = False, progress=None) -> PatchData:
+                          augment: bool = False, cache_dir=None, progress=None) -> PatchData:
     """Patches of synthetic *shaded* scenes (:func:`wirescene.synth.generate.generate_scene`
     ``(seed, i)``, ``i < n_scenes``), described exactly as at test time
     (:func:`wirescene.parts.detector.box_descriptors`: the car's 2D label box, box-relative scale):
@@ -375,11 +375,20 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
     towards real camera images.
 
     ``group`` is the scene index. Deterministic given ``seed``, ``sample_seed``.
+
+    ``cache_dir``: keep the patches in an ``.npz`` there, named by every argument above, and
+    read them back instead of rendering when present (the same scenes serve every fold).
     """
     from wirescene.synth.generate import load_car_library, generate_scene
 
     if seed < SYNTH_TRAIN_SEED:
         raise ValueError(f"synthetic training scenes must use seeds >= {SYNTH_TRAIN_SEED} (lower ones are evaluation)")
+    args = dict(n_scenes=n_scenes, seed=seed, kinds=list(kinds), sample_seed=sample_seed, scale_samples=scale_samples,
+                n_jitter=n_jitter, jitter=jitter, bg_per_car=bg_per_car, bg_boxes=bg_boxes, bg_per_box=bg_per_box,
+                min_box_h=min_box_h, min_dist=min_dist, augment=augment)
+    cache = None if cache_dir is None else synth_cache_path(cache_dir, args)
+    if cache is not None and cache.is_file():
+        return load_patch_data(cache)
     library = load_car_library()
     patches = PatchCollector(kinds)
     add = patches.add
@@ -431,7 +440,44 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
             add(img, fake, cand[:bg_per_box], BACKGROUND, 1.0, edges, i)
         if progress and (i + 1) % 50 == 0:
             progress(f"synthetic scenes: {i + 1}/{n_scenes} in {time.time() - t0:.0f} s")
-    return patches.data([])
+    data = patches.data([])
+    if cache is not None:
+        save_patch_data(cache, data)
+    return data
+
+
+def synth_cache_path(cache_dir, args: dict) -> Path:
+    """File of the synthetic patches made with ``args`` in ``cache_dir`` (name: a hash of
+    the arguments and of the package version, so a new renderer never reads old patches)."""
+    import hashlib
+    import json
+
+    from wirescene import __version__
+
+    key = hashlib.sha256(json.dumps({**args, "version": __version__}, sort_keys=True).encode()).hexdigest()[:16]
+    return Path(cache_dir) / f"synth_patches_{key}.npz"
+
+
+def save_patch_data(path, data: PatchData) -> Path:
+    """Write :class:`PatchData` as a versioned ``.npz`` (no pickles)."""
+    from wirescene.core.artefacts import save_npz
+
+    arrays = {f"X_{k}": v for k, v in data.X.items()}
+    arrays.update(y=data.y, group=data.group, names=np.array(list(data.names), dtype=str))
+    for name in ("pos", "ctx"):
+        if getattr(data, name) is not None:
+            arrays[name] = getattr(data, name)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    return save_npz(path, arrays, kind="patches", version=1)
+
+
+def load_patch_data(path) -> PatchData:
+    """:class:`PatchData` written by :func:`save_patch_data`."""
+    from wirescene.core.artefacts import load_npz
+
+    z = load_npz(path, kind="patches", version=1)
+    return PatchData({k[2:]: v for k, v in z.items() if k.startswith("X_")}, z["y"], z["group"],
+                     z["names"].tolist(), z.get("pos"), z.get("ctx"))
 
 
 def _photometric(img, rng):
@@ -650,7 +696,7 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
                         synth_seed: int = SYNTH_TRAIN_SEED, class_weight: str | None = "balanced",
                         min_samples_leaf: int = 2, augment: bool = False, kitti_root=None, frames=None,
                         position: bool = False, context: bool = False, calibrate_real: bool = False,
-                        smooth: float = 0.0, n_jobs: int = 1, progress=None):
+                        smooth: float = 0.0, n_jobs: int = 1, synth_cache=None, progress=None):
     """Generate training patches, optionally evaluate leave-models-out, fit the forest
     on all data and write the model ``.npz``.
 
@@ -708,7 +754,7 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
         report["cars"] = sorted(set(data.names[g] for g in data.group[data.group >= 0]))
     if synth_scenes:
         sd = make_synth_patch_data(n_scenes=synth_scenes, seed=synth_seed, kinds=kinds, sample_seed=seed,
-                                   augment=augment, progress=progress)
+                                   augment=augment, cache_dir=synth_cache, progress=progress)
         data = sd if data is None else _merge(data, sd)
     real = None
     if kitti_root is not None:
