@@ -143,7 +143,7 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
         raise InputError("detections file not found", path=path)
     suffix = path.suffix.lower()
     if suffix == ".txt":
-        dets = detections_from_labels(read_labels(path), source=str(path))
+        dets = detections_from_labels(read_labels(path, image_size=image_size), source=str(path))
     elif suffix == ".json":
         try:
             data = json.loads(path.read_text(encoding="utf-8-sig"))
