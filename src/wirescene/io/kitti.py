@@ -26,6 +26,7 @@ from wirescene.core.errors import InputError, ShapeError
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.validate import MAX_PIXEL, outside_image
 from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label types live in core)
+    ALPHA_NOT_ESTIMATED,
     COLUMNS,
     CAR_TYPES,
     DONTCARE,
