@@ -44,7 +44,7 @@ if __name__ == "__main__":
 
 import numpy as np
 
-from timing import best_of
+from _common import best_of
 from wirescene.infer import torch_backend as tb
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, object_pose, transform
 from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion
