@@ -36,6 +36,15 @@ def test_doctest_examples_run():
     assert result.attempted >= 3 and result.failed == 0
 
 
+def test_doctest_examples_of_the_returned_types_run():
+    import wirescene.core.types as types
+
+    for cls in (types.Detections, types.ObjectEstimate, types.SceneEstimate):
+        assert "Examples\n    --------\n    >>> " in cls.__doc__, cls.__name__
+    result = doctest.testmod(types)
+    assert result.attempted >= 20 and result.failed == 0
+
+
 def test_version_is_the_package_metadata_and_options_and_reports_are_exported(monkeypatch):
     import importlib
     import importlib.metadata
