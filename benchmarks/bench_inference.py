@@ -45,8 +45,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from tune_fine import parse_config, run_configs  # noqa: E402
+from _common import parse_config, run_configs  # noqa: E402
 
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.io.wireframes import read_wireframe_gt, wireframe_gt_path  # noqa: E402

@@ -26,7 +26,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from timing import best_of  # noqa: E402
+from _common import best_of  # noqa: E402
 from wirescene.core.boxes import box_corners  # noqa: E402
 from wirescene.io.kitti import Label, write_labels  # noqa: E402
 from wirescene.eval.kitti_metrics import format_kitti_table, kitti_metrics, read_label_dirs  # noqa: E402

@@ -27,7 +27,7 @@ import argparse
 
 import numpy as np
 
-from timing import best_of
+from _common import best_of
 from wirescene.core.groundplane import object_pose, transform
 from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
 from wirescene.core.shape import load_default

@@ -18,8 +18,12 @@ scenes and on the real KITTI frames (plain script).
        *mean* shape, so they are themselves off by a few percent of the car length. These
        frames are the evaluation set: the shipped model never saw them.
 
-Usage: python benchmarks/bench_parts.py [--root /work/shared/data/kitti] [--frame 000010]
-       [--synth-root /tmp/synval] [--model PATH]
+Usage: python benchmarks/bench_parts.py --root KITTI_ROOT [--frame 000010]
+       [--synth-root DIR] [--model PATH]
+
+``--root`` holds the labelled KITTI frames scored (``tests/data/kitti``, three frames, is
+a quick check of the script); without ``--synth-root`` the synthetic scenes are generated
+into a temporary directory and removed afterwards.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -50,9 +55,10 @@ def _line(name, r, radii):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--root", default="/work/shared/data/kitti")
+    ap.add_argument("--root", required=True, help="KITTI root with labelled frames")
     ap.add_argument("--frame", default="000010")
-    ap.add_argument("--synth-root", default="/tmp/synval")
+    ap.add_argument("--synth-root", default=None,
+                    help="synthetic held-out scenes, generated here if missing (default: a temporary directory)")
     ap.add_argument("--synth-scenes", type=int, default=20)
     ap.add_argument("--synth-seed", type=int, default=1)
     ap.add_argument("--model", default=None)
@@ -75,21 +81,22 @@ def main():
     print(f"frame {args.frame}: {len(boxes)} car boxes, {n_grid} grid points x scales, "
           f"response maps in {dt:.2f} s (1 thread)")
 
-    synth = Path(args.synth_root)
-    if not (synth / "training" / "wireframes").is_dir():
-        from wirescene.synth.generate import generate_dataset
+    with tempfile.TemporaryDirectory() as tmp:
+        synth = Path(args.synth_root or tmp)
+        if not (synth / "training" / "wireframes").is_dir():
+            from wirescene.synth.generate import generate_dataset
 
-        print(f"generating {args.synth_scenes} synthetic scenes (seed {args.synth_seed}) into {synth}")
-        generate_dataset(synth, args.synth_scenes, seed=args.synth_seed)
-    radii = tuple(args.radius)
-    rows = [
-        ("synthetic held-out", lambda: synth_eval_frames(synth)),
-        ("real KITTI clean", lambda: kitti_eval_frames(args.root)),
-        ("real KITTI all cars", lambda: kitti_eval_frames(args.root, clean=False, min_box_h=0.0)),
-    ]
-    for name, frames in rows:
-        r = localisation(det, frames(), radii=radii)
-        print(_line(name, r, radii) + f"  [maps {r['t_maps_s']:.1f} s]")
+            print(f"generating {args.synth_scenes} synthetic scenes (seed {args.synth_seed}) into {synth}")
+            generate_dataset(synth, args.synth_scenes, seed=args.synth_seed)
+        radii = tuple(args.radius)
+        rows = [
+            ("synthetic held-out", lambda: synth_eval_frames(synth)),
+            ("real KITTI clean", lambda: kitti_eval_frames(args.root)),
+            ("real KITTI all cars", lambda: kitti_eval_frames(args.root, clean=False, min_box_h=0.0)),
+        ]
+        for name, frames in rows:
+            r = localisation(det, frames(), radii=radii)
+            print(_line(name, r, radii) + f"  [maps {r['t_maps_s']:.1f} s]")
 
 
 if __name__ == "__main__":

@@ -19,12 +19,14 @@ Usage (defaults = the shipped model's recipe: ghog_ms, box position, smoothing 1
 box height, real + 100 synthetic scenes; the CV models are not calibrated, which does not
 change any arg-max)::
 
-    python benchmarks/bench_real.py [--root /work/shared/data/kitti] [--kind ghog_ms]
+    python benchmarks/bench_real.py --root KITTI_ROOT [--kind ghog_ms]
         [--no-position] [--smooth 0.0625] [--synth-scenes 100] [--context] [--n-trees 30]
         [--max-depth 13] [--cache DIR] [--save-dir DIR] [--baseline] [--no-synth-eval]
+        [--synth-eval-root DIR]
 
 ``--baseline`` additionally scores the shipped model (trained without real frames) on every
-fold. ``--cache DIR`` keeps the described patches between runs (npz).
+fold. ``--cache DIR`` keeps the described patches between runs (npz); ``--synth-eval-root
+DIR`` keeps the synthetic held-out scenes (default: generated into a temporary directory).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse
+import tempfile
 import time
 from pathlib import Path
 
@@ -156,7 +159,7 @@ def parts_cv(root, *, kind: str = "ghog_ms", position: bool = False, context: bo
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--root", default="/work/shared/data/kitti")
+    ap.add_argument("--root", required=True, help="KITTI root with the labelled frames of the folds")
     ap.add_argument("--kind", default="ghog_ms")
     ap.add_argument("--smooth", type=float, default=0.0625, help="response-map smoothing (sigma in box heights)")
     ap.add_argument("--context", action="store_true", help="append the box's gradient layout (ghog_ms kinds)")
@@ -173,7 +176,8 @@ def main():
     ap.add_argument("--model", default=None, help="with --baseline: this model instead of the shipped one")
     ap.add_argument("--no-synth-eval", action="store_true",
                     help="skip the synthetic held-out row (score the shipped model with bench_parts.py instead)")
-    ap.add_argument("--synth-eval-root", default="/tmp/synval")
+    ap.add_argument("--synth-eval-root", default=None,
+                    help="synthetic held-out scenes, generated here if missing (default: a temporary directory)")
     ap.add_argument("--synth-eval-scenes", type=int, default=20)
     args = ap.parse_args()
     cache = Path(args.cache) if args.cache else None
@@ -206,16 +210,17 @@ def main():
     if args.no_synth_eval:
         return
     # synthetic held-out scenes, model trained on all real frames (+ synthetic)
-    synth_root = Path(args.synth_eval_root)
-    if not (synth_root / "training" / "wireframes").is_dir():
-        from wirescene.synth.generate import generate_dataset
+    with tempfile.TemporaryDirectory() as tmp:
+        synth_root = Path(args.synth_eval_root or tmp)
+        if not (synth_root / "training" / "wireframes").is_dir():
+            from wirescene.synth.generate import generate_dataset
 
-        generate_dataset(synth_root, args.synth_eval_scenes, seed=1)
-    parts = [p for p in (real, synth) if p is not None]
-    data = parts[0] if len(parts) == 1 else _concat(parts[0], parts[1], args.kind)
-    det = fit_detector(data, kind=args.kind, position=args.position, context=args.context, smooth=args.smooth,
-                       n_trees=args.n_trees, max_depth=args.max_depth, min_samples_leaf=args.min_samples_leaf)
-    print(line(f"synthetic held-out [{tag}]", localisation(det, synth_eval_frames(synth_root))))
+            generate_dataset(synth_root, args.synth_eval_scenes, seed=1)
+        parts = [p for p in (real, synth) if p is not None]
+        data = parts[0] if len(parts) == 1 else _concat(parts[0], parts[1], args.kind)
+        det = fit_detector(data, kind=args.kind, position=args.position, context=args.context, smooth=args.smooth,
+                           n_trees=args.n_trees, max_depth=args.max_depth, min_samples_leaf=args.min_samples_leaf)
+        print(line(f"synthetic held-out [{tag}]", localisation(det, synth_eval_frames(synth_root))))
 
 
 if __name__ == "__main__":

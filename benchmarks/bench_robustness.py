@@ -15,7 +15,7 @@ only), so all 33 frames are scored. Fine variants (``--variant fg+gp`` ...) use 
 detectors and occluder statistics; check what they were trained on before reading their
 figures as held-out ones.
 
-Usage: python benchmarks/bench_robustness.py [--root /work/shared/data/kitti]
+Usage: python benchmarks/bench_robustness.py --root KITTI_ROOT
        [--levels 0,0.05,0.1,0.2] [--viewpoint-noise 0,20] [--variant coarse --variant coarse+gp]
        [--seed 0] [--json out.json]
 """
@@ -69,7 +69,7 @@ def write_perturbed_detections(dataset: KittiDataset, out_dir: Path, *, level: f
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--root", default="/work/shared/data/kitti")
+    ap.add_argument("--root", required=True, help="KITTI root with labelled frames")
     ap.add_argument("--levels", default="0,0.05,0.1,0.2", help="Box jitter, fractions of the box size.")
     ap.add_argument("--viewpoint-noise", default="0,20", help="Std. dev. of the angle noise, degrees.")
     ap.add_argument("--variant", dest="variants", action="append", default=None)

@@ -2,7 +2,7 @@
 path, side by side in one run on the same data:
 
 * self-occlusion of 250 particles x 5 objects x 12 samples = 15000 placed wireframes
-  (the ray casting of ``scene.likelihood.instantiate_wireframes``);
+  (the ray casting of ``wirescene.infer.likelihood.instantiate_wireframes``);
 * inter-object occlusion of 250 scenes x 5 objects;
 * the object likelihood (paper Eq. 2) of the 15000 hypotheses.
 
@@ -44,7 +44,7 @@ if __name__ == "__main__":
 
 import numpy as np
 
-from timing import best_of
+from _common import best_of
 from wirescene.infer import torch_backend as tb
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, object_pose, transform
 from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion

@@ -27,52 +27,16 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import copy  # noqa: E402
-import dataclasses  # noqa: E402
 import json  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.io.folds import fold_of  # noqa: E402
-from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.io.wireframes import read_wireframe_gt, wireframe_gt_path  # noqa: E402
+from _common import option_value, parse_config, run_configs  # noqa: E402, F401  (option_value: bench_real_folds)
 from wirescene.eval.metrics import evaluate  # noqa: E402
-from wirescene.eval.runner import frame_result  # noqa: E402
-from wirescene.eval.sources import DetectionSource, frame_seed  # noqa: E402
-from wirescene.infer.evidence import oracle_evidence, part_evidence  # noqa: E402
-from wirescene.fitting.pipeline import FitOptions, fit_scene  # noqa: E402
-from wirescene.parts.detector import PartDetector  # noqa: E402
-from wirescene.infer.inference import InferenceOptions  # noqa: E402
-from wirescene.lift import lift_table  # noqa: E402
+from wirescene.io.folds import fold_of  # noqa: E402
 
 GROUPS = {"A": (0, 1), "B": (2, 3)}
-
-
-def option_value(options, key: str, text: str):
-    """``text`` as a value of field ``key`` of the options dataclass ``options`` (an
-    instance), of its default's type; booleans are written 0 / 1. Raises ``KeyError``
-    for a key that is not a field."""
-    if key not in {f.name for f in dataclasses.fields(options)}:
-        raise KeyError(key)
-    default = getattr(options, key)
-    return bool(int(text)) if isinstance(default, bool) else type(default)(text)
-
-
-def parse_config(text: str) -> tuple[str, dict]:
-    name, _, body = text.partition(":")
-    out = {}
-    for item in filter(None, body.split(",")):
-        key, _, value = item.partition("=")
-        if key == "bilinear":  # evidence lookup (parts only), not an inference option
-            out[key] = bool(int(value))
-            continue
-        try:
-            out[key] = option_value(InferenceOptions(), key, value)
-        except KeyError:
-            raise SystemExit(f"unknown option {key!r}") from None
-    return name, out
 
 
 def figures(records, n_gt):
@@ -89,49 +53,6 @@ def group_of(frame_id: str, synthetic: bool) -> str:
         return "A" if int(frame_id) % 2 == 0 else "B"
     f = fold_of(frame_id)
     return next(g for g, folds in GROUPS.items() if f in folds)
-
-
-def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=1, models=None, log=print):
-    """Fit ``variants`` under every configuration ``{name: options}`` on the frames of
-    ``root`` (label boxes as pre-detections; evidence and coarse grid once per frame).
-
-    Returns ``{(name, variant): [FrameResult]}``, ``{name: seconds}`` (CPU seconds of
-    fitting, i.e. one core's time on a shared machine) and the number of frames.
-    """
-    ds = KittiDataset(root)
-    frame_ids = ds.frame_ids()[:frames]
-    source = DetectionSource("gt")
-    results = {(c, v): [] for c in configs for v in variants}
-    seconds = dict.fromkeys(configs, 0.0)
-    t0 = time.perf_counter()
-    for fid in frame_ids:
-        gt = ds.labels(fid)
-        detections = source.for_frame(ds, fid, frame_seed(seed, fid))
-        camera = ds.camera(fid)
-        gt_path = wireframe_gt_path(ds.split_dir, fid)
-        vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
-        if not len(detections):
-            continue
-        if evidence == "oracle":
-            frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
-        else:
-            detector = None if models is None else PartDetector.load(models / f"parts_fold{fold_of(fid)}.npz")
-            frame_evidence = part_evidence(ds.image(fid), detections, detector=detector)
-        lifted = lift_table(camera, detections)
-        for name, kw in configs.items():
-            kw = dict(kw)
-            ev = frame_evidence
-            if "bilinear" in kw:
-                ev = copy.copy(frame_evidence)
-                ev.bilinear = kw.pop("bilinear")
-            options = FitOptions(inference=InferenceOptions(**kw), seed=seed)
-            for v in variants:
-                t = time.process_time()
-                est = fit_scene(camera, detections, variant=v, options=options, lifted=lifted, evidence=ev)
-                seconds[name] += time.process_time() - t
-                results[(name, v)].append(frame_result(fid, gt, detections, est, vertex_gt, camera))
-        log(f"{fid} done ({time.perf_counter() - t0:.0f} s)")
-    return results, seconds, len(frame_ids)
 
 
 def main():

@@ -3,6 +3,7 @@ table-driven through the CLI (exit code 2, one line ``wirescene: error: ...``, n
 left behind), and property-based fuzzing of the parsers and the option ranges."""
 
 import json
+import re
 import shutil
 import signal
 import subprocess
@@ -23,7 +24,8 @@ from wirescene.cli.main import main
 from wirescene.core.camera import read_kitti_calib
 from wirescene.core.errors import InputError
 from wirescene.io.detections import read_detections
-from wirescene.io.kitti import read_image, read_labels
+import wirescene.io.kitti
+from wirescene.io.kitti import KittiDataset, read_image, read_labels
 
 SPLIT = KITTI_ROOT / "training"
 FRAME = "000010"
@@ -57,6 +59,22 @@ def _fit_case(tmp, *, calib=None, dets=None, image=None, extra=()):
 
 def _eval_case(tmp, *extra):
     return ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", FRAME, "--workers", "1", *extra]
+
+
+LABEL_ROWS = len((SPLIT / "label_2" / f"{FRAME}.txt").read_text().splitlines())
+
+
+def _eval_label_case(tmp, row):
+    """``eval`` of a copy of the test frame whose label file ends with ``row``; outputs asked
+    for, so that any partial output would show."""
+    split = tmp / "kitti" / "training"
+    for sub, ext in (("image_2", "png"), ("calib", "txt"), ("label_2", "txt")):
+        (split / sub).mkdir(parents=True)
+        shutil.copy(SPLIT / sub / f"{FRAME}.{ext}", split / sub)
+    label = split / "label_2" / f"{FRAME}.txt"
+    label.write_text(label.read_text() + row + "\n")
+    return ["eval", tmp / "kitti", "--variant", "coarse", "--frames", FRAME, "--workers", "1",
+            "--predictions", tmp / "pred", "--json", tmp / "metrics.json", "--report", tmp / "report"]
 
 
 def _write_16bit(path):
@@ -158,6 +176,54 @@ def test_bad_input_ends_in_one_line_and_exit_code_2(tmp_path, case):
     assert re.search(pattern, lines[0]), lines[0]
     after = {p for p in tmp_path.rglob("*")}
     assert after <= before, f"{case} left {sorted(after - before)}"
+
+
+# Label rows that cannot be (row appended to the test frame's label file -> the problem named).
+BAD_LABEL_ROWS = {
+    "car box right of the image": (CAR.replace("354.43 185.52 549.52 294.49", "1300 185.52 1400 294.49"),
+                                   r"2D box \(x1 y1 x2 y2 = 1300 185.52 1400 294.49\) lies entirely outside the "
+                                   r"1242x375 image"),
+    "car box above the image": (CAR.replace("185.52 549.52 294.49", "-90 549.52 -10"), "2D box .* entirely outside"),
+    "DontCare box outside the image": ("DontCare -1 -1 -10 1500 160 1560 190 -1 -1 -1 -1000 -1000 -1000 -10",
+                                       "2D box .* entirely outside"),
+    "x2 = 1e30": (CAR.replace("549.52", "1e30"), r"2D box coordinate 1e\+30 is absurdly far from any image"),
+    "x1 = -1e6": (CAR.replace("354.43", "-1e6"), r"2D box coordinate -1e\+06 is absurdly far from any image"),
+    "x2 NaN": (CAR.replace("549.52", "nan"), r"column 7 \(x2\) is not finite"),
+    "y1 -inf": (CAR.replace("185.52", "-inf"), r"column 6 \(y1\) is not finite"),
+    "x2 < x1": (CAR.replace("354.43 185.52 549.52", "549.52 185.52 354.43"), "2D box is empty or inverted"),
+    "y2 = y1": (CAR.replace("294.49", "185.52"), "2D box is empty or inverted"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_LABEL_ROWS)
+def test_eval_refuses_label_boxes_that_cannot_be_naming_file_and_row(tmp_path, case):
+    row, problem = BAD_LABEL_ROWS[case]
+    args = [str(a) for a in _eval_label_case(tmp_path, row)]
+    before = set(tmp_path.rglob("*"))
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2, (case, r.output, r.exception)
+    # The frame's progress bar (erased on a terminal) may precede the error line.
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip() and not ln.startswith("eval: ")]
+    assert len(lines) == 1, r.stderr
+    assert re.match(rf"wirescene: error: \S+/label_2/{FRAME}\.txt: line {LABEL_ROWS + 1}: {problem}", lines[0]), lines[0]
+    assert set(tmp_path.rglob("*")) <= before, f"{case} left {sorted(set(tmp_path.rglob('*')) - before)}"
+
+
+def test_label_boxes_of_real_frames_are_accepted(tmp_path):
+    """Truncated cars touching the border, DontCare regions and other classes are fine;
+    so is every label file shipped with the package or the tests."""
+    for root in (KITTI_ROOT, Path(wirescene.io.kitti.__file__).parents[1] / "data" / "sample" / "kitti"):
+        ds = KittiDataset(root)
+        assert all(len(ds.labels(f)) > 0 for f in ds.frame_ids())
+    path = tmp_path / "edge.txt"
+    path.write_text(CAR.replace("354.43 185.52 549.52 294.49", "0.00 160.00 120.50 374.00") + "\n"
+                    + CAR.replace("354.43 185.52 549.52 294.49", "1100.00 150.00 1241.00 300.00") + "\n"
+                    + "DontCare -1 -1 -10 1200.00 160.00 1241.00 190.00 -1 -1 -1 -1000 -1000 -1000 -10\n"
+                    + "Pedestrian 0.00 0 0.2 700 150 730 240 1.7 0.6 0.8 2.0 1.6 20.0 0.3\n")
+    labels = read_labels(path, image_size=(1242, 375))
+    assert len(labels.objects) == 3 and len(labels.dontcare) == 1
+    with pytest.raises(InputError, match=r"edge\.txt: line 2: .* entirely outside the 1100x300 image"):
+        read_labels(path, image_size=(1100, 300))
 
 
 def test_sixteen_bit_images_are_scaled_not_clipped(tmp_path):

@@ -1,5 +1,5 @@
 """CAD reading, canonicalisation, road-car rule and landmarking (tests/data/cad copies of
-TORCS meshes; see /work/shared/data/README.md for their origin and licence)."""
+TORCS meshes; see tests/data/cad/README.md for their origin and licence)."""
 
 from __future__ import annotations
 

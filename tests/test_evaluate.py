@@ -245,3 +245,21 @@ def test_shape_contracts():
     with pytest.raises(ShapeError, match="gt_occluded_parts"):
         FrameResult("x", [car(B1)], np.zeros((0, 4)), [], [], np.zeros((0, 3)), np.zeros((0, 3)), [], [],
                     gt_occluded_parts=[1, 2])
+
+
+def test_report_gallery_ranks_missed_and_false_cars_below_many_cars_found_well():
+    from wirescene.eval.report import frame_scores
+
+    boxes = [[100.0 + 150 * i, 100.0, 200.0 + 150 * i, 200.0] for i in range(5)]
+    gt = [car(b, x=-6.0 + 3 * i, z=20.0) for i, b in enumerate(boxes)]
+    # "few": 1 of 5 cars found exactly and a large false car; "many": 4 of 5 found 0.5 m off.
+    few = frame(gt, [dict(gt_for=0), dict(gt_for=0, box=[900.0, 50.0, 1200.0, 350.0])], frame_id="few")
+    many = frame(gt, [dict(gt_for=i, loc=gt[i].location + [0.5, 0, 0]) for i in range(4)], frame_id="many")
+    empty = frame(gt, [dict(gt_for=0, box=[900.0, 50.0, 1200.0, 350.0])], frame_id="none")
+    report = evaluate([few, many, empty])
+    errors = {f: [r.loc_error for r in report.records if r.frame_id == f] for f in ("few", "many")}
+    assert np.mean(errors["few"]) < np.mean(errors["many"])  # the old ranking put "few" first
+    scores = frame_scores(report, {"few": (5, 2), "many": (5, 4), "none": (5, 1)})
+    assert_close([scores["few"], scores["many"], scores["none"]], [0.0, 4 * 0.75 / 5, -1 / 5])
+    assert sorted(scores, key=scores.get, reverse=True) == ["many", "few", "none"]
+    assert frame_scores(report, {"many": (4, 4)})["many"] == pytest.approx(0.75)  # only the frames asked for

@@ -181,3 +181,25 @@ def test_dataset_without_labels_and_bad_roots(kitti_root, tmp_path):
     shutil.rmtree(split / "calib")
     with pytest.raises(InputError, match="no calib/ directory"):
         KittiDataset(split)
+
+
+def test_alpha_minus_ten_is_an_unknown_viewpoint(tmp_path):
+    """KITTI's alpha -10 ("not estimated", as a 2D-only detector writes it) is no viewpoint,
+    in a KITTI detection file, in JSON and in CSV, with or without viewpoint noise."""
+    from wirescene.core.viewpoints import bin_center, viewpoint_bin
+    from wirescene.io.detections import detections_from_labels, read_detections
+
+    txt = tmp_path / "000010.txt"
+    txt.write_text(GOOD.replace(" 1.95 ", " -10 ") + " 0.9\n" + GOOD + " 0.8\n"
+                   + GOOD.replace(" 1.95 ", " -10.00 ") + " 0.7\n")
+    dets = read_detections(txt)
+    assert np.isnan(dets.alpha[[0, 2]]).all() and dets.alpha[1] == pytest.approx(bin_center(viewpoint_bin(1.95)))
+    noisy = detections_from_labels(read_labels(txt), viewpoint_noise_deg=30, rng=np.random.default_rng(1))
+    assert np.isnan(noisy.alpha[[0, 2]]).all() and np.isfinite(noisy.alpha[1])
+    js = tmp_path / "d.json"
+    js.write_text('[{"box": [300, 180, 520, 300], "alpha": -10}, {"box": [600, 170, 680, 230], "alpha": -3.0}]')
+    csv = tmp_path / "d.csv"
+    csv.write_text("x1,y1,x2,y2,alpha\n300,180,520,300,-10\n600,170,680,230,-3.0\n")
+    for path in (js, csv):
+        alpha = read_detections(path).alpha
+        assert np.isnan(alpha[0]) and alpha[1] == pytest.approx(bin_center(viewpoint_bin(-3.0))), path.name

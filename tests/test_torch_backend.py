@@ -40,7 +40,7 @@ def shape_model():
 
 def placed_wireframes(shape_model, batch, seed, *, max_bearing_deg=40.0):
     """Random shape-model cars on random ground planes, 5-40 m from a camera at KITTI
-    height, placed like ``scene.likelihood.instantiate_wireframes``; ``(*batch, 36, 3)``."""
+    height, placed like ``wirescene.infer.likelihood.instantiate_wireframes``; ``(*batch, 36, 3)``."""
     rng = np.random.default_rng(seed)
     shape = rng.normal(size=batch + (5,))
     dist = rng.uniform(5, 40, batch)

@@ -12,16 +12,19 @@ The public API (see :mod:`wirescene.api`)::
 Importing the package reads no data file; trained artefacts are loaded on first use.
 """
 
-__version__ = "0.2.0"
-
-from wirescene.api import detect, evaluate, fit  # noqa: E402
-from wirescene.core.camera import Camera, read_kitti_calib  # noqa: E402
-from wirescene.core.errors import ArgumentError, InputError, ShapeError, WiresceneError  # noqa: E402
-from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate  # noqa: E402
-from wirescene.fitting.pipeline import FitOptions  # noqa: E402
-from wirescene.fitting.variants import VARIANTS  # noqa: E402
+from wirescene.api import detect, evaluate, fit
+from wirescene.core.camera import Camera, read_kitti_calib
+from wirescene.core.errors import ArgumentError, InputError, ShapeError, WiresceneError
+from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate
+from wirescene.core.version import __version__
+from wirescene.eval.metrics import EvaluationReport
+from wirescene.fitting.pipeline import FitOptions
+from wirescene.fitting.variants import VARIANTS
+from wirescene.infer.inference import InferenceOptions
+from wirescene.lift import LiftingOptions
 
 __all__ = [
     "fit", "detect", "evaluate", "Camera", "read_kitti_calib", "Detections", "ObjectEstimate", "SceneEstimate",
-    "FitOptions", "VARIANTS", "ArgumentError", "InputError", "ShapeError", "WiresceneError", "__version__",
+    "FitOptions", "InferenceOptions", "LiftingOptions", "EvaluationReport", "VARIANTS",
+    "ArgumentError", "InputError", "ShapeError", "WiresceneError", "__version__",
 ]

@@ -109,9 +109,6 @@ class Camera:
         homog = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1) * depth[..., None]
         return (homog - self.P[:, 3]) @ np.linalg.inv(self.K).T
 
-    def with_image_size(self, width: int, height: int) -> "Camera":
-        return Camera(self.P, (int(width), int(height)))
-
 
 @dataclass(frozen=True)
 class KittiCalib:

@@ -20,6 +20,8 @@ from wirescene.core.groundplane import rotation_y as _rotation_y_matrix
 
 CAR_TYPES = ("Car",)
 DONTCARE = "DontCare"
+#: KITTI's ``alpha`` of a row whose viewpoint is not estimated (DontCare, 2D-only detectors).
+ALPHA_NOT_ESTIMATED = -10.0
 
 COLUMNS = (
     "type", "truncated", "occluded", "alpha", "x1", "y1", "x2", "y2",

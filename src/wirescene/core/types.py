@@ -38,6 +38,23 @@ class Detections:
         centre of one of 8 bins; NaN where the detector gives no viewpoint.
     source : str
         Where the detections came from (``"gt"``, a file name, ...).
+
+    Returned by :func:`wirescene.detect` and by the readers of
+    :mod:`wirescene.io.detections`; ``scores`` and ``alpha`` broadcast to one per box.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.types import Detections
+    >>> dets = Detections([[300, 180, 520, 300], [600, 170, 680, 230]], scores=[0.9, 0.4], alpha=np.nan)
+    >>> len(dets), dets.boxes.shape
+    (2, (2, 4))
+    >>> bool(np.isnan(dets.alpha).all())  # no viewpoint: the lifting searches every azimuth
+    True
+    >>> dets.subset(dets.scores > 0.5).boxes
+    array([[300., 180., 520., 300.]])
+    >>> len(Detections.empty())
+    0
     """
 
     boxes: np.ndarray
@@ -56,9 +73,11 @@ class Detections:
 
     @staticmethod
     def empty(source: str = "") -> "Detections":
+        """No detection (an image without cars)."""
         return Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0), source)
 
     def subset(self, index) -> "Detections":
+        """The detections selected by ``index`` (a boolean mask or indices)."""
         return Detections(self.boxes[index], self.scores[index], self.alpha[index], self.source)
 
 
@@ -121,7 +140,48 @@ class SceneParticles:
 
 @dataclass
 class ObjectEstimate:
-    """One car of a scene estimate (camera frame, metres, radians)."""
+    """One car of a scene estimate (camera frame, metres, radians).
+
+    Attributes
+    ----------
+    detection_index : int
+        Index of the pre-detection the car was fitted to.
+    box2d : (4,) array
+        That pre-detection's box ``x1 y1 x2 y2`` (also :attr:`box`).
+    score : float
+        Confidence that the estimate is right (KITTI's 16th column).
+    location : (3,) array
+        Bottom centre of the 3D box.
+    R : (3, 3) array
+        Object-to-camera rotation (azimuth :attr:`rotation_y`, tilted by the plane).
+    dims : (3,) array
+        Box size ``h w l`` (also :attr:`dimensions`).
+    cost : float
+        The fit's objective for this car (lower is better).
+    pitch, roll : float
+        The ground plane under the car.
+    shape, vertices, visibility, exemplar, occluder_mask
+        Fine variants only: shape coefficients ``(K,)``, wireframe vertices ``(36, 3)``,
+        their visibility ``(36,)`` (also :attr:`visible`), the nearest CAD exemplar
+        (also :attr:`cad_model`) and the occluder mask's index; ``None`` otherwise.
+    detection_score : float or None
+        The pre-detection's own score.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.groundplane import rotation_y
+    >>> from wirescene.core.types import ObjectEstimate
+    >>> car = ObjectEstimate(detection_index=0, box2d=np.array([300.0, 180.0, 520.0, 300.0]), score=0.8,
+    ...                      location=np.array([-2.0, 1.65, 12.0]), R=rotation_y(0.3),
+    ...                      dims=np.array([1.5, 1.6, 3.9]), cost=0.0)
+    >>> round(car.rotation_y, 6), round(car.alpha, 6)  # alpha = rotation_y - atan2(x, z)
+    (0.3, 0.465149)
+    >>> car.centroid  # the bottom centre raised by h / 2 (y points down)
+    array([-2. ,  0.9, 12. ])
+    >>> car.to_label().type, car.to_label().score
+    ('Car', 0.8)
+    """
 
     detection_index: int
     box2d: np.ndarray
@@ -175,13 +235,16 @@ class ObjectEstimate:
 
     @property
     def alpha(self) -> float:
+        """Observation angle (KITTI ``alpha``), radians."""
         return float(alpha_from_rotation_y(self.rotation_y, self.location[0], self.location[2]))
 
     @property
     def centroid(self) -> np.ndarray:
+        """(3,) centre of the 3D box."""
         return box_centers(self.dims, self.location, self.R)
 
     def to_dict(self) -> dict:
+        """The car as plain JSON-ready values (fine-variant fields only where set)."""
         d = {
             "detection_index": int(self.detection_index),
             "box2d": [float(v) for v in self.box2d],
@@ -209,7 +272,43 @@ class ObjectEstimate:
 
 @dataclass
 class SceneEstimate:
-    """The result of fitting a scene: the chosen particle, as per-object estimates."""
+    """The result of fitting a scene: the chosen particle, as per-object estimates.
+
+    Returned by :func:`wirescene.fit`.
+
+    Attributes
+    ----------
+    variant : str
+        The model variant that made it (``"coarse+gp"``, ``"full"``, ...).
+    objects : list of ObjectEstimate
+        The cars, one per pre-detection (:attr:`cars` sorts them by detection).
+    camera_height : float
+        Height of the camera above the ground plane, metres.
+    shared_plane : bool
+        Whether all cars stand on one ground plane (:attr:`ground_plane`).
+    n_particles : int
+        Number of scene particles of the search.
+    extras : dict
+        Further JSON-ready entries of :meth:`to_dict`.
+    detections : Detections or None
+        The pre-detections the scene was fitted to (viewpoints completed).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.groundplane import rotation_y
+    >>> from wirescene.core.types import ObjectEstimate, SceneEstimate
+    >>> car = ObjectEstimate(detection_index=0, box2d=np.array([300.0, 180.0, 520.0, 300.0]), score=0.8,
+    ...                      location=np.array([-2.0, 1.65, 12.0]), R=rotation_y(0.3),
+    ...                      dims=np.array([1.5, 1.6, 3.9]), cost=0.0)
+    >>> scene = SceneEstimate(variant="coarse+gp", objects=[car], shared_plane=True)
+    >>> scene.ground_plane
+    GroundPlane(pitch=0.0, roll=0.0, height=1.65)
+    >>> print(scene.to_kitti(), end="")
+    Car -1.00 -1 0.465149 300.00 180.00 520.00 300.00 1.500000 1.600000 3.900000 -2.000000 1.650000 12.000000 0.300000 0.8
+    >>> sorted(scene.to_dict())
+    ['camera_height', 'n_particles', 'objects', 'shared_plane', 'variant']
+    """
 
     variant: str
     objects: list[ObjectEstimate]
@@ -243,6 +342,7 @@ class SceneEstimate:
         return format_labels(self.to_labels())
 
     def to_dict(self) -> dict:
+        """The scene as plain JSON-ready values (the body of the JSON file ``wirescene fit`` writes)."""
         return {
             "variant": self.variant,
             "camera_height": float(self.camera_height),

@@ -9,6 +9,8 @@ import numpy as np
 
 # Focal lengths outside this range (pixels) are not a street camera: KITTI's is ~720.
 FOCAL_RANGE = (10.0, 1e5)
+# No image is this large (pixels): a box coordinate beyond it is a corrupted number.
+MAX_PIXEL = 1e5
 
 
 def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | None:
@@ -60,7 +62,7 @@ def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | Non
         return f"box {i} is empty or inverted (x1 y1 x2 y2 = {' '.join(f'{v:g}' for v in b[i])})"
     if image_size is not None and len(b):
         w, h = image_size
-        outside = (b[:, 2] <= 0) | (b[:, 0] >= w) | (b[:, 3] <= 0) | (b[:, 1] >= h)
+        outside = outside_image(b, image_size)
         if outside.any():
             i = int(np.flatnonzero(outside)[0])
             return f"box {i} lies entirely outside the {w}x{h} image"
@@ -68,3 +70,11 @@ def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | Non
         if huge.any():
             return f"box {int(np.flatnonzero(huge)[0])} extends absurdly far beyond the {w}x{h} image"
     return None
+
+
+def outside_image(boxes, image_size: tuple[int, int]) -> np.ndarray:
+    """``(N,)`` bool: which boxes ``(N, 4)`` ``x1 y1 x2 y2`` have no pixel in the
+    ``(width, height)`` image (a truncated box touching the border is inside)."""
+    b = np.asarray(boxes, dtype=float).reshape(-1, 4)
+    w, h = image_size
+    return (b[:, 2] <= 0) | (b[:, 0] >= w) | (b[:, 3] <= 0) | (b[:, 1] >= h)

@@ -92,9 +92,6 @@ GROUPS = {
 }
 """Part groups (one-side names) useful for drawing and for part configurations."""
 
-GROUND_PARTS = ("front_wheel_ground", "rear_wheel_ground")
-"""Parts that lie on the ground plane (y = 0) by construction."""
-
 
 def _i(part: str, side: str) -> int:
     return VERTEX_INDEX[f"{part}_{side}"]

@@ -13,10 +13,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable, Iterable
 
-from wirescene import __version__
 from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_text
 from wirescene.core.errors import InputError
+from wirescene.core.version import __version__
 from wirescene.eval.runner import fit_frames
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.pipeline import FitOptions, fit_frame

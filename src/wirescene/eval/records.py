@@ -8,9 +8,9 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
 
-from wirescene import __version__
 from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_text
+from wirescene.core.version import __version__
 from wirescene.eval.metrics import FrameResult
 from wirescene.io.kitti import KittiDataset
 

@@ -5,8 +5,9 @@
   so one pixel of error there moves it by ``z**2 / (f * H)`` metres (camera height ``H``);
 * the distribution of localisation errors (fraction of true positives within d metres)
   and a histogram of 3D azimuth errors, per variant;
-* a gallery of the best and worst frames (mean localisation error of the first fine
-  variant, else the first variant) with overlays and bird's-eye views.
+* a gallery of the best and worst frames of the first fine variant, else the first
+  variant (ranked by :func:`frame_scores`, which counts missed and false cars as well as
+  errors) with overlays and bird's-eye views.
 
 Everything is written atomically into one directory; the page references its PNGs by
 relative path, so the directory can be moved or served as it is.
@@ -108,11 +109,26 @@ def _plot_azimuth_histogram(reports, path):
     return save_figure(fig, path)
 
 
-def _frame_errors(report: EvaluationReport) -> dict[str, float]:
-    per: dict[str, list[float]] = {}
+#: Localisation error (m) at which a found car's share of the gallery score falls to 0.
+SCORE_ZERO_ERROR = 2.0
+
+
+def frame_scores(report: EvaluationReport, counts: dict[str, tuple[int, int]]) -> dict[str, float]:
+    """Per frame: (sum over true positives of max(0, 1 - error / 2 m) - false detections) / labelled cars.
+
+    ``counts`` is ``{frame_id: (labelled cars, detections)}``; a false detection is any
+    that is not a true positive (unmatched, or of a wrong viewpoint). A frame scores 1
+    when every car is found exactly and nothing else is detected; a missed car adds
+    nothing and a false detection costs what a perfect car earns, so a few cars found
+    precisely do not outrank many found well. A frame without labelled cars divides by 1.
+    """
+    credit: dict[str, float] = {}
+    found: dict[str, int] = {}
     for r in report.records:
-        per.setdefault(r.frame_id, []).append(r.loc_error)
-    return {f: float(np.mean(v)) for f, v in per.items()}
+        credit[r.frame_id] = credit.get(r.frame_id, 0.0) + max(0.0, 1.0 - r.loc_error / SCORE_ZERO_ERROR)
+        found[r.frame_id] = found.get(r.frame_id, 0) + 1
+    return {f: (credit.get(f, 0.0) - (n_dets - found.get(f, 0))) / max(n_cars, 1)
+            for f, (n_cars, n_dets) in counts.items()}
 
 
 def _metrics_table(reports) -> str:
@@ -156,13 +172,17 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
     }
     fine = [v for v in reports if get_variant(v).fine]
     lead = fine[0] if fine else next(iter(reports))
-    errors = _frame_errors(reports[lead])
-    ranked = sorted(errors, key=errors.get)
+    counts = {f: (len(cars), len(dets)) for f, (_, cars, dets, _) in gallery.frames.items()}
+    scores = frame_scores(reports[lead], counts)
+    errors: dict[str, list[float]] = {}
+    for r in reports[lead].records:
+        errors.setdefault(r.frame_id, []).append(r.loc_error)
+    ranked = sorted(scores, key=lambda f: (-scores[f], f))  # best first; ties by frame id
     k = min(n_gallery, max(1, len(ranked) // 2))  # best and worst never share a frame
     picks = [("best", f) for f in ranked[:k]] + [("worst", f) for f in ranked[::-1][:min(n_gallery, len(ranked) - k)]]
     seen, cards = set(), []
     for kind, frame_id in picks:
-        if frame_id in seen or frame_id not in gallery.frames:
+        if frame_id in seen:
             continue
         seen.add(frame_id)
         camera, cars, dets, estimates = gallery.frames[frame_id]
@@ -171,8 +191,11 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
         save_figure(overlay(image_of(frame_id), camera, estimate, gt=cars, detections=dets, edges=EDGES,
                             title=f"{frame_id}  {lead}"), out / f"{stem}_overlay.png")
         save_figure(birds_eye(estimate, gt=cars, camera=camera, title=f"{frame_id}  {lead}"), out / f"{stem}_bev.png")
-        cards.append(f'<figure><figcaption>{kind}: {html.escape(frame_id)} — mean localisation error '
-                     f'{errors[frame_id]:.2f} m ({lead})</figcaption><img class="wide" src="{stem}_overlay.png">'
+        found = errors.get(frame_id, [])
+        mean = f", mean localisation error {np.mean(found):.2f} m" if found else ""
+        cards.append(f'<figure><figcaption>{kind}: {html.escape(frame_id)} — score {scores[frame_id]:.2f}: '
+                     f'{len(found)} of {len(cars)} cars found{mean}, {len(dets) - len(found)} false detections '
+                     f'({lead})</figcaption><img class="wide" src="{stem}_overlay.png">'
                      f'<img class="bev" src="{stem}_bev.png"></figure>')
     n_frames = len(gallery.frames) or max((r.counts.get("frames", 0) for r in reports.values()), default=0)
     page = f"""<!DOCTYPE html>
@@ -189,7 +212,9 @@ viewpoint within 45°).</p>
 {_metrics_table(reports)}
 <div class="plots">{''.join(f'<img src="{name}" alt="{name}">' for name in plots)}</div>
 <h2>Gallery ({html.escape(lead)}): best and worst frames</h2>
-<p>Red: estimate (wireframe, hidden vertices faded); green: ground truth; yellow: pre-detections.</p>
+<p>Red: estimate (wireframe, hidden vertices faded); green: ground truth; yellow: pre-detections.
+Frames ranked by a score that counts missed and false cars: (sum over true positives of
+max(0, 1 &minus; error / {SCORE_ZERO_ERROR:g} m) &minus; false detections) / labelled cars.</p>
 {''.join(cards)}
 </body></html>
 """

@@ -3,7 +3,8 @@ adapters for boxes of any external detector (JSON, CSV, KITTI label files with s
 
 Every source yields a :class:`~wirescene.core.types.Detections` whose ``alpha`` is
 the centre of the coarse viewpoint bin (8 bins, paper Sec. 3.4), or NaN when the source
-has no viewpoint; the lifting stage then searches all azimuths.
+has no viewpoint (no ``alpha`` given, or KITTI's ``-10``, "not estimated"); the lifting
+stage then searches all azimuths.
 """
 
 from __future__ import annotations
@@ -14,11 +15,19 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.io.kitti import CAR_TYPES, FrameLabels, read_labels
+from wirescene.io.kitti import ALPHA_NOT_ESTIMATED, CAR_TYPES, FrameLabels, read_labels
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
 from wirescene.core.validate import boxes_problem
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
+
+
+def _binned_viewpoint(alpha) -> np.ndarray:
+    """Centre of the viewpoint bin of each observation angle ``alpha`` (radians, any
+    range: angles wrap); NaN (unknown viewpoint) where ``alpha`` is KITTI's ``-10``."""
+    alpha = np.asarray(alpha, dtype=float)
+    known = alpha != ALPHA_NOT_ESTIMATED
+    return np.where(known, bin_center(viewpoint_bin(np.where(known, alpha, 0.0))), np.nan)
 
 
 def detections_from_labels(
@@ -33,17 +42,19 @@ def detections_from_labels(
 
     The viewpoint is the bin of the true observation angle after adding zero-mean
     Gaussian noise of ``viewpoint_noise_deg`` (so bins can be wrong, as a detector's
-    would); the score is 1, or the label's score if it has one.
+    would), unknown (NaN) where the label's ``alpha`` is KITTI's ``-10``; the score is
+    1, or the label's score if it has one.
     """
     objs = labels.of_type(*types)
     if not objs:
         return Detections.empty(source)
     alpha = np.array([o.alpha for o in objs])
+    known = alpha != ALPHA_NOT_ESTIMATED
     if viewpoint_noise_deg > 0:
         rng = np.random.default_rng(0) if rng is None else rng
-        alpha = alpha + np.deg2rad(viewpoint_noise_deg) * rng.standard_normal(len(alpha))
+        alpha = np.where(known, alpha + np.deg2rad(viewpoint_noise_deg) * rng.standard_normal(len(alpha)), alpha)
     scores = np.array([1.0 if o.score is None else o.score for o in objs])
-    return Detections(np.stack([o.box for o in objs]), scores, bin_center(viewpoint_bin(alpha)), source)
+    return Detections(np.stack([o.box for o in objs]), scores, _binned_viewpoint(alpha), source)
 
 
 def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
@@ -62,7 +73,7 @@ def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
             raise InputError(f"{where}: alpha must be a number (radians)", path=path) from None
         if not np.isfinite(alpha):
             raise InputError(f"{where}: alpha must be finite (radians), got {alpha}", path=path)
-        return float(bin_center(viewpoint_bin(alpha)))
+        return float(_binned_viewpoint(alpha))
     return float("nan")
 
 
@@ -129,6 +140,9 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     * ``.txt``: a KITTI label file (15 or 16 columns); Car rows are used, with their
       ``alpha`` binned and their score (16th column) if present.
 
+    An ``alpha`` of ``-10`` (KITTI's "not estimated", as 2D-only detectors write) is an
+    unknown viewpoint (NaN), in every format.
+
     With ``image_size`` (width, height), every box must overlap the image
     (:func:`wirescene.core.validate.boxes_problem`).
 
@@ -143,7 +157,7 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
         raise InputError("detections file not found", path=path)
     suffix = path.suffix.lower()
     if suffix == ".txt":
-        dets = detections_from_labels(read_labels(path), source=str(path))
+        dets = detections_from_labels(read_labels(path, image_size=image_size), source=str(path))
     elif suffix == ".json":
         try:
             data = json.loads(path.read_text(encoding="utf-8-sig"))

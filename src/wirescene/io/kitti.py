@@ -24,7 +24,9 @@ from wirescene.core.camera import Camera, KittiCalib, read_kitti_calib
 from wirescene.core.atomic import write_text
 from wirescene.core.errors import InputError, ShapeError
 from wirescene.core.image import to_rgb_uint8
+from wirescene.core.validate import MAX_PIXEL, outside_image
 from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label types live in core)
+    ALPHA_NOT_ESTIMATED,
     COLUMNS,
     CAR_TYPES,
     DONTCARE,
@@ -57,7 +59,21 @@ def _object_problem(values: list[float]) -> str | None:
     return None
 
 
-def _parse_label_line(tokens: list[str], lineno: int, path: Path) -> Label:
+def _box_problem(box: list[float], image_size: tuple[int, int] | None) -> str | None:
+    """What cannot be about the 2D box of a row of any class (DontCare included): a
+    coordinate no image reaches or, with the image's ``(width, height)``, a box with no
+    pixel in the image (KITTI clips boxes to the image, so truncated cars touch its border)."""
+    far = [v for v in box if abs(v) > MAX_PIXEL]
+    if far:
+        return f"2D box coordinate {far[0]:g} is absurdly far from any image (beyond {MAX_PIXEL:g} px)"
+    if image_size is not None and outside_image(box, image_size)[0]:
+        return (f"2D box (x1 y1 x2 y2 = {' '.join(f'{v:g}' for v in box)}) lies entirely outside the "
+                f"{image_size[0]}x{image_size[1]} image")
+    return None
+
+
+def _parse_label_line(tokens: list[str], lineno: int, path: Path,
+                      image_size: tuple[int, int] | None = None) -> Label:
     if len(tokens) not in (15, 16):
         raise InputError(
             f"line {lineno}: expected 15 columns (ground truth) or 16 (with score), got {len(tokens)}",
@@ -77,10 +93,10 @@ def _parse_label_line(tokens: list[str], lineno: int, path: Path) -> Label:
     occluded = values[1]
     if occluded != int(occluded):
         raise InputError(f"line {lineno}: column 3 (occluded) must be an integer, got {tokens[2]!r}", path=path)
-    if tokens[0] != DONTCARE:
-        problem = _object_problem(values)
-        if problem:
-            raise InputError(f"line {lineno}: {problem}", path=path)
+    problem = _object_problem(values) if tokens[0] != DONTCARE else None
+    problem = problem or _box_problem(values[3:7], image_size)
+    if problem:
+        raise InputError(f"line {lineno}: {problem}", path=path)
     return Label(
         type=tokens[0],
         truncated=values[0],
@@ -94,17 +110,20 @@ def _parse_label_line(tokens: list[str], lineno: int, path: Path) -> Label:
     )
 
 
-def read_labels(path: str | Path) -> FrameLabels:
+def read_labels(path: str | Path, *, image_size: tuple[int, int] | None = None) -> FrameLabels:
     """Read a KITTI label file (15 columns) or detection file (16 columns, with score).
 
-    Blank lines are skipped; an empty file is a frame without objects.
+    Blank lines are skipped; an empty file is a frame without objects. With the image's
+    ``image_size`` ``(width, height)``, every row's 2D box must have a pixel in the image.
 
     Raises
     ------
     InputError
         If the file is missing or unreadable, or a line has the wrong number of columns,
-        a non-numeric or non-finite number, or a non-integer occlusion state; the message
-        gives the line number and the column.
+        a non-numeric or non-finite number, a non-integer occlusion state, impossible
+        values (an empty or inverted box, a truncation outside [0, 1], ...) or a 2D box
+        coordinate beyond :data:`~wirescene.core.validate.MAX_PIXEL` or (with
+        ``image_size``) a box wholly outside the image; the message gives the line number.
     """
     path = Path(path)
     if not path.is_file():
@@ -118,7 +137,7 @@ def read_labels(path: str | Path) -> FrameLabels:
         tokens = line.split()
         if not tokens:
             continue
-        label = _parse_label_line(tokens, lineno, path)
+        label = _parse_label_line(tokens, lineno, path, image_size)
         (out.dontcare if label.is_dontcare else out.objects).append(label)
     return out
 
@@ -282,6 +301,10 @@ class KittiDataset:
         return self.calib(frame_id).camera(self.image_size(frame_id))
 
     def labels(self, frame_id: str | int) -> FrameLabels:
+        """The frame's ground truth; every box is checked against the image's size when
+        the frame has an image (:func:`read_labels`)."""
         if not self.has_labels:
             raise InputError("split has no label_2/ directory (no ground truth)", path=self.split_dir)
-        return read_labels(self.label_path(frame_id))
+        image = self.image_path(frame_id)
+        size = self.image_size(frame_id) if image.is_file() else None  # no image: checked where it is read
+        return read_labels(self.label_path(frame_id), image_size=size)

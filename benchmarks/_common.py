@@ -1,0 +1,109 @@
+"""Helpers shared by the benchmark scripts, so that no script imports another. Run the
+scripts as ``python benchmarks/NAME.py``: Python puts this directory on ``sys.path``.
+
+Importing this module loads no part of wirescene (scripts set thread counts first);
+the helpers that need it import it when called.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import time
+
+
+def best_of(fn, repeat: int = 3, *, warmup: bool = False):
+    """``(seconds, result)``: the fastest of ``repeat`` calls of ``fn`` (after one
+    untimed call with ``warmup``: lazy imports, allocators, CUDA kernels)."""
+    out = fn() if warmup else None
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return min(times), out
+
+
+def option_value(options, key: str, text: str):
+    """``text`` as a value of field ``key`` of the options dataclass ``options`` (an
+    instance), of its default's type; booleans are written 0 / 1. Raises ``KeyError``
+    for a key that is not a field."""
+    if key not in {f.name for f in dataclasses.fields(options)}:
+        raise KeyError(key)
+    default = getattr(options, key)
+    return bool(int(text)) if isinstance(default, bool) else type(default)(text)
+
+
+def parse_config(text: str) -> tuple[str, dict]:
+    """``NAME:key=value,key=value`` (keys of :class:`~wirescene.infer.inference.InferenceOptions`,
+    or ``bilinear`` for the part maps' lookup) as ``(NAME, {key: value})``."""
+    from wirescene.infer.inference import InferenceOptions
+
+    name, _, body = text.partition(":")
+    out = {}
+    for item in filter(None, body.split(",")):
+        key, _, value = item.partition("=")
+        if key == "bilinear":  # evidence lookup (parts only), not an inference option
+            out[key] = bool(int(value))
+            continue
+        try:
+            out[key] = option_value(InferenceOptions(), key, value)
+        except KeyError:
+            raise SystemExit(f"unknown option {key!r}") from None
+    return name, out
+
+
+def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=1, models=None, log=print):
+    """Fit ``variants`` under every configuration ``{name: options}`` on the frames of
+    ``root`` (label boxes as pre-detections; evidence and coarse grid once per frame).
+
+    Returns ``{(name, variant): [FrameResult]}``, ``{name: seconds}`` (CPU seconds of
+    fitting, i.e. one core's time on a shared machine) and the number of frames.
+    """
+    import numpy as np
+
+    from wirescene.eval.runner import frame_result
+    from wirescene.eval.sources import DetectionSource, frame_seed
+    from wirescene.fitting.pipeline import FitOptions, fit_scene
+    from wirescene.infer.evidence import oracle_evidence, part_evidence
+    from wirescene.infer.inference import InferenceOptions
+    from wirescene.io.folds import fold_of
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.io.wireframes import read_wireframe_gt, wireframe_gt_path
+    from wirescene.lift import lift_table
+    from wirescene.parts.detector import PartDetector
+
+    ds = KittiDataset(root)
+    frame_ids = ds.frame_ids()[:frames]
+    source = DetectionSource("gt")
+    results = {(c, v): [] for c in configs for v in variants}
+    seconds = dict.fromkeys(configs, 0.0)
+    t0 = time.perf_counter()
+    for fid in frame_ids:
+        gt = ds.labels(fid)
+        detections = source.for_frame(ds, fid, frame_seed(seed, fid))
+        camera = ds.camera(fid)
+        gt_path = wireframe_gt_path(ds.split_dir, fid)
+        vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
+        if not len(detections):
+            continue
+        if evidence == "oracle":
+            frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
+        else:
+            detector = None if models is None else PartDetector.load(models / f"parts_fold{fold_of(fid)}.npz")
+            frame_evidence = part_evidence(ds.image(fid), detections, detector=detector)
+        lifted = lift_table(camera, detections)
+        for name, kw in configs.items():
+            kw = dict(kw)
+            ev = frame_evidence
+            if "bilinear" in kw:
+                ev = copy.copy(frame_evidence)
+                ev.bilinear = kw.pop("bilinear")
+            options = FitOptions(inference=InferenceOptions(**kw), seed=seed)
+            for v in variants:
+                t = time.process_time()
+                est = fit_scene(camera, detections, variant=v, options=options, lifted=lifted, evidence=ev)
+                seconds[name] += time.process_time() - t
+                results[(name, v)].append(frame_result(fid, gt, detections, est, vertex_gt, camera))
+        log(f"{fid} done ({time.perf_counter() - t0:.0f} s)")
+    return results, seconds, len(frame_ids)
