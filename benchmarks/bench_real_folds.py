@@ -39,8 +39,7 @@ from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
 from wirescene.training.scores import cross_validated_confidences, read_run_records
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from tune_fine import option_value  # noqa: E402
+from _common import option_value  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 
 
 def kitti_with_cv_scores(records, gt, folds):

@@ -75,7 +75,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from wirescene.core.errors import InputError, check_shape
-from wirescene.core.labels import FrameLabels, Label
+from wirescene.core.labels import ALPHA_NOT_ESTIMATED, FrameLabels, Label
 from wirescene.io.kitti import read_labels
 
 DIFFICULTIES = ("easy", "moderate", "hard")
@@ -94,7 +94,7 @@ MIN_OVERLAP = {"car": 0.7, "pedestrian": 0.5, "cyclist": 0.5}
 METRICS = ("2d", "bev", "3d")
 
 # The devkit's placeholders for "not given".
-_NO_ALPHA = -10.0
+_NO_ALPHA = ALPHA_NOT_ESTIMATED
 _NO_LOCATION = -1000.0
 
 

@@ -452,7 +452,7 @@ def synth_cache_path(cache_dir, args: dict) -> Path:
     import hashlib
     import json
 
-    from wirescene import __version__
+    from wirescene.core.version import __version__
 
     key = hashlib.sha256(json.dumps({**args, "version": __version__}, sort_keys=True).encode()).hexdigest()[:16]
     return Path(cache_dir) / f"synth_patches_{key}.npz"
