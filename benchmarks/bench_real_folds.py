@@ -64,6 +64,8 @@ def main():
     ap.add_argument("--particles", type=int, default=250)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--fold", type=int, action="append", default=None,
+                    help="fit only this fold (repeatable; no summary), e.g. while other folds' models are trained")
     ap.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
                     help="An InferenceOptions field, e.g. plane_refinement=0 or box_weight=100, or a "
                          "LiftingOptions field with the prefix lifting., e.g. lifting.road_prior=0.01.")
@@ -87,7 +89,7 @@ def main():
     frames = dataset.frame_ids()
     folds = {f: fold_of(f) for f in frames}
     t0 = time.perf_counter()
-    for k in range(N_FOLDS):
+    for k in sorted(set(args.fold)) if args.fold else range(N_FOLDS):
         test = [f for f in frames if folds[f] == k]
         models = {}
         if not args.shipped:
@@ -105,6 +107,8 @@ def main():
         evaluate_dataset(dataset, variants, frames=test, source=source, options=options,
                          predictions_dir=args.out / f"fold{k}", resume=True, workers=args.workers)
     elapsed = time.perf_counter() - t0
+    if args.fold:
+        return
     records: dict = {}
     for k in range(N_FOLDS):
         for v, rs in read_run_records(args.out / f"fold{k}").items():
