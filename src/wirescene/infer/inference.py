@@ -432,6 +432,291 @@ def _best_rows(score: np.ndarray, k: int, *, coupled: bool, weights: np.ndarray 
     return np.argsort(-score, axis=0, kind="stable")[:k]
 
 
+@dataclass(frozen=True)
+class FineObjective:
+    """What the fine search maximises for one image, fixed during the search: the
+    objective's terms (:func:`_terms`), the occlusion update (step 2 of Algorithm 1) and
+    the scene objective that compares coupled particles.
+
+    Build it with :meth:`create`; ``window`` is ``(centre, known, half)`` of the
+    viewpoint window (``(1, N, 1)`` arrays and radians) or None.
+    """
+
+    camera: Camera
+    shape_model: ShapeModel
+    evidence: PartEvidence
+    options: InferenceOptions
+    boxes: np.ndarray | None = None
+    weights: np.ndarray | None = None
+    window: tuple | None = None
+    searched_occluder: bool = False
+    deterministic_occlusion: bool = False
+
+    @classmethod
+    def create(cls, camera, shape_model, evidence, options, *, n_objects, boxes=None, weights=None, alpha=None,
+               searched_occluder=False, deterministic_occlusion=False) -> "FineObjective":
+        """The objective of :func:`refine_particles` (same arguments); ``alpha`` ``(N,)``
+        becomes the viewpoint window."""
+        window = None
+        if alpha is not None and options.viewpoint_window_deg > 0:
+            alpha = np.asarray(alpha, dtype=float)
+            check_shape("alpha", alpha, (n_objects,))
+            known = np.isfinite(alpha)
+            window = (np.where(known, alpha, 0.0)[None, :, None], known[None, :, None],
+                      np.deg2rad(options.viewpoint_window_deg))
+        return cls(camera, shape_model, evidence, options, boxes, weights, window, searched_occluder,
+                   deterministic_occlusion)
+
+    @property
+    def occlusion(self) -> bool:
+        """Whether step 2 of Algorithm 1 (the occlusion update) runs."""
+        return self.searched_occluder or self.deterministic_occlusion
+
+    def coupled(self, particles: SceneParticles) -> bool:
+        """Whether objects depend on each other, so that only whole particles compare."""
+        return particles.shared_plane or self.deterministic_occlusion
+
+    def road_weight(self, particles: SceneParticles):
+        """Weight of the road prior per car of ``particles`` (``(P, N, 1)``, or a scalar
+        ungated): only cars whose coarse start heads along the road are pulled onto it."""
+        o = self.options
+        if not o.road_prior_gated:
+            return o.road_prior
+        along = road_angle(particles.azimuth) <= np.deg2rad(ROAD_PRIOR_WIDTH)
+        return o.road_prior * along[:, :, None]
+
+    def terms(self, particles: SceneParticles, theta: np.ndarray, plane: np.ndarray) -> "_Terms":
+        """:class:`_Terms` of viewing parameters ``theta`` ``(P, N, M, D)`` on planes
+        ``plane`` ``(P, N, 2)`` or ``(P, N, M, 2)`` (pitch, roll)."""
+        o = self.options
+        return _terms(self.camera, self.shape_model, self.evidence, particles, theta, o.n_shape, self.boxes,
+                      o.box_weight, o.device, plane=(plane[..., 0], plane[..., 1]), shape_prior=o.shape_prior,
+                      box_robust=o.box_robust, size_prior=o.size_prior,
+                      road_prior=o.road_prior and self.road_weight(particles))
+
+    def value(self, terms: "_Terms", mask, gamma) -> np.ndarray:
+        """Objective ``(P, N, M)`` of ``terms`` under the occlusion ``mask``, ``gamma``."""
+        return terms.value(self.options.occluded_score, mask, gamma)
+
+    def update_occlusion(self, current: "_Terms"):
+        """Step 2 of Algorithm 1 on the current geometry: ``mask``, ``gamma``."""
+        return _occlusion_of(self.camera, current, self.options.occluded_score, searched=self.searched_occluder,
+                             deterministic=self.deterministic_occlusion, device=self.options.device)
+
+    def scene(self, score: np.ndarray) -> np.ndarray:
+        """Scene objective: object scores summed over axis 1 with the objects' weights."""
+        return _scene(score, self.weights)
+
+
+def sampling_blocks(options: InferenceOptions) -> list:
+    """Parameter blocks sampled in turn: indices into the viewing parameters (pose, then
+    shape), and None for the ground plane."""
+    D = 3 + options.n_shape
+    blocks = [np.arange(3), np.arange(3, D)] if options.block_sampling and options.n_shape else [np.arange(D)]
+    if options.plane_refinement:
+        blocks.append(None)  # the ground plane
+    return blocks
+
+
+def smoothed_spread(values: np.ndarray, delta: np.ndarray, sigma0: np.ndarray, options: InferenceOptions):
+    """Step 3 of Algorithm 1, the smoothing-based variance update around the previous
+    value: the spread of the sample offsets ``delta`` ``(..., M, d)`` weighted by their
+    objective ``values`` ``(..., M)`` relative to its spread, times ``growth``, within
+    ``[min_sigma_ratio, max_sigma_ratio]`` of the initial spread ``sigma0``. Even weights
+    (a flat objective) widen the search, weights concentrated on a peak narrow it."""
+    spread = values.std(axis=-1, keepdims=True) + 1e-9
+    w = np.exp((values - values.max(axis=-1, keepdims=True)) / spread)
+    w /= w.sum(axis=-1, keepdims=True)
+    wstd = np.sqrt(np.sum(w[..., None] * delta**2, axis=-2))
+    return np.clip(options.growth * wstd, options.min_sigma_ratio * sigma0, options.max_sigma_ratio * sigma0)
+
+
+def _within_window(alpha: np.ndarray, window) -> np.ndarray:
+    """Observation angles ``alpha`` ``(P, N, M)`` clipped to the viewpoint window of
+    each car (unknown viewpoints unchanged)."""
+    centre, known, half = window
+    inside = wrap_angle(centre + np.clip(wrap_angle(alpha - centre), -half, half))
+    return np.where(known, inside, alpha)
+
+
+@dataclass
+class SearchState:
+    """The state of Algorithm 1 over all particles, refined in place by its steps.
+
+    Per particle and object: viewing parameters ``theta`` ``(P, N, D)`` (bearing, log
+    range, observation angle, shape), their sampling spreads ``sigma`` and initial
+    spreads ``sigma0``; the ground plane ``plane`` ``(P, N, 2)`` (pitch, roll) with
+    ``plane_sigma`` and ``plane_sigma0``; the kept geometry and evidence ``current``
+    ``(P, N, 1)`` of the current value, its objective ``score`` ``(P, N)`` and occlusion
+    (``mask`` ``(P, N)``, ``gamma`` ``(P, N, 36)``, None where unused); ``particles``,
+    the coarse particles of the rows still refined; ``history``, the best scene
+    objective after each iteration.
+    """
+
+    particles: SceneParticles
+    theta: np.ndarray
+    sigma: np.ndarray
+    sigma0: np.ndarray
+    plane: np.ndarray
+    plane_sigma: np.ndarray
+    plane_sigma0: np.ndarray
+    current: "_Terms"
+    score: np.ndarray
+    mask: np.ndarray | None
+    gamma: np.ndarray | None
+    history: list
+
+    @classmethod
+    def start(cls, objective: FineObjective, particles: SceneParticles) -> "SearchState":
+        """The coarse particles as a start: their poses, the mean shape, their planes,
+        the initial spreads and no occluder (``a0``)."""
+        o = objective.options
+        P, N = particles.x.shape
+        D = 3 + o.n_shape
+        theta = np.zeros((P, N, D))
+        theta[..., 0], theta[..., 1], theta[..., 2] = _to_viewing(particles.x, particles.z, particles.azimuth)
+        sigma0 = np.empty((P, N, D))
+        sigma0[..., 0] = np.deg2rad(o.sigma_bearing_deg)
+        sigma0[..., 1] = o.sigma_range_frac
+        sigma0[..., 2] = np.deg2rad(o.sigma_azimuth_deg)
+        sigma0[..., 3:] = o.sigma_shape
+        plane = np.stack([particles.pitch, particles.roll], axis=-1).astype(float)  # (P, N, 2)
+        plane_sigma0 = np.empty((P, N, 2))
+        plane_sigma0[..., 0] = np.deg2rad(o.sigma_pitch_deg)
+        plane_sigma0[..., 1] = np.deg2rad(o.sigma_roll_deg)
+        mask = np.zeros((P, N), dtype=int) if objective.occlusion else None
+        current = objective.terms(particles, theta[:, :, None], plane)
+        score = objective.value(current, mask, None)[..., 0]
+        return cls(particles, theta, sigma0.copy(), sigma0, plane, plane_sigma0.copy(), plane_sigma0, current,
+                   score, mask, None, [objective.scene(score).max()])
+
+    def iterate(self, objective: FineObjective, rng: np.random.Generator, block, samples: int) -> None:
+        """One iteration of Algorithm 1: sample ``block`` (see :func:`sampling_blocks`)
+        with ``samples`` candidates per object, the current value among them, then
+        update the occlusion."""
+        if block is None:
+            self.plane_step(objective, rng, samples)
+        else:
+            self.pose_step(objective, rng, block, samples)
+        if objective.occlusion:
+            self.occlusion_step(objective)
+        self.history.append(objective.scene(self.score).max())
+
+    def pose_step(self, objective: FineObjective, rng: np.random.Generator, block: np.ndarray, samples: int) -> None:
+        """Steps 1 and 3 of Algorithm 1 for the parameters ``block`` (pose or shape) of
+        every object with its occlusion fixed: Gaussian samples around the current value,
+        the best kept, the spread re-estimated."""
+        o = objective.options
+        P, N, D = self.theta.shape
+        noise = np.zeros((P, N, samples, D))
+        noise[..., block] = rng.standard_normal((P, N, samples, len(block)))
+        noise[:, :, 0] = 0.0  # the current value competes too
+        cand = self.theta[:, :, None] + self.sigma[:, :, None] * noise
+        cand[..., 1] = np.maximum(cand[..., 1], 0.0)  # at least 1 m away
+        cand[..., 2] = wrap_angle(cand[..., 2])
+        if objective.window is not None:
+            cand[..., 2] = _within_window(cand[..., 2], objective.window)
+        cand[..., 3:] = np.clip(cand[..., 3:], -o.shape_limit, o.shape_limit)
+        # The current value's objective (under the current occlusion) is known: only the
+        # new samples are placed and scored.
+        sampled = objective.terms(self.particles, cand[:, :, 1:], self.plane)
+        values = np.concatenate([self.score[:, :, None], objective.value(sampled, self.mask, self.gamma)], axis=2)
+        best = np.argmax(values, axis=2)
+        delta = cand - self.theta[:, :, None]
+        delta[..., 2] = wrap_angle(delta[..., 2])
+        updated = smoothed_spread(values, delta, self.sigma0, o)
+        self.sigma[..., block] = updated[..., block]
+        self._accept(cand, values, best, sampled)
+
+    def plane_step(self, objective: FineObjective, rng: np.random.Generator, samples: int) -> None:
+        """Steps 1 and 3 for the ground plane: sample the plane of every particle (of
+        every object without ``+gp``) and move its objects along their viewing rays onto
+        it; a shared plane is judged by the scene objective."""
+        P, N, D = self.theta.shape
+        shared = self.particles.shared_plane
+        noise = rng.standard_normal((P, 1 if shared else N, samples, 2))
+        noise[:, :, 0] = 0.0
+        cand_plane = self.plane[:, :, None] + self.plane_sigma[:, :, None] * noise  # (P, N, M, 2)
+        cand = _onto_plane(objective.camera, np.broadcast_to(self.theta[:, :, None], (P, N, samples, D)),
+                           (self.plane[:, :, None, 0], self.plane[:, :, None, 1]),
+                           (cand_plane[..., 0], cand_plane[..., 1]), self.particles.height)
+        sampled = objective.terms(self.particles, cand[:, :, 1:], cand_plane[:, :, 1:])
+        values = np.concatenate([self.score[:, :, None], objective.value(sampled, self.mask, self.gamma)], axis=2)
+        judged = objective.scene(values)[:, None] if shared else values
+        best = np.broadcast_to(np.argmax(judged, axis=2), (P, N))
+        delta = cand_plane - self.plane[:, :, None]
+        spread = smoothed_spread(judged, delta, self.plane_sigma0, objective.options)
+        self.plane_sigma = np.broadcast_to(spread, (P, N, 2)).copy()
+        self.plane = np.take_along_axis(cand_plane, best[..., None, None], axis=2)[:, :, 0]
+        self._accept(cand, values, best, sampled)
+
+    def _accept(self, cand: np.ndarray, values: np.ndarray, best: np.ndarray, sampled: "_Terms") -> None:
+        """Take candidate ``best`` ``(P, N)`` of every object (0: the current value) with
+        its objective and kept geometry."""
+        self.theta = np.take_along_axis(cand, best[..., None, None], axis=2)[:, :, 0]
+        moved = best > 0
+        chosen = sampled.take(np.maximum(best - 1, 0))
+        for f in self.current.__dataclass_fields__:
+            a, b = getattr(self.current, f), getattr(chosen, f)
+            a[moved] = b[moved]
+        self.score = np.take_along_axis(values, best[..., None], axis=2)[..., 0]
+
+    def occlusion_step(self, objective: FineObjective) -> None:
+        """Step 2 of Algorithm 1: the occlusion of the new shapes and poses, on their
+        kept geometry, and their objective under it."""
+        self.mask, self.gamma = objective.update_occlusion(self.current)
+        self.score = objective.value(self.current, self.mask, self.gamma)[..., 0]
+
+    def prune(self, objective: FineObjective, k: int) -> None:
+        """Keep the ``k`` best rows (:func:`_best_rows`): the best scenes when objects are
+        coupled, else each object's own best particles."""
+        self.keep_rows(_best_rows(self.score, k, coupled=objective.coupled(self.particles),
+                                  weights=objective.weights))
+
+    def keep_rows(self, keep: np.ndarray) -> None:
+        """Keep particle rows ``keep`` ``(k, N)`` of every object."""
+        cols = np.arange(keep.shape[1])
+        for name in ("theta", "sigma", "sigma0", "score", "plane", "plane_sigma", "plane_sigma0"):
+            setattr(self, name, getattr(self, name)[keep, cols])
+        self.current = _Terms(*(getattr(self.current, f)[keep, cols] for f in self.current.__dataclass_fields__))
+        self.mask = None if self.mask is None else self.mask[keep, cols]
+        self.gamma = None if self.gamma is None else self.gamma[keep, cols]
+        self.particles = self.particles.take(keep)
+
+    def result(self, objective: FineObjective) -> RefinedParticles:
+        """The refined particles of the rows still kept."""
+        P, N = self.score.shape
+        x, z, azimuth = _from_viewing(self.theta)
+        p = self.particles
+        refined = SceneParticles(
+            pitch=self.plane[..., 0], roll=self.plane[..., 1], x=x, z=z, azimuth=azimuth,
+            object_cost=-self.score, dims=p.dims, height=p.height, shared_plane=p.shared_plane,
+        )
+        return RefinedParticles(
+            refined, self.theta[..., 3:], self.score, np.array(self.history),
+            mask=np.zeros((P, N), dtype=int) if self.mask is None else self.mask,
+            gamma=np.zeros((P, N, N_VERTICES), dtype=bool) if self.gamma is None else self.gamma,
+            coupled=objective.coupled(p),
+            spread=self.sigma, plane_spread=self.plane_sigma, weights=objective.weights,
+        )
+
+
+def _prunes_after(options: InferenceOptions, done: int) -> bool:
+    """Whether the successive halving happens after ``done`` iterations."""
+    return bool(options.prune_after and done == options.prune_after and options.keep_fraction < 1
+                and done < options.iterations)
+
+
+def polish(state: SearchState, objective: FineObjective, rng: np.random.Generator, blocks: list) -> None:
+    """The polish: only the MAP rows run ``polish_iterations`` more iterations of the
+    same search with ``polish_samples`` samples, from the spreads they reached (the
+    block schedule continues where Algorithm 1 stopped)."""
+    o = objective.options
+    state.prune(objective, 1)
+    for it in range(o.iterations, o.iterations + o.polish_iterations):
+        state.iterate(objective, rng, blocks[it % len(blocks)], o.polish_samples)
+
+
 def refine_particles(
     camera: Camera,
     particles: SceneParticles,
@@ -471,151 +756,18 @@ def refine_particles(
     """
     options = InferenceOptions() if options is None else options
     rng = np.random.default_rng(0) if rng is None else rng
-    P, N = particles.x.shape
-    K = options.n_shape
-    D = 3 + K
-    theta = np.zeros((P, N, D))
-    theta[..., 0], theta[..., 1], theta[..., 2] = _to_viewing(particles.x, particles.z, particles.azimuth)
-    sigma0 = np.empty((P, N, D))
-    sigma0[..., 0] = np.deg2rad(options.sigma_bearing_deg)
-    sigma0[..., 1] = options.sigma_range_frac
-    sigma0[..., 2] = np.deg2rad(options.sigma_azimuth_deg)
-    sigma0[..., 3:] = options.sigma_shape
-    sigma = sigma0.copy()
-    plane = np.stack([particles.pitch, particles.roll], axis=-1).astype(float)  # (P, N, 2)
-    plane_sigma0 = np.empty((P, N, 2))
-    plane_sigma0[..., 0] = np.deg2rad(options.sigma_pitch_deg)
-    plane_sigma0[..., 1] = np.deg2rad(options.sigma_roll_deg)
-    plane_sigma = plane_sigma0.copy()
-    occlusion = searched_occluder or deterministic_occlusion
-    mask = np.zeros((P, N), dtype=int) if occlusion else None
-    gamma = None
-    height = particles.height
-    window = None
-    if alpha is not None and options.viewpoint_window_deg > 0:
-        alpha = np.asarray(alpha, dtype=float)
-        check_shape("alpha", alpha, (N,))
-        known = np.isfinite(alpha)
-        window = (np.where(known, alpha, 0.0)[None, :, None], known[None, :, None],
-                  np.deg2rad(options.viewpoint_window_deg))
-
-    def road_weight():
-        # (P, N, 1) per car of the current particles (rows follow pruning and the polish)
-        if not options.road_prior_gated:
-            return options.road_prior
-        along = road_angle(particles.azimuth) <= np.deg2rad(ROAD_PRIOR_WIDTH)
-        return options.road_prior * along[:, :, None]
-
-    def terms_of(th, pl):
-        return _terms(camera, shape_model, evidence, particles, th, K, boxes, options.box_weight, options.device,
-                      plane=(pl[..., 0], pl[..., 1]), shape_prior=options.shape_prior, box_robust=options.box_robust,
-                      size_prior=options.size_prior, road_prior=options.road_prior and road_weight())
-
-    def smoothed_spread(values, delta, sig, sig0):
-        # Smoothing-based variance update around the previous value: samples weighted
-        # by their objective relative to its spread; even weights (flat objective)
-        # widen, weights concentrated on a peak narrow the search.
-        spread = values.std(axis=-1, keepdims=True) + 1e-9
-        w = np.exp((values - values.max(axis=-1, keepdims=True)) / spread)
-        w /= w.sum(axis=-1, keepdims=True)
-        wstd = np.sqrt(np.sum(w[..., None] * delta**2, axis=-2))
-        return np.clip(options.growth * wstd, options.min_sigma_ratio * sig0, options.max_sigma_ratio * sig0)
-
-    c = options.occluded_score
-    current = terms_of(theta[:, :, None], plane)
-    score = current.value(c, mask, gamma)[..., 0]
-    history = [_scene(score, weights).max()]
-    blocks = [np.arange(3), np.arange(3, D)] if options.block_sampling and K else [np.arange(D)]
-    if options.plane_refinement:
-        blocks.append(None)  # the ground plane
-    coupled = particles.shared_plane or deterministic_occlusion
-
-    def keep_rows(keep):
-        nonlocal theta, sigma, sigma0, score, plane, plane_sigma, plane_sigma0, current, mask, gamma, particles, P
-        cols = np.arange(N)
-        theta, sigma, sigma0, score, plane, plane_sigma, plane_sigma0 = (
-            a[keep, cols] for a in (theta, sigma, sigma0, score, plane, plane_sigma, plane_sigma0))
-        current = _Terms(*(getattr(current, f)[keep, cols] for f in current.__dataclass_fields__))
-        mask = None if mask is None else mask[keep, cols]
-        gamma = None if gamma is None else gamma[keep, cols]
-        particles = particles.take(keep)
-        P = len(keep)
-
-    for it in range(options.iterations + options.polish_iterations):
-        if it == options.iterations:
-            keep_rows(_best_rows(score, 1, coupled=coupled, weights=weights))
-        M = options.samples if it < options.iterations else options.polish_samples
-        block = blocks[it % len(blocks)]
-        if block is None:
-            # 1'. sample the plane of every particle (of every object without +gp) and
-            # move its objects along their rays onto it
-            shared = particles.shared_plane
-            noise = rng.standard_normal((P, 1 if shared else N, M, 2))
-            noise[:, :, 0] = 0.0
-            cand_plane = plane[:, :, None] + plane_sigma[:, :, None] * noise  # (P, N, M, 2)
-            cand = _onto_plane(camera, np.broadcast_to(theta[:, :, None], (P, N, M, D)),
-                               (plane[:, :, None, 0], plane[:, :, None, 1]),
-                               (cand_plane[..., 0], cand_plane[..., 1]), height)
-            sampled = terms_of(cand[:, :, 1:], cand_plane[:, :, 1:])
-            values = np.concatenate([score[:, :, None], sampled.value(c, mask, gamma)], axis=2)
-            # a shared plane: the scene decides
-            judged = _scene(values, weights)[:, None] if shared else values
-            best = np.broadcast_to(np.argmax(judged, axis=2), (P, N))
-            delta = cand_plane - plane[:, :, None]
-            plane_sigma = np.broadcast_to(smoothed_spread(judged, delta, plane_sigma, plane_sigma0), (P, N, 2)).copy()
-            plane = np.take_along_axis(cand_plane, best[..., None, None], axis=2)[:, :, 0]
-        else:
-            # 1. sample pose or shape of every object with its occlusion fixed
-            noise = np.zeros((P, N, M, D))
-            noise[..., block] = rng.standard_normal((P, N, M, len(block)))
-            noise[:, :, 0] = 0.0  # the current value competes too
-            cand = theta[:, :, None] + sigma[:, :, None] * noise
-            cand[..., 1] = np.maximum(cand[..., 1], 0.0)  # at least 1 m away
-            cand[..., 2] = wrap_angle(cand[..., 2])
-            if window is not None:
-                centre, known, half = window
-                inside = wrap_angle(centre + np.clip(wrap_angle(cand[..., 2] - centre), -half, half))
-                cand[..., 2] = np.where(known, inside, cand[..., 2])
-            cand[..., 3:] = np.clip(cand[..., 3:], -options.shape_limit, options.shape_limit)
-            # The current value's objective (under the current occlusion) is known: only
-            # the new samples are placed and scored.
-            sampled = terms_of(cand[:, :, 1:], plane)
-            values = np.concatenate([score[:, :, None], sampled.value(c, mask, gamma)], axis=2)
-            best = np.argmax(values, axis=2)
-            delta = cand - theta[:, :, None]
-            delta[..., 2] = wrap_angle(delta[..., 2])
-            # 3. smoothing-based variance update around the previous value
-            updated = smoothed_spread(values, delta, sigma, sigma0)
-            sigma[..., block] = updated[..., block]
-        theta = np.take_along_axis(cand, best[..., None, None], axis=2)[:, :, 0]
-        moved = best > 0
-        chosen = sampled.take(np.maximum(best - 1, 0))
-        for f in current.__dataclass_fields__:
-            a, b = getattr(current, f), getattr(chosen, f)
-            a[moved] = b[moved]
-        score = np.take_along_axis(values, best[..., None], axis=2)[..., 0]
-        # 2. occlusion update for the new shapes and poses, on their kept geometry
-        if occlusion:
-            mask, gamma = _occlusion_of(camera, current, c, searched=searched_occluder,
-                                        deterministic=deterministic_occlusion, device=options.device)
-            score = current.value(c, mask, gamma)[..., 0]
-        history.append(_scene(score, weights).max())
-        if (options.prune_after and it + 1 == options.prune_after and options.keep_fraction < 1
-                and it + 1 < options.iterations):
-            keep_rows(_best_rows(score, max(1, int(np.ceil(options.keep_fraction * P))), coupled=coupled,
-                                 weights=weights))
-    x, z, azimuth = _from_viewing(theta)
-    refined = SceneParticles(
-        pitch=plane[..., 0], roll=plane[..., 1], x=x, z=z, azimuth=azimuth,
-        object_cost=-score, dims=particles.dims, height=particles.height, shared_plane=particles.shared_plane,
-    )
-    return RefinedParticles(
-        refined, theta[..., 3:], score, np.array(history),
-        mask=np.zeros((P, N), dtype=int) if mask is None else mask,
-        gamma=np.zeros((P, N, N_VERTICES), dtype=bool) if gamma is None else gamma,
-        coupled=coupled,
-        spread=sigma, plane_spread=plane_sigma, weights=weights,
-    )
+    objective = FineObjective.create(
+        camera, shape_model, evidence, options, n_objects=particles.n_objects, boxes=boxes, weights=weights,
+        alpha=alpha, searched_occluder=searched_occluder, deterministic_occlusion=deterministic_occlusion)
+    state = SearchState.start(objective, particles)
+    blocks = sampling_blocks(options)
+    for it in range(options.iterations):
+        state.iterate(objective, rng, blocks[it % len(blocks)], options.samples)
+        if _prunes_after(options, it + 1):  # successive halving
+            state.prune(objective, max(1, int(np.ceil(options.keep_fraction * state.score.shape[0]))))
+    if options.polish_iterations:
+        polish(state, objective, rng, blocks)
+    return state.result(objective)
 
 
 def estimate_from_refined(
