@@ -6,30 +6,35 @@ Gaussian samples of its pose (x, z, azimuth on the particle's fixed ground plane
 shape coefficients around its current value, keeps the best (the current value is
 always among the candidates, so the objective never decreases), and re-estimates its
 sampling spread from the samples weighted by their objective values: where the
-objective is flat or wiggly the weights are even and the spread grows (by ``growth``),
-near a distinct peak they concentrate and the spread shrinks. Pose and shape are
-sampled in alternate iterations, so each step searches a 3- or K-dimensional space
-rather than both at once. Particles, objects and
-samples form one batch, so one likelihood call per iteration scores all of them.
+objective is flat or wiggly the weights are even and the spread grows (by
+:data:`GROWTH`), near a distinct peak they concentrate and the spread shrinks. Pose and
+shape are sampled in alternate iterations, so each step searches a 3- or K-dimensional
+space rather than both at once. Particles, objects and samples form one batch, so one
+likelihood call per iteration scores all of them.
+
+The search is a :class:`SearchState` (the per-particle arrays) refined in place by its
+named steps -- :meth:`~SearchState.pose_step` (step 1 for the pose or the shape, with
+step 3), :meth:`~SearchState.plane_step` (the same for the ground plane),
+:meth:`~SearchState.occlusion_step` (step 2), :meth:`~SearchState.prune` and
+:func:`polish` -- against a :class:`FineObjective`, which holds what stays fixed.
 
 The current value's geometry and evidence are kept between iterations, so only new
 samples are placed and ray cast, and the occlusion update and re-scoring reuse the
 chosen samples' geometry. After ``prune_after`` iterations only the best
-``keep_fraction`` of the particles continue (successive halving); on 40 synthetic
-scenes this halved the time with localisation and azimuth figures within +-3 points of
-refining all of them (see the closing note of the speed issue).
+``keep_fraction`` of the particles continue (successive halving).
 
-Additions to the paper's objective and search (see :class:`InferenceOptions` for
-their defaults and how they were chosen): a detection-box term in KITTI's convention
-(``box_weight``: the coarse stage's lifting cost of the wireframe's 3D box, so that the
-fine objective contains what placed the car and picked its particle, and weak part
-evidence cannot slide a car along its viewing ray), and a third sampling block for the
-ground plane (``plane_refinement``: the paper's scene-level inference samples the plane
-too, instead of keeping the coarse grid's plane; objects follow a sampled plane along
-their viewing rays), priors on the shape and on the car's size (``shape_prior``,
-``size_prior``: boxes and parts cannot tell a small car near from a large one far, the
-priors can), and a polish
-(``polish_iterations``: more iterations of the same search on the MAP rows alone).
+Additions to the paper's objective and search (see :class:`InferenceOptions`, and
+``benchmarks/RESULTS.md`` for how their defaults were chosen): a detection-box term in
+KITTI's convention (``box_weight``: the coarse stage's lifting cost of the wireframe's
+3D box, so that the fine objective contains what placed the car and picked its
+particle, and weak part evidence cannot slide a car along its viewing ray), and a third
+sampling block for the ground plane (``plane_refinement``: the paper's scene-level
+inference samples the plane too, instead of keeping the coarse grid's plane; objects
+follow a sampled plane along their viewing rays), priors on the shape and on the car's
+size (``shape_prior``, ``size_prior``: boxes and parts cannot tell a small car near
+from a large one far, the priors can), a road-alignment prior (``road_prior``) and a
+viewpoint window (``viewpoint_window_deg``), and a polish (``polish_iterations``: more
+iterations of the same search on the MAP rows alone).
 
 Positions are sampled in viewing coordinates -- the bearing ``phi = atan2(x, z)``, the
 log range and the observation angle ``alpha = azimuth - phi`` -- rather than in
@@ -61,137 +66,61 @@ from wirescene.infer.likelihood import PartEvidence, instantiate_wireframes, obj
 _SIZE_MEAN, _SIZE_STD = np.array(KITTI_CAR_SIZE["mean"]), np.array(KITTI_CAR_SIZE["std"])  # l, w, h
 
 
+#: Factor on the weighted spread of the samples in the variance update (step 3 of
+#: Algorithm 1): above 1, so that evenly weighted samples (a flat objective) widen the search.
+GROWTH = 1.3
+#: Bounds of every sampling spread relative to its initial value, so the search neither
+#: freezes nor leaves the neighbourhood of its start.
+MIN_SIGMA_RATIO, MAX_SIGMA_RATIO = 0.05, 3.0
+#: Shape coefficients stay within this many standard deviations of the shape model.
+SHAPE_LIMIT = 3.0
+#: Scale ``b`` of the box term's robust loss ``b log(1 + cost / b)``: the coarse stage's
+#: vote cap, so that a false detection cannot dominate a shared plane.
+BOX_ROBUST = 0.01
+
+
 @dataclass(frozen=True)
 class InferenceOptions:
     """Options of :func:`refine_particles`.
 
     ``sigma_*`` are the initial sampling spreads: bearing in degrees, range as a
     fraction (log range), observation angle in degrees, shape in units of the PCA
-    standard deviations.
+    standard deviations, plane pitch and roll in degrees. How each default was chosen
+    (the study, its command and figures): ``benchmarks/RESULTS.md``.
     """
 
     iterations: int = 12
-    samples: int = 12
+    samples: int = 12  # per object and iteration, the current value among them
     n_shape: int = 5
-    sigma_bearing_deg: float = 0.5
-    sigma_range_frac: float = 0.05
+    sigma_bearing_deg: float = 0.5  # the image pins the bearing tightly ...
+    sigma_range_frac: float = 0.05  # ... and the range loosely
     sigma_azimuth_deg: float = 8.0
     sigma_shape: float = 0.6
-    growth: float = 1.3
-    min_sigma_ratio: float = 0.05
-    max_sigma_ratio: float = 3.0
-    shape_limit: float = 3.0
-    block_sampling: bool = True  # alternate pose and shape samples (halves the dimension per step)
-    # Successive halving: after `prune_after` iterations only the best `keep_fraction`
-    # of the particles are refined further (0 = never prune). Particles that are far
-    # behind by then practically never win, and the remaining iterations cost
-    # `keep_fraction` as much.
-    prune_after: int = 4
+    # Successive halving: particles far behind after ``prune_after`` iterations practically never win.
+    prune_after: int = 4  # 0: never prune
     keep_fraction: float = 0.25
-    # Polish: after the ``iterations``, only the MAP rows (the best scene with coupled
-    # objects, else each object's best particle) run ``polish_iterations`` more
-    # iterations of the same smoothing-based search with ``polish_samples`` samples,
-    # starting from the spreads they reached: about 3% of the main search's hypotheses,
-    # spent where the answer is. Chosen with the shape prior 10 among {0, 12, 24, 36, 48}
-    # iterations across fold groups of the real frames (label boxes, fold part models,
-    # benchmarks/tune_fine.py): folds {0,1} chose 24, folds {2,3} 36. With the size prior
-    # and box weight 100, 48 against 24 on the 141 real cars (bench_real_folds.py) moved
-    # fg+gp / full 48% / 54% -> 53% / 55% within 1 m but fg / fg+so 53% / 52% -> 51% / 50%
-    # and cost every fine variant 1-4 points of 3D AP@0.5, so 24 stays.
+    # The polish: more iterations on the MAP rows alone, spent where the answer is.
     polish_iterations: int = 24
     polish_samples: int = 24
-    # The paper's c, the log ratio charged to occluded parts, chosen on held-out
-    # synthetic scenes by `wirescene train occlusion` (wirescene.training.occlusion).
+    # The paper's c, the log ratio charged to occluded parts (`wirescene train occlusion`).
     occluded_score: float = field(default_factory=load_occluded_score)
-    # Weight of the detection-box term (not in the paper, whose objective is the part
-    # likelihood alone): ``box_weight`` times the coarse stage's lifting cost (squared
-    # side differences over the detection diagonal, lifting.box_residual) of the box
-    # in KITTI's convention -- the projected 3D box of the wireframe's extent, clipped
-    # to the image -- so the fine objective contains the very criterion by which the
-    # coarse stage placed the car and picked its particle, and weak part evidence can
-    # no longer slide a car metres along its viewing ray or pick a particle alone.
-    # 100 since the size prior (below) pins the range: 300 had been chosen among
-    # {0, 100, 300, 1000} before it (fold groups chose 300 and 100). With the size prior
-    # (141 real cars, label boxes, fold part models), 100 against 300: fg+gp 52% -> 48%
-    # and full 52% -> 54% within 1 m, the median azimuth error halved (fg+gp 3.7 -> 2.0
-    # deg, full 5.5 -> 2.9 deg; in fg+gp both fold groups gained) and the previous
-    # default's 3D AP@0.5 (26 / 29) rose to 42 / 46. The box's residual at the truth is
-    # not small: the label box is fitted to the whole car, the wireframe's extent is not
-    # exactly it (on synthetic scenes the true wireframe's box is off by 2 px per side
-    # in the median), and at 300 that misfit outweighed the part evidence (oracle
-    # evidence, 119 synthetic cars: 1 m 62% -> 66%, median azimuth 1.6 -> 1.4 deg with
-    # 100; benchmarks/bench_inference.py).
+    # The coarse stage's box cost in the fine objective, so weak evidence cannot slide a car along its ray.
     box_weight: float = 100.0
-    # Scale of the box term's robust loss: ``box_robust * log(1 + cost / box_robust)``
-    # instead of ``cost`` (0: plain squares). Like the coarse stage's capped vote, a
-    # detection that no car explains (a false one) must not dominate the scene objective
-    # that chooses a shared plane; a car fitting its box (cost << box_robust) is charged
-    # as before. 0.01, the coarse stage's cap: from our own pre-detections (fold models,
-    # 36 true positives) fg+gp / full placed 8% / 6% of the true positives within 1 m
-    # with plain squares and 31% / 36% with it (both fold groups gained); with label
-    # boxes (141 cars) 47% / 49% -> 48% / 51% (benchmarks/bench_real_folds.py).
-    box_robust: float = 0.01
-    # Scene-level inference of the ground plane: a third sampling block draws the
-    # plane's pitch and roll (one plane per particle with ``+gp``, else one per
-    # object), each object moving along its viewing ray onto the sampled plane, so a
-    # plane is judged with its objects where the image puts them. Off: planes stay on
-    # the coarse grid (0.25 deg; 0.1 deg of pitch moves a car at 30 m by ~1 m).
+    # Sample the ground plane too (the paper's scene-level inference) instead of keeping the coarse grid's.
     plane_refinement: bool = True
-    # Weight of the shape prior: ``shape_prior`` times half the squared norm of the
-    # shape coefficients (in PCA standard deviations), i.e. the negative log density of
-    # the shape model's Gaussian. Without any prior the objective cannot tell a small car
-    # near from a large one far away (boxes and parts scale alike), so a shared ground
-    # plane, which fixes range through where each car stands, loses the size prior that
-    # lets the coarse stage's mean-size boxes pin the plane. At 10 (the earlier default)
-    # the shape practically stays at the mean, which costs the fit of the parts where
-    # the evidence is good; the size prior below carries the size information instead.
+    # The shape model's Gaussian, weak: the size prior carries the size, the evidence the details.
     shape_prior: float = 1.0
-    # Weight of the car-size prior: ``size_prior`` times half the squared distance of
-    # the wireframe's box size (l, w, h) from KITTI's mean car in KITTI's standard
-    # deviations per dimension (:func:`size_cost`). It pins what the images cannot --
-    # size against range, hence the shared plane (a pitched plane with every car scaled
-    # along its ray explains the same image) -- and leaves the shape's details to the
-    # evidence. Chosen with shape_prior on the real frames (label boxes, fold part
-    # models, benchmarks/tune_fine.py; box weight 300): shape prior 10 alone gave fg+gp /
-    # full 48% / 51% within 1 m, shape prior 1 + size prior 1 52% / 52% (fold group
-    # {2,3}: 37% -> 47% in fg+gp; {0,1} held), size prior 3 48% / 52%.
+    # KITTI's car sizes pin what the image cannot: size against range, hence the shared plane.
     size_prior: float = 1.0
-    # Weight of the road-alignment prior on each car's azimuth in the fine objective
-    # (:func:`wirescene.lift.road_alignment_cost` of width ``ROAD_PRIOR_WIDTH``, up to
-    # ``road_prior`` across the road), so that weak part evidence does not turn a car off
-    # the road it drives on. In box-cost units the coarse stage's weight is 0.03, i.e. 3
-    # here at ``box_weight`` 100. Chosen on the real frames leaving one fold out among
-    # {0, 1, 3} (benchmarks/choose_by_fold.py, all five fine variants, label boxes and our
-    # pre-detections): 1 on every fold. Held out against 0, within 1 m: label boxes (141
-    # cars) fg+gp 55 -> 52%, full 55 -> 55%, fg 48 -> 48%; our pre-detections (54 true
-    # positives) fg+gp 43 -> 46%, full 41 -> 54%, fg 54 -> 52%; median azimuth error down
-    # in every variant (fg+gp 1.9 -> 1.7 and 5.5 -> 5.0 deg).
+    # Cars head along the road where the part evidence is weak (the coarse stage's prior, fine scale).
     road_prior: float = 1.0
-    # The fine road prior applies only to cars whose coarse start heads within
-    # ``ROAD_PRIOR_WIDTH`` of the road. The coarse stage already settled which cars stand
-    # across it (their viewpoint bin and box keep them > 20 deg off, since its own prior
-    # pulls every car whose bin window reaches the road onto it); for those, weak or
-    # explained-away evidence (an occluded or truncated car, the occluder search of
-    # ``full``) would otherwise let the prior's well turn them onto the road. With
-    # oracle evidence on synthetic scenes (seed 7, 119 cars, 31% across the road) that
-    # turned cars parked across by 50-90 deg.
+    # Only for cars whose coarse start heads within ROAD_PRIOR_WIDTH of the road: the rest stand across it.
     road_prior_gated: bool = True
-    # The fine search keeps each car's observation angle within this many degrees of its
-    # pre-detection's viewpoint (the bin centre; unknown viewpoints are free), the
-    # paper's tolerance for a correct coarse viewpoint: one bin either side of the
-    # coarse lifting's own window. On the real frames with label boxes, every car the
-    # fine stage had taken further (3-6 per variant, e.g. cars across the road that the
-    # part evidence turned) ended with a larger azimuth error than its coarse start
-    # (31-102 deg against 1-36 deg). Held out with the gate above (benchmarks/
-    # bench_real_folds.py, the five fine variants summed): azimuth errors over 30 deg in
-    # 35 -> 28 fits of the 141 label-box cars, within 1 m 356 -> 354 (label boxes) and
-    # 135 -> 136 (our pre-detections, 54 true positives). 0 turns the window off.
+    # The paper's tolerance for a correct coarse viewpoint, around each pre-detection's (0: no window).
     viewpoint_window_deg: float = 45.0
     sigma_pitch_deg: float = 0.2
     sigma_roll_deg: float = 0.2
-    # Where the ray casting of the likelihood runs: "numpy", or a PyTorch device
-    # ("cpu", "cuda", "cuda:N"; see wirescene.infer.torch_backend). Results agree within
-    # float tolerance.
+    # Where the likelihood's ray casting runs: "numpy" or a PyTorch device (see infer.torch_backend).
     device: str = "numpy"
 
 
@@ -326,12 +255,13 @@ class _Terms:
 
 
 def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None, box_weight=0.0,
-           device="numpy", plane=None, shape_prior=0.0, box_robust=0.0, size_prior=0.0, road_prior=0.0) -> _Terms:
+           device="numpy", plane=None, shape_prior=0.0, size_prior=0.0, road_prior=0.0) -> _Terms:
     """:class:`_Terms` of viewing parameters ``theta`` ``(P, N, M, 3 + K)`` on the
     particles' planes (or ``plane = (pitch, roll)``, see :func:`_geometry`); the
     penalty is ``box_weight`` times :func:`box_cost` against the detection ``boxes``
-    ``(N, 4)``, plus ``shape_prior`` times half the squared norm of the shape
-    coefficients, plus the size and road-alignment priors."""
+    ``(N, 4)`` under the robust loss of scale :data:`BOX_ROBUST`, plus ``shape_prior``
+    times half the squared norm of the shape coefficients, plus the size and
+    road-alignment priors."""
     N = particles.x.shape[1]
     plane = (particles.pitch, particles.roll) if plane is None else plane
     batch = _geometry(camera, shape_model, plane, particles.height, theta, n_shape, device)
@@ -342,7 +272,7 @@ def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None,
     extent = _extent(batch.vertices, batch.location, batch.R) if box or size_prior else None
     if box:
         cost = box_cost(camera, batch.vertices, batch.location, batch.R, boxes[None, :, None, :], extent)
-        penalty = box_weight * (box_robust * np.log1p(cost / box_robust) if box_robust else cost)
+        penalty = box_weight * (BOX_ROBUST * np.log1p(cost / BOX_ROBUST))
     if size_prior:
         penalty = penalty + size_prior * size_cost(*extent)
     if shape_prior:
@@ -491,8 +421,7 @@ class FineObjective:
         o = self.options
         return _terms(self.camera, self.shape_model, self.evidence, particles, theta, o.n_shape, self.boxes,
                       o.box_weight, o.device, plane=(plane[..., 0], plane[..., 1]), shape_prior=o.shape_prior,
-                      box_robust=o.box_robust, size_prior=o.size_prior,
-                      road_prior=o.road_prior and self.road_weight(particles))
+                      size_prior=o.size_prior, road_prior=o.road_prior and self.road_weight(particles))
 
     def value(self, terms: "_Terms", mask, gamma) -> np.ndarray:
         """Objective ``(P, N, M)`` of ``terms`` under the occlusion ``mask``, ``gamma``."""
@@ -509,26 +438,27 @@ class FineObjective:
 
 
 def sampling_blocks(options: InferenceOptions) -> list:
-    """Parameter blocks sampled in turn: indices into the viewing parameters (pose, then
-    shape), and None for the ground plane."""
-    D = 3 + options.n_shape
-    blocks = [np.arange(3), np.arange(3, D)] if options.block_sampling and options.n_shape else [np.arange(D)]
+    """Parameter blocks sampled in turn, so each step searches a 3- or K-dimensional
+    space: indices into the viewing parameters (pose, then shape), and None for the
+    ground plane."""
+    blocks = [np.arange(3), np.arange(3, 3 + options.n_shape)] if options.n_shape else [np.arange(3)]
     if options.plane_refinement:
         blocks.append(None)  # the ground plane
     return blocks
 
 
-def smoothed_spread(values: np.ndarray, delta: np.ndarray, sigma0: np.ndarray, options: InferenceOptions):
+def smoothed_spread(values: np.ndarray, delta: np.ndarray, sigma0: np.ndarray) -> np.ndarray:
     """Step 3 of Algorithm 1, the smoothing-based variance update around the previous
     value: the spread of the sample offsets ``delta`` ``(..., M, d)`` weighted by their
-    objective ``values`` ``(..., M)`` relative to its spread, times ``growth``, within
-    ``[min_sigma_ratio, max_sigma_ratio]`` of the initial spread ``sigma0``. Even weights
-    (a flat objective) widen the search, weights concentrated on a peak narrow it."""
+    objective ``values`` ``(..., M)`` relative to its spread, times :data:`GROWTH`,
+    within :data:`MIN_SIGMA_RATIO` and :data:`MAX_SIGMA_RATIO` of the initial spread
+    ``sigma0``. Even weights (a flat objective) widen the search, weights concentrated
+    on a peak narrow it."""
     spread = values.std(axis=-1, keepdims=True) + 1e-9
     w = np.exp((values - values.max(axis=-1, keepdims=True)) / spread)
     w /= w.sum(axis=-1, keepdims=True)
     wstd = np.sqrt(np.sum(w[..., None] * delta**2, axis=-2))
-    return np.clip(options.growth * wstd, options.min_sigma_ratio * sigma0, options.max_sigma_ratio * sigma0)
+    return np.clip(GROWTH * wstd, MIN_SIGMA_RATIO * sigma0, MAX_SIGMA_RATIO * sigma0)
 
 
 def _within_window(alpha: np.ndarray, window) -> np.ndarray:
@@ -616,7 +546,7 @@ class SearchState:
         cand[..., 2] = wrap_angle(cand[..., 2])
         if objective.window is not None:
             cand[..., 2] = _within_window(cand[..., 2], objective.window)
-        cand[..., 3:] = np.clip(cand[..., 3:], -o.shape_limit, o.shape_limit)
+        cand[..., 3:] = np.clip(cand[..., 3:], -SHAPE_LIMIT, SHAPE_LIMIT)
         # The current value's objective (under the current occlusion) is known: only the
         # new samples are placed and scored.
         sampled = objective.terms(self.particles, cand[:, :, 1:], self.plane)
@@ -624,7 +554,7 @@ class SearchState:
         best = np.argmax(values, axis=2)
         delta = cand - self.theta[:, :, None]
         delta[..., 2] = wrap_angle(delta[..., 2])
-        updated = smoothed_spread(values, delta, self.sigma0, o)
+        updated = smoothed_spread(values, delta, self.sigma0)
         self.sigma[..., block] = updated[..., block]
         self._accept(cand, values, best, sampled)
 
@@ -645,7 +575,7 @@ class SearchState:
         judged = objective.scene(values)[:, None] if shared else values
         best = np.broadcast_to(np.argmax(judged, axis=2), (P, N))
         delta = cand_plane - self.plane[:, :, None]
-        spread = smoothed_spread(judged, delta, self.plane_sigma0, objective.options)
+        spread = smoothed_spread(judged, delta, self.plane_sigma0)
         self.plane_sigma = np.broadcast_to(spread, (P, N, 2)).copy()
         self.plane = np.take_along_axis(cand_plane, best[..., None, None], axis=2)[:, :, 0]
         self._accept(cand, values, best, sampled)

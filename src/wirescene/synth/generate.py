@@ -420,7 +420,8 @@ def _shade(layout: SceneLayout, camera: Camera, rays, rendered, instances, car_c
     img, bg_dist = _background(layout, camera, rays, rng)
     _shade_objects(img, layout, camera, rays, depth, obj, normals, instances, car_cols)
     bgh = ~(obj >= 0) & np.isfinite(bg_dist)
-    img[bgh] = img[bgh] * np.exp(-bg_dist[bgh] / 300.0)[:, None] + (1 - np.exp(-bg_dist[bgh] / 300.0))[:, None] * [0.8, 0.85, 0.9]
+    img[bgh] = (img[bgh] * np.exp(-bg_dist[bgh] / 300.0)[:, None]
+                + (1 - np.exp(-bg_dist[bgh] / 300.0))[:, None] * [0.8, 0.85, 0.9])
     img = img + rng.normal(0, 0.012, size=img.shape)
     return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
 
