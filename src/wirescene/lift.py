@@ -37,17 +37,17 @@ from wirescene.core.groundplane import (
 from wirescene.core.types import Detections, SceneParticles
 
 
-#: Width (degrees) of the road-alignment prior (:func:`road_alignment_cost`), shared by
-#: the coarse and the fine stage.
+#: Width (degrees) of the road-alignment prior (:func:`road_alignment_cost`), one for
+#: both stages: the fine stage's prior and its gate act on what the coarse prior settled.
 ROAD_PRIOR_WIDTH = 20.0
 
 
 @dataclass(frozen=True)
 class LiftingOptions:
-    """Options of the coarse lifting stage (all angles in degrees)."""
+    """Options of the coarse lifting stage (all angles in degrees). How the defaults
+    were chosen (the study, its command and figures): ``benchmarks/RESULTS.md``."""
 
-    # KITTI's camera is rigidly mounted; road surfaces seen from it tilt by a few
-    # degrees in pitch (slopes, braking) and much less in roll (road camber).
+    # KITTI's camera is rigidly mounted: roads tilt by a few degrees in pitch, much less in roll.
     pitch_range: float = 3.0
     pitch_step: float = 0.25
     roll_range: float = 1.5
@@ -56,32 +56,12 @@ class LiftingOptions:
     azimuth_step: float = 2.5
     unknown_viewpoint_step: float = 5.0  # full circle when the detector gives none
     iterations: int = 8
-    # Per-object cost cap when objects vote for a shared plane, near the cost of a car
-    # that fits its box (so a box no car on the plane explains counts as an outlier).
-    # 0.01 rather than 0.05: with our pre-detections (1-2 true positives per frame
-    # among false ones; fold models) coarse+gp placed 31% of the 36 true positives
-    # within 1 m instead of 22% (both fold groups gained or held), label boxes unchanged
-    # (43% of 141 cars; benchmarks/bench_real_folds.py).
+    # Cap of each object's shared-plane vote, near a fitting car's cost: a box no car explains is an outlier.
     robust_cost: float = 0.01
     camera_height: float = KITTI_CAMERA_HEIGHT
     n_particles: int = 250
-    # Prior that a car heads along the camera's road (rotation_y = +-90 deg): a 2D box
-    # barely constrains the yaw of a car seen from behind or ahead, and 88% of KITTI's
-    # labelled cars head within 10 deg of the road (median 1.1 deg; 141 cars), the rest
-    # mostly across it (parked in bays, crossing). When each (detection, plane) picks its
-    # azimuth, ``road_prior * (1 - exp(-sin(d)**2 / (2 sin(road_prior_width)**2)))`` is
-    # added to its box cost, ``d`` being the heading's angle to the road: among azimuths
-    # whose boxes fit alike the one along the road wins, and the penalty saturates (within
-    # 5% of its ceiling beyond 60 deg), so a car across the road is left to its box. The
-    # plane votes use the box cost alone.
-    # Chosen on the real frames leaving one fold out (benchmarks/choose_by_fold.py over
-    # bench_real_folds.py runs with --set lifting.road_prior=...): weight 0.03 and width
-    # 20 deg won on the other folds of every fold among 7 configurations (off included);
-    # the coarse median azimuth error fell 8.4 -> 1.7 deg with label boxes (141 cars) and
-    # 11.4 -> 4.2 deg with our pre-detections (54 true positives).
-    # 0 turns it off.
+    # Weight of the prior that cars head along the road (:func:`road_alignment_cost`), which a box leaves open; 0: off.
     road_prior: float = 0.03
-    road_prior_width: float = ROAD_PRIOR_WIDTH
 
     def plane_grid(self) -> tuple[np.ndarray, np.ndarray]:
         """Flattened pitch and roll grids (radians), shape ``(G,)`` each."""
@@ -272,7 +252,7 @@ def lift_table(
     )
     choice = cost
     if options.road_prior:
-        choice = cost + road_alignment_cost(az, weight=options.road_prior, width=options.road_prior_width)
+        choice = cost + road_alignment_cost(az, weight=options.road_prior, width=ROAD_PRIOR_WIDTH)
     best_a = np.argmin(choice, axis=2)[..., None]  # (N, G, 1)
     take = lambda a: np.take_along_axis(a, best_a, axis=2)[..., 0]  # noqa: E731
     return LiftingTable(pitch_g, roll_g, take(x), take(z), take(az), take(cost), np.array(dims), options.camera_height)
@@ -283,7 +263,8 @@ def road_alignment_cost(azimuth, *, weight: float, width: float) -> np.ndarray:
     ``azimuth`` (KITTI ``rotation_y`` in the ground plane's frame, radians):
     ``weight * (1 - exp(-sin(d)**2 / (2 sin(width)**2)))``, ``d`` the heading's angle to
     the road (rotation_y = +-90 deg) and ``width`` in degrees. 0 along the road, near
-    ``weight`` across it; the same front and back. See :class:`LiftingOptions`."""
+    ``weight`` across it (within 5% of it beyond 60 deg, so a car across the road is
+    left to its box); the same front and back. See :class:`LiftingOptions`."""
     # cos(rotation_y) is the sine of the heading's angle to the road (the camera's z axis).
     s2 = np.cos(azimuth) ** 2 / (2 * np.sin(np.deg2rad(width)) ** 2)
     return weight * -np.expm1(-s2)

@@ -6,30 +6,35 @@ Gaussian samples of its pose (x, z, azimuth on the particle's fixed ground plane
 shape coefficients around its current value, keeps the best (the current value is
 always among the candidates, so the objective never decreases), and re-estimates its
 sampling spread from the samples weighted by their objective values: where the
-objective is flat or wiggly the weights are even and the spread grows (by ``growth``),
-near a distinct peak they concentrate and the spread shrinks. Pose and shape are
-sampled in alternate iterations, so each step searches a 3- or K-dimensional space
-rather than both at once. Particles, objects and
-samples form one batch, so one likelihood call per iteration scores all of them.
+objective is flat or wiggly the weights are even and the spread grows (by
+:data:`GROWTH`), near a distinct peak they concentrate and the spread shrinks. Pose and
+shape are sampled in alternate iterations, so each step searches a 3- or K-dimensional
+space rather than both at once. Particles, objects and samples form one batch, so one
+likelihood call per iteration scores all of them.
+
+The search is a :class:`SearchState` (the per-particle arrays) refined in place by its
+named steps -- :meth:`~SearchState.pose_step` (step 1 for the pose or the shape, with
+step 3), :meth:`~SearchState.plane_step` (the same for the ground plane),
+:meth:`~SearchState.occlusion_step` (step 2), :meth:`~SearchState.prune` and
+:func:`polish` -- against a :class:`FineObjective`, which holds what stays fixed.
 
 The current value's geometry and evidence are kept between iterations, so only new
 samples are placed and ray cast, and the occlusion update and re-scoring reuse the
 chosen samples' geometry. After ``prune_after`` iterations only the best
-``keep_fraction`` of the particles continue (successive halving); on 40 synthetic
-scenes this halved the time with localisation and azimuth figures within +-3 points of
-refining all of them (see the closing note of the speed issue).
+``keep_fraction`` of the particles continue (successive halving).
 
-Additions to the paper's objective and search (see :class:`InferenceOptions` for
-their defaults and how they were chosen): a detection-box term in KITTI's convention
-(``box_weight``: the coarse stage's lifting cost of the wireframe's 3D box, so that the
-fine objective contains what placed the car and picked its particle, and weak part
-evidence cannot slide a car along its viewing ray), and a third sampling block for the
-ground plane (``plane_refinement``: the paper's scene-level inference samples the plane
-too, instead of keeping the coarse grid's plane; objects follow a sampled plane along
-their viewing rays), priors on the shape and on the car's size (``shape_prior``,
-``size_prior``: boxes and parts cannot tell a small car near from a large one far, the
-priors can), and a polish
-(``polish_iterations``: more iterations of the same search on the MAP rows alone).
+Additions to the paper's objective and search (see :class:`InferenceOptions`, and
+``benchmarks/RESULTS.md`` for how their defaults were chosen): a detection-box term in
+KITTI's convention (``box_weight``: the coarse stage's lifting cost of the wireframe's
+3D box, so that the fine objective contains what placed the car and picked its
+particle, and weak part evidence cannot slide a car along its viewing ray), and a third
+sampling block for the ground plane (``plane_refinement``: the paper's scene-level
+inference samples the plane too, instead of keeping the coarse grid's plane; objects
+follow a sampled plane along their viewing rays), priors on the shape and on the car's
+size (``shape_prior``, ``size_prior``: boxes and parts cannot tell a small car near
+from a large one far, the priors can), a road-alignment prior (``road_prior``) and a
+viewpoint window (``viewpoint_window_deg``), and a polish (``polish_iterations``: more
+iterations of the same search on the MAP rows alone).
 
 Positions are sampled in viewing coordinates -- the bearing ``phi = atan2(x, z)``, the
 log range and the observation angle ``alpha = azimuth - phi`` -- rather than in
@@ -61,137 +66,61 @@ from wirescene.infer.likelihood import PartEvidence, instantiate_wireframes, obj
 _SIZE_MEAN, _SIZE_STD = np.array(KITTI_CAR_SIZE["mean"]), np.array(KITTI_CAR_SIZE["std"])  # l, w, h
 
 
+#: Factor on the weighted spread of the samples in the variance update (step 3 of
+#: Algorithm 1): above 1, so that evenly weighted samples (a flat objective) widen the search.
+GROWTH = 1.3
+#: Bounds of every sampling spread relative to its initial value, so the search neither
+#: freezes nor leaves the neighbourhood of its start.
+MIN_SIGMA_RATIO, MAX_SIGMA_RATIO = 0.05, 3.0
+#: Shape coefficients stay within this many standard deviations of the shape model.
+SHAPE_LIMIT = 3.0
+#: Scale ``b`` of the box term's robust loss ``b log(1 + cost / b)``: the coarse stage's
+#: vote cap, so that a false detection cannot dominate a shared plane.
+BOX_ROBUST = 0.01
+
+
 @dataclass(frozen=True)
 class InferenceOptions:
     """Options of :func:`refine_particles`.
 
     ``sigma_*`` are the initial sampling spreads: bearing in degrees, range as a
     fraction (log range), observation angle in degrees, shape in units of the PCA
-    standard deviations.
+    standard deviations, plane pitch and roll in degrees. How each default was chosen
+    (the study, its command and figures): ``benchmarks/RESULTS.md``.
     """
 
     iterations: int = 12
-    samples: int = 12
+    samples: int = 12  # per object and iteration, the current value among them
     n_shape: int = 5
-    sigma_bearing_deg: float = 0.5
-    sigma_range_frac: float = 0.05
+    sigma_bearing_deg: float = 0.5  # the image pins the bearing tightly ...
+    sigma_range_frac: float = 0.05  # ... and the range loosely
     sigma_azimuth_deg: float = 8.0
     sigma_shape: float = 0.6
-    growth: float = 1.3
-    min_sigma_ratio: float = 0.05
-    max_sigma_ratio: float = 3.0
-    shape_limit: float = 3.0
-    block_sampling: bool = True  # alternate pose and shape samples (halves the dimension per step)
-    # Successive halving: after `prune_after` iterations only the best `keep_fraction`
-    # of the particles are refined further (0 = never prune). Particles that are far
-    # behind by then practically never win, and the remaining iterations cost
-    # `keep_fraction` as much.
-    prune_after: int = 4
+    # Successive halving: particles far behind after ``prune_after`` iterations practically never win.
+    prune_after: int = 4  # 0: never prune
     keep_fraction: float = 0.25
-    # Polish: after the ``iterations``, only the MAP rows (the best scene with coupled
-    # objects, else each object's best particle) run ``polish_iterations`` more
-    # iterations of the same smoothing-based search with ``polish_samples`` samples,
-    # starting from the spreads they reached: about 3% of the main search's hypotheses,
-    # spent where the answer is. Chosen with the shape prior 10 among {0, 12, 24, 36, 48}
-    # iterations across fold groups of the real frames (label boxes, fold part models,
-    # benchmarks/tune_fine.py): folds {0,1} chose 24, folds {2,3} 36. With the size prior
-    # and box weight 100, 48 against 24 on the 141 real cars (bench_real_folds.py) moved
-    # fg+gp / full 48% / 54% -> 53% / 55% within 1 m but fg / fg+so 53% / 52% -> 51% / 50%
-    # and cost every fine variant 1-4 points of 3D AP@0.5, so 24 stays.
+    # The polish: more iterations on the MAP rows alone, spent where the answer is.
     polish_iterations: int = 24
     polish_samples: int = 24
-    # The paper's c, the log ratio charged to occluded parts, chosen on held-out
-    # synthetic scenes by `wirescene train occlusion` (wirescene.training.occlusion).
+    # The paper's c, the log ratio charged to occluded parts (`wirescene train occlusion`).
     occluded_score: float = field(default_factory=load_occluded_score)
-    # Weight of the detection-box term (not in the paper, whose objective is the part
-    # likelihood alone): ``box_weight`` times the coarse stage's lifting cost (squared
-    # side differences over the detection diagonal, lifting.box_residual) of the box
-    # in KITTI's convention -- the projected 3D box of the wireframe's extent, clipped
-    # to the image -- so the fine objective contains the very criterion by which the
-    # coarse stage placed the car and picked its particle, and weak part evidence can
-    # no longer slide a car metres along its viewing ray or pick a particle alone.
-    # 100 since the size prior (below) pins the range: 300 had been chosen among
-    # {0, 100, 300, 1000} before it (fold groups chose 300 and 100). With the size prior
-    # (141 real cars, label boxes, fold part models), 100 against 300: fg+gp 52% -> 48%
-    # and full 52% -> 54% within 1 m, the median azimuth error halved (fg+gp 3.7 -> 2.0
-    # deg, full 5.5 -> 2.9 deg; in fg+gp both fold groups gained) and the previous
-    # default's 3D AP@0.5 (26 / 29) rose to 42 / 46. The box's residual at the truth is
-    # not small: the label box is fitted to the whole car, the wireframe's extent is not
-    # exactly it (on synthetic scenes the true wireframe's box is off by 2 px per side
-    # in the median), and at 300 that misfit outweighed the part evidence (oracle
-    # evidence, 119 synthetic cars: 1 m 62% -> 66%, median azimuth 1.6 -> 1.4 deg with
-    # 100; benchmarks/bench_inference.py).
+    # The coarse stage's box cost in the fine objective, so weak evidence cannot slide a car along its ray.
     box_weight: float = 100.0
-    # Scale of the box term's robust loss: ``box_robust * log(1 + cost / box_robust)``
-    # instead of ``cost`` (0: plain squares). Like the coarse stage's capped vote, a
-    # detection that no car explains (a false one) must not dominate the scene objective
-    # that chooses a shared plane; a car fitting its box (cost << box_robust) is charged
-    # as before. 0.01, the coarse stage's cap: from our own pre-detections (fold models,
-    # 36 true positives) fg+gp / full placed 8% / 6% of the true positives within 1 m
-    # with plain squares and 31% / 36% with it (both fold groups gained); with label
-    # boxes (141 cars) 47% / 49% -> 48% / 51% (benchmarks/bench_real_folds.py).
-    box_robust: float = 0.01
-    # Scene-level inference of the ground plane: a third sampling block draws the
-    # plane's pitch and roll (one plane per particle with ``+gp``, else one per
-    # object), each object moving along its viewing ray onto the sampled plane, so a
-    # plane is judged with its objects where the image puts them. Off: planes stay on
-    # the coarse grid (0.25 deg; 0.1 deg of pitch moves a car at 30 m by ~1 m).
+    # Sample the ground plane too (the paper's scene-level inference) instead of keeping the coarse grid's.
     plane_refinement: bool = True
-    # Weight of the shape prior: ``shape_prior`` times half the squared norm of the
-    # shape coefficients (in PCA standard deviations), i.e. the negative log density of
-    # the shape model's Gaussian. Without any prior the objective cannot tell a small car
-    # near from a large one far away (boxes and parts scale alike), so a shared ground
-    # plane, which fixes range through where each car stands, loses the size prior that
-    # lets the coarse stage's mean-size boxes pin the plane. At 10 (the earlier default)
-    # the shape practically stays at the mean, which costs the fit of the parts where
-    # the evidence is good; the size prior below carries the size information instead.
+    # The shape model's Gaussian, weak: the size prior carries the size, the evidence the details.
     shape_prior: float = 1.0
-    # Weight of the car-size prior: ``size_prior`` times half the squared distance of
-    # the wireframe's box size (l, w, h) from KITTI's mean car in KITTI's standard
-    # deviations per dimension (:func:`size_cost`). It pins what the images cannot --
-    # size against range, hence the shared plane (a pitched plane with every car scaled
-    # along its ray explains the same image) -- and leaves the shape's details to the
-    # evidence. Chosen with shape_prior on the real frames (label boxes, fold part
-    # models, benchmarks/tune_fine.py; box weight 300): shape prior 10 alone gave fg+gp /
-    # full 48% / 51% within 1 m, shape prior 1 + size prior 1 52% / 52% (fold group
-    # {2,3}: 37% -> 47% in fg+gp; {0,1} held), size prior 3 48% / 52%.
+    # KITTI's car sizes pin what the image cannot: size against range, hence the shared plane.
     size_prior: float = 1.0
-    # Weight of the road-alignment prior on each car's azimuth in the fine objective
-    # (:func:`wirescene.lift.road_alignment_cost` of width ``ROAD_PRIOR_WIDTH``, up to
-    # ``road_prior`` across the road), so that weak part evidence does not turn a car off
-    # the road it drives on. In box-cost units the coarse stage's weight is 0.03, i.e. 3
-    # here at ``box_weight`` 100. Chosen on the real frames leaving one fold out among
-    # {0, 1, 3} (benchmarks/choose_by_fold.py, all five fine variants, label boxes and our
-    # pre-detections): 1 on every fold. Held out against 0, within 1 m: label boxes (141
-    # cars) fg+gp 55 -> 52%, full 55 -> 55%, fg 48 -> 48%; our pre-detections (54 true
-    # positives) fg+gp 43 -> 46%, full 41 -> 54%, fg 54 -> 52%; median azimuth error down
-    # in every variant (fg+gp 1.9 -> 1.7 and 5.5 -> 5.0 deg).
+    # Cars head along the road where the part evidence is weak (the coarse stage's prior, fine scale).
     road_prior: float = 1.0
-    # The fine road prior applies only to cars whose coarse start heads within
-    # ``ROAD_PRIOR_WIDTH`` of the road. The coarse stage already settled which cars stand
-    # across it (their viewpoint bin and box keep them > 20 deg off, since its own prior
-    # pulls every car whose bin window reaches the road onto it); for those, weak or
-    # explained-away evidence (an occluded or truncated car, the occluder search of
-    # ``full``) would otherwise let the prior's well turn them onto the road. With
-    # oracle evidence on synthetic scenes (seed 7, 119 cars, 31% across the road) that
-    # turned cars parked across by 50-90 deg.
+    # Only for cars whose coarse start heads within ROAD_PRIOR_WIDTH of the road: the rest stand across it.
     road_prior_gated: bool = True
-    # The fine search keeps each car's observation angle within this many degrees of its
-    # pre-detection's viewpoint (the bin centre; unknown viewpoints are free), the
-    # paper's tolerance for a correct coarse viewpoint: one bin either side of the
-    # coarse lifting's own window. On the real frames with label boxes, every car the
-    # fine stage had taken further (3-6 per variant, e.g. cars across the road that the
-    # part evidence turned) ended with a larger azimuth error than its coarse start
-    # (31-102 deg against 1-36 deg). Held out with the gate above (benchmarks/
-    # bench_real_folds.py, the five fine variants summed): azimuth errors over 30 deg in
-    # 35 -> 28 fits of the 141 label-box cars, within 1 m 356 -> 354 (label boxes) and
-    # 135 -> 136 (our pre-detections, 54 true positives). 0 turns the window off.
+    # The paper's tolerance for a correct coarse viewpoint, around each pre-detection's (0: no window).
     viewpoint_window_deg: float = 45.0
     sigma_pitch_deg: float = 0.2
     sigma_roll_deg: float = 0.2
-    # Where the ray casting of the likelihood runs: "numpy", or a PyTorch device
-    # ("cpu", "cuda", "cuda:N"; see wirescene.infer.torch_backend). Results agree within
-    # float tolerance.
+    # Where the likelihood's ray casting runs: "numpy" or a PyTorch device (see infer.torch_backend).
     device: str = "numpy"
 
 
@@ -326,12 +255,13 @@ class _Terms:
 
 
 def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None, box_weight=0.0,
-           device="numpy", plane=None, shape_prior=0.0, box_robust=0.0, size_prior=0.0, road_prior=0.0) -> _Terms:
+           device="numpy", plane=None, shape_prior=0.0, size_prior=0.0, road_prior=0.0) -> _Terms:
     """:class:`_Terms` of viewing parameters ``theta`` ``(P, N, M, 3 + K)`` on the
     particles' planes (or ``plane = (pitch, roll)``, see :func:`_geometry`); the
     penalty is ``box_weight`` times :func:`box_cost` against the detection ``boxes``
-    ``(N, 4)``, plus ``shape_prior`` times half the squared norm of the shape
-    coefficients, plus the size and road-alignment priors."""
+    ``(N, 4)`` under the robust loss of scale :data:`BOX_ROBUST`, plus ``shape_prior``
+    times half the squared norm of the shape coefficients, plus the size and
+    road-alignment priors."""
     N = particles.x.shape[1]
     plane = (particles.pitch, particles.roll) if plane is None else plane
     batch = _geometry(camera, shape_model, plane, particles.height, theta, n_shape, device)
@@ -342,7 +272,7 @@ def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None,
     extent = _extent(batch.vertices, batch.location, batch.R) if box or size_prior else None
     if box:
         cost = box_cost(camera, batch.vertices, batch.location, batch.R, boxes[None, :, None, :], extent)
-        penalty = box_weight * (box_robust * np.log1p(cost / box_robust) if box_robust else cost)
+        penalty = box_weight * (BOX_ROBUST * np.log1p(cost / BOX_ROBUST))
     if size_prior:
         penalty = penalty + size_prior * size_cost(*extent)
     if shape_prior:
@@ -432,6 +362,291 @@ def _best_rows(score: np.ndarray, k: int, *, coupled: bool, weights: np.ndarray 
     return np.argsort(-score, axis=0, kind="stable")[:k]
 
 
+@dataclass(frozen=True)
+class FineObjective:
+    """What the fine search maximises for one image, fixed during the search: the
+    objective's terms (:func:`_terms`), the occlusion update (step 2 of Algorithm 1) and
+    the scene objective that compares coupled particles.
+
+    Build it with :meth:`create`; ``window`` is ``(centre, known, half)`` of the
+    viewpoint window (``(1, N, 1)`` arrays and radians) or None.
+    """
+
+    camera: Camera
+    shape_model: ShapeModel
+    evidence: PartEvidence
+    options: InferenceOptions
+    boxes: np.ndarray | None = None
+    weights: np.ndarray | None = None
+    window: tuple | None = None
+    searched_occluder: bool = False
+    deterministic_occlusion: bool = False
+
+    @classmethod
+    def create(cls, camera, shape_model, evidence, options, *, n_objects, boxes=None, weights=None, alpha=None,
+               searched_occluder=False, deterministic_occlusion=False) -> "FineObjective":
+        """The objective of :func:`refine_particles` (same arguments); ``alpha`` ``(N,)``
+        becomes the viewpoint window."""
+        window = None
+        if alpha is not None and options.viewpoint_window_deg > 0:
+            alpha = np.asarray(alpha, dtype=float)
+            check_shape("alpha", alpha, (n_objects,))
+            known = np.isfinite(alpha)
+            window = (np.where(known, alpha, 0.0)[None, :, None], known[None, :, None],
+                      np.deg2rad(options.viewpoint_window_deg))
+        return cls(camera, shape_model, evidence, options, boxes, weights, window, searched_occluder,
+                   deterministic_occlusion)
+
+    @property
+    def occlusion(self) -> bool:
+        """Whether step 2 of Algorithm 1 (the occlusion update) runs."""
+        return self.searched_occluder or self.deterministic_occlusion
+
+    def coupled(self, particles: SceneParticles) -> bool:
+        """Whether objects depend on each other, so that only whole particles compare."""
+        return particles.shared_plane or self.deterministic_occlusion
+
+    def road_weight(self, particles: SceneParticles):
+        """Weight of the road prior per car of ``particles`` (``(P, N, 1)``, or a scalar
+        ungated): only cars whose coarse start heads along the road are pulled onto it."""
+        o = self.options
+        if not o.road_prior_gated:
+            return o.road_prior
+        along = road_angle(particles.azimuth) <= np.deg2rad(ROAD_PRIOR_WIDTH)
+        return o.road_prior * along[:, :, None]
+
+    def terms(self, particles: SceneParticles, theta: np.ndarray, plane: np.ndarray) -> "_Terms":
+        """:class:`_Terms` of viewing parameters ``theta`` ``(P, N, M, D)`` on planes
+        ``plane`` ``(P, N, 2)`` or ``(P, N, M, 2)`` (pitch, roll)."""
+        o = self.options
+        return _terms(self.camera, self.shape_model, self.evidence, particles, theta, o.n_shape, self.boxes,
+                      o.box_weight, o.device, plane=(plane[..., 0], plane[..., 1]), shape_prior=o.shape_prior,
+                      size_prior=o.size_prior, road_prior=o.road_prior and self.road_weight(particles))
+
+    def value(self, terms: "_Terms", mask, gamma) -> np.ndarray:
+        """Objective ``(P, N, M)`` of ``terms`` under the occlusion ``mask``, ``gamma``."""
+        return terms.value(self.options.occluded_score, mask, gamma)
+
+    def update_occlusion(self, current: "_Terms"):
+        """Step 2 of Algorithm 1 on the current geometry: ``mask``, ``gamma``."""
+        return _occlusion_of(self.camera, current, self.options.occluded_score, searched=self.searched_occluder,
+                             deterministic=self.deterministic_occlusion, device=self.options.device)
+
+    def scene(self, score: np.ndarray) -> np.ndarray:
+        """Scene objective: object scores summed over axis 1 with the objects' weights."""
+        return _scene(score, self.weights)
+
+
+def sampling_blocks(options: InferenceOptions) -> list:
+    """Parameter blocks sampled in turn, so each step searches a 3- or K-dimensional
+    space: indices into the viewing parameters (pose, then shape), and None for the
+    ground plane."""
+    blocks = [np.arange(3), np.arange(3, 3 + options.n_shape)] if options.n_shape else [np.arange(3)]
+    if options.plane_refinement:
+        blocks.append(None)  # the ground plane
+    return blocks
+
+
+def smoothed_spread(values: np.ndarray, delta: np.ndarray, sigma0: np.ndarray) -> np.ndarray:
+    """Step 3 of Algorithm 1, the smoothing-based variance update around the previous
+    value: the spread of the sample offsets ``delta`` ``(..., M, d)`` weighted by their
+    objective ``values`` ``(..., M)`` relative to its spread, times :data:`GROWTH`,
+    within :data:`MIN_SIGMA_RATIO` and :data:`MAX_SIGMA_RATIO` of the initial spread
+    ``sigma0``. Even weights (a flat objective) widen the search, weights concentrated
+    on a peak narrow it."""
+    spread = values.std(axis=-1, keepdims=True) + 1e-9
+    w = np.exp((values - values.max(axis=-1, keepdims=True)) / spread)
+    w /= w.sum(axis=-1, keepdims=True)
+    wstd = np.sqrt(np.sum(w[..., None] * delta**2, axis=-2))
+    return np.clip(GROWTH * wstd, MIN_SIGMA_RATIO * sigma0, MAX_SIGMA_RATIO * sigma0)
+
+
+def _within_window(alpha: np.ndarray, window) -> np.ndarray:
+    """Observation angles ``alpha`` ``(P, N, M)`` clipped to the viewpoint window of
+    each car (unknown viewpoints unchanged)."""
+    centre, known, half = window
+    inside = wrap_angle(centre + np.clip(wrap_angle(alpha - centre), -half, half))
+    return np.where(known, inside, alpha)
+
+
+@dataclass
+class SearchState:
+    """The state of Algorithm 1 over all particles, refined in place by its steps.
+
+    Per particle and object: viewing parameters ``theta`` ``(P, N, D)`` (bearing, log
+    range, observation angle, shape), their sampling spreads ``sigma`` and initial
+    spreads ``sigma0``; the ground plane ``plane`` ``(P, N, 2)`` (pitch, roll) with
+    ``plane_sigma`` and ``plane_sigma0``; the kept geometry and evidence ``current``
+    ``(P, N, 1)`` of the current value, its objective ``score`` ``(P, N)`` and occlusion
+    (``mask`` ``(P, N)``, ``gamma`` ``(P, N, 36)``, None where unused); ``particles``,
+    the coarse particles of the rows still refined; ``history``, the best scene
+    objective after each iteration.
+    """
+
+    particles: SceneParticles
+    theta: np.ndarray
+    sigma: np.ndarray
+    sigma0: np.ndarray
+    plane: np.ndarray
+    plane_sigma: np.ndarray
+    plane_sigma0: np.ndarray
+    current: "_Terms"
+    score: np.ndarray
+    mask: np.ndarray | None
+    gamma: np.ndarray | None
+    history: list
+
+    @classmethod
+    def start(cls, objective: FineObjective, particles: SceneParticles) -> "SearchState":
+        """The coarse particles as a start: their poses, the mean shape, their planes,
+        the initial spreads and no occluder (``a0``)."""
+        o = objective.options
+        P, N = particles.x.shape
+        D = 3 + o.n_shape
+        theta = np.zeros((P, N, D))
+        theta[..., 0], theta[..., 1], theta[..., 2] = _to_viewing(particles.x, particles.z, particles.azimuth)
+        sigma0 = np.empty((P, N, D))
+        sigma0[..., 0] = np.deg2rad(o.sigma_bearing_deg)
+        sigma0[..., 1] = o.sigma_range_frac
+        sigma0[..., 2] = np.deg2rad(o.sigma_azimuth_deg)
+        sigma0[..., 3:] = o.sigma_shape
+        plane = np.stack([particles.pitch, particles.roll], axis=-1).astype(float)  # (P, N, 2)
+        plane_sigma0 = np.empty((P, N, 2))
+        plane_sigma0[..., 0] = np.deg2rad(o.sigma_pitch_deg)
+        plane_sigma0[..., 1] = np.deg2rad(o.sigma_roll_deg)
+        mask = np.zeros((P, N), dtype=int) if objective.occlusion else None
+        current = objective.terms(particles, theta[:, :, None], plane)
+        score = objective.value(current, mask, None)[..., 0]
+        return cls(particles, theta, sigma0.copy(), sigma0, plane, plane_sigma0.copy(), plane_sigma0, current,
+                   score, mask, None, [objective.scene(score).max()])
+
+    def iterate(self, objective: FineObjective, rng: np.random.Generator, block, samples: int) -> None:
+        """One iteration of Algorithm 1: sample ``block`` (see :func:`sampling_blocks`)
+        with ``samples`` candidates per object, the current value among them, then
+        update the occlusion."""
+        if block is None:
+            self.plane_step(objective, rng, samples)
+        else:
+            self.pose_step(objective, rng, block, samples)
+        if objective.occlusion:
+            self.occlusion_step(objective)
+        self.history.append(objective.scene(self.score).max())
+
+    def pose_step(self, objective: FineObjective, rng: np.random.Generator, block: np.ndarray, samples: int) -> None:
+        """Steps 1 and 3 of Algorithm 1 for the parameters ``block`` (pose or shape) of
+        every object with its occlusion fixed: Gaussian samples around the current value,
+        the best kept, the spread re-estimated."""
+        o = objective.options
+        P, N, D = self.theta.shape
+        noise = np.zeros((P, N, samples, D))
+        noise[..., block] = rng.standard_normal((P, N, samples, len(block)))
+        noise[:, :, 0] = 0.0  # the current value competes too
+        cand = self.theta[:, :, None] + self.sigma[:, :, None] * noise
+        cand[..., 1] = np.maximum(cand[..., 1], 0.0)  # at least 1 m away
+        cand[..., 2] = wrap_angle(cand[..., 2])
+        if objective.window is not None:
+            cand[..., 2] = _within_window(cand[..., 2], objective.window)
+        cand[..., 3:] = np.clip(cand[..., 3:], -SHAPE_LIMIT, SHAPE_LIMIT)
+        # The current value's objective (under the current occlusion) is known: only the
+        # new samples are placed and scored.
+        sampled = objective.terms(self.particles, cand[:, :, 1:], self.plane)
+        values = np.concatenate([self.score[:, :, None], objective.value(sampled, self.mask, self.gamma)], axis=2)
+        best = np.argmax(values, axis=2)
+        delta = cand - self.theta[:, :, None]
+        delta[..., 2] = wrap_angle(delta[..., 2])
+        updated = smoothed_spread(values, delta, self.sigma0)
+        self.sigma[..., block] = updated[..., block]
+        self._accept(cand, values, best, sampled)
+
+    def plane_step(self, objective: FineObjective, rng: np.random.Generator, samples: int) -> None:
+        """Steps 1 and 3 for the ground plane: sample the plane of every particle (of
+        every object without ``+gp``) and move its objects along their viewing rays onto
+        it; a shared plane is judged by the scene objective."""
+        P, N, D = self.theta.shape
+        shared = self.particles.shared_plane
+        noise = rng.standard_normal((P, 1 if shared else N, samples, 2))
+        noise[:, :, 0] = 0.0
+        cand_plane = self.plane[:, :, None] + self.plane_sigma[:, :, None] * noise  # (P, N, M, 2)
+        cand = _onto_plane(objective.camera, np.broadcast_to(self.theta[:, :, None], (P, N, samples, D)),
+                           (self.plane[:, :, None, 0], self.plane[:, :, None, 1]),
+                           (cand_plane[..., 0], cand_plane[..., 1]), self.particles.height)
+        sampled = objective.terms(self.particles, cand[:, :, 1:], cand_plane[:, :, 1:])
+        values = np.concatenate([self.score[:, :, None], objective.value(sampled, self.mask, self.gamma)], axis=2)
+        judged = objective.scene(values)[:, None] if shared else values
+        best = np.broadcast_to(np.argmax(judged, axis=2), (P, N))
+        delta = cand_plane - self.plane[:, :, None]
+        spread = smoothed_spread(judged, delta, self.plane_sigma0)
+        self.plane_sigma = np.broadcast_to(spread, (P, N, 2)).copy()
+        self.plane = np.take_along_axis(cand_plane, best[..., None, None], axis=2)[:, :, 0]
+        self._accept(cand, values, best, sampled)
+
+    def _accept(self, cand: np.ndarray, values: np.ndarray, best: np.ndarray, sampled: "_Terms") -> None:
+        """Take candidate ``best`` ``(P, N)`` of every object (0: the current value) with
+        its objective and kept geometry."""
+        self.theta = np.take_along_axis(cand, best[..., None, None], axis=2)[:, :, 0]
+        moved = best > 0
+        chosen = sampled.take(np.maximum(best - 1, 0))
+        for f in self.current.__dataclass_fields__:
+            a, b = getattr(self.current, f), getattr(chosen, f)
+            a[moved] = b[moved]
+        self.score = np.take_along_axis(values, best[..., None], axis=2)[..., 0]
+
+    def occlusion_step(self, objective: FineObjective) -> None:
+        """Step 2 of Algorithm 1: the occlusion of the new shapes and poses, on their
+        kept geometry, and their objective under it."""
+        self.mask, self.gamma = objective.update_occlusion(self.current)
+        self.score = objective.value(self.current, self.mask, self.gamma)[..., 0]
+
+    def prune(self, objective: FineObjective, k: int) -> None:
+        """Keep the ``k`` best rows (:func:`_best_rows`): the best scenes when objects are
+        coupled, else each object's own best particles."""
+        self.keep_rows(_best_rows(self.score, k, coupled=objective.coupled(self.particles),
+                                  weights=objective.weights))
+
+    def keep_rows(self, keep: np.ndarray) -> None:
+        """Keep particle rows ``keep`` ``(k, N)`` of every object."""
+        cols = np.arange(keep.shape[1])
+        for name in ("theta", "sigma", "sigma0", "score", "plane", "plane_sigma", "plane_sigma0"):
+            setattr(self, name, getattr(self, name)[keep, cols])
+        self.current = _Terms(*(getattr(self.current, f)[keep, cols] for f in self.current.__dataclass_fields__))
+        self.mask = None if self.mask is None else self.mask[keep, cols]
+        self.gamma = None if self.gamma is None else self.gamma[keep, cols]
+        self.particles = self.particles.take(keep)
+
+    def result(self, objective: FineObjective) -> RefinedParticles:
+        """The refined particles of the rows still kept."""
+        P, N = self.score.shape
+        x, z, azimuth = _from_viewing(self.theta)
+        p = self.particles
+        refined = SceneParticles(
+            pitch=self.plane[..., 0], roll=self.plane[..., 1], x=x, z=z, azimuth=azimuth,
+            object_cost=-self.score, dims=p.dims, height=p.height, shared_plane=p.shared_plane,
+        )
+        return RefinedParticles(
+            refined, self.theta[..., 3:], self.score, np.array(self.history),
+            mask=np.zeros((P, N), dtype=int) if self.mask is None else self.mask,
+            gamma=np.zeros((P, N, N_VERTICES), dtype=bool) if self.gamma is None else self.gamma,
+            coupled=objective.coupled(p),
+            spread=self.sigma, plane_spread=self.plane_sigma, weights=objective.weights,
+        )
+
+
+def _prunes_after(options: InferenceOptions, done: int) -> bool:
+    """Whether the successive halving happens after ``done`` iterations."""
+    return bool(options.prune_after and done == options.prune_after and options.keep_fraction < 1
+                and done < options.iterations)
+
+
+def polish(state: SearchState, objective: FineObjective, rng: np.random.Generator, blocks: list) -> None:
+    """The polish: only the MAP rows run ``polish_iterations`` more iterations of the
+    same search with ``polish_samples`` samples, from the spreads they reached (the
+    block schedule continues where Algorithm 1 stopped)."""
+    o = objective.options
+    state.prune(objective, 1)
+    for it in range(o.iterations, o.iterations + o.polish_iterations):
+        state.iterate(objective, rng, blocks[it % len(blocks)], o.polish_samples)
+
+
 def refine_particles(
     camera: Camera,
     particles: SceneParticles,
@@ -471,151 +686,18 @@ def refine_particles(
     """
     options = InferenceOptions() if options is None else options
     rng = np.random.default_rng(0) if rng is None else rng
-    P, N = particles.x.shape
-    K = options.n_shape
-    D = 3 + K
-    theta = np.zeros((P, N, D))
-    theta[..., 0], theta[..., 1], theta[..., 2] = _to_viewing(particles.x, particles.z, particles.azimuth)
-    sigma0 = np.empty((P, N, D))
-    sigma0[..., 0] = np.deg2rad(options.sigma_bearing_deg)
-    sigma0[..., 1] = options.sigma_range_frac
-    sigma0[..., 2] = np.deg2rad(options.sigma_azimuth_deg)
-    sigma0[..., 3:] = options.sigma_shape
-    sigma = sigma0.copy()
-    plane = np.stack([particles.pitch, particles.roll], axis=-1).astype(float)  # (P, N, 2)
-    plane_sigma0 = np.empty((P, N, 2))
-    plane_sigma0[..., 0] = np.deg2rad(options.sigma_pitch_deg)
-    plane_sigma0[..., 1] = np.deg2rad(options.sigma_roll_deg)
-    plane_sigma = plane_sigma0.copy()
-    occlusion = searched_occluder or deterministic_occlusion
-    mask = np.zeros((P, N), dtype=int) if occlusion else None
-    gamma = None
-    height = particles.height
-    window = None
-    if alpha is not None and options.viewpoint_window_deg > 0:
-        alpha = np.asarray(alpha, dtype=float)
-        check_shape("alpha", alpha, (N,))
-        known = np.isfinite(alpha)
-        window = (np.where(known, alpha, 0.0)[None, :, None], known[None, :, None],
-                  np.deg2rad(options.viewpoint_window_deg))
-
-    def road_weight():
-        # (P, N, 1) per car of the current particles (rows follow pruning and the polish)
-        if not options.road_prior_gated:
-            return options.road_prior
-        along = road_angle(particles.azimuth) <= np.deg2rad(ROAD_PRIOR_WIDTH)
-        return options.road_prior * along[:, :, None]
-
-    def terms_of(th, pl):
-        return _terms(camera, shape_model, evidence, particles, th, K, boxes, options.box_weight, options.device,
-                      plane=(pl[..., 0], pl[..., 1]), shape_prior=options.shape_prior, box_robust=options.box_robust,
-                      size_prior=options.size_prior, road_prior=options.road_prior and road_weight())
-
-    def smoothed_spread(values, delta, sig, sig0):
-        # Smoothing-based variance update around the previous value: samples weighted
-        # by their objective relative to its spread; even weights (flat objective)
-        # widen, weights concentrated on a peak narrow the search.
-        spread = values.std(axis=-1, keepdims=True) + 1e-9
-        w = np.exp((values - values.max(axis=-1, keepdims=True)) / spread)
-        w /= w.sum(axis=-1, keepdims=True)
-        wstd = np.sqrt(np.sum(w[..., None] * delta**2, axis=-2))
-        return np.clip(options.growth * wstd, options.min_sigma_ratio * sig0, options.max_sigma_ratio * sig0)
-
-    c = options.occluded_score
-    current = terms_of(theta[:, :, None], plane)
-    score = current.value(c, mask, gamma)[..., 0]
-    history = [_scene(score, weights).max()]
-    blocks = [np.arange(3), np.arange(3, D)] if options.block_sampling and K else [np.arange(D)]
-    if options.plane_refinement:
-        blocks.append(None)  # the ground plane
-    coupled = particles.shared_plane or deterministic_occlusion
-
-    def keep_rows(keep):
-        nonlocal theta, sigma, sigma0, score, plane, plane_sigma, plane_sigma0, current, mask, gamma, particles, P
-        cols = np.arange(N)
-        theta, sigma, sigma0, score, plane, plane_sigma, plane_sigma0 = (
-            a[keep, cols] for a in (theta, sigma, sigma0, score, plane, plane_sigma, plane_sigma0))
-        current = _Terms(*(getattr(current, f)[keep, cols] for f in current.__dataclass_fields__))
-        mask = None if mask is None else mask[keep, cols]
-        gamma = None if gamma is None else gamma[keep, cols]
-        particles = particles.take(keep)
-        P = len(keep)
-
-    for it in range(options.iterations + options.polish_iterations):
-        if it == options.iterations:
-            keep_rows(_best_rows(score, 1, coupled=coupled, weights=weights))
-        M = options.samples if it < options.iterations else options.polish_samples
-        block = blocks[it % len(blocks)]
-        if block is None:
-            # 1'. sample the plane of every particle (of every object without +gp) and
-            # move its objects along their rays onto it
-            shared = particles.shared_plane
-            noise = rng.standard_normal((P, 1 if shared else N, M, 2))
-            noise[:, :, 0] = 0.0
-            cand_plane = plane[:, :, None] + plane_sigma[:, :, None] * noise  # (P, N, M, 2)
-            cand = _onto_plane(camera, np.broadcast_to(theta[:, :, None], (P, N, M, D)),
-                               (plane[:, :, None, 0], plane[:, :, None, 1]),
-                               (cand_plane[..., 0], cand_plane[..., 1]), height)
-            sampled = terms_of(cand[:, :, 1:], cand_plane[:, :, 1:])
-            values = np.concatenate([score[:, :, None], sampled.value(c, mask, gamma)], axis=2)
-            # a shared plane: the scene decides
-            judged = _scene(values, weights)[:, None] if shared else values
-            best = np.broadcast_to(np.argmax(judged, axis=2), (P, N))
-            delta = cand_plane - plane[:, :, None]
-            plane_sigma = np.broadcast_to(smoothed_spread(judged, delta, plane_sigma, plane_sigma0), (P, N, 2)).copy()
-            plane = np.take_along_axis(cand_plane, best[..., None, None], axis=2)[:, :, 0]
-        else:
-            # 1. sample pose or shape of every object with its occlusion fixed
-            noise = np.zeros((P, N, M, D))
-            noise[..., block] = rng.standard_normal((P, N, M, len(block)))
-            noise[:, :, 0] = 0.0  # the current value competes too
-            cand = theta[:, :, None] + sigma[:, :, None] * noise
-            cand[..., 1] = np.maximum(cand[..., 1], 0.0)  # at least 1 m away
-            cand[..., 2] = wrap_angle(cand[..., 2])
-            if window is not None:
-                centre, known, half = window
-                inside = wrap_angle(centre + np.clip(wrap_angle(cand[..., 2] - centre), -half, half))
-                cand[..., 2] = np.where(known, inside, cand[..., 2])
-            cand[..., 3:] = np.clip(cand[..., 3:], -options.shape_limit, options.shape_limit)
-            # The current value's objective (under the current occlusion) is known: only
-            # the new samples are placed and scored.
-            sampled = terms_of(cand[:, :, 1:], plane)
-            values = np.concatenate([score[:, :, None], sampled.value(c, mask, gamma)], axis=2)
-            best = np.argmax(values, axis=2)
-            delta = cand - theta[:, :, None]
-            delta[..., 2] = wrap_angle(delta[..., 2])
-            # 3. smoothing-based variance update around the previous value
-            updated = smoothed_spread(values, delta, sigma, sigma0)
-            sigma[..., block] = updated[..., block]
-        theta = np.take_along_axis(cand, best[..., None, None], axis=2)[:, :, 0]
-        moved = best > 0
-        chosen = sampled.take(np.maximum(best - 1, 0))
-        for f in current.__dataclass_fields__:
-            a, b = getattr(current, f), getattr(chosen, f)
-            a[moved] = b[moved]
-        score = np.take_along_axis(values, best[..., None], axis=2)[..., 0]
-        # 2. occlusion update for the new shapes and poses, on their kept geometry
-        if occlusion:
-            mask, gamma = _occlusion_of(camera, current, c, searched=searched_occluder,
-                                        deterministic=deterministic_occlusion, device=options.device)
-            score = current.value(c, mask, gamma)[..., 0]
-        history.append(_scene(score, weights).max())
-        if (options.prune_after and it + 1 == options.prune_after and options.keep_fraction < 1
-                and it + 1 < options.iterations):
-            keep_rows(_best_rows(score, max(1, int(np.ceil(options.keep_fraction * P))), coupled=coupled,
-                                 weights=weights))
-    x, z, azimuth = _from_viewing(theta)
-    refined = SceneParticles(
-        pitch=plane[..., 0], roll=plane[..., 1], x=x, z=z, azimuth=azimuth,
-        object_cost=-score, dims=particles.dims, height=particles.height, shared_plane=particles.shared_plane,
-    )
-    return RefinedParticles(
-        refined, theta[..., 3:], score, np.array(history),
-        mask=np.zeros((P, N), dtype=int) if mask is None else mask,
-        gamma=np.zeros((P, N, N_VERTICES), dtype=bool) if gamma is None else gamma,
-        coupled=coupled,
-        spread=sigma, plane_spread=plane_sigma, weights=weights,
-    )
+    objective = FineObjective.create(
+        camera, shape_model, evidence, options, n_objects=particles.n_objects, boxes=boxes, weights=weights,
+        alpha=alpha, searched_occluder=searched_occluder, deterministic_occlusion=deterministic_occlusion)
+    state = SearchState.start(objective, particles)
+    blocks = sampling_blocks(options)
+    for it in range(options.iterations):
+        state.iterate(objective, rng, blocks[it % len(blocks)], options.samples)
+        if _prunes_after(options, it + 1):  # successive halving
+            state.prune(objective, max(1, int(np.ceil(options.keep_fraction * state.score.shape[0]))))
+    if options.polish_iterations:
+        polish(state, objective, rng, blocks)
+    return state.result(objective)
 
 
 def estimate_from_refined(

@@ -206,56 +206,35 @@ def _sample_noise(grid, a, b):
             + (1 - fa) * fb * g[i, j + 1] + fa * fb * g[i + 1, j + 1])
 
 
-def _background(layout: SceneLayout, camera: Camera, rays_cam, rng):
-    """RGB background (H, W, 3) float32 and the distance to the background surface per
-    pixel (inf on sky). Works on flat pixel subsets (sky, facades, ground)."""
-    H, W = rays_cam.shape[:2]
-    R_gp = layout.R_gp
-    st = layout.street
-    hgt = layout.plane.height
-    c = R_gp.T @ camera.center
-    d = rays_cam.reshape(-1, 3) @ R_gp  # street-frame directions (R_gp.T @ d per pixel)
-    N = len(d)
-    noise = _value_noise(rng)
-    noise2 = _value_noise(rng)
-
-    # sky gradient
-    elev = -d[:, 1]
-    tsky = np.clip(elev * 4, 0, 1)[:, None]
-    img = (np.array([0.80, 0.86, 0.92]) * (1 - tsky) + np.array([0.45, 0.62, 0.85]) * tsky)
-    dist = np.full(N, np.inf)
-
-    # ground: y = hgt in the street frame
+def _facade(img, dist, xf: float, c, d, tg, g_ok, hgt: float, noise2, rng) -> None:
+    """Paint the building facade in the vertical plane ``x = xf`` (street frame) into the
+    flat ``img`` and ``dist``, where its rays ``d`` from ``c`` meet it before the ground:
+    blocks along z of random length, height and colour, with a window grid."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        tg = (hgt - c[1]) / d[:, 1]
-    g_ok = np.isfinite(tg) & (tg > 0)
+        t = (xf - c[0]) / d[:, 0]
+    idx = np.flatnonzero(np.isfinite(t) & (t > 0) & ~(g_ok & (tg < t)))
+    block_len = rng.uniform(8, 20, size=64)
+    edges_z = np.cumsum(block_len) - rng.uniform(0, 10)
+    heights = rng.uniform(6, 18, size=64)
+    colours = rng.uniform(0.35, 0.75, size=(64, 1)) * np.array([1.0, 0.93, 0.82]) + rng.uniform(-0.05, 0.05, (64, 3))
+    P = c + t[idx, None] * d[idx]
+    blk = np.clip(np.searchsorted(edges_z, P[:, 2]), 0, 63)
+    up = hgt - P[:, 1]  # height above ground
+    keep = (up >= 0) & (up <= heights[blk]) & (P[:, 2] > -5)
+    idx, P, blk, up = idx[keep], P[keep], blk[keep], up[keep]
+    col = colours[blk]
+    # window grid: 1.4 m wide windows every 3 m, 1.5 m high every 3.2 m, from 1 m up
+    win = ((P[:, 2] % 3.0) < 1.4) & ((up - 1.0) % 3.2 < 1.5) & (up > 1.0) & (up < heights[blk] - 0.8)
+    col[win] = col[win] * 0.35 + [0.05, 0.07, 0.1]
+    col *= (1 + 0.06 * _sample_noise(noise2, P[:, 2] * 3, up * 3))[:, None]
+    img[idx] = col
+    dist[idx] = t[idx]
 
-    # facades: vertical planes x = facade_left / facade_right, blocks along z
-    for xf in (st.facade_left, st.facade_right):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (xf - c[0]) / d[:, 0]
-        idx = np.flatnonzero(np.isfinite(t) & (t > 0) & ~(g_ok & (tg < t)))
-        block_len = rng.uniform(8, 20, size=64)
-        edges_z = np.cumsum(block_len) - rng.uniform(0, 10)
-        heights = rng.uniform(6, 18, size=64)
-        colours = rng.uniform(0.35, 0.75, size=(64, 1)) * np.array([1.0, 0.93, 0.82]) + rng.uniform(-0.05, 0.05, (64, 3))
-        P = c + t[idx, None] * d[idx]
-        blk = np.clip(np.searchsorted(edges_z, P[:, 2]), 0, 63)
-        up = hgt - P[:, 1]  # height above ground
-        keep = (up >= 0) & (up <= heights[blk]) & (P[:, 2] > -5)
-        idx, P, blk, up = idx[keep], P[keep], blk[keep], up[keep]
-        col = colours[blk]
-        # window grid: 1.4 m wide windows every 3 m, 1.5 m high every 3.2 m, from 1 m up
-        win = ((P[:, 2] % 3.0) < 1.4) & ((up - 1.0) % 3.2 < 1.5) & (up > 1.0) & (up < heights[blk] - 0.8)
-        col[win] = col[win] * 0.35 + [0.05, 0.07, 0.1]
-        col *= (1 + 0.06 * _sample_noise(noise2, P[:, 2] * 3, up * 3))[:, None]
-        img[idx] = col
-        dist[idx] = t[idx]
 
-    idx = np.flatnonzero(g_ok & (tg < dist))
-    t = tg[idx]
-    P = c + t[:, None] * d[idx]
-    x, z = P[:, 0], P[:, 2]
+def _ground_colour(layout: SceneLayout, x, z, noise, noise2) -> np.ndarray:
+    """Colour ``(n, 3)`` of ground points at street-frame ``x, z``: textured asphalt,
+    parking bays, kerbs, paved sidewalks, lane markings and the cars' contact shadows."""
+    st = layout.street
     n_fine = _sample_noise(noise, x * 8.0, z * 8.0)
     n_coarse = _sample_noise(noise2, x * 0.7 + 50, z * 0.7)
     ground = np.array([0.33, 0.33, 0.34]) * (1 + 0.07 * n_fine + 0.08 * n_coarse)[:, None]
@@ -289,7 +268,38 @@ def _background(layout: SceneLayout, camera: Camera, rays_cam, rng):
         v = sa * dx + ca * dz
         out = np.hypot(np.maximum(np.abs(u) - l_ / 2, 0), np.maximum(np.abs(v) - w_ / 2, 0))
         ground[near] *= (1 - 0.6 * np.clip(1 - out / 0.4, 0, 1))[:, None]
-    img[idx] = ground
+    return ground
+
+
+def _background(layout: SceneLayout, camera: Camera, rays_cam, rng):
+    """RGB background (H, W, 3) float32 and the distance to the background surface per
+    pixel (inf on sky). Works on flat pixel subsets (sky, facades, ground)."""
+    H, W = rays_cam.shape[:2]
+    R_gp = layout.R_gp
+    st = layout.street
+    hgt = layout.plane.height
+    c = R_gp.T @ camera.center
+    d = rays_cam.reshape(-1, 3) @ R_gp  # street-frame directions (R_gp.T @ d per pixel)
+    N = len(d)
+    noise = _value_noise(rng)
+    noise2 = _value_noise(rng)
+
+    # sky gradient
+    elev = -d[:, 1]
+    tsky = np.clip(elev * 4, 0, 1)[:, None]
+    img = (np.array([0.80, 0.86, 0.92]) * (1 - tsky) + np.array([0.45, 0.62, 0.85]) * tsky)
+    dist = np.full(N, np.inf)
+
+    # ground: y = hgt in the street frame
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tg = (hgt - c[1]) / d[:, 1]
+    g_ok = np.isfinite(tg) & (tg > 0)
+    for xf in (st.facade_left, st.facade_right):  # vertical planes, blocks along z
+        _facade(img, dist, xf, c, d, tg, g_ok, hgt, noise2, rng)
+    idx = np.flatnonzero(g_ok & (tg < dist))
+    t = tg[idx]
+    P = c + t[:, None] * d[idx]
+    img[idx] = _ground_colour(layout, P[:, 0], P[:, 2], noise, noise2)
     dist[idx] = t
     return img.reshape(H, W, 3), dist.reshape(H, W)
 
@@ -339,6 +349,220 @@ def _first_hits(intersectors, meshes, origin, dirs):
                      for it, (v, f) in zip(intersectors, meshes)]) if meshes else np.zeros((0, len(dirs)))
 
 
+def _scene_meshes(layout: SceneLayout, library: dict, rng: np.random.Generator):
+    """Camera-frame meshes of the layout's cars (each resized to its KITTI-like size)
+    and occluders: the resized car models, the cars' poses ``(loc, R)``, the car meshes
+    and the occluder meshes (``rng`` shapes the bushes)."""
+    instances = [resized(library[car.model], car.dims) for car in layout.cars]
+    poses, car_meshes = [], []
+    for car, m in zip(layout.cars, instances):
+        loc, R = place(car.x, car.z, car.azimuth, layout.plane)
+        poses.append((loc, R))
+        car_meshes.append((_to_cam(m.vertices, loc, R), m.faces))
+    occ_meshes = []
+    for occ in layout.occluders:
+        v, f = occluder_mesh(occ, rng)
+        loc, R = place(occ.x, occ.z, 0.0, layout.plane)
+        occ_meshes.append((_to_cam(v, loc, R), f))
+    return instances, poses, car_meshes, occ_meshes
+
+
+def _car_colours(rng: np.random.Generator, n_cars: int) -> np.ndarray:
+    """Body colours ``(max(n_cars, 1), 3)``: a paint of the palette, brightness varied."""
+    cols = CAR_COLOURS[rng.integers(len(CAR_COLOURS), size=max(n_cars, 1))]
+    return np.clip(cols * rng.uniform(0.9, 1.1, size=(len(cols), 1)), 0, 1)
+
+
+def _albedo(layout: SceneLayout, instances: list, car_cols, o, above, steep) -> np.ndarray:
+    """Albedo ``(n, 3)`` of seen object points of object ids ``o``: car paint with glass
+    (steep surfaces high on the car) and dark trim (low), occluders plain."""
+    nc = len(instances)
+    alb = np.zeros((len(o), 3))
+    for i in range(nc + len(layout.occluders)):
+        sel = o == i
+        if not sel.any():
+            continue
+        if i < nc:
+            hcar = instances[i].dims[0]
+            a = np.broadcast_to(car_cols[i], (sel.sum(), 3)).copy()
+            a[(above[sel] > 0.62 * hcar) & steep[sel]] = [0.10, 0.12, 0.14]
+            a[above[sel] < 0.28] = [0.07, 0.07, 0.07]
+        else:
+            a = np.broadcast_to(OCCLUDER_COLOURS[layout.occluders[i - nc].kind], (sel.sum(), 3))
+        alb[sel] = a
+    return alb
+
+
+def _shade_objects(img, layout: SceneLayout, camera: Camera, rays, depth, obj, normals, instances, car_cols):
+    """Lambertian + ambient shading with haze of the object pixels of ``img``, in place."""
+    hit = obj >= 0
+    if not hit.any():
+        return
+    # height of each seen point above the ground plane (per pixel, so that the glass
+    # and trim bands have straight edges whatever the mesh's triangulation)
+    ray_h = rays[hit]
+    X = camera.center + ray_h * (depth[hit] / (ray_h @ camera.P[2, :3]))[:, None]
+    n_gp = layout.plane.normal
+    above = layout.plane.height - X @ n_gp
+    steep = np.abs(normals[hit] @ n_gp) < 0.8
+    alb = _albedo(layout, instances, car_cols, obj[hit], above, steep)
+    lam = np.clip(normals[hit] @ LIGHT, 0, None)
+    # a little specular sky reflection on glass / bright body panels
+    shade = alb * (0.35 + 0.65 * lam)[:, None] + 0.08 * lam[:, None] ** 8
+    pts_dist = depth[hit]
+    haze = (1 - np.exp(-pts_dist / 300.0))[:, None]
+    img[hit] = shade * (1 - haze) + haze * np.array([0.8, 0.85, 0.9])
+
+
+def _shade(layout: SceneLayout, camera: Camera, rays, rendered, instances, car_cols, rng) -> np.ndarray:
+    """The uint8 image: background, shaded objects, distance haze and sensor noise."""
+    depth, obj, _, normals, _ = rendered
+    img, bg_dist = _background(layout, camera, rays, rng)
+    _shade_objects(img, layout, camera, rays, depth, obj, normals, instances, car_cols)
+    bgh = ~(obj >= 0) & np.isfinite(bg_dist)
+    img[bgh] = (img[bgh] * np.exp(-bg_dist[bgh] / 300.0)[:, None]
+                + (1 - np.exp(-bg_dist[bgh] / 300.0))[:, None] * [0.8, 0.85, 0.9])
+    img = img + rng.normal(0, 0.012, size=img.shape)
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def _silhouette(camera: Camera, obj, rays, i: int, mesh, intersector):
+    """Car ``i``'s truncation and occlusion: KITTI's ``truncated`` (the share of its full
+    silhouette outside the image), the hidden fraction of its in-image silhouette, and
+    its count of visible pixels."""
+    W, H = camera.image_size
+    Vc, Fc = mesh
+    origin = camera.center
+    vis = obj == i
+    n_vis = int(vis.sum())
+    uvm = camera.project(Vc)
+    bx0, by0 = np.floor(uvm.min(0)).astype(int)
+    bx1, by1 = np.ceil(uvm.max(0)).astype(int)
+    cx0, cx1 = max(bx0, 0), min(bx1, W - 1)
+    cy0, cy1 = max(by0, 0), min(by1, H - 1)
+    n_hidden = 0
+    if cx1 >= cx0 and cy1 >= cy0:
+        win = (slice(cy0, cy1 + 1), slice(cx0, cx1 + 1))
+        cand = (obj[win] >= 0) & (obj[win] != i)
+        if cand.any():
+            rr, cc = np.nonzero(cand)
+            dirs = rays[rr + cy0, cc + cx0]
+            t, _ = first_hit_distance(Vc, Fc, origin, dirs, intersector=intersector)
+            n_hidden = int(np.isfinite(t).sum())
+    n_out = 0.0
+    area = (bx1 - bx0 + 1) * (by1 - by0 + 1)
+    if bx0 < 0 or by0 < 0 or bx1 > W - 1 or by1 > H - 1:
+        s = max(1, int(np.ceil(np.sqrt(area / MAX_TRUNCATION_RAYS))))
+        gu, gv = np.meshgrid(np.arange(bx0, bx1 + 1, s, dtype=float), np.arange(by0, by1 + 1, s, dtype=float))
+        outside = (gu < 0) | (gu > W - 1) | (gv < 0) | (gv > H - 1)
+        if outside.any():
+            uv_o = np.stack([gu[outside], gv[outside]], -1)
+            t, _ = first_hit_distance(Vc, Fc, origin, camera.rays(uv_o), intersector=intersector)
+            n_out = float(np.isfinite(t).sum()) * s * s
+    n_in = n_vis + n_hidden
+    truncated = n_out / (n_out + n_in) if n_out + n_in > 0 else 1.0
+    occ_frac = n_hidden / n_in if n_in > 0 else 1.0
+    return truncated, occ_frac, n_vis
+
+
+def _vertex_visibility(camera: Camera, m: CarModel, pose, i: int, meshes, intersectors, n_cars: int):
+    """Car ``i``'s 36 vertices in the camera frame, their projections and depths, and
+    the reason of each one's visibility (see the module docstring)."""
+    W, H = camera.image_size
+    loc, R = pose
+    origin = camera.center
+    X = _to_cam(m.landmarks, loc, R)
+    uv, vdepth = camera.project_with_depth(X)
+    centre_obj = np.array([0.0, -m.dims[0] / 2, 0.0])
+    push = m.landmarks - centre_obj
+    push /= np.maximum(np.linalg.norm(push, axis=1, keepdims=True), 1e-9)
+    Xp = _to_cam(m.landmarks + VERTEX_PUSH * push, loc, R)
+    dv = Xp - origin
+    dist = np.linalg.norm(dv, axis=1)
+    dv = dv / dist[:, None]
+    hits = _first_hits(intersectors, meshes, origin, dv)  # (n_meshes, 36)
+    blocked = hits < (dist - VERTEX_TOL)
+    ui, vi = np.round(uv[:, 0]), np.round(uv[:, 1])
+    reasons = []
+    for k in range(len(X)):
+        if vdepth[k] <= 0 or not (0 <= ui[k] <= W - 1 and 0 <= vi[k] <= H - 1):
+            reasons.append("truncated")
+        elif blocked[i, k]:
+            reasons.append("self")
+        else:
+            others = [j for j in range(len(meshes)) if j != i and blocked[j, k]]
+            if not others:
+                reasons.append("visible")
+            else:
+                j = min(others, key=lambda j: hits[j, k])
+                reasons.append("other-car" if j < n_cars else "occluder")
+    return X, uv, vdepth, reasons
+
+
+def _kitti_box(camera: Camera, m: CarModel, loc, ry: float, visible_box: list) -> list:
+    """KITTI's 2D box: the level 3D label box projected and clipped to the image (a box
+    reaching behind the camera has no projection: its visible extent stands in)."""
+    corners = box_corners(np.asarray(m.dims), loc, rotation_y(ry))
+    if corners[:, 2].min() > 0.1:
+        return [float(b) for b in project_points_to_box(camera, corners)]
+    return visible_box
+
+
+def _car_record(car, m: CarModel, pose, colour, silhouette, vertices, shape_model) -> dict:
+    """The wireframes-JSON record of one car (without its boxes)."""
+    loc, R = pose
+    truncated, occ_frac, n_vis = silhouette
+    X, uv, vdepth, reasons = vertices
+    return {
+        "cad_model": car.model,
+        "role": car.role,
+        "street_xz": [car.x, car.z],
+        "azimuth": car.azimuth,
+        "location": loc.tolist(),
+        "R": R.tolist(),
+        "rotation_y": float(rotation_y_of(R)),
+        "dims_hwl": list(m.dims),
+        "colour": colour.tolist(),
+        "truncated": truncated,
+        "occluded_fraction": occ_frac,
+        "occluded": int(np.searchsorted(OCCLUSION_THRESHOLDS, occ_frac, side="right")),
+        "visible_pixels": n_vis,
+        "vertices_3d": X.tolist(),
+        "vertices_2d": uv.tolist(),
+        "vertex_depth": vdepth.tolist(),
+        "visibility": reasons,
+        "visible": [r == "visible" for r in reasons],
+        "n_occluded_not_self": int(sum(r in ("other-car", "occluder") for r in reasons)),
+        "shape_coefficients": None if shape_model is None else shape_model.project_coefficients(m.landmarks).tolist(),
+    }
+
+
+def _annotate(camera: Camera, layout: SceneLayout, instances, poses, meshes, obj, rays, car_cols):
+    """Ground truth of every car: KITTI labels, the JSON records of the labelled cars
+    (same order) and those of the cars of which no pixel is visible."""
+    nc = len(instances)
+    intersectors = [mesh_intersector(v, f) for v, f in meshes]
+    shape_model = _shape_model()
+    labels, cars_json, hidden = FrameLabels(), [], []
+    for i, car in enumerate(layout.cars):
+        m, loc = instances[i], poses[i][0]
+        silhouette = _silhouette(camera, obj, rays, i, meshes[i], intersectors[i])
+        vertices = _vertex_visibility(camera, m, poses[i], i, meshes, intersectors, nc)
+        rec = _car_record(car, m, poses[i], car_cols[i], silhouette, vertices, shape_model)
+        if rec["visible_pixels"] == 0:
+            hidden.append(rec)
+            continue
+        rr, cc = np.nonzero(obj == i)
+        rec["visible_box"] = [float(cc.min()), float(rr.min()), float(cc.max()), float(rr.max())]
+        ry = rec["rotation_y"]
+        rec["box"] = box = _kitti_box(camera, m, loc, ry, rec["visible_box"])
+        rec["scene_object_id"] = i
+        labels.objects.append(Label("Car", rec["truncated"], rec["occluded"],
+                                    float(alpha_from_rotation_y(ry, loc[0], loc[2])), box, m.dims, loc, ry))
+        cars_json.append(rec)
+    return labels, cars_json, hidden
+
+
 def generate_scene(seed: int, index: int, *, cars=(2, 8), occluders: bool = True,
                    camera: Camera | None = None, library: dict | None = None) -> SyntheticScene:
     """Sample, render and annotate scene ``index`` of the stream ``seed``."""
@@ -353,170 +577,15 @@ def generate_scene(seed: int, index: int, *, cars=(2, 8), occluders: bool = True
     colour_rng = np.random.default_rng([int(seed), int(index), 1])
     noise_rng = np.random.default_rng([int(seed), int(index), 2])
 
-    # ---- meshes in the camera frame; every car instance has its own KITTI-like size
-    instances = [resized(library[car.model], car.dims) for car in layout.cars]
-    poses, car_meshes = [], []
-    for car, m in zip(layout.cars, instances):
-        loc, R = place(car.x, car.z, car.azimuth, layout.plane)
-        poses.append((loc, R))
-        car_meshes.append((_to_cam(m.vertices, loc, R), m.faces))
-    occ_meshes = []
-    for occ in layout.occluders:
-        v, f = occluder_mesh(occ, noise_rng)
-        loc, R = place(occ.x, occ.z, 0.0, layout.plane)
-        occ_meshes.append((_to_cam(v, loc, R), f))
+    instances, poses, car_meshes, occ_meshes = _scene_meshes(layout, library, noise_rng)
     meshes = car_meshes + occ_meshes
     nc = len(car_meshes)
-
-    depth, obj, face, normals, edges = _render_objects(meshes, camera)
-
-    # ---- shading
+    rendered = _render_objects(meshes, camera)
+    depth, obj, _, _, edges = rendered
     rays = _pixel_rays(camera.P.tobytes(), W, H)
-    img, bg_dist = _background(layout, camera, rays, noise_rng)
-    car_cols = CAR_COLOURS[colour_rng.integers(len(CAR_COLOURS), size=max(nc, 1))]
-    car_cols = np.clip(car_cols * colour_rng.uniform(0.9, 1.1, size=(len(car_cols), 1)), 0, 1)
-    hit = obj >= 0
-    if hit.any():
-        o = obj[hit]
-        # height of each seen point above the ground plane (per pixel, so that the glass
-        # and trim bands have straight edges whatever the mesh's triangulation)
-        ray_h = rays[hit]
-        X = camera.center + ray_h * (depth[hit] / (ray_h @ camera.P[2, :3]))[:, None]
-        n_gp = layout.plane.normal
-        above = layout.plane.height - X @ n_gp
-        steep = np.abs(normals[hit] @ n_gp) < 0.8
-        alb = np.zeros((len(o), 3))
-        for i in range(len(meshes)):
-            sel = o == i
-            if not sel.any():
-                continue
-            if i < nc:
-                hcar = instances[i].dims[0]
-                a = np.broadcast_to(car_cols[i], (sel.sum(), 3)).copy()
-                a[(above[sel] > 0.62 * hcar) & steep[sel]] = [0.10, 0.12, 0.14]
-                a[above[sel] < 0.28] = [0.07, 0.07, 0.07]
-            else:
-                a = np.broadcast_to(OCCLUDER_COLOURS[layout.occluders[i - nc].kind], (sel.sum(), 3))
-            alb[sel] = a
-        lam = np.clip(normals[hit] @ LIGHT, 0, None)
-        # a little specular sky reflection on glass / bright body panels
-        shade = alb * (0.35 + 0.65 * lam)[:, None] + 0.08 * lam[:, None] ** 8
-        pts_dist = depth[hit]
-        haze = (1 - np.exp(-pts_dist / 300.0))[:, None]
-        img[hit] = shade * (1 - haze) + haze * np.array([0.8, 0.85, 0.9])
-    bgh = ~hit & np.isfinite(bg_dist)
-    img[bgh] = img[bgh] * np.exp(-bg_dist[bgh] / 300.0)[:, None] + (1 - np.exp(-bg_dist[bgh] / 300.0))[:, None] * [0.8, 0.85, 0.9]
-    img = img + noise_rng.normal(0, 0.012, size=img.shape)
-    image = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
-
-    # ---- ground truth
-    intersectors = [mesh_intersector(v, f) for v, f in meshes]
-    origin = camera.center
-    shape_model = _shape_model()
-    labels, cars_json, hidden = FrameLabels(), [], []
-    for i, car in enumerate(layout.cars):
-        m = instances[i]
-        loc, R = poses[i]
-        Vc, Fc = car_meshes[i]
-        # silhouette: visible pixels, hidden in-image pixels, outside-image area
-        vis = obj == i
-        n_vis = int(vis.sum())
-        uvm = camera.project(Vc)
-        bx0, by0 = np.floor(uvm.min(0)).astype(int)
-        bx1, by1 = np.ceil(uvm.max(0)).astype(int)
-        cx0, cx1 = max(bx0, 0), min(bx1, W - 1)
-        cy0, cy1 = max(by0, 0), min(by1, H - 1)
-        n_hidden = 0
-        if cx1 >= cx0 and cy1 >= cy0:
-            win = (slice(cy0, cy1 + 1), slice(cx0, cx1 + 1))
-            cand = (obj[win] >= 0) & (obj[win] != i)
-            if cand.any():
-                rr, cc = np.nonzero(cand)
-                dirs = rays[rr + cy0, cc + cx0]
-                t, _ = first_hit_distance(Vc, Fc, origin, dirs, intersector=intersectors[i])
-                n_hidden = int(np.isfinite(t).sum())
-        n_out = 0.0
-        area = (bx1 - bx0 + 1) * (by1 - by0 + 1)
-        if bx0 < 0 or by0 < 0 or bx1 > W - 1 or by1 > H - 1:
-            s = max(1, int(np.ceil(np.sqrt(area / MAX_TRUNCATION_RAYS))))
-            gu, gv = np.meshgrid(np.arange(bx0, bx1 + 1, s, dtype=float), np.arange(by0, by1 + 1, s, dtype=float))
-            outside = (gu < 0) | (gu > W - 1) | (gv < 0) | (gv > H - 1)
-            if outside.any():
-                uv_o = np.stack([gu[outside], gv[outside]], -1)
-                t, _ = first_hit_distance(Vc, Fc, origin, camera.rays(uv_o), intersector=intersectors[i])
-                n_out = float(np.isfinite(t).sum()) * s * s
-        n_in = n_vis + n_hidden
-        truncated = n_out / (n_out + n_in) if n_out + n_in > 0 else 1.0
-        occ_frac = n_hidden / n_in if n_in > 0 else 1.0
-        occluded = int(np.searchsorted(OCCLUSION_THRESHOLDS, occ_frac, side="right"))
-
-        # per-vertex visibility
-        X = _to_cam(m.landmarks, loc, R)
-        uv, vdepth = camera.project_with_depth(X)
-        centre_obj = np.array([0.0, -m.dims[0] / 2, 0.0])
-        push = m.landmarks - centre_obj
-        push /= np.maximum(np.linalg.norm(push, axis=1, keepdims=True), 1e-9)
-        Xp = _to_cam(m.landmarks + VERTEX_PUSH * push, loc, R)
-        dv = Xp - origin
-        dist = np.linalg.norm(dv, axis=1)
-        dv = dv / dist[:, None]
-        hits = _first_hits(intersectors, meshes, origin, dv)  # (n_meshes, 36)
-        blocked = hits < (dist - VERTEX_TOL)
-        ui, vi = np.round(uv[:, 0]), np.round(uv[:, 1])
-        reasons = []
-        for k in range(len(X)):
-            if vdepth[k] <= 0 or not (0 <= ui[k] <= W - 1 and 0 <= vi[k] <= H - 1):
-                reasons.append("truncated")
-            elif blocked[i, k]:
-                reasons.append("self")
-            else:
-                others = [j for j in range(len(meshes)) if j != i and blocked[j, k]]
-                if not others:
-                    reasons.append("visible")
-                else:
-                    j = min(others, key=lambda j: hits[j, k])
-                    reasons.append("other-car" if j < nc else "occluder")
-
-        ry = float(rotation_y_of(R))
-        rec = {
-            "cad_model": car.model,
-            "role": car.role,
-            "street_xz": [car.x, car.z],
-            "azimuth": car.azimuth,
-            "location": loc.tolist(),
-            "R": R.tolist(),
-            "rotation_y": ry,
-            "dims_hwl": list(m.dims),
-            "colour": car_cols[i].tolist(),
-            "truncated": truncated,
-            "occluded_fraction": occ_frac,
-            "occluded": occluded,
-            "visible_pixels": n_vis,
-            "vertices_3d": X.tolist(),
-            "vertices_2d": uv.tolist(),
-            "vertex_depth": vdepth.tolist(),
-            "visibility": reasons,
-            "visible": [r == "visible" for r in reasons],
-            "n_occluded_not_self": int(sum(r in ("other-car", "occluder") for r in reasons)),
-            "shape_coefficients": None if shape_model is None else shape_model.project_coefficients(m.landmarks).tolist(),
-        }
-        if n_vis == 0:
-            hidden.append(rec)
-            continue
-        rr, cc = np.nonzero(vis)
-        rec["visible_box"] = [float(cc.min()), float(rr.min()), float(cc.max()), float(rr.max())]
-        # KITTI's 2D box: the level 3D label box projected and clipped to the image (a box
-        # reaching behind the camera has no projection: its visible extent stands in).
-        corners = box_corners(np.asarray(m.dims), loc, rotation_y(ry))
-        box = rec["visible_box"]
-        if corners[:, 2].min() > 0.1:
-            box = [float(b) for b in project_points_to_box(camera, corners)]
-        rec["box"] = box
-        rec["scene_object_id"] = i
-        labels.objects.append(Label("Car", truncated, occluded, float(alpha_from_rotation_y(ry, loc[0], loc[2])),
-                                    box, m.dims, loc, ry))
-        cars_json.append(rec)
-
+    car_cols = _car_colours(colour_rng, nc)
+    image = _shade(layout, camera, rays, rendered, instances, car_cols, noise_rng)
+    labels, cars_json, hidden = _annotate(camera, layout, instances, poses, meshes, obj, rays, car_cols)
     wire = {
         "format": 1,
         "seed": int(seed),
