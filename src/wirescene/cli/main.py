@@ -514,12 +514,13 @@ def _register_commands():
     from wirescene.cli.parts import parts
     from wirescene.cli.scores import scores
     from wirescene.cli.synth import synth
+    from wirescene.cli.train_all import train_all_cmd
 
     main.add_command(synth)
     main.add_command(cad)
     main.add_command(detect)
     train = click.Group("train", help="Train the model's artefacts from documented data.")
-    for command in (shape, parts, detector, occlusion, scores):
+    for command in (shape, parts, detector, occlusion, scores, train_all_cmd):
         train.add_command(command)
     main.add_command(train)
 
