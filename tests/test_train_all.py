@@ -168,6 +168,16 @@ def test_models_directory_replaces_c_and_an_explicit_file_wins(tmp_path):
         with_models(FitOptions(), resolve_models(tmp_path))
     # raw scores do not read it
     assert with_models(FitOptions(calibrate_scores=False), resolve_models(tmp_path)).inference.occluded_score == -2.75
+    (tmp_path / "score_calibration.json").unlink()
+    # the CLI's and the API's options go through the same resolver
+    from wirescene.api import _options
+    from wirescene.cli.main import _fit_options
+
+    for options in (_fit_options(10, 0, models=tmp_path), _options(None, 10, 0, tmp_path)):
+        assert options.inference.occluded_score == -2.75 and options.parts_model.endswith("parts_model.npz")
+    with pytest.raises(wirescene.ArgumentError, match="^models: "):
+        wirescene.fit(KITTI_ROOT / "training" / "image_2" / "000010.png", KITTI_ROOT / "training" / "calib" / "000010.txt",
+                      [[354, 185, 549, 294]], models=3)
 
 
 # -- train all -----------------------------------------------------------------------------

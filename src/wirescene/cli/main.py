@@ -21,7 +21,6 @@ from wirescene.cli.options import (
     check_output_file,
     load_models,
     models_option,
-    parse_frames,
     select_frames,
     split_file_option,
 )
@@ -212,8 +211,8 @@ def _dask_client(address: str):
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_file, particles, seed, split, json_out,
-             predictions, evidence,
-             raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address, **inference):
+             predictions, evidence, raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address,
+             **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
@@ -429,7 +428,8 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
               help="Scene particles (the paper used 250; fewer keep the demo short).")
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()),
               default=("coarse", "coarse+gp", "fg+gp", "full"), show_default=True)
-def demo_cmd(out, particles, variants):
+@models_option
+def demo_cmd(out, particles, variants, models):
     """Fit model variants to the bundled real KITTI frames, evaluate, write pictures."""
     import time
 
@@ -441,6 +441,7 @@ def demo_cmd(out, particles, variants):
     from wirescene.io.outputs import write_fit_outputs
 
     check_output_dir(out, "--out")
+    options = _fit_options(particles, 0, models=models)
     t0 = time.perf_counter()
     dataset = KittiDataset(sample_root())
     first = dataset.frame_ids()[0]
@@ -452,11 +453,11 @@ def demo_cmd(out, particles, variants):
                                       estimate=estimate, detections=detections, gt=gt.of_type("Car"))
             written.extend(paths.values())
 
-    reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=_fit_options(particles, 0),
+    reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=options,
                                progress=_progress("demo"), on_estimate=draw)
     # Raw-pixel mode: our own pre-detection instead of label boxes, then the full model.
     image = dataset.image(first)
-    estimate = fit(image, dataset.camera(first), None, variant="full", options=_fit_options(particles, 0))
+    estimate = fit(image, dataset.camera(first), None, variant="full", options=options)
     raw = estimate.detections
     if len(raw):
         written.extend(write_fit_outputs(out / "raw-pixels", first, image=image, camera=dataset.camera(first),

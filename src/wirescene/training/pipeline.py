@@ -53,10 +53,10 @@ from wirescene.core.resources import (
     shipped_path,
 )
 
-__all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "calibration_folds", "heldout_bank_calibration",
-           "train_all"]
+__all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "calibration_folds",
+           "heldout_bank_calibration", "train_all"]
 
-#: The steps in order, each named by the artefact it makes.
+#: The steps in order; each makes one artefact (``_ARTEFACT``).
 STEPS: tuple[str, ...] = ("parts", "detector", "score_calibration", "occlusion")
 #: The steps that take options (``score_calibration`` is the shipped file).
 STEP_OPTIONS: tuple[str, ...] = ("parts", "detector", "occlusion")
@@ -176,16 +176,23 @@ def _frames_sha256(frames: list[str]) -> str:
     return hashlib.sha256("\n".join(frames).encode()).hexdigest()
 
 
+def option_default(step: str, key: str):
+    """The default of option ``key`` of ``step``; a ``ValueError`` naming what exists if
+    there is no such step or option."""
+    known = step_options()
+    if step not in known:
+        raise ValueError(f"no step {step!r} takes options; steps: {', '.join(STEP_OPTIONS)}")
+    if key not in known[step]:
+        raise ValueError(f"step {step} has no option {key!r}; options: {', '.join(sorted(known[step]))}")
+    return known[step][key]
+
+
 def _check_options(overrides: Mapping[str, Mapping[str, object]]) -> dict[str, dict]:
     """The recipe with ``overrides`` (``{step: {option: value}}``), every name checked."""
-    known = step_options()
     out = {step: dict(RECIPE.get(step, {})) for step in STEP_OPTIONS}
     for step, values in overrides.items():
-        if step not in known:
-            raise ValueError(f"no step {step!r} takes options; steps: {', '.join(STEP_OPTIONS)}")
         for key, value in values.items():
-            if key not in known[step]:
-                raise ValueError(f"step {step!r} has no option {key!r}; options: {', '.join(sorted(known[step]))}")
+            option_default(step, key)
             out[step][key] = value
     return out
 
