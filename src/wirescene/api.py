@@ -110,13 +110,25 @@ def _variant_names(variant, name: str = "variant") -> list[str]:
     return names
 
 
-def _options(options: FitOptions | None, particles, seed) -> FitOptions:
+def _models(models):
+    """The :class:`~wirescene.core.resources.Models` of a models directory (None: shipped)."""
+    from wirescene.core.resources import resolve_models
+
+    if models is not None and not isinstance(models, (str, Path)):
+        raise ArgumentError("models", f"expected a models directory path, got {type(models).__name__}")
+    return resolve_models(models)  # InputError naming the directory or file
+
+
+def _options(options: FitOptions | None, particles, seed, models=None) -> FitOptions:
+    from wirescene.fitting.models import with_models
+
     if options is not None:
         if not isinstance(options, FitOptions):
             raise ArgumentError("options", f"expected FitOptions, got {type(options).__name__}")
-        return options
-    return FitOptions(lifting=LiftingOptions(n_particles=_positive_int(particles, "particles")),
-                      inference=InferenceOptions(), seed=_seed(seed))
+    else:
+        options = FitOptions(lifting=LiftingOptions(n_particles=_positive_int(particles, "particles")),
+                             inference=InferenceOptions(), seed=_seed(seed))
+    return with_models(options, _models(models))
 
 
 def fit(
@@ -128,6 +140,7 @@ def fit(
     particles: int = 250,
     seed: int = 0,
     options: FitOptions | None = None,
+    models=None,
 ) -> SceneEstimate:
     """Estimate the 3D cars of one street image.
 
@@ -152,6 +165,10 @@ def fit(
         Seed of the inference's random sampling; equal seeds give equal results.
     options : FitOptions, optional
         Every stage's options (overrides ``particles`` and ``seed``).
+    models : path, optional
+        A models directory (``wirescene train all --out MODELS_DIR``): its part model,
+        detector bank and occluded-part score replace the shipped ones (a part model or
+        bank file set in ``options`` is kept); what it lacks stays shipped.
 
     Returns
     -------
@@ -184,11 +201,11 @@ def fit(
     camera = as_camera(calib, size)
     dets = None if boxes is None else as_detections(boxes, size)
     (name,) = _variant_names(variant)
-    fitted = fit_frame(camera, dets, [name], image=rgb, options=_options(options, particles, seed))
+    fitted = fit_frame(camera, dets, [name], image=rgb, options=_options(options, particles, seed, models))
     return fitted.estimates[name]
 
 
-def detect(image, calib=None) -> Detections:
+def detect(image, calib=None, *, models=None) -> Detections:
     """wirescene's own 2D pre-detection of cars (paper Sec. 3.4).
 
     Parameters
@@ -201,17 +218,22 @@ def detect(image, calib=None) -> Detections:
         :mod:`wirescene.predetect.geometry`), which the shipped bank was calibrated with,
         and each detection's viewpoint weighs front against back views by where the car
         stands in the traffic (:mod:`wirescene.predetect.viewpoint_prior`).
+    models : path, optional
+        A models directory whose detector bank replaces the shipped one.
 
     Returns
     -------
     Detections
         Boxes ``(D, 4)``, calibrated scores ``(D,)`` and viewpoints ``alpha`` ``(D,)``.
     """
+    from wirescene.fitting.pipeline import detector_bank
     from wirescene.predetect import detect_cars
 
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
-    return detect_cars(rgb, camera=camera)
+    found = _models(models)
+    bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
+    return detect_cars(rgb, bank=bank, camera=camera)
 
 
 def evaluate(
@@ -220,10 +242,12 @@ def evaluate(
     variants: str | Iterable[str] = ("coarse+gp", "full"),
     detections: str = "gt",
     frames: Iterable[str] | None = None,
+    split_file=None,
     particles: int = 250,
     seed: int = 0,
     workers: int = 1,
     predictions=None,
+    models=None,
 ):
     """Fit and evaluate variants on a KITTI directory with the paper's protocol.
 
@@ -239,12 +263,17 @@ def evaluate(
         detection file per frame.
     frames : iterable of str, optional
         Frame ids (default: every labelled frame).
+    split_file : path, optional
+        Instead of ``frames``: a file listing them, one id a line (KITTI's
+        ``ImageSets/val.txt`` format; see :func:`wirescene.io.splits.read_split_file`).
     particles, seed : int
         As in :func:`fit`.
     workers : int
         Processes fitting frames in parallel.
     predictions : path, optional
         Also write KITTI label files per variant there.
+    models : path, optional
+        A models directory replacing the shipped artefacts, as in :func:`fit`.
 
     Returns
     -------
@@ -259,12 +288,23 @@ def evaluate(
     dataset = KittiDataset(kitti_root)
     if not isinstance(detections, (str, Path)):
         raise ArgumentError("detections", f"expected 'gt', 'bank' or a directory, got {type(detections).__name__}")
+    if frames is not None and split_file is not None:
+        raise ArgumentError("split_file", "frames and split_file both choose the frames: give one")
     frame_ids = None
     if frames is not None:
         frame_ids = list(dict.fromkeys(str(f) for f in frames))
         missing = sorted(set(frame_ids) - set(dataset.frame_ids()))
         if missing:
             raise ArgumentError("frames", f"not in {dataset.split_dir}: {', '.join(missing[:5])}")
-    return evaluate_dataset(dataset, names, frames=frame_ids, source=DetectionSource(str(detections)),
-                            options=_options(None, particles, seed), workers=_positive_int(workers, "workers"),
+    elif split_file is not None:
+        from wirescene.io.splits import read_split_file
+
+        if not isinstance(split_file, (str, Path)):
+            raise ArgumentError("split_file", f"expected a path, got {type(split_file).__name__}")
+        frame_ids = read_split_file(split_file, known=dataset.frame_ids(), what="labelled frame",
+                                    where=dataset.split_dir)
+    options = _options(None, particles, seed, models)
+    return evaluate_dataset(dataset, names, frames=frame_ids,
+                            source=DetectionSource(str(detections), bank=options.detector_bank),
+                            options=options, workers=_positive_int(workers, "workers"),
                             predictions_dir=None if predictions is None else Path(predictions))

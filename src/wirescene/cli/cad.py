@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from wirescene.cli.options import check_output_file
 from wirescene.core.errors import InputError
 
 __all__ = ["cad", "shape", "draw_car"]
@@ -114,17 +115,16 @@ def show_cmd(name, out, cad_dir):
 @click.command("shape")
 @click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
               help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
-@click.option("--out", type=click.Path(dir_okay=False), default=None,
-              help="Shape model .npz (default: the package's data/shape_model.npz); "
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Shape model .npz to write (the shipped one is src/wirescene/data/shape_model.npz); "
                    "cad_landmarks.json and cad_meshes.npz are written next to it.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the size augmentation.")
 @click.option("--augment", type=int, default=None, help="Size-augmented copies per exemplar (default 100).")
 def shape(cad_dir, out, seed, augment):
     """Train the metric PCA wireframe shape model from CAD meshes."""
     from wirescene.cad.training import DEFAULT_AUGMENT, train_shape_model
-    from wirescene.core.shape import DEFAULT_MODEL_PATH
 
-    out = Path(out) if out else DEFAULT_MODEL_PATH
+    check_output_file(out, "--out")
     model = train_shape_model(_cad_dir(cad_dir), out, seed=seed,
                               augment=DEFAULT_AUGMENT if augment is None else augment, progress=click.echo)
     ev = ", ".join(f"{v:.3f}" for v in model.explained_variance_ratio[:8])

@@ -8,7 +8,15 @@ from pathlib import Path
 
 import click
 
-from wirescene.predetect.bank import DEFAULT_BANK_PATH
+from wirescene.cli.options import (
+    check_output_dir,
+    check_output_file,
+    load_models,
+    models_option,
+    select_frames,
+    split_file_option,
+)
+from wirescene.core.atomic import write_text
 
 
 def _single_thread():
@@ -23,12 +31,13 @@ def _single_thread():
 
 
 @click.command("detector")
-@click.option("--out", type=click.Path(dir_okay=False), default=str(DEFAULT_BANK_PATH), show_default=True,
-              help="Detector bank .npz to write.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Detector bank .npz to write (the shipped one is src/wirescene/data/detector_bank.npz).")
 @click.option("--kitti-root", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Train on the labelled real frames of this KITTI root (the shipped bank: all 33 frames of "
                    "shared/data/kitti). Without it: synthetic scenes.")
 @click.option("--frames", default=None, help="With --kitti-root: comma-separated training frame ids (default all).")
+@split_file_option
 @click.option("--folds", default=None,
               help="With --kitti-root: train only on the frames of these cross-validation folds (e.g. 0,1,3).")
 @click.option("--no-calibration", is_flag=True,
@@ -51,13 +60,17 @@ def _single_thread():
 @click.option("--val-scenes", "n_val", type=int, default=20, show_default=True, help="Synthetic only.")
 @click.option("--C", "C", type=float, default=0.01, show_default=True, help="Linear SVM regularisation.")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
-def detector(out, kitti_root, frames, folds, no_calibration, calibration, threshold, seed, n_scenes, n_partial, per_octave, cut_paste,
-             mining_rounds, mining_images, n_val, C, report):
+def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, seed, n_scenes, n_partial,
+             per_octave, cut_paste, mining_rounds, mining_images, n_val, C, report):
     """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
+    check_output_file(out, "--out")
+    check_output_file(report, "--report")
     if kitti_root is not None:
+        from wirescene.io.kitti import KittiDataset
         from wirescene.training.kitti_detector import train_detector_bank_kitti
 
-        ids = [f.strip() for f in frames.split(",") if f.strip()] if frames else None
+        ds = KittiDataset(kitti_root)
+        ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
         with _single_thread():
             _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
@@ -67,8 +80,8 @@ def detector(out, kitti_root, frames, folds, no_calibration, calibration, thresh
                                                mining_rounds=3 if mining_rounds is None else mining_rounds,
                                                per_octave=per_octave, cut_paste=cut_paste, progress=click.echo)
     else:
-        if frames or folds or cut_paste or per_octave != 6:
-            raise click.UsageError("--frames / --folds / --per-octave / --cut-paste need --kitti-root")
+        if frames or split_file or folds or cut_paste or per_octave != 6:
+            raise click.UsageError("--frames / --split-file / --folds / --per-octave / --cut-paste need --kitti-root")
         from wirescene.training.detector import train_detector_bank
 
         with _single_thread():
@@ -76,33 +89,38 @@ def detector(out, kitti_root, frames, folds, no_calibration, calibration, thresh
                                          mining_rounds=2 if mining_rounds is None else mining_rounds,
                                          mining_images=mining_images, n_val=n_val, progress=click.echo)
     if report:
-        Path(report).write_text(json.dumps(rep, indent=1, default=float))
+        write_text(report, json.dumps(rep, indent=1, default=float))
 
 
 @click.command("detect")
 @click.argument("kitti_root", type=click.Path(path_type=Path))
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all).")
+@split_file_option
 @click.option("--split", default="training", show_default=True)
+@models_option
 @click.option("--bank", "bank_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Detector bank .npz (default: the shipped one).")
+              help="Detector bank .npz (default: --models' or the shipped one).")
 @click.option("--threshold", type=float, default=None, help="Score threshold (default: the bank's).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Write FRAME.json detection files here (readable by --detections of `eval`).")
 @click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PR curve PNG.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write AP and timing as JSON.")
-def detect(kitti_root, frames, split, bank_path, threshold, out_dir, pr_curve, json_out):
+def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out):
     """Run the configuration detector bank on a KITTI-layout directory and report AP."""
     import numpy as np
 
     from wirescene.io.kitti import KittiDataset
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.predetect.ap import evaluate_detections, kitti_ap_2d, kitti_frame_gt, load_frame_gt, plot_pr, summary
-    from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank
+    from wirescene.predetect.bank import DetectorBank, detect_cars
 
+    check_output_dir(out_dir, "--out")
+    check_output_file(pr_curve, "--pr-curve")
+    check_output_file(json_out, "--json")
     ds = KittiDataset(kitti_root, split=split)
-    bank = DetectorBank.load(bank_path) if bank_path else load_default_bank()
-    ids = [f.strip() for f in frames.split(",")] if frames else ds.frame_ids()
+    bank = DetectorBank.load(bank_path if bank_path else load_models(models).path("detector_bank"))
+    ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
     dets_all, gts, times = [], [], []
     with _single_thread():
@@ -113,10 +131,9 @@ def detect(kitti_root, frames, split, bank_path, threshold, out_dir, pr_curve, j
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:
-                out_dir.mkdir(parents=True, exist_ok=True)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
-                (out_dir / f"{fid}.json").write_text(json.dumps({"detections": entries}, indent=1))
+                write_text(out_dir / f"{fid}.json", json.dumps({"detections": entries}, indent=1))
             dets_all.append(d)
             if ds.has_labels:
                 gts.append((load_frame_gt(ds.split_dir, fid), kitti_frame_gt(ds.labels(fid))))
@@ -138,5 +155,4 @@ def detect(kitti_root, frames, split, bank_path, threshold, out_dir, pr_curve, j
             plot_pr({"detector bank": res}, pr_curve)
     click.echo(f"{result['seconds_per_frame']:.2f} s per frame")
     if json_out is not None:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
-        json_out.write_text(json.dumps(result, indent=1))
+        write_text(json_out, json.dumps(result, indent=1))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import sys
@@ -20,7 +19,10 @@ from wirescene.cli.options import (
     POSITIVE,
     check_output_dir,
     check_output_file,
-    parse_frames,
+    load_models,
+    models_option,
+    select_frames,
+    split_file_option,
 )
 
 
@@ -71,10 +73,14 @@ def _progress(desc: str, total: int | None = None):
 
 
 def _fit_options(particles: int, seed: int, **inference):
+    from wirescene.fitting.models import with_models
     from wirescene.fitting.pipeline import FitOptions
     from wirescene.infer.inference import InferenceOptions
     from wirescene.lift import LiftingOptions
 
+    models_dir = inference.pop("models", None)
+    # False: the pre-detection scores (`eval --raw-scores`), with which a models directory's own calibration is moot.
+    calibrate_scores = inference.pop("calibrate_scores", True)
     models = {k: None if inference.get(k) is None else str(inference.pop(k)) for k in ("parts_model", "detector_bank")}
     # --road-prior is the coarse stage's weight, --fine-road-prior the fine stage's.
     road_prior = inference.pop("road_prior", None)
@@ -83,8 +89,10 @@ def _fit_options(particles: int, seed: int, **inference):
     inference = {k: v for k, v in inference.items() if v is not None}
     if "device" in inference:
         inference["device"] = _resolve_device(inference["device"])
-    return FitOptions(lifting=LiftingOptions(n_particles=particles, **lifting), inference=InferenceOptions(**inference),
-                      seed=seed, **models)
+    options = FitOptions(lifting=LiftingOptions(n_particles=particles, **lifting),
+                         inference=InferenceOptions(**inference), seed=seed, calibrate_scores=calibrate_scores,
+                         **models)
+    return with_models(options, load_models(models_dir))
 
 
 def _resolve_device(name: str) -> str:
@@ -106,10 +114,13 @@ def _resolve_device(name: str) -> str:
 def _inference_options(f):
     """Options of the coarse and fine-grained inference stages (and the trained models
     they use), shared by `eval`, `fit` and `predict`."""
+    f = models_option(f)
     f = click.option("--parts-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-                     help="Part detector file (default: the shipped model), e.g. a cross-validation fold's.")(f)
+                     help="Part detector file (default: --models' or the shipped model), e.g. a cross-validation "
+                          "fold's.")(f)
     f = click.option("--bank", "detector_bank", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                     default=None, help="Detector bank file for our own pre-detection (default: the shipped bank).")(f)
+                     default=None, help="Detector bank file for our own pre-detection (default: --models' or the "
+                                        "shipped bank).")(f)
     f = click.option("--device", default="auto", show_default=True,
                      help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
                           "(optional: pip install torch). auto: a CUDA GPU if PyTorch sees one, else numpy.")(f)
@@ -176,6 +187,7 @@ def _dask_client(address: str):
 @click.option("--viewpoint-noise", type=NON_NEGATIVE_FLOAT, default=0.0, show_default=True,
               help="Std. dev. (deg) of noise on the GT viewpoint before binning.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all labelled frames).")
+@split_file_option
 @click.option("--particles", type=POSITIVE, default=250, show_default=True, help="Scene particles kept by the coarse stage.")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--split", default="training", show_default=True)
@@ -198,8 +210,9 @@ def _dask_client(address: str):
               help="Fit frames on this running Dask scheduler (e.g. tcp://host:8786) instead of local processes "
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
-def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particles, seed, split, json_out, predictions, evidence,
-             raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address, **inference):
+def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_file, particles, seed, split, json_out,
+             predictions, evidence, raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address,
+             **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
@@ -219,10 +232,10 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
     check_output_dir(report_dir, "--report")
     dataset = KittiDataset(kitti_root, split=split)
     variants = list(variants) or _variants()
-    frame_ids = parse_frames(frames, dataset.frame_ids())
-    options = _fit_options(particles, seed, **inference)
+    frame_ids = select_frames(frames, split_file, dataset.frame_ids(), where=dataset.split_dir)
     if raw_scores:
-        options = dataclasses.replace(options, calibrate_scores=False)
+        inference["calibrate_scores"] = False
+    options = _fit_options(particles, seed, **inference)
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections,
                              bank=options.detector_bank)
     on_gpu = options.inference.device.startswith("cuda")
@@ -292,6 +305,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
 @click.option("--allow-missing-detections", is_flag=True, default=False,
               help="With --detections DIR: images without a detection file get an empty label file.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every image).")
+@split_file_option
 @click.option("--particles", type=POSITIVE, default=250, show_default=True)
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--workers", type=POSITIVE, default=None, help="Processes fitting frames in parallel (default: all cores).")
@@ -300,8 +314,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, particle
 @click.option("--dask", "dask_address", metavar="ADDRESS", default=None,
               help="Fit frames on this running Dask scheduler instead of local processes.")
 @_inference_options
-def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, frames, particles, seed, workers,
-                resume, dask_address, **inference):
+def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, frames, split_file, particles,
+                seed, workers, resume, dask_address, **inference):
     """Write KITTI label files (with scores) for every image of a split, labelled or not."""
     from wirescene.eval.predict import predict_dataset
     from wirescene.eval.sources import DetectionSource
@@ -313,7 +327,7 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())
     dataset = KittiDataset(kitti_root, split=split)
-    frame_ids = parse_frames(frames, dataset.image_ids())
+    frame_ids = select_frames(frames, split_file, dataset.image_ids(), where=dataset.split_dir, what="image")
     options = _fit_options(particles, seed, **inference)
     on_gpu = options.inference.device.startswith("cuda")
     client = _dask_client(dask_address) if dask_address is not None else None
@@ -355,7 +369,8 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions) -> dict:
 @click.argument("pred_dir", type=click.Path(path_type=Path))
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the figures as JSON.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every GT_DIR/*.txt).")
-def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames):
+@split_file_option
+def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames, split_file):
     """KITTI object-benchmark AP of Car (2D, AOS, BEV, 3D; easy / moderate / hard; R40 and
     R11; IoU 0.7 and 0.5) of the label files in PRED_DIR against GT_DIR, by the devkit's
     rules. A frame without a prediction file has no detections."""
@@ -363,7 +378,7 @@ def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames):
 
     check_output_file(json_out, "--json")
     known = sorted(p.stem for p in gt_dir.glob("*.txt")) if gt_dir.is_dir() else []
-    frame_ids = parse_frames(frames, known) if known else None
+    frame_ids = select_frames(frames, split_file, known, where=gt_dir, what="label file of frame") if known else None
     _, gts, preds = read_label_dirs(gt_dir, pred_dir, frames=frame_ids)
     result = kitti_metrics(gts, preds)
     click.echo(format_kitti_table(result))
@@ -413,7 +428,8 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
               help="Scene particles (the paper used 250; fewer keep the demo short).")
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()),
               default=("coarse", "coarse+gp", "fg+gp", "full"), show_default=True)
-def demo_cmd(out, particles, variants):
+@models_option
+def demo_cmd(out, particles, variants, models):
     """Fit model variants to the bundled real KITTI frames, evaluate, write pictures."""
     import time
 
@@ -425,6 +441,7 @@ def demo_cmd(out, particles, variants):
     from wirescene.io.outputs import write_fit_outputs
 
     check_output_dir(out, "--out")
+    options = _fit_options(particles, 0, models=models)
     t0 = time.perf_counter()
     dataset = KittiDataset(sample_root())
     first = dataset.frame_ids()[0]
@@ -436,11 +453,11 @@ def demo_cmd(out, particles, variants):
                                       estimate=estimate, detections=detections, gt=gt.of_type("Car"))
             written.extend(paths.values())
 
-    reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=_fit_options(particles, 0),
+    reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=options,
                                progress=_progress("demo"), on_estimate=draw)
     # Raw-pixel mode: our own pre-detection instead of label boxes, then the full model.
     image = dataset.image(first)
-    estimate = fit(image, dataset.camera(first), None, variant="full", options=_fit_options(particles, 0))
+    estimate = fit(image, dataset.camera(first), None, variant="full", options=options)
     raw = estimate.detections
     if len(raw):
         written.extend(write_fit_outputs(out / "raw-pixels", first, image=image, camera=dataset.camera(first),
@@ -498,12 +515,13 @@ def _register_commands():
     from wirescene.cli.parts import parts
     from wirescene.cli.scores import scores
     from wirescene.cli.synth import synth
+    from wirescene.cli.train_all import train_all_cmd
 
     main.add_command(synth)
     main.add_command(cad)
     main.add_command(detect)
     train = click.Group("train", help="Train the model's artefacts from documented data.")
-    for command in (shape, parts, detector, occlusion, scores):
+    for command in (shape, parts, detector, occlusion, scores, train_all_cmd):
         train.add_command(command)
     main.add_command(train)
 

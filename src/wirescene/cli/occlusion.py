@@ -7,21 +7,28 @@ from pathlib import Path
 
 import click
 
+from wirescene.cli.options import check_output_file, load_models, models_option
+
 
 @click.command("occlusion")
 @click.option("--seed", default=2000, show_default=True, help="Synthetic stream of the held-out scenes.")
 @click.option("--scenes", default=30, show_default=True)
-@click.option("--out", type=click.Path(path_type=Path), default=None, help="Default: the packaged data/occlusion.json.")
-def occlusion(seed, scenes, out):
-    """Choose the likelihood's occluded-part score c on held-out synthetic scenes."""
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Record to write (the shipped one is src/wirescene/data/occlusion.json).")
+@models_option
+def occlusion(seed, scenes, out, models):
+    """Choose the likelihood's occluded-part score c on held-out synthetic scenes, with
+    the part detectors of --models (default: the shipped ones)."""
     from tqdm import tqdm
 
-    from wirescene.infer.occluded_score import DEFAULT_PATH, save_occluded_score
+    from wirescene.infer.occluded_score import save_occluded_score
+    from wirescene.parts.detector import PartDetector
     from wirescene.training.occlusion import calibrate_occluded_score
 
-    result = calibrate_occluded_score(seed=seed, n_scenes=scenes,
+    check_output_file(out, "--out")
+    detector = PartDetector.load(load_models(models).path("parts_model"))
+    result = calibrate_occluded_score(seed=seed, n_scenes=scenes, detector=detector,
                                       progress=lambda it: tqdm(it, desc="scenes", leave=False, file=sys.stderr))
-    out = DEFAULT_PATH if out is None else out
     save_occluded_score(out, result)
     for c, a in zip(result["grid"], result["accuracy"]):
         click.echo(f"c = {c:+.2f}  occlusion accuracy {100 * a:.1f}%")

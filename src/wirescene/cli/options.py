@@ -98,3 +98,41 @@ def parse_frames(value: str | None, known: list[str], option: str = "--frames") 
         more = f" (and {len(unknown) - 1} more)" if len(unknown) > 1 else ""
         raise click.BadParameter(f"no frame {unknown[0]} in the dataset{more}", param_hint=option)
     return frames
+
+
+def split_file_option(f):
+    """``--split-file FILE``: the frames of a run from a KITTI ``ImageSets`` file."""
+    return click.option("--split-file", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                        help="Frames listed in this file, one id a line (KITTI's ImageSets format, e.g. "
+                             "ImageSets/val.txt); instead of --frames.")(f)
+
+
+def select_frames(frames: str | None, split_file: Path | None, known: list[str], *, where, what: str = "labelled frame",
+                  option: str = "--frames") -> list[str] | None:
+    """The frames chosen by ``--frames`` (comma-separated) or ``--split-file`` (not both),
+    each one of ``known``; None: neither was given (all frames)."""
+    if frames is not None and split_file is not None:
+        raise click.UsageError(f"{option} and --split-file both choose the frames: give one")
+    if split_file is not None:
+        from wirescene.io.splits import read_split_file
+
+        return read_split_file(split_file, known=known, what=what, where=where)
+    return parse_frames(frames, known, option)
+
+
+def models_option(f):
+    """``--models MODELS_DIR``: trained artefacts that replace the shipped ones."""
+    return click.option("--models", "models", type=click.Path(path_type=Path), default=None,
+                        help="Models directory (`wirescene train all --out`): its parts_model.npz, detector_bank.npz "
+                             "and occlusion.json replace the shipped ones; what it lacks stays shipped.")(f)
+
+
+def load_models(models_dir: Path | None):
+    """The :class:`~wirescene.core.resources.Models` of ``--models`` (shipped without
+    it), said on standard error so that a run's log tells which models it used."""
+    from wirescene.core.resources import resolve_models
+
+    models = resolve_models(models_dir)
+    if models.root is not None:
+        click.echo(f"wirescene: {models.describe()}", err=True)
+    return models

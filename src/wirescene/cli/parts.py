@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import click
 
-from wirescene.parts.detector import DEFAULT_MODEL_PATH
+from wirescene.cli.options import check_output_file, select_frames, split_file_option
 
 
 @click.command("parts")
-@click.option("--out", type=click.Path(dir_okay=False), default=str(DEFAULT_MODEL_PATH), show_default=True,
-              help="Model .npz to write.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Model .npz to write (the shipped one is src/wirescene/data/parts_model.npz).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--n-views", type=int, default=0, show_default=True,
               help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog only).")
@@ -24,8 +25,8 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
 @click.option("--kitti-root", type=click.Path(file_okay=False, exists=True), default=None,
               help="Labelled KITTI root whose frames add real part and background patches "
                    "(the shipped model: ../shared/data/kitti, all 72 frames).")
-@click.option("--frames", default=None,
-              help="Real training frames: comma-separated ids, or @FILE with one id per line (default: all).")
+@click.option("--frames", default=None, help="Real training frames: comma-separated ids (default: all).")
+@split_file_option
 @click.option("--position/--no-position", default=False, show_default=True,
               help="Append the point's position relative to the box to the descriptor.")
 @click.option("--smooth", type=float, default=0.0, show_default=True,
@@ -48,17 +49,21 @@ from wirescene.parts.detector import DEFAULT_MODEL_PATH
 @click.option("--kitti-background", type=click.Path(file_okay=False), default=None,
               help="KITTI root whose car-free regions add background patches (off by default).")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
-def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, position, smooth, calibrate, synth_scenes,
-          synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
+def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, split_file, position, smooth, calibrate,
+          synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
     """Train the 37-class part detector on real KITTI frames, synthetic shaded scenes
     and/or CAD renderings."""
-    from pathlib import Path
-
     from wirescene.training.parts import train_part_detector
 
-    if frames is not None:
-        text = Path(frames[1:]).read_text() if frames.startswith("@") else frames.replace(",", " ")
-        frames = text.split()
+    check_output_file(out, "--out")
+    check_output_file(report, "--report")
+    if frames is not None or split_file is not None:
+        if kitti_root is None:
+            raise click.UsageError("--frames / --split-file need --kitti-root")
+        from wirescene.io.kitti import KittiDataset
+
+        ds = KittiDataset(kitti_root)
+        frames = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
 
     _, rep = train_part_detector(out, seed=seed, n_views=n_views, n_trees=n_trees, max_depth=max_depth, kind=kind,
                                  n_aug=n_aug, heldout=heldout, synth_scenes=synth_scenes, synth_seed=synth_seed,
@@ -73,6 +78,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, posi
                 return {k: conv(v) for k, v in o.items() if not str(k).startswith("_")}
             return o.tolist() if hasattr(o, "tolist") else o
 
-        with open(report, "w") as f:
-            json.dump(conv(rep), f, indent=1)
+        from wirescene.core.atomic import write_text
+
+        write_text(report, json.dumps(conv(rep), indent=1))
     click.echo(f"train accuracy {rep['train_acc']:.3f}")

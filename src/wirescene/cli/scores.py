@@ -6,24 +6,27 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_file
+from wirescene.cli.options import check_output_file, select_frames, split_file_option
 
 
 @click.command("scores")
 @click.argument("predictions_dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--frames", default=None, help="Comma-separated frame ids to train on (default: every record).")
-@click.option("--out", type=click.Path(path_type=Path), default=None,
-              help="Default: the packaged data/score_calibration.json.")
-def scores(predictions_dirs, frames, out):
+@split_file_option
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Calibration to write (the shipped one is src/wirescene/data/score_calibration.json).")
+def scores(predictions_dirs, frames, split_file, out):
     """Fit the confidence model on the frame records of evaluation runs on labelled
     real frames (`wirescene eval ROOT --variant coarse+gp --variant full --raw-scores
     --predictions DIR`; e.g. one run with label boxes and one with `--detections bank`)."""
-    from wirescene.fitting.confidence import DEFAULT_PATH, save_score_calibration
+    from wirescene.eval.records import RECORDS_DIR
+    from wirescene.fitting.confidence import save_score_calibration
     from wirescene.training.scores import fit_score_calibration, read_run_records
 
-    out = DEFAULT_PATH if out is None else out
     check_output_file(out, "--out")
-    frame_ids = None if frames is None else [f.strip() for f in frames.split(",") if f.strip()]
+    recorded = sorted({p.stem for folder in predictions_dirs for p in (Path(folder) / RECORDS_DIR).glob("*.json")})
+    where = ", ".join(str(d) for d in predictions_dirs)
+    frame_ids = select_frames(frames, split_file, recorded, where=where, what="frame record") if recorded else None
     records: dict = {}
     for folder in predictions_dirs:
         for variant, results in read_run_records(folder, frame_ids).items():

@@ -1,8 +1,141 @@
-"""Where the package's trained artefacts and bundled data live."""
+"""Where the package's trained artefacts and bundled data live, and the one resolver of
+a models directory (``--models MODELS_DIR``, ``models=``) that replaces them.
+
+A models directory (written by ``wirescene train all --out MODELS_DIR``, or put together
+by hand) holds any of the replaceable artefacts of :data:`ARTEFACTS`. Each one it holds
+replaces the shipped file everywhere that file is loaded; each one it lacks is the
+shipped one. Its manifest ``models.json`` (format ``wirescene-models/1``) lists what it
+holds (``"artefacts"``) and whether its training finished (``"complete"``); the directory
+must agree with it. A directory with neither a manifest nor any known artefact is an
+error, as is an unfinished training or a listed file that is missing.
+"""
 
 from __future__ import annotations
 
+import hashlib
+from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
+
+from wirescene.core.artefacts import load_json
+from wirescene.core.errors import InputError
 
 #: ``src/wirescene/data``: trained models (npz / JSON) and the bundled sample frames.
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
+
+#: The artefacts a models directory can replace: ``{name: file name}`` (the same name in
+#: the models directory as in :data:`DATA_DIR`).
+ARTEFACTS: dict[str, str] = {
+    "parts_model": "parts_model.npz",
+    "detector_bank": "detector_bank.npz",
+    "score_calibration": "score_calibration.json",
+    "occlusion": "occlusion.json",
+}
+MANIFEST_FILE = "models.json"
+MANIFEST_KIND = "models"
+MANIFEST_VERSION = 1
+
+
+def shipped_path(name: str) -> Path:
+    """The package's own file of artefact ``name`` (a key of :data:`ARTEFACTS`)."""
+    return DATA_DIR / ARTEFACTS[name]
+
+
+@dataclass(frozen=True)
+class Models:
+    """The artefacts a run uses: those of a models directory, the shipped ones otherwise.
+
+    Attributes
+    ----------
+    root : Path or None
+        The models directory (None: every artefact is the shipped one).
+    own : tuple of str
+        Names of the artefacts ``root`` holds (keys of :data:`ARTEFACTS`).
+    """
+
+    root: Path | None = None
+    own: tuple[str, ...] = ()
+
+    def path(self, name: str) -> Path:
+        """The file of artefact ``name``: the directory's if it holds one, else the shipped one."""
+        if name not in ARTEFACTS:
+            raise KeyError(f"unknown artefact {name!r}; known: {', '.join(ARTEFACTS)}")
+        return self.root / ARTEFACTS[name] if name in self.own else shipped_path(name)
+
+    def fingerprint(self) -> dict[str, str]:
+        """``{name: SHA-256 of its file}`` for every artefact of :data:`ARTEFACTS`."""
+        return {name: file_sha256(self.path(name)) for name in ARTEFACTS}
+
+    def describe(self) -> str:
+        """One line: which artefacts come from the directory and which are shipped."""
+        if self.root is None:
+            return "shipped models"
+        shipped = [n for n in ARTEFACTS if n not in self.own]
+        return (f"models from {self.root}: {', '.join(self.own)}"
+                + (f"; shipped: {', '.join(shipped)}" if shipped else ""))
+
+
+SHIPPED = Models()
+
+
+def resolve_models(models_dir: str | Path | None) -> Models:
+    """The :class:`Models` of a models directory (None: the shipped models).
+
+    Raises
+    ------
+    InputError
+        Naming the directory or file: not a directory; a manifest that is corrupt, of
+        another format, lists an unknown or missing artefact, disagrees with the files
+        present, or marks an unfinished training; no manifest and no known artefact.
+    """
+    if models_dir is None:
+        return SHIPPED
+    root = Path(models_dir)
+    if not root.is_dir():
+        raise InputError("models directory not found", path=root)
+    present = tuple(n for n, f in ARTEFACTS.items() if (root / f).is_file())
+    manifest = root / MANIFEST_FILE
+    if not manifest.is_file():
+        if not present:
+            raise InputError(f"not a models directory: holds no {MANIFEST_FILE} and none of "
+                             f"{', '.join(ARTEFACTS.values())}", path=root)
+        return Models(root.resolve(), present)
+    record = load_json(manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION)
+    listed = record.get("artefacts")
+    if not isinstance(listed, list) or not all(isinstance(n, str) for n in listed):
+        raise InputError("'artefacts' must be a list of artefact names", path=manifest)
+    unknown = [n for n in listed if n not in ARTEFACTS]
+    if unknown:
+        raise InputError(f"unknown artefact {unknown[0]!r} (known: {', '.join(ARTEFACTS)})", path=manifest)
+    if record.get("complete") is not True:
+        done = [name for name, step in (record.get("steps") or {}).items() if isinstance(step, dict)
+                and step.get("done")]
+        raise InputError(f"training not finished (steps done: {', '.join(done) or 'none'}); "
+                         "finish it with `wirescene train all ... --resume`", path=manifest)
+    missing = [ARTEFACTS[n] for n in listed if n not in present]
+    if missing:
+        raise InputError(f"{missing[0]} is listed in {MANIFEST_FILE} but missing", path=root)
+    extra = [ARTEFACTS[n] for n in present if n not in listed]
+    if extra:
+        raise InputError(f"{extra[0]} is not listed in {MANIFEST_FILE} (add it to 'artefacts' or remove the file)",
+                         path=root)
+    return Models(root.resolve(), tuple(n for n in ARTEFACTS if n in listed))
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's bytes, computed once per file version (path, size, mtime)."""
+    path = Path(path).resolve()
+    try:
+        stat = path.stat()
+    except OSError:
+        raise InputError("artefact file is missing", path=path) from None
+    return _sha256(path, stat.st_size, stat.st_mtime_ns)
+
+
+@lru_cache(maxsize=64)
+def _sha256(path: Path, size: int, mtime_ns: int) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

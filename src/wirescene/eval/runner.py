@@ -25,6 +25,7 @@ from wirescene.core.types import Detections, SceneEstimate
 from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
 from wirescene.eval.records import FrameRecords, StaleRecord, run_config
 from wirescene.eval.sources import DetectionSource, frame_seed
+from wirescene.fitting.models import models_fingerprint
 from wirescene.fitting.pipeline import FitOptions, fit_frame, needs_evidence
 from wirescene.fitting.variants import get_variant
 from wirescene.infer.evidence import oracle_evidence
@@ -206,7 +207,8 @@ def evaluate_dataset(
         Write KITTI label files of each variant to ``predictions_dir/VARIANT/FRAME.txt``
         and, once a frame is complete, its resume record to
         ``predictions_dir/.frames/FRAME.json`` (configuration, per-variant
-        :class:`FrameResult` and label text; see :func:`run_config`).
+        :class:`FrameResult` and label text; see :func:`run_config`, completed with the
+        content hashes of the trained artefacts, :func:`models_fingerprint`).
     resume : bool
         Reuse the records in ``predictions_dir`` instead of fitting those frames again;
         needs ``predictions_dir``. A record written with a different configuration, or
@@ -258,7 +260,10 @@ def evaluate_dataset(
     job = _FrameJob(dataset, tuple(variants), source, options, evidence)
     records = None
     if predictions_dir is not None:
-        records = FrameRecords(Path(predictions_dir), run_config(dataset, variants, source, options, evidence))
+        config = run_config(dataset, variants, source, options, evidence)
+        # The artefacts' content, not only their paths: a model retrained in place refits.
+        config["models"] = models_fingerprint(options)
+        records = FrameRecords(Path(predictions_dir), config)
     by_frame: dict[str, dict[str, FrameResult]] = {}
     reused: dict[str, dict[str, tuple[str, FrameResult]]] = {}
     if resume:

@@ -43,12 +43,13 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from wirescene.parts import features as feat
-from wirescene.parts.detector import BACKGROUND, DEFAULT_MODEL_PATH, N_PARTS, PartDetector
+from wirescene.parts.detector import BACKGROUND, N_PARTS, PartDetector
 from wirescene.training.patches import PatchCollector, PatchData, _rng
 
 __all__ = ["PatchData", "render_views", "make_patch_data", "make_synth_patch_data", "heldout_accuracy",
@@ -628,11 +629,14 @@ def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True):
 GREY_KINDS = feat.GREY_KINDS
 
 
-def real_folds(frame_ids) -> np.ndarray:
-    """Cross-validation fold of each frame: :func:`wirescene.io.folds.fold_of` where
-    the drive is known, else the frame's position modulo the number of folds."""
+def real_folds(frame_ids, folds: Mapping[str, int] | None = None) -> np.ndarray:
+    """Cross-validation fold of each frame: ``folds[frame]`` if given, else
+    :func:`wirescene.io.folds.fold_of` where the drive is known, else the frame's
+    position modulo the number of folds."""
     from wirescene.io.folds import N_FOLDS, fold_of
 
+    if folds is not None:
+        return np.asarray([folds[f] for f in frame_ids], dtype=np.int64)
     out = []
     for i, f in enumerate(frame_ids):
         try:
@@ -643,16 +647,17 @@ def real_folds(frame_ids) -> np.ndarray:
 
 
 def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, position: bool = False,
-                        context: bool = False, progress=None, **fit_kwargs):
+                        context: bool = False, folds: Mapping[str, int] | None = None, progress=None, **fit_kwargs):
     """Per-class calibration (:func:`calibrate`) of a forest trained on ``real`` (+
     ``other``) from held-out scores: for each fold of the real frames
-    (:func:`real_folds`), a forest trained without that fold's real patches scores them.
+    (:func:`real_folds` of ``folds``), a forest trained without that fold's real patches
+    scores them.
 
     Returns ``(scale, offset, report)``; the report holds the held-out balanced log loss
     of "is vertex j" before (raw ``log(S_j / S_b)`` as logit) and after calibration
     (each fold calibrated on the other folds' scores)."""
     say = progress or (lambda m: None)
-    folds = real_folds(real.names)[real.group]
+    folds = real_folds(real.names, folds)[real.group]
     lr = np.zeros((len(real.y), N_PARTS))
     for k in np.unique(folds):
         m = folds != k
@@ -690,19 +695,21 @@ def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, 
     return scale, offset, report
 
 
-def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: int = 0, n_trees: int = 30,
+def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: int = 30,
                         max_depth: int = 13, kind: str = "ghog", n_aug: int = 2, cars=None, heldout: int = 0,
                         compare_kinds=(), kitti_background=None, synth_scenes: int = 300,
                         synth_seed: int = SYNTH_TRAIN_SEED, class_weight: str | None = "balanced",
                         min_samples_leaf: int = 2, augment: bool = False, kitti_root=None, frames=None,
                         position: bool = False, context: bool = False, calibrate_real: bool = False,
-                        smooth: float = 0.0, n_jobs: int = 1, synth_cache=None, progress=None):
+                        smooth: float = 0.0, calibration_folds: Mapping[str, int] | None = None, n_jobs: int = 1,
+                        synth_cache=None, progress=None):
     """Generate training patches, optionally evaluate leave-models-out, fit the forest
     on all data and write the model ``.npz``.
 
     Parameters
     ----------
-    out_path : path or None (do not write)
+    out_path : path or None (do not write); no default, so that a training never overwrites
+        the shipped model unless asked
     seed : int -- drives augmentation, background sampling, forest
     n_views : int -- CAD edge renderings: total views per car, split evenly over the 2
         elevations (144: the paper's 72 x 2); 0: none (edge-map kinds only)
@@ -731,6 +738,8 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
         heights, see :func:`wirescene.parts.detector.response_maps`)
     calibrate_real : bool -- calibrate the log ratio per class on held-out real patches
         (:func:`heldout_calibration`; needs ``kitti_root``)
+    calibration_folds : dict, optional -- ``{frame: fold}`` of that calibration (default:
+        :func:`real_folds`)
 
     Returns
     -------
@@ -786,7 +795,8 @@ def train_part_detector(out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, n_views: 
                       min_samples_leaf=min_samples_leaf)
     cal = None
     if calibrate_real:
-        cal = heldout_calibration(real, other, kind=kind, position=position, context=context, progress=progress, **fit_kwargs)
+        cal = heldout_calibration(real, other, kind=kind, position=position, context=context, folds=calibration_folds,
+                                  progress=progress, **fit_kwargs)
         report["calibration"] = cal[2]
     t1 = time.time()
     meta = {"seed": seed, "n_views": n_az * len(ELEVATIONS), "n_trees": n_trees, "max_depth": max_depth,

@@ -1,0 +1,96 @@
+"""``wirescene train all``: every artefact of a models directory from one labelled KITTI
+root (see :mod:`wirescene.training.pipeline`)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from wirescene.cli.options import check_output_dir, split_file_option
+
+
+def option_value(text: str, default):
+    """``text`` as a value of an option whose default is ``default``: booleans as
+    0/1/true/false, numbers as the default's type, anything else as JSON or else text."""
+    if isinstance(default, bool):
+        key = text.strip().lower()
+        if key not in ("0", "1", "true", "false"):
+            raise ValueError(f"expected 0, 1, true or false, got {text!r}")
+        return key in ("1", "true")
+    if isinstance(default, int):
+        return int(text)
+    if isinstance(default, float):
+        return float(text)
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
+    """``{step: {option: value}}`` of ``--set STEP.KEY=VALUE`` (each name checked)."""
+    from wirescene.training.pipeline import option_default
+
+    out: dict[str, dict] = {}
+    for item in values:
+        name, sep, text = item.partition("=")
+        step, dot, key = name.strip().partition(".")
+        if not sep or not dot:
+            raise click.BadParameter(f"{item!r} is not STEP.KEY=VALUE", param_hint="--set")
+        try:
+            out.setdefault(step, {})[key] = option_value(text, option_default(step, key))
+        except ValueError as exc:
+            raise click.BadParameter(f"{name}: {exc}", param_hint="--set") from None
+    return out
+
+
+@click.command("all")
+@click.argument("kitti_root", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Models directory to write (parts_model.npz, detector_bank.npz, occlusion.json, models.json); "
+                   "use it with --models of fit, eval, predict and detect.")
+@click.option("--frames", default=None, help="Comma-separated training frame ids (default: every labelled frame).")
+@split_file_option
+@click.option("--folds", "n_folds", type=click.IntRange(min=2), default=4, show_default=True,
+              help="Folds of the held-out calibrations (by drive where it is known, else by frame).")
+@click.option("--set", "settings", multiple=True, metavar="STEP.KEY=VALUE",
+              help="Change one option of a step's recipe (steps parts, detector, occlusion), e.g. "
+                   "parts.synth_scenes=100 or detector.mining_rounds=2; repeatable.")
+@click.option("--resume/--no-resume", default=False, show_default=True,
+              help="Keep the steps already done in --out with the same data, options and inputs; train the rest.")
+def train_all_cmd(kitti_root, out, frames, split_file, n_folds, settings, resume):
+    """Train part detectors, detector bank (held-out calibration), occluded-part score c
+    (the score calibration stays the shipped one) on the labelled frames of KITTI_ROOT,
+    in order, into a models directory with a manifest."""
+    from tqdm import tqdm
+
+    from wirescene.cli.options import parse_frames
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.pipeline import train_all
+
+    check_output_dir(out, "--out")
+    options = parse_settings(settings)
+    if frames is not None and split_file is not None:
+        raise click.UsageError("--frames and --split-file both choose the frames: give one")
+    ids = None
+    if frames is not None:
+        dataset = KittiDataset(kitti_root)
+        ids = parse_frames(frames, dataset.frame_ids())
+    bars = []
+
+    def iterate(items, name):
+        bar = tqdm(items, desc=name, unit="step" if name == "train all" else "it", leave=False, file=sys.stderr)
+        bars.append(bar)
+        return bar
+
+    manifest = train_all(out, kitti_root, frames=ids, split_file=split_file, options=options, n_folds=n_folds,
+                         resume=resume, iterate=iterate, progress=lambda line: tqdm.write(line, file=sys.stderr))
+    for step, record in manifest["steps"].items():
+        if record.get("source") == "shipped":
+            click.echo(f"{step:18s} shipped ({record['why']})")
+        else:
+            click.echo(f"{step:18s} {record['artefact']}: {record['seconds']:.0f} s, peak {record['peak_rss_mb']:.0f} MB")
+    click.echo(f"models written to {out} ({manifest['data']['frames']} frames, {manifest['data']['cars']} cars)")

@@ -1,0 +1,391 @@
+"""``wirescene train all``: every trained artefact of a models directory from one labelled
+KITTI root, in order, each step fed by the previous, with a manifest.
+
+Steps (:data:`STEPS`), each writing one file of :data:`wirescene.core.resources.ARTEFACTS`:
+
+1. ``parts``: the part detectors (:func:`wirescene.training.parts.train_part_detector`,
+   the shipped recipe :data:`RECIPE`), their per-part calibration held out by the folds below;
+2. ``detector``: the detector bank (:func:`wirescene.training.kitti_detector.train_detector_bank_kitti`),
+   its Platt calibration fitted on leave-one-fold-out detections
+   (:func:`heldout_bank_calibration`);
+3. ``score_calibration``: not trained. Fitting the confidence honestly needs evaluation
+   records of every frame fitted by models that never saw it (fold models of both steps
+   above, then ``eval --raw-scores`` per fold and ``train scores``): several times the
+   whole training. The directory keeps the shipped calibration, and the manifest says so;
+4. ``occlusion``: the occluded-part score ``c`` (:func:`wirescene.training.occlusion.calibrate_occluded_score`)
+   with the part detectors of step 1.
+
+Held-out folds (:func:`calibration_folds`): frames are grouped by recording drive where
+the drive is known (:func:`wirescene.io.folds.frame_drives`), each other frame is a group
+of its own, and the groups are dealt to folds balanced by cars
+(:func:`wirescene.io.folds.assign_folds`).
+
+``MODELS_DIR/models.json`` (format ``wirescene-models/1``) records the data (root, split
+file, frames), the folds, and per step its options, inputs, artefact hash, wall time and
+peak resident memory. It is rewritten after every step, ``"complete": false`` until the
+last; :func:`wirescene.core.resources.resolve_models` refuses an unfinished directory.
+With ``resume``, a step whose record matches the current data, options, inputs and
+package version, and whose file is unchanged, is not run again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import resource
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
+
+from wirescene import __version__
+from wirescene.core.artefacts import load_json, save_json
+from wirescene.core.errors import InputError
+from wirescene.core.resources import (
+    ARTEFACTS,
+    MANIFEST_FILE,
+    MANIFEST_KIND,
+    MANIFEST_VERSION,
+    file_sha256,
+    shipped_path,
+)
+
+__all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "calibration_folds",
+           "heldout_bank_calibration", "train_all"]
+
+#: The steps in order; each makes one artefact (``_ARTEFACT``).
+STEPS: tuple[str, ...] = ("parts", "detector", "score_calibration", "occlusion")
+#: The steps that take options (``score_calibration`` is the shipped file).
+STEP_OPTIONS: tuple[str, ...] = ("parts", "detector", "occlusion")
+_ARTEFACT = {"parts": "parts_model", "detector": "detector_bank", "score_calibration": "score_calibration",
+             "occlusion": "occlusion"}
+
+#: The shipped artefacts' recipes (README, "Trained artefacts"): each step's options.
+RECIPE: dict[str, dict] = {
+    "parts": {"kind": "ghog_ms", "position": True, "smooth": 0.0625, "calibrate_real": True, "synth_scenes": 100},
+    "detector": {"threshold": 0.1},
+    "occlusion": {"seed": 2000, "n_scenes": 30},
+}
+
+
+def _parameters(fn, exclude: Iterable[str]) -> dict[str, object]:
+    """``{name: default}`` of the keyword parameters of ``fn`` a step may set."""
+    skip = set(exclude)
+    return {n: p.default for n, p in inspect.signature(fn).parameters.items()
+            if n not in skip and p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD) and p.default is not p.empty}
+
+
+def step_options() -> dict[str, dict[str, object]]:
+    """``{step: {option: default}}``: what each trained step accepts (``--set STEP.KEY=VALUE``)."""
+    from wirescene.training.kitti_detector import train_bank_on_frames, train_detector_bank_kitti
+    from wirescene.training.occlusion import calibrate_occluded_score
+    from wirescene.training.parts import train_part_detector
+
+    bank = _parameters(train_bank_on_frames, ("images", "examples", "progress"))
+    bank.update(_parameters(train_detector_bank_kitti, ("out_path", "kitti_root", "frames", "folds", "split", "progress",
+                                                         "calibration_folds", "calibration")))
+    return {
+        "parts": _parameters(train_part_detector, ("out_path", "kitti_root", "frames", "progress", "calibration_folds")),
+        "detector": bank,
+        "occlusion": _parameters(calibrate_occluded_score, ("detector", "progress")),
+    }
+
+
+def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4) -> dict[str, int]:
+    """``{frame: fold}`` of the held-out calibrations: groups of frames by drive (a frame
+    of unknown drive alone), dealt to ``min(n_folds, groups)`` folds balanced by their
+    cars. An :class:`InputError` if there are fewer than two groups."""
+    from wirescene.io.folds import assign_folds, frame_drives
+
+    drives = frame_drives()
+    group = {f: drives.get(f, f) for f in frames}
+    cars: dict[str, int] = {}
+    for f in frames:
+        cars[group[f]] = cars.get(group[f], 0) + len(dataset.labels(f).of_type("Car"))
+    if len(cars) < 2:
+        raise InputError(f"held-out calibration needs frames of at least two drives (or two frames of unknown drive); "
+                         f"got {len(frames)} frame(s) of one", path=dataset.split_dir)
+    folds = assign_folds(cars, n_folds=min(n_folds, len(cars)))
+    return {f: folds[group[f]] for f in frames}
+
+
+def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str = "training", seed: int = 0,
+                             progress=None, **bank_options) -> dict:
+    """Platt calibration of a detector bank from held-out detections: for each fold, a
+    bank trained on the other folds' frames detects on that fold's (unmirrored) frames;
+    :func:`~wirescene.training.kitti_detector.fit_platt` on all of them, with the ground
+    prior's log ratio as offset.
+
+    Returns ``{"a", "b", "n_detections", "n_positive", "n_folds", "source"}``.
+    """
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.kitti_detector import (
+        detect_training_image,
+        detection_labels,
+        fit_platt,
+        kitti_gt_boxes,
+        load_training_frames,
+        train_detector_bank_kitti,
+    )
+
+    say = progress or (lambda message: None)
+    dataset = KittiDataset(kitti_root, split=split)
+    scores, labels, offsets = [], [], []
+    for k in sorted(set(folds.values())):
+        held = [f for f, j in folds.items() if j == k]
+        train = [f for f, j in folds.items() if j != k]
+        say(f"calibration: fold {k} held out ({len(held)} frames), bank trained on {len(train)}")
+        bank, _ = train_detector_bank_kitti(None, kitti_root, frames=train, split=split, seed=seed,
+                                            calibration_folds=False, **bank_options)
+        images, _ = load_training_frames(dataset, held, flips=False)
+        for image in images:
+            d = detect_training_image(bank, image)
+            scores.append(d.scores)
+            offsets.append(bank.ground_log_ratio(d.boxes, image.horizon))
+            labels.append(detection_labels(d.boxes, kitti_gt_boxes(dataset.labels(image.frame))))
+        del images  # a fold's frames and pyramids are not needed by the next
+    s, y = np.concatenate(scores), np.concatenate(labels)
+    if not y.any():
+        raise InputError(f"no held-out detection of the fold banks matches a labelled car ({len(s)} detections): "
+                         "too few training frames for a calibrated bank", path=dataset.split_dir)
+    a, b = fit_platt(s, y, offset=np.concatenate(offsets))
+    return {"a": float(a), "b": float(b), "n_detections": int(len(s)), "n_positive": int(y.sum()),
+            "n_folds": len(set(folds.values())), "source": "leave-one-fold-out detections"}
+
+
+def _reset_peak_memory() -> bool:
+    """Reset the process's peak resident memory (Linux ``/proc/self/clear_refs``), so
+    that ``ru_maxrss`` measures the next step alone; False where that is not possible."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def _peak_memory_mb() -> float:
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return round(peak / (1 << 20 if sys.platform == "darwin" else 1 << 10), 1)  # bytes on macOS, KiB on Linux
+
+
+def _frames_sha256(frames: list[str]) -> str:
+    return hashlib.sha256("\n".join(frames).encode()).hexdigest()
+
+
+def option_default(step: str, key: str):
+    """The default of option ``key`` of ``step``; a ``ValueError`` naming what exists if
+    there is no such step or option."""
+    known = step_options()
+    if step not in known:
+        raise ValueError(f"no step {step!r} takes options; steps: {', '.join(STEP_OPTIONS)}")
+    if key not in known[step]:
+        raise ValueError(f"step {step} has no option {key!r}; options: {', '.join(sorted(known[step]))}")
+    return known[step][key]
+
+
+def _check_options(overrides: Mapping[str, Mapping[str, object]]) -> dict[str, dict]:
+    """The recipe with ``overrides`` (``{step: {option: value}}``), every name checked."""
+    out = {step: dict(RECIPE.get(step, {})) for step in STEP_OPTIONS}
+    for step, values in overrides.items():
+        for key, value in values.items():
+            option_default(step, key)
+            out[step][key] = value
+    return out
+
+
+def train_all(
+    out_dir,
+    kitti_root,
+    *,
+    frames: list[str] | None = None,
+    split_file=None,
+    options: Mapping[str, Mapping[str, object]] | None = None,
+    n_folds: int = 4,
+    resume: bool = False,
+    progress: Callable[[str], None] | None = None,
+    iterate: Callable[[Iterable, str], Iterable] | None = None,
+) -> dict:
+    """Train every artefact of a models directory (see the module docstring).
+
+    Parameters
+    ----------
+    out_dir : path
+        The models directory; must be empty of models unless ``resume``.
+    kitti_root : path
+        A labelled KITTI root (``training/`` with ``label_2/``) or split directory.
+    frames : list of str, optional
+        The training frames (default: every labelled frame); checked against the root.
+    split_file : path, optional
+        Instead of ``frames``: a KITTI ``ImageSets`` file (:func:`wirescene.io.splits.read_split_file`).
+    options : dict, optional
+        ``{step: {option: value}}`` over :data:`RECIPE` (names of :func:`step_options`).
+    n_folds : int
+        Folds of the held-out calibrations (fewer if there are fewer groups).
+    resume : bool
+        Keep the steps already done in ``out_dir`` with the same data, options and inputs.
+    progress : callable, optional
+        Receives one line per event.
+    iterate : callable, optional
+        ``iterate(items, name)`` wraps the steps and a step's inner loops (progress bars).
+
+    Returns
+    -------
+    dict
+        The manifest as written to ``out_dir/models.json``.
+
+    Raises
+    ------
+    InputError
+        A bad root, frame selection, split file or models directory, before any training.
+    ValueError
+        An unknown step option.
+    """
+    from wirescene.io.kitti import KittiDataset
+
+    say = progress or (lambda message: None)
+    wrap = iterate or (lambda items, name: items)
+    out = Path(out_dir)
+    if frames is not None and split_file is not None:
+        raise ValueError("frames and split_file both choose the frames: give one")
+    opts = _check_options(options or {})
+    dataset = KittiDataset(kitti_root)
+    if not dataset.has_labels:
+        raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
+    known = dataset.frame_ids()
+    if split_file is not None:
+        from wirescene.io.splits import read_split_file
+
+        ids = read_split_file(split_file, known=known, what="labelled frame", where=dataset.split_dir)
+    elif frames is not None:
+        ids = list(dict.fromkeys(frames))
+        unknown = [f for f in ids if f not in set(known)]
+        if unknown:
+            raise InputError(f"no labelled frame {unknown[0]}", path=dataset.split_dir)
+    else:
+        ids = known
+    if not ids:
+        raise InputError("no labelled frame to train on", path=dataset.split_dir)
+    folds = calibration_folds(dataset, ids, n_folds=n_folds)
+
+    manifest_path = out / MANIFEST_FILE
+    previous: dict = {}
+    if out.exists() and not out.is_dir():
+        raise InputError("is a file, expected a models directory", path=out)
+    held = [f for f in (MANIFEST_FILE, *ARTEFACTS.values()) if (out / f).exists()]
+    if held and not resume:
+        raise InputError(f"already holds models ({', '.join(held)}): continue with --resume or choose an empty "
+                         "directory", path=out)
+    if resume and held and not manifest_path.is_file():
+        raise InputError(f"holds {held[0]} but no {MANIFEST_FILE}: not a directory of `train all`, nothing to resume",
+                         path=out)
+    if resume and manifest_path.is_file():
+        previous = load_json(manifest_path, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("steps") or {}
+
+    cars = sum(len(dataset.labels(f).of_type("Car")) for f in ids)
+    data = {"kitti_root": str(Path(dataset.split_dir).resolve()), "frames": len(ids), "cars": cars,
+            "frames_sha256": _frames_sha256(ids), "frame_ids": ids}
+    if split_file is not None:
+        data["split_file"] = str(Path(split_file).resolve())
+        data["split_file_sha256"] = file_sha256(split_file)
+    from wirescene.io.folds import frame_drives
+
+    fold_record = {"n_folds": len(set(folds.values())), "frames_with_known_drive": sum(f in frame_drives() for f in ids),
+                   "frames_per_fold": {str(k): sum(1 for j in folds.values() if j == k) for k in sorted(set(folds.values()))},
+                   "fold_of": folds}
+    manifest = {"wirescene": __version__, "complete": False, "data": data, "calibration_folds": fold_record,
+                "artefacts": [], "shipped": [], "steps": {}}
+    key_data = {"kitti_root": data["kitti_root"], "frames_sha256": data["frames_sha256"], "n_folds": n_folds}
+
+    def write_manifest():
+        save_json(manifest_path, manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION)
+
+    def path_of(step):
+        return out / ARTEFACTS[_ARTEFACT[step]]
+
+    def run_parts(record):
+        from wirescene.training.parts import train_part_detector
+
+        _, report = train_part_detector(path_of("parts"), kitti_root=kitti_root, frames=ids, calibration_folds=folds,
+                                        progress=say, **opts["parts"])
+        record["train_accuracy"] = float(report["train_acc"])
+        if "calibration" in report:
+            record["calibration"] = {k: float(v) for k, v in report["calibration"].items()}
+
+    def run_detector(record):
+        from wirescene.training.kitti_detector import train_detector_bank_kitti
+
+        bank_opts = dict(opts["detector"])
+        threshold = bank_opts.pop("threshold", 0.5)
+        seed = bank_opts.pop("seed", 0)
+        calib = heldout_bank_calibration(kitti_root, folds, seed=seed, progress=say, **bank_opts)
+        record["calibration"] = calib
+        bank, _ = train_detector_bank_kitti(path_of("detector"), kitti_root, frames=ids, seed=seed,
+                                            calibration=(calib["a"], calib["b"]), threshold=threshold, progress=say,
+                                            **bank_opts)
+        record["detectors"] = len(bank)
+
+    def run_occlusion(record):
+        from wirescene.infer.occluded_score import save_occluded_score
+        from wirescene.parts.detector import PartDetector
+        from wirescene.training.occlusion import calibrate_occluded_score
+
+        detector = PartDetector.load(path_of("parts"))
+        result = calibrate_occluded_score(detector=detector, progress=lambda it: wrap(it, "occlusion scenes"),
+                                          **opts["occlusion"])
+        save_occluded_score(path_of("occlusion"), result)
+        record["c"] = result["c"]
+        say(f"occlusion: c = {result['c']} ({result['n_cars']} cars)")
+
+    runners = {"parts": run_parts, "detector": run_detector, "occlusion": run_occlusion}
+    inputs_of = {"parts": (), "detector": (), "occlusion": ("parts",)}
+
+    out.mkdir(parents=True, exist_ok=True)
+    write_manifest()
+    for step in wrap(STEPS, "train all"):
+        if step == "score_calibration":
+            manifest["shipped"].append(_ARTEFACT[step])
+            manifest["steps"][step] = {
+                "done": True, "source": "shipped", "sha256": file_sha256(shipped_path(_ARTEFACT[step])),
+                "why": "an honest calibration needs evaluation records of fold models on every frame "
+                       "(eval --raw-scores per fold, then train scores): not trained by train all"}
+            write_manifest()
+            continue
+        key = {"data": key_data, "options": opts[step], "wirescene": __version__,
+               "inputs": {s: manifest["steps"][s]["sha256"] for s in inputs_of[step]}}
+        key = _normalised(key)
+        old = previous.get(step)
+        path = path_of(step)
+        if (old and old.get("done") and old.get("key") == key and path.is_file()
+                and file_sha256(path) == old.get("sha256")):
+            say(f"{step}: done in an earlier run, kept ({path.name})")
+            manifest["steps"][step] = old
+        else:
+            if old:
+                say(f"{step}: the earlier run's record does not match (data, options, inputs or file): training again")
+            say(f"{step}: training -> {path}")
+            exact = _reset_peak_memory()
+            t0 = time.perf_counter()
+            record = {"done": False, "key": key, "artefact": path.name}
+            runners[step](record)
+            record.update(done=True, sha256=file_sha256(path), seconds=round(time.perf_counter() - t0, 1),
+                          peak_rss_mb=_peak_memory_mb(), peak_rss_of="step" if exact else "process so far",
+                          finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+            manifest["steps"][step] = record
+            say(f"{step}: {record['seconds']:.0f} s, peak {record['peak_rss_mb']:.0f} MB")
+        manifest["artefacts"].append(_ARTEFACT[step])
+        write_manifest()
+    manifest["complete"] = True
+    write_manifest()
+    return manifest
+
+
+def _normalised(value):
+    """``value`` as JSON would give it back (tuples as lists), so that it compares equal
+    to the stored record."""
+    import json
+
+    return json.loads(json.dumps(value, default=str))

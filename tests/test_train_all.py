@@ -1,0 +1,330 @@
+"""Split files, models directories (`--models`, `models=`) and `wirescene train all`.
+
+``tests/data/kitti/ImageSets/{train,val}.txt`` are the lines of KITTI's standard split
+files that name the frames of ``tests/data/kitti`` (000010 is in train, 000002 and 001545
+in val).
+"""
+
+import hashlib
+import json
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import wirescene
+from conftest import KITTI_ROOT
+from wirescene.cli.main import main
+from wirescene.core.errors import InputError
+from wirescene.core.resources import ARTEFACTS, DATA_DIR, MANIFEST_FILE, resolve_models, shipped_path
+from wirescene.io.splits import read_split_file
+
+SPLITS = KITTI_ROOT / "ImageSets"
+LABELLED = ["000002", "000010", "001545"]
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def one_line_error(result) -> str:
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("wirescene: error: "), result.stderr
+    return lines[0]
+
+
+# -- split files -------------------------------------------------------------------------
+
+
+def test_standard_split_files_read_in_order():
+    assert read_split_file(SPLITS / "val.txt", known=LABELLED) == ["000002", "001545"]
+    assert read_split_file(SPLITS / "train.txt") == ["000010"]
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("000010\n000002 000010\n", "line 2: '000002 000010' is not a frame id"),
+    ("000010\n\n../000002\n", "line 3: '../000002' is not a frame id"),
+    ("000010\n000002\n000010\n", "line 3: frame 000010 is listed twice (first on line 1)"),
+    ("000010\n424242\n", "line 2: no labelled frame 424242 in"),
+    ("\n  \n", "split file lists no frame id"),
+])
+def test_bad_split_file_names_file_and_line(tmp_path, text, problem):
+    path = tmp_path / "split.txt"
+    path.write_text(text)
+    with pytest.raises(InputError) as info:
+        read_split_file(path, known=LABELLED, what="labelled frame", where=KITTI_ROOT)
+    assert str(info.value).startswith(f"{path}: {problem}")
+
+
+def test_blank_lines_and_spaces_are_ignored(tmp_path):
+    path = tmp_path / "split.txt"
+    path.write_text("\n 001545 \n\n000002\r\n")
+    assert read_split_file(path, known=LABELLED) == ["001545", "000002"]
+    with pytest.raises(InputError, match="split file not found"):
+        read_split_file(tmp_path / "nope.txt")
+
+
+def test_eval_split_file_selects_exactly_its_frames(tmp_path):
+    pred = tmp_path / "pred"
+    r = cli("eval", KITTI_ROOT, "--variant", "coarse", "--split-file", SPLITS / "val.txt", "--particles", 10,
+            "--workers", 1, "--predictions", pred)
+    assert r.exit_code == 0, r.output
+    assert sorted(p.stem for p in (pred / "coarse").glob("*.txt")) == ["000002", "001545"]
+    assert sorted(p.stem for p in (pred / ".frames").glob("*.json")) == ["000002", "001545"]
+    # the API takes the same file and fits the same frames
+    by_file = wirescene.evaluate(KITTI_ROOT, variants="coarse", split_file=SPLITS / "val.txt", particles=10)
+    by_list = wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000002", "001545"], particles=10)
+    assert json.dumps(by_file["coarse"].metrics, sort_keys=True) == json.dumps(by_list["coarse"].metrics, sort_keys=True)
+    assert by_file["coarse"].counts["frames"] == 2
+    assert sorted({r.frame_id for r in by_file["coarse"].records}) == ["000002", "001545"]
+    with pytest.raises(wirescene.ArgumentError, match="^split_file: "):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000002"], split_file=SPLITS / "val.txt")
+
+
+def test_split_file_errors_are_one_line(tmp_path):
+    bad = tmp_path / "split.txt"
+    bad.write_text("000002\n000099\n")
+    for command in (["eval", KITTI_ROOT], ["predict", KITTI_ROOT, "--split", "training", "--out", tmp_path / "p"],
+                    ["detect", KITTI_ROOT], ["train", "detector", "--kitti-root", KITTI_ROOT, "--out", tmp_path / "b.npz"],
+                    ["train", "parts", "--kitti-root", KITTI_ROOT, "--out", tmp_path / "p.npz"],
+                    ["train", "all", KITTI_ROOT, "--out", tmp_path / "m"]):
+        line = one_line_error(cli(*command, "--split-file", bad))
+        assert f"{bad}: line 2: no " in line and "000099" in line, line
+    assert not (tmp_path / "p").exists() and not (tmp_path / "m").exists() and not (tmp_path / "b.npz").exists()
+    line = one_line_error(cli("eval", KITTI_ROOT, "--frames", "000002", "--split-file", SPLITS / "val.txt"))
+    assert "--frames and --split-file" in line
+
+
+# -- nothing writes into the package -------------------------------------------------------
+
+
+def _package_state():
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in DATA_DIR.iterdir() if p.is_file()}
+
+
+@pytest.mark.parametrize("command", [
+    ["train", "detector", "--kitti-root", KITTI_ROOT, "--frames", "000010"],
+    ["train", "parts", "--kitti-root", KITTI_ROOT, "--frames", "000010"],
+    ["train", "occlusion", "--scenes", "1"],
+    ["train", "shape"],
+    ["train", "scores", "somewhere"],
+    ["train", "all", KITTI_ROOT],
+])
+def test_training_without_out_is_refused_and_leaves_the_package_alone(command):
+    before = _package_state()
+    r = cli(*command)
+    assert "--out" in one_line_error(r)
+    assert _package_state() == before
+
+
+# -- models directories -------------------------------------------------------------------
+
+
+def test_models_directory_rules(tmp_path):
+    with pytest.raises(InputError, match="models directory not found"):
+        resolve_models(tmp_path / "nope")
+    with pytest.raises(InputError, match="not a models directory"):
+        resolve_models(tmp_path)
+    shutil.copy(shipped_path("occlusion"), tmp_path / "occlusion.json")
+    models = resolve_models(tmp_path)  # without a manifest: the files present
+    assert models.own == ("occlusion",)
+    assert models.path("occlusion") == (tmp_path / "occlusion.json").resolve()
+    assert models.path("parts_model") == shipped_path("parts_model")  # what it lacks is shipped
+    manifest = {"format": "wirescene-models/1", "complete": False, "artefacts": ["occlusion"],
+                "steps": {"parts": {"done": True}}}
+    (tmp_path / MANIFEST_FILE).write_text(json.dumps(manifest))
+    with pytest.raises(InputError, match=r"training not finished \(steps done: parts\)"):
+        resolve_models(tmp_path)
+    manifest.update(complete=True, artefacts=["occlusion", "detector_bank"])
+    (tmp_path / MANIFEST_FILE).write_text(json.dumps(manifest))
+    with pytest.raises(InputError, match="detector_bank.npz is listed in models.json but missing"):
+        resolve_models(tmp_path)
+    manifest.update(artefacts=[])
+    (tmp_path / MANIFEST_FILE).write_text(json.dumps(manifest))
+    with pytest.raises(InputError, match="occlusion.json is not listed in models.json"):
+        resolve_models(tmp_path)
+    manifest.update(artefacts=["occlusion"])
+    (tmp_path / MANIFEST_FILE).write_text(json.dumps(manifest))
+    assert resolve_models(tmp_path).own == ("occlusion",)
+    line = one_line_error(cli("eval", KITTI_ROOT, "--frames", "000002", "--models", tmp_path / "nope"))
+    assert "models directory not found" in line
+
+
+def test_models_directory_replaces_c_and_an_explicit_file_wins(tmp_path):
+    from wirescene.fitting.models import with_models
+    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.infer.occluded_score import save_occluded_score
+
+    save_occluded_score(tmp_path / "occlusion.json", {"c": -2.75})
+    shutil.copy(shipped_path("parts_model"), tmp_path / "parts_model.npz")
+    options = with_models(FitOptions(detector_bank="my_bank.npz"), resolve_models(tmp_path))
+    assert options.inference.occluded_score == -2.75
+    assert options.parts_model == str((tmp_path / "parts_model.npz").resolve())
+    assert options.detector_bank == "my_bank.npz"
+    shutil.copy(shipped_path("score_calibration"), tmp_path / "score_calibration.json")
+    with pytest.raises(InputError, match="score calibration cannot be used yet"):
+        with_models(FitOptions(), resolve_models(tmp_path))
+    # raw scores do not read it
+    assert with_models(FitOptions(calibrate_scores=False), resolve_models(tmp_path)).inference.occluded_score == -2.75
+    (tmp_path / "score_calibration.json").unlink()
+    # the CLI's and the API's options go through the same resolver
+    from wirescene.api import _options
+    from wirescene.cli.main import _fit_options
+
+    for options in (_fit_options(10, 0, models=tmp_path), _options(None, 10, 0, tmp_path)):
+        assert options.inference.occluded_score == -2.75 and options.parts_model.endswith("parts_model.npz")
+    with pytest.raises(wirescene.ArgumentError, match="^models: "):
+        wirescene.fit(KITTI_ROOT / "training" / "image_2" / "000010.png", KITTI_ROOT / "training" / "calib" / "000010.txt",
+                      [[354, 185, 549, 294]], models=3)
+
+
+# -- train all -----------------------------------------------------------------------------
+
+# Seconds, not minutes: tiny forests and banks, no part calibration (its folds: the next test).
+TINY = ["--set", "parts.n_trees=3", "--set", "parts.max_depth=8", "--set", "parts.synth_scenes=0",
+        "--set", "parts.calibrate_real=0",
+        "--set", "detector.n_partial=0", "--set", "detector.mining_rounds=1", "--set", "detector.neg_per_image=10",
+        "--set", "detector.min_pos=20", "--set", "detector.min_height=40", "--set", "detector.max_scale=1.0",
+        "--set", "detector.per_octave=2", "--set", "occlusion.n_scenes=2", "--set", "occlusion.grid=[-1, 0, 1]"]
+
+
+def test_held_out_folds_are_drives_where_known_and_frames_otherwise(tmp_path):
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.parts import real_folds
+    from wirescene.training.pipeline import calibration_folds
+
+    # 000002 and 000010 are frames of known drives; a copy under an unknown id is a group of its own
+    root = tmp_path / "kitti" / "training"
+    for sub, ext in (("image_2", "png"), ("calib", "txt"), ("label_2", "txt")):
+        (root / sub).mkdir(parents=True)
+        for frame in ("000002", "000010"):
+            shutil.copy(KITTI_ROOT / "training" / sub / f"{frame}.{ext}", root / sub / f"{frame}.{ext}")
+        shutil.copy(KITTI_ROOT / "training" / sub / f"001545.{ext}", root / sub / f"900001.{ext}")
+    dataset = KittiDataset(tmp_path / "kitti")
+    folds = calibration_folds(dataset, ["000002", "000010", "900001"], n_folds=2)
+    # cars: 000010 8, 900001 6, 000002 1 -> the largest group alone, the other two together
+    assert folds == {"000010": 0, "900001": 1, "000002": 1}
+    assert calibration_folds(dataset, ["000002", "000010", "900001"], n_folds=4) == \
+        {"000010": 0, "900001": 1, "000002": 2}
+    assert real_folds(["900001", "000010"], folds).tolist() == [1, 0]  # the parts' calibration takes them
+    with pytest.raises(InputError, match="at least two drives"):
+        calibration_folds(dataset, ["000010"])
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """`train all` on two frames of two drives (two held-out folds), with a tiny recipe."""
+    base = tmp_path_factory.mktemp("train_all")
+    split = base / "split.txt"
+    split.write_text("000010\n001545\n")
+    out = base / "models"
+    r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY)
+    assert r.exit_code == 0, r.output + r.stderr
+    return out, split, r
+
+
+def _mtimes(out):
+    return {f: (out / f).stat().st_mtime_ns for f in ARTEFACTS.values() if (out / f).exists()}
+
+
+def test_train_all_writes_a_manifest_and_loadable_models(trained):
+    from wirescene.infer.occluded_score import load_occluded_score
+    from wirescene.parts.detector import PartDetector
+    from wirescene.predetect.bank import DetectorBank
+
+    out, split, r = trained
+    manifest = json.loads((out / MANIFEST_FILE).read_text())
+    assert manifest["format"] == "wirescene-models/1" and manifest["complete"] is True
+    assert manifest["wirescene"] == wirescene.__version__
+    assert manifest["artefacts"] == ["parts_model", "detector_bank", "occlusion"]
+    assert manifest["shipped"] == ["score_calibration"]
+    data = manifest["data"]
+    assert data["frames"] == 2 and data["frame_ids"] == ["000010", "001545"] and data["cars"] == 14
+    assert data["split_file"] == str(split.resolve())
+    assert manifest["calibration_folds"]["fold_of"] == {"000010": 0, "001545": 1}
+    assert list(manifest["steps"]) == ["parts", "detector", "score_calibration", "occlusion"]
+    for step in ("parts", "detector", "occlusion"):
+        record = manifest["steps"][step]
+        assert record["done"] and record["seconds"] >= 0 and record["peak_rss_mb"] > 10
+        assert record["sha256"] == hashlib.sha256((out / record["artefact"]).read_bytes()).hexdigest()
+    assert manifest["steps"]["detector"]["key"]["options"]["threshold"] == 0.1  # the shipped recipe's
+    assert manifest["steps"]["parts"]["key"]["options"]["n_trees"] == 3  # --set
+    assert manifest["steps"]["detector"]["calibration"]["n_folds"] == 2
+    parts = PartDetector.load(out / "parts_model.npz")
+    assert parts.kind == "ghog_ms" and parts.position and parts.meta["real_frames"] == "000010,001545"
+    bank = DetectorBank.load(out / "detector_bank.npz")
+    assert bank.calibration is not None and bank.threshold == 0.1
+    assert np.isfinite(load_occluded_score(out / "occlusion.json"))
+    assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")
+    assert "shipped" in r.output and "models written to" in r.output
+
+
+def test_train_all_resume_skips_finished_steps(trained):
+    out, split, _ = trained
+    before = _mtimes(out)
+    line = one_line_error(cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY))
+    assert "already holds models" in line and "--resume" in line
+    r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--resume")
+    assert r.exit_code == 0, r.output + r.stderr
+    assert r.stderr.count("done in an earlier run, kept") == 3
+    assert _mtimes(out) == before
+    # another option of the last step: only that step runs again
+    r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "occlusion.n_scenes=1",
+            "--resume")
+    assert r.exit_code == 0, r.output + r.stderr
+    after = _mtimes(out)
+    assert after["occlusion.json"] != before["occlusion.json"]
+    assert {f: t for f, t in after.items() if f != "occlusion.json"} == \
+        {f: t for f, t in before.items() if f != "occlusion.json"}
+    assert json.loads((out / MANIFEST_FILE).read_text())["steps"]["occlusion"]["key"]["options"]["n_scenes"] == 1
+    assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")
+
+
+def test_train_all_needs_two_groups_and_known_options(tmp_path):
+    line = one_line_error(cli("train", "all", KITTI_ROOT, "--frames", "000010", "--out", tmp_path / "m"))
+    assert "at least two drives" in line
+    line = one_line_error(cli("train", "all", KITTI_ROOT, "--out", tmp_path / "m", "--set", "parts.nope=1"))
+    assert "--set" in line and "no option 'nope'" in line
+    assert not (tmp_path / "m").exists()
+
+
+def test_models_replace_the_bank_and_the_resume_fingerprint(trained, tmp_path):
+    """The tiny bank detects other boxes than the shipped one, everywhere a bank is
+    loaded (API, `detect`, `eval --detections bank`), and eval's resume records tell the
+    two runs apart."""
+    out, _, _ = trained
+    image = KITTI_ROOT / "training" / "image_2" / "000010.png"
+    calib = KITTI_ROOT / "training" / "calib" / "000010.txt"
+    shipped = wirescene.detect(image, calib)
+    own = wirescene.detect(image, calib, models=out)
+    assert len(own) != len(shipped) or not np.allclose(own.boxes, shipped.boxes)
+    from wirescene.predetect.bank import DetectorBank, detect_cars
+    from wirescene.api import as_camera, as_image
+
+    rgb = as_image(image)
+    direct = detect_cars(rgb, bank=DetectorBank.load(out / "detector_bank.npz"),
+                         camera=as_camera(calib, (rgb.shape[1], rgb.shape[0])))
+    np.testing.assert_array_equal(own.boxes, direct.boxes)
+    r = cli("detect", KITTI_ROOT, "--frames", "000010", "--out", tmp_path / "dets", "--models", out)
+    assert r.exit_code == 0 and f"models from {out.resolve()}" in r.stderr
+    written = json.loads((tmp_path / "dets" / "000010.json").read_text())["detections"]
+    kept = own.subset(own.scores > DetectorBank.load(out / "detector_bank.npz").threshold)
+    np.testing.assert_allclose([d["box"] for d in written], kept.boxes, atol=0.01)
+    pred = tmp_path / "pred"
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--particles", 10, "--workers", 1,
+              "--detections", "bank", "--predictions", pred]
+    assert cli(*common, "--models", out).exit_code == 0
+    record = json.loads((pred / ".frames" / "000010.json").read_text())
+    from wirescene.eval.metrics import FrameResult
+
+    np.testing.assert_allclose(FrameResult.from_dict(record["variants"]["coarse"]["result"]).det_boxes, own.boxes)
+    assert record["config"]["models"]["detector_bank"] == hashlib.sha256(
+        (out / "detector_bank.npz").read_bytes()).hexdigest()
+    # the same bank file, the shipped part model: the record is not reused
+    r = cli(*common, "--bank", out / "detector_bank.npz", "--resume")
+    assert r.exit_code == 0 and "written with a different configuration" in r.stderr
+    assert "models.parts_model" in r.stderr and "models.detector_bank" not in r.stderr
+    r = cli(*common, "--bank", out / "detector_bank.npz", "--resume")
+    assert r.exit_code == 0 and "1 of 1 frames already done" in r.stderr
