@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from wirescene import __version__
+from wirescene.core.version import __version__
 from wirescene.core.errors import InputError, WiresceneError
 from wirescene.cli.options import (
     NON_NEGATIVE,

@@ -32,7 +32,7 @@ def scores(predictions_dirs, frames, split_file, out):
         for variant, results in read_run_records(folder, frame_ids).items():
             records.setdefault(variant, []).extend(results)
     result = fit_score_calibration(records)
-    result["trained_on"] = {"runs": [str(d) for d in predictions_dirs],
+    result["trained_on"] = {"runs": [f"{Path(d).parent.name}/{Path(d).name}" for d in predictions_dirs],
                             "frames": sorted({r.frame_id for rs in records.values() for r in rs})}
     save_score_calibration(out, result)
     for stage in ("coarse", "fine"):

@@ -19,6 +19,7 @@ from wirescene.core.errors import InputError
 from wirescene.core.version import __version__
 from wirescene.eval.runner import fit_frames
 from wirescene.eval.sources import DetectionSource, frame_seed
+from wirescene.fitting.models import models_fingerprint
 from wirescene.fitting.pipeline import FitOptions, fit_frame
 from wirescene.fitting.variants import get_variant
 from wirescene.io.kitti import KittiDataset
@@ -45,7 +46,8 @@ def _config(dataset: KittiDataset, variant: str, source: DetectionSource, option
     spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
     config = {"format": format_tag("predict-config", 1), "wirescene": __version__,
               "dataset": str(Path(dataset.split_dir).resolve()), "variant": variant,
-              "detections": {"spec": spec, "allow_missing": source.allow_missing}, "options": asdict(options)}
+              "detections": {"spec": spec, "allow_missing": source.allow_missing}, "options": asdict(options),
+              "models": models_fingerprint(options)}
     return json.loads(json.dumps(config, default=str))
 
 

@@ -41,7 +41,7 @@ from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from wirescene import __version__
+from wirescene.core.version import __version__
 from wirescene.core.artefacts import load_json, save_json
 from wirescene.core.errors import InputError
 from wirescene.core.resources import (
