@@ -1,22 +1,20 @@
-"""Benchmark of the part-configuration detector bank on real KITTI frames (issue 16), plain script.
+"""Benchmark of the part-configuration detector bank on real KITTI frames, plain script.
 
 Protocol: 4-fold cross-validation by recording drive (:mod:`wirescene.io.folds`):
 for each fold k a bank is trained (:func:`wirescene.training.kitti_detector.train_bank_on_frames`)
 on the frames of the other three folds and detects on the frames of fold k; the held-out
-detections of all folds are pooled (33 frames, 141 cars) and scored. No figure is computed
+detections of all folds are pooled (72 frames, 294 cars) and scored. No figure is computed
 on a frame the scoring model was trained on. ``--bank PATH`` instead scores one given bank
-on all frames (fair only for a bank that never saw these frames, e.g. the synthetic one).
+on all frames (fair only for a bank that never saw these frames).
 
 Metrics (all on the pooled held-out detections):
-* KITTI 2D AP for Car, easy / moderate / hard, IoU > 0.7, R40, computed by
-  :func:`wirescene.predetect.ap.kitti_ap_2d` (a compact re-implementation of the devkit's
-  2D rules: min height 40/25/25 px, max occlusion 0/1/2, max truncation 0.15/0.3/0.5;
-  Vans and DontCare regions ignored, detections lower than the min height ignored);
-  also AP at IoU 0.5;
-* recall at 1 false positive per image (moderate rules, IoU 0.7 and 0.5), and the recall
-  of unoccluded cars taller than 40 px (= easy cars) at 1 FP per image and overall;
-* viewpoint of true positives (moderate, IoU 0.7): same bin, same-or-adjacent bin, and
-  |alpha_det - alpha_true| <= 45 deg with alpha_det the centre of the winning bin;
+* KITTI 2D AP and AOS for Car, easy / moderate / hard, R40, at IoU 0.7 and 0.5, by the
+  devkit's rules (:func:`wirescene.eval.kitti_metrics.detection_ap_2d`, the project's one
+  KITTI evaluation);
+* the operating point at the shipped threshold and at ``--operating-points``: detections,
+  the share on a car (IoU >= ``--min-iou``), the share of cars found, by box height (< 25,
+  25-40, 40-60, > 60 px), and the viewpoint error of the detections on a car (> 45 deg, and
+  > 135 deg: front and back swapped);
 * seconds per frame of :func:`wirescene.predetect.detect_cars` on one core (whole image:
   pyramid + templates + clustering), measured on ``--time-frames`` frames.
 
@@ -27,8 +25,10 @@ confidences, whose calibration left that fold out) and banks with a viewpoint pr
 scores without either.
 
 Usage:
-  python benchmarks/bench_predetect.py --cv [--models-dir DIR] [--pr-curve pr.png] [--json out.json]
-  python benchmarks/bench_predetect.py --bank src/wirescene/data/detector_bank.npz   # a fixed bank
+  python benchmarks/bench_predetect.py --root ROOT --cv [--models-dir DIR] [--pr-curve pr.png] [--json out.json]
+  python benchmarks/bench_predetect.py --root ROOT --cv --fold 0 --fold 2 --models-dir DIR   # in parallel with 1, 3
+  python benchmarks/bench_predetect.py --root ROOT --from-raw DIR --models-dir DIR        # then score them
+  python benchmarks/bench_predetect.py --root ROOT --bank src/wirescene/data/detector_bank.npz   # a fixed bank
 Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples,
 --per-octave, --cut-paste; --train-fraction F [--subset-seed S] trains each fold bank on a share F
 of its training frames (a learning curve: held-out AP against the amount of real training data).
@@ -51,7 +51,8 @@ import numpy as np  # noqa: E402
 
 from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.predetect.ap import kitti_ap_2d, kitti_frame_gt, plot_pr, recall_at_fppi, viewpoint_accuracy  # noqa: E402
+from wirescene.eval.kitti_metrics import N_SAMPLE_PTS, detection_ap_2d  # noqa: E402
+from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
@@ -65,37 +66,31 @@ from wirescene.training.kitti_detector import (  # noqa: E402
 )
 
 
-def metrics(dets, gts) -> dict:
-    out = {}
-    for diff in ("easy", "moderate", "hard"):
-        r = kitti_ap_2d(dets, gts, difficulty=diff)
-        out[diff] = {"ap": r["ap"], "n_gt": r["n_gt"], "recall_at_1fppi": recall_at_fppi(r),
-                     "max_recall": float(r["recall"][-1]) if len(r["recall"]) else 0.0}
-        if diff == "moderate":
-            out["viewpoint"] = viewpoint_accuracy(r["tp_alpha"])
-            out["_curve"] = r
-    r5 = kitti_ap_2d(dets, gts, difficulty="moderate", iou=0.5)
-    out["moderate_iou05"] = {"ap": r5["ap"], "recall_at_1fppi": recall_at_fppi(r5),
-                             "max_recall": float(r5["recall"][-1]) if len(r5["recall"]) else 0.0}
-    out["_curve05"] = r5
-    return out
+def metrics(dets, labels) -> dict:
+    """2D AP by the devkit's rules (:func:`wirescene.eval.kitti_metrics.detection_ap_2d`) and
+    the precision curves to plot."""
+    r = detection_ap_2d(dets, labels)
+    recall = np.linspace(0.0, 1.0, N_SAMPLE_PTS)
+    curves = {k: {"recall": recall, "precision": r["curves"][k]["moderate"],
+                  "ap": (r[k]["moderate"] or 0.0) / 100} for k in ("2d", "2d_iou_0.5") if r["curves"][k]["moderate"] is not None}
+    return {"2d": r["2d"], "aos": r["aos"], "2d_iou_0.5": r["2d_iou_0.5"], "n_gt": r["n_gt"], "_curves": curves}
+
+
+def fmt(name, m) -> str:
+    def ap(v):
+        return "-" if v is None else f"{v:.1f}"
+
+    d = ("easy", "moderate", "hard")
+    return (f"{name}: 2D AP easy / moderate / hard {' / '.join(ap(m['2d'][k]) for k in d)} "
+            f"({' / '.join(str(m['n_gt'][k]) for k in d)} cars); AOS {' / '.join(ap(m['aos'][k]) for k in d)}; "
+            f"2D AP at IoU 0.5 {' / '.join(ap(m['2d_iou_0.5'][k]) for k in d)}")
+
+
+def public(m):
+    return {k: v for k, v in m.items() if not k.startswith("_")}
 
 
 HEIGHT_BANDS = (0.0, 25.0, 40.0, 60.0, np.inf)
-
-
-def official_2d_ap(dets, labels) -> dict:
-    """2D AP (R40, easy / moderate / hard) and AOS of ``dets`` by the devkit's rules
-    (:func:`wirescene.eval.kitti_metrics.kitti_metrics`), at IoU 0.7 and 0.5."""
-    from wirescene.core.labels import Label
-    from wirescene.eval.kitti_metrics import kitti_metrics
-
-    rows = [[Label("Car", -1, -1, float(a), b, [-1, -1, -1], [-1000, -1000, -1000], -10, float(c))
-             for b, c, a in zip(np.asarray(d.boxes, float), np.asarray(d.scores, float), np.asarray(d.alpha, float))]
-            for d in dets]
-    r = kitti_metrics(labels, rows)
-    return {"2d": r["car"]["2d"], "aos": r["car"]["aos"], "2d_iou_0.5": r["iou_0.5"]["car"]["2d"],
-            "n_gt": r["n_gt"]["car"]}
 
 
 def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict:
@@ -146,20 +141,6 @@ def fmt_operating_point(o) -> str:
             f"(by height: {bands}); viewpoint of the detections on a car off by > 45 deg "
             f"{o['viewpoint_over_45'] if o['viewpoint_over_45'] is None else round(o['viewpoint_over_45'], 2)}, "
             f"> 135 deg {o['viewpoint_over_135'] if o['viewpoint_over_135'] is None else round(o['viewpoint_over_135'], 2)}")
-
-
-def fmt(name, m) -> str:
-    e, mo, h = m["easy"], m["moderate"], m["hard"]
-    v = m["viewpoint"]
-    return (f"{name}: AP easy {100 * e['ap']:.1f}% ({e['n_gt']} cars) | moderate {100 * mo['ap']:.1f}% ({mo['n_gt']}) | "
-            f"hard {100 * h['ap']:.1f}% ({h['n_gt']}) | moderate@IoU0.5 {100 * m['moderate_iou05']['ap']:.1f}%\n"
-            f"    recall@1FPPI moderate {mo['recall_at_1fppi']:.2f} (IoU0.5: {m['moderate_iou05']['recall_at_1fppi']:.2f}), "
-            f"easy {e['recall_at_1fppi']:.2f}, easy max {e['max_recall']:.2f}; viewpoint of {v['n']} TPs: bin {v['bin']:.2f}, "
-            f"adjacent {v['adjacent']:.2f}, within 45 deg {v['within_45']:.2f}")
-
-
-def public(m):
-    return {k: v for k, v in m.items() if not k.startswith("_")}
 
 
 def training_subset(frames: list, fraction: float, *, seed) -> set:
@@ -224,7 +205,7 @@ def main():
     threadpool_limits(1)
     ds = KittiDataset(args.root)
     ids = ds.frame_ids()
-    gts = {f: kitti_frame_gt(ds.labels(f)) for f in ids}
+    gts = {f: ds.labels(f) for f in ids}
     out, times = {"frames": len(ids)}, []
     dets = {}
     fold_banks = {}
@@ -336,18 +317,13 @@ def main():
     per_fold = {}
     for k in range(N_FOLDS):
         fk = [f for f in ids if fold_of(f) == k]
+        if not fk:
+            continue
         m = metrics([dets[f] for f in fk], [gts[f] for f in fk])
         per_fold[k] = public(m)
         print(fmt(f"fold {k} ({len(fk)} frames)", m))
     pooled = metrics([dets[f] for f in ids], [gts[f] for f in ids])
     print(fmt(f"POOLED {name} ({len(ids)} frames)", pooled))
-    pooled["official"] = official_2d_ap([dets[f] for f in ids], [ds.labels(f) for f in ids])
-    o = pooled["official"]
-    print("    devkit rules (eval.kitti_metrics): 2D AP easy / moderate / hard "
-          + " / ".join(f"{o['2d'][d]:.1f}" for d in ("easy", "moderate", "hard"))
-          + f" ({' / '.join(str(o['n_gt'][d]) for d in ('easy', 'moderate', 'hard'))} cars); AOS "
-          + " / ".join(f"{o['aos'][d]:.1f}" if o['aos'][d] is not None else "-" for d in ("easy", "moderate", "hard"))
-          + "; 2D AP at IoU 0.5 " + " / ".join(f"{o['2d_iou_0.5'][d]:.1f}" for d in ("easy", "moderate", "hard")))
     calibrated = args.bank is not None or not args.no_ground
     if calibrated:
         thresholds = sorted({args.threshold, *args.operating_points})
@@ -370,7 +346,8 @@ def main():
     out.update(pooled=public(pooled), per_fold=per_fold, seconds_per_frame=float(np.mean(times)),
                cpu_seconds_per_frame=float(np.mean(cpu)))
     if args.pr_curve:
-        print("PR curve:", plot_pr({"moderate, IoU 0.7": pooled["_curve"], "moderate, IoU 0.5": pooled["_curve05"]},
+        c = pooled["_curves"]
+        print("PR curve:", plot_pr({"moderate, IoU 0.7": c["2d"], "moderate, IoU 0.5": c["2d_iou_0.5"]},
                                    args.pr_curve, title=f"{name} ({len(ids)} frames)"))
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1, default=float))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from wirescene.io.kitti import FrameLabels, Label, read_image
-from wirescene.predetect.ap import FrameGT, average_precision, evaluate_detections, frame_gt
+from wirescene.predetect.ap import FrameGT, evaluate_detections, frame_gt, voc_average_precision
 from wirescene.predetect.bank import DetectorBank, cluster_activations, detect_cars, load_default_bank, nms
 from wirescene.predetect.configurations import Configuration, connected_subsets, mirror_bin
 from wirescene.predetect.hog import N_FEAT, crop_features, hog_cells
@@ -47,7 +47,7 @@ def test_ap_false_positive_above_all_true_positives():
     # a duplicate detection of a matched car is a false positive too
     det2 = _dets([[10, 10, 110, 80], [12, 10, 110, 80], [200, 20, 300, 100]], [0.9, 0.85, 0.7])
     assert evaluate_detections([det2], [gt])["ap"] == pytest.approx(0.5 + 0.5 * 2 / 3)
-    assert average_precision(np.array([0.5, 1.0]), np.array([1.0, 1.0])) == pytest.approx(1.0)
+    assert voc_average_precision(np.array([0.5, 1.0]), np.array([1.0, 1.0])) == pytest.approx(1.0)
 
 
 def test_ap_ignored_objects_and_regions():
@@ -224,69 +224,39 @@ def test_detect_command_writes_readable_files(tmp_path):
     assert len(dets) > 0 and np.all(np.isfinite(dets.alpha))
 
 
-# ------------------------------------------------------------------ KITTI 2D AP (devkit rules)
+# ------------------------------------------------------------------ KITTI 2D AP of detections (devkit rules)
 
-def _kgt(boxes, occluded=None, truncated=None, is_car=None, dontcare=()):
-    from wirescene.predetect.ap import KittiFrameGT
+def _car(box, occluded=0, truncated=0.0, type_="Car"):
+    from wirescene.core.labels import Label
 
-    b = np.array(boxes, float).reshape(-1, 4)
-    n = len(b)
-    return KittiFrameGT(b, np.ones(n, bool) if is_car is None else np.array(is_car, bool),
-                        np.zeros(n, int) if occluded is None else np.array(occluded, int),
-                        np.zeros(n) if truncated is None else np.array(truncated, float), np.zeros(n),
-                        np.array(dontcare, float).reshape(-1, 4))
+    return Label(type_, truncated, occluded, 0.0, box, [1.5, 1.6, 4.0], [0.0, 1.6, 20.0], 0.0)
 
 
-def test_kitti_ap_rules():
-    from wirescene.predetect.ap import kitti_ap_2d, recall_at_fppi
+def test_detection_ap_2d_uses_the_devkit_rules():
+    """41 frames, one car each (the devkit samples 41 recall points): found -> 100, IoU ~0.6
+    -> 0 at 0.7 but 100 at 0.5; a Van is ignored; a DontCare region absorbs a false box."""
+    from wirescene.core.labels import FrameLabels, Label
+    from wirescene.eval.kitti_metrics import detection_ap_2d
 
-    gt = _kgt([[10, 10, 110, 80], [200, 20, 300, 100]])
-    assert kitti_ap_2d([_dets(gt.boxes, [0.9, 0.8])], [gt])["ap"] == pytest.approx(1.0)
-    # IoU 0.7 is required for a car: a box shifted to IoU ~0.6 is a false positive (and a miss)
-    shifted = np.array([[10, 10, 110, 80], [225, 20, 325, 100]], float)
-    r = kitti_ap_2d([_dets(shifted, [0.9, 0.8])], [gt])
-    assert r["ap"] == pytest.approx(0.5, abs=0.03) and r["n_gt"] == 2
-    assert kitti_ap_2d([_dets(shifted, [0.9, 0.8])], [gt], iou=0.5)["ap"] == pytest.approx(1.0)
-    # a false positive above both true positives: precision 1/2 at recall 1/2, 2/3 at recall 1;
-    # interpolated precision is 2/3 everywhere
-    r = kitti_ap_2d([_dets([[500, 10, 600, 90], *gt.boxes], [0.95, 0.8, 0.7])], [gt])
-    assert r["ap"] == pytest.approx(2 / 3, abs=1e-6)
-    # the false positive between the two: 1 up to recall 1/2, then 2/3
-    r = kitti_ap_2d([_dets([gt.boxes[0], [500, 10, 600, 90], gt.boxes[1]], [0.95, 0.8, 0.7])], [gt])
-    assert r["ap"] == pytest.approx(0.5 + 0.5 * 2 / 3, abs=1e-6)
-    assert recall_at_fppi(r, 1.0) == pytest.approx(1.0) and recall_at_fppi(r, 0.0) == pytest.approx(0.5)
-
-
-def test_kitti_ap_ignores_van_dontcare_small_and_hard():
-    from wirescene.predetect.ap import kitti_ap_2d
-
-    gt = _kgt([[10, 10, 110, 80],  # counted
-               [200, 20, 300, 100],  # Van: ignored
-               [400, 20, 500, 100],  # occluded 2: ignored in moderate, counted in hard
-               [600, 20, 700, 40]],  # 20 px high: ignored
-              occluded=[0, 0, 2, 0], is_car=[1, 0, 1, 1], dontcare=[[800, 0, 1000, 200]])
-    dets = _dets([[200, 20, 300, 100], [400, 20, 500, 100], [600, 20, 700, 40], [850, 50, 950, 150],
-                  [620, 200, 700, 215], [10, 10, 110, 80]], [0.99, 0.98, 0.97, 0.96, 0.95, 0.5])
-    r = kitti_ap_2d([dets], [gt], difficulty="moderate")
-    assert r["n_gt"] == 1 and r["ap"] == pytest.approx(1.0)
-    h = kitti_ap_2d([dets], [gt], difficulty="hard")
-    assert h["n_gt"] == 2 and h["ap"] == pytest.approx(1.0)
-    e = kitti_ap_2d([dets], [gt], difficulty="easy")  # 40 px minimum: the occluded car is ignored too
-    assert e["n_gt"] == 1
-    # a pedestrian-sized false positive outside DontCare does count
-    fp = _dets([[620, 150, 700, 215], [10, 10, 110, 80]], [0.9, 0.5])
-    assert kitti_ap_2d([fp], [gt])["ap"] == pytest.approx(0.5)
-
-
-def test_viewpoint_accuracy_definitions():
-    from wirescene.predetect.ap import viewpoint_accuracy
-
-    a = np.array([[bin_center(2), np.deg2rad(90)],  # same bin
-                  [bin_center(2), np.deg2rad(130)],  # adjacent bin, 40 deg off
-                  [bin_center(2), np.deg2rad(150)],  # adjacent bin, 60 deg off
-                  [bin_center(6), np.deg2rad(90)]])  # opposite
-    v = viewpoint_accuracy(a)
-    assert v == {"n": 4, "bin": 0.25, "adjacent": 0.75, "within_45": 0.5}
+    box = np.array([[10.0, 10, 110, 80]])
+    gt = [[_car(box[0])] for _ in range(41)]
+    scores = [np.array([0.5 + i / 100]) for i in range(41)]
+    found = [_dets(box, s) for s in scores]
+    assert detection_ap_2d(found, gt)["2d"]["moderate"] == pytest.approx(100.0)
+    shifted = [_dets(box + [25, 0, 25, 0], s) for s in scores]
+    r = detection_ap_2d(shifted, gt)
+    assert r["2d"]["moderate"] == pytest.approx(0.0) and r["2d_iou_0.5"]["moderate"] == pytest.approx(100.0)
+    assert r["n_gt"]["moderate"] == 41
+    # a false box on a Van, and one inside DontCare, cost nothing; one elsewhere does
+    van = [_car([300, 10, 400, 80], type_="Van")]
+    dc = Label("DontCare", -1, -1, -10, [500, 0, 700, 200], [-1, -1, -1], [-1000, -1000, -1000], -10)
+    frames = [FrameLabels(objects=g + van, dontcare=[dc]) for g in gt]
+    extra = [_dets(np.vstack([[300.0, 10, 400, 80], [550, 50, 650, 150], box[0]]), np.r_[0.99, 0.98, s]) for s in scores]
+    assert detection_ap_2d(extra, frames)["2d"]["moderate"] == pytest.approx(100.0)
+    false = [_dets(np.vstack([[800.0, 10, 900, 80], box[0]]), np.r_[0.99, s]) for s in scores]
+    assert detection_ap_2d(false, frames)["2d"]["moderate"] < 60.0
+    with pytest.raises(ValueError, match="frames"):
+        detection_ap_2d(found[:3], gt)
 
 
 # ------------------------------------------------------------------ real-data training pieces

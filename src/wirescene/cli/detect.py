@@ -112,7 +112,8 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
 
     from wirescene.io.kitti import KittiDataset
     from wirescene.core.viewpoints import viewpoint_bin
-    from wirescene.predetect.ap import evaluate_detections, kitti_ap_2d, kitti_frame_gt, load_frame_gt, plot_pr, summary
+    from wirescene.eval.kitti_metrics import detection_ap_2d
+    from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import DetectorBank, detect_cars
 
     check_output_dir(out_dir, "--out")
@@ -136,18 +137,18 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
                 write_text(out_dir / f"{fid}.json", json.dumps({"detections": entries}, indent=1))
             dets_all.append(d)
             if ds.has_labels:
-                gts.append((load_frame_gt(ds.split_dir, fid), kitti_frame_gt(ds.labels(fid))))
+                gts.append((load_frame_gt(ds.split_dir, fid), ds.labels(fid)))
             click.echo(f"{fid}: {len(kept)} detections above {thr:.3f} ({times[-1]:.2f}s)")
     result = {"frames": len(ids), "threshold": thr, "seconds_per_frame": float(np.mean(times)) if times else 0.0}
     if gts:
         res = evaluate_detections(dets_all, [g[0] for g in gts])
         kept_res = evaluate_detections([d.subset(d.scores > thr) for d in dets_all], [g[0] for g in gts])
-        kit = {d: kitti_ap_2d(dets_all, [g[1] for g in gts], difficulty=d) for d in ("easy", "moderate", "hard")}
+        kit = detection_ap_2d(dets_all, [g[1] for g in gts])
         result.update(ap=summary(res), at_threshold={"recall": kept_res["max_recall"],
                                                      "precision": float(kept_res["precision"][-1]) if len(kept_res["precision"]) else float("nan")},
-                      kitti_2d_ap={d: {"ap": r["ap"], "n_gt": r["n_gt"]} for d, r in kit.items()})
-        click.echo("KITTI 2D AP (Car, IoU 0.7, R40): " + ", ".join(
-            f"{d} {100 * r['ap']:.1f}% ({r['n_gt']} cars)" for d, r in kit.items()))
+                      kitti_2d_ap={d: {"ap": kit["2d"][d], "n_gt": kit["n_gt"][d]} for d in kit["2d"]})
+        click.echo("KITTI 2D AP (Car, IoU 0.7, R40, devkit rules): " + ", ".join(
+            f"{d} {'-' if ap is None else f'{ap:.1f}'} ({kit['n_gt'][d]} cars)" for d, ap in kit["2d"].items()))
         click.echo(f"AP {100 * res['ap']:.1f}% over {res['n_gt']} cars (IoU 0.5, >50 px, >=20% visible); "
                    f"max recall {res['max_recall']:.2f}; viewpoint bin accuracy of TPs {res['viewpoint_bin_acc']:.2f}, "
                    f"within 45 deg {res['viewpoint_within_45']:.2f}")

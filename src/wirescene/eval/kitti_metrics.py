@@ -591,6 +591,53 @@ def kitti_metrics(
     }
 
 
+def detection_ap_2d(detections, gt_frames: Sequence[FrameLabels | Sequence[Label]]) -> dict:
+    """KITTI 2D AP and AOS (R40, Car) of 2D detections, by the devkit's rules.
+
+    Parameters
+    ----------
+    detections : sequence of Detections
+        Per frame, anything with ``boxes`` ``(D, 4)``, ``scores`` ``(D,)`` and ``alpha``
+        ``(D,)`` (NaN: no viewpoint, then AOS is not evaluated); every box a ``Car``.
+    gt_frames : sequence of FrameLabels or lists of Label
+        Ground truth of the same frames.
+
+    Returns
+    -------
+    dict
+        ``{"2d" | "aos" | "2d_iou_0.5": {difficulty: AP in percent or None}, "n_gt":
+        {difficulty: count}, "curves": {"2d" | "2d_iou_0.5": {difficulty: (41,) precision}}}``.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> from wirescene.core.types import Detections
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> box = np.array([[100.0, 100, 200, 160]])
+    >>> dets = [Detections(box, np.array([0.5 + i / 100]), np.array([0.0])) for i in range(41)]
+    >>> detection_ap_2d(dets, [[car]] * 41)["2d"]["moderate"]  # 41 cars, each found (fewer: < 100, the devkit's sampling)
+    100.0
+    >>> detection_ap_2d([Detections(box + [25, 0, 25, 0], d.scores, d.alpha) for d in dets], [[car]] * 41)["2d"]
+    {'easy': 0.0, 'moderate': 0.0, 'hard': 0.0}
+    """
+    if len(detections) != len(gt_frames):
+        raise ValueError(f"{len(detections)} detection frames but {len(gt_frames)} ground-truth frames")
+    rows = []
+    for d in detections:
+        alpha = np.nan_to_num(np.asarray(d.alpha, float), nan=_NO_ALPHA)
+        rows.append([Label("Car", -1.0, -1, float(a), b, [-1.0, -1.0, -1.0], [_NO_LOCATION] * 3, _NO_ALPHA, float(c))
+                     for b, c, a in zip(np.asarray(d.boxes, float).reshape(-1, 4), np.asarray(d.scores, float), alpha)])
+    curves = kitti_curves(gt_frames, rows, class_name="car", min_overlaps=(MIN_OVERLAP["car"], 0.5))
+    strict, loose = _aps(curves[MIN_OVERLAP["car"]], 40), _aps(curves[0.5], 40)
+
+    def precision(c):
+        return {d: None if c["2d"][d] is None else c["2d"][d].precision for d in DIFFICULTIES}
+
+    return {"2d": strict["2d"], "aos": strict["aos"], "2d_iou_0.5": loose["2d"],
+            "n_gt": {d: _count_gt(gt_frames, d) for d in DIFFICULTIES},
+            "curves": {"2d": precision(curves[MIN_OVERLAP["car"]]), "2d_iou_0.5": precision(curves[0.5])}}
+
+
 def difficulty_of(label: Label) -> str | None:
     """The easiest KITTI difficulty whose limits a ground-truth object meets (``None``:
     beyond *hard*, ignored in every evaluation)."""
