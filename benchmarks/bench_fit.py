@@ -18,20 +18,20 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-from pathlib import Path  # noqa: E402
 import resource  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.io.detections import detections_from_labels  # noqa: E402
-from wirescene.infer.evidence import part_evidence  # noqa: E402
-from wirescene.fitting.pipeline import FitOptions, fit_scene  # noqa: E402
-from wirescene.infer.inference import InferenceOptions  # noqa: E402
-from wirescene.lift import LiftingOptions, lift_table, select_particles  # noqa: E402
-from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood  # noqa: E402
 from wirescene.core.shape import load_default  # noqa: E402
+from wirescene.fitting.pipeline import FitOptions, fit_scene  # noqa: E402
+from wirescene.infer.evidence import part_evidence  # noqa: E402
+from wirescene.infer.inference import InferenceOptions  # noqa: E402
+from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood  # noqa: E402
+from wirescene.io.detections import detections_from_labels  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
+from wirescene.lift import LiftingOptions, lift_table, select_particles  # noqa: E402
 
 
 def likelihood_batch(camera, model, evidence, x, z, az, s, obj, c):

@@ -46,20 +46,18 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _common import parse_config, run_configs  # noqa: E402
-
-from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.io.wireframes import read_wireframe_gt, wireframe_gt_path  # noqa: E402
-from wirescene.io.detections import detections_from_labels  # noqa: E402
-from wirescene.core.types import Detections  # noqa: E402
-from wirescene.eval.metrics import evaluate  # noqa: E402
-from wirescene.infer.evidence import oracle_evidence, part_evidence  # noqa: E402
-from wirescene.infer.inference import (  # noqa: E402
-    InferenceOptions, _evaluate, _to_viewing, estimate_from_refined, refine_particles)
-from wirescene.lift import lift_table, plane_vote_weights, select_particles, LiftingOptions  # noqa: E402
 from wirescene.core.groundplane import object_pose  # noqa: E402
 from wirescene.core.shape import load_default  # noqa: E402
-from wirescene.eval.runner import frame_result  # noqa: E402
+from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import angle_difference  # noqa: E402
+from wirescene.eval.metrics import evaluate  # noqa: E402
+from wirescene.eval.runner import frame_result  # noqa: E402
+from wirescene.infer.evidence import oracle_evidence, part_evidence  # noqa: E402
+from wirescene.infer.inference import InferenceOptions, _evaluate, _to_viewing, estimate_from_refined, refine_particles  # noqa: E402
+from wirescene.io.detections import detections_from_labels  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
+from wirescene.io.wireframes import read_wireframe_gt, wireframe_gt_path  # noqa: E402
+from wirescene.lift import LiftingOptions, lift_table, plane_vote_weights, select_particles  # noqa: E402
 
 #: The settings of the study: the paper's schedule, each addition alone, the previous
 #: default (shape prior 10, box 300, polish 24), then the default and its variations of weights,

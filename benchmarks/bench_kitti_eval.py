@@ -28,9 +28,9 @@ import numpy as np  # noqa: E402
 
 from _common import best_of  # noqa: E402
 from wirescene.core.boxes import box_corners  # noqa: E402
-from wirescene.io.kitti import Label, write_labels  # noqa: E402
-from wirescene.eval.kitti_metrics import format_kitti_table, kitti_metrics, read_label_dirs  # noqa: E402
 from wirescene.core.groundplane import rotation_y  # noqa: E402
+from wirescene.eval.kitti_metrics import format_kitti_table, kitti_metrics, read_label_dirs  # noqa: E402
+from wirescene.io.kitti import Label, write_labels  # noqa: E402
 
 P2 = np.array([[721.5, 0.0, 609.6, 44.9], [0.0, 721.5, 172.9, 0.2], [0.0, 0.0, 1.0, 0.003]])
 SIZES = {"Car": (1.53, 1.63, 3.88), "Van": (2.2, 1.9, 5.1), "Pedestrian": (1.76, 0.66, 0.84)}

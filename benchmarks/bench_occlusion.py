@@ -29,9 +29,9 @@ import numpy as np
 
 from _common import best_of
 from wirescene.core.groundplane import object_pose, transform
-from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
 from wirescene.core.shape import load_default
 from wirescene.core.wireframe import FACES
+from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
 
 
 def dense_reference_blocked(origin, targets, triangles, ignore=None, eps=1e-6, chunk=1 << 17):

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _common import option_value  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.eval.kitti_metrics import kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
@@ -38,8 +39,6 @@ from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
 from wirescene.training.scores import cross_validated_confidences, read_run_records
-
-from _common import option_value  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 
 
 def kitti_with_cv_scores(records, gt, folds):

@@ -35,11 +35,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.io.kitti import KittiDataset, Label, read_labels, write_labels  # noqa: E402
 from wirescene.eval.kitti_metrics import kitti_metrics  # noqa: E402
 from wirescene.eval.runner import evaluate_dataset  # noqa: E402
 from wirescene.eval.sources import DetectionSource, frame_seed  # noqa: E402
 from wirescene.fitting.pipeline import FitOptions  # noqa: E402
+from wirescene.io.kitti import KittiDataset, Label, read_labels, write_labels  # noqa: E402
 
 
 def write_perturbed_detections(dataset: KittiDataset, out_dir: Path, *, level: float, viewpoint_noise_deg: float,

@@ -44,9 +44,9 @@ def main():
     for variant, results in records.items():
         by_frame = {r.frame_id: r for r in results}
         calibrated = cross_validated_confidences(records, folds, variant)
-        for name, scores_of in (("detection", lambda f: by_frame[f].det_scores),
-                                ("objective", lambda f: -by_frame[f].est_cost),
-                                ("calibrated", lambda f: calibrated[f])):
+        for name, scores_of in (("detection", lambda f, by_frame=by_frame: by_frame[f].det_scores),
+                                ("objective", lambda f, by_frame=by_frame: -by_frame[f].est_cost),
+                                ("calibrated", lambda f, calibrated=calibrated: calibrated[f])):
             preds = [by_frame[f].estimate_labels(scores_of(f)) for f in frames]
             m = kitti_metrics([gt[f] for f in frames], preds)
 

@@ -45,12 +45,12 @@ if __name__ == "__main__":
 import numpy as np
 
 from _common import best_of
-from wirescene.infer import torch_backend as tb
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, object_pose, transform
-from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion
-from wirescene.infer.likelihood import object_likelihood
 from wirescene.core.shape import load_default
 from wirescene.core.wireframe import FACES
+from wirescene.infer import torch_backend as tb
+from wirescene.infer.likelihood import object_likelihood
+from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion
 
 CENTER = np.array([0.06, 0.0, 0.0])  # KITTI P2's optical centre is slightly off the origin
 

@@ -6,11 +6,11 @@ import json
 import re
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import time
 import zlib
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -19,12 +19,12 @@ from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import wirescene.io.kitti
 from conftest import KITTI_ROOT
 from wirescene.cli.main import main
 from wirescene.core.camera import read_kitti_calib
 from wirescene.core.errors import InputError
 from wirescene.io.detections import read_detections
-import wirescene.io.kitti
 from wirescene.io.kitti import KittiDataset, read_image, read_labels
 
 SPLIT = KITTI_ROOT / "training"

@@ -9,8 +9,8 @@ from click.testing import CliRunner
 
 from conftest import KITTI_ROOT
 from wirescene.cli.main import main
-from wirescene.io.detections import read_detections
 from wirescene.core.errors import InputError
+from wirescene.io.detections import read_detections
 
 SPLIT = KITTI_ROOT / "training"
 
@@ -167,8 +167,8 @@ def test_eval_with_external_boxes_without_viewpoint(tmp_path):
 
 
 def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gpu(tmp_path):
-    from wirescene.infer import torch_backend
     from wirescene.cli.main import _resolve_device
+    from wirescene.infer import torch_backend
 
     r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "fg", "--frames", "000002", "--device", "tpu"])
     assert r.exit_code == 2 and "unknown device 'tpu'" in r.output and len(r.output.strip().splitlines()) == 1

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from conftest import KITTI_ROOT, assert_close
 from wirescene.io.kitti import KittiDataset
 from wirescene.predetect.geometry import bottom_ratio
 from wirescene.training.cut_paste import car_silhouette, paste_cars
 from wirescene.training.kitti_detector import load_training_frames, mirrored_boxes, mirrored_image
-
-from conftest import KITTI_ROOT, assert_close
 
 FRAMES = ["000010", "001545", "000002"]
 

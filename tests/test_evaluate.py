@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from conftest import assert_close
-from wirescene.io import KittiDataset, Label
-from wirescene.eval.metrics import FrameResult, evaluate, format_table, match_detections
 from wirescene.core.errors import ShapeError
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
+from wirescene.eval.metrics import FrameResult, evaluate, format_table, match_detections
+from wirescene.io import KittiDataset, Label
 
 
 def car(box, *, x=0.0, z=20.0, ry=0.0, alpha=None, occluded=0, type="Car", h=1.5):

@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, assert_close
-from wirescene.io.kitti import KittiDataset
-from wirescene.core.groundplane import alpha_from_rotation_y
-from wirescene.fitting.pipeline import FitOptions, fit_scene
-from wirescene.core.types import Detections
 from wirescene.core.errors import ShapeError
-from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
-from wirescene.lift import LiftingOptions, lift_table, road_angle, select_particles
-from wirescene.infer.likelihood import GaussianVertexEvidence, instantiate_wireframes, object_likelihood
+from wirescene.core.groundplane import alpha_from_rotation_y
 from wirescene.core.shape import load_default
+from wirescene.core.types import Detections
 from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
+from wirescene.fitting.pipeline import FitOptions, fit_scene
+from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
+from wirescene.infer.likelihood import GaussianVertexEvidence, instantiate_wireframes, object_likelihood
+from wirescene.io.kitti import KittiDataset
+from wirescene.lift import LiftingOptions, lift_table, road_angle, select_particles
 
 
 def test_object_likelihood_matches_equation():

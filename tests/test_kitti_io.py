@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_close
+from wirescene.core.errors import InputError
 from wirescene.io import (
     CAR_TYPES,
     KittiDataset,
@@ -18,7 +19,6 @@ from wirescene.io import (
     select_cars,
     write_labels,
 )
-from wirescene.core.errors import InputError
 
 GOOD = "Car 0.00 0 1.95 354.43 185.52 549.52 294.49 1.43 1.70 3.95 -2.39 1.66 11.80 1.76"
 

@@ -8,7 +8,6 @@ import pytest
 
 from conftest import KITTI_ROOT, assert_close
 from wirescene.core.errors import InputError
-from wirescene.io.kitti import FrameLabels, Label, read_labels
 from wirescene.eval.kitti_metrics import (
     DIFFICULTIES,
     N_SAMPLE_PTS,
@@ -23,6 +22,7 @@ from wirescene.eval.kitti_metrics import (
     kitti_metrics,
     read_label_dirs,
 )
+from wirescene.io.kitti import FrameLabels, Label, read_labels
 
 
 def lab(box, *, typ="Car", loc=(0.0, 1.6, 20.0), dims=(1.5, 1.6, 3.9), ry=0.0, alpha=0.0, score=None, occ=0, trunc=0.0):

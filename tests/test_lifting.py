@@ -3,11 +3,12 @@ import pytest
 
 from conftest import KITTI_ROOT, assert_close
 from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners, project_points_to_box
-from wirescene.io.kitti import KittiDataset
-from wirescene.io.detections import detections_from_labels
 from wirescene.core.groundplane import object_pose
-from wirescene.fitting.pipeline import fit_scene
 from wirescene.core.types import Detections
+from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
+from wirescene.fitting.pipeline import fit_scene
+from wirescene.io.detections import detections_from_labels
+from wirescene.io.kitti import KittiDataset
 from wirescene.lift import (
     LiftingOptions,
     lift_detections,
@@ -16,7 +17,6 @@ from wirescene.lift import (
     select_particles,
     solve_positions,
 )
-from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
 
 
 @pytest.fixture(scope="module")

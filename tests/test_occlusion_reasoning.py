@@ -1,13 +1,19 @@
 import numpy as np
 
 from conftest import KITTI_ROOT, assert_close
-from wirescene.io.kitti import KittiDataset
-from wirescene.infer.masks import all_mask_hidden, fit_mask, mask_hidden, mask_weight_sums, normalised_coordinates, occluder_masks
-from wirescene.training.occlusion import occlusion_accuracy_by_c
-from wirescene.infer.inference import update_occlusion
-from wirescene.core.types import SceneParticles
-from wirescene.infer.inference import _to_viewing
 from wirescene.core.shape import load_default
+from wirescene.core.types import SceneParticles
+from wirescene.infer.inference import _to_viewing, update_occlusion
+from wirescene.infer.masks import (
+    all_mask_hidden,
+    fit_mask,
+    mask_hidden,
+    mask_weight_sums,
+    normalised_coordinates,
+    occluder_masks,
+)
+from wirescene.io.kitti import KittiDataset
+from wirescene.training.occlusion import occlusion_accuracy_by_c
 
 rng = np.random.default_rng(0)
 UV = rng.uniform([100, 50], [300, 120], size=(36, 2))

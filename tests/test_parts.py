@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import KITTI_ROOT, assert_close
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, N_CLASSES, N_PARTS, PartDetector, load_default, response_maps
-
-from conftest import KITTI_ROOT, assert_close
 
 
 def _pattern(shape=(80, 100), seed=0):
@@ -187,8 +186,8 @@ def test_response_lookup_matches_patch_classification(tiny, kitti_frame):
 def tiny_synth():
     from sklearn.ensemble import RandomForestClassifier
 
-    from wirescene.training.parts import make_synth_patch_data
     from wirescene.synth.generate import generate_scene
+    from wirescene.training.parts import make_synth_patch_data
 
     data = make_synth_patch_data(n_scenes=3, seed=1000, kinds=("ghog",))
     rf = RandomForestClassifier(n_estimators=8, max_depth=14, random_state=0, class_weight="balanced",
@@ -291,9 +290,9 @@ def test_response_map_smoothing(tiny, kitti_frame):
 
 def test_kitti_car_wireframes_fit_label_boxes():
     from wirescene.core.boxes import iou_2d
+    from wirescene.core.wireframe import SIDE
     from wirescene.io.kitti import KittiDataset
     from wirescene.training.parts_real import kitti_car_wireframes
-    from wirescene.core.wireframe import SIDE
 
     ds = KittiDataset(KITTI_ROOT)
     n = 0
@@ -313,8 +312,8 @@ def test_kitti_car_wireframes_fit_label_boxes():
 
 
 def test_mirror_cars_swaps_sides_and_is_an_involution():
-    from wirescene.training.parts_real import mirror_cars
     from wirescene.core.wireframe import MIRROR
+    from wirescene.training.parts_real import mirror_cars
 
     rng = np.random.default_rng(0)
     img = rng.integers(0, 255, (30, 50, 3)).astype(np.uint8)

@@ -8,13 +8,13 @@ from click.testing import CliRunner
 
 from conftest import KITTI_ROOT
 from wirescene.cli.main import main
-from wirescene.io.kitti import KittiDataset, Label
 from wirescene.eval.metrics import FrameResult
 from wirescene.eval.records import RECORDS_DIR
 from wirescene.eval.runner import _FrameJob, evaluate_dataset
 from wirescene.eval.sources import DetectionSource
 from wirescene.fitting.pipeline import FitOptions
 from wirescene.infer.inference import InferenceOptions
+from wirescene.io.kitti import KittiDataset, Label
 from wirescene.lift import LiftingOptions
 
 # Few particles and iterations keep every run of the two frames at a few seconds.

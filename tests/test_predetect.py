@@ -5,17 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import KITTI_ROOT, assert_close
+from wirescene.core.errors import InputError
+from wirescene.core.types import Detections
+from wirescene.core.viewpoints import bin_center
+from wirescene.core.wireframe import EDGES
 from wirescene.io.kitti import FrameLabels, Label, read_image
 from wirescene.predetect.ap import FrameGT, evaluate_detections, frame_gt, voc_average_precision
 from wirescene.predetect.bank import DetectorBank, cluster_activations, detect_cars, load_default_bank, nms
 from wirescene.predetect.configurations import Configuration, connected_subsets, mirror_bin
 from wirescene.predetect.hog import N_FEAT, crop_features, hog_cells
-from wirescene.core.errors import InputError
-from wirescene.core.types import Detections
-from wirescene.core.viewpoints import bin_center
-from wirescene.core.wireframe import EDGES
-
-from conftest import KITTI_ROOT, assert_close
 
 
 def _label(box, type_="Car", occluded=0, truncated=0.0, alpha=0.0):
@@ -155,9 +154,9 @@ def test_bank_npz_round_trip(tmp_path):
 
 def test_retrain_tiny_bank_finds_cars(tmp_path):
     from wirescene.core.boxes import iou_2d
-    from wirescene.training.detector import train_detector_bank
-    from wirescene.synth.generate import generate_scene
     from wirescene.core.viewpoints import viewpoint_bin
+    from wirescene.synth.generate import generate_scene
+    from wirescene.training.detector import train_detector_bank
 
     bank, rep = train_detector_bank(tmp_path / "tiny.npz", seed=3, n_scenes=8, n_partial=1, bins=[2, 6],
                                     mining_images=4, neg_per_image=20, n_val=1, cars=(4, 8))
@@ -210,8 +209,8 @@ def test_detect_command_writes_readable_files(tmp_path):
 
     from click.testing import CliRunner
 
-    from wirescene.io.detections import read_detections
     from wirescene.cli.detect import detect
+    from wirescene.io.detections import read_detections
 
     res = CliRunner().invoke(detect, [str(KITTI_ROOT), "--frames", "000010", "--out", str(tmp_path / "dets"),
                                       "--json", str(tmp_path / "ap.json"), "--pr-curve", str(tmp_path / "pr.png"),
@@ -277,9 +276,9 @@ def test_platt_calibration_is_monotone_and_fits():
 
 def test_kitti_examples_geometry_and_mirror():
     from wirescene.core.boxes import iou_2d
+    from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.io.kitti import KittiDataset
     from wirescene.training.kitti_detector import load_training_frames
-    from wirescene.core.viewpoints import viewpoint_bin
 
     ds = KittiDataset(KITTI_ROOT)
     images, ex = load_training_frames(ds, ["000010"])

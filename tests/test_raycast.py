@@ -11,8 +11,8 @@ from scipy.spatial import ConvexHull
 from conftest import assert_close
 from wirescene.core.errors import ShapeError
 from wirescene.core.groundplane import object_pose, transform
-from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
 from wirescene.core.raycast import first_hit_distance, segment_blocked
+from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
 
 
 def embree_blocked(mesh_vertices, mesh_faces, origin, targets):

@@ -11,8 +11,7 @@ import trimesh
 from conftest import DATA, assert_close
 from wirescene.core import wireframe as wf
 from wirescene.core.errors import InputError, ShapeError
-from wirescene.core.shape import (KITTI_CAR_SIZE, ShapeModel, augment_to_kitti_sizes, fit_shape_model,
-                             load_default)
+from wirescene.core.shape import KITTI_CAR_SIZE, ShapeModel, augment_to_kitti_sizes, fit_shape_model, load_default
 
 FLIP = np.array([1.0, 1.0, -1.0])
 

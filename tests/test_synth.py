@@ -12,8 +12,8 @@ import pytest
 pytest.importorskip("embreex")
 
 from wirescene.core.boxes import box_corners, project_points_to_box  # noqa: E402
-from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.core.groundplane import rotation_y  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.synth import OCCLUSION_THRESHOLDS, generate_dataset, generate_scene, write_scene  # noqa: E402
 from wirescene.synth.layout import CarPlacement, Occluder, polygons_overlap  # noqa: E402
 

@@ -11,16 +11,16 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import assert_close
 
-from wirescene.infer import torch_backend as tb
+from conftest import assert_close
 from wirescene.core.errors import ShapeError, WiresceneError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, object_pose, transform
-from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
 from wirescene.core.raycast import segment_blocked
-from wirescene.infer.likelihood import object_likelihood
 from wirescene.core.shape import load_default
 from wirescene.core.wireframe import FACES, N_VERTICES
+from wirescene.infer import torch_backend as tb
+from wirescene.infer.likelihood import object_likelihood
+from wirescene.infer.occlusion import incidence, inter_object_occlusion, self_occlusion
 
 CENTER = np.array([0.06, 0.0, 0.0])  # KITTI P2's optical centre is slightly off the origin
 AGREEMENT = 0.9999  # float32 vs float64 occlusion flags, fraction of vertices

@@ -300,8 +300,8 @@ def test_models_replace_the_bank_and_the_resume_fingerprint(trained, tmp_path):
     shipped = wirescene.detect(image, calib)
     own = wirescene.detect(image, calib, models=out)
     assert len(own) != len(shipped) or not np.allclose(own.boxes, shipped.boxes)
-    from wirescene.predetect.bank import DetectorBank, detect_cars
     from wirescene.api import as_camera, as_image
+    from wirescene.predetect.bank import DetectorBank, detect_cars
 
     rgb = as_image(image)
     direct = detect_cars(rgb, bank=DetectorBank.load(out / "detector_bank.npz"),

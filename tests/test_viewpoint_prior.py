@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import KITTI_ROOT, assert_close
 from wirescene.core.camera import Camera
 from wirescene.predetect.viewpoint_prior import (
     choose_viewpoints,
@@ -12,8 +13,6 @@ from wirescene.predetect.viewpoint_prior import (
     lateral_position,
     viewpoint_log_prior,
 )
-
-from conftest import KITTI_ROOT, assert_close
 
 FRONT, REAR = 2, 6  # bins of alpha = +90 deg (facing the camera) and -90 deg (facing away)
 

@@ -36,7 +36,6 @@ from wirescene.core.groundplane import (
 )
 from wirescene.core.types import Detections, SceneParticles
 
-
 #: Width (degrees) of the road-alignment prior (:func:`road_alignment_cost`), one for
 #: both stages: the fine stage's prior and its gate act on what the coarse prior settled.
 ROAD_PRIOR_WIDTH = 20.0

@@ -46,8 +46,8 @@ import numpy as np
 
 from wirescene.cad.sideview import SideView, find_arches, side_view
 from wirescene.core.errors import InputError
-from wirescene.core.wireframe import MIRROR, N_PER_SIDE, PART_NAMES, VERTEX_INDEX, VERTEX_NAMES
 from wirescene.core.resources import DATA_DIR
+from wirescene.core.wireframe import MIRROR, N_PER_SIDE, PART_NAMES, VERTEX_INDEX, VERTEX_NAMES
 
 __all__ = ["annotate", "auto_landmarks", "load_corrections", "apply_corrections",
            "symmetrize", "CORRECTIONS_PATH"]

@@ -231,8 +231,10 @@ def canonicalize(vertices, faces, *, units: str = "auto", up: int | None = None)
     else:
         fwd_sign = 1.0
 
-    ex = np.zeros(3); ex[length] = fwd_sign
-    ey = np.zeros(3); ey[up] = -up_sign  # object y points down
+    ex = np.zeros(3)
+    ex[length] = fwd_sign
+    ey = np.zeros(3)
+    ey[up] = -up_sign  # object y points down
     ez = np.cross(ex, ey)
     R = np.stack([ex, ey, ez])  # rows: object axes in file coordinates
     out = v @ R.T

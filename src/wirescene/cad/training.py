@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
+from wirescene.core.artefacts import load_json, load_npz, save_json, save_npz
 from wirescene.core.errors import InputError
+from wirescene.core.resources import DATA_DIR
 from wirescene.core.shape import DEFAULT_MODEL_PATH, ShapeModel, fit_shape_model
 from wirescene.core.wireframe import VERTEX_NAMES
-from wirescene.core.artefacts import load_json, load_npz, save_json, save_npz
-from wirescene.core.resources import DATA_DIR
 
 __all__ = ["train_shape_model", "load_cad_meshes", "load_cad_landmarks", "DEFAULT_AUGMENT"]
 

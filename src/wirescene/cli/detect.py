@@ -110,9 +110,9 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     """Run the configuration detector bank on a KITTI-layout directory and report AP."""
     import numpy as np
 
-    from wirescene.io.kitti import KittiDataset
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
+    from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import DetectorBank, detect_cars
 

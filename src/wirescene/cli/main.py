@@ -11,8 +11,6 @@ from pathlib import Path
 import click
 import numpy as np
 
-from wirescene.core.version import __version__
-from wirescene.core.errors import InputError, WiresceneError
 from wirescene.cli.options import (
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
@@ -24,6 +22,8 @@ from wirescene.cli.options import (
     select_frames,
     split_file_option,
 )
+from wirescene.core.errors import InputError, WiresceneError
+from wirescene.core.version import __version__
 
 
 def _usage_message(exc: click.UsageError) -> str:
@@ -433,11 +433,11 @@ def demo_cmd(out, particles, variants, models):
     """Fit model variants to the bundled real KITTI frames, evaluate, write pictures."""
     import time
 
-    from wirescene.io.kitti import KittiDataset
-    from wirescene.eval.metrics import format_table
     from wirescene.api import fit
+    from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
     from wirescene.io.outputs import write_fit_outputs
 
     check_output_dir(out, "--out")
@@ -482,13 +482,13 @@ def demo_cmd(out, particles, variants, models):
 def gt_cmd(kitti_root, frame, out, split):
     """Draw a frame's ground truth with the mean wireframe at every GT car pose
     (self-occluded vertices in blue): a check of geometry, shape model and labels."""
-    from wirescene.io.kitti import KittiDataset
     from wirescene.core.groundplane import rotation_y, transform
-    from wirescene.infer.occlusion import self_occlusion
-    from wirescene.core.types import ObjectEstimate, SceneEstimate
     from wirescene.core.shape import load_default
-    from wirescene.io.pictures import overlay, save_figure
+    from wirescene.core.types import ObjectEstimate, SceneEstimate
     from wirescene.core.wireframe import EDGES, FACES
+    from wirescene.infer.occlusion import self_occlusion
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.io.pictures import overlay, save_figure
 
     dataset = KittiDataset(kitti_root, split=split)
     camera = dataset.camera(frame)

@@ -248,8 +248,8 @@ def _blocked_chunk(d, t, eps, keep):
 def has_embree() -> bool:
     """Whether trimesh's Embree ray tracer (``embreex``) is importable."""
     try:
-        from trimesh.ray import ray_pyembree  # noqa: F401
         import embreex  # noqa: F401
+        from trimesh.ray import ray_pyembree  # noqa: F401
     except ImportError:
         return False
     return True

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.boxes import KITTI_CAR_SIZE
 from wirescene.core.errors import InputError, check_shape
-from wirescene.core.wireframe import N_VERTICES
-from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.resources import DATA_DIR
+from wirescene.core.wireframe import N_VERTICES
 
 __all__ = ["ShapeModel", "fit_shape_model", "augment_to_kitti_sizes", "load_default",
            "FORMAT_VERSION", "DEFAULT_MODEL_PATH", "KITTI_CAR_SIZE"]

@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wirescene.core.boxes import box_centers
-from wirescene.core.labels import Label, format_labels
 from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import (
     KITTI_CAMERA_HEIGHT,
@@ -22,6 +21,7 @@ from wirescene.core.groundplane import (
     object_pose,
     rotation_y_of,
 )
+from wirescene.core.labels import Label, format_labels
 
 
 @dataclass

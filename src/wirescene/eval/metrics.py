@@ -50,9 +50,9 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from wirescene.core.boxes import iou_2d
-from wirescene.io.kitti import CAR_TYPES, Label
 from wirescene.core.errors import ShapeError, check_shape
 from wirescene.core.viewpoints import angle_difference
+from wirescene.io.kitti import CAR_TYPES, Label
 
 SUBSETS = ("all", "occ>0", "occ>3")
 METRICS = (

@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 from wirescene.core.boxes import MEAN_CAR_DIMS, iou_2d
-from wirescene.core.wireframe import N_VERTICES
-from wirescene.io.wireframes import WireframeGT
 from wirescene.core.types import Detections
+from wirescene.core.wireframe import N_VERTICES
 from wirescene.infer.likelihood import GaussianVertexEvidence
+from wirescene.io.wireframes import WireframeGT
 
 
 class ResponseEvidence:
@@ -78,8 +78,8 @@ def viewpoint_from_evidence(camera, detections: Detections, evidence, shape_mode
     detector) are set to the bin whose mean-shape wireframe, lifted onto a level ground
     plane at that viewpoint, best explains the part evidence; known viewpoints are kept."""
     from wirescene.core.viewpoints import N_BINS, bin_center
-    from wirescene.lift import LiftingOptions, solve_positions
     from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood
+    from wirescene.lift import LiftingOptions, solve_positions
 
     unknown = np.flatnonzero(~np.isfinite(detections.alpha))
     if len(unknown) == 0:

@@ -55,13 +55,12 @@ from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import plane_normal, point_on_plane, wrap_angle
 from wirescene.core.shape import ShapeModel
 from wirescene.core.types import ObjectEstimate, SceneEstimate, SceneParticles
-from wirescene.lift import ROAD_PRIOR_WIDTH, box_residual, project_boxes, road_alignment_cost, road_angle
-from wirescene.infer.occluded_score import load_occluded_score
-from wirescene.infer.masks import best_mask, fit_mask, mask_hidden
-from wirescene.infer.occlusion import inter_object_occlusion
 from wirescene.core.wireframe import FACES, N_VERTICES
 from wirescene.infer.likelihood import PartEvidence, instantiate_wireframes, object_likelihood
-
+from wirescene.infer.masks import best_mask, fit_mask, mask_hidden
+from wirescene.infer.occluded_score import load_occluded_score
+from wirescene.infer.occlusion import inter_object_occlusion
+from wirescene.lift import ROAD_PRIOR_WIDTH, box_residual, project_boxes, road_alignment_cost, road_angle
 
 _SIZE_MEAN, _SIZE_STD = np.array(KITTI_CAR_SIZE["mean"]), np.array(KITTI_CAR_SIZE["std"])  # l, w, h
 
@@ -536,7 +535,6 @@ class SearchState:
         """Steps 1 and 3 of Algorithm 1 for the parameters ``block`` (pose or shape) of
         every object with its occlusion fixed: Gaussian samples around the current value,
         the best kept, the spread re-estimated."""
-        o = objective.options
         P, N, D = self.theta.shape
         noise = np.zeros((P, N, samples, D))
         noise[..., block] = rng.standard_normal((P, N, samples, len(block)))

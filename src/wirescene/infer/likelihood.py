@@ -21,9 +21,9 @@ import numpy as np
 from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import object_pose, transform
-from wirescene.infer.occlusion import self_occlusion
 from wirescene.core.shape import ShapeModel
 from wirescene.core.wireframe import FACES, N_VERTICES
+from wirescene.infer.occlusion import self_occlusion
 
 
 class PartEvidence(Protocol):

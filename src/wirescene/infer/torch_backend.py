@@ -45,7 +45,14 @@ import os
 import numpy as np
 
 from wirescene.core.errors import ShapeError, WiresceneError, check_shape
-from wirescene.core.raycast import DEFAULT_EPS, check_eps, check_faces, incidence, interaction_candidates, segment_inputs
+from wirescene.core.raycast import (
+    DEFAULT_EPS,
+    check_eps,
+    check_faces,
+    incidence,
+    interaction_candidates,
+    segment_inputs,
+)
 
 # Upper bound on (ray x triangle) pairs per chunk. The pair temporaries are the
 # (rays, 4F) matrix of dot products and two (rays, F) minima, 6 values per pair, so

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.io.kitti import ALPHA_NOT_ESTIMATED, CAR_TYPES, FrameLabels, read_labels
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
 from wirescene.core.validate import boxes_problem
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
+from wirescene.io.kitti import ALPHA_NOT_ESTIMATED, CAR_TYPES, FrameLabels, read_labels
 
 
 def _binned_viewpoint(alpha) -> np.ndarray:

@@ -20,15 +20,14 @@ from typing import Iterable
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from wirescene.core.camera import Camera, KittiCalib, read_kitti_calib
 from wirescene.core.atomic import write_text
+from wirescene.core.camera import Camera, KittiCalib, read_kitti_calib
 from wirescene.core.errors import InputError, ShapeError
 from wirescene.core.image import to_rgb_uint8
-from wirescene.core.validate import MAX_PIXEL, outside_image
 from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label types live in core)
     ALPHA_NOT_ESTIMATED,
-    COLUMNS,
     CAR_TYPES,
+    COLUMNS,
     DONTCARE,
     FrameLabels,
     Label,
@@ -37,6 +36,7 @@ from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label
     format_labels,
     select_cars,
 )
+from wirescene.core.validate import MAX_PIXEL, outside_image
 
 # --------------------------------------------------------------------------- labels
 

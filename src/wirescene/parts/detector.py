@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from wirescene.parts import features as feat
 from wirescene.core.errors import InputError, ShapeError, check_shape
 from wirescene.core.resources import DATA_DIR
+from wirescene.parts import features as feat
 
 __all__ = [
     "N_PARTS", "BACKGROUND", "N_CLASSES", "MODEL_FORMAT", "DEFAULT_MODEL_PATH", "DEFAULT_SCALES",

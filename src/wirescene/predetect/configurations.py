@@ -247,6 +247,6 @@ def select_configurations(examples, *, n_partial: int = 3, min_coverage: float =
                 break
             if all(iou_2d(nb, o) <= max_iou for _, _, o in chosen):
                 chosen.append((cov, c, nb))
-        for cov, c, nb in chosen:
+        for _, c, _ in chosen:
             out.append(make_configuration(b, c, ex, area_cells=partial_area))
     return out

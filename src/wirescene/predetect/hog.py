@@ -10,9 +10,9 @@ image, no Python loops over pixels.
 from __future__ import annotations
 
 import numpy as np
+from PIL import Image
 
 from wirescene.core.image import to_grey
-from PIL import Image
 
 CELL = 8
 N_FEAT = 31

@@ -56,16 +56,16 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from wirescene.core.camera import Camera, read_kitti_calib, write_kitti_calib
-from wirescene.io.kitti import FrameLabels, Label, write_labels
-from wirescene.core.errors import InputError
-from wirescene.core.boxes import box_corners, project_points_to_box
-from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y, rotation_y_of
-from wirescene.core.atomic import atomic_path, write_bytes
 from wirescene.cad.mesh import body_extent
+from wirescene.core.atomic import atomic_path, write_bytes
+from wirescene.core.boxes import box_corners, project_points_to_box
+from wirescene.core.camera import Camera, read_kitti_calib, write_kitti_calib
+from wirescene.core.errors import InputError
+from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y, rotation_y_of
 from wirescene.core.raycast import first_hit_distance, mesh_intersector
-from wirescene.render import render_scene
 from wirescene.core.wireframe import VERTEX_NAMES
+from wirescene.io.kitti import FrameLabels, Label, write_labels
+from wirescene.render import render_scene
 from wirescene.synth.layout import Occluder, SceneLayout, place, sample_layout
 
 IMAGE_SIZE = (1242, 375)

@@ -67,7 +67,7 @@ def paste_cars(images, examples, *, per_image: int = 3, seed: int = 0, min_heigh
     if not donors:
         return new_images, new_examples
     base = len(images)
-    for t, target in enumerate(images):
+    for target in images:
         if target.flipped or target.horizon is None:
             continue
         canvas = target.gray.astype(np.float32)

@@ -107,8 +107,8 @@ def calibrate_threshold(bank: DetectorBank, *, seed: int, n_val: int, cars=(2, 8
                         min_height: float = 30.0, camera=None, library=None):
     """Threshold maximising F1 on ``n_val`` synthetic scenes of stream ``seed`` (with
     :func:`detect_cars`'s default merging); returns ``(threshold, evaluation or None)``."""
-    from wirescene.synth.generate import default_camera, generate_scene, load_car_library
     from wirescene.predetect.ap import evaluate_detections, frame_gt
+    from wirescene.synth.generate import default_camera, generate_scene, load_car_library
 
     if not n_val:
         return 0.0, None

@@ -102,8 +102,8 @@ def car_wireframe(label, camera, mean: np.ndarray):
 def frame_examples(labels, camera, width: int, height: int, image_index: int, mean: np.ndarray, *,
                    flips: bool = True) -> list:
     """Car examples (and their mirror images, image ``image_index + 1``) of one labelled frame."""
-    from wirescene.infer.occlusion import self_occlusion
     from wirescene.core.wireframe import FACES
+    from wirescene.infer.occlusion import self_occlusion
 
     objs = [o for o in labels.objects if o.type != "DontCare"]
     out = []
@@ -390,9 +390,9 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
     IoU >= ``min_iou``: targets are each side's offset to the best-overlapping box in
     units of the detection's width or height (clipped to +-0.5). ``reg`` is the ridge
     weight on everything but the constant."""
-    from wirescene.predetect.bank import REGRESSION_FEATURES, regression_features
-
     from dataclasses import replace
+
+    from wirescene.predetect.bank import REGRESSION_FEATURES, regression_features
 
     plain = replace(bank, meta={k: v for k, v in bank.meta.items() if k != "box_regression"}, refinement=None)
     X, T = [], []

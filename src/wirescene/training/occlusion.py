@@ -19,7 +19,6 @@ import numpy as np
 from wirescene.infer.masks import best_mask, mask_hidden
 
 
-
 def occlusion_accuracy_by_c(evidence, self_hidden, visible_gt, uv, grid) -> np.ndarray:
     """Occlusion prediction accuracy ``(len(grid),)`` of the mask search for each ``c``.
 
@@ -37,7 +36,8 @@ def occlusion_accuracy_by_c(evidence, self_hidden, visible_gt, uv, grid) -> np.n
 
 def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None, detector=None, progress=None) -> dict:
     """Pick ``c`` on ``n_scenes`` held-out synthetic scenes of stream ``seed``."""
-    from wirescene.parts.detector import load_default as load_parts, response_maps
+    from wirescene.parts.detector import load_default as load_parts
+    from wirescene.parts.detector import response_maps
     from wirescene.synth.generate import generate_scene
 
     grid = np.round(np.arange(-3.0, 3.01, 0.25), 2) if grid is None else np.asarray(grid, float)

@@ -150,10 +150,12 @@ def _procedural_bg(rng, size=(240, 320)):
         kind = rng.integers(0, 4)
         if kind == 0:  # long near-horizontal / vertical line
             if rng.random() < 0.5:
-                r0 = rng.integers(0, H); r1 = int(np.clip(r0 + rng.normal(0, 15), 0, H - 1))
+                r0 = rng.integers(0, H)
+                r1 = int(np.clip(r0 + rng.normal(0, 15), 0, H - 1))
                 rr, cc = line(r0, 0, r1, W - 1)
             else:
-                c0 = rng.integers(0, W); c1 = int(np.clip(c0 + rng.normal(0, 8), 0, W - 1))
+                c0 = rng.integers(0, W)
+                c1 = int(np.clip(c0 + rng.normal(0, 8), 0, W - 1))
                 rr, cc = line(0, c0, H - 1, c1)
             e[rr, cc] = 1
         elif kind == 1:  # rectangle
@@ -380,7 +382,7 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
     ``cache_dir``: keep the patches in an ``.npz`` there, named by every argument above, and
     read them back instead of rendering when present (the same scenes serve every fold).
     """
-    from wirescene.synth.generate import load_car_library, generate_scene
+    from wirescene.synth.generate import generate_scene, load_car_library
 
     if seed < SYNTH_TRAIN_SEED:
         raise ValueError(f"synthetic training scenes must use seeds >= {SYNTH_TRAIN_SEED} (lower ones are evaluation)")
@@ -407,7 +409,7 @@ def make_synth_patch_data(*, n_scenes: int, seed: int = SYNTH_TRAIN_SEED, kinds=
         all_vis = [_visible_uv(c) for c in cars]
         vis_pts = np.concatenate([uv[v] for uv, v in all_vis] + [np.zeros((0, 2))])
         boxes = np.array([c["box"] for c in cars]).reshape(-1, 4)
-        for c, (uv, vis), box in zip(cars, all_vis, boxes):
+        for (uv, vis), box in zip(all_vis, boxes):
             bw, bh = box[2] - box[0], box[3] - box[1]
             if bh < min_box_h:
                 continue
@@ -606,10 +608,10 @@ def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True):
     placed at each ``Car`` label's pose (location = the label's bottom centre), visibility
     by :func:`wirescene.infer.occlusion.self_occlusion`. EVALUATION ONLY: never train on these."""
     from wirescene.core import wireframe
-    from wirescene.io.kitti import KittiDataset
     from wirescene.core.groundplane import rotation_y, transform
-    from wirescene.infer.occlusion import self_occlusion
     from wirescene.core.shape import load_default
+    from wirescene.infer.occlusion import self_occlusion
+    from wirescene.io.kitti import KittiDataset
 
     ds = KittiDataset(root)
     mean = load_default().mean
@@ -863,7 +865,7 @@ def calibrate(log_ratio, y, *, reg: float = 1e-2) -> tuple[np.ndarray, np.ndarra
         x = r[:, j]
         w = np.where(t > 0, 0.5 / n1, 0.5 / (len(t) - n1))
 
-        def nll(p):
+        def nll(p, x=x, t=t, w=w):
             z = p[0] * x + p[1]
             ll = np.logaddexp(0.0, -z) * t + np.logaddexp(0.0, z) * (1 - t)
             return float((w * ll).sum() + reg * (p[0] - 1.0) ** 2 + reg * p[1] ** 2)

@@ -41,7 +41,6 @@ from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from wirescene.core.version import __version__
 from wirescene.core.artefacts import load_json, save_json
 from wirescene.core.errors import InputError
 from wirescene.core.resources import (
@@ -52,6 +51,7 @@ from wirescene.core.resources import (
     file_sha256,
     shipped_path,
 )
+from wirescene.core.version import __version__
 
 __all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "calibration_folds",
            "heldout_bank_calibration", "train_all"]
