@@ -51,9 +51,11 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
+from wirescene.core.errors import InputError
 from wirescene.core.viewpoints import N_BINS, viewpoint_bin
 from wirescene.predetect.bank import DetectorBank, detect_pyramid, score_pyramid
 from wirescene.predetect.configurations import (
@@ -555,16 +557,17 @@ def mirrored_boxes(boxes, width: int) -> np.ndarray:
 
 
 def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str = "training",
-                              seed: int = 0, calibration_folds: bool = True, calibration=None, threshold: float = 0.5,
+                              seed: int = 0, calibration_folds: bool | Mapping[str, int] = True, calibration=None,
+                              threshold: float = 0.5,
                               progress=None, **train_kw):
     """``wirescene train detector --kitti-root``: train on the labelled frames of a KITTI root.
 
     ``frames``: frame ids to train on (default all); ``folds``: restrict to the frames of
-    these :mod:`wirescene.io.folds` folds. With ``calibration_folds`` (and frames of at
-    least two folds) the Platt calibration and default threshold come from held-out
-    detections: for each fold present, a bank trained on the other folds detects on it
-    (this is the cross-validation of ``benchmarks/bench_predetect.py``); otherwise the bank
-    stays uncalibrated (scores are margins, threshold 0). ``calibration``: given Platt
+    these :mod:`wirescene.io.folds` folds. With ``calibration_folds`` the Platt calibration
+    and default threshold come from held-out detections (:func:`heldout_bank_calibration`)
+    over the folds of :func:`calibration_folds` (drives, else frames, balanced by cars), or
+    over a given ``{frame: fold}`` mapping; frames of a single group leave the bank
+    uncalibrated (scores are margins, threshold 0). ``calibration``: given Platt
     ``(a, b)`` -- e.g. the pooled held-out fit printed by ``benchmarks/bench_predetect.py``
     for the same recipe -- instead of the leave-one-fold-out run (saves four trainings).
     ``threshold``: default detection threshold of a calibrated bank (probability).
@@ -583,35 +586,15 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
         raise ValueError("no training frames selected")
     images, examples = load_training_frames(ds, ids, progress=say)
     report = {"frames": ids}
-    fold_ids = {}
-    for f in ids:
-        try:
-            fold_ids.setdefault(fold_of(f), []).append(f)
-        except KeyError:
-            pass
     calib = None if calibration is None else np.asarray(calibration, float).reshape(2)
     if calib is not None:
         report["calibration"] = {"a": float(calib[0]), "b": float(calib[1]), "source": "given"}
-    elif calibration_folds and len(fold_ids) >= 2:
-        scores, ys, offsets = [], [], []
-        for k in sorted(fold_ids):
-            held = set(fold_ids[k])
-            tr_idx = [i for i, im in enumerate(images) if im.frame not in held]
-            remap = {old: new for new, old in enumerate(tr_idx)}
-            tr_ex = [_reindexed(e, remap[e.image]) for e in examples if e.image in remap]
-            say(f"calibration: fold {k} held out ({len(held)} frames)")
-            tr_images = [images[i] for i in tr_idx]
-            b = finish_bank(train_bank_on_frames(tr_images, tr_ex, seed=seed, **train_kw), tr_images, ds)
-            for im in images:
-                if im.frame in held and not im.flipped:
-                    d = detect_training_image(b, im)
-                    scores.append(d.scores)
-                    offsets.append(b.ground_log_ratio(d.boxes, im.horizon))
-                    ys.append(detection_labels(d.boxes, kitti_gt_boxes(ds.labels(im.frame))))
-        s, y = np.concatenate(scores), np.concatenate(ys)
-        calib = fit_platt(s, y, offset=np.concatenate(offsets))
-        report["calibration"] = {"a": float(calib[0]), "b": float(calib[1]), "n_detections": int(len(s)),
-                                 "n_positive": int(y.sum()), "source": "leave-one-fold-out detections"}
+    elif calibration_folds:
+        folds = calibration_folds if isinstance(calibration_folds, Mapping) else _frame_folds(ds, ids)
+        if folds is not None:
+            report["calibration"] = heldout_bank_calibration(kitti_root, folds, split=split, seed=seed, progress=say,
+                                                             **train_kw)
+            calib = np.array([report["calibration"]["a"], report["calibration"]["b"]])
     bank = finish_bank(train_bank_on_frames(images, examples, seed=seed, progress=say, **train_kw), images, ds,
                        progress=say)
     bank.calibration = calib
@@ -625,7 +608,64 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     return bank, report
 
 
-def _reindexed(e: CarExample, image: int) -> CarExample:
-    from dataclasses import replace
+def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4) -> dict[str, int]:
+    """``{frame: fold}`` of the held-out calibrations: groups of frames by drive (a frame
+    of unknown drive alone), dealt to ``min(n_folds, groups)`` folds balanced by their
+    cars. An :class:`InputError` if there are fewer than two groups."""
+    from wirescene.io.folds import assign_folds, frame_drives
 
-    return replace(e, image=image)
+    drives = frame_drives()
+    group = {f: drives.get(f, f) for f in frames}
+    cars: dict[str, int] = {}
+    for f in frames:
+        cars[group[f]] = cars.get(group[f], 0) + len(dataset.labels(f).of_type("Car"))
+    if len(cars) < 2:
+        raise InputError(f"held-out calibration needs frames of at least two drives (or two frames of unknown drive); "
+                         f"got {len(frames)} frame(s) of one", path=dataset.split_dir)
+    folds = assign_folds(cars, n_folds=min(n_folds, len(cars)))
+    return {f: folds[group[f]] for f in frames}
+
+
+def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str = "training", seed: int = 0,
+                             progress=None, **bank_options) -> dict:
+    """Platt calibration of a detector bank from held-out detections: for each fold, a
+    bank trained on the other folds' frames detects on that fold's (unmirrored) frames;
+    :func:`~wirescene.training.kitti_detector.fit_platt` on all of them, with the ground
+    prior's log ratio as offset.
+
+    Returns ``{"a", "b", "n_detections", "n_positive", "n_folds", "source"}``.
+    """
+    from wirescene.io.kitti import KittiDataset
+
+    say = progress or (lambda message: None)
+    dataset = KittiDataset(kitti_root, split=split)
+    scores, labels, offsets = [], [], []
+    for k in sorted(set(folds.values())):
+        held = [f for f, j in folds.items() if j == k]
+        train = [f for f, j in folds.items() if j != k]
+        say(f"calibration: fold {k} held out ({len(held)} frames), bank trained on {len(train)}")
+        bank, _ = train_detector_bank_kitti(None, kitti_root, frames=train, split=split, seed=seed,
+                                            calibration_folds=False, **bank_options)
+        images, _ = load_training_frames(dataset, held, flips=False)
+        for image in images:
+            d = detect_training_image(bank, image)
+            scores.append(d.scores)
+            offsets.append(bank.ground_log_ratio(d.boxes, image.horizon))
+            labels.append(detection_labels(d.boxes, kitti_gt_boxes(dataset.labels(image.frame))))
+        del images  # a fold's frames and pyramids are not needed by the next
+    s, y = np.concatenate(scores), np.concatenate(labels)
+    if not y.any():
+        raise InputError(f"no held-out detection of the fold banks matches a labelled car ({len(s)} detections): "
+                         "too few training frames for a calibrated bank", path=dataset.split_dir)
+    a, b = fit_platt(s, y, offset=np.concatenate(offsets))
+    return {"a": float(a), "b": float(b), "n_detections": int(len(s)), "n_positive": int(y.sum()),
+            "n_folds": len(set(folds.values())), "source": "leave-one-fold-out detections"}
+
+
+def _frame_folds(dataset, frames) -> dict[str, int] | None:
+    """:func:`calibration_folds` of ``frames``, or None where they form a single group (no
+    held-out calibration is possible: the bank stays uncalibrated)."""
+    try:
+        return calibration_folds(dataset, list(frames))
+    except InputError:
+        return None

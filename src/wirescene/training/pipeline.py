@@ -39,8 +39,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Iterable, Mapping
 
-import numpy as np
-
 from wirescene.core.artefacts import load_json, save_json
 from wirescene.core.errors import InputError
 from wirescene.core.resources import (
@@ -52,6 +50,7 @@ from wirescene.core.resources import (
     shipped_path,
 )
 from wirescene.core.version import __version__
+from wirescene.training.kitti_detector import calibration_folds, heldout_bank_calibration
 
 __all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "calibration_folds",
            "heldout_bank_calibration", "train_all"]
@@ -92,68 +91,6 @@ def step_options() -> dict[str, dict[str, object]]:
         "detector": bank,
         "occlusion": _parameters(calibrate_occluded_score, ("detector", "progress")),
     }
-
-
-def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4) -> dict[str, int]:
-    """``{frame: fold}`` of the held-out calibrations: groups of frames by drive (a frame
-    of unknown drive alone), dealt to ``min(n_folds, groups)`` folds balanced by their
-    cars. An :class:`InputError` if there are fewer than two groups."""
-    from wirescene.io.folds import assign_folds, frame_drives
-
-    drives = frame_drives()
-    group = {f: drives.get(f, f) for f in frames}
-    cars: dict[str, int] = {}
-    for f in frames:
-        cars[group[f]] = cars.get(group[f], 0) + len(dataset.labels(f).of_type("Car"))
-    if len(cars) < 2:
-        raise InputError(f"held-out calibration needs frames of at least two drives (or two frames of unknown drive); "
-                         f"got {len(frames)} frame(s) of one", path=dataset.split_dir)
-    folds = assign_folds(cars, n_folds=min(n_folds, len(cars)))
-    return {f: folds[group[f]] for f in frames}
-
-
-def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str = "training", seed: int = 0,
-                             progress=None, **bank_options) -> dict:
-    """Platt calibration of a detector bank from held-out detections: for each fold, a
-    bank trained on the other folds' frames detects on that fold's (unmirrored) frames;
-    :func:`~wirescene.training.kitti_detector.fit_platt` on all of them, with the ground
-    prior's log ratio as offset.
-
-    Returns ``{"a", "b", "n_detections", "n_positive", "n_folds", "source"}``.
-    """
-    from wirescene.io.kitti import KittiDataset
-    from wirescene.training.kitti_detector import (
-        detect_training_image,
-        detection_labels,
-        fit_platt,
-        kitti_gt_boxes,
-        load_training_frames,
-        train_detector_bank_kitti,
-    )
-
-    say = progress or (lambda message: None)
-    dataset = KittiDataset(kitti_root, split=split)
-    scores, labels, offsets = [], [], []
-    for k in sorted(set(folds.values())):
-        held = [f for f, j in folds.items() if j == k]
-        train = [f for f, j in folds.items() if j != k]
-        say(f"calibration: fold {k} held out ({len(held)} frames), bank trained on {len(train)}")
-        bank, _ = train_detector_bank_kitti(None, kitti_root, frames=train, split=split, seed=seed,
-                                            calibration_folds=False, **bank_options)
-        images, _ = load_training_frames(dataset, held, flips=False)
-        for image in images:
-            d = detect_training_image(bank, image)
-            scores.append(d.scores)
-            offsets.append(bank.ground_log_ratio(d.boxes, image.horizon))
-            labels.append(detection_labels(d.boxes, kitti_gt_boxes(dataset.labels(image.frame))))
-        del images  # a fold's frames and pyramids are not needed by the next
-    s, y = np.concatenate(scores), np.concatenate(labels)
-    if not y.any():
-        raise InputError(f"no held-out detection of the fold banks matches a labelled car ({len(s)} detections): "
-                         "too few training frames for a calibrated bank", path=dataset.split_dir)
-    a, b = fit_platt(s, y, offset=np.concatenate(offsets))
-    return {"a": float(a), "b": float(b), "n_detections": int(len(s)), "n_positive": int(y.sum()),
-            "n_folds": len(set(folds.values())), "source": "leave-one-fold-out detections"}
 
 
 def _reset_peak_memory() -> bool:
