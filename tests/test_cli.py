@@ -289,3 +289,12 @@ def test_inference_options_reach_the_fit():
     defaults = InferenceOptions()  # not given: the defaults
     assert (unset.shape_prior, unset.size_prior, unset.polish_iterations) == (
         defaults.shape_prior, defaults.size_prior, defaults.polish_iterations)
+
+
+def test_frame_workers_on_a_gpu_drop_to_one_with_a_notice(capsys):
+    from wirescene.cli.main import _frame_workers
+
+    assert _frame_workers(3, "numpy") == 3 and capsys.readouterr().err == ""
+    assert _frame_workers(3, "cuda:0") == 1
+    assert "one process, not 3" in capsys.readouterr().err
+    assert _frame_workers(1, "cuda") == 1 and capsys.readouterr().err == ""

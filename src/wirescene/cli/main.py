@@ -66,6 +66,17 @@ def sample_root() -> Path:
     return Path(str(resources.files("wirescene") / "data" / "sample" / "kitti"))
 
 
+def _frame_workers(workers: int | None, device: str) -> int:
+    """Processes fitting frames: ``workers`` (None: all cores), or one on a CUDA device,
+    said on stderr when that reduces them (forked processes cannot share the CUDA state)."""
+    n = workers or os.cpu_count() or 1
+    if device.startswith("cuda") and n > 1:
+        click.echo(f"wirescene: --device {device} fits frames in one process, not {n} (the GPU is the parallelism)",
+                   err=True)
+        return 1
+    return n
+
+
 def _progress(desc: str, total: int | None = None):
     from tqdm import tqdm
 
@@ -265,7 +276,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
             predictions_dir=predictions,
             resume=resume,
             evidence=evidence,
-            workers=1 if on_gpu else workers or os.cpu_count() or 1,
+            workers=_frame_workers(workers, options.inference.device),
             dask_client=client,
             progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
             notify=lambda message: click.echo(f"wirescene: {message}", err=True),
@@ -329,14 +340,13 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     dataset = KittiDataset(kitti_root, split=split)
     frame_ids = select_frames(frames, split_file, dataset.image_ids(), where=dataset.split_dir, what="image")
     options = _fit_options(particles, seed, **inference)
-    on_gpu = options.inference.device.startswith("cuda")
     client = _dask_client(dask_address) if dask_address is not None else None
     total = len(frame_ids) if frame_ids else len(dataset.image_ids())
     try:
         fitted = predict_dataset(dataset, out, variant=variant, options=options, frames=frame_ids, resume=resume,
                                  source=DetectionSource(detections, allow_missing=allow_missing_detections,
                                                         bank=options.detector_bank),
-                                 workers=1 if on_gpu else workers or os.cpu_count() or 1, dask_client=client,
+                                 workers=_frame_workers(workers, options.inference.device), dask_client=client,
                                  progress=_progress("predict", total))
     finally:
         if client is not None:
