@@ -613,7 +613,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         report[name] = {"detections": detections, "frames": len(frames), "labelled_cars": int(n_labels),
                         "summaries": summaries, "versus_reference": comparison,
                         "cars": tables}
-        plotted[name] = tables
+        plotted[f"{Path(run).name} (detections: {detections})"] = tables
     if args.json:
         meta = {"camera_height": args.camera_height, "reference": args.reference, "iou_threshold": IOU_THRESHOLD,
                 "loc_threshold": LOC_THRESHOLD, "bands": [b[0] for b in BANDS],
