@@ -168,7 +168,7 @@ def main():
         pyr = feature_pyramid(image, pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
                                                     per_octave=int(bank.meta.get("per_octave", 4))))
         horizon, cc = horizon_row(camera), float(camera.K[0, 2])
-        templ = box_bin_log_odds(bank, pyr, (W, H), both, iou=args.iou, floor_margin=args.floor_margin)
+        templ = box_bin_log_odds(bank, image, both, pyramid=pyr, iou=args.iou, floor_margin=args.floor_margin)
         prior = traffic_log_prior(bank, both, horizon, cc)
         prior = np.zeros_like(templ) if prior is None else prior
         if parts:

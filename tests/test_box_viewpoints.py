@@ -38,7 +38,7 @@ def scene():
     pyr = feature_pyramid(crop, pyramid_scales(X1 - X0, Y1 - Y0, max_scale=float(bank.meta["max_scale"]),
                                                per_octave=int(bank.meta["per_octave"])))
     horizon, center = float(cam.K[1, 2]), float(cam.K[0, 2])
-    log_odds = box_bin_log_odds(bank, pyr, (X1 - X0, Y1 - Y0), boxes, horizon=horizon, center_column=center)
+    log_odds = box_bin_log_odds(bank, crop, boxes, pyramid=pyr, horizon=horizon, center_column=center)
     return dict(image=crop, camera=cam, cars=cars, boxes=boxes, bank=bank, pyramid=pyr, horizon=horizon,
                 center=center, log_odds=log_odds)
 
@@ -57,7 +57,7 @@ def test_one_viewpoint_per_box_and_the_shape_contract(scene):
     with pytest.raises(ArgumentError, match="empty or inverted"):
         box_viewpoints(bank, image, [[50, 50, 40, 80]])
     with pytest.raises(ShapeError):
-        box_bin_log_odds(bank, scene["pyramid"], image.shape[1::-1], np.zeros((3, 5)))
+        box_bin_log_odds(bank, image, np.zeros((3, 5)))
 
 
 def test_label_boxes_get_the_viewpoint_of_our_own_detections(scene):
@@ -79,11 +79,14 @@ def test_label_boxes_get_the_viewpoint_of_our_own_detections(scene):
     assert list(chosen[clear]) == [int(viewpoint_bin(scene["cars"][i].alpha)) for i in clear]
 
 
-def test_the_traffic_prior_enters_with_the_camera(scene):
+def test_only_the_cells_the_boxes_need_give_the_whole_pyramid_scores_and_the_prior_adds(scene):
     bank, image = scene["bank"], scene["image"]
-    h, w = image.shape[:2]
-    plain = box_bin_log_odds(bank, scene["pyramid"], (w, h), scene["boxes"])
-    diff = scene["log_odds"] - plain
+    # without a pyramid only the cells around the boxes are computed: the same scores
+    plain = box_bin_log_odds(bank, image, scene["boxes"])
+    with_prior = box_bin_log_odds(bank, image, scene["boxes"], horizon=scene["horizon"], center_column=scene["center"])
+    assert with_prior.shape == scene["log_odds"].shape
+    assert np.allclose(with_prior, scene["log_odds"], rtol=0, atol=1e-4)
+    diff = with_prior - plain
     # the prior is a log probability over the 8 bins of each box
     assert np.allclose(np.exp(diff).sum(1), 1.0) and np.all(diff < 0)
 

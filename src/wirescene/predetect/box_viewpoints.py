@@ -35,7 +35,7 @@ from wirescene.predetect.bank import (
     traffic_log_prior,
 )
 from wirescene.predetect.geometry import horizon_row
-from wirescene.predetect.hog import CELL, feature_pyramid, pyramid_scales
+from wirescene.predetect.hog import CELL, hog_cells, pyramid_scales, resize, to_gray
 
 #: Overlap (IoU of a window's predicted car box with the given box) for a window to vote.
 IOU = 0.5
@@ -45,6 +45,13 @@ FLOOR_MARGIN = -1.0
 # Factor by which the box regression may change a vote's height, at most (the shipped bank's
 # moves it by 0.84-1.23x), so windows beyond it cannot reach the IoU and are not scored.
 _REGRESSION_SLACK = 1.5
+
+
+def _check_image(image) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim not in (2, 3) or image.shape[0] < 16 or image.shape[1] < 16:
+        raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
+    return image
 
 
 def _check_boxes(boxes, image_size=None) -> np.ndarray:
@@ -58,60 +65,113 @@ def _check_boxes(boxes, image_size=None) -> np.ndarray:
     return b.astype(float)
 
 
-def _best_votes(bank: DetectorBank, t: int, scale: float, R: np.ndarray, boxes: np.ndarray, image_size,
+def _window_ranges(config, scale: float, boxes: np.ndarray, iou: float):
+    """Windows (top-left cells) of template ``config`` at pyramid ``scale`` whose vote may
+    overlap each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``: ``(near (N,) bool, r0, r1, q0, q1)``,
+    the half-open row and column ranges ``(N,)`` (unclipped; meaningless where not ``near``)."""
+    th, tw = config.template
+    step = CELL / scale
+    vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]  # the vote of window (0, 0)
+    vw, vh = vote[2] - vote[0], vote[3] - vote[1]
+    gw, gh = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
+    # the regression moves a height by < 25% and clipping only shrinks it: no IoU >= iou beyond these ratios
+    near = (vh >= iou / _REGRESSION_SLACK * gh) & (vh <= _REGRESSION_SLACK / iou * gh)
+    # the vote of window (r, q) is that of (0, 0) shifted by step * (q, r): votes that intersect the
+    # box, with room for the regression's shift
+    rx, ry = 0.5 * (gw + vw) + 0.25 * vw, 0.5 * (gh + vh) + 0.25 * vh
+    cx = (boxes[:, 0] + boxes[:, 2] - vote[0] - vote[2]) / 2
+    cy = (boxes[:, 1] + boxes[:, 3] - vote[1] - vote[3]) / 2
+    q0, q1 = np.ceil((cx - rx) / step).astype(int), np.floor((cx + rx) / step).astype(int) + 1
+    r0, r1 = np.ceil((cy - ry) / step).astype(int), np.floor((cy + ry) / step).astype(int) + 1
+    return near, r0, r1, q0, q1
+
+
+def _plan(bank: DetectorBank, levels, boxes: np.ndarray, iou: float) -> list:
+    """Per pyramid level ``(index, scale, (Hc, Wc) cells)`` of ``levels``, the templates that can
+    vote for some box and the cell rectangle ``(R0, R1, C0, C1)`` their windows cover:
+    ``[(index, scale, rectangle, templates)]``; levels no template can use are left out."""
+    out = []
+    for li, scale, (Hc, Wc) in levels:
+        rect, templates = [Hc, 0, Wc, 0], []
+        for t, config in enumerate(bank.configs):
+            th, tw = config.template
+            if th > Hc or tw > Wc:
+                continue
+            near, r0, r1, q0, q1 = _window_ranges(config, scale, boxes, iou)
+            r0, r1 = np.maximum(r0, 0), np.minimum(r1, Hc - th + 1)
+            q0, q1 = np.maximum(q0, 0), np.minimum(q1, Wc - tw + 1)
+            ok = near & (r1 > r0) & (q1 > q0)
+            if ok.any():
+                templates.append(t)
+                rect = [min(rect[0], int(r0[ok].min())), max(rect[1], int(r1[ok].max()) + th - 1),
+                        min(rect[2], int(q0[ok].min())), max(rect[3], int(q1[ok].max()) + tw - 1)]
+        if templates:
+            out.append((li, scale, tuple(rect), templates))
+    return out
+
+
+def _region_features(gray: np.ndarray, scale: float, rect) -> np.ndarray:
+    """The cells ``rect`` ``(R0, R1, C0, C1)`` of the image's pyramid level ``scale``, exactly as
+    :func:`~wirescene.predetect.hog.feature_pyramid` computes them, from that rectangle alone."""
+    H, W = gray.shape
+    w, h = max(int(round(W * scale)), 1), max(int(round(H * scale)), 1)
+    im = gray if (w == W and h == H) else resize(gray, w, h)
+    R0, R1, C0, C1 = rect
+    # two cells of margin: a cell's features depend on its neighbours' gradients and energies only
+    y0, y1 = max(R0 - 2, 0), min(R1 + 2, h // CELL)
+    x0, x1 = max(C0 - 2, 0), min(C1 + 2, w // CELL)
+    f = hog_cells(im[y0 * CELL:y1 * CELL, x0 * CELL:x1 * CELL])
+    return f[R0 - y0:R1 - y0, C0 - x0:C1 - x0]
+
+
+def _best_votes(bank: DetectorBank, t: int, scale: float, R: np.ndarray, origin, boxes: np.ndarray, image_size,
                 iou: float) -> np.ndarray:
-    """``(N,)`` best response in ``R`` (template ``t`` at pyramid ``scale``) among the windows
-    whose vote overlaps each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``; -inf where none does."""
+    """``(N,)`` best response in ``R`` (template ``t`` at pyramid ``scale``; entry ``(r, q)``
+    scores the window whose top-left cell is ``origin + (r, q)``) among the windows whose
+    vote overlaps each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``; -inf where none does."""
     W, H = image_size
     config = bank.configs[t]
     th, tw = config.template
-    Hr, Wr = R.shape
     step = CELL / scale
-    # the vote of window (r, q) is this box shifted by step * (q, r): each box's windows are a grid range
-    vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]
-    vw, vh = vote[2] - vote[0], vote[3] - vote[1]
+    o_r, o_q = origin
+    near, r0, r1, q0, q1 = _window_ranges(config, scale, boxes, iou)
+    r0, r1 = np.maximum(r0, o_r), np.minimum(r1, o_r + R.shape[0])
+    q0, q1 = np.maximum(q0, o_q), np.minimum(q1, o_q + R.shape[1])
     out = np.full(len(boxes), -np.inf)
-    gw, gh = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
-    # the regression moves a height by < 25% and clipping only shrinks it: no IoU >= iou beyond these ratios
-    near = np.flatnonzero((vh >= iou / _REGRESSION_SLACK * gh) & (vh <= _REGRESSION_SLACK / iou * gh))
     idx, rows, cols = [], [], []
-    for i in near:
-        # windows whose vote intersects the box (with room for the regression's shift)
-        rx, ry = 0.5 * (gw[i] + vw) + 0.25 * vw, 0.5 * (gh[i] + vh) + 0.25 * vh
-        cx = (boxes[i, 0] + boxes[i, 2] - vote[0] - vote[2]) / 2
-        cy = (boxes[i, 1] + boxes[i, 3] - vote[1] - vote[3]) / 2
-        q = np.arange(max(int(np.ceil((cx - rx) / step)), 0), min(int(np.floor((cx + rx) / step)), Wr - 1) + 1)
-        r = np.arange(max(int(np.ceil((cy - ry) / step)), 0), min(int(np.floor((cy + ry) / step)), Hr - 1) + 1)
-        if len(q) and len(r):
-            rows.append(np.repeat(r, len(q)))
-            cols.append(np.tile(q, len(r)))
-            idx.append(np.full(len(r) * len(q), i))
+    for i in np.flatnonzero(near & (r1 > r0) & (q1 > q0)):
+        nr, nq = r1[i] - r0[i], q1[i] - q0[i]
+        rows.append(np.repeat(np.arange(r0[i], r1[i]), nq))
+        cols.append(np.tile(np.arange(q0[i], q1[i]), nr))
+        idx.append(np.full(nr * nq, i))
     if not idx:
         return out
     idx, rows, cols = np.concatenate(idx), np.concatenate(rows), np.concatenate(cols)
+    vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]
     votes = _clip(vote[None] + step * np.column_stack([cols, rows, cols, rows]), W, H)
     regression = bank.meta.get("box_regression")
     if regression is not None:
         votes = _clip(apply_box_regression(regression, votes, np.full(len(votes), config.bin), (W, H)), W, H)
     ok = iou_2d(votes, boxes[idx]) >= iou
-    np.maximum.at(out, idx[ok], R[rows[ok], cols[ok]].astype(float))
+    np.maximum.at(out, idx[ok], R[rows[ok] - o_r, cols[ok] - o_q].astype(float))
     return out
 
 
-def box_bin_log_odds(bank: DetectorBank, pyramid, image_size, boxes, *, iou: float = IOU,
+def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=None, iou: float = IOU,
                      floor_margin: float = FLOOR_MARGIN, horizon: float | None = None,
                      center_column: float | None = None) -> np.ndarray:
-    """Score the 8 viewpoint bins inside given boxes on a precomputed feature pyramid.
+    """Score the 8 viewpoint bins inside given boxes with the bank's templates.
 
     Parameters
     ----------
     bank : DetectorBank
-    pyramid : list of (float, ndarray)
-        :func:`wirescene.predetect.hog.feature_pyramid` of the image.
-    image_size : (int, int)
-        ``(W, H)`` of the image.
+    image : (H, W, 3) uint8 array
     boxes : (N, 4) array
         ``x1 y1 x2 y2`` in pixels.
+    pyramid : list of (float, ndarray), optional
+        :func:`wirescene.predetect.hog.feature_pyramid` of the image if already computed;
+        without it only the cells of the bank's pyramid levels (``meta["max_scale"]``,
+        ``meta["per_octave"]``) that some box's windows cover are computed, to the same values.
     iou : float, optional
         Overlap of a window's predicted car box with a box for the window to vote.
     floor_margin : float, optional
@@ -130,22 +190,30 @@ def box_bin_log_odds(bank: DetectorBank, pyramid, image_size, boxes, *, iou: flo
     --------
     >>> import numpy as np
     >>> from wirescene.predetect import load_default_bank
-    >>> from wirescene.predetect.hog import feature_pyramid
     >>> image = np.zeros((64, 96, 3), np.uint8)
-    >>> box_bin_log_odds(load_default_bank(), feature_pyramid(image, [1.0]), (96, 64),
-    ...                  np.array([[10.0, 10.0, 70.0, 40.0]])).shape
+    >>> box_bin_log_odds(load_default_bank(), image, np.array([[10.0, 10.0, 70.0, 40.0]])).shape
     (1, 8)
     """
+    image = _check_image(image)
+    H, W = image.shape[:2]
     b = _check_boxes(boxes)
     best = np.full((len(b), N_BINS), -np.inf)
     if len(b):
-        heights = b[:, 3] - b[:, 1]
-        # the levels where a template's full car could match a box (its implied height is the vote's, roughly)
-        reach = 2 * _REGRESSION_SLACK / iou
-        for t, _, scale, R in template_responses(bank, pyramid, min_height=heights.min() / reach,
-                                                 max_height=heights.max() * reach):
-            k = bank.configs[t].bin
-            best[:, k] = np.maximum(best[:, k], _best_votes(bank, t, scale, R, b, image_size, iou))
+        if pyramid is None:
+            scales = pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
+                                    per_octave=int(bank.meta.get("per_octave", 4)))
+            gray = to_gray(image)
+            levels = [(li, s, (max(int(round(H * s)), 1) // CELL, max(int(round(W * s)), 1) // CELL))
+                      for li, s in enumerate(scales)]
+        else:
+            levels = [(li, s, F.shape[:2]) for li, (s, F) in enumerate(pyramid)]
+        for li, scale, rect, templates in _plan(bank, levels, b, iou):
+            R0, R1, C0, C1 = rect
+            F = _region_features(gray, scale, rect) if pyramid is None else pyramid[li][1][R0:R1, C0:C1]
+            for t, _, _, R in template_responses(bank, [(scale, F)], min_height=0.0, max_height=np.inf,
+                                                 detectors=templates):
+                k = bank.configs[t].bin
+                best[:, k] = np.maximum(best[:, k], _best_votes(bank, t, scale, R, (R0, C0), b, (W, H), iou))
     best = np.maximum(best, floor_margin)
     if bank.calibration is not None:
         a, c = (float(v) for v in bank.calibration)
@@ -173,7 +241,7 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     iou, floor_margin : float, optional
         See :func:`box_bin_log_odds`.
     pyramid : list of (float, ndarray), optional
-        The image's feature pyramid if already computed (default: the bank's scales).
+        The image's feature pyramid if already computed (see :func:`box_bin_log_odds`).
 
     Returns
     -------
@@ -188,19 +256,13 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     >>> box_viewpoints(load_default_bank(), image, [[10, 10, 70, 40], [20, 5, 90, 60]]).shape
     (2,)
     """
-    image = np.asarray(image)
-    if image.ndim not in (2, 3) or image.shape[0] < 16 or image.shape[1] < 16:
-        raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
+    image = _check_image(image)
     H, W = image.shape[:2]
     b = _check_boxes(boxes, (W, H))
     if not len(b):
         return np.zeros(0)
-    if pyramid is None:
-        scales = pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
-                                per_octave=int(bank.meta.get("per_octave", 4)))
-        pyramid = feature_pyramid(image, scales)
     horizon = None if camera is None else horizon_row(camera)
     center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
-    scores = box_bin_log_odds(bank, pyramid, (W, H), b, iou=iou, floor_margin=floor_margin, horizon=horizon,
+    scores = box_bin_log_odds(bank, image, b, pyramid=pyramid, iou=iou, floor_margin=floor_margin, horizon=horizon,
                               center_column=center_column)
     return bin_center(np.argmax(scores, axis=1))
