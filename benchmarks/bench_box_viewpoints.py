@@ -2,13 +2,14 @@
 
 Every labelled Car of every frame of ``--root`` is given to each method as its label box
 without a viewpoint -- and as a copy whose four sides are moved by Gaussian noise of 5% of
-the box's width / height (seeded per frame), as a good external detector's would be -- with
+the box's width / height (seeded per frame id), as a good external detector's would be -- with
 the models of the frame's fold (:mod:`wirescene.io.folds`), trained without its drives:
 
 * ``bank``: :func:`wirescene.predetect.box_viewpoints.box_bin_log_odds` of the fold bank
-  (``--fold-models DIR/fold{k}.npz``) with the camera's traffic prior (what
-  :func:`wirescene.fitting.pipeline.fit_frame` does for boxes without a viewpoint);
-* ``bank-templates``: the same without the traffic prior; ``prior``: the prior alone;
+  (``--fold-models DIR/fold{k}.npz``) plus ``--prior-weight`` times the camera's road prior
+  (:func:`~wirescene.predetect.box_viewpoints.box_log_prior`), what
+  :func:`wirescene.fitting.pipeline.fit_frame` does for boxes without a viewpoint;
+* ``bank-templates``: the same without the prior; ``prior``: the prior alone;
 * ``evidence``: :func:`wirescene.infer.evidence.viewpoint_from_evidence` with the fold's part
   model (``--parts-models DIR/parts_fold{k}.npz``; skipped without it);
 * ``bank+evidence*W``: the bank's per-bin log-odds plus ``W`` times the evidence's per-bin
@@ -37,6 +38,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
+import zlib  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -47,8 +49,9 @@ from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import N_BINS, angle_difference, bin_center  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.predetect.bank import DetectorBank, detect_pyramid, traffic_log_prior  # noqa: E402
-from wirescene.predetect.box_viewpoints import FLOOR_MARGIN, IOU, box_bin_log_odds  # noqa: E402
+from wirescene.predetect.bank import DetectorBank, detect_pyramid  # noqa: E402
+from wirescene.predetect.box_viewpoints import (  # noqa: E402
+    FLOOR_MARGIN, IOU, PRIOR_WEIGHT, ROAD_SPREAD, box_bin_log_odds, box_log_prior)  # noqa: E402
 from wirescene.predetect.geometry import horizon_row  # noqa: E402
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray  # noqa: E402
 
@@ -118,18 +121,31 @@ def fmt(name: str, s: dict) -> str:
         f" swaps={100 * s['all']['swaps']:.1f}%"
 
 
+def floored(log_odds: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """The templates' log-odds raised to each box's ``floor`` (the log-odds of the floor margin)."""
+    return np.maximum(log_odds, floor[:, None])
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--root", required=True, help="KITTI root with labelled frames")
     ap.add_argument("--fold-models", required=True, help="DIR with fold{k}.npz: bank k trained without fold k")
     ap.add_argument("--parts-models", default=None, help="DIR with parts_fold{k}.npz, for the evidence methods")
     ap.add_argument("--folds", type=int, nargs="*", default=list(range(N_FOLDS)), help="score only these folds")
-    ap.add_argument("--iou", type=float, default=IOU, help="overlap of a window's vote with the box")
-    ap.add_argument("--floor-margin", type=float, default=FLOOR_MARGIN)
+    ap.add_argument("--iou", type=float, nargs="+", default=[IOU],
+                    help="overlaps of a window's vote with the box (the first: the main table; others: the grid)")
+    ap.add_argument("--floor-margin", type=float, nargs="+", default=[FLOOR_MARGIN],
+                    help="floor margins (the first: the main table)")
+    ap.add_argument("--prior-weight", type=float, nargs="+", default=[PRIOR_WEIGHT],
+                    help="weights of the log prior (the first: the main table)")
+    ap.add_argument("--road-spread", type=float, nargs="+", default=[-1.0 if ROAD_SPREAD is None else ROAD_SPREAD],
+                    help="widths of the road-aligned prior's kernel, radians; a negative one: the traffic prior "
+                         "alone (the first: the main table)")
     ap.add_argument("--evidence-weights", type=float, nargs="*", default=[0.1, 0.3, 1.0])
     ap.add_argument("--own", action="store_true", help="also our own detections' viewpoints (reference)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the box jitter")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--save", default=None, help="write the per-car, per-bin scores to this .npz")
     args = ap.parse_args()
     from threadpoolctl import threadpool_limits
 
@@ -153,7 +169,10 @@ def main():
             frames.append((f, k))
     sets = ("label", "jittered")
     rec = {k: [] for k in ("fold", "occluded", "height", "alpha")}
-    scores = {s: {"templates": [], "prior": [], "evidence": []} for s in sets}
+    spreads = [None if r < 0 else r for r in args.road_spread]
+    keys = [f"templates@{u:g}" for u in args.iou] + [f"floor@{m:g}" for m in args.floor_margin] + \
+        [f"prior@{r}" for r in spreads] + ["evidence"]
+    scores = {s: {key: [] for key in keys} for s in sets}
     own_alpha, mismatch, seconds = [], 0, []
     for f, k in frames:
         t0 = time.time()
@@ -163,37 +182,43 @@ def main():
         image, camera, bank = ds.image(f), ds.camera(f), banks[k]
         H, W = image.shape[:2]
         label = np.array([o.box for o in cars], float)
-        boxes = {"label": label, "jittered": jittered(label, (W, H), np.random.default_rng([args.seed, int(f)]))}
+        rng = np.random.default_rng([args.seed, zlib.crc32(f.encode())])
+        boxes = {"label": label, "jittered": jittered(label, (W, H), rng)}
         both = np.concatenate([boxes[s] for s in sets])
         pyr = feature_pyramid(image, pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
                                                     per_octave=int(bank.meta.get("per_octave", 4))))
-        horizon, cc = horizon_row(camera), float(camera.K[0, 2])
-        templ = box_bin_log_odds(bank, image, both, pyramid=pyr, iou=args.iou, floor_margin=args.floor_margin)
-        prior = traffic_log_prior(bank, both, horizon, cc)
-        prior = np.zeros_like(templ) if prior is None else prior
+        # unfloored log-odds (-inf: no window); a floor applies after (calibration is increasing)
+        got = {f"templates@{u:g}": box_bin_log_odds(bank, image, both, pyramid=pyr, iou=u, floor_margin=-np.inf)
+               for u in args.iou}
+        a, c = (1.0, 0.0) if bank.calibration is None else (float(v) for v in bank.calibration)
+        got.update({f"floor@{m:g}": np.full(len(both), a * m + c) for m in args.floor_margin})
+        for r in spreads:
+            prior = box_log_prior(bank, both, camera, road_spread=r)
+            got[f"prior@{r}"] = np.zeros((len(both), N_BINS)) if prior is None else prior
         if parts:
             from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
 
             dets = Detections(both, np.ones(len(both)), np.full(len(both), np.nan), "labels")
             ev = part_evidence(image, dets, detector=parts[k])
-            evs = evidence_bin_scores(camera, both, ev, shape_model)
+            got["evidence"] = evidence_bin_scores(camera, both, ev, shape_model)
             ref = viewpoint_from_evidence(camera, dets, ev, shape_model).alpha
-            mismatch += int(np.sum(angle_difference(ref, bin_center(np.argmax(evs, 1))) > 1e-6))
+            mismatch += int(np.sum(angle_difference(ref, bin_center(np.argmax(got["evidence"], 1))) > 1e-6))
         else:
-            evs = np.full_like(templ, np.nan)
+            got["evidence"] = np.full((len(both), N_BINS), np.nan)
         n = len(label)
         for i, s in enumerate(sets):
-            part = slice(i * n, (i + 1) * n)
-            scores[s]["templates"].append(templ[part])
-            scores[s]["prior"].append(prior[part])
-            scores[s]["evidence"].append(evs[part])
+            for key in keys:
+                scores[s][key].append(got[key][i * n:(i + 1) * n])
         rec["fold"] += [k] * n
         rec["occluded"] += [o.occluded for o in cars]
         rec["height"] += list(label[:, 3] - label[:, 1])
         rec["alpha"] += [o.alpha for o in cars]
         if args.own:
-            d = detect_pyramid(bank, pyr, (W, H), threshold=bank.threshold, min_height=float(bank.meta.get("min_height", 30)),
-                               horizon=horizon, center_column=cc, gray=to_gray(image) if bank.refinement else None)
+            # what detect_cars does with the camera, on the pyramid already computed
+            d = detect_pyramid(bank, pyr, (W, H), threshold=bank.threshold,
+                               min_height=float(bank.meta.get("min_height", 30.0)), horizon=horizon_row(camera),
+                               center_column=float(camera.K[0, 2]),
+                               gray=None if bank.refinement is None else to_gray(image))
             ov = iou_2d(label[:, None], d.boxes[None]) if len(d) else np.zeros((n, 0))
             for i in range(n):
                 j = int(np.argmax(ov[i])) if ov.shape[1] else -1
@@ -201,24 +226,50 @@ def main():
         seconds.append(time.time() - t0)
         print(f"frame {f} fold {k}: {n} cars, {seconds[-1]:.1f} s", flush=True)
     rec = {key: np.asarray(v) for key, v in rec.items()}
+    scores = {s: {key: np.concatenate(v) for key, v in scores[s].items()} for s in sets}
+    if args.save:
+        np.savez(args.save, **{f"rec_{key}": v for key, v in rec.items()},
+                 **{f"{s}_{key}": v for s in sets for key, v in scores[s].items()})
     if parts:
         print(f"evidence argmax differs from viewpoint_from_evidence on {mismatch} boxes (expected 0)")
-    out = {"frames": len(seconds), "cars": int(len(rec["alpha"])), "iou": args.iou, "floor_margin": args.floor_margin,
-           "seconds_per_frame": float(np.mean(seconds)) if seconds else 0.0, "methods": {}}
+    out = {"frames": len(seconds), "cars": int(len(rec["alpha"])), "iou": args.iou[0],
+           "floor_margin": args.floor_margin[0], "road_spread": spreads[0], "prior_weight": args.prior_weight[0],
+           "seconds_per_frame": float(np.mean(seconds)) if seconds else 0.0,
+           "methods": {}, "grid": {}}
     print(f"{out['frames']} frames, {out['cars']} cars, {out['seconds_per_frame']:.1f} s per frame; "
-          f"cells: share within 45 deg (cars)")
+          f"cells: share within 45 deg (cars); bank: IoU {args.iou[0]:g}, floor margin {args.floor_margin[0]:g}, "
+          f"road spread {spreads[0]}, prior weight {args.prior_weight[0]:g}")
+
+    def share(m):
+        return summary(angle_difference(bin_center(np.argmax(m, 1)), rec["alpha"]), rec)
+
     for s in sets:
-        sc = {key: np.concatenate(v) if v else np.zeros((0, N_BINS)) for key, v in scores[s].items()}
-        methods = {"bank": sc["templates"] + sc["prior"], "bank-templates": sc["templates"], "prior": sc["prior"]}
+        sc = scores[s]
+        templ = floored(sc[f"templates@{args.iou[0]:g}"], sc[f"floor@{args.floor_margin[0]:g}"])
+        prior = sc[f"prior@{spreads[0]}"]
+        bank_scores = templ + args.prior_weight[0] * prior
+        methods = {"bank": bank_scores, "bank-templates": templ, "prior": prior}
         if parts:
             methods["evidence"] = sc["evidence"]
             for w in args.evidence_weights:
-                methods[f"bank+evidence*{w:g}"] = sc["templates"] + sc["prior"] + w * sc["evidence"]
+                methods[f"bank+evidence*{w:g}"] = bank_scores + w * sc["evidence"]
         print(f"--- {s} boxes")
         for name, m in methods.items():
-            err = angle_difference(bin_center(np.argmax(m, 1)), rec["alpha"])
-            out["methods"][f"{s}/{name}"] = summary(err, rec)
+            out["methods"][f"{s}/{name}"] = share(m)
             print(fmt(name, out["methods"][f"{s}/{name}"]))
+    grid = [(u, m, r, w) for u in args.iou for m in args.floor_margin for r in spreads for w in args.prior_weight]
+    if len(grid) > 1:
+        print("--- grid of the bank's settings (label / jittered boxes): share within 45 deg by fold group")
+        for u, m, r, w in grid:
+            line = []
+            for s in sets:
+                sc = scores[s]
+                res = share(floored(sc[f"templates@{u:g}"], sc[f"floor@{m:g}"]) + w * sc[f"prior@{r}"])
+                name = f"iou={u:g} floor={m:g} road_spread={r} prior*{w:g}"
+                out["grid"][f"{s}/{name}"] = res
+                line.append(" ".join(f"{g}={100 * res[g]['within45']:5.1f}% ({res[g]['n']:3d})"
+                                     for g in res if g.startswith("folds") and res[g]["n"]))
+            print(f"{name}:  " + "  |  ".join(line))
     if args.own:
         err = angle_difference(np.asarray(own_alpha), rec["alpha"])
         out["methods"]["own"] = summary(err, rec)

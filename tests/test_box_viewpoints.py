@@ -14,7 +14,7 @@ from wirescene.fitting.pipeline import fit_frame
 from wirescene.io.kitti import KittiDataset
 from wirescene.predetect import load_default_bank
 from wirescene.predetect.bank import detect_pyramid
-from wirescene.predetect.box_viewpoints import box_bin_log_odds, box_viewpoints
+from wirescene.predetect.box_viewpoints import PRIOR_WEIGHT, box_bin_log_odds, box_log_prior, box_viewpoints
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
 
 from conftest import KITTI_ROOT
@@ -38,9 +38,10 @@ def scene():
     pyr = feature_pyramid(crop, pyramid_scales(X1 - X0, Y1 - Y0, max_scale=float(bank.meta["max_scale"]),
                                                per_octave=int(bank.meta["per_octave"])))
     horizon, center = float(cam.K[1, 2]), float(cam.K[0, 2])
-    log_odds = box_bin_log_odds(bank, crop, boxes, pyramid=pyr, horizon=horizon, center_column=center)
+    templates = box_bin_log_odds(bank, crop, boxes, pyramid=pyr)
+    prior = box_log_prior(bank, boxes, cam)
     return dict(image=crop, camera=cam, cars=cars, boxes=boxes, bank=bank, pyramid=pyr, horizon=horizon,
-                center=center, log_odds=log_odds)
+                center=center, templates=templates, prior=prior, log_odds=templates + PRIOR_WEIGHT * prior)
 
 
 def test_one_viewpoint_per_box_and_the_shape_contract(scene):
@@ -66,7 +67,9 @@ def test_label_boxes_get_the_viewpoint_of_our_own_detections(scene):
     dets = detect_pyramid(bank, scene["pyramid"], (w, h), threshold=bank.threshold,
                           min_height=float(bank.meta["min_height"]), horizon=scene["horizon"],
                           center_column=scene["center"], gray=to_gray(image))
-    chosen = np.argmax(scene["log_odds"], axis=1)
+    # under the bank's own rule (the traffic prior alone, naive Bayes) the bins of its detections
+    own_rule = scene["templates"] + box_log_prior(bank, scene["boxes"], scene["camera"], road_spread=None)
+    chosen = np.argmax(own_rule, axis=1)
     ov = iou_2d(scene["boxes"][:, None], dets.boxes[None])
     matched = np.flatnonzero(ov.max(1) >= 0.5)
     assert len(matched) >= 4
@@ -76,19 +79,34 @@ def test_label_boxes_get_the_viewpoint_of_our_own_detections(scene):
     # the unoccluded cars (both sides of the road) get their label's bin
     clear = [i for i, o in enumerate(scene["cars"]) if o.occluded == 0]
     assert len(clear) >= 3
+    chosen = np.argmax(scene["log_odds"], axis=1)  # the default rule
     assert list(chosen[clear]) == [int(viewpoint_bin(scene["cars"][i].alpha)) for i in clear]
 
 
-def test_only_the_cells_the_boxes_need_give_the_whole_pyramid_scores_and_the_prior_adds(scene):
-    bank, image = scene["bank"], scene["image"]
+def test_only_the_cells_the_boxes_need_give_the_whole_pyramid_scores(scene):
     # without a pyramid only the cells around the boxes are computed: the same scores
-    plain = box_bin_log_odds(bank, image, scene["boxes"])
-    with_prior = box_bin_log_odds(bank, image, scene["boxes"], horizon=scene["horizon"], center_column=scene["center"])
-    assert with_prior.shape == scene["log_odds"].shape
-    assert np.allclose(with_prior, scene["log_odds"], rtol=0, atol=1e-4)
-    diff = with_prior - plain
-    # the prior is a log probability over the 8 bins of each box
-    assert np.allclose(np.exp(diff).sum(1), 1.0) and np.all(diff < 0)
+    alone = box_bin_log_odds(scene["bank"], scene["image"], scene["boxes"])
+    assert alone.shape == scene["templates"].shape
+    assert np.allclose(alone, scene["templates"], rtol=0, atol=1e-4)
+
+
+def test_the_road_prior_puts_front_and_back_along_the_road(scene):
+    bank, camera = scene["bank"], scene["camera"]
+    prior = scene["prior"]
+    assert prior.shape == (len(scene["boxes"]), 8) and np.allclose(np.exp(prior).sum(1), 1.0)
+    # a box straight ahead: the road's two headings are bins 2 (front) and 6 (back)
+    ahead = np.array([[camera.K[0, 2] - 30, 40.0, camera.K[0, 2] + 30, 90.0]])
+    p = np.exp(box_log_prior(bank, ahead, camera))[0]
+    assert set(np.argsort(p)[-2:]) == {2, 6} and p[6] > p[2]  # in the ego lane traffic goes away
+    # seen 45 deg to the right, the same headings are bins 1 and 5
+    f = float(camera.K[0, 0])
+    right = ahead + [f, 0.0, f, 0.0]
+    p = np.exp(box_log_prior(bank, right, camera))[0]
+    assert set(np.argsort(p)[-2:]) == {1, 5}
+    # without the road, the traffic prior alone (the bank's own), which knows no ray angle
+    kde = np.exp(box_log_prior(bank, right, camera, road_spread=None))[0]
+    assert p[1] + p[5] > kde[1] + kde[5]
+    assert box_log_prior(bank, np.zeros((0, 4)), camera) is None
 
 
 def test_fit_frame_completes_unknown_viewpoints_with_the_bank(scene):

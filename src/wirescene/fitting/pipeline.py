@@ -153,7 +153,9 @@ def fit_frame(
     variants : iterable of str or Variant
         See :data:`wirescene.fitting.variants.VARIANTS`.
     image : (H, W, 3) uint8 array, optional
-        Needed for pre-detection and for the part evidence, unless ``evidence`` is given.
+        Needed for pre-detection, for the viewpoints of detections without one (scored by
+        the detector bank, :func:`complete_viewpoints`) and for the part evidence, unless
+        ``evidence`` is given (viewpoints then come from the part evidence).
     evidence : PartEvidence, optional
         Per-vertex evidence to use instead of the part detectors' response maps
         (e.g. the oracle evidence of synthetic scenes).

@@ -42,6 +42,14 @@ IOU = 0.5
 #: Margin a bin scores at least (the lowest activation :func:`~wirescene.predetect.bank.detect_pyramid`
 #: keeps at the shipped threshold), so that one bin's missing window does not rule it out.
 FLOOR_MARGIN = -1.0
+#: Weight of the log prior against the templates' log-odds (1: naive Bayes, as
+#: :func:`~wirescene.predetect.bank.traffic_viewpoints`).
+PRIOR_WEIGHT = 1.0
+#: Width (radians) of the road-aligned prior's kernel around the two headings along the road
+#: (:func:`box_log_prior`; None: the traffic prior alone).
+ROAD_SPREAD: float | None = 0.2
+#: Share of the road-aligned prior spread evenly over the bins: cars not aligned with the road.
+UNALIGNED = 0.05
 # Factor by which the box regression may change a vote's height, at most (the shipped bank's
 # moves it by 0.84-1.23x), so windows beyond it cannot reach the IoU and are not scored.
 _REGRESSION_SLACK = 1.5
@@ -158,8 +166,7 @@ def _best_votes(bank: DetectorBank, t: int, scale: float, R: np.ndarray, origin,
 
 
 def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=None, iou: float = IOU,
-                     floor_margin: float = FLOOR_MARGIN, horizon: float | None = None,
-                     center_column: float | None = None) -> np.ndarray:
+                     floor_margin: float = FLOOR_MARGIN) -> np.ndarray:
     """Score the 8 viewpoint bins inside given boxes with the bank's templates.
 
     Parameters
@@ -176,15 +183,12 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
         Overlap of a window's predicted car box with a box for the window to vote.
     floor_margin : float, optional
         Margin each bin scores at least.
-    horizon, center_column : float, optional
-        Image row of the horizon and column of the principal point: both given, the bank's
-        traffic viewpoint prior is added (banks with that prior and a calibration).
 
     Returns
     -------
     (N, 8) ndarray
         Per box and bin the calibrated log-odds of the bin's best vote (raw margins for an
-        uncalibrated bank), plus the log prior when the camera's rows are given.
+        uncalibrated bank).
 
     Examples
     --------
@@ -218,15 +222,67 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
     if bank.calibration is not None:
         a, c = (float(v) for v in bank.calibration)
         best = a * best + c
-    if horizon is not None and center_column is not None and len(b):
-        log_prior = traffic_log_prior(bank, b, horizon, center_column)
-        if log_prior is not None:
-            best = best + log_prior
     return best
 
 
+def box_log_prior(bank: DetectorBank, boxes, camera, *, road_spread: float | None = ROAD_SPREAD) -> np.ndarray | None:
+    """Log prior of the 8 viewpoint bins of boxes from where they stand on the road.
+
+    The bank's traffic prior (:func:`~wirescene.predetect.bank.traffic_log_prior`) gives
+    P(bin | lateral position). With ``road_spread``, the prior also knows that a car on
+    the road is aligned with it: seen along the ray at angle ``theta`` (right positive) from
+    the optical axis, a car facing the camera has ``alpha = pi/2 - theta`` and one facing
+    away ``alpha = -pi/2 - theta`` (KITTI's ``alpha = rotation_y - theta``). The traffic
+    prior's mass of the front bins (1-3) goes to the first, that of the back bins (5-7) to
+    the second, each spread over the bins by a von Mises kernel of width ``road_spread``
+    (radians; roads bend), the side bins (0, 4: crossing cars) keep theirs, and a share
+    :data:`UNALIGNED` is spread evenly (cars parked askew, turning).
+
+    Parameters
+    ----------
+    bank : DetectorBank
+    boxes : (N, 4) array
+    camera : Camera
+    road_spread : float or None, optional
+        None: the traffic prior alone, as for the bank's own detections.
+
+    Returns
+    -------
+    (N, 8) ndarray or None
+        None for a bank without a viewpoint prior or a calibration.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> from wirescene.predetect import load_default_bank
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> prior = box_log_prior(load_default_bank(), [[900.0, 180, 1000, 250]], camera)
+    >>> prior.shape, bool(np.allclose(np.exp(prior).sum(1), 1.0))
+    ((1, 8), True)
+    """
+    b = _check_boxes(boxes)
+    K = np.asarray(camera.K, float)
+    log_prior = traffic_log_prior(bank, b, horizon_row(camera), float(K[0, 2])) if len(b) else None
+    if log_prior is None or road_spread is None:
+        return log_prior
+    p = np.exp(log_prior)
+    theta = np.arctan2((b[:, 0] + b[:, 2]) / 2 - K[0, 2], K[0, 0])
+    centres = bin_center(np.arange(N_BINS))
+
+    def kernel(mu):
+        k = np.exp((np.cos(centres[None] - mu[:, None]) - 1.0) / road_spread ** 2)
+        return k / k.sum(1, keepdims=True)
+
+    road = (p[:, [1, 2, 3]].sum(1, keepdims=True) * kernel(np.pi / 2 - theta)
+            + p[:, [5, 6, 7]].sum(1, keepdims=True) * kernel(-np.pi / 2 - theta))
+    road[:, [0, 4]] += p[:, [0, 4]]
+    return np.log((1.0 - UNALIGNED) * road + UNALIGNED / N_BINS)
+
+
 def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None, iou: float = IOU,
-                   floor_margin: float = FLOOR_MARGIN, pyramid=None) -> np.ndarray:
+                   floor_margin: float = FLOOR_MARGIN, prior_weight: float = PRIOR_WEIGHT,
+                   road_spread: float | None = ROAD_SPREAD, pyramid=None) -> np.ndarray:
     """The viewpoint of each given box, scored by the bank's configuration detectors.
 
     Parameters
@@ -236,10 +292,14 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     boxes : (N, 4) array
         ``x1 y1 x2 y2`` in pixels, e.g. another detector's boxes.
     camera : Camera, optional
-        With it, the bank's traffic viewpoint prior weighs front against back by where each
-        box stands on the road.
+        With it, the prior of where each box stands on the road (:func:`box_log_prior`)
+        weighs the bins, front against back above all.
     iou, floor_margin : float, optional
         See :func:`box_bin_log_odds`.
+    prior_weight : float, optional
+        Weight of the log prior against the templates' log-odds (:data:`PRIOR_WEIGHT`).
+    road_spread : float or None, optional
+        See :func:`box_log_prior`.
     pyramid : list of (float, ndarray), optional
         The image's feature pyramid if already computed (see :func:`box_bin_log_odds`).
 
@@ -261,8 +321,8 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     b = _check_boxes(boxes, (W, H))
     if not len(b):
         return np.zeros(0)
-    horizon = None if camera is None else horizon_row(camera)
-    center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
-    scores = box_bin_log_odds(bank, image, b, pyramid=pyramid, iou=iou, floor_margin=floor_margin, horizon=horizon,
-                              center_column=center_column)
+    scores = box_bin_log_odds(bank, image, b, pyramid=pyramid, iou=iou, floor_margin=floor_margin)
+    prior = None if camera is None else box_log_prior(bank, b, camera, road_spread=road_spread)
+    if prior is not None:
+        scores = scores + prior_weight * prior
     return bin_center(np.argmax(scores, axis=1))
