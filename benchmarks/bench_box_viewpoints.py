@@ -10,10 +10,13 @@ the models of the frame's fold (:mod:`wirescene.io.folds`), trained without its 
   (:func:`~wirescene.predetect.box_viewpoints.box_log_prior`), what
   :func:`wirescene.fitting.pipeline.fit_frame` does for boxes without a viewpoint;
 * ``bank-templates``: the same without the prior; ``prior``: the prior alone;
+* ``bank+classifier``: ``bank`` plus the log-probabilities of a crop viewpoint classifier
+  (:mod:`wirescene.predetect.viewpoint_classifier`) trained here for each fold on the other
+  folds' frames -- the pipeline's default; ``classifier`` alone and ``classifier+prior``;
 * ``evidence``: :func:`wirescene.infer.evidence.viewpoint_from_evidence` with the fold's part
   model (``--parts-models DIR/parts_fold{k}.npz``; skipped without it);
-* ``bank+evidence*W``: the bank's per-bin log-odds plus ``W`` times the evidence's per-bin
-  score (``--evidence-weights``);
+* ``bank+classifier+evidence*W``: the pipeline's per-bin scores plus ``W`` times the
+  evidence's per-bin score (``--evidence-weights``);
 * ``own``: with ``--own``, the fold bank's own detections (:func:`wirescene.predetect.detect_cars`
   at its threshold, with the camera) matched to the cars at IoU >= 0.5, for reference: the
   viewpoint of the matched detection, over the cars found only.
@@ -54,6 +57,7 @@ from wirescene.predetect.box_viewpoints import (  # noqa: E402
     FLOOR_MARGIN, IOU, PRIOR_WEIGHT, ROAD_SPREAD, box_bin_log_odds, box_log_prior)  # noqa: E402
 from wirescene.predetect.geometry import horizon_row  # noqa: E402
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray  # noqa: E402
+from wirescene.predetect.viewpoint_classifier import train_on_kitti  # noqa: E402
 
 JITTER = 0.05
 HEIGHT_BANDS = ((0, 25), (25, 40), (40, 60), (60, np.inf))
@@ -142,6 +146,8 @@ def main():
                     help="widths of the road-aligned prior's kernel, radians; a negative one: the traffic prior "
                          "alone (the first: the main table)")
     ap.add_argument("--evidence-weights", type=float, nargs="*", default=[0.1, 0.3, 1.0])
+    ap.add_argument("--no-classifier", action="store_true",
+                    help="skip the crop viewpoint classifiers (trained here, per fold, on the other folds' frames)")
     ap.add_argument("--own", action="store_true", help="also our own detections' viewpoints (reference)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the box jitter")
     ap.add_argument("--json", default=None)
@@ -152,26 +158,33 @@ def main():
     threadpool_limits(1)
     ds = KittiDataset(args.root)
     banks = {k: DetectorBank.load(Path(args.fold_models) / f"fold{k}.npz") for k in args.folds}
+    known = {}
+    for f in ds.frame_ids():
+        try:
+            known[f] = fold_of(f)
+        except KeyError:
+            print(f"skipping frame {f}: unknown drive")
     parts = {}
     if args.parts_models:
         from wirescene.parts.detector import PartDetector
 
         parts = {k: PartDetector.load(Path(args.parts_models) / f"parts_fold{k}.npz") for k in args.folds}
     shape_model = load_shape_model()
+    classifiers = {}
+    if not args.no_classifier:
+        for k in args.folds:
+            t0 = time.time()
+            train = [f for f in ds.frame_ids() if f in known and known[f] != k]
+            classifiers[k] = train_on_kitti(ds, train)
+            print(f"viewpoint classifier of fold {k}: {classifiers[k].meta['n']} examples from {len(train)} frames "
+                  f"[{time.time() - t0:.0f} s]", flush=True)
     frames = []
-    for f in ds.frame_ids():
-        try:
-            k = fold_of(f)
-        except KeyError:
-            print(f"skipping frame {f}: unknown drive")
-            continue
-        if k in banks:
-            frames.append((f, k))
+    frames = [(f, k) for f, k in known.items() if k in banks]
     sets = ("label", "jittered")
     rec = {k: [] for k in ("fold", "occluded", "height", "alpha")}
     spreads = [None if r < 0 else r for r in args.road_spread]
     keys = [f"templates@{u:g}" for u in args.iou] + [f"floor@{m:g}" for m in args.floor_margin] + \
-        [f"prior@{r}" for r in spreads] + ["evidence"]
+        [f"prior@{r}" for r in spreads] + ["evidence", "classifier"]
     scores = {s: {key: [] for key in keys} for s in sets}
     own_alpha, mismatch, seconds = [], 0, []
     for f, k in frames:
@@ -192,6 +205,8 @@ def main():
                for u in args.iou}
         a, c = (1.0, 0.0) if bank.calibration is None else (float(v) for v in bank.calibration)
         got.update({f"floor@{m:g}": np.full(len(both), a * m + c) for m in args.floor_margin})
+        got["classifier"] = (classifiers[k].log_probs(image, both) if classifiers
+                             else np.zeros((len(both), N_BINS)))
         for r in spreads:
             prior = box_log_prior(bank, both, camera, road_spread=r)
             got[f"prior@{r}"] = np.zeros((len(both), N_BINS)) if prior is None else prior
@@ -227,6 +242,8 @@ def main():
         print(f"frame {f} fold {k}: {n} cars, {seconds[-1]:.1f} s", flush=True)
     rec = {key: np.asarray(v) for key, v in rec.items()}
     scores = {s: {key: np.concatenate(v) for key, v in scores[s].items()} for s in sets}
+    if args.own:
+        rec["own_alpha"] = np.asarray(own_alpha)
     if args.save:
         np.savez(args.save, **{f"rec_{key}": v for key, v in rec.items()},
                  **{f"{s}_{key}": v for s in sets for key, v in scores[s].items()})
@@ -249,23 +266,32 @@ def main():
         prior = sc[f"prior@{spreads[0]}"]
         bank_scores = templ + args.prior_weight[0] * prior
         methods = {"bank": bank_scores, "bank-templates": templ, "prior": prior}
+        if classifiers:
+            methods.update({"bank+classifier": bank_scores + sc["classifier"], "classifier": sc["classifier"],
+                            "classifier+prior": sc["classifier"] + args.prior_weight[0] * prior})
+            bank_scores = methods["bank+classifier"]  # the pipeline's
         if parts:
             methods["evidence"] = sc["evidence"]
             for w in args.evidence_weights:
-                methods[f"bank+evidence*{w:g}"] = bank_scores + w * sc["evidence"]
+                methods[f"{'bank+classifier' if classifiers else 'bank'}+evidence*{w:g}"] = \
+                    bank_scores + w * sc["evidence"]
+        if s == "label":
+            pipeline_scores = bank_scores
         print(f"--- {s} boxes")
         for name, m in methods.items():
             out["methods"][f"{s}/{name}"] = share(m)
             print(fmt(name, out["methods"][f"{s}/{name}"]))
-    grid = [(u, m, r, w) for u in args.iou for m in args.floor_margin for r in spreads for w in args.prior_weight]
+    grid = [(u, m, r, w, c) for u in args.iou for m in args.floor_margin for r in spreads for w in args.prior_weight
+            for c in ((True, False) if classifiers else (False,))]
     if len(grid) > 1:
         print("--- grid of the bank's settings (label / jittered boxes): share within 45 deg by fold group")
-        for u, m, r, w in grid:
+        for u, m, r, w, c in grid:
             line = []
             for s in sets:
                 sc = scores[s]
-                res = share(floored(sc[f"templates@{u:g}"], sc[f"floor@{m:g}"]) + w * sc[f"prior@{r}"])
-                name = f"iou={u:g} floor={m:g} road_spread={r} prior*{w:g}"
+                res = share(floored(sc[f"templates@{u:g}"], sc[f"floor@{m:g}"]) + w * sc[f"prior@{r}"]
+                            + (sc["classifier"] if c else 0.0))
+                name = f"iou={u:g} floor={m:g} road_spread={r} prior*{w:g} classifier={int(c)}"
                 out["grid"][f"{s}/{name}"] = res
                 line.append(" ".join(f"{g}={100 * res[g]['within45']:5.1f}% ({res[g]['n']:3d})"
                                      for g in res if g.startswith("folds") and res[g]["n"]))
@@ -274,8 +300,12 @@ def main():
         err = angle_difference(np.asarray(own_alpha), rec["alpha"])
         out["methods"]["own"] = summary(err, rec)
         out["methods"]["own"]["found"] = int(np.isfinite(err).sum())
-        print("--- our own detections, cars found at IoU >= 0.5")
+        print("--- our own detections, cars found at IoU >= 0.5; the pipeline's method on the same cars' label boxes")
         print(fmt("own", out["methods"]["own"]))
+        found = np.isfinite(err)
+        ours = angle_difference(bin_center(np.argmax(pipeline_scores, 1)), rec["alpha"])
+        out["methods"]["label/pipeline-on-found"] = summary(np.where(found, ours, np.nan), rec)
+        print(fmt("pipeline on found", out["methods"]["label/pipeline-on-found"]))
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
 

@@ -16,6 +16,14 @@ from wirescene.predetect import load_default_bank
 from wirescene.predetect.bank import detect_pyramid
 from wirescene.predetect.box_viewpoints import PRIOR_WEIGHT, box_bin_log_odds, box_log_prior, box_viewpoints
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
+from wirescene.predetect.viewpoint_classifier import (
+    ViewpointClassifier,
+    crop_viewpoint_features,
+    fit_viewpoint_classifier,
+    kitti_examples,
+    load_default_classifier,
+)
+from wirescene.core.errors import InputError
 
 from conftest import KITTI_ROOT
 
@@ -117,6 +125,36 @@ def test_fit_frame_completes_unknown_viewpoints_with_the_bank(scene):
     fit = fit_frame(scene["camera"], dets, ["coarse"], image=scene["image"])
     out = fit.detections.alpha
     assert out[0] == pytest.approx(bin_center(4)) and np.all(np.isfinite(out))
-    expected = bin_center(np.argmax(scene["log_odds"], axis=1))
+    # box_viewpoints' rule with the shipped bank and classifier: templates + classifier + road prior
+    # (the templates' scores without a pyramid are the whole pyramid's: see the test above)
+    classified = load_default_classifier().log_probs(scene["image"], boxes)
+    expected = bin_center(np.argmax(scene["log_odds"] + classified, axis=1))
     assert np.allclose(out[1:], expected[1:])
     assert fit.evidence is None  # a coarse variant needs no part evidence for it any more
+
+
+def test_crop_classifier_contract_storage_and_mirror_training(scene, tmp_path):
+    image, boxes = scene["image"], scene["boxes"]
+    x = crop_viewpoint_features(image, boxes)
+    assert x.shape[0] == len(boxes) and np.all(np.isfinite(x))
+    with pytest.raises(ShapeError):
+        crop_viewpoint_features(image, boxes[:, :3])
+    model = load_default_classifier()
+    lp = model.log_probs(image, boxes)
+    assert lp.shape == (len(boxes), 8) and np.allclose(np.exp(lp).sum(1), 1.0)
+    with pytest.raises(ShapeError):
+        model.log_probs_of_features(x[:, :-1])
+    path = model.save(tmp_path / "vc.npz")
+    assert np.allclose(ViewpointClassifier.load(path).log_probs_of_features(x), model.log_probs_of_features(x))
+    (tmp_path / "bad.npz").write_bytes(b"not a model")
+    with pytest.raises(InputError):
+        ViewpointClassifier.load(tmp_path / "bad.npz")
+    # trained on one frame's cars, their mirror images and jittered copies: each car's bin and its mirror
+    ds = KittiDataset(KITTI_ROOT)
+    feats, bins = kitti_examples(ds, [FRAME])
+    n = sum(o.type == "Car" for o in ds.labels(FRAME).objects)
+    assert len(feats) == 4 * n
+    truth = viewpoint_bin(np.array([o.alpha for o in ds.labels(FRAME).objects if o.type == "Car"]))
+    assert list(bins[:n]) == list(truth) and list(bins[2 * n:3 * n]) == list((4 - truth) % 8)
+    fitted = fit_viewpoint_classifier(feats, bins, C=1.0)
+    assert np.mean(fitted.log_probs_of_features(feats).argmax(1) == bins) > 0.9

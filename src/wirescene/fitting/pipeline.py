@@ -40,6 +40,8 @@ class FitOptions:
     parts_model: str | None = None
     # Detector bank file for our own pre-detection (None: the shipped bank).
     detector_bank: str | None = None
+    # Crop viewpoint classifier file for boxes given without a viewpoint (None: the shipped one).
+    viewpoint_classifier: str | None = None
 
 
 @lru_cache(maxsize=4)
@@ -47,6 +49,14 @@ def _part_detector(path: str | None):
     from wirescene.parts.detector import PartDetector, load_default
 
     return load_default() if path is None else PartDetector.load(path)
+
+
+@lru_cache(maxsize=4)
+def viewpoint_classifier(path: str | None):
+    """The crop viewpoint classifier at ``path`` (None: the shipped one), loaded once per process."""
+    from wirescene.predetect.viewpoint_classifier import ViewpointClassifier, load_default_classifier
+
+    return load_default_classifier() if path is None else ViewpointClassifier.load(path)
 
 
 @lru_cache(maxsize=4)
@@ -91,11 +101,12 @@ def needs_evidence(detections: Detections, variants: Iterable[str | Variant]) ->
     return any(_variant(v).fine for v in variants) or not np.all(np.isfinite(detections.alpha))
 
 
-def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarray, *, bank=None) -> Detections:
+def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarray, *, bank=None,
+                        classifier=None) -> Detections:
     """Detections whose unknown viewpoints (NaN ``alpha``, e.g. boxes of an external
-    detector) are scored by the detector bank inside each box
-    (:func:`wirescene.predetect.box_viewpoints.box_viewpoints`, with the camera's traffic
-    prior); known viewpoints are kept.
+    detector) are scored inside each box by the detector bank's templates and the crop
+    viewpoint classifier, with the camera's road prior
+    (:func:`wirescene.predetect.box_viewpoints.box_viewpoints`); known viewpoints are kept.
 
     Parameters
     ----------
@@ -104,6 +115,8 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     image : (H, W, 3) uint8 array
     bank : DetectorBank, optional
         Default: the shipped bank.
+    classifier : ViewpointClassifier, optional
+        Default: the shipped one.
 
     Returns
     -------
@@ -120,15 +133,15 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     >>> bool(np.isfinite(out.alpha).all())
     True
     """
-    from wirescene.predetect import load_default_bank
     from wirescene.predetect.box_viewpoints import box_viewpoints
 
     unknown = np.flatnonzero(~np.isfinite(detections.alpha))
     if len(unknown) == 0:
         return detections
-    bank = load_default_bank() if bank is None else bank
+    bank = detector_bank(None) if bank is None else bank
+    classifier = viewpoint_classifier(None) if classifier is None else classifier
     alpha = detections.alpha.copy()
-    alpha[unknown] = box_viewpoints(bank, image, detections.boxes[unknown], camera=camera)
+    alpha[unknown] = box_viewpoints(bank, image, detections.boxes[unknown], camera=camera, classifier=classifier)
     return Detections(detections.boxes, detections.scores, alpha, detections.source)
 
 
@@ -183,9 +196,10 @@ def fit_frame(
         return FrameFit(detections, {v.name: SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane,
                                                            detections=detections) for v in variants})
     if image is not None and not np.all(np.isfinite(detections.alpha)):
-        # Boxes without a viewpoint (external detectors): the bank's configuration detectors
-        # score the 8 bins inside each box, for every variant, so all start from the same detections.
-        detections = complete_viewpoints(camera, detections, image, bank=detector_bank(options.detector_bank))
+        # Boxes without a viewpoint (external detectors): the bank's templates and the crop
+        # classifier score the 8 bins inside each box, for every variant alike.
+        detections = complete_viewpoints(camera, detections, image, bank=detector_bank(options.detector_bank),
+                                         classifier=viewpoint_classifier(options.viewpoint_classifier))
     if evidence is None and needs_evidence(detections, variants):
         if image is None:
             raise ValueError("image is needed for the part evidence of fine variants and unknown viewpoints")

@@ -432,12 +432,12 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     else:
         boxes, scores, bins = np.zeros((0, 4)), np.zeros(0), np.zeros(0, int)
     if len(boxes):
-        boxes = _clip(boxes, W, H)
+        boxes = clip_boxes(boxes, W, H)
         if "box_regression" in bank.meta:
-            boxes = _clip(apply_box_regression(bank.meta["box_regression"], boxes, bins, (W, H)), W, H)
+            boxes = clip_boxes(apply_box_regression(bank.meta["box_regression"], boxes, bins, (W, H)), W, H)
         if bank.refinement is not None and gray is not None:
-            boxes = _clip(apply_box_refinement(bank.refinement, gray, boxes, regression_features(boxes, bins, (W, H))),
-                          W, H)
+            boxes = clip_boxes(apply_box_refinement(bank.refinement, gray, boxes,
+                                                    regression_features(boxes, bins, (W, H))), W, H)
         ok = (boxes[:, 2] - boxes[:, 0] >= 2) & (boxes[:, 3] - boxes[:, 1] >= 2)
         boxes, scores, bins = boxes[ok], scores[ok], bins[ok]
         if horizon is not None:
@@ -495,7 +495,8 @@ def traffic_log_prior(bank: DetectorBank, boxes, horizon: float, center_column: 
     return viewpoint_log_prior(prior, lateral_position(boxes, horizon, center_column))
 
 
-def _clip(boxes: np.ndarray, W: int, H: int) -> np.ndarray:
+def clip_boxes(boxes: np.ndarray, W: int, H: int) -> np.ndarray:
+    """Boxes ``(D, 4)`` clipped to the pixels of a ``W x H`` image."""
     return np.column_stack([np.clip(boxes[:, 0], 0, W - 1), np.clip(boxes[:, 1], 0, H - 1),
                             np.clip(boxes[:, 2], 0, W - 1), np.clip(boxes[:, 3], 0, H - 1)])
 

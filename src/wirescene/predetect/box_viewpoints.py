@@ -13,7 +13,10 @@ clusters, whose score is their best member's), a bin without any candidate, or w
 only weaker ones, scores as :data:`FLOOR_MARGIN`. Given the camera, the bank's traffic
 prior (:mod:`wirescene.predetect.viewpoint_prior`) adds log P(bin | lateral position),
 as :func:`~wirescene.predetect.bank.traffic_viewpoints` does for the bank's own
-detections, and the viewpoint is the best bin's centre.
+detections; made geometric, it knows that a car on the road is aligned with it
+(:func:`box_log_prior`). A crop classifier
+(:mod:`wirescene.predetect.viewpoint_classifier`) may add what the templates miss (front
+against back), and the viewpoint is the best bin's centre.
 
 The settings were chosen held out by drive on fold group (0, 1) and reported on (2, 3)
 (``benchmarks/bench_box_viewpoints.py``).
@@ -29,8 +32,8 @@ from wirescene.core.validate import boxes_problem
 from wirescene.core.viewpoints import N_BINS, bin_center
 from wirescene.predetect.bank import (
     DetectorBank,
-    _clip,
     apply_box_regression,
+    clip_boxes,
     template_responses,
     traffic_log_prior,
 )
@@ -42,9 +45,10 @@ IOU = 0.5
 #: Margin a bin scores at least (the lowest activation :func:`~wirescene.predetect.bank.detect_pyramid`
 #: keeps at the shipped threshold), so that one bin's missing window does not rule it out.
 FLOOR_MARGIN = -1.0
-#: Weight of the log prior against the templates' log-odds (1: naive Bayes, as
-#: :func:`~wirescene.predetect.bank.traffic_viewpoints`).
-PRIOR_WEIGHT = 1.0
+#: Weight of the log prior against the templates' log-odds (1 would be naive Bayes, as
+#: :func:`~wirescene.predetect.bank.traffic_viewpoints`; 2 chosen on fold group (0, 1): the
+#: templates' log-odds are calibrated for car against background, not for one bin against another).
+PRIOR_WEIGHT = 2.0
 #: Width (radians) of the road-aligned prior's kernel around the two headings along the road
 #: (:func:`box_log_prior`; None: the traffic prior alone).
 ROAD_SPREAD: float | None = 0.2
@@ -156,10 +160,11 @@ def _best_votes(bank: DetectorBank, t: int, scale: float, R: np.ndarray, origin,
         return out
     idx, rows, cols = np.concatenate(idx), np.concatenate(rows), np.concatenate(cols)
     vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]
-    votes = _clip(vote[None] + step * np.column_stack([cols, rows, cols, rows]), W, H)
+    votes = clip_boxes(vote[None] + step * np.column_stack([cols, rows, cols, rows]), W, H)
     regression = bank.meta.get("box_regression")
     if regression is not None:
-        votes = _clip(apply_box_regression(regression, votes, np.full(len(votes), config.bin), (W, H)), W, H)
+        votes = clip_boxes(apply_box_regression(regression, votes, np.full(len(votes), config.bin), (W, H)),
+                           W, H)
     ok = iou_2d(votes, boxes[idx]) >= iou
     np.maximum.at(out, idx[ok], R[rows[ok] - o_r, cols[ok] - o_q].astype(float))
     return out
@@ -280,10 +285,12 @@ def box_log_prior(bank: DetectorBank, boxes, camera, *, road_spread: float | Non
     return np.log((1.0 - UNALIGNED) * road + UNALIGNED / N_BINS)
 
 
-def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None, iou: float = IOU,
+def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None, classifier=None, iou: float = IOU,
                    floor_margin: float = FLOOR_MARGIN, prior_weight: float = PRIOR_WEIGHT,
                    road_spread: float | None = ROAD_SPREAD, pyramid=None) -> np.ndarray:
-    """The viewpoint of each given box, scored by the bank's configuration detectors.
+    """The viewpoint of each given box, scored by the bank's configuration detectors (and a
+    crop classifier): the bin maximising the templates' log-odds, plus the classifier's
+    log-probability, plus ``prior_weight`` times the road prior.
 
     Parameters
     ----------
@@ -294,6 +301,9 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     camera : Camera, optional
         With it, the prior of where each box stands on the road (:func:`box_log_prior`)
         weighs the bins, front against back above all.
+    classifier : ViewpointClassifier, optional
+        A crop classifier (:mod:`wirescene.predetect.viewpoint_classifier`) whose
+        log-probabilities are added (None: the templates alone).
     iou, floor_margin : float, optional
         See :func:`box_bin_log_odds`.
     prior_weight : float, optional
@@ -322,6 +332,8 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     if not len(b):
         return np.zeros(0)
     scores = box_bin_log_odds(bank, image, b, pyramid=pyramid, iou=iou, floor_margin=floor_margin)
+    if classifier is not None:
+        scores = scores + classifier.log_probs(image, b)
     prior = None if camera is None else box_log_prior(bank, b, camera, road_spread=road_spread)
     if prior is not None:
         scores = scores + prior_weight * prior
