@@ -40,6 +40,8 @@ class FitOptions:
     parts_model: str | None = None
     # Detector bank file for our own pre-detection (None: the shipped bank).
     detector_bank: str | None = None
+    # Crop viewpoint classifier file for boxes given without a viewpoint (None: the shipped one).
+    viewpoint_classifier: str | None = None
 
 
 @lru_cache(maxsize=4)
@@ -47,6 +49,14 @@ def _part_detector(path: str | None):
     from wirescene.parts.detector import PartDetector, load_default
 
     return load_default() if path is None else PartDetector.load(path)
+
+
+@lru_cache(maxsize=4)
+def viewpoint_classifier(path: str | None):
+    """The crop viewpoint classifier at ``path`` (None: the shipped one), loaded once per process."""
+    from wirescene.predetect.viewpoint_classifier import ViewpointClassifier, load_default_classifier
+
+    return load_default_classifier() if path is None else ViewpointClassifier.load(path)
 
 
 @lru_cache(maxsize=4)
@@ -65,7 +75,8 @@ class FrameFit:
     ----------
     detections : Detections
         The pre-detections the variants were fitted to, with unknown viewpoints
-        completed from the part evidence.
+        completed by the detector bank (:func:`complete_viewpoints`; from the part evidence
+        when no image is given).
     estimates : dict of str to SceneEstimate
         One estimate per requested variant, in the requested order.
     evidence : PartEvidence or None
@@ -82,11 +93,56 @@ def _variant(v: str | Variant) -> Variant:
 
 
 def needs_evidence(detections: Detections, variants: Iterable[str | Variant]) -> bool:
-    """Whether :func:`fit_frame` needs part evidence (hence the image) for these
-    detections: a fine variant, or a detection without a viewpoint."""
+    """Whether :func:`fit_frame` needs part evidence or the image for these detections:
+    a fine variant, or a detection without a viewpoint (scored by the detector bank on the
+    image, or taken from the part evidence when only that is given)."""
     if len(detections) == 0:
         return False
     return any(_variant(v).fine for v in variants) or not np.all(np.isfinite(detections.alpha))
+
+
+def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarray, *, bank=None,
+                        classifier=None) -> Detections:
+    """Detections whose unknown viewpoints (NaN ``alpha``, e.g. boxes of an external
+    detector) are scored inside each box by the detector bank's templates and the crop
+    viewpoint classifier, with the camera's road prior
+    (:func:`wirescene.predetect.box_viewpoints.box_viewpoints`); known viewpoints are kept.
+
+    Parameters
+    ----------
+    camera : Camera
+    detections : Detections
+    image : (H, W, 3) uint8 array
+    bank : DetectorBank, optional
+        Default: the shipped bank.
+    classifier : ViewpointClassifier, optional
+        Default: the shipped one.
+
+    Returns
+    -------
+    Detections
+        The same boxes and scores, every ``alpha`` finite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> P = np.array([[720.0, 0, 48, 0], [0, 720.0, 20, 0], [0, 0, 1, 0]])
+    >>> dets = Detections(np.array([[10.0, 20.0, 70.0, 50.0]]), np.ones(1), np.full(1, np.nan))
+    >>> out = complete_viewpoints(Camera(P, (96, 64)), dets, np.zeros((64, 96, 3), np.uint8))
+    >>> bool(np.isfinite(out.alpha).all())
+    True
+    """
+    from wirescene.predetect.box_viewpoints import box_viewpoints
+
+    unknown = np.flatnonzero(~np.isfinite(detections.alpha))
+    if len(unknown) == 0:
+        return detections
+    bank = detector_bank(None) if bank is None else bank
+    classifier = viewpoint_classifier(None) if classifier is None else classifier
+    alpha = detections.alpha.copy()
+    alpha[unknown] = box_viewpoints(bank, image, detections.boxes[unknown], camera=camera, classifier=classifier)
+    return Detections(detections.boxes, detections.scores, alpha, detections.source)
 
 
 def fit_frame(
@@ -110,7 +166,9 @@ def fit_frame(
     variants : iterable of str or Variant
         See :data:`wirescene.fitting.variants.VARIANTS`.
     image : (H, W, 3) uint8 array, optional
-        Needed for pre-detection and for the part evidence, unless ``evidence`` is given.
+        Needed for pre-detection, for the viewpoints of detections without one (scored by
+        the detector bank, :func:`complete_viewpoints`) and for the part evidence, unless
+        ``evidence`` is given (viewpoints then come from the part evidence).
     evidence : PartEvidence, optional
         Per-vertex evidence to use instead of the part detectors' response maps
         (e.g. the oracle evidence of synthetic scenes).
@@ -137,14 +195,17 @@ def fit_frame(
     if len(detections) == 0:
         return FrameFit(detections, {v.name: SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane,
                                                            detections=detections) for v in variants})
-    unknown_viewpoint = not np.all(np.isfinite(detections.alpha))
+    if image is not None and not np.all(np.isfinite(detections.alpha)):
+        # Boxes without a viewpoint (external detectors): the bank's templates and the crop
+        # classifier score the 8 bins inside each box, for every variant alike.
+        detections = complete_viewpoints(camera, detections, image, bank=detector_bank(options.detector_bank),
+                                         classifier=viewpoint_classifier(options.viewpoint_classifier))
     if evidence is None and needs_evidence(detections, variants):
         if image is None:
             raise ValueError("image is needed for the part evidence of fine variants and unknown viewpoints")
         evidence = part_evidence(image, detections, detector=_part_detector(options.parts_model))
-    if unknown_viewpoint:
-        # Boxes without a viewpoint (external detectors): take it from the part evidence,
-        # for every variant, so that all variants start from the same pre-detections.
+    if not np.all(np.isfinite(detections.alpha)):
+        # no image to score (given evidence, e.g. the oracle's): the viewpoint from the part evidence
         detections = viewpoint_from_evidence(camera, detections, evidence, load_shape_model())
     if lifted is None:
         lifted = lift_table(camera, detections, options=options.lifting)

@@ -183,15 +183,14 @@ class Activations:
     cell: np.ndarray  # (A, 2) (row, col) of the window's top-left cell
 
 
-def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k: int = 200,
-                  min_height: float = 30.0, max_height: float = 2000.0, chunk_cols: int = 800,
-                  detectors=None) -> Activations:
-    """Apply every template to every pyramid level where the full object it implies is
-    ``min_height..max_height`` px high: per level and chunk of templates ONE matrix
-    product of the cell features with all their template cells, then shifted sums.
-    Keeps per detector and level the ``top_k`` windows scoring above ``threshold``."""
+def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0, max_height: float = 2000.0,
+                       chunk_cols: int = 800, detectors=None):
+    """Yield ``(t, level, scale, R)``: the response map ``R`` ``(Hr, Wr)`` (float32, bias
+    included; entry ``(r, q)`` scores the window whose top-left cell is ``(r, q)``) of every
+    template ``t`` at every pyramid level where the full object it implies is
+    ``min_height..max_height`` px high. Per level and chunk of templates ONE matrix product
+    of the cell features with all their template cells, then shifted sums."""
     dets = range(len(bank)) if detectors is None else detectors
-    out = {k: [] for k in ("det", "boxes", "scores", "level", "cell")}
     for li, (s, F) in enumerate(pyramid):
         Hc, Wc = F.shape[:2]
         active = []
@@ -222,19 +221,33 @@ def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k
                     for dx in range(tw):
                         R += P[o + dy * tw + dx, dy:dy + Hr, dx:dx + Wr]
                 o += th * tw
-                flat = R.ravel()
-                idx = np.flatnonzero(flat > threshold)
-                if len(idx) > top_k:
-                    idx = idx[np.argpartition(-flat[idx], top_k - 1)[:top_k]]
-                if not len(idx):
-                    continue
-                r, q = np.divmod(idx, Wr)
-                boxes = np.stack([q * CELL, r * CELL, (q + tw) * CELL, (r + th) * CELL], 1) / s
-                out["det"].append(np.full(len(idx), t))
-                out["boxes"].append(boxes)
-                out["scores"].append(flat[idx].astype(float))
-                out["level"].append(np.full(len(idx), li))
-                out["cell"].append(np.stack([r, q], 1))
+                yield t, li, s, R
+
+
+def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k: int = 200,
+                  min_height: float = 30.0, max_height: float = 2000.0, chunk_cols: int = 800,
+                  detectors=None) -> Activations:
+    """Apply every template to every pyramid level where the full object it implies is
+    ``min_height..max_height`` px high (:func:`template_responses`). Keeps per detector
+    and level the ``top_k`` windows scoring above ``threshold``."""
+    out = {k: [] for k in ("det", "boxes", "scores", "level", "cell")}
+    for t, li, s, R in template_responses(bank, pyramid, min_height=min_height, max_height=max_height,
+                                          chunk_cols=chunk_cols, detectors=detectors):
+        th, tw = bank.configs[t].template
+        Wr = R.shape[1]
+        flat = R.ravel()
+        idx = np.flatnonzero(flat > threshold)
+        if len(idx) > top_k:
+            idx = idx[np.argpartition(-flat[idx], top_k - 1)[:top_k]]
+        if not len(idx):
+            continue
+        r, q = np.divmod(idx, Wr)
+        boxes = np.stack([q * CELL, r * CELL, (q + tw) * CELL, (r + th) * CELL], 1) / s
+        out["det"].append(np.full(len(idx), t))
+        out["boxes"].append(boxes)
+        out["scores"].append(flat[idx].astype(float))
+        out["level"].append(np.full(len(idx), li))
+        out["cell"].append(np.stack([r, q], 1))
     if not out["det"]:
         return Activations(np.zeros(0, int), np.zeros((0, 4)), np.zeros(0), np.zeros(0, int), np.zeros((0, 2), int))
     return Activations(*(np.concatenate(out[k]) for k in ("det", "boxes", "scores", "level", "cell")))
@@ -419,12 +432,12 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     else:
         boxes, scores, bins = np.zeros((0, 4)), np.zeros(0), np.zeros(0, int)
     if len(boxes):
-        boxes = _clip(boxes, W, H)
+        boxes = clip_boxes(boxes, W, H)
         if "box_regression" in bank.meta:
-            boxes = _clip(apply_box_regression(bank.meta["box_regression"], boxes, bins, (W, H)), W, H)
+            boxes = clip_boxes(apply_box_regression(bank.meta["box_regression"], boxes, bins, (W, H)), W, H)
         if bank.refinement is not None and gray is not None:
-            boxes = _clip(apply_box_refinement(bank.refinement, gray, boxes, regression_features(boxes, bins, (W, H))),
-                          W, H)
+            boxes = clip_boxes(apply_box_refinement(bank.refinement, gray, boxes,
+                                                    regression_features(boxes, bins, (W, H))), W, H)
         ok = (boxes[:, 2] - boxes[:, 0] >= 2) & (boxes[:, 3] - boxes[:, 1] >= 2)
         boxes, scores, bins = boxes[ok], scores[ok], bins[ok]
         if horizon is not None:
@@ -463,16 +476,27 @@ def traffic_viewpoints(bank: DetectorBank, kept, kept_bins, clusters, horizon: f
     prior at each box's lateral position. ``kept_bins`` (the winners' own bins) unchanged
     for a bank without that prior or without a calibration (margins of different
     viewpoints' templates are only comparable as calibrated log-odds)."""
-    prior = bank.meta.get("viewpoint_prior")
-    if not prior or bank.calibration is None or not len(kept):
+    log_prior = traffic_log_prior(bank, kept, horizon, center_column) if len(kept) else None
+    if log_prior is None:
         return np.asarray(kept_bins, int)
     boxes, margins, bins = clusters
-    log_prior = viewpoint_log_prior(prior, lateral_position(kept, horizon, center_column))
     return choose_viewpoints(kept, boxes, float(bank.calibration[0]) * np.asarray(margins, float), bins, log_prior,
                              iou=iou)
 
 
-def _clip(boxes: np.ndarray, W: int, H: int) -> np.ndarray:
+def traffic_log_prior(bank: DetectorBank, boxes, horizon: float, center_column: float) -> np.ndarray | None:
+    """``(D, 8)`` log P(bin | lateral position) of ``boxes`` ``(D, 4)`` under the bank's
+    viewpoint prior (:func:`wirescene.predetect.viewpoint_prior.viewpoint_log_prior`), or None
+    for a bank without that prior or without a calibration (its margins are no log-odds the
+    prior could be added to)."""
+    prior = bank.meta.get("viewpoint_prior")
+    if not prior or bank.calibration is None:
+        return None
+    return viewpoint_log_prior(prior, lateral_position(boxes, horizon, center_column))
+
+
+def clip_boxes(boxes: np.ndarray, W: int, H: int) -> np.ndarray:
+    """Boxes ``(D, 4)`` clipped to the pixels of a ``W x H`` image."""
     return np.column_stack([np.clip(boxes[:, 0], 0, W - 1), np.clip(boxes[:, 1], 0, H - 1),
                             np.clip(boxes[:, 2], 0, W - 1), np.clip(boxes[:, 3], 0, H - 1)])
 

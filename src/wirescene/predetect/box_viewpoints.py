@@ -1,0 +1,340 @@
+"""A viewpoint for every box, whoever detected it: the bank's configuration detectors
+score the 8 viewpoint bins inside given boxes (issue 27, item 2).
+
+Boxes read from another detector's files (:mod:`wirescene.io.detections`) carry no
+viewpoint. The bank's templates already say which viewpoint a window looks like, and
+every window predicts the full car box it belongs to -- the vote of
+:func:`~wirescene.predetect.bank.merge_activations`: the configuration box grown by the
+configuration's offsets, clipped to the image and moved by the bank's box regression
+onto the labelled boxes' convention. For each given box, the windows of every template
+on the HOG pyramid whose vote overlaps it by IoU >= :data:`IOU` are its candidates; a
+bin scores the calibrated log-odds of its best candidate (the rule of the bank's own
+clusters, whose score is their best member's), a bin without any candidate, or with
+only weaker ones, scores as :data:`FLOOR_MARGIN`. Given the camera, the bank's traffic
+prior (:mod:`wirescene.predetect.viewpoint_prior`) adds log P(bin | lateral position),
+as :func:`~wirescene.predetect.bank.traffic_viewpoints` does for the bank's own
+detections; made geometric, it knows that a car on the road is aligned with it
+(:func:`box_log_prior`). A crop classifier
+(:mod:`wirescene.predetect.viewpoint_classifier`) may add what the templates miss (front
+against back), and the viewpoint is the best bin's centre.
+
+The settings were chosen held out by drive on fold group (0, 1) and reported on (2, 3)
+(``benchmarks/bench_box_viewpoints.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wirescene.core.boxes import iou_2d
+from wirescene.core.errors import ArgumentError, InputError, check_shape
+from wirescene.core.validate import boxes_problem
+from wirescene.core.viewpoints import N_BINS, bin_center
+from wirescene.predetect.bank import (
+    DetectorBank,
+    apply_box_regression,
+    clip_boxes,
+    template_responses,
+    traffic_log_prior,
+)
+from wirescene.predetect.geometry import horizon_row
+from wirescene.predetect.hog import CELL, hog_cells, pyramid_scales, resize, to_gray
+
+#: Overlap (IoU of a window's predicted car box with the given box) for a window to vote.
+IOU = 0.5
+#: Margin a bin scores at least (the lowest activation :func:`~wirescene.predetect.bank.detect_pyramid`
+#: keeps at the shipped threshold), so that one bin's missing window does not rule it out.
+FLOOR_MARGIN = -1.0
+#: Weight of the log prior against the templates' log-odds (1 would be naive Bayes, as
+#: :func:`~wirescene.predetect.bank.traffic_viewpoints`; 2 chosen on fold group (0, 1): the
+#: templates' log-odds are calibrated for car against background, not for one bin against another).
+PRIOR_WEIGHT = 2.0
+#: Width (radians) of the road-aligned prior's kernel around the two headings along the road
+#: (:func:`box_log_prior`; None: the traffic prior alone).
+ROAD_SPREAD: float | None = 0.2
+#: Share of the road-aligned prior spread evenly over the bins: cars not aligned with the road.
+UNALIGNED = 0.05
+# Factor by which the box regression may change a vote's height, at most (the shipped bank's
+# moves it by 0.84-1.23x), so windows beyond it cannot reach the IoU and are not scored.
+_REGRESSION_SLACK = 1.5
+
+
+def _check_image(image) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim not in (2, 3) or image.shape[0] < 16 or image.shape[1] < 16:
+        raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
+    return image
+
+
+def _check_boxes(boxes, image_size=None) -> np.ndarray:
+    b = np.asarray(boxes)
+    if b.size == 0:
+        b = b.reshape(0, 4)
+    check_shape("boxes", b, (None, 4))
+    problem = boxes_problem(b, image_size)
+    if problem:
+        raise ArgumentError("boxes", problem)
+    return b.astype(float)
+
+
+def _window_ranges(config, scale: float, boxes: np.ndarray, iou: float):
+    """Windows (top-left cells) of template ``config`` at pyramid ``scale`` whose vote may
+    overlap each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``: ``(near (N,) bool, r0, r1, q0, q1)``,
+    the half-open row and column ranges ``(N,)`` (unclipped; meaningless where not ``near``)."""
+    th, tw = config.template
+    step = CELL / scale
+    vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]  # the vote of window (0, 0)
+    vw, vh = vote[2] - vote[0], vote[3] - vote[1]
+    gw, gh = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
+    # the regression moves a height by < 25% and clipping only shrinks it: no IoU >= iou beyond these ratios
+    near = (vh >= iou / _REGRESSION_SLACK * gh) & (vh <= _REGRESSION_SLACK / iou * gh)
+    # the vote of window (r, q) is that of (0, 0) shifted by step * (q, r): votes that intersect the
+    # box, with room for the regression's shift
+    rx, ry = 0.5 * (gw + vw) + 0.25 * vw, 0.5 * (gh + vh) + 0.25 * vh
+    cx = (boxes[:, 0] + boxes[:, 2] - vote[0] - vote[2]) / 2
+    cy = (boxes[:, 1] + boxes[:, 3] - vote[1] - vote[3]) / 2
+    q0, q1 = np.ceil((cx - rx) / step).astype(int), np.floor((cx + rx) / step).astype(int) + 1
+    r0, r1 = np.ceil((cy - ry) / step).astype(int), np.floor((cy + ry) / step).astype(int) + 1
+    return near, r0, r1, q0, q1
+
+
+def _plan(bank: DetectorBank, levels, boxes: np.ndarray, iou: float) -> list:
+    """Per pyramid level ``(index, scale, (Hc, Wc) cells)`` of ``levels``, the templates that can
+    vote for some box and the cell rectangle ``(R0, R1, C0, C1)`` their windows cover:
+    ``[(index, scale, rectangle, templates)]``; levels no template can use are left out."""
+    out = []
+    for li, scale, (Hc, Wc) in levels:
+        rect, templates = [Hc, 0, Wc, 0], []
+        for t, config in enumerate(bank.configs):
+            th, tw = config.template
+            if th > Hc or tw > Wc:
+                continue
+            near, r0, r1, q0, q1 = _window_ranges(config, scale, boxes, iou)
+            r0, r1 = np.maximum(r0, 0), np.minimum(r1, Hc - th + 1)
+            q0, q1 = np.maximum(q0, 0), np.minimum(q1, Wc - tw + 1)
+            ok = near & (r1 > r0) & (q1 > q0)
+            if ok.any():
+                templates.append(t)
+                rect = [min(rect[0], int(r0[ok].min())), max(rect[1], int(r1[ok].max()) + th - 1),
+                        min(rect[2], int(q0[ok].min())), max(rect[3], int(q1[ok].max()) + tw - 1)]
+        if templates:
+            out.append((li, scale, tuple(rect), templates))
+    return out
+
+
+def _region_features(gray: np.ndarray, scale: float, rect) -> np.ndarray:
+    """The cells ``rect`` ``(R0, R1, C0, C1)`` of the image's pyramid level ``scale``, exactly as
+    :func:`~wirescene.predetect.hog.feature_pyramid` computes them, from that rectangle alone."""
+    H, W = gray.shape
+    w, h = max(int(round(W * scale)), 1), max(int(round(H * scale)), 1)
+    im = gray if (w == W and h == H) else resize(gray, w, h)
+    R0, R1, C0, C1 = rect
+    # two cells of margin: a cell's features depend on its neighbours' gradients and energies only
+    y0, y1 = max(R0 - 2, 0), min(R1 + 2, h // CELL)
+    x0, x1 = max(C0 - 2, 0), min(C1 + 2, w // CELL)
+    f = hog_cells(im[y0 * CELL:y1 * CELL, x0 * CELL:x1 * CELL])
+    return f[R0 - y0:R1 - y0, C0 - x0:C1 - x0]
+
+
+def _best_votes(bank: DetectorBank, t: int, scale: float, R: np.ndarray, origin, boxes: np.ndarray, image_size,
+                iou: float) -> np.ndarray:
+    """``(N,)`` best response in ``R`` (template ``t`` at pyramid ``scale``; entry ``(r, q)``
+    scores the window whose top-left cell is ``origin + (r, q)``) among the windows whose
+    vote overlaps each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``; -inf where none does."""
+    W, H = image_size
+    config = bank.configs[t]
+    th, tw = config.template
+    step = CELL / scale
+    o_r, o_q = origin
+    near, r0, r1, q0, q1 = _window_ranges(config, scale, boxes, iou)
+    r0, r1 = np.maximum(r0, o_r), np.minimum(r1, o_r + R.shape[0])
+    q0, q1 = np.maximum(q0, o_q), np.minimum(q1, o_q + R.shape[1])
+    out = np.full(len(boxes), -np.inf)
+    idx, rows, cols = [], [], []
+    for i in np.flatnonzero(near & (r1 > r0) & (q1 > q0)):
+        nr, nq = r1[i] - r0[i], q1[i] - q0[i]
+        rows.append(np.repeat(np.arange(r0[i], r1[i]), nq))
+        cols.append(np.tile(np.arange(q0[i], q1[i]), nr))
+        idx.append(np.full(nr * nq, i))
+    if not idx:
+        return out
+    idx, rows, cols = np.concatenate(idx), np.concatenate(rows), np.concatenate(cols)
+    vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]
+    votes = clip_boxes(vote[None] + step * np.column_stack([cols, rows, cols, rows]), W, H)
+    regression = bank.meta.get("box_regression")
+    if regression is not None:
+        votes = clip_boxes(apply_box_regression(regression, votes, np.full(len(votes), config.bin), (W, H)),
+                           W, H)
+    ok = iou_2d(votes, boxes[idx]) >= iou
+    np.maximum.at(out, idx[ok], R[rows[ok] - o_r, cols[ok] - o_q].astype(float))
+    return out
+
+
+def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=None, iou: float = IOU,
+                     floor_margin: float = FLOOR_MARGIN) -> np.ndarray:
+    """Score the 8 viewpoint bins inside given boxes with the bank's templates.
+
+    Parameters
+    ----------
+    bank : DetectorBank
+    image : (H, W, 3) uint8 array
+    boxes : (N, 4) array
+        ``x1 y1 x2 y2`` in pixels.
+    pyramid : list of (float, ndarray), optional
+        :func:`wirescene.predetect.hog.feature_pyramid` of the image if already computed;
+        without it only the cells of the bank's pyramid levels (``meta["max_scale"]``,
+        ``meta["per_octave"]``) that some box's windows cover are computed, to the same values.
+    iou : float, optional
+        Overlap of a window's predicted car box with a box for the window to vote.
+    floor_margin : float, optional
+        Margin each bin scores at least.
+
+    Returns
+    -------
+    (N, 8) ndarray
+        Per box and bin the calibrated log-odds of the bin's best vote (raw margins for an
+        uncalibrated bank).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.predetect import load_default_bank
+    >>> image = np.zeros((64, 96, 3), np.uint8)
+    >>> box_bin_log_odds(load_default_bank(), image, np.array([[10.0, 10.0, 70.0, 40.0]])).shape
+    (1, 8)
+    """
+    image = _check_image(image)
+    H, W = image.shape[:2]
+    b = _check_boxes(boxes)
+    best = np.full((len(b), N_BINS), -np.inf)
+    if len(b):
+        if pyramid is None:
+            scales = pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
+                                    per_octave=int(bank.meta.get("per_octave", 4)))
+            gray = to_gray(image)
+            levels = [(li, s, (max(int(round(H * s)), 1) // CELL, max(int(round(W * s)), 1) // CELL))
+                      for li, s in enumerate(scales)]
+        else:
+            levels = [(li, s, F.shape[:2]) for li, (s, F) in enumerate(pyramid)]
+        for li, scale, rect, templates in _plan(bank, levels, b, iou):
+            R0, R1, C0, C1 = rect
+            F = _region_features(gray, scale, rect) if pyramid is None else pyramid[li][1][R0:R1, C0:C1]
+            for t, _, _, R in template_responses(bank, [(scale, F)], min_height=0.0, max_height=np.inf,
+                                                 detectors=templates):
+                k = bank.configs[t].bin
+                best[:, k] = np.maximum(best[:, k], _best_votes(bank, t, scale, R, (R0, C0), b, (W, H), iou))
+    best = np.maximum(best, floor_margin)
+    if bank.calibration is not None:
+        a, c = (float(v) for v in bank.calibration)
+        best = a * best + c
+    return best
+
+
+def box_log_prior(bank: DetectorBank, boxes, camera, *, road_spread: float | None = ROAD_SPREAD) -> np.ndarray | None:
+    """Log prior of the 8 viewpoint bins of boxes from where they stand on the road.
+
+    The bank's traffic prior (:func:`~wirescene.predetect.bank.traffic_log_prior`) gives
+    P(bin | lateral position). With ``road_spread``, the prior also knows that a car on
+    the road is aligned with it: seen along the ray at angle ``theta`` (right positive) from
+    the optical axis, a car facing the camera has ``alpha = pi/2 - theta`` and one facing
+    away ``alpha = -pi/2 - theta`` (KITTI's ``alpha = rotation_y - theta``). The traffic
+    prior's mass of the front bins (1-3) goes to the first, that of the back bins (5-7) to
+    the second, each spread over the bins by a von Mises kernel of width ``road_spread``
+    (radians; roads bend), the side bins (0, 4: crossing cars) keep theirs, and a share
+    :data:`UNALIGNED` is spread evenly (cars parked askew, turning).
+
+    Parameters
+    ----------
+    bank : DetectorBank
+    boxes : (N, 4) array
+    camera : Camera
+    road_spread : float or None, optional
+        None: the traffic prior alone, as for the bank's own detections.
+
+    Returns
+    -------
+    (N, 8) ndarray or None
+        None for a bank without a viewpoint prior or a calibration.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> from wirescene.predetect import load_default_bank
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> prior = box_log_prior(load_default_bank(), [[900.0, 180, 1000, 250]], camera)
+    >>> prior.shape, bool(np.allclose(np.exp(prior).sum(1), 1.0))
+    ((1, 8), True)
+    """
+    b = _check_boxes(boxes)
+    K = np.asarray(camera.K, float)
+    log_prior = traffic_log_prior(bank, b, horizon_row(camera), float(K[0, 2])) if len(b) else None
+    if log_prior is None or road_spread is None:
+        return log_prior
+    p = np.exp(log_prior)
+    theta = np.arctan2((b[:, 0] + b[:, 2]) / 2 - K[0, 2], K[0, 0])
+    centres = bin_center(np.arange(N_BINS))
+
+    def kernel(mu):
+        k = np.exp((np.cos(centres[None] - mu[:, None]) - 1.0) / road_spread ** 2)
+        return k / k.sum(1, keepdims=True)
+
+    road = (p[:, [1, 2, 3]].sum(1, keepdims=True) * kernel(np.pi / 2 - theta)
+            + p[:, [5, 6, 7]].sum(1, keepdims=True) * kernel(-np.pi / 2 - theta))
+    road[:, [0, 4]] += p[:, [0, 4]]
+    return np.log((1.0 - UNALIGNED) * road + UNALIGNED / N_BINS)
+
+
+def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None, classifier=None, iou: float = IOU,
+                   floor_margin: float = FLOOR_MARGIN, prior_weight: float = PRIOR_WEIGHT,
+                   road_spread: float | None = ROAD_SPREAD, pyramid=None) -> np.ndarray:
+    """The viewpoint of each given box, scored by the bank's configuration detectors (and a
+    crop classifier): the bin maximising the templates' log-odds, plus the classifier's
+    log-probability, plus ``prior_weight`` times the road prior.
+
+    Parameters
+    ----------
+    bank : DetectorBank
+    image : (H, W, 3) uint8 array
+    boxes : (N, 4) array
+        ``x1 y1 x2 y2`` in pixels, e.g. another detector's boxes.
+    camera : Camera, optional
+        With it, the prior of where each box stands on the road (:func:`box_log_prior`)
+        weighs the bins, front against back above all.
+    classifier : ViewpointClassifier, optional
+        A crop classifier (:mod:`wirescene.predetect.viewpoint_classifier`) whose
+        log-probabilities are added (None: the templates alone).
+    iou, floor_margin : float, optional
+        See :func:`box_bin_log_odds`.
+    prior_weight : float, optional
+        Weight of the log prior against the templates' log-odds (:data:`PRIOR_WEIGHT`).
+    road_spread : float or None, optional
+        See :func:`box_log_prior`.
+    pyramid : list of (float, ndarray), optional
+        The image's feature pyramid if already computed (see :func:`box_bin_log_odds`).
+
+    Returns
+    -------
+    (N,) ndarray
+        Observation angle ``alpha`` (radians): the centre of the best bin of each box.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.predetect import load_default_bank
+    >>> image = np.zeros((64, 96, 3), np.uint8)
+    >>> box_viewpoints(load_default_bank(), image, [[10, 10, 70, 40], [20, 5, 90, 60]]).shape
+    (2,)
+    """
+    image = _check_image(image)
+    H, W = image.shape[:2]
+    b = _check_boxes(boxes, (W, H))
+    if not len(b):
+        return np.zeros(0)
+    scores = box_bin_log_odds(bank, image, b, pyramid=pyramid, iou=iou, floor_margin=floor_margin)
+    if classifier is not None:
+        scores = scores + classifier.log_probs(image, b)
+    prior = None if camera is None else box_log_prior(bank, b, camera, road_spread=road_spread)
+    if prior is not None:
+        scores = scores + prior_weight * prior
+    return bin_center(np.argmax(scores, axis=1))

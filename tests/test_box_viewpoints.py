@@ -1,0 +1,160 @@
+"""A viewpoint for every box: the bank scores the 8 bins inside given boxes (issue 27, item 2)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wirescene.core.boxes import iou_2d
+from wirescene.core.camera import Camera
+from wirescene.core.errors import ArgumentError, ShapeError
+from wirescene.core.types import Detections
+from wirescene.core.viewpoints import bin_center, viewpoint_bin
+from wirescene.fitting.pipeline import fit_frame
+from wirescene.io.kitti import KittiDataset
+from wirescene.predetect import load_default_bank
+from wirescene.predetect.bank import detect_pyramid
+from wirescene.predetect.box_viewpoints import PRIOR_WEIGHT, box_bin_log_odds, box_log_prior, box_viewpoints
+from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
+from wirescene.predetect.viewpoint_classifier import (
+    ViewpointClassifier,
+    crop_viewpoint_features,
+    fit_viewpoint_classifier,
+    kitti_examples,
+    load_default_classifier,
+)
+from wirescene.core.errors import InputError
+
+from conftest import KITTI_ROOT
+
+# A 600 x 160 px crop of frame 000010 holding seven labelled cars (fast to score).
+FRAME, X0, Y0, X1, Y1 = "000010", 340, 150, 940, 310
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """The crop, its camera (principal point moved with the crop), its labelled cars and the
+    bank's pyramid of it, with the per-bin log-odds of the cars' label boxes."""
+    ds = KittiDataset(KITTI_ROOT)
+    image, camera = ds.image(FRAME), ds.camera(FRAME)
+    crop = np.ascontiguousarray(image[Y0:Y1, X0:X1])
+    shift = np.array([[1.0, 0, -X0], [0, 1.0, -Y0], [0, 0, 1.0]])
+    cam = Camera(shift @ camera.P, (X1 - X0, Y1 - Y0))
+    cars = [o for o in ds.labels(FRAME).objects if o.type == "Car" and o.box[0] >= X0 and o.box[2] <= X1]
+    boxes = np.array([o.box for o in cars]) - [X0, Y0, X0, Y0]
+    bank = load_default_bank()
+    pyr = feature_pyramid(crop, pyramid_scales(X1 - X0, Y1 - Y0, max_scale=float(bank.meta["max_scale"]),
+                                               per_octave=int(bank.meta["per_octave"])))
+    horizon, center = float(cam.K[1, 2]), float(cam.K[0, 2])
+    templates = box_bin_log_odds(bank, crop, boxes, pyramid=pyr)
+    prior = box_log_prior(bank, boxes, cam)
+    return dict(image=crop, camera=cam, cars=cars, boxes=boxes, bank=bank, pyramid=pyr, horizon=horizon,
+                center=center, templates=templates, prior=prior, log_odds=templates + PRIOR_WEIGHT * prior)
+
+
+def test_one_viewpoint_per_box_and_the_shape_contract(scene):
+    bank, image = scene["bank"], scene["image"]
+    boxes = scene["boxes"][:2]
+    alpha = box_viewpoints(bank, image, boxes, pyramid=scene["pyramid"])
+    assert alpha.shape == (2,) and np.all(np.isfinite(alpha))
+    assert np.allclose(alpha, bin_center(viewpoint_bin(alpha)))  # bin centres
+    assert box_viewpoints(bank, image, np.zeros((0, 4))).shape == (0,)
+    assert scene["log_odds"].shape == (len(scene["boxes"]), 8) and np.all(np.isfinite(scene["log_odds"]))
+    for bad in (np.zeros((2, 3)), np.zeros(4), np.zeros((1, 2, 4))):
+        with pytest.raises(ShapeError, match="boxes must have shape"):
+            box_viewpoints(bank, image, bad)
+    with pytest.raises(ArgumentError, match="empty or inverted"):
+        box_viewpoints(bank, image, [[50, 50, 40, 80]])
+    with pytest.raises(ShapeError):
+        box_bin_log_odds(bank, image, np.zeros((3, 5)))
+
+
+def test_label_boxes_get_the_viewpoint_of_our_own_detections(scene):
+    bank, image = scene["bank"], scene["image"]
+    h, w = image.shape[:2]
+    dets = detect_pyramid(bank, scene["pyramid"], (w, h), threshold=bank.threshold,
+                          min_height=float(bank.meta["min_height"]), horizon=scene["horizon"],
+                          center_column=scene["center"], gray=to_gray(image))
+    # under the bank's own rule (the traffic prior alone, naive Bayes) the bins of its detections
+    own_rule = scene["templates"] + box_log_prior(bank, scene["boxes"], scene["camera"], road_spread=None)
+    chosen = np.argmax(own_rule, axis=1)
+    ov = iou_2d(scene["boxes"][:, None], dets.boxes[None])
+    matched = np.flatnonzero(ov.max(1) >= 0.5)
+    assert len(matched) >= 4
+    own = viewpoint_bin(dets.alpha[ov[matched].argmax(1)])
+    steps = np.abs((chosen[matched] - own + 4) % 8 - 4)
+    assert np.all(steps <= 1), (chosen[matched], own)
+    # the unoccluded cars (both sides of the road) get their label's bin
+    clear = [i for i, o in enumerate(scene["cars"]) if o.occluded == 0]
+    assert len(clear) >= 3
+    chosen = np.argmax(scene["log_odds"], axis=1)  # the default rule
+    assert list(chosen[clear]) == [int(viewpoint_bin(scene["cars"][i].alpha)) for i in clear]
+
+
+def test_only_the_cells_the_boxes_need_give_the_whole_pyramid_scores(scene):
+    # without a pyramid only the cells around the boxes are computed: the same scores
+    alone = box_bin_log_odds(scene["bank"], scene["image"], scene["boxes"])
+    assert alone.shape == scene["templates"].shape
+    assert np.allclose(alone, scene["templates"], rtol=0, atol=1e-4)
+
+
+def test_the_road_prior_puts_front_and_back_along_the_road(scene):
+    bank, camera = scene["bank"], scene["camera"]
+    prior = scene["prior"]
+    assert prior.shape == (len(scene["boxes"]), 8) and np.allclose(np.exp(prior).sum(1), 1.0)
+    # a box straight ahead: the road's two headings are bins 2 (front) and 6 (back)
+    ahead = np.array([[camera.K[0, 2] - 30, 40.0, camera.K[0, 2] + 30, 90.0]])
+    p = np.exp(box_log_prior(bank, ahead, camera))[0]
+    assert set(np.argsort(p)[-2:]) == {2, 6} and p[6] > p[2]  # in the ego lane traffic goes away
+    # seen 45 deg to the right, the same headings are bins 1 and 5
+    f = float(camera.K[0, 0])
+    right = ahead + [f, 0.0, f, 0.0]
+    p = np.exp(box_log_prior(bank, right, camera))[0]
+    assert set(np.argsort(p)[-2:]) == {1, 5}
+    # without the road, the traffic prior alone (the bank's own), which knows no ray angle
+    kde = np.exp(box_log_prior(bank, right, camera, road_spread=None))[0]
+    assert p[1] + p[5] > kde[1] + kde[5]
+    assert box_log_prior(bank, np.zeros((0, 4)), camera) is None
+
+
+def test_fit_frame_completes_unknown_viewpoints_with_the_bank(scene):
+    boxes = scene["boxes"]
+    alpha = np.full(len(boxes), np.nan)
+    alpha[0] = bin_center(4)  # a known viewpoint is kept
+    dets = Detections(boxes, np.ones(len(boxes)), alpha, "external")
+    fit = fit_frame(scene["camera"], dets, ["coarse"], image=scene["image"])
+    out = fit.detections.alpha
+    assert out[0] == pytest.approx(bin_center(4)) and np.all(np.isfinite(out))
+    # box_viewpoints' rule with the shipped bank and classifier: templates + classifier + road prior
+    # (the templates' scores without a pyramid are the whole pyramid's: see the test above)
+    classified = load_default_classifier().log_probs(scene["image"], boxes)
+    expected = bin_center(np.argmax(scene["log_odds"] + classified, axis=1))
+    assert np.allclose(out[1:], expected[1:])
+    assert fit.evidence is None  # a coarse variant needs no part evidence for it any more
+
+
+def test_crop_classifier_contract_storage_and_mirror_training(scene, tmp_path):
+    image, boxes = scene["image"], scene["boxes"]
+    x = crop_viewpoint_features(image, boxes)
+    assert x.shape[0] == len(boxes) and np.all(np.isfinite(x))
+    with pytest.raises(ShapeError):
+        crop_viewpoint_features(image, boxes[:, :3])
+    model = load_default_classifier()
+    lp = model.log_probs(image, boxes)
+    assert lp.shape == (len(boxes), 8) and np.allclose(np.exp(lp).sum(1), 1.0)
+    with pytest.raises(ShapeError):
+        model.log_probs_of_features(x[:, :-1])
+    path = model.save(tmp_path / "vc.npz")
+    assert np.allclose(ViewpointClassifier.load(path).log_probs_of_features(x), model.log_probs_of_features(x))
+    (tmp_path / "bad.npz").write_bytes(b"not a model")
+    with pytest.raises(InputError):
+        ViewpointClassifier.load(tmp_path / "bad.npz")
+    # trained on one frame's cars, their mirror images and jittered copies: each car's bin and its mirror
+    ds = KittiDataset(KITTI_ROOT)
+    feats, bins = kitti_examples(ds, [FRAME])
+    n = sum(o.type == "Car" for o in ds.labels(FRAME).objects)
+    assert len(feats) == 4 * n
+    truth = viewpoint_bin(np.array([o.alpha for o in ds.labels(FRAME).objects if o.type == "Car"]))
+    assert list(bins[:n]) == list(truth) and list(bins[2 * n:3 * n]) == list((4 - truth) % 8)
+    fitted = fit_viewpoint_classifier(feats, bins, C=1.0)
+    assert np.mean(fitted.log_probs_of_features(feats).argmax(1) == bins) > 0.9
