@@ -54,7 +54,13 @@ from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, detect_pyramid  # noqa: E402
 from wirescene.predetect.box_viewpoints import (  # noqa: E402
-    FLOOR_MARGIN, IOU, PRIOR_WEIGHT, ROAD_SPREAD, box_bin_log_odds, box_log_prior)  # noqa: E402
+    FLOOR_MARGIN,  # noqa: E402
+    IOU,
+    PRIOR_WEIGHT,
+    ROAD_SPREAD,
+    box_bin_log_odds,
+    box_log_prior,
+)
 from wirescene.predetect.geometry import horizon_row  # noqa: E402
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray  # noqa: E402
 from wirescene.predetect.viewpoint_classifier import train_on_kitti  # noqa: E402

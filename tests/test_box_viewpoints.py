@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import KITTI_ROOT
 from wirescene.core.boxes import iou_2d
 from wirescene.core.camera import Camera
-from wirescene.core.errors import ArgumentError, ShapeError
+from wirescene.core.errors import ArgumentError, InputError, ShapeError
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
 from wirescene.fitting.pipeline import fit_frame
@@ -23,9 +24,6 @@ from wirescene.predetect.viewpoint_classifier import (
     kitti_examples,
     load_default_classifier,
 )
-from wirescene.core.errors import InputError
-
-from conftest import KITTI_ROOT
 
 # A 600 x 160 px crop of frame 000010 holding seven labelled cars (fast to score).
 FRAME, X0, Y0, X1, Y1 = "000010", 340, 150, 940, 310

@@ -298,3 +298,14 @@ def test_frame_workers_on_a_gpu_drop_to_one_with_a_notice(capsys):
     assert _frame_workers(3, "cuda:0") == 1
     assert "one process, not 3" in capsys.readouterr().err
     assert _frame_workers(1, "cuda") == 1 and capsys.readouterr().err == ""
+
+
+def test_train_viewpoints_writes_a_classifier_of_the_chosen_frames(tmp_path):
+    from wirescene.predetect.viewpoint_classifier import ViewpointClassifier
+
+    out = tmp_path / "vc.npz"
+    assert run("train", "viewpoints", KITTI_ROOT, "--frames", "000002,000010", "--out", out).exit_code == 0
+    clf = ViewpointClassifier.load(out)
+    assert clf.meta["frames"] == ["000002", "000010"] and clf.weights.shape[1] == 8
+    r = CliRunner().invoke(main, ["train", "viewpoints", str(KITTI_ROOT), "--frames", "999999", "--out", str(out)])
+    assert r.exit_code != 0

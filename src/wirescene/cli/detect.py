@@ -1,4 +1,4 @@
-"""CLI pieces: ``wirescene train detector`` and ``wirescene detect``."""
+"""CLI pieces: ``wirescene train detector``, ``train viewpoints`` and ``wirescene detect``."""
 
 from __future__ import annotations
 
@@ -90,6 +90,26 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
                                          mining_images=mining_images, n_val=n_val, progress=click.echo)
     if report:
         write_text(report, json.dumps(rep, indent=1, default=float))
+
+
+@click.command("viewpoints")
+@click.argument("kitti_root", type=click.Path(file_okay=False, exists=True, path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Classifier to write (the shipped one is src/wirescene/data/viewpoint_classifier.npz).")
+@click.option("--frames", default=None, help="Comma-separated training frame ids (default: all).")
+@split_file_option
+@click.option("--seed", type=int, default=0, show_default=True, help="Random stream of the jittered copies.")
+def viewpoints(kitti_root, out, frames, split_file, seed):
+    """Train the crop viewpoint classifier that gives boxes of other detectors a viewpoint."""
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.viewpoint_classifier import train_on_kitti
+
+    check_output_file(out, "--out")
+    ds = KittiDataset(kitti_root)
+    ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir, what="frame") or ds.frame_ids()
+    clf = train_on_kitti(ds, ids, seed=seed)
+    clf.save(out)
+    click.echo(f"viewpoint classifier: {clf.meta['n']} crops of {len(ids)} frames -> {out}")
 
 
 @click.command("detect")

@@ -520,7 +520,7 @@ def _register_commands():
     plain: a broken module fails ``wirescene --help`` (and the CLI tests) loudly instead
     of silently dropping commands."""
     from wirescene.cli.cad import cad, shape
-    from wirescene.cli.detect import detect, detector
+    from wirescene.cli.detect import detect, detector, viewpoints
     from wirescene.cli.occlusion import occlusion
     from wirescene.cli.parts import parts
     from wirescene.cli.scores import scores
@@ -531,7 +531,7 @@ def _register_commands():
     main.add_command(cad)
     main.add_command(detect)
     train = click.Group("train", help="Train the model's artefacts from documented data.")
-    for command in (shape, parts, detector, occlusion, scores, train_all_cmd):
+    for command in (shape, parts, detector, viewpoints, occlusion, scores, train_all_cmd):
         train.add_command(command)
     main.add_command(train)
 

@@ -31,13 +31,13 @@ from pathlib import Path
 
 import numpy as np
 
+from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import InputError
+from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import N_VERTICES
-from wirescene.core.artefacts import load_npz, save_npz
-from wirescene.core.resources import DATA_DIR
 from wirescene.predetect.configurations import Configuration
 from wirescene.predetect.geometry import ground_log_ratio, horizon_row
 from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales, to_gray
