@@ -18,8 +18,15 @@ detections; made geometric, it knows that a car on the road is aligned with it
 (:mod:`wirescene.predetect.viewpoint_classifier`) may add what the templates miss (front
 against back), and the viewpoint is the best bin's centre.
 
-The settings were chosen held out by drive on fold group (0, 1) and reported on (2, 3)
-(``benchmarks/bench_box_viewpoints.py``).
+Held out by drive on the 72 shared KITTI frames (``benchmarks/bench_box_viewpoints.py``:
+each fold's bank and classifier trained without its drives; settings chosen on fold group
+(0, 1), 148 cars, reported on (2, 3), 146 cars), label boxes given without a viewpoint come
+out within 45 deg for 76.0% of the cars of (2, 3) (81.1% on (0, 1); 75.3% with the boxes
+jittered by 5% of their size): the templates alone 63.0%, with the road prior 73.3%, the
+classifier alone 72.6%, the part evidence
+(:func:`~wirescene.infer.evidence.viewpoint_from_evidence`) 54.8%, and adding it to this
+rule gains nothing on (0, 1). On the cars the bank itself finds, this rule gets 83% of the
+178 right, its own detections 79%.
 """
 
 from __future__ import annotations
