@@ -20,6 +20,7 @@ The model is stored without pickle in a versioned ``.npz``; the shipped one
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -196,12 +197,7 @@ def train_on_kitti(dataset, frames, *, C: float = C, seed: int = 0) -> Viewpoint
     return fit_viewpoint_classifier(x, y, C=C, meta={"frames": [str(f) for f in frames], "seed": seed})
 
 
-_DEFAULT: ViewpointClassifier | None = None
-
-
+@lru_cache(maxsize=1)
 def load_default_classifier() -> ViewpointClassifier:
     """The classifier shipped in ``wirescene/data/viewpoint_classifier.npz`` (cached)."""
-    global _DEFAULT
-    if _DEFAULT is None:
-        _DEFAULT = ViewpointClassifier.load(DEFAULT_PATH)
-    return _DEFAULT
+    return ViewpointClassifier.load(DEFAULT_PATH)
