@@ -225,6 +225,17 @@ def detect(image, calib=None, *, models=None) -> Detections:
     -------
     Detections
         Boxes ``(D, 4)``, calibrated scores ``(D,)`` and viewpoints ``alpha`` ``(D,)``.
+
+    Examples
+    --------
+    >>> import wirescene
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> frame = DATA_DIR / "sample" / "kitti" / "training"
+    >>> dets = wirescene.detect(frame / "image_2" / "000010.png", frame / "calib" / "000010.txt")
+    >>> dets.boxes.shape[1], dets.scores.shape == dets.alpha.shape
+    (4, True)
+    >>> bool((dets.scores > 0.1).all())  # above the shipped bank's threshold
+    True
     """
     from wirescene.fitting.pipeline import detector_bank
     from wirescene.predetect import detect_cars
@@ -279,6 +290,17 @@ def evaluate(
     -------
     dict of str to EvaluationReport
         Per variant: ``.metrics`` (localisation within 1 m / 1.5 m, azimuth errors, ...).
+
+    Examples
+    --------
+    >>> import wirescene
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> reports = wirescene.evaluate(DATA_DIR / "sample" / "kitti", variants="coarse", frames=["000010"], particles=20)
+    >>> m = reports["coarse"].metrics["all"]
+    >>> m["n_gt"], m["n_tp"]  # the label boxes are the pre-detections: every car is a true positive
+    (8, 8)
+    >>> bool(0 <= m["loc_1m"] <= 100)
+    True
     """
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
