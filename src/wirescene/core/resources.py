@@ -62,10 +62,6 @@ class Models:
             raise KeyError(f"unknown artefact {name!r}; known: {', '.join(ARTEFACTS)}")
         return self.root / ARTEFACTS[name] if name in self.own else shipped_path(name)
 
-    def fingerprint(self) -> dict[str, str]:
-        """``{name: SHA-256 of its file}`` for every artefact of :data:`ARTEFACTS`."""
-        return {name: file_sha256(self.path(name)) for name in ARTEFACTS}
-
     def describe(self) -> str:
         """One line: which artefacts come from the directory and which are shipped."""
         if self.root is None:

@@ -62,7 +62,7 @@ def assign_folds(cars: Mapping[str, int], *, n_folds: int = N_FOLDS) -> dict[str
 
 
 #: Fold of each drive of the shared frames (short names: date_drive_NNNN without ``_sync``):
-#: :func:`assign_folds` of their car counts (checked by ``tests/test_kitti_io.py``).
+#: :func:`assign_folds` of their car counts (checked by ``tests/test_folds.py``).
 DRIVE_FOLDS: dict[str, int] = {
     "2011_09_26_drive_0009": 0, "2011_09_26_drive_0011": 0, "2011_09_26_drive_0086": 0,
     "2011_09_26_drive_0091": 0,

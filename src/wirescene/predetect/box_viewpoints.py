@@ -45,7 +45,7 @@ from wirescene.predetect.bank import (
     traffic_log_prior,
 )
 from wirescene.predetect.geometry import horizon_row
-from wirescene.predetect.hog import CELL, hog_cells, pyramid_scales, resize, to_gray
+from wirescene.predetect.hog import CELL, hog_cells, level_image, level_size, pyramid_scales, to_gray
 
 #: Overlap (IoU of a window's predicted car box with the given box) for a window to vote.
 IOU = 0.5
@@ -133,8 +133,8 @@ def _region_features(gray: np.ndarray, scale: float, rect) -> np.ndarray:
     """The cells ``rect`` ``(R0, R1, C0, C1)`` of the image's pyramid level ``scale``, exactly as
     :func:`~wirescene.predetect.hog.feature_pyramid` computes them, from that rectangle alone."""
     H, W = gray.shape
-    w, h = max(int(round(W * scale)), 1), max(int(round(H * scale)), 1)
-    im = gray if (w == W and h == H) else resize(gray, w, h)
+    w, h = level_size(W, H, scale)
+    im = level_image(gray, scale)
     R0, R1, C0, C1 = rect
     # two cells of margin: a cell's features depend on its neighbours' gradients and energies only
     y0, y1 = max(R0 - 2, 0), min(R1 + 2, h // CELL)
@@ -219,8 +219,7 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
             scales = pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
                                     per_octave=int(bank.meta.get("per_octave", 4)))
             gray = to_gray(image)
-            levels = [(li, s, (max(int(round(H * s)), 1) // CELL, max(int(round(W * s)), 1) // CELL))
-                      for li, s in enumerate(scales)]
+            levels = [(li, s, tuple(n // CELL for n in level_size(W, H, s)[::-1])) for li, s in enumerate(scales)]
         else:
             levels = [(li, s, F.shape[:2]) for li, (s, F) in enumerate(pyramid)]
         for li, scale, rect, templates in _plan(bank, levels, b, iou):

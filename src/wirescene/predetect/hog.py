@@ -86,16 +86,22 @@ def pyramid_scales(width: int, height: int, *, max_scale: float = 2.0, min_scale
     return scales
 
 
+def level_size(W: int, H: int, scale: float) -> tuple[int, int]:
+    """``(w, h)`` in pixels of a ``W x H`` image at pyramid ``scale``."""
+    return max(int(round(W * scale)), 1), max(int(round(H * scale)), 1)
+
+
+def level_image(gray: np.ndarray, scale: float) -> np.ndarray:
+    """The grey image resized to pyramid ``scale`` (itself at scale 1)."""
+    H, W = gray.shape
+    w, h = level_size(W, H, scale)
+    return gray if (w == W and h == H) else resize(gray, w, h)
+
+
 def feature_pyramid(image: np.ndarray, scales) -> list[tuple[float, np.ndarray]]:
     """``[(scale, (Hc, Wc, 31) features)]`` of the image resized by each scale."""
     gray = to_gray(image)
-    H, W = gray.shape
-    out = []
-    for s in scales:
-        w, h = max(int(round(W * s)), 1), max(int(round(H * s)), 1)
-        im = gray if (w == W and h == H) else resize(gray, w, h)
-        out.append((float(s), hog_cells(im)))
-    return out
+    return [(float(s), hog_cells(level_image(gray, s))) for s in scales]
 
 
 def crop_features(gray: np.ndarray, box, th: int, tw: int) -> np.ndarray:

@@ -584,7 +584,6 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
         ids = [f for f in ids if fold_of(f) in set(folds)]
     if not ids:
         raise ValueError("no training frames selected")
-    images, examples = load_training_frames(ds, ids, progress=say)
     report = {"frames": ids}
     calib = None if calibration is None else np.asarray(calibration, float).reshape(2)
     if calib is not None:
@@ -595,6 +594,8 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
             report["calibration"] = heldout_bank_calibration(kitti_root, folds, split=split, seed=seed, progress=say,
                                                              **train_kw)
             calib = np.array([report["calibration"]["a"], report["calibration"]["b"]])
+    # loaded after the calibration, whose fold banks load their own frames
+    images, examples = load_training_frames(ds, ids, progress=say)
     bank = finish_bank(train_bank_on_frames(images, examples, seed=seed, progress=say, **train_kw), images, ds,
                        progress=say)
     bank.calibration = calib
