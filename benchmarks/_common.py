@@ -8,7 +8,6 @@ the helpers that need it import it when called.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import time
 
 
@@ -24,19 +23,10 @@ def best_of(fn, repeat: int = 3, *, warmup: bool = False):
     return min(times), out
 
 
-def option_value(options, key: str, text: str):
-    """``text`` as a value of field ``key`` of the options dataclass ``options`` (an
-    instance), of its default's type; booleans are written 0 / 1. Raises ``KeyError``
-    for a key that is not a field."""
-    if key not in {f.name for f in dataclasses.fields(options)}:
-        raise KeyError(key)
-    default = getattr(options, key)
-    return bool(int(text)) if isinstance(default, bool) else type(default)(text)
-
-
 def parse_config(text: str) -> tuple[str, dict]:
     """``NAME:key=value,key=value`` (keys of :class:`~wirescene.infer.inference.InferenceOptions`,
     or ``bilinear`` for the part maps' lookup) as ``(NAME, {key: value})``."""
+    from wirescene.core.settings import replace_fields
     from wirescene.infer.inference import InferenceOptions
 
     name, _, body = text.partition(":")
@@ -46,10 +36,10 @@ def parse_config(text: str) -> tuple[str, dict]:
         if key == "bilinear":  # evidence lookup (parts only), not an inference option
             out[key] = bool(int(value))
             continue
-        try:
-            out[key] = option_value(InferenceOptions(), key, value)
-        except KeyError:
-            raise SystemExit(f"unknown option {key!r}") from None
+        try:  # the package's one mapping of option names (wirescene.core.settings)
+            out[key] = getattr(replace_fields(InferenceOptions(), {key: value}), key)
+        except ValueError as exc:
+            raise SystemExit(str(exc)) from None
     return name, out
 
 

@@ -27,14 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from _common import option_value  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.eval.kitti_metrics import kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
 from wirescene.eval.sources import DetectionSource
 from wirescene.fitting.pipeline import FitOptions
 from wirescene.fitting.variants import VARIANTS
-from wirescene.infer.inference import InferenceOptions
 from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
@@ -72,18 +70,13 @@ def main():
     if not args.shipped and args.models is None:
         ap.error("give --models DIR (fold models) or --shipped")
     variants = args.variants or list(VARIANTS)
-    overrides: dict = {"inference": {}, "lifting": {}}
-    for item in args.settings:
-        key, _, value = item.partition("=")
-        stage, _, key = key.rpartition(".")
-        stage = stage or "inference"
-        try:
-            if stage not in overrides:
-                raise KeyError(stage)
-            overrides[stage][key] = option_value(LiftingOptions() if stage == "lifting" else InferenceOptions(), key,
-                                                 value)
-        except KeyError:
-            ap.error(f"--set {item}: not an InferenceOptions field nor lifting.<LiftingOptions field>")
+    # STAGE.FIELD as everywhere (FitOptions.with_settings); a bare FIELD is the fine stage's
+    settings = {(key if "." in key else f"inference.{key}"): value
+                for key, _, value in (item.partition("=") for item in args.settings)}
+    try:
+        FitOptions().with_settings(settings)
+    except ValueError as exc:
+        ap.error(f"--set: {exc}")
     dataset = KittiDataset(args.root)
     frames = dataset.frame_ids()
     folds = {f: fold_of(f) for f in frames}
@@ -98,9 +91,8 @@ def main():
             for path in models.values():
                 if not Path(path).is_file():
                     sys.exit(f"missing fold model {path}")
-        options = FitOptions(lifting=LiftingOptions(n_particles=args.particles, **overrides["lifting"]),
-                             inference=InferenceOptions(**overrides["inference"]),
-                             seed=args.seed, calibrate_scores=False, **models)
+        options = FitOptions(lifting=LiftingOptions(n_particles=args.particles), seed=args.seed,
+                             calibrate_scores=False, **models).with_settings(settings)
         source = DetectionSource(args.detections, bank=models.get("detector_bank"))
         print(f"fold {k}: {len(test)} frames, models {models or 'shipped'}", file=sys.stderr)
         evaluate_dataset(dataset, variants, frames=test, source=source, options=options,

@@ -32,7 +32,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import option_value, parse_config, run_configs  # noqa: E402, F401  (option_value: bench_real_folds)
+from _common import parse_config, run_configs  # noqa: E402
 from wirescene.eval.metrics import evaluate  # noqa: E402
 from wirescene.io.folds import fold_of  # noqa: E402
 

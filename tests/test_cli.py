@@ -262,6 +262,17 @@ def test_model_files_can_be_chosen_per_run(tmp_path):
     assert r.exit_code == 2 and "--parts-model" in r.stderr
 
 
+def _parsed_fit_options(*flags):
+    """The FitOptions `wirescene fit` makes of its command line ``flags``."""
+    from wirescene.cli import main as cli_main
+
+    ctx = cli_main.fit_cmd.make_context("fit", ["image.png", "--calib", "c.txt", "--out", "o", "--particles", "7",
+                                                "--seed", "3", "--device", "numpy", *flags])
+    params = dict(ctx.params)
+    own = ("image", "calib", "detections", "gt", "variant", "particles", "seed", "out")
+    return cli_main._fit_options(params["particles"], params["seed"], **{k: v for k, v in params.items() if k not in own})
+
+
 def test_inference_options_reach_the_fit():
     """Every option of the fine stage on the command line ends up in InferenceOptions,
     and the coarse stage's road prior in LiftingOptions."""
@@ -271,24 +282,18 @@ def test_inference_options_reach_the_fit():
 
     for command in (cli_main.eval_cmd, cli_main.fit_cmd, cli_main.predict_cmd):
         assert {"--road-prior", "--fine-road-prior", "--viewpoint-window"} <= {o for p in command.params for o in p.opts}
-    opts = cli_main._fit_options(7, 3, iterations=5, samples=4, prune_after=0, box_weight=2.5, plane_refinement=False,
-                                 shape_prior=0.0, size_prior=4.0, polish_iterations=9, device="numpy",
-                                 parts_model=None, detector_bank=None, road_prior=0.5, fine_road_prior=2.0,
-                                 viewpoint_window_deg=30.0)
+    opts = _parsed_fit_options("--iterations", "5", "--samples", "4", "--prune-after", "0", "--box-weight", "2.5",
+                               "--no-plane-refinement", "--shape-prior", "0", "--size-prior", "4",
+                               "--polish-iterations", "9", "--road-prior", "0.5", "--fine-road-prior", "2",
+                               "--viewpoint-window", "30")
     assert opts.lifting.road_prior == 0.5 and opts.inference.road_prior == 2.0
     assert opts.inference.viewpoint_window_deg == 30.0
-    unset = cli_main._fit_options(7, 3, road_prior=None, fine_road_prior=None, viewpoint_window_deg=None)
-    assert unset.inference.viewpoint_window_deg == InferenceOptions().viewpoint_window_deg
-    assert unset.lifting.road_prior == LiftingOptions().road_prior
-    assert unset.inference.road_prior == InferenceOptions().road_prior
     inf = opts.inference
     assert (inf.iterations, inf.samples, inf.prune_after, inf.box_weight, inf.plane_refinement, inf.shape_prior,
             inf.size_prior, inf.polish_iterations) == (5, 4, 0, 2.5, False, 0.0, 4.0, 9)
     assert opts.lifting.n_particles == 7 and opts.seed == 3
-    unset = cli_main._fit_options(7, 3, shape_prior=None, size_prior=None, polish_iterations=None).inference
-    defaults = InferenceOptions()  # not given: the defaults
-    assert (unset.shape_prior, unset.size_prior, unset.polish_iterations) == (
-        defaults.shape_prior, defaults.size_prior, defaults.polish_iterations)
+    unset = _parsed_fit_options()  # not given: the defaults
+    assert unset.inference == InferenceOptions() and unset.lifting == LiftingOptions(n_particles=7)
 
 
 def test_frame_workers_on_a_gpu_drop_to_one_with_a_notice(capsys):

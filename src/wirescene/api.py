@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numbers
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Mapping
 
 import numpy as np
 
@@ -119,7 +119,7 @@ def _models(models):
     return resolve_models(models)  # InputError naming the directory or file
 
 
-def _options(options: FitOptions | None, particles, seed, models=None) -> FitOptions:
+def _options(options: FitOptions | None, particles, seed, models=None, settings=None) -> FitOptions:
     from wirescene.fitting.models import with_models
 
     if options is not None:
@@ -128,6 +128,13 @@ def _options(options: FitOptions | None, particles, seed, models=None) -> FitOpt
     else:
         options = FitOptions(lifting=LiftingOptions(n_particles=_positive_int(particles, "particles")),
                              inference=InferenceOptions(), seed=_seed(seed))
+    if settings is not None:
+        if not isinstance(settings, Mapping):
+            raise ArgumentError("settings", f"expected a mapping of 'STAGE.FIELD' to values, got {type(settings).__name__}")
+        try:
+            options = options.with_settings(settings)
+        except (ValueError, TypeError) as exc:
+            raise ArgumentError("settings", str(exc)) from None
     return with_models(options, _models(models))
 
 
@@ -141,6 +148,7 @@ def fit(
     seed: int = 0,
     options: FitOptions | None = None,
     models=None,
+    settings=None,
 ) -> SceneEstimate:
     """Estimate the 3D cars of one street image.
 
@@ -169,6 +177,10 @@ def fit(
         A models directory (``wirescene train all --out MODELS_DIR``): its part model,
         detector bank and occluded-part score replace the shipped ones (a part model or
         bank file set in ``options`` is kept); what it lacks stays shipped.
+    settings : mapping, optional
+        ``{"STAGE.FIELD": value}`` changes to the stages' options, by the names of the
+        command line's ``--set`` (e.g. ``{"inference.box_weight": 50}``; stages
+        ``lifting`` and ``inference``, see :meth:`FitOptions.with_settings`).
 
     Returns
     -------
@@ -201,7 +213,7 @@ def fit(
     camera = as_camera(calib, size)
     dets = None if boxes is None else as_detections(boxes, size)
     (name,) = _variant_names(variant)
-    fitted = fit_frame(camera, dets, [name], image=rgb, options=_options(options, particles, seed, models))
+    fitted = fit_frame(camera, dets, [name], image=rgb, options=_options(options, particles, seed, models, settings))
     return fitted.estimates[name]
 
 
@@ -259,6 +271,7 @@ def evaluate(
     workers: int = 1,
     predictions=None,
     models=None,
+    settings=None,
 ):
     """Fit and evaluate variants on a KITTI directory with the paper's protocol.
 
@@ -285,6 +298,8 @@ def evaluate(
         Also write KITTI label files per variant there.
     models : path, optional
         A models directory replacing the shipped artefacts, as in :func:`fit`.
+    settings : mapping, optional
+        Changes to the stages' options, as in :func:`fit`.
 
     Returns
     -------
@@ -325,7 +340,7 @@ def evaluate(
             raise ArgumentError("split_file", f"expected a path, got {type(split_file).__name__}")
         frame_ids = read_split_file(split_file, known=dataset.frame_ids(), what="labelled frame",
                                     where=dataset.split_dir)
-    options = _options(None, particles, seed, models)
+    options = _options(None, particles, seed, models, settings)
     return evaluate_dataset(dataset, names, frames=frame_ids,
                             source=DetectionSource(str(detections), bank=options.detector_bank),
                             options=options, workers=_positive_int(workers, "workers"),

@@ -34,6 +34,7 @@ from wirescene.core.groundplane import (
     rotation_y,
     wrap_angle,
 )
+from wirescene.core.settings import option
 from wirescene.core.types import Detections, SceneParticles
 
 #: Width (degrees) of the road-alignment prior (:func:`road_alignment_cost`), one for
@@ -60,7 +61,8 @@ class LiftingOptions:
     camera_height: float = KITTI_CAMERA_HEIGHT
     n_particles: int = 250
     # Weight of the prior that cars head along the road (:func:`road_alignment_cost`), which a box leaves open; 0: off.
-    road_prior: float = 0.03
+    road_prior: float = option(0.03, help="Weight of the coarse stage's prior that cars head along the road "
+                                          "(0: none).")
 
     def plane_grid(self) -> tuple[np.ndarray, np.ndarray]:
         """Flattened pitch and roll grids (radians), shape ``(G,)`` each."""

@@ -20,7 +20,10 @@ from wirescene.cli.options import (
     load_models,
     models_option,
     select_frames,
+    settings_option,
     split_file_option,
+    stage_options,
+    stage_settings,
 )
 from wirescene.core.errors import InputError, WiresceneError
 from wirescene.core.version import __version__
@@ -84,25 +87,29 @@ def _progress(desc: str, total: int | None = None):
 
 
 def _fit_options(particles: int, seed: int, **inference):
+    """The :class:`FitOptions` of a command's options: the stage options and ``--set``
+    (one mapping, :meth:`FitOptions.with_settings`), the models and the device."""
     from wirescene.fitting.models import with_models
     from wirescene.fitting.pipeline import FitOptions
-    from wirescene.infer.inference import InferenceOptions
     from wirescene.lift import LiftingOptions
 
     models_dir = inference.pop("models", None)
     # False: the pre-detection scores (`eval --raw-scores`), with which a models directory's own calibration is moot.
     calibrate_scores = inference.pop("calibrate_scores", True)
-    models = {k: None if inference.get(k) is None else str(inference.pop(k)) for k in ("parts_model", "detector_bank")}
-    # --road-prior is the coarse stage's weight, --fine-road-prior the fine stage's.
-    road_prior = inference.pop("road_prior", None)
-    lifting = {} if road_prior is None else {"road_prior": road_prior}
-    inference["road_prior"] = inference.pop("fine_road_prior", None)
-    inference = {k: v for k, v in inference.items() if v is not None}
-    if "device" in inference:
-        inference["device"] = _resolve_device(inference["device"])
-    options = FitOptions(lifting=LiftingOptions(n_particles=particles, **lifting),
-                         inference=InferenceOptions(**inference), seed=seed, calibrate_scores=calibrate_scores,
+    models = {k: None if inference.get(k) is None else str(inference[k]) for k in ("parts_model", "detector_bank")}
+    settings = stage_settings(inference, inference.pop("settings", ()))
+    device = inference.pop("device", None)
+    unknown = set(inference) - set(models)
+    if unknown:  # a command passed an option no stage owns: a bug, not a user error
+        raise TypeError(f"options no stage owns: {', '.join(sorted(unknown))}")
+    if device is not None:
+        settings["inference.device"] = _resolve_device(device)
+    options = FitOptions(lifting=LiftingOptions(n_particles=particles), seed=seed, calibrate_scores=calibrate_scores,
                          **models)
+    try:
+        options = options.with_settings(settings)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--set") from None
     return with_models(options, load_models(models_dir))
 
 
@@ -123,8 +130,15 @@ def _resolve_device(name: str) -> str:
 
 
 def _inference_options(f):
-    """Options of the coarse and fine-grained inference stages (and the trained models
-    they use), shared by `eval`, `fit` and `predict`."""
+    """Options of the coarse and fine-grained inference stages (generated from the
+    stages' own option fields, :func:`stage_options`) and the trained models they use,
+    shared by `eval`, `fit` and `predict`."""
+    from wirescene.infer.inference import InferenceOptions
+    from wirescene.lift import LiftingOptions
+
+    f = settings_option(f)
+    f = stage_options(InferenceOptions, "inference")(f)
+    f = stage_options(LiftingOptions, "lifting")(f)
     f = models_option(f)
     f = click.option("--parts-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
                      help="Part detector file (default: --models' or the shipped model), e.g. a cross-validation "
@@ -135,32 +149,6 @@ def _inference_options(f):
     f = click.option("--device", default="auto", show_default=True,
                      help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
                           "(optional: pip install torch). auto: a CUDA GPU if PyTorch sees one, else numpy.")(f)
-    f = click.option("--iterations", type=NON_NEGATIVE, default=None, help="Inference iterations (Algorithm 1).")(f)
-    f = click.option("--samples", type=click.IntRange(min=2), default=None,
-                     help="Samples per object and iteration (the current value among them).")(f)
-    f = click.option("--prune-after", type=NON_NEGATIVE, default=None,
-                     help="Keep only the best quarter of the particles after this many iterations (default 4; 0: never).")(f)
-    f = click.option("--box-weight", type=NON_NEGATIVE_FLOAT, default=None,
-                     help="Weight of the detection box (KITTI convention) in the fine objective "
-                          "(0: the paper's part likelihood only; default: InferenceOptions).")(f)
-    f = click.option("--plane-refinement/--no-plane-refinement", default=None,
-                     help="Sample the ground plane in the fine stage (default: InferenceOptions).")(f)
-    f = click.option("--shape-prior", type=NON_NEGATIVE_FLOAT, default=None,
-                     help="Weight of the shape model's Gaussian prior in the fine objective "
-                          "(0: none; default: InferenceOptions).")(f)
-    f = click.option("--size-prior", type=NON_NEGATIVE_FLOAT, default=None,
-                     help="Weight of the car-size prior (KITTI's size statistics) in the fine objective "
-                          "(0: none; default: InferenceOptions).")(f)
-    f = click.option("--road-prior", type=NON_NEGATIVE_FLOAT, default=None,
-                     help="Weight of the coarse stage's prior that cars head along the road "
-                          "(0: none; default: LiftingOptions).")(f)
-    f = click.option("--fine-road-prior", "fine_road_prior", type=NON_NEGATIVE_FLOAT, default=None,
-                     help="Weight of the same prior in the fine objective (0: none; default: InferenceOptions).")(f)
-    f = click.option("--viewpoint-window", "viewpoint_window_deg", type=NON_NEGATIVE_FLOAT, default=None,
-                     help="Degrees the fine stage may turn a car's observation angle away from its "
-                          "pre-detection's viewpoint (0: unlimited; default: InferenceOptions).")(f)
-    f = click.option("--polish-iterations", type=NON_NEGATIVE, default=None,
-                     help="Extra iterations on the MAP scene after Algorithm 1 (0: none; default: InferenceOptions).")(f)
     return f
 
 
@@ -418,11 +406,11 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     from wirescene.io.outputs import write_fit_outputs
 
     check_output_dir(out, "--out")
+    options = _fit_options(particles, seed, **inference)  # a bad --set fails before any file is read
     img = read_image(image)
     camera = read_kitti_calib(calib).camera((img.shape[1], img.shape[0]))
     dets = read_detections(detections, image_size=(img.shape[1], img.shape[0])) if detections is not None else None
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
-    options = _fit_options(particles, seed, **inference)
     estimate = fit(img, camera, dets, variant=variant, options=options)
     if not estimate.cars and dets is None:
         raise InputError("pre-detection found no car in the image", path=image)

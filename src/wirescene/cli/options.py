@@ -136,3 +136,53 @@ def load_models(models_dir: Path | None):
     if models.root is not None:
         click.echo(f"wirescene: {models.describe()}", err=True)
     return models
+
+
+def stage_options(cls, scope: str):
+    """Click options for the fields of stage options ``cls`` declared with
+    :func:`wirescene.core.settings.option`: ``--NAME`` (booleans ``--NAME/--no-NAME``),
+    each parsed into the parameter ``SCOPE__FIELD`` with default None (the dataclass's
+    default, shown in the help). :func:`stage_settings` turns them into settings."""
+    from wirescene.core.settings import exposed_fields, field_default
+
+    def decorate(f):
+        for field, name, text in reversed(exposed_fields(cls)):
+            default = field_default(field)
+            param = f"{scope}__{field.name}"
+            if isinstance(default, bool):
+                flag, kind = f"--{name}/--no-{name}", None
+            elif isinstance(default, int):
+                flag, kind = f"--{name}", click.IntRange(min=int(field.metadata["minimum"]))
+            else:
+                flag, kind = f"--{name}", FiniteFloat(min=float(field.metadata["minimum"]))
+            f = click.option(flag, param, type=kind, default=None, help=f"{text} Default: {default}.")(f)
+        return f
+
+    return decorate
+
+
+def settings_option(f):
+    """``--set STAGE.FIELD=VALUE``: any option of a fitting stage, by the same names as the API's ``settings``."""
+    return click.option("--set", "settings", multiple=True, metavar="STAGE.FIELD=VALUE",
+                        help="Set any field of the stage options (stages lifting, inference; e.g. "
+                             "inference.polish_samples=12); repeatable; the named options above win.")(f)
+
+
+def stage_settings(kwargs: dict, assignments: tuple[str, ...] = ()) -> dict[str, object]:
+    """``{"STAGE.FIELD": value}`` of ``--set`` items and of the :func:`stage_options`
+    parameters in ``kwargs`` that were given (popped from ``kwargs``)."""
+    from wirescene.core.settings import parse_assignment
+
+    out: dict[str, object] = {}
+    for item in assignments:
+        try:
+            stage, key, text = parse_assignment(item)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--set") from None
+        out[f"{stage}.{key}"] = text
+    for param in [k for k in kwargs if "__" in k]:
+        value = kwargs.pop(param)
+        if value is not None:
+            stage, _, key = param.partition("__")
+            out[f"{stage}.{key}"] = value
+    return out

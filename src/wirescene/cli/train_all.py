@@ -3,7 +3,6 @@ root (see :mod:`wirescene.training.pipeline`)."""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -12,38 +11,19 @@ import click
 from wirescene.cli.options import check_output_dir, split_file_option
 
 
-def option_value(text: str, default):
-    """``text`` as a value of an option whose default is ``default``: booleans as
-    0/1/true/false, numbers as the default's type, anything else as JSON or else text."""
-    if isinstance(default, bool):
-        key = text.strip().lower()
-        if key not in ("0", "1", "true", "false"):
-            raise ValueError(f"expected 0, 1, true or false, got {text!r}")
-        return key in ("1", "true")
-    if isinstance(default, int):
-        return int(text)
-    if isinstance(default, float):
-        return float(text)
-    try:
-        return json.loads(text)
-    except ValueError:
-        return text
-
-
 def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
-    """``{step: {option: value}}`` of ``--set STEP.KEY=VALUE`` (each name checked)."""
+    """``{step: {option: value}}`` of ``--set STEP.KEY=VALUE`` (each name checked, each
+    value parsed as its default's type by :func:`wirescene.core.settings.parse_value`)."""
+    from wirescene.core.settings import parse_assignment, parse_value
     from wirescene.training.pipeline import option_default
 
     out: dict[str, dict] = {}
     for item in values:
-        name, sep, text = item.partition("=")
-        step, dot, key = name.strip().partition(".")
-        if not sep or not dot:
-            raise click.BadParameter(f"{item!r} is not STEP.KEY=VALUE", param_hint="--set")
         try:
-            out.setdefault(step, {})[key] = option_value(text, option_default(step, key))
+            step, key, text = parse_assignment(item)
+            out.setdefault(step, {})[key] = parse_value(text, option_default(step, key))
         except ValueError as exc:
-            raise click.BadParameter(f"{name}: {exc}", param_hint="--set") from None
+            raise click.BadParameter(f"{item.partition('=')[0]}: {exc}", param_hint="--set") from None
     return out
 
 

@@ -264,44 +264,54 @@ def evaluate_dataset(
         # The artefacts' content, not only their paths: a model retrained in place refits.
         config["models"] = models_fingerprint(options)
         records = FrameRecords(Path(predictions_dir), config)
-    by_frame: dict[str, dict[str, FrameResult]] = {}
-    reused: dict[str, dict[str, tuple[str, FrameResult]]] = {}
-    if resume:
-        stale = []
-        for frame_id in frame_ids:
-            try:
-                fits = records.load(frame_id)
-            except StaleRecord as exc:
-                stale.append((records.path(frame_id), str(exc)))
-                continue
-            if fits is not None:
-                reused[frame_id] = fits
-        if stale:
-            more = f" (and {len(stale) - 1} more)" if len(stale) > 1 else ""
-            notify(f"refitting {len(stale)} frame(s) whose record cannot be reused: {stale[0][0]} {stale[0][1]}{more}")
-        if reused:
-            notify(f"resuming: {len(reused)} of {len(frame_ids)} frames already done in {records.root}")
+    reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
-
     with ExitStack() as stack:
         fitted = fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
-        # Reused frames go through `progress` too, so a bar counts every frame.
-        items = itertools.chain(((f, None) for f in reused), ((out[0], out) for out in fitted))
-        for frame_id, output in progress(items):
-            if output is None:
-                by_frame[frame_id] = {v: result for v, (_, result) in reused[frame_id].items()}
-                records.restore_labels(frame_id, reused[frame_id])
-                continue
-            _, camera, detections, gt, fits = output
-            by_frame[frame_id] = {v: result for v, (_, result) in fits.items()}
-            if on_estimate is not None:
-                for v, (estimate, _) in fits.items():
-                    on_estimate(frame_id, v, estimate, camera, detections, gt)
-            if records is not None:
-                labels = {v: estimate.to_kitti() for v, (estimate, _) in fits.items()}
-                records.save(frame_id, {v: (labels[v], result) for v, (_, result) in fits.items()})
+        by_frame = _collect_frames(fitted, reused, records, progress, on_estimate)
     # Frames finish in any order; the reports list them in the given order.
     return {v: evaluate([by_frame[f][v] for f in frame_ids]) for v in variants}
+
+
+def _reusable_records(records: FrameRecords, frame_ids: list[str], notify) -> dict[str, dict]:
+    """``{frame: {variant: (label text, FrameResult)}}`` of the frames whose records can
+    be reused; those that cannot (stale or unreadable) are refitted, and ``notify`` told."""
+    reused, stale = {}, []
+    for frame_id in frame_ids:
+        try:
+            fits = records.load(frame_id)
+        except StaleRecord as exc:
+            stale.append((records.path(frame_id), str(exc)))
+            continue
+        if fits is not None:
+            reused[frame_id] = fits
+    if stale:
+        more = f" (and {len(stale) - 1} more)" if len(stale) > 1 else ""
+        notify(f"refitting {len(stale)} frame(s) whose record cannot be reused: {stale[0][0]} {stale[0][1]}{more}")
+    if reused:
+        notify(f"resuming: {len(reused)} of {len(frame_ids)} frames already done in {records.root}")
+    return reused
+
+
+def _collect_frames(fitted, reused: dict, records: FrameRecords | None, progress, on_estimate):
+    """``{frame: {variant: FrameResult}}`` of the reused frames and the fitted ones as
+    they finish; each fitted frame's labels and record are written as it arrives."""
+    by_frame: dict[str, dict[str, FrameResult]] = {}
+    # Reused frames go through `progress` too, so a bar counts every frame.
+    items = itertools.chain(((f, None) for f in reused), ((out[0], out) for out in fitted))
+    for frame_id, output in progress(items):
+        if output is None:
+            by_frame[frame_id] = {v: result for v, (_, result) in reused[frame_id].items()}
+            records.restore_labels(frame_id, reused[frame_id])
+            continue
+        _, camera, detections, gt, fits = output
+        by_frame[frame_id] = {v: result for v, (_, result) in fits.items()}
+        if on_estimate is not None:
+            for v, (estimate, _) in fits.items():
+                on_estimate(frame_id, v, estimate, camera, detections, gt)
+        if records is not None:
+            records.save(frame_id, {v: (estimate.to_kitti(), result) for v, (estimate, result) in fits.items()})
+    return by_frame
 
 
 def _notify_stderr(message: str) -> None:

@@ -8,9 +8,9 @@ I/O: inputs are arrays and typed objects, outputs a :class:`FrameFit`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from typing import Iterable
+from typing import Iterable, Mapping
 
 import numpy as np
 
@@ -42,6 +42,33 @@ class FitOptions:
     detector_bank: str | None = None
     # Crop viewpoint classifier file for boxes given without a viewpoint (None: the shipped one).
     viewpoint_classifier: str | None = None
+
+    def with_settings(self, settings: Mapping[str, object] | None) -> "FitOptions":
+        """These options with ``{"STAGE.FIELD": value}`` changed, ``STAGE`` one of
+        :data:`STAGES` (``lifting``, ``inference``): the mapping ``--set`` and the named
+        options of ``eval`` / ``predict`` / ``fit`` and the API's ``settings`` share.
+        String values are parsed as the field's type; an unknown stage or field is a
+        ``ValueError`` naming what exists.
+
+        Examples
+        --------
+        >>> FitOptions().with_settings({"inference.box_weight": "50", "lifting.road_prior": 0}).inference.box_weight
+        50.0
+        """
+        from wirescene.core.settings import replace_fields
+
+        by_stage: dict[str, dict[str, object]] = {}
+        for name, value in (settings or {}).items():
+            stage, dot, key = name.partition(".")
+            if not dot or stage not in STAGES:
+                raise ValueError(f"{name!r}: settings are STAGE.FIELD, STAGE one of {', '.join(STAGES)}")
+            by_stage.setdefault(stage, {})[key] = value
+        changed = {stage: replace_fields(getattr(self, stage), values, scope=stage) for stage, values in by_stage.items()}
+        return replace(self, **changed)
+
+
+#: The stages whose options :meth:`FitOptions.with_settings` reaches, by attribute of :class:`FitOptions`.
+STAGES: tuple[str, ...] = ("lifting", "inference")
 
 
 @lru_cache(maxsize=4)

@@ -53,6 +53,7 @@ from wirescene.core.boxes import KITTI_CAR_SIZE
 from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import plane_normal, point_on_plane, wrap_angle
+from wirescene.core.settings import option
 from wirescene.core.shape import ShapeModel
 from wirescene.core.types import ObjectEstimate, SceneEstimate, SceneParticles
 from wirescene.core.wireframe import FACES, N_VERTICES
@@ -88,35 +89,41 @@ class InferenceOptions:
     (the study, its command and figures): ``benchmarks/RESULTS.md``.
     """
 
-    iterations: int = 12
-    samples: int = 12  # per object and iteration, the current value among them
+    iterations: int = option(12, help="Inference iterations (Algorithm 1).")
+    samples: int = option(12, minimum=2, help="Samples per object and iteration (the current value among them).")
     n_shape: int = 5
     sigma_bearing_deg: float = 0.5  # the image pins the bearing tightly ...
     sigma_range_frac: float = 0.05  # ... and the range loosely
     sigma_azimuth_deg: float = 8.0
     sigma_shape: float = 0.6
     # Successive halving: particles far behind after ``prune_after`` iterations practically never win.
-    prune_after: int = 4  # 0: never prune
+    prune_after: int = option(4, help="Keep only the best quarter of the particles after this many iterations "
+                                       "(0: never).")
     keep_fraction: float = 0.25
     # The polish: more iterations on the MAP rows alone, spent where the answer is.
-    polish_iterations: int = 24
+    polish_iterations: int = option(24, help="Extra iterations on the MAP scene after Algorithm 1 (0: none).")
     polish_samples: int = 24
     # The paper's c, the log ratio charged to occluded parts (`wirescene train occlusion`).
     occluded_score: float = field(default_factory=load_occluded_score)
     # The coarse stage's box cost in the fine objective, so weak evidence cannot slide a car along its ray.
-    box_weight: float = 100.0
+    box_weight: float = option(100.0, help="Weight of the detection box (KITTI convention) in the fine objective "
+                                           "(0: the paper's part likelihood only).")
     # Sample the ground plane too (the paper's scene-level inference) instead of keeping the coarse grid's.
-    plane_refinement: bool = True
+    plane_refinement: bool = option(True, help="Sample the ground plane in the fine stage.")
     # The shape model's Gaussian, weak: the size prior carries the size, the evidence the details.
-    shape_prior: float = 1.0
+    shape_prior: float = option(1.0, help="Weight of the shape model's Gaussian prior in the fine objective (0: none).")
     # KITTI's car sizes pin what the image cannot: size against range, hence the shared plane.
-    size_prior: float = 1.0
+    size_prior: float = option(1.0, help="Weight of the car-size prior (KITTI's size statistics) in the fine "
+                                        "objective (0: none).")
     # Cars head along the road where the part evidence is weak (the coarse stage's prior, fine scale).
-    road_prior: float = 1.0
+    road_prior: float = option(1.0, cli="fine-road-prior",
+                               help="Weight of the prior that cars head along the road in the fine objective (0: none).")
     # Only for cars whose coarse start heads within ROAD_PRIOR_WIDTH of the road: the rest stand across it.
     road_prior_gated: bool = True
     # The paper's tolerance for a correct coarse viewpoint, around each pre-detection's (0: no window).
-    viewpoint_window_deg: float = 45.0
+    viewpoint_window_deg: float = option(45.0, cli="viewpoint-window",
+                                         help="Degrees the fine stage may turn a car's observation angle away from "
+                                              "its pre-detection's viewpoint (0: unlimited).")
     sigma_pitch_deg: float = 0.2
     sigma_roll_deg: float = 0.2
     # Where the likelihood's ray casting runs: "numpy" or a PyTorch device (see infer.torch_backend).

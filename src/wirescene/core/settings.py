@@ -1,0 +1,115 @@
+"""One mapping from option names to the stages that own them.
+
+Each stage's options are a dataclass (``LiftingOptions``, ``InferenceOptions``); a field
+meant for users carries its help text (:func:`option`). From those fields alone come the
+named command-line options (:func:`wirescene.cli.options.stage_options`), the
+``--set STAGE.FIELD=VALUE`` settings of ``eval``, ``predict`` and ``fit`` and the
+``settings`` of :func:`wirescene.fit` / :func:`wirescene.evaluate`
+(:meth:`wirescene.fitting.pipeline.FitOptions.with_settings`), so that the three cannot
+disagree on a name, a type or a default. ``train all --set`` parses its values with the
+same :func:`parse_value`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import Any, Mapping
+
+__all__ = ["option", "exposed_fields", "parse_value", "parse_assignment", "replace_fields"]
+
+
+def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, minimum: float = 0,
+           default_factory=dataclasses.MISSING):
+    """A dataclass field that users may set: ``help`` is its one-line description on the
+    command line; ``cli`` the option name there (default: the field name with dashes);
+    ``minimum`` the least value a number may take.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Stage:
+    ...     weight: float = option(1.0, help="Weight of the prior (0: none).")
+    >>> [(f.name, cli) for f, cli, _ in exposed_fields(Stage)]
+    [('weight', 'weight')]
+    """
+    metadata = {"help": help, "cli": cli, "minimum": minimum}
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata=metadata)
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+def exposed_fields(cls) -> list[tuple[dataclasses.Field, str, str]]:
+    """``[(field, cli_name, help)]`` of the fields of dataclass ``cls`` declared with
+    :func:`option`, in declaration order."""
+    return [(f, f.metadata.get("cli") or f.name.replace("_", "-"), f.metadata["help"])
+            for f in dataclasses.fields(cls) if "help" in f.metadata]
+
+
+def field_default(f: dataclasses.Field):
+    """The default value of dataclass field ``f``."""
+    return f.default_factory() if f.default is dataclasses.MISSING else f.default
+
+
+def parse_value(text: str, default):
+    """``text`` as a value of an option whose default is ``default``: booleans as
+    0/1/true/false, numbers as the default's type, anything else as JSON or else text.
+    A ``ValueError`` says what was expected.
+
+    Examples
+    --------
+    >>> parse_value("2", 1.0), parse_value("false", True), parse_value("[1, 2]", None)
+    (2.0, False, [1, 2])
+    """
+    if isinstance(default, bool):
+        key = text.strip().lower()
+        if key not in ("0", "1", "true", "false"):
+            raise ValueError(f"expected 0, 1, true or false, got {text!r}")
+        return key in ("1", "true")
+    if isinstance(default, int):
+        return int(text)
+    if isinstance(default, float):
+        return float(text)
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def parse_assignment(item: str) -> tuple[str, str, str]:
+    """``(scope, key, text)`` of ``"SCOPE.KEY=VALUE"``; a ``ValueError`` otherwise."""
+    name, sep, text = item.partition("=")
+    scope, dot, key = name.strip().partition(".")
+    if not sep or not dot or not scope or not key:
+        raise ValueError(f"{item!r} is not SCOPE.KEY=VALUE")
+    return scope, key.strip(), text
+
+
+def replace_fields(obj, values: Mapping[str, Any], *, scope: str = ""):
+    """``dataclasses.replace(obj, **values)`` with every name checked and every string
+    value parsed as the field's default type (:func:`parse_value`); an unknown name is a
+    ``ValueError`` that lists the known ones.
+
+    Examples
+    --------
+    >>> from wirescene.infer.inference import InferenceOptions
+    >>> replace_fields(InferenceOptions(), {"box_weight": "50"}).box_weight
+    50.0
+    """
+    fields = {f.name: f for f in dataclasses.fields(obj)}
+    changes = {}
+    for key, value in values.items():
+        if key not in fields:
+            where = f"{scope} has" if scope else f"{type(obj).__name__} has"
+            raise ValueError(f"{where} no option {key!r}; options: {', '.join(sorted(fields))}")
+        default = field_default(fields[key])
+        if isinstance(value, str):
+            try:
+                value = parse_value(value, default)
+            except ValueError as exc:
+                raise ValueError(f"{scope + '.' if scope else ''}{key}: {exc}") from None
+        elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)  # the same configuration (and resume record) as the float
+        changes[key] = value
+    return dataclasses.replace(obj, **changes)

@@ -1,0 +1,110 @@
+"""One mapping of option names: the named options, ``--set`` and the API's ``settings``."""
+
+from __future__ import annotations
+
+import pytest
+
+from wirescene.core.errors import ArgumentError
+from wirescene.core.settings import exposed_fields, parse_assignment, parse_value, replace_fields
+from wirescene.fitting.pipeline import STAGES, FitOptions
+from wirescene.infer.inference import InferenceOptions
+from wirescene.lift import LiftingOptions
+
+
+def test_parse_value_follows_the_default_type():
+    assert parse_value("3", 1.0) == 3.0 and isinstance(parse_value("3", 1.0), float)
+    assert parse_value("3", 1) == 3 and isinstance(parse_value("3", 1), int)
+    assert parse_value("TRUE", False) is True and parse_value("0", True) is False
+    with pytest.raises(ValueError, match="expected 0, 1, true or false"):
+        parse_value("yes", True)
+    with pytest.raises(ValueError):
+        parse_value("x", 1.0)
+
+
+def test_parse_assignment_needs_scope_key_and_value():
+    assert parse_assignment("inference.box_weight=5") == ("inference", "box_weight", "5")
+    for bad in ("box_weight=5", "inference.box_weight", ".x=1", "inference.=1"):
+        with pytest.raises(ValueError, match="SCOPE.KEY=VALUE"):
+            parse_assignment(bad)
+
+
+def test_replace_fields_checks_names_and_keeps_the_rest():
+    base = InferenceOptions()
+    out = replace_fields(base, {"box_weight": "7", "plane_refinement": "0", "iterations": 3})
+    assert (out.box_weight, out.plane_refinement, out.iterations) == (7.0, False, 3)
+    assert out.size_prior == base.size_prior and base.box_weight == 100.0  # a copy, the defaults untouched
+    assert isinstance(replace_fields(LiftingOptions(), {"road_prior": 0}).road_prior, float)
+    with pytest.raises(ValueError, match="no option 'box_wieght'.*box_weight"):
+        replace_fields(base, {"box_wieght": 1})
+
+
+def test_with_settings_reaches_every_stage_and_refuses_unknown_ones():
+    out = FitOptions().with_settings({"inference.polish_samples": "6", "lifting.iterations": 2})
+    assert out.inference.polish_samples == 6 and out.lifting.iterations == 2
+    assert FitOptions().with_settings(None) == FitOptions()
+    with pytest.raises(ValueError, match="STAGE one of lifting, inference"):
+        FitOptions().with_settings({"parts.n_trees": 3})
+    with pytest.raises(ValueError, match="no option"):
+        FitOptions().with_settings({"lifting.box_weight": 3})
+
+
+def test_every_exposed_field_is_a_command_line_option_of_eval_fit_and_predict():
+    from wirescene.cli.main import eval_cmd, fit_cmd, predict_cmd
+
+    stages = {"lifting": LiftingOptions, "inference": InferenceOptions}
+    assert set(stages) == set(STAGES)
+    wanted = {f"{stage}__{f.name}": f"--{cli}" for stage, cls in stages.items() for f, cli, _ in exposed_fields(cls)}
+    assert len(wanted) >= 11  # the options the commands had before they were generated
+    for command in (eval_cmd, fit_cmd, predict_cmd):
+        params = {p.name: p.opts for p in command.params}
+        for name, flag in wanted.items():
+            assert flag in params.get(name, []), (command.name, name)
+        assert "settings" in params
+
+
+def test_named_options_set_and_api_give_the_same_options():
+    from wirescene.api import _options
+    from wirescene.cli.main import _fit_options
+
+    settings = {"inference.box_weight": 40.0, "lifting.road_prior": 0.5, "inference.polish_samples": 6}
+    named = _fit_options(30, 2, inference__box_weight=40.0, lifting__road_prior=0.5,
+                         settings=("inference.polish_samples=6",), device="numpy")
+    by_set = _fit_options(30, 2, settings=tuple(f"{k}={v}" for k, v in settings.items()), device="numpy")
+    api = _options(None, 30, 2, None, settings)
+    assert named == by_set == api
+    assert named.inference.box_weight == 40.0 and named.lifting.n_particles == 30
+
+
+def test_named_option_wins_over_set():
+    from wirescene.cli.main import _fit_options
+
+    out = _fit_options(30, 0, inference__box_weight=5.0, settings=("inference.box_weight=9",))
+    assert out.inference.box_weight == 5.0
+
+
+def test_api_settings_errors_name_the_argument():
+    import numpy as np
+
+    import wirescene
+
+    image = np.zeros((100, 200, 3), np.uint8)
+    P = np.array([[700.0, 0, 100, 0], [0, 700, 50, 0], [0, 0, 1, 0]])
+    with pytest.raises(ArgumentError, match="settings.*no option 'nope'"):
+        wirescene.fit(image, P, [[50, 40, 120, 80]], settings={"inference.nope": 1})
+    with pytest.raises(ArgumentError, match="settings"):
+        wirescene.fit(image, P, [[50, 40, 120, 80]], settings=["inference.box_weight=1"])
+
+
+def test_set_on_the_command_line_is_checked(tmp_path):
+    from click.testing import CliRunner
+
+    from wirescene.cli.main import main, sample_root
+
+    frame = sample_root() / "training"
+    for item, says in (("inference.nope=1", "no option 'nope'"), ("inference.box_weight=x", "box_weight"),
+                       ("box_weight=1", "SCOPE.KEY=VALUE")):
+        r = CliRunner().invoke(main, ["fit", str(frame / "image_2" / "000010.png"), "--calib",
+                                      str(frame / "calib" / "000010.txt"), "--out", str(tmp_path / "o"),
+                                      "--set", item])
+        assert r.exit_code == 2 and "--set" in r.output and says in r.output, (item, r.output)
+        assert not (tmp_path / "o").exists()
