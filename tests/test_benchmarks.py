@@ -56,3 +56,41 @@ def test_learning_curve_subsets_are_reproducible_shares_of_the_training_frames(m
     assert training_subset(frames, 1 / 3, seed=(0, 3)) != third  # each fold draws its own
     assert training_subset(frames, 1.0, seed=(0, 2)) == set(frames)
     assert len(training_subset(frames, 0.01, seed=(0, 2))) == 1
+
+
+def test_rescoring_context_features_see_the_higher_scoring_neighbours(monkeypatch):
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_rescore import FEATURES, rescoring_features
+
+    # a car box, a box half over it scoring lower, and one inside it scoring lower still
+    boxes = np.array([[100.0, 150, 200, 220], [150, 150, 250, 220], [110, 160, 150, 200]])
+    X = rescoring_features(boxes, np.array([0.9, 0.3, 0.2]), np.zeros(3), (1242, 375), horizon=180, center_column=620)
+    col = {name: X[:, i] for i, name in enumerate(FEATURES)}
+    assert X.shape == (3, len(FEATURES))
+    assert col["best_iou_above"][0] == 0.0 and abs(col["best_iou_above"][1] - 1 / 3) < 1e-9
+    assert col["inside_above"][2] == 1.0 and col["covers_above"][0] == 0.0
+    assert col["logit_gap"][1] > 0 and col["n_above"].tolist() == [0, 1, 1]  # the third only touches the second
+    assert col["best_iou_below"][0] > 0 and col["best_iou_below"][2] == 0.0
+
+
+def test_range_bias_correction_is_fitted_on_the_other_group(monkeypatch):
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_range_bias import corrected_within_1m
+
+    from wirescene.io.folds import DRIVE_FOLDS, frame_drives
+
+    drives = frame_drives()
+    by_fold = {k: next(f for f, d in sorted(drives.items()) if DRIVE_FOLDS[d] == k) for k in range(4)}
+    frames = [by_fold[k] for k in (0, 1, 2, 3) for _ in range(5)]
+    label = np.full(20, 20.0)
+    bias = np.where(np.arange(20) < 10, 0.10, 0.0)  # folds 0-1 10% long, folds 2-3 exact
+    cars = {"frame": frames, "label_range": label.tolist(), "range": (label * bias).tolist(),
+            "lateral": [0.0] * 20, "height": [0.0] * 20}
+    to_23, to_01 = corrected_within_1m(cars)
+    assert to_23["test"] == [2, 3] and abs(to_23["bias_fitted_on_other"] - 10) < 1e-9
+    assert to_23["within_1m_before"] == 100 and to_23["within_1m_after"] == 0  # 2 m short after dividing by 1.1
+    assert to_01["within_1m_before"] == 0 and to_01["within_1m_after"] == 0  # fitted 0% on {2, 3}: unchanged

@@ -15,7 +15,7 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
     """``{step: {option: value}}`` of ``--set STEP.KEY=VALUE`` (each name checked, each
     value parsed as its default's type by :func:`wirescene.core.settings.parse_value`)."""
     from wirescene.core.settings import parse_assignment, parse_value
-    from wirescene.training.pipeline import option_default
+    from wirescene.training.pipeline import check_options, option_default
 
     out: dict[str, dict] = {}
     for item in values:
@@ -24,6 +24,10 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
             out.setdefault(step, {})[key] = parse_value(text, option_default(step, key))
         except ValueError as exc:
             raise click.BadParameter(f"{item.partition('=')[0]}: {exc}", param_hint="--set") from None
+    try:
+        check_options(out)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--set") from None
     return out
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import math
 import resource
 import sys
 import time
@@ -52,7 +53,7 @@ from wirescene.core.resources import (
 from wirescene.core.version import __version__
 from wirescene.training.kitti_detector import calibration_folds, heldout_bank_calibration
 
-__all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "calibration_folds",
+__all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "check_options", "calibration_folds",
            "heldout_bank_calibration", "train_all"]
 
 #: The steps in order; each makes one artefact (``_ARTEFACT``).
@@ -85,7 +86,7 @@ def step_options() -> dict[str, dict[str, object]]:
 
     bank = _parameters(train_bank_on_frames, ("images", "examples", "progress"))
     bank.update(_parameters(train_detector_bank_kitti, ("out_path", "kitti_root", "frames", "folds", "split", "progress",
-                                                         "calibration_folds", "calibration")))
+                                                         "calibration_folds")))
     return {
         "parts": _parameters(train_part_detector, ("out_path", "kitti_root", "frames", "progress", "calibration_folds")),
         "detector": bank,
@@ -124,13 +125,22 @@ def option_default(step: str, key: str):
     return known[step][key]
 
 
-def _check_options(overrides: Mapping[str, Mapping[str, object]]) -> dict[str, dict]:
-    """The recipe with ``overrides`` (``{step: {option: value}}``), every name checked."""
+def check_options(overrides: Mapping[str, Mapping[str, object]]) -> dict[str, dict]:
+    """The recipe with ``overrides`` (``{step: {option: value}}``), every name checked
+    (and a given ``detector.calibration``); a ``ValueError`` says what is wrong."""
     out = {step: dict(RECIPE.get(step, {})) for step in STEP_OPTIONS}
     for step, values in overrides.items():
         for key, value in values.items():
             option_default(step, key)
             out[step][key] = value
+    given = out["detector"].get("calibration")
+    if given is not None:  # checked here, not after the parts step has trained
+        try:
+            pair = [float(v) for v in given]
+        except (TypeError, ValueError):
+            pair = []
+        if len(pair) != 2 or not all(map(math.isfinite, pair)) or pair[0] <= 0:
+            raise ValueError(f"detector.calibration must be [a, b], finite numbers with a > 0, got {given!r}")
     return out
 
 
@@ -188,7 +198,7 @@ def train_all(
     out = Path(out_dir)
     if frames is not None and split_file is not None:
         raise ValueError("frames and split_file both choose the frames: give one")
-    opts = _check_options(options or {})
+    opts = check_options(options or {})
     dataset = KittiDataset(kitti_root)
     if not dataset.has_labels:
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
@@ -258,7 +268,12 @@ def train_all(
         bank_opts = dict(opts["detector"])
         threshold = bank_opts.pop("threshold", 0.5)
         seed = bank_opts.pop("seed", 0)
-        calib = heldout_bank_calibration(kitti_root, folds, seed=seed, progress=say, **bank_opts)
+        given = bank_opts.pop("calibration", None)
+        if given is None:
+            calib = heldout_bank_calibration(kitti_root, folds, seed=seed, progress=say, **bank_opts)
+        else:  # a Platt fit of the same recipe's fold banks made elsewhere: saves their trainings
+            a, b = (float(v) for v in given)
+            calib = {"a": a, "b": b, "source": "given"}
         record["calibration"] = calib
         bank, _ = train_detector_bank_kitti(path_of("detector"), kitti_root, frames=ids, seed=seed,
                                             calibration=(calib["a"], calib["b"]), threshold=threshold, progress=say,
