@@ -177,6 +177,13 @@ def main():
                     help="labelled boxes as full-car targets of clean cars (default: placed wireframe + correction)")
     ap.add_argument("--box-weight", type=float, default=None,
                     help="override the banks' cluster box weighting (fold-models / bank modes)")
+    ap.add_argument("--cross-view-nms", type=float, default=0.3,
+                    help="fold-models / bank modes: IoU above which detections of different viewpoints suppress "
+                         "each other (1: none)")
+    ap.add_argument("--cluster-rx", type=float, default=None,
+                    help="fold-models / bank modes: override the banks' vote-clustering radius across (and, "
+                         "with --cluster-ry unset, along) the box, in box widths / heights")
+    ap.add_argument("--cluster-ry", type=float, default=None)
     ap.add_argument("--time-frames", type=int, default=5)
     ap.add_argument("--pr-curve", default=None)
     ap.add_argument("--no-ground", action="store_true",
@@ -294,10 +301,14 @@ def main():
                 b.calibration = None  # pool raw margins (monotone per fold)
             if args.box_weight is not None:
                 b.meta["box_weight"] = args.box_weight
+            if args.cluster_rx is not None:
+                b.meta["cluster_rx"] = args.cluster_rx
+            if args.cluster_ry is not None:
+                b.meta["cluster_ry"] = args.cluster_ry
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
             dets[f] = detect_cars(ds.image(f), bank=banks[fold_of(f)], return_all=True,
-                                  camera=ds.camera(f) if ground else None)
+                                  camera=ds.camera(f) if ground else None, cross_view_nms=args.cross_view_nms)
         time_bank = banks[0]
         name = f"fold banks {args.fold_models}"
         if not ground:

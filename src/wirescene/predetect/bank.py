@@ -380,8 +380,12 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
 
 
 def _cluster_kw(bank: DetectorBank) -> dict:
-    """Clustering options stored with the bank (``meta["box_weight"]``; old banks: plain means)."""
-    return {"box_weight": float(bank.meta.get("box_weight", 0.0))}
+    """Clustering options stored with the bank (``meta["box_weight"]``, old banks: plain
+    means; ``meta["cluster_rx" | "cluster_ry" | "cluster_rs"]`` where set, else
+    :func:`cluster_activations`' radii)."""
+    kw = {"box_weight": float(bank.meta.get("box_weight", 0.0))}
+    kw.update({k: float(bank.meta[f"cluster_{k}"]) for k in ("rx", "ry", "rs") if f"cluster_{k}" in bank.meta})
+    return kw
 
 
 def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float | None = None,
