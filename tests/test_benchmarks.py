@@ -94,3 +94,26 @@ def test_range_bias_correction_is_fitted_on_the_other_group(monkeypatch):
     assert to_23["test"] == [2, 3] and abs(to_23["bias_fitted_on_other"] - 10) < 1e-9
     assert to_23["within_1m_before"] == 100 and to_23["within_1m_after"] == 0  # 2 m short after dividing by 1.1
     assert to_01["within_1m_before"] == 0 and to_01["within_1m_after"] == 0  # fitted 0% on {2, 3}: unchanged
+
+
+def test_dev_holdout_keeps_the_tuning_frames_apart(monkeypatch):
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_dev_holdout import split_figures
+
+    from wirescene.core.labels import Label
+    from wirescene.eval.metrics import FrameResult
+
+    car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+
+    def frame(fid, dz):  # one car found, its centre dz metres off in depth
+        return FrameResult(fid, [car], np.array([car.box]), np.array([0.0]), np.array([1.0]),
+                           np.array([[0, 1.6, 20 + dz]]), np.array([[1.5, 1.6, 4.0]]), np.array([0.0]),
+                           np.array([0.0]))
+
+    records = {"coarse+gp": [frame("a", 0.1), frame("b", 3.0)], "full": [frame("a", 0.1), frame("b", 0.2)]}
+    out = split_figures(records, {"a"}, "coarse+gp")
+    assert out["tuning frames"]["full"]["loc_1m"] == 100 and out["tuning frames"]["full"]["margin"] == 0
+    assert out["new drives"]["coarse+gp"]["loc_1m"] == 0 and out["new drives"]["full"]["margin"] == 100
+    assert out["new drives"]["full"]["n_gt"] == 1 and out["new drives"]["full"]["frames"] == 1
