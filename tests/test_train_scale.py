@@ -143,3 +143,23 @@ def test_capped_negatives_bound_every_pool():
     images, examples = load_training_frames(KittiDataset(KITTI_ROOT), ["000010", "001545"])
     bank = train_bank_on_frames(images, examples, **TINY_BANK, max_negatives=12)
     assert bank.meta["max_negatives"] == 12 and max(bank.meta["n_negatives"]) == 12
+
+
+def test_row_sample_is_the_plain_rows_below_the_cap_and_a_uniform_ordered_sample_above():
+    from wirescene.training.scale import RowSample
+
+    rows = RowSample(100, seed=3)
+    for i in range(10):
+        rows.add(np.arange(i * 5, i * 5 + 5, dtype=float)[:, None], np.full(5, i))
+    X, T = rows.arrays()
+    assert X[:, 0].tolist() == list(range(50)) and T.tolist() == sorted(T.tolist())
+
+    capped = RowSample(50, seed=3)
+    for i in range(100):
+        capped.add(np.arange(i * 10, i * 10 + 10, dtype=float)[:, None], np.arange(i * 10, i * 10 + 10))
+        assert capped.n <= 75  # never more than 1.5 x the cap held
+    X, T = capped.arrays()
+    assert len(X) == 50 and capped.offered == 1000
+    assert np.all(np.diff(X[:, 0]) > 0)  # arrival order kept
+    assert np.all(X[:, 0] == T)  # the columns stay aligned row by row
+    assert X[:, 0].min() < 200 and X[:, 0].max() > 800  # spread over the whole stream

@@ -79,7 +79,15 @@ from wirescene.predetect.geometry import bottom_ratio, fit_ground_prior, horizon
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.viewpoint_prior import fit_viewpoint_prior, lateral_position
 from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, sample_random_negatives
-from wirescene.training.scale import CACHE, DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, NegativePool, map_images
+from wirescene.training.scale import (
+    CACHE,
+    DEFAULT_CACHE_MB,
+    DEFAULT_MAX_NEGATIVES,
+    DEFAULT_MAX_REFINEMENT_ROWS,
+    NegativePool,
+    RowSample,
+    map_images,
+)
 
 BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
 """Labelled objects no negative window may overlap (DontCare regions too)."""
@@ -508,7 +516,8 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
 
 def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20, sigma: float = 0.12,
                        reg: float = 1e5, min_iou: float = 0.4, per_image: int = 60, min_height: float = 20.0,
-                       seed: int = 0, workers: int = 1, progress=None) -> dict:
+                       seed: int = 0, max_rows: int | None = DEFAULT_MAX_REFINEMENT_ROWS, workers: int = 1,
+                       progress=None) -> dict:
     """The bank's image-based box refinement (:mod:`wirescene.predetect.refine`), a ridge
     regression (weight ``reg`` on standardised features) fitted on ``images``
     (``TrainImage``, flipped copies included) from two sources: ``jitter`` copies of every
@@ -518,7 +527,9 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     ``min_iou``. Targets: each side's offset to the car's box in units of the moved box's
     width / height, clipped to +-0.5. ``sigma`` and ``reg`` were chosen among 6 settings
     on the held-out folds (0.08-0.16 x 3e4-1e5: all gained 2.6-7.4 points of moderate AP).
-    ``workers``, ``progress``: of the detection pass (:func:`training_detections`)."""
+    ``max_rows``: at most that many rows, a uniform sample (:class:`~wirescene.training.scale.RowSample`;
+    the 72 shared frames give 11,572, below the default, so memory stops growing at about
+    16k x 12 kB = 0.2 GB). ``workers``, ``progress``: of the detection pass (:func:`training_detections`)."""
     from dataclasses import replace
 
     from wirescene.predetect.bank import regression_features
@@ -526,11 +537,11 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
 
     rng = np.random.default_rng(seed)
     plain = replace(bank, refinement=None)
-    X, T = [], []
+    rows = RowSample(max_rows, seed=seed)
 
     def add(gray, moved, target, bins):
-        T.append(_side_offsets(moved, target))
-        X.append(refinement_features(gray, moved, regression_features(moved, bins, gray.shape[::-1])).astype(np.float32))
+        rows.add(refinement_features(gray, moved, regression_features(moved, bins, gray.shape[::-1])).astype(np.float32),
+                 _side_offsets(moved, target))
 
     found = training_detections(plain, images, workers=workers, progress=progress, name="box refinement")
     for im, det in zip(images, found):
@@ -554,10 +565,13 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
             keep, targets = _matched(d, boxes, min_iou)
             if keep.any():
                 add(gray, d[keep], targets, viewpoint_bin(det.alpha[:per_image][keep]))
-    if not X:
+    if not rows.n:
         raise ValueError("no training cars for the box refinement")
-    out = fit_ridge(np.concatenate(X), np.concatenate(T), reg)
-    out["n"] = int(sum(len(x) for x in X))
+    X, T = rows.arrays()
+    out = fit_ridge(X, T, reg)
+    out["n"] = int(len(X))
+    if rows.offered > len(X):
+        out["sampled_from"] = int(rows.offered)  # recorded where the cap shaped the refinement
     return out
 
 
@@ -620,6 +634,8 @@ def finish_bank(bank: DetectorBank, images, dataset, *, workers: int = 1, progre
         say(f"no box refinement: {exc}")
     else:
         bank.meta["box_refinement"] = {"n": refinement.pop("n"), "features": int(len(refinement["mean"]))}
+        if "sampled_from" in refinement:
+            bank.meta["box_refinement"]["sampled_from"] = refinement.pop("sampled_from")
         bank.refinement = refinement
         say(f"box refinement fitted on {bank.meta['box_refinement']['n']} boxes")
     try:

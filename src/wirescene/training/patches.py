@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wirescene.parts import features as feat
+from wirescene.training.scale import lowest_keys
 
 
 @dataclass
@@ -89,7 +90,7 @@ class PatchCollector:
     def _shrink(self) -> None:
         """Keep the ``max_patches`` of lowest key, in order."""
         keys = np.concatenate(self.keys)
-        keep = np.sort(np.argpartition(keys, self.max_patches - 1)[:self.max_patches])
+        keep = lowest_keys(keys, self.max_patches)
         self.keys = [keys[keep]]
         for k in self.kinds:
             self.X[k] = [np.concatenate(self.X[k])[keep]]

@@ -8,6 +8,7 @@ number of training frames, and runs its per-image passes in parallel.
 * :class:`NegativePool` -- one configuration's negative descriptors, at most ``cap``:
   random negatives by reservoir sampling, hard negatives kept by margin (the hardest
   under the current SVM, as the cache shrinking of DPM).
+* :class:`RowSample` -- a bounded uniform sample of regression rows (the box refinement's).
 * :func:`map_images` -- a function over training images, in order, in ``workers`` forked
   processes (each computes its own pyramids), with progress and time left.
 """
@@ -29,6 +30,10 @@ DEFAULT_CACHE_MB = 3000
 #: Default cap of a configuration's negatives: the shipped recipe on the 72 shared frames
 #: gathers at most 144 x (40 + 3 x 15) = 12,240 per configuration, so it never reaches it.
 DEFAULT_MAX_NEGATIVES = 12800
+
+#: Default cap of the box refinement's regression rows (:class:`RowSample`): the 72 shared
+#: frames give 11,572 (jittered label boxes and the bank's own detections), below it.
+DEFAULT_MAX_REFINEMENT_ROWS = 16000
 
 
 class FrameCache:
@@ -134,6 +139,49 @@ class NegativePool:
         margin = np.stack(self.items) @ np.asarray(weights, np.float32).ravel() + bias
         keep = np.sort(np.argsort(-margin, kind="stable")[:self.cap])
         self.items = [self.items[k] for k in keep]
+
+
+def lowest_keys(keys: np.ndarray, k: int) -> np.ndarray:
+    """Indices of the ``k`` lowest of ``keys``, in their original order (bottom-k sampling:
+    with uniform random keys, a uniform sample of the rows that keeps their order)."""
+    return np.sort(np.argpartition(keys, k - 1)[:k])
+
+
+class RowSample:
+    """At most ``max_rows`` rows of parallel arrays (None: all), a uniform sample of every
+    row added, in the order they came (:func:`lowest_keys`; each row draws a key from its
+    own stream ``seed``). Below the cap nothing is dropped; it holds at most 1.5 times the
+    cap at once."""
+
+    def __init__(self, max_rows: int | None, *, seed: int = 0):
+        self.max_rows = max_rows
+        self.parts: list[tuple[np.ndarray, ...]] = []
+        self.keys: list[np.ndarray] = []
+        self.n = 0
+        self.offered = 0
+        self._rng = np.random.default_rng([seed, 7])
+
+    def add(self, *arrays: np.ndarray) -> None:
+        """Add rows (every array with the same number of rows)."""
+        n = len(arrays[0])
+        self.parts.append(arrays)
+        self.keys.append(self._rng.random(n))
+        self.n += n
+        self.offered += n
+        if self.max_rows is not None and self.n > 1.5 * self.max_rows:
+            self._shrink()
+
+    def _shrink(self) -> None:
+        keys = np.concatenate(self.keys)
+        keep = lowest_keys(keys, self.max_rows)
+        self.parts = [tuple(np.concatenate(col)[keep] for col in zip(*self.parts))]
+        self.keys, self.n = [keys[keep]], len(keep)
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The kept rows, one concatenated array per column."""
+        if self.max_rows is not None and self.n > self.max_rows:
+            self._shrink()
+        return tuple(np.concatenate(col) for col in zip(*self.parts))
 
 
 # --------------------------------------------------------------------------- parallel passes
