@@ -224,7 +224,6 @@ def main():
             fold_banks[k] = DetectorBank.load(Path(args.from_raw) / f"fold{k}_raw.npz")
         for im in images:
             dets[im.frame] = detect_training_image(fold_banks[fold_of(im.frame)], im)
-            im.pyramid = None  # one frame's pyramid in memory at a time
         out["cv_seconds"] = round(time.time() - t0, 1)
     if args.cv:
         t0 = time.time()
@@ -286,8 +285,6 @@ def main():
                     bank = fold_banks[fold_of(im.frame)]
                     d = detect_training_image(bank, im, horizon=im.horizon, center_column=im.center_column)
                     dets[im.frame] = Detections(d.boxes, bank.confidence(d.scores), d.alpha, d.source)
-                    if args.from_raw:
-                        im.pyramid = None
         time_bank = fold_banks[0]
         name = "cross-validated real-data bank"
     elif args.cv:

@@ -80,7 +80,6 @@ def test_range_bias_correction_is_fitted_on_the_other_group(monkeypatch):
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_range_bias import corrected_within_1m
-
     from wirescene.io.folds import DRIVE_FOLDS, frame_drives
 
     drives = frame_drives()
@@ -101,7 +100,6 @@ def test_dev_holdout_keeps_the_tuning_frames_apart(monkeypatch):
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_dev_holdout import split_figures
-
     from wirescene.core.labels import Label
     from wirescene.eval.metrics import FrameResult
 

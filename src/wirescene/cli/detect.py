@@ -9,14 +9,19 @@ from pathlib import Path
 import click
 
 from wirescene.cli.options import (
+    NON_NEGATIVE_FLOAT,
+    POSITIVE,
     check_output_dir,
     check_output_file,
     load_models,
     models_option,
     select_frames,
     split_file_option,
+    workers_count,
+    workers_option,
 )
 from wirescene.core.atomic import write_text
+from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES
 
 
 def _single_thread():
@@ -60,8 +65,14 @@ def _single_thread():
 @click.option("--val-scenes", "n_val", type=int, default=20, show_default=True, help="Synthetic only.")
 @click.option("--C", "C", type=float, default=0.01, show_default=True, help="Linear SVM regularisation.")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
+@click.option("--max-negatives", type=POSITIVE, default=DEFAULT_MAX_NEGATIVES, show_default=True,
+              help="With --kitti-root: cap of each configuration's negatives (reservoir, then the hardest).")
+@click.option("--pyramid-cache-mb", type=NON_NEGATIVE_FLOAT, default=DEFAULT_CACHE_MB, show_default=True,
+              help="With --kitti-root: memory for cached grey images and HOG pyramids (beyond it they are recomputed).")
+@workers_option("of the per-image passes (mining, detections; --kitti-root only)")
 def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, seed, n_scenes, n_partial,
-             per_octave, cut_paste, mining_rounds, mining_images, n_val, C, report):
+             per_octave, cut_paste, mining_rounds, mining_images, n_val, C, report, max_negatives, pyramid_cache_mb,
+             workers):
     """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
     check_output_file(out, "--out")
     check_output_file(report, "--report")
@@ -78,7 +89,9 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
                                                calibration=[float(v) for v in calibration.split(",")] if calibration
                                                else None, threshold=threshold,
                                                mining_rounds=3 if mining_rounds is None else mining_rounds,
-                                               per_octave=per_octave, cut_paste=cut_paste, progress=click.echo)
+                                               per_octave=per_octave, cut_paste=cut_paste, max_negatives=max_negatives,
+                                               pyramid_cache_mb=pyramid_cache_mb, workers=workers_count(workers),
+                                               progress=click.echo)
     else:
         if frames or split_file or folds or cut_paste or per_octave != 6:
             raise click.UsageError("--frames / --split-file / --folds / --per-octave / --cut-paste need --kitti-root")

@@ -24,6 +24,7 @@ from wirescene.cli.options import (
     split_file_option,
     stage_options,
     stage_settings,
+    workers_option,
 )
 from wirescene.core.errors import InputError, WiresceneError
 from wirescene.core.version import __version__
@@ -198,7 +199,7 @@ def _dask_client(address: str):
               help="Write the pre-detection scores instead of calibrated confidences (the data of `train scores`).")
 @click.option("--report", "report_dir", type=click.Path(path_type=Path), default=None,
               help="Write an HTML report with plots and a gallery of the best and worst frames to this directory.")
-@click.option("--workers", type=POSITIVE, default=None, help="Processes fitting frames in parallel (default: all cores).")
+@workers_option()
 @click.option("--allow-missing-detections", is_flag=True, default=False,
               help="With --detections DIR: frames without a detection file count as frames without detections "
                    "(their number is reported) instead of an error.")
@@ -307,7 +308,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
 @split_file_option
 @click.option("--particles", type=POSITIVE, default=250, show_default=True)
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
-@click.option("--workers", type=POSITIVE, default=None, help="Processes fitting frames in parallel (default: all cores).")
+@workers_option()
 @click.option("--resume/--no-resume", default=False, show_default=True,
               help="Continue an interrupted run in --out (same settings): fit only the images without a label file.")
 @click.option("--dask", "dask_address", metavar="ADDRESS", default=None,

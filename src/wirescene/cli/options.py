@@ -120,6 +120,17 @@ def select_frames(frames: str | None, split_file: Path | None, known: list[str],
     return parse_frames(frames, known, option)
 
 
+def workers_option(what: str = "fitting frames"):
+    """``--workers N``: processes doing ``what`` in parallel (None: all cores, :func:`workers_count`)."""
+    return click.option("--workers", type=POSITIVE, default=None,
+                        help=f"Processes {what} in parallel (default: all cores).")
+
+
+def workers_count(workers: int | None) -> int:
+    """The processes of ``--workers`` (None: all cores)."""
+    return workers or os.cpu_count() or 1
+
+
 def models_option(f):
     """``--models MODELS_DIR``: trained artefacts that replace the shipped ones."""
     return click.option("--models", "models", type=click.Path(path_type=Path), default=None,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_dir, split_file_option
+from wirescene.cli.options import check_output_dir, split_file_option, workers_count, workers_option
 
 
 def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
@@ -45,7 +45,8 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
                    "parts.synth_scenes=100 or detector.mining_rounds=2; repeatable.")
 @click.option("--resume/--no-resume", default=False, show_default=True,
               help="Keep the steps already done in --out with the same data, options and inputs; train the rest.")
-def train_all_cmd(kitti_root, out, frames, split_file, n_folds, settings, resume):
+@workers_option("of the detector step's per-image passes (mining, detections)")
+def train_all_cmd(kitti_root, out, frames, split_file, n_folds, settings, resume, workers):
     """Train part detectors, detector bank (held-out calibration), occluded-part score c
     (the score calibration stays the shipped one) on the labelled frames of KITTI_ROOT,
     in order, into a models directory with a manifest."""
@@ -71,7 +72,7 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, settings, resume
         return bar
 
     manifest = train_all(out, kitti_root, frames=ids, split_file=split_file, options=options, n_folds=n_folds,
-                         resume=resume, iterate=iterate, progress=lambda line: tqdm.write(line, file=sys.stderr))
+                         resume=resume, workers=workers_count(workers), iterate=iterate, progress=lambda line: tqdm.write(line, file=sys.stderr))
     for step, record in manifest["steps"].items():
         if record.get("source") == "shipped":
             click.echo(f"{step:18s} shipped ({record['why']})")

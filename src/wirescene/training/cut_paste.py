@@ -117,7 +117,7 @@ def paste_cars(images, examples, *, per_image: int = 3, seed: int = 0, min_heigh
             continue
         gray = np.clip(np.round(canvas), 0, 255).astype(np.uint8)
         block = np.concatenate([np.asarray(target.block, float).reshape(-1, 4), np.array([e.label_box for e in pasted])])
-        composite = replace(target, gray=gray, block=block, pyramid=None, composite=True, occupied=None)
+        composite = target.with_pixels(gray, block=block, composite=True, occupied=None)
         new_images.append(composite)
         new_examples += pasted
         flipped, flipped_examples = mirror(composite, pasted, base + len(new_images))

@@ -67,8 +67,8 @@ def _fit_svm(pos, neg, C, seed):
 
 
 def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_image, rng) -> None:
-    """Append to ``neg[t]`` up to ``per_image`` random windows of pyramid ``pyr`` for each
-    configuration ``t``, skipping windows that overlap a ``blocked`` box (cars) by more than 30%."""
+    """Append to ``neg[t]`` (a list or a :class:`~wirescene.training.scale.NegativePool`) up
+    to ``per_image`` random windows of pyramid ``pyr`` for each configuration ``t``, skipping windows that overlap a ``blocked`` box (cars) by more than 30%."""
     for t, c in enumerate(configs):
         th, tw = c.template
         levels = _valid_levels(c, pyr, H, min_height)
@@ -82,7 +82,7 @@ def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_im
             win = np.array([[q, r, q + tw, r + th]]) * CELL / s
             if _overlap_frac(win, blocked)[0] > 0.3:
                 continue
-            neg[t].append(F[r:r + th, q:q + tw].ravel())
+            neg[t].append(F[r:r + th, q:q + tw].flatten())  # a copy: a view would hold the whole level
             got += 1
             if got >= per_image:
                 break

@@ -44,12 +44,22 @@ linear HOG template trained as a linear SVM -- from the labelled frames of a KIT
 9. Viewpoint prior (:func:`fit_bank_viewpoint_prior`, :mod:`wirescene.predetect.viewpoint_prior`):
    which way the labelled cars face at each lateral position on the road (traffic); with a
    camera it settles front against back views among a detection's candidate clusters.
+
+Memory does not grow with the number of training frames beyond fixed bounds
+(:mod:`wirescene.training.scale`): the training images hold no pixels (read again where a
+pass needs them), grey images and pyramids live in a cache of ``pyramid_cache_mb``, each
+configuration's negatives are capped at ``max_negatives``, positives at ``max_pos``. What
+still grows is small: the car examples (~1 kB each) and, with ``cut_paste``, the
+composites' pixels. The passes over the images (mining, detections) run in ``workers``
+processes.
 """
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Mapping
 
@@ -69,6 +79,15 @@ from wirescene.predetect.geometry import bottom_ratio, fit_ground_prior, horizon
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.viewpoint_prior import fit_viewpoint_prior, lateral_position
 from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, sample_random_negatives
+from wirescene.training.scale import (
+    CACHE,
+    DEFAULT_CACHE_MB,
+    DEFAULT_MAX_NEGATIVES,
+    DEFAULT_MAX_REFINEMENT_ROWS,
+    NegativePool,
+    RowSample,
+    map_images,
+)
 
 BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
 """Labelled objects no negative window may overlap (DontCare regions too)."""
@@ -76,17 +95,50 @@ BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
 
 @dataclass
 class TrainImage:
-    """One training image (the original or the flipped copy of a frame)."""
+    """One training image (the original or the flipped copy of a frame).
+
+    Its grey image is read from ``source`` (a :class:`~wirescene.io.kitti.KittiDataset`)
+    on demand, or held in ``pixels`` where it cannot be read (composites); both it and its
+    HOG pyramids are kept in :data:`wirescene.training.scale.CACHE` within its budget."""
 
     frame: str
     flipped: bool
-    gray: np.ndarray  # (H, W) uint8, already flipped if ``flipped``
     block: np.ndarray  # (K, 4) boxes negatives must not overlap (in this image's frame)
-    pyramid: list | None = None
+    size: tuple  # (W, H) in pixels
+    source: object = None  # the dataset the grey image is read from (None: ``pixels``)
+    pixels: np.ndarray | None = None  # (H, W) uint8 grey image where it is not read from ``source``
     horizon: float | None = None  # image row of the ground plane's horizon (flips keep rows)
     center_column: float | None = None  # column of the principal point (mirrored in flipped copies)
     composite: bool = False  # made by pasting cars of other frames in (:mod:`.cut_paste`)
     occupied: np.ndarray | None = None  # (K, 4) boxes of every labelled object (pedestrians too), unflipped frame
+    key: tuple = ()  # identity in the cache: (split directory, frame, flipped), or a composite's number
+
+    @property
+    def gray(self) -> np.ndarray:
+        """``(H, W)`` uint8 grey image, already flipped if ``flipped``."""
+        if self.pixels is not None:
+            return self.pixels
+        return CACHE.get(("gray",) + self.key, lambda: read_gray(self.source, self.frame, flipped=self.flipped))
+
+    def hog_pyramid(self, scales) -> list:
+        """The HOG pyramid (:func:`~wirescene.predetect.hog.feature_pyramid`) at ``scales``."""
+        scales = tuple(float(s) for s in scales)
+        return CACHE.get(("pyramid", scales) + self.key, lambda: feature_pyramid(self.gray, scales))
+
+    def with_pixels(self, pixels: np.ndarray, **changes) -> TrainImage:
+        """A copy holding its grey image ``pixels`` (a composite), with ``changes``."""
+        from dataclasses import replace
+
+        return replace(self, pixels=pixels, source=None, key=("composite", next(_COMPOSITES)), **changes)
+
+
+_COMPOSITES = itertools.count()
+
+
+def read_gray(dataset, frame: str, *, flipped: bool = False) -> np.ndarray:
+    """``(H, W)`` uint8 grey image of ``frame`` of ``dataset``, mirrored if ``flipped``."""
+    gray = np.round(to_gray(dataset.image(frame)) * 255).astype(np.uint8)
+    return np.ascontiguousarray(gray[:, ::-1]) if flipped else gray
 
 
 def car_wireframe(label, camera, mean: np.ndarray):
@@ -153,23 +205,30 @@ def mirrored_image(image: TrainImage, examples, index: int):
     """``(image, examples)`` of ``image`` mirrored horizontally, as training image ``index``."""
     from dataclasses import replace
 
-    W = image.gray.shape[1]
-    flipped = replace(image, flipped=not image.flipped, gray=np.ascontiguousarray(image.gray[:, ::-1]),
-                      block=mirrored_boxes(image.block, W), pyramid=None,
-                      center_column=None if image.center_column is None else (W - 1) - image.center_column)
+    W = image.size[0]
+    changes = dict(flipped=not image.flipped, block=mirrored_boxes(image.block, W),
+                   center_column=None if image.center_column is None else (W - 1) - image.center_column)
+    if image.pixels is not None:
+        flipped = image.with_pixels(np.ascontiguousarray(image.pixels[:, ::-1]), **changes)
+    else:
+        flipped = replace(image, key=image.key[:-1] + (not image.flipped,), **changes)
     return flipped, [mirrored_example(e, W, index) for e in examples]
 
 
 def load_training_frames(dataset, frame_ids, *, flips: bool = True, progress=None):
-    """``(images, examples)`` of labelled KITTI frames (see the module docstring)."""
+    """``(images, examples)`` of labelled KITTI frames (see the module docstring).
+
+    The images hold no pixels (:class:`TrainImage`): each frame's grey image is read here
+    once, for its size, and offered to the cache."""
     from wirescene.core.shape import load_default
 
     mean = load_default().mean
     images, examples = [], []
+    where = str(Path(dataset.split_dir).resolve())
     for fid in frame_ids:
-        img = dataset.image(fid)
-        H, W = img.shape[:2]
-        gray = np.round(to_gray(img) * 255).astype(np.uint8)
+        gray = read_gray(dataset, fid)
+        H, W = gray.shape
+        CACHE.put(("gray", where, fid, False), gray)
         labels = dataset.labels(fid)
         block = np.array([o.box for o in labels.objects if o.type in BLOCKING_TYPES]
                          + [d.box for d in labels.dontcare], float).reshape(-1, 4)
@@ -178,7 +237,8 @@ def load_training_frames(dataset, frame_ids, *, flips: bool = True, progress=Non
         cx = float(camera.K[0, 2])
         occupied = np.array([o.box for o in labels.objects] + [d.box for d in labels.dontcare], float).reshape(-1, 4)
         examples += frame_examples(labels, camera, W, H, len(images), mean, flips=flips)
-        images.append(TrainImage(fid, False, gray, block, horizon=horizon, center_column=cx, occupied=occupied))
+        images.append(TrainImage(fid, False, block, (W, H), source=dataset, horizon=horizon, center_column=cx,
+                                 occupied=occupied, key=(where, fid, False)))
         if flips:
             images.append(mirrored_image(images[-1], [], len(images))[0])
     if progress:
@@ -186,23 +246,18 @@ def load_training_frames(dataset, frame_ids, *, flips: bool = True, progress=Non
     return images, examples
 
 
-def ensure_pyramids(images, scales) -> None:
-    """Compute (once) the HOG pyramid of every training image."""
-    for im in images:
-        if im.pyramid is None:
-            im.pyramid = feature_pyramid(im.gray, scales)
-
-
 def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3, C: float = 0.01,
                          max_pos: int = 600, min_pos: int = 120, max_jitter: int = 6, min_bin_examples: int = 5,
                          neg_per_image: int = 40, mining_rounds: int = 3, hard_per_image: int = 15,
                          min_height: float = 25.0, max_scale: float = 2.0, full_area: float = 48,
                          partial_area: float = 36, label_boxes: bool = False, per_octave: int = 6, box_weight: float = 2.0,
-                         cut_paste: int = 0, progress=None) -> DetectorBank:
+                         cut_paste: int = 0, max_negatives: int | None = DEFAULT_MAX_NEGATIVES,
+                         pyramid_cache_mb: float = DEFAULT_CACHE_MB, workers: int = 1, progress=None) -> DetectorBank:
     """Train a :class:`DetectorBank` on real training images and their car examples.
 
-    ``images``/``examples`` as returned by :func:`load_training_frames` (pyramids are
-    computed on demand and kept on the images, so cross-validation folds share them).
+    ``images``/``examples`` as returned by :func:`load_training_frames` (grey images and
+    pyramids are computed on demand and kept in :data:`~wirescene.training.scale.CACHE`, so
+    cross-validation folds share them).
     Returns an uncalibrated bank (``calibration`` None, ``threshold`` 0 in margin units).
     ``box_weight``: detections average the votes of a cluster with weights
     ``exp(box_weight * margin)`` (stored in the bank's meta; see :func:`wirescene.predetect.bank.cluster_activations`).
@@ -217,10 +272,23 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     3 pasted cars per frame took the first two folds' moderate AP from 35.4 / 56.6 to
     22.7 / 54.0 (the convex hull of the placed wireframe is not the car's outline, and the
     HOG templates see the seam).
+    ``max_negatives``: cap of each configuration's negatives (:class:`~wirescene.training.scale.NegativePool`;
+    None: unbounded): random ones by reservoir sampling, after each mining round the
+    hardest under the current SVM. The default is above what the 72 shared frames gather
+    with the default recipe (144 x (40 + 3 x 15) = 12,240), so it shapes only a bank of more
+    frames: from about 80 frames on the random negatives are a uniform sample of all
+    frames' windows, and each round keeps the 12,800 windows of highest margin (about 1 GB
+    for the 32 configurations at 1.3k floats each, whatever the number of frames).
+    ``pyramid_cache_mb``: budget of the process's cache of grey images and HOG pyramids
+    (:data:`~wirescene.training.scale.CACHE`, set here); the default holds the 72 shared
+    frames' (nothing is computed twice), more frames are read and described again in
+    every pass. ``workers``: processes of the per-image passes (hard-negative mining), 0 or
+    1 serial; the bank is the same.
     """
     say = progress or (lambda msg: None)
     t0 = time.time()
     rng = np.random.default_rng(seed)
+    CACHE.resize(pyramid_cache_mb)
     from dataclasses import replace
 
     corr = learn_full_box_correction(examples)
@@ -256,35 +324,30 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     say("positives per detector: " + " ".join(str(len(p)) for p in pos) + f" [{time.time() - t0:.0f}s]")
 
     # ---- random negatives
-    H = max(im.gray.shape[0] for im in images)
-    scales = pyramid_scales(images[0].gray.shape[1], images[0].gray.shape[0], max_scale=max_scale,
-                            per_octave=per_octave)
-    ensure_pyramids(images, scales)
-    neg = [[] for _ in configs]
+    H = max(im.size[1] for im in images)
+    scales = pyramid_scales(*images[0].size, max_scale=max_scale, per_octave=per_octave)
+    reservoir = np.random.default_rng([seed, 1])  # only drawn from once a pool is full
+    neg = [NegativePool(max_negatives, reservoir) for _ in configs]
     for im in images:
-        pyr = im.pyramid
-        sample_random_negatives(neg, pyr, configs, im.block, H=H, min_height=min_height,
+        sample_random_negatives(neg, im.hog_pyramid(scales), configs, im.block, H=H, min_height=min_height,
                                 per_image=neg_per_image, rng=rng)
     say(f"random negatives: {sum(len(n) for n in neg)} [{time.time() - t0:.0f}s]")
 
-    weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)
+    weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed)
     bank = DetectorBank(configs, weights, biases)
     for rnd in range(mining_rounds):
+        mine = partial(hard_negatives, bank, scales=scales, min_height=min_height, max_height=3.0 * H,
+                       per_image=hard_per_image)
         n_new = 0
-        for im in images:
-            act = score_pyramid(bank, im.pyramid, threshold=-1.0, top_k=40, min_height=min_height, max_height=3.0 * H)
-            if not len(act.det):
-                continue
-            ok = _overlap_frac(act.boxes, im.block) <= 0.3
-            for t in np.unique(act.det[ok]):
-                sel = np.flatnonzero(ok & (act.det == t))
-                sel = sel[np.argsort(-act.scores[sel])[:hard_per_image]]
-                th, tw = configs[t].template
-                for k in sel:
-                    r, q = act.cell[k]
-                    neg[t].append(im.pyramid[act.level[k]][1][r:r + th, q:q + tw].ravel())
-                n_new += len(sel)
-        weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)
+        for found in map_images(mine, images, workers=workers, progress=say, name=f"mining round {rnd + 1}"):
+            for t, feats in found:
+                for x in feats:
+                    neg[t].add_hard(x)
+                neg[t].shrink(bank.weights[t], bank.biases[t], slack=1.1)
+                n_new += len(feats)
+        for t, pool in enumerate(neg):
+            pool.shrink(bank.weights[t], bank.biases[t])
+        weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed)
         bank = DetectorBank(configs, weights, biases)
         say(f"mining round {rnd + 1}: {n_new} hard negatives [{time.time() - t0:.0f}s]")
     bank.meta = {
@@ -295,7 +358,29 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
         "car_examples_per_bin": per_bin.tolist(), "full_box_correction": np.round(corr, 5).tolist(),
         "train_seconds": round(time.time() - t0, 1),
     }
+    if any(n.offered > len(n) or len(n) == max_negatives for n in neg):
+        bank.meta["max_negatives"] = int(max_negatives)  # recorded where the cap shaped the bank
     return bank
+
+
+def hard_negatives(bank: DetectorBank, image: TrainImage, *, scales, min_height: float, max_height: float,
+                   per_image: int) -> list:
+    """``[(configuration, (k, D) descriptors)]``: the ``per_image`` best-scoring windows of
+    each configuration in ``image`` (margin above -1) overlapping no blocked box by more
+    than 30% of the window (one pass of hard-negative mining)."""
+    pyramid = image.hog_pyramid(scales)
+    act = score_pyramid(bank, pyramid, threshold=-1.0, top_k=40, min_height=min_height, max_height=max_height)
+    if not len(act.det):
+        return []
+    ok = _overlap_frac(act.boxes, image.block) <= 0.3
+    out = []
+    for t in np.unique(act.det[ok]):
+        sel = np.flatnonzero(ok & (act.det == t))
+        sel = sel[np.argsort(-act.scores[sel])[:per_image]]
+        th, tw = bank.configs[t].template
+        out.append((int(t), [pyramid[act.level[k]][1][r:r + th, q:q + tw].flatten() for k, (r, q) in
+                             zip(sel, act.cell[sel])]))
+    return out
 
 
 # --------------------------------------------------------------------------- calibration
@@ -352,19 +437,26 @@ def training_gt_boxes(dataset, images) -> list:
     out = []
     for im in images:
         gt = kitti_gt_boxes(dataset.labels(im.frame))
-        out.append(mirrored_boxes(gt, im.gray.shape[1]) if im.flipped else gt)
+        out.append(mirrored_boxes(gt, im.size[0]) if im.flipped else gt)
     return out
 
 
 def detect_training_image(bank: DetectorBank, image: TrainImage, **kw):
-    """Raw (uncalibrated, unthresholded) detections of a training image from its cached pyramid."""
-    H, W = image.gray.shape
-    if image.pyramid is None:
-        ensure_pyramids([image], pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
-                                                per_octave=int(bank.meta.get("per_octave", 4))))
+    """Raw (uncalibrated, unthresholded) detections of a training image from its (cached) pyramid."""
+    W, H = image.size
+    pyramid = image.hog_pyramid(pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
+                                               per_octave=int(bank.meta.get("per_octave", 4))))
     kw.setdefault("min_height", float(bank.meta.get("min_height", 30.0)))
     gray = None if bank.refinement is None else image.gray.astype(np.float32) / 255.0
-    return detect_pyramid(bank, image.pyramid, (W, H), calibrated=False, threshold=None, gray=gray, **kw)
+    return detect_pyramid(bank, pyramid, (W, H), calibrated=False, threshold=None, gray=gray, **kw)
+
+
+def training_detections(bank: DetectorBank, images, *, workers: int = 1, progress=None, name: str = "detections",
+                        **kw):
+    """:func:`detect_training_image` of every image, in order, in ``workers`` processes
+    (:func:`~wirescene.training.scale.map_images`); an iterator."""
+    return map_images(partial(detect_training_image, bank, **kw), images, workers=workers, progress=progress,
+                      name=name)
 
 
 def _matched(boxes, gt, min_iou: float):
@@ -385,24 +477,25 @@ def _side_offsets(moved, target) -> np.ndarray:
     return np.clip((target - moved) / np.column_stack([w, h, w, h]), -0.5, 0.5)
 
 
-def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.0, min_iou: float = 0.5) -> dict:
+def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.0, min_iou: float = 0.5,
+                       workers: int = 1, progress=None) -> dict:
     """The bank's box regression (:func:`wirescene.predetect.bank.apply_box_regression`)
     by ridge regression on its own detections of ``images`` (``TrainImage``; without any
     regression) that overlap a box of ``gt_boxes`` (one ``(K, 4)`` array per image) with
     IoU >= ``min_iou``: targets are each side's offset to the best-overlapping box in
     units of the detection's width or height (clipped to +-0.5). ``reg`` is the ridge
-    weight on everything but the constant."""
+    weight on everything but the constant. ``workers``, ``progress``: of the detection pass
+    (:func:`training_detections`)."""
     from dataclasses import replace
 
     from wirescene.predetect.bank import REGRESSION_FEATURES, regression_features
 
     plain = replace(bank, meta={k: v for k, v in bank.meta.items() if k != "box_regression"}, refinement=None)
     X, T = [], []
-    for im, gt in zip(images, gt_boxes):
-        gt = np.asarray(gt, float).reshape(-1, 4)
-        if not len(gt):
-            continue
-        det = detect_training_image(plain, im)
+    gt_boxes = [np.asarray(gt, float).reshape(-1, 4) for gt in gt_boxes]
+    with_cars = [im for im, gt in zip(images, gt_boxes) if len(gt)]
+    found = training_detections(plain, with_cars, workers=workers, progress=progress, name="box regression")
+    for im, gt, det in zip(with_cars, [gt for gt in gt_boxes if len(gt)], found):
         if not len(det):
             continue
         keep, g = _matched(det.boxes, gt, min_iou)
@@ -410,8 +503,7 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
             continue
         d = det.boxes[keep]
         T.append(_side_offsets(d, g))
-        H, W = im.gray.shape
-        X.append(regression_features(d, viewpoint_bin(det.alpha[keep]), (W, H)))
+        X.append(regression_features(d, viewpoint_bin(det.alpha[keep]), im.size))
     F = len(REGRESSION_FEATURES)
     if not X:
         return {"weights": np.zeros((F, 4)).tolist(), "features": list(REGRESSION_FEATURES), "n": 0}
@@ -424,7 +516,8 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
 
 def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20, sigma: float = 0.12,
                        reg: float = 1e5, min_iou: float = 0.4, per_image: int = 60, min_height: float = 20.0,
-                       seed: int = 0) -> dict:
+                       seed: int = 0, max_rows: int | None = DEFAULT_MAX_REFINEMENT_ROWS, workers: int = 1,
+                       progress=None) -> dict:
     """The bank's image-based box refinement (:mod:`wirescene.predetect.refine`), a ridge
     regression (weight ``reg`` on standardised features) fitted on ``images``
     (``TrainImage``, flipped copies included) from two sources: ``jitter`` copies of every
@@ -433,7 +526,10 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     regression, without refinement; best ``per_image``) overlapping a car with IoU >=
     ``min_iou``. Targets: each side's offset to the car's box in units of the moved box's
     width / height, clipped to +-0.5. ``sigma`` and ``reg`` were chosen among 6 settings
-    on the held-out folds (0.08-0.16 x 3e4-1e5: all gained 2.6-7.4 points of moderate AP)."""
+    on the held-out folds (0.08-0.16 x 3e4-1e5: all gained 2.6-7.4 points of moderate AP).
+    ``max_rows``: at most that many rows, a uniform sample (:class:`~wirescene.training.scale.RowSample`;
+    the 72 shared frames give 11,572, below the default, so memory stops growing at about
+    16k x 12 kB = 0.2 GB). ``workers``, ``progress``: of the detection pass (:func:`training_detections`)."""
     from dataclasses import replace
 
     from wirescene.predetect.bank import regression_features
@@ -441,13 +537,14 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
 
     rng = np.random.default_rng(seed)
     plain = replace(bank, refinement=None)
-    X, T = [], []
+    rows = RowSample(max_rows, seed=seed)
 
     def add(gray, moved, target, bins):
-        T.append(_side_offsets(moved, target))
-        X.append(refinement_features(gray, moved, regression_features(moved, bins, gray.shape[::-1])).astype(np.float32))
+        rows.add(refinement_features(gray, moved, regression_features(moved, bins, gray.shape[::-1])).astype(np.float32),
+                 _side_offsets(moved, target))
 
-    for im in images:
+    found = training_detections(plain, images, workers=workers, progress=progress, name="box refinement")
+    for im, det in zip(images, found):
         gray = im.gray.astype(np.float32) / 255.0
         W = gray.shape[1]
         cars = [o for o in dataset.labels(im.frame).objects if o.type == "Car"]
@@ -463,35 +560,39 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
             ok = np.all(moved[:, 2:] - moved[:, :2] > 8, axis=1)
             if ok.any():
                 add(gray, moved[ok], g, np.full(int(ok.sum()), viewpoint_bin(a)))
-        det = detect_training_image(plain, im)
         d = det.boxes[:per_image]
         if len(d) and len(boxes):
             keep, targets = _matched(d, boxes, min_iou)
             if keep.any():
                 add(gray, d[keep], targets, viewpoint_bin(det.alpha[:per_image][keep]))
-    if not X:
+    if not rows.n:
         raise ValueError("no training cars for the box refinement")
-    out = fit_ridge(np.concatenate(X), np.concatenate(T), reg)
-    out["n"] = int(sum(len(x) for x in X))
+    X, T = rows.arrays()
+    out = fit_ridge(X, T, reg)
+    out["n"] = int(len(X))
+    if rows.offered > len(X):
+        out["sampled_from"] = int(rows.offered)  # recorded where the cap shaped the refinement
     return out
 
 
 def fit_bank_ground_prior(bank: DetectorBank, images, dataset, *, per_image: int = 30,
-                          max_overlap: float = 0.1) -> dict:
+                          max_overlap: float = 0.1, workers: int = 1, progress=None) -> dict:
     """The bank's ground prior (:mod:`wirescene.predetect.geometry`) from its training
     images: the ``Car`` labels' boxes (each frame once) against the ``per_image``
     best-scoring detections (with the bank's box regression and refinement, without any ground term) that
-    overlap no labelled object or DontCare region by more than ``max_overlap`` IoU."""
+    overlap no labelled object or DontCare region by more than ``max_overlap`` IoU.
+    ``workers``, ``progress``: of the detection pass (:func:`training_detections`)."""
     from wirescene.core.boxes import iou_2d
 
     cars, background, seen = [], [], set()
     for im in images:
         if im.horizon is None:
             raise ValueError(f"training image {im.frame} has no horizon (camera) for the ground prior")
+    for im, det in zip(images, training_detections(bank, images, workers=workers, progress=progress,
+                                                   name="ground prior")):
         if im.frame not in seen:
             seen.add(im.frame)
             cars.append(bottom_ratio(kitti_gt_boxes(dataset.labels(im.frame)), im.horizon))
-        det = detect_training_image(bank, im)
         boxes = det.boxes[:per_image]
         if len(boxes) and len(im.block):
             boxes = boxes[iou_2d(boxes[:, None], im.block[None]).max(1) <= max_overlap]
@@ -516,25 +617,29 @@ def fit_bank_viewpoint_prior(images, dataset) -> dict:
     return fit_viewpoint_prior(np.concatenate(lateral), np.concatenate(bins))
 
 
-def finish_bank(bank: DetectorBank, images, dataset, *, progress=None) -> DetectorBank:
+def finish_bank(bank: DetectorBank, images, dataset, *, workers: int = 1, progress=None) -> DetectorBank:
     """The steps after the SVMs, on the bank's own training images: the box regression
     (:func:`fit_box_regression`), the box refinement (:func:`fit_box_refinement`), the
     ground prior (:func:`fit_bank_ground_prior`) of the refined boxes, and the viewpoint
-    prior of the labelled cars (:func:`fit_bank_viewpoint_prior`)."""
+    prior of the labelled cars (:func:`fit_bank_viewpoint_prior`). ``workers``: processes
+    of their detection passes (0 or 1 serial; the bank is the same)."""
     say = progress or (lambda msg: None)
-    bank.meta["box_regression"] = fit_box_regression(bank, images, training_gt_boxes(dataset, images))
+    passes = dict(workers=workers, progress=say)
+    bank.meta["box_regression"] = fit_box_regression(bank, images, training_gt_boxes(dataset, images), **passes)
     say(f"box regression fitted on {bank.meta['box_regression']['n']} detections")
     # a handful of training frames may hold too few cars for either; the bank then goes without
     try:
-        refinement = fit_box_refinement(bank, images, dataset)
+        refinement = fit_box_refinement(bank, images, dataset, **passes)
     except ValueError as exc:
         say(f"no box refinement: {exc}")
     else:
         bank.meta["box_refinement"] = {"n": refinement.pop("n"), "features": int(len(refinement["mean"]))}
+        if "sampled_from" in refinement:
+            bank.meta["box_refinement"]["sampled_from"] = refinement.pop("sampled_from")
         bank.refinement = refinement
         say(f"box refinement fitted on {bank.meta['box_refinement']['n']} boxes")
     try:
-        gp = bank.meta["ground_prior"] = fit_bank_ground_prior(bank, images, dataset)
+        gp = bank.meta["ground_prior"] = fit_bank_ground_prior(bank, images, dataset, **passes)
     except ValueError as exc:
         say(f"no ground prior: {exc}")
     else:
@@ -558,7 +663,7 @@ def mirrored_boxes(boxes, width: int) -> np.ndarray:
 
 def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str = "training",
                               seed: int = 0, calibration_folds: bool | Mapping[str, int] = True, calibration=None,
-                              threshold: float = 0.5,
+                              threshold: float = 0.5, workers: int = 1,
                               progress=None, **train_kw):
     """``wirescene train detector --kitti-root``: train on the labelled frames of a KITTI root.
 
@@ -571,6 +676,8 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     ``(a, b)`` -- e.g. the pooled held-out fit printed by ``benchmarks/bench_predetect.py``
     for the same recipe -- instead of the leave-one-fold-out run (saves four trainings).
     ``threshold``: default detection threshold of a calibrated bank (probability).
+    ``workers``: processes of the per-image passes (:func:`train_bank_on_frames`,
+    :func:`finish_bank`, :func:`heldout_bank_calibration`); the bank is the same.
     Returns ``(bank, report)``.
     """
     from wirescene.io.folds import fold_of
@@ -592,12 +699,12 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
         folds = calibration_folds if isinstance(calibration_folds, Mapping) else _frame_folds(ds, ids)
         if folds is not None:
             report["calibration"] = heldout_bank_calibration(kitti_root, folds, split=split, seed=seed, progress=say,
-                                                             **train_kw)
+                                                             workers=workers, **train_kw)
             calib = np.array([report["calibration"]["a"], report["calibration"]["b"]])
     # loaded after the calibration, whose fold banks load their own frames
     images, examples = load_training_frames(ds, ids, progress=say)
-    bank = finish_bank(train_bank_on_frames(images, examples, seed=seed, progress=say, **train_kw), images, ds,
-                       progress=say)
+    bank = train_bank_on_frames(images, examples, seed=seed, workers=workers, progress=say, **train_kw)
+    bank = finish_bank(bank, images, ds, workers=workers, progress=say)
     bank.calibration = calib
     if calib is not None:
         bank.threshold = float(threshold)  # probability of a true car (IoU >= 0.5)
@@ -628,11 +735,12 @@ def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4) -> dict[s
 
 
 def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str = "training", seed: int = 0,
-                             progress=None, **bank_options) -> dict:
+                             workers: int = 1, progress=None, **bank_options) -> dict:
     """Platt calibration of a detector bank from held-out detections: for each fold, a
     bank trained on the other folds' frames detects on that fold's (unmirrored) frames;
     :func:`~wirescene.training.kitti_detector.fit_platt` on all of them, with the ground
-    prior's log ratio as offset.
+    prior's log ratio as offset. ``workers``: processes of the fold banks' trainings and
+    of the held-out detections (the result is the same).
 
     Returns ``{"a", "b", "n_detections", "n_positive", "n_folds", "source"}``.
     """
@@ -646,14 +754,13 @@ def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str
         train = [f for f, j in folds.items() if j != k]
         say(f"calibration: fold {k} held out ({len(held)} frames), bank trained on {len(train)}")
         bank, _ = train_detector_bank_kitti(None, kitti_root, frames=train, split=split, seed=seed,
-                                            calibration_folds=False, **bank_options)
+                                            calibration_folds=False, workers=workers, progress=say, **bank_options)
         images, _ = load_training_frames(dataset, held, flips=False)
-        for image in images:
-            d = detect_training_image(bank, image)
+        for image, d in zip(images, training_detections(bank, images, workers=workers, progress=say,
+                                                        name=f"fold {k} held-out detections")):
             scores.append(d.scores)
             offsets.append(bank.ground_log_ratio(d.boxes, image.horizon))
             labels.append(detection_labels(d.boxes, kitti_gt_boxes(dataset.labels(image.frame))))
-        del images  # a fold's frames and pyramids are not needed by the next
     s, y = np.concatenate(scores), np.concatenate(labels)
     if not y.any():
         raise InputError(f"no held-out detection of the fold banks matches a labelled car ({len(s)} detections): "

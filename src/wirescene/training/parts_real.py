@@ -161,7 +161,8 @@ def mirror_cars(image, boxes, uv, visible):
 def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mirror: bool = True,
                          scale_samples: int = 3, n_jitter: int = 2, jitter: float = 2.0, bg_per_car: int = 60,
                          bg_boxes: int = 12, bg_per_box: int = 15, min_box_h: float = 25.0, max_occluded: int = 1,
-                         min_dist: float = 8.0, box_jitter: float = 0.04, progress=None):
+                         min_dist: float = 8.0, box_jitter: float = 0.04, max_patches: int | None = None,
+                         progress=None):
     """Descriptors of real part and background patches of labelled KITTI frames.
 
     For every ``Car`` with occlusion level <= ``max_occluded`` and box height >=
@@ -179,6 +180,9 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
       25..150 px, aspect 2.5), ``bg_per_box`` points each outside every padded
       Car / Van / DontCare box.
 
+    ``max_patches``: keep at most that many, a uniform random sample of all
+    (:class:`~wirescene.training.patches.PatchCollector`; None: all).
+
     Returns
     -------
     wirescene.training.parts.PatchData -- ``group`` is the frame's index in ``frame_ids``.
@@ -187,7 +191,7 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
 
     ds = KittiDataset(root)
     frame_ids = list(frame_ids)
-    patches = PatchCollector(kinds)
+    patches = PatchCollector(kinds, max_patches=max_patches, seed=seed)
     add = patches.add
     t0 = time.time()
 

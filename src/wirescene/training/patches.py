@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wirescene.parts import features as feat
+from wirescene.training.scale import lowest_keys
 
 
 @dataclass
@@ -51,15 +52,24 @@ def _rng(seed, *keys):
 
 
 class PatchCollector:
-    """Accumulates described patches of one training source into a :class:`PatchData`."""
+    """Accumulates described patches of one training source into a :class:`PatchData`.
 
-    def __init__(self, kinds):
+    ``max_patches``: keep at most that many (None: all), a uniform random sample of every
+    patch added (bottom-k sampling: each patch draws a key from the stream ``seed``, and
+    the ``max_patches`` of lowest key are kept, in the order they came); below it nothing
+    is drawn or dropped. The collector holds at most 1.5 times ``max_patches`` at once.
+    """
+
+    def __init__(self, kinds, *, max_patches: int | None = None, seed: int = 0):
         self.kinds = tuple(kinds)
+        self.max_patches = max_patches
         self.X = {k: [] for k in self.kinds}
-        self.y, self.group, self.pos, self.ctx = [], [], [], []
+        self.y, self.group, self.pos, self.ctx, self.keys = [], [], [], [], []
+        self._rng = _rng(seed, 11)
+        self._n = 0
 
     def __len__(self):
-        return len(self.y)
+        return self._n
 
     def add(self, image, box, pts, y, scale, edges, group):
         """Describe points ``pts`` ``(N, 2)`` of ``image`` in ``box`` with label(s) ``y``."""
@@ -72,8 +82,25 @@ class PatchCollector:
         self.group.append(np.full(len(pts), group, dtype=np.int64))
         self.pos.append(pos)
         self.ctx.append(ctx)
+        self.keys.append(self._rng.random(len(pts)))
+        self._n += len(pts)
+        if self.max_patches is not None and self._n > 1.5 * self.max_patches:
+            self._shrink()
+
+    def _shrink(self) -> None:
+        """Keep the ``max_patches`` of lowest key, in order."""
+        keys = np.concatenate(self.keys)
+        keep = lowest_keys(keys, self.max_patches)
+        self.keys = [keys[keep]]
+        for k in self.kinds:
+            self.X[k] = [np.concatenate(self.X[k])[keep]]
+        self.y, self.group, self.pos = ([np.concatenate(v)[keep]] for v in (self.y, self.group, self.pos))
+        self.ctx = [None] if self.ctx[0] is None else [np.concatenate(self.ctx)[keep]]
+        self._n = len(keep)
 
     def data(self, names) -> PatchData:
+        if self.max_patches is not None and self._n > self.max_patches:
+            self._shrink()
         X = {k: np.concatenate(v).astype(np.float32) for k, v in self.X.items()}
         return PatchData(X=X, y=np.concatenate(self.y), group=np.concatenate(self.group), names=list(names),
                          pos=np.concatenate(self.pos), ctx=None if self.ctx[0] is None else np.concatenate(self.ctx))

@@ -52,6 +52,7 @@ from wirescene.core.resources import (
 )
 from wirescene.core.version import __version__
 from wirescene.training.kitti_detector import calibration_folds, heldout_bank_calibration
+from wirescene.training.scale import CACHE
 
 __all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "check_options", "calibration_folds",
            "heldout_bank_calibration", "train_all"]
@@ -84,9 +85,10 @@ def step_options() -> dict[str, dict[str, object]]:
     from wirescene.training.occlusion import calibrate_occluded_score
     from wirescene.training.parts import train_part_detector
 
-    bank = _parameters(train_bank_on_frames, ("images", "examples", "progress"))
+    # workers change how fast, not what is trained: a run argument, not a recipe option
+    bank = _parameters(train_bank_on_frames, ("images", "examples", "progress", "workers"))
     bank.update(_parameters(train_detector_bank_kitti, ("out_path", "kitti_root", "frames", "folds", "split", "progress",
-                                                         "calibration_folds")))
+                                                         "calibration_folds", "workers")))
     return {
         "parts": _parameters(train_part_detector, ("out_path", "kitti_root", "frames", "progress", "calibration_folds")),
         "detector": bank,
@@ -153,6 +155,7 @@ def train_all(
     options: Mapping[str, Mapping[str, object]] | None = None,
     n_folds: int = 4,
     resume: bool = False,
+    workers: int = 1,
     progress: Callable[[str], None] | None = None,
     iterate: Callable[[Iterable, str], Iterable] | None = None,
 ) -> dict:
@@ -174,6 +177,9 @@ def train_all(
         Folds of the held-out calibrations (fewer if there are fewer groups).
     resume : bool
         Keep the steps already done in ``out_dir`` with the same data, options and inputs.
+    workers : int
+        Processes of the detector step's per-image passes (0 or 1: serial); the
+        artefacts are the same, so a resumed run may use another number.
     progress : callable, optional
         Receives one line per event.
     iterate : callable, optional
@@ -270,15 +276,16 @@ def train_all(
         seed = bank_opts.pop("seed", 0)
         given = bank_opts.pop("calibration", None)
         if given is None:
-            calib = heldout_bank_calibration(kitti_root, folds, seed=seed, progress=say, **bank_opts)
+            calib = heldout_bank_calibration(kitti_root, folds, seed=seed, workers=workers, progress=say, **bank_opts)
         else:  # a Platt fit of the same recipe's fold banks made elsewhere: saves their trainings
             a, b = (float(v) for v in given)
             calib = {"a": a, "b": b, "source": "given"}
         record["calibration"] = calib
         bank, _ = train_detector_bank_kitti(path_of("detector"), kitti_root, frames=ids, seed=seed,
-                                            calibration=(calib["a"], calib["b"]), threshold=threshold, progress=say,
-                                            **bank_opts)
+                                            calibration=(calib["a"], calib["b"]), threshold=threshold,
+                                            workers=workers, progress=say, **bank_opts)
         record["detectors"] = len(bank)
+        CACHE.clear()  # the frames' images and pyramids are not needed by the steps after
 
     def run_occlusion(record):
         from wirescene.infer.occluded_score import save_occluded_score

@@ -1,0 +1,132 @@
+"""Training at scale: wall time and peak memory of the detector-bank training against the
+number of training frames, plain script.
+
+Protocol: ``wirescene synth`` writes ``max(--frames)`` synthetic KITTI-layout scenes into
+``WORK_DIR/kitti`` (kept for a later run); for each N of ``--frames`` the detector step
+(``wirescene train detector --kitti-root``) trains on the first N of them in a
+subprocess, whose wall time and peak resident memory (``os.wait4``: the largest of the
+process and its workers) are recorded. With ``--workers-check N`` the run at N frames
+is repeated with 2 workers: the speed-up gives the share of the time spent in the
+per-image passes that run in parallel (Amdahl: ``t2 = t1 * (1 - p / 2)``).
+
+Fitted: time = a + b N (least squares), peak MB = c + d N; projected: the 3,712-frame
+KITTI train split on 2 and 16 workers, assuming the parallel share ``p`` measured here
+speeds up linearly (``t * (1 - p + p / workers)``) and the rest stays serial.
+
+The recipe is a light one, so that the points fit in minutes (``RECIPE``: 1 partial
+configuration per viewpoint, 3 pyramid levels per octave, 1 mining round, a given Platt
+calibration instead of the held-out fold banks); the figures are for it. ``--cache-mb``
+and ``--max-negatives`` set the caches' bounds (small by default, so that the bounds bind
+within the frames measured here: above them memory must stay flat).
+
+Usage:
+  python benchmarks/bench_train_scale.py WORK_DIR [--frames 10,20,40,80] [--workers-check 20] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+RECIPE = ["--partial", "1", "--per-octave", "3", "--mining-rounds", "1", "--calibration", "9.1515,1.2966",
+          "--threshold", "0.1"]
+KITTI_TRAIN_FRAMES = 3712
+
+
+def run_child(args: list[str]) -> tuple[float, float, str]:
+    """``(seconds, peak MB, output)`` of ``python -m wirescene.cli.main ARGS``."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "wirescene.cli.main", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    out = proc.stdout.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    seconds = time.perf_counter() - t0
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"{' '.join(args[:3])} failed:\n{out[-3000:]}")
+    peak = usage.ru_maxrss / (1 << 20 if sys.platform == "darwin" else 1 << 10)  # bytes on macOS, KiB on Linux
+    return seconds, peak, out
+
+
+def make_frames(work: Path, n: int) -> Path:
+    """``work/kitti`` holding at least ``n`` synthetic scenes (written if fewer)."""
+    root = work / "kitti"
+    images = root / "training" / "image_2"
+    if not images.is_dir() or len(list(images.glob("*.png"))) < n:
+        run_child(["synth", str(root), "--scenes", str(n), "--overwrite"])
+    return root
+
+
+def train(root: Path, work: Path, n: int, *, workers: int, cache_mb: float, max_negatives: int) -> dict:
+    """One detector-step run on the first ``n`` frames."""
+    frames = ",".join(f"{i:06d}" for i in range(n))
+    seconds, peak, out = run_child(["train", "detector", "--kitti-root", str(root), "--frames", frames, *RECIPE,
+                                    "--pyramid-cache-mb", str(cache_mb), "--max-negatives", str(max_negatives),
+                                    "--workers", str(workers), "--out", str(work / f"bank_{n}_{workers}.npz")])
+    row = {"frames": n, "workers": workers, "seconds": round(seconds, 1), "peak_mb": round(peak)}
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def fit_line(x, y) -> tuple[float, float]:
+    """``(a, b)`` of the least-squares line ``y = a + b x``."""
+    import numpy as np
+
+    b, a = np.polyfit(np.asarray(x, float), np.asarray(y, float), 1)
+    return float(a), float(b)
+
+
+def summarise(rows: list[dict], check: list[dict]) -> dict:
+    """Fitted laws and the projection of the 3,712-frame split."""
+    serial = [r for r in rows if r["workers"] == 1]
+    n = [r["frames"] for r in serial]
+    a, b = fit_line(n, [r["seconds"] for r in serial])
+    c, d = fit_line(n, [r["peak_mb"] for r in serial])
+    out = {"time_s": {"a": round(a, 1), "b_per_frame": round(b, 2)},
+           "peak_mb": {"c": round(c), "d_per_frame": round(d, 2), "first": serial[0]["peak_mb"],
+                       "last": serial[-1]["peak_mb"], "ratio_last_first": round(serial[-1]["peak_mb"]
+                                                                                / serial[0]["peak_mb"], 2)}}
+    t1 = a + b * KITTI_TRAIN_FRAMES
+    out["projection_3712"] = {"serial_h": round(t1 / 3600, 1)}
+    if check:
+        one, two = check
+        p = min(max(2 * (1 - two["seconds"] / one["seconds"]), 0.0), 1.0)
+        out["parallel_share"] = round(p, 2)
+        for w in (2, 16):
+            out["projection_3712"][f"workers_{w}_h"] = round(t1 * (1 - p + p / w) / 3600, 1)
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("work_dir", type=Path, help="directory for the synthetic frames and the banks")
+    ap.add_argument("--frames", default="10,20,40,80", help="numbers of training frames, comma-separated")
+    ap.add_argument("--workers-check", type=int, default=20, help="frames of the 1- and 2-worker runs (0: none)")
+    ap.add_argument("--cache-mb", type=float, default=300.0, help="--pyramid-cache-mb of the runs")
+    ap.add_argument("--max-negatives", type=int, default=2000, help="--max-negatives of the runs")
+    ap.add_argument("--json", type=Path, default=None, help="write the rows and the fitted laws here")
+    args = ap.parse_args()
+    counts = sorted({int(v) for v in args.frames.split(",") if v.strip()})
+    args.work_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    root = make_frames(args.work_dir, max(counts + [args.workers_check]))
+    print(f"synthetic frames ready in {time.perf_counter() - t0:.0f} s", flush=True)
+    caps = dict(cache_mb=args.cache_mb, max_negatives=args.max_negatives)
+    rows = [train(root, args.work_dir, n, workers=1, **caps) for n in counts]
+    check = []
+    if args.workers_check:
+        one = next((r for r in rows if r["frames"] == args.workers_check), None)
+        one = one or train(root, args.work_dir, args.workers_check, workers=1, **caps)
+        check = [one, train(root, args.work_dir, args.workers_check, workers=2, **caps)]
+    result = {"recipe": RECIPE, **caps, "rows": rows, "workers_check": check, "fit": summarise(rows, check)}
+    print(json.dumps(result["fit"], indent=1))
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

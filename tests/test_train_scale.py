@@ -1,0 +1,165 @@
+"""Training at scale (:mod:`wirescene.training.scale`): bounded caches and negative pools,
+bounded real part patches, and per-image passes in worker processes that train the same bank."""
+
+import numpy as np
+import pytest
+
+from conftest import KITTI_ROOT
+from wirescene.training.scale import FrameCache, NegativePool, can_fork, map_images
+
+TINY_BANK = dict(n_partial=0, mining_rounds=1, neg_per_image=10, min_pos=20, min_height=40.0, max_scale=1.0,
+                 per_octave=2)
+
+
+def test_negative_pool_below_its_cap_is_the_plain_list_and_draws_nothing():
+    rng = np.random.default_rng(3)
+    state = rng.bit_generator.state
+    pool = NegativePool(10, rng)
+    items = [np.full(4, i, np.float32) for i in range(10)]
+    for x in items:
+        pool.append(x)
+    pool.shrink(np.ones(4), 0.0)
+    assert [int(x[0]) for x in pool.items] == list(range(10))
+    assert rng.bit_generator.state == state
+
+
+def test_negative_pool_reservoir_never_exceeds_its_cap_and_samples_uniformly():
+    counts = np.zeros(100)
+    for seed in range(400):
+        pool = NegativePool(10, np.random.default_rng(seed))
+        for i in range(100):
+            pool.add_random(np.array([i], np.float32))
+            assert len(pool) <= 10
+        counts[[int(x[0]) for x in pool.items]] += 1
+    # every window offered is held with probability 10 / 100 (400 draws: 40 +- 6 each)
+    assert counts.sum() == 4000
+    assert abs(counts[:50].mean() - 40) < 4 and abs(counts[50:].mean() - 40) < 4
+    assert counts.min() > 15 and counts.max() < 70
+
+
+def test_negative_pool_shrink_keeps_the_hardest_in_order():
+    rng = np.random.default_rng(0)
+    pool = NegativePool(5, rng)
+    X = rng.normal(size=(12, 3)).astype(np.float32)
+    for x in X:
+        pool.add_hard(x)
+    w = np.array([1.0, -2.0, 0.5], np.float32)
+    pool.shrink(w, 0.3, slack=1.5)  # 12 <= 7.5? no: shrinks
+    margin = X @ w + 0.3
+    hardest = np.sort(np.argsort(-margin)[:5])
+    assert len(pool) == 5
+    np.testing.assert_array_equal(np.stack(pool.items), X[hardest])
+    pool.add_hard(X[0])
+    pool.shrink(w, 0.3, slack=1.5)  # 6 <= 7.5: kept as is
+    assert len(pool) == 6
+
+
+def test_frame_cache_keeps_the_recently_used_within_its_budget():
+    cache = FrameCache(max_mb=0.0025)  # 2,500 bytes: two arrays of 1,000
+    computed = []
+
+    def make(key):
+        computed.append(key)
+        return np.zeros(1000, np.uint8)
+
+    for key in ("a", "b", "a", "c", "a", "b"):
+        cache.get(key, lambda key=key: make(key))
+        assert cache.bytes <= 2500
+    # c evicts b (a was used since), then b evicts c
+    assert computed == ["a", "b", "c", "b"] and cache.hits == 2 and len(cache) == 2
+    cache.put("big", np.zeros(3000, np.uint8))  # larger than the budget: not kept
+    assert len(cache) == 2
+    cache.resize(0.0)
+    assert len(cache) == 0 and cache.bytes == 0
+
+
+@pytest.mark.skipif(not can_fork(), reason="no fork start method")
+def test_map_images_in_workers_keeps_the_order():
+    lines = []
+    assert list(map_images(np.square, list(range(7)), workers=3, progress=lines.append)) == \
+        [i * i for i in range(7)]
+    assert list(map_images(np.square, [], workers=3)) == []
+
+
+def test_patch_collector_cap_keeps_a_uniform_sample_in_order():
+    from wirescene.training.patches import PatchCollector
+
+    def collect(cap):
+        patches = PatchCollector(("ghog",), max_patches=cap, seed=1)
+        rng = np.random.default_rng(0)
+        image = rng.uniform(0, 1, (120, 160, 3)).astype(np.float32)
+        for g in range(40):
+            pts = rng.uniform(30, 90, (25, 2))
+            patches.add(image, np.array([20.0, 20.0, 140.0, 100.0]), pts, g % 37, 1.0, None, g)
+        return patches.data(["frame"])
+
+    full, same, capped = collect(None), collect(1000), collect(300)
+    assert len(full) == len(same) == 1000
+    for a, b in ((full.X["ghog"], same.X["ghog"]), (full.y, same.y), (full.group, same.group)):
+        np.testing.assert_array_equal(a, b)
+    assert len(capped) == 300 and np.all(np.diff(capped.group) >= 0)  # in the order they came
+    rows = {row.tobytes(): i for i, row in enumerate(full.pos)}  # each point's own position in its box
+    kept = np.array([rows[row.tobytes()] for row in capped.pos])
+    assert len(set(kept.tolist())) == 300 and np.all(np.diff(kept) > 0)
+    np.testing.assert_array_equal(full.X["ghog"][kept], capped.X["ghog"])
+    np.testing.assert_array_equal(full.group[kept], capped.group)
+    # early and late patches alike are kept (150 of 500 each, +- ~10)
+    assert abs(int((kept < 500).sum()) - 150) < 35
+
+
+def _tiny_bank(**options):
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.kitti_detector import finish_bank, load_training_frames, train_bank_on_frames
+
+    ds = KittiDataset(KITTI_ROOT)
+    images, examples = load_training_frames(ds, ["000010", "001545"])
+    workers = options.get("workers", 1)
+    bank = train_bank_on_frames(images, examples, **TINY_BANK, **options)
+    return finish_bank(bank, images, ds, workers=workers)
+
+
+def _arrays(bank):
+    meta = {k: v for k, v in bank.meta.items() if k != "train_seconds"}
+    return [np.asarray(w) for w in bank.weights] + [bank.biases], meta
+
+
+@pytest.mark.skipif(not can_fork(), reason="no fork start method")
+def test_bank_is_the_same_in_workers_and_without_a_cache():
+    from wirescene.training.scale import CACHE
+
+    weights, meta = _arrays(_tiny_bank())
+    # nothing cached: every pass reads and describes its images again, in two processes
+    again, meta_again = _arrays(_tiny_bank(workers=2, pyramid_cache_mb=0))
+    assert len(CACHE) == 0
+    assert meta_again == meta and "max_negatives" not in meta
+    for a, b in zip(weights, again):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_capped_negatives_bound_every_pool():
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.kitti_detector import load_training_frames, train_bank_on_frames
+
+    images, examples = load_training_frames(KittiDataset(KITTI_ROOT), ["000010", "001545"])
+    bank = train_bank_on_frames(images, examples, **TINY_BANK, max_negatives=12)
+    assert bank.meta["max_negatives"] == 12 and max(bank.meta["n_negatives"]) == 12
+
+
+def test_row_sample_is_the_plain_rows_below_the_cap_and_a_uniform_ordered_sample_above():
+    from wirescene.training.scale import RowSample
+
+    rows = RowSample(100, seed=3)
+    for i in range(10):
+        rows.add(np.arange(i * 5, i * 5 + 5, dtype=float)[:, None], np.full(5, i))
+    X, T = rows.arrays()
+    assert X[:, 0].tolist() == list(range(50)) and T.tolist() == sorted(T.tolist())
+
+    capped = RowSample(50, seed=3)
+    for i in range(100):
+        capped.add(np.arange(i * 10, i * 10 + 10, dtype=float)[:, None], np.arange(i * 10, i * 10 + 10))
+        assert capped.n <= 75  # never more than 1.5 x the cap held
+    X, T = capped.arrays()
+    assert len(X) == 50 and capped.offered == 1000
+    assert np.all(np.diff(X[:, 0]) > 0)  # arrival order kept
+    assert np.all(X[:, 0] == T)  # the columns stay aligned row by row
+    assert X[:, 0].min() < 200 and X[:, 0].max() > 800  # spread over the whole stream
