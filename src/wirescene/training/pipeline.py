@@ -36,6 +36,7 @@ import math
 import resource
 import sys
 import time
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Iterable, Mapping
@@ -199,8 +200,6 @@ def train_all(
     """
     from wirescene.io.kitti import KittiDataset
 
-    say = progress or (lambda message: None)
-    wrap = iterate or (lambda items, name: items)
     out = Path(out_dir)
     if frames is not None and split_file is not None:
         raise ValueError("frames and split_file both choose the frames: give one")
@@ -208,6 +207,40 @@ def train_all(
     dataset = KittiDataset(kitti_root)
     if not dataset.has_labels:
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
+    ids = _training_frames(dataset, frames, split_file)
+    folds = calibration_folds(dataset, ids, n_folds=n_folds)
+    previous = _previous_steps(out, resume)
+    manifest = _new_manifest(dataset, ids, folds, split_file)
+    key_data = {"kitti_root": manifest["data"]["kitti_root"], "frames_sha256": manifest["data"]["frames_sha256"],
+                "n_folds": n_folds}
+    run = _Run(out, kitti_root, ids, folds, opts, workers, progress or (lambda message: None),
+               iterate or (lambda items, name: items))
+    out.mkdir(parents=True, exist_ok=True)
+    run.write(manifest)
+    for step in run.wrap(STEPS, "train all"):
+        if step == "score_calibration":
+            manifest["shipped"].append(_ARTEFACT[step])
+            manifest["steps"][step] = {
+                "done": True, "source": "shipped", "sha256": file_sha256(shipped_path(_ARTEFACT[step])),
+                "why": "an honest calibration needs evaluation records of fold models on every frame "
+                       "(eval --raw-scores per fold, then train scores): not trained by train all"}
+        else:
+            key = _normalised({"data": key_data, "options": opts[step], "wirescene": __version__,
+                               "inputs": {s: manifest["steps"][s]["sha256"] for s in _INPUTS[step]}})
+            manifest["steps"][step] = run.step(step, key, previous.get(step))
+            manifest["artefacts"].append(_ARTEFACT[step])
+        run.write(manifest)
+    manifest["complete"] = True
+    run.write(manifest)
+    return manifest
+
+
+#: Steps whose artefacts another step trains from (part of the resume key).
+_INPUTS = {"parts": (), "detector": (), "occlusion": ("parts",)}
+
+
+def _training_frames(dataset, frames, split_file) -> list[str]:
+    """The frames to train on: of ``split_file``, ``frames`` (checked) or all labelled ones."""
     known = dataset.frame_ids()
     if split_file is not None:
         from wirescene.io.splits import read_split_file
@@ -222,10 +255,13 @@ def train_all(
         ids = known
     if not ids:
         raise InputError("no labelled frame to train on", path=dataset.split_dir)
-    folds = calibration_folds(dataset, ids, n_folds=n_folds)
+    return ids
 
+
+def _previous_steps(out: Path, resume: bool) -> dict:
+    """The step records of an earlier run in ``out`` to resume from (empty: none); an
+    :class:`InputError` for a directory that holds models but may not be written over."""
     manifest_path = out / MANIFEST_FILE
-    previous: dict = {}
     if out.exists() and not out.is_dir():
         raise InputError("is a file, expected a models directory", path=out)
     held = [f for f in (MANIFEST_FILE, *ARTEFACTS.values()) if (out / f).exists()]
@@ -236,7 +272,13 @@ def train_all(
         raise InputError(f"holds {held[0]} but no {MANIFEST_FILE}: not a directory of `train all`, nothing to resume",
                          path=out)
     if resume and manifest_path.is_file():
-        previous = load_json(manifest_path, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("steps") or {}
+        return load_json(manifest_path, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("steps") or {}
+    return {}
+
+
+def _new_manifest(dataset, ids: list[str], folds: dict[str, int], split_file) -> dict:
+    """The manifest of a run before its steps: data, split file and folds."""
+    from wirescene.io.folds import frame_drives
 
     cars = sum(len(dataset.labels(f).of_type("Car")) for f in ids)
     data = {"kitti_root": str(Path(dataset.split_dir).resolve()), "frames": len(ids), "cars": cars,
@@ -244,102 +286,93 @@ def train_all(
     if split_file is not None:
         data["split_file"] = str(Path(split_file).resolve())
         data["split_file_sha256"] = file_sha256(split_file)
-    from wirescene.io.folds import frame_drives
-
-    fold_record = {"n_folds": len(set(folds.values())), "frames_with_known_drive": sum(f in frame_drives() for f in ids),
-                   "frames_per_fold": {str(k): sum(1 for j in folds.values() if j == k) for k in sorted(set(folds.values()))},
+    fold_ids = sorted(set(folds.values()))
+    fold_record = {"n_folds": len(fold_ids), "frames_with_known_drive": sum(f in frame_drives() for f in ids),
+                   "frames_per_fold": {str(k): sum(1 for j in folds.values() if j == k) for k in fold_ids},
                    "fold_of": folds}
-    manifest = {"wirescene": __version__, "complete": False, "data": data, "calibration_folds": fold_record,
-                "artefacts": [], "shipped": [], "steps": {}}
-    key_data = {"kitti_root": data["kitti_root"], "frames_sha256": data["frames_sha256"], "n_folds": n_folds}
+    return {"wirescene": __version__, "complete": False, "data": data, "calibration_folds": fold_record,
+            "artefacts": [], "shipped": [], "steps": {}}
 
-    def write_manifest():
-        save_json(manifest_path, manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION)
 
-    def path_of(step):
-        return out / ARTEFACTS[_ARTEFACT[step]]
+@dataclass
+class _Run:
+    """One ``train all`` run: where it writes, what it trains on, and its steps."""
 
-    def run_parts(record):
+    out: Path
+    kitti_root: object
+    ids: list
+    folds: dict
+    opts: dict
+    workers: int
+    say: Callable[[str], None]
+    wrap: Callable
+
+    def write(self, manifest: dict) -> None:
+        save_json(self.out / MANIFEST_FILE, manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION)
+
+    def path_of(self, step: str) -> Path:
+        return self.out / ARTEFACTS[_ARTEFACT[step]]
+
+    def step(self, step: str, key: dict, old: dict | None) -> dict:
+        """The record of ``step``: the earlier run's where its key and file match, else trained now."""
+        path = self.path_of(step)
+        if (old and old.get("done") and old.get("key") == key and path.is_file()
+                and file_sha256(path) == old.get("sha256")):
+            self.say(f"{step}: done in an earlier run, kept ({path.name})")
+            return old
+        if old:
+            self.say(f"{step}: the earlier run's record does not match (data, options, inputs or file): training again")
+        self.say(f"{step}: training -> {path}")
+        exact = _reset_peak_memory()
+        t0 = time.perf_counter()
+        record = {"done": False, "key": key, "artefact": path.name}
+        getattr(self, f"run_{step}")(record)
+        record.update(done=True, sha256=file_sha256(path), seconds=round(time.perf_counter() - t0, 1),
+                      peak_rss_mb=_peak_memory_mb(), peak_rss_of="step" if exact else "process so far",
+                      finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+        self.say(f"{step}: {record['seconds']:.0f} s, peak {record['peak_rss_mb']:.0f} MB")
+        return record
+
+    def run_parts(self, record: dict) -> None:
         from wirescene.training.parts import train_part_detector
 
-        _, report = train_part_detector(path_of("parts"), kitti_root=kitti_root, frames=ids, calibration_folds=folds,
-                                        progress=say, **opts["parts"])
+        _, report = train_part_detector(self.path_of("parts"), kitti_root=self.kitti_root, frames=self.ids,
+                                        calibration_folds=self.folds, progress=self.say, **self.opts["parts"])
         record["train_accuracy"] = float(report["train_acc"])
         if "calibration" in report:
             record["calibration"] = {k: float(v) for k, v in report["calibration"].items()}
 
-    def run_detector(record):
+    def run_detector(self, record: dict) -> None:
         from wirescene.training.kitti_detector import train_detector_bank_kitti
 
-        bank_opts = dict(opts["detector"])
+        bank_opts = dict(self.opts["detector"])
         threshold = bank_opts.pop("threshold", 0.5)
         seed = bank_opts.pop("seed", 0)
         given = bank_opts.pop("calibration", None)
         if given is None:
-            calib = heldout_bank_calibration(kitti_root, folds, seed=seed, workers=workers, progress=say, **bank_opts)
+            calib = heldout_bank_calibration(self.kitti_root, self.folds, seed=seed, workers=self.workers,
+                                             progress=self.say, **bank_opts)
         else:  # a Platt fit of the same recipe's fold banks made elsewhere: saves their trainings
             a, b = (float(v) for v in given)
             calib = {"a": a, "b": b, "source": "given"}
         record["calibration"] = calib
-        bank, _ = train_detector_bank_kitti(path_of("detector"), kitti_root, frames=ids, seed=seed,
+        bank, _ = train_detector_bank_kitti(self.path_of("detector"), self.kitti_root, frames=self.ids, seed=seed,
                                             calibration=(calib["a"], calib["b"]), threshold=threshold,
-                                            workers=workers, progress=say, **bank_opts)
+                                            workers=self.workers, progress=self.say, **bank_opts)
         record["detectors"] = len(bank)
         CACHE.clear()  # the frames' images and pyramids are not needed by the steps after
 
-    def run_occlusion(record):
+    def run_occlusion(self, record: dict) -> None:
         from wirescene.infer.occluded_score import save_occluded_score
         from wirescene.parts.detector import PartDetector
         from wirescene.training.occlusion import calibrate_occluded_score
 
-        detector = PartDetector.load(path_of("parts"))
-        result = calibrate_occluded_score(detector=detector, progress=lambda it: wrap(it, "occlusion scenes"),
-                                          **opts["occlusion"])
-        save_occluded_score(path_of("occlusion"), result)
+        detector = PartDetector.load(self.path_of("parts"))
+        result = calibrate_occluded_score(detector=detector, progress=lambda it: self.wrap(it, "occlusion scenes"),
+                                          **self.opts["occlusion"])
+        save_occluded_score(self.path_of("occlusion"), result)
         record["c"] = result["c"]
-        say(f"occlusion: c = {result['c']} ({result['n_cars']} cars)")
-
-    runners = {"parts": run_parts, "detector": run_detector, "occlusion": run_occlusion}
-    inputs_of = {"parts": (), "detector": (), "occlusion": ("parts",)}
-
-    out.mkdir(parents=True, exist_ok=True)
-    write_manifest()
-    for step in wrap(STEPS, "train all"):
-        if step == "score_calibration":
-            manifest["shipped"].append(_ARTEFACT[step])
-            manifest["steps"][step] = {
-                "done": True, "source": "shipped", "sha256": file_sha256(shipped_path(_ARTEFACT[step])),
-                "why": "an honest calibration needs evaluation records of fold models on every frame "
-                       "(eval --raw-scores per fold, then train scores): not trained by train all"}
-            write_manifest()
-            continue
-        key = {"data": key_data, "options": opts[step], "wirescene": __version__,
-               "inputs": {s: manifest["steps"][s]["sha256"] for s in inputs_of[step]}}
-        key = _normalised(key)
-        old = previous.get(step)
-        path = path_of(step)
-        if (old and old.get("done") and old.get("key") == key and path.is_file()
-                and file_sha256(path) == old.get("sha256")):
-            say(f"{step}: done in an earlier run, kept ({path.name})")
-            manifest["steps"][step] = old
-        else:
-            if old:
-                say(f"{step}: the earlier run's record does not match (data, options, inputs or file): training again")
-            say(f"{step}: training -> {path}")
-            exact = _reset_peak_memory()
-            t0 = time.perf_counter()
-            record = {"done": False, "key": key, "artefact": path.name}
-            runners[step](record)
-            record.update(done=True, sha256=file_sha256(path), seconds=round(time.perf_counter() - t0, 1),
-                          peak_rss_mb=_peak_memory_mb(), peak_rss_of="step" if exact else "process so far",
-                          finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
-            manifest["steps"][step] = record
-            say(f"{step}: {record['seconds']:.0f} s, peak {record['peak_rss_mb']:.0f} MB")
-        manifest["artefacts"].append(_ARTEFACT[step])
-        write_manifest()
-    manifest["complete"] = True
-    write_manifest()
-    return manifest
+        self.say(f"occlusion: c = {result['c']} ({result['n_cars']} cars)")
 
 
 def _normalised(value):
