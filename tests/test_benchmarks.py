@@ -115,3 +115,21 @@ def test_dev_holdout_keeps_the_tuning_frames_apart(monkeypatch):
     assert out["tuning frames"]["full"]["loc_1m"] == 100 and out["tuning frames"]["full"]["margin"] == 0
     assert out["new drives"]["coarse+gp"]["loc_1m"] == 0 and out["new drives"]["full"]["margin"] == 100
     assert out["new drives"]["full"]["n_gt"] == 1 and out["new drives"]["full"]["frames"] == 1
+
+
+def test_operating_point_counts_boxes_on_no_car_and_second_boxes_as_false(monkeypatch):
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_operating_point import false_cars
+
+    from wirescene.core.labels import Label
+    from wirescene.eval.metrics import FrameResult
+
+    car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    van = Label("Van", 0.0, 0, 0.0, [400, 100, 500, 160], [2.0, 1.8, 5.0], [5, 1.6, 20], 0.0)
+    boxes = np.array([[102, 100, 200, 160], [100, 102, 198, 160], [400, 100, 500, 160], [700, 100, 800, 160]], float)
+    n = len(boxes)
+    result = FrameResult("f", [car, van], boxes, np.zeros(n), np.array([0.9, 0.8, 0.7, 0.6]),
+                         np.zeros((n, 3)), np.ones((n, 3)), np.zeros(n), np.zeros(n))
+    assert false_cars(result) == 3  # the second box on the car, the van, the empty road
