@@ -249,13 +249,13 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
         record = manifest["steps"][step]
         assert record["done"] and record["seconds"] >= 0 and record["peak_rss_mb"] > 10
         assert record["sha256"] == hashlib.sha256((out / record["artefact"]).read_bytes()).hexdigest()
-    assert manifest["steps"]["detector"]["key"]["options"]["threshold"] == 0.1  # the shipped recipe's
+    assert manifest["steps"]["detector"]["key"]["options"]["threshold"] == 0.5  # the shipped recipe's
     assert manifest["steps"]["parts"]["key"]["options"]["n_trees"] == 3  # --set
     assert manifest["steps"]["detector"]["calibration"]["n_folds"] == 2
     parts = PartDetector.load(out / "parts_model.npz")
     assert parts.kind == "ghog_ms" and parts.position and parts.meta["real_frames"] == "000010,001545"
     bank = DetectorBank.load(out / "detector_bank.npz")
-    assert bank.calibration is not None and bank.threshold == 0.1
+    assert bank.calibration is not None and bank.threshold == 0.5
     assert np.isfinite(load_occluded_score(out / "occlusion.json"))
     assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")
     assert "shipped" in r.output and "models written to" in r.output

@@ -246,7 +246,7 @@ def detect(image, calib=None, *, models=None) -> Detections:
     >>> dets = wirescene.detect(frame / "image_2" / "000010.png", frame / "calib" / "000010.txt")
     >>> dets.boxes.shape[1], dets.scores.shape == dets.alpha.shape
     (4, True)
-    >>> bool((dets.scores > 0.1).all())  # above the shipped bank's threshold
+    >>> bool((dets.scores > 0.5).all())  # above the shipped bank's threshold
     True
     """
     from wirescene.fitting.pipeline import detector_bank

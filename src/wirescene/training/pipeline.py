@@ -68,7 +68,7 @@ _ARTEFACT = {"parts": "parts_model", "detector": "detector_bank", "score_calibra
 #: The shipped artefacts' recipes (README, "Trained artefacts"): each step's options.
 RECIPE: dict[str, dict] = {
     "parts": {"kind": "ghog_ms", "position": True, "smooth": 0.0625, "calibrate_real": True, "synth_scenes": 100},
-    "detector": {"threshold": 0.1},
+    "detector": {"threshold": 0.5},
     "occlusion": {"seed": 2000, "n_scenes": 30},
 }
 
