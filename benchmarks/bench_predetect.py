@@ -159,7 +159,7 @@ def main():
     ap.add_argument("--bank", default=None, help="score this fixed bank on all frames instead of cross-validating")
     ap.add_argument("--cv", action="store_true", help="4-fold cross-validation by drive")
     ap.add_argument("--models-dir", default=None, help="write the fold banks here (foldK.npz, calibrated)")
-    ap.add_argument("--threshold", type=float, default=0.1,
+    ap.add_argument("--threshold", type=float, default=0.5,
                     help="default detection threshold (confidence) stored in the saved fold banks, as the shipped bank's")
     ap.add_argument("--fold-models", default=None,
                     help="score saved fold banks DIR/fold{k}.npz (or a path pattern with {k}), each on its "
@@ -199,7 +199,7 @@ def main():
     ap.add_argument("--from-raw", default=None,
                     help="DIR of the four foldK_raw.npz of --cv --fold runs: detect, calibrate (and save with "
                          "--models-dir) and score them as --cv does")
-    ap.add_argument("--operating-points", type=float, nargs="*", default=[0.05, 0.2, 0.3, 0.5],
+    ap.add_argument("--operating-points", type=float, nargs="*", default=[0.05, 0.1, 0.2, 0.3],
                     help="further confidence thresholds at which to report the operating point")
     ap.add_argument("--min-iou", type=float, default=0.5, help="overlap at which the operating point counts a car found")
     args = ap.parse_args()
