@@ -122,7 +122,6 @@ def test_operating_point_counts_boxes_on_no_car_and_second_boxes_as_false(monkey
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_operating_point import false_cars
-
     from wirescene.core.labels import Label
     from wirescene.eval.metrics import FrameResult
 
