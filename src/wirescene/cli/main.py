@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import sys
 from importlib import resources
 from pathlib import Path
@@ -24,6 +23,7 @@ from wirescene.cli.options import (
     split_file_option,
     stage_options,
     stage_settings,
+    workers_count,
     workers_option,
 )
 from wirescene.core.errors import InputError, WiresceneError
@@ -73,7 +73,7 @@ def sample_root() -> Path:
 def _frame_workers(workers: int | None, device: str) -> int:
     """Processes fitting frames: ``workers`` (None: all cores), or one on a CUDA device,
     said on stderr when that reduces them (forked processes cannot share the CUDA state)."""
-    n = workers or os.cpu_count() or 1
+    n = workers_count(workers)
     if device.startswith("cuda") and n > 1:
         click.echo(f"wirescene: --device {device} fits frames in one process, not {n} (the GPU is the parallelism)",
                    err=True)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wirescene.parts import features as feat
-from wirescene.training.scale import lowest_keys
+from wirescene.training.scale import RowSample
 
 
 @dataclass
@@ -55,52 +55,35 @@ class PatchCollector:
     """Accumulates described patches of one training source into a :class:`PatchData`.
 
     ``max_patches``: keep at most that many (None: all), a uniform random sample of every
-    patch added (bottom-k sampling: each patch draws a key from the stream ``seed``, and
-    the ``max_patches`` of lowest key are kept, in the order they came); below it nothing
-    is drawn or dropped. The collector holds at most 1.5 times ``max_patches`` at once.
+    patch added (:class:`~wirescene.training.scale.RowSample`: each patch draws a key from
+    the stream ``seed``, and the ``max_patches`` of lowest key are kept, in the order they
+    came); below it nothing is dropped. The collector holds at most 1.5 times
+    ``max_patches`` at once.
     """
 
     def __init__(self, kinds, *, max_patches: int | None = None, seed: int = 0):
         self.kinds = tuple(kinds)
-        self.max_patches = max_patches
-        self.X = {k: [] for k in self.kinds}
-        self.y, self.group, self.pos, self.ctx, self.keys = [], [], [], [], []
-        self._rng = _rng(seed, 11)
-        self._n = 0
+        # columns: one descriptor array per kind, then y, group, pos and (ghog_ms kinds) ctx
+        self._rows = RowSample(max_patches, rng=_rng(seed, 11))
 
     def __len__(self):
-        return self._n
+        return self._rows.n
 
     def add(self, image, box, pts, y, scale, edges, group):
         """Describe points ``pts`` ``(N, 2)`` of ``image`` in ``box`` with label(s) ``y``."""
         if len(pts) == 0:
             return
         X, ctx, pos = describe_in_box(image, box, pts, self.kinds, scale=scale, edges=edges)
-        for k in self.kinds:
-            self.X[k].append(X[k])
-        self.y.append(np.broadcast_to(np.asarray(y, dtype=np.int64), (len(pts),)).copy())
-        self.group.append(np.full(len(pts), group, dtype=np.int64))
-        self.pos.append(pos)
-        self.ctx.append(ctx)
-        self.keys.append(self._rng.random(len(pts)))
-        self._n += len(pts)
-        if self.max_patches is not None and self._n > 1.5 * self.max_patches:
-            self._shrink()
-
-    def _shrink(self) -> None:
-        """Keep the ``max_patches`` of lowest key, in order."""
-        keys = np.concatenate(self.keys)
-        keep = lowest_keys(keys, self.max_patches)
-        self.keys = [keys[keep]]
-        for k in self.kinds:
-            self.X[k] = [np.concatenate(self.X[k])[keep]]
-        self.y, self.group, self.pos = ([np.concatenate(v)[keep]] for v in (self.y, self.group, self.pos))
-        self.ctx = [None] if self.ctx[0] is None else [np.concatenate(self.ctx)[keep]]
-        self._n = len(keep)
+        labels = np.broadcast_to(np.asarray(y, dtype=np.int64), (len(pts),)).copy()
+        self._rows.add(*(X[k] for k in self.kinds), labels, np.full(len(pts), group, dtype=np.int64), pos,
+                       *(() if ctx is None else (ctx,)))
 
     def data(self, names) -> PatchData:
-        if self.max_patches is not None and self._n > self.max_patches:
-            self._shrink()
-        X = {k: np.concatenate(v).astype(np.float32) for k, v in self.X.items()}
-        return PatchData(X=X, y=np.concatenate(self.y), group=np.concatenate(self.group), names=list(names),
-                         pos=np.concatenate(self.pos), ctx=None if self.ctx[0] is None else np.concatenate(self.ctx))
+        if not len(self):
+            raise ValueError("need at least one patch")
+        cols = self._rows.arrays()
+        n = len(self.kinds)
+        X = {k: c.astype(np.float32) for k, c in zip(self.kinds, cols[:n])}
+        y, group, pos = cols[n:n + 3]
+        ctx = cols[n + 3] if len(cols) > n + 3 else None
+        return PatchData(X=X, y=y, group=group, names=list(names), pos=pos, ctx=ctx)

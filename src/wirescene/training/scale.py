@@ -150,16 +150,16 @@ def lowest_keys(keys: np.ndarray, k: int) -> np.ndarray:
 class RowSample:
     """At most ``max_rows`` rows of parallel arrays (None: all), a uniform sample of every
     row added, in the order they came (:func:`lowest_keys`; each row draws a key from its
-    own stream ``seed``). Below the cap nothing is dropped; it holds at most 1.5 times the
-    cap at once."""
+    own stream: ``rng``, else one of ``seed``). Below the cap nothing is dropped; it holds
+    at most 1.5 times the cap at once."""
 
-    def __init__(self, max_rows: int | None, *, seed: int = 0):
+    def __init__(self, max_rows: int | None, *, seed: int = 0, rng: np.random.Generator | None = None):
         self.max_rows = max_rows
         self.parts: list[tuple[np.ndarray, ...]] = []
         self.keys: list[np.ndarray] = []
         self.n = 0
         self.offered = 0
-        self._rng = np.random.default_rng([seed, 7])
+        self._rng = np.random.default_rng([seed, 7]) if rng is None else rng
 
     def add(self, *arrays: np.ndarray) -> None:
         """Add rows (every array with the same number of rows)."""
