@@ -97,3 +97,45 @@ def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=
                 results[(name, v)].append(frame_result(fid, gt, detections, est, vertex_gt, camera))
         log(f"{fid} done ({time.perf_counter() - t0:.0f} s)")
     return results, seconds, len(frame_ids)
+
+
+def prediction_dirs(run):
+    """The predictions directories of a run: the run itself if it holds frame records,
+    else its ``fold*`` subdirectories that do (as ``bench_real_folds.py`` writes them)."""
+    from pathlib import Path
+
+    from wirescene.core.errors import InputError
+    from wirescene.eval.records import RECORDS_DIR
+
+    run = Path(run)
+    if (run / RECORDS_DIR).is_dir():
+        return [run]
+    folds = sorted(p for p in run.glob("fold*") if (p / RECORDS_DIR).is_dir())
+    if not folds:
+        raise InputError(f"no frame records: expected {RECORDS_DIR}/ or fold*/{RECORDS_DIR}/", path=run)
+    return folds
+
+
+def read_run(run) -> tuple[dict, str]:
+    """``({variant: [FrameResult, ...]}, detections)`` of a run's folds, pooled; the
+    detections spec as recorded (``gt``, ``bank`` or a directory)."""
+    import json
+
+    from wirescene.core.errors import InputError
+    from wirescene.eval.records import RECORDS_DIR
+    from wirescene.training.scores import read_run_records
+
+    records: dict[str, list] = {}
+    specs, seen = set(), set()
+    for folder in prediction_dirs(run):
+        for variant, results in read_run_records(folder).items():
+            records.setdefault(variant, []).extend(results)
+        frames = sorted(p.stem for p in (folder / RECORDS_DIR).glob("*.json"))
+        # Pooling folds must not count a frame twice (e.g. a fold fitted into two dirs).
+        twice = seen.intersection(frames)
+        if twice:
+            raise InputError(f"frame {sorted(twice)[0]} recorded in more than one fold directory", path=folder)
+        seen.update(frames)
+        first = json.loads((folder / RECORDS_DIR / f"{frames[0]}.json").read_text())
+        specs.add(str(first.get("config", {}).get("detections", {}).get("spec", "?")))
+    return records, ", ".join(sorted(specs))

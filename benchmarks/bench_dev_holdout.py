@@ -17,6 +17,7 @@ import argparse
 import json
 from pathlib import Path
 
+from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.eval.metrics import evaluate
 from wirescene.io.splits import read_split_file
 
@@ -50,8 +51,6 @@ def main() -> None:
     ap.add_argument("--reference", default="coarse+gp")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
-    from bench_error_budget import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
-
     tuning = set(read_split_file(args.tuning_frames))
     out = {}
     for run in args.runs:

@@ -44,13 +44,12 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.core.errors import InputError
 from wirescene.core.viewpoints import wrap_angle
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.eval.metrics import FrameResult, evaluate
-from wirescene.eval.records import RECORDS_DIR
 from wirescene.io.kitti import CAR_TYPES, KittiDataset
-from wirescene.training.scores import read_run_records
 
 #: KITTI's camera height above the road (the recording car's mounting, metres).
 KITTI_CAMERA_HEIGHT = 1.65
@@ -244,37 +243,6 @@ def decompose(fitted: Boxes, labels: Boxes, camera_centre) -> dict[str, dict[str
 
 
 # --------------------------------------------------------------------------- reading runs
-
-
-def prediction_dirs(run: Path) -> list[Path]:
-    """The predictions directories of a run: the run itself if it holds frame records,
-    else its ``fold*`` subdirectories that do (as ``bench_real_folds.py`` writes them)."""
-    run = Path(run)
-    if (run / RECORDS_DIR).is_dir():
-        return [run]
-    folds = sorted(p for p in run.glob("fold*") if (p / RECORDS_DIR).is_dir())
-    if not folds:
-        raise InputError(f"no frame records: expected {RECORDS_DIR}/ or fold*/{RECORDS_DIR}/", path=run)
-    return folds
-
-
-def read_run(run: Path) -> tuple[dict[str, list[FrameResult]], str]:
-    """``({variant: [FrameResult, ...]}, detections)`` of a run's folds, pooled; the
-    detections spec as recorded (``gt``, ``bank`` or a directory)."""
-    records: dict[str, list[FrameResult]] = {}
-    specs, seen = set(), set()
-    for folder in prediction_dirs(run):
-        for variant, results in read_run_records(folder).items():
-            records.setdefault(variant, []).extend(results)
-        frames = sorted(p.stem for p in (folder / RECORDS_DIR).glob("*.json"))
-        # Pooling folds must not count a frame twice (e.g. a fold fitted into two dirs).
-        twice = seen.intersection(frames)
-        if twice:
-            raise InputError(f"frame {sorted(twice)[0]} recorded in more than one fold directory", path=folder)
-        seen.update(frames)
-        first = json.loads((folder / RECORDS_DIR / f"{frames[0]}.json").read_text())
-        specs.add(str(first.get("config", {}).get("detections", {}).get("spec", "?")))
-    return records, ", ".join(sorted(specs))
 
 
 def true_positive_cars(results: Sequence[FrameResult], cameras: dict) -> dict[str, np.ndarray]:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.eval.metrics import evaluate
 from wirescene.io.folds import FOLD_GROUPS, fold_of
 
@@ -47,8 +48,6 @@ def main() -> None:
     ap.add_argument("runs", nargs="+", help="NAME=RUN_DIR (bench_real_folds.py --out, --detections bank)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
-    from bench_error_budget import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
-
     out = {}
     for item in args.runs:
         name, _, run = item.partition("=")
