@@ -16,7 +16,7 @@ import dataclasses
 import json
 from typing import Any, Mapping
 
-__all__ = ["option", "exposed_fields", "parse_value", "parse_assignment", "replace_fields"]
+__all__ = ["option", "exposed_fields", "field_default", "parse_value", "parse_assignment", "replace_fields"]
 
 
 def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, minimum: float = 0,
