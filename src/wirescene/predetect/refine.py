@@ -61,15 +61,29 @@ def apply_box_refinement(refinement: dict, gray: np.ndarray, boxes, geometry) ->
     return b + t * np.column_stack([w, h, w, h])
 
 
-def fit_ridge(X, T, reg: float) -> dict:
+def fit_ridge(X, T, reg: float, *, chunk: int = 2048) -> dict:
     """The refinement ``dict`` of a ridge regression ``T (N, 4) ~ X (N, F)`` on
-    standardised features (constant features keep scale 1), the constant unpenalised."""
-    X, T = np.asarray(X, float), np.asarray(T, float)
-    mean, sd = X.mean(0), X.std(0)
+    standardised features (constant features keep scale 1), the constant unpenalised.
+    The normal equations are accumulated ``chunk`` rows at a time in float64, so memory
+    is that of ``X`` itself plus ``F x F`` floats, whatever ``N``."""
+    X, T = np.asarray(X), np.asarray(T, float)
+    n, F = X.shape
+    total = np.zeros(F)
+    for i in range(0, n, chunk):
+        total += np.asarray(X[i:i + chunk], float).sum(0)
+    mean = total / n
+    squares = np.zeros(F)
+    for i in range(0, n, chunk):
+        squares += ((np.asarray(X[i:i + chunk], float) - mean) ** 2).sum(0)
+    sd = np.sqrt(squares / n)
     flat = sd < 1e-9
     mean[flat], sd[flat] = 0.0, 1.0
-    Z = np.column_stack([(X - mean) / sd, np.ones(len(X))])
-    penalty = np.full(Z.shape[1], float(reg))
+    ZZ, ZT = np.zeros((F + 1, F + 1)), np.zeros((F + 1, T.shape[1]))
+    for i in range(0, n, chunk):
+        Z = np.column_stack([(np.asarray(X[i:i + chunk], float) - mean) / sd, np.ones(len(X[i:i + chunk]))])
+        ZZ += Z.T @ Z
+        ZT += Z.T @ T[i:i + chunk]
+    penalty = np.full(F + 1, float(reg))
     penalty[-1] = 0.0
-    weights = np.linalg.solve(Z.T @ Z + np.diag(penalty), Z.T @ T)
+    weights = np.linalg.solve(ZZ + np.diag(penalty), ZT)
     return {"mean": mean.astype(np.float32), "scale": sd.astype(np.float32), "weights": weights.astype(np.float32)}

@@ -540,29 +540,25 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     on the held-out folds (0.08-0.16 x 3e4-1e5: all gained 2.6-7.4 points of moderate AP).
     ``max_rows``: at most that many rows, a uniform sample (:class:`~wirescene.training.scale.RowSample`;
     the 72 shared frames give 11,572, below the default, so memory stops growing at about
-    16k x 12 kB = 0.2 GB). ``workers``, ``progress``: of the detection pass (:func:`training_detections`)."""
+    16k x 12 kB = 0.2 GB, and the ridge fit adds only its normal equations). ``workers``,
+    ``progress``: of the per-image pass (the bank's detections and every row's features)."""
     from dataclasses import replace
 
-    from wirescene.predetect.bank import regression_features
-    from wirescene.predetect.refine import fit_ridge, refinement_features
+    from wirescene.predetect.refine import fit_ridge
 
     rng = np.random.default_rng(seed)
     plain = replace(bank, refinement=None)
     rows = RowSample(max_rows, seed=seed)
-
-    def add(gray, moved, target, bins):
-        rows.add(refinement_features(gray, moved, regression_features(moved, bins, gray.shape[::-1])).astype(np.float32),
-                 _side_offsets(moved, target))
-
-    found = training_detections(plain, images, workers=workers, progress=progress, name="box refinement")
-    for im, det in zip(images, found):
-        gray = im.gray.astype(np.float32) / 255.0
-        W = gray.shape[1]
+    # the jittered copies are drawn here in image order (the random stream of a serial pass);
+    # the detections and every row's features are computed per image, in the workers
+    tasks = []
+    for im in images:
         cars = [o for o in dataset.labels(im.frame).objects if o.type == "Car"]
         boxes = np.array([o.box for o in cars], float).reshape(-1, 4)
         alpha = np.array([o.alpha for o in cars], float)
         if im.flipped:
-            boxes, alpha = mirrored_boxes(boxes, W), np.pi - alpha
+            boxes, alpha = mirrored_boxes(boxes, im.size[0]), np.pi - alpha
+        jittered = []
         for g, a in zip(boxes, alpha):
             size = np.array([g[2] - g[0], g[3] - g[1]] * 2)
             if size[1] < min_height:
@@ -570,12 +566,12 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
             moved = g - np.clip(rng.normal(0.0, sigma, (jitter, 4)), -0.4, 0.4) * size
             ok = np.all(moved[:, 2:] - moved[:, :2] > 8, axis=1)
             if ok.any():
-                add(gray, moved[ok], g, np.full(int(ok.sum()), viewpoint_bin(a)))
-        d = det.boxes[:per_image]
-        if len(d) and len(boxes):
-            keep, targets = _matched(d, boxes, min_iou)
-            if keep.any():
-                add(gray, d[keep], targets, viewpoint_bin(det.alpha[:per_image][keep]))
+                jittered.append((moved[ok], g, np.full(int(ok.sum()), viewpoint_bin(a))))
+        tasks.append((im, boxes, jittered))
+    rows_of = partial(_refinement_rows, plain, per_image=per_image, min_iou=min_iou)
+    for found in map_images(rows_of, tasks, workers=workers, progress=progress, name="box refinement"):
+        for X, T in found:
+            rows.add(X, T)
     if not rows.n:
         raise ValueError("no training cars for the box refinement")
     X, T = rows.arrays()
@@ -583,6 +579,29 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     out["n"] = int(len(X))
     if rows.offered > len(X):
         out["sampled_from"] = int(rows.offered)  # recorded where the cap shaped the refinement
+    return out
+
+
+def _refinement_rows(bank: DetectorBank, task, *, per_image: int, min_iou: float) -> list:
+    """``[(features (k, F) float32, side offsets (k, 4))]`` of one image of
+    :func:`fit_box_refinement`: its jittered cars in order, then its matched detections."""
+    from wirescene.predetect.bank import regression_features
+    from wirescene.predetect.refine import refinement_features
+
+    image, boxes, jittered = task
+    gray = image.gray.astype(np.float32) / 255.0
+
+    def rows(moved, target, bins):
+        X = refinement_features(gray, moved, regression_features(moved, bins, gray.shape[::-1])).astype(np.float32)
+        return X, _side_offsets(moved, target)
+
+    out = [rows(*j) for j in jittered]
+    det = detect_training_image(bank, image)
+    d = det.boxes[:per_image]
+    if len(d) and len(boxes):
+        keep, targets = _matched(d, boxes, min_iou)
+        if keep.any():
+            out.append(rows(d[keep], targets, viewpoint_bin(det.alpha[:per_image][keep])))
     return out
 
 
