@@ -136,32 +136,6 @@ def _random_bank(seed=0):
     return DetectorBank(configs, weights, np.array([-1.0, 0.5], np.float32), 0.25, {"seed": seed})
 
 
-def test_level_shapes_and_random_windows_need_no_features():
-    from wirescene.predetect.hog import feature_pyramid, level_shapes, pyramid_scales
-    from wirescene.training.detector import pyramid_shapes, random_windows, sample_random_negatives
-
-    rng = np.random.default_rng(3)
-    for W, H in ((1242, 375), (1224, 370), (333, 121)):
-        scales = pyramid_scales(W, H, max_scale=2.0, per_octave=3)
-        img = rng.random((H, W)).astype(np.float32)
-        pyr = feature_pyramid(img, scales)
-        assert level_shapes(W, H, scales) == pyramid_shapes(pyr)
-    configs = [Configuration(0, tuple(range(36)), (5, 8), np.zeros(4), np.ones(2), 1.0),
-               Configuration(3, (1, 2), (6, 6), np.zeros(4), np.array([0.5, 0.6]), 0.3)]
-    blocked = np.array([[100.0, 100.0, 200.0, 180.0]])
-    windows = random_windows(level_shapes(W, H, scales), configs, blocked, H=H, min_height=20, per_image=7,
-                             rng=np.random.default_rng(5))
-    assert 0 < len(windows) <= 14 and {t for t, *_ in windows} == {0, 1}
-    # the same stream as drawing them from the features, and the same windows
-    neg = [[], []]
-    sample_random_negatives(neg, pyr, configs, blocked, H=H, min_height=20, per_image=7, rng=np.random.default_rng(5))
-    for t, li, r, q in windows:
-        th, tw = configs[t].template
-        x = pyr[li][1][r:r + th, q:q + tw].flatten()
-        assert any(np.array_equal(x, y) for y in neg[t])
-    assert [len(n) for n in neg] == [sum(w[0] == t for w in windows) for t in (0, 1)]
-
-
 def test_bank_npz_round_trip(tmp_path):
     bank = _random_bank()
     path = bank.save(tmp_path / "bank.npz")

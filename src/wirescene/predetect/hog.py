@@ -91,16 +91,6 @@ def level_size(W: int, H: int, scale: float) -> tuple[int, int]:
     return max(int(round(W * scale)), 1), max(int(round(H * scale)), 1)
 
 
-def level_shapes(width: int, height: int, scales) -> list[tuple[float, tuple[int, int]]]:
-    """``[(scale, (rows, cols))]`` of the feature pyramid of a ``width x height`` image at
-    ``scales`` (:func:`feature_pyramid`), without computing it."""
-    out = []
-    for s in scales:
-        w, h = level_size(width, height, s)
-        out.append((float(s), (h // CELL, w // CELL)))
-    return out
-
-
 def level_image(gray: np.ndarray, scale: float) -> np.ndarray:
     """The grey image resized to pyramid ``scale`` (itself at scale 1)."""
     H, W = gray.shape

@@ -44,14 +44,12 @@ def _overlap_frac(windows: np.ndarray, cars: np.ndarray) -> np.ndarray:
     return (iw * ih).max(1) / area
 
 
-def _valid_levels(cfg, shapes, H, min_height):
-    """Levels of ``shapes`` (``[(scale, (rows, cols))]`` of a feature pyramid) where
-    configuration ``cfg`` fits and its car is ``min_height`` to ``3 H`` pixels high."""
+def _valid_levels(cfg, pyr, H, min_height):
     th, tw = cfg.template
     out = []
-    for li, (s, (rows, cols)) in enumerate(shapes):
+    for li, (s, F) in enumerate(pyr):
         full_h = th * CELL / s / max(float(cfg.frac[1]), 1e-3)
-        if th <= rows and tw <= cols and min_height <= full_h <= 3.0 * H:
+        if th <= F.shape[0] and tw <= F.shape[1] and min_height <= full_h <= 3.0 * H:
             out.append(li)
     return out
 
@@ -68,56 +66,26 @@ def _fit_svm(pos, neg, C, seed):
 
 
 
-def random_windows(shapes, configs, blocked, *, H, min_height, per_image, rng) -> list[tuple[int, int, int, int]]:
-    """``[(configuration, level, row, column)]``: up to ``per_image`` random windows of a
-    feature pyramid of level ``shapes`` (``[(scale, (rows, cols))]``, :func:`pyramid_shapes`)
-    for each configuration, skipping windows that overlap a ``blocked`` box (cars) by more
-    than 30%. Needs the pyramid's shapes only, so the windows can be drawn where the
-    features are not (the random stream is the same as if they were)."""
-    out = []
+def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_image, rng) -> None:
+    """Append to ``neg[t]`` (a list or a :class:`~wirescene.training.scale.NegativePool`) up
+    to ``per_image`` random windows of pyramid ``pyr`` for each configuration ``t``, skipping windows that overlap a ``blocked`` box (cars) by more than 30%."""
     for t, c in enumerate(configs):
         th, tw = c.template
-        levels = _valid_levels(c, shapes, H, min_height)
+        levels = _valid_levels(c, pyr, H, min_height)
         if not levels:
             continue
         got = 0
         for _ in range(4 * per_image):
             li = levels[rng.integers(len(levels))]
-            s, (rows, cols) = shapes[li]
-            r, q = rng.integers(rows - th + 1), rng.integers(cols - tw + 1)
+            s, F = pyr[li]
+            r, q = rng.integers(F.shape[0] - th + 1), rng.integers(F.shape[1] - tw + 1)
             win = np.array([[q, r, q + tw, r + th]]) * CELL / s
             if _overlap_frac(win, blocked)[0] > 0.3:
                 continue
-            out.append((t, int(li), int(r), int(q)))
+            neg[t].append(F[r:r + th, q:q + tw].flatten())  # a copy: a view would hold the whole level
             got += 1
             if got >= per_image:
                 break
-    return out
-
-
-def pyramid_shapes(pyr) -> list[tuple[float, tuple[int, int]]]:
-    """``[(scale, (rows, cols))]`` of a feature pyramid ``[(scale, features)]``."""
-    return [(s, F.shape[:2]) for s, F in pyr]
-
-
-def window_features(pyr, configs, windows) -> list[tuple[int, np.ndarray]]:
-    """``[(configuration, flat features)]`` of ``windows`` (:func:`random_windows`) in ``pyr``."""
-    out = []
-    for t, li, r, q in windows:
-        th, tw = configs[t].template
-        out.append((t, pyr[li][1][r:r + th, q:q + tw].flatten()))  # a copy: a view would hold the whole level
-    return out
-
-
-def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_image, rng) -> None:
-    """Append to ``neg[t]`` (a list or a :class:`~wirescene.training.scale.NegativePool`) up
-    to ``per_image`` random windows of pyramid ``pyr`` for each configuration ``t``
-    (:func:`random_windows`)."""
-    windows = random_windows(pyramid_shapes(pyr), configs, blocked, H=H, min_height=min_height, per_image=per_image,
-                             rng=rng)
-    for t, x in window_features(pyr, configs, windows):
-        neg[t].append(x)
-
 
 def fit_svms(configs, pos, neg, *, C: float, seed: int):
     """One linear SVM per configuration on its positive and negative descriptors (lists

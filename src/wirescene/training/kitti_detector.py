@@ -50,7 +50,7 @@ Memory does not grow with the number of training frames beyond fixed bounds
 pass needs them), grey images and pyramids live in a cache of ``pyramid_cache_mb``, each
 configuration's negatives are capped at ``max_negatives``, positives at ``max_pos``. What
 still grows is small: the car examples (~1 kB each) and, with ``cut_paste``, the
-composites' pixels. The passes over the images (random negatives, mining, detections) run in ``workers``
+composites' pixels. The passes over the images (mining, detections) run in ``workers``
 processes.
 """
 
@@ -76,9 +76,9 @@ from wirescene.predetect.configurations import (
     select_configurations,
 )
 from wirescene.predetect.geometry import bottom_ratio, fit_ground_prior, horizon_row
-from wirescene.predetect.hog import feature_pyramid, level_shapes, pyramid_scales, to_gray
+from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.viewpoint_prior import fit_viewpoint_prior, lateral_position
-from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, random_windows, window_features
+from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, sample_random_negatives
 from wirescene.training.scale import (
     CACHE,
     DEFAULT_CACHE_MB,
@@ -282,7 +282,7 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     ``pyramid_cache_mb``: budget of the process's cache of grey images and HOG pyramids
     (:data:`~wirescene.training.scale.CACHE`, set here); the default holds the 72 shared
     frames' (nothing is computed twice), more frames are read and described again in
-    every pass. ``workers``: processes of the per-image passes (random negatives, hard-negative mining), 0 or
+    every pass. ``workers``: processes of the per-image passes (hard-negative mining), 0 or
     1 serial; the bank is the same.
     """
     say = progress or (lambda msg: None)
@@ -328,14 +328,9 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     scales = pyramid_scales(*images[0].size, max_scale=max_scale, per_octave=per_octave)
     reservoir = np.random.default_rng([seed, 1])  # only drawn from once a pool is full
     neg = [NegativePool(max_negatives, reservoir) for _ in configs]
-    # windows drawn here in image order (the random stream of a serial pass), features in the workers
-    windows = [random_windows(level_shapes(*im.size, scales), configs, im.block, H=H, min_height=min_height,
-                              per_image=neg_per_image, rng=rng) for im in images]
-    extract = partial(_window_features_of, scales=scales, configs=configs)
-    for found in map_images(extract, list(zip(images, windows)), workers=workers, progress=say,
-                            name="random negatives"):
-        for t, x in found:
-            neg[t].append(x)
+    for im in images:
+        sample_random_negatives(neg, im.hog_pyramid(scales), configs, im.block, H=H, min_height=min_height,
+                                per_image=neg_per_image, rng=rng)
     say(f"random negatives: {sum(len(n) for n in neg)} [{time.time() - t0:.0f}s]")
 
     weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed)
@@ -366,12 +361,6 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     if any(n.offered > len(n) or len(n) == max_negatives for n in neg):
         bank.meta["max_negatives"] = int(max_negatives)  # recorded where the cap shaped the bank
     return bank
-
-
-def _window_features_of(item, *, scales, configs):
-    """Features of the random windows of ``item = (TrainImage, windows)``."""
-    image, windows = item
-    return window_features(image.hog_pyramid(scales), configs, windows)
 
 
 def hard_negatives(bank: DetectorBank, image: TrainImage, *, scales, min_height: float, max_height: float,
