@@ -139,3 +139,21 @@ def read_run(run) -> tuple[dict, str]:
         first = json.loads((folder / RECORDS_DIR / f"{frames[0]}.json").read_text())
         specs.add(str(first.get("config", {}).get("detections", {}).get("spec", "?")))
     return records, ", ".join(sorted(specs))
+
+
+def frame_result_2d(labels, vgt, camera, uv):
+    """A frame record whose estimates are the true cars with vertices ``uv`` ``(N, 36, 2)``."""
+    import numpy as np
+
+    from wirescene.core.groundplane import object_pose
+    from wirescene.core.types import ObjectEstimate, SceneEstimate
+    from wirescene.eval.runner import frame_result
+    from wirescene.io.detections import detections_from_labels
+
+    dets = detections_from_labels(labels)
+    objects = [ObjectEstimate(detection_index=j, box2d=o.box, score=1.0, location=np.asarray(o.location, float),
+                              R=object_pose(0.0, 1.0, o.rotation_y)[1], dims=np.asarray(o.dims, float), cost=0.0)
+               for j, o in enumerate(labels.objects)]
+    res = frame_result("x", labels, dets, SceneEstimate(variant="truth", objects=objects), vgt, camera)
+    res.est_vertices_2d = uv
+    return res

@@ -45,8 +45,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import parse_config, run_configs  # noqa: E402
-from wirescene.core.groundplane import object_pose  # noqa: E402
+from _common import frame_result_2d, parse_config, run_configs  # noqa: E402
 from wirescene.core.shape import load_default  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import angle_difference  # noqa: E402
@@ -212,19 +211,6 @@ def ceiling(args):
             frame_results.append(frame_result_2d(labels, vgt, camera, np.array(uv)))
         m = evaluate(frame_results).metrics["all"]
         print(f"{K:3d} {m['parts_70']:9.1f} {np.median(ratio):32.2f}")
-
-
-def frame_result_2d(labels, vgt, camera, uv):
-    """A frame record whose estimates are the true cars with vertices ``uv`` ``(N, 36, 2)``."""
-    from wirescene.core.types import ObjectEstimate, SceneEstimate
-
-    dets = detections_from_labels(labels)
-    objects = [ObjectEstimate(detection_index=j, box2d=o.box, score=1.0, location=np.asarray(o.location, float),
-                              R=object_pose(0.0, 1.0, o.rotation_y)[1], dims=np.asarray(o.dims, float), cost=0.0)
-               for j, o in enumerate(labels.objects)]
-    res = frame_result("x", labels, dets, SceneEstimate(variant="truth", objects=objects), vgt, camera)
-    res.est_vertices_2d = uv
-    return res
 
 
 def true_plane(args):

@@ -7,7 +7,12 @@ Protocol: ``wirescene synth`` writes ``max(--frames)`` synthetic KITTI-layout sc
 subprocess, whose wall time and peak resident memory (``os.wait4``: the largest of the
 process and its workers) are recorded. With ``--workers-check N`` the run at N frames
 is repeated with 2 workers: the speed-up gives the share of the time spent in the
-per-image passes that run in parallel (Amdahl: ``t2 = t1 * (1 - p / 2)``).
+per-image passes that run in parallel (Amdahl: ``t2 = t1 * (1 - p / 2)``). The points of
+``--two-workers`` run with 2 workers only (a large point that would take too long on one);
+each is set against the serial law's projection for it, as a check of that projection.
+Every row also gives the sizes of the bounded pools of its bank (the largest configuration's
+negatives, the refinement's rows and the rows they were sampled from), so that one can see
+where each bound binds.
 
 Fitted: time = a + b N (least squares), peak MB = c + d N; projected: the 3,712-frame
 KITTI train split on 2 and 16 workers, assuming the parallel share ``p`` measured here
@@ -20,7 +25,8 @@ and ``--max-negatives`` set the caches' bounds (small by default, so that the bo
 within the frames measured here: above them memory must stay flat).
 
 Usage:
-  python benchmarks/bench_train_scale.py WORK_DIR [--frames 10,20,40,80] [--workers-check 20] [--json out.json]
+  python benchmarks/bench_train_scale.py WORK_DIR [--frames 10,20,40,80] [--workers-check 20]
+      [--two-workers 800] [--json out.json]
 """
 
 from __future__ import annotations
@@ -64,12 +70,24 @@ def make_frames(work: Path, n: int) -> Path:
 def train(root: Path, work: Path, n: int, *, workers: int, cache_mb: float, max_negatives: int) -> dict:
     """One detector-step run on the first ``n`` frames."""
     frames = ",".join(f"{i:06d}" for i in range(n))
+    out_path = work / f"bank_{n}_{workers}.npz"
     seconds, peak, out = run_child(["train", "detector", "--kitti-root", str(root), "--frames", frames, *RECIPE,
                                     "--pyramid-cache-mb", str(cache_mb), "--max-negatives", str(max_negatives),
-                                    "--workers", str(workers), "--out", str(work / f"bank_{n}_{workers}.npz")])
-    row = {"frames": n, "workers": workers, "seconds": round(seconds, 1), "peak_mb": round(peak)}
+                                    "--workers", str(workers), "--out", str(out_path)])
+    row = {"frames": n, "workers": workers, "seconds": round(seconds, 1), "peak_mb": round(peak),
+           **pool_sizes(out_path)}
     print(json.dumps(row), flush=True)
     return row
+
+
+def pool_sizes(path: Path) -> dict:
+    """Sizes of the bounded pools recorded in the meta of the bank at ``path``."""
+    from wirescene.predetect.bank import DetectorBank
+
+    meta = DetectorBank.load(path).meta
+    refinement = meta.get("box_refinement", {})
+    return {"negatives_max": max(meta.get("n_negatives", [0])), "refinement_rows": refinement.get("n", 0),
+            "refinement_offered": refinement.get("sampled_from", refinement.get("n", 0))}
 
 
 def fit_line(x, y) -> tuple[float, float]:
@@ -80,8 +98,9 @@ def fit_line(x, y) -> tuple[float, float]:
     return float(a), float(b)
 
 
-def summarise(rows: list[dict], check: list[dict]) -> dict:
-    """Fitted laws and the projection of the 3,712-frame split."""
+def summarise(rows: list[dict], check: list[dict], large: list[dict] = ()) -> dict:
+    """Fitted laws and the projection of the 3,712-frame split; ``large``: points run with
+    2 workers, set against the serial law's projection for them."""
     serial = [r for r in rows if r["workers"] == 1]
     n = [r["frames"] for r in serial]
     a, b = fit_line(n, [r["seconds"] for r in serial])
@@ -98,6 +117,10 @@ def summarise(rows: list[dict], check: list[dict]) -> dict:
         out["parallel_share"] = round(p, 2)
         for w in (2, 16):
             out["projection_3712"][f"workers_{w}_h"] = round(t1 * (1 - p + p / w) / 3600, 1)
+        out["two_workers"] = [{"frames": r["frames"], "seconds": r["seconds"],
+                               "projected_s": round((a + b * r["frames"]) * (1 - p / 2), 1), "peak_mb": r["peak_mb"],
+                               "peak_over_first_serial": round(r["peak_mb"] / serial[0]["peak_mb"], 2)}
+                              for r in large]
     return out
 
 
@@ -106,14 +129,18 @@ def main():
     ap.add_argument("work_dir", type=Path, help="directory for the synthetic frames and the banks")
     ap.add_argument("--frames", default="10,20,40,80", help="numbers of training frames, comma-separated")
     ap.add_argument("--workers-check", type=int, default=20, help="frames of the 1- and 2-worker runs (0: none)")
+    ap.add_argument("--two-workers", default="", help="numbers of frames run with 2 workers only, comma-separated")
     ap.add_argument("--cache-mb", type=float, default=300.0, help="--pyramid-cache-mb of the runs")
     ap.add_argument("--max-negatives", type=int, default=2000, help="--max-negatives of the runs")
     ap.add_argument("--json", type=Path, default=None, help="write the rows and the fitted laws here")
     args = ap.parse_args()
     counts = sorted({int(v) for v in args.frames.split(",") if v.strip()})
+    large = sorted({int(v) for v in args.two_workers.split(",") if v.strip()})
+    if large and not args.workers_check:
+        ap.error("--two-workers needs --workers-check (the parallel share of its projection)")
     args.work_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    root = make_frames(args.work_dir, max(counts + [args.workers_check]))
+    root = make_frames(args.work_dir, max(counts + large + [args.workers_check]))
     print(f"synthetic frames ready in {time.perf_counter() - t0:.0f} s", flush=True)
     caps = dict(cache_mb=args.cache_mb, max_negatives=args.max_negatives)
     rows = [train(root, args.work_dir, n, workers=1, **caps) for n in counts]
@@ -122,7 +149,9 @@ def main():
         one = next((r for r in rows if r["frames"] == args.workers_check), None)
         one = one or train(root, args.work_dir, args.workers_check, workers=1, **caps)
         check = [one, train(root, args.work_dir, args.workers_check, workers=2, **caps)]
-    result = {"recipe": RECIPE, **caps, "rows": rows, "workers_check": check, "fit": summarise(rows, check)}
+    two = [train(root, args.work_dir, n, workers=2, **caps) for n in large]
+    result = {"recipe": RECIPE, **caps, "rows": rows, "workers_check": check, "two_workers": two,
+              "fit": summarise(rows, check, two)}
     print(json.dumps(result["fit"], indent=1))
     if args.json:
         args.json.write_text(json.dumps(result, indent=1) + "\n")

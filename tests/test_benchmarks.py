@@ -132,3 +132,39 @@ def test_operating_point_counts_boxes_on_no_car_and_second_boxes_as_false(monkey
     result = FrameResult("f", [car, van], boxes, np.zeros(n), np.array([0.9, 0.8, 0.7, 0.6]),
                          np.zeros((n, 3)), np.ones((n, 3)), np.zeros(n), np.zeros(n))
     assert false_cars(result) == 3  # the second box on the car, the van, the empty road
+
+
+def test_unseen_shape_model_leaves_its_exemplar_out(monkeypatch):
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_unseen_shapes import approximated, leave_one_out
+    from wirescene.core.shape import load_default
+    from wirescene.synth.generate import default_camera
+
+    shipped = load_default()
+    name = shipped.exemplar_names[3]
+    unseen = leave_one_out(shipped, name)
+    assert name not in unseen.exemplar_names and len(unseen.exemplar_names) == len(shipped.exemplar_names) - 1
+    # one car of that exemplar, 12 m ahead, turned 30 degrees
+    c, s = np.cos(0.5), np.sin(0.5)
+    R, t = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]), np.array([1.0, 1.6, 12.0])
+    car = {"vertices_3d": (shipped.exemplars[3] @ R.T + t).tolist(), "R": R.tolist(), "location": t.tolist()}
+    uv_seen, err_seen = approximated(shipped, [car], default_camera(), 5)
+    uv_unseen, err_unseen = approximated(unseen, [car], default_camera(), 5)
+    assert uv_seen.shape == (1, 36, 2) and err_seen.shape == (1, 36)
+    assert np.median(err_unseen) > np.median(err_seen)
+
+
+def test_train_scale_checks_its_two_worker_points_against_the_serial_law(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_train_scale import summarise
+
+    rows = [{"frames": 50, "workers": 1, "seconds": 300.0, "peak_mb": 1000},
+            {"frames": 200, "workers": 1, "seconds": 1200.0, "peak_mb": 1500}]
+    check = [rows[0], {"frames": 50, "workers": 2, "seconds": 180.0, "peak_mb": 1000}]
+    out = summarise(rows, check, [{"frames": 800, "workers": 2, "seconds": 3000.0, "peak_mb": 1600}])
+    assert out["time_s"] == {"a": 0.0, "b_per_frame": 6.0} and out["parallel_share"] == 0.8
+    # 800 frames: 4,800 s serial, 60% of it with 2 workers at a parallel share of 0.8
+    assert out["two_workers"] == [{"frames": 800, "seconds": 3000.0, "projected_s": 2880.0, "peak_mb": 1600,
+                                   "peak_over_first_serial": 1.6}]

@@ -21,18 +21,7 @@ from wirescene.cli.options import (
     workers_option,
 )
 from wirescene.core.atomic import write_text
-from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES
-
-
-def _single_thread():
-    try:
-        from threadpoolctl import threadpool_limits
-
-        return threadpool_limits(1)
-    except ImportError:  # pragma: no cover
-        import contextlib
-
-        return contextlib.nullcontext()
+from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, single_thread
 
 
 @click.command("detector")
@@ -83,7 +72,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
-        with _single_thread():
+        with single_thread():
             _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
                                                n_partial=n_partial, calibration_folds=not no_calibration,
                                                calibration=[float(v) for v in calibration.split(",")] if calibration
@@ -97,7 +86,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
             raise click.UsageError("--frames / --split-file / --folds / --per-octave / --cut-paste need --kitti-root")
         from wirescene.training.detector import train_detector_bank
 
-        with _single_thread():
+        with single_thread():
             _, rep = train_detector_bank(out, seed=seed, n_scenes=n_scenes, n_partial=n_partial, C=C,
                                          mining_rounds=2 if mining_rounds is None else mining_rounds,
                                          mining_images=mining_images, n_val=n_val, progress=click.echo)
@@ -157,7 +146,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
     dets_all, gts, times = [], [], []
-    with _single_thread():
+    with single_thread():
         for fid in ids:
             img = ds.image(fid)
             t = time.perf_counter()

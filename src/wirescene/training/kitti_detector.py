@@ -87,6 +87,7 @@ from wirescene.training.scale import (
     NegativePool,
     RowSample,
     map_images,
+    single_threaded,
 )
 
 BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
@@ -680,6 +681,7 @@ def mirrored_boxes(boxes, width: int) -> np.ndarray:
     return b
 
 
+@single_threaded
 def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str = "training",
                               seed: int = 0, calibration_folds: bool | Mapping[str, int] = True, calibration=None,
                               threshold: float = 0.5, workers: int = 1,
@@ -753,6 +755,7 @@ def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4) -> dict[s
     return {f: folds[group[f]] for f in frames}
 
 
+@single_threaded
 def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str = "training", seed: int = 0,
                              workers: int = 1, progress=None, **bank_options) -> dict:
     """Platt calibration of a detector bank from held-out detections: for each fold, a

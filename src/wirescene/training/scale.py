@@ -15,6 +15,8 @@ number of training frames, and runs its per-image passes in parallel.
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import multiprocessing
 import time
 from collections import OrderedDict
@@ -197,6 +199,27 @@ def _run_task(index: int):
 def _worker_init() -> None:
     # what the parent held is shared (copy-on-write); a worker keeps nothing new
     CACHE.max_bytes = 0
+
+
+def single_thread():
+    """A context in which the BLAS / OpenMP libraries run on one thread: what they sum in
+    float32 (window scores, Gram matrices) then does not depend on the machine's cores, so a
+    training gives the same artefact everywhere (workers are processes, not threads)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - installed with scikit-learn
+        return contextlib.nullcontext()
+    return threadpool_limits(1)
+
+
+def single_threaded(fn: Callable) -> Callable:
+    """``fn`` run inside :func:`single_thread`."""
+    @functools.wraps(fn)
+    def run(*args, **kwargs):
+        with single_thread():
+            return fn(*args, **kwargs)
+
+    return run
 
 
 def can_fork() -> bool:
