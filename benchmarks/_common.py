@@ -157,3 +157,19 @@ def frame_result_2d(labels, vgt, camera, uv):
     res = frame_result("x", labels, dets, SceneEstimate(variant="truth", objects=objects), vgt, camera)
     res.est_vertices_2d = uv
     return res
+
+
+def approximated_wireframes(model, cars, camera, n_shape: int):
+    """``(uv (N, 36, 2), vertex errors (N, 36) in metres)``: the true wireframes of the
+    wireframes-JSON ``cars`` approximated by the first ``n_shape`` components of ``model``
+    (least squares in the object frame; 0: the mean shape), placed with their true poses."""
+    import numpy as np
+
+    uv, err = [], []
+    for car in cars:
+        X, R, t = np.array(car["vertices_3d"]), np.array(car["R"]), np.array(car["location"])
+        obj = (X - t) @ R
+        approx = model.reconstruct(obj, n_shape) if n_shape else model.mean
+        uv.append(camera.project(approx @ R.T + t))
+        err.append(np.linalg.norm(approx - obj, axis=1))
+    return np.array(uv), np.array(err)

@@ -45,7 +45,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import frame_result_2d, parse_config, run_configs  # noqa: E402
+from _common import approximated_wireframes, frame_result_2d, parse_config, run_configs  # noqa: E402
 from wirescene.core.shape import load_default  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import angle_difference  # noqa: E402
@@ -200,15 +200,11 @@ def ceiling(args):
     for K in (0, 3, 5, 8, 10, 12, 15, 20):
         frame_results, ratio = [], []
         for labels, vgt, raw, camera in frames:
-            uv = []
-            for j, car in enumerate(raw["cars"]):
-                X, R, t = np.array(car["vertices_3d"]), np.array(car["R"]), np.array(car["location"])
-                approx = model.reconstruct((X - t) @ R, K) if K else model.mean
-                uv.append(camera.project(approx @ R.T + t))
-                box = labels.objects[j].box
-                err = np.linalg.norm(uv[-1] - vgt.vertices_2d[j], axis=1)[~vgt.self_occluded[j]]
+            uv, _ = approximated_wireframes(model, raw["cars"], camera, K)
+            for j, box in enumerate(o.box for o in labels.objects):
+                err = np.linalg.norm(uv[j] - vgt.vertices_2d[j], axis=1)[~vgt.self_occluded[j]]
                 ratio.append(np.median(err) / (0.04 * max(box[2] - box[0], box[3] - box[1])))
-            frame_results.append(frame_result_2d(labels, vgt, camera, np.array(uv)))
+            frame_results.append(frame_result_2d(labels, vgt, camera, uv))
         m = evaluate(frame_results).metrics["all"]
         print(f"{K:3d} {m['parts_70']:9.1f} {np.median(ratio):32.2f}")
 

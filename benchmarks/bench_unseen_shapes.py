@@ -38,7 +38,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import frame_result_2d  # noqa: E402
+from _common import approximated_wireframes, frame_result_2d  # noqa: E402
 from wirescene.core.shape import fit_shape_model, load_default  # noqa: E402
 from wirescene.eval.metrics import evaluate  # noqa: E402
 from wirescene.eval.runner import frame_result  # noqa: E402
@@ -77,19 +77,6 @@ def leave_one_out(model, name):
                            rng=np.random.default_rng(AUGMENT_SEED))
 
 
-def approximated(model, cars, camera, n_shape: int):
-    """``(uv (N, 36, 2), vertex errors (N, 36) in metres)``: the true wireframes of the
-    wireframes-JSON ``cars`` by the first ``n_shape`` components, with their true poses."""
-    uv, err = [], []
-    for car in cars:
-        X, R, t = np.array(car["vertices_3d"]), np.array(car["R"]), np.array(car["location"])
-        obj = (X - t) @ R
-        approx = model.reconstruct(obj, n_shape)
-        uv.append(camera.project(approx @ R.T + t))
-        err.append(np.linalg.norm(approx - obj, axis=1))
-    return np.array(uv), np.array(err)
-
-
 def summary(frames) -> dict:
     m = evaluate(frames).metrics["all"]
     return {k: (round(float(m[k]), 2) if isinstance(m[k], float) else m[k])
@@ -115,13 +102,13 @@ def main():
         models = {"seen": shipped, "unseen": leave_one_out(shipped, name)}
         for fid in [f for f, n in frame_car.items() if n == name]:
             labels, camera = ds.labels(fid), ds.camera(fid)
-            vgt = read_wireframe_gt(wireframe_gt_path(ds.split_dir, fid))
+            path = wireframe_gt_path(ds.split_dir, fid)
+            vgt, wire = read_wireframe_gt(path), json.loads(path.read_text())  # wire: the cars' true wireframes
             dets = detections_from_labels(labels)
             ev = oracle_evidence(dets, np.array([o.box for o in labels.objects]).reshape(-1, 4), vgt)
             weights = plane_vote_weights(dets.scores)
             particles = select_particles(lift_table(camera, dets), shared_plane=spec.shared_plane,
                                          n_particles=LiftingOptions().n_particles, weights=weights)
-            wire = json.loads(wireframe_gt_path(ds.split_dir, fid).read_text())  # the cars' true wireframes
             for key, model in models.items():
                 refined = refine_particles(camera, particles, ev, model, options=options, boxes=dets.boxes,
                                            weights=weights, alpha=dets.alpha, rng=np.random.default_rng([1, len(dets)]),
@@ -129,7 +116,7 @@ def main():
                                            deterministic_occlusion=spec.deterministic_occlusion)
                 est = estimate_from_refined(camera, refined, dets, model, variant=args.variant)
                 results[key].setdefault(name, []).append(frame_result(fid, labels, dets, est, vgt, camera))
-                uv, err = approximated(model, wire["cars"], camera, options.n_shape)
+                uv, err = approximated_wireframes(model, wire["cars"], camera, options.n_shape)
                 ceiling[key].append(frame_result_2d(labels, vgt, camera, uv))
                 approx[key].append(err)
         print(f"{name} done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)

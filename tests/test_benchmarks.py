@@ -138,7 +138,8 @@ def test_unseen_shape_model_leaves_its_exemplar_out(monkeypatch):
     import numpy as np
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
-    from bench_unseen_shapes import approximated, leave_one_out
+    from _common import approximated_wireframes
+    from bench_unseen_shapes import leave_one_out
     from wirescene.core.shape import load_default
     from wirescene.synth.generate import default_camera
 
@@ -150,8 +151,8 @@ def test_unseen_shape_model_leaves_its_exemplar_out(monkeypatch):
     c, s = np.cos(0.5), np.sin(0.5)
     R, t = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]), np.array([1.0, 1.6, 12.0])
     car = {"vertices_3d": (shipped.exemplars[3] @ R.T + t).tolist(), "R": R.tolist(), "location": t.tolist()}
-    uv_seen, err_seen = approximated(shipped, [car], default_camera(), 5)
-    uv_unseen, err_unseen = approximated(unseen, [car], default_camera(), 5)
+    uv_seen, err_seen = approximated_wireframes(shipped, [car], default_camera(), 5)
+    uv_unseen, err_unseen = approximated_wireframes(unseen, [car], default_camera(), 5)
     assert uv_seen.shape == (1, 36, 2) and err_seen.shape == (1, 36)
     assert np.median(err_unseen) > np.median(err_seen)
 
