@@ -72,24 +72,22 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
-        with single_thread():
-            _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
-                                               n_partial=n_partial, calibration_folds=not no_calibration,
-                                               calibration=[float(v) for v in calibration.split(",")] if calibration
-                                               else None, threshold=threshold,
-                                               mining_rounds=3 if mining_rounds is None else mining_rounds,
-                                               per_octave=per_octave, cut_paste=cut_paste, max_negatives=max_negatives,
-                                               pyramid_cache_mb=pyramid_cache_mb, workers=workers_count(workers),
-                                               progress=click.echo)
+        _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
+                                           n_partial=n_partial, calibration_folds=not no_calibration,
+                                           calibration=[float(v) for v in calibration.split(",")] if calibration
+                                           else None, threshold=threshold,
+                                           mining_rounds=3 if mining_rounds is None else mining_rounds,
+                                           per_octave=per_octave, cut_paste=cut_paste, max_negatives=max_negatives,
+                                           pyramid_cache_mb=pyramid_cache_mb, workers=workers_count(workers),
+                                           progress=click.echo)
     else:
         if frames or split_file or folds or cut_paste or per_octave != 6:
             raise click.UsageError("--frames / --split-file / --folds / --per-octave / --cut-paste need --kitti-root")
         from wirescene.training.detector import train_detector_bank
 
-        with single_thread():
-            _, rep = train_detector_bank(out, seed=seed, n_scenes=n_scenes, n_partial=n_partial, C=C,
-                                         mining_rounds=2 if mining_rounds is None else mining_rounds,
-                                         mining_images=mining_images, n_val=n_val, progress=click.echo)
+        _, rep = train_detector_bank(out, seed=seed, n_scenes=n_scenes, n_partial=n_partial, C=C,
+                                     mining_rounds=2 if mining_rounds is None else mining_rounds,
+                                     mining_images=mining_images, n_val=n_val, progress=click.echo)
     if report:
         write_text(report, json.dumps(rep, indent=1, default=float))
 

@@ -32,6 +32,7 @@ from wirescene.predetect.configurations import (
     select_configurations,
 )
 from wirescene.predetect.hog import CELL, N_FEAT, crop_features, feature_pyramid, pyramid_scales, to_gray
+from wirescene.training.scale import single_threaded
 
 
 def _overlap_frac(windows: np.ndarray, cars: np.ndarray) -> np.ndarray:
@@ -183,6 +184,7 @@ def positive_features(configs, examples, gray_of, rng, *, min_height, max_pos, m
     return pos, counts
 
 
+@single_threaded
 def train_detector_bank(out_path, *, seed: int = 0, n_scenes: int = 200, n_partial: int = 3, bins=range(N_BINS),
                         C: float = 0.01, max_pos: int = 800, min_pos: int = 150, neg_per_image: int = 15, mining_rounds: int = 1,
                         mining_images: int = 80, hard_per_image: int = 10, n_val: int = 20,
