@@ -68,19 +68,17 @@ def fit_ridge(X, T, reg: float, *, chunk: int = 2048) -> dict:
     is that of ``X`` itself plus ``F x F`` floats, whatever ``N``."""
     X, T = np.asarray(X), np.asarray(T, float)
     n, F = X.shape
-    total = np.zeros(F)
-    for i in range(0, n, chunk):
-        total += np.asarray(X[i:i + chunk], float).sum(0)
-    mean = total / n
-    squares = np.zeros(F)
-    for i in range(0, n, chunk):
-        squares += ((np.asarray(X[i:i + chunk], float) - mean) ** 2).sum(0)
-    sd = np.sqrt(squares / n)
+
+    def blocks():  # (first row, float64 rows)
+        return ((i, np.asarray(X[i:i + chunk], float)) for i in range(0, n, chunk))
+
+    mean = sum(b.sum(0) for _, b in blocks()) / n
+    sd = np.sqrt(sum(((b - mean) ** 2).sum(0) for _, b in blocks()) / n)
     flat = sd < 1e-9
     mean[flat], sd[flat] = 0.0, 1.0
     ZZ, ZT = np.zeros((F + 1, F + 1)), np.zeros((F + 1, T.shape[1]))
-    for i in range(0, n, chunk):
-        Z = np.column_stack([(np.asarray(X[i:i + chunk], float) - mean) / sd, np.ones(len(X[i:i + chunk]))])
+    for i, b in blocks():
+        Z = np.column_stack([(b - mean) / sd, np.ones(len(b))])
         ZZ += Z.T @ Z
         ZT += Z.T @ T[i:i + chunk]
     penalty = np.full(F + 1, float(reg))
