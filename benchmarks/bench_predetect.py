@@ -56,12 +56,15 @@ from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
+    add_verifier,
     detect_training_image,
     detection_labels,
     finish_bank,
     fit_platt,
+    heldout_rows,
     kitti_gt_boxes,
     load_training_frames,
+    set_calibration,
     train_bank_on_frames,
 )
 
@@ -153,6 +156,22 @@ def training_subset(frames: list, fraction: float, *, seed) -> set:
     return set(rng.choice(np.array(frames, dtype=object), size=n, replace=False).tolist())
 
 
+def add_verifiers(args) -> None:
+    """The ``--add-verifier`` mode: earlier fold banks finished with today's last step."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
+    ds = KittiDataset(args.root)
+    for k in sorted(set(args.fold or range(N_FOLDS))):
+        bank = DetectorBank.load(Path(args.add_verifier) / f"fold{k}_raw.npz")
+        if bank.verifier is not None:
+            raise SystemExit(f"{args.add_verifier}/fold{k}_raw.npz has a verifier already")
+        images, _ = load_training_frames(ds, [f for f in ds.frame_ids() if fold_of(f) != k])
+        print(f"--- fold {k}: verifier on {len(images)} images", flush=True)
+        add_verifier(bank, images, ds, progress=lambda m: print("   ", m, flush=True))
+        bank.save(Path(args.models_dir) / f"fold{k}_raw.npz")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--root", required=True, help="KITTI root with labelled frames (e.g. ../shared/data/kitti)")
@@ -202,7 +221,15 @@ def main():
     ap.add_argument("--operating-points", type=float, nargs="*", default=[0.05, 0.1, 0.2, 0.3],
                     help="further confidence thresholds at which to report the operating point")
     ap.add_argument("--min-iou", type=float, default=0.5, help="overlap at which the operating point counts a car found")
+    ap.add_argument("--add-verifier", default=None, metavar="DIR",
+                    help="fit the verifier (the last step of the bank training) to the foldK_raw.npz of DIR that lack "
+                         "one, on each bank's own training frames, and save them to --models-dir (the --fold folds, "
+                         "default all); the same banks a --cv --fold run of today's recipe writes")
     args = ap.parse_args()
+    if args.add_verifier:
+        if not args.models_dir:
+            ap.error("--add-verifier needs --models-dir")
+        return add_verifiers(args)
     if args.fold and not (args.cv and args.models_dir):
         ap.error("--fold needs --cv and --models-dir")
     if not 0 < args.train_fraction <= 1:
@@ -264,20 +291,24 @@ def main():
         # Platt calibration of each fold bank from the OTHER folds' held-out detections, with
         # their ground-prior log ratios as offsets (the ground term's weight rests on it, so
         # no fold's calibration sees that fold's frames)
-        horizon = {im.frame: im.horizon for im in images}
-        ys = {f: detection_labels(dets[f].boxes, kitti_gt_boxes(ds.labels(f))) for f in ids}
-        off = {f: fold_banks[fold_of(f)].ground_log_ratio(dets[f].boxes, horizon[f]) for f in ids}
+        # (with verifiers: (a, b, c), c the weight of each detection's verifier logit)
+        rows = {im.frame: heldout_rows(fold_banks[fold_of(im.frame)], im, dets[im.frame], ds)
+                for im in images if not im.flipped}
+        verified = all(b.verifier is not None for b in fold_banks.values())
+
+        def platt(frames):
+            s, y, off, logits = (np.concatenate(col) for col in zip(*(rows[f] for f in frames)))
+            return fit_platt(s, y, offset=off, verifier=logits if verified else None)
+
         for k, bank in fold_banks.items():
-            o = [f for f in ids if fold_of(f) != k]
-            bank.calibration = fit_platt(np.concatenate([dets[f].scores for f in o]), np.concatenate([ys[f] for f in o]),
-                                         offset=np.concatenate([off[f] for f in o]))
+            set_calibration(bank, platt([f for f in ids if fold_of(f) != k]))
             bank.threshold = args.threshold
             if args.models_dir:
                 bank.save(Path(args.models_dir) / f"fold{k}.npz")
-        allc = fit_platt(np.concatenate([dets[f].scores for f in ids]), np.concatenate([ys[f] for f in ids]),
-                         offset=np.concatenate([off[f] for f in ids]))
+        allc = platt(ids)
         out["pooled_platt"] = allc.tolist()
-        print("Platt calibration of the pooled held-out detections (a, b):", allc.tolist())
+        print(f"Platt calibration of the pooled held-out detections ({'a, b, c' if verified else 'a, b'}):",
+              allc.tolist())
         if not args.no_ground:
             # final held-out detections: calibrated confidences with the ground term
             for im in images:

@@ -365,20 +365,22 @@ def test_interrupted_train_all_resumes_to_the_same_artefacts(trained, tmp_path, 
 
 
 def test_train_all_takes_a_given_calibration_and_refuses_a_bad_one(tmp_path):
-    """``--set detector.calibration=[a, b]`` skips the fold banks (the shipped recipe's way);
-    a malformed pair is refused before any step trains."""
+    """``--set detector.calibration=[a, b, c]`` skips the fold banks (the shipped recipe's way);
+    a malformed one, or a pair without the verifier's weight, is refused before any step trains."""
     from wirescene.predetect.bank import DetectorBank
 
     split = tmp_path / "split.txt"
     split.write_text("000010\n001545\n")
     out = tmp_path / "models"
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY,
-            "--set", "detector.calibration=[2.5, -1.0]")
+            "--set", "detector.calibration=[2.5, -1.0, 0.5]")
     assert r.exit_code == 0, r.output + r.stderr
     manifest = json.loads((out / "models.json").read_text())
-    assert manifest["steps"]["detector"]["calibration"] == {"a": 2.5, "b": -1.0, "source": "given"}
-    assert_close(DetectorBank.load(out / "detector_bank.npz").calibration, [2.5, -1.0])
-    for bad in ("[1]", "[0, 1]", "[1, nan]", "fast"):
+    assert manifest["steps"]["detector"]["calibration"] == {"a": 2.5, "b": -1.0, "c": 0.5, "source": "given"}
+    bank = DetectorBank.load(out / "detector_bank.npz")
+    assert_close(bank.calibration, [2.5, -1.0])
+    assert float(bank.verifier["gain"]) == pytest.approx(0.2)  # c / a: the logit's weight in margin units
+    for bad in ("[1]", "[0, 1, 1]", "[1, nan, 1]", "[2.5, -1.0]", "[1, 1, -1]", "fast"):
         line = one_line_error(cli("train", "all", KITTI_ROOT, "--out", tmp_path / "bad", *TINY,
                                   "--set", f"detector.calibration={bad}"))
         assert "--set" in line and "detector.calibration" in line, (bad, line)

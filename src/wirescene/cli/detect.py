@@ -37,8 +37,9 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
 @click.option("--no-calibration", is_flag=True,
               help="With --kitti-root: skip the held-out (leave-one-fold-out) Platt calibration; scores stay margins.")
 @click.option("--calibration", default=None,
-              help="With --kitti-root: Platt 'a,b' mapping margins to confidences, from held-out detections of the "
-                   "same recipe (printed by benchmarks/bench_predetect.py); default: leave-one-fold-out training.")
+              help="With --kitti-root: Platt 'a,b,c' mapping margins and the verifier's logits to confidences, from "
+                   "held-out detections of the same recipe (printed by benchmarks/bench_predetect.py); default: "
+                   "leave-one-fold-out training.")
 @click.option("--threshold", type=float, default=0.5, show_default=True,
               help="With --kitti-root and a calibration: default detection threshold (confidence).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random stream (synthetic: scenes; validation: seed+1).")
@@ -67,15 +68,18 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
     check_output_file(report, "--report")
     if kitti_root is not None:
         from wirescene.io.kitti import KittiDataset
-        from wirescene.training.kitti_detector import train_detector_bank_kitti
+        from wirescene.training.kitti_detector import check_calibration, train_detector_bank_kitti
 
+        try:
+            given = None if calibration is None else check_calibration(calibration.split(","), size=3)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--calibration") from None
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
                                            n_partial=n_partial, calibration_folds=not no_calibration,
-                                           calibration=[float(v) for v in calibration.split(",")] if calibration
-                                           else None, threshold=threshold,
+                                           calibration=given, threshold=threshold,
                                            mining_rounds=3 if mining_rounds is None else mining_rounds,
                                            per_octave=per_octave, cut_paste=cut_paste, max_negatives=max_negatives,
                                            pyramid_cache_mb=pyramid_cache_mb, workers=workers_count(workers),

@@ -13,7 +13,9 @@ moves the clusters' boxes onto the labelled boxes' convention. Given the camera,
 prior (:mod:`wirescene.predetect.geometry`) weighs each box's height against its position
 below the horizon: background windows rarely stand on the road at the size of a car; and a
 viewpoint prior (:mod:`wirescene.predetect.viewpoint_prior`) weighs front against back views
-by where the car stands in the traffic.
+by where the car stands in the traffic. A verifier (:mod:`wirescene.predetect.verifier`)
+takes a second look at each final box with its surroundings, whose logit adds to the score
+with the weight its calibration gave it.
 
 The shipped bank is trained on the real labelled KITTI frames
 (:mod:`wirescene.training.kitti_detector`, ``wirescene train detector --kitti-root``) and carries a Platt
@@ -42,13 +44,17 @@ from wirescene.predetect.configurations import Configuration
 from wirescene.predetect.geometry import ground_log_ratio, horizon_row
 from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.refine import apply_box_refinement
+from wirescene.predetect.verifier import verifier_features, verifier_logits
 from wirescene.predetect.viewpoint_prior import choose_viewpoints, lateral_position, viewpoint_log_prior
 
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 """2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated). 3: adds the box
-refinement (``refine_mean``, ``refine_scale``, ``refine_weights``; empty when none)."""
+refinement (``refine_mean``, ``refine_scale``, ``refine_weights``; empty when none). 4: adds
+the verifier (``verify_mean``, ``verify_scale``, ``verify_weights``, ``verify_gain``; empty
+when none)."""
 ARTEFACT_KIND = "detector-bank"
 DEFAULT_BANK_PATH = DATA_DIR / "detector_bank.npz"
+VERIFIER_ARRAYS = ("mean", "scale", "weights", "gain")
 
 
 @dataclass
@@ -60,6 +66,7 @@ class DetectorBank:
     meta: dict = field(default_factory=dict)
     calibration: np.ndarray | None = None  # (2,) Platt (a, b): confidence = sigmoid(a * margin + b)
     refinement: dict | None = None  # image-based box refinement (wirescene.predetect.refine)
+    verifier: dict | None = None  # second look at each box (wirescene.predetect.verifier), with its "gain"
 
     def __len__(self) -> int:
         return len(self.configs)
@@ -119,13 +126,21 @@ class DetectorBank:
             calibration=np.zeros(0, np.float64) if self.calibration is None else np.asarray(self.calibration, float),
             **{f"refine_{k}": (np.zeros(0, np.float32) if self.refinement is None
                                else np.asarray(self.refinement[k], np.float32)) for k in ("mean", "scale", "weights")},
+            **{f"verify_{k}": (np.zeros(0, np.float32) if self.verifier is None
+                               else np.asarray(self.verifier[k], np.float32)) for k in VERIFIER_ARRAYS},
         )
         return save_npz(path, arrays, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
     @classmethod
     def load(cls, path) -> "DetectorBank":
         path = Path(path)
-        z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)  # missing / corrupt / foreign: InputError
+        try:
+            z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)  # missing / corrupt / foreign: InputError
+        except InputError as exc:
+            try:  # a bank of format 3 reads as one without a verifier
+                z = load_npz(path, kind=ARTEFACT_KIND, version=3)
+            except InputError:
+                raise exc from None
         try:
             T = len(z["bins"])
             flat = z["weights"]
@@ -152,8 +167,14 @@ class DetectorBank:
             elif not (refinement["weights"].ndim == 2 and refinement["weights"].shape[1] == 4
                       and refinement["mean"].shape == refinement["scale"].shape == (len(refinement["weights"]) - 1,)):
                 raise InputError("detector bank refinement arrays do not match", path=path)
+            verifier = {k: z.get(f"verify_{k}", np.zeros(0, np.float32)) for k in VERIFIER_ARRAYS}
+            if verifier["weights"].size == 0:
+                verifier = None  # a bank without verifier
+            elif not (verifier["mean"].shape == verifier["scale"].shape == (len(verifier["weights"]) - 1,)
+                      and verifier["gain"].shape == ()):
+                raise InputError("detector bank verifier arrays do not match", path=path)
             return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
-                       json.loads(str(z["meta_json"])), calib, refinement)
+                       json.loads(str(z["meta_json"])), calib, refinement, verifier)
         except (KeyError, ValueError) as exc:
             raise InputError(f"malformed detector bank ({exc.__class__.__name__}: {exc})", path=path) from None
 
@@ -371,7 +392,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     H, W = image.shape[:2]
     scales = pyramid_scales(W, H, max_scale=max_scale, per_octave=per_octave)
     pyr = feature_pyramid(image, scales)
-    gray = None if bank.refinement is None else to_gray(image)
+    gray = None if bank.refinement is None and bank.verifier is None else to_gray(image)
     horizon = None if camera is None else horizon_row(camera)
     center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
     return detect_pyramid(bank, pyr, (W, H), threshold=None if return_all else thr, min_height=min_height,
@@ -417,7 +438,8 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
                       center_column: float | None = None, gray: np.ndarray | None = None) -> Detections:
     """Activations -> Detections: NMS per detector, full-box votes, clustering per
     viewpoint, clip to image, box regression, box refinement from the grey image ``gray``
-    (None: none; :mod:`wirescene.predetect.refine`), ground-plane consistency (``horizon``: the
+    (None: none; :mod:`wirescene.predetect.refine`), the verifier's second look at each box
+    (with ``gray``; :func:`verification_logits` times its calibrated gain), ground-plane consistency (``horizon``: the
     image row of the horizon, None to skip; :func:`ground_margin`), optional NMS across
     viewpoints with each kept detection's viewpoint chosen by :func:`traffic_viewpoints`
     (``center_column``: the principal point's column, None to keep the winner's), threshold
@@ -444,6 +466,9 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
                                                     regression_features(boxes, bins, (W, H))), W, H)
         ok = (boxes[:, 2] - boxes[:, 0] >= 2) & (boxes[:, 3] - boxes[:, 1] >= 2)
         boxes, scores, bins = boxes[ok], scores[ok], bins[ok]
+        if bank.verifier is not None and gray is not None and float(bank.verifier["gain"]):
+            # before the suppression: which of two overlapping boxes survives is most of its gain
+            scores = scores + float(bank.verifier["gain"]) * verification_logits(bank, gray, boxes, bins)
         if horizon is not None:
             scores = scores + ground_margin(bank, boxes, horizon)
     if cross_view_nms is not None and len(boxes):
@@ -459,6 +484,17 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     order = np.argsort(-scores, kind="stable")
     boxes, scores, bins = boxes[order], scores[order], bins[order]
     return Detections(boxes, scores, bin_center(bins) if len(bins) else np.zeros(0), source)
+
+
+def verification_logits(bank: DetectorBank, gray: np.ndarray, boxes, bins) -> np.ndarray:
+    """``(D,)`` log-odds of the bank's verifier (:mod:`wirescene.predetect.verifier`) that
+    ``boxes`` ``(D, 4)`` of viewpoint ``bins`` ``(D,)`` in the grey ``(H, W)`` float image
+    show a car; zeros for a bank without one."""
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    if bank.verifier is None or not len(b):
+        return np.zeros(len(b))
+    H, W = gray.shape
+    return verifier_logits(bank.verifier, verifier_features(gray, b, regression_features(b, bins, (W, H))))
 
 
 def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:

@@ -44,6 +44,11 @@ linear HOG template trained as a linear SVM -- from the labelled frames of a KIT
 9. Viewpoint prior (:func:`fit_bank_viewpoint_prior`, :mod:`wirescene.predetect.viewpoint_prior`):
    which way the labelled cars face at each lateral position on the road (traffic); with a
    camera it settles front against back views among a detection's candidate clusters.
+10. Verifier (:func:`fit_bank_verifier`, :mod:`wirescene.predetect.verifier`): a logistic
+   regression on the HOG cells in and around each final box, fitted on the bank's own
+   detections of its training images and the labelled boxes; its logit enters the score
+   with the weight ``c`` of a three-parameter Platt calibration fitted on held-out
+   detections (:func:`fit_platt`, :func:`set_calibration`).
 
 Memory does not grow with the number of training frames beyond fixed bounds
 (:mod:`wirescene.training.scale`): the training images hold no pixels (read again where a
@@ -77,6 +82,7 @@ from wirescene.predetect.configurations import (
 )
 from wirescene.predetect.geometry import bottom_ratio, fit_ground_prior, horizon_row
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
+from wirescene.predetect.verifier import C as VERIFIER_C
 from wirescene.predetect.viewpoint_prior import fit_viewpoint_prior, lateral_position
 from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, sample_random_negatives
 from wirescene.training.scale import (
@@ -407,24 +413,30 @@ def detection_labels(boxes, gt_boxes, *, iou: float = 0.5) -> np.ndarray:
     return y
 
 
-def fit_platt(scores, labels, *, reg: float = 1.0, offset=None) -> np.ndarray:
+def fit_platt(scores, labels, *, reg: float = 1.0, offset=None, verifier=None) -> np.ndarray:
     """``(a, b)`` of ``P(car) = 1 / (1 + exp(-(a * score + b + offset)))`` by (lightly
     L2-regularised) logistic regression with Platt's target smoothing; ``a`` is forced
     positive so that calibration never reorders detections of equal ``offset`` (the ground
-    prior's log ratio of each detection, :meth:`DetectorBank.ground_log_ratio`; None: 0)."""
+    prior's log ratio of each detection, :meth:`DetectorBank.ground_log_ratio`; None: 0).
+    With ``verifier`` (each detection's verifier log-odds, :func:`wirescene.predetect.bank.verification_logits`)
+    ``(a, b, c)`` of ``a * score + b + c * verifier + offset``, ``c`` >= 0 as well."""
     from scipy.optimize import minimize
 
     s = np.asarray(scores, float)
     y = np.asarray(labels, float)
     off = np.zeros(len(s)) if offset is None else np.asarray(offset, float)
+    v = None if verifier is None else np.asarray(verifier, float)
     n1, n0 = y.sum(), len(y) - y.sum()
     t = np.where(y > 0, (n1 + 1) / (n1 + 2), 1 / (n0 + 2))
 
     def nll(p):
-        z = p[0] * s + p[1] + off
+        z = p[0] * s + p[1] + off + (0.0 if v is None else p[2] * v)
         return np.sum(np.logaddexp(0, z) - t * z) + 0.5 * reg * p[0] ** 2 * 1e-3
 
-    p = minimize(nll, np.array([1.0, 0.0]), method="L-BFGS-B", bounds=[(1e-3, None), (None, None)]).x
+    start, bounds = [1.0, 0.0], [(1e-3, None), (None, None)]
+    if v is not None:
+        start, bounds = start + [0.0], bounds + [(0.0, None)]
+    p = minimize(nll, np.array(start), method="L-BFGS-B", bounds=bounds).x
     return p.astype(float)
 
 
@@ -448,7 +460,7 @@ def detect_training_image(bank: DetectorBank, image: TrainImage, **kw):
     pyramid = image.hog_pyramid(pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
                                                per_octave=int(bank.meta.get("per_octave", 4))))
     kw.setdefault("min_height", float(bank.meta.get("min_height", 30.0)))
-    gray = None if bank.refinement is None else image.gray.astype(np.float32) / 255.0
+    gray = None if bank.refinement is None and bank.verifier is None else image.gray.astype(np.float32) / 255.0
     return detect_pyramid(bank, pyramid, (W, H), calibrated=False, threshold=None, gray=gray, **kw)
 
 
@@ -515,6 +527,17 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
     return {"weights": weights.tolist(), "features": list(REGRESSION_FEATURES), "n": int(len(X)), "reg": float(reg)}
 
 
+def image_cars(dataset, image: TrainImage) -> tuple[np.ndarray, np.ndarray]:
+    """``(boxes (K, 4), alpha (K,))`` of the ``Car`` labels of a training image, mirrored
+    (``alpha -> pi - alpha``) for a flipped copy."""
+    cars = [o for o in dataset.labels(image.frame).objects if o.type == "Car"]
+    boxes = np.array([o.box for o in cars], float).reshape(-1, 4)
+    alpha = np.array([o.alpha for o in cars], float)
+    if image.flipped:
+        boxes, alpha = mirrored_boxes(boxes, image.size[0]), np.pi - alpha
+    return boxes, alpha
+
+
 def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20, sigma: float = 0.12,
                        reg: float = 1e5, min_iou: float = 0.4, per_image: int = 60, min_height: float = 20.0,
                        seed: int = 0, max_rows: int | None = DEFAULT_MAX_REFINEMENT_ROWS, workers: int = 1,
@@ -543,11 +566,7 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     # the detections and every row's features are computed per image, in the workers
     tasks = []
     for im in images:
-        cars = [o for o in dataset.labels(im.frame).objects if o.type == "Car"]
-        boxes = np.array([o.box for o in cars], float).reshape(-1, 4)
-        alpha = np.array([o.alpha for o in cars], float)
-        if im.flipped:
-            boxes, alpha = mirrored_boxes(boxes, im.size[0]), np.pi - alpha
+        boxes, alpha = image_cars(dataset, im)
         jittered = []
         for g, a in zip(boxes, alpha):
             size = np.array([g[2] - g[0], g[3] - g[1]] * 2)
@@ -620,6 +639,65 @@ def fit_bank_ground_prior(bank: DetectorBank, images, dataset, *, per_image: int
     return fit_ground_prior(np.concatenate(cars), np.concatenate(background))
 
 
+def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 150, max_rows: int | None = 40_000,
+                      C: float = VERIFIER_C, seed: int = 0, workers: int = 1, progress=None) -> dict:
+    """The bank's verifier (:mod:`wirescene.predetect.verifier`), fitted on its training
+    ``images`` (flipped copies included): the ``per_image`` best-scoring detections of each
+    (with the bank's box regression and refinement, no ground term, no verifier), a car
+    where one overlaps a ``Car`` label at IoU >= 0.5, left out where it overlaps another
+    labelled object or DontCare region that much (a Van is neither car nor background), and
+    the labelled cars' own boxes with one copy jittered by 5% of their size per side, as
+    further cars. ``max_rows``: a uniform sample of at most that many rows
+    (:class:`~wirescene.training.scale.RowSample`). The returned verifier's ``gain`` is 0
+    until a calibration sets it (:func:`set_calibration`). ``workers``, ``progress``: of
+    the per-image pass."""
+    from dataclasses import replace
+
+    from wirescene.predetect.verifier import fit_verifier
+
+    rng = np.random.default_rng([seed, 11])
+    plain = replace(bank, verifier=None)
+    tasks = []
+    for im in images:
+        boxes, alpha = image_cars(dataset, im)
+        size = np.tile(np.column_stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]]), 2)
+        moved = boxes + np.clip(rng.normal(0.0, 0.05, boxes.shape), -0.2, 0.2) * size
+        tasks.append((im, boxes, np.concatenate([boxes, moved]), np.tile(viewpoint_bin(alpha), 2)))
+    rows = RowSample(max_rows, seed=seed)
+    for X, y in map_images(partial(_verifier_rows, plain, per_image=per_image), tasks, workers=workers,
+                           progress=progress, name="verifier"):
+        rows.add(X, y)
+    X, y = rows.arrays()
+    out = fit_verifier(X, y, C=C)
+    out["gain"] = np.float32(0.0)
+    out["n"], out["n_car"] = int(len(y)), int(y.sum())
+    if rows.offered > len(y):
+        out["sampled_from"] = int(rows.offered)  # recorded where the cap shaped the verifier
+    return out
+
+
+def _verifier_rows(bank: DetectorBank, task, *, per_image: int):
+    """``(features (k, F) float32, labels (k,))`` of one image of :func:`fit_bank_verifier`."""
+    from wirescene.core.boxes import iou_2d
+    from wirescene.predetect.bank import regression_features
+    from wirescene.predetect.verifier import verifier_features
+
+    image, cars, positives, positive_bins = task
+    gray = image.gray.astype(np.float32) / 255.0
+    det = detect_training_image(bank, image)
+    boxes, bins = det.boxes[:per_image], viewpoint_bin(det.alpha[:per_image])
+    y = np.zeros(len(boxes), int)
+    if len(boxes) and len(cars):
+        y = (iou_2d(boxes[:, None], cars[None]).max(1) >= 0.5).astype(int)
+    if len(boxes) and len(image.block):
+        ambiguous = (y == 0) & (iou_2d(boxes[:, None], image.block[None]).max(1) >= 0.5)
+        boxes, bins, y = boxes[~ambiguous], bins[~ambiguous], y[~ambiguous]
+    boxes, bins = np.concatenate([boxes, positives]), np.concatenate([bins, positive_bins]).astype(int)
+    y = np.concatenate([y, np.ones(len(positives), int)])
+    X = verifier_features(gray, boxes, regression_features(boxes, bins, image.size))
+    return X.astype(np.float32), y
+
+
 def fit_bank_viewpoint_prior(images, dataset) -> dict:
     """The viewpoint prior (:mod:`wirescene.predetect.viewpoint_prior`) of the ``Car`` labels
     of the frames of ``images`` (their unmirrored originals, at each one's horizon and
@@ -671,7 +749,71 @@ def finish_bank(bank: DetectorBank, images, dataset, *, workers: int = 1, progre
         say(f"no viewpoint prior: {exc}")
     else:
         say(f"viewpoint prior: {vp['n']} cars, bandwidth {vp['bandwidth']:.2f} camera heights")
+    add_verifier(bank, images, dataset, **passes)
     return bank
+
+
+def add_verifier(bank: DetectorBank, images, dataset, *, workers: int = 1, progress=None) -> DetectorBank:
+    """Fit the bank's verifier (:func:`fit_bank_verifier`) on its training ``images``, the
+    last step of :func:`finish_bank` (nothing before it reads the verifier); its gain stays 0
+    until a calibration sets it (:func:`set_calibration`)."""
+    say = progress or (lambda msg: None)
+    try:
+        verifier = fit_bank_verifier(bank, images, dataset, workers=workers, progress=say)
+    except ValueError as exc:
+        say(f"no verifier: {exc}")
+        return bank
+    bank.meta["verifier"] = {k: verifier.pop(k) for k in ("n", "n_car", "sampled_from") if k in verifier}
+    bank.verifier = verifier
+    say(f"verifier fitted on {bank.meta['verifier']['n']} boxes ({bank.meta['verifier']['n_car']} cars)")
+    return bank
+
+
+def set_calibration(bank: DetectorBank, params) -> DetectorBank:
+    """Give ``bank`` the calibration ``params``: Platt ``(a, b)``, or ``(a, b, c)`` for a
+    bank with a verifier, whose logit then adds ``c / a`` of itself to every margin (so
+    that ``confidence = sigmoid(a * margin + b)`` reads ``a * margin + b + c * logit``)."""
+    p = check_calibration(params)
+    if (len(p) == 3) != (bank.verifier is not None):
+        raise ValueError(f"a bank {'with' if bank.verifier is not None else 'without'} a verifier takes "
+                         f"{'3' if bank.verifier is not None else '2'} calibration numbers, got {len(p)}")
+    bank.calibration = p[:2].copy()
+    if bank.verifier is not None:
+        bank.verifier["gain"] = np.float32(p[2] / p[0])
+    return bank
+
+
+def check_calibration(params, *, size: int | None = None) -> np.ndarray:
+    """``params`` as a float array if they are a calibration :func:`set_calibration` takes:
+    ``(a, b)`` or ``(a, b, c)`` (``size`` numbers where given), finite, ``a > 0`` and
+    ``c >= 0``; else a ``ValueError``."""
+    try:
+        p = np.asarray(params, float).ravel()
+    except (TypeError, ValueError):
+        p = np.zeros(0)
+    if p.shape not in ((2,), (3,)) or not np.all(np.isfinite(p)) or p[0] <= 0 or (len(p) == 3 and p[2] < 0):
+        raise ValueError(f"a calibration is [a, b] or [a, b, c], finite numbers with a > 0 and c >= 0; got {params!r}")
+    if size is not None and len(p) != size:
+        raise ValueError(f"a calibration of a bank {'with' if size == 3 else 'without'} a verifier is "
+                         f"{'[a, b, c]' if size == 3 else '[a, b]'}; got {params!r}")
+    return p
+
+
+def calibration_record(params, **extra) -> dict:
+    """``{"a", "b"[, "c"], **extra}`` of calibration ``params`` (as :func:`set_calibration` takes them)."""
+    return {**dict(zip("abc", (float(v) for v in np.asarray(params, float).ravel()))), **extra}
+
+
+def heldout_rows(bank: DetectorBank, image: TrainImage, det, dataset) -> tuple:
+    """``(margins, labels, ground offsets, verifier logits)`` of one held-out image's
+    detections ``det`` (raw margins of ``bank``), for :func:`fit_platt`."""
+    from wirescene.predetect.bank import verification_logits
+
+    y = detection_labels(det.boxes, kitti_gt_boxes(dataset.labels(image.frame)))
+    logits = np.zeros(len(det.boxes))
+    if bank.verifier is not None:
+        logits = verification_logits(bank, image.gray.astype(np.float32) / 255.0, det.boxes, viewpoint_bin(det.alpha))
+    return det.scores, y, bank.ground_log_ratio(det.boxes, image.horizon), logits
 
 
 def mirrored_boxes(boxes, width: int) -> np.ndarray:
@@ -694,8 +836,9 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     over the folds of :func:`calibration_folds` (drives, else frames, balanced by cars), or
     over a given ``{frame: fold}`` mapping; frames of a single group leave the bank
     uncalibrated (scores are margins, threshold 0). ``calibration``: given Platt
-    ``(a, b)`` -- e.g. the pooled held-out fit printed by ``benchmarks/bench_predetect.py``
-    for the same recipe -- instead of the leave-one-fold-out run (saves four trainings).
+    ``(a, b, c)`` (``c``: the verifier's weight, :func:`set_calibration`) -- e.g. the pooled
+    held-out fit printed by ``benchmarks/bench_predetect.py`` for the same recipe -- instead
+    of the leave-one-fold-out run (saves four trainings).
     ``threshold``: default detection threshold of a calibrated bank (probability).
     ``workers``: processes of the per-image passes (:func:`train_bank_on_frames`,
     :func:`finish_bank`, :func:`heldout_bank_calibration`); the bank is the same.
@@ -713,21 +856,25 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     if not ids:
         raise ValueError("no training frames selected")
     report = {"frames": ids}
-    calib = None if calibration is None else np.asarray(calibration, float).reshape(2)
+    # the recipe trains a verifier (finish_bank), weighted by the calibration's third number
+    calib = None if calibration is None else check_calibration(calibration, size=3)
     if calib is not None:
-        report["calibration"] = {"a": float(calib[0]), "b": float(calib[1]), "source": "given"}
+        report["calibration"] = calibration_record(calib, source="given")
     elif calibration_folds:
         folds = calibration_folds if isinstance(calibration_folds, Mapping) else _frame_folds(ds, ids)
         if folds is not None:
             report["calibration"] = heldout_bank_calibration(kitti_root, folds, split=split, seed=seed, progress=say,
                                                              workers=workers, **train_kw)
-            calib = np.array([report["calibration"]["a"], report["calibration"]["b"]])
+            calib = np.array([report["calibration"][k] for k in "abc" if k in report["calibration"]])
     # loaded after the calibration, whose fold banks load their own frames
     images, examples = load_training_frames(ds, ids, progress=say)
     bank = train_bank_on_frames(images, examples, seed=seed, workers=workers, progress=say, **train_kw)
     bank = finish_bank(bank, images, ds, workers=workers, progress=say)
-    bank.calibration = calib
     if calib is not None:
+        if bank.verifier is None and len(calib) == 3:
+            say("the bank has no verifier: the calibration's c goes unused")
+            calib = calib[:2]
+        set_calibration(bank, calib)
         bank.threshold = float(threshold)  # probability of a true car (IoU >= 0.5)
     bank.meta["calibration"] = report.get("calibration")
     if out_path is not None:
@@ -770,26 +917,25 @@ def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str
 
     say = progress or (lambda message: None)
     dataset = KittiDataset(kitti_root, split=split)
-    scores, labels, offsets = [], [], []
+    rows, verified = [], []
     for k in sorted(set(folds.values())):
         held = [f for f, j in folds.items() if j == k]
         train = [f for f, j in folds.items() if j != k]
         say(f"calibration: fold {k} held out ({len(held)} frames), bank trained on {len(train)}")
         bank, _ = train_detector_bank_kitti(None, kitti_root, frames=train, split=split, seed=seed,
                                             calibration_folds=False, workers=workers, progress=say, **bank_options)
+        verified.append(bank.verifier is not None)
         images, _ = load_training_frames(dataset, held, flips=False)
         for image, d in zip(images, training_detections(bank, images, workers=workers, progress=say,
                                                         name=f"fold {k} held-out detections")):
-            scores.append(d.scores)
-            offsets.append(bank.ground_log_ratio(d.boxes, image.horizon))
-            labels.append(detection_labels(d.boxes, kitti_gt_boxes(dataset.labels(image.frame))))
-    s, y = np.concatenate(scores), np.concatenate(labels)
+            rows.append(heldout_rows(bank, image, d, dataset))
+    s, y, off, logits = (np.concatenate(col) for col in zip(*rows))
     if not y.any():
         raise InputError(f"no held-out detection of the fold banks matches a labelled car ({len(s)} detections): "
                          "too few training frames for a calibrated bank", path=dataset.split_dir)
-    a, b = fit_platt(s, y, offset=np.concatenate(offsets))
-    return {"a": float(a), "b": float(b), "n_detections": int(len(s)), "n_positive": int(y.sum()),
-            "n_folds": len(set(folds.values())), "source": "leave-one-fold-out detections"}
+    params = fit_platt(s, y, offset=off, verifier=logits if all(verified) else None)
+    return calibration_record(params, n_detections=int(len(s)), n_positive=int(y.sum()),
+                              n_folds=len(set(folds.values())), source="leave-one-fold-out detections")
 
 
 def _frame_folds(dataset, frames) -> dict[str, int] | None:

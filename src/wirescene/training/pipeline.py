@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import hashlib
 import inspect
-import math
 import resource
 import sys
 import time
@@ -52,7 +51,12 @@ from wirescene.core.resources import (
     shipped_path,
 )
 from wirescene.core.version import __version__
-from wirescene.training.kitti_detector import calibration_folds, heldout_bank_calibration
+from wirescene.training.kitti_detector import (
+    calibration_folds,
+    calibration_record,
+    check_calibration,
+    heldout_bank_calibration,
+)
 from wirescene.training.scale import CACHE
 
 __all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "check_options", "calibration_folds",
@@ -139,11 +143,9 @@ def check_options(overrides: Mapping[str, Mapping[str, object]]) -> dict[str, di
     given = out["detector"].get("calibration")
     if given is not None:  # checked here, not after the parts step has trained
         try:
-            pair = [float(v) for v in given]
-        except (TypeError, ValueError):
-            pair = []
-        if len(pair) != 2 or not all(map(math.isfinite, pair)) or pair[0] <= 0:
-            raise ValueError(f"detector.calibration must be [a, b], finite numbers with a > 0, got {given!r}")
+            check_calibration(given, size=3)
+        except ValueError as exc:
+            raise ValueError(f"detector.calibration: {exc}") from None
     return out
 
 
@@ -353,11 +355,10 @@ class _Run:
             calib = heldout_bank_calibration(self.kitti_root, self.folds, seed=seed, workers=self.workers,
                                              progress=self.say, **bank_opts)
         else:  # a Platt fit of the same recipe's fold banks made elsewhere: saves their trainings
-            a, b = (float(v) for v in given)
-            calib = {"a": a, "b": b, "source": "given"}
+            calib = calibration_record(given, source="given")
         record["calibration"] = calib
         bank, _ = train_detector_bank_kitti(self.path_of("detector"), self.kitti_root, frames=self.ids, seed=seed,
-                                            calibration=(calib["a"], calib["b"]), threshold=threshold,
+                                            calibration=[calib[k] for k in "abc" if k in calib], threshold=threshold,
                                             workers=self.workers, progress=self.say, **bank_opts)
         record["detectors"] = len(bank)
         CACHE.clear()  # the frames' images and pyramids are not needed by the steps after
