@@ -874,6 +874,10 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
         if bank.verifier is None and len(calib) == 3:
             say("the bank has no verifier: the calibration's c goes unused")
             calib = calib[:2]
+        elif bank.verifier is not None and len(calib) == 2:  # a held-out fold bank had none to weigh
+            say("the held-out calibration has no weight for the verifier: the bank goes without one")
+            bank.verifier = None
+            bank.meta.pop("verifier", None)
         set_calibration(bank, calib)
         bank.threshold = float(threshold)  # probability of a true car (IoU >= 0.5)
     bank.meta["calibration"] = report.get("calibration")
