@@ -19,6 +19,14 @@ group and pooled over the two held-out halves.
 With ``--fold-banks DIR`` (the ``fold{k}.npz`` of the same run) and ``--extra-refinements N``
 it measures instead what applying each frame's fold bank's box refinement N more times to
 its detections does (a cascade of the one regression).
+
+With ``--appearance grey|colour`` it measures instead what a look at each box's pixels adds
+(the study behind :mod:`wirescene.predetect.verifier`'s settings): a logistic regression
+(``--C``) on the appearance of each detection's box -- ``grey``: the verifier's features (HOG
+cells of the box grown by 25%, its geometry); ``colour``: the crop viewpoint classifier's
+(HOG, colour cells, aspect) -- fitted on the detections and label boxes of one fold group,
+stacked with the calibrated score by a two-feature logistic regression fitted on
+appearance logits cross-fitted between the group's two folds, and scored on the other group.
 """
 
 from __future__ import annotations
@@ -200,7 +208,11 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--fold-banks", type=Path, default=None, help="DIR of the run's fold{k}.npz (with --extra-refinements)")
     ap.add_argument("--extra-refinements", type=int, default=0)
+    ap.add_argument("--appearance", choices=("grey", "colour"), default=None)
+    ap.add_argument("--C", type=float, nargs="+", default=[1e-3], help="with --appearance: the inverse regularisations")
     args = ap.parse_args()
+    if args.appearance:
+        return appearance(args)
     if args.extra_refinements:
         if args.fold_banks is None:
             ap.error("--extra-refinements needs --fold-banks")
@@ -241,6 +253,71 @@ def main() -> None:
     print(fmt(f"POOLED after  ({len(frames)} frames)", p["after"], p["op_after"]))
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
+
+
+def appearance_features(image: np.ndarray, boxes: np.ndarray, alpha: np.ndarray, kind: str) -> np.ndarray:
+    """``(D, F)`` appearance features of ``boxes`` in an ``(H, W, 3)`` image (see the module's ``--appearance``)."""
+    from wirescene.core.viewpoints import viewpoint_bin
+    from wirescene.predetect.bank import regression_features
+    from wirescene.predetect.hog import to_gray
+    from wirescene.predetect.verifier import verifier_features
+    from wirescene.predetect.viewpoint_classifier import crop_viewpoint_features
+
+    if kind == "colour":
+        return crop_viewpoint_features(image, boxes)
+    gray = to_gray(image)
+    bins = viewpoint_bin(np.where(np.isfinite(alpha), alpha, 0.0))
+    return verifier_features(gray, boxes, regression_features(boxes, bins, gray.shape[::-1]))
+
+
+def appearance(args) -> None:
+    """The ``--appearance`` study: 2D AP per fold group and pooled, before and after stacking."""
+    from sklearn.linear_model import LogisticRegression
+
+    from wirescene.core.boxes import iou_2d
+    from wirescene.predetect.verifier import fit_verifier, verifier_logits
+
+    ds = KittiDataset(args.root)
+    dets = load_dets(args.dets)
+    frames = [f for f in ds.frame_ids() if f in dets]
+    labels = {f: ds.labels(f) for f in frames}
+    X, Xcar, on_car, first = {}, {}, {}, {}
+    for f in frames:
+        image, d, gt = ds.image(f), dets[f], kitti_gt_boxes(labels[f])
+        X[f] = appearance_features(image, d.boxes, d.alpha, args.appearance)
+        Xcar[f] = appearance_features(image, gt, np.full(len(gt), np.nan), args.appearance)
+        on_car[f] = (iou_2d(d.boxes[:, None], gt[None]).max(1) >= 0.5).astype(int) if len(gt) and len(d.boxes) \
+            else np.zeros(len(d.boxes), int)
+        first[f] = detection_labels(d.boxes, gt)
+
+    def fit(fr, C):
+        v = fit_verifier(np.concatenate([X[f] for f in fr] + [Xcar[f] for f in fr]),
+                         np.concatenate([on_car[f] for f in fr] + [np.ones(len(Xcar[f]), int) for f in fr]), C=C)
+        return lambda f: verifier_logits(v, X[f])
+
+    def logit(f):
+        return np.log(np.clip(dets[f].scores, 1e-6, 1 - 1e-6) / np.clip(1 - dets[f].scores, 1e-6, 1))
+
+    for C in args.C:
+        rescored = {}
+        for train_group, test_group in (FOLD_GROUPS, FOLD_GROUPS[::-1]):
+            train = [f for f in frames if fold_of(f) in train_group]
+            crossed = {}
+            for k in train_group:  # appearance logits of each training fold from a model of the group's other fold
+                model = fit([f for f in train if fold_of(f) != k], C)
+                crossed.update({f: model(f) for f in train if fold_of(f) == k})
+            stack = LogisticRegression(max_iter=2000).fit(
+                np.concatenate([np.column_stack([logit(f), crossed[f]]) for f in train]),
+                np.concatenate([first[f] for f in train]))
+            model = fit(train, C)
+            for f in (f for f in frames if fold_of(f) in test_group):
+                rescored[f] = Detections(dets[f].boxes, stack.predict_proba(np.column_stack([logit(f), model(f)]))[:, 1],
+                                         dets[f].alpha)
+        for name, group in [*((str(g), [f for f in frames if fold_of(f) in g]) for g in FOLD_GROUPS), ("pooled", frames)]:
+            for label, d in (("before", dets), (f"{args.appearance} C={C:g}", rescored)):
+                m = ap_summary([d[f] for f in group], [labels[f] for f in group])
+                print(f"{name} {label}: 2D AP " + " / ".join(f"{m['2d'][k]:.1f}" for k in ("easy", "moderate", "hard"))
+                      + f" (IoU 0.5 moderate {m['2d_iou_0.5']['moderate']:.1f})")
 
 
 def cascade(args) -> None:

@@ -153,3 +153,11 @@ def test_train_detector_refuses_a_calibration_without_the_verifier_weight(tmp_pa
         assert r.exit_code == 2 and len(lines) == 1, r.stderr
         assert lines[0].startswith("wirescene: error: --calibration") and says in lines[0], lines[0]
         assert not (tmp_path / "bank.npz").exists()
+
+
+def test_an_image_without_boxes_gives_no_rows():
+    from wirescene.predetect.bank import regression_features
+
+    boxes = np.zeros((0, 4))
+    X = verifier_features(np.zeros((60, 80), np.float32), boxes, regression_features(boxes, np.zeros(0, int), (80, 60)))
+    assert X.shape[0] == 0 and X.shape[1] > 0

@@ -39,7 +39,8 @@ def refinement_features(gray: np.ndarray, boxes, geometry: np.ndarray) -> np.nda
     image: the HOG cells of each grown window, then ``geometry`` ``(D, G)`` (the box
     regression's features of the same boxes)."""
     b = np.asarray(boxes, float).reshape(-1, 4)
-    geometry = np.asarray(geometry, float).reshape(len(b), -1)
+    geometry = np.asarray(geometry, float)
+    geometry = geometry.reshape(len(b), -1) if len(b) else geometry.reshape(0, geometry.shape[-1] if geometry.ndim == 2 else 0)
     th, tw = GRID
     cells = np.zeros((len(b), th * tw * N_FEAT), np.float32)
     for i, wb in enumerate(window_boxes(b)):
