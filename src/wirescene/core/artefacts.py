@@ -23,9 +23,9 @@ def format_tag(kind: str, version: int) -> str:
     return f"wirescene-{kind}/{int(version)}"
 
 
-def _check(found, kind: str, version: int, path: Path) -> None:
+def _check(found, kind: str, version: int, path: Path, older=()) -> None:
     want = format_tag(kind, version)
-    if found != want:
+    if found != want and found not in {format_tag(kind, v) for v in older}:
         raise InputError(f"format {found!r}, expected {want!r} (retrain or reinstall it)", path=path)
 
 
@@ -37,8 +37,9 @@ def save_npz(path: str | Path, arrays: dict, *, kind: str, version: int) -> Path
     return Path(path)
 
 
-def load_npz(path: str | Path, *, kind: str, version: int) -> dict[str, np.ndarray]:
-    """Arrays of an artefact written by :func:`save_npz` (format checked)."""
+def load_npz(path: str | Path, *, kind: str, version: int, older=()) -> dict[str, np.ndarray]:
+    """Arrays of an artefact written by :func:`save_npz` (format checked: ``version``, or one
+    of the ``older`` versions its reader still understands; an error names ``version``)."""
     path = Path(path)
     if not path.is_file():
         raise InputError("artefact file is missing (run the training command that makes it)", path=path)
@@ -48,7 +49,7 @@ def load_npz(path: str | Path, *, kind: str, version: int) -> dict[str, np.ndarr
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise InputError(f"corrupt artefact file ({exc.__class__.__name__})", path=path) from None
     found = arrays.pop("format", None)
-    _check(None if found is None else str(found), kind, version, path)
+    _check(None if found is None else str(found), kind, version, path, older)
     return arrays
 
 

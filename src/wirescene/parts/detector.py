@@ -171,15 +171,7 @@ class PartDetector:
         from wirescene.core.artefacts import load_npz
 
         path = DEFAULT_MODEL_PATH if path is None else Path(path)
-        try:
-            z = load_npz(path, kind=FORMAT_KIND, version=FORMAT_VERSION)
-        except InputError:
-            try:
-                z = load_npz(path, kind=FORMAT_KIND, version=1)
-            except InputError:
-                z = None
-            if z is None:
-                raise
+        z = load_npz(path, kind=FORMAT_KIND, version=FORMAT_VERSION, older=(1,))
         try:
             if int(z["canonical_height"]) != feat.CANONICAL_HEIGHT or int(z["radius"]) != feat.RADIUS:
                 raise InputError("part model was trained with other canonical patch geometry", path=path)

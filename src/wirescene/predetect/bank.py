@@ -134,13 +134,8 @@ class DetectorBank:
     @classmethod
     def load(cls, path) -> "DetectorBank":
         path = Path(path)
-        try:
-            z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)  # missing / corrupt / foreign: InputError
-        except InputError as exc:
-            try:  # a bank of format 3 reads as one without a verifier
-                z = load_npz(path, kind=ARTEFACT_KIND, version=3)
-            except InputError:
-                raise exc from None
+        # missing / corrupt / foreign: InputError; a bank of format 3 reads as one without a verifier
+        z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION, older=(3,))
         try:
             T = len(z["bins"])
             flat = z["weights"]

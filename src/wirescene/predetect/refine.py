@@ -40,7 +40,7 @@ def refinement_features(gray: np.ndarray, boxes, geometry: np.ndarray) -> np.nda
     regression's features of the same boxes)."""
     b = np.asarray(boxes, float).reshape(-1, 4)
     geometry = np.asarray(geometry, float)
-    geometry = geometry.reshape(len(b), -1) if len(b) else geometry.reshape(0, geometry.shape[-1] if geometry.ndim == 2 else 0)
+    geometry = geometry.reshape(len(b), geometry.shape[-1])  # (the last axis named: no boxes, no rows to infer it)
     th, tw = GRID
     cells = np.zeros((len(b), th * tw * N_FEAT), np.float32)
     for i, wb in enumerate(window_boxes(b)):
