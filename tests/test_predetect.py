@@ -126,6 +126,46 @@ def test_hog_crop_matches_sliding_window():
     np.testing.assert_allclose(c, f[3:8, 2:8], atol=0.02)
 
 
+def _fhog_by_loops(g, cell=8):
+    """FHOG written out per pixel and per cell (Felzenszwalb et al., PAMI 2010), the
+    definition :func:`hog_cells` vectorises."""
+    H, W = g.shape
+    hc, wc = H // cell, W // cell
+    hist = np.zeros((hc, wc, 18))
+    for y in range(hc * cell):
+        for x in range(wc * cell):
+            dx = g[y, min(x + 1, W - 1)] - g[y, max(x - 1, 0)]
+            dy = g[min(y + 1, H - 1), x] - g[max(y - 1, 0), x]
+            pos = (np.arctan2(dy, dx) + np.pi) * 18 / (2 * np.pi)
+            b, f = int(np.floor(pos)), pos - np.floor(pos)
+            hist[y // cell, x // cell, b % 18] += np.hypot(dx, dy) * (1 - f)
+            hist[y // cell, x // cell, (b + 1) % 18] += np.hypot(dx, dy) * f
+    h9 = hist[..., :9] + hist[..., 9:]
+    energy = (h9 ** 2).sum(-1)
+    out = np.zeros((hc, wc, N_FEAT))
+    for i in range(hc):
+        for j in range(wc):
+            for oy in (-1, 0):  # the four 2 x 2 blocks holding the cell (edge cells replicated)
+                for ox in (-1, 0):
+                    cells = [(min(max(i + oy + a, 0), hc - 1), min(max(j + ox + b, 0), wc - 1))
+                             for a in (0, 1) for b in (0, 1)]
+                    n = 1 / np.sqrt(sum(energy[c] for c in cells) + 1e-4)
+                    a18 = np.minimum(hist[i, j] * n, 0.2)
+                    out[i, j, :18] += 0.5 * a18
+                    out[i, j, 18:27] += 0.5 * np.minimum(h9[i, j] * n, 0.2)
+                    out[i, j, 27 + 2 * (oy + 1) + (ox + 1)] = 0.2357 * a18.sum()
+    return out
+
+
+def test_hog_cells_match_the_definition():
+    rng = np.random.default_rng(3)
+    g = rng.random((27, 42)).astype(np.float32)  # 3 x 5 cells, ragged border dropped
+    g[5:15, 10:30] += 1.0  # a bright block: strong, oriented edges
+    assert_close(hog_cells(g), _fhog_by_loops(g.astype(float)[:24, :40]), atol=2e-5)
+    flat = hog_cells(np.full((16, 24), 0.5, np.float32))
+    assert_close(flat, np.zeros((2, 3, N_FEAT)))
+
+
 # ------------------------------------------------------------------ storage
 
 def _random_bank(seed=0):

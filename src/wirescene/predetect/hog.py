@@ -24,46 +24,57 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     return to_grey(image)
 
 
+def _edge_pad(x: np.ndarray) -> np.ndarray:
+    """``x`` ``(h, w)`` with one edge-replicated row / column on every side (``np.pad``'s
+    ``mode="edge"``, without its per-call cost, which dominated small crops)."""
+    h, w = x.shape
+    out = np.empty((h + 2, w + 2), x.dtype)
+    out[1:-1, 1:-1] = x
+    out[0, 1:-1], out[-1, 1:-1] = x[0], x[-1]
+    out[:, 0], out[:, -1] = out[:, 1], out[:, -2]
+    return out
+
+
 def hog_cells(gray: np.ndarray, cell: int = CELL) -> np.ndarray:
     """(H // cell, W // cell, 31) float32 FHOG features of a grey image."""
     g = np.asarray(gray, dtype=np.float32)
     hc, wc = g.shape[0] // cell, g.shape[1] // cell
     if hc < 1 or wc < 1:
         return np.zeros((max(hc, 0), max(wc, 0), N_FEAT), np.float32)
-    g = g[: hc * cell, : wc * cell]
-    p = np.pad(g, 1, mode="edge")
+    p = _edge_pad(g[: hc * cell, : wc * cell])
     gx = p[1:-1, 2:] - p[1:-1, :-2]
     gy = p[2:, 1:-1] - p[:-2, 1:-1]
     mag = np.sqrt(gx * gx + gy * gy)
-    ang = np.arctan2(gy, gx)  # [-pi, pi]
-    pos = (ang + np.pi) * (_N_ORIENT / (2 * np.pi))
-    b0 = np.floor(pos).astype(np.int64)
-    f = (pos - b0).astype(np.float32)
-    b0 %= _N_ORIENT
-    b1 = (b0 + 1) % _N_ORIENT
-    rows = np.arange(hc * cell) // cell
-    cols = np.arange(wc * cell) // cell
-    cidx = (rows[:, None] * wc + cols[None, :]) * _N_ORIENT
+    pos = (np.arctan2(gy, gx) + np.pi) * (_N_ORIENT / (2 * np.pi))  # [0, 18]
+    lower = np.floor(pos)
+    f = pos - lower  # exact in float32: a fractional part
+    b0 = lower.astype(np.intp)
+    b0[b0 >= _N_ORIENT] -= _N_ORIENT  # (a modulo costs more than the whole histogram)
+    b1 = b0 + 1
+    b1[b1 == _N_ORIENT] = 0
+    # histogram index of each pixel's bins: (cell row * wc + cell column) * 18 + bin
+    row_offset = (np.arange(hc * cell) // cell * (wc * _N_ORIENT))[:, None]
+    col_offset = np.arange(wc * cell) // cell * _N_ORIENT
+    b0 += row_offset
+    b0 += col_offset
+    b1 += row_offset
+    b1 += col_offset
     n = hc * wc * _N_ORIENT
-    h18 = np.bincount((cidx + b0).ravel(), weights=(mag * (1 - f)).ravel(), minlength=n)
-    h18 += np.bincount((cidx + b1).ravel(), weights=(mag * f).ravel(), minlength=n)
+    h18 = np.bincount(b0.ravel(), weights=(mag * (1 - f)).ravel(), minlength=n)
+    h18 += np.bincount(b1.ravel(), weights=(mag * f).ravel(), minlength=n)
     h18 = h18.reshape(hc, wc, _N_ORIENT).astype(np.float32)
     h9 = h18[..., :9] + h18[..., 9:]
-    energy = np.pad((h9 * h9).sum(-1), 1, mode="edge")
+    energy = _edge_pad((h9 * h9).sum(-1))
     # block energies: block (i, j) covers cells (i..i+1, j..j+1) of the padded grid
     blk = energy[:-1, :-1] + energy[1:, :-1] + energy[:-1, 1:] + energy[1:, 1:]  # (hc+1, wc+1)
-    eps = 1e-4
-    norms = [1.0 / np.sqrt(blk[dy:dy + hc, dx:dx + wc] + eps) for dy in (0, 1) for dx in (0, 1)]
+    inv = 1.0 / np.sqrt(blk + 1e-4)
+    norms = np.stack([inv[dy:dy + hc, dx:dx + wc] for dy in (0, 1) for dx in (0, 1)])[..., None]  # (4, hc, wc, 1)
+    a = np.minimum(h18 * norms, 0.2)
+    a9 = np.minimum(h9 * norms, 0.2)
     out = np.empty((hc, wc, N_FEAT), np.float32)
-    s18 = np.zeros((hc, wc, 18), np.float32)
-    s9 = np.zeros((hc, wc, 9), np.float32)
-    for k, nk in enumerate(norms):
-        a = np.minimum(h18 * nk[..., None], 0.2)
-        s18 += a
-        s9 += np.minimum(h9 * nk[..., None], 0.2)
-        out[..., 27 + k] = 0.2357 * a.sum(-1)
-    out[..., :18] = 0.5 * s18
-    out[..., 18:27] = 0.5 * s9
+    out[..., :18] = 0.5 * (((a[0] + a[1]) + a[2]) + a[3])  # summed in the order of the four blocks
+    out[..., 18:27] = 0.5 * (((a9[0] + a9[1]) + a9[2]) + a9[3])
+    out[..., 27:] = 0.2357 * np.moveaxis(a.sum(-1), 0, -1)
     return out
 
 
@@ -119,7 +130,7 @@ def crop_features(gray: np.ndarray, box, th: int, tw: int) -> np.ndarray:
     # whole image per crop cost more than the crop's features)
     rows = np.clip(np.arange(iy1, int(np.ceil(Y2))), 0, H - 1)
     cols = np.clip(np.arange(ix1, int(np.ceil(X2))), 0, W - 1)
-    patch = np.asarray(gray)[np.ix_(rows, cols)]
+    patch = np.asarray(gray).take(rows, 0).take(cols, 1)  # (two takes: half the time of np.ix_)
     # map the exact (sub-pixel) crop to the template grid
     im = Image.fromarray(np.ascontiguousarray(patch, np.float32), mode="F")
     ox, oy = X1 - ix1, Y1 - iy1
