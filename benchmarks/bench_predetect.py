@@ -99,19 +99,25 @@ HEIGHT_BANDS = (0.0, 25.0, 40.0, 60.0, np.inf)
 def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict:
     """What the fit receives at the detection ``threshold``: how many detections, the share
     that overlap a ``Car`` label at IoU >= ``iou`` (precision), the share of the cars found
-    (recall, also by box height: :data:`HEIGHT_BANDS` px) and the viewpoint error of the
-    detections on a car (over 45 deg; over 135 deg: front and back swapped)."""
+    (recall, also by box height: :data:`HEIGHT_BANDS` px, by truncation and by KITTI's
+    occlusion flag), why the others are missed (no detection at any score overlaps them, or
+    only ones below the threshold) and the viewpoint error of the detections on a car (over
+    45 deg; over 135 deg: front and back swapped)."""
     from wirescene.core.boxes import iou_2d
 
     n_det = n_on = 0
-    found, heights, dalpha = [], [], []
+    found, candidate, heights, truncated, occluded, dalpha = [], [], [], [], [], []
     for d, lab in zip(dets, labels):
         cars = [o for o in lab.objects if o.type == "Car"]
         gt = np.array([o.box for o in cars], float).reshape(-1, 4)
+        every = np.asarray(d.boxes, float).reshape(-1, 4)
+        candidate.append(iou_2d(every[:, None], gt[None]).max(0) >= iou if len(every) else np.zeros(len(gt), bool))
         keep = np.asarray(d.scores) >= threshold
-        boxes, alpha = np.asarray(d.boxes, float)[keep], np.asarray(d.alpha, float)[keep]
+        boxes, alpha = every[keep], np.asarray(d.alpha, float)[keep]
         n_det += len(boxes)
         heights.append(gt[:, 3] - gt[:, 1])
+        truncated.append(np.array([o.truncated > 0 for o in cars], bool))
+        occluded.append(np.array([min(int(o.occluded), 2) for o in cars], int))
         if not len(gt):
             continue
         if not len(boxes):
@@ -124,7 +130,12 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
         truth = np.array([o.alpha for o in cars], float)[ov.argmax(1)[on]]
         dalpha.append(np.abs(np.angle(np.exp(1j * (alpha[on] - truth)))))
     found = np.concatenate(found) if found else np.zeros(0, bool)
-    heights = np.concatenate(heights)
+    candidate, heights = np.concatenate(candidate), np.concatenate(heights)
+    truncated, occluded = np.concatenate(truncated), np.concatenate(occluded)
+
+    def share(mask) -> list:  # [share of the cars found, cars]
+        return [float(found[mask].mean()) if mask.any() else None, int(mask.sum())]
+
     dalpha = np.degrees(np.concatenate(dalpha)) if dalpha else np.zeros(0)
     band = np.digitize(heights, HEIGHT_BANDS[1:-1])
     return {"threshold": float(threshold), "iou": float(iou), "n_detections": int(n_det), "n_on_car": int(n_on),
@@ -133,15 +144,24 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
                                                                                     if (band == b).any() else None,
                                                                                     int((band == b).sum())]
                                  for b in range(len(HEIGHT_BANDS) - 1)},
+            "recall_by_truncation": {"truncated": share(truncated), "whole": share(~truncated)},
+            "recall_by_occlusion": {str(k): share(occluded == k) for k in range(3)},
+            "missed_without_candidate": int((~found & ~candidate).sum()),
+            "missed_below_threshold": int((~found & candidate).sum()),
             "viewpoint_over_45": float(np.mean(dalpha > 45)) if len(dalpha) else None,
             "viewpoint_over_135": float(np.mean(dalpha > 135)) if len(dalpha) else None}
 
 
 def fmt_operating_point(o) -> str:
-    bands = ", ".join(f"{k} {v[0]:.2f} ({v[1]})" if v[0] is not None else f"{k} - (0)" for k, v in o["recall_by_height"].items())
+    def parts(groups: dict) -> str:
+        return ", ".join(f"{k} {v[0]:.2f} ({v[1]})" if v[0] is not None else f"{k} - (0)" for k, v in groups.items())
+
+    bands = parts(o["recall_by_height"])
     return (f"at threshold {o['threshold']:g}: {o['n_detections']} detections, {o['n_on_car']} on a car at IoU "
             f"{o['iou']:g} (precision {o['precision']:.2f}); cars found {o['recall']:.2f} of {o['n_cars']} "
-            f"(by height: {bands}); viewpoint of the detections on a car off by > 45 deg "
+            f"(by height: {bands}; {parts(o['recall_by_truncation'])}; occlusion flag "
+            f"{parts(o['recall_by_occlusion'])}); missed: {o['missed_without_candidate']} without any detection at IoU "
+            f"{o['iou']:g}, {o['missed_below_threshold']} only below the threshold; viewpoint of the detections on a car off by > 45 deg "
             f"{o['viewpoint_over_45'] if o['viewpoint_over_45'] is None else round(o['viewpoint_over_45'], 2)}, "
             f"> 135 deg {o['viewpoint_over_135'] if o['viewpoint_over_135'] is None else round(o['viewpoint_over_135'], 2)}")
 

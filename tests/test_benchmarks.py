@@ -58,6 +58,32 @@ def test_learning_curve_subsets_are_reproducible_shares_of_the_training_frames(m
     assert len(training_subset(frames, 0.01, seed=(0, 2))) == 1
 
 
+def test_operating_point_says_why_cars_are_missed(monkeypatch):
+    import numpy as np
+
+    from wirescene.core.types import Detections
+    from wirescene.io.kitti import FrameLabels, Label
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_predetect import operating_point
+
+    def car(box, truncated=0.0, occluded=0):
+        return Label("Car", truncated, occluded, 0.0, np.array(box, float), np.array([1.5, 1.6, 3.9]),
+                     np.array([0.0, 1.6, 10.0]), 0.0)
+
+    labels = FrameLabels([car([0, 100, 80, 160], truncated=0.4), car([200, 100, 280, 160], occluded=1),
+                          car([400, 100, 480, 160], occluded=2)])
+    # the truncated car found, the occluded one only below the threshold, the last one not at all;
+    # one detection on no car
+    dets = Detections(np.array([[1, 100, 80, 160], [200, 101, 280, 160], [600, 100, 680, 160]], float),
+                      np.array([0.9, 0.3, 0.8]), np.zeros(3))
+    o = operating_point([dets], [labels], 0.5)
+    assert (o["n_detections"], o["n_on_car"], o["n_cars"]) == (2, 1, 3)
+    assert o["recall_by_truncation"] == {"truncated": [1.0, 1], "whole": [0.0, 2]}
+    assert o["recall_by_occlusion"] == {"0": [1.0, 1], "1": [0.0, 1], "2": [0.0, 1]}
+    assert (o["missed_below_threshold"], o["missed_without_candidate"]) == (1, 1)
+
+
 def test_rescoring_context_features_see_the_higher_scoring_neighbours(monkeypatch):
     import numpy as np
 
