@@ -19,7 +19,8 @@ the models of the frame's fold (:mod:`wirescene.io.folds`), trained without its 
   evidence's per-bin score (``--evidence-weights``);
 * ``own``: with ``--own``, the fold bank's own detections (:func:`wirescene.predetect.detect_cars`
   at its threshold, with the camera) matched to the cars at IoU >= 0.5, for reference: the
-  viewpoint of the matched detection, over the cars found only.
+  viewpoint of the matched detection, over the cars found only; and ``own/pipeline``, the
+  pipeline's rule (``bank+classifier``) applied to those matched boxes instead.
 
 Reported per method and box set: the share of cars whose ``|alpha_est - alpha_true|``
 (wrapped) is <= 45 deg -- the paper's criterion -- overall, by fold group
@@ -192,7 +193,7 @@ def main():
     keys = [f"templates@{u:g}" for u in args.iou] + [f"floor@{m:g}" for m in args.floor_margin] + \
         [f"prior@{r}" for r in spreads] + ["evidence", "classifier"]
     scores = {s: {key: [] for key in keys} for s in sets}
-    own_alpha, mismatch, seconds = [], 0, []
+    own_alpha, own_rule, mismatch, seconds = [], [], 0, []
     for f, k in frames:
         t0 = time.time()
         cars = [o for o in ds.labels(f).objects if o.type == "Car"]
@@ -241,9 +242,19 @@ def main():
                                center_column=float(camera.K[0, 2]),
                                gray=None if bank.refinement is None else to_gray(image))
             ov = iou_2d(label[:, None], d.boxes[None]) if len(d) else np.zeros((n, 0))
-            for i in range(n):
-                j = int(np.argmax(ov[i])) if ov.shape[1] else -1
-                own_alpha.append(d.alpha[j] if j >= 0 and ov[i, j] >= 0.5 else np.nan)
+            match = [int(np.argmax(ov[i])) if ov.shape[1] and ov[i].max() >= 0.5 else -1 for i in range(n)]
+            own_alpha += [d.alpha[j] if j >= 0 else np.nan for j in match]
+            # the pipeline's rule for boxes without a viewpoint, on our own matched boxes
+            mine = d.boxes[[j for j in match if j >= 0]]
+            rule = np.full(n, np.nan)
+            if len(mine):
+                sc = floored(box_bin_log_odds(bank, image, mine, pyramid=pyr, iou=args.iou[0], floor_margin=-np.inf),
+                             np.full(len(mine), a * args.floor_margin[0] + c))
+                prior = box_log_prior(bank, mine, camera, road_spread=spreads[0])
+                sc = sc + (0.0 if prior is None else args.prior_weight[0] * prior) + \
+                    (classifiers[k].log_probs(image, mine) if classifiers else 0.0)
+                rule[[i for i, j in enumerate(match) if j >= 0]] = bin_center(np.argmax(sc, 1))
+            own_rule += list(rule)
         seconds.append(time.time() - t0)
         print(f"frame {f} fold {k}: {n} cars, {seconds[-1]:.1f} s", flush=True)
     rec = {key: np.asarray(v) for key, v in rec.items()}
@@ -312,6 +323,8 @@ def main():
         ours = angle_difference(bin_center(np.argmax(pipeline_scores, 1)), rec["alpha"])
         out["methods"]["label/pipeline-on-found"] = summary(np.where(found, ours, np.nan), rec)
         print(fmt("pipeline on found", out["methods"]["label/pipeline-on-found"]))
+        out["methods"]["own/pipeline"] = summary(angle_difference(np.asarray(own_rule), rec["alpha"]), rec)
+        print(fmt("pipeline on own boxes", out["methods"]["own/pipeline"]))
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
 

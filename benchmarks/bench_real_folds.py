@@ -1,9 +1,12 @@
 """The model variants on the real KITTI frames, cross-validated by drive.
 
 Every frame of fold k (:mod:`wirescene.io.folds`) is fitted with the part detectors and
-the detector bank trained on the other folds (``MODELS/parts_fold{k}.npz``,
-``MODELS/bank_fold{k}.npz``, made by ``wirescene train parts|detector --kitti-root ROOT
---folds ...``), so no figure comes from a model that saw the frame's drive. The folds'
+the detector bank and crop viewpoint classifier trained on the other folds
+(``MODELS/parts_fold{k}.npz``, ``MODELS/bank_fold{k}.npz``,
+``MODELS/viewpoint_classifier_fold{k}.npz``; the last two only with ``--detections bank``;
+made by ``wirescene train parts|detector --kitti-root ROOT`` and ``wirescene train
+viewpoints ROOT`` with ``--split-file`` of the other folds' frames), so no figure comes
+from a model that saw the frame's drive. The folds'
 records are pooled and reported with the paper's tables and the KITTI metrics, whose
 scores are the calibrated confidences cross-validated the same way (the confidence model
 of fold k is fitted on the other folds' records).
@@ -88,12 +91,14 @@ def main():
             models = {"parts_model": str(args.models / f"parts_fold{k}.npz")}
             if args.detections == "bank":
                 models["detector_bank"] = str(args.models / f"bank_fold{k}.npz")
+                models["viewpoint_classifier"] = str(args.models / f"viewpoint_classifier_fold{k}.npz")
             for path in models.values():
                 if not Path(path).is_file():
                     sys.exit(f"missing fold model {path}")
         options = FitOptions(lifting=LiftingOptions(n_particles=args.particles), seed=args.seed,
                              calibrate_scores=False, **models).with_settings(settings)
-        source = DetectionSource(args.detections, bank=models.get("detector_bank"))
+        source = DetectionSource(args.detections, bank=models.get("detector_bank"),
+                                 classifier=models.get("viewpoint_classifier"))
         print(f"fold {k}: {len(test)} frames, models {models or 'shipped'}", file=sys.stderr)
         evaluate_dataset(dataset, variants, frames=test, source=source, options=options,
                          predictions_dir=args.out / f"fold{k}", resume=True, workers=args.workers)

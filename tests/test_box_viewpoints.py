@@ -136,6 +136,23 @@ def test_fit_frame_completes_unknown_viewpoints_with_the_bank(scene):
     assert fit.evidence is None  # a coarse variant needs no part evidence for it any more
 
 
+def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
+    from wirescene.fitting.pipeline import detect_own
+    from wirescene.predetect import detect_cars
+
+    image, camera, bank = scene["image"], scene["camera"], scene["bank"]
+    raw = detect_cars(image, bank=bank, camera=camera)
+    own = detect_own(camera, image, bank=bank)
+    assert len(raw) >= 3
+    assert np.array_equal(own.boxes, raw.boxes) and np.array_equal(own.scores, raw.scores)
+    expected = box_viewpoints(bank, image, raw.boxes, camera=camera, classifier=load_default_classifier())
+    assert np.allclose(own.alpha, expected)
+    # fit_frame's own pre-detection is this one
+    assert np.allclose(fit_frame(camera, None, ["coarse"], image=image).detections.alpha, expected)
+    # no camera, no road prior: the detector's own viewpoints stay
+    assert np.array_equal(detect_own(None, image, bank=bank).alpha, detect_cars(image, bank=bank).alpha)
+
+
 def test_crop_classifier_contract_storage_and_mirror_training(scene, tmp_path):
     image, boxes = scene["image"], scene["boxes"]
     x = crop_viewpoint_features(image, boxes)

@@ -228,8 +228,10 @@ def detect(image, calib=None, *, models=None) -> Detections:
         The camera; when given, each detection's score also weighs how well its box's
         height fits its position below the horizon (the bank's ground prior,
         :mod:`wirescene.predetect.geometry`), which the shipped bank was calibrated with,
-        and each detection's viewpoint weighs front against back views by where the car
-        stands in the traffic (:mod:`wirescene.predetect.viewpoint_prior`).
+        and each box's viewpoint is chosen by the bank's templates inside it, the crop
+        viewpoint classifier and where the car stands on the road
+        (:func:`wirescene.fitting.pipeline.detect_own`); without it the detector's own
+        viewpoints stay.
     models : path, optional
         A models directory whose detector bank replaces the shipped one.
 
@@ -249,14 +251,13 @@ def detect(image, calib=None, *, models=None) -> Detections:
     >>> bool((dets.scores > 0.5).all())  # above the shipped bank's threshold
     True
     """
-    from wirescene.fitting.pipeline import detector_bank
-    from wirescene.predetect import detect_cars
+    from wirescene.fitting.pipeline import detect_own, detector_bank
 
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
     bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
-    return detect_cars(rgb, bank=bank, camera=camera)
+    return detect_own(camera, rgb, bank=bank)
 
 
 def evaluate(
@@ -342,6 +343,7 @@ def evaluate(
                                     where=dataset.split_dir)
     options = _options(None, particles, seed, models, settings)
     return evaluate_dataset(dataset, names, frames=frame_ids,
-                            source=DetectionSource(str(detections), bank=options.detector_bank),
+                            source=DetectionSource(str(detections), bank=options.detector_bank,
+                                                   classifier=options.viewpoint_classifier),
                             options=options, workers=_positive_int(workers, "workers"),
                             predictions_dir=None if predictions is None else Path(predictions))

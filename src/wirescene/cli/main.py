@@ -237,7 +237,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         inference["calibrate_scores"] = False
     options = _fit_options(particles, seed, **inference)
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections,
-                             bank=options.detector_bank)
+                             bank=options.detector_bank, classifier=options.viewpoint_classifier)
     on_gpu = options.inference.device.startswith("cuda")
     if on_gpu and (workers or 1) > 1:
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
@@ -334,7 +334,8 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     try:
         fitted = predict_dataset(dataset, out, variant=variant, options=options, frames=frame_ids, resume=resume,
                                  source=DetectionSource(detections, allow_missing=allow_missing_detections,
-                                                        bank=options.detector_bank),
+                                                        bank=options.detector_bank,
+                                                        classifier=options.viewpoint_classifier),
                                  workers=_frame_workers(workers, options.inference.device), dask_client=client,
                                  progress=_progress("predict", total))
     finally:

@@ -28,6 +28,7 @@ class DetectionSource:
     viewpoint_noise_deg: float = 0.0
     allow_missing: bool = False
     bank: str | None = None  # detector bank file for "bank" (None: the shipped one)
+    classifier: str | None = None  # crop viewpoint classifier file for "bank" (None: the shipped one)
 
     @property
     def folder(self) -> Path | None:
@@ -63,10 +64,10 @@ class DetectionSource:
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
         if self.spec == "bank":
-            from wirescene.fitting.pipeline import detector_bank
-            from wirescene.predetect import detect_cars
+            from wirescene.fitting.pipeline import detect_own, detector_bank, viewpoint_classifier
 
-            return detect_cars(dataset.image(frame_id), bank=detector_bank(self.bank), camera=dataset.camera(frame_id))
+            return detect_own(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
+                              classifier=viewpoint_classifier(self.classifier))
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:
