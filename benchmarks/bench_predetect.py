@@ -390,18 +390,30 @@ def main():
                                                       iou=args.min_iou) for t in thresholds]
         for o in pooled["operating_points"]:
             print("   ", fmt_operating_point(o))
-    cpu = []
-    for f in ids[: args.time_frames]:
+    from wirescene.fitting.pipeline import detect_own
+
+    cpu, plain, own = [], [], []
+    unverified = replace(time_bank, verifier=None)
+    for f in ids[: args.time_frames]:  # side by side, frame by frame: load falls on all three alike
         img = ds.image(f)
-        t, c = time.perf_counter(), time.process_time()
         use_ground = not args.no_ground and time_bank.calibration is not None and time_bank.meta.get("ground_prior")
-        detect_cars(img, bank=time_bank, return_all=True, camera=ds.camera(f) if use_ground else None)
+        camera = ds.camera(f) if use_ground else None
+        t, c = time.perf_counter(), time.process_time()
+        detect_cars(img, bank=time_bank, return_all=True, camera=camera)
         times.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
+        c = time.process_time()
+        detect_cars(img, bank=unverified, return_all=True, camera=camera)
+        plain.append(time.process_time() - c)
+        c = time.process_time()
+        detect_own(camera, img, bank=time_bank)  # the pipeline's: at the threshold, the box rule's viewpoints
+        own.append(time.process_time() - c)
     # CPU time of this single-threaded process = seconds on one free core (wall time grows
     # with whatever else shares the machine)
     print(f"time per frame (detect_cars, 1 thread, {len(times)} frames): CPU {np.mean(cpu):.2f} s (max {np.max(cpu):.2f}), "
-          f"wall {np.mean(times):.2f} s (load average {os.getloadavg()[0]:.1f})")
+          f"wall {np.mean(times):.2f} s (load average {os.getloadavg()[0]:.1f}); side by side: without the verifier "
+          f"{np.mean(plain):.2f} s, the pipeline's own pre-detection (fitting.pipeline.detect_own, shipped viewpoint "
+          f"classifier) {np.mean(own):.2f} s")
     out.update(pooled=public(pooled), per_fold=per_fold, seconds_per_frame=float(np.mean(times)),
                cpu_seconds_per_frame=float(np.mean(cpu)))
     if args.pr_curve:

@@ -312,6 +312,10 @@ def test_models_replace_the_bank_and_the_resume_fingerprint(trained, tmp_path):
     written = json.loads((tmp_path / "dets" / "000010.json").read_text())["detections"]
     kept = own.subset(own.scores > DetectorBank.load(out / "detector_bank.npz").threshold)
     np.testing.assert_allclose([d["box"] for d in written], kept.boxes, atol=0.01)
+    from wirescene.core.viewpoints import viewpoint_bin
+
+    # the files carry the viewpoints the pipeline gives the boxes, as wirescene.detect does
+    assert [d["viewpoint_bin"] for d in written] == [int(b) for b in viewpoint_bin(kept.alpha)]
     pred = tmp_path / "pred"
     common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--particles", 10, "--workers", 1,
               "--detections", "bank", "--predictions", pred]

@@ -131,11 +131,15 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write AP and timing as JSON.")
 def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out):
-    """Run the configuration detector bank on a KITTI-layout directory and report AP."""
+    """Run the configuration detector bank on a KITTI-layout directory and report AP.
+
+    The files of --out hold the detections above the threshold with the viewpoints the
+    pipeline gives them (the box rule of `fit`); AP and AOS score the bank's own."""
     import numpy as np
 
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
+    from wirescene.fitting.pipeline import detect_own
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import DetectorBank, detect_cars
@@ -156,6 +160,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:
+                kept = detect_own(ds.camera(fid), img, bank=bank, detections=kept)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
                 write_text(out_dir / f"{fid}.json", json.dumps({"detections": entries}, indent=1))

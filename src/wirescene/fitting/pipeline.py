@@ -172,7 +172,8 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     return Detections(detections.boxes, detections.scores, alpha, detections.source)
 
 
-def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None) -> Detections:
+def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
+               detections: Detections | None = None) -> Detections:
     """Our own pre-detection (stage 1): the detector bank's cars at its threshold
     (:func:`wirescene.predetect.detect_cars`, with the camera), each box's viewpoint then
     chosen as for the boxes of any other detector (:func:`complete_viewpoints`: the bank's
@@ -180,7 +181,8 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     that rule puts 85% of the cars the bank finds within 45 deg, the detector's own choice
     81% (``benchmarks/RESULTS.md``). Without a camera (``None``) the detector's own
     viewpoints stay. ``image``, ``bank`` and ``classifier`` as in :func:`complete_viewpoints`;
-    returns the bank's boxes and calibrated scores with the rule's viewpoints.
+    ``detections``: the bank's detections of ``image`` if already made (e.g. at another
+    threshold). Returns the bank's boxes and calibrated scores with the rule's viewpoints.
 
     Examples
     --------
@@ -191,7 +193,7 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     from wirescene.predetect import detect_cars
 
     bank = detector_bank(None) if bank is None else bank
-    found = detect_cars(image, bank=bank, camera=camera)
+    found = detect_cars(image, bank=bank, camera=camera) if detections is None else detections
     if camera is None or not len(found):
         return found
     unknown = Detections(found.boxes, found.scores, np.full(len(found), np.nan), found.source)
