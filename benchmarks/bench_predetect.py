@@ -185,10 +185,11 @@ def add_verifiers(args) -> None:
     for k in sorted(set(args.fold or range(N_FOLDS))):
         bank = DetectorBank.load(Path(args.add_verifier) / f"fold{k}_raw.npz")
         if bank.verifier is not None:
-            raise SystemExit(f"{args.add_verifier}/fold{k}_raw.npz has a verifier already")
+            print(f"--- fold {k}: its verifier is replaced", flush=True)
+            bank = replace(bank, verifier=None, meta={m: v for m, v in bank.meta.items() if m != "verifier"})
         images, _ = load_training_frames(ds, [f for f in ds.frame_ids() if fold_of(f) != k])
-        print(f"--- fold {k}: verifier on {len(images)} images", flush=True)
-        add_verifier(bank, images, ds, progress=lambda m: print("   ", m, flush=True))
+        print(f"--- fold {k}: verifier on {len(images)} images (cars at IoU >= {args.verifier_iou:g})", flush=True)
+        add_verifier(bank, images, ds, car_iou=args.verifier_iou, progress=lambda m: print("   ", m, flush=True))
         bank.save(Path(args.models_dir) / f"fold{k}_raw.npz")
 
 
@@ -242,9 +243,11 @@ def main():
                     help="further confidence thresholds at which to report the operating point")
     ap.add_argument("--min-iou", type=float, default=0.5, help="overlap at which the operating point counts a car found")
     ap.add_argument("--add-verifier", default=None, metavar="DIR",
-                    help="fit the verifier (the last step of the bank training) to the foldK_raw.npz of DIR that lack "
-                         "one, on each bank's own training frames, and save them to --models-dir (the --fold folds, "
-                         "default all); the same banks a --cv --fold run of today's recipe writes")
+                    help="fit the verifier (the last step of the bank training) to the foldK_raw.npz of DIR (replacing "
+                         "one they have), on each bank's own training frames, and save them to --models-dir (the "
+                         "--fold folds, default all); the same banks a --cv --fold run of today's recipe writes")
+    ap.add_argument("--verifier-iou", type=float, default=0.5,
+                    help="--add-verifier: IoU with a Car label at which the verifier's training boxes count as cars")
     args = ap.parse_args()
     if args.add_verifier:
         if not args.models_dir:

@@ -640,14 +640,15 @@ def fit_bank_ground_prior(bank: DetectorBank, images, dataset, *, per_image: int
 
 
 def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 150, max_rows: int | None = 40_000,
-                      C: float = VERIFIER_C, seed: int = 0, workers: int = 1, progress=None) -> dict:
+                      C: float = VERIFIER_C, car_iou: float = 0.5, seed: int = 0, workers: int = 1,
+                      progress=None) -> dict:
     """The bank's verifier (:mod:`wirescene.predetect.verifier`), fitted on its training
     ``images`` (flipped copies included): the ``per_image`` best-scoring detections of each
     (with the bank's box regression and refinement, no ground term, no verifier), a car
-    where one overlaps a ``Car`` label at IoU >= 0.5, left out where it overlaps another
+    where one overlaps a ``Car`` label at IoU >= ``car_iou``, left out where it overlaps another
     labelled object or DontCare region that much (a Van is neither car nor background), and
     the labelled cars' own boxes with one copy jittered by 5% of their size per side, as
-    further cars. ``max_rows``: a uniform sample of at most that many rows
+    further cars (the copy as a car where it keeps IoU >= ``car_iou``). ``max_rows``: a uniform sample of at most that many rows
     (:class:`~wirescene.training.scale.RowSample`). The returned verifier's ``gain`` is 0
     until a calibration sets it (:func:`set_calibration`). ``workers``, ``progress``: of
     the per-image pass."""
@@ -664,8 +665,8 @@ def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 1
         moved = boxes + np.clip(rng.normal(0.0, 0.05, boxes.shape), -0.2, 0.2) * size
         tasks.append((im, boxes, np.concatenate([boxes, moved]), np.tile(viewpoint_bin(alpha), 2)))
     rows = RowSample(max_rows, seed=seed)
-    for X, y in map_images(partial(_verifier_rows, plain, per_image=per_image), tasks, workers=workers,
-                           progress=progress, name="verifier"):
+    for X, y in map_images(partial(_verifier_rows, plain, per_image=per_image, car_iou=car_iou), tasks,
+                           workers=workers, progress=progress, name="verifier"):
         rows.add(X, y)
     X, y = rows.arrays()
     out = fit_verifier(X, y, C=C)
@@ -676,7 +677,7 @@ def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 1
     return out
 
 
-def _verifier_rows(bank: DetectorBank, task, *, per_image: int):
+def _verifier_rows(bank: DetectorBank, task, *, per_image: int, car_iou: float = 0.5):
     """``(features (k, F) float32, labels (k,))`` of one image of :func:`fit_bank_verifier`."""
     from wirescene.core.boxes import iou_2d
     from wirescene.predetect.bank import regression_features
@@ -688,12 +689,13 @@ def _verifier_rows(bank: DetectorBank, task, *, per_image: int):
     boxes, bins = det.boxes[:per_image], viewpoint_bin(det.alpha[:per_image])
     y = np.zeros(len(boxes), int)
     if len(boxes) and len(cars):
-        y = (iou_2d(boxes[:, None], cars[None]).max(1) >= 0.5).astype(int)
+        y = (iou_2d(boxes[:, None], cars[None]).max(1) >= car_iou).astype(int)
     if len(boxes) and len(image.block):
         ambiguous = (y == 0) & (iou_2d(boxes[:, None], image.block[None]).max(1) >= 0.5)
         boxes, bins, y = boxes[~ambiguous], bins[~ambiguous], y[~ambiguous]
     boxes, bins = np.concatenate([boxes, positives]), np.concatenate([bins, positive_bins]).astype(int)
-    y = np.concatenate([y, np.ones(len(positives), int)])
+    y = np.concatenate([y, (iou_2d(positives[:, None], cars[None]).max(1) >= car_iou).astype(int) if len(positives)
+                        else np.zeros(0, int)])
     X = verifier_features(gray, boxes, regression_features(boxes, bins, image.size))
     return X.astype(np.float32), y
 
@@ -753,13 +755,14 @@ def finish_bank(bank: DetectorBank, images, dataset, *, workers: int = 1, progre
     return bank
 
 
-def add_verifier(bank: DetectorBank, images, dataset, *, workers: int = 1, progress=None) -> DetectorBank:
+def add_verifier(bank: DetectorBank, images, dataset, *, car_iou: float = 0.5, workers: int = 1,
+                 progress=None) -> DetectorBank:
     """Fit the bank's verifier (:func:`fit_bank_verifier`) on its training ``images``, the
     last step of :func:`finish_bank` (nothing before it reads the verifier); its gain stays 0
     until a calibration sets it (:func:`set_calibration`)."""
     say = progress or (lambda msg: None)
     try:
-        verifier = fit_bank_verifier(bank, images, dataset, workers=workers, progress=say)
+        verifier = fit_bank_verifier(bank, images, dataset, car_iou=car_iou, workers=workers, progress=say)
     except ValueError as exc:
         say(f"no verifier: {exc}")
         return bank
