@@ -217,7 +217,8 @@ def fit_frame(
     camera : Camera
         Calibrated camera with ``image_size`` set.
     detections : Detections or None
-        2D pre-detections; ``None`` runs our own pre-detection on ``image`` (stage 1).
+        2D pre-detections; ``None`` runs our own pre-detection on ``image`` (stage 1,
+        :func:`detect_own`).
     variants : iterable of str or Variant
         See :data:`wirescene.fitting.variants.VARIANTS`.
     image : (H, W, 3) uint8 array, optional
