@@ -51,7 +51,7 @@ import numpy as np  # noqa: E402
 
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.eval.kitti_metrics import N_SAMPLE_PTS, detection_ap_2d  # noqa: E402
-from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
+from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank  # noqa: E402
@@ -176,6 +176,15 @@ def training_subset(frames: list, fraction: float, *, seed) -> set:
     return set(rng.choice(np.array(frames, dtype=object), size=n, replace=False).tolist())
 
 
+def with_clustering(bank: DetectorBank, args) -> DetectorBank:
+    """``bank`` with the clustering options given on the command line (``--box-weight``,
+    ``--cluster-rx``, ``--cluster-ry``) stored in its meta, where the detector reads them."""
+    for key, value in (("box_weight", args.box_weight), ("cluster_rx", args.cluster_rx), ("cluster_ry", args.cluster_ry)):
+        if value is not None:
+            bank.meta[key] = value
+    return bank
+
+
 def add_verifiers(args) -> None:
     """The ``--add-verifier`` mode: earlier fold banks finished with today's last step."""
     from threadpoolctl import threadpool_limits
@@ -221,8 +230,9 @@ def main():
                     help="fold-models / bank modes: IoU above which detections of different viewpoints suppress "
                          "each other (1: none)")
     ap.add_argument("--cluster-rx", type=float, default=None,
-                    help="fold-models / bank modes: override the banks' vote-clustering radius across (and, "
-                         "with --cluster-ry unset, along) the box, in box widths / heights")
+                    help="override the banks' vote-clustering radius across (and, with --cluster-ry unset, along) "
+                         "the box, in box widths / heights: --cv trains the steps after the templates with it, "
+                         "--from-raw fits the calibration with it, and the banks of --models-dir keep it")
     ap.add_argument("--cluster-ry", type=float, default=None)
     ap.add_argument("--time-frames", type=int, default=5)
     ap.add_argument("--pr-curve", default=None)
@@ -271,7 +281,7 @@ def main():
         t0 = time.time()
         images, _ = load_training_frames(ds, ids, flips=False)
         for k in range(N_FOLDS):
-            fold_banks[k] = DetectorBank.load(Path(args.from_raw) / f"fold{k}_raw.npz")
+            fold_banks[k] = with_clustering(DetectorBank.load(Path(args.from_raw) / f"fold{k}_raw.npz"), args)
         for im in images:
             dets[im.frame] = detect_training_image(fold_banks[fold_of(im.frame)], im)
         out["cv_seconds"] = round(time.time() - t0, 1)
@@ -294,6 +304,7 @@ def main():
                                         cut_paste=args.cut_paste,
                                         progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
+            with_clustering(bank, args)  # the steps after the templates detect with it
             finish_bank(bank, train_images, ds, progress=lambda m: print("   ", m, flush=True))
             if args.fold:
                 bank.save(Path(args.models_dir) / f"fold{k}_raw.npz")
@@ -350,12 +361,7 @@ def main():
         for b in banks.values():
             if not ground:
                 b.calibration = None  # pool raw margins (monotone per fold)
-            if args.box_weight is not None:
-                b.meta["box_weight"] = args.box_weight
-            if args.cluster_rx is not None:
-                b.meta["cluster_rx"] = args.cluster_rx
-            if args.cluster_ry is not None:
-                b.meta["cluster_ry"] = args.cluster_ry
+            with_clustering(b, args)
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
             dets[f] = detect_cars(ds.image(f), bank=banks[fold_of(f)], return_all=True,
@@ -368,7 +374,7 @@ def main():
             out["pooled_platt"] = allc.tolist()
             print("Platt calibration of the pooled held-out detections (a, b):", allc.tolist())
     else:
-        bank = DetectorBank.load(args.bank) if args.bank else load_default_bank()
+        bank = with_clustering(DetectorBank.load(args.bank) if args.bank else load_default_bank(), args)
         for f in ids:
             dets[f] = detect_cars(ds.image(f), bank=bank, return_all=True,
                                   camera=None if args.no_ground else ds.camera(f))
@@ -384,6 +390,12 @@ def main():
         m = metrics([dets[f] for f in fk], [gts[f] for f in fk])
         per_fold[k] = public(m)
         print(fmt(f"fold {k} ({len(fk)} frames)", m))
+    per_group = {}
+    for group in FOLD_GROUPS:  # a setting is chosen on one group and reported on the other
+        fg = [f for f in ids if fold_of(f) in group]
+        if fg:
+            per_group[str(group)] = public(m := metrics([dets[f] for f in fg], [gts[f] for f in fg]))
+            print(fmt(f"folds {group} ({len(fg)} frames)", m))
     pooled = metrics([dets[f] for f in ids], [gts[f] for f in ids])
     print(fmt(f"POOLED {name} ({len(ids)} frames)", pooled))
     calibrated = args.bank is not None or not args.no_ground
@@ -413,12 +425,13 @@ def main():
         own.append(time.process_time() - c)
     # CPU time of this single-threaded process = seconds on one free core (wall time grows
     # with whatever else shares the machine)
-    print(f"time per frame (detect_cars, 1 thread, {len(times)} frames): CPU {np.mean(cpu):.2f} s (max {np.max(cpu):.2f}), "
-          f"wall {np.mean(times):.2f} s (load average {os.getloadavg()[0]:.1f}); side by side: without the verifier "
-          f"{np.mean(plain):.2f} s, the pipeline's own pre-detection (fitting.pipeline.detect_own, shipped viewpoint "
-          f"classifier) {np.mean(own):.2f} s")
-    out.update(pooled=public(pooled), per_fold=per_fold, seconds_per_frame=float(np.mean(times)),
-               cpu_seconds_per_frame=float(np.mean(cpu)))
+    if times:  # (--time-frames 0: no timing)
+        print(f"time per frame (detect_cars, 1 thread, {len(times)} frames): CPU {np.mean(cpu):.2f} s (max "
+              f"{np.max(cpu):.2f}), wall {np.mean(times):.2f} s (load average {os.getloadavg()[0]:.1f}); side by side: "
+              f"without the verifier {np.mean(plain):.2f} s, the pipeline's own pre-detection "
+              f"(fitting.pipeline.detect_own, shipped viewpoint classifier) {np.mean(own):.2f} s")
+        out.update(seconds_per_frame=float(np.mean(times)), cpu_seconds_per_frame=float(np.mean(cpu)))
+    out.update(pooled=public(pooled), per_fold=per_fold, per_group=per_group)
     if args.pr_curve:
         c = pooled["_curves"]
         print("PR curve:", plot_pr({"moderate, IoU 0.7": c["2d"], "moderate, IoU 0.5": c["2d_iou_0.5"]},

@@ -39,7 +39,7 @@ import sys
 import time
 from pathlib import Path
 
-RECIPE = ["--partial", "1", "--per-octave", "3", "--mining-rounds", "1", "--calibration", "6.9778,0.2899,0.4637",
+RECIPE = ["--partial", "1", "--per-octave", "3", "--mining-rounds", "1", "--calibration", "7.5854,0.6654,0.4381",
           "--threshold", "0.1"]
 KITTI_TRAIN_FRAMES = 3712
 
