@@ -61,6 +61,7 @@ from wirescene.predetect.box_viewpoints import (  # noqa: E402
     ROAD_SPREAD,
     box_bin_log_odds,
     box_log_prior,
+    box_viewpoints,
 )
 from wirescene.predetect.geometry import horizon_row  # noqa: E402
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray  # noqa: E402
@@ -240,20 +241,16 @@ def main():
             d = detect_pyramid(bank, pyr, (W, H), threshold=bank.threshold,
                                min_height=float(bank.meta.get("min_height", 30.0)), horizon=horizon_row(camera),
                                center_column=float(camera.K[0, 2]),
-                               gray=None if bank.refinement is None else to_gray(image))
+                               gray=None if bank.refinement is None and bank.verifier is None else to_gray(image))
             ov = iou_2d(label[:, None], d.boxes[None]) if len(d) else np.zeros((n, 0))
             match = [int(np.argmax(ov[i])) if ov.shape[1] and ov[i].max() >= 0.5 else -1 for i in range(n)]
             own_alpha += [d.alpha[j] if j >= 0 else np.nan for j in match]
             # the pipeline's rule for boxes without a viewpoint, on our own matched boxes
-            mine = d.boxes[[j for j in match if j >= 0]]
             rule = np.full(n, np.nan)
-            if len(mine):
-                sc = floored(box_bin_log_odds(bank, image, mine, pyramid=pyr, iou=args.iou[0], floor_margin=-np.inf),
-                             np.full(len(mine), a * args.floor_margin[0] + c))
-                prior = box_log_prior(bank, mine, camera, road_spread=spreads[0])
-                sc = sc + (0.0 if prior is None else args.prior_weight[0] * prior) + \
-                    (classifiers[k].log_probs(image, mine) if classifiers else 0.0)
-                rule[[i for i, j in enumerate(match) if j >= 0]] = bin_center(np.argmax(sc, 1))
+            rule[[i for i, j in enumerate(match) if j >= 0]] = box_viewpoints(
+                bank, image, d.boxes[[j for j in match if j >= 0]], camera=camera, classifier=classifiers.get(k),
+                iou=args.iou[0], floor_margin=args.floor_margin[0], prior_weight=args.prior_weight[0],
+                road_spread=spreads[0], pyramid=pyr)
             own_rule += list(rule)
         seconds.append(time.time() - t0)
         print(f"frame {f} fold {k}: {n} cars, {seconds[-1]:.1f} s", flush=True)
