@@ -100,18 +100,19 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
     """What the fit receives at the detection ``threshold``: how many detections, the share
     that overlap a ``Car`` label at IoU >= ``iou`` (precision), the share of the cars found
     (recall, also by box height: :data:`HEIGHT_BANDS` px, by truncation and by KITTI's
-    occlusion flag), why the others are missed (no detection at any score overlaps them, or
-    only ones below the threshold) and the viewpoint error of the detections on a car (over
+    occlusion flag), why the others are missed (no detection at any score overlaps them --
+    by box height, with how many of those have one at IoU >= 0.3 at least -- or only ones
+    below the threshold) and the viewpoint error of the detections on a car (over
     45 deg; over 135 deg: front and back swapped)."""
     from wirescene.core.boxes import iou_2d
 
     n_det = n_on = 0
-    found, candidate, heights, truncated, occluded, dalpha = [], [], [], [], [], []
+    found, best, heights, truncated, occluded, dalpha = [], [], [], [], [], []
     for d, lab in zip(dets, labels):
         cars = [o for o in lab.objects if o.type == "Car"]
         gt = np.array([o.box for o in cars], float).reshape(-1, 4)
         every = np.asarray(d.boxes, float).reshape(-1, 4)
-        candidate.append(iou_2d(every[:, None], gt[None]).max(0) >= iou if len(every) else np.zeros(len(gt), bool))
+        best.append(iou_2d(every[:, None], gt[None]).max(0) if len(every) else np.zeros(len(gt)))  # any score
         keep = np.asarray(d.scores) >= threshold
         boxes, alpha = every[keep], np.asarray(d.alpha, float)[keep]
         n_det += len(boxes)
@@ -130,7 +131,8 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
         truth = np.array([o.alpha for o in cars], float)[ov.argmax(1)[on]]
         dalpha.append(np.abs(np.angle(np.exp(1j * (alpha[on] - truth)))))
     found = np.concatenate(found) if found else np.zeros(0, bool)
-    candidate, heights = np.concatenate(candidate), np.concatenate(heights)
+    best, heights = np.concatenate(best), np.concatenate(heights)
+    candidate = best >= iou
     truncated, occluded = np.concatenate(truncated), np.concatenate(occluded)
 
     def share(mask) -> list:  # [share of the cars found, cars]
@@ -140,14 +142,16 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
     band = np.digitize(heights, HEIGHT_BANDS[1:-1])
     return {"threshold": float(threshold), "iou": float(iou), "n_detections": int(n_det), "n_on_car": int(n_on),
             "precision": n_on / max(n_det, 1), "n_cars": int(len(found)), "recall": float(found.mean()) if len(found) else 0.0,
-            "recall_by_height": {f"{HEIGHT_BANDS[b]:.0f}-{HEIGHT_BANDS[b + 1]:.0f}px": [float(found[band == b].mean())
-                                                                                    if (band == b).any() else None,
-                                                                                    int((band == b).sum())]
+            "recall_by_height": {f"{HEIGHT_BANDS[b]:.0f}-{HEIGHT_BANDS[b + 1]:.0f}px": share(band == b)
                                  for b in range(len(HEIGHT_BANDS) - 1)},
             "recall_by_truncation": {"truncated": share(truncated), "whole": share(~truncated)},
             "recall_by_occlusion": {str(k): share(occluded == k) for k in range(3)},
             "missed_without_candidate": int((~found & ~candidate).sum()),
             "missed_below_threshold": int((~found & candidate).sum()),
+            "missed_without_candidate_by_height": {  # [cars, of them with a detection at IoU >= 0.3]
+                f"{HEIGHT_BANDS[b]:.0f}-{HEIGHT_BANDS[b + 1]:.0f}px": [int((~candidate & (band == b)).sum()),
+                                                                      int((~candidate & (band == b) & (best >= 0.3)).sum())]
+                for b in range(len(HEIGHT_BANDS) - 1)},
             "viewpoint_over_45": float(np.mean(dalpha > 45)) if len(dalpha) else None,
             "viewpoint_over_135": float(np.mean(dalpha > 135)) if len(dalpha) else None}
 
@@ -161,7 +165,9 @@ def fmt_operating_point(o) -> str:
             f"{o['iou']:g} (precision {o['precision']:.2f}); cars found {o['recall']:.2f} of {o['n_cars']} "
             f"(by height: {bands}; {parts(o['recall_by_truncation'])}; occlusion flag "
             f"{parts(o['recall_by_occlusion'])}); missed: {o['missed_without_candidate']} without any detection at IoU "
-            f"{o['iou']:g}, {o['missed_below_threshold']} only below the threshold; viewpoint of the detections on a car off by > 45 deg "
+            f"{o['iou']:g} (by height, with one at IoU >= 0.3: "
+            f"{', '.join(f'{k} {v[0]} ({v[1]})' for k, v in o['missed_without_candidate_by_height'].items())}), "
+            f"{o['missed_below_threshold']} only below the threshold; viewpoint of the detections on a car off by > 45 deg "
             f"{o['viewpoint_over_45'] if o['viewpoint_over_45'] is None else round(o['viewpoint_over_45'], 2)}, "
             f"> 135 deg {o['viewpoint_over_135'] if o['viewpoint_over_135'] is None else round(o['viewpoint_over_135'], 2)}")
 

@@ -82,6 +82,12 @@ def test_operating_point_says_why_cars_are_missed(monkeypatch):
     assert o["recall_by_truncation"] == {"truncated": [1.0, 1], "whole": [0.0, 2]}
     assert o["recall_by_occlusion"] == {"0": [1.0, 1], "1": [0.0, 1], "2": [0.0, 1]}
     assert (o["missed_below_threshold"], o["missed_without_candidate"]) == (1, 1)
+    assert o["missed_without_candidate_by_height"]["60-infpx"] == [1, 0]  # (the boxes are 60 px high)
+    # a low-scoring box half off the missed car (IoU 0.33): still no candidate, but one at IoU >= 0.3
+    near = Detections(np.vstack([dets.boxes, [440, 100, 520, 160]]), np.append(dets.scores, 0.1), np.zeros(4))
+    o = operating_point([near], [labels], 0.5)
+    assert o["missed_without_candidate_by_height"] == {"0-25px": [0, 0], "25-40px": [0, 0], "40-60px": [0, 0],
+                                                       "60-infpx": [1, 1]}
 
 
 def test_rescoring_context_features_see_the_higher_scoring_neighbours(monkeypatch):
