@@ -23,7 +23,7 @@ The decomposition replaces one component at a time by the label's ("perfect rang
 puts the fitted box at the label's range along the ray, keeping its lateral offset,
 height, azimuth and size) and counts the cars that would then pass IoU > 0.7 (KITTI's
 rule for cars) or a centre within 1 m; "only X wrong" makes every other component
-perfect. All of it is reported per distance band and KITTI occlusion flag, and each
+perfect. All of it is reported per distance band, KITTI occlusion flag and truncation, and each
 variant against a reference (default coarse+gp) on the same cars.
 
     python benchmarks/bench_error_budget.py RUN [RUN ...] --root KITTI \\
@@ -62,6 +62,9 @@ BANDS = (("<15 m", 0.0, 15.0), ("15-25 m", 15.0, 25.0), ("25-35 m", 25.0, 35.0),
 #: KITTI occlusion groups: (label, flags). Flag 3 ("unknown") counts as occluded, as in
 #: :mod:`wirescene.eval.metrics`.
 OCCLUSION_GROUPS = (("occ 0", (0,)), ("occ 1", (1,)), ("occ 2+", (2, 3)))
+#: Truncation groups by KITTI's ``truncated`` (the share of the car outside the image):
+#: (label, lower, upper), lower exclusive except for the first.
+TRUNCATION_GROUPS = (("inside", -math.inf, 0.0), ("truncated", 0.0, math.inf))
 #: The components the decomposition makes perfect one at a time.
 COMPONENTS = ("range", "lateral", "height", "azimuth", "size")
 #: Width of the depth bins of the plot, metres.
@@ -257,7 +260,8 @@ def true_positive_cars(results: Sequence[FrameResult], cameras: dict) -> dict[st
     Returns
     -------
     dict
-        ``frame``, ``gt_index``, ``det_index``, ``occluded`` (KITTI flag), ``focal``,
+        ``frame``, ``gt_index``, ``det_index``, ``occluded`` (KITTI flag), ``truncated``
+        (KITTI's share outside the image), ``focal``,
         ``camera_centre`` (N, 3) and the ``fitted`` / ``labels`` :class:`Boxes`.
     """
     by_frame = {r.frame_id: r for r in results}
@@ -268,13 +272,14 @@ def true_positive_cars(results: Sequence[FrameResult], cameras: dict) -> dict[st
         camera = cameras[tp.frame_id]
         rows.append((tp.frame_id, tp.gt_index, d, tp.kitti_occluded, camera.P[1, 1], camera.center,
                      frame.est_location[d], frame.est_dims[d], frame.est_rotation_y[d],
-                     label.location, label.dims, label.rotation_y))
-    cols = list(zip(*rows)) if rows else [[]] * 12  # no true positive: empty columns of the right kinds
+                     label.location, label.dims, label.rotation_y, label.truncated))
+    cols = list(zip(*rows)) if rows else [[]] * 13  # no true positive: empty columns of the right kinds
     return {
         "frame": np.array(cols[0], dtype=object),
         "gt_index": np.array(cols[1], dtype=int),
         "det_index": np.array(cols[2], dtype=int),
         "occluded": np.array(cols[3], dtype=int),
+        "truncated": np.array(cols[12], dtype=float),
         "focal": np.array(cols[4], dtype=float),
         "camera_centre": np.array(cols[5], dtype=float).reshape(-1, 3),
         "fitted": Boxes.of(np.array(cols[6]), np.array(cols[7]), np.array(cols[8])),
@@ -312,13 +317,16 @@ def _share(mask) -> float | None:
 
 
 def group_masks(table: dict) -> dict[str, np.ndarray]:
-    """``{"all" | band | occlusion group: (N,) bool}`` of the cars of a :func:`car_table`."""
-    z, occ = table["label_depth"], table["occluded"]
+    """``{"all" | band | occlusion group | truncation group: (N,) bool}`` of the cars of a
+    :func:`car_table`."""
+    z, occ, trunc = table["label_depth"], table["occluded"], table["truncated"]
     masks = {"all": np.ones(len(z), bool)}
     for name, lo, hi in BANDS:
         masks[name] = (z >= lo) & (z < hi)
     for name, flags in OCCLUSION_GROUPS:
         masks[name] = np.isin(occ, flags)
+    for name, lo, hi in TRUNCATION_GROUPS:
+        masks[name] = (trunc > lo) & (trunc <= hi)
     return masks
 
 
@@ -438,7 +446,9 @@ def format_report(name: str, detections: str, summaries: dict, comparison: dict 
                      _f(s["median_limit"])])
     out += ["### All cars", "", _markdown(header, rows), ""]
     for title, groups in (("By distance (label depth z)", [b[0] for b in BANDS]),
-                          ("By KITTI occlusion flag", [g[0] for g in OCCLUSION_GROUPS])):
+                          ("By KITTI occlusion flag", [g[0] for g in OCCLUSION_GROUPS]),
+                          ("By truncation at the image border (KITTI's truncated > 0)",
+                           [g[0] for g in TRUNCATION_GROUPS])):
         header = ["variant", "group", "cars", "lateral", "range", "range (signed)", "1-px limit", "range / limit",
                   "az (deg)", "<1 m", "IoU>0.7"]
         rows = []
@@ -585,7 +595,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.json:
         meta = {"camera_height": args.camera_height, "reference": args.reference, "iou_threshold": IOU_THRESHOLD,
                 "loc_threshold": LOC_THRESHOLD, "bands": [b[0] for b in BANDS],
-                "occlusion_groups": [g[0] for g in OCCLUSION_GROUPS], "components": list(COMPONENTS)}
+                "occlusion_groups": [g[0] for g in OCCLUSION_GROUPS],
+                "truncation_groups": [g[0] for g in TRUNCATION_GROUPS], "components": list(COMPONENTS)}
         args.json.write_text(json.dumps(_json_ready({"_meta": meta, "runs": report}), indent=1))
         print(f"json: {args.json}", file=sys.stderr)
     if args.plot:

@@ -144,7 +144,8 @@ def cma_refine(camera, particles, evidence, model, options, seed):
             theta = np.zeros((1, N, len(xs), 3 + K))
             theta[0, :, :, 0], theta[0, :, :, 1], theta[0, :, :, 2] = phi[0][:, None], logr[0][:, None], alpha[0][:, None]
             theta[0, j] = x0 + xs * scale
-            vals = _evaluate(camera, model, evidence, particles.take([0]), theta, K, options.occluded_score)[0, j]
+            vals = _evaluate(camera, model, evidence, particles.take([0]), theta, K, options.occluded_score,
+                             border_occludes=options.border_occludes)[0, j]
             es.tell(list(xs), list(-vals))
         best[0, j] = x0 + np.asarray(es.result.xbest) * scale
     return best[0]
@@ -173,7 +174,8 @@ def cma_comparison(args):
         times["cma"] += time.perf_counter() - t
         cars = labels.objects
         for name, th in (("sbo", sbo_theta), ("cma", cma_theta)):
-            val = _evaluate(cam, model, ev, p, th[None, :, None, :], opts.n_shape, opts.occluded_score)[0, :, 0]
+            val = _evaluate(cam, model, ev, p, th[None, :, None, :], opts.n_shape, opts.occluded_score,
+                            border_occludes=opts.border_occludes)[0, :, 0]
             rng_ = np.exp(th[:, 1])
             x, z, az = rng_ * np.sin(th[:, 0]), rng_ * np.cos(th[:, 0]), th[:, 2] + th[:, 0]
             for j, g in enumerate(cars):

@@ -3,7 +3,8 @@ import numpy as np
 from conftest import KITTI_ROOT, assert_close
 from wirescene.core.shape import load_default
 from wirescene.core.types import SceneParticles
-from wirescene.infer.inference import _to_viewing, update_occlusion
+from wirescene.infer.inference import _evaluate, _terms, _to_viewing, update_occlusion
+from wirescene.infer.likelihood import outside_image
 from wirescene.infer.masks import (
     all_mask_hidden,
     fit_mask,
@@ -68,6 +69,43 @@ def test_deterministic_occlusion_hides_the_car_behind():
     assert not gamma[0, 0].any()  # nothing hides the near car
     mask_do, gamma_do = update_occlusion(camera, model, _Flat(), p, theta, 5, -0.5, searched=False, deterministic=True)
     assert gamma_do is None and mask_do[0, 1] != 0 and mask_do[0, 0] == 0
+
+
+def test_parts_outside_the_image_score_c_not_the_evidence():
+    # A car at the right image border, part of it beyond: with border occlusion its
+    # visible vertices outside the image score c, inside they keep the evidence (here
+    # a constant floor), as a mask hiding exactly those vertices would give.
+    camera = KittiDataset(KITTI_ROOT).camera("000010")
+    model = load_default()
+    x, z, az = np.array([[6.5]]), np.array([[9.0]]), np.array([[0.3]])
+    p = SceneParticles(np.zeros((1, 1)), np.zeros((1, 1)), x, z, az, np.zeros((1, 1)), np.ones((1, 1, 3)))
+    theta = np.zeros((1, 1, 1, 8))
+    theta[..., 0], theta[..., 1], theta[..., 2] = (v[..., None] for v in _to_viewing(x, z, az))
+    floor, c = -2.0, 0.75
+
+    class _Floor:
+        def log_ratio(self, uv, obj, scale):
+            return np.full(uv.shape[:-1], floor)
+
+    terms = _terms(camera, model, _Floor(), p, theta, 5, border_occludes=True)
+    visible = ~terms.self_hidden[0, 0, 0]
+    out = outside_image(camera, terms.uv[0, 0, 0]) & visible
+    assert 3 <= out.sum() < visible.sum()  # truncated, not gone
+    assert np.array_equal(terms.border[0, 0, 0], out)
+    expected = (floor * (visible & ~out).sum() + c * out.sum()) / visible.sum()
+    assert_close(_evaluate(camera, model, _Floor(), p, theta, 5, c, border_occludes=True)[0, 0, 0], expected)
+    assert_close(_evaluate(camera, model, _Floor(), p, theta, 5, c)[0, 0, 0], floor)
+    # Good evidence inside the image, the floor beyond it: without border occlusion the
+    # searched mask must hide the outside vertices; with it, hiding anything costs.
+
+    class _Inside:
+        def log_ratio(self, uv, obj, scale):
+            return np.where(outside_image(camera, uv), floor, 3.0)
+
+    masks = [update_occlusion(camera, model, _Inside(), p, theta[:, :, 0], 5, c, searched=True, deterministic=False,
+                              border_occludes=b)[0][0, 0] for b in (False, True)]
+    assert mask_hidden(terms.uv[0, 0, 0], masks[0])[out].mean() > 0.5
+    assert masks[1] == 0
 
 
 def test_mask_weight_sums_equal_the_explicit_sums_over_all_masks():

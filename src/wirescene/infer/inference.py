@@ -57,7 +57,7 @@ from wirescene.core.settings import option
 from wirescene.core.shape import ShapeModel
 from wirescene.core.types import ObjectEstimate, SceneEstimate, SceneParticles
 from wirescene.core.wireframe import FACES, N_VERTICES
-from wirescene.infer.likelihood import PartEvidence, instantiate_wireframes, object_likelihood
+from wirescene.infer.likelihood import PartEvidence, instantiate_wireframes, object_likelihood, outside_image
 from wirescene.infer.masks import best_mask, fit_mask, mask_hidden
 from wirescene.infer.occluded_score import load_occluded_score
 from wirescene.infer.occlusion import inter_object_occlusion
@@ -120,6 +120,9 @@ class InferenceOptions:
                                help="Weight of the prior that cars head along the road in the fine objective (0: none).")
     # Only for cars whose coarse start heads within ROAD_PRIOR_WIDTH of the road: the rest stand across it.
     road_prior_gated: bool = True
+    # A part projected outside the image scores c like any occluded part, not the detectors' floor.
+    border_occludes: bool = option(True, help="Count the parts a hypothesis projects outside the image as occluded "
+                                              "by the image border.")
     # The paper's tolerance for a correct coarse viewpoint, around each pre-detection's (0: no window).
     viewpoint_window_deg: float = option(45.0, cli="viewpoint-window",
                                          help="Degrees the fine stage may turn a car's observation angle away from "
@@ -230,13 +233,15 @@ def size_cost(lo, hi) -> np.ndarray:
 class _Terms:
     """The mask-independent parts of the objective for a batch ``(P, N, M)`` of
     hypotheses: projected vertices, their self-occlusion (or being behind the camera),
-    the part evidence at them and the box penalty. Kept so that the occlusion update
+    which fall outside the image (occluded by its border), the part evidence at them and
+    the box penalty. Kept so that the occlusion update
     and the re-scoring after it reuse the geometry of the chosen samples instead of
     placing and ray casting them again."""
 
     uv: np.ndarray  # (P, N, M, 36, 2)
     vertices: np.ndarray  # (P, N, M, 36, 3)
     self_hidden: np.ndarray  # (P, N, M, 36)
+    border: np.ndarray  # (P, N, M, 36) visible but outside the image
     evidence: np.ndarray  # (P, N, M, 36)
     penalty: np.ndarray  # (P, N, M)
 
@@ -250,24 +255,25 @@ class _Terms:
 
     def value(self, c: float, mask=None, gamma=None) -> np.ndarray:
         """Objective ``(P, N, M)`` with vertices hidden by each object's occluder
-        ``mask`` ``(P, N)`` and by ``gamma`` ``(P, N, 36)``."""
-        hidden = None
+        ``mask`` ``(P, N)``, by ``gamma`` ``(P, N, 36)`` and by the image border."""
+        hidden = self.border
         if mask is not None:
-            hidden = mask_hidden(self.uv, np.asarray(mask)[:, :, None])
+            hidden = hidden | mask_hidden(self.uv, np.asarray(mask)[:, :, None])
         if gamma is not None:
-            g = np.asarray(gamma)[:, :, None, :]
-            hidden = g if hidden is None else hidden | g
+            hidden = hidden | np.asarray(gamma)[:, :, None, :]
         return object_likelihood(self.evidence, self.self_hidden, hidden, c=c) - self.penalty
 
 
 def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None, box_weight=0.0,
-           device="numpy", plane=None, shape_prior=0.0, size_prior=0.0, road_prior=0.0) -> _Terms:
+           device="numpy", plane=None, shape_prior=0.0, size_prior=0.0, road_prior=0.0,
+           border_occludes=False) -> _Terms:
     """:class:`_Terms` of viewing parameters ``theta`` ``(P, N, M, 3 + K)`` on the
     particles' planes (or ``plane = (pitch, roll)``, see :func:`_geometry`); the
     penalty is ``box_weight`` times :func:`box_cost` against the detection ``boxes``
     ``(N, 4)`` under the robust loss of scale :data:`BOX_ROBUST`, plus ``shape_prior``
     times half the squared norm of the shape coefficients, plus the size and
-    road-alignment priors."""
+    road-alignment priors. With ``border_occludes`` the visible vertices projected outside
+    the image are occluded by its border."""
     N = particles.x.shape[1]
     plane = (particles.pitch, particles.roll) if plane is None else plane
     batch = _geometry(camera, shape_model, plane, particles.height, theta, n_shape, device)
@@ -287,14 +293,17 @@ def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None,
         azimuth = _from_viewing(theta)[2]
         penalty = penalty + road_alignment_cost(azimuth, weight=road_prior, width=ROAD_PRIOR_WIDTH)
     self_hidden = batch.self_hidden | (batch.depth <= NEAR_PLANE)
-    return _Terms(batch.uv, batch.vertices, self_hidden, e, penalty)
+    border = (outside_image(camera, batch.uv) & ~self_hidden if border_occludes
+              else np.zeros_like(self_hidden))
+    return _Terms(batch.uv, batch.vertices, self_hidden, border, e, penalty)
 
 
 def _evaluate(camera, shape_model, evidence, particles, theta, n_shape, c, boxes=None, box_weight=0.0,
-              mask=None, gamma=None):
+              mask=None, gamma=None, *, border_occludes=False):
     """Objective of viewing parameters ``theta`` ``(P, N, M, 3 + K)`` -> ``(P, N, M)``
     (see :class:`_Terms`)."""
-    return _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes, box_weight).value(c, mask, gamma)
+    return _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes, box_weight,
+                  border_occludes=border_occludes).value(c, mask, gamma)
 
 
 def _onto_plane(camera, theta, plane_from, plane_to, height):
@@ -317,7 +326,8 @@ def _onto_plane(camera, theta, plane_from, plane_to, height):
     return out
 
 
-def update_occlusion(camera, shape_model, evidence, particles, theta, n_shape, c, *, searched: bool, deterministic: bool):
+def update_occlusion(camera, shape_model, evidence, particles, theta, n_shape, c, *, searched: bool, deterministic: bool,
+                     border_occludes: bool = False):
     """Step 2 of Algorithm 1 for the current parameters ``theta`` ``(P, N, D)``.
 
     * deterministic only (``fg+do``): ``gamma`` by ray casting against the other
@@ -329,9 +339,11 @@ def update_occlusion(camera, shape_model, evidence, particles, theta, n_shape, c
       deterministically occluded vertex stays occluded whatever the mask (the paper's
       domain restriction).
 
-    Returns ``mask`` ``(P, N)`` and ``gamma`` ``(P, N, 36)`` (None where unused).
+    With ``border_occludes`` the vertices outside the image stay occluded whatever the
+    mask. Returns ``mask`` ``(P, N)`` and ``gamma`` ``(P, N, 36)`` (None where unused).
     """
-    terms = _terms(camera, shape_model, evidence, particles, theta[:, :, None], n_shape)
+    terms = _terms(camera, shape_model, evidence, particles, theta[:, :, None], n_shape,
+                   border_occludes=border_occludes)
     return _occlusion_of(camera, terms, c, searched=searched, deterministic=deterministic)
 
 
@@ -339,11 +351,13 @@ def _occlusion_of(camera, terms: _Terms, c, *, searched: bool, deterministic: bo
     """:func:`update_occlusion` for the geometry ``terms`` ``(P, N, 1)`` of the current parameters."""
     uv = terms.uv[:, :, 0]
     self_hidden = terms.self_hidden[:, :, 0]
+    border = terms.border[:, :, 0]
     gamma = None
     if deterministic:
         gamma = inter_object_occlusion(terms.vertices[:, :, 0], FACES, camera.center, device=device) & ~self_hidden
     if searched:
-        return best_mask(uv, terms.evidence[:, :, 0], self_hidden, c=c, hidden=gamma), gamma
+        hidden = border if gamma is None else gamma | border
+        return best_mask(uv, terms.evidence[:, :, 0], self_hidden, c=c, hidden=hidden), gamma
     if deterministic:
         return fit_mask(uv, gamma, ~self_hidden), None
     return None, None
@@ -427,7 +441,8 @@ class FineObjective:
         o = self.options
         return _terms(self.camera, self.shape_model, self.evidence, particles, theta, o.n_shape, self.boxes,
                       o.box_weight, o.device, plane=(plane[..., 0], plane[..., 1]), shape_prior=o.shape_prior,
-                      size_prior=o.size_prior, road_prior=o.road_prior and self.road_weight(particles))
+                      size_prior=o.size_prior, road_prior=o.road_prior and self.road_weight(particles),
+                      border_occludes=o.border_occludes)
 
     def value(self, terms: "_Terms", mask, gamma) -> np.ndarray:
         """Objective ``(P, N, M)`` of ``terms`` under the occlusion ``mask``, ``gamma``."""
@@ -737,7 +752,7 @@ def estimate_from_refined(
     bottom_centre = np.stack([(lo[:, 0] + hi[:, 0]) / 2, np.zeros(N), (lo[:, 2] + hi[:, 2]) / 2], axis=1)
     location = batch.location + np.einsum("nij,nj->ni", batch.R, bottom_centre)
     _, names, _ = shape_model.nearest_exemplar(X_obj)
-    occluded = refined.gamma[rows, cols] | mask_hidden(batch.uv, refined.mask[rows, cols])
+    occluded = refined.gamma[rows, cols] | mask_hidden(batch.uv, refined.mask[rows, cols]) | outside_image(camera, batch.uv)
     objects = [
         ObjectEstimate(
             detection_index=j,

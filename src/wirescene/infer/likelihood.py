@@ -49,6 +49,27 @@ def object_likelihood(evidence: np.ndarray, self_hidden: np.ndarray, mask_hidden
     return num / np.maximum(visible0.sum(axis=-1), 1)
 
 
+def outside_image(camera: Camera, uv: np.ndarray) -> np.ndarray:
+    """``(...)`` bool: which pixels ``uv`` ``(..., 2)`` fall outside the camera's image
+    (all False when its ``image_size`` is unknown). A part projected there is hidden by
+    the image border, an occluder known without search (the paper's truncation mode).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> cam = Camera(np.hstack([np.eye(3), np.zeros((3, 1))]), (100, 50))
+    >>> outside_image(cam, np.array([[10.0, 10.0], [-1.0, 10.0], [10.0, 60.0]])).tolist()
+    [False, True, True]
+    """
+    uv = np.asarray(uv, dtype=float)
+    check_shape("uv", uv, (..., 2))
+    if camera.image_size is None:
+        return np.zeros(uv.shape[:-1], dtype=bool)
+    width, height = camera.image_size
+    return (uv[..., 0] < 0) | (uv[..., 0] > width - 1) | (uv[..., 1] < 0) | (uv[..., 1] > height - 1)
+
+
 @dataclass
 class WireframeBatch:
     """Geometry of a batch of wireframe hypotheses, everything ``(..., 36, ...)``."""
