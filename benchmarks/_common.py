@@ -116,10 +116,13 @@ def prediction_dirs(run):
     return folds
 
 
-def read_run(run) -> tuple[dict, str]:
+def read_run(run, *, verified: bool = True) -> tuple[dict, str]:
     """``({variant: [FrameResult, ...]}, detections)`` of a run's folds, pooled; the
-    detections spec as recorded (``gt``, ``bank`` or a directory)."""
+    detections spec as recorded (``gt``, ``bank`` or a directory). A ``bench_real_folds.py``
+    run on our own pre-detections holds every fitted car; with ``verified`` its fit's
+    verification is applied held out, as its summary does (``verification.json``)."""
     import json
+    from pathlib import Path
 
     from wirescene.core.errors import InputError
     from wirescene.eval.records import RECORDS_DIR
@@ -138,6 +141,14 @@ def read_run(run) -> tuple[dict, str]:
         seen.update(frames)
         first = json.loads((folder / RECORDS_DIR / f"{frames[0]}.json").read_text())
         specs.add(str(first.get("config", {}).get("detections", {}).get("spec", "?")))
+    verification = Path(run) / "verification.json"
+    if verified and verification.is_file():
+        from wirescene.io.folds import fold_of
+        from wirescene.training.scores import cross_validated_car_filter
+
+        tau = json.loads(verification.read_text())["min_car_probability"]
+        folds = {r.frame_id: fold_of(r.frame_id) for rs in records.values() for r in rs}
+        records = cross_validated_car_filter(records, folds, min_probability=tau)
     return records, ", ".join(sorted(specs))
 
 

@@ -24,14 +24,22 @@ from wirescene.eval.metrics import evaluate
 from wirescene.io.folds import FOLD_GROUPS, fold_of
 
 
-def false_cars(result) -> int:
-    """Fitted cars of a frame whose pre-detection is not the first to overlap a ``Car``
-    label at IoU >= 0.5 (in score order: a second box on a car counts too)."""
+def on_car(result) -> np.ndarray:
+    """``(D,)`` bool: which fitted cars of a frame have the first pre-detection, in score
+    order, to overlap a ``Car`` label at IoU >= 0.5."""
     from wirescene.training.kitti_detector import detection_labels
 
     order = np.argsort(-np.asarray(result.det_scores, float), kind="stable")
     cars = np.array([g.box for g in result.gt if g.type == "Car"], float).reshape(-1, 4)
-    return int(len(order) - detection_labels(np.asarray(result.det_boxes)[order], cars).sum())
+    out = np.zeros(len(order), bool)
+    if len(order):
+        out[order] = detection_labels(np.asarray(result.det_boxes)[order], cars)
+    return out
+
+
+def false_cars(result) -> int:
+    """Fitted cars of a frame that are not :func:`on_car` (a second box on a car counts too)."""
+    return int((~on_car(result)).sum())
 
 
 def figures(results) -> dict:

@@ -39,7 +39,10 @@ from wirescene.fitting.variants import VARIANTS
 from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
-from wirescene.training.scores import cross_validated_confidences, read_run_records
+from wirescene.training.scores import cross_validated_car_filter, cross_validated_confidences, read_run_records
+
+#: Written into a bank run: the verification the summary applied (``_common.read_run`` applies it too).
+VERIFICATION_FILE = "verification.json"
 
 
 def kitti_with_cv_scores(records, gt, folds):
@@ -68,7 +71,8 @@ def main():
                     help="fit only this fold (repeatable; no summary), e.g. while other folds' models are trained")
     ap.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
                     help="An InferenceOptions field, e.g. plane_refinement=0 or box_weight=100, or a "
-                         "LiftingOptions field with the prefix lifting., e.g. lifting.road_prior=0.01.")
+                         "LiftingOptions field with the prefix lifting., e.g. lifting.road_prior=0.01, or a "
+                         "PredetectOptions field with the prefix predetect., e.g. predetect.threshold=0.5.")
     args = ap.parse_args()
     if not args.shipped and args.models is None:
         ap.error("give --models DIR (fold models) or --shipped")
@@ -95,8 +99,11 @@ def main():
             for path in models.values():
                 if not Path(path).is_file():
                     sys.exit(f"missing fold model {path}")
+        # Our own pre-detections are fitted unverified; the summary verifies them held out (each
+        # fold by a car model of the other folds), so that no fold is scored by a model that saw it.
         options = FitOptions(lifting=LiftingOptions(n_particles=args.particles), seed=args.seed,
-                             calibrate_scores=False, **models).with_settings(settings)
+                             calibrate_scores=False, **models).with_settings(
+                                 settings | {"predetect.min_car_probability": 0})
         source = DetectionSource(args.detections, bank=models.get("detector_bank"),
                                  classifier=models.get("viewpoint_classifier"))
         print(f"fold {k}: {len(test)} frames, models {models or 'shipped'}", file=sys.stderr)
@@ -109,6 +116,13 @@ def main():
     for k in range(N_FOLDS):
         for v, rs in read_run_records(args.out / f"fold{k}").items():
             records.setdefault(v, []).extend(rs)
+    tau = FitOptions().with_settings(settings).predetect.min_car_probability
+    if args.detections == "bank":
+        fitted = sum(r.n_detections for r in records[variants[0]])
+        records = cross_validated_car_filter(records, folds, min_probability=tau)
+        (args.out / VERIFICATION_FILE).write_text(json.dumps({"min_car_probability": tau}))
+        print(f"verified held out at p(car) >= {tau:g}: {variants[0]} keeps "
+              f"{sum(r.n_detections for r in records[variants[0]])} of {fitted} fitted cars", file=sys.stderr)
     reports = {v: evaluate(records[v]) for v in variants}
     gt = {f: dataset.labels(f) for f in frames}
     n_cars = sum(len(g.of_type("Car")) for g in gt.values())

@@ -147,8 +147,23 @@ def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
     assert np.array_equal(own.boxes, raw.boxes) and np.array_equal(own.scores, raw.scores)
     expected = box_viewpoints(bank, image, raw.boxes, camera=camera, classifier=load_default_classifier())
     assert np.allclose(own.alpha, expected)
-    # fit_frame's own pre-detection is this one
-    assert np.allclose(fit_frame(camera, None, ["coarse"], image=image).detections.alpha, expected)
+    # fit_frame's own pre-detection is this one at the fit's lower threshold, its cars verified by the fit
+    from dataclasses import replace
+
+    from wirescene.fitting.confidence import car_probabilities
+    from wirescene.fitting.pipeline import FitOptions, PredetectOptions
+
+    options = FitOptions()
+    at_fit = detect_own(camera, image, bank=bank, threshold=options.predetect.threshold)
+    assert len(at_fit) >= len(own)
+    fit = fit_frame(camera, None, ["coarse"], image=image)
+    assert np.array_equal(fit.detections.boxes, at_fit.boxes) and np.allclose(fit.detections.alpha, at_fit.alpha)
+    unverified = fit_frame(camera, None, ["coarse"], image=image,
+                           options=replace(options, predetect=PredetectOptions(min_car_probability=0)))
+    est = unverified.estimates["coarse"]
+    assert len(est.objects) == len(at_fit)
+    likely = [o.detection_index for o, p in zip(est.objects, car_probabilities(est, fine=False)) if p >= 0.5]
+    assert [o.detection_index for o in fit.estimates["coarse"].objects] == likely
     # no camera, no road prior: the detector's own viewpoints stay
     assert np.array_equal(detect_own(None, image, bank=bank).alpha, detect_cars(image, bank=bank).alpha)
 

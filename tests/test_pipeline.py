@@ -196,3 +196,18 @@ def test_eval_cli_resume_needs_predictions_and_dask_needs_distributed(monkeypatc
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
     assert r.exit_code == 1
     assert lines == ["Error: --dask needs the 'distributed' package: pip install wirescene[dask]"]
+
+
+def test_frame_result_leaves_out_the_cars_the_fit_dropped():
+    from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate
+    from wirescene.eval.runner import frame_result
+
+    labels = KittiDataset(KITTI_ROOT).labels("000002")
+    dets = Detections([[0, 0, 10, 10], [20, 20, 40, 40], [50, 50, 80, 90]], [0.9, 0.5, 0.4], 0.0)
+    objs = [ObjectEstimate(j, dets.boxes[j], dets.scores[j], np.array([0.0, 1.6, 10.0 + j]), np.eye(3), np.ones(3),
+                           0.1 * j) for j in (2, 0)]
+    r = frame_result("000002", labels, dets, SceneEstimate("coarse", objs))
+    assert np.array_equal(r.det_boxes, dets.boxes[[0, 2]]) and r.est_cost.tolist() == [0.0, 0.2]
+    assert r.subset([1]).det_scores.tolist() == [0.4] and r.subset(np.array([True, False])).n_detections == 1
+    with pytest.raises(ValueError, match="at most one object per detection"):
+        frame_result("000002", labels, dets, SceneEstimate("coarse", objs + [objs[0]]))

@@ -13,28 +13,41 @@ from wirescene.core.errors import InputError
 from wirescene.fitting.confidence import (
     apply_confidence,
     calibrated_confidence,
+    car_probabilities,
     confidence_features,
+    keep_likely_cars,
     load_score_calibration,
 )
 
 
-def test_train_scores_from_an_eval_run_and_use_them(tmp_path):
-    pred, cal = tmp_path / "pred", tmp_path / "cal.json"
-    r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "coarse", "--variant", "fg+gp", "--raw-scores",
-                                  "--predictions", str(pred), "--particles", "15", "--workers", "1",
-                                  "--device", "numpy"])
+def test_train_scores_from_eval_runs_and_use_them(tmp_path):
+    pred, own, cal = tmp_path / "pred", tmp_path / "own", tmp_path / "cal.json"
+    common = ["--variant", "coarse", "--variant", "fg+gp", "--raw-scores", "--particles", "15", "--workers", "1",
+              "--device", "numpy"]
+    r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--predictions", str(pred), *common])
     assert r.exit_code == 0, r.output
     # Raw scores: the label boxes' score 1 is what was written.
     assert {row.split()[15] for row in (pred / "coarse" / "000010.txt").read_text().splitlines()} == {"1"}
     r = CliRunner().invoke(main, ["train", "scores", str(pred), "--out", str(cal)])
+    assert r.exit_code != 0 and "--detections bank" in r.output and not cal.exists()  # label boxes are all cars
+    # Our own pre-detections, at a low threshold so that some boxes are not cars; unverified.
+    r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--detections", "bank", "--predictions", str(own),
+                                  "--detection-threshold", "0.05", "--min-car-probability", "0", *common])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(main, ["train", "scores", str(pred), str(own), "--out", str(cal)])
     assert r.exit_code == 0, r.output
     record = json.loads(cal.read_text())
-    assert record["format"] == "wirescene-score-calibration/1"
-    assert record["coarse"]["n"] == 15 and record["fine"]["n"] == 15
+    assert record["format"] == "wirescene-score-calibration/2"
+    n_own = len(list((own / "coarse").glob("*.txt")))
+    assert n_own == 3
+    own_cars = sum(len(p.read_text().splitlines()) for p in (own / "coarse").glob("*.txt"))
+    assert record["coarse"]["n"] == 15 + own_cars and record["car"]["coarse"]["n"] == own_cars
+    assert 0 < record["car"]["fine"]["positive_rate"] < 1
     model = load_score_calibration(cal)
     feats = confidence_features([0.9, 0.9], [0.1, 5.0], [[0, 0, 10, 100], [0, 0, 10, 100]])
-    p = calibrated_confidence(feats, fine=False, calibration=model)
-    assert np.all((p > 0) & (p < 1))
+    for target in ("right", "car"):
+        p = calibrated_confidence(feats, fine=False, calibration=model, target=target)
+        assert np.all((p > 0) & (p < 1))
 
 
 def test_confidence_is_the_calibrated_model_and_keeps_the_detection_score():
@@ -48,8 +61,45 @@ def test_confidence_is_the_calibrated_model_and_keeps_the_detection_score():
     assert est.cars[0].score == pytest.approx(0.5) and est.cars[1].score == pytest.approx(1 / (1 + np.exp(2)))
 
 
+def test_the_fit_drops_the_cars_its_car_model_doubts():
+    from wirescene.core.types import ObjectEstimate, SceneEstimate
+
+    right = {"mean": [0, 0, 0], "scale": [1, 1, 1], "weights": [1.0, -1.0, 0.0], "bias": 0.0}
+    car = {"mean": [0, 0, 0], "scale": [1, 1, 1], "weights": [0.0, -1.0, 0.0], "bias": 1.0}  # p = sigmoid(1 - cost)
+    cal = {"coarse": right, "fine": right, "car": {"coarse": car, "fine": car}}
+    objs = [ObjectEstimate(i, np.array([0, 0, 10, 50.0]), 0.5, np.zeros(3), np.eye(3), np.ones(3), cost)
+            for i, cost in enumerate([0.0, 0.9, 3.0])]
+    est = apply_confidence(SceneEstimate("full", objs), fine=True, calibration=cal)
+    p = car_probabilities(est, fine=True, calibration=cal)  # from the detection score, not the confidence
+    assert p == pytest.approx(1 / (1 + np.exp(-(1 - np.array([0.0, 0.9, 3.0])))))
+    kept = keep_likely_cars(est, fine=True, min_probability=0.5, calibration=cal)
+    assert [o.detection_index for o in kept.objects] == [0, 1]
+    assert len(keep_likely_cars(SceneEstimate("full", list(objs)), fine=True, min_probability=0, calibration=cal).objects) == 3
+
+
 def test_broken_calibration_is_an_error_naming_the_file(tmp_path):
     bad = tmp_path / "cal.json"
-    bad.write_text('{"format": "wirescene-score-calibration/1", "coarse": {}}')
+    bad.write_text('{"format": "wirescene-score-calibration/2", "coarse": {}}')
     with pytest.raises(InputError, match="cal.json: malformed score calibration"):
         load_score_calibration(bad)
+
+
+def test_held_out_verification_keeps_the_boxes_that_fit_like_cars():
+    from wirescene.eval.metrics import FrameResult
+    from wirescene.io.kitti import Label
+    from wirescene.training.scores import cross_validated_car_filter
+
+    rng = np.random.default_rng(0)
+    results, folds = [], {}
+    for i in range(16):  # 4 folds of 4 frames; a car fits well (low objective), a false box badly
+        car = [100.0, 150.0, 200.0, 220.0]
+        gt = [Label("Car", 0.0, 0, 0.0, car, [1.5, 1.6, 3.9], [0.0, 1.6, 15.0], 0.0)]
+        boxes = np.array([car, [600.0, 150.0, 650.0, 190.0]])
+        cost = np.array([rng.uniform(0, 1), rng.uniform(2, 3)])
+        results.append(FrameResult(f"f{i}", gt, boxes, [0.0, 0.0], rng.uniform(0.3, 0.9, 2), np.zeros((2, 3)),
+                                   np.ones((2, 3)), np.zeros(2), np.zeros(2), est_cost=cost, est_score=np.ones(2)))
+        folds[f"f{i}"] = i % 4
+    kept = cross_validated_car_filter({"coarse": results}, folds, min_probability=0.5)["coarse"]
+    assert [r.frame_id for r in kept] == [r.frame_id for r in results]
+    assert all(r.n_detections == 1 and r.det_boxes[0, 0] == 100.0 for r in kept)
+    assert cross_validated_car_filter({"coarse": results}, folds, min_probability=0)["coarse"][0].n_detections == 2

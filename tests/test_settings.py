@@ -42,7 +42,8 @@ def test_with_settings_reaches_every_stage_and_refuses_unknown_ones():
     out = FitOptions().with_settings({"inference.polish_samples": "6", "lifting.iterations": 2})
     assert out.inference.polish_samples == 6 and out.lifting.iterations == 2
     assert FitOptions().with_settings(None) == FitOptions()
-    with pytest.raises(ValueError, match="STAGE one of lifting, inference"):
+    assert FitOptions().with_settings({"predetect.threshold": "0.5"}).predetect.threshold == 0.5
+    with pytest.raises(ValueError, match="STAGE one of lifting, inference, predetect"):
         FitOptions().with_settings({"parts.n_trees": 3})
     with pytest.raises(ValueError, match="no option"):
         FitOptions().with_settings({"lifting.box_weight": 3})
@@ -50,8 +51,9 @@ def test_with_settings_reaches_every_stage_and_refuses_unknown_ones():
 
 def test_every_exposed_field_is_a_command_line_option_of_eval_fit_and_predict():
     from wirescene.cli.main import eval_cmd, fit_cmd, predict_cmd
+    from wirescene.fitting.pipeline import PredetectOptions
 
-    stages = {"lifting": LiftingOptions, "inference": InferenceOptions}
+    stages = {"lifting": LiftingOptions, "inference": InferenceOptions, "predetect": PredetectOptions}
     assert set(stages) == set(STAGES)
     wanted = {f"{stage}__{f.name}": f"--{cli}" for stage, cls in stages.items() for f, cli, _ in exposed_fields(cls)}
     assert len(wanted) >= 11  # the options the commands had before they were generated

@@ -134,10 +134,12 @@ def _inference_options(f):
     """Options of the coarse and fine-grained inference stages (generated from the
     stages' own option fields, :func:`stage_options`) and the trained models they use,
     shared by `eval`, `fit` and `predict`."""
+    from wirescene.fitting.pipeline import PredetectOptions
     from wirescene.infer.inference import InferenceOptions
     from wirescene.lift import LiftingOptions
 
     f = settings_option(f)
+    f = stage_options(PredetectOptions, "predetect")(f)
     f = stage_options(InferenceOptions, "inference")(f)
     f = stage_options(LiftingOptions, "lifting")(f)
     f = models_option(f)
@@ -462,8 +464,8 @@ def demo_cmd(out, particles, variants, models):
     if len(raw):
         written.extend(write_fit_outputs(out / "raw-pixels", first, image=image, camera=dataset.camera(first),
                                          estimate=estimate, detections=raw, gt=dataset.labels(first).of_type("Car")).values())
-    click.echo(f"raw-pixel mode on {first}: the detector bank found {len(raw)} cars "
-               f"({len(dataset.labels(first).of_type('Car'))} labelled)\n")
+    click.echo(f"raw-pixel mode on {first}: the detector bank proposed {len(raw)} boxes, the fit kept "
+               f"{len(estimate.objects)} cars ({len(dataset.labels(first).of_type('Car'))} labelled)\n")
     click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
                f"(GT boxes as pre-detections, {particles} particles)\n")
     click.echo(format_table(reports))

@@ -175,7 +175,7 @@ def stage_options(cls, scope: str):
 def settings_option(f):
     """``--set STAGE.FIELD=VALUE``: any option of a fitting stage, by the same names as the API's ``settings``."""
     return click.option("--set", "settings", multiple=True, metavar="STAGE.FIELD=VALUE",
-                        help="Set any field of the stage options (stages lifting, inference; e.g. "
+                        help="Set any field of the stage options (stages lifting, inference, predetect; e.g. "
                              "inference.polish_samples=12); repeatable; the named options above win.")(f)
 
 

@@ -18,7 +18,10 @@ from wirescene.cli.options import check_output_file, select_frames, split_file_o
 def scores(predictions_dirs, frames, split_file, out):
     """Fit the confidence model on the frame records of evaluation runs on labelled
     real frames (`wirescene eval ROOT --variant coarse+gp --variant full --raw-scores
-    --predictions DIR`; e.g. one run with label boxes and one with `--detections bank`)."""
+    --predictions DIR`; e.g. one run with label boxes and one with `--detections bank`),
+    and the model of which fitted cars stand on a car on the runs with our own
+    pre-detections (`--detections bank`, at least one needed)."""
+    from wirescene.core.errors import InputError
     from wirescene.eval.records import RECORDS_DIR
     from wirescene.fitting.confidence import save_score_calibration
     from wirescene.training.scores import fit_score_calibration, read_run_records
@@ -28,15 +31,21 @@ def scores(predictions_dirs, frames, split_file, out):
     where = ", ".join(str(d) for d in predictions_dirs)
     frame_ids = select_frames(frames, split_file, recorded, where=where, what="frame record") if recorded else None
     records: dict = {}
+    own: dict = {}
     for folder in predictions_dirs:
         for variant, results in read_run_records(folder, frame_ids).items():
             records.setdefault(variant, []).extend(results)
-    result = fit_score_calibration(records)
+        for variant, results in read_run_records(folder, frame_ids, label_boxes=False).items():
+            own.setdefault(variant, []).extend(results)
+    if not own:
+        raise InputError("no run on our own pre-detections (`--detections bank`): the car model needs one",
+                         path=Path(predictions_dirs[0]))
+    result = fit_score_calibration(records, car_records=own)
     result["trained_on"] = {"runs": [f"{Path(d).parent.name}/{Path(d).name}" for d in predictions_dirs],
                             "frames": sorted({r.frame_id for rs in records.values() for r in rs})}
     save_score_calibration(out, result)
     for stage in ("coarse", "fine"):
-        m = result[stage]
-        click.echo(f"{stage}: {m['n']} estimates, {100 * m['positive_rate']:.0f}% right; weights "
-                   + ", ".join(f"{f} {w:+.2f}" for f, w in zip(result["features"], m["weights"])))
+        for m, what in ((result[stage], "right"), (result["car"][stage], "on a car")):
+            click.echo(f"{stage}: {m['n']} estimates, {100 * m['positive_rate']:.0f}% {what}; weights "
+                       + ", ".join(f"{f} {w:+.2f}" for f, w in zip(result["features"], m["weights"])))
     click.echo(f"-> {out}")

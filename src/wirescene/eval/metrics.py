@@ -44,7 +44,7 @@ Protocol
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -154,6 +154,14 @@ class FrameResult:
     @property
     def n_detections(self) -> int:
         return len(self.det_boxes)
+
+    def subset(self, index) -> "FrameResult":
+        """This record with only the detections (and their estimates) at ``index`` (indices
+        or a boolean mask), e.g. those a verification keeps."""
+        per_detection = ("det_boxes", "det_alpha", "det_scores", "est_location", "est_dims", "est_rotation_y",
+                         "est_alpha", "est_occluded", "est_vertices_2d", "est_cost", "est_score")
+        return replace(self, **{k: None if getattr(self, k) is None else np.asarray(getattr(self, k))[index]
+                                for k in per_detection})
 
     def estimate_labels(self, scores) -> list[Label]:
         """KITTI label rows (Car) of the estimates, with ``scores`` ``(D,)`` as column 16."""

@@ -44,11 +44,14 @@ def frame_result(
     vertex_gt: WireframeGT | None = None,
     camera: Camera | None = None,
 ) -> FrameResult:
-    """Evaluation record of one frame (estimates aligned with detections); with
+    """Evaluation record of one frame: the estimates with the detections they were fitted
+    to (those the fit's verification dropped are left out, as from its output); with
     ``vertex_gt`` (synthetic data) the occlusion subsets use true part counts."""
     objs = sorted(estimate.objects, key=lambda o: o.detection_index)
-    if [o.detection_index for o in objs] != list(range(len(detections))):
-        raise ValueError("estimate must hold exactly one object per detection")
+    kept = np.array([o.detection_index for o in objs], dtype=int)
+    if len(np.unique(kept)) != len(kept) or (len(kept) and (kept.min() < 0 or kept.max() >= len(detections))):
+        raise ValueError("estimate must hold at most one object per detection")
+    detections = detections.subset(kept)
     fine = camera is not None and objs and all(o.vertices is not None for o in objs)
     return FrameResult(
         frame_id=frame_id,
@@ -86,7 +89,8 @@ class _FrameJob:
         gt = dataset.labels(frame_id)
         gt_path = wireframe_gt_path(dataset.split_dir, frame_id)
         vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
-        detections = self.source.for_frame(dataset, frame_id, frame_seed(self.options.seed, frame_id))
+        detections = self.source.for_frame(dataset, frame_id, frame_seed(self.options.seed, frame_id),
+                                           threshold=self.options.predetect.threshold)
         camera = dataset.camera(frame_id)
         image = evidence = None
         if needs_evidence(detections, self.variants):
@@ -96,7 +100,8 @@ class _FrameJob:
                 evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
             else:
                 image = dataset.image(frame_id)
-        fitted = fit_frame(camera, detections, self.variants, image=image, evidence=evidence, options=self.options)
+        fitted = fit_frame(camera, detections, self.variants, image=image, evidence=evidence, options=self.options,
+                           own=self.source.own)
         fits = {v: (estimate, frame_result(frame_id, gt, fitted.detections, estimate, vertex_gt, camera))
                 for v, estimate in fitted.estimates.items()}
         return frame_id, camera, fitted.detections, gt, fits

@@ -60,14 +60,21 @@ class DetectionSource:
                              "--allow-missing-detections treats such frames as having none", path=self.folder)
         return missing
 
-    def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator) -> Detections:
+    @property
+    def own(self) -> bool:
+        """Whether these are our own pre-detections (the fit verifies them)."""
+        return self.spec == "bank"
+
+    def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator, *,
+                  threshold: float | None = None) -> Detections:
+        """The detections of one frame; ``threshold``: our own pre-detection's (None: the bank's)."""
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
         if self.spec == "bank":
             from wirescene.fitting.pipeline import detect_own, detector_bank, viewpoint_classifier
 
             return detect_own(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
-                              classifier=viewpoint_classifier(self.classifier))
+                              classifier=viewpoint_classifier(self.classifier), threshold=threshold)
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:

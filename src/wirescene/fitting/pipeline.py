@@ -15,9 +15,10 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from wirescene.core.camera import Camera
+from wirescene.core.settings import option
 from wirescene.core.shape import load_default as load_shape_model
 from wirescene.core.types import Detections, SceneEstimate
-from wirescene.fitting.confidence import apply_confidence
+from wirescene.fitting.confidence import apply_confidence, keep_likely_cars
 from wirescene.fitting.variants import Variant, get_variant
 from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
@@ -26,11 +27,26 @@ from wirescene.lift import LiftingOptions, LiftingTable, lift_table, plane_vote_
 
 
 @dataclass(frozen=True)
+class PredetectOptions:
+    """Options of our own pre-detection as the fit uses it (stage 1), and of the fit's
+    verification of its boxes. How each default was chosen: ``benchmarks/RESULTS.md``."""
+
+    # Below the bank's own 2D operating point (0.5): the fit verifies every box it is given.
+    threshold: float = option(0.3, cli="detection-threshold",
+                              help="Score threshold of our own pre-detection for the fit (the bank's calibrated "
+                                   "probability of a car).")
+    # The score calibration's car model on the detection score, the fit's objective and the box height.
+    min_car_probability: float = option(0.5, help="Drop the fitted cars of our own pre-detection whose probability "
+                                                  "of standing on a car is below this (0: keep all).")
+
+
+@dataclass(frozen=True)
 class FitOptions:
     """Options of every stage of :func:`fit_frame`, with the run's seed."""
 
     lifting: LiftingOptions = field(default_factory=LiftingOptions)
     inference: InferenceOptions = field(default_factory=InferenceOptions)
+    predetect: PredetectOptions = field(default_factory=PredetectOptions)
     seed: int = 0
     # Write calibrated confidences (wirescene.fitting.confidence) as the cars' scores;
     # False keeps the pre-detection scores (used to collect the calibration's own data).
@@ -68,7 +84,7 @@ class FitOptions:
 
 
 #: The stages whose options :meth:`FitOptions.with_settings` reaches, by attribute of :class:`FitOptions`.
-STAGES: tuple[str, ...] = ("lifting", "inference")
+STAGES: tuple[str, ...] = ("lifting", "inference", "predetect")
 
 
 @lru_cache(maxsize=4)
@@ -173,7 +189,7 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
 
 
 def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
-               detections: Detections | None = None) -> Detections:
+               detections: Detections | None = None, threshold: float | None = None) -> Detections:
     """Our own pre-detection (stage 1): the detector bank's cars at its threshold
     (:func:`wirescene.predetect.detect_cars`, with the camera), each box's viewpoint then
     chosen as for the boxes of any other detector (:func:`complete_viewpoints`: the bank's
@@ -182,7 +198,8 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     81% (``benchmarks/RESULTS.md``). Without a camera (``None``) the detector's own
     viewpoints stay. ``image``, ``bank`` and ``classifier`` as in :func:`complete_viewpoints`;
     ``detections``: the bank's detections of ``image`` if already made (e.g. at another
-    threshold). Returns the bank's boxes and calibrated scores with the rule's viewpoints.
+    threshold); ``threshold``: the bank's score threshold (None: its own, the 2D operating
+    point). Returns the bank's boxes and calibrated scores with the rule's viewpoints.
 
     Examples
     --------
@@ -193,7 +210,7 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     from wirescene.predetect import detect_cars
 
     bank = detector_bank(None) if bank is None else bank
-    found = detect_cars(image, bank=bank, camera=camera) if detections is None else detections
+    found = detect_cars(image, bank=bank, camera=camera, threshold=threshold) if detections is None else detections
     if camera is None or not len(found):
         return found
     unknown = Detections(found.boxes, found.scores, np.full(len(found), np.nan), found.source)
@@ -209,6 +226,7 @@ def fit_frame(
     evidence: PartEvidence | None = None,
     options: FitOptions | None = None,
     lifted: LiftingTable | None = None,
+    own: bool = False,
 ) -> FrameFit:
     """Fit model variants to one image.
 
@@ -233,6 +251,11 @@ def fit_frame(
     lifted : LiftingTable, optional
         The coarse lifting of ``detections`` if already computed (benchmarks time the
         stages apart); it must belong to these detections with known viewpoints.
+    own : bool
+        ``detections`` are our own pre-detection (``detections=None`` makes it at
+        ``options.predetect.threshold``): each variant then drops the fitted cars less
+        likely to stand on a car than ``options.predetect.min_car_probability``
+        (:func:`wirescene.fitting.confidence.keep_likely_cars`).
 
     Returns
     -------
@@ -246,7 +269,9 @@ def fit_frame(
         if image is None:
             raise ValueError("image is needed to detect the cars (or pass detections)")
         detections = detect_own(camera, image, bank=detector_bank(options.detector_bank),
-                                classifier=viewpoint_classifier(options.viewpoint_classifier))
+                                classifier=viewpoint_classifier(options.viewpoint_classifier),
+                                threshold=options.predetect.threshold)
+        own = True
     if len(detections) == 0:
         return FrameFit(detections, {v.name: SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane,
                                                            detections=detections) for v in variants})
@@ -265,8 +290,10 @@ def fit_frame(
     if lifted is None:
         lifted = lift_table(camera, detections, options=options.lifting)
     estimates = {v.name: _fit_variant(camera, detections, v, lifted, evidence, options) for v in variants}
-    for estimate in estimates.values():
-        estimate.detections = detections
+    for v in variants:
+        estimates[v.name].detections = detections
+        if own:
+            keep_likely_cars(estimates[v.name], fine=v.fine, min_probability=options.predetect.min_car_probability)
     return FrameFit(detections, estimates, evidence)
 
 

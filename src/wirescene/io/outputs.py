@@ -27,12 +27,14 @@ def write_fit_outputs(
     gt: list[Label] = (),
 ) -> dict[str, Path]:
     """Write ``STEM.txt`` (KITTI labels), ``STEM.json``, ``STEM_overlay.png`` and
-    ``STEM_bev.png``. Everything is rendered in memory first; if any write fails the
-    files already written by this call are removed, so no partial result remains."""
+    ``STEM_bev.png``. The overlay draws the pre-detections of the fitted cars (not those
+    the fit's verification dropped). Everything is rendered in memory first; if any write
+    fails the files already written by this call are removed, so no partial result remains."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
-    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=detections, title=f"{stem}  {estimate.variant}", edges=EDGES)
+    fitted = detections.subset(sorted(o.detection_index for o in estimate.objects))
+    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted, title=f"{stem}  {estimate.variant}", edges=EDGES)
     fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=f"{stem}  {estimate.variant}")
     paths = {
         "labels": out_dir / f"{stem}.txt",

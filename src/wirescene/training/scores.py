@@ -22,16 +22,20 @@ def _centroid(location, dims):
     return np.asarray(location, float) - [0.0, float(dims[0]) / 2, 0.0]
 
 
-def labelled_features(result: FrameResult, *, max_error_m: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def labelled_features(result: FrameResult, *, max_error_m: float = 1.0,
+                      target: str = "right") -> tuple[np.ndarray, np.ndarray]:
     """Features ``(D, 3)`` of a frame's estimates and whether each is right: its
     detection matches a ground-truth car (IoU > 0.5, greedy by score) and the estimated
-    3D centre is within ``max_error_m`` of the car's."""
+    3D centre is within ``max_error_m`` of the car's; with ``target="car"``, whether its
+    detection matches a car at all."""
     if result.est_cost is None:
         raise ValueError(f"record of frame {result.frame_id} has no fit objective (est_cost)")
     feats = confidence_features(result.det_scores, result.est_cost, result.det_boxes)
     cars = [g for g in result.gt if g.type in CAR_TYPES]
     gt_boxes = np.array([g.box for g in cars]).reshape(-1, 4)
     match, _ = match_detections(result.det_boxes, result.det_scores, gt_boxes)
+    if target == "car":
+        return feats, match >= 0
     right = np.zeros(len(feats), bool)
     for d in np.flatnonzero(match >= 0):
         g = cars[match[d]]
@@ -40,8 +44,10 @@ def labelled_features(result: FrameResult, *, max_error_m: float = 1.0) -> tuple
     return feats, right
 
 
-def read_run_records(predictions_dir, frames: Iterable[str] | None = None) -> dict[str, list[FrameResult]]:
-    """``{variant: [FrameResult, ...]}`` from ``predictions_dir/.frames/*.json``."""
+def read_run_records(predictions_dir, frames: Iterable[str] | None = None, *,
+                     label_boxes: bool = True) -> dict[str, list[FrameResult]]:
+    """``{variant: [FrameResult, ...]}`` from ``predictions_dir/.frames/*.json``; without
+    ``label_boxes``, only the records of runs whose detections were not the labels."""
     folder = Path(predictions_dir) / RECORDS_DIR
     paths = sorted(folder.glob("*.json"))
     if frames is not None:
@@ -53,6 +59,8 @@ def read_run_records(predictions_dir, frames: Iterable[str] | None = None) -> di
     for path in paths:
         try:
             record = json.loads(path.read_text())
+            if not label_boxes and record.get("config", {}).get("detections", {}).get("spec") == "gt":
+                continue
             for variant, entry in record["variants"].items():
                 out.setdefault(variant, []).append(FrameResult.from_dict(entry["result"]))
         except (OSError, ValueError, KeyError, TypeError) as exc:
@@ -60,10 +68,8 @@ def read_run_records(predictions_dir, frames: Iterable[str] | None = None) -> di
     return out
 
 
-def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1.0,
-                          stages: tuple[str, ...] = STAGES) -> dict:
-    """A logistic model per stage (coarse / fine variants) on the records' estimates;
-    every stage of ``stages`` needs records."""
+def _fit_stages(records: dict[str, list[FrameResult]], *, C: float, stages: tuple[str, ...], target: str) -> dict:
+    """One logistic model per stage of ``stages`` on the records' estimates."""
     from sklearn.linear_model import LogisticRegression
 
     data = {stage: ([], []) for stage in STAGES}
@@ -71,10 +77,10 @@ def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1
         stage = "fine" if get_variant(variant).fine else "coarse"
         for r in results:
             if r.n_detections:
-                x, y = labelled_features(r)
+                x, y = labelled_features(r, target=target)
                 data[stage][0].append(x)
                 data[stage][1].append(y)
-    out = {"features": list(FEATURES), "criterion": "detection IoU > 0.5 with a Car and 3D centre within 1 m"}
+    out = {}
     for stage in stages:
         xs, ys = data[stage]
         if not xs:
@@ -82,12 +88,27 @@ def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1
                              path=None)
         X, y = np.concatenate(xs), np.concatenate(ys)
         if y.all() or not y.any():
-            raise InputError(f"{stage} estimates are all {'right' if y.all() else 'wrong'}: nothing to calibrate")
+            what = {"right": ("right", "wrong"), "car": ("on a car", "off every car")}[target]
+            raise InputError(f"{stage} estimates are all {what[0] if y.all() else what[1]}: nothing to calibrate")
         mean, scale = X.mean(axis=0), X.std(axis=0)
         scale = np.where(scale > 1e-9, scale, 1.0)
         model = LogisticRegression(C=C).fit((X - mean) / scale, y)
         out[stage] = {"mean": mean.tolist(), "scale": scale.tolist(), "weights": model.coef_[0].tolist(),
                       "bias": float(model.intercept_[0]), "n": int(len(y)), "positive_rate": float(y.mean())}
+    return out
+
+
+def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1.0,
+                          stages: tuple[str, ...] = STAGES,
+                          car_records: dict[str, list[FrameResult]] | None = None) -> dict:
+    """A logistic model per stage (coarse / fine variants) on the records' estimates;
+    every stage of ``stages`` needs records. With ``car_records`` (runs on our own
+    pre-detections: label boxes are all cars), also the ``"car"`` models."""
+    out = {"features": list(FEATURES), "criterion": "detection IoU > 0.5 with a Car and 3D centre within 1 m"}
+    out.update(_fit_stages(records, C=C, stages=stages, target="right"))
+    if car_records is not None:
+        out["car"] = {"criterion": "detection IoU > 0.5 with a Car (greedy by score)",
+                      **_fit_stages(car_records, C=C, stages=stages, target="car")}
     return out
 
 
@@ -106,4 +127,28 @@ def cross_validated_confidences(records: dict[str, list[FrameResult]], folds: di
         for r in test:
             feats = confidence_features(r.det_scores, r.est_cost, r.det_boxes)
             out[r.frame_id] = calibrated_confidence(feats, fine=fine, calibration=model) if len(feats) else np.zeros(0)
+    return out
+
+
+def cross_validated_car_filter(records: dict[str, list[FrameResult]], folds: dict[str, int], *,
+                               min_probability: float) -> dict[str, list[FrameResult]]:
+    """The records of a run on our own pre-detections with the fit's verification
+    (:func:`wirescene.fitting.confidence.keep_likely_cars`) applied held out: each fold's
+    fitted cars scored by a car model fitted on the records of the other folds only
+    (``folds``: frame -> fold), those below ``min_probability`` left out."""
+    out: dict[str, list[FrameResult]] = {}
+    for variant, results in records.items():
+        fine = get_variant(variant).fine
+        kept = {}
+        for k in sorted(set(folds[r.frame_id] for r in results)):
+            model = _fit_stages({v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()}, C=1.0,
+                                stages=("fine",) if fine else ("coarse",), target="car")
+            for r in results:
+                if folds[r.frame_id] == k and min_probability > 0 and r.n_detections:
+                    feats = confidence_features(r.det_scores, r.est_cost, r.det_boxes)
+                    p = calibrated_confidence(feats, fine=fine, calibration={"car": model}, target="car")
+                    kept[r.frame_id] = r.subset(p >= min_probability)
+                elif folds[r.frame_id] == k:
+                    kept[r.frame_id] = r
+        out[variant] = [kept[r.frame_id] for r in results]
     return out

@@ -1,0 +1,89 @@
+"""Rescoring our own pre-detections by the fit: does the fitted car's objective tell cars from false boxes?
+
+Reads ``bench_real_folds.py --detections bank`` runs (their frame records keep each fitted
+car's objective, ``est_cost``) and asks, per variant, how well a logistic model of the
+features of the shipped confidence (:func:`wirescene.fitting.confidence.confidence_features`:
+the detection's logit, the fit's objective, the log box height) predicts that a fitted car
+stands on a labelled car (its box the first in score order to overlap a ``Car`` label at
+IoU >= 0.5; the rest are the false 3D cars of ``bench_operating_point.py``). The model is
+fitted on one fold group and applied to the other, both ways (:data:`FOLD_GROUPS`); the
+cars it scores below ``tau`` are dropped, and the paper-protocol figures (true-positive
+initialisations, cars within 1 m) and the false cars are reported for each ``tau``, with
+the ROC AUC of each feature alone.
+
+    python benchmarks/bench_car_filter.py NAME=RUN [NAME=RUN ...] [--variant full] [--tau 0.3 0.5 0.7]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from sklearn.linear_model import LogisticRegression
+from sklearn.metrics import roc_auc_score
+from sklearn.pipeline import make_pipeline
+from sklearn.preprocessing import StandardScaler
+
+from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
+from bench_operating_point import false_cars, figures, on_car
+from wirescene.fitting.confidence import FEATURES, confidence_features
+from wirescene.io.folds import FOLD_GROUPS, fold_of
+
+
+def features(results) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per frame, the confidence features ``(D, 3)`` and the on-car labels ``(D,)``."""
+    return ([confidence_features(r.det_scores, r.est_cost, r.det_boxes) for r in results],
+            [on_car(r) for r in results])
+
+
+def cross_group_probabilities(results) -> list[np.ndarray]:
+    """Per frame, the probability that each fitted car is on a car, from a model fitted on
+    the other fold group's frames."""
+    X, y = features(results)
+    group = [next(i for i, g in enumerate(FOLD_GROUPS) if fold_of(r.frame_id) in g) for r in results]
+    out = [None] * len(results)
+    for g in range(len(FOLD_GROUPS)):
+        train = [i for i in range(len(results)) if group[i] != g]
+        model = make_pipeline(StandardScaler(), LogisticRegression(C=1.0))  # as wirescene train scores fits it
+        model.fit(np.concatenate([X[i] for i in train]), np.concatenate([y[i] for i in train]))
+        for i in range(len(results)):
+            if group[i] == g:
+                out[i] = model.predict_proba(X[i])[:, 1] if len(X[i]) else np.zeros(0)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", nargs="+", help="NAME=RUN_DIR (bench_real_folds.py --out, --detections bank)")
+    ap.add_argument("--variant", action="append", default=None, help="variants to report (default: all in the run)")
+    ap.add_argument("--tau", type=float, nargs="+", default=[0.3, 0.5, 0.7])
+    args = ap.parse_args()
+    for item in args.runs:
+        name, _, run = item.partition("=")
+        records, _ = read_run(Path(run), verified=False)
+        for variant, results in records.items():
+            if args.variant and variant not in args.variant:
+                continue
+            if any(r.est_cost is None for r in results):
+                raise SystemExit(f"{run}: {variant} records have no fit objective (est_cost)")
+            X, y = features(results)
+            Xa, ya = np.concatenate(X), np.concatenate(y)
+            auc = ", ".join(f"{f} {roc_auc_score(ya, s * Xa[:, j]):.3f}"
+                            for j, (f, s) in enumerate(zip(FEATURES, (1, -1, 1))))
+            prob = cross_group_probabilities(results)
+            print(f"{name} {variant}: {len(ya)} fitted cars, {int(ya.sum())} on a car; ROC AUC {auc}, "
+                  f"cross-group model {roc_auc_score(ya, np.concatenate(prob)):.3f}")
+            for tau in [None] + list(args.tau):
+                kept = results if tau is None else [r.subset(p >= tau) for r, p in zip(results, prob)]
+                cells = []
+                for g in FOLD_GROUPS + ("pooled",):
+                    sub = kept if g == "pooled" else [r for r in kept if fold_of(r.frame_id) in g]
+                    f = figures(sub)
+                    cells.append(f"{g}: TP {f['tp']}/{f['gt']}, {f['cars_within_1m']} <1 m, "
+                                 f"{sum(map(false_cars, sub))} false")
+                print(f"    {'all' if tau is None else f'p >= {tau:g}':9s} " + " | ".join(cells))
+
+
+if __name__ == "__main__":
+    main()
