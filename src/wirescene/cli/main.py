@@ -198,7 +198,8 @@ def _dask_client(address: str):
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
               help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
 @click.option("--raw-scores", is_flag=True, default=False,
-              help="Write the pre-detection scores instead of calibrated confidences (the data of `train scores`).")
+              help="Write the pre-detection scores instead of calibrated confidences, and keep every box of our own "
+                   "pre-detection (the data of `train scores`).")
 @click.option("--report", "report_dir", type=click.Path(path_type=Path), default=None,
               help="Write an HTML report with plots and a gallery of the best and worst frames to this directory.")
 @workers_option()
@@ -237,6 +238,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     frame_ids = select_frames(frames, split_file, dataset.frame_ids(), where=dataset.split_dir)
     if raw_scores:
         inference["calibrate_scores"] = False
+        # The car model of `train scores` learns from the boxes the verification would drop.
+        inference["predetect__min_car_probability"] = 0.0
     options = _fit_options(particles, seed, **inference)
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections,
                              bank=options.detector_bank, classifier=options.viewpoint_classifier)
