@@ -67,7 +67,7 @@ def main() -> None:
             out[name][variant] = row
             print(f"{name:6s} {variant:10s} " + " | ".join(
                 f"{k}: TP {v['tp']}/{v['gt']}, {v['loc_1m']:.1f}% <1 m = {v['cars_within_1m']} cars, "
-                f"{v['false_cars']} false" for k, v in row.items()))
+                f"{v['false_cars']} false of {v['fitted']} fitted" for k, v in row.items()))
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
 
