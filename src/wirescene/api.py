@@ -162,8 +162,10 @@ def fit(
         rectified camera frame (x right, y down, z forward, metres), or a camera.
     boxes : None, (N, 4) array or Detections
         2D car boxes ``x1 y1 x2 y2`` in pixels from any detector (viewpoints are then
-        taken from the part evidence), or :class:`Detections` with viewpoints; ``None``
-        runs wirescene's own pre-detection.
+        taken from the box rule, :func:`wirescene.fitting.pipeline.complete_viewpoints`),
+        or :class:`Detections` with viewpoints; ``None`` runs wirescene's own
+        pre-detection, whose boxes the fit verifies (cars it finds unlikely are dropped:
+        ``settings={"predetect.min_car_probability": 0}`` keeps them all).
     variant : str
         Model variant (paper Sec. 5.2): ``coarse``, ``coarse+gp``, ``fg``, ``fg+so``,
         ``fg+do``, ``fg+gp`` or ``full``.
