@@ -141,15 +141,24 @@ def read_run(run, *, verified: bool = True) -> tuple[dict, str]:
         seen.update(frames)
         first = json.loads((folder / RECORDS_DIR / f"{frames[0]}.json").read_text())
         specs.add(str(first.get("config", {}).get("detections", {}).get("spec", "?")))
-    verification = Path(run) / "verification.json"
+    verification = Path(run) / VERIFICATION_FILE
     if verified and verification.is_file():
-        from wirescene.io.folds import fold_of
-        from wirescene.training.scores import cross_validated_car_filter
-
-        tau = json.loads(verification.read_text())["min_car_probability"]
-        folds = {r.frame_id: fold_of(r.frame_id) for rs in records.values() for r in rs}
-        records = cross_validated_car_filter(records, folds, min_probability=tau)
+        records = verified_records(records, json.loads(verification.read_text())["min_car_probability"])
     return records, ", ".join(sorted(specs))
+
+
+#: Written into a ``bench_real_folds.py`` run on our own pre-detections: the verification its summary applied.
+VERIFICATION_FILE = "verification.json"
+
+
+def verified_records(records: dict, min_probability: float) -> dict:
+    """The records of a run on our own pre-detections with the fit's verification applied
+    held out by drive (each fold by a car model of the other folds' records)."""
+    from wirescene.io.folds import fold_of
+    from wirescene.training.scores import cross_validated_car_filter
+
+    folds = {r.frame_id: fold_of(r.frame_id) for rs in records.values() for r in rs}
+    return cross_validated_car_filter(records, folds, min_probability=min_probability)
 
 
 def frame_result_2d(labels, vgt, camera, uv):

@@ -5,7 +5,8 @@ car's objective, ``est_cost``) and asks, per variant, how well a logistic model 
 features of the shipped confidence (:func:`wirescene.fitting.confidence.confidence_features`:
 the detection's logit, the fit's objective, the log box height) predicts that a fitted car
 stands on a labelled car (its box the first in score order to overlap a ``Car`` label at
-IoU >= 0.5; the rest are the false 3D cars of ``bench_operating_point.py``). The model is
+IoU >= 0.5; the rest are the false 3D cars of ``bench_operating_point.py``). The model,
+the car model of ``wirescene train scores`` fitted on the variant's own records, is
 fitted on one fold group and applied to the other, both ways (:data:`FOLD_GROUPS`); the
 cars it scores below ``tau`` are dropped, and the paper-protocol figures (true-positive
 initialisations, cars within 1 m) and the false cars are reported for each ``tau``, with
@@ -20,15 +21,13 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from sklearn.linear_model import LogisticRegression
 from sklearn.metrics import roc_auc_score
-from sklearn.pipeline import make_pipeline
-from sklearn.preprocessing import StandardScaler
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from bench_operating_point import false_cars, figures, on_car
 from wirescene.fitting.confidence import FEATURES, confidence_features
 from wirescene.io.folds import FOLD_GROUPS, fold_of
+from wirescene.training.scores import cross_validated_confidences
 
 
 def features(results) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -37,20 +36,12 @@ def features(results) -> tuple[list[np.ndarray], list[np.ndarray]]:
             [on_car(r) for r in results])
 
 
-def cross_group_probabilities(results) -> list[np.ndarray]:
-    """Per frame, the probability that each fitted car is on a car, from a model fitted on
-    the other fold group's frames."""
-    X, y = features(results)
-    group = [next(i for i, g in enumerate(FOLD_GROUPS) if fold_of(r.frame_id) in g) for r in results]
-    out = [None] * len(results)
-    for g in range(len(FOLD_GROUPS)):
-        train = [i for i in range(len(results)) if group[i] != g]
-        model = make_pipeline(StandardScaler(), LogisticRegression(C=1.0))  # as wirescene train scores fits it
-        model.fit(np.concatenate([X[i] for i in train]), np.concatenate([y[i] for i in train]))
-        for i in range(len(results)):
-            if group[i] == g:
-                out[i] = model.predict_proba(X[i])[:, 1] if len(X[i]) else np.zeros(0)
-    return out
+def cross_group_probabilities(variant: str, results) -> list[np.ndarray]:
+    """Per frame, the probability that each fitted car is on a car, from the car model of
+    ``wirescene train scores`` fitted on this variant's records of the other fold group."""
+    group = {r.frame_id: next(i for i, g in enumerate(FOLD_GROUPS) if fold_of(r.frame_id) in g) for r in results}
+    p = cross_validated_confidences({variant: results}, group, variant, target="car")
+    return [p[r.frame_id] for r in results]
 
 
 def main() -> None:
@@ -71,7 +62,7 @@ def main() -> None:
             Xa, ya = np.concatenate(X), np.concatenate(y)
             auc = ", ".join(f"{f} {roc_auc_score(ya, s * Xa[:, j]):.3f}"
                             for j, (f, s) in enumerate(zip(FEATURES, (1, -1, 1))))
-            prob = cross_group_probabilities(results)
+            prob = cross_group_probabilities(variant, results)
             print(f"{name} {variant}: {len(ya)} fitted cars, {int(ya.sum())} on a car; ROC AUC {auc}, "
                   f"cross-group model {roc_auc_score(ya, np.concatenate(prob)):.3f}")
             for tau in [None] + list(args.tau):

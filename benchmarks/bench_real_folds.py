@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
 from wirescene.eval.kitti_metrics import kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
@@ -39,10 +40,7 @@ from wirescene.fitting.variants import VARIANTS
 from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
-from wirescene.training.scores import cross_validated_car_filter, cross_validated_confidences, read_run_records
-
-#: Written into a bank run: the verification the summary applied (``_common.read_run`` applies it too).
-VERIFICATION_FILE = "verification.json"
+from wirescene.training.scores import cross_validated_confidences
 
 
 def kitti_with_cv_scores(records, gt, folds):
@@ -112,14 +110,11 @@ def main():
     elapsed = time.perf_counter() - t0
     if args.fold:
         return
-    records: dict = {}
-    for k in range(N_FOLDS):
-        for v, rs in read_run_records(args.out / f"fold{k}").items():
-            records.setdefault(v, []).extend(rs)
+    records, _ = read_run(args.out, verified=False)
     tau = FitOptions().with_settings(settings).predetect.min_car_probability
     if args.detections == "bank":
         fitted = sum(r.n_detections for r in records[variants[0]])
-        records = cross_validated_car_filter(records, folds, min_probability=tau)
+        records = verified_records(records, tau)
         (args.out / VERIFICATION_FILE).write_text(json.dumps({"min_car_probability": tau}))
         print(f"verified held out at p(car) >= {tau:g}: {variants[0]} keeps "
               f"{sum(r.n_detections for r in records[variants[0]])} of {fitted} fitted cars", file=sys.stderr)

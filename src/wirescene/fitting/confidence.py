@@ -92,6 +92,13 @@ def calibrated_confidence(features: np.ndarray, *, fine: bool, calibration: dict
     return 1.0 / (1.0 + np.exp(-logit))
 
 
+def _car_features(cars) -> np.ndarray:
+    """:func:`confidence_features` of fitted cars, from their pre-detection's score
+    (``detection_score`` once :func:`apply_confidence` has set it)."""
+    scores = [o.score if o.detection_score is None else o.detection_score for o in cars]
+    return confidence_features(scores, [o.cost for o in cars], [o.box2d for o in cars])
+
+
 def apply_confidence(estimate: SceneEstimate, *, fine: bool, calibration: dict | None = None) -> SceneEstimate:
     """Set every car's ``score`` to its calibrated confidence, keeping the pre-detection's
     score as ``detection_score``."""
@@ -101,8 +108,7 @@ def apply_confidence(estimate: SceneEstimate, *, fine: bool, calibration: dict |
     for o in cars:
         if o.detection_score is None:
             o.detection_score = o.score
-    feats = confidence_features([o.detection_score for o in cars], [o.cost for o in cars], [o.box2d for o in cars])
-    for o, p in zip(cars, calibrated_confidence(feats, fine=fine, calibration=calibration)):
+    for o, p in zip(cars, calibrated_confidence(_car_features(cars), fine=fine, calibration=calibration)):
         o.score = float(p)
     return estimate
 
@@ -111,12 +117,9 @@ def car_probabilities(estimate: SceneEstimate, *, fine: bool, calibration: dict 
     """``(N,)`` probabilities that the ``N`` fitted cars of ``estimate`` stand on a car,
     from their pre-detection's score (``detection_score`` once :func:`apply_confidence`
     has run), their objective and their box height."""
-    cars = estimate.objects
-    if not cars:
+    if not estimate.objects:
         return np.zeros(0)
-    scores = [o.score if o.detection_score is None else o.detection_score for o in cars]
-    feats = confidence_features(scores, [o.cost for o in cars], [o.box2d for o in cars])
-    return calibrated_confidence(feats, fine=fine, calibration=calibration, target="car")
+    return calibrated_confidence(_car_features(estimate.objects), fine=fine, calibration=calibration, target="car")
 
 
 def keep_likely_cars(estimate: SceneEstimate, *, fine: bool, min_probability: float,

@@ -113,20 +113,23 @@ def fit_score_calibration(records: dict[str, list[FrameResult]], *, C: float = 1
 
 
 def cross_validated_confidences(records: dict[str, list[FrameResult]], folds: dict[str, int],
-                                variant: str) -> dict[str, np.ndarray]:
+                                variant: str, *, target: str = "right") -> dict[str, np.ndarray]:
     """``{frame: (D,) confidences}`` of ``variant``'s estimates, each fold's from a model
-    fitted on the records of the other folds only (``folds``: frame -> fold)."""
+    fitted on the records of the other folds only (``folds``: frame -> fold); ``target``
+    as in :func:`wirescene.fitting.confidence.calibrated_confidence`."""
     fine = get_variant(variant).fine
     out = {}
     for k in sorted(set(folds.values())):
         test = [r for r in records[variant] if folds[r.frame_id] == k]
         if not test:
             continue
-        model = fit_score_calibration({v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()},
-                                      stages=("fine",) if fine else ("coarse",))
+        model = _fit_stages({v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()}, C=1.0,
+                            stages=("fine",) if fine else ("coarse",), target=target)
+        calibration = model if target == "right" else {target: model}
         for r in test:
             feats = confidence_features(r.det_scores, r.est_cost, r.det_boxes)
-            out[r.frame_id] = calibrated_confidence(feats, fine=fine, calibration=model) if len(feats) else np.zeros(0)
+            out[r.frame_id] = (calibrated_confidence(feats, fine=fine, calibration=calibration, target=target)
+                               if len(feats) else np.zeros(0))
     return out
 
 
@@ -135,20 +138,12 @@ def cross_validated_car_filter(records: dict[str, list[FrameResult]], folds: dic
     """The records of a run on our own pre-detections with the fit's verification
     (:func:`wirescene.fitting.confidence.keep_likely_cars`) applied held out: each fold's
     fitted cars scored by a car model fitted on the records of the other folds only
-    (``folds``: frame -> fold), those below ``min_probability`` left out."""
+    (``folds``: frame -> fold, :func:`cross_validated_confidences`), those below
+    ``min_probability`` left out (0 keeps every car)."""
+    if min_probability <= 0:
+        return records
     out: dict[str, list[FrameResult]] = {}
     for variant, results in records.items():
-        fine = get_variant(variant).fine
-        kept = {}
-        for k in sorted(set(folds[r.frame_id] for r in results)):
-            model = _fit_stages({v: [r for r in rs if folds[r.frame_id] != k] for v, rs in records.items()}, C=1.0,
-                                stages=("fine",) if fine else ("coarse",), target="car")
-            for r in results:
-                if folds[r.frame_id] == k and min_probability > 0 and r.n_detections:
-                    feats = confidence_features(r.det_scores, r.est_cost, r.det_boxes)
-                    p = calibrated_confidence(feats, fine=fine, calibration={"car": model}, target="car")
-                    kept[r.frame_id] = r.subset(p >= min_probability)
-                elif folds[r.frame_id] == k:
-                    kept[r.frame_id] = r
-        out[variant] = [kept[r.frame_id] for r in results]
+        p = cross_validated_confidences(records, folds, variant, target="car")
+        out[variant] = [r.subset(p[r.frame_id] >= min_probability) for r in results]
     return out
