@@ -239,6 +239,8 @@ def main():
                     help="override the banks' vote-clustering radius across (and, with --cluster-ry unset, along) "
                          "the box, in box widths / heights: --cv trains the steps after the templates with it, "
                          "--from-raw fits the calibration with it, and the banks of --models-dir keep it")
+    ap.add_argument("--pad-cells", type=int, help="--fold-models: empty HOG cells padded left and right of the "
+                    "image, so that windows reach past its sides (truncated cars)")
     ap.add_argument("--cluster-ry", type=float, default=None)
     ap.add_argument("--time-frames", type=int, default=5)
     ap.add_argument("--pr-curve", default=None)
@@ -368,6 +370,8 @@ def main():
             if not ground:
                 b.calibration = None  # pool raw margins (monotone per fold)
             with_clustering(b, args)
+            if args.pad_cells is not None:
+                b.meta["pad_cells"] = args.pad_cells
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
             dets[f] = detect_cars(ds.image(f), bank=banks[fold_of(f)], return_all=True,

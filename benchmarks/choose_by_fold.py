@@ -20,14 +20,16 @@ from pathlib import Path
 
 import numpy as np
 
+from _common import read_run
 from wirescene.eval.metrics import evaluate
-from wirescene.io.folds import N_FOLDS
-from wirescene.training.scores import read_run_records
+from wirescene.io.folds import N_FOLDS, fold_of
 
 
 def fold_records(run: Path, variant: str) -> list[list]:
-    """True-positive records of ``variant`` per fold of one run, ``[fold][car]``."""
-    return [evaluate(read_run_records(run / f"fold{k}")[variant]).records for k in range(N_FOLDS)]
+    """True-positive records of ``variant`` per fold of one run, ``[fold][car]``; a run on our
+    own pre-detections verified as its summary does (``_common.read_run``)."""
+    records = evaluate(read_run(run)[0][variant]).records
+    return [[t for t in records if fold_of(t.frame_id) == k] for k in range(N_FOLDS)]
 
 
 def other_folds_total(counts: dict[str, list[int]], k: int) -> dict[str, int]:

@@ -11,7 +11,10 @@ import importlib.util
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+from conftest import assert_close
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 SCRIPTS = sorted(p for p in BENCHMARKS.glob("*.py") if not p.stem.startswith("_"))  # _common.py: helpers
@@ -201,3 +204,21 @@ def test_train_scale_checks_its_two_worker_points_against_the_serial_law(monkeyp
     # 800 frames: 4,800 s serial, 60% of it with 2 workers at a parallel share of 0.8
     assert out["two_workers"] == [{"frames": 800, "seconds": 3000.0, "projected_s": 2880.0, "peak_mb": 1600,
                                    "peak_over_first_serial": 1.6}]
+
+
+def test_plane_height_bound_moves_cars_along_their_rays(monkeypatch):
+    """A car moved by its own height factor stands at its label's height, on the same ray."""
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_error_budget import Boxes
+    from bench_plane_height import moved_along_rays
+
+    centre = np.array([[0.06, -0.01, 0.0], [0.06, -0.01, 0.0]])
+    fitted = Boxes.of([[2.0, 1.70, 20.0], [-3.0, 1.62, 9.0]], [[1.5, 1.6, 3.9]] * 2, [0.1, -1.5])
+    label_y = np.array([1.60, 1.66])
+    factor = (label_y - centre[:, 1]) / (fitted.location[:, 1] - centre[:, 1])
+    moved = moved_along_rays({"camera_centre": centre, "fitted": fitted}, factor)
+    assert_close(moved.location[:, 1], label_y)
+    ray = fitted.location - centre
+    assert_close(np.cross(moved.location - centre, ray), np.zeros((2, 3)), atol=1e-9)
+    assert_close(moved.dims, fitted.dims)
+    assert_close(moved.rotation_y, fitted.rotation_y)

@@ -12,9 +12,16 @@ from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import EDGES
 from wirescene.io.kitti import FrameLabels, Label, read_image
 from wirescene.predetect.ap import FrameGT, evaluate_detections, frame_gt, voc_average_precision
-from wirescene.predetect.bank import DetectorBank, cluster_activations, detect_cars, load_default_bank, nms
+from wirescene.predetect.bank import (
+    DetectorBank,
+    cluster_activations,
+    detect_cars,
+    load_default_bank,
+    nms,
+    score_pyramid,
+)
 from wirescene.predetect.configurations import Configuration, connected_subsets, mirror_bin
-from wirescene.predetect.hog import N_FEAT, crop_features, hog_cells
+from wirescene.predetect.hog import N_FEAT, crop_features, feature_pyramid, hog_cells
 
 
 def _label(box, type_="Car", occluded=0, truncated=0.0, alpha=0.0):
@@ -242,6 +249,24 @@ def test_detect_cars_on_kitti_image_well_formed():
     # the shipped bank is trained on real frames and calibrated: scores are probabilities
     assert bank.meta["trained_on"] == "real KITTI frames" and bank.calibration is not None
     assert np.all((det.scores > 0) & (det.scores < 1)) and 0 < bank.threshold < 1
+
+
+def test_padded_pyramid_adds_windows_past_the_sides_and_keeps_the_others():
+    bank = load_default_bank()
+    img = read_image(KITTI_ROOT / "training" / "image_2" / "000010.png")[:, :400]
+    pyramid = feature_pyramid(img, [0.5])
+    plain = score_pyramid(bank, pyramid, threshold=-np.inf, top_k=10**7, min_height=10.0)
+    padded = score_pyramid(bank, pyramid, threshold=-np.inf, top_k=10**7, min_height=10.0, pad_cells=3)
+    W = pyramid[0][1].shape[1] * 8 / 0.5  # the grid's width in pixels
+    # the padded windows that lie on the grid are the plain ones, box for box, score for score
+    inside = (padded.boxes[:, 0] >= -1e-6) & (padded.boxes[:, 2] <= W + 1e-6)
+    assert inside.sum() == len(plain.scores) and (~inside).sum() > 0
+    key = lambda a, m: np.lexsort((a.scores[m], *a.boxes[m].T, a.det[m]))  # noqa: E731
+    all_plain = np.ones(len(plain.scores), bool)
+    assert_close(padded.boxes[inside][key(padded, inside)], plain.boxes[key(plain, all_plain)])
+    assert_close(padded.scores[inside][key(padded, inside)], plain.scores[key(plain, all_plain)], atol=1e-4)
+    # past the side, a window reaches at most pad_cells cells (8 px each at scale 0.5: 48 px) out
+    assert padded.boxes[:, 0].min() >= -48 - 1e-6 and padded.boxes[:, 2].max() <= W + 48 + 1e-6
 
 
 def test_detect_command_writes_readable_files(tmp_path):

@@ -242,11 +242,15 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
 
 def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k: int = 200,
                   min_height: float = 30.0, max_height: float = 2000.0, chunk_cols: int = 800,
-                  detectors=None) -> Activations:
+                  detectors=None, pad_cells: int = 0) -> Activations:
     """Apply every template to every pyramid level where the full object it implies is
     ``min_height..max_height`` px high (:func:`template_responses`). Keeps per detector
-    and level the ``top_k`` windows scoring above ``threshold``."""
+    and level the ``top_k`` windows scoring above ``threshold``. ``pad_cells`` columns of
+    empty cells left and right of every level let windows reach past the image's sides
+    (cars it truncates); their boxes keep image coordinates and ``cell`` the padded grid's."""
     out = {k: [] for k in ("det", "boxes", "scores", "level", "cell")}
+    if pad_cells:
+        pyramid = [(s, np.pad(F, ((0, 0), (pad_cells, pad_cells), (0, 0)))) for s, F in pyramid]
     for t, li, s, R in template_responses(bank, pyramid, min_height=min_height, max_height=max_height,
                                           chunk_cols=chunk_cols, detectors=detectors):
         th, tw = bank.configs[t].template
@@ -258,7 +262,7 @@ def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k
         if not len(idx):
             continue
         r, q = np.divmod(idx, Wr)
-        boxes = np.stack([q * CELL, r * CELL, (q + tw) * CELL, (r + th) * CELL], 1) / s
+        boxes = np.stack([(q - pad_cells) * CELL, r * CELL, (q - pad_cells + tw) * CELL, (r + th) * CELL], 1) / s
         out["det"].append(np.full(len(idx), t))
         out["boxes"].append(boxes)
         out["scores"].append(flat[idx].astype(float))
@@ -418,7 +422,8 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
     W, H = image_size
     raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
     floor = min(raw_thr if raw_thr is not None else -0.5, -0.5) - 0.5
-    act = score_pyramid(bank, pyramid, threshold=floor, min_height=min_height, max_height=3.0 * H)
+    act = score_pyramid(bank, pyramid, threshold=floor, min_height=min_height, max_height=3.0 * H,
+                        pad_cells=int(bank.meta.get("pad_cells", 0)))
     det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
                             cross_view_nms=cross_view_nms, source=source, cluster_kw=_cluster_kw(bank),
                             horizon=horizon, center_column=center_column, gray=gray)
