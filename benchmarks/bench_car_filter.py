@@ -25,15 +25,17 @@ from sklearn.metrics import roc_auc_score
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from bench_operating_point import false_cars, figures, on_car
-from wirescene.fitting.confidence import FEATURES, confidence_features
+from wirescene.fitting.confidence import FEATURES, MODEL_FEATURES
 from wirescene.io.folds import FOLD_GROUPS, fold_of
-from wirescene.training.scores import cross_validated_confidences
+from wirescene.training.scores import cross_validated_confidences, record_features
+
+#: The car model's features (:data:`MODEL_FEATURES`), as columns of the confidence's.
+CAR_COLUMNS = [FEATURES.index(f) for f in MODEL_FEATURES["car"]]
 
 
 def features(results) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Per frame, the confidence features ``(D, 3)`` and the on-car labels ``(D,)``."""
-    return ([confidence_features(r.det_scores, r.est_cost, r.det_boxes) for r in results],
-            [on_car(r) for r in results])
+    """Per frame, the car model's features ``(D, 3)`` and the on-car labels ``(D,)``."""
+    return [record_features(r)[:, CAR_COLUMNS] for r in results], [on_car(r) for r in results]
 
 
 def cross_group_probabilities(variant: str, results) -> list[np.ndarray]:
@@ -61,7 +63,7 @@ def main() -> None:
             X, y = features(results)
             Xa, ya = np.concatenate(X), np.concatenate(y)
             auc = ", ".join(f"{f} {roc_auc_score(ya, s * Xa[:, j]):.3f}"
-                            for j, (f, s) in enumerate(zip(FEATURES, (1, -1, 1))))
+                            for j, (f, s) in enumerate(zip(MODEL_FEATURES["car"], (1, -1, 1))))
             prob = cross_group_probabilities(variant, results)
             print(f"{name} {variant}: {len(ya)} fitted cars, {int(ya.sum())} on a car; ROC AUC {auc}, "
                   f"cross-group model {roc_auc_score(ya, np.concatenate(prob)):.3f}")

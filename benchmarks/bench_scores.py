@@ -1,61 +1,108 @@
-"""Do the written confidences rank? KITTI AP of one evaluation run's estimates under
-different scores, with the confidence model cross-validated by drive.
+"""Do the written confidences rank? KITTI AP of runs' estimates under different scores,
+with the confidence model cross-validated by drive.
 
-Input: an evaluation run on labelled real frames with raw scores and frame records::
+Input: runs of ``bench_real_folds.py`` (``RUN/fold{k}/``; a run on our own pre-detections is
+verified as its summary does) or ``wirescene eval ... --raw-scores --predictions DIR``
+directories::
 
-    wirescene eval ../shared/data/kitti --variant coarse+gp --variant full --raw-scores \\
-        --seed 1 --predictions RUN_DIR
-    python benchmarks/bench_scores.py RUN_DIR --root ../shared/data/kitti
+    python benchmarks/bench_scores.py RUN_GT RUN_BANK --root ../shared/data/kitti
 
 For each fold of :mod:`wirescene.io.folds` the confidence model is fitted on the records
-of the other folds and applied to this fold's estimates; the pooled predictions are then
-scored with the KITTI rules (:mod:`wirescene.eval.kitti_metrics`) three ways: the
-pre-detection scores as they are (label boxes: all 1), the fit's objective alone
-(negated cost), and the calibrated confidence. Estimates are the same in all three:
-only their order differs.
+of the other folds and applied to this fold's estimates; the predictions are then scored
+with the KITTI rules (:mod:`wirescene.eval.kitti_metrics`), per fold group and pooled, by:
+the pre-detection scores as they are (label boxes: all 1), the fit's objective alone
+(negated cost), and the calibrated confidence of each model of :data:`MODELS`: a criterion
+of :data:`wirescene.training.scores.RIGHT_CRITERIA` (when an estimate counts as right) and
+a feature set. Estimates are the same in all: only their order differs. Last, the model is
+chosen on one fold group by the fine variants' 3D AP at IoU 0.7 summed over the runs, and
+read on the other.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from wirescene.eval.kitti_metrics import kitti_metrics
-from wirescene.io.folds import N_FOLDS, fold_of
-from wirescene.io.kitti import KittiDataset
-from wirescene.training.scores import cross_validated_confidences, read_run_records
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import read_run  # noqa: E402
+from wirescene.eval.kitti_metrics import kitti_metrics  # noqa: E402
+from wirescene.fitting.confidence import FEATURES  # noqa: E402
+from wirescene.fitting.variants import get_variant  # noqa: E402
+from wirescene.io.folds import FOLD_GROUPS, fold_of  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
+from wirescene.training.scores import cross_validated_confidences  # noqa: E402
+
+#: The confidence models compared: name -> (criterion, features). ``3 features`` are those of
+#: the confidence before December 2026 (detection logit, objective, log box height).
+MODELS = {"1m, 3 features": ("1m", FEATURES[:3]), "iou, 3 features": ("iou", FEATURES[:3]),
+          "1m": ("1m", FEATURES), "iou": ("iou", FEATURES)}
+#: (name, KITTI metrics path) of the APs printed, moderate.
+COLUMNS = (("3D 0.7", ("car", "3d")), ("BEV 0.7", ("car", "bev")), ("3D 0.5", ("iou_0.5", "car", "3d")))
+
+
+def _ap(metrics: dict, path) -> float | None:
+    for key in path:
+        metrics = metrics[key]
+    return metrics["moderate"]
+
+
+def score_table(records: dict, gt: dict) -> dict:
+    """``{(variant, scores): {group: {column: AP}}}`` for the groups of
+    :data:`FOLD_GROUPS` and ``"pooled"``."""
+    frames = sorted({r.frame_id for rs in records.values() for r in rs})
+    folds = {f: fold_of(f) for f in frames}
+    groups = {str(g): [f for f in frames if folds[f] in g] for g in FOLD_GROUPS} | {"pooled": frames}
+    table = {}
+    for variant, results in records.items():
+        by_frame = {r.frame_id: r for r in results}
+        scores = {"detection": {f: by_frame[f].det_scores for f in frames},
+                  "objective": {f: -np.asarray(by_frame[f].est_cost, float) for f in frames}}
+        for name, (right, features) in MODELS.items():
+            scores[f"calibrated ({name})"] = cross_validated_confidences(records, folds, variant, right=right,
+                                                                         features=features)
+        for name, of in scores.items():
+            table[(variant, name)] = {
+                g: {c: _ap(kitti_metrics([gt[f] for f in fs], [by_frame[f].estimate_labels(of[f]) for f in fs]), p)
+                    for c, p in COLUMNS} for g, fs in groups.items()}
+    return table
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("run_dir", type=Path)
+    ap.add_argument("runs", nargs="+", type=Path, metavar="RUN")
     ap.add_argument("--root", default=str(Path(__file__).resolve().parents[1] / "tests" / "data" / "kitti"))
     args = ap.parse_args()
     dataset = KittiDataset(args.root)
-    records = read_run_records(args.run_dir)
-    frames = sorted({r.frame_id for rs in records.values() for r in rs})
-    folds = {f: fold_of(f) for f in frames}
-    gt = {f: dataset.labels(f) for f in frames}
-    n_cars = sum(len(gt[f].of_type("Car")) for f in frames)
-    print(f"{len(frames)} frames, {n_cars} cars, {N_FOLDS} folds by drive; AP in % (KITTI rules, R40)")
-    print(f"{'variant':10s} {'scores':12s} {'3D mod 0.7':>10s} {'3D mod 0.5':>10s} {'BEV mod 0.5':>11s} {'2D mod':>7s}")
-    for variant, results in records.items():
-        by_frame = {r.frame_id: r for r in results}
-        calibrated = cross_validated_confidences(records, folds, variant)
-        for name, scores_of in (("detection", lambda f, by_frame=by_frame: by_frame[f].det_scores),
-                                ("objective", lambda f, by_frame=by_frame: -by_frame[f].est_cost),
-                                ("calibrated", lambda f, calibrated=calibrated: calibrated[f])):
-            preds = [by_frame[f].estimate_labels(scores_of(f)) for f in frames]
-            m = kitti_metrics([gt[f] for f in frames], preds)
-
-            def fmt(v):
-                return "-" if v is None else f"{v:.1f}"
-
-            print(f"{variant:10s} {name:12s} {fmt(m['car']['3d']['moderate']):>10s} "
-                  f"{fmt(m['iou_0.5']['car']['3d']['moderate']):>10s} {fmt(m['iou_0.5']['car']['bev']['moderate']):>11s} "
-                  f"{fmt(m['car']['2d']['moderate']):>7s}")
+    groups = [str(g) for g in FOLD_GROUPS]
+    chosen_by = {g: {m: 0.0 for m in MODELS} for g in groups}
+    for run in args.runs:
+        records, detections = read_run(run)
+        frames = sorted({r.frame_id for rs in records.values() for r in rs})
+        gt = {f: dataset.labels(f) for f in frames}
+        n_cars = sum(len(gt[f].of_type("Car")) for f in frames)
+        print(f"\n## {run.name} (detections {detections}): {len(frames)} frames, {n_cars} cars; AP moderate, "
+              "KITTI rules, R40\n")
+        print("| variant | scores | " + " | ".join(f"{g}: {', '.join(c for c, _ in COLUMNS)}"
+                                                   for g in groups + ["pooled"]) + " |")
+        print("|---|---|" + "---|" * (len(groups) + 1))
+        for (variant, name), row in score_table(records, gt).items():
+            cells = " | ".join(", ".join("-" if row[g][c] is None else f"{row[g][c]:.1f}" for c, _ in COLUMNS)
+                               for g in groups + ["pooled"])
+            print(f"| {variant} | {name} | {cells} |")
+            if get_variant(variant).fine and name.startswith("calibrated"):
+                model = name[len("calibrated ("):-1]
+                for g in groups:
+                    chosen_by[g][model] += row[g]["3D 0.7"] or 0.0
+    print()
+    for choose, report in (groups, groups[::-1]):
+        best = max(chosen_by[choose], key=chosen_by[choose].get)
+        sums = ", ".join(f"{r} {v:.1f}" for r, v in chosen_by[choose].items())
+        held = ", ".join(f"{r} {v:.1f}" for r, v in chosen_by[report].items())
+        print(f"chosen on {choose} (fine variants' 3D AP@0.7 summed: {sums}): {best}; on {report}: {held}")
 
 
 if __name__ == "__main__":

@@ -61,7 +61,7 @@ def _assert_frame_results_equal(a: FrameResult, b: FrameResult):
             assert isinstance(y, np.ndarray) and x.dtype == y.dtype and x.shape == y.shape, name
             assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), name
         elif isinstance(x, (list, tuple)):
-            assert isinstance(y, list) and len(x) == len(y), name
+            assert isinstance(y, (list, tuple)) and len(x) == len(y), name
             for i, (xi, yi) in enumerate(zip(x, y)):
                 same(xi, yi, f"{name}[{i}]")
         elif isinstance(x, Label):
@@ -98,6 +98,7 @@ def test_frame_result_round_trip_is_exact():
         gt_vertices_2d=[np.full((36, 2), np.nan), None],
         gt_vertex_visible=[rng.random(36) < 0.5, None],
         gt_self_occluded=np.zeros((2, 36), bool),  # an array, not a list: stays an array
+        image_size=(1242, 375),
     )
     empty = FrameResult("000008", [], np.zeros((0, 4)), [], [], np.zeros((0, 3)), np.zeros((0, 3)), [], [])
     for result in (full, empty):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import KITTI_ROOT
+from conftest import KITTI_ROOT, assert_close
 from wirescene.cli.main import main
 from wirescene.core.errors import InputError
 from wirescene.fitting.confidence import (
@@ -40,6 +40,7 @@ def test_train_scores_from_eval_runs_and_use_them(tmp_path):
     assert r.exit_code == 0, r.output
     record = json.loads(cal.read_text())
     assert record["format"] == "wirescene-score-calibration/2"
+    assert record["right"] == "iou" and "3D box IoU > 0.7" in record["criterion"]  # KITTI's rule, the default
     n_own = len(list((own / "coarse").glob("*.txt")))
     assert n_own == 3
     own_cars = sum(len(p.read_text().splitlines()) for p in (own / "coarse").glob("*.txt"))
@@ -99,9 +100,53 @@ def test_held_out_verification_keeps_the_boxes_that_fit_like_cars():
         boxes = np.array([car, [600.0, 150.0, 650.0, 190.0]])
         cost = np.array([rng.uniform(0, 1), rng.uniform(2, 3)])
         results.append(FrameResult(f"f{i}", gt, boxes, [0.0, 0.0], rng.uniform(0.3, 0.9, 2), np.zeros((2, 3)),
-                                   np.ones((2, 3)), np.zeros(2), np.zeros(2), est_cost=cost, est_score=np.ones(2)))
+                                   np.ones((2, 3)), np.zeros(2), np.zeros(2), est_cost=cost, est_score=np.ones(2),
+                                   image_size=(1242, 375)))
         folds[f"f{i}"] = i % 4
     kept = cross_validated_car_filter({"coarse": results}, folds, min_probability=0.5)["coarse"]
     assert [r.frame_id for r in kept] == [r.frame_id for r in results]
     assert all(r.n_detections == 1 and r.det_boxes[0, 0] == 100.0 for r in kept)
     assert cross_validated_car_filter({"coarse": results}, folds, min_probability=0)["coarse"][0].n_detections == 2
+
+
+def test_right_is_kittis_iou_or_the_papers_metre():
+    """A car fitted 0.8 m too far along its own length is within 1 m (the paper's rule) but
+    overlaps its label at 3D IoU 3.1 / 4.7 < 0.7 (KITTI's); the unmatched box is wrong either way."""
+    from wirescene.eval.metrics import FrameResult
+    from wirescene.io.kitti import Label
+    from wirescene.training.scores import labelled_features
+
+    dims, loc = [1.5, 1.6, 3.9], [2.0, 1.65, 15.0]
+    label = Label("Car", 0.0, 0, 0.0, [600.0, 170.0, 700.0, 230.0], dims, loc, -np.pi / 2)
+    boxes = [[600.0, 170.0, 700.0, 230.0], [100.0, 170.0, 160.0, 210.0]]
+    fits = {"exact": [loc, loc], "far": [[2.0, 1.65, 15.8], loc]}
+    for name, est in fits.items():
+        result = FrameResult("000000", [label], boxes, [0.0, 0.0], [0.9, 0.8], est, [dims, dims],
+                             [-np.pi / 2, -np.pi / 2], [0.0, 0.0], est_cost=[0.1, 0.2], image_size=(1242, 375))
+        right = {c: labelled_features(result, right=c)[1].tolist() for c in ("iou", "1m")}
+        assert right == ({"iou": [True, False], "1m": [True, False]} if name == "exact"
+                         else {"iou": [False, False], "1m": [True, False]}), name
+        assert labelled_features(result, target="car")[1].tolist() == [True, False]
+    with pytest.raises(ValueError, match="unknown criterion"):
+        labelled_features(result, right="2m")
+    # a record written before the image size was kept cannot give the features: say so, and which frame
+    old = FrameResult.from_dict({k: v for k, v in result.to_dict().items() if k != "image_size"})
+    assert old.image_size is None
+    with pytest.raises(InputError, match="000000 has no image size"):
+        labelled_features(old)
+
+
+def test_features_mark_the_boxes_the_image_cuts_and_old_calibrations_read_three():
+    boxes = [[0.0, 150.0, 90.0, 250.0], [500.0, 150.0, 600.0, 250.0], [1150.0, 150.0, 1241.0, 250.0]]
+    f = confidence_features([0.9] * 3, [1.0] * 3, boxes, image_width=1242)
+    assert f.shape == (3, 5)
+    assert f[:, 4].tolist() == [1.0, 0.0, 1.0]
+    assert_close(f[:, 3], f[:, 2] ** 2)
+    # without the width only the left side is known
+    assert confidence_features([0.9] * 3, [1.0] * 3, boxes)[:, 4].tolist() == [1.0, 0.0, 0.0]
+    # a calibration of the earlier format names its three features once, at the top level
+    model = {"mean": [0.0] * 3, "scale": [1.0] * 3, "weights": [0.0, 0.0, 1.0], "bias": 0.0}
+    old = {"features": ["detection_logit", "objective", "log_box_height"], "coarse": model, "fine": model,
+           "car": {"coarse": model, "fine": model}}
+    p = calibrated_confidence(f, fine=False, calibration=old)
+    assert_close(p, 1 / (1 + np.exp(-f[:, 2])))

@@ -15,7 +15,10 @@ from wirescene.cli.options import check_output_file, select_frames, split_file_o
 @split_file_option
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Calibration to write (the shipped one is src/wirescene/data/score_calibration.json).")
-def scores(predictions_dirs, frames, split_file, out):
+@click.option("--right", type=click.Choice(["iou", "1m"]), default="iou", show_default=True,
+              help="When the confidence calls a car right: its 3D box overlaps the labelled car's at IoU > 0.7 "
+                   "(KITTI's rule for cars) or its centre lies within 1 m (the paper's).")
+def scores(predictions_dirs, frames, split_file, out, right):
     """Fit the confidence model on the frame records of evaluation runs on labelled
     real frames (`wirescene eval ROOT --variant coarse+gp --variant full --raw-scores
     --predictions DIR`; e.g. one run with label boxes and one with `--detections bank`),
@@ -40,12 +43,12 @@ def scores(predictions_dirs, frames, split_file, out):
     if not own:
         raise InputError("no run on our own pre-detections (`--detections bank`): the car model needs one",
                          path=Path(predictions_dirs[0]))
-    result = fit_score_calibration(records, car_records=own)
+    result = fit_score_calibration(records, car_records=own, right=right)
     result["trained_on"] = {"runs": [f"{Path(d).parent.name}/{Path(d).name}" for d in predictions_dirs],
                             "frames": sorted({r.frame_id for rs in records.values() for r in rs})}
     save_score_calibration(out, result)
     for stage in ("coarse", "fine"):
         for m, what in ((result[stage], "right"), (result["car"][stage], "on a car")):
             click.echo(f"{stage}: {m['n']} estimates, {100 * m['positive_rate']:.0f}% {what}; weights "
-                       + ", ".join(f"{f} {w:+.2f}" for f, w in zip(result["features"], m["weights"])))
+                       + ", ".join(f"{f} {w:+.2f}" for f, w in zip(m["features"], m["weights"])))
     click.echo(f"-> {out}")

@@ -108,6 +108,9 @@ class FrameResult:
         The fit's objective per car (lower is better), a feature of the confidence.
     est_score : (D,) array, optional
         The confidence written with each car (KITTI's 16th column).
+    image_size : (width, height), optional
+        Of the frame's image (a feature of the confidence: boxes at its sides); records
+        written before it was kept lack it.
     """
 
     frame_id: str
@@ -127,6 +130,7 @@ class FrameResult:
     gt_self_occluded: Sequence[np.ndarray | None] | None = None
     est_cost: np.ndarray | None = None
     est_score: np.ndarray | None = None
+    image_size: tuple[int, int] | None = None
 
     def __post_init__(self):
         self.frame_id = str(self.frame_id)
@@ -146,6 +150,11 @@ class FrameResult:
         for name in ("est_cost", "est_score"):
             if getattr(self, name) is not None:
                 setattr(self, name, _array(name, getattr(self, name), (D,)))
+        if self.image_size is not None:
+            size = np.asarray(self.image_size).reshape(-1)
+            if size.shape != (2,) or not np.all(size > 0):
+                raise ShapeError(f"image_size must be (width, height), got {self.image_size!r}")
+            self.image_size = (int(size[0]), int(size[1]))
         for name in ("gt_occluded_parts", "gt_vertices_2d", "gt_vertex_visible", "gt_self_occluded"):
             value = getattr(self, name)
             if value is not None and len(value) != len(self.gt):
@@ -194,6 +203,8 @@ class FrameResult:
             If ``data`` is not such a record (missing or unknown keys, bad arrays).
         """
         names = [f.name for f in fields(cls)]
+        if isinstance(data, dict) and "image_size" not in data:
+            data = {**data, "image_size": None}  # records written before the image size was kept
         if not isinstance(data, dict) or set(data) != set(names):
             got = sorted(data) if isinstance(data, dict) else type(data).__name__
             raise ValueError(f"not a FrameResult record: expected keys {names}, got {got}")

@@ -71,6 +71,7 @@ def frame_result(
         gt_self_occluded=None if vertex_gt is None else vertex_gt.self_occluded,
         est_cost=np.array([o.cost for o in objs]),
         est_score=np.array([o.score for o in objs]),
+        image_size=None if camera is None or camera.image_size is None else tuple(int(v) for v in camera.image_size),
     )
 
 

@@ -289,16 +289,20 @@ def fit_frame(
         detections = viewpoint_from_evidence(camera, detections, evidence, load_shape_model())
     if lifted is None:
         lifted = lift_table(camera, detections, options=options.lifting)
-    estimates = {v.name: _fit_variant(camera, detections, v, lifted, evidence, options) for v in variants}
+    # the confidence's features ask whether a box touches the image's side
+    width = camera.image_size[0] if camera.image_size is not None else (None if image is None else image.shape[1])
+    estimates = {v.name: _fit_variant(camera, detections, v, lifted, evidence, options, image_width=width)
+                 for v in variants}
     for v in variants:
         estimates[v.name].detections = detections
         if own:
-            keep_likely_cars(estimates[v.name], fine=v.fine, min_probability=options.predetect.min_car_probability)
+            keep_likely_cars(estimates[v.name], fine=v.fine, min_probability=options.predetect.min_car_probability,
+                             image_width=width)
     return FrameFit(detections, estimates, evidence)
 
 
 def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: LiftingTable,
-                 evidence: PartEvidence | None, options: FitOptions) -> SceneEstimate:
+                 evidence: PartEvidence | None, options: FitOptions, *, image_width: float | None) -> SceneEstimate:
     """Stages 4-5 for one variant: scene particles from the lifting table, then (fine
     variants) Algorithm 1 on every particle and the MAP scene."""
     weights = plane_vote_weights(detections.scores)
@@ -311,7 +315,8 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
         # weighted by the detections' scores), not by the plain sum ``particles.cost``,
         # which lets badly fitting (false) detections pick the shared plane.
         estimate = SceneEstimate.from_particle(particles, 0, detections, variant=v.name)
-        return apply_confidence(estimate, fine=False) if options.calibrate_scores else estimate
+        return apply_confidence(estimate, fine=False, image_width=image_width) if options.calibrate_scores \
+            else estimate
     shape_model = load_shape_model()
     # Seeded per call from the run seed and the scene size alone, so a variant's fit does
     # not depend on which other variants are fitted with it.
@@ -322,7 +327,7 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
         alpha=detections.alpha,
     )
     estimate = estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)
-    return apply_confidence(estimate, fine=True) if options.calibrate_scores else estimate
+    return apply_confidence(estimate, fine=True, image_width=image_width) if options.calibrate_scores else estimate
 
 
 def fit_scene(
