@@ -51,6 +51,15 @@ def test_train_scores_from_eval_runs_and_use_them(tmp_path):
     for target in ("right", "car"):
         p = calibrated_confidence(feats, fine=False, calibration=model, target=target)
         assert np.all((p > 0) & (p < 1))
+    # records of an older wirescene lack the image size the features need: one line naming the record
+    path = sorted((pred / ".frames").glob("*.json"))[0]
+    record = json.loads(path.read_text())
+    for entry in record["variants"].values():
+        del entry["result"]["image_size"]
+    path.write_text(json.dumps(record))
+    r = CliRunner().invoke(main, ["train", "scores", str(pred), str(own), "--out", str(tmp_path / "again.json")])
+    assert r.exit_code == 2 and f"{path.name}: frame record without the image size" in r.output
+    assert not (tmp_path / "again.json").exists()
 
 
 def test_confidence_is_the_calibrated_model_and_keeps_the_detection_score():

@@ -37,6 +37,10 @@ def scores(predictions_dirs, frames, split_file, out, right):
     own: dict = {}
     for folder in predictions_dirs:
         for variant, results in read_run_records(folder, frame_ids).items():
+            old = next((r for r in results if r.image_size is None), None)
+            if old is not None:  # the confidence's features need it
+                raise InputError("frame record without the image size (written by an older wirescene): evaluate "
+                                 "again", path=Path(folder) / RECORDS_DIR / f"{old.frame_id}.json")
             records.setdefault(variant, []).extend(results)
         for variant, results in read_run_records(folder, frame_ids, label_boxes=False).items():
             own.setdefault(variant, []).extend(results)
