@@ -49,9 +49,10 @@ def record_features(result: FrameResult) -> np.ndarray:
 
 def labelled_features(result: FrameResult, *, target: str = "right",
                       right: str = DEFAULT_RIGHT) -> tuple[np.ndarray, np.ndarray]:
-    """Features ``(D, 3)`` of a frame's estimates and whether each is right by the
-    criterion ``right`` of :data:`RIGHT_CRITERIA`; with ``target="car"``, whether its
-    detection matches a car at all (IoU > 0.5, greedy by score)."""
+    """Features ``(D, 5)`` of a frame's estimates (:func:`record_features`) and whether
+    each is right by the criterion ``right`` of :data:`RIGHT_CRITERIA`; with
+    ``target="car"``, whether its detection matches a car at all (IoU > 0.5, greedy by
+    score)."""
     if result.est_cost is None:
         raise ValueError(f"record of frame {result.frame_id} has no fit objective (est_cost)")
     if right not in RIGHT_CRITERIA:
