@@ -27,7 +27,7 @@ def scores(predictions_dirs, frames, split_file, out, right):
     from wirescene.core.errors import InputError
     from wirescene.eval.records import RECORDS_DIR
     from wirescene.fitting.confidence import save_score_calibration
-    from wirescene.training.scores import fit_score_calibration, read_run_records
+    from wirescene.training.scores import fit_score_calibration, read_run_sources
 
     check_output_file(out, "--out")
     recorded = sorted({p.stem for folder in predictions_dirs for p in (Path(folder) / RECORDS_DIR).glob("*.json")})
@@ -36,14 +36,16 @@ def scores(predictions_dirs, frames, split_file, out, right):
     records: dict = {}
     own: dict = {}
     for folder in predictions_dirs:
-        for variant, results in read_run_records(folder, frame_ids).items():
-            old = next((r for r in results if r.image_size is None), None)
-            if old is not None:  # the confidence's features need it
-                raise InputError("frame record without the image size (written by an older wirescene): evaluate "
-                                 "again", path=Path(folder) / RECORDS_DIR / f"{old.frame_id}.json")
-            records.setdefault(variant, []).extend(results)
-        for variant, results in read_run_records(folder, frame_ids, label_boxes=False).items():
-            own.setdefault(variant, []).extend(results)
+        sources = read_run_sources(folder, frame_ids)
+        for source, by_variant in sources.items():
+            for variant, results in by_variant.items():
+                old = next((r for r in results if r.image_size is None), None)
+                if old is not None:  # the confidence's features need it
+                    raise InputError("frame record without the image size (written by an older wirescene): evaluate "
+                                     "again", path=Path(folder) / RECORDS_DIR / f"{old.frame_id}.json")
+                records.setdefault(variant, []).extend(results)
+                if source == "detections":
+                    own.setdefault(variant, []).extend(results)
     if not own:
         raise InputError("no run on our own pre-detections (`--detections bank`): the car model needs one",
                          path=Path(predictions_dirs[0]))

@@ -18,8 +18,8 @@ Each stored model names the features it reads (older calibrations: the first thr
 "Right" means the pre-detection matches a ground-truth car (IoU > 0.5) and the estimated
 3D box overlaps the car's at IoU > 0.7, KITTI's rule for cars (the calibration records its
 criterion; ``wirescene train scores --right 1m`` fits the paper's, the 3D centre within 1 m,
-instead). A second model per stage, on the
-same features, gives the probability that the fitted car stands on a car at all (its
+instead). A second model per stage, on the first three features, gives the
+probability that the fitted car stands on a car at all (its
 pre-detection matches one): the fit's verification of our own pre-detections
 (:func:`keep_likely_cars`), since a box that is not a car fits the part evidence badly.
 The weights are fitted by ``wirescene train scores`` (:mod:`wirescene.training.scores`) on

@@ -79,10 +79,10 @@ def labelled_features(result: FrameResult, *, target: str = "right",
     return feats, out
 
 
-def read_run_records(predictions_dir, frames: Iterable[str] | None = None, *,
-                     label_boxes: bool = True) -> dict[str, list[FrameResult]]:
-    """``{variant: [FrameResult, ...]}`` from ``predictions_dir/.frames/*.json``; without
-    ``label_boxes``, only the records of runs whose detections were not the labels."""
+def read_run_sources(predictions_dir, frames: Iterable[str] | None = None) -> dict[str, dict[str, list[FrameResult]]]:
+    """``{"labels" | "detections": {variant: [FrameResult, ...]}}`` from
+    ``predictions_dir/.frames/*.json``, by whether the run's pre-detections were the label
+    boxes or a detector's (ours, or files of another); each file read once."""
     folder = Path(predictions_dir) / RECORDS_DIR
     paths = sorted(folder.glob("*.json"))
     if frames is not None:
@@ -90,16 +90,26 @@ def read_run_records(predictions_dir, frames: Iterable[str] | None = None, *,
         paths = [p for p in paths if p.stem in keep]
     if not paths:
         raise InputError("no frame records (run `wirescene eval ... --predictions DIR` first)", path=folder)
-    out: dict[str, list[FrameResult]] = {}
+    out: dict[str, dict[str, list[FrameResult]]] = {"labels": {}, "detections": {}}
     for path in paths:
         try:
             record = json.loads(path.read_text())
-            if not label_boxes and record.get("config", {}).get("detections", {}).get("spec") == "gt":
-                continue
+            gt = record.get("config", {}).get("detections", {}).get("spec") == "gt"
             for variant, entry in record["variants"].items():
-                out.setdefault(variant, []).append(FrameResult.from_dict(entry["result"]))
+                out["labels" if gt else "detections"].setdefault(variant, []).append(
+                    FrameResult.from_dict(entry["result"]))
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise InputError(f"unreadable frame record ({' '.join(str(exc).split())[:100]})", path=path) from None
+    return out
+
+
+def read_run_records(predictions_dir, frames: Iterable[str] | None = None) -> dict[str, list[FrameResult]]:
+    """``{variant: [FrameResult, ...]}`` from ``predictions_dir/.frames/*.json``
+    (:func:`read_run_sources`, both sources)."""
+    out: dict[str, list[FrameResult]] = {}
+    for by_variant in read_run_sources(predictions_dir, frames).values():
+        for variant, results in by_variant.items():
+            out.setdefault(variant, []).extend(results)
     return out
 
 
