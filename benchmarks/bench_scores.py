@@ -13,7 +13,8 @@ with the KITTI rules (:mod:`wirescene.eval.kitti_metrics`), per fold group and p
 the pre-detection scores as they are (label boxes: all 1), the fit's objective alone
 (negated cost), and the calibrated confidence of each model of :data:`MODELS`: a criterion
 of :data:`wirescene.training.scores.RIGHT_CRITERIA` (when an estimate counts as right) and
-a feature set. Estimates are the same in all: only their order differs. Last, the model is
+a feature set. Estimates are the same in all: only their order differs. Per run, a reliability table
+says whether the shipped model's held-out confidence is a probability. Last, the model is
 chosen on one fold group by the fine variants' 3D AP at IoU 0.7 summed over the runs, and
 read on the other.
 """
@@ -34,7 +35,7 @@ from wirescene.fitting.confidence import FEATURES  # noqa: E402
 from wirescene.fitting.variants import get_variant  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.training.scores import cross_validated_confidences  # noqa: E402
+from wirescene.training.scores import cross_validated_confidences, labelled_features  # noqa: E402
 
 #: The confidence models compared: name -> (criterion, features). ``3 features`` are those of
 #: the confidence before December 2026 (detection logit, objective, log box height).
@@ -71,6 +72,32 @@ def score_table(records: dict, gt: dict) -> dict:
     return table
 
 
+#: Edges of the confidence bins of the reliability table.
+RELIABILITY_BINS = (0.0, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
+
+
+def reliability(records: dict, *, fine: bool) -> list[tuple[float, float, int, float, float]]:
+    """Is the shipped model's confidence a probability? Per bin of :data:`RELIABILITY_BINS`
+    ``(low, high, cars, mean confidence, share right)`` of the held-out confidences of the
+    fine (or coarse) variants' estimates, pooled, right by the shipped criterion."""
+    frames = sorted({r.frame_id for rs in records.values() for r in rs})
+    folds = {f: fold_of(f) for f in frames}
+    p, y = [], []
+    for variant, results in records.items():
+        if get_variant(variant).fine != fine:
+            continue
+        conf = cross_validated_confidences(records, folds, variant)
+        for r in results:
+            if r.n_detections:
+                p.append(conf[r.frame_id])
+                y.append(labelled_features(r)[1])
+    p, y = np.concatenate(p), np.concatenate(y)
+    edges = np.asarray(RELIABILITY_BINS)
+    which = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, len(edges) - 2)
+    return [(edges[b], edges[b + 1], int(np.sum(which == b)), float(np.mean(p[which == b])),
+             float(np.mean(y[which == b]))) for b in range(len(edges) - 1) if np.any(which == b)]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", type=Path, metavar="RUN")
@@ -97,6 +124,10 @@ def main():
                 model = name[len("calibrated ("):-1]
                 for g in groups:
                     chosen_by[g][model] += row[g]["3D 0.7"] or 0.0
+        for fine in (False, True):
+            bins = "; ".join(f"{lo:.1f}-{hi:.1f}: {n} cars, {100 * m:.0f}% predicted, {100 * o:.0f}% right"
+                             for lo, hi, n, m, o in reliability(records, fine=fine))
+            print(f"\nreliability of the shipped model, held out, {'fine' if fine else 'coarse'} variants pooled: {bins}")
     print()
     for choose, report in (groups, groups[::-1]):
         best = max(chosen_by[choose], key=chosen_by[choose].get)
