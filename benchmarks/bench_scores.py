@@ -31,16 +31,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import read_run  # noqa: E402
 from wirescene.eval.kitti_metrics import kitti_metrics  # noqa: E402
-from wirescene.fitting.confidence import FEATURES  # noqa: E402
+from wirescene.fitting.confidence import FEATURES, MODEL_FEATURES  # noqa: E402
 from wirescene.fitting.variants import get_variant  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.training.scores import cross_validated_confidences, labelled_features  # noqa: E402
+from wirescene.training.scores import DEFAULT_RIGHT, cross_validated_confidences, labelled_features  # noqa: E402
 
 #: The confidence models compared: name -> (criterion, features). ``3 features`` are those of
 #: the confidence before December 2026 (detection logit, objective, log box height).
 MODELS = {"1m, 3 features": ("1m", FEATURES[:3]), "iou, 3 features": ("iou", FEATURES[:3]),
           "1m": ("1m", FEATURES), "iou": ("iou", FEATURES)}
+#: The model of :data:`MODELS` that ``wirescene train scores`` fits by default.
+SHIPPED = next(name for name, model in MODELS.items() if model == (DEFAULT_RIGHT, MODEL_FEATURES["right"]))
 #: (name, KITTI metrics path) of the APs printed, moderate.
 COLUMNS = (("3D 0.7", ("car", "3d")), ("BEV 0.7", ("car", "bev")), ("3D 0.5", ("iou_0.5", "car", "3d")))
 
@@ -51,42 +53,48 @@ def _ap(metrics: dict, path) -> float | None:
     return metrics["moderate"]
 
 
-def score_table(records: dict, gt: dict) -> dict:
+def _calibrated(model: str) -> str:
+    """The name of a model of :data:`MODELS` among the scores."""
+    return f"calibrated ({model})"
+
+
+def score_table(records: dict, gt: dict) -> tuple[dict, dict]:
     """``{(variant, scores): {group: {column: AP}}}`` for the groups of
-    :data:`FOLD_GROUPS` and ``"pooled"``."""
+    :data:`FOLD_GROUPS` and ``"pooled"``, and ``{variant: {frame: (D,) confidences}}``
+    of the :data:`SHIPPED` model."""
     frames = sorted({r.frame_id for rs in records.values() for r in rs})
     folds = {f: fold_of(f) for f in frames}
     groups = {str(g): [f for f in frames if folds[f] in g] for g in FOLD_GROUPS} | {"pooled": frames}
-    table = {}
+    table, shipped = {}, {}
     for variant, results in records.items():
         by_frame = {r.frame_id: r for r in results}
         scores = {"detection": {f: by_frame[f].det_scores for f in frames},
                   "objective": {f: -np.asarray(by_frame[f].est_cost, float) for f in frames}}
         for name, (right, features) in MODELS.items():
-            scores[f"calibrated ({name})"] = cross_validated_confidences(records, folds, variant, right=right,
-                                                                         features=features)
+            scores[_calibrated(name)] = cross_validated_confidences(records, folds, variant, right=right,
+                                                                    features=features)
+        shipped[variant] = scores[_calibrated(SHIPPED)]
         for name, of in scores.items():
             table[(variant, name)] = {
                 g: {c: _ap(kitti_metrics([gt[f] for f in fs], [by_frame[f].estimate_labels(of[f]) for f in fs]), p)
                     for c, p in COLUMNS} for g, fs in groups.items()}
-    return table
+    return table, shipped
 
 
 #: Edges of the confidence bins of the reliability table.
 RELIABILITY_BINS = (0.0, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
 
 
-def reliability(records: dict, *, fine: bool) -> list[tuple[float, float, int, float, float]]:
+def reliability(records: dict, confidences: dict, *, fine: bool) -> list[tuple[float, float, int, float, float]]:
     """Is the shipped model's confidence a probability? Per bin of :data:`RELIABILITY_BINS`
-    ``(low, high, cars, mean confidence, share right)`` of the held-out confidences of the
-    fine (or coarse) variants' estimates, pooled, right by the shipped criterion."""
-    frames = sorted({r.frame_id for rs in records.values() for r in rs})
-    folds = {f: fold_of(f) for f in frames}
+    ``(low, high, cars, mean confidence, share right)`` of the held-out ``confidences``
+    (``{variant: {frame: (D,)}}``, :func:`score_table`) of the fine (or coarse) variants'
+    estimates, pooled, right by the shipped criterion."""
     p, y = [], []
     for variant, results in records.items():
         if get_variant(variant).fine != fine:
             continue
-        conf = cross_validated_confidences(records, folds, variant)
+        conf = confidences[variant]
         for r in results:
             if r.n_detections:
                 p.append(conf[r.frame_id])
@@ -116,17 +124,19 @@ def main():
         print("| variant | scores | " + " | ".join(f"{g}: {', '.join(c for c, _ in COLUMNS)}"
                                                    for g in groups + ["pooled"]) + " |")
         print("|---|---|" + "---|" * (len(groups) + 1))
-        for (variant, name), row in score_table(records, gt).items():
+        table, shipped = score_table(records, gt)
+        for (variant, name), row in table.items():
             cells = " | ".join(", ".join("-" if row[g][c] is None else f"{row[g][c]:.1f}" for c, _ in COLUMNS)
                                for g in groups + ["pooled"])
             print(f"| {variant} | {name} | {cells} |")
-            if get_variant(variant).fine and name.startswith("calibrated"):
-                model = name[len("calibrated ("):-1]
-                for g in groups:
-                    chosen_by[g][model] += row[g]["3D 0.7"] or 0.0
+        for variant in records:
+            if get_variant(variant).fine:
+                for model in MODELS:
+                    for g in groups:
+                        chosen_by[g][model] += table[(variant, _calibrated(model))][g]["3D 0.7"] or 0.0
         for fine in (False, True):
             bins = "; ".join(f"{lo:.1f}-{hi:.1f}: {n} cars, {100 * m:.0f}% predicted, {100 * o:.0f}% right"
-                             for lo, hi, n, m, o in reliability(records, fine=fine))
+                             for lo, hi, n, m, o in reliability(records, shipped, fine=fine))
             print(f"\nreliability of the shipped model, held out, {'fine' if fine else 'coarse'} variants pooled: {bins}")
     print()
     for choose, report in (groups, groups[::-1]):

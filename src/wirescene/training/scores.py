@@ -10,7 +10,9 @@ from typing import Iterable
 
 import numpy as np
 
+from wirescene.core.boxes import box_centers
 from wirescene.core.errors import InputError
+from wirescene.core.groundplane import rotation_y
 from wirescene.core.labels import CAR_TYPES
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.eval.metrics import FrameResult, match_detections
@@ -32,10 +34,6 @@ RIGHT_CRITERIA = {"iou": "detection IoU > 0.5 with a Car and 3D box IoU > 0.7 wi
                   "1m": "detection IoU > 0.5 with a Car and 3D centre within 1 m"}
 DEFAULT_RIGHT = "iou"
 _MIN_IOU, _MAX_ERROR_M = 0.7, 1.0
-
-
-def _centroid(location, dims):
-    return np.asarray(location, float) - [0.0, float(dims[0]) / 2, 0.0]
 
 
 def record_features(result: FrameResult) -> np.ndarray:
@@ -65,15 +63,16 @@ def labelled_features(result: FrameResult, *, target: str = "right",
         return feats, match >= 0
     d = np.flatnonzero(match >= 0)
     matched = [cars[m] for m in match[d]]
-    est = np.asarray(result.est_location, float).reshape(-1, 3)[d], np.asarray(result.est_dims, float).reshape(-1, 3)[d]
-    lab = np.array([g.location for g in matched], float).reshape(-1, 3), np.array([g.dims for g in matched],
-                                                                                   float).reshape(-1, 3)
+    location, dims = result.est_location[d], result.est_dims[d]
+    rot = np.asarray(result.est_rotation_y, float)[d]
+    g_location = np.array([g.location for g in matched], float).reshape(-1, 3)
+    g_dims = np.array([g.dims for g in matched], float).reshape(-1, 3)
+    g_rot = np.array([g.rotation_y for g in matched], float)
     if right == "iou":
-        ok = iou_3d(est[0], est[1], np.asarray(result.est_rotation_y, float)[d], lab[0], lab[1],
-                    np.array([g.rotation_y for g in matched], float)) > _MIN_IOU
-    else:
-        ok = np.array([np.linalg.norm(_centroid(loc, dims) - _centroid(gl, gd)) < _MAX_ERROR_M
-                       for loc, dims, gl, gd in zip(*est, *lab)], bool)
+        ok = iou_3d(location, dims, rot, g_location, g_dims, g_rot) > _MIN_IOU
+    else:  # the evaluation's localisation error: between the boxes' centroids
+        error = box_centers(dims, location, rotation_y(rot)) - box_centers(g_dims, g_location, rotation_y(g_rot))
+        ok = np.linalg.norm(error, axis=-1) < _MAX_ERROR_M
     out = np.zeros(len(feats), bool)
     out[d] = ok
     return feats, out
