@@ -204,7 +204,8 @@ def add_verifiers(args) -> None:
             bank = replace(bank, verifier=None, meta={m: v for m, v in bank.meta.items() if m != "verifier"})
         images, _ = load_training_frames(ds, [f for f in ds.frame_ids() if fold_of(f) != k])
         print(f"--- fold {k}: verifier on {len(images)} images (cars at IoU >= {args.verifier_iou:g})", flush=True)
-        add_verifier(bank, images, ds, car_iou=args.verifier_iou, progress=lambda m: print("   ", m, flush=True))
+        add_verifier(bank, images, ds, car_iou=args.verifier_iou, view_groups=args.view_groups,
+                     progress=lambda m: print("   ", m, flush=True))
         bank.save(Path(args.models_dir) / f"fold{k}_raw.npz")
 
 
@@ -264,6 +265,9 @@ def main():
                     help="fit the verifier (the last step of the bank training) to the foldK_raw.npz of DIR (replacing "
                          "one they have), on each bank's own training frames, and save them to --models-dir (the "
                          "--fold folds, default all); the same banks a --cv --fold run of today's recipe writes")
+    ap.add_argument("--view-groups", action="store_true",
+                    help="--add-verifier: one verifier regression per viewpoint group (side, diagonal, front or "
+                         "back) instead of one for all (a study, not adopted)")
     ap.add_argument("--verifier-iou", type=float, default=0.5,
                     help="--add-verifier: IoU with a Car label at which the verifier's training boxes count as cars")
     args = ap.parse_args()

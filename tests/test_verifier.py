@@ -10,7 +10,7 @@ from wirescene.core.errors import InputError
 from wirescene.predetect.bank import DetectorBank, detect_pyramid, load_default_bank, verification_logits
 from wirescene.predetect.configurations import Configuration
 from wirescene.predetect.hog import N_FEAT
-from wirescene.predetect.verifier import fit_verifier, verifier_features, verifier_logits
+from wirescene.predetect.verifier import N_VIEW_GROUPS, VIEW_GROUPS, fit_verifier, verifier_features, verifier_logits
 from wirescene.training.kitti_detector import check_calibration, fit_platt, set_calibration
 
 
@@ -55,6 +55,32 @@ def test_verifier_tells_the_object_from_background_on_new_images():
         fit_verifier(X[y == 1], y[y == 1])
 
 
+def test_one_regression_per_viewpoint_group_is_each_groups_own_fit():
+    """The grouped verifier gives every row the logit of the regression fitted on its group's
+    rows alone (re-expressed exactly on the standardisation of all rows); a group without
+    both classes falls back on the regression of all rows."""
+    rng = np.random.default_rng(4)
+    n, F = 600, 6
+    g = rng.integers(0, 2, n)  # group 2 has no rows
+    y = rng.integers(0, 2, n)
+    # the groups need opposite weights: no single regression fits both
+    X = rng.normal(size=(n, F)) * rng.uniform(0.5, 3.0, F) + 2.0 + np.where(g == 0, 1.0, -1.0)[:, None] * y[:, None]
+    v = fit_verifier(X, y, C=1.0, groups=g)
+    assert v["weights"].shape == (N_VIEW_GROUPS, F + 1)
+    for j in (0, 1):
+        own = fit_verifier(X[g == j], y[g == j], C=1.0)
+        assert_close(verifier_logits(v, X[g == j], groups=g[g == j]), verifier_logits(own, X[g == j]), atol=1e-3)
+    everyone = fit_verifier(X, y, C=1.0)
+    assert_close(v["weights"][2], everyone["weights"])
+    grouped_right = np.mean((verifier_logits(v, X, groups=g) > 0) == y)
+    assert grouped_right > np.mean((verifier_logits(everyone, X) > 0) == y) + 0.2
+    with pytest.raises(ValueError, match="needs the rows' groups"):
+        verifier_logits(v, X)
+    with pytest.raises(ValueError, match="groups must be integers"):
+        fit_verifier(X, y, groups=np.full(n, N_VIEW_GROUPS))
+    assert VIEW_GROUPS.tolist() == [0, 1, 2, 1, 0, 1, 2, 1]  # mirror images share a group
+
+
 def test_bank_verifier_round_trip_and_format_3_banks(tmp_path):
     bank = _small_bank()
     F = 12
@@ -63,23 +89,33 @@ def test_bank_verifier_round_trip_and_format_3_banks(tmp_path):
                      "weights": rng.normal(size=F + 1).astype(np.float32), "gain": np.float32(0.3)}
     path = bank.save(tmp_path / "v.npz")
     with np.load(path, allow_pickle=False) as z:
-        assert str(z["format"]) == "wirescene-detector-bank/4"
+        assert str(z["format"]) == "wirescene-detector-bank/5"
         arrays = {k: z[k] for k in z.files if k != "format"}
     back = DetectorBank.load(path)
     for k in ("mean", "scale", "weights", "gain"):
         np.testing.assert_array_equal(back.verifier[k], bank.verifier[k])
+    # a bank of format 4 (one regression) reads the same; a grouped verifier round-trips
+    np.savez(tmp_path / "v4.npz", format=np.array("wirescene-detector-bank/4"), **arrays)
+    np.testing.assert_array_equal(DetectorBank.load(tmp_path / "v4.npz").verifier["weights"], bank.verifier["weights"])
+    bank.verifier["weights"] = rng.normal(size=(N_VIEW_GROUPS, F + 1)).astype(np.float32)
+    back = DetectorBank.load(bank.save(tmp_path / "g.npz"))
+    np.testing.assert_array_equal(back.verifier["weights"], bank.verifier["weights"])
     # a bank written before the verifier (format 3) reads as one without
     old = {k: v for k, v in arrays.items() if not k.startswith("verify_")}
     np.savez(tmp_path / "v3.npz", format=np.array("wirescene-detector-bank/3"), **old)
     assert DetectorBank.load(tmp_path / "v3.npz").verifier is None
     # mismatched arrays, and a foreign format, are errors naming the file
-    np.savez(tmp_path / "bad.npz", format=np.array("wirescene-detector-bank/4"),
+    np.savez(tmp_path / "bad.npz", format=np.array("wirescene-detector-bank/5"),
              **{**arrays, "verify_scale": np.ones(F + 2, np.float32)})
     with pytest.raises(InputError, match="bad.npz: detector bank verifier arrays do not match"):
         DetectorBank.load(tmp_path / "bad.npz")
     np.savez(tmp_path / "v9.npz", format=np.array("wirescene-detector-bank/9"), **arrays)
-    with pytest.raises(InputError, match="v9.npz: format 'wirescene-detector-bank/9', expected 'wirescene-detector-bank/4'"):
+    with pytest.raises(InputError, match="v9.npz: format 'wirescene-detector-bank/9', expected 'wirescene-detector-bank/5'"):
         DetectorBank.load(tmp_path / "v9.npz")
+    np.savez(tmp_path / "bad_groups.npz", format=np.array("wirescene-detector-bank/5"),
+             **{**arrays, "verify_weights": np.ones((2, F + 1), np.float32)})
+    with pytest.raises(InputError, match="bad_groups.npz: detector bank verifier arrays do not match"):
+        DetectorBank.load(tmp_path / "bad_groups.npz")
 
 
 def test_calibration_sets_the_verifier_gain_and_refuses_what_does_not_fit():

@@ -44,14 +44,15 @@ from wirescene.predetect.configurations import Configuration
 from wirescene.predetect.geometry import ground_log_ratio, horizon_row
 from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.refine import apply_box_refinement
-from wirescene.predetect.verifier import verifier_features, verifier_logits
+from wirescene.predetect.verifier import N_VIEW_GROUPS, VIEW_GROUPS, verifier_features, verifier_logits
 from wirescene.predetect.viewpoint_prior import choose_viewpoints, lateral_position, viewpoint_log_prior
 
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 """2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated). 3: adds the box
 refinement (``refine_mean``, ``refine_scale``, ``refine_weights``; empty when none). 4: adds
 the verifier (``verify_mean``, ``verify_scale``, ``verify_weights``, ``verify_gain``; empty
-when none)."""
+when none). 5: ``verify_weights`` may hold one row per viewpoint group
+(:data:`wirescene.predetect.verifier.VIEW_GROUPS`)."""
 ARTEFACT_KIND = "detector-bank"
 DEFAULT_BANK_PATH = DATA_DIR / "detector_bank.npz"
 VERIFIER_ARRAYS = ("mean", "scale", "weights", "gain")
@@ -134,8 +135,9 @@ class DetectorBank:
     @classmethod
     def load(cls, path) -> "DetectorBank":
         path = Path(path)
-        # missing / corrupt / foreign: InputError; a bank of format 3 reads as one without a verifier
-        z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION, older=(3,))
+        # missing / corrupt / foreign: InputError; a bank of format 3 reads as one without a verifier,
+        # one of format 4 as one with a single verifier regression
+        z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION, older=(3, 4))
         try:
             T = len(z["bins"])
             flat = z["weights"]
@@ -165,8 +167,8 @@ class DetectorBank:
             verifier = {k: z.get(f"verify_{k}", np.zeros(0, np.float32)) for k in VERIFIER_ARRAYS}
             if verifier["weights"].size == 0:
                 verifier = None  # a bank without verifier
-            elif not (verifier["mean"].shape == verifier["scale"].shape == (len(verifier["weights"]) - 1,)
-                      and verifier["gain"].shape == ()):
+            elif not (verifier["mean"].shape == verifier["scale"].shape == (verifier["weights"].shape[-1] - 1,)
+                      and verifier["weights"].shape[:-1] in ((), (N_VIEW_GROUPS,)) and verifier["gain"].shape == ()):
                 raise InputError("detector bank verifier arrays do not match", path=path)
             return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
                        json.loads(str(z["meta_json"])), calib, refinement, verifier)
@@ -399,7 +401,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
                           center_column=center_column, gray=gray)
 
 
-def _cluster_kw(bank: DetectorBank) -> dict:
+def cluster_options(bank: DetectorBank) -> dict:
     """Clustering options stored with the bank (``meta["box_weight"]``, old banks: plain
     means; ``meta["cluster_rx" | "cluster_ry" | "cluster_rs"]`` where set, else
     :func:`cluster_activations`' radii)."""
@@ -427,7 +429,7 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
     act = score_pyramid(bank, pyramid, threshold=floor, min_height=min_height, max_height=3.0 * H,
                         pad_cells=int(bank.meta.get("pad_cells", 0)))
     det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
-                            cross_view_nms=cross_view_nms, source=source, cluster_kw=_cluster_kw(bank),
+                            cross_view_nms=cross_view_nms, source=source, cluster_kw=cluster_options(bank),
                             horizon=horizon, center_column=center_column, gray=gray)
     if calibrated and bank.calibration is not None:
         det = Detections(det.boxes, bank.confidence(det.scores), det.alpha, det.source)
@@ -496,7 +498,9 @@ def verification_logits(bank: DetectorBank, gray: np.ndarray, boxes, bins) -> np
     if bank.verifier is None or not len(b):
         return np.zeros(len(b))
     H, W = gray.shape
-    return verifier_logits(bank.verifier, verifier_features(gray, b, regression_features(b, bins, (W, H))))
+    bins = np.asarray(bins, int).reshape(len(b))
+    return verifier_logits(bank.verifier, verifier_features(gray, b, regression_features(b, bins, (W, H))),
+                           groups=VIEW_GROUPS[bins % 8])
 
 
 def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:

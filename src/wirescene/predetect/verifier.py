@@ -8,7 +8,10 @@ on every side (:func:`wirescene.predetect.refine.refinement_features`, the featu
 refinement reads, with the box's geometry), standardised, and an L2-regularised logistic
 regression fitted on the bank's own detections of its training images (a detection is a
 car when it overlaps one at IoU >= 0.5) and the labelled cars' boxes, each with a copy
-jittered as the bank's boxes are.
+jittered as the bank's boxes are. Banks of format 5 may hold one such regression per group
+of viewpoints instead (:data:`VIEW_GROUPS`: side, diagonal, front or back; a mixture of
+linear models, as DPM's components), all stored on one standardisation; a study, not
+adopted (``benchmarks/RESULTS.md``).
 
 Its logit enters the bank's score through the Platt calibration, whose third coefficient
 (``c`` in ``P(car) = sigmoid(a * margin + b + c * logit + ground)``) is fitted on held-out
@@ -25,6 +28,9 @@ from wirescene.predetect.refine import refinement_features
 
 #: Inverse L2 regularisation of the logistic regression.
 C = 1e-3
+#: Group of each of the 8 viewpoint bins: 0 side (bins 0, 4), 1 diagonal, 2 front or back (bins 2, 6).
+VIEW_GROUPS = np.array([0, 1, 2, 1, 0, 1, 2, 1])
+N_VIEW_GROUPS = 3
 
 
 def verifier_features(gray: np.ndarray, boxes, geometry) -> np.ndarray:
@@ -33,10 +39,14 @@ def verifier_features(gray: np.ndarray, boxes, geometry) -> np.ndarray:
     return refinement_features(gray, boxes, geometry)
 
 
-def fit_verifier(features, labels, *, C: float = C) -> dict:
-    """The verifier (``mean`` ``(F,)``, ``scale`` ``(F,)``, ``weights`` ``(F + 1,)``, the last
-    entry the constant) of training ``features`` ``(N, F)`` with 0/1 ``labels`` ``(N,)``;
-    the classes are weighted to balance, so the logit's zero sits between them.
+def fit_verifier(features, labels, *, C: float = C, groups=None) -> dict:
+    """The verifier (``mean`` ``(F,)``, ``scale`` ``(F,)``, ``weights``) of training
+    ``features`` ``(N, F)`` with 0/1 ``labels`` ``(N,)``; the classes are weighted to balance,
+    so the logit's zero sits between them. ``weights`` is ``(F + 1,)`` (the last entry the
+    constant), or with ``groups`` (``(N,)`` ints below :data:`N_VIEW_GROUPS`, e.g.
+    ``VIEW_GROUPS[bins]``) ``(N_VIEW_GROUPS, F + 1)``: one regression per group, each on its
+    own rows and standardisation, re-expressed on the standardisation of all rows (a group
+    without both classes takes the regression of all rows).
 
     Examples
     --------
@@ -46,24 +56,57 @@ def fit_verifier(features, labels, *, C: float = C) -> dict:
     >>> v = fit_verifier(x, y, C=1.0)
     >>> bool(np.mean((verifier_logits(v, x) > 0) == y) > 0.8)
     True
+    >>> g = np.arange(200) // 100  # two groups
+    >>> v = fit_verifier(x, y, C=1.0, groups=g)
+    >>> v["weights"].shape
+    (3, 6)
+    >>> bool(np.mean((verifier_logits(v, x, groups=g) > 0) == y) > 0.8)
+    True
     """
-    from sklearn.linear_model import LogisticRegression
-
     x = np.asarray(features, float)
     y = np.asarray(labels, int)
     check_shape("labels", y, (len(x),))
+    mean, scale, w = _logistic(x, y, C)
+    if groups is None:
+        return {"mean": mean.astype(np.float32), "scale": scale.astype(np.float32), "weights": w.astype(np.float32)}
+    g = np.asarray(groups)
+    check_shape("groups", g, (len(x),))
+    if len(g) and not (np.issubdtype(g.dtype, np.integer) and 0 <= g.min() and g.max() < N_VIEW_GROUPS):
+        raise ValueError(f"groups must be integers in [0, {N_VIEW_GROUPS})")
+    weights = np.tile(w, (N_VIEW_GROUPS, 1))
+    for j in range(N_VIEW_GROUPS):
+        if len(np.unique(y[g == j])) == 2:
+            m, s, wj = _logistic(x[g == j], y[g == j], C)
+            # (x - m) / s . w + c  ==  (x - mean) / scale . (scale / s * w) + (mean - m) / s . w + c
+            weights[j, :-1] = scale / s * wj[:-1]
+            weights[j, -1] = wj[-1] + ((mean - m) / s) @ wj[:-1]
+    return {"mean": mean.astype(np.float32), "scale": scale.astype(np.float32), "weights": weights.astype(np.float32)}
+
+
+def _logistic(x: np.ndarray, y: np.ndarray, C: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(mean, scale, weights (F + 1,))`` of a class-balanced L2 logistic regression on
+    standardised ``x``."""
+    from sklearn.linear_model import LogisticRegression
+
     if len(np.unique(y)) < 2:
         raise ValueError("the verifier needs both cars and non-cars to train on")
     mean, scale = x.mean(0), x.std(0)
     scale[scale < 1e-9] = 1.0  # constant features: left as they are
     clf = LogisticRegression(C=C, max_iter=5000, class_weight="balanced").fit((x - mean) / scale, y)
-    weights = np.concatenate([clf.coef_.ravel(), clf.intercept_]).astype(np.float32)
-    return {"mean": mean.astype(np.float32), "scale": scale.astype(np.float32), "weights": weights}
+    return mean, scale, np.concatenate([clf.coef_.ravel(), clf.intercept_])
 
 
-def verifier_logits(verifier: dict, features) -> np.ndarray:
-    """``(D,)`` log-odds of the verifier for ``features`` ``(D, F)``."""
+def verifier_logits(verifier: dict, features, *, groups=None) -> np.ndarray:
+    """``(D,)`` log-odds of the verifier for ``features`` ``(D, F)``; a verifier with one
+    regression per viewpoint group needs each row's ``groups`` ``(D,)``."""
     mean, scale, weights = (np.asarray(verifier[k], float) for k in ("mean", "scale", "weights"))
     x = np.asarray(features, float).reshape(-1, len(mean))
-    check_shape("verifier weights", weights, (len(mean) + 1,))
-    return ((x - mean) / scale) @ weights[:-1] + weights[-1]
+    z = (x - mean) / scale
+    if weights.ndim == 1:
+        check_shape("verifier weights", weights, (len(mean) + 1,))
+        return z @ weights[:-1] + weights[-1]
+    check_shape("verifier weights", weights, (N_VIEW_GROUPS, len(mean) + 1))
+    if groups is None:
+        raise ValueError("a verifier with one regression per viewpoint group needs the rows' groups")
+    w = weights[np.asarray(groups, int).reshape(len(x))]
+    return np.einsum("df,df->d", z, w[:, :-1]) + w[:, -1]

@@ -647,21 +647,39 @@ def fit_bank_ground_prior(bank: DetectorBank, images, dataset, *, per_image: int
 
 
 def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 150, max_rows: int | None = 40_000,
-                      C: float = VERIFIER_C, car_iou: float = 0.5, seed: int = 0, workers: int = 1,
-                      progress=None) -> dict:
-    """The bank's verifier (:mod:`wirescene.predetect.verifier`), fitted on its training
-    ``images`` (flipped copies included): the ``per_image`` best-scoring detections of each
-    (with the bank's box regression and refinement, no ground term, no verifier), a car
-    where one overlaps a ``Car`` label at IoU >= ``car_iou``, left out where it overlaps another
-    labelled object or DontCare region that much (a Van is neither car nor background), and
-    the labelled cars' own boxes with one copy jittered by 5% of their size per side, as
-    further cars (the copy as a car where it keeps IoU >= ``car_iou``). ``max_rows``: a uniform sample of at most that many rows
-    (:class:`~wirescene.training.scale.RowSample`). The returned verifier's ``gain`` is 0
-    until a calibration sets it (:func:`set_calibration`). ``workers``, ``progress``: of
-    the per-image pass."""
-    from dataclasses import replace
+                      C: float = VERIFIER_C, car_iou: float = 0.5, view_groups: bool = False, seed: int = 0,
+                      workers: int = 1, progress=None) -> dict:
+    """The bank's verifier (:mod:`wirescene.predetect.verifier`), fitted on the rows of
+    :func:`verifier_training_rows` (the same options): one regression for all boxes, or with
+    ``view_groups`` one per viewpoint group (:data:`~wirescene.predetect.verifier.VIEW_GROUPS`;
+    a study, not adopted: ``benchmarks/RESULTS.md``). The returned verifier's ``gain`` is 0
+    until a calibration sets it (:func:`set_calibration`)."""
+    from wirescene.predetect.verifier import VIEW_GROUPS, fit_verifier
 
-    from wirescene.predetect.verifier import fit_verifier
+    X, y, bins, offered = verifier_training_rows(bank, images, dataset, per_image=per_image, max_rows=max_rows,
+                                                 car_iou=car_iou, seed=seed, workers=workers, progress=progress)
+    out = fit_verifier(X, y, C=C, groups=VIEW_GROUPS[bins] if view_groups else None)
+    out["gain"] = np.float32(0.0)
+    out["n"], out["n_car"] = int(len(y)), int(y.sum())
+    if offered > len(y):
+        out["sampled_from"] = int(offered)  # recorded where the cap shaped the verifier
+    return out
+
+
+def verifier_training_rows(bank: DetectorBank, images, dataset, *, per_image: int = 150,
+                           max_rows: int | None = 40_000, car_iou: float = 0.5, seed: int = 0, workers: int = 1,
+                           progress=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """``(features (N, F) float32, labels (N,), viewpoint bins (N,), rows offered)`` the
+    bank's verifier trains on, from its training ``images`` (flipped copies included): the
+    ``per_image`` best-scoring detections of each (with the bank's box regression and
+    refinement, no ground term, no verifier), a car where one overlaps a ``Car`` label at IoU
+    >= ``car_iou``, left out where it overlaps another labelled object or DontCare region
+    that much (a Van is neither car nor background), and the labelled cars' own boxes with
+    one copy jittered by 5% of their size per side, as further cars (the copy as a car where
+    it keeps IoU >= ``car_iou``). ``max_rows``: a uniform sample of at most that many rows
+    (:class:`~wirescene.training.scale.RowSample`). ``workers``, ``progress``: of the
+    per-image pass."""
+    from dataclasses import replace
 
     rng = np.random.default_rng([seed, 11])
     plain = replace(bank, verifier=None)
@@ -672,20 +690,15 @@ def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 1
         moved = boxes + np.clip(rng.normal(0.0, 0.05, boxes.shape), -0.2, 0.2) * size
         tasks.append((im, boxes, np.concatenate([boxes, moved]), np.tile(viewpoint_bin(alpha), 2)))
     rows = RowSample(max_rows, seed=seed)
-    for X, y in map_images(partial(_verifier_rows, plain, per_image=per_image, car_iou=car_iou), tasks,
-                           workers=workers, progress=progress, name="verifier"):
-        rows.add(X, y)
-    X, y = rows.arrays()
-    out = fit_verifier(X, y, C=C)
-    out["gain"] = np.float32(0.0)
-    out["n"], out["n_car"] = int(len(y)), int(y.sum())
-    if rows.offered > len(y):
-        out["sampled_from"] = int(rows.offered)  # recorded where the cap shaped the verifier
-    return out
+    for X, y, bins in map_images(partial(_verifier_rows, plain, per_image=per_image, car_iou=car_iou), tasks,
+                                 workers=workers, progress=progress, name="verifier"):
+        rows.add(X, y, bins)
+    X, y, bins = rows.arrays()
+    return X, y, bins, int(rows.offered)
 
 
 def _verifier_rows(bank: DetectorBank, task, *, per_image: int, car_iou: float = 0.5):
-    """``(features (k, F) float32, labels (k,))`` of one image of :func:`fit_bank_verifier`."""
+    """``(features (k, F) float32, labels (k,), bins (k,))`` of one image of :func:`verifier_training_rows`."""
     from wirescene.core.boxes import iou_2d
     from wirescene.predetect.bank import regression_features
     from wirescene.predetect.verifier import verifier_features
@@ -704,7 +717,7 @@ def _verifier_rows(bank: DetectorBank, task, *, per_image: int, car_iou: float =
     y = np.concatenate([y, (iou_2d(positives[:, None], cars[None]).max(1) >= car_iou).astype(int) if len(positives)
                         else np.zeros(0, int)])
     X = verifier_features(gray, boxes, regression_features(boxes, bins, image.size))
-    return X.astype(np.float32), y
+    return X.astype(np.float32), y, bins
 
 
 def fit_bank_viewpoint_prior(images, dataset) -> dict:
@@ -762,18 +775,21 @@ def finish_bank(bank: DetectorBank, images, dataset, *, workers: int = 1, progre
     return bank
 
 
-def add_verifier(bank: DetectorBank, images, dataset, *, car_iou: float = 0.5, workers: int = 1,
-                 progress=None) -> DetectorBank:
+def add_verifier(bank: DetectorBank, images, dataset, *, car_iou: float = 0.5, view_groups: bool = False,
+                 workers: int = 1, progress=None) -> DetectorBank:
     """Fit the bank's verifier (:func:`fit_bank_verifier`) on its training ``images``, the
     last step of :func:`finish_bank` (nothing before it reads the verifier); its gain stays 0
     until a calibration sets it (:func:`set_calibration`)."""
     say = progress or (lambda msg: None)
     try:
-        verifier = fit_bank_verifier(bank, images, dataset, car_iou=car_iou, workers=workers, progress=say)
+        verifier = fit_bank_verifier(bank, images, dataset, car_iou=car_iou, view_groups=view_groups,
+                                     workers=workers, progress=say)
     except ValueError as exc:
         say(f"no verifier: {exc}")
         return bank
     bank.meta["verifier"] = {k: verifier.pop(k) for k in ("n", "n_car", "sampled_from") if k in verifier}
+    if np.ndim(verifier["weights"]) == 2:
+        bank.meta["verifier"]["view_groups"] = len(verifier["weights"])  # recorded where the study's option is on
     bank.verifier = verifier
     say(f"verifier fitted on {bank.meta['verifier']['n']} boxes ({bank.meta['verifier']['n_car']} cars)")
     return bank
