@@ -57,6 +57,7 @@ from wirescene.predetect.hog import pyramid_scales  # noqa: E402
 from wirescene.predetect.verifier import VIEW_GROUPS, fit_verifier, verifier_features, verifier_logits  # noqa: E402
 from wirescene.predetect.verifier import C as VERIFIER_C  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
+    detection_labels,
     fit_platt,
     kitti_gt_boxes,
     load_training_frames,
@@ -124,7 +125,7 @@ def _groups(X) -> np.ndarray:
 
 
 def _per_group(C):
-    """One logistic regression per viewpoint group (a mixture of linear verifiers; the shipped verifier)."""
+    """One logistic regression per viewpoint group (a mixture of linear verifiers, ``fit_verifier(groups=)``)."""
     def fit(X, y):
         v = fit_verifier(X, y, C=C, groups=_groups(X))
         return lambda Z: verifier_logits(v, Z, groups=_groups(Z))
@@ -205,8 +206,6 @@ def found_at_precision(dets, labels, precision: float) -> tuple[int, int]:
     """``(cars found, detections)`` of the longest prefix of the pooled detections, best
     first, of which at least ``precision`` lie on a car (first match at IoU 0.5, greedy per
     frame by score, as :func:`~wirescene.training.kitti_detector.detection_labels`)."""
-    from wirescene.training.kitti_detector import detection_labels
-
     s = np.concatenate([d.scores for d in dets])
     y = np.concatenate([detection_labels(d.boxes, kitti_gt_boxes(lab)) for d, lab in zip(dets, labels)])
     order = np.argsort(-s, kind="stable")
@@ -216,10 +215,7 @@ def found_at_precision(dets, labels, precision: float) -> tuple[int, int]:
 
 
 def score(args) -> None:
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from bench_predetect import fmt, fmt_operating_point, metrics, operating_point
+    from bench_predetect import fmt, fmt_operating_point, metrics, operating_point  # benchmarks/ is on the path
 
     ds = KittiDataset(args.root)
     ids = ds.frame_ids()
@@ -239,7 +235,7 @@ def score(args) -> None:
         dets = {}
         for k in range(N_FOLDS):
             other = [f for f in ids if fold_of(f) != k]
-            a, b, c = fit_platt(*(np.concatenate([rows[f][key] for f in other]) for key in ("margins",)),
+            a, b, c = fit_platt(np.concatenate([rows[f]["margins"] for f in other]),
                                 np.concatenate([rows[f]["best_iou"] >= 0.5 for f in other]),
                                 offset=np.concatenate([rows[f]["ground"] for f in other]),
                                 verifier=np.concatenate([rows[f]["logit"] for f in other]))
@@ -247,8 +243,7 @@ def score(args) -> None:
                 r = rows[f]
                 s = a * r["margins"] + b + c * r["logit"] + r["ground"]
                 keep = (suppress(r["boxes"], s, iou=args.nms, behind_iou=args.behind_nms, bottom_gap=args.bottom_gap)
-                        if len(s) else np.zeros(0, int))
-                keep = keep[np.argsort(-s[keep], kind="stable")]
+                        if len(s) else np.zeros(0, int))  # best first
                 dets[f] = Detections(r["boxes"][keep], 1 / (1 + np.exp(-s[keep])), bin_center(r["bins"][keep]),
                                      "bank")
         print(f"== {name} [{time.time() - t0:.0f}s]")

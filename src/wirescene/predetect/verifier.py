@@ -66,34 +66,46 @@ def fit_verifier(features, labels, *, C: float = C, groups=None) -> dict:
     x = np.asarray(features, float)
     y = np.asarray(labels, int)
     check_shape("labels", y, (len(x),))
-    mean, scale, w = _logistic(x, y, C)
+    if len(np.unique(y)) < 2:
+        raise ValueError("the verifier needs both cars and non-cars to train on")
+    mean, scale = _standardisation(x)
+    stored = {"mean": mean.astype(np.float32), "scale": scale.astype(np.float32)}
     if groups is None:
-        return {"mean": mean.astype(np.float32), "scale": scale.astype(np.float32), "weights": w.astype(np.float32)}
+        return {**stored, "weights": _logistic((x - mean) / scale, y, C).astype(np.float32)}
     g = np.asarray(groups)
     check_shape("groups", g, (len(x),))
     if len(g) and not (np.issubdtype(g.dtype, np.integer) and 0 <= g.min() and g.max() < N_VIEW_GROUPS):
         raise ValueError(f"groups must be integers in [0, {N_VIEW_GROUPS})")
-    weights = np.tile(w, (N_VIEW_GROUPS, 1))
+    weights = np.zeros((N_VIEW_GROUPS, x.shape[1] + 1))
+    shared = None  # the regression of all rows, fitted only for a group that lacks a class
     for j in range(N_VIEW_GROUPS):
-        if len(np.unique(y[g == j])) == 2:
-            m, s, wj = _logistic(x[g == j], y[g == j], C)
-            # (x - m) / s . w + c  ==  (x - mean) / scale . (scale / s * w) + (mean - m) / s . w + c
-            weights[j, :-1] = scale / s * wj[:-1]
-            weights[j, -1] = wj[-1] + ((mean - m) / s) @ wj[:-1]
-    return {"mean": mean.astype(np.float32), "scale": scale.astype(np.float32), "weights": weights.astype(np.float32)}
+        xj, yj = x[g == j], y[g == j]
+        if len(np.unique(yj)) < 2:
+            shared = _logistic((x - mean) / scale, y, C) if shared is None else shared
+            weights[j] = shared
+            continue
+        m, s = _standardisation(xj)
+        wj = _logistic((xj - m) / s, yj, C)
+        # (x - m) / s . w + c  ==  (x - mean) / scale . (scale / s * w) + (mean - m) / s . w + c
+        weights[j, :-1] = scale / s * wj[:-1]
+        weights[j, -1] = wj[-1] + ((mean - m) / s) @ wj[:-1]
+    return {**stored, "weights": weights.astype(np.float32)}
 
 
-def _logistic(x: np.ndarray, y: np.ndarray, C: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(mean, scale, weights (F + 1,))`` of a class-balanced L2 logistic regression on
-    standardised ``x``."""
+def _standardisation(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(mean, scale)`` of the columns of ``x``; constant columns keep scale 1."""
+    mean, scale = x.mean(0), x.std(0)
+    scale[scale < 1e-9] = 1.0
+    return mean, scale
+
+
+def _logistic(z: np.ndarray, y: np.ndarray, C: float) -> np.ndarray:
+    """``(F + 1,)`` weights (the last the constant) of a class-balanced L2 logistic
+    regression on standardised rows ``z``."""
     from sklearn.linear_model import LogisticRegression
 
-    if len(np.unique(y)) < 2:
-        raise ValueError("the verifier needs both cars and non-cars to train on")
-    mean, scale = x.mean(0), x.std(0)
-    scale[scale < 1e-9] = 1.0  # constant features: left as they are
-    clf = LogisticRegression(C=C, max_iter=5000, class_weight="balanced").fit((x - mean) / scale, y)
-    return mean, scale, np.concatenate([clf.coef_.ravel(), clf.intercept_])
+    clf = LogisticRegression(C=C, max_iter=5000, class_weight="balanced").fit(z, y)
+    return np.concatenate([clf.coef_.ravel(), clf.intercept_])
 
 
 def verifier_logits(verifier: dict, features, *, groups=None) -> np.ndarray:
