@@ -63,6 +63,7 @@ from wirescene.predetect.box_viewpoints import (  # noqa: E402
     box_log_prior,
     box_viewpoints,
 )
+from wirescene.predetect.channels import integral_channels  # noqa: E402
 from wirescene.predetect.geometry import horizon_row  # noqa: E402
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray  # noqa: E402
 from wirescene.predetect.viewpoint_classifier import train_on_kitti  # noqa: E402
@@ -241,7 +242,8 @@ def main():
             d = detect_pyramid(bank, pyr, (W, H), threshold=bank.threshold,
                                min_height=float(bank.meta.get("min_height", 30.0)), horizon=horizon_row(camera),
                                center_column=float(camera.K[0, 2]),
-                               gray=None if bank.refinement is None and bank.verifier is None else to_gray(image))
+                               gray=None if bank.refinement is None and bank.verifier is None else to_gray(image),
+                               channels=integral_channels(image) if bank.needs_channels else None)
             ov = iou_2d(label[:, None], d.boxes[None]) if len(d) else np.zeros((n, 0))
             match = [int(np.argmax(ov[i])) if ov.shape[1] and ov[i].max() >= 0.5 else -1 for i in range(n)]
             own_alpha += [d.alpha[j] if j >= 0 else np.nan for j in match]

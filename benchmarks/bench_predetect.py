@@ -205,6 +205,7 @@ def add_verifiers(args) -> None:
         images, _ = load_training_frames(ds, [f for f in ds.frame_ids() if fold_of(f) != k])
         print(f"--- fold {k}: verifier on {len(images)} images (cars at IoU >= {args.verifier_iou:g})", flush=True)
         add_verifier(bank, images, ds, car_iou=args.verifier_iou, view_groups=args.view_groups,
+                     channels=not args.grey_verifier,
                      progress=lambda m: print("   ", m, flush=True))
         bank.save(Path(args.models_dir) / f"fold{k}_raw.npz")
 
@@ -265,6 +266,9 @@ def main():
                     help="fit the verifier (the last step of the bank training) to the foldK_raw.npz of DIR (replacing "
                          "one they have), on each bank's own training frames, and save them to --models-dir (the "
                          "--fold folds, default all); the same banks a --cv --fold run of today's recipe writes")
+    ap.add_argument("--grey-verifier", action="store_true",
+                    help="--add-verifier: a verifier of the HOG cells and geometry alone, without the colour channels "
+                         "(the verifier of banks before December 2026)")
     ap.add_argument("--view-groups", action="store_true",
                     help="--add-verifier: one verifier regression per viewpoint group (side, diagonal, front or "
                          "back) instead of one for all (a study, not adopted)")

@@ -9,7 +9,8 @@ the candidates of drives it never saw better. Two phases:
 their mirror images) and the candidates of its held-out frames before the cross-view
 suppression (clustered, regressed and refined boxes, their margins, the ground prior's log
 ratio, the verifier's features, the best IoU with a ``Car`` label), into ``CACHE/fold{k}.npz``.
-Run one process per fold pair, as the bank training does.
+Run one process per fold pair, as the bank training does. The features hold the colour
+channels (:mod:`wirescene.predetect.channels`) unless ``--grey``.
 
 Scoring (default): for every learner, each fold's verifier is fitted on its training rows,
 its logits on the held-out candidates enter the score as the bank's do
@@ -67,8 +68,9 @@ from wirescene.training.kitti_detector import (  # noqa: E402
 N_GEOMETRY = 14  # regression_features' columns at the end of every row
 
 
-def candidates(bank: DetectorBank, image, dataset) -> dict:
-    """The candidates of one held-out image before the cross-view suppression."""
+def candidates(bank: DetectorBank, image, dataset, *, channels: bool) -> dict:
+    """The candidates of one held-out image before the cross-view suppression (their
+    verifier features with the colour channels where ``channels``)."""
     W, H = image.size
     pyramid = image.hog_pyramid(pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
                                                per_octave=int(bank.meta.get("per_octave", 4))))
@@ -85,7 +87,8 @@ def candidates(bank: DetectorBank, image, dataset) -> dict:
     best = iou_2d(boxes[:, None], cars[None]).max(1) if len(boxes) and len(cars) else np.zeros(len(boxes))
     return {"boxes": boxes, "margins": det.scores, "bins": bins, "best_iou": best,
             "ground": bank.ground_log_ratio(boxes, image.horizon),
-            "features": verifier_features(gray, boxes, regression_features(boxes, bins, (W, H))).astype(np.float16)}
+            "features": verifier_features(gray, boxes, regression_features(boxes, bins, (W, H)),
+                                          channels=image.channels if channels else None).astype(np.float16)}
 
 
 def dump(args) -> None:
@@ -99,12 +102,12 @@ def dump(args) -> None:
         t0 = time.time()
         bank = DetectorBank.load(Path(args.raw) / f"fold{k}_raw.npz")
         train, _ = load_training_frames(ds, [f for f in ids if fold_of(f) != k])
-        X, y, _, _ = verifier_training_rows(bank, train, ds)
+        X, y, _, _ = verifier_training_rows(bank, train, ds, channels=not args.grey)
         print(f"fold {k}: {len(y)} training rows ({int(y.sum())} cars) [{time.time() - t0:.0f}s]", flush=True)
         held, _ = load_training_frames(ds, [f for f in ids if fold_of(f) == k], flips=False)
         out = {"train_X": X.astype(np.float16), "train_y": y}
         for im in held:
-            for key, v in candidates(bank, im, ds).items():
+            for key, v in candidates(bank, im, ds, channels=not args.grey).items():
                 out[f"{im.frame}__{key}"] = v
         np.savez(Path(args.cache) / f"fold{k}.npz", **out)
         print(f"fold {k}: {len(held)} held-out frames [{time.time() - t0:.0f}s]", flush=True)
@@ -269,6 +272,9 @@ def main():
     ap.add_argument("--raw", help="--dump: folder of the uncalibrated fold banks fold{k}_raw.npz")
     ap.add_argument("--dump", action="store_true", help="write the rows of --fold (default all) to --cache")
     ap.add_argument("--fold", type=int, action="append", default=None)
+    ap.add_argument("--grey", action="store_true",
+                    help="--dump: the verifier's features without the colour channels (HOG cells and geometry, as "
+                         "the verifiers of banks before December 2026)")
     ap.add_argument("--nms", type=float, default=0.3, help="cross-view suppression IoU")
     ap.add_argument("--behind-nms", type=float, default=None,
                     help="suppression IoU between boxes whose bottoms differ by more than --bottom-gap of the "

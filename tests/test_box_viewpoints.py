@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -70,7 +72,9 @@ def test_one_viewpoint_per_box_and_the_shape_contract(scene):
 def test_label_boxes_get_the_viewpoint_of_our_own_detections(scene):
     bank, image = scene["bank"], scene["image"]
     h, w = image.shape[:2]
-    dets = detect_pyramid(bank, scene["pyramid"], (w, h), threshold=bank.threshold,
+    # without the verifier, whose logit also reads the bin (its geometry features) and so may tip front against back
+    plain = replace(bank, verifier=None)
+    dets = detect_pyramid(plain, scene["pyramid"], (w, h), threshold=bank.threshold,
                           min_height=float(bank.meta["min_height"]), horizon=scene["horizon"],
                           center_column=scene["center"], gray=to_gray(image))
     # under the bank's own rule (the traffic prior alone, naive Bayes) the bins of its detections

@@ -187,7 +187,7 @@ def test_bank_npz_round_trip(tmp_path):
     bank = _random_bank()
     path = bank.save(tmp_path / "bank.npz")
     with np.load(path, allow_pickle=False) as z:  # plain arrays only
-        assert str(z["format"]) == "wirescene-detector-bank/5"
+        assert str(z["format"]) == "wirescene-detector-bank/6"
     back = DetectorBank.load(path)
     assert back.threshold == 0.25 and back.meta == {"seed": 0} and len(back) == 2
     for a, b in zip(bank.configs, back.configs):

@@ -372,6 +372,7 @@ def test_train_all_takes_a_given_calibration_and_refuses_a_bad_one(tmp_path):
     """``--set detector.calibration=[a, b, c]`` skips the fold banks (the shipped recipe's way);
     a malformed one, or a pair without the verifier's weight, is refused before any step trains."""
     from wirescene.predetect.bank import DetectorBank
+    from wirescene.predetect.channels import N_CHANNEL_FEATURES
 
     split = tmp_path / "split.txt"
     split.write_text("000010\n001545\n")
@@ -384,6 +385,8 @@ def test_train_all_takes_a_given_calibration_and_refuses_a_bad_one(tmp_path):
     bank = DetectorBank.load(out / "detector_bank.npz")
     assert_close(bank.calibration, [2.5, -1.0])
     assert float(bank.verifier["gain"]) == pytest.approx(0.2)  # c / a: the logit's weight in margin units
+    # the verifier reads what the box refinement reads (HOG cells, geometry) and the colour channels
+    assert bank.needs_channels and len(bank.verifier["mean"]) == len(bank.refinement["mean"]) + N_CHANNEL_FEATURES
     for bad in ("[1]", "[0, 1, 1]", "[1, nan, 1]", "[2.5, -1.0]", "[1, 1, -1]", "fast"):
         line = one_line_error(cli("train", "all", KITTI_ROOT, "--out", tmp_path / "bad", *TINY,
                                   "--set", f"detector.calibration={bad}"))

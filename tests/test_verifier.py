@@ -89,14 +89,21 @@ def test_bank_verifier_round_trip_and_format_3_banks(tmp_path):
                      "weights": rng.normal(size=F + 1).astype(np.float32), "gain": np.float32(0.3)}
     path = bank.save(tmp_path / "v.npz")
     with np.load(path, allow_pickle=False) as z:
-        assert str(z["format"]) == "wirescene-detector-bank/5"
+        assert str(z["format"]) == "wirescene-detector-bank/6"
         arrays = {k: z[k] for k in z.files if k != "format"}
     back = DetectorBank.load(path)
     for k in ("mean", "scale", "weights", "gain"):
         np.testing.assert_array_equal(back.verifier[k], bank.verifier[k])
-    # a bank of format 4 (one regression) reads the same; a grouped verifier round-trips
-    np.savez(tmp_path / "v4.npz", format=np.array("wirescene-detector-bank/4"), **arrays)
-    np.testing.assert_array_equal(DetectorBank.load(tmp_path / "v4.npz").verifier["weights"], bank.verifier["weights"])
+    assert not back.needs_channels
+    bank.verifier["channels"] = True
+    assert DetectorBank.load(bank.save(tmp_path / "c.npz")).needs_channels
+    # banks of formats 4 (one regression) and 5 read the same, with a grey verifier; a grouped verifier round-trips
+    for version in (4, 5):
+        old = {k: v for k, v in arrays.items() if k != "verify_channels"}
+        np.savez(tmp_path / f"v{version}.npz", format=np.array(f"wirescene-detector-bank/{version}"), **old)
+        back = DetectorBank.load(tmp_path / f"v{version}.npz")
+        np.testing.assert_array_equal(back.verifier["weights"], bank.verifier["weights"])
+        assert not back.needs_channels
     bank.verifier["weights"] = rng.normal(size=(N_VIEW_GROUPS, F + 1)).astype(np.float32)
     back = DetectorBank.load(bank.save(tmp_path / "g.npz"))
     np.testing.assert_array_equal(back.verifier["weights"], bank.verifier["weights"])
@@ -105,14 +112,14 @@ def test_bank_verifier_round_trip_and_format_3_banks(tmp_path):
     np.savez(tmp_path / "v3.npz", format=np.array("wirescene-detector-bank/3"), **old)
     assert DetectorBank.load(tmp_path / "v3.npz").verifier is None
     # mismatched arrays, and a foreign format, are errors naming the file
-    np.savez(tmp_path / "bad.npz", format=np.array("wirescene-detector-bank/5"),
+    np.savez(tmp_path / "bad.npz", format=np.array("wirescene-detector-bank/6"),
              **{**arrays, "verify_scale": np.ones(F + 2, np.float32)})
     with pytest.raises(InputError, match="bad.npz: detector bank verifier arrays do not match"):
         DetectorBank.load(tmp_path / "bad.npz")
     np.savez(tmp_path / "v9.npz", format=np.array("wirescene-detector-bank/9"), **arrays)
-    with pytest.raises(InputError, match="v9.npz: format 'wirescene-detector-bank/9', expected 'wirescene-detector-bank/5'"):
+    with pytest.raises(InputError, match="v9.npz: format 'wirescene-detector-bank/9', expected 'wirescene-detector-bank/6'"):
         DetectorBank.load(tmp_path / "v9.npz")
-    np.savez(tmp_path / "bad_groups.npz", format=np.array("wirescene-detector-bank/5"),
+    np.savez(tmp_path / "bad_groups.npz", format=np.array("wirescene-detector-bank/6"),
              **{**arrays, "verify_weights": np.ones((2, F + 1), np.float32)})
     with pytest.raises(InputError, match="bad_groups.npz: detector bank verifier arrays do not match"):
         DetectorBank.load(tmp_path / "bad_groups.npz")
@@ -143,9 +150,11 @@ def test_platt_recovers_the_verifier_weight():
 
 
 def test_gain_adds_the_weighted_logit_to_every_margin():
-    """With a grey image, each detection's margin gains exactly gain x the verifier's logit
-    of its final box (the shipped bank's verifier); without one, nothing."""
+    """With a grey image (and the colour channels its verifier reads), each detection's
+    margin gains exactly gain x the verifier's logit of its final box (the shipped bank's
+    verifier); without one, nothing."""
     from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.channels import integral_channels
     from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
 
     bank = load_default_bank()
@@ -156,7 +165,9 @@ def test_gain_adds_the_weighted_logit_to_every_margin():
     gray = to_gray(img)
     pyr = feature_pyramid(img, pyramid_scales(W, H, max_scale=float(bank.meta["max_scale"]),
                                               per_octave=int(bank.meta["per_octave"])))
-    kw = dict(calibrated=False, cross_view_nms=None, min_height=float(bank.meta["min_height"]), gray=gray)
+    channels = integral_channels(img) if bank.needs_channels else None
+    kw = dict(calibrated=False, cross_view_nms=None, min_height=float(bank.meta["min_height"]), gray=gray,
+              channels=channels)
     off = DetectorBank(bank.configs, bank.weights, bank.biases, meta=dict(bank.meta), calibration=bank.calibration,
                        refinement=bank.refinement, verifier={**bank.verifier, "gain": np.float32(0.0)})
     plain, verified = detect_pyramid(off, pyr, (W, H), **kw), detect_pyramid(bank, pyr, (W, H), **kw)
@@ -165,14 +176,18 @@ def test_gain_adds_the_weighted_logit_to_every_margin():
     assert_close(verified.boxes[v], plain.boxes[p])
     from wirescene.core.viewpoints import viewpoint_bin
 
-    logits = verification_logits(bank, gray, plain.boxes[p], viewpoint_bin(plain.alpha[p]))
+    logits = verification_logits(bank, gray, plain.boxes[p], viewpoint_bin(plain.alpha[p]), channels=channels)
     assert_close(verified.scores[v] - plain.scores[p], float(bank.verifier["gain"]) * logits, atol=1e-5)
     # the labelled cars' boxes look more like cars to it than the same boxes moved into the sky
     cars = np.array([o.box for o in ds.labels("000010").objects if o.type == "Car"])
     sky = cars.copy()
     sky[:, [1, 3]] -= cars[:, [3]] - 10
     bins = np.full(len(cars), 2)
-    assert np.median(verification_logits(bank, gray, cars, bins)) > np.median(verification_logits(bank, gray, sky, bins))
+    assert (np.median(verification_logits(bank, gray, cars, bins, channels=channels))
+            > np.median(verification_logits(bank, gray, sky, bins, channels=channels)))
+    if bank.needs_channels:
+        with pytest.raises(ValueError, match="reads the image's colour channels"):
+            verification_logits(bank, gray, cars, bins)
 
 
 def test_train_detector_refuses_a_calibration_without_the_verifier_weight(tmp_path):

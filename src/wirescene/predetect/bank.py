@@ -40,6 +40,7 @@ from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import N_VERTICES
+from wirescene.predetect.channels import integral_channels
 from wirescene.predetect.configurations import Configuration
 from wirescene.predetect.geometry import ground_log_ratio, horizon_row
 from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales, to_gray
@@ -47,12 +48,13 @@ from wirescene.predetect.refine import apply_box_refinement
 from wirescene.predetect.verifier import N_VIEW_GROUPS, VIEW_GROUPS, verifier_features, verifier_logits
 from wirescene.predetect.viewpoint_prior import choose_viewpoints, lateral_position, viewpoint_log_prior
 
-FORMAT_VERSION = 5
+FORMAT_VERSION = 6
 """2: adds ``calibration`` (Platt ``a, b``; empty when uncalibrated). 3: adds the box
 refinement (``refine_mean``, ``refine_scale``, ``refine_weights``; empty when none). 4: adds
 the verifier (``verify_mean``, ``verify_scale``, ``verify_weights``, ``verify_gain``; empty
 when none). 5: ``verify_weights`` may hold one row per viewpoint group
-(:data:`wirescene.predetect.verifier.VIEW_GROUPS`)."""
+(:data:`wirescene.predetect.verifier.VIEW_GROUPS`). 6: adds ``verify_channels`` (1: the verifier also
+reads the colour channels of :mod:`wirescene.predetect.channels`; older banks: 0)."""
 ARTEFACT_KIND = "detector-bank"
 DEFAULT_BANK_PATH = DATA_DIR / "detector_bank.npz"
 VERIFIER_ARRAYS = ("mean", "scale", "weights", "gain")
@@ -71,6 +73,12 @@ class DetectorBank:
 
     def __len__(self) -> int:
         return len(self.configs)
+
+    @property
+    def needs_channels(self) -> bool:
+        """Whether the verifier reads the image's colour channels
+        (:func:`wirescene.predetect.channels.integral_channels`) besides its grey image."""
+        return self.verifier is not None and bool(self.verifier.get("channels", False))
 
     @property
     def bins(self) -> np.ndarray:
@@ -129,6 +137,7 @@ class DetectorBank:
                                else np.asarray(self.refinement[k], np.float32)) for k in ("mean", "scale", "weights")},
             **{f"verify_{k}": (np.zeros(0, np.float32) if self.verifier is None
                                else np.asarray(self.verifier[k], np.float32)) for k in VERIFIER_ARRAYS},
+            verify_channels=np.array(int(self.needs_channels), np.int8),
         )
         return save_npz(path, arrays, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
@@ -136,8 +145,8 @@ class DetectorBank:
     def load(cls, path) -> "DetectorBank":
         path = Path(path)
         # missing / corrupt / foreign: InputError; a bank of format 3 reads as one without a verifier,
-        # one of format 4 as one with a single verifier regression
-        z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION, older=(3, 4))
+        # one of format 4 as one with a single verifier regression, formats 3-5 as ones whose verifier reads no colour
+        z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION, older=(3, 4, 5))
         try:
             T = len(z["bins"])
             flat = z["weights"]
@@ -170,6 +179,8 @@ class DetectorBank:
             elif not (verifier["mean"].shape == verifier["scale"].shape == (verifier["weights"].shape[-1] - 1,)
                       and verifier["weights"].shape[:-1] in ((), (N_VIEW_GROUPS,)) and verifier["gain"].shape == ()):
                 raise InputError("detector bank verifier arrays do not match", path=path)
+            else:
+                verifier["channels"] = bool(z.get("verify_channels", np.array(0)))
             return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
                        json.loads(str(z["meta_json"])), calib, refinement, verifier)
         except (KeyError, ValueError) as exc:
@@ -394,11 +405,12 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     scales = pyramid_scales(W, H, max_scale=max_scale, per_octave=per_octave)
     pyr = feature_pyramid(image, scales)
     gray = None if bank.refinement is None and bank.verifier is None else to_gray(image)
+    channels = integral_channels(image) if bank.needs_channels else None
     horizon = None if camera is None else horizon_row(camera)
     center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
     return detect_pyramid(bank, pyr, (W, H), threshold=None if return_all else thr, min_height=min_height,
                           per_detector=per_detector, cross_view_nms=cross_view_nms, source=source, horizon=horizon,
-                          center_column=center_column, gray=gray)
+                          center_column=center_column, gray=gray, channels=channels)
 
 
 def cluster_options(bank: DetectorBank) -> dict:
@@ -414,14 +426,15 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
                    calibrated: bool = True, min_height: float = 30.0, per_detector: int = 30,
                    cross_view_nms: float | None = 0.3, source: str = "bank",
                    horizon: float | None = None, center_column: float | None = None,
-                   gray: np.ndarray | None = None) -> Detections:
+                   gray: np.ndarray | None = None, channels: np.ndarray | None = None) -> Detections:
     """:func:`detect_cars` on a precomputed feature pyramid of an image of ``image_size``
     ``(W, H)``; ``threshold`` (None: keep all) in the units of the returned scores
     (``calibrated``: :meth:`DetectorBank.confidence`, else raw margins); ``horizon``: image
     row of the horizon for the ground-plane consistency term (None: none);
     ``center_column``: column of the principal point, for the viewpoint prior (None: none);
-    ``gray``: the ``(H, W)`` float grey image, for the bank's box refinement (None: none).
-    A bank's ``meta["pad_cells"]`` (default 0) lets windows reach past the image's sides
+    ``gray``: the ``(H, W)`` float grey image, for the bank's box refinement and verifier (None:
+    neither); ``channels``: the image's :func:`~wirescene.predetect.channels.integral_channels`, for a
+    verifier that reads them (:attr:`DetectorBank.needs_channels`). A bank's ``meta["pad_cells"]`` (default 0) lets windows reach past the image's sides
     (:func:`score_pyramid`; a study, not adopted: ``benchmarks/RESULTS.md``)."""
     W, H = image_size
     raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
@@ -430,7 +443,7 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
                         pad_cells=int(bank.meta.get("pad_cells", 0)))
     det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
                             cross_view_nms=cross_view_nms, source=source, cluster_kw=cluster_options(bank),
-                            horizon=horizon, center_column=center_column, gray=gray)
+                            horizon=horizon, center_column=center_column, gray=gray, channels=channels)
     if calibrated and bank.calibration is not None:
         det = Detections(det.boxes, bank.confidence(det.scores), det.alpha, det.source)
     return det
@@ -439,11 +452,13 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
 def merge_activations(act: Activations, bank: DetectorBank, image_size, *, threshold: float | None,
                       per_detector: int = 30, cross_view_nms: float | None = 0.3, source: str = "bank",
                       cluster_kw: dict | None = None, horizon: float | None = None,
-                      center_column: float | None = None, gray: np.ndarray | None = None) -> Detections:
+                      center_column: float | None = None, gray: np.ndarray | None = None,
+                      channels: np.ndarray | None = None) -> Detections:
     """Activations -> Detections: NMS per detector, full-box votes, clustering per
     viewpoint, clip to image, box regression, box refinement from the grey image ``gray``
     (None: none; :mod:`wirescene.predetect.refine`), the verifier's second look at each box
-    (with ``gray``; :func:`verification_logits` times its calibrated gain), ground-plane consistency (``horizon``: the
+    (with ``gray`` and, where it reads them, ``channels``; :func:`verification_logits` times its
+    calibrated gain), ground-plane consistency (``horizon``: the
     image row of the horizon, None to skip; :func:`ground_margin`), optional NMS across
     viewpoints with each kept detection's viewpoint chosen by :func:`traffic_viewpoints`
     (``center_column``: the principal point's column, None to keep the winner's), threshold
@@ -472,7 +487,8 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
         boxes, scores, bins = boxes[ok], scores[ok], bins[ok]
         if bank.verifier is not None and gray is not None and float(bank.verifier["gain"]):
             # before the suppression: which of two overlapping boxes survives is most of its gain
-            scores = scores + float(bank.verifier["gain"]) * verification_logits(bank, gray, boxes, bins)
+            scores = scores + float(bank.verifier["gain"]) * verification_logits(bank, gray, boxes, bins,
+                                                                                   channels=channels)
         if horizon is not None:
             scores = scores + ground_margin(bank, boxes, horizon)
     if cross_view_nms is not None and len(boxes):
@@ -490,17 +506,23 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     return Detections(boxes, scores, bin_center(bins) if len(bins) else np.zeros(0), source)
 
 
-def verification_logits(bank: DetectorBank, gray: np.ndarray, boxes, bins) -> np.ndarray:
+def verification_logits(bank: DetectorBank, gray: np.ndarray, boxes, bins, *,
+                        channels: np.ndarray | None = None) -> np.ndarray:
     """``(D,)`` log-odds of the bank's verifier (:mod:`wirescene.predetect.verifier`) that
     ``boxes`` ``(D, 4)`` of viewpoint ``bins`` ``(D,)`` in the grey ``(H, W)`` float image
-    show a car; zeros for a bank without one."""
+    show a car; zeros for a bank without one. A verifier that reads colour
+    (:attr:`DetectorBank.needs_channels`) needs the image's ``channels``
+    (:func:`~wirescene.predetect.channels.integral_channels`)."""
     b = np.asarray(boxes, float).reshape(-1, 4)
     if bank.verifier is None or not len(b):
         return np.zeros(len(b))
+    if bank.needs_channels and channels is None:
+        raise ValueError("this bank's verifier reads the image's colour channels: pass channels=integral_channels(image)")
     H, W = gray.shape
     bins = np.asarray(bins, int).reshape(len(b))
-    return verifier_logits(bank.verifier, verifier_features(gray, b, regression_features(b, bins, (W, H))),
-                           groups=VIEW_GROUPS[bins % 8])
+    features = verifier_features(gray, b, regression_features(b, bins, (W, H)),
+                                 channels=channels if bank.needs_channels else None)
+    return verifier_logits(bank.verifier, features, groups=VIEW_GROUPS[bins % 8])
 
 
 def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:

@@ -5,10 +5,12 @@ so a box across two parked cars, on half of one or on a car-like patch of backgr
 scores as high as a car. The verifier looks at the whole final box at once, with its
 surroundings: the HOG cells of the box grown by :data:`wirescene.predetect.refine.CONTEXT`
 on every side (:func:`wirescene.predetect.refine.refinement_features`, the features the box
-refinement reads, with the box's geometry), standardised, and an L2-regularised logistic
+refinement reads, with the box's geometry) and, in banks trained since December 2026, the
+mean colour and gradient magnitude of the same window's cells
+(:mod:`wirescene.predetect.channels`; :data:`CHANNELS`), standardised, and an L2-regularised logistic
 regression fitted on the bank's own detections of its training images (a detection is a
 car when it overlaps one at IoU >= 0.5) and the labelled cars' boxes, each with a copy
-jittered as the bank's boxes are. Banks of format 5 may hold one such regression per group
+jittered as the bank's boxes are. Banks of format 5 and later may hold one such regression per group
 of viewpoints instead (:data:`VIEW_GROUPS`: side, diagonal, front or back; a mixture of
 linear models, as DPM's components), all stored on one standardisation; a study, not
 adopted (``benchmarks/RESULTS.md``).
@@ -24,19 +26,30 @@ from __future__ import annotations
 import numpy as np
 
 from wirescene.core.errors import check_shape
+from wirescene.predetect.channels import window_channel_features
 from wirescene.predetect.refine import refinement_features
 
 #: Inverse L2 regularisation of the logistic regression.
 C = 1e-3
+#: Whether newly trained verifiers also read the boxes' colour channels (:mod:`wirescene.predetect.channels`).
+CHANNELS = True
 #: Group of each of the 8 viewpoint bins: 0 side (bins 0, 4), 1 diagonal, 2 front or back (bins 2, 6).
 VIEW_GROUPS = np.array([0, 1, 2, 1, 0, 1, 2, 1])
 N_VIEW_GROUPS = 3
 
 
-def verifier_features(gray: np.ndarray, boxes, geometry) -> np.ndarray:
+def verifier_features(gray: np.ndarray, boxes, geometry, *, channels: np.ndarray | None = None) -> np.ndarray:
     """``(D, F)`` features of ``boxes`` ``(D, 4)`` in a grey ``(H, W)`` float image, with the
-    boxes' ``geometry`` ``(D, G)`` (:func:`wirescene.predetect.bank.regression_features`)."""
-    return refinement_features(gray, boxes, geometry)
+    boxes' ``geometry`` ``(D, G)`` (:func:`wirescene.predetect.bank.regression_features`):
+    the HOG cells of each box's window, then, given the image's ``channels``
+    (:func:`wirescene.predetect.channels.integral_channels`), its colour and gradient-magnitude
+    channel features (:func:`wirescene.predetect.channels.window_channel_features`), then the
+    geometry."""
+    if channels is None:
+        return refinement_features(gray, boxes, geometry)
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    geometry = np.asarray(geometry, float).reshape(len(b), -1) if len(b) else np.zeros((0, np.shape(geometry)[-1]))
+    return refinement_features(gray, b, np.concatenate([window_channel_features(channels, b), geometry], axis=1))
 
 
 def fit_verifier(features, labels, *, C: float = C, groups=None) -> dict:

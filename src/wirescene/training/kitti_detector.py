@@ -45,7 +45,8 @@ linear HOG template trained as a linear SVM -- from the labelled frames of a KIT
    which way the labelled cars face at each lateral position on the road (traffic); with a
    camera it settles front against back views among a detection's candidate clusters.
 10. Verifier (:func:`fit_bank_verifier`, :mod:`wirescene.predetect.verifier`): a logistic
-   regression on the HOG cells in and around each final box, fitted on the bank's own
+   regression on the HOG cells and the colour and gradient-magnitude channels
+   (:mod:`wirescene.predetect.channels`) in and around each final box, fitted on the bank's own
    detections of its training images and the labelled boxes; its logit enters the score
    with the weight ``c`` of a three-parameter Platt calibration fitted on held-out
    detections (:func:`fit_platt`, :func:`set_calibration`).
@@ -82,6 +83,7 @@ from wirescene.predetect.configurations import (
 )
 from wirescene.predetect.geometry import bottom_ratio, fit_ground_prior, horizon_row
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
+from wirescene.predetect.verifier import CHANNELS as VERIFIER_CHANNELS
 from wirescene.predetect.verifier import C as VERIFIER_C
 from wirescene.predetect.viewpoint_prior import fit_viewpoint_prior, lateral_position
 from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, sample_random_negatives
@@ -126,6 +128,19 @@ class TrainImage:
         if self.pixels is not None:
             return self.pixels
         return CACHE.get(("gray",) + self.key, lambda: read_gray(self.source, self.frame, flipped=self.flipped))
+
+    @property
+    def channels(self) -> np.ndarray:
+        """The image's :func:`~wirescene.predetect.channels.integral_channels` (flipped if
+        ``flipped``; a composite holds grey pixels only, so its channels carry no colour)."""
+        from wirescene.predetect.channels import integral_channels
+
+        def read():
+            if self.pixels is not None:
+                return integral_channels(self.pixels)
+            rgb = self.source.image(self.frame)
+            return integral_channels(rgb[:, ::-1] if self.flipped else rgb)
+        return CACHE.get(("channels",) + self.key, read)
 
     def hog_pyramid(self, scales) -> list:
         """The HOG pyramid (:func:`~wirescene.predetect.hog.feature_pyramid`) at ``scales``."""
@@ -468,7 +483,8 @@ def detect_training_image(bank: DetectorBank, image: TrainImage, **kw):
                                                per_octave=int(bank.meta.get("per_octave", 4))))
     kw.setdefault("min_height", float(bank.meta.get("min_height", 30.0)))
     gray = None if bank.refinement is None and bank.verifier is None else image.gray.astype(np.float32) / 255.0
-    return detect_pyramid(bank, pyramid, (W, H), calibrated=False, threshold=None, gray=gray, **kw)
+    channels = image.channels if bank.needs_channels else None
+    return detect_pyramid(bank, pyramid, (W, H), calibrated=False, threshold=None, gray=gray, channels=channels, **kw)
 
 
 def training_detections(bank: DetectorBank, images, *, workers: int = 1, progress=None, name: str = "detections",
@@ -647,19 +663,22 @@ def fit_bank_ground_prior(bank: DetectorBank, images, dataset, *, per_image: int
 
 
 def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 150, max_rows: int | None = 40_000,
-                      C: float = VERIFIER_C, car_iou: float = 0.5, view_groups: bool = False, seed: int = 0,
-                      workers: int = 1, progress=None) -> dict:
+                      C: float = VERIFIER_C, car_iou: float = 0.5, view_groups: bool = False,
+                      channels: bool = VERIFIER_CHANNELS, seed: int = 0, workers: int = 1, progress=None) -> dict:
     """The bank's verifier (:mod:`wirescene.predetect.verifier`), fitted on the rows of
     :func:`verifier_training_rows` (the same options): one regression for all boxes, or with
     ``view_groups`` one per viewpoint group (:data:`~wirescene.predetect.verifier.VIEW_GROUPS`;
-    a study, not adopted: ``benchmarks/RESULTS.md``). The returned verifier's ``gain`` is 0
-    until a calibration sets it (:func:`set_calibration`)."""
+    a study, not adopted: ``benchmarks/RESULTS.md``); with ``channels`` it also reads the
+    boxes' colour channels (:mod:`wirescene.predetect.channels`). The returned verifier's
+    ``gain`` is 0 until a calibration sets it (:func:`set_calibration`)."""
     from wirescene.predetect.verifier import VIEW_GROUPS, fit_verifier
 
     X, y, bins, offered = verifier_training_rows(bank, images, dataset, per_image=per_image, max_rows=max_rows,
-                                                 car_iou=car_iou, seed=seed, workers=workers, progress=progress)
+                                                 car_iou=car_iou, channels=channels, seed=seed, workers=workers,
+                                                 progress=progress)
     out = fit_verifier(X, y, C=C, groups=VIEW_GROUPS[bins] if view_groups else None)
     out["gain"] = np.float32(0.0)
+    out["channels"] = bool(channels)
     out["n"], out["n_car"] = int(len(y)), int(y.sum())
     if offered > len(y):
         out["sampled_from"] = int(offered)  # recorded where the cap shaped the verifier
@@ -667,7 +686,8 @@ def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 1
 
 
 def verifier_training_rows(bank: DetectorBank, images, dataset, *, per_image: int = 150,
-                           max_rows: int | None = 40_000, car_iou: float = 0.5, seed: int = 0, workers: int = 1,
+                           max_rows: int | None = 40_000, car_iou: float = 0.5, channels: bool = VERIFIER_CHANNELS,
+                           seed: int = 0, workers: int = 1,
                            progress=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """``(features (N, F) float32, labels (N,), viewpoint bins (N,), rows offered)`` the
     bank's verifier trains on, from its training ``images`` (flipped copies included): the
@@ -676,7 +696,8 @@ def verifier_training_rows(bank: DetectorBank, images, dataset, *, per_image: in
     >= ``car_iou``, left out where it overlaps another labelled object or DontCare region
     that much (a Van is neither car nor background), and the labelled cars' own boxes with
     one copy jittered by 5% of their size per side, as further cars (the copy as a car where
-    it keeps IoU >= ``car_iou``). ``max_rows``: a uniform sample of at most that many rows
+    it keeps IoU >= ``car_iou``); with ``channels``, the features include the boxes' colour
+    channels (:func:`~wirescene.predetect.verifier.verifier_features`). ``max_rows``: a uniform sample of at most that many rows
     (:class:`~wirescene.training.scale.RowSample`). ``workers``, ``progress``: of the
     per-image pass."""
     from dataclasses import replace
@@ -690,14 +711,15 @@ def verifier_training_rows(bank: DetectorBank, images, dataset, *, per_image: in
         moved = boxes + np.clip(rng.normal(0.0, 0.05, boxes.shape), -0.2, 0.2) * size
         tasks.append((im, boxes, np.concatenate([boxes, moved]), np.tile(viewpoint_bin(alpha), 2)))
     rows = RowSample(max_rows, seed=seed)
-    for X, y, bins in map_images(partial(_verifier_rows, plain, per_image=per_image, car_iou=car_iou), tasks,
+    for X, y, bins in map_images(partial(_verifier_rows, plain, per_image=per_image, car_iou=car_iou,
+                                         channels=channels), tasks,
                                  workers=workers, progress=progress, name="verifier"):
         rows.add(X, y, bins)
     X, y, bins = rows.arrays()
     return X, y, bins, int(rows.offered)
 
 
-def _verifier_rows(bank: DetectorBank, task, *, per_image: int, car_iou: float = 0.5):
+def _verifier_rows(bank: DetectorBank, task, *, per_image: int, car_iou: float = 0.5, channels: bool = False):
     """``(features (k, F) float32, labels (k,), bins (k,))`` of one image of :func:`verifier_training_rows`."""
     from wirescene.core.boxes import iou_2d
     from wirescene.predetect.bank import regression_features
@@ -716,7 +738,8 @@ def _verifier_rows(bank: DetectorBank, task, *, per_image: int, car_iou: float =
     boxes, bins = np.concatenate([boxes, positives]), np.concatenate([bins, positive_bins]).astype(int)
     y = np.concatenate([y, (iou_2d(positives[:, None], cars[None]).max(1) >= car_iou).astype(int) if len(positives)
                         else np.zeros(0, int)])
-    X = verifier_features(gray, boxes, regression_features(boxes, bins, image.size))
+    X = verifier_features(gray, boxes, regression_features(boxes, bins, image.size),
+                          channels=image.channels if channels else None)
     return X.astype(np.float32), y, bins
 
 
@@ -776,14 +799,14 @@ def finish_bank(bank: DetectorBank, images, dataset, *, workers: int = 1, progre
 
 
 def add_verifier(bank: DetectorBank, images, dataset, *, car_iou: float = 0.5, view_groups: bool = False,
-                 workers: int = 1, progress=None) -> DetectorBank:
+                 channels: bool = VERIFIER_CHANNELS, workers: int = 1, progress=None) -> DetectorBank:
     """Fit the bank's verifier (:func:`fit_bank_verifier`) on its training ``images``, the
     last step of :func:`finish_bank` (nothing before it reads the verifier); its gain stays 0
     until a calibration sets it (:func:`set_calibration`)."""
     say = progress or (lambda msg: None)
     try:
         verifier = fit_bank_verifier(bank, images, dataset, car_iou=car_iou, view_groups=view_groups,
-                                     workers=workers, progress=say)
+                                     channels=channels, workers=workers, progress=say)
     except ValueError as exc:
         say(f"no verifier: {exc}")
         return bank
@@ -838,7 +861,8 @@ def heldout_rows(bank: DetectorBank, image: TrainImage, det, dataset) -> tuple:
     y = detection_labels(det.boxes, kitti_gt_boxes(dataset.labels(image.frame)))
     logits = np.zeros(len(det.boxes))
     if bank.verifier is not None:
-        logits = verification_logits(bank, image.gray.astype(np.float32) / 255.0, det.boxes, viewpoint_bin(det.alpha))
+        logits = verification_logits(bank, image.gray.astype(np.float32) / 255.0, det.boxes, viewpoint_bin(det.alpha),
+                                     channels=image.channels if bank.needs_channels else None)
     return det.scores, y, bank.ground_log_ratio(det.boxes, image.horizon), logits
 
 
