@@ -432,10 +432,12 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
     (``calibrated``: :meth:`DetectorBank.confidence`, else raw margins); ``horizon``: image
     row of the horizon for the ground-plane consistency term (None: none);
     ``center_column``: column of the principal point, for the viewpoint prior (None: none);
-    ``gray``: the ``(H, W)`` float grey image, for the bank's box refinement and verifier (None:
-    neither); ``channels``: the image's :func:`~wirescene.predetect.channels.integral_channels`, for a
-    verifier that reads them (:attr:`DetectorBank.needs_channels`). A bank's ``meta["pad_cells"]`` (default 0) lets windows reach past the image's sides
-    (:func:`score_pyramid`; a study, not adopted: ``benchmarks/RESULTS.md``)."""
+    ``gray``: the ``(H, W)`` float grey image, for the bank's box refinement and verifier
+    (None: neither); ``channels``: the image's
+    :func:`~wirescene.predetect.channels.integral_channels`, for a verifier that reads them
+    (:attr:`DetectorBank.needs_channels`). A bank's ``meta["pad_cells"]`` (default 0) lets
+    windows reach past the image's sides (:func:`score_pyramid`; a study, not adopted:
+    ``benchmarks/RESULTS.md``)."""
     W, H = image_size
     raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
     floor = min(raw_thr if raw_thr is not None else -0.5, -0.5) - 0.5

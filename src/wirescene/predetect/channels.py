@@ -6,8 +6,8 @@ above a kerb) look alike to the verifier. These features, as the channels of agg
 channel features (Dollar et al. 2014), add per cell of the verifier's window (the box grown
 by :data:`wirescene.predetect.refine.CONTEXT`, on the :data:`wirescene.predetect.refine.GRID`
 of the HOG cells) the mean CIE L*u*v* colour and gradient magnitude, each channel
-standardised over the window (so a shadow or a bright day shifts nothing), then the
-window's own mean and log spread of each channel.
+standardised over the window (where in the window it is light, red or busy, whatever the
+window's overall level), then the window's own mean and log spread of each channel.
 
 Cell means are read from one integral image per image (:func:`integral_channels`), so a
 frame's few hundred candidate boxes cost a few array lookups each.

@@ -7,11 +7,11 @@ surroundings: the HOG cells of the box grown by :data:`wirescene.predetect.refin
 on every side (:func:`wirescene.predetect.refine.refinement_features`, the features the box
 refinement reads, with the box's geometry) and, in banks trained since December 2026, the
 mean colour and gradient magnitude of the same window's cells
-(:mod:`wirescene.predetect.channels`; :data:`CHANNELS`), standardised, and an L2-regularised logistic
-regression fitted on the bank's own detections of its training images (a detection is a
-car when it overlaps one at IoU >= 0.5) and the labelled cars' boxes, each with a copy
-jittered as the bank's boxes are. Banks of format 5 and later may hold one such regression per group
-of viewpoints instead (:data:`VIEW_GROUPS`: side, diagonal, front or back; a mixture of
+(:mod:`wirescene.predetect.channels`; :data:`CHANNELS`), standardised, and an
+L2-regularised logistic regression fitted on the bank's own detections of its training
+images (a detection is a car when it overlaps one at IoU >= 0.5) and the labelled cars'
+boxes, each with a copy jittered as the bank's boxes are. Banks of format 5 and later may
+hold one such regression per group of viewpoints instead (:data:`VIEW_GROUPS`: side, diagonal, front or back; a mixture of
 linear models, as DPM's components), all stored on one standardisation; a study, not
 adopted (``benchmarks/RESULTS.md``).
 

@@ -697,9 +697,9 @@ def verifier_training_rows(bank: DetectorBank, images, dataset, *, per_image: in
     that much (a Van is neither car nor background), and the labelled cars' own boxes with
     one copy jittered by 5% of their size per side, as further cars (the copy as a car where
     it keeps IoU >= ``car_iou``); with ``channels``, the features include the boxes' colour
-    channels (:func:`~wirescene.predetect.verifier.verifier_features`). ``max_rows``: a uniform sample of at most that many rows
-    (:class:`~wirescene.training.scale.RowSample`). ``workers``, ``progress``: of the
-    per-image pass."""
+    channels (:func:`~wirescene.predetect.verifier.verifier_features`). ``max_rows``: a
+    uniform sample of at most that many rows (:class:`~wirescene.training.scale.RowSample`).
+    ``workers``, ``progress``: of the per-image pass."""
     from dataclasses import replace
 
     rng = np.random.default_rng([seed, 11])
