@@ -11,9 +11,9 @@ mean colour and gradient magnitude of the same window's cells
 L2-regularised logistic regression fitted on the bank's own detections of its training
 images (a detection is a car when it overlaps one at IoU >= 0.5) and the labelled cars'
 boxes, each with a copy jittered as the bank's boxes are. Banks of format 5 and later may
-hold one such regression per group of viewpoints instead (:data:`VIEW_GROUPS`: side, diagonal, front or back; a mixture of
-linear models, as DPM's components), all stored on one standardisation; a study, not
-adopted (``benchmarks/RESULTS.md``).
+hold one such regression per group of viewpoints instead (:data:`VIEW_GROUPS`: side,
+diagonal, front or back; a mixture of linear models, as DPM's components), all stored on
+one standardisation; a study, not adopted (``benchmarks/RESULTS.md``).
 
 Its logit enters the bank's score through the Platt calibration, whose third coefficient
 (``c`` in ``P(car) = sigmoid(a * margin + b + c * logit + ground)``) is fitted on held-out
@@ -48,7 +48,8 @@ def verifier_features(gray: np.ndarray, boxes, geometry, *, channels: np.ndarray
     if channels is None:
         return refinement_features(gray, boxes, geometry)
     b = np.asarray(boxes, float).reshape(-1, 4)
-    geometry = np.asarray(geometry, float).reshape(len(b), -1) if len(b) else np.zeros((0, np.shape(geometry)[-1]))
+    geometry = np.asarray(geometry, float)
+    geometry = geometry.reshape(len(b), geometry.shape[-1])  # as refinement_features reads it
     return refinement_features(gray, b, np.concatenate([window_channel_features(channels, b), geometry], axis=1))
 
 
