@@ -12,15 +12,20 @@ the models of the frame's fold (:mod:`wirescene.io.folds`), trained without its 
 * ``bank-templates``: the same without the prior; ``prior``: the prior alone;
 * ``bank+classifier``: ``bank`` plus the log-probabilities of a crop viewpoint classifier
   (:mod:`wirescene.predetect.viewpoint_classifier`) trained here for each fold on the other
-  folds' frames -- the pipeline's default; ``classifier`` alone and ``classifier+prior``;
+  folds' frames; ``classifier`` alone and ``classifier+prior``;
+* ``bank+classifier+rows``: its bins chosen for all boxes of a frame at once, cars in one row
+  agreeing (:func:`~wirescene.predetect.box_viewpoints.row_coherent_bins`, ``--row-weight``,
+  ``--row-width``) -- the pipeline's default;
 * ``evidence``: :func:`wirescene.infer.evidence.viewpoint_from_evidence` with the fold's part
   model (``--parts-models DIR/parts_fold{k}.npz``; skipped without it);
 * ``bank+classifier+evidence*W``: the pipeline's per-bin scores plus ``W`` times the
   evidence's per-bin score (``--evidence-weights``);
 * ``own``: with ``--own``, the fold bank's own detections (:func:`wirescene.predetect.detect_cars`
-  at its threshold, with the camera) matched to the cars at IoU >= 0.5, for reference: the
+  at its threshold or ``--own-threshold``, with the camera) matched to the cars at IoU >= 0.5, for reference: the
   viewpoint of the matched detection, over the cars found only; and ``own/pipeline``, the
-  pipeline's rule (``bank+classifier``) applied to those matched boxes instead.
+  pipeline's rule applied to every detection of the frame (as
+  :func:`wirescene.fitting.pipeline.detect_own` does), read on the matched ones
+  (``own/pipeline-rowless``: each box alone).
 
 Reported per method and box set: the share of cars whose ``|alpha_est - alpha_true|``
 (wrapped) is <= 45 deg -- the paper's criterion -- overall, by fold group
@@ -29,7 +34,8 @@ share of front/back swaps (> 135 deg), with numbers of cars. Each image's featur
 template responses and part evidence are computed once per frame for all boxes.
 
     python benchmarks/bench_box_viewpoints.py --root KITTI_ROOT --fold-models BANKS \\
-        [--parts-models PARTS] [--folds 0 1] [--own] [--json out.json]
+        [--parts-models PARTS] [--folds 0 1] [--own [--own-threshold 0.3]] \\
+        [--row-weight 2 0 1] [--row-width 3 1.5] [--json out.json]
 """
 
 from __future__ import annotations
@@ -59,9 +65,12 @@ from wirescene.predetect.box_viewpoints import (  # noqa: E402
     IOU,
     PRIOR_WEIGHT,
     ROAD_SPREAD,
+    ROW_WEIGHT,
+    ROW_WIDTH,
     box_bin_log_odds,
     box_log_prior,
     box_viewpoints,
+    row_coherent_bins,
 )
 from wirescene.predetect.channels import integral_channels  # noqa: E402
 from wirescene.predetect.geometry import horizon_row  # noqa: E402
@@ -154,10 +163,16 @@ def main():
     ap.add_argument("--road-spread", type=float, nargs="+", default=[-1.0 if ROAD_SPREAD is None else ROAD_SPREAD],
                     help="widths of the road-aligned prior's kernel, radians; a negative one: the traffic prior "
                          "alone (the first: the main table)")
+    ap.add_argument("--row-weight", type=float, nargs="+", default=[ROW_WEIGHT],
+                    help="weights of the rows' agreement (the first: the main table; 0: each box alone)")
+    ap.add_argument("--row-width", type=float, nargs="+", default=[ROW_WIDTH],
+                    help="lateral widths of a row, metres (the first: the main table)")
     ap.add_argument("--evidence-weights", type=float, nargs="*", default=[0.1, 0.3, 1.0])
     ap.add_argument("--no-classifier", action="store_true",
                     help="skip the crop viewpoint classifiers (trained here, per fold, on the other folds' frames)")
     ap.add_argument("--own", action="store_true", help="also our own detections' viewpoints (reference)")
+    ap.add_argument("--own-threshold", type=float, default=None,
+                    help="--own: the banks' detection threshold (default: each bank's own; the fit takes 0.3)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the box jitter")
     ap.add_argument("--json", default=None)
     ap.add_argument("--save", default=None, help="write the per-car, per-bin scores to this .npz")
@@ -190,12 +205,13 @@ def main():
     frames = []
     frames = [(f, k) for f, k in known.items() if k in banks]
     sets = ("label", "jittered")
-    rec = {k: [] for k in ("fold", "occluded", "height", "alpha")}
+    rec = {k: [] for k in ("fold", "occluded", "height", "alpha", "frame")}
+    set_boxes, cameras = {s: [] for s in sets}, []
     spreads = [None if r < 0 else r for r in args.road_spread]
     keys = [f"templates@{u:g}" for u in args.iou] + [f"floor@{m:g}" for m in args.floor_margin] + \
         [f"prior@{r}" for r in spreads] + ["evidence", "classifier"]
     scores = {s: {key: [] for key in keys} for s in sets}
-    own_alpha, own_rule, mismatch, seconds = [], [], 0, []
+    own_alpha, own_rule, own_rowless, mismatch, seconds = [], [], [], 0, []
     for f, k in frames:
         t0 = time.time()
         cars = [o for o in ds.labels(f).objects if o.type == "Car"]
@@ -237,9 +253,14 @@ def main():
         rec["occluded"] += [o.occluded for o in cars]
         rec["height"] += list(label[:, 3] - label[:, 1])
         rec["alpha"] += [o.alpha for o in cars]
+        rec["frame"] += [len(cameras)] * n
+        cameras.append(camera)
+        for s in sets:
+            set_boxes[s].append(boxes[s])
         if args.own:
             # what detect_cars does with the camera, on the pyramid already computed
-            d = detect_pyramid(bank, pyr, (W, H), threshold=bank.threshold,
+            d = detect_pyramid(bank, pyr, (W, H), threshold=bank.threshold if args.own_threshold is None
+                               else args.own_threshold,
                                min_height=float(bank.meta.get("min_height", 30.0)), horizon=horizon_row(camera),
                                center_column=float(camera.K[0, 2]),
                                gray=None if bank.refinement is None and bank.verifier is None else to_gray(image),
@@ -247,17 +268,31 @@ def main():
             ov = iou_2d(label[:, None], d.boxes[None]) if len(d) else np.zeros((n, 0))
             match = [int(np.argmax(ov[i])) if ov.shape[1] and ov[i].max() >= 0.5 else -1 for i in range(n)]
             own_alpha += [d.alpha[j] if j >= 0 else np.nan for j in match]
-            # the pipeline's rule for boxes without a viewpoint, on our own matched boxes
-            rule = np.full(n, np.nan)
-            rule[[i for i, j in enumerate(match) if j >= 0]] = box_viewpoints(
-                bank, image, d.boxes[[j for j in match if j >= 0]], camera=camera, classifier=classifiers.get(k),
-                iou=args.iou[0], floor_margin=args.floor_margin[0], prior_weight=args.prior_weight[0],
-                road_spread=spreads[0], pyramid=pyr)
-            own_rule += list(rule)
+            # the pipeline's rule for boxes without a viewpoint, given every detection of the frame (as
+            # detect_own), read on the matched ones; with and without the rows
+            found = [i for i, j in enumerate(match) if j >= 0]
+            for weight, out_list in ((args.row_weight[0], own_rule), (0.0, own_rowless)):
+                rule = np.full(n, np.nan)
+                if len(d):
+                    rule[found] = box_viewpoints(
+                        bank, image, d.boxes, camera=camera, classifier=classifiers.get(k), iou=args.iou[0],
+                        floor_margin=args.floor_margin[0], prior_weight=args.prior_weight[0],
+                        road_spread=spreads[0], pyramid=pyr, row_weight=weight)[[match[i] for i in found]]
+                out_list += list(rule)
         seconds.append(time.time() - t0)
         print(f"frame {f} fold {k}: {n} cars, {seconds[-1]:.1f} s", flush=True)
     rec = {key: np.asarray(v) for key, v in rec.items()}
     scores = {s: {key: np.concatenate(v) for key, v in scores[s].items()} for s in sets}
+    set_boxes = {s: np.concatenate(v) if v else np.zeros((0, 4)) for s, v in set_boxes.items()}
+
+    def rows(m: np.ndarray, s: str, weight: float, width: float) -> np.ndarray:
+        """Per-bin scores ``m`` of box set ``s`` made one-hot at each frame's row-coherent bins."""
+        best = np.argmax(m, 1)
+        if weight:
+            for fi, camera in enumerate(cameras):
+                sel = np.flatnonzero(rec["frame"] == fi)
+                best[sel] = row_coherent_bins(m[sel], set_boxes[s][sel], camera, weight=weight, width=width)
+        return np.eye(N_BINS)[best]
     if args.own:
         rec["own_alpha"] = np.asarray(own_alpha)
     if args.save:
@@ -285,29 +320,32 @@ def main():
         if classifiers:
             methods.update({"bank+classifier": bank_scores + sc["classifier"], "classifier": sc["classifier"],
                             "classifier+prior": sc["classifier"] + args.prior_weight[0] * prior})
-            bank_scores = methods["bank+classifier"]  # the pipeline's
+            bank_scores = methods["bank+classifier"]
+        methods[f"{'bank+classifier' if classifiers else 'bank'}+rows"] = \
+            rows(bank_scores, s, args.row_weight[0], args.row_width[0])  # the pipeline's
         if parts:
             methods["evidence"] = sc["evidence"]
             for w in args.evidence_weights:
                 methods[f"{'bank+classifier' if classifiers else 'bank'}+evidence*{w:g}"] = \
                     bank_scores + w * sc["evidence"]
         if s == "label":
-            pipeline_scores = bank_scores
+            pipeline_scores = methods[f"{'bank+classifier' if classifiers else 'bank'}+rows"]
         print(f"--- {s} boxes")
         for name, m in methods.items():
             out["methods"][f"{s}/{name}"] = share(m)
             print(fmt(name, out["methods"][f"{s}/{name}"]))
-    grid = [(u, m, r, w, c) for u in args.iou for m in args.floor_margin for r in spreads for w in args.prior_weight
-            for c in ((True, False) if classifiers else (False,))]
+    grid = [(u, m, r, w, c, rw, rs) for u in args.iou for m in args.floor_margin for r in spreads
+            for w in args.prior_weight for c in ((True, False) if classifiers else (False,))
+            for rw in args.row_weight for rs in (args.row_width if rw else args.row_width[:1])]
     if len(grid) > 1:
         print("--- grid of the bank's settings (label / jittered boxes): share within 45 deg by fold group")
-        for u, m, r, w, c in grid:
+        for u, m, r, w, c, rw, rs in grid:
             line = []
             for s in sets:
                 sc = scores[s]
-                res = share(floored(sc[f"templates@{u:g}"], sc[f"floor@{m:g}"]) + w * sc[f"prior@{r}"]
-                            + (sc["classifier"] if c else 0.0))
-                name = f"iou={u:g} floor={m:g} road_spread={r} prior*{w:g} classifier={int(c)}"
+                res = share(rows(floored(sc[f"templates@{u:g}"], sc[f"floor@{m:g}"]) + w * sc[f"prior@{r}"]
+                                 + (sc["classifier"] if c else 0.0), s, rw, rs))
+                name = f"iou={u:g} floor={m:g} road_spread={r} prior*{w:g} classifier={int(c)} rows={rw:g}@{rs:g}m"
                 out["grid"][f"{s}/{name}"] = res
                 line.append(" ".join(f"{g}={100 * res[g]['within45']:5.1f}% ({res[g]['n']:3d})"
                                      for g in res if g.startswith("folds") and res[g]["n"]))
@@ -324,6 +362,8 @@ def main():
         print(fmt("pipeline on found", out["methods"]["label/pipeline-on-found"]))
         out["methods"]["own/pipeline"] = summary(angle_difference(np.asarray(own_rule), rec["alpha"]), rec)
         print(fmt("pipeline on own boxes", out["methods"]["own/pipeline"]))
+        out["methods"]["own/pipeline-rowless"] = summary(angle_difference(np.asarray(own_rowless), rec["alpha"]), rec)
+        print(fmt("each own box alone", out["methods"]["own/pipeline-rowless"]))
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
 

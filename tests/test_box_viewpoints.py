@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from conftest import KITTI_ROOT
+from conftest import KITTI_ROOT, assert_close
 from wirescene.core.boxes import iou_2d
 from wirescene.core.camera import Camera
 from wirescene.core.errors import ArgumentError, InputError, ShapeError
@@ -17,7 +17,15 @@ from wirescene.fitting.pipeline import fit_frame
 from wirescene.io.kitti import KittiDataset
 from wirescene.predetect import load_default_bank
 from wirescene.predetect.bank import detect_pyramid
-from wirescene.predetect.box_viewpoints import PRIOR_WEIGHT, box_bin_log_odds, box_log_prior, box_viewpoints
+from wirescene.predetect.box_viewpoints import (
+    PRIOR_WEIGHT,
+    ROW_WEIGHT,
+    box_bin_log_odds,
+    box_ground_positions,
+    box_log_prior,
+    box_viewpoints,
+    row_coherent_bins,
+)
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.viewpoint_classifier import (
     ViewpointClassifier,
@@ -135,8 +143,8 @@ def test_fit_frame_completes_unknown_viewpoints_with_the_bank(scene):
     # box_viewpoints' rule with the shipped bank and classifier: templates + classifier + road prior
     # (the templates' scores without a pyramid are the whole pyramid's: see the test above)
     classified = load_default_classifier().log_probs(scene["image"], boxes)
-    expected = bin_center(np.argmax(scene["log_odds"] + classified, axis=1))
-    assert np.allclose(out[1:], expected[1:])
+    expected = row_coherent_bins((scene["log_odds"] + classified)[1:], boxes[1:], scene["camera"])
+    assert np.allclose(out[1:], bin_center(expected))
     assert fit.evidence is None  # a coarse variant needs no part evidence for it any more
 
 
@@ -197,3 +205,58 @@ def test_crop_classifier_contract_storage_and_mirror_training(scene, tmp_path):
     assert list(bins[:n]) == list(truth) and list(bins[2 * n:3 * n]) == list((4 - truth) % 8)
     fitted = fit_viewpoint_classifier(feats, bins, C=1.0)
     assert np.mean(fitted.log_probs_of_features(feats).argmax(1) == bins) > 0.9
+
+
+def _row_objective(scores, bins, boxes, camera, weight):
+    """The quantity row_coherent_bins maximises, written out pair by pair."""
+    from wirescene.predetect.box_viewpoints import ROW_DEPTH, ROW_WIDTH
+
+    x, z = box_ground_positions(boxes, camera)
+    heading = bin_center(bins) + np.arctan2(x, z)
+    total = float(scores[np.arange(len(bins)), bins].sum())
+    for i in range(len(bins)):
+        for j in range(i + 1, len(bins)):
+            if abs(z[i] - z[j]) < ROW_DEPTH:
+                near = np.exp(-0.5 * ((x[i] - x[j]) / ROW_WIDTH) ** 2)
+                total += weight * near * np.cos(heading[i] - heading[j])
+    return total
+
+
+def test_cars_of_one_row_share_their_heading():
+    camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    # a row ahead (x ~ 0 m at 10, 17 and 27 m) and a car 12 m to the right at 20 m
+    boxes = np.array([[540.0, 110, 660, 218], [565.0, 140, 635, 204], [580.0, 155, 620, 195],
+                      [1010.0, 150, 1110, 204]])
+    x, z = box_ground_positions(boxes, camera)
+    assert_close(z[:3], [10.0, 16.875, 27.0], atol=1e-9)
+    assert np.all(np.abs(x[:3]) < 0.1) and x[3] > 11
+    scores = np.full((4, 8), -20.0)
+    scores[0, 6] = scores[1, 6] = 0.0  # clearly seen from the back
+    scores[2, [2, 6]] = [-0.3, -0.6]  # barely front rather than back
+    scores[3, [2, 6]] = [-0.3, -0.6]  # the same, but in no row
+    alone = row_coherent_bins(scores, boxes, camera, weight=0.0)
+    assert alone.tolist() == [6, 6, 2, 2] and np.array_equal(alone, np.argmax(scores, 1))
+    rows = row_coherent_bins(scores, boxes, camera)
+    assert rows.tolist() == [6, 6, 6, 2]
+    assert _row_objective(scores, rows, boxes, camera, ROW_WEIGHT) > _row_objective(scores, alone, boxes, camera,
+                                                                                    ROW_WEIGHT)
+    # a confident front is not overruled by its row (two cars agreeing weigh 2 x 2 x ROW_WEIGHT)
+    scores[2, [2, 6]] = [0.0, -4.5 * ROW_WEIGHT]
+    assert row_coherent_bins(scores, boxes, camera).tolist() == [6, 6, 2, 2]
+    # one box, or none
+    assert row_coherent_bins(scores[:1], boxes[:1], camera).tolist() == [6]
+    assert row_coherent_bins(np.zeros((0, 8)), np.zeros((0, 4)), camera).shape == (0,)
+    with pytest.raises(ShapeError, match="scores"):
+        row_coherent_bins(scores[:, :7], boxes, camera)
+    with pytest.raises(ShapeError, match="scores"):
+        row_coherent_bins(scores[:3], boxes, camera)
+
+
+def test_the_rows_never_lower_the_frames_objective(scene):
+    rng = np.random.default_rng(3)
+    boxes, camera = scene["boxes"], scene["camera"]
+    for _ in range(20):
+        scores = rng.normal(0.0, 1.5, (len(boxes), 8))
+        got = row_coherent_bins(scores, boxes, camera)
+        assert _row_objective(scores, got, boxes, camera, ROW_WEIGHT) >= \
+            _row_objective(scores, np.argmax(scores, 1), boxes, camera, ROW_WEIGHT) - 1e-9
