@@ -3,7 +3,7 @@
 Every frame of fold k (:mod:`wirescene.io.folds`) is fitted with the part detectors and
 the detector bank and crop viewpoint classifier trained on the other folds
 (``MODELS/parts_fold{k}.npz``, ``MODELS/bank_fold{k}.npz``,
-``MODELS/viewpoint_classifier_fold{k}.npz``; the last two only with ``--detections bank``;
+``MODELS/viewpoint_classifier_fold{k}.npz``; the last two only with ``--detections bank`` or ``DIR``;
 made by ``wirescene train parts|detector --kitti-root ROOT`` and ``wirescene train
 viewpoints ROOT`` with ``--split-file`` of the other folds' frames), so no figure comes
 from a model that saw the frame's drive. The folds'
@@ -14,7 +14,9 @@ of fold k is fitted on the other folds' records).
     python benchmarks/bench_real_folds.py --root ../shared/data/kitti --models MODELS \\
         --detections gt --out RUN_DIR [--variant full ...] [--workers 2]
 
-``--detections bank`` is the paper's protocol end to end (our own pre-detections).
+``--detections bank`` is the paper's protocol end to end (our own pre-detections);
+``--detections DIR`` fits another detector's per-frame files (``FRAME.json``, ``.csv``, ``.txt``),
+whose boxes without a viewpoint take one from the fold's bank and crop classifier.
 ``--shipped`` uses the shipped models for every fold instead: fair only for models that
 were not trained on these frames (e.g. wirescene 0.1's synthetic-only models).
 Interrupted runs resume (``RUN_DIR/fold{k}`` are ordinary ``eval --predictions`` dirs).
@@ -59,7 +61,9 @@ def main():
     ap.add_argument("--root", required=True)
     ap.add_argument("--models", type=Path, default=None)
     ap.add_argument("--shipped", action="store_true")
-    ap.add_argument("--detections", default="gt", choices=["gt", "bank"])
+    ap.add_argument("--detections", default="gt",
+                    help="gt (label boxes), bank (our pre-detection) or a directory of per-frame detection files "
+                         "(boxes without a viewpoint take one from the fold's bank and crop classifier)")
     ap.add_argument("--variant", dest="variants", action="append", choices=list(VARIANTS))
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--particles", type=int, default=250)
@@ -91,7 +95,7 @@ def main():
         models = {}
         if not args.shipped:
             models = {"parts_model": str(args.models / f"parts_fold{k}.npz")}
-            if args.detections == "bank":
+            if args.detections != "gt":
                 models["detector_bank"] = str(args.models / f"bank_fold{k}.npz")
                 models["viewpoint_classifier"] = str(args.models / f"viewpoint_classifier_fold{k}.npz")
             for path in models.values():
