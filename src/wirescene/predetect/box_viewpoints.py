@@ -73,7 +73,7 @@ ROW_WIDTH = 3.0
 ROW_DEPTH = 30.0
 # Car height (m) that places a box from its pixel height alone, for the rows.
 _CAR_HEIGHT = 1.5
-# Sweeps of iterated conditional modes; the labelled frames settle in 2-3.
+# Most sweeps of iterated conditional modes (it stops earlier once no bin changes).
 _SWEEPS = 5
 # Factor by which the box regression may change a vote's height, at most (the shipped bank's
 # moves it by 0.84-1.23x), so windows beyond it cannot reach the IoU and are not scored.
