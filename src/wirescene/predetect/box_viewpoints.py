@@ -437,7 +437,7 @@ def row_coherent_bins(scores, boxes, camera, *, weight: float = ROW_WEIGHT, widt
     s = np.asarray(scores, float)
     b = _check_boxes(boxes)
     check_shape("scores", s, (len(b), N_BINS))
-    best = np.argmax(s, axis=1) if len(b) else np.zeros(0, int)
+    best = np.argmax(s, axis=1)
     if len(b) < 2 or weight == 0:
         return best
     x, z = box_ground_positions(b, camera)
