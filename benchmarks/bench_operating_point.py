@@ -8,7 +8,14 @@ them and the number of cars placed within 1 m, the cars fitted and the false one
 pre-detection overlaps no labelled car at IoU 0.5, or one already taken: each is a 3D car
 in the output that is not there).
 
-    python benchmarks/bench_operating_point.py NAME=RUN [NAME=RUN ...] [--json OUT.json]
+With ``--paired``, every run after the first is also compared with the first on the cars
+that are true positives in both (the same label matched), per fold group: their median and
+mean localisation error (each clipped at :data:`CLIP` m, so that a lost car counts as one
+far off), how many lie within 1 m and 1.5 m, and on how many cars the run is nearer the
+label than the first run or farther from it. A change that moves few cars across 1 m can
+still move the errors of all of them.
+
+    python benchmarks/bench_operating_point.py NAME=RUN [NAME=RUN ...] [--paired] [--json OUT.json]
 """
 
 from __future__ import annotations
@@ -51,15 +58,44 @@ def figures(results) -> dict:
             "fitted": int(sum(len(r.det_boxes) for r in results)), "false_cars": sum(map(false_cars, results))}
 
 
+#: Localisation errors are clipped here (m) before averaging in ``--paired``.
+CLIP = 5.0
+
+
+def errors_by_car(results) -> dict:
+    """``{(frame, label index): localisation error (m)}`` of the true positives."""
+    return {(tp.frame_id, tp.gt_index): tp.loc_error for tp in evaluate(results).records}
+
+
+def paired(first: dict, other: dict) -> dict:
+    """Per fold group with any, the cars true positives in both ``{car: error}``: count, median
+    and mean clipped error of each, within 1 m and 1.5 m of each, and cars nearer / farther."""
+    out = {}
+    for g in FOLD_GROUPS:
+        cars = [c for c in first if c in other and fold_of(c[0]) in g]
+        if not cars:
+            continue
+        a = np.array([first[c] for c in cars], float)
+        b = np.array([other[c] for c in cars], float)
+        out[str(g)] = {"cars": len(cars), "median": [float(np.median(a)), float(np.median(b))],
+                       "mean_clipped": [float(np.minimum(a, CLIP).mean()), float(np.minimum(b, CLIP).mean())],
+                       "within_1m": [int((a < 1).sum()), int((b < 1).sum())],
+                       "within_1.5m": [int((a < 1.5).sum()), int((b < 1.5).sum())],
+                       "nearer": int((b < a).sum()), "farther": int((b > a).sum())}
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", help="NAME=RUN_DIR (bench_real_folds.py --out, --detections bank)")
+    ap.add_argument("--paired", action="store_true", help="compare every run with the first, car by car")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
-    out = {}
+    out, errors = {}, {}
     for item in args.runs:
         name, _, run = item.partition("=")
         records, _ = read_run(Path(run))
+        errors[name] = {variant: errors_by_car(results) for variant, results in records.items()}
         out[name] = {}
         for variant, results in records.items():
             row = {str(g): figures([r for r in results if fold_of(r.frame_id) in g]) for g in FOLD_GROUPS}
@@ -68,6 +104,21 @@ def main() -> None:
             print(f"{name:6s} {variant:10s} " + " | ".join(
                 f"{k}: TP {v['tp']}/{v['gt']}, {v['loc_1m']:.1f}% <1 m = {v['cars_within_1m']} cars, "
                 f"{v['false_cars']} false of {v['fitted']} fitted" for k, v in row.items()))
+    if args.paired and len(errors) > 1:
+        first, *others = errors
+        print(f"\ncars true positives in both runs, against {first}: median / mean of errors clipped at {CLIP:g} m, "
+              "within 1 m, within 1.5 m, nearer / farther than there")
+        for name in others:
+            for variant in errors[name]:
+                if variant not in errors[first]:
+                    continue
+                rows = paired(errors[first][variant], errors[name][variant])
+                out[name][variant]["paired"] = rows
+                print(f"{name:6s} {variant:10s} " + " | ".join(
+                    f"{g}: {r['cars']} cars, {r['median'][0]:.2f} -> {r['median'][1]:.2f} / {r['mean_clipped'][0]:.2f} "
+                    f"-> {r['mean_clipped'][1]:.2f} m, {r['within_1m'][0]} -> {r['within_1m'][1]}, "
+                    f"{r['within_1.5m'][0]} -> {r['within_1.5m'][1]}, {r['nearer']} / {r['farther']}"
+                    for g, r in rows.items()))
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
 

@@ -244,6 +244,10 @@ def main():
     ap.add_argument("--pad-cells", type=int, help="--fold-models: empty HOG cells padded left and right of the "
                     "image, so that windows reach past its sides (truncated cars)")
     ap.add_argument("--cluster-ry", type=float, default=None)
+    ap.add_argument("--min-height", type=float, help="--fold-models: the smallest full-car height searched, px "
+                    "(default: each bank's)")
+    ap.add_argument("--max-scale", type=float, help="--fold-models: the pyramid's largest upsampling (default: "
+                    "each bank's)")
     ap.add_argument("--time-frames", type=int, default=5)
     ap.add_argument("--pr-curve", default=None)
     ap.add_argument("--no-ground", action="store_true",
@@ -380,6 +384,10 @@ def main():
             with_clustering(b, args)
             if args.pad_cells is not None:
                 b.meta["pad_cells"] = args.pad_cells
+            if args.min_height is not None:
+                b.meta["min_height"] = args.min_height
+            if args.max_scale is not None:
+                b.meta["max_scale"] = args.max_scale
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
             dets[f] = detect_cars(ds.image(f), bank=banks[fold_of(f)], return_all=True,

@@ -11,9 +11,10 @@ For each fold of :mod:`wirescene.io.folds` the confidence model is fitted on the
 of the other folds and applied to this fold's estimates; the predictions are then scored
 with the KITTI rules (:mod:`wirescene.eval.kitti_metrics`), per fold group and pooled, by:
 the pre-detection scores as they are (label boxes: all 1), the fit's objective alone
-(negated cost), and the calibrated confidence of each model of :data:`MODELS`: a criterion
-of :data:`wirescene.training.scores.RIGHT_CRITERIA` (when an estimate counts as right) and
-a feature set. Estimates are the same in all: only their order differs. Per run, a reliability table
+(negated cost), the calibrated confidence of each model of :data:`MODELS` (a criterion
+of :data:`wirescene.training.scores.RIGHT_CRITERIA`, when an estimate counts as right, and
+a feature set), and the ceiling: the estimates that pass IoU 0.7 ranked first (:data:`PERFECT`).
+Estimates are the same in all: only their order differs. Per run, a reliability table
 says whether the shipped model's held-out confidence is a probability. Last, the model is
 chosen on one fold group by the fine variants' 3D AP at IoU 0.7 summed over the runs, and
 read on the other.
@@ -43,6 +44,8 @@ MODELS = {"1m, 3 features": ("1m", FEATURES[:3]), "iou, 3 features": ("iou", FEA
           "1m": ("1m", FEATURES), "iou": ("iou", FEATURES)}
 #: The model of :data:`MODELS` that ``wirescene train scores`` fits by default.
 SHIPPED = next(name for name, model in MODELS.items() if model == (DEFAULT_RIGHT, MODEL_FEATURES["right"]))
+#: The scores that rank every estimate passing KITTI's IoU 0.7 above every other: what no confidence can beat.
+PERFECT = "perfect ranking (IoU 0.7; ceiling)"
 #: (name, KITTI metrics path) of the APs printed, moderate.
 COLUMNS = (("3D 0.7", ("car", "3d")), ("BEV 0.7", ("car", "bev")), ("3D 0.5", ("iou_0.5", "car", "3d")))
 
@@ -74,6 +77,9 @@ def score_table(records: dict, gt: dict) -> tuple[dict, dict]:
             scores[_calibrated(name)] = cross_validated_confidences(records, folds, variant, right=right,
                                                                     features=features)
         shipped[variant] = scores[_calibrated(SHIPPED)]
+        # the ceiling of any confidence: the estimates that pass IoU 0.7 ranked first
+        scores[PERFECT] = {f: labelled_features(by_frame[f], right="iou")[1].astype(float) if by_frame[f].n_detections
+                           else np.zeros(0) for f in frames}
         for name, of in scores.items():
             table[(variant, name)] = {
                 g: {c: _ap(kitti_metrics([gt[f] for f in fs], [by_frame[f].estimate_labels(of[f]) for f in fs]), p)

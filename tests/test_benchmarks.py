@@ -169,6 +169,33 @@ def test_operating_point_counts_boxes_on_no_car_and_second_boxes_as_false(monkey
     assert false_cars(result) == 3  # the second box on the car, the van, the empty road
 
 
+def test_paired_comparison_counts_only_cars_both_runs_place(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_operating_point import CLIP, paired
+
+    # one frame (so one fold group), with a car only the first run finds
+    first = {("000000", 0): 0.5, ("000000", 1): 2.0, ("000000", 2): 9.0, ("000000", 3): 0.4}
+    other = {("000000", 0): 0.7, ("000000", 1): 1.2, ("000000", 2): 6.0}
+    (row,) = paired(first, other).values()
+    assert row["cars"] == 3 and row["nearer"] == 2 and row["farther"] == 1
+    assert row["within_1m"] == [1, 1] and row["within_1.5m"] == [1, 2]
+    assert_close(row["mean_clipped"], [(0.5 + 2.0 + CLIP) / 3, (0.7 + 1.2 + CLIP) / 3])
+
+
+def test_range_cues_size_move_keeps_the_image_and_k0_is_the_fit(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_range_cues import MEAN_HEIGHT, size_against_plane
+    from wirescene.core.labels import Label
+
+    label = Label("Car", 0.0, 0, 0.0, [0, 0, 10, 10], [MEAN_HEIGHT, 1.6, 4.0], [1.0, 1.6, 20.0], 0.3)
+    # fitted 10% too tall and 10% too far along the ray from the camera centre (0, 0, 0)
+    cars = {"group": np.array([0]), "centre": np.zeros((1, 3)), "location": np.array([[1.1, 1.76, 22.0]]),
+            "dims": np.array([[1.1 * MEAN_HEIGHT, 1.76, 4.4]]), "rotation_y": np.array([0.3]), "labels": [label]}
+    rows = size_against_plane(cars)
+    assert rows[0].startswith("| k = 0 | 0 / 0 of 1 |")  # the fit: 2 m off
+    assert rows[-1].startswith("| k = 1 | 1 / 1 of 1 |")  # the mean height puts it back on the label
+
+
 def test_unseen_shape_model_leaves_its_exemplar_out(monkeypatch):
     import numpy as np
 

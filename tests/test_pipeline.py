@@ -212,3 +212,28 @@ def test_frame_result_leaves_out_the_cars_the_fit_dropped():
     assert r.subset([1]).det_scores.tolist() == [0.4] and r.subset(np.array([True, False])).n_detections == 1
     with pytest.raises(ValueError, match="at most one object per detection"):
         frame_result("000002", labels, dets, SceneEstimate("coarse", objs + [objs[0]]))
+
+
+def test_own_boxes_weigh_by_the_predetect_stage():
+    """Our own boxes are fitted with ``predetect.box_weight``, any other boxes with
+    ``inference.box_weight``: the same boxes fitted as our own at weight 30 are the boxes
+    fitted as given at weight 30, and differ from those at weight 100."""
+    from dataclasses import replace
+
+    from wirescene.fitting.pipeline import PredetectOptions, fit_frame
+    from wirescene.io.detections import detections_from_labels
+
+    ds = KittiDataset(KITTI_ROOT)
+    camera, image = ds.camera("000002"), ds.image("000002")
+    dets = detections_from_labels(ds.labels("000002"))
+    unverified = replace(OPTS, predetect=PredetectOptions(min_car_probability=0, box_weight=30.0),
+                         calibrate_scores=False)
+
+    def locations(options, own):
+        est = fit_frame(camera, dets, ["fg"], image=image, options=options, own=own).estimates["fg"]
+        return np.array([o.location for o in est.objects])
+
+    as_own = locations(unverified, True)
+    assert np.array_equal(as_own, locations(replace(unverified, inference=replace(OPTS.inference, box_weight=30.0)),
+                                            False))
+    assert not np.allclose(as_own, locations(unverified, False))  # inference.box_weight: 100

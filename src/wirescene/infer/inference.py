@@ -107,7 +107,8 @@ class InferenceOptions:
     occluded_score: float = field(default_factory=load_occluded_score)
     # The coarse stage's box cost in the fine objective, so weak evidence cannot slide a car along its ray.
     box_weight: float = option(100.0, help="Weight of the detection box (KITTI convention) in the fine objective "
-                                           "(0: the paper's part likelihood only).")
+                                           "(0: the paper's part likelihood only; our own pre-detection's boxes: "
+                                           "--own-box-weight).")
     # Sample the ground plane too (the paper's scene-level inference) instead of keeping the coarse grid's.
     plane_refinement: bool = option(True, help="Sample the ground plane in the fine stage.")
     # The shape model's Gaussian, weak: the size prior carries the size, the evidence the details.
