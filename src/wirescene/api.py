@@ -165,7 +165,9 @@ def fit(
         taken from the box rule, :func:`wirescene.fitting.pipeline.complete_viewpoints`),
         or :class:`Detections` with viewpoints; ``None`` runs wirescene's own
         pre-detection, whose boxes the fit verifies (cars it finds unlikely are dropped:
-        ``settings={"predetect.min_car_probability": 0}`` keeps them all).
+        ``settings={"predetect.min_car_probability": 0}`` keeps them all) and weighs less than
+        given boxes (``predetect.box_weight`` 30 against ``inference.box_weight`` 100: they
+        miss the car's outline by more).
     variant : str
         Model variant (paper Sec. 5.2): ``coarse``, ``coarse+gp``, ``fg``, ``fg+so``,
         ``fg+do``, ``fg+gp`` or ``full``.
@@ -182,7 +184,7 @@ def fit(
     settings : mapping, optional
         ``{"STAGE.FIELD": value}`` changes to the stages' options, by the names of the
         command line's ``--set`` (e.g. ``{"inference.box_weight": 50}``; stages
-        ``lifting`` and ``inference``, see :meth:`FitOptions.with_settings`).
+        ``lifting``, ``inference`` and ``predetect``, see :meth:`FitOptions.with_settings`).
 
     Returns
     -------

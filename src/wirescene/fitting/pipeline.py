@@ -28,8 +28,9 @@ from wirescene.lift import LiftingOptions, LiftingTable, lift_table, plane_vote_
 
 @dataclass(frozen=True)
 class PredetectOptions:
-    """Options of our own pre-detection as the fit uses it (stage 1), and of the fit's
-    verification of its boxes. How each default was chosen: ``benchmarks/RESULTS.md``."""
+    """Options of our own pre-detection as the fit uses it (stage 1), and of how the fit
+    treats its boxes: their weight in the fine objective and their verification. How each
+    default was chosen: ``benchmarks/RESULTS.md``."""
 
     # Below the bank's own 2D operating point (0.5): the fit verifies every box it is given.
     threshold: float = option(0.3, cli="detection-threshold",
@@ -65,7 +66,7 @@ class FitOptions:
 
     def with_settings(self, settings: Mapping[str, object] | None) -> "FitOptions":
         """These options with ``{"STAGE.FIELD": value}`` changed, ``STAGE`` one of
-        :data:`STAGES` (``lifting``, ``inference``): the mapping ``--set`` and the named
+        :data:`STAGES` (``lifting``, ``inference``, ``predetect``): the mapping ``--set`` and the named
         options of ``eval`` / ``predict`` / ``fit`` and the API's ``settings`` share.
         String values are parsed as the field's type; an unknown stage or field is a
         ``ValueError`` naming what exists.
