@@ -193,3 +193,32 @@ def approximated_wireframes(model, cars, camera, n_shape: int):
         uv.append(camera.project(approx @ R.T + t))
         err.append(np.linalg.norm(approx - obj, axis=1))
     return np.array(uv), np.array(err)
+
+
+#: Each side of a jittered box moves by Gaussian noise of this share of the box's width / height.
+JITTER = 0.05
+
+
+def jittered(boxes, image_size, rng):
+    """Boxes ``(N, 4)`` with each side moved by N(0, JITTER) of the box's width / height,
+    clipped to the image and kept at least 2 px wide and high: a good external detector's
+    boxes, made from label boxes."""
+    import numpy as np
+
+    W, H = image_size
+    wh = np.column_stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]])
+    out = boxes + rng.normal(0.0, JITTER, boxes.shape) * np.tile(wh, 2)
+    out = np.column_stack([np.clip(out[:, 0], 0, W - 3), np.clip(out[:, 1], 0, H - 3),
+                           np.clip(out[:, 2], 0, W - 1), np.clip(out[:, 3], 0, H - 1)])
+    out[:, 2] = np.maximum(out[:, 2], out[:, 0] + 2)
+    out[:, 3] = np.maximum(out[:, 3], out[:, 1] + 2)
+    return out
+
+
+def jitter_rng(seed: int, frame_id: str):
+    """The jitter's random stream for one frame: the same boxes whatever else runs."""
+    import zlib
+
+    import numpy as np
+
+    return np.random.default_rng([seed, zlib.crc32(frame_id.encode())])

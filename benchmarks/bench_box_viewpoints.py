@@ -48,11 +48,11 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
-import zlib  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from _common import jitter_rng, jittered  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.core.boxes import MEAN_CAR_DIMS, iou_2d  # noqa: E402
 from wirescene.core.shape import load_default as load_shape_model  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
@@ -77,22 +77,8 @@ from wirescene.predetect.geometry import horizon_row  # noqa: E402
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray  # noqa: E402
 from wirescene.predetect.viewpoint_classifier import train_on_kitti  # noqa: E402
 
-JITTER = 0.05
 HEIGHT_BANDS = ((0, 25), (25, 40), (40, 60), (60, np.inf))
 GOOD, SWAP = np.radians(45.0), np.radians(135.0)
-
-
-def jittered(boxes: np.ndarray, image_size, rng) -> np.ndarray:
-    """Boxes ``(N, 4)`` with each side moved by N(0, JITTER) of the box's width / height,
-    clipped to the image and kept at least 2 px wide and high."""
-    W, H = image_size
-    wh = np.column_stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]])
-    out = boxes + rng.normal(0.0, JITTER, boxes.shape) * np.tile(wh, 2)
-    out = np.column_stack([np.clip(out[:, 0], 0, W - 3), np.clip(out[:, 1], 0, H - 3),
-                           np.clip(out[:, 2], 0, W - 1), np.clip(out[:, 3], 0, H - 1)])
-    out[:, 2] = np.maximum(out[:, 2], out[:, 0] + 2)
-    out[:, 3] = np.maximum(out[:, 3], out[:, 1] + 2)
-    return out
 
 
 def evidence_bin_scores(camera, boxes, evidence, shape_model) -> np.ndarray:
@@ -220,8 +206,7 @@ def main():
         image, camera, bank = ds.image(f), ds.camera(f), banks[k]
         H, W = image.shape[:2]
         label = np.array([o.box for o in cars], float)
-        rng = np.random.default_rng([args.seed, zlib.crc32(f.encode())])
-        boxes = {"label": label, "jittered": jittered(label, (W, H), rng)}
+        boxes = {"label": label, "jittered": jittered(label, (W, H), jitter_rng(args.seed, f))}
         both = np.concatenate([boxes[s] for s in sets])
         pyr = feature_pyramid(image, pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
                                                     per_octave=int(bank.meta.get("per_octave", 4))))

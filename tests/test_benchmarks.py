@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import assert_close
+from conftest import KITTI_ROOT, assert_close
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 SCRIPTS = sorted(p for p in BENCHMARKS.glob("*.py") if not p.stem.startswith("_"))  # _common.py: helpers
@@ -194,6 +194,24 @@ def test_range_cues_size_move_keeps_the_image_and_k0_is_the_fit(monkeypatch):
     rows = size_against_plane(cars)
     assert rows[0].startswith("| k = 0 | 0 / 0 of 1 |")  # the fit: 2 m off
     assert rows[-1].startswith("| k = 1 | 1 / 1 of 1 |")  # the mean height puts it back on the label
+
+
+def test_box_files_are_the_label_boxes_and_their_jitter_is_seeded(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from wirescene.io.kitti import KittiDataset
+    from write_box_files import frame_boxes
+
+    ds = KittiDataset(KITTI_ROOT)
+    cars = ds.labels("000010").of_type("Car")
+    plain = frame_boxes(ds, "000010", jitter=False, seed=0)
+    assert [b["box"] for b in plain] == [[round(float(v), 2) for v in o.box] for o in cars]
+    assert all(set(b) == {"box", "score"} for b in plain)  # no viewpoint: the fit completes it
+    moved = frame_boxes(ds, "000010", jitter=True, seed=0)
+    assert moved == frame_boxes(ds, "000010", jitter=True, seed=0) != frame_boxes(ds, "000010", jitter=True, seed=1)
+    a, b = np.array([x["box"] for x in plain]), np.array([x["box"] for x in moved])
+    assert a.shape == b.shape and not np.allclose(a, b)
+    height, width = ds.image("000010").shape[:2]
+    assert (b[:, :2] >= 0).all() and (b[:, 2] <= width - 1).all() and (b[:, 3] <= height - 1).all()
 
 
 def test_unseen_shape_model_leaves_its_exemplar_out(monkeypatch):
