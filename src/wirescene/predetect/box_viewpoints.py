@@ -37,6 +37,7 @@ import numpy as np
 
 from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import ArgumentError, InputError, check_shape
+from wirescene.core.groundplane import rotation_y_from_alpha
 from wirescene.core.validate import boxes_problem
 from wirescene.core.viewpoints import N_BINS, bin_center
 from wirescene.predetect.bank import (
@@ -361,7 +362,7 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     prior = None if camera is None else box_log_prior(bank, b, camera, road_spread=road_spread)
     if prior is not None:
         scores = scores + prior_weight * prior
-    if camera is None or row_weight == 0:
+    if camera is None:
         return bin_center(np.argmax(scores, axis=1))
     return bin_center(row_coherent_bins(scores, b, camera, weight=row_weight))
 
@@ -443,7 +444,7 @@ def row_coherent_bins(scores, boxes, camera, *, weight: float = ROW_WEIGHT, widt
     x, z = box_ground_positions(b, camera)
     near = np.exp(-0.5 * ((x[:, None] - x[None]) / width) ** 2) * (np.abs(z[:, None] - z[None]) < depth)
     np.fill_diagonal(near, 0.0)
-    heading = bin_center(np.arange(N_BINS))[None, :] + np.arctan2(x, z)[:, None]  # (N, 8) rotation_y
+    heading = rotation_y_from_alpha(bin_center(np.arange(N_BINS))[None, :], x[:, None], z[:, None])  # (N, 8)
     rows = np.arange(len(b))
     for _ in range(_SWEEPS):
         before = best.copy()
