@@ -241,8 +241,13 @@ def main():
                     help="override the banks' vote-clustering radius across (and, with --cluster-ry unset, along) "
                          "the box, in box widths / heights: --cv trains the steps after the templates with it, "
                          "--from-raw fits the calibration with it, and the banks of --models-dir keep it")
-    ap.add_argument("--pad-cells", type=int, help="--fold-models: empty HOG cells padded left and right of the "
-                    "image, so that windows reach past its sides (truncated cars)")
+    ap.add_argument("--pad-cells", type=int, help="empty HOG cells padded left and right of the image, so that "
+                    "windows reach past its sides (truncated cars): --cv trains the banks with them, --fold-models "
+                    "detects with them")
+    ap.add_argument("--whiten", action="store_true", help="--cv: train the templates in whitened HOG "
+                    "(training/whitening.py)")
+    ap.add_argument("--max-truncated", type=float, default=0.15,
+                    help="--cv: the largest KITTI truncation of a full-car positive")
     ap.add_argument("--cluster-ry", type=float, default=None)
     ap.add_argument("--min-height", type=float, help="--fold-models: the smallest full-car height searched, px "
                     "(default: each bank's)")
@@ -321,8 +326,8 @@ def main():
             bank = train_bank_on_frames([images[i] for i in tr], ex, n_partial=args.partial, C=args.C,
                                         mining_rounds=args.mining_rounds, min_bin_examples=args.min_bin_examples,
                                         label_boxes=args.label_boxes, per_octave=args.per_octave,
-                                        cut_paste=args.cut_paste,
-                                        progress=lambda m: print("   ", m, flush=True))
+                                        cut_paste=args.cut_paste, pad_cells=args.pad_cells or 0,
+                                        max_truncated=args.max_truncated, whiten=args.whiten, progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
             with_clustering(bank, args)  # the steps after the templates detect with it
             finish_bank(bank, train_images, ds, progress=lambda m: print("   ", m, flush=True))

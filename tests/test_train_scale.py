@@ -145,6 +145,30 @@ def test_capped_negatives_bound_every_pool():
     assert bank.meta["max_negatives"] == 12 and max(bank.meta["n_negatives"]) == 12
 
 
+def test_padded_training_shows_truncated_cars_as_detection_sees_them():
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.bank import score_pyramid
+    from wirescene.predetect.hog import pyramid_scales
+    from wirescene.training.detector import outside_cells_zeroed
+    from wirescene.training.kitti_detector import load_training_frames, train_bank_on_frames
+
+    f = outside_cells_zeroed(np.ones((2, 4, 31), np.float32), [-20.0, 0.0, 20.0, 10.0], 100)
+    assert f[:, :2].max() == 0 and f[:, 2:].min() == 1  # column centres -15, -5 | 5, 15
+    # both frames hold a car cut by the image's side (KITTI truncation 0.8 and 0.71)
+    images, examples = load_training_frames(KittiDataset(KITTI_ROOT), ["000010", "001545"])
+    plain = train_bank_on_frames(images, examples, **TINY_BANK)
+    padded = train_bank_on_frames(images, examples, **TINY_BANK, pad_cells=4, max_truncated=0.9)
+    assert "pad_cells" not in plain.meta and padded.meta["pad_cells"] == 4
+    assert sum(padded.meta["n_positives"]) > sum(plain.meta["n_positives"])
+    W, H = images[0].size
+    pyramid = images[0].hog_pyramid(pyramid_scales(W, H, max_scale=1.0, per_octave=2))
+    act = score_pyramid(padded, pyramid, threshold=-np.inf, min_height=40.0, pad_cells=4)
+    width = act.boxes[:, 2] - act.boxes[:, 0]
+    inside = np.minimum(act.boxes[:, 2], W) - np.maximum(act.boxes[:, 0], 0)
+    assert act.boxes[:, 0].min() < 0 and act.boxes[:, 2].max() > W  # windows past both sides
+    assert np.all(inside >= width / 2 - 1e-6)  # each keeps at least half of itself in the image
+
+
 def test_row_sample_is_the_plain_rows_below_the_cap_and_a_uniform_ordered_sample_above():
     from wirescene.training.scale import RowSample
 

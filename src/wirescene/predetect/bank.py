@@ -259,15 +259,17 @@ def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k
     """Apply every template to every pyramid level where the full object it implies is
     ``min_height..max_height`` px high (:func:`template_responses`). Keeps per detector
     and level the ``top_k`` windows scoring above ``threshold``. ``pad_cells`` columns of
-    empty cells left and right of every level let windows reach past the image's sides
-    (cars it truncates); their boxes keep image coordinates and ``cell`` the padded grid's."""
+    empty cells left and right of every level (:func:`pad_pyramid`) let windows reach past
+    the image's sides (cars it truncates) while at least half of each stays inside
+    (:func:`half_inside`); their boxes keep image coordinates and ``cell`` the padded grid's."""
     out = {k: [] for k in ("det", "boxes", "scores", "level", "cell")}
-    if pad_cells:
-        pyramid = [(s, np.pad(F, ((0, 0), (pad_cells, pad_cells), (0, 0)))) for s, F in pyramid]
+    pyramid = pad_pyramid(pyramid, pad_cells)
     for t, li, s, R in template_responses(bank, pyramid, min_height=min_height, max_height=max_height,
                                           chunk_cols=chunk_cols, detectors=detectors):
         th, tw = bank.configs[t].template
         Wr = R.shape[1]
+        if pad_cells:
+            R[:, ~half_inside(np.arange(Wr), tw, R.shape[1] + tw - 1 - 2 * pad_cells, pad_cells)] = -np.inf
         flat = R.ravel()
         idx = np.flatnonzero(flat > threshold)
         if len(idx) > top_k:
@@ -284,6 +286,23 @@ def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k
     if not out["det"]:
         return Activations(np.zeros(0, int), np.zeros((0, 4)), np.zeros(0), np.zeros(0, int), np.zeros((0, 2), int))
     return Activations(*(np.concatenate(out[k]) for k in ("det", "boxes", "scores", "level", "cell")))
+
+
+def pad_pyramid(pyramid, pad_cells: int) -> list:
+    """``pyramid`` with ``pad_cells`` columns of empty cells left and right of every level
+    (windows past the image's sides; DPM's padding), unchanged for 0."""
+    if not pad_cells:
+        return list(pyramid)
+    return [(s, np.pad(F, ((0, 0), (pad_cells, pad_cells), (0, 0)))) for s, F in pyramid]
+
+
+def half_inside(q, tw: int, wc: int, pad_cells: int) -> np.ndarray:
+    """Whether windows ``tw`` cells wide whose first column is ``q`` in a level ``wc``
+    cells wide padded by ``pad_cells`` keep at least half their columns in the image (a
+    window mostly in the padding scores its bias, whatever the image shows)."""
+    q = np.asarray(q) - pad_cells
+    inside = np.minimum(q + tw, wc) - np.maximum(q, 0)
+    return 2 * inside >= tw
 
 
 def nms(boxes: np.ndarray, scores: np.ndarray, iou: float = 0.5, max_keep: int | None = None) -> np.ndarray:
@@ -435,9 +454,9 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
     ``gray``: the ``(H, W)`` float grey image, for the bank's box refinement and verifier
     (None: neither); ``channels``: the image's
     :func:`~wirescene.predetect.channels.integral_channels`, for a verifier that reads them
-    (:attr:`DetectorBank.needs_channels`). A bank's ``meta["pad_cells"]`` (default 0) lets
-    windows reach past the image's sides (:func:`score_pyramid`; a study, not adopted:
-    ``benchmarks/RESULTS.md``)."""
+    (:attr:`DetectorBank.needs_channels`). A bank's ``meta["pad_cells"]`` (default 0: banks
+    trained with windows inside the image) lets windows reach past the image's sides
+    (:func:`score_pyramid`; ``train_bank_on_frames(pad_cells=)``)."""
     W, H = image_size
     raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
     floor = min(raw_thr if raw_thr is not None else -0.5, -0.5) - 0.5

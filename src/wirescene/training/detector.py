@@ -22,7 +22,7 @@ import numpy as np
 
 from wirescene.core.viewpoints import N_BINS
 from wirescene.predetect.ap import summary
-from wirescene.predetect.bank import DetectorBank, detect_cars, score_pyramid
+from wirescene.predetect.bank import DetectorBank, detect_cars, half_inside, pad_pyramid, score_pyramid
 from wirescene.predetect.configurations import (
     FULL,
     apply_full_box,
@@ -67,9 +67,12 @@ def _fit_svm(pos, neg, C, seed):
 
 
 
-def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_image, rng) -> None:
+def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_image, rng, pad_cells: int = 0) -> None:
     """Append to ``neg[t]`` (a list or a :class:`~wirescene.training.scale.NegativePool`) up
-    to ``per_image`` random windows of pyramid ``pyr`` for each configuration ``t``, skipping windows that overlap a ``blocked`` box (cars) by more than 30%."""
+    to ``per_image`` random windows of pyramid ``pyr`` for each configuration ``t``, skipping windows that overlap a ``blocked`` box (cars) by more than 30%.
+    ``pad_cells``: windows may reach that many empty cells past the image's sides, as
+    :func:`~wirescene.predetect.bank.score_pyramid` scores them."""
+    padded = pad_pyramid(pyr, pad_cells)
     for t, c in enumerate(configs):
         th, tw = c.template
         levels = _valid_levels(c, pyr, H, min_height)
@@ -78,9 +81,11 @@ def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_im
         got = 0
         for _ in range(4 * per_image):
             li = levels[rng.integers(len(levels))]
-            s, F = pyr[li]
+            s, F = padded[li]
             r, q = rng.integers(F.shape[0] - th + 1), rng.integers(F.shape[1] - tw + 1)
-            win = np.array([[q, r, q + tw, r + th]]) * CELL / s
+            if not half_inside(q, tw, F.shape[1] - 2 * pad_cells, pad_cells):
+                continue
+            win = np.array([[q - pad_cells, r, q - pad_cells + tw, r + th]]) * CELL / s
             if _overlap_frac(win, blocked)[0] > 0.3:
                 continue
             neg[t].append(F[r:r + th, q:q + tw].flatten())  # a copy: a view would hold the whole level
@@ -88,10 +93,14 @@ def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_im
             if got >= per_image:
                 break
 
-def fit_svms(configs, pos, neg, *, C: float, seed: int):
+def fit_svms(configs, pos, neg, *, C: float, seed: int, background=None):
     """One linear SVM per configuration on its positive and negative descriptors (lists
     per configuration); a configuration without positives gets zero weights and a bias of
-    -10, so it never fires. Returns ``(weights, biases)`` as :class:`DetectorBank` takes them."""
+    -10, so it never fires. Returns ``(weights, biases)`` as :class:`DetectorBank` takes them.
+    ``background``: :class:`~wirescene.training.whitening.BackgroundStatistics` to train
+    in whitened features (:func:`~wirescene.training.whitening.whitening_matrix`), None for raw HOG."""
+    from wirescene.training.whitening import whitening_matrix
+
     weights, biases = [], np.zeros(len(configs), np.float32)
     for t, c in enumerate(configs):
         th, tw = c.template
@@ -99,7 +108,13 @@ def fit_svms(configs, pos, neg, *, C: float, seed: int):
             weights.append(np.zeros((th, tw, N_FEAT), np.float32))
             biases[t] = -10.0
             continue
-        w, b = _fit_svm(pos[t], np.array(neg[t], np.float32).reshape(-1, th * tw * N_FEAT), C, seed)
+        P, N = pos[t], np.array(neg[t], np.float32).reshape(-1, th * tw * N_FEAT)
+        if background is None:
+            w, b = _fit_svm(P, N, C, seed)
+        else:
+            M = whitening_matrix(background, th, tw)
+            w, b = _fit_svm(P @ M, N @ M, C, seed)
+            w = M @ w
         weights.append(w.reshape(th, tw, N_FEAT))
         biases[t] = b
     return weights, biases
@@ -129,8 +144,23 @@ def calibrate_threshold(bank: DetectorBank, *, seed: int, n_val: int, cars=(2, 8
     return thr, val
 
 
+def outside_cells_zeroed(f: np.ndarray, box, width: int) -> np.ndarray:
+    """Template features ``f`` ``(th, tw, 31)`` of ``box`` with the columns whose centres lie
+    outside an image ``width`` px wide set to zero, as a padded pyramid
+    (:func:`~wirescene.predetect.bank.pad_pyramid`) shows a window past the image's sides."""
+    tw = f.shape[1]
+    centres = box[0] + (np.arange(tw) + 0.5) * (box[2] - box[0]) / tw
+    f[:, (centres < 0) | (centres > width)] = 0.0
+    return f
+
+
+def _window_features(gray, box, th: int, tw: int, truncated_windows: bool) -> np.ndarray:
+    f = crop_features(gray, box, th, tw)
+    return (outside_cells_zeroed(f, box, gray.shape[1]) if truncated_windows else f).ravel()
+
+
 def positive_features(configs, examples, gray_of, rng, *, min_height, max_pos, min_pos, max_jitter,
-                      max_occluded, max_truncated, min_box_cells=None):
+                      max_occluded, max_truncated, min_box_cells=None, truncated_windows: bool = False):
     """HOG features of every configuration's positive examples.
 
     A car example is a positive of configuration ``c`` when it is in ``c``'s viewpoint
@@ -141,6 +171,10 @@ def positive_features(configs, examples, gray_of, rng, *, min_height, max_pos, m
     ``max_pos`` are drawn at random; rare viewpoints get up to ``max_jitter`` jittered
     copies each (shift +-5%, scale +-7%) to reach about ``min_pos``. ``gray_of(example)``
     is its float grey image in [0, 1].
+
+    ``truncated_windows``: cells of a window past the image's sides are zero
+    (:func:`outside_cells_zeroed`), as detection with padded levels sees them; else they
+    show the edge-replicated image.
 
     Returns the ``(n, th * tw * N_FEAT)`` feature arrays and the number of examples
     (before jitter), one per configuration.
@@ -171,14 +205,14 @@ def positive_features(configs, examples, gray_of, rng, *, min_height, max_pos, m
                 cache.clear()
                 cache[key] = gray_of(e)
             g = cache[key]
-            feats.append(crop_features(g, box, th, tw).ravel())
+            feats.append(_window_features(g, box, th, tw, truncated_windows))
             w, h = box[2] - box[0], box[3] - box[1]
             for _ in range(max(n_jit, 0)):
                 cx = (box[0] + box[2]) / 2 + rng.uniform(-0.05, 0.05) * w
                 cy = (box[1] + box[3]) / 2 + rng.uniform(-0.05, 0.05) * h
                 f = np.exp(rng.uniform(-0.07, 0.07))
-                feats.append(crop_features(g, [cx - f * w / 2, cy - f * h / 2, cx + f * w / 2, cy + f * h / 2],
-                                           th, tw).ravel())
+                feats.append(_window_features(g, [cx - f * w / 2, cy - f * h / 2, cx + f * w / 2, cy + f * h / 2],
+                                              th, tw, truncated_windows))
         pos.append(np.array(feats, np.float32).reshape(-1, th * tw * N_FEAT))
         counts.append(len(cand))
     return pos, counts

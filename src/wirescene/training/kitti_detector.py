@@ -73,7 +73,7 @@ import numpy as np
 
 from wirescene.core.errors import InputError
 from wirescene.core.viewpoints import N_BINS, viewpoint_bin
-from wirescene.predetect.bank import DetectorBank, detect_pyramid, score_pyramid
+from wirescene.predetect.bank import DetectorBank, detect_pyramid, pad_pyramid, score_pyramid
 from wirescene.predetect.configurations import (
     CarExample,
     apply_full_box,
@@ -274,7 +274,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                          min_height: float = 25.0, max_scale: float = 2.0, full_area: float = 48,
                          partial_area: float = 36, label_boxes: bool = False, per_octave: int = 6, box_weight: float = 2.0,
                          cluster_radius: float = 0.2, cut_paste: int = 0, max_negatives: int | None = DEFAULT_MAX_NEGATIVES,
-                         pyramid_cache_mb: float = DEFAULT_CACHE_MB, workers: int = 1, progress=None) -> DetectorBank:
+                         pyramid_cache_mb: float = DEFAULT_CACHE_MB, pad_cells: int = 0, max_truncated: float = 0.15,
+                         whiten: bool = False, workers: int = 1, progress=None) -> DetectorBank:
     """Train a :class:`DetectorBank` on real training images and their car examples.
 
     ``images``/``examples`` as returned by :func:`load_training_frames` (grey images and
@@ -307,6 +308,14 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     frames: from about 80 frames on the random negatives are a uniform sample of all
     frames' windows, and each round keeps the 12,800 windows of highest margin (about 1 GB
     for the 32 configurations at 1.3k floats each, whatever the number of frames).
+    ``pad_cells``: columns of empty cells left and right of every pyramid level, so that
+    windows reach past the image's sides (DPM's padding, for cars the image truncates;
+    stored in the bank's meta, detection pads alike): random and hard negatives are drawn
+    from the padded levels, and the cells of a positive past the image's sides are zero.
+    ``max_truncated``: the largest KITTI truncation of a full-car positive (0.15 suits
+    windows inside the image; with ``pad_cells`` a truncated car is shown as detection sees it).
+    ``whiten``: train the templates in whitened HOG (:mod:`wirescene.training.whitening`),
+    with background statistics of the training images' pyramid levels at scales up to 1.
     ``pyramid_cache_mb``: budget of the process's cache of grey images and HOG pyramids
     (:data:`~wirescene.training.scale.CACHE`, set here); the default holds the 72 shared
     frames' (nothing is computed twice), more frames are read and described again in
@@ -346,7 +355,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     # ---- positives
     pos, counts = positive_features(
         configs, examples, lambda e: images[e.image].gray.astype(np.float32) / 255.0, rng, min_height=min_height,
-        max_pos=max_pos, min_pos=min_pos, max_jitter=max_jitter, max_occluded=0.35, max_truncated=0.15)
+        max_pos=max_pos, min_pos=min_pos, max_jitter=max_jitter, max_occluded=0.35, max_truncated=max_truncated,
+        truncated_windows=pad_cells > 0)
     for c, n in zip(configs, counts):
         c.n_examples = n
     say("positives per detector: " + " ".join(str(len(p)) for p in pos) + f" [{time.time() - t0:.0f}s]")
@@ -358,14 +368,22 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     neg = [NegativePool(max_negatives, reservoir) for _ in configs]
     for im in images:
         sample_random_negatives(neg, im.hog_pyramid(scales), configs, im.block, H=H, min_height=min_height,
-                                per_image=neg_per_image, rng=rng)
+                                per_image=neg_per_image, rng=rng, pad_cells=pad_cells)
     say(f"random negatives: {sum(len(n) for n in neg)} [{time.time() - t0:.0f}s]")
 
-    weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed)
+    background = None
+    if whiten:
+        from wirescene.training.whitening import background_statistics
+
+        step = max(1, len(images) // 8)  # a few images hold the cells' statistics many times over
+        levels = [F for im in images[:n_real_images:step] for s, F in im.hog_pyramid(scales) if s <= 1.0]
+        background = background_statistics(levels, tuple(np.max([c.template for c in configs], 0)))
+        say(f"background statistics of {len(levels)} levels [{time.time() - t0:.0f}s]")
+    weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed, background=background)
     bank = DetectorBank(configs, weights, biases)
     for rnd in range(mining_rounds):
         mine = partial(hard_negatives, bank, scales=scales, min_height=min_height, max_height=3.0 * H,
-                       per_image=hard_per_image)
+                       per_image=hard_per_image, pad_cells=pad_cells)
         n_new = 0
         for found in map_images(mine, images, workers=workers, progress=say, name=f"mining round {rnd + 1}"):
             for t, feats in found:
@@ -375,7 +393,7 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                 n_new += len(feats)
         for t, pool in enumerate(neg):
             pool.shrink(bank.weights[t], bank.biases[t])
-        weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed)
+        weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed, background=background)
         bank = DetectorBank(configs, weights, biases)
         say(f"mining round {rnd + 1}: {n_new} hard negatives [{time.time() - t0:.0f}s]")
     bank.meta = {
@@ -387,18 +405,24 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
         "car_examples_per_bin": per_bin.tolist(), "full_box_correction": np.round(corr, 5).tolist(),
         "train_seconds": round(time.time() - t0, 1),
     }
+    if whiten:
+        bank.meta["whiten"] = True
+    if pad_cells:  # recorded where set: older banks and their detection stay as they were
+        bank.meta.update(pad_cells=int(pad_cells), max_truncated=float(max_truncated))
     if any(n.offered > len(n) or len(n) == max_negatives for n in neg):
         bank.meta["max_negatives"] = int(max_negatives)  # recorded where the cap shaped the bank
     return bank
 
 
 def hard_negatives(bank: DetectorBank, image: TrainImage, *, scales, min_height: float, max_height: float,
-                   per_image: int) -> list:
+                   per_image: int, pad_cells: int = 0) -> list:
     """``[(configuration, (k, D) descriptors)]``: the ``per_image`` best-scoring windows of
     each configuration in ``image`` (margin above -1) overlapping no blocked box by more
-    than 30% of the window (one pass of hard-negative mining)."""
-    pyramid = image.hog_pyramid(scales)
-    act = score_pyramid(bank, pyramid, threshold=-1.0, top_k=40, min_height=min_height, max_height=max_height)
+    than 30% of the window (one pass of hard-negative mining); ``pad_cells`` as
+    :func:`~wirescene.predetect.bank.score_pyramid` takes it."""
+    act = score_pyramid(bank, image.hog_pyramid(scales), threshold=-1.0, top_k=40, min_height=min_height,
+                        max_height=max_height, pad_cells=pad_cells)
+    pyramid = pad_pyramid(image.hog_pyramid(scales), pad_cells)
     if not len(act.det):
         return []
     ok = _overlap_frac(act.boxes, image.block) <= 0.3
