@@ -93,14 +93,12 @@ def sample_random_negatives(neg, pyr, configs, blocked, *, H, min_height, per_im
             if got >= per_image:
                 break
 
-def fit_svms(configs, pos, neg, *, C: float, seed: int, background=None):
+def fit_svms(configs, pos, neg, *, C: float, seed: int, whiteners=None):
     """One linear SVM per configuration on its positive and negative descriptors (lists
     per configuration); a configuration without positives gets zero weights and a bias of
     -10, so it never fires. Returns ``(weights, biases)`` as :class:`DetectorBank` takes them.
-    ``background``: :class:`~wirescene.training.whitening.BackgroundStatistics` to train
-    in whitened features (:func:`~wirescene.training.whitening.whitening_matrix`), None for raw HOG."""
-    from wirescene.training.whitening import whitening_matrix
-
+    ``whiteners``: one :func:`~wirescene.training.whitening.whitening_matrix` per
+    configuration to train in whitened features, None for raw HOG."""
     weights, biases = [], np.zeros(len(configs), np.float32)
     for t, c in enumerate(configs):
         th, tw = c.template
@@ -109,10 +107,10 @@ def fit_svms(configs, pos, neg, *, C: float, seed: int, background=None):
             biases[t] = -10.0
             continue
         P, N = pos[t], np.array(neg[t], np.float32).reshape(-1, th * tw * N_FEAT)
-        if background is None:
+        if whiteners is None:
             w, b = _fit_svm(P, N, C, seed)
         else:
-            M = whitening_matrix(background, th, tw)
+            M = whiteners[t]
             w, b = _fit_svm(P @ M, N @ M, C, seed)
             w = M @ w
         weights.append(w.reshape(th, tw, N_FEAT))

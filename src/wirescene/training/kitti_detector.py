@@ -371,15 +371,16 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                                 per_image=neg_per_image, rng=rng, pad_cells=pad_cells)
     say(f"random negatives: {sum(len(n) for n in neg)} [{time.time() - t0:.0f}s]")
 
-    background = None
+    whiteners = None  # one per configuration, for every round's fit
     if whiten:
-        from wirescene.training.whitening import background_statistics
+        from wirescene.training.whitening import background_statistics, whitening_matrix
 
         step = max(1, len(images) // 8)  # a few images hold the cells' statistics many times over
         levels = [F for im in images[:n_real_images:step] for s, F in im.hog_pyramid(scales) if s <= 1.0]
         background = background_statistics(levels, tuple(np.max([c.template for c in configs], 0)))
+        whiteners = [whitening_matrix(background, *c.template) for c in configs]
         say(f"background statistics of {len(levels)} levels [{time.time() - t0:.0f}s]")
-    weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed, background=background)
+    weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed, whiteners=whiteners)
     bank = DetectorBank(configs, weights, biases)
     for rnd in range(mining_rounds):
         mine = partial(hard_negatives, bank, scales=scales, min_height=min_height, max_height=3.0 * H,
@@ -393,7 +394,7 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                 n_new += len(feats)
         for t, pool in enumerate(neg):
             pool.shrink(bank.weights[t], bank.biases[t])
-        weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed, background=background)
+        weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed, whiteners=whiteners)
         bank = DetectorBank(configs, weights, biases)
         say(f"mining round {rnd + 1}: {n_new} hard negatives [{time.time() - t0:.0f}s]")
     bank.meta = {
@@ -420,9 +421,10 @@ def hard_negatives(bank: DetectorBank, image: TrainImage, *, scales, min_height:
     each configuration in ``image`` (margin above -1) overlapping no blocked box by more
     than 30% of the window (one pass of hard-negative mining); ``pad_cells`` as
     :func:`~wirescene.predetect.bank.score_pyramid` takes it."""
-    act = score_pyramid(bank, image.hog_pyramid(scales), threshold=-1.0, top_k=40, min_height=min_height,
-                        max_height=max_height, pad_cells=pad_cells)
-    pyramid = pad_pyramid(image.hog_pyramid(scales), pad_cells)
+    pyramid = image.hog_pyramid(scales)
+    act = score_pyramid(bank, pyramid, threshold=-1.0, top_k=40, min_height=min_height, max_height=max_height,
+                        pad_cells=pad_cells)
+    pyramid = pad_pyramid(pyramid, pad_cells)  # the cells act.cell indexes
     if not len(act.det):
         return []
     ok = _overlap_frac(act.boxes, image.block) <= 0.3
