@@ -249,6 +249,12 @@ def main():
     ap.add_argument("--max-truncated", type=float, default=0.15,
                     help="--cv: the largest KITTI truncation of a full-car positive")
     ap.add_argument("--cluster-ry", type=float, default=None)
+    ap.add_argument("--align", action="store_true", help="--cv: latent placement of the positive windows "
+                    "(train_bank_on_frames align)")
+    ap.add_argument("--full-area", type=float, default=48,
+                    help="--cv: HOG cells of a full-car template (its resolution)")
+    ap.add_argument("--partial-area", type=float, default=36,
+                    help="--cv: HOG cells of a partial configuration's template")
     ap.add_argument("--min-height", type=float, help="--fold-models: the smallest full-car height searched, px "
                     "(default: each bank's)")
     ap.add_argument("--max-scale", type=float, help="--fold-models: the pyramid's largest upsampling (default: "
@@ -327,7 +333,8 @@ def main():
                                         mining_rounds=args.mining_rounds, min_bin_examples=args.min_bin_examples,
                                         label_boxes=args.label_boxes, per_octave=args.per_octave,
                                         cut_paste=args.cut_paste, pad_cells=args.pad_cells or 0,
-                                        max_truncated=args.max_truncated, whiten=args.whiten, progress=lambda m: print("   ", m, flush=True))
+                                        max_truncated=args.max_truncated, whiten=args.whiten, align=args.align,
+                                        full_area=args.full_area, partial_area=args.partial_area, progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
             with_clustering(bank, args)  # the steps after the templates detect with it
             finish_bank(bank, train_images, ds, progress=lambda m: print("   ", m, flush=True))

@@ -152,13 +152,51 @@ def outside_cells_zeroed(f: np.ndarray, box, width: int) -> np.ndarray:
     return f
 
 
-def _window_features(gray, box, th: int, tw: int, truncated_windows: bool) -> np.ndarray:
+def _window_features(gray, box, th: int, tw: int, truncated_windows: bool, offsets=None) -> np.ndarray:
+    if offsets is not None:  # (K, D): the window moved by each offset, as latent placement searches it
+        return np.stack([_window_features(gray, moved_box(box, o, th, tw), th, tw, truncated_windows)
+                         for o in offsets])
     f = crop_features(gray, box, th, tw)
     return (outside_cells_zeroed(f, box, gray.shape[1]) if truncated_windows else f).ravel()
 
 
+def alignment_offsets(*, shift: float = 0.5, scale_steps: float = 1 / 6) -> np.ndarray:
+    """``(27, 3)`` offsets ``(dx, dy, ds)`` of a positive window searched by latent placement:
+    ``dx, dy`` in template cells (``-shift, 0, shift``), ``ds`` in octaves (``-scale_steps, 0,
+    scale_steps``: one pyramid level at 6 per octave); the unmoved window first."""
+    grid = np.array([(dx, dy, ds) for dx in (0.0, -shift, shift) for dy in (0.0, -shift, shift)
+                     for ds in (0.0, -scale_steps, scale_steps)])
+    return grid
+
+
+def moved_box(box, offset, th: int, tw: int) -> np.ndarray:
+    """``box`` (x1 y1 x2 y2) of a ``th x tw``-cell window shifted by ``offset[:2]`` cells and
+    scaled about its centre by ``2 ** offset[2]``."""
+    x1, y1, x2, y2 = (float(v) for v in box)
+    cw, ch = (x2 - x1) / tw, (y2 - y1) / th
+    cx, cy = (x1 + x2) / 2 + offset[0] * cw, (y1 + y2) / 2 + offset[1] * ch
+    f = 2.0 ** offset[2]
+    return np.array([cx - f * (x2 - x1) / 2, cy - f * (y2 - y1) / 2, cx + f * (x2 - x1) / 2, cy + f * (y2 - y1) / 2])
+
+
+def align_positives(candidates, weights) -> list:
+    """Latent placement of the positives (as DPM relabels its root windows): per configuration,
+    each positive's ``(K, D)`` candidate windows (:func:`positive_features` with ``offsets``)
+    reduced to the one the current template ``weights[t]`` scores highest. Returns the
+    ``(n, D)`` positives :func:`fit_svms` takes."""
+    out = []
+    for C, w in zip(candidates, weights):
+        if not len(C):
+            out.append(C.reshape(0, C.shape[-1]))
+            continue
+        best = np.argmax(C @ np.asarray(w, np.float32).ravel(), axis=1)
+        out.append(C[np.arange(len(C)), best])
+    return out
+
+
 def positive_features(configs, examples, gray_of, rng, *, min_height, max_pos, min_pos, max_jitter,
-                      max_occluded, max_truncated, min_box_cells=None, truncated_windows: bool = False):
+                      max_occluded, max_truncated, min_box_cells=None, truncated_windows: bool = False,
+                      offsets=None):
     """HOG features of every configuration's positive examples.
 
     A car example is a positive of configuration ``c`` when it is in ``c``'s viewpoint
@@ -174,8 +212,12 @@ def positive_features(configs, examples, gray_of, rng, *, min_height, max_pos, m
     (:func:`outside_cells_zeroed`), as detection with padded levels sees them; else they
     show the edge-replicated image.
 
-    Returns the ``(n, th * tw * N_FEAT)`` feature arrays and the number of examples
-    (before jitter), one per configuration.
+    ``offsets``: ``(K, 3)`` moves of every window (:func:`alignment_offsets`) for latent
+    placement; each positive then holds the ``(K, th * tw * N_FEAT)`` features of its moved
+    windows (:func:`align_positives` picks one).
+
+    Returns the ``(n, th * tw * N_FEAT)`` feature arrays (``(n, K, ...)`` with ``offsets``)
+    and the number of examples (before jitter), one per configuration.
     """
     pos, counts = [], []
     for c in configs:
@@ -203,15 +245,16 @@ def positive_features(configs, examples, gray_of, rng, *, min_height, max_pos, m
                 cache.clear()
                 cache[key] = gray_of(e)
             g = cache[key]
-            feats.append(_window_features(g, box, th, tw, truncated_windows))
+            feats.append(_window_features(g, box, th, tw, truncated_windows, offsets))
             w, h = box[2] - box[0], box[3] - box[1]
             for _ in range(max(n_jit, 0)):
                 cx = (box[0] + box[2]) / 2 + rng.uniform(-0.05, 0.05) * w
                 cy = (box[1] + box[3]) / 2 + rng.uniform(-0.05, 0.05) * h
                 f = np.exp(rng.uniform(-0.07, 0.07))
                 feats.append(_window_features(g, [cx - f * w / 2, cy - f * h / 2, cx + f * w / 2, cy + f * h / 2],
-                                              th, tw, truncated_windows))
-        pos.append(np.array(feats, np.float32).reshape(-1, th * tw * N_FEAT))
+                                              th, tw, truncated_windows, offsets))
+        shape = (-1, th * tw * N_FEAT) if offsets is None else (-1, len(offsets), th * tw * N_FEAT)
+        pos.append(np.array(feats, np.float32).reshape(shape))
         counts.append(len(cand))
     return pos, counts
 

@@ -86,7 +86,14 @@ from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.verifier import CHANNELS as VERIFIER_CHANNELS
 from wirescene.predetect.verifier import C as VERIFIER_C
 from wirescene.predetect.viewpoint_prior import fit_viewpoint_prior, lateral_position
-from wirescene.training.detector import _overlap_frac, fit_svms, positive_features, sample_random_negatives
+from wirescene.training.detector import (
+    _overlap_frac,
+    align_positives,
+    alignment_offsets,
+    fit_svms,
+    positive_features,
+    sample_random_negatives,
+)
 from wirescene.training.scale import (
     CACHE,
     DEFAULT_CACHE_MB,
@@ -275,7 +282,7 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                          partial_area: float = 36, label_boxes: bool = False, per_octave: int = 6, box_weight: float = 2.0,
                          cluster_radius: float = 0.2, cut_paste: int = 0, max_negatives: int | None = DEFAULT_MAX_NEGATIVES,
                          pyramid_cache_mb: float = DEFAULT_CACHE_MB, pad_cells: int = 0, max_truncated: float = 0.15,
-                         whiten: bool = False, workers: int = 1, progress=None) -> DetectorBank:
+                         whiten: bool = False, align: bool = False, workers: int = 1, progress=None) -> DetectorBank:
     """Train a :class:`DetectorBank` on real training images and their car examples.
 
     ``images``/``examples`` as returned by :func:`load_training_frames` (grey images and
@@ -316,6 +323,10 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     windows inside the image; with ``pad_cells`` a truncated car is shown as detection sees it).
     ``whiten``: train the templates in whitened HOG (:mod:`wirescene.training.whitening`),
     with background statistics of the training images' pyramid levels at scales up to 1.
+    ``align``: latent placement of the positives (DPM's relabelling of root windows): before
+    every mining round's fit each positive takes, of its window moved by half a cell and a
+    pyramid level either way (:func:`~wirescene.training.detector.alignment_offsets`), the one
+    the current template scores highest; the first fit takes the unmoved windows.
     ``pyramid_cache_mb``: budget of the process's cache of grey images and HOG pyramids
     (:data:`~wirescene.training.scale.CACHE`, set here); the default holds the 72 shared
     frames' (nothing is computed twice), more frames are read and described again in
@@ -353,10 +364,11 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     say(f"{len(configs)} configurations; car examples per bin {per_bin.tolist()}")
 
     # ---- positives
-    pos, counts = positive_features(
+    cands, counts = positive_features(
         configs, examples, lambda e: images[e.image].gray.astype(np.float32) / 255.0, rng, min_height=min_height,
         max_pos=max_pos, min_pos=min_pos, max_jitter=max_jitter, max_occluded=0.35, max_truncated=max_truncated,
-        truncated_windows=pad_cells > 0)
+        truncated_windows=pad_cells > 0, offsets=alignment_offsets() if align else None)
+    pos = [c[:, 0] for c in cands] if align else cands  # the unmoved windows first
     for c, n in zip(configs, counts):
         c.n_examples = n
     say("positives per detector: " + " ".join(str(len(p)) for p in pos) + f" [{time.time() - t0:.0f}s]")
@@ -394,6 +406,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                 n_new += len(feats)
         for t, pool in enumerate(neg):
             pool.shrink(bank.weights[t], bank.biases[t])
+        if align:
+            pos = align_positives(cands, bank.weights)
         weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed, whiteners=whiteners)
         bank = DetectorBank(configs, weights, biases)
         say(f"mining round {rnd + 1}: {n_new} hard negatives [{time.time() - t0:.0f}s]")
@@ -408,6 +422,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     }
     if whiten:
         bank.meta["whiten"] = True
+    if align:
+        bank.meta["align"] = True
     if pad_cells:  # recorded where set: older banks and their detection stay as they were
         bank.meta.update(pad_cells=int(pad_cells), max_truncated=float(max_truncated))
     if any(n.offered > len(n) or len(n) == max_negatives for n in neg):
