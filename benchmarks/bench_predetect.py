@@ -30,7 +30,7 @@ Usage:
   python benchmarks/bench_predetect.py --root ROOT --from-raw DIR --models-dir DIR        # then score them
   python benchmarks/bench_predetect.py --root ROOT --bank src/wirescene/data/detector_bank.npz   # a fixed bank
 Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples,
---per-octave, --cut-paste; --train-fraction F [--subset-seed S] trains each fold bank on a share F
+--per-octave, --cut-paste, --pad-cells, --whiten, --align, --full-area, --partial-area; --train-fraction F [--subset-seed S] trains each fold bank on a share F
 of its training frames (a learning curve: held-out AP against the amount of real training data).
 """
 
