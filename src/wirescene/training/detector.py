@@ -164,9 +164,8 @@ def alignment_offsets(*, shift: float = 0.5, scale_steps: float = 1 / 6) -> np.n
     """``(27, 3)`` offsets ``(dx, dy, ds)`` of a positive window searched by latent placement:
     ``dx, dy`` in template cells (``-shift, 0, shift``), ``ds`` in octaves (``-scale_steps, 0,
     scale_steps``: one pyramid level at 6 per octave); the unmoved window first."""
-    grid = np.array([(dx, dy, ds) for dx in (0.0, -shift, shift) for dy in (0.0, -shift, shift)
+    return np.array([(dx, dy, ds) for dx in (0.0, -shift, shift) for dy in (0.0, -shift, shift)
                      for ds in (0.0, -scale_steps, scale_steps)])
-    return grid
 
 
 def moved_box(box, offset, th: int, tw: int) -> np.ndarray:

@@ -326,7 +326,9 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     ``align``: latent placement of the positives (DPM's relabelling of root windows): before
     every mining round's fit each positive takes, of its window moved by half a cell and a
     pyramid level either way (:func:`~wirescene.training.detector.alignment_offsets`), the one
-    the current template scores highest; the first fit takes the unmoved windows.
+    the current template scores highest; the first fit takes the unmoved windows. The 27
+    windows of every positive are kept (at most 600 per configuration: about 3 GB for 32
+    configurations at 1.5k floats each, whatever the number of frames).
     ``pyramid_cache_mb``: budget of the process's cache of grey images and HOG pyramids
     (:data:`~wirescene.training.scale.CACHE`, set here); the default holds the 72 shared
     frames' (nothing is computed twice), more frames are read and described again in
