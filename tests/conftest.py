@@ -9,6 +9,9 @@ import pytest
 
 DATA = Path(__file__).parent / "data"
 KITTI_ROOT = DATA / "kitti"
+# a detector bank trained in seconds on two frames (train_bank_on_frames options)
+TINY_BANK = dict(n_partial=0, mining_rounds=1, neg_per_image=10, min_pos=20, min_height=40.0, max_scale=1.0,
+                 per_octave=2)
 
 
 def assert_close(actual, expected, *, atol=1e-6, rtol=1e-6, msg=""):

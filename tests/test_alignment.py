@@ -2,10 +2,8 @@
 
 import numpy as np
 
-from conftest import KITTI_ROOT, assert_close
+from conftest import KITTI_ROOT, TINY_BANK, assert_close
 from wirescene.training.detector import align_positives, alignment_offsets, moved_box
-
-TINY = dict(n_partial=0, mining_rounds=1, neg_per_image=10, min_pos=20, min_height=40.0, max_scale=1.0, per_octave=2)
 
 
 def test_moved_box_shifts_by_cells_and_scales_about_the_centre():
@@ -34,8 +32,8 @@ def test_aligned_training_starts_from_the_plain_positives_and_moves_some():
     from wirescene.training.kitti_detector import load_training_frames, train_bank_on_frames
 
     images, examples = load_training_frames(KittiDataset(KITTI_ROOT), ["000010", "001545"])
-    bank = train_bank_on_frames(images, examples, **TINY, align=True)
-    plain = train_bank_on_frames(images, examples, **TINY)
+    bank = train_bank_on_frames(images, examples, **TINY_BANK, align=True)
+    plain = train_bank_on_frames(images, examples, **TINY_BANK)
     assert bank.meta["align"] and "align" not in plain.meta
     assert bank.meta["n_positives"] == plain.meta["n_positives"]
 

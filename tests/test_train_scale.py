@@ -4,11 +4,8 @@ bounded real part patches, and per-image passes in worker processes that train t
 import numpy as np
 import pytest
 
-from conftest import KITTI_ROOT
+from conftest import KITTI_ROOT, TINY_BANK
 from wirescene.training.scale import FrameCache, NegativePool, can_fork, map_images
-
-TINY_BANK = dict(n_partial=0, mining_rounds=1, neg_per_image=10, min_pos=20, min_height=40.0, max_scale=1.0,
-                 per_octave=2)
 
 
 def test_negative_pool_below_its_cap_is_the_plain_list_and_draws_nothing():
