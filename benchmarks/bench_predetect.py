@@ -30,7 +30,7 @@ Usage:
   python benchmarks/bench_predetect.py --root ROOT --from-raw DIR --models-dir DIR        # then score them
   python benchmarks/bench_predetect.py --root ROOT --bank src/wirescene/data/detector_bank.npz   # a fixed bank
 Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples,
---per-octave, --cut-paste, --pad-cells, --whiten, --align, --full-area, --partial-area; --train-fraction F [--subset-seed S] trains each fold bank on a share F
+--per-octave, --cut-paste, --pad-cells, --whiten, --align, --full-area, --partial-area, --synth-root [--synth-scenes N]; --train-fraction F [--subset-seed S] trains each fold bank on a share F
 of its training frames (a learning curve: held-out AP against the amount of real training data).
 """
 
@@ -251,6 +251,9 @@ def main():
     ap.add_argument("--cluster-ry", type=float, default=None)
     ap.add_argument("--align", action="store_true", help="--cv: latent placement of the positive windows "
                     "(train_bank_on_frames align)")
+    ap.add_argument("--synth-root", default=None, help="--cv: a `wirescene synth` root whose rendered cars join "
+                    "every fold bank's positives (negatives stay real)")
+    ap.add_argument("--synth-scenes", type=int, default=None, help="--synth-root: its first N scenes (default: all)")
     ap.add_argument("--full-area", type=float, default=48,
                     help="--cv: HOG cells of a full-car template (its resolution)")
     ap.add_argument("--partial-area", type=float, default=36,
@@ -322,6 +325,11 @@ def main():
         # a --fold run loads only the frames its banks train on (memory), and the others to score
         need = ids if not args.fold else [f for f in ids if any(fold_of(f) != k for k in train_folds)]
         images, examples = load_training_frames(ds, need, flips=not args.no_flips, progress=print)
+        synthetic = None
+        if args.synth_root:
+            sds = KittiDataset(args.synth_root)
+            synthetic = load_training_frames(sds, sds.frame_ids()[:args.synth_scenes], flips=not args.no_flips,
+                                             progress=print)
         for k in train_folds:
             kept = training_subset(sorted({im.frame for im in images if fold_of(im.frame) != k}),
                                    args.train_fraction, seed=(args.subset_seed, k))
@@ -334,6 +342,7 @@ def main():
                                         label_boxes=args.label_boxes, per_octave=args.per_octave,
                                         cut_paste=args.cut_paste, pad_cells=args.pad_cells or 0,
                                         max_truncated=args.max_truncated, whiten=args.whiten, align=args.align,
+                                        synthetic=synthetic,
                                         full_area=args.full_area, partial_area=args.partial_area, progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
             with_clustering(bank, args)  # the steps after the templates detect with it

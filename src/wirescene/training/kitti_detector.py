@@ -282,7 +282,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                          partial_area: float = 36, label_boxes: bool = False, per_octave: int = 6, box_weight: float = 2.0,
                          cluster_radius: float = 0.2, cut_paste: int = 0, max_negatives: int | None = DEFAULT_MAX_NEGATIVES,
                          pyramid_cache_mb: float = DEFAULT_CACHE_MB, pad_cells: int = 0, max_truncated: float = 0.15,
-                         whiten: bool = False, align: bool = False, workers: int = 1, progress=None) -> DetectorBank:
+                         whiten: bool = False, align: bool = False, synthetic=None, workers: int = 1,
+                         progress=None) -> DetectorBank:
     """Train a :class:`DetectorBank` on real training images and their car examples.
 
     ``images``/``examples`` as returned by :func:`load_training_frames` (grey images and
@@ -329,6 +330,9 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     the current template scores highest; the first fit takes the unmoved windows. The 27
     windows of every positive are kept (at most 600 per configuration: about 3 GB for 32
     configurations at 1.5k floats each, whatever the number of frames).
+    ``synthetic``: ``(images, examples)`` of rendered scenes (:func:`load_training_frames` of a
+    ``wirescene synth`` root), whose cars join the positives only: the negatives, random and
+    mined, and the full-box correction come from the real images.
     ``pyramid_cache_mb``: budget of the process's cache of grey images and HOG pyramids
     (:data:`~wirescene.training.scale.CACHE`, set here); the default holds the 72 shared
     frames' (nothing is computed twice), more frames are read and described again in
@@ -350,6 +354,14 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                                          mirror=mirrored_image)
         images, examples = list(images) + extra_images, list(examples) + extra
         say(f"cut and paste: {len(extra)} pasted cars in {len(extra_images)} composite images")
+    negative_images = list(images)
+    n_synthetic = 0
+    if synthetic is not None:
+        synth_images, synth_examples = synthetic
+        images = negative_images + list(synth_images)
+        examples = list(examples) + [replace(e, image=e.image + len(negative_images)) for e in synth_examples]
+        n_synthetic = len(synth_examples)
+        say(f"synthetic: {n_synthetic} car examples in {len(synth_images)} rendered images (positives only)")
     apply_full_box(examples, corr)
     if label_boxes:
         # the labelled box is the exact target where it shows the whole car (not truncated,
@@ -376,11 +388,11 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     say("positives per detector: " + " ".join(str(len(p)) for p in pos) + f" [{time.time() - t0:.0f}s]")
 
     # ---- random negatives
-    H = max(im.size[1] for im in images)
+    H = max(im.size[1] for im in negative_images)
     scales = pyramid_scales(*images[0].size, max_scale=max_scale, per_octave=per_octave)
     reservoir = np.random.default_rng([seed, 1])  # only drawn from once a pool is full
     neg = [NegativePool(max_negatives, reservoir) for _ in configs]
-    for im in images:
+    for im in negative_images:
         sample_random_negatives(neg, im.hog_pyramid(scales), configs, im.block, H=H, min_height=min_height,
                                 per_image=neg_per_image, rng=rng, pad_cells=pad_cells)
     say(f"random negatives: {sum(len(n) for n in neg)} [{time.time() - t0:.0f}s]")
@@ -400,7 +412,7 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
         mine = partial(hard_negatives, bank, scales=scales, min_height=min_height, max_height=3.0 * H,
                        per_image=hard_per_image, pad_cells=pad_cells)
         n_new = 0
-        for found in map_images(mine, images, workers=workers, progress=say, name=f"mining round {rnd + 1}"):
+        for found in map_images(mine, negative_images, workers=workers, progress=say, name=f"mining round {rnd + 1}"):
             for t, feats in found:
                 for x in feats:
                     neg[t].add_hard(x)
@@ -426,6 +438,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
         bank.meta["whiten"] = True
     if align:
         bank.meta["align"] = True
+    if n_synthetic:
+        bank.meta["synthetic_examples"] = int(n_synthetic)
     if pad_cells:  # recorded where set: older banks and their detection stay as they were
         bank.meta.update(pad_cells=int(pad_cells), max_truncated=float(max_truncated))
     if any(n.offered > len(n) or len(n) == max_negatives for n in neg):
