@@ -30,7 +30,7 @@ Usage:
   python benchmarks/bench_predetect.py --root ROOT --from-raw DIR --models-dir DIR        # then score them
   python benchmarks/bench_predetect.py --root ROOT --bank src/wirescene/data/detector_bank.npz   # a fixed bank
 Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples,
---per-octave, --cut-paste, --pad-cells, --whiten, --align, --full-area, --partial-area, --synth-root [--synth-scenes N]; --train-fraction F [--subset-seed S] trains each fold bank on a share F
+--per-octave, --cut-paste, --pad-cells, --whiten, --align, --full-area, --partial-area, --synth-root [--synth-scenes N], --support-weight W (also --from-raw; the recipe's 0.3 by default, 0 for the best vote alone); --train-fraction F [--subset-seed S] trains each fold bank on a share F
 of its training frames (a learning curve: held-out AP against the amount of real training data).
 """
 
@@ -56,6 +56,7 @@ from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
+    SUPPORT_WEIGHT,
     add_verifier,
     detect_training_image,
     detection_labels,
@@ -249,6 +250,9 @@ def main():
     ap.add_argument("--max-truncated", type=float, default=0.15,
                     help="--cv: the largest KITTI truncation of a full-car positive")
     ap.add_argument("--cluster-ry", type=float, default=None)
+    ap.add_argument("--support-weight", type=float, default=SUPPORT_WEIGHT,
+                    help="--cv / --from-raw: margin added per e-fold of a cluster's votes, as the recipe sets it on "
+                         "the finished bank (0: the best vote alone)")
     ap.add_argument("--align", action="store_true", help="--cv: latent placement of the positive windows "
                     "(train_bank_on_frames align)")
     ap.add_argument("--synth-root", default=None, help="--cv: a `wirescene synth` root whose rendered cars join "
@@ -316,6 +320,7 @@ def main():
         images, _ = load_training_frames(ds, ids, flips=False)
         for k in range(N_FOLDS):
             fold_banks[k] = with_clustering(DetectorBank.load(Path(args.from_raw) / f"fold{k}_raw.npz"), args)
+            fold_banks[k].meta["support_weight"] = args.support_weight  # as the recipe sets it on the finished bank
         for im in images:
             dets[im.frame] = detect_training_image(fold_banks[fold_of(im.frame)], im)
         out["cv_seconds"] = round(time.time() - t0, 1)
@@ -347,6 +352,7 @@ def main():
             train_images = [images[i] for i in tr]
             with_clustering(bank, args)  # the steps after the templates detect with it
             finish_bank(bank, train_images, ds, progress=lambda m: print("   ", m, flush=True))
+            bank.meta["support_weight"] = args.support_weight  # as the recipe sets it on the finished bank
             if args.fold:
                 bank.save(Path(args.models_dir) / f"fold{k}_raw.npz")
                 print(f"    saved {Path(args.models_dir) / f'fold{k}_raw.npz'}", flush=True)

@@ -13,10 +13,12 @@ from wirescene.core.wireframe import EDGES
 from wirescene.io.kitti import FrameLabels, Label, read_image
 from wirescene.predetect.ap import FrameGT, evaluate_detections, frame_gt, voc_average_precision
 from wirescene.predetect.bank import (
+    Activations,
     DetectorBank,
     cluster_activations,
     detect_cars,
     load_default_bank,
+    merge_activations,
     nms,
     score_pyramid,
 )
@@ -181,6 +183,21 @@ def _random_bank(seed=0):
                Configuration(5, (0, 1, 2), (5, 3), np.array([-0.2, -0.1, 1.5, 0.4]), np.array([0.4, 0.7]), 0.28, 7)]
     weights = [rng.normal(size=(*c.template, N_FEAT)).astype(np.float32) for c in configs]
     return DetectorBank(configs, weights, np.array([-1.0, 0.5], np.float32), 0.25, {"seed": seed})
+
+
+def test_support_weight_adds_the_log_of_a_clusters_votes():
+    full = _random_bank().configs[0]  # a full-car configuration of bin 2: its box is the car's
+    bank = DetectorBank([full] * 3, [np.zeros((*full.template, N_FEAT), np.float32)] * 3, np.zeros(3, np.float32))
+    boxes = np.array([[100, 100, 200, 150], [104, 102, 206, 152], [98, 99, 198, 149], [500, 100, 600, 150]], float)
+    act = Activations(det=np.array([0, 1, 2, 0]), boxes=boxes, scores=np.array([0.5, 0.9, 0.1, 0.3]),
+                      level=np.zeros(4, int), cell=np.zeros((4, 2), int))
+    kw = dict(threshold=None, cross_view_nms=None, per_detector=10)
+    plain = merge_activations(act, bank, (1242, 375), **kw)
+    bank.meta["support_weight"] = 0.1
+    weighted = merge_activations(act, bank, (1242, 375), **kw)
+    assert_close(plain.scores, [0.9, 0.3])  # best votes: the cluster of three, the single vote
+    assert_close(weighted.scores, [0.9 + 0.1 * np.log(3), 0.3])
+    assert_close(weighted.boxes, plain.boxes)
 
 
 def test_bank_npz_round_trip(tmp_path):

@@ -19,6 +19,7 @@ from wirescene.cli.main import main
 from wirescene.core.errors import InputError
 from wirescene.core.resources import ARTEFACTS, DATA_DIR, MANIFEST_FILE, resolve_models, shipped_path
 from wirescene.io.splits import read_split_file
+from wirescene.training.kitti_detector import SUPPORT_WEIGHT
 
 SPLITS = KITTI_ROOT / "ImageSets"
 LABELLED = ["000002", "000010", "001545"]
@@ -256,6 +257,7 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert parts.kind == "ghog_ms" and parts.position and parts.meta["real_frames"] == "000010,001545"
     bank = DetectorBank.load(out / "detector_bank.npz")
     assert bank.calibration is not None and bank.threshold == 0.5
+    assert bank.meta["support_weight"] == SUPPORT_WEIGHT  # the recipe's, set on the finished bank
     assert np.isfinite(load_occluded_score(out / "occlusion.json"))
     assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")
     assert "shipped" in r.output and "models written to" in r.output

@@ -21,6 +21,7 @@ from wirescene.cli.options import (
     workers_option,
 )
 from wirescene.core.atomic import write_text
+from wirescene.training.kitti_detector import SUPPORT_WEIGHT
 from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, single_thread
 
 
@@ -42,6 +43,9 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
                    "leave-one-fold-out training.")
 @click.option("--threshold", type=float, default=0.5, show_default=True,
               help="With --kitti-root and a calibration: default detection threshold (confidence).")
+@click.option("--support-weight", type=NON_NEGATIVE_FLOAT, default=SUPPORT_WEIGHT, show_default=True,
+              help="With --kitti-root: margin a cluster of detections gains per e-fold of its votes (0: its best vote "
+                   "alone).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random stream (synthetic: scenes; validation: seed+1).")
 @click.option("--scenes", "n_scenes", type=int, default=200, show_default=True, help="Synthetic training scenes.")
 @click.option("--partial", "n_partial", type=int, default=3, show_default=True,
@@ -60,7 +64,8 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
 @click.option("--pyramid-cache-mb", type=NON_NEGATIVE_FLOAT, default=DEFAULT_CACHE_MB, show_default=True,
               help="With --kitti-root: memory for cached grey images and HOG pyramids (beyond it they are recomputed).")
 @workers_option("of the per-image passes (mining, detections; --kitti-root only)")
-def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, seed, n_scenes, n_partial,
+def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, support_weight, seed,
+             n_scenes, n_partial,
              per_octave, cut_paste, mining_rounds, mining_images, n_val, C, report, max_negatives, pyramid_cache_mb,
              workers):
     """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
@@ -79,7 +84,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
                                            n_partial=n_partial, calibration_folds=not no_calibration,
-                                           calibration=given, threshold=threshold,
+                                           calibration=given, threshold=threshold, support_weight=support_weight,
                                            mining_rounds=3 if mining_rounds is None else mining_rounds,
                                            per_octave=per_octave, cut_paste=cut_paste, max_negatives=max_negatives,
                                            pyramid_cache_mb=pyramid_cache_mb, workers=workers_count(workers),

@@ -476,7 +476,8 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
                       center_column: float | None = None, gray: np.ndarray | None = None,
                       channels: np.ndarray | None = None) -> Detections:
     """Activations -> Detections: NMS per detector, full-box votes, clustering per
-    viewpoint, clip to image, box regression, box refinement from the grey image ``gray``
+    viewpoint (a cluster's score: its best vote, plus ``meta["support_weight"]`` times the log of
+    its number of votes where a bank sets it), clip to image, box regression, box refinement from the grey image ``gray``
     (None: none; :mod:`wirescene.predetect.refine`), the verifier's second look at each box
     (with ``gray`` and, where it reads them, ``channels``; :func:`verification_logits` times its
     calibrated gain), ground-plane consistency (``horizon``: the
@@ -493,8 +494,10 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
         fs.append(act.scores[keep])
         fbin.append(np.full(len(keep), bank.configs[t].bin))
     if fb:
-        boxes, scores, bins, _ = cluster_activations(np.concatenate(fb), np.concatenate(fs), np.concatenate(fbin),
-                                                     **(cluster_kw or {}))
+        boxes, scores, bins, support = cluster_activations(np.concatenate(fb), np.concatenate(fs),
+                                                           np.concatenate(fbin), **(cluster_kw or {}))
+        # a cluster many votes agree on: margin units per e-fold of its votes (0 in the shipped bank)
+        scores = scores + float(bank.meta.get("support_weight", 0.0)) * np.log(support)
     else:
         boxes, scores, bins = np.zeros((0, 4)), np.zeros(0), np.zeros(0, int)
     if len(boxes):

@@ -105,6 +105,10 @@ from wirescene.training.scale import (
     single_threaded,
 )
 
+#: Margin added per e-fold of a cluster's votes (:func:`wirescene.predetect.bank.merge_activations`), set on
+#: the finished bank: chosen on fold group {0, 1} among 0 / 0.05 / 0.15 / 0.3 / 0.6 (``benchmarks/RESULTS.md``).
+SUPPORT_WEIGHT = 0.3
+
 BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
 """Labelled objects no negative window may overlap (DontCare regions too)."""
 
@@ -934,7 +938,7 @@ def mirrored_boxes(boxes, width: int) -> np.ndarray:
 @single_threaded
 def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str = "training",
                               seed: int = 0, calibration_folds: bool | Mapping[str, int] = True, calibration=None,
-                              threshold: float = 0.5, workers: int = 1,
+                              threshold: float = 0.5, support_weight: float = SUPPORT_WEIGHT, workers: int = 1,
                               progress=None, **train_kw):
     """``wirescene train detector --kitti-root``: train on the labelled frames of a KITTI root.
 
@@ -948,6 +952,10 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     held-out fit printed by ``benchmarks/bench_predetect.py`` for the same recipe -- instead
     of the leave-one-fold-out run (saves four trainings).
     ``threshold``: default detection threshold of a calibrated bank (probability).
+    ``support_weight``: stored in the finished bank's meta (its detections, the held-out
+    calibration's included, score a cluster by its best vote plus this weight times the log of
+    its number of votes); the steps of :func:`finish_bank` detect without it, as the study
+    that chose it did.
     ``workers``: processes of the per-image passes (:func:`train_bank_on_frames`,
     :func:`finish_bank`, :func:`heldout_bank_calibration`); the bank is the same.
     Returns ``(bank, report)``.
@@ -972,12 +980,14 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
         folds = calibration_folds if isinstance(calibration_folds, Mapping) else _frame_folds(ds, ids)
         if folds is not None:
             report["calibration"] = heldout_bank_calibration(kitti_root, folds, split=split, seed=seed, progress=say,
-                                                             workers=workers, **train_kw)
+                                                             workers=workers, support_weight=support_weight,
+                                                             **train_kw)
             calib = np.array([report["calibration"][k] for k in "abc" if k in report["calibration"]])
     # loaded after the calibration, whose fold banks load their own frames
     images, examples = load_training_frames(ds, ids, progress=say)
     bank = train_bank_on_frames(images, examples, seed=seed, workers=workers, progress=say, **train_kw)
     bank = finish_bank(bank, images, ds, workers=workers, progress=say)
+    bank.meta["support_weight"] = float(support_weight)
     if calib is not None:
         if bank.verifier is None and len(calib) == 3:
             say("the bank has no verifier: the calibration's c goes unused")
