@@ -496,7 +496,7 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     if fb:
         boxes, scores, bins, support = cluster_activations(np.concatenate(fb), np.concatenate(fs),
                                                            np.concatenate(fbin), **(cluster_kw or {}))
-        # a cluster many votes agree on: margin units per e-fold of its votes (0 in the shipped bank)
+        # a cluster many votes agree on: margin units per e-fold of its votes (banks without the key: 0)
         scores = scores + float(bank.meta.get("support_weight", 0.0)) * np.log(support)
     else:
         boxes, scores, bins = np.zeros((0, 4)), np.zeros(0), np.zeros(0, int)

@@ -90,8 +90,9 @@ def step_options() -> dict[str, dict[str, object]]:
     from wirescene.training.occlusion import calibrate_occluded_score
     from wirescene.training.parts import train_part_detector
 
-    # workers change how fast, not what is trained: a run argument, not a recipe option
-    bank = _parameters(train_bank_on_frames, ("images", "examples", "progress", "workers"))
+    # workers change how fast, not what is trained: a run argument, not a recipe option; synthetic
+    # takes loaded frames, which no --set value can name (a study's option: benchmarks/bench_predetect.py)
+    bank = _parameters(train_bank_on_frames, ("images", "examples", "progress", "workers", "synthetic"))
     bank.update(_parameters(train_detector_bank_kitti, ("out_path", "kitti_root", "frames", "folds", "split", "progress",
                                                          "calibration_folds", "workers")))
     return {
