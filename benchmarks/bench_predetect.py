@@ -54,9 +54,8 @@ from wirescene.eval.kitti_metrics import N_SAMPLE_PTS, detection_ap_2d  # noqa: 
 from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
-from wirescene.predetect.bank import DetectorBank, detect_cars, load_default_bank  # noqa: E402
+from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_cars, load_default_bank  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
-    SUPPORT_WEIGHT,
     add_verifier,
     detect_training_image,
     detection_labels,

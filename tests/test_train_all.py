@@ -19,7 +19,7 @@ from wirescene.cli.main import main
 from wirescene.core.errors import InputError
 from wirescene.core.resources import ARTEFACTS, DATA_DIR, MANIFEST_FILE, resolve_models, shipped_path
 from wirescene.io.splits import read_split_file
-from wirescene.training.kitti_detector import SUPPORT_WEIGHT
+from wirescene.predetect.bank import SUPPORT_WEIGHT
 
 SPLITS = KITTI_ROOT / "ImageSets"
 LABELLED = ["000002", "000010", "001545"]

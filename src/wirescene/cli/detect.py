@@ -21,7 +21,7 @@ from wirescene.cli.options import (
     workers_option,
 )
 from wirescene.core.atomic import write_text
-from wirescene.training.kitti_detector import SUPPORT_WEIGHT
+from wirescene.predetect.bank import SUPPORT_WEIGHT
 from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, single_thread
 
 

@@ -58,6 +58,9 @@ reads the colour channels of :mod:`wirescene.predetect.channels`; older banks: 0
 ARTEFACT_KIND = "detector-bank"
 DEFAULT_BANK_PATH = DATA_DIR / "detector_bank.npz"
 VERIFIER_ARRAYS = ("mean", "scale", "weights", "gain")
+#: ``meta["support_weight"]`` of newly trained banks: margin a cluster gains per e-fold of its votes
+#: (:func:`merge_activations`), chosen on fold group {0, 1} among 0 / 0.05 / 0.15 / 0.3 / 0.6 (``benchmarks/RESULTS.md``).
+SUPPORT_WEIGHT = 0.3
 
 
 @dataclass

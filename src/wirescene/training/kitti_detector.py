@@ -73,7 +73,7 @@ import numpy as np
 
 from wirescene.core.errors import InputError
 from wirescene.core.viewpoints import N_BINS, viewpoint_bin
-from wirescene.predetect.bank import DetectorBank, detect_pyramid, pad_pyramid, score_pyramid
+from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_pyramid, pad_pyramid, score_pyramid
 from wirescene.predetect.configurations import (
     CarExample,
     apply_full_box,
@@ -104,10 +104,6 @@ from wirescene.training.scale import (
     map_images,
     single_threaded,
 )
-
-#: Margin added per e-fold of a cluster's votes (:func:`wirescene.predetect.bank.merge_activations`), set on
-#: the finished bank: chosen on fold group {0, 1} among 0 / 0.05 / 0.15 / 0.3 / 0.6 (``benchmarks/RESULTS.md``).
-SUPPORT_WEIGHT = 0.3
 
 BLOCKING_TYPES = ("Car", "Van", "Truck", "Tram", "Misc")
 """Labelled objects no negative window may overlap (DontCare regions too)."""
