@@ -31,7 +31,8 @@ Usage:
   python benchmarks/bench_predetect.py --root ROOT --bank src/wirescene/data/detector_bank.npz   # a fixed bank
 Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples,
 --per-octave, --cut-paste, --pad-cells, --whiten, --align, --full-area, --partial-area, --synth-root [--synth-scenes N], --support-weight W (also --from-raw; the recipe's 0.3 by default, 0 for the best vote alone); --train-fraction F [--subset-seed S] trains each fold bank on a share F
-of its training frames (a learning curve: held-out AP against the amount of real training data).
+of its training drives, each with all its frames (a learning curve: held-out AP against the amount of real training
+data; --subset-unit frame: a share of the frames).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ import numpy as np  # noqa: E402
 
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.eval.kitti_metrics import N_SAMPLE_PTS, detection_ap_2d  # noqa: E402
-from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of  # noqa: E402
+from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of, frame_drives  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_cars, load_default_bank  # noqa: E402
@@ -172,14 +173,18 @@ def fmt_operating_point(o) -> str:
             f"> 135 deg {o['viewpoint_over_135'] if o['viewpoint_over_135'] is None else round(o['viewpoint_over_135'], 2)}")
 
 
-def training_subset(frames: list, fraction: float, *, seed) -> set:
+def training_subset(frames: list, fraction: float, *, seed, groups: dict | None = None) -> set:
     """A share ``fraction`` of ``frames`` (at least one), drawn without replacement with
-    ``seed``; all of them at 1."""
+    ``seed``; all of them at 1. With ``groups`` (``{frame: group}``, e.g. its drive) the
+    share is of the groups, and a drawn group brings all its frames (frames of one drive
+    share cars and streets, so a share of the frames would overstate a share of the data)."""
     if fraction >= 1:
         return set(frames)
-    n = max(1, int(round(fraction * len(frames))))
+    units = sorted({groups[f] for f in frames}) if groups is not None else list(frames)
+    n = max(1, int(round(fraction * len(units))))
     rng = np.random.default_rng(list(np.atleast_1d(seed)))
-    return set(rng.choice(np.array(frames, dtype=object), size=n, replace=False).tolist())
+    drawn = set(rng.choice(np.array(units, dtype=object), size=n, replace=False).tolist())
+    return {f for f in frames if (groups[f] if groups is not None else f) in drawn}
 
 
 def with_clustering(bank: DetectorBank, args) -> DetectorBank:
@@ -271,8 +276,10 @@ def main():
                     help="score without the banks' ground prior (no camera passed; raw margins pooled)")
     ap.add_argument("--json", default=None)
     ap.add_argument("--train-fraction", type=float, default=1.0,
-                    help="--cv: train each fold bank on this share of its training frames (a learning curve; "
-                         "the frames are drawn per fold with --subset-seed, flips follow their frames)")
+                    help="--cv: train each fold bank on this share of its training drives (a learning curve; "
+                         "the drives are drawn per fold with --subset-seed, each with all its frames, flips "
+                         "follow their frames; --subset-unit frame: a share of the frames)")
+    ap.add_argument("--subset-unit", choices=("drive", "frame"), default="drive")
     ap.add_argument("--subset-seed", type=int, default=0)
     ap.add_argument("--fold", type=int, action="append", default=None,
                     help="--cv: train only this fold's bank (repeatable) and save it uncalibrated as "
@@ -336,7 +343,8 @@ def main():
                                              progress=print)
         for k in train_folds:
             kept = training_subset(sorted({im.frame for im in images if fold_of(im.frame) != k}),
-                                   args.train_fraction, seed=(args.subset_seed, k))
+                                   args.train_fraction, seed=(args.subset_seed, k),
+                                   groups=frame_drives() if args.subset_unit == "drive" else None)
             tr = [i for i, im in enumerate(images) if im.frame in kept]
             remap = {old: new for new, old in enumerate(tr)}
             ex = [replace(e, image=remap[e.image]) for e in examples if e.image in remap]

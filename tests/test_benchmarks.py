@@ -59,6 +59,11 @@ def test_learning_curve_subsets_are_reproducible_shares_of_the_training_frames(m
     assert training_subset(frames, 1 / 3, seed=(0, 3)) != third  # each fold draws its own
     assert training_subset(frames, 1.0, seed=(0, 2)) == set(frames)
     assert len(training_subset(frames, 0.01, seed=(0, 2))) == 1
+    # By drive: a share of the drives, each drawn with all its frames.
+    drives = {f: f"drive{int(f) % 6}" for f in frames}
+    two = training_subset(frames, 1 / 3, seed=(0, 2), groups=drives)
+    assert len({drives[f] for f in two}) == 2 and len(two) == 8
+    assert two == {f for f in frames if drives[f] in {drives[g] for g in two}}
 
 
 def test_operating_point_says_why_cars_are_missed(monkeypatch):
