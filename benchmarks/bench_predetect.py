@@ -279,7 +279,8 @@ def main():
                     help="--cv: train each fold bank on this share of its training drives (a learning curve; "
                          "the drives are drawn per fold with --subset-seed, each with all its frames, flips "
                          "follow their frames; --subset-unit frame: a share of the frames)")
-    ap.add_argument("--subset-unit", choices=("drive", "frame"), default="drive")
+    ap.add_argument("--subset-unit", choices=("drive", "frame"), default="drive",
+                    help="--train-fraction: draw a share of the drives (default) or of the frames")
     ap.add_argument("--subset-seed", type=int, default=0)
     ap.add_argument("--fold", type=int, action="append", default=None,
                     help="--cv: train only this fold's bank (repeatable) and save it uncalibrated as "
@@ -375,6 +376,7 @@ def main():
             return
         out["cv_seconds"] = round(time.time() - t0, 1)
         out["train_fraction"] = args.train_fraction
+        out["train_subset"] = {"unit": args.subset_unit, "seed": args.subset_seed}
     if args.cv or args.from_raw:
         # Platt calibration of each fold bank from the OTHER folds' held-out detections, with
         # their ground-prior log ratios as offsets (the ground term's weight rests on it, so
