@@ -272,3 +272,30 @@ def test_plane_height_bound_moves_cars_along_their_rays(monkeypatch):
     assert_close(np.cross(moved.location - centre, ray), np.zeros((2, 3)), atol=1e-9)
     assert_close(moved.dims, fitted.dims)
     assert_close(moved.rotation_y, fitted.rotation_y)
+
+
+def test_missed_cars_are_the_labels_no_detection_reaches_and_the_verifier_sees_their_boxes(monkeypatch):
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.bank import load_default_bank
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_missed_cars import frame_logits
+
+    ds = KittiDataset(KITTI_ROOT)
+    cars = [o for o in ds.labels("000010").objects if o.type == "Car"]
+    bank = load_default_bank()
+    gt = np.array([o.box for o in cars], float)
+    # one detection on the first car, one on no car, none near the others
+    boxes = np.vstack([gt[0] + [2, 1, -2, 0], [5, 5, 60, 40]])
+    on, off, missed = frame_logits(bank, ds.image("000010"), boxes, np.array([0.9, 0.8]), np.zeros(2), cars,
+                                   threshold=0.3)
+    assert (len(on), len(off), missed.shape) == (1, 1, (len(cars) - 1, 3))
+    assert_close(missed[:, 2], gt[1:, 3] - gt[1:, 1])
+    assert np.all(missed[:, 1] >= missed[:, 0])  # the best of the 8 bins is at least the label's
+    # a verifier that reads the pixels: a labelled car scores above a patch of sky
+    assert np.median(missed[:, 1]) > off[0]
+    # below the threshold nothing is kept, and the missed cars stay the same
+    on, off, again = frame_logits(bank, ds.image("000010"), boxes, np.array([0.2, 0.1]), np.zeros(2), cars,
+                                  threshold=0.3)
+    assert (len(on), len(off)) == (0, 0)
+    assert_close(again, missed)
