@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from wirescene.core.boxes import iou_2d  # noqa: E402
-from wirescene.core.viewpoints import viewpoint_bin  # noqa: E402
+from wirescene.core.viewpoints import N_BINS, viewpoint_bin  # noqa: E402
 from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, verification_logits  # noqa: E402
@@ -50,10 +50,10 @@ def frame_logits(bank: DetectorBank, image, boxes, scores, alpha, cars, *, thres
     if not len(m):
         return kept[on], kept[~on], np.zeros((0, 3))
     mb = gt[m]
-    true_bin = verification_logits(bank, gray, mb, viewpoint_bin(np.array([cars[i].alpha for i in m])),
-                                   channels=channels)
-    any_bin = np.max([verification_logits(bank, gray, mb, np.full(len(m), b), channels=channels) for b in range(8)], 0)
-    return kept[on], kept[~on], np.column_stack([true_bin, any_bin, mb[:, 3] - mb[:, 1]])
+    per_bin = np.column_stack([verification_logits(bank, gray, mb, np.full(len(m), b), channels=channels)
+                               for b in range(N_BINS)])  # (M, 8)
+    true_bin = per_bin[np.arange(len(m)), viewpoint_bin(np.array([cars[i].alpha for i in m]))]
+    return kept[on], kept[~on], np.column_stack([true_bin, per_bin.max(1), mb[:, 3] - mb[:, 1]])
 
 
 def main():

@@ -359,8 +359,8 @@ def main():
                                         full_area=args.full_area, partial_area=args.partial_area, progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
             with_clustering(bank, args)  # the steps after the templates detect with it
-            finish_bank(bank, train_images, ds, progress=lambda m: print("   ", m, flush=True))
-            bank.meta["support_weight"] = args.support_weight  # as the recipe sets it on the finished bank
+            finish_bank(bank, train_images, ds, support_weight=args.support_weight,
+                        progress=lambda m: print("   ", m, flush=True))
             if args.fold:
                 bank.save(Path(args.models_dir) / f"fold{k}_raw.npz")
                 print(f"    saved {Path(args.models_dir) / f'fold{k}_raw.npz'}", flush=True)

@@ -818,12 +818,16 @@ def fit_bank_viewpoint_prior(images, dataset) -> dict:
     return fit_viewpoint_prior(np.concatenate(lateral), np.concatenate(bins))
 
 
-def finish_bank(bank: DetectorBank, images, dataset, *, workers: int = 1, progress=None) -> DetectorBank:
+def finish_bank(bank: DetectorBank, images, dataset, *, support_weight: float | None = None, workers: int = 1,
+                progress=None) -> DetectorBank:
     """The steps after the SVMs, on the bank's own training images: the box regression
     (:func:`fit_box_regression`), the box refinement (:func:`fit_box_refinement`), the
-    ground prior (:func:`fit_bank_ground_prior`) of the refined boxes, and the viewpoint
-    prior of the labelled cars (:func:`fit_bank_viewpoint_prior`). ``workers``: processes
-    of their detection passes (0 or 1 serial; the bank is the same)."""
+    ground prior (:func:`fit_bank_ground_prior`) of the refined boxes, the viewpoint
+    prior of the labelled cars (:func:`fit_bank_viewpoint_prior`) and the verifier
+    (:func:`add_verifier`); they detect without a vote count, and ``support_weight`` (None:
+    the bank's meta left as it is) is stored last, for the bank's own detections
+    (:func:`~wirescene.predetect.bank.merge_activations`). ``workers``: processes of their
+    detection passes (0 or 1 serial; the bank is the same)."""
     say = progress or (lambda msg: None)
     passes = dict(workers=workers, progress=say)
     bank.meta["box_regression"] = fit_box_regression(bank, images, training_gt_boxes(dataset, images), **passes)
@@ -853,6 +857,8 @@ def finish_bank(bank: DetectorBank, images, dataset, *, workers: int = 1, progre
     else:
         say(f"viewpoint prior: {vp['n']} cars, bandwidth {vp['bandwidth']:.2f} camera heights")
     add_verifier(bank, images, dataset, **passes)
+    if support_weight is not None:
+        bank.meta["support_weight"] = float(support_weight)
     return bank
 
 
@@ -948,10 +954,10 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     held-out fit printed by ``benchmarks/bench_predetect.py`` for the same recipe -- instead
     of the leave-one-fold-out run (saves four trainings).
     ``threshold``: default detection threshold of a calibrated bank (probability).
-    ``support_weight``: stored in the finished bank's meta (its detections, the held-out
-    calibration's included, score a cluster by its best vote plus this weight times the log of
-    its number of votes); the steps of :func:`finish_bank` detect without it, as the study
-    that chose it did.
+    ``support_weight``: stored in the finished bank's meta by :func:`finish_bank` (its
+    detections, the held-out calibration's included, score a cluster by its best vote plus
+    this weight times the log of its number of votes); the steps before detect without it,
+    as the study that chose it did.
     ``workers``: processes of the per-image passes (:func:`train_bank_on_frames`,
     :func:`finish_bank`, :func:`heldout_bank_calibration`); the bank is the same.
     Returns ``(bank, report)``.
@@ -982,8 +988,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     # loaded after the calibration, whose fold banks load their own frames
     images, examples = load_training_frames(ds, ids, progress=say)
     bank = train_bank_on_frames(images, examples, seed=seed, workers=workers, progress=say, **train_kw)
-    bank = finish_bank(bank, images, ds, workers=workers, progress=say)
-    bank.meta["support_weight"] = float(support_weight)
+    bank = finish_bank(bank, images, ds, support_weight=support_weight, workers=workers, progress=say)
     if calib is not None:
         if bank.verifier is None and len(calib) == 3:
             say("the bank has no verifier: the calibration's c goes unused")
