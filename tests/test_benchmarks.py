@@ -299,3 +299,57 @@ def test_missed_cars_are_the_labels_no_detection_reaches_and_the_verifier_sees_t
                                   threshold=0.3)
     assert (len(on), len(off)) == (0, 0)
     assert_close(again, missed)
+
+
+def test_acf_scores_windows_from_the_channel_map_as_the_trees_score_their_features(monkeypatch):
+    from wirescene.io.kitti import KittiDataset
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import bench_acf as acf
+
+    ds = KittiDataset(KITTI_ROOT)
+    pos = acf.positives(ds, ["000010"])
+    assert sum(len(p) for p in pos) == 2 * sum(o.type == "Car" and o.box[3] - o.box[1] >= 0.9 * acf.MIN_HEIGHT
+                                               for o in ds.labels("000010").objects)  # each car and its mirror
+    aspect = acf.ASPECTS[0]
+    pyr = acf.pyramid(ds.image("000010"))
+    s, ch = pyr[4]
+    assert ch.shape[0] == acf.N_CH and np.isfinite(ch).all()
+    yy, xx, boxes = acf.window_positions(s, ch.shape[1:], aspect, acf.horizon_row(ds.camera("000010")))
+    ratio = (boxes[:, 3] - acf.horizon_row(ds.camera("000010"))) / (boxes[:, 3] - boxes[:, 1])
+    assert len(yy) and ratio.min() >= acf.RATIO_BAND[0] - 1e-9 and ratio.max() <= acf.RATIO_BAND[1] + 1e-9
+    X = acf.gather(ch, yy, xx, aspect)
+    rng = np.random.default_rng(0)
+    labels_ = rng.random(len(X)) < 0.2
+    clf, trees = acf.fit(X[labels_], X[~labels_][:400], aspect, n_trees=12)
+    assert_close(acf.score_windows(trees, ch, yy, xx, chunk=97), clf.decision_function(X), atol=1e-9, rtol=0)
+
+
+def test_acf_found_at_precision_counts_each_car_once(monkeypatch):
+    from wirescene.core.labels import Label
+    from wirescene.core.types import Detections
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_acf import found_at_precision
+
+    cars = [Label("Car", 0.0, 0, 0.0, [0, 0, 10, 10], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0),
+            Label("Car", 0.0, 0, 0.0, [50, 0, 60, 10], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)]
+    # two detections of the first car, one off every car, then the second car
+    d = Detections(np.array([[0, 0, 10, 10], [1, 0, 10, 10], [20, 0, 30, 10], [50, 0, 60, 10.0]]),
+                   np.array([0.9, 0.8, 0.7, 0.6]), np.zeros(4))
+    (r1, k1, t1), (r2, k2, t2) = found_at_precision([d], [cars], (1.0, 0.7))
+    assert (r1, k1, t1) == (0.5, 1, 0.9)  # the second detection on the first car finds no new one
+    assert (r2, k2, t2) == (1.0, 4, 0.6)  # 3 of 4 on a car
+
+
+def test_acf_fusion_features_read_the_other_source_where_boxes_overlap(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_acf import fusion_features
+
+    bank = (np.array([[0, 0, 10, 10], [100, 0, 110, 10.0]]), np.array([0.5, 0.9]), np.zeros(2))
+    acf = (np.array([[1, 0, 10, 10], [200, 0, 240, 20.0]]), np.array([2.0, -1.0]))
+    xb, xa = fusion_features(bank, acf)
+    assert_close(xb, np.array([[0.0, 2.0, 1.0], [np.log(9.0), -10.0, 0.0]]))  # bank logit, ACF score, overlap
+    assert_close(xa[:, [0, 3, 4]], np.array([[2.0, 0.0, 1.0], [-1.0, -10.0, 0.0]]))
+    assert_close(xa[:, 1], np.log([10.0, 20.0]))
+    assert_close(xa[:, 2], xa[:, 0] * xa[:, 1])
