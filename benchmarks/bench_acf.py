@@ -1,9 +1,9 @@
 """A second detector family as a source of candidates: aggregated channel features.
 
-Question (issue 27): the detector bank's candidates reach about 70% of the real cars at any
-threshold, and its verifier scores two thirds of the missed cars' label boxes like background
-(``bench_missed_cars.py``). Does a detector of another family, with its own appearance model,
-reach the cars the bank misses?
+Question (issue 27): the detector bank's held-out detections reach 80% of the real cars at any
+score (70% above 0.05), and its verifier scores two thirds of the missed cars' label boxes like
+background (``bench_missed_cars.py``). Does a detector of another family, with its own appearance
+model, find the cars the bank misses at a precision the fit can use?
 
 The detector is aggregated channel features (Dollar, Appel, Belongie and Perona, "Fast feature
 pyramids for object detection", PAMI 2014) in its plain form: ten channels (CIE L*u*v*, gradient
@@ -19,7 +19,9 @@ size down.
 Protocol: 4 folds by drive (:mod:`wirescene.io.folds`); each fold's model is trained on the other
 folds' frames and detects on its own. The held-out detections are scored with the bank's
 (``bench_predetect.py --fold-models DIR --save-dets D.npz``) by the devkit's 2D AP and by the cars
-each source reaches (a detection at IoU >= 0.5 at any score), alone and together.
+each source reaches (a detection at IoU >= 0.5 at any score), alone and together, and by the cars
+found at a given precision; the two sources are fused by a logistic model per source fitted on one
+fold group and read on the other (:func:`fused_detections`).
 
     python benchmarks/bench_acf.py --root ../shared/data/kitti --out DIR --fold 0 --fold 2   # and --fold 1 --fold 3
     python benchmarks/bench_acf.py --root ../shared/data/kitti --out DIR --bank-dets D.npz   # score
@@ -151,7 +153,9 @@ def aspect_model(box) -> int:
 def compile_trees(clf, aspect: float) -> dict:
     """The boosted trees of ``clf`` as arrays ``(T, K)`` over each tree's ``K`` nodes, features
     as (channel, row, column) of the window, so that windows are scored straight from a
-    channel map (:func:`score_windows`) without copying their features out."""
+    channel map (:func:`score_windows`) without copying their features out. Reads scikit-learn's
+    private tree arrays (``_predictors``, ``_baseline_prediction``); the tests check the scores
+    against ``decision_function``, so a change there fails them."""
     trees = [p[0].nodes for p in clf._predictors]
     K = max(len(t) for t in trees)
     th, tw = model_cells(aspect)
@@ -290,6 +294,8 @@ def positives(ds, frames):
 
 
 def fit(Xp, Xn, aspect: float, *, seed: int = 0, n_trees: int = N_TREES):
+    """Boosted trees of depth 2 on cars ``Xp`` against background ``Xn`` (classes weighted
+    equally), and the trees compiled for the windows of the model of ``aspect``."""
     from sklearn.ensemble import HistGradientBoostingClassifier
 
     X = np.concatenate([Xp, Xn])
@@ -303,6 +309,7 @@ def fit(Xp, Xn, aspect: float, *, seed: int = 0, n_trees: int = N_TREES):
 
 
 def train(ds, frames, *, seed: int = 0, rounds: int = 2, log=print) -> ACF:
+    """The three aspect models on ``frames``: random background, then ``rounds`` of mined hard background."""
     rng = np.random.default_rng(seed)
     t = time.time()
     Xp = positives(ds, frames)
