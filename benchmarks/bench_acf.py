@@ -483,7 +483,11 @@ def main():
             for g in FOLD_GROUPS:
                 sel = [i for i, f in enumerate(frames) if fold_of(f) in g]
                 m = metrics([dd[i] for i in sel], [labels[i] for i in sel])
-                print(f"  folds {g}: moderate 2D AP {m['2d']['moderate']:.1f} ({m['n_gt']['moderate']} cars)")
+                n_cars = sum(o.type == "Car" for i in sel for o in labels[i].objects)
+                found = found_at_precision([dd[i] for i in sel], [labels[i] for i in sel], PRECISIONS)
+                print(f"  folds {g}: moderate 2D AP {m['2d']['moderate']:.1f} ({m['n_gt']['moderate']} cars); cars found "
+                      f"at precision {' / '.join(f'{p:.2f}' for p in PRECISIONS)}: "
+                      f"{' / '.join(str(round(r * n_cars)) for r, _, _ in found)} of {n_cars}")
             print("  most cars found at precision " + "; ".join(
                 f">= {p:.2f}: {r:.1%} ({k} detections)"
                 for p, (r, k, _) in zip(PRECISIONS, found_at_precision(dd, labels, PRECISIONS))))
