@@ -51,6 +51,7 @@ from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.bank import nms  # noqa: E402
 from wirescene.predetect.geometry import horizon_row  # noqa: E402
 from wirescene.predetect.hog import resize  # noqa: E402
+from wirescene.training.kitti_detector import kitti_gt_boxes  # noqa: E402
 
 SHRINK = 4  # pixels a block
 N_ORIENT = 6
@@ -178,7 +179,7 @@ def compile_trees(clf, aspect: float) -> dict:
 
 def score_windows(trees: dict, ch: np.ndarray, yy, xx, *, chunk: int = 8192) -> np.ndarray:
     """``(N,)`` boosted-tree scores of the windows at block rows ``yy``, columns ``xx`` of ``ch``."""
-    C, Hc, Wc = ch.shape
+    _, Hc, Wc = ch.shape
     flat = ch.reshape(-1)
     off = trees["c"] * (Hc * Wc) + trees["dy"] * Wc + trees["dx"]  # (T, K)
     T = off.shape[0]
@@ -201,9 +202,9 @@ class ACF:
     def __init__(self, models):
         self.models = models
 
-    def detect(self, image, camera, *, top_k: int = TOP_K, pyr=None):
+    def detect(self, image, camera, *, top_k: int = TOP_K):
         horizon = horizon_row(camera)
-        pyr = pyramid(image) if pyr is None else pyr
+        pyr = pyramid(image)
         boxes, scores = [], []
         for aspect, trees in zip(ASPECTS, self.models):
             for s, ch in pyr:
@@ -266,11 +267,13 @@ def training_windows(ds, frames, rng, *, models=None, per_frame: int = 40, hard:
     return [np.array(x, np.float32).reshape(-1, N_CH * np.prod(model_cells(a))) for x, a in zip(X, ASPECTS)]
 
 
-def positives(ds, frames):
+def positives(ds, frames, *, cache=None):
     """Features of the labelled cars and their mirror images: the window of the model whose
     aspect is nearest the box's, centred on the box, at the level of a pyramid of 8 scales an
     octave where the car is nearest ``CAR_CELLS`` blocks tall (so each positive is computed
-    as the windows searched at detection time are)."""
+    as the windows searched at detection time are). ``cache`` receives every other level: the
+    detection pyramid of 4 scales an octave, for :func:`training_windows`."""
+    cache = {} if cache is None else cache
     X = [[] for _ in ASPECTS]
     for f in frames:
         img = ds.image(f)
@@ -280,6 +283,7 @@ def positives(ds, frames):
             if not cars:
                 break
             pyr = pyramid(img[:, ::-1] if flip else img, per_octave=2 * PER_OCTAVE)
+            cache[f, flip] = pyr[::2]  # 2 ** (-2k / 8) is 2 ** (-k / 4) exactly
             scales = np.array([s for s, _ in pyr])
             for box in cars:
                 box = np.array([W - box[2], box[1], W - box[0], box[3]]) if flip else np.asarray(box, float)
@@ -293,9 +297,9 @@ def positives(ds, frames):
     return [np.array(x, np.float32) for x in X]
 
 
-def fit(Xp, Xn, aspect: float, *, seed: int = 0, n_trees: int = N_TREES):
+def fit(Xp, Xn, aspect: float, *, seed: int = 0, n_trees: int = N_TREES) -> dict:
     """Boosted trees of depth 2 on cars ``Xp`` against background ``Xn`` (classes weighted
-    equally), and the trees compiled for the windows of the model of ``aspect``."""
+    equally), compiled for the windows of the model of ``aspect``."""
     from sklearn.ensemble import HistGradientBoostingClassifier
 
     X = np.concatenate([Xp, Xn])
@@ -305,32 +309,32 @@ def fit(Xp, Xn, aspect: float, *, seed: int = 0, n_trees: int = N_TREES):
                                          l2_regularization=1.0, early_stopping=False, random_state=seed,
                                          max_features=0.25)
     clf.fit(X, y, sample_weight=w)
-    return clf, compile_trees(clf, aspect)
+    return compile_trees(clf, aspect)
 
 
 def train(ds, frames, *, seed: int = 0, rounds: int = 2, log=print) -> ACF:
     """The three aspect models on ``frames``: random background, then ``rounds`` of mined hard background."""
     rng = np.random.default_rng(seed)
     t = time.time()
-    Xp = positives(ds, frames)
     cache = {}
+    Xp = positives(ds, frames, cache=cache)
     Xn = training_windows(ds, frames, rng, per_frame=120, cache=cache)
     log(f"  positives {[len(x) for x in Xp]}, random background {[len(x) for x in Xn]} ({time.time() - t:.0f} s)")
-    models = [fit(p, n, a, seed=seed)[1] for p, n, a in zip(Xp, Xn, ASPECTS)]
+    models = [fit(p, n, a, seed=seed) for p, n, a in zip(Xp, Xn, ASPECTS)]
     for r in range(rounds):
         t = time.time()
         Xh = training_windows(ds, frames, rng, models=models, per_frame=25, hard=True, cache=cache)
         Xn = [np.concatenate([n, h]) for n, h in zip(Xn, Xh)]
-        models = [fit(p, n, a, seed=seed)[1] for p, n, a in zip(Xp, Xn, ASPECTS)]
+        models = [fit(p, n, a, seed=seed) for p, n, a in zip(Xp, Xn, ASPECTS)]
         log(f"  round {r + 1}: background {[len(x) for x in Xn]} ({time.time() - t:.0f} s)")
     return ACF(models)
 
 
-def reach(dets: dict, ds, frames, *, iou: float = 0.5) -> np.ndarray:
+def reach(dets: dict, frames, labels) -> np.ndarray:
     """``(n_cars,)`` best IoU of any detection with each ``Car`` label, frames in order."""
     out = []
-    for f in frames:
-        gt = np.array([o.box for o in ds.labels(f).objects if o.type == "Car"], float).reshape(-1, 4)
+    for f, lab in zip(frames, labels):
+        gt = kitti_gt_boxes(lab)
         b = dets[f][0]
         out.append(iou_2d(b[:, None], gt[None]).max(0) if len(b) and len(gt) else np.zeros(len(gt)))
     return np.concatenate(out)
@@ -363,7 +367,7 @@ def fused_detections(frames, bank, acf, labels, weights_from, *, bank_first: boo
     from sklearn.linear_model import LogisticRegression
 
     def car(f, boxes):
-        gt = np.array([o.box for o in labels[f].objects if o.type == "Car"], float).reshape(-1, 4)
+        gt = kitti_gt_boxes(labels[f])
         return iou_2d(boxes[:, None], gt[None]).max(1) >= iou if len(gt) and len(boxes) else np.zeros(len(boxes), bool)
 
     x = {f: fusion_features(bank[f], acf[f], iou=iou) for f in frames}
@@ -390,7 +394,7 @@ def found_at_precision(dets, labels, precisions, *, iou: float = 0.5) -> list[tu
     detections (and the threshold) that find as many."""
     scores, on, car_id, n_cars = [], [], [], 0
     for d, lab in zip(dets, labels):
-        gt = np.array([o.box for o in getattr(lab, "objects", lab) if o.type == "Car"], float).reshape(-1, 4)
+        gt = kitti_gt_boxes(lab)
         b = np.asarray(d.boxes, float).reshape(-1, 4)
         ov = iou_2d(b[:, None], gt[None]) if len(gt) and len(b) else np.zeros((len(b), len(gt)))
         scores.append(np.asarray(d.scores, float))
@@ -454,12 +458,12 @@ def main():
     # the logistic of each fold model's boosted score (the pooled AP ranks the four models' scores together)
     dets = [Detections(acf[f][0], 1 / (1 + np.exp(-acf[f][1])), np.full(len(acf[f][1]), np.nan)) for f in frames]
     print(fmt("ACF (held out)", metrics(dets, labels)))
-    r_acf = reach(acf, ds, frames)
+    r_acf = reach(acf, frames, labels)
     print(f"ACF reaches {np.mean(r_acf >= 0.5):.1%} of {len(r_acf)} cars at IoU 0.5, {np.mean(r_acf >= 0.7):.1%} at 0.7")
     if args.bank_dets:
         saved = np.load(args.bank_dets)
         bank = {f: (saved[f"{f}__boxes"], saved[f"{f}__scores"]) for f in frames}
-        r_bank = reach(bank, ds, frames)
+        r_bank = reach(bank, frames, labels)
         both = np.maximum(r_acf, r_bank)
         h = np.concatenate([[o.box[3] - o.box[1] for o in lab.objects if o.type == "Car"] for lab in labels])
         print(f"the bank reaches {np.mean(r_bank >= 0.5):.1%}, both {np.mean(both >= 0.5):.1%}; "
@@ -493,15 +497,14 @@ def main():
                 for p, (r, k, _) in zip(PRECISIONS, found_at_precision(dd, labels, PRECISIONS))))
         # the cars the bank misses: does ACF score them above its own false detections?
         acf_dets = [Detections(acf[f][0], acf[f][1], np.zeros(len(acf[f][1]))) for f in frames]
+        best = []  # each car's best ACF score among ACF's boxes at IoU >= 0.5
+        for f, lab in zip(frames, labels):
+            gt = kitti_gt_boxes(lab)
+            b, sc = acf[f]
+            ov = iou_2d(b[:, None], gt[None]) >= 0.5 if len(gt) and len(b) else np.zeros((len(b), len(gt)), bool)
+            best.append(np.where(ov, sc[:, None], -np.inf).max(0, initial=-np.inf))
+        best, missed = np.concatenate(best), r_bank < 0.5
         for p, (_, _, t) in zip(PRECISIONS, found_at_precision(acf_dets, labels, PRECISIONS)):
-            best = []
-            for f, lab in zip(frames, labels):
-                gt = np.array([o.box for o in lab.objects if o.type == "Car"], float).reshape(-1, 4)
-                b, sc = acf[f]
-                ov = iou_2d(b[:, None], gt[None]) >= 0.5 if len(gt) and len(b) else np.zeros((len(b), len(gt)), bool)
-                best.append(np.where(ov, sc[:, None], -np.inf).max(0, initial=-np.inf))
-            best = np.concatenate(best)
-            missed = r_bank < 0.5
             print(f"  ACF at precision >= {p:.2f} (score >= {t:.2f}) finds {int(np.sum(missed & (best >= t)))} of the "
                   f"{int(missed.sum())} cars no bank box reaches")
 

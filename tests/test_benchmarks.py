@@ -330,7 +330,7 @@ def test_acf_scores_windows_from_the_channel_map_as_the_trees_score_their_featur
 
 
 def test_acf_found_at_precision_counts_each_car_once(monkeypatch):
-    from wirescene.core.labels import Label
+    from wirescene.core.labels import FrameLabels, Label
     from wirescene.core.types import Detections
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
@@ -341,7 +341,7 @@ def test_acf_found_at_precision_counts_each_car_once(monkeypatch):
     # two detections of the first car, one off every car, then the second car
     d = Detections(np.array([[0, 0, 10, 10], [1, 0, 10, 10], [20, 0, 30, 10], [50, 0, 60, 10.0]]),
                    np.array([0.9, 0.8, 0.7, 0.6]), np.zeros(4))
-    (r1, k1, t1), (r2, k2, t2) = found_at_precision([d], [cars], (1.0, 0.7))
+    (r1, k1, t1), (r2, k2, t2) = found_at_precision([d], [FrameLabels(cars)], (1.0, 0.7))
     assert (r1, k1, t1) == (0.5, 1, 0.9)  # the second detection on the first car finds no new one
     assert (r2, k2, t2) == (1.0, 4, 0.6)  # 3 of 4 on a car
 
