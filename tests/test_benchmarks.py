@@ -357,3 +357,27 @@ def test_acf_fusion_features_read_the_other_source_where_boxes_overlap(monkeypat
     assert_close(xa[:, [0, 3, 4]], np.array([[2.0, 0.0, 1.0], [-1.0, -10.0, 0.0]]))
     assert_close(xa[:, 1], np.log([10.0, 20.0]))
     assert_close(xa[:, 2], xa[:, 0] * xa[:, 1])
+
+
+def test_confidence_cues_read_the_box_fit_and_the_frame_scale(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_confidence_cues import _MEAN_HEIGHT, CUES, cue_features
+    from wirescene.eval.metrics import FrameResult
+
+    focal = 700.0
+    boxes = np.array([[100.0, 150.0, 200.0, 220.0], [0.0, 160.0, 80.0, 200.0]])  # the second at the left border
+    heights = boxes[:, 3] - boxes[:, 1]
+    # the first car at the depth a car of the mean height has at its box height, the second twice as far
+    depth = np.array([1.0, 2.0]) * focal * _MEAN_HEIGHT / heights
+    corners = np.stack([boxes[:, [0, 1]], boxes[:, [2, 3]]], axis=1)  # (2, 2, 2): the boxes' corners
+    corners[1, 0, 0] -= 30.0  # the second wireframe reaches past the image's left side, where its box is cut
+    corners[0, 1, 1] += 7.0  # the first wireframe's bottom 10% of its box's height below the box
+    result = FrameResult("f", [], boxes, np.zeros(2), np.ones(2), np.column_stack([[0.0, 3.0], [1.6, 1.7], depth]),
+                         np.tile([1.5, 1.6, 3.9], (2, 1)), np.zeros(2), np.zeros(2), est_vertices_2d=corners,
+                         image_size=(1242, 375))
+    cues = dict(zip(CUES, cue_features(result, focal).T))
+    assert_close(cues["box fit"], np.log([0.1 + 1e-3, 1e-3]))
+    assert_close(cues["frame scale"], np.full(2, np.log(2.0) / 2))  # the median of log 1 and log 2
+    assert_close(cues["own scale"], np.array([-1.0, 1.0]) * np.log(2.0) / 2)
+    assert_close(cues["pitch"], np.full(2, 0.1 / (depth[1] - depth[0])))
+    assert_close(cues["cars"], np.full(2, np.log(2.0)))
