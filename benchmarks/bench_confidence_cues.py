@@ -46,6 +46,7 @@ from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a scr
 from bench_scores import COLUMNS, _ap
 from wirescene.core.boxes import KITTI_CAR_SIZE
 from wirescene.eval.kitti_metrics import kitti_metrics
+from wirescene.fitting.confidence import FEATURES
 from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.training.scores import labelled_features, record_features
@@ -55,10 +56,12 @@ CUES = ("box fit", "frame scale", "own scale", "pitch", "cars")
 #: Fine variants whose estimates are ranked (and pooled to fit the models).
 VARIANTS = ("fg+gp", "full")
 #: The feature sets compared: columns of ``record_features`` (the shipped five) plus cue columns.
-N_SHIPPED = 5
+N_SHIPPED = len(FEATURES)
 SETS = {"shipped": []} | {f"+ {c}": [N_SHIPPED + i] for i, c in enumerate(CUES)} | {
     "+ all cues": [N_SHIPPED + i for i in range(len(CUES))]}
 PRODUCT = "p(car) x p(right | label-box model)"
+#: Names of the columns of :func:`frame_rows`' features.
+FEATURE_NAMES = FEATURES + CUES
 _MEAN_HEIGHT = KITTI_CAR_SIZE["mean"][2]
 
 
@@ -97,6 +100,16 @@ def frame_rows(records: dict, dataset: KittiDataset) -> dict[str, list[tuple]]:
                 rows.append((r, x, labelled_features(r, right="iou")[1], labelled_features(r, target="car")[1]))
         out[v] = rows
     return out
+
+
+def separation(rows: list[tuple]) -> np.ndarray:
+    """ROC AUC of each feature column of :func:`frame_rows`' rows (of one variant) for telling
+    the estimates that pass IoU 0.7 from the others (0.5: no signal; below: inverted)."""
+    from sklearn.metrics import roc_auc_score
+
+    X = np.concatenate([row[1] for row in rows])
+    y = np.concatenate([row[2] for row in rows])
+    return np.array([roc_auc_score(y, X[:, j]) for j in range(X.shape[1])])
 
 
 def _logistic(X: np.ndarray, y: np.ndarray):
@@ -168,6 +181,10 @@ def main():
         print(f"\n## {run.name} (detections {detections}): {len(frames)} frames, "
               f"{sum(len(gt[f].of_type('Car')) for f in frames)} cars; estimates passing IoU 0.7: "
               + ", ".join(f"{v} {n_right[v]} of {n_est[v]}" for v in rows) + "\n")
+        for v, rs in rows.items():
+            print(f"{v}: ROC AUC for passing IoU 0.7, " + ", ".join(
+                f"{name} {auc:.2f}" for name, auc in zip(FEATURE_NAMES, separation(rs))))
+        print()
         print("| variant | features | " + " | ".join(f"{g}: 3D, BEV @0.7" for g in groups) + " |")
         print("|---|---|" + "---|" * len(groups))
         tables = {name: ap_table(rows, held_out_scores(rows, list(range(N_SHIPPED)) + cols), gt, groups)
