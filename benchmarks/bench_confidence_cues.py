@@ -81,9 +81,9 @@ def cue_features(result, focal: float) -> np.ndarray:
     frame = np.median(scale) if len(scale) else 0.0
     bottom = np.asarray(result.est_location, float)[:, 1]
     pitch = np.polyfit(depth, bottom, 1)[0] if len(depth) > 1 and np.ptp(depth) > 1.0 else 0.0
-    n = np.full(len(depth), 1.0)
-    return np.column_stack([np.log(offset.sum(1) + 1e-3), frame * n, scale - frame, pitch * n,
-                            np.log(len(depth)) * n])
+    ones = np.ones(len(depth))
+    return np.column_stack([np.log(offset.sum(1) + 1e-3), frame * ones, scale - frame, pitch * ones,
+                            np.log(len(depth)) * ones])
 
 
 def frame_rows(records: dict, dataset: KittiDataset) -> dict[str, list[tuple]]:
