@@ -43,13 +43,12 @@ from pathlib import Path
 import numpy as np
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
-from bench_scores import COLUMNS, _ap
+from bench_scores import COLUMNS, group_aps
 from wirescene.core.boxes import KITTI_CAR_SIZE
-from wirescene.eval.kitti_metrics import kitti_metrics
 from wirescene.fitting.confidence import FEATURES
 from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
-from wirescene.training.scores import labelled_features, record_features
+from wirescene.training.scores import labelled_features
 
 #: The cues of the module docstring, by column of :func:`cue_features`.
 CUES = ("box fit", "frame scale", "own scale", "pitch", "cars")
@@ -95,9 +94,9 @@ def frame_rows(records: dict, dataset: KittiDataset) -> dict[str, list[tuple]]:
         rows = []
         for r in records[v]:
             if r.n_detections:
-                focal = dataset.camera(r.frame_id).P[1, 1]
-                x = np.column_stack([record_features(r), cue_features(r, focal)])
-                rows.append((r, x, labelled_features(r, right="iou")[1], labelled_features(r, target="car")[1]))
+                shipped, right = labelled_features(r, right="iou")
+                x = np.column_stack([shipped, cue_features(r, dataset.camera(r.frame_id).P[1, 1])])
+                rows.append((r, x, right, labelled_features(r, target="car")[1]))
         out[v] = rows
     return out
 
@@ -149,16 +148,9 @@ def product_scores(rows: dict, label_rows: dict) -> dict:
 
 
 def ap_table(rows: dict, scores: dict, gt: dict, groups: dict) -> dict:
-    """``{variant: {group: {column: AP}}}`` (moderate) of the fine estimates ranked by ``scores``."""
-    out = {}
-    for v, rs in rows.items():
-        by_frame = {row[0].frame_id: row[0] for row in rs}
-        out[v] = {}
-        for g, frames in groups.items():
-            metrics = kitti_metrics([gt[f] for f in frames],
-                                    [by_frame[f].estimate_labels(scores[v][f]) if f in by_frame else [] for f in frames])
-            out[v][g] = {c: _ap(metrics, path) for c, path in COLUMNS[:2]}
-    return out
+    """``{variant: {group: {column: AP}}}`` (moderate, IoU 0.7) of the fine estimates ranked by ``scores``."""
+    return {v: group_aps({row[0].frame_id: row[0] for row in rs}, scores[v], gt, groups, COLUMNS[:2])
+            for v, rs in rows.items()}
 
 
 def main():

@@ -56,6 +56,15 @@ def _ap(metrics: dict, path) -> float | None:
     return metrics["moderate"]
 
 
+def group_aps(by_frame: dict, scores: dict, gt: dict, groups: dict, columns=COLUMNS) -> dict:
+    """``{group: {column: AP}}`` (moderate) of the records ``by_frame`` (frame -> record)
+    ranked by ``scores`` (frame -> ``(D,)``), for ``groups`` (name -> frames) and the
+    ``columns`` of :data:`COLUMNS`; a frame without a record counts its labels alone."""
+    return {g: {c: _ap(kitti_metrics([gt[f] for f in fs],
+                                     [by_frame[f].estimate_labels(scores[f]) if f in by_frame else [] for f in fs]), p)
+                for c, p in columns} for g, fs in groups.items()}
+
+
 def _calibrated(model: str) -> str:
     """The name of a model of :data:`MODELS` among the scores."""
     return f"calibrated ({model})"
@@ -81,9 +90,7 @@ def score_table(records: dict, gt: dict) -> tuple[dict, dict]:
         scores[PERFECT] = {f: labelled_features(by_frame[f], right="iou")[1].astype(float) if by_frame[f].n_detections
                            else np.zeros(0) for f in frames}
         for name, of in scores.items():
-            table[(variant, name)] = {
-                g: {c: _ap(kitti_metrics([gt[f] for f in fs], [by_frame[f].estimate_labels(of[f]) for f in fs]), p)
-                    for c, p in COLUMNS} for g, fs in groups.items()}
+            table[(variant, name)] = group_aps(by_frame, of, gt, groups)
     return table, shipped
 
 
