@@ -303,6 +303,20 @@ def car_table(cars: dict, *, camera_height: float) -> dict[str, np.ndarray]:
     return out
 
 
+def run_tables(run, dataset: KittiDataset, *, camera_height: float = KITTI_CAMERA_HEIGHT) -> tuple[dict, str, dict]:
+    """``(records, detections, tables)`` of a run: its records pooled over folds
+    (:func:`_common.read_run`, verified held out), the detections spec, and per variant
+    the :func:`car_table` of its true positives (cameras read from ``dataset``)."""
+    records, detections = read_run(run)
+    cameras = {}
+    for f in sorted({r.frame_id for rs in records.values() for r in rs}):
+        if not dataset.calib_path(f).is_file():
+            raise InputError(f"frame {f} of {run} has no calibration under --root", path=dataset.calib_path(f))
+        cameras[f] = dataset.calib(f).camera()
+    tables = {v: car_table(true_positive_cars(rs, cameras), camera_height=camera_height) for v, rs in records.items()}
+    return records, detections, tables
+
+
 # --------------------------------------------------------------------------- summaries
 
 
@@ -573,15 +587,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     if len(set(names)) != len(names):
         ap.error("a run is given twice")
     for run, name in zip(args.runs, names):
-        records, detections = read_run(run)
+        records, detections, tables = run_tables(run, dataset, camera_height=args.camera_height)
         frames = sorted({r.frame_id for rs in records.values() for r in rs})
-        cameras = {}
-        for f in frames:
-            if not dataset.calib_path(f).is_file():
-                raise InputError(f"frame {f} of {run} has no calibration under --root", path=dataset.calib_path(f))
-            cameras[f] = dataset.calib(f).camera()
-        tables = {v: car_table(true_positive_cars(rs, cameras), camera_height=args.camera_height)
-                  for v, rs in records.items()}
         summaries = {v: {g: summarise(t, m) for g, m in group_masks(t).items()} for v, t in tables.items()}
         comparison = versus_reference(tables, args.reference) if args.reference in tables else None
         n_labels = sum(sum(o.type in CAR_TYPES for o in r.gt) for r in next(iter(records.values())))

@@ -157,6 +157,30 @@ def test_dev_holdout_keeps_the_tuning_frames_apart(monkeypatch):
     assert out["new drives"]["full"]["n_gt"] == 1 and out["new drives"]["full"]["frames"] == 1
 
 
+def test_by_drive_margin_shows_the_drive_that_carries_it(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_by_drive import drive_counts, margin_by_drive
+
+    table = {"frame": np.array(["a", "a", "b", "c"], dtype=object), "pass_loc": np.array([True, False, True, True])}
+    n, k = drive_counts(table, ["d1", "d2", "d3"], {"a": "d1", "b": "d1", "c": "d3"}, column="pass_loc")
+    assert n.tolist() == [3, 0, 1] and k.tolist() == [2, 0, 1]
+
+    # The variant gains 10 cars on the big drive and none on the four small ones.
+    k_ref, n_cars = np.array([20, 5, 5, 5, 5]), np.array([50, 10, 10, 10, 10])
+    k_var = k_ref + np.array([10, 0, 0, 0, 0])
+    out = margin_by_drive(k_var, n_cars, k_ref, n_cars, n_boot=2000, seed=3)
+    assert_close(out["margin"], 100 * 10 / 90)
+    assert out["net"].tolist() == [10, 0, 0, 0, 0]
+    assert_close(out["leave_one_out"][0], 0.0)  # without the big drive nothing is left
+    assert_close(out["leave_one_out"][1:], np.full(4, 100 * 10 / 80))
+    lo, hi = out["interval"]
+    assert lo < out["margin"] < hi and lo <= 1e-9  # some draws hold no big drive at all
+    assert margin_by_drive(k_var, n_cars, k_ref, n_cars, n_boot=2000, seed=3)["interval"] == (lo, hi)
+    assert margin_by_drive(k_var, n_cars, k_ref, n_cars, n_boot=0)["interval"] is None
+    with pytest.raises(ValueError, match="one shape"):
+        margin_by_drive(k_var, n_cars[:4], k_ref, n_cars)
+
+
 def test_operating_point_counts_boxes_on_no_car_and_second_boxes_as_false(monkeypatch):
     import numpy as np
 
