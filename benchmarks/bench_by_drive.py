@@ -101,16 +101,6 @@ def margin_by_drive(k, n, k_ref, n_ref, *, n_boot: int = 10000, seed: int = 0) -
             "net": (k - k_ref).astype(int)}
 
 
-def _parse_runs(items: Sequence[str]) -> dict[str, Path]:
-    runs = {}
-    for item in items:
-        name, _, path = item.rpartition("=") if "=" in item else (Path(item).name, "", item)
-        if name in runs:
-            raise SystemExit(f"bench_by_drive.py: error: run name {name!r} given twice")
-        runs[name] = Path(path)
-    return runs
-
-
 def main(argv: Sequence[str] | None = None) -> None:
     """The command line (module docstring); ``argv`` as for :meth:`argparse.ArgumentParser.parse_args`."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -126,7 +116,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = ap.parse_args(argv)
     if args.bootstrap < 0:
         ap.error("--bootstrap must be >= 0")
-    runs = _parse_runs(args.runs)
+    runs = {}
+    for item in args.runs:
+        name, _, path = item.rpartition("=") if "=" in item else (Path(item).name, "", item)
+        if name in runs:
+            ap.error(f"run name {name!r} given twice")
+        runs[name] = Path(path)
     dataset = KittiDataset(args.root)
     column = METRICS[args.metric]
     tables = {}
@@ -155,8 +150,10 @@ def main(argv: Sequence[str] | None = None) -> None:
             continue
         n_ref, k_ref = counts[ref]
         out = margin_by_drive(k, n, k_ref, n_ref, n_boot=args.bootstrap, seed=args.seed)
-        groups = {str(g): float(_margin(k[np.isin(group_of, g)], n[np.isin(group_of, g)],
-                                        k_ref[np.isin(group_of, g)], n_ref[np.isin(group_of, g)])) for g in GROUPS}
+        groups = {}
+        for g in GROUPS:
+            m = np.isin(group_of, g)
+            groups[str(g)] = float(_margin(k[m], n[m], k_ref[m], n_ref[m]))
         loo = out["leave_one_out"]
         most = int(np.argmax(np.abs(loo - out["margin"])))
         lo, hi = out["interval"] or (float("nan"), float("nan"))
@@ -169,6 +166,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                                        "groups": groups, "interval": out["interval"],
                                        "leave_one_out": dict(zip(drives, loo.tolist())),
                                        "net": dict(zip(drives, out["net"].tolist()))}
+    if not report:
+        print(f"no run holds both {args.reference} and another variant: no margins")
     cells = list(counts)
     print("\n| drive | fold | " + " | ".join(f"{a}:{b}" for a, b in cells) + " |")
     print("|---|---|" + "---|" * len(cells))
