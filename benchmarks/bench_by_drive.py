@@ -156,10 +156,11 @@ def main(argv: Sequence[str] | None = None) -> None:
             groups[str(g)] = float(_margin(k[m], n[m], k_ref[m], n_ref[m]))
         loo = out["leave_one_out"]
         most = int(np.argmax(np.abs(loo - out["margin"])))
-        lo, hi = out["interval"] or (float("nan"), float("nan"))
+        spread = "no bootstrap" if out["interval"] is None else "drive bootstrap 90% [{:+.1f}, {:+.1f}]".format(
+            *out["interval"])
         print(f"{name}:{variant}: {out['margin']:+.1f} ({int(k.sum())}/{int(n.sum())} against "
               f"{int(k_ref.sum())}/{int(n_ref.sum())}); {{0, 1}} {groups[str(GROUPS[0])]:+.1f}, {{2, 3}} "
-              f"{groups[str(GROUPS[1])]:+.1f}; drive bootstrap 90% [{lo:+.1f}, {hi:+.1f}]; one drive left out "
+              f"{groups[str(GROUPS[1])]:+.1f}; {spread}; one drive left out "
               f"{loo.min():+.1f} .. {loo.max():+.1f} (without {drives[most]} ({int(n[most])} cars, net "
               f"{int(out['net'][most]):+d}): {loo[most]:+.1f})")
         report[f"{name}:{variant}"] = {"reference": f"{ref[0]}:{ref[1]}", "margin": out["margin"],
