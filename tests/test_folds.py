@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import collections
+import re
 from pathlib import Path
 
 import pytest
@@ -42,3 +43,44 @@ def test_shipped_drive_folds_are_assign_folds_of_the_shared_frames():
     for drive, n in cars.items():
         per_fold[DRIVE_FOLDS[drive]] += n
     assert max(per_fold.values()) - min(per_fold.values()) <= 2
+
+
+def _devkit(directory, rand: str, mapping: list[str]):
+    directory.mkdir(parents=True)
+    (directory / "train_rand.txt").write_text(rand)
+    (directory / "train_mapping.txt").write_text("".join(line + "\n" for line in mapping))
+    return directory
+
+
+def test_devkit_mapping_gives_each_frame_its_drive(tmp_path):
+    from wirescene.io.folds import drive_map, find_devkit_mapping, read_devkit_mapping
+
+    lines = ["2011_09_26 2011_09_26_drive_0005_sync 0000000109", "2011_09_26 2011_09_26_drive_0009_sync 0000000003",
+             "2011_10_03 2011_10_03_drive_0047_sync 0000000723"]
+    mapping = _devkit(tmp_path / "kitti" / "devkit_object" / "mapping", "3,1,2,1\n", lines)
+    assert read_devkit_mapping(mapping) == {"000000": "2011_10_03_drive_0047", "000001": "2011_09_26_drive_0005",
+                                            "000002": "2011_09_26_drive_0009", "000003": "2011_09_26_drive_0005"}
+    assert find_devkit_mapping(tmp_path / "kitti") == mapping
+    assert find_devkit_mapping(tmp_path) is None
+    drives, where = drive_map(tmp_path / "kitti")
+    assert where == mapping and drives["000002"] == "2011_09_26_drive_0009"  # the devkit's over the project's
+    assert drives["trk0001_000000"] == frame_drives()["trk0001_000000"]  # frames it does not list keep theirs
+    assert drive_map(tmp_path) == (frame_drives(), None)
+
+
+@pytest.mark.parametrize("rand, mapping, problem", [
+    ("1,4\n", ["2011_09_26 2011_09_26_drive_0005_sync 0000000109"], "entry 2 ('4') is not a line"),
+    ("1,x\n", ["2011_09_26 2011_09_26_drive_0005_sync 0000000109"], "entry 2 ('x')"),
+    ("1\n", ["2011_09_26 0000000109"], "line 1 is not 'date drive frame'"),
+])
+def test_bad_devkit_mapping_names_the_file(tmp_path, rand, mapping, problem):
+    from wirescene.core.errors import InputError
+    from wirescene.io.folds import read_devkit_mapping
+
+    directory = _devkit(tmp_path / "mapping", rand, mapping)
+    with pytest.raises(InputError, match=re.escape(problem)) as info:
+        read_devkit_mapping(directory)
+    assert "train_" in str(info.value) and "\n" not in str(info.value)
+    (directory / "train_rand.txt").unlink()
+    with pytest.raises(InputError, match="no train_rand.txt here"):
+        read_devkit_mapping(directory)

@@ -192,6 +192,7 @@ TINY = ["--set", "parts.n_trees=3", "--set", "parts.max_depth=8", "--set", "part
 
 
 def test_held_out_folds_are_drives_where_known_and_frames_otherwise(tmp_path):
+    from wirescene.io.folds import drive_map
     from wirescene.io.kitti import KittiDataset
     from wirescene.training.parts import real_folds
     from wirescene.training.pipeline import calibration_folds
@@ -212,6 +213,26 @@ def test_held_out_folds_are_drives_where_known_and_frames_otherwise(tmp_path):
     assert real_folds(["900001", "000010"], folds).tolist() == [1, 0]  # the parts' calibration takes them
     with pytest.raises(InputError, match="at least two drives"):
         calibration_folds(dataset, ["000010"])
+    # the devkit's mapping files of a user's KITTI: 000002 and 000010 recorded on one drive, one group now
+    mapping = tmp_path / "kitti" / "devkit" / "mapping"
+    mapping.mkdir(parents=True)
+    (mapping / "train_mapping.txt").write_text("2011_09_26 2011_09_26_drive_0005_sync 0000000001\n")
+    (mapping / "train_rand.txt").write_text(",".join(["1"] * 11))
+    drives, where = drive_map(dataset.root)
+    assert where == mapping
+    assert calibration_folds(dataset, ["000002", "000010", "900001"], n_folds=2, drives=drives) == \
+        {"000010": 0, "000002": 0, "900001": 1}
+
+
+def test_a_bad_drive_map_is_refused_before_training(tmp_path):
+    line = one_line_error(cli("train", "all", KITTI_ROOT, "--out", tmp_path / "m", "--drive-map", tmp_path))
+    assert "no train_rand.txt here" in line and str(tmp_path) in line
+    assert not (tmp_path / "m").exists()
+    r = cli("train", "detector", "--out", tmp_path / "b.npz", "--drive-map", tmp_path)
+    assert r.exit_code == 2 and "--drive-map need --kitti-root" in r.output + r.stderr
+    r = cli("train", "parts", "--out", tmp_path / "p.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path)
+    assert r.exit_code == 2 and "--drive-map needs --kitti-root and --calibrate" in r.output + r.stderr
+    assert not any(tmp_path.glob("*.npz"))
 
 
 @pytest.fixture(scope="module")
@@ -245,6 +266,8 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert data["frames"] == 2 and data["frame_ids"] == ["000010", "001545"] and data["cars"] == 14
     assert data["split_file"] == str(split.resolve())
     assert manifest["calibration_folds"]["fold_of"] == {"000010": 0, "001545": 1}
+    assert manifest["calibration_folds"]["frames_with_known_drive"] == 2  # the shared frames' drives
+    assert manifest["calibration_folds"]["devkit_mapping"] is None  # tests/data/kitti holds no devkit
     assert list(manifest["steps"]) == ["parts", "detector", "score_calibration", "occlusion"]
     for step in ("parts", "detector", "occlusion"):
         record = manifest["steps"][step]
@@ -260,7 +283,7 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert bank.meta["support_weight"] == SUPPORT_WEIGHT  # the recipe's, set on the finished bank
     assert np.isfinite(load_occluded_score(out / "occlusion.json"))
     assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")
-    assert "shipped" in r.output and "models written to" in r.output
+    assert "shipped" in r.output and "models written to" in r.output and "2 frames of known drive)" in r.output
 
 
 def test_train_all_resume_skips_finished_steps(trained):

@@ -13,6 +13,7 @@ from wirescene.cli.options import (
     POSITIVE,
     check_output_dir,
     check_output_file,
+    drive_map_option,
     load_models,
     models_option,
     select_frames,
@@ -29,7 +30,7 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Detector bank .npz to write (the shipped one is src/wirescene/data/detector_bank.npz).")
 @click.option("--kitti-root", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Train on the labelled real frames of this KITTI root (the shipped bank: all 33 frames of "
+              help="Train on the labelled real frames of this KITTI root (the shipped bank: all 72 frames of "
                    "shared/data/kitti). Without it: synthetic scenes.")
 @click.option("--frames", default=None, help="With --kitti-root: comma-separated training frame ids (default all).")
 @split_file_option
@@ -43,6 +44,7 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
                    "leave-one-fold-out training.")
 @click.option("--threshold", type=float, default=0.5, show_default=True,
               help="With --kitti-root and a calibration: default detection threshold (confidence).")
+@drive_map_option
 @click.option("--support-weight", type=NON_NEGATIVE_FLOAT, default=SUPPORT_WEIGHT, show_default=True,
               help="With --kitti-root: margin a cluster of detections gains per e-fold of its votes (0: its best vote "
                    "alone).")
@@ -64,13 +66,14 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
 @click.option("--pyramid-cache-mb", type=NON_NEGATIVE_FLOAT, default=DEFAULT_CACHE_MB, show_default=True,
               help="With --kitti-root: memory for cached grey images and HOG pyramids (beyond it they are recomputed).")
 @workers_option("of the per-image passes (mining, detections; --kitti-root only)")
-def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, support_weight, seed,
-             n_scenes, n_partial, per_octave, cut_paste, mining_rounds, mining_images, n_val, C, report, max_negatives,
+def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, drive_mapping,
+             support_weight, seed, n_scenes, n_partial, per_octave, cut_paste, mining_rounds, mining_images, n_val, C, report, max_negatives,
              pyramid_cache_mb, workers):
     """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
     check_output_file(out, "--out")
     check_output_file(report, "--report")
     if kitti_root is not None:
+        from wirescene.io.folds import drive_map
         from wirescene.io.kitti import KittiDataset
         from wirescene.training.kitti_detector import check_calibration, train_detector_bank_kitti
 
@@ -81,16 +84,20 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
+        drives, mapping_dir = drive_map(ds.root, mapping=drive_mapping)
+        if mapping_dir is not None:
+            click.echo(f"frames grouped by drive with {mapping_dir}")
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
                                            n_partial=n_partial, calibration_folds=not no_calibration,
                                            calibration=given, threshold=threshold, support_weight=support_weight,
                                            mining_rounds=3 if mining_rounds is None else mining_rounds,
                                            per_octave=per_octave, cut_paste=cut_paste, max_negatives=max_negatives,
                                            pyramid_cache_mb=pyramid_cache_mb, workers=workers_count(workers),
-                                           progress=click.echo)
+                                           drives=drives, progress=click.echo)
     else:
-        if frames or split_file or folds or cut_paste or per_octave != 6:
-            raise click.UsageError("--frames / --split-file / --folds / --per-octave / --cut-paste need --kitti-root")
+        if frames or split_file or folds or cut_paste or per_octave != 6 or drive_mapping:
+            raise click.UsageError("--frames / --split-file / --folds / --per-octave / --cut-paste / --drive-map need "
+                                   "--kitti-root")
         from wirescene.training.detector import train_detector_bank
 
         _, rep = train_detector_bank(out, seed=seed, n_scenes=n_scenes, n_partial=n_partial, C=C,

@@ -107,6 +107,15 @@ def split_file_option(f):
                              "ImageSets/val.txt); instead of --frames.")(f)
 
 
+def drive_map_option(f):
+    """``--drive-map DIR``: the KITTI devkit's mapping files, grouping frames by drive."""
+    return click.option("--drive-map", "drive_mapping", type=click.Path(file_okay=False, path_type=Path), default=None,
+                        help="KITTI devkit mapping directory (train_rand.txt, train_mapping.txt): the held-out "
+                             "calibrations' folds group the frames by recording drive (default: mapping/, "
+                             "devkit/mapping/ or devkit_object/mapping/ under the KITTI root when there, else the "
+                             "drives of the shared frames only; other frames are each their own group).")(f)
+
+
 def select_frames(frames: str | None, split_file: Path | None, known: list[str], *, where, what: str = "labelled frame",
                   option: str = "--frames") -> list[str] | None:
     """The frames chosen by ``--frames`` (comma-separated) or ``--split-file`` (not both),

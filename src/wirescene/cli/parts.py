@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_file, select_frames, split_file_option
+from wirescene.cli.options import check_output_file, drive_map_option, select_frames, split_file_option
 
 
 @click.command("parts")
@@ -33,6 +33,7 @@ from wirescene.cli.options import check_output_file, select_frames, split_file_o
               help="Default Gaussian smoothing of the response maps (sigma in box heights).")
 @click.option("--calibrate/--no-calibrate", default=False, show_default=True,
               help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root).")
+@drive_map_option
 @click.option("--synth-scenes", type=int, default=300, show_default=True,
               help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
 @click.option("--synth-seed", type=int, default=1000, show_default=True,
@@ -50,7 +51,7 @@ from wirescene.cli.options import check_output_file, select_frames, split_file_o
               help="KITTI root whose car-free regions add background patches (off by default).")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
 def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, split_file, position, smooth, calibrate,
-          synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
+          drive_mapping, synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
     """Train the 37-class part detector on real KITTI frames, synthetic shaded scenes
     and/or CAD renderings."""
     from wirescene.training.parts import train_part_detector
@@ -64,6 +65,19 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
 
         ds = KittiDataset(kitti_root)
         frames = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
+    folds = None
+    if drive_mapping is not None and not (calibrate and kitti_root is not None):
+        raise click.UsageError("--drive-map needs --kitti-root and --calibrate")
+    if calibrate and kitti_root is not None:
+        from wirescene.io.folds import drive_map
+        from wirescene.io.kitti import KittiDataset
+        from wirescene.training.kitti_detector import calibration_folds
+
+        ds = KittiDataset(kitti_root)
+        drives, mapping_dir = drive_map(ds.root, mapping=drive_mapping)
+        if mapping_dir is not None:  # else the folds of the shared frames' drives, as the shipped recipe
+            click.echo(f"frames grouped by drive with {mapping_dir}")
+            folds = calibration_folds(ds, frames or ds.frame_ids(), drives=drives)
 
     _, rep = train_part_detector(out, seed=seed, n_views=n_views, n_trees=n_trees, max_depth=max_depth, kind=kind,
                                  n_aug=n_aug, heldout=heldout, synth_scenes=synth_scenes, synth_seed=synth_seed,
@@ -71,7 +85,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
                                  compare_kinds=("hog",) if compare_hog else (),
                                  kitti_background=kitti_background, kitti_root=kitti_root, frames=frames,
                                  position=position, calibrate_real=calibrate, smooth=smooth, synth_cache=synth_cache,
-                                 progress=click.echo)
+                                 calibration_folds=folds, progress=click.echo)
     if report:
         def conv(o):
             if isinstance(o, dict):

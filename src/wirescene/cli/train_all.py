@@ -8,7 +8,13 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_dir, split_file_option, workers_count, workers_option
+from wirescene.cli.options import (
+    check_output_dir,
+    drive_map_option,
+    split_file_option,
+    workers_count,
+    workers_option,
+)
 
 
 def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
@@ -40,13 +46,14 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
 @split_file_option
 @click.option("--folds", "n_folds", type=click.IntRange(min=2), default=4, show_default=True,
               help="Folds of the held-out calibrations (by drive where it is known, else by frame).")
+@drive_map_option
 @click.option("--set", "settings", multiple=True, metavar="STEP.KEY=VALUE",
               help="Change one option of a step's recipe (steps parts, detector, occlusion), e.g. "
                    "parts.synth_scenes=100 or detector.mining_rounds=2; repeatable.")
 @click.option("--resume/--no-resume", default=False, show_default=True,
               help="Keep the steps already done in --out with the same data, options and inputs; train the rest.")
 @workers_option("of the detector step's per-image passes (mining, detections)")
-def train_all_cmd(kitti_root, out, frames, split_file, n_folds, settings, resume, workers):
+def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, settings, resume, workers):
     """Train part detectors, detector bank (held-out calibration), occluded-part score c
     (the score calibration stays the shipped one) on the labelled frames of KITTI_ROOT,
     in order, into a models directory with a manifest."""
@@ -72,10 +79,13 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, settings, resume
         return bar
 
     manifest = train_all(out, kitti_root, frames=ids, split_file=split_file, options=options, n_folds=n_folds,
-                         resume=resume, workers=workers_count(workers), iterate=iterate, progress=lambda line: tqdm.write(line, file=sys.stderr))
+                         drive_mapping=drive_mapping, resume=resume, workers=workers_count(workers), iterate=iterate, progress=lambda line: tqdm.write(line, file=sys.stderr))
     for step, record in manifest["steps"].items():
         if record.get("source") == "shipped":
             click.echo(f"{step:18s} shipped ({record['why']})")
         else:
             click.echo(f"{step:18s} {record['artefact']}: {record['seconds']:.0f} s, peak {record['peak_rss_mb']:.0f} MB")
-    click.echo(f"models written to {out} ({manifest['data']['frames']} frames, {manifest['data']['cars']} cars)")
+    folds = manifest["calibration_folds"]
+    click.echo(f"models written to {out} ({manifest['data']['frames']} frames, {manifest['data']['cars']} cars; "
+               f"{folds['frames_with_known_drive']} frames of known drive"
+               + (f" from {folds['devkit_mapping']})" if folds["devkit_mapping"] else ")"))

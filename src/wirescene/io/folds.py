@@ -23,15 +23,19 @@ fold   drives (2011_MM_DD_drive_NNNN)                                           
 
 The frame -> drive map (``data/kitti_drives.json``) is copied from the KITTI devkit's
 mapping files as listed in ``shared/data/kitti/SOURCES.md``; frames of other drives have
-no fold in :func:`fold_of`.
+no fold in :func:`fold_of`. A user's whole KITTI training split is grouped by drive through
+the devkit's own mapping files (:func:`read_devkit_mapping`, found next to the data by
+:func:`find_devkit_mapping`; :func:`drive_map` joins both).
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 from typing import Mapping
 
 from wirescene.core.artefacts import load_json
+from wirescene.core.errors import InputError
 from wirescene.core.resources import DATA_DIR
 
 N_FOLDS = 4
@@ -82,6 +86,89 @@ def frame_drives() -> dict[str, str]:
     """``{frame id: drive}`` of the labelled real frames the project knows."""
     record = load_json(DATA_DIR / "kitti_drives.json", kind="kitti-drives", version=1)
     return {f: d.removesuffix("_sync") for f, d in record["drives"].items()}
+
+
+#: The devkit's files: a random permutation of the object frames' 1-based indices into the
+#: lines of the mapping (``date drive raw_frame``), one line each.
+DEVKIT_RAND, DEVKIT_MAPPING = "train_rand.txt", "train_mapping.txt"
+#: Where :func:`find_devkit_mapping` looks, relative to a KITTI root (the object devkit
+#: unpacks as ``devkit_object/`` or ``devkit/``, its mapping files in ``mapping/``).
+DEVKIT_PLACES = ("mapping", "devkit/mapping", "devkit_object/mapping")
+
+
+def read_devkit_mapping(directory) -> dict[str, str]:
+    r"""``{frame id: drive}`` of KITTI's object training frames from the devkit's mapping files.
+
+    Parameters
+    ----------
+    directory : path
+        Holds :data:`DEVKIT_RAND` (one line of comma-separated 1-based indices, the i-th for
+        frame ``i``, written ``%06d``) and :data:`DEVKIT_MAPPING` (``2011_09_26
+        2011_09_26_drive_0005_sync 0000000109`` a line).
+
+    Returns
+    -------
+    dict
+        Drive names as :func:`frame_drives` gives them (``2011_09_26_drive_0005``).
+
+    Raises
+    ------
+    InputError
+        A missing file, an index that is not a positive integer or has no mapping line, a
+        malformed mapping line; the message names the file.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> _ = (d / "train_rand.txt").write_text("2,1\n")
+    >>> _ = (d / "train_mapping.txt").write_text(
+    ...     "2011_09_26 2011_09_26_drive_0005_sync 0000000109\n2011_09_26 2011_09_26_drive_0009_sync 0000000003\n")
+    >>> read_devkit_mapping(d)
+    {'000000': '2011_09_26_drive_0009', '000001': '2011_09_26_drive_0005'}
+    """
+    directory = Path(directory)
+    rand_path, mapping_path = directory / DEVKIT_RAND, directory / DEVKIT_MAPPING
+    for path in (rand_path, mapping_path):
+        if not path.is_file():
+            raise InputError(f"no {path.name} here: not a KITTI devkit mapping directory", path=directory)
+    drives = []
+    for number, line in enumerate(mapping_path.read_text().splitlines(), 1):
+        fields = line.split()
+        if not fields:
+            continue
+        if len(fields) != 3 or "_drive_" not in fields[1]:
+            raise InputError(f"line {number} is not 'date drive frame': {line.strip()[:60]!r}", path=mapping_path)
+        drives.append(fields[1].removesuffix("_sync"))
+    out = {}
+    for i, item in enumerate(t for t in rand_path.read_text().replace("\n", ",").split(",") if t.strip()):
+        if not item.strip().isdigit() or not 1 <= int(item) <= len(drives):
+            raise InputError(f"entry {i + 1} ({item.strip()[:20]!r}) is not a line of {DEVKIT_MAPPING} "
+                             f"(1..{len(drives)})", path=rand_path)
+        out[f"{i:06d}"] = drives[int(item) - 1]
+    return out
+
+
+def find_devkit_mapping(kitti_root) -> Path | None:
+    """The devkit mapping directory at one of :data:`DEVKIT_PLACES` under ``kitti_root``
+    (both files present), or None."""
+    for place in DEVKIT_PLACES:
+        directory = Path(kitti_root) / place
+        if (directory / DEVKIT_RAND).is_file() and (directory / DEVKIT_MAPPING).is_file():
+            return directory
+    return None
+
+
+def drive_map(kitti_root=None, *, mapping=None) -> tuple[dict[str, str], Path | None]:
+    """``({frame id: drive}, mapping directory or None)``: the drives of the frames the
+    project knows (:func:`frame_drives`) and, over them, those of the devkit mapping files
+    in ``mapping`` or else found under ``kitti_root`` (:func:`find_devkit_mapping`)."""
+    directory = Path(mapping) if mapping is not None else (
+        None if kitti_root is None else find_devkit_mapping(kitti_root))
+    drives = dict(frame_drives())
+    if directory is not None:
+        drives.update(read_devkit_mapping(directory))
+    return drives, directory
 
 
 def fold_of(frame_id: str) -> int:

@@ -941,7 +941,7 @@ def mirrored_boxes(boxes, width: int) -> np.ndarray:
 def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str = "training",
                               seed: int = 0, calibration_folds: bool | Mapping[str, int] = True, calibration=None,
                               threshold: float = 0.5, support_weight: float = SUPPORT_WEIGHT, workers: int = 1,
-                              progress=None, **train_kw):
+                              drives: Mapping[str, str] | None = None, progress=None, **train_kw):
     """``wirescene train detector --kitti-root``: train on the labelled frames of a KITTI root.
 
     ``frames``: frame ids to train on (default all); ``folds``: restrict to the frames of
@@ -960,6 +960,9 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     as the study that chose it did.
     ``workers``: processes of the per-image passes (:func:`train_bank_on_frames`,
     :func:`finish_bank`, :func:`heldout_bank_calibration`); the bank is the same.
+    ``drives``: ``{frame: drive}`` grouping the calibration's folds (default
+    :func:`wirescene.io.folds.frame_drives`; :func:`wirescene.io.folds.drive_map` adds a
+    user's devkit mapping).
     Returns ``(bank, report)``.
     """
     from wirescene.io.folds import fold_of
@@ -979,7 +982,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     if calib is not None:
         report["calibration"] = calibration_record(calib, source="given")
     elif calibration_folds:
-        folds = calibration_folds if isinstance(calibration_folds, Mapping) else _frame_folds(ds, ids)
+        folds = calibration_folds if isinstance(calibration_folds, Mapping) else _frame_folds(ds, ids, drives)
         if folds is not None:
             report["calibration"] = heldout_bank_calibration(kitti_root, folds, split=split, seed=seed, progress=say,
                                                              workers=workers, support_weight=support_weight,
@@ -1007,13 +1010,15 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     return bank, report
 
 
-def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4) -> dict[str, int]:
-    """``{frame: fold}`` of the held-out calibrations: groups of frames by drive (a frame
-    of unknown drive alone), dealt to ``min(n_folds, groups)`` folds balanced by their
-    cars. An :class:`InputError` if there are fewer than two groups."""
+def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4,
+                      drives: Mapping[str, str] | None = None) -> dict[str, int]:
+    """``{frame: fold}`` of the held-out calibrations: groups of frames by drive (``drives``,
+    default :func:`wirescene.io.folds.frame_drives`; a frame of unknown drive alone), dealt
+    to ``min(n_folds, groups)`` folds balanced by their cars. An :class:`InputError` if
+    there are fewer than two groups."""
     from wirescene.io.folds import assign_folds, frame_drives
 
-    drives = frame_drives()
+    drives = frame_drives() if drives is None else drives
     group = {f: drives.get(f, f) for f in frames}
     cars: dict[str, int] = {}
     for f in frames:
@@ -1061,10 +1066,10 @@ def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str
                               n_folds=len(set(folds.values())), source="leave-one-fold-out detections")
 
 
-def _frame_folds(dataset, frames) -> dict[str, int] | None:
+def _frame_folds(dataset, frames, drives=None) -> dict[str, int] | None:
     """:func:`calibration_folds` of ``frames``, or None where they form a single group (no
     held-out calibration is possible: the bank stays uncalibrated)."""
     try:
-        return calibration_folds(dataset, list(frames))
+        return calibration_folds(dataset, list(frames), drives=drives)
     except InputError:
         return None

@@ -16,8 +16,9 @@ Steps (:data:`STEPS`), each writing one file of :data:`wirescene.core.resources.
    with the part detectors of step 1.
 
 Held-out folds (:func:`calibration_folds`): frames are grouped by recording drive where
-the drive is known (:func:`wirescene.io.folds.frame_drives`), each other frame is a group
-of its own, and the groups are dealt to folds balanced by cars
+the drive is known (:func:`wirescene.io.folds.frame_drives`, and the KITTI devkit's mapping
+files of a user's whole training split: :func:`wirescene.io.folds.drive_map`), each other
+frame is a group of its own, and the groups are dealt to folds balanced by cars
 (:func:`wirescene.io.folds.assign_folds`).
 
 ``MODELS_DIR/models.json`` (format ``wirescene-models/1``) records the data (root, split
@@ -51,6 +52,7 @@ from wirescene.core.resources import (
     shipped_path,
 )
 from wirescene.core.version import __version__
+from wirescene.io.folds import drive_map
 from wirescene.training.kitti_detector import (
     calibration_folds,
     calibration_record,
@@ -94,7 +96,7 @@ def step_options() -> dict[str, dict[str, object]]:
     # takes loaded frames, which no --set value can name (a study's option: benchmarks/bench_predetect.py)
     bank = _parameters(train_bank_on_frames, ("images", "examples", "progress", "workers", "synthetic"))
     bank.update(_parameters(train_detector_bank_kitti, ("out_path", "kitti_root", "frames", "folds", "split", "progress",
-                                                         "calibration_folds", "workers")))
+                                                         "calibration_folds", "workers", "drives")))
     return {
         "parts": _parameters(train_part_detector, ("out_path", "kitti_root", "frames", "progress", "calibration_folds")),
         "detector": bank,
@@ -158,6 +160,7 @@ def train_all(
     split_file=None,
     options: Mapping[str, Mapping[str, object]] | None = None,
     n_folds: int = 4,
+    drive_mapping=None,
     resume: bool = False,
     workers: int = 1,
     progress: Callable[[str], None] | None = None,
@@ -179,6 +182,10 @@ def train_all(
         ``{step: {option: value}}`` over :data:`RECIPE` (names of :func:`step_options`).
     n_folds : int
         Folds of the held-out calibrations (fewer if there are fewer groups).
+    drive_mapping : path, optional
+        A KITTI devkit mapping directory (``train_rand.txt``, ``train_mapping.txt``) that
+        groups the frames by drive; default: one found under ``kitti_root``
+        (:func:`wirescene.io.folds.find_devkit_mapping`), else the drives the project knows.
     resume : bool
         Keep the steps already done in ``out_dir`` with the same data, options and inputs.
     workers : int
@@ -211,11 +218,14 @@ def train_all(
     if not dataset.has_labels:
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
     ids = _training_frames(dataset, frames, split_file)
-    folds = calibration_folds(dataset, ids, n_folds=n_folds)
+    drives, mapping_dir = drive_map(dataset.root, mapping=drive_mapping)
+    folds = calibration_folds(dataset, ids, n_folds=n_folds, drives=drives)
     previous = _previous_steps(out, resume)
-    manifest = _new_manifest(dataset, ids, folds, split_file)
+    manifest = _new_manifest(dataset, ids, folds, split_file, drives=drives, mapping_dir=mapping_dir)
     key_data = {"kitti_root": manifest["data"]["kitti_root"], "frames_sha256": manifest["data"]["frames_sha256"],
                 "n_folds": n_folds}
+    if mapping_dir is not None:  # other drives, other folds: a resumed step must not keep the old ones
+        key_data["folds_sha256"] = hashlib.sha256(str(sorted(folds.items())).encode()).hexdigest()
     run = _Run(out, kitti_root, ids, folds, opts, workers, progress or (lambda message: None),
                iterate or (lambda items, name: items))
     out.mkdir(parents=True, exist_ok=True)
@@ -279,10 +289,9 @@ def _previous_steps(out: Path, resume: bool) -> dict:
     return {}
 
 
-def _new_manifest(dataset, ids: list[str], folds: dict[str, int], split_file) -> dict:
-    """The manifest of a run before its steps: data, split file and folds."""
-    from wirescene.io.folds import frame_drives
-
+def _new_manifest(dataset, ids: list[str], folds: dict[str, int], split_file, *, drives: Mapping[str, str],
+                  mapping_dir: Path | None) -> dict:
+    """The manifest of a run before its steps: data, split file and folds (grouped by ``drives``)."""
     cars = sum(len(dataset.labels(f).of_type("Car")) for f in ids)
     data = {"kitti_root": str(Path(dataset.split_dir).resolve()), "frames": len(ids), "cars": cars,
             "frames_sha256": _frames_sha256(ids), "frame_ids": ids}
@@ -290,7 +299,8 @@ def _new_manifest(dataset, ids: list[str], folds: dict[str, int], split_file) ->
         data["split_file"] = str(Path(split_file).resolve())
         data["split_file_sha256"] = file_sha256(split_file)
     fold_ids = sorted(set(folds.values()))
-    fold_record = {"n_folds": len(fold_ids), "frames_with_known_drive": sum(f in frame_drives() for f in ids),
+    fold_record = {"n_folds": len(fold_ids), "frames_with_known_drive": sum(f in drives for f in ids),
+                   "devkit_mapping": None if mapping_dir is None else str(Path(mapping_dir).resolve()),
                    "frames_per_fold": {str(k): sum(1 for j in folds.values() if j == k) for k in fold_ids},
                    "fold_of": folds}
     return {"wirescene": __version__, "complete": False, "data": data, "calibration_folds": fold_record,
