@@ -67,8 +67,8 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
               help="With --kitti-root: memory for cached grey images and HOG pyramids (beyond it they are recomputed).")
 @workers_option("of the per-image passes (mining, detections; --kitti-root only)")
 def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, drive_mapping,
-             support_weight, seed, n_scenes, n_partial, per_octave, cut_paste, mining_rounds, mining_images, n_val, C, report, max_negatives,
-             pyramid_cache_mb, workers):
+             support_weight, seed, n_scenes, n_partial, per_octave, cut_paste, mining_rounds, mining_images, n_val, C,
+             report, max_negatives, pyramid_cache_mb, workers):
     """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
     check_output_file(out, "--out")
     check_output_file(report, "--report")

@@ -51,33 +51,33 @@ from wirescene.cli.options import check_output_file, drive_map_option, select_fr
               help="KITTI root whose car-free regions add background patches (off by default).")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
 def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, split_file, position, smooth, calibrate,
-          drive_mapping, synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog, kitti_background, report):
+          drive_mapping, synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog,
+          kitti_background, report):
     """Train the 37-class part detector on real KITTI frames, synthetic shaded scenes
     and/or CAD renderings."""
     from wirescene.training.parts import train_part_detector
 
     check_output_file(out, "--out")
     check_output_file(report, "--report")
-    if frames is not None or split_file is not None:
-        if kitti_root is None:
-            raise click.UsageError("--frames / --split-file need --kitti-root")
-        from wirescene.io.kitti import KittiDataset
-
-        ds = KittiDataset(kitti_root)
-        frames = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
-    folds = None
+    if kitti_root is None and (frames is not None or split_file is not None):
+        raise click.UsageError("--frames / --split-file need --kitti-root")
     if drive_mapping is not None and not (calibrate and kitti_root is not None):
         raise click.UsageError("--drive-map needs --kitti-root and --calibrate")
-    if calibrate and kitti_root is not None:
-        from wirescene.io.folds import drive_map
+    folds = None
+    if kitti_root is not None:
         from wirescene.io.kitti import KittiDataset
-        from wirescene.training.kitti_detector import calibration_folds
 
         ds = KittiDataset(kitti_root)
-        drives, mapping_dir = drive_map(ds.root, mapping=drive_mapping)
-        if mapping_dir is not None:  # else the folds of the shared frames' drives, as the shipped recipe
-            click.echo(f"frames grouped by drive with {mapping_dir}")
-            folds = calibration_folds(ds, frames or ds.frame_ids(), drives=drives)
+        if frames is not None or split_file is not None:
+            frames = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
+        if calibrate:
+            from wirescene.io.folds import drive_map
+            from wirescene.training.kitti_detector import calibration_folds
+
+            drives, mapping_dir = drive_map(ds.root, mapping=drive_mapping)
+            if mapping_dir is not None:  # else the folds of the shared frames' drives, as the shipped recipe
+                click.echo(f"frames grouped by drive with {mapping_dir}")
+                folds = calibration_folds(ds, frames or ds.frame_ids(), drives=drives)
 
     _, rep = train_part_detector(out, seed=seed, n_views=n_views, n_trees=n_trees, max_depth=max_depth, kind=kind,
                                  n_aug=n_aug, heldout=heldout, synth_scenes=synth_scenes, synth_seed=synth_seed,
