@@ -34,7 +34,7 @@ import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, run_tables  # noqa: E402  (benchmarks/ is on the path)
 from wirescene.io.folds import fold_of, frame_drives
-from wirescene.io.kitti import KittiDataset
+from wirescene.io.kitti import CAR_TYPES, KittiDataset
 
 #: The columns of a car table (:func:`bench_error_budget.car_table`) each ``--metric`` counts.
 METRICS = {"loc": "pass_loc", "iou": "pass_iou"}
@@ -54,6 +54,36 @@ def drive_counts(table: dict, drives: Sequence[str], drive_of: dict[str, str], *
 def _margin(k, n, k_ref, n_ref, axis=-1):
     with np.errstate(invalid="ignore", divide="ignore"):
         return 100.0 * (np.sum(k, axis) / np.sum(n, axis) - np.sum(k_ref, axis) / np.sum(n_ref, axis))
+
+
+def _drive_weights(d: int, n_boot: int, seed: int) -> np.ndarray:
+    """``(n_boot, d)`` times each of ``d`` drives is drawn in each bootstrap sample."""
+    return np.random.default_rng(seed).multinomial(d, np.full(d, 1.0 / d), size=n_boot).astype(float)
+
+
+def _percentiles(draws) -> tuple[float, float]:
+    draws = draws[np.isfinite(draws)]
+    return float(np.percentile(draws, 5)), float(np.percentile(draws, 95))
+
+
+def share_by_drive(k, n, *, n_boot: int = 10000, seed: int = 0) -> tuple[float, tuple[float, float] | None]:
+    """``(100 sum k / sum n, its drive-clustered bootstrap 90% interval or None)`` of per-drive counts ``(D,)``.
+
+    Examples
+    --------
+    >>> share, interval = share_by_drive([9, 1], [10, 10], n_boot=200)
+    >>> share, interval[0] <= 50.0 <= interval[1]
+    (50.0, True)
+    """
+    k, n = np.asarray(k, float), np.asarray(n, float)
+    if k.shape != n.shape or k.ndim != 1:
+        raise ValueError(f"per-drive counts of one shape (D,) expected, got {k.shape} {n.shape}")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = 100.0 * k.sum() / n.sum()
+        if n_boot <= 0:
+            return float(share), None
+        w = _drive_weights(len(k), n_boot, seed)
+        return float(share), _percentiles(100.0 * (w @ k) / (w @ n))
 
 
 def margin_by_drive(k, n, k_ref, n_ref, *, n_boot: int = 10000, seed: int = 0) -> dict:
@@ -93,10 +123,8 @@ def margin_by_drive(k, n, k_ref, n_ref, *, n_boot: int = 10000, seed: int = 0) -
     loo = np.array([_margin(k[m], n[m], k_ref[m], n_ref[m]) for m in keep])
     interval = None
     if n_boot > 0:
-        w = np.random.default_rng(seed).multinomial(d, np.full(d, 1.0 / d), size=n_boot).astype(float)  # (B, D)
-        draws = _margin(w * k, w * n, w * k_ref, w * n_ref)
-        draws = draws[np.isfinite(draws)]
-        interval = (float(np.percentile(draws, 5)), float(np.percentile(draws, 95)))
+        w = _drive_weights(d, n_boot, seed)
+        interval = _percentiles(_margin(w * k, w * n, w * k_ref, w * n_ref))
     return {"margin": float(_margin(k, n, k_ref, n_ref)), "interval": interval, "leave_one_out": loo,
             "net": (k - k_ref).astype(int)}
 
@@ -124,20 +152,23 @@ def main(argv: Sequence[str] | None = None) -> None:
         runs[name] = Path(path)
     dataset = KittiDataset(args.root)
     column = METRICS[args.metric]
-    tables = {}
+    tables, labelled = {}, {}
     for name, run in runs.items():
-        _, _, by_variant = run_tables(run, dataset, camera_height=KITTI_CAMERA_HEIGHT)
+        records, _, by_variant = run_tables(run, dataset, camera_height=KITTI_CAMERA_HEIGHT)
         tables.update({(name, v): t for v, t in by_variant.items()})
+        for r in next(iter(records.values())):
+            labelled[r.frame_id] = sum(o.type in CAR_TYPES for o in r.gt)
     if ":" in args.reference:
         ref_run, _, ref_variant = args.reference.partition(":")
         if (ref_run, ref_variant) not in tables:
             ap.error(f"--reference {args.reference}: no such run and variant")
     drive_of = frame_drives()
-    frames = {f for t in tables.values() for f in t["frame"]}
+    frames = {f for t in tables.values() for f in t["frame"]} | set(labelled)
     missing = sorted(f for f in frames if f not in drive_of)
     if missing:
         ap.error(f"frame {missing[0]} has no drive in wirescene's drive map")
-    drives = sorted({drive_of[f] for f in frames})
+    # a drive enters the bootstrap through its cars: one without any is no draw
+    drives = sorted({drive_of[f] for f in frames if labelled.get(f, 1) > 0})
     counts = {cell: drive_counts(t, drives, drive_of, column=column) for cell, t in tables.items()}
     fold_by_drive = {drive_of[f]: fold_of(f) for f in frames}  # folds are dealt by drive
     group_of = np.array([fold_by_drive[d] for d in drives])
@@ -169,6 +200,20 @@ def main(argv: Sequence[str] | None = None) -> None:
                                        "net": dict(zip(drives, out["net"].tolist()))}
     if not report:
         print(f"no run holds both {args.reference} and another variant: no margins")
+    cars = np.zeros(len(drives))
+    for f, c in labelled.items():
+        if c:
+            cars[drives.index(drive_of[f])] += c
+    print(f"\nshares, drive bootstrap 90% ({int(cars.sum())} labelled cars):")
+    shares = {}
+    for (name, variant), (n, k) in counts.items():
+        tp, tp_interval = share_by_drive(n, cars, n_boot=args.bootstrap, seed=args.seed)
+        ok, ok_interval = share_by_drive(k, n, n_boot=args.bootstrap, seed=args.seed)
+        shares[f"{name}:{variant}"] = {"true_positives": tp, "true_positives_interval": tp_interval,
+                                       "passing": ok, "passing_interval": ok_interval}
+        spans = ["" if i is None else " [{:.1f}, {:.1f}]".format(*i) for i in (tp_interval, ok_interval)]
+        print(f"{name}:{variant}: true positives {int(n.sum())}/{int(cars.sum())} = {tp:.1f}%{spans[0]}; {what} "
+              f"{int(k.sum())}/{int(n.sum())} = {ok:.1f}%{spans[1]}")
     cells = list(counts)
     print("\n| drive | fold | " + " | ".join(f"{a}:{b}" for a, b in cells) + " |")
     print("|---|---|" + "---|" * len(cells))
@@ -176,7 +221,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(f"| {drives[i]} | {group_of[i]} | "
               + " | ".join(f"{counts[c][1][i]}/{counts[c][0][i]}" for c in cells) + " |")
     if args.json:
-        args.json.write_text(json.dumps({"metric": args.metric, "drives": drives, "margins": report,
+        args.json.write_text(json.dumps({"metric": args.metric, "drives": drives, "margins": report, "shares": shares,
                                          "counts": {f"{a}:{b}": {"n": n.tolist(), "k": k.tolist()}
                                                     for (a, b), (n, k) in counts.items()}}, indent=1))
         print(f"json: {args.json}", file=sys.stderr)
