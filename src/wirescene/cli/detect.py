@@ -84,7 +84,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
-        drives, mapping_dir = drive_map(ds.root, mapping=drive_mapping)
+        drives, mapping_dir = drive_map(ds.split_dir.parent, mapping=drive_mapping)
         if mapping_dir is not None:
             click.echo(f"frames grouped by drive with {mapping_dir}")
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,

@@ -74,7 +74,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
             from wirescene.io.folds import drive_map
             from wirescene.training.kitti_detector import calibration_folds
 
-            drives, mapping_dir = drive_map(ds.root, mapping=drive_mapping)
+            drives, mapping_dir = drive_map(ds.split_dir.parent, mapping=drive_mapping)
             if mapping_dir is not None:  # else the folds of the shared frames' drives, as the shipped recipe
                 click.echo(f"frames grouped by drive with {mapping_dir}")
                 folds = calibration_folds(ds, frames or ds.frame_ids(), drives=drives)
