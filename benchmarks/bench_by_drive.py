@@ -14,6 +14,8 @@ for all):
   other drives like these would show;
 * the margin with each drive left out: its smallest and largest value and the drive
   whose absence moves it most;
+* each variant's own shares with the same bootstrap: its true positives of the labelled
+  cars, and the true positives that pass;
 * a table of the counts by drive.
 
     python benchmarks/bench_by_drive.py RUN [NAME=RUN ...] --root KITTI \\
@@ -171,7 +173,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     drives = sorted({drive_of[f] for f in frames if labelled.get(f, 1) > 0})
     counts = {cell: drive_counts(t, drives, drive_of, column=column) for cell, t in tables.items()}
     fold_by_drive = {drive_of[f]: fold_of(f) for f in frames}  # folds are dealt by drive
-    group_of = np.array([fold_by_drive[d] for d in drives])
+    drive_fold = np.array([fold_by_drive[d] for d in drives])
     report = {}
     what = "within 1 m" if args.metric == "loc" else "3D IoU > 0.7"
     print(f"margins over {args.reference} in points of the true positives {what}; {len(drives)} drives")
@@ -183,7 +185,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         out = margin_by_drive(k, n, k_ref, n_ref, n_boot=args.bootstrap, seed=args.seed)
         groups = {}
         for g in GROUPS:
-            m = np.isin(group_of, g)
+            m = np.isin(drive_fold, g)
             groups[str(g)] = float(_margin(k[m], n[m], k_ref[m], n_ref[m]))
         loo = out["leave_one_out"]
         most = int(np.argmax(np.abs(loo - out["margin"])))
@@ -218,7 +220,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     print("\n| drive | fold | " + " | ".join(f"{a}:{b}" for a, b in cells) + " |")
     print("|---|---|" + "---|" * len(cells))
     for i in np.argsort([-counts[cells[0]][0][j] for j in range(len(drives))], kind="stable"):
-        print(f"| {drives[i]} | {group_of[i]} | "
+        print(f"| {drives[i]} | {drive_fold[i]} | "
               + " | ".join(f"{counts[c][1][i]}/{counts[c][0][i]}" for c in cells) + " |")
     if args.json:
         args.json.write_text(json.dumps({"metric": args.metric, "drives": drives, "margins": report, "shares": shares,
