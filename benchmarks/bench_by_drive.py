@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, run_tables  # noqa: E402  (benchmarks/ is on the path)
-from wirescene.io.folds import fold_of, frame_drives
+from wirescene.io.folds import DRIVE_FOLDS, frame_drives
 from wirescene.io.kitti import CAR_TYPES, KittiDataset
 
 #: The columns of a car table (:func:`bench_error_budget.car_table`) each ``--metric`` counts.
@@ -172,8 +172,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     # a drive enters the bootstrap through its cars: one without any is no draw
     drives = sorted({drive_of[f] for f in frames if labelled.get(f, 1) > 0})
     counts = {cell: drive_counts(t, drives, drive_of, column=column) for cell, t in tables.items()}
-    fold_by_drive = {drive_of[f]: fold_of(f) for f in frames}  # folds are dealt by drive
-    drive_fold = np.array([fold_by_drive[d] for d in drives])
+    drive_fold = np.array([DRIVE_FOLDS[d] for d in drives])
     report = {}
     what = "within 1 m" if args.metric == "loc" else "3D IoU > 0.7"
     print(f"margins over {args.reference} in points of the true positives {what}; {len(drives)} drives")
