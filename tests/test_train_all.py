@@ -233,6 +233,10 @@ def test_a_bad_drive_map_is_refused_before_training(tmp_path):
     assert r.exit_code == 2 and "--drive-map need --kitti-root" in r.output + r.stderr
     r = cli("train", "parts", "--out", tmp_path / "p.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path)
     assert r.exit_code == 2 and "--drive-map needs --kitti-root and --calibrate" in r.output + r.stderr
+    for without in (["--no-calibration"], ["--calibration", "9,1,0.4"]):  # no held-out calibration to group
+        r = cli("train", "detector", "--out", tmp_path / "b.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path,
+                *without)
+        assert r.exit_code == 2 and "not with --no-calibration or --calibration" in r.output + r.stderr
     assert not any(tmp_path.glob("*.npz"))
 
 

@@ -16,6 +16,7 @@ from wirescene.cli.options import (
     drive_map_option,
     load_models,
     models_option,
+    read_drive_map,
     select_frames,
     split_file_option,
     workers_count,
@@ -72,8 +73,10 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
     """Train the part-configuration detector bank (real KITTI frames or synthetic scenes)."""
     check_output_file(out, "--out")
     check_output_file(report, "--report")
+    if drive_mapping is not None and (no_calibration or calibration is not None):
+        raise click.UsageError("--drive-map groups the held-out calibration's folds: not with --no-calibration or "
+                               "--calibration")
     if kitti_root is not None:
-        from wirescene.io.folds import drive_map
         from wirescene.io.kitti import KittiDataset
         from wirescene.training.kitti_detector import check_calibration, train_detector_bank_kitti
 
@@ -84,9 +87,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
-        drives, mapping_dir = drive_map(ds.split_dir.parent, mapping=drive_mapping)
-        if mapping_dir is not None:
-            click.echo(f"frames grouped by drive with {mapping_dir}")
+        drives = read_drive_map(ds, drive_mapping)[0] if not no_calibration and given is None else None
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
                                            n_partial=n_partial, calibration_folds=not no_calibration,
                                            calibration=given, threshold=threshold, support_weight=support_weight,

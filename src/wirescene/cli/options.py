@@ -116,6 +116,18 @@ def drive_map_option(f):
                              "drives of the shared frames only; other frames are each their own group).")(f)
 
 
+def read_drive_map(dataset, mapping: Path | None) -> tuple[dict[str, str], Path | None]:
+    """``({frame: drive}, mapping directory or None)`` for the held-out calibrations of a training
+    on ``dataset`` (a :class:`~wirescene.io.kitti.KittiDataset`, given as ROOT or ROOT/training):
+    ``--drive-map`` or the devkit mapping found under the root; says which directory groups the frames."""
+    from wirescene.io.folds import drive_map
+
+    drives, mapping_dir = drive_map(dataset.split_dir.parent, mapping=mapping)
+    if mapping_dir is not None:
+        click.echo(f"frames grouped by drive with {mapping_dir}")
+    return drives, mapping_dir
+
+
 def select_frames(frames: str | None, split_file: Path | None, known: list[str], *, where, what: str = "labelled frame",
                   option: str = "--frames") -> list[str] | None:
     """The frames chosen by ``--frames`` (comma-separated) or ``--split-file`` (not both),

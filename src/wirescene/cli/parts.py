@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_file, drive_map_option, select_frames, split_file_option
+from wirescene.cli.options import check_output_file, drive_map_option, read_drive_map, select_frames, split_file_option
 
 
 @click.command("parts")
@@ -71,12 +71,10 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
         if frames is not None or split_file is not None:
             frames = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         if calibrate:
-            from wirescene.io.folds import drive_map
             from wirescene.training.kitti_detector import calibration_folds
 
-            drives, mapping_dir = drive_map(ds.split_dir.parent, mapping=drive_mapping)
+            drives, mapping_dir = read_drive_map(ds, drive_mapping)
             if mapping_dir is not None:  # else the folds of the shared frames' drives, as the shipped recipe
-                click.echo(f"frames grouped by drive with {mapping_dir}")
                 folds = calibration_folds(ds, frames or ds.frame_ids(), drives=drives)
 
     _, rep = train_part_detector(out, seed=seed, n_views=n_views, n_trees=n_trees, max_depth=max_depth, kind=kind,
