@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, run_tables  # noqa: E402  (benchmarks/ is on the path)
+from wirescene.eval.intervals import bootstrap_weights, clustered_share, percentile_interval
 from wirescene.io.folds import DRIVE_FOLDS, frame_drives
 from wirescene.io.kitti import CAR_TYPES, KittiDataset
 
@@ -56,36 +57,6 @@ def drive_counts(table: dict, drives: Sequence[str], drive_of: dict[str, str], *
 def _margin(k, n, k_ref, n_ref, axis=-1):
     with np.errstate(invalid="ignore", divide="ignore"):
         return 100.0 * (np.sum(k, axis) / np.sum(n, axis) - np.sum(k_ref, axis) / np.sum(n_ref, axis))
-
-
-def _drive_weights(d: int, n_boot: int, seed: int) -> np.ndarray:
-    """``(n_boot, d)`` times each of ``d`` drives is drawn in each bootstrap sample."""
-    return np.random.default_rng(seed).multinomial(d, np.full(d, 1.0 / d), size=n_boot).astype(float)
-
-
-def _percentiles(draws) -> tuple[float, float]:
-    draws = draws[np.isfinite(draws)]
-    return float(np.percentile(draws, 5)), float(np.percentile(draws, 95))
-
-
-def share_by_drive(k, n, *, n_boot: int = 10000, seed: int = 0) -> tuple[float, tuple[float, float] | None]:
-    """``(100 sum k / sum n, its drive-clustered bootstrap 90% interval or None)`` of per-drive counts ``(D,)``.
-
-    Examples
-    --------
-    >>> share, interval = share_by_drive([9, 1], [10, 10], n_boot=200)
-    >>> share, interval[0] <= 50.0 <= interval[1]
-    (50.0, True)
-    """
-    k, n = np.asarray(k, float), np.asarray(n, float)
-    if k.shape != n.shape or k.ndim != 1:
-        raise ValueError(f"per-drive counts of one shape (D,) expected, got {k.shape} {n.shape}")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        share = 100.0 * k.sum() / n.sum()
-        if n_boot <= 0:
-            return float(share), None
-        w = _drive_weights(len(k), n_boot, seed)
-        return float(share), _percentiles(100.0 * (w @ k) / (w @ n))
 
 
 def margin_by_drive(k, n, k_ref, n_ref, *, n_boot: int = 10000, seed: int = 0) -> dict:
@@ -125,8 +96,8 @@ def margin_by_drive(k, n, k_ref, n_ref, *, n_boot: int = 10000, seed: int = 0) -
     loo = np.array([_margin(k[m], n[m], k_ref[m], n_ref[m]) for m in keep])
     interval = None
     if n_boot > 0:
-        w = _drive_weights(d, n_boot, seed)
-        interval = _percentiles(_margin(w * k, w * n, w * k_ref, w * n_ref))
+        w = np.concatenate(list(bootstrap_weights(d, n_boot, seed=seed)))
+        interval = percentile_interval(_margin(w * k, w * n, w * k_ref, w * n_ref))
     return {"margin": float(_margin(k, n, k_ref, n_ref)), "interval": interval, "leave_one_out": loo,
             "net": (k - k_ref).astype(int)}
 
@@ -208,8 +179,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     print(f"\nshares, drive bootstrap 90% ({int(cars.sum())} labelled cars):")
     shares = {}
     for (name, variant), (n, k) in counts.items():
-        tp, tp_interval = share_by_drive(n, cars, n_boot=args.bootstrap, seed=args.seed)
-        ok, ok_interval = share_by_drive(k, n, n_boot=args.bootstrap, seed=args.seed)
+        tp, tp_interval = clustered_share(n, cars, n_boot=args.bootstrap, seed=args.seed)
+        ok, ok_interval = clustered_share(k, n, n_boot=args.bootstrap, seed=args.seed)
         shares[f"{name}:{variant}"] = {"true_positives": tp, "true_positives_interval": tp_interval,
                                        "passing": ok, "passing_interval": ok_interval}
         spans = ["" if i is None else " [{:.1f}, {:.1f}]".format(*i) for i in (tp_interval, ok_interval)]

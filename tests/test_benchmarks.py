@@ -159,7 +159,8 @@ def test_dev_holdout_keeps_the_tuning_frames_apart(monkeypatch):
 
 def test_by_drive_margin_shows_the_drive_that_carries_it(monkeypatch):
     monkeypatch.syspath_prepend(str(BENCHMARKS))
-    from bench_by_drive import drive_counts, margin_by_drive, share_by_drive
+    from bench_by_drive import drive_counts, margin_by_drive
+    from wirescene.eval.intervals import clustered_share
 
     table = {"frame": np.array(["a", "a", "b", "c"], dtype=object), "pass_loc": np.array([True, False, True, True])}
     n, k = drive_counts(table, ["d1", "d2", "d3"], {"a": "d1", "b": "d1", "c": "d3"}, column="pass_loc")
@@ -179,11 +180,11 @@ def test_by_drive_margin_shows_the_drive_that_carries_it(monkeypatch):
     assert margin_by_drive(k_var, n_cars, k_ref, n_cars, n_boot=0)["interval"] is None
     with pytest.raises(ValueError, match="one shape"):
         margin_by_drive(k_var, n_cars[:4], k_ref, n_cars)
-    share, (lo, hi) = share_by_drive(k_var, n_cars, n_boot=2000, seed=3)
+    share, (lo, hi) = clustered_share(k_var, n_cars, n_boot=2000, seed=3)
     assert_close(share, 100 * 50 / 90)
     assert lo < share < hi
     assert lo >= 100 * 5 / 10 - 1e-9 and hi <= 100 * 30 / 50 + 1e-9  # between the small drives' and the big one's
-    assert share_by_drive(k_var, n_cars, n_boot=0) == (share, None)
+    assert clustered_share(k_var, n_cars, n_boot=0) == (share, None)
 
 
 def test_operating_point_counts_boxes_on_no_car_and_second_boxes_as_false(monkeypatch):

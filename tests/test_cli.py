@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import KITTI_ROOT
+from conftest import KITTI_ROOT, assert_close
 from wirescene.cli.main import main
 from wirescene.core.errors import InputError
 from wirescene.io.detections import read_detections
@@ -29,6 +29,12 @@ def test_eval_prints_table_and_writes_json(tmp_path):
     for key in ("loc_1m", "loc_1_5m", "az_5", "az_10", "median_az3d", "median_az2d", "n_tp"):
         assert key in data
     assert data["n_tp"] == 9  # 1 + 8 cars, GT boxes with their true viewpoint bins
+    # Table 1's share with its bootstrap interval over the frames' two drives
+    assert "90% bootstrap interval over drives" in r.output
+    interval = data["loc_1m_interval"]
+    assert interval["true_positives"] == 9 and interval["drives"] == 2 and interval["frames_alone"] == 0
+    assert_close(interval["share"], data["loc_1m"])
+    assert interval["interval"][0] <= interval["share"] <= interval["interval"][1]
 
 
 def test_fit_writes_all_outputs(tmp_path):

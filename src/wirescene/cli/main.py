@@ -217,10 +217,12 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
              predictions, evidence, raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address,
              **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
+    from wirescene.eval.intervals import format_intervals, localisation_intervals
     from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
+    from wirescene.io.folds import drive_map
     from wirescene.io.kitti import KittiDataset
 
     if resume and predictions is None:
@@ -282,10 +284,14 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())
     click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if has_parts else ("3d", "viewpoint")))
+    # the drives of the shared frames and of a devkit mapping under the root; other frames alone
+    intervals = localisation_intervals(reports, drive_map(dataset.split_dir.parent)[0], seed=seed)
+    click.echo("\n" + format_intervals(intervals))
     kitti = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions)
     click.echo("\n" + format_kitti_summary(kitti))
     if json_out is not None:
-        data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v]} for v, r in reports.items()}
+        data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "loc_1m_interval": intervals[v]}
+                for v, r in reports.items()}
         if len(variants) == 1:
             data = data[variants[0]]
         _write_json_atomic(json_out, data)

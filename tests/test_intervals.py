@@ -1,0 +1,67 @@
+"""Bootstrap intervals clustered by drive (wirescene.eval.intervals)."""
+
+import numpy as np
+import pytest
+
+from conftest import assert_close
+from wirescene.eval.intervals import bootstrap_weights, clustered_share, localisation_intervals, percentile_interval
+from wirescene.eval.metrics import EvaluationReport, TPRecord
+
+
+def test_the_draws_do_not_depend_on_the_chunks():
+    drawn = np.concatenate(list(bootstrap_weights(24, 2500, seed=7)))
+    assert drawn.shape == (2500, 24)
+    whole = np.random.default_rng(7).multinomial(24, np.full(24, 1 / 24), size=2500)
+    assert_close(drawn, whole.astype(float), atol=0)
+
+
+def test_a_share_the_drives_agree_on_has_no_spread_and_one_they_split_has_much():
+    share, interval = clustered_share([5, 5, 5], [10, 10, 10], n_boot=500)
+    assert_close(share, 50.0)
+    assert_close(np.array(interval), np.array([50.0, 50.0]))
+    # the same 15 of 30 cars, all passing on one drive and none on two: other drives could show 0% or 100%
+    share, (lo, hi) = clustered_share([10, 0, 5], [10, 10, 10], n_boot=2000)
+    assert_close(share, 50.0)
+    assert lo <= 20.0 and hi >= 80.0
+    # a drive of many cars weighs as its cars: the pooled share, not the mean of the drives' shares
+    share, _ = clustered_share([1, 30], [10, 40], n_boot=0)
+    assert_close(share, 62.0)
+
+
+def test_bad_counts_are_refused():
+    with pytest.raises(ValueError, match="one shape"):
+        clustered_share([1, 2], [3], n_boot=10)
+    with pytest.raises(ValueError, match="0 <= k <= n"):
+        clustered_share([4], [3], n_boot=10)
+    with pytest.raises(ValueError, match="at least one cluster"):
+        next(bootstrap_weights(0, 10))
+    with pytest.raises(ValueError, match="no finite"):
+        percentile_interval([np.nan])
+    assert clustered_share([0], [0], n_boot=10)[1] is None
+
+
+def _report(errors_by_frame):
+    records = [TPRecord(frame, i, i, 0.9, err, 1.0, 1.0, True, None, 0)
+               for frame, errors in errors_by_frame.items() for i, err in enumerate(errors)]
+    return EvaluationReport(metrics={}, records=records, occlusion_source="kitti_flag", viewpoint_check="applied")
+
+
+def test_localisation_intervals_group_frames_by_drive_and_others_alone():
+    report = _report({"a1": [0.2, 3.0], "a2": [0.5], "b1": [2.0], "x": [0.1, 0.4]})
+    out = localisation_intervals({"full": report}, {"a1": "A", "a2": "A", "b1": "B"}, n_boot=300)["full"]
+    assert out["true_positives"] == 6 and out["drives"] == 3 and out["frames_alone"] == 1
+    assert_close(out["share"], 100.0 * 4 / 6)
+    lo, hi = out["interval"]
+    assert lo < out["share"] < hi
+    # a tighter threshold counts fewer cars; a variant without true positives has no share
+    assert_close(localisation_intervals({"v": report}, {}, threshold=0.3, n_boot=0)["v"]["share"], 100.0 * 2 / 6)
+    empty = localisation_intervals({"v": _report({})}, {}, n_boot=100)["v"]
+    assert empty["share"] is None and empty["interval"] is None and empty["drives"] == 0
+
+
+def test_the_examples_run():
+    import doctest
+
+    from wirescene.eval import intervals
+
+    assert doctest.testmod(intervals).failed == 0
