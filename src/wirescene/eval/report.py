@@ -131,24 +131,29 @@ def frame_scores(report: EvaluationReport, counts: dict[str, tuple[int, int]]) -
             for f, (n_cars, n_dets) in counts.items()}
 
 
-def _metrics_table(reports) -> str:
+def _metrics_table(reports, intervals=None) -> str:
     cols = [("n_gt", "GT cars", "{:.0f}"), ("n_tp", "TP", "{:.0f}"), ("loc_1m", "&lt;1 m", "{:.0f}%"),
             ("loc_1_5m", "&lt;1.5 m", "{:.0f}%"), ("median_loc", "median loc. (m)", "{:.2f}"),
             ("az_5", "az &lt;5°", "{:.0f}%"), ("median_az3d", "median az (°)", "{:.1f}")]
     head = "".join(f"<th>{c[1]}</th>" for c in cols)
+    if intervals is not None:
+        head = head.replace("<th>&lt;1.5 m</th>", "<th>&lt;1 m, 90% over drives</th><th>&lt;1.5 m</th>")
     rows = []
     for name, rep in reports.items():
         m = rep.metrics["all"]
         cells = []
         for key, _, fmt in cols:
             v = m.get(key)
+            if key == "loc_1_5m" and intervals is not None:
+                span = intervals[name]["interval"]
+                cells.append("–" if span is None else f"[{span[0]:.0f}, {span[1]:.0f}]%")
             cells.append("–" if v is None or not np.isfinite(v) else fmt.format(v))
         rows.append(f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     return f"<table><tr><th>variant</th>{head}</tr>{''.join(rows)}</table>"
 
 
 def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gallery, image_of, title: str = "",
-                 n_gallery: int = 3) -> Path:
+                 n_gallery: int = 3, intervals: dict | None = None) -> Path:
     """Write ``out_dir/index.html`` and its PNGs; returns the page's path.
 
     Parameters
@@ -161,6 +166,9 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
         ``image_of(frame_id)`` -> ``(H, W, 3)`` uint8 image, for the overlays.
     n_gallery : int
         Number of best and of worst frames shown.
+    intervals : dict, optional
+        ``{variant: figures}`` of :func:`wirescene.eval.intervals.localisation_intervals`: the
+        table then gives the 1 m share's interval over drives.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -209,7 +217,7 @@ img.wide {{ max-width: 70%; vertical-align: top; }} img.bev {{ max-width: 25%; v
 <h1>wirescene evaluation report</h1>
 <p>{html.escape(title)} — {n_frames} frames; the paper's protocol (true-positive initialisations, IoU &gt; 0.5,
 viewpoint within 45°).</p>
-{_metrics_table(reports)}
+{_metrics_table(reports, intervals)}
 <div class="plots">{''.join(f'<img src="{name}" alt="{name}">' for name in plots)}</div>
 <h2>Gallery ({html.escape(lead)}): best and worst frames</h2>
 <p>Red: estimate (wireframe, hidden vertices faded); green: ground truth; yellow: pre-detections.
