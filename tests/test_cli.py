@@ -143,6 +143,9 @@ def test_eval_runs_unchanged_on_synth_and_uses_vertex_ground_truth(tmp_path):
     data = json.loads(out.read_text())
     assert data["occlusion_source"] == "vertex_gt"
     assert data["n_tp"] >= 3
+    # synthetic scenes share KITTI's frame ids but no drive: each scene is a draw of its own
+    interval = data["loc_1m_interval"]
+    assert interval["drives"] == 0 and interval["frames_alone"] == 2 and interval["true_positives"] == data["n_tp"]
 
 
 def test_demo_runs_end_to_end(tmp_path):

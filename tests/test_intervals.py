@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 
 from conftest import assert_close
-from wirescene.eval.intervals import bootstrap_weights, clustered_share, localisation_intervals, percentile_interval
+from wirescene.eval.intervals import (
+    bootstrap_weights,
+    clustered_share,
+    format_intervals,
+    localisation_intervals,
+    percentile_interval,
+)
 from wirescene.eval.metrics import EvaluationReport, TPRecord
 
 
@@ -49,14 +55,15 @@ def _report(errors_by_frame):
 def test_localisation_intervals_group_frames_by_drive_and_others_alone():
     report = _report({"a1": [0.2, 3.0], "a2": [0.5], "b1": [2.0], "x": [0.1, 0.4]})
     out = localisation_intervals({"full": report}, {"a1": "A", "a2": "A", "b1": "B"}, n_boot=300)["full"]
-    assert out["true_positives"] == 6 and out["drives"] == 3 and out["frames_alone"] == 1
+    assert out["true_positives"] == 6 and out["drives"] == 2 and out["frames_alone"] == 1
     assert_close(out["share"], 100.0 * 4 / 6)
     lo, hi = out["interval"]
     assert lo < out["share"] < hi
     # a tighter threshold counts fewer cars; a variant without true positives has no share
     assert_close(localisation_intervals({"v": report}, {}, threshold=0.3, n_boot=0)["v"]["share"], 100.0 * 2 / 6)
     empty = localisation_intervals({"v": _report({})}, {}, n_boot=100)["v"]
-    assert empty["share"] is None and empty["interval"] is None and empty["drives"] == 0
+    assert empty["share"] is None and empty["interval"] is None and empty["drives"] == empty["frames_alone"] == 0
+    assert "-" in format_intervals({"v": empty}) and "2 drives and 1 frame of no known drive" in format_intervals({"full": out})
 
 
 def test_the_examples_run():

@@ -122,33 +122,36 @@ def localisation_intervals(reports: Mapping, cluster_of: Mapping[str, str], *, t
     -------
     dict
         ``{variant: {"share", "interval", "true_positives", "drives", "frames_alone"}}``:
-        ``drives`` the clusters with a true positive, ``frames_alone`` those of them that
-        are a frame of unknown drive.
+        ``drives`` the drives with a true positive, ``frames_alone`` the frames of no known
+        drive with one (each drawn on its own); ``share`` None without true positives.
     """
     out = {}
     for variant, report in reports.items():
         frames = [r.frame_id for r in report.records]
-        clusters = [cluster_of.get(f, f"frame {f}") for f in frames]
-        names, index = np.unique(np.array(clusters, dtype=str), return_inverse=True) if frames else ([], [])
+        clusters = [cluster_of.get(f, (f,)) for f in frames]  # a frame of no known drive: a cluster of its own
+        index = {c: i for i, c in enumerate(dict.fromkeys(clusters))}
+        rows = np.array([index[c] for c in clusters], int)
         within = np.array([r.loc_error < threshold for r in report.records], float)
-        n = np.bincount(index, minlength=len(names)).astype(float)
-        k = np.bincount(index, weights=within, minlength=len(names))
+        n = np.bincount(rows, minlength=len(index)).astype(float)
+        k = np.bincount(rows, weights=within, minlength=len(index))
         share, interval = clustered_share(k, n, n_boot=n_boot, seed=seed)
-        out[variant] = {"share": share if interval is not None or len(frames) else None, "interval": interval,
-                        "true_positives": len(frames), "drives": len(names),
-                        "frames_alone": sum(str(c).startswith("frame ") for c in names)}
+        alone = sum(isinstance(c, tuple) for c in index)
+        out[variant] = {"share": share if frames else None, "interval": interval, "true_positives": len(frames),
+                        "drives": len(index) - alone, "frames_alone": alone}
     return out
 
 
 def format_intervals(intervals: Mapping[str, dict], *, threshold: float = 1.0) -> str:
     """Lines of :func:`localisation_intervals`' figures, a variant a line."""
-    lines = [f"Within {threshold:g} m, 90% bootstrap interval over drives (other drives could move the share so far):"]
+    lines = [f"Within {threshold:g} m, 90% bootstrap interval over drives (other drives could move the share so far; "
+             "a frame of no known drive is drawn alone):"]
     width = max([len(v) for v in intervals] + [7])
     for variant, f in intervals.items():
         if f["interval"] is None:
             lines.append(f"  {variant.ljust(width)}  -")
             continue
-        alone = f", {f['frames_alone']} of them single frames of unknown drive" if f["frames_alone"] else ""
+        n_alone = f["frames_alone"]
+        alone = f" and {n_alone} frame{'s' * (n_alone != 1)} of no known drive" if n_alone else ""
         lines.append(f"  {variant.ljust(width)}  {f['share']:.1f}% [{f['interval'][0]:.1f}, {f['interval'][1]:.1f}] "
                      f"of {f['true_positives']} true positives, {f['drives']} drives{alone}")
     return "\n".join(lines)
