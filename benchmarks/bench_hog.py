@@ -2,12 +2,14 @@
 
 ``--against FILE`` is a ``wirescene/predetect/hog.py`` of another revision, e.g.
 ``git show REV:src/wirescene/predetect/hog.py > OLD_HOG.py``. Both modules' ``hog_cells``,
-``crop_features`` and ``feature_pyramid`` are swapped into the detector in turn, and the
+``crop_features``, ``crops_features`` (a revision without it: its ``crop_features`` one window
+at a time) and ``feature_pyramid`` are swapped into the detector in turn, and the
 shipped bank's ``detect_cars`` runs on the same frames, alternating between them, on one
 core (BLAS threads limited to 1; CPU time of this process). It prints whether the two give
 identical detections, the CPU seconds per frame of each (best of ``--repeat`` passes) and
-their ratio, and the same for ``hog_cells`` alone on a 112 x 80 crop (the refinement's and
-the verifier's windows) and on a 2x-upsampled frame (the pyramid's largest level).
+their ratio, the same for ``crops_features`` on 256 windows of the refinement's grid, and for
+``hog_cells`` alone on a 112 x 80 crop (the refinement's and the verifier's windows) and on a
+2x-upsampled frame (the pyramid's largest level).
 
     python benchmarks/bench_hog.py --root ../shared/data/kitti --against OLD_HOG.py [--frames 5]
 """
@@ -42,8 +44,18 @@ def main() -> None:
         raise SystemExit(f"{args.against}: not a Python file")
     other = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(other)
-    names = ("hog_cells", "crop_features", "feature_pyramid")
-    versions = {"this": {n: getattr(hog, n) for n in names}, "other": {n: getattr(other, n) for n in names}}
+    names = ("hog_cells", "crop_features", "crops_features", "feature_pyramid")
+
+    def crop_by_crop(crop_features):  # a revision without crops_features: one crop at a time, as it did
+        def crops_features(gray, boxes, th, tw):
+            b = np.asarray(boxes, float).reshape(-1, 4)
+            return np.stack([crop_features(gray, box, th, tw) for box in b]) if len(b) else \
+                np.zeros((0, th, tw, hog.N_FEAT), np.float32)
+        return crops_features
+
+    versions = {v: {n: getattr(m, n, None) for n in names} for v, m in (("this", hog), ("other", other))}
+    for v in versions.values():
+        v["crops_features"] = v["crops_features"] or crop_by_crop(v["crop_features"])
 
     def use(version: str) -> None:
         for module in (hog, bank_module, refine):
@@ -79,6 +91,14 @@ def main() -> None:
           f"this {seconds['this']:.2f}, other {seconds['other']:.2f}, other / this {seconds['other'] / seconds['this']:.2f}x")
 
     gray = hog.to_gray(frames[0][0])
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(0, gray.shape[1] - 120, 256), rng.uniform(100, gray.shape[0] - 60, 256)
+    boxes = np.column_stack([x, y, x + rng.uniform(20, 120, 256), y + rng.uniform(15, 60, 256)])
+    t = {v: cpu(lambda f=versions[v]["crops_features"]: f(gray, boxes, 8, 12), args.repeat + 1)[0] for v in versions}
+    equal = np.array_equal(versions["this"]["crops_features"](gray, boxes, 8, 12),
+                           versions["other"]["crops_features"](gray, boxes, 8, 12))
+    print(f"crops_features, 256 windows of 8 x 12 cells: identical {equal}; this {t['this'] * 1e3:.1f} ms, "
+          f"other {t['other'] * 1e3:.1f} ms, other / this {t['other'] / t['this']:.2f}x")
     crop = np.ascontiguousarray(gray[100:212, 300:380])
     big = hog.resize(gray, 2 * gray.shape[1], 2 * gray.shape[0])
     for name, image, reps in (("112 x 80 crop", crop, 2000), (f"{big.shape[1]} x {big.shape[0]} level", big, 10)):

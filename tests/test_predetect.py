@@ -23,7 +23,7 @@ from wirescene.predetect.bank import (
     score_pyramid,
 )
 from wirescene.predetect.configurations import Configuration, connected_subsets, mirror_bin
-from wirescene.predetect.hog import N_FEAT, crop_features, feature_pyramid, hog_cells
+from wirescene.predetect.hog import N_FEAT, crop_features, crops_features, feature_pyramid, hog_cells
 
 
 def _label(box, type_="Car", occluded=0, truncated=0.0, alpha=0.0):
@@ -133,6 +133,20 @@ def test_hog_crop_matches_sliding_window():
     assert f.shape == (12, 16, N_FEAT) and np.all(f >= 0)
     c = crop_features(g, [16, 24, 64, 64], 5, 6)  # exactly cells (3..8, 2..8)
     np.testing.assert_allclose(c, f[3:8, 2:8], atol=0.02)
+
+
+def test_many_crops_at_once_give_each_crop_s_features():
+    rng = np.random.default_rng(1)
+    g = rng.random((120, 200)).astype(np.float32)
+    # windows inside, across the image's sides and corners, of several sizes
+    boxes = np.array([[10, 20, 90, 60], [-30, 5, 40, 70], [150, 80, 230, 140], [0.5, 0.25, 199.5, 119.75]])
+    many = crops_features(g, boxes, 8, 12, chunk=3)  # two chunks
+    assert many.shape == (4, 8, 12, N_FEAT)
+    for box, f in zip(boxes, many):
+        assert np.array_equal(f, crop_features(g, box, 8, 12))  # the same numbers, not close ones
+    assert crops_features(g, np.zeros((0, 4)), 8, 12).shape == (0, 8, 12, N_FEAT)
+    stack = rng.random((3, 40, 56)).astype(np.float32)
+    assert np.array_equal(hog_cells(stack), np.stack([hog_cells(x) for x in stack]))
 
 
 def _fhog_by_loops(g, cell=8):

@@ -25,25 +25,29 @@ def to_gray(image: np.ndarray) -> np.ndarray:
 
 
 def _edge_pad(x: np.ndarray) -> np.ndarray:
-    """``x`` ``(h, w)`` with one edge-replicated row / column on every side (``np.pad``'s
-    ``mode="edge"``, without its per-call cost, which dominated small crops)."""
-    h, w = x.shape
-    out = np.empty((h + 2, w + 2), x.dtype)
-    out[1:-1, 1:-1] = x
-    out[0, 1:-1], out[-1, 1:-1] = x[0], x[-1]
-    out[:, 0], out[:, -1] = out[:, 1], out[:, -2]
+    """``x`` ``(..., h, w)`` with one edge-replicated row / column on every side of its last
+    two axes (``np.pad``'s ``mode="edge"``, without its per-call cost, which dominated small
+    crops)."""
+    h, w = x.shape[-2:]
+    out = np.empty(x.shape[:-2] + (h + 2, w + 2), x.dtype)
+    out[..., 1:-1, 1:-1] = x
+    out[..., 0, 1:-1], out[..., -1, 1:-1] = x[..., 0, :], x[..., -1, :]
+    out[..., :, 0], out[..., :, -1] = out[..., :, 1], out[..., :, -2]
     return out
 
 
 def hog_cells(gray: np.ndarray, cell: int = CELL) -> np.ndarray:
-    """(H // cell, W // cell, 31) float32 FHOG features of a grey image."""
+    """(..., H // cell, W // cell, 31) float32 FHOG features of grey images ``(..., H, W)``
+    (a stack of equal crops in one call: the same numbers as one call each, for far fewer
+    numpy calls)."""
     g = np.asarray(gray, dtype=np.float32)
-    hc, wc = g.shape[0] // cell, g.shape[1] // cell
+    lead = g.shape[:-2]
+    hc, wc = g.shape[-2] // cell, g.shape[-1] // cell
     if hc < 1 or wc < 1:
-        return np.zeros((max(hc, 0), max(wc, 0), N_FEAT), np.float32)
-    p = _edge_pad(g[: hc * cell, : wc * cell])
-    gx = p[1:-1, 2:] - p[1:-1, :-2]
-    gy = p[2:, 1:-1] - p[:-2, 1:-1]
+        return np.zeros(lead + (max(hc, 0), max(wc, 0), N_FEAT), np.float32)
+    p = _edge_pad(g[..., : hc * cell, : wc * cell])
+    gx = p[..., 1:-1, 2:] - p[..., 1:-1, :-2]
+    gy = p[..., 2:, 1:-1] - p[..., :-2, 1:-1]
     mag = np.sqrt(gx * gx + gy * gy)
     pos = (np.arctan2(gy, gx) + np.pi) * (_N_ORIENT / (2 * np.pi))  # [0, 18]
     lower = np.floor(pos)
@@ -52,26 +56,26 @@ def hog_cells(gray: np.ndarray, cell: int = CELL) -> np.ndarray:
     b0[b0 >= _N_ORIENT] -= _N_ORIENT  # (a modulo costs more than the whole histogram)
     b1 = b0 + 1
     b1[b1 == _N_ORIENT] = 0
-    # histogram index of each pixel's bins: (cell row * wc + cell column) * 18 + bin
-    row_offset = (np.arange(hc * cell) // cell * (wc * _N_ORIENT))[:, None]
-    col_offset = np.arange(wc * cell) // cell * _N_ORIENT
-    b0 += row_offset
-    b0 += col_offset
-    b1 += row_offset
-    b1 += col_offset
-    n = hc * wc * _N_ORIENT
+    # histogram index of each pixel's bins: ((image * hc + cell row) * wc + cell column) * 18 + bin
+    per_image = hc * wc * _N_ORIENT
+    offset = (np.arange(hc * cell) // cell * (wc * _N_ORIENT))[:, None] + np.arange(wc * cell) // cell * _N_ORIENT
+    if lead:
+        offset = offset + (np.arange(int(np.prod(lead))) * per_image).reshape(lead + (1, 1))
+    b0 += offset
+    b1 += offset
+    n = per_image * int(np.prod(lead))
     h18 = np.bincount(b0.ravel(), weights=(mag * (1 - f)).ravel(), minlength=n)
     h18 += np.bincount(b1.ravel(), weights=(mag * f).ravel(), minlength=n)
-    h18 = h18.reshape(hc, wc, _N_ORIENT).astype(np.float32)
+    h18 = h18.reshape(lead + (hc, wc, _N_ORIENT)).astype(np.float32)
     h9 = h18[..., :9] + h18[..., 9:]
     energy = _edge_pad((h9 * h9).sum(-1))
     # block energies: block (i, j) covers cells (i..i+1, j..j+1) of the padded grid
-    blk = energy[:-1, :-1] + energy[1:, :-1] + energy[:-1, 1:] + energy[1:, 1:]  # (hc+1, wc+1)
+    blk = energy[..., :-1, :-1] + energy[..., 1:, :-1] + energy[..., :-1, 1:] + energy[..., 1:, 1:]  # (hc+1, wc+1)
     inv = 1.0 / np.sqrt(blk + 1e-4)
-    norms = np.stack([inv[dy:dy + hc, dx:dx + wc] for dy in (0, 1) for dx in (0, 1)])[..., None]  # (4, hc, wc, 1)
+    norms = np.stack([inv[..., dy:dy + hc, dx:dx + wc] for dy in (0, 1) for dx in (0, 1)])[..., None]  # (4, ..., hc, wc, 1)
     a = np.minimum(h18 * norms, 0.2)
     a9 = np.minimum(h9 * norms, 0.2)
-    out = np.empty((hc, wc, N_FEAT), np.float32)
+    out = np.empty(lead + (hc, wc, N_FEAT), np.float32)
     out[..., :18] = 0.5 * (((a[0] + a[1]) + a[2]) + a[3])  # summed in the order of the four blocks
     out[..., 18:27] = 0.5 * (((a9[0] + a9[1]) + a9[2]) + a9[3])
     out[..., 27:] = 0.2357 * np.moveaxis(a.sum(-1), 0, -1)
@@ -115,12 +119,8 @@ def feature_pyramid(image: np.ndarray, scales) -> list[tuple[float, np.ndarray]]
     return [(float(s), hog_cells(level_image(gray, s))) for s in scales]
 
 
-def crop_features(gray: np.ndarray, box, th: int, tw: int) -> np.ndarray:
-    """(th, tw, 31) features of ``box`` (x1 y1 x2 y2) warped to a ``th x tw``-cell template.
-
-    The crop includes one cell of context on every side (edge-replicated outside the
-    image) so that gradients and block normalisation at the template border match those
-    of the sliding-window features."""
+def _warped_crop(gray: np.ndarray, box, th: int, tw: int) -> np.ndarray:
+    """``((th + 2) * CELL, (tw + 2) * CELL)`` float32 pixels of ``box`` with one cell of context."""
     x1, y1, x2, y2 = [float(v) for v in box]
     cw, ch = (x2 - x1) / tw, (y2 - y1) / th
     X1, Y1, X2, Y2 = x1 - cw, y1 - ch, x2 + cw, y2 + ch
@@ -136,5 +136,24 @@ def crop_features(gray: np.ndarray, box, th: int, tw: int) -> np.ndarray:
     ox, oy = X1 - ix1, Y1 - iy1
     im = im.resize(((tw + 2) * CELL, (th + 2) * CELL), Image.BILINEAR,
                    box=(ox, oy, ox + (X2 - X1), oy + (Y2 - Y1)))
-    f = hog_cells(np.asarray(im, np.float32))
-    return f[1:-1, 1:-1]
+    return np.asarray(im, np.float32)
+
+
+def crop_features(gray: np.ndarray, box, th: int, tw: int) -> np.ndarray:
+    """(th, tw, 31) features of ``box`` (x1 y1 x2 y2) warped to a ``th x tw``-cell template.
+
+    The crop includes one cell of context on every side (edge-replicated outside the
+    image) so that gradients and block normalisation at the template border match those
+    of the sliding-window features."""
+    return hog_cells(_warped_crop(gray, box, th, tw))[1:-1, 1:-1]
+
+
+def crops_features(gray: np.ndarray, boxes, th: int, tw: int, *, chunk: int = 256) -> np.ndarray:
+    """(D, th, tw, 31) :func:`crop_features` of ``boxes`` ``(D, 4)``, the same numbers, the
+    features of ``chunk`` crops at a time (memory: some 60 kB per crop and array)."""
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    out = np.zeros((len(b), th, tw, N_FEAT), np.float32)
+    for start in range(0, len(b), chunk):
+        stack = np.stack([_warped_crop(gray, box, th, tw) for box in b[start:start + chunk]])
+        out[start:start + len(stack)] = hog_cells(stack)[:, 1:-1, 1:-1]
+    return out

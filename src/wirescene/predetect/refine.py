@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from wirescene.core.errors import check_shape
-from wirescene.predetect.hog import N_FEAT, crop_features
+from wirescene.predetect.hog import N_FEAT, crops_features
 
 CONTEXT = 0.25
 GRID = (8, 12)  # (rows, cols) of HOG cells of the grown window
@@ -42,9 +42,7 @@ def refinement_features(gray: np.ndarray, boxes, geometry: np.ndarray) -> np.nda
     geometry = np.asarray(geometry, float)
     geometry = geometry.reshape(len(b), geometry.shape[-1])  # (the last axis named: no boxes, no rows to infer it)
     th, tw = GRID
-    cells = np.zeros((len(b), th * tw * N_FEAT), np.float32)
-    for i, wb in enumerate(window_boxes(b)):
-        cells[i] = crop_features(gray, wb, th, tw).ravel()
+    cells = crops_features(gray, window_boxes(b), th, tw).reshape(len(b), th * tw * N_FEAT)
     return np.concatenate([cells, geometry], 1)
 
 
