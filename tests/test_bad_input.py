@@ -77,6 +77,17 @@ def _eval_label_case(tmp, row):
             "--predictions", tmp / "pred", "--json", tmp / "metrics.json", "--report", tmp / "report"]
 
 
+def _eval_mapping_case(tmp):
+    """``eval`` of a copy of the test frame under a root whose devkit mapping (the drives of its
+    bootstrap intervals) is malformed: refused before any frame is fitted."""
+    args = _eval_label_case(tmp, "")
+    label = tmp / "kitti" / "training" / "label_2" / f"{FRAME}.txt"
+    label.write_text(label.read_text().rstrip("\n") + "\n")
+    _file(tmp, "kitti/mapping/train_mapping.txt", "2011_09_26 2011_09_26_drive_0005_sync 0000000001\n")
+    _file(tmp, "kitti/mapping/train_rand.txt", "1,x")
+    return args
+
+
 def _write_16bit(path):
     from PIL import Image
 
@@ -153,6 +164,7 @@ CASES = {
     "--predictions is a file": (lambda t: _eval_case(t, "--predictions", _file(t, "f")), "is a file"),
     "fit --out is a file": (lambda t: [*_fit_case(t), "--out", _file(t, "o")], "is a file"),
     "demo --out is a file": (lambda t: ["demo", "--out", _file(t, "o")], "is a file"),
+    "eval devkit mapping malformed": (_eval_mapping_case, r"train_rand\.txt.*entry 2 \('x'\)"),
     # detection directories
     "eval detections match no frame": (lambda t: _eval_case(t, "--detections", _dets_dir(t, {"10.csv": "x1,y1,x2,y2\n1,2,3,4\n"})),
                                        "none of the frames"),

@@ -238,6 +238,9 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     dataset = KittiDataset(kitti_root, split=split)
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.frame_ids(), where=dataset.split_dir)
+    # the drives of the shared frames and of a devkit mapping under the root (a bad one is an error before any fit);
+    # synthetic scenes (their ids are KITTI's too) and other frames each alone
+    drives = {} if (dataset.split_dir / "wireframes").is_dir() else drive_map(dataset.split_dir.parent)[0]
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
@@ -284,10 +287,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())
     click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if has_parts else ("3d", "viewpoint")))
-    # the drives of the shared frames and of a devkit mapping under the root; synthetic scenes (their ids are
-    # KITTI's too) and other frames each alone
-    synthetic = (dataset.split_dir / "wireframes").is_dir()
-    intervals = localisation_intervals(reports, {} if synthetic else drive_map(dataset.split_dir.parent)[0], seed=seed)
+    intervals = localisation_intervals(reports, drives, seed=seed)
     click.echo("\n" + format_intervals(intervals))
     kitti = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions)
     click.echo("\n" + format_kitti_summary(kitti))
