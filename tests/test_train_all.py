@@ -218,9 +218,9 @@ def test_held_out_folds_are_drives_where_known_and_frames_otherwise(tmp_path):
     mapping.mkdir(parents=True)
     (mapping / "train_mapping.txt").write_text("2011_09_26 2011_09_26_drive_0005_sync 0000000001\n")
     (mapping / "train_rand.txt").write_text(",".join(["1"] * 11))
-    drives, where = drive_map(dataset.split_dir.parent)
+    drives, where = drive_map(dataset.base_dir)
     assert where == mapping
-    assert drive_map(KittiDataset(tmp_path / "kitti" / "training").split_dir.parent)[1] == mapping  # the split given
+    assert drive_map(KittiDataset(tmp_path / "kitti" / "training").base_dir)[1] == mapping  # the split given
     assert calibration_folds(dataset, ["000002", "000010", "900001"], n_folds=2, drives=drives) == \
         {"000010": 0, "000002": 0, "900001": 1}
 

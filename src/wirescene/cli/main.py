@@ -224,6 +224,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     from wirescene.eval.sources import DetectionSource
     from wirescene.io.folds import drive_map
     from wirescene.io.kitti import KittiDataset
+    from wirescene.io.wireframes import wireframe_gt_dir
 
     if resume and predictions is None:
         raise click.UsageError("--resume needs --predictions DIR, where finished frames are recorded")
@@ -240,7 +241,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     frame_ids = select_frames(frames, split_file, dataset.frame_ids(), where=dataset.split_dir)
     # the drives of the shared frames and of a devkit mapping under the root (a bad one is an error before any fit);
     # synthetic scenes (their ids are KITTI's too) and other frames each alone
-    drives = {} if (dataset.split_dir / "wireframes").is_dir() else drive_map(dataset.split_dir.parent)[0]
+    drives = {} if wireframe_gt_dir(dataset.split_dir).is_dir() else drive_map(dataset.base_dir)[0]
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.

@@ -122,7 +122,7 @@ def read_drive_map(dataset, mapping: Path | None) -> tuple[dict[str, str], Path 
     ``--drive-map`` or the devkit mapping found under the root; says which directory groups the frames."""
     from wirescene.io.folds import drive_map
 
-    drives, mapping_dir = drive_map(dataset.split_dir.parent, mapping=mapping)
+    drives, mapping_dir = drive_map(dataset.base_dir, mapping=mapping)
     if mapping_dir is not None:
         click.echo(f"frames grouped by drive with {mapping_dir}")
     return drives, mapping_dir

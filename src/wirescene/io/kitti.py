@@ -248,6 +248,12 @@ class KittiDataset:
         self._ids: list[str] | None = None
 
     @property
+    def base_dir(self) -> Path:
+        """The directory above the split (the KITTI root, whether ``ROOT`` or ``ROOT/training``
+        was given), where the devkit's files lie."""
+        return self.split_dir.parent
+
+    @property
     def has_labels(self) -> bool:
         """Whether the split has a ``label_2/`` directory (training split)."""
         return (self.split_dir / "label_2").is_dir()

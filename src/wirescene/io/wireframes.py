@@ -43,5 +43,10 @@ def read_wireframe_gt(path: str | Path) -> WireframeGT:
         raise InputError(f"malformed wireframe ground truth ({exc.__class__.__name__}: {exc})", path=path) from None
 
 
+def wireframe_gt_dir(split_dir: Path) -> Path:
+    """Where a split keeps its per-vertex ground truth (synthetic scenes have one)."""
+    return Path(split_dir) / "wireframes"
+
+
 def wireframe_gt_path(split_dir: Path, frame_id: str) -> Path:
-    return Path(split_dir) / "wireframes" / f"{frame_id}.json"
+    return wireframe_gt_dir(split_dir) / f"{frame_id}.json"

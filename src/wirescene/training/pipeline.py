@@ -218,7 +218,7 @@ def train_all(
     if not dataset.has_labels:
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
     ids = _training_frames(dataset, frames, split_file)
-    drives, mapping_dir = drive_map(dataset.split_dir.parent, mapping=drive_mapping)  # ROOT given as ROOT or ROOT/training
+    drives, mapping_dir = drive_map(dataset.base_dir, mapping=drive_mapping)
     folds = calibration_folds(dataset, ids, n_folds=n_folds, drives=drives)
     previous = _previous_steps(out, resume)
     manifest = _new_manifest(dataset, ids, folds, split_file, drives=drives, mapping_dir=mapping_dir)
