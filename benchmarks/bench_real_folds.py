@@ -33,27 +33,31 @@ from pathlib import Path
 import numpy as np
 
 from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
+from wirescene.eval.intervals import format_intervals, kitti_intervals, localisation_intervals
 from wirescene.eval.kitti_metrics import kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
 from wirescene.eval.sources import DetectionSource
 from wirescene.fitting.pipeline import FitOptions
 from wirescene.fitting.variants import VARIANTS
-from wirescene.io.folds import N_FOLDS, fold_of
+from wirescene.io.folds import N_FOLDS, drive_map, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
 from wirescene.training.scores import cross_validated_confidences
 
 
-def kitti_with_cv_scores(records, gt, folds):
-    """{variant: KITTI metrics} with each fold's confidences from a model of the other folds."""
+def kitti_with_cv_scores(records, gt, folds, drives, *, seed):
+    """({variant: KITTI metrics}, {variant: their moderate figures' intervals over drives}) with each
+    fold's confidences from a model of the other folds."""
     frames = sorted(gt)
-    out = {}
+    out, spread = {}, {}
     for variant, results in records.items():
         by_frame = {r.frame_id: r for r in results}
         scores = cross_validated_confidences(records, folds, variant)
-        out[variant] = kitti_metrics([gt[f] for f in frames], [by_frame[f].estimate_labels(scores[f]) for f in frames])
-    return out
+        gts, preds = [gt[f] for f in frames], [by_frame[f].estimate_labels(scores[f]) for f in frames]
+        out[variant] = kitti_metrics(gts, preds)
+        spread[variant] = kitti_intervals(gts, preds, frames, drives, seed=seed)
+    return out, spread
 
 
 def main():
@@ -128,18 +132,31 @@ def main():
     print(f"\n{len(frames)} real frames, {n_cars} cars, {N_FOLDS} folds by drive, detections: {args.detections}, "
           f"models: {'shipped' if args.shipped else args.models}, seed {args.seed} ({elapsed:.0f} s)\n")
     print(format_table(reports, tables=("3d", "viewpoint")))
-    kitti = kitti_with_cv_scores({v: records[v] for v in variants}, gt, folds)
+    drives = drive_map(dataset.base_dir)[0]
+    within = localisation_intervals(reports, drives, seed=args.seed)
+    print("\n" + format_intervals(within))
+    kitti, spread = kitti_with_cv_scores({v: records[v] for v in variants}, gt, folds, drives, seed=args.seed)
 
     def fmt(v):
         return "    -" if v is None else f"{v:5.1f}"
 
-    print("\nKITTI AP (R40, moderate; scores: cross-validated calibrated confidences)")
-    print(f"{'variant':10s} {'2D 0.7':>7s} {'AOS':>6s} {'BEV 0.7':>8s} {'3D 0.7':>7s} {'BEV 0.5':>8s} {'3D 0.5':>7s}")
+    def fmt_interval(v):
+        return "-" if v is None else f"[{v[0]:.1f}, {v[1]:.1f}]"
+
+    print("\nKITTI AP (R40, moderate; scores: cross-validated calibrated confidences), each with its 90% bootstrap "
+          "interval over drives")
+    print(f"{'variant':10s} {'2D 0.7':>20s} {'AOS':>20s} {'BEV 0.7':>20s} {'3D 0.7':>20s} {'BEV 0.5':>20s} "
+          f"{'3D 0.5':>20s}")
     for v, m in kitti.items():
-        c, h = m["car"], m["iou_0.5"]["car"]
-        print(f"{v:10s} {fmt(c['2d']['moderate']):>7s} {fmt(c['aos']['moderate']):>6s} {fmt(c['bev']['moderate']):>8s} "
-              f"{fmt(c['3d']['moderate']):>7s} {fmt(h['bev']['moderate']):>8s} {fmt(h['3d']['moderate']):>7s}")
-    summary = {v: {"paper": reports[v].to_json_dict(include_records=False), "kitti": kitti[v]} for v in variants}
+        cells = [(m[block] if block == "car" else m[block]["car"])[metric]
+                 for block, metric in (("car", "2d"), ("car", "aos"), ("car", "bev"), ("car", "3d"),
+                                       ("iou_0.5", "bev"), ("iou_0.5", "3d"))]
+        bounds = [(spread[v][block] if block == "car" else spread[v][block]["car"])[metric]
+                  for block, metric in (("car", "2d"), ("car", "aos"), ("car", "bev"), ("car", "3d"),
+                                        ("iou_0.5", "bev"), ("iou_0.5", "3d"))]
+        print(f"{v:10s} " + " ".join(f"{fmt(c['moderate']) + ' ' + fmt_interval(b):>20s}" for c, b in zip(cells, bounds)))
+    summary = {v: {"paper": reports[v].to_json_dict(include_records=False), "kitti": kitti[v],
+                   "kitti_interval": spread[v], "loc_1m_interval": within[v]} for v in variants}
     summary["_run"] = {"frames": len(frames), "cars": n_cars, "detections": args.detections, "seed": args.seed,
                        "models": "shipped" if args.shipped else str(args.models), "seconds": elapsed,
                        "settings": args.settings}

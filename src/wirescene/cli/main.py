@@ -290,10 +290,11 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if has_parts else ("3d", "viewpoint")))
     intervals = localisation_intervals(reports, drives, seed=seed)
     click.echo("\n" + format_intervals(intervals))
-    kitti = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions)
-    click.echo("\n" + format_kitti_summary(kitti))
+    kitti, kitti_spread = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions, drives=drives, seed=seed)
+    click.echo("\n" + format_kitti_summary(kitti, intervals=kitti_spread))
     if json_out is not None:
-        data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "loc_1m_interval": intervals[v]}
+        data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "kitti_interval": kitti_spread[v],
+                    "loc_1m_interval": intervals[v]}
                 for v, r in reports.items()}
         if len(variants) == 1:
             data = data[variants[0]]
@@ -358,24 +359,27 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     click.echo(f"{len(fitted)} frames fitted, {total - len(fitted)} kept from an earlier run; labels in {out}")
 
 
-def _kitti_figures(dataset, frame_ids, variants, rows, predictions) -> dict:
+def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, seed) -> tuple[dict, dict]:
     """KITTI benchmark figures (:func:`wirescene.eval.kitti_metrics.kitti_metrics`) of each
-    variant: of its label files in ``predictions`` if given (so that fitted and resumed
-    frames give the same figures, and ``kitti-eval`` on those files agrees), else of the
-    label rows it predicted (``rows[variant][frame]``)."""
+    variant, and the moderate ones' bootstrap intervals over ``drives``
+    (:func:`wirescene.eval.intervals.kitti_intervals`): of its label files in ``predictions``
+    if given (so that fitted and resumed frames give the same figures, and ``kitti-eval`` on
+    those files agrees), else of the label rows it predicted (``rows[variant][frame]``)."""
+    from wirescene.eval.intervals import kitti_intervals
     from wirescene.eval.kitti_metrics import kitti_metrics
     from wirescene.io.kitti import read_labels
 
     frame_ids = list(frame_ids) if frame_ids else dataset.frame_ids()
     gts = [dataset.labels(f) for f in frame_ids]
-    out = {}
+    out, spread = {}, {}
     for v in variants:
         if predictions is not None:
             preds = [read_labels(Path(predictions) / v / f"{f}.txt") for f in frame_ids]
         else:
             preds = [rows[v][f] for f in frame_ids]
         out[v] = kitti_metrics(gts, preds)
-    return out
+        spread[v] = kitti_intervals(gts, preds, frame_ids, drives, seed=seed)
+    return out, spread
 
 
 @main.command("kitti-eval")

@@ -381,42 +381,86 @@ def _greedy(pg, pd, rank, priority_keys, available):
     return chosen, assigned
 
 
-def _thresholds(scores: np.ndarray, n_gt: int) -> np.ndarray:
-    """The devkit's score thresholds for evenly spaced recall (``getThresholds``)."""
-    v = np.sort(np.asarray(scores, dtype=float))[::-1]
-    out = []
-    current = 0.0
-    step = 1.0 / (N_SAMPLE_PTS - 1.0)
-    last = len(v) - 1
-    for i, score in enumerate(v):
-        left = (i + 1) / n_gt
-        right = (i + 2) / n_gt if i < last else left
-        if (right - current) < (current - left) and i < last:
-            continue
-        out.append(score)
-        current += step
-    return np.asarray(out, dtype=float)
+def _threshold_columns(counts: np.ndarray, n_gt: float) -> np.ndarray:
+    """The devkit's score thresholds for evenly spaced recall (``getThresholds``).
+
+    ``counts`` (U,) says how often each distinct TP score occurs, scores in descending
+    order. Walking along the scores, one is kept whenever its recall ``(i + 1) / n_gt`` is
+    the closest to the next recall step 0, 1/40, 2/40, ...; the last is always kept.
+    Returns the positions in ``counts`` of the kept scores, ascending."""
+    n = int(round(float(np.sum(counts))))
+    if n == 0:
+        return np.zeros(0, dtype=int)
+    last = n - 1
+    i = np.arange(last, dtype=float)
+    left, right = (i + 1) / n_gt, (i + 2) / n_gt
+    # The recall steps as the devkit accumulates them (cumsum adds in sequence, as its loop does).
+    current = np.concatenate([[0.0], np.cumsum(np.full(N_SAMPLE_PTS - 1, 1.0 / (N_SAMPLE_PTS - 1.0)))])
+    keep = (right[None, :] - current[:, None]) >= (current[:, None] - left[None, :])  # (K, last), monotone in i
+    first = np.where(keep.any(axis=1), keep.argmax(axis=1), last) if last else np.zeros(len(current), dtype=int)
+    steps = np.arange(len(current))
+    taken = np.maximum.accumulate(first - steps) + steps  # a step's score lies past the previous step's
+    taken = np.append(taken[taken < last], last)
+    return np.searchsorted(np.cumsum(counts), taken, side="right")
 
 
 @dataclass
 class _Curve:
-    precision: np.ndarray  # (41,)
-    orientation: np.ndarray  # (41,) orientation similarity
-    n_gt: int
+    precision: np.ndarray  # (41,), or (B, 41) with frame weights
+    orientation: np.ndarray  # (41,) or (B, 41) orientation similarity
+    n_gt: int | np.ndarray  # or (B,) float
+
+
+def _levels(frame: np.ndarray, score: np.ndarray, n_frames: int):
+    """Where each detection stands in its frame and how to find a threshold's level.
+
+    Returns ``level`` (D,): the frame's detections scoring strictly higher (a threshold
+    admitting ``j`` of a frame's detections admits those of level ``< j``), and
+    ``count(t)``: ``(F, K)`` detections of each frame scoring at least each threshold ``t``
+    (K,), which must be among the scores."""
+    order = np.lexsort((score, frame))  # by frame, scores ascending
+    s, f = score[order], frame[order]
+    frame_end = np.searchsorted(f, np.arange(n_frames), side="right")
+    positions = np.arange(len(s))
+    # Ties share the level of the run's last position: none of them scores higher than another.
+    ends_run = np.ones(len(s), dtype=bool)
+    ends_run[:-1] = (f[1:] != f[:-1]) | (s[1:] != s[:-1])
+    run_last = np.minimum.accumulate(np.where(ends_run, positions, len(s))[::-1])[::-1] if len(s) else positions
+    level = np.empty(len(s), dtype=int)
+    level[order] = frame_end[f] - 1 - run_last
+    distinct = np.unique(s)
+    key = f.astype(np.int64) * (len(distinct) + 1) + np.searchsorted(distinct, s)
+
+    def count(thresholds: np.ndarray) -> np.ndarray:
+        rank = np.searchsorted(distinct, thresholds)
+        query = np.arange(n_frames, dtype=np.int64)[:, None] * (len(distinct) + 1) + rank[None, :]
+        return (frame_end[:, None] - np.searchsorted(key, query)).astype(np.int32)
+
+    return level, count
+
+
+def _per_frame(frame: np.ndarray, values: np.ndarray, n_frames: int) -> np.ndarray:
+    """Sums ``(F, L)`` of the rows of ``values`` ``(N, L)`` per frame (``frame`` sorted)."""
+    ends = np.searchsorted(frame, np.arange(n_frames), side="right")
+    total = np.concatenate([np.zeros((1, values.shape[1])), np.cumsum(values, axis=0, dtype=float)])
+    return total[ends] - total[np.concatenate([[0], ends[:-1]])]
 
 
 def _evaluate(gt: _Rows, det: _Rows, dc_hit: np.ndarray | None, overlap: np.ndarray, pg, pd, *,
-              class_name: str, difficulty: int, min_overlap: float) -> _Curve:
+              class_name: str, difficulty: int, min_overlap: float, n_frames: int,
+              weights: np.ndarray | None = None, levels=None) -> _Curve:
     """Precision and orientation-similarity curves of one class, difficulty and metric.
 
     ``gt`` holds the rows of the class and its neighbours, ``det`` the detections that
     may take part; ``(pg, pd)`` are all same-frame pairs with their ``overlap``;
-    ``dc_hit`` (D,) the largest DontCare overlap of each detection (2D only)."""
+    ``dc_hit`` (D,) the largest DontCare overlap of each detection (2D only).
+    ``weights`` (B, F): curves of B sets of frames, each frame counted as often as its
+    weight says (a bootstrap draw), with ``levels`` the detections' :func:`_levels`; the
+    matching is per frame, so only the thresholds and the sums depend on the weights."""
     height = gt.box[:, 3] - gt.box[:, 1]
     hard = (gt.occluded > MAX_OCCLUSION[difficulty]) | (gt.truncated > MAX_TRUNCATION[difficulty]) | (
         height < MIN_HEIGHT[difficulty])
     counted = (gt.type == class_name) & ~hard  # ignored_gt == 0; everything else here is 1
-    n_gt = int(counted.sum())
     det_height = np.trunc(np.abs(det.box[:, 1] - det.box[:, 3]))  # an int32 in the devkit
     det_ignored = det_height < MIN_HEIGHT[difficulty]
     det_valid = ~det_ignored & (det.type == class_name)  # ignored_det == 0
@@ -433,42 +477,71 @@ def _evaluate(gt: _Rows, det: _Rows, dc_hit: np.ndarray | None, overlap: np.ndar
     chosen, _ = _greedy(cg, cd, rank, [cd, -score[cd]], np.ones((len(det), 1), dtype=bool))
     c = chosen[:, 0]
     tp1 = counted & (c >= 0) & det_valid[np.maximum(c, 0)]
-    thresholds = _thresholds(score[c[tp1]], n_gt) if n_gt else np.zeros(0)
+    tp_score, tp_frame = score[c[tp1]], gt.frame[tp1]
+    distinct = np.unique(tp_score)[::-1]
+    tp_column = len(distinct) - 1 - np.searchsorted(distinct[::-1], tp_score)
 
-    precision = np.zeros(N_SAMPLE_PTS)
-    orientation = np.zeros(N_SAMPLE_PTS)
-    if len(thresholds):
-        available = score[:, None] >= thresholds[None, :]
-        # Pass 2: non-ignored candidate of largest overlap, else the first ignored one.
-        ignored_key = det_ignored[cd].astype(int)
-        chosen, assigned = _greedy(cg, cd, rank, [cd, np.where(det_ignored[cd], 0.0, -cov), ignored_key], available)
-        safe = np.maximum(chosen, 0)
-        tp_mask = counted[:, None] & (chosen >= 0) & det_valid[safe]
-        tp = tp_mask.sum(axis=0)
-        not_dc = np.ones(len(det), dtype=bool) if dc_hit is None else ~(dc_hit > min_overlap)
-        fp = ((det_valid & not_dc)[:, None] & available & ~assigned).sum(axis=0)
-        similarity = np.where(tp_mask, (1.0 + np.cos(gt.alpha[:, None] - det.alpha[safe])) / 2.0, 0.0).sum(axis=0)
-        denom = tp + fp
-        with np.errstate(invalid="ignore", divide="ignore"):
-            prec = np.where(denom > 0, tp / np.maximum(denom, 1), 0.0)
-            sim = np.where(denom > 0, similarity / np.maximum(denom, 1), 0.0)
-        precision[: len(thresholds)] = prec
-        orientation[: len(thresholds)] = sim
-        precision = np.maximum.accumulate(precision[::-1])[::-1]
-        orientation = np.maximum.accumulate(orientation[::-1])[::-1]
+    n_gt_frame = np.bincount(gt.frame[counted], minlength=n_frames)
+    if weights is None:  # one set of frames: pass 2 at its own thresholds, as the devkit runs it
+        n_gt = float(n_gt_frame.sum())
+        thresholds = distinct[_threshold_columns(np.bincount(tp_column, minlength=len(distinct)), n_gt)] if n_gt else []
+        available = score[:, None] >= np.asarray(thresholds)[None, :]  # (D, K)
+    else:  # any threshold leaves each frame at one of the levels its own scores make
+        level, count = levels
+        frame_size = np.bincount(det.frame, minlength=n_frames)
+        available = level[:, None] < np.arange(int(frame_size.max(initial=0)) + 1)[None, :]  # (D, L)
+    # Pass 2: non-ignored candidate of largest overlap, else the first ignored one.
+    ignored_key = det_ignored[cd].astype(int)
+    chosen, assigned = _greedy(cg, cd, rank, [cd, np.where(det_ignored[cd], 0.0, -cov), ignored_key], available)
+    safe = np.maximum(chosen, 0)
+    tp_mask = counted[:, None] & (chosen >= 0) & det_valid[safe]
+    not_dc = np.ones(len(det), dtype=bool) if dc_hit is None else ~(dc_hit > min_overlap)
+    fp_mask = (det_valid & not_dc)[:, None] & available & ~assigned
+    similarity = np.where(tp_mask, (1.0 + np.cos(gt.alpha[:, None] - det.alpha[safe])) / 2.0, 0.0)
+
+    if weights is None:
+        precision, orientation = _points(tp_mask.sum(axis=0), fp_mask.sum(axis=0), similarity.sum(axis=0))
+        return _Curve(precision, orientation, int(n_gt))
+    # per frame and level: TP, FP, similarity
+    tables = np.stack([_per_frame(gt.frame, tp_mask, n_frames), _per_frame(det.frame, fp_mask, n_frames),
+                       _per_frame(gt.frame, similarity, n_frames)]).reshape(3, -1)  # (3, F x L)
+    # (U, F): where each frame's row of the tables stands at each threshold a draw may pick
+    at = (count(distinct) + (np.arange(n_frames) * available.shape[1])[:, None]).T.copy()
+    n_gt = weights @ n_gt_frame
+    precision = np.zeros((len(weights), N_SAMPLE_PTS))
+    orientation = np.zeros((len(weights), N_SAMPLE_PTS))
+    for b, wb in enumerate(weights):
+        if n_gt[b] == 0:
+            continue
+        columns = _threshold_columns(np.bincount(tp_column, weights=wb[tp_frame], minlength=len(distinct)), n_gt[b])
+        precision[b], orientation[b] = _points(*(tables[:, at[columns]] @ wb))
     return _Curve(precision, orientation, n_gt)
 
 
-def average_precision(curve: np.ndarray, *, recall_points: int = 40) -> float:
+def _points(tp: np.ndarray, fp: np.ndarray, similarity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 41-point precision and orientation-similarity curves from TP, FP and summed
+    similarity ``(K,)`` at the K thresholds: made monotone, missing points 0."""
+    precision, orientation = np.zeros(N_SAMPLE_PTS), np.zeros(N_SAMPLE_PTS)
+    denom = tp + fp
+    with np.errstate(invalid="ignore", divide="ignore"):
+        precision[: len(denom)] = np.where(denom > 0, tp / np.maximum(denom, 1), 0.0)
+        orientation[: len(denom)] = np.where(denom > 0, similarity / np.maximum(denom, 1), 0.0)
+    return np.maximum.accumulate(precision[::-1])[::-1], np.maximum.accumulate(orientation[::-1])[::-1]
+
+
+def average_precision(curve: np.ndarray, *, recall_points: int = 40):
     """AP in percent from a 41-point precision (or orientation-similarity) curve: R40
-    averages points 1..40, R11 points 0, 4, ..., 40."""
+    averages points 1..40, R11 points 0, 4, ..., 40. Curves ``(..., 41)`` give an array
+    ``(...)`` of APs."""
     curve = np.asarray(curve, dtype=float)
-    check_shape("curve", curve, (N_SAMPLE_PTS,))
+    check_shape("curve", curve, (..., N_SAMPLE_PTS))
     if recall_points == 40:
-        return float(curve[1:].sum() / 40.0 * 100.0)
-    if recall_points == 11:
-        return float(curve[::4].sum() / 11.0 * 100.0)
-    raise ValueError(f"recall_points must be 40 or 11, got {recall_points}")
+        ap = curve[..., 1:].sum(axis=-1) / 40.0 * 100.0
+    elif recall_points == 11:
+        ap = curve[..., ::4].sum(axis=-1) / 11.0 * 100.0
+    else:
+        raise ValueError(f"recall_points must be 40 or 11, got {recall_points}")
+    return float(ap) if ap.ndim == 0 else ap
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -480,24 +553,48 @@ def kitti_curves(
     *,
     class_name: str = "car",
     min_overlaps: Sequence[float] | None = None,
+    difficulties: Sequence[str] = DIFFICULTIES,
+    frame_weights: np.ndarray | None = None,
 ) -> dict:
     """Precision curves of one class at each minimum overlap (default: the devkit's).
+
+    Parameters
+    ----------
+    gt_frames, pred_frames : sequences of FrameLabels or lists of Label
+        As :func:`kitti_metrics` takes them.
+    class_name : str, keyword-only
+    min_overlaps : sequence of float, keyword-only
+    difficulties : sequence of str, keyword-only
+        Those of :data:`DIFFICULTIES` to evaluate.
+    frame_weights : (B, F) array, keyword-only
+        Curves of ``B`` resampled sets at once: frame ``f`` counts ``frame_weights[b, f]``
+        times in set ``b`` (whole numbers, as a bootstrap draws them); equal to
+        evaluating each set with its frames repeated, at the cost of one matching.
 
     Returns
     -------
     dict
         ``{min_overlap: {metric: {difficulty: curve or None}, "aos_valid": bool}}`` with
         metrics ``2d`` (whose curve also holds the orientation similarity), ``bev`` and
-        ``3d``; a curve has ``precision`` and ``orientation`` (41 points) and ``n_gt``;
-        ``None`` where the devkit does not evaluate (see the module docstring).
+        ``3d``; a curve has ``precision`` and ``orientation`` (41 points; ``(B, 41)``
+        with weights) and ``n_gt`` (``(B,)`` with weights); ``None`` where the devkit
+        does not evaluate (see the module docstring).
     """
     if len(gt_frames) != len(pred_frames):
         raise ValueError(f"{len(gt_frames)} ground-truth frames but {len(pred_frames)} prediction frames")
     class_name = class_name.lower()
     if class_name not in NEIGHBOURS:
         raise ValueError(f"class must be one of {sorted(NEIGHBOURS)}, got {class_name!r}")
+    unknown = sorted(set(difficulties) - set(DIFFICULTIES))
+    if unknown:
+        raise ValueError(f"difficulties must be among {DIFFICULTIES}, got {unknown}")
     thresholds = [MIN_OVERLAP[class_name]] if min_overlaps is None else [float(t) for t in min_overlaps]
     n_frames = len(gt_frames)
+    if frame_weights is not None:
+        frame_weights = np.asarray(frame_weights, dtype=float)
+        check_shape("frame_weights", frame_weights, (None, n_frames))
+        if np.any(frame_weights < 0) or np.any(frame_weights != np.round(frame_weights)):
+            raise ValueError("frame_weights must be whole numbers >= 0 (how often each frame is drawn)")
     gt_all = _Rows.of([_rows_of(f) for f in gt_frames])
     det_all = _Rows.of([_rows_of(f) for f in pred_frames])
     gt = gt_all.take(np.isin(gt_all.type, (class_name, *NEIGHBOURS[class_name])))
@@ -528,14 +625,16 @@ def kitti_curves(
         "3d": bool((det_is_class & (det.location[:, 1] != _NO_LOCATION)).any()),
     }
     aos_valid = not bool((det_all.alpha == _NO_ALPHA).any())
+    levels = None if frame_weights is None else _levels(det.frame, det.score, n_frames)
     out = {}
     for thr in thresholds:
         curves: dict = {"aos_valid": aos_valid}
         for metric in METRICS:
             curves[metric] = {
                 name: _evaluate(gt, det, dc_hit if metric == "2d" else None, overlaps[metric], pg, pd,
-                                class_name=class_name, difficulty=d, min_overlap=thr) if evaluated[metric] else None
-                for d, name in enumerate(DIFFICULTIES)
+                                class_name=class_name, difficulty=d, min_overlap=thr, n_frames=n_frames,
+                                weights=frame_weights, levels=levels) if evaluated[metric] else None
+                for d, name in enumerate(DIFFICULTIES) if name in difficulties
             }
         out[thr] = curves
     return out
@@ -715,9 +814,11 @@ def format_kitti_table(result: dict, *, title: str = "") -> str:
     return "\n".join(lines)
 
 
-def format_kitti_summary(results: dict[str, dict]) -> str:
+def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict] | None = None) -> str:
     """One line per variant of :func:`kitti_metrics` results ``{variant: result}``: R40
-    AP at moderate difficulty, 2D / AOS / BEV / 3D at IoU 0.7 and BEV / 3D at 0.5."""
+    AP at moderate difficulty, 2D / AOS / BEV / 3D at IoU 0.7 and BEV / 3D at 0.5; with
+    ``intervals`` (``{variant: intervals}`` of :func:`wirescene.eval.intervals.kitti_intervals`)
+    a second table of their bootstrap intervals over drives."""
     if not results:
         return ""
     first = next(iter(results.values()))
@@ -731,4 +832,15 @@ def format_kitti_summary(results: dict[str, dict]) -> str:
     for v, r in results.items():
         cells = [(r[block] if block == "car" else r[block]["car"])[m]["moderate"] for _, block, m in cols]
         lines.append(f"{v:<{name_w}} " + " ".join(f"{_fmt(c):>7}" for c in cells))
+    if intervals:
+        some = next(iter(intervals.values()))
+        alone = some["frames_alone"]
+        lines += ["", f"{some['level']:g}% bootstrap interval over {some['drives']} drives"
+                  + (f" and {alone} frame{'s' * (alone != 1)} of no known drive" if alone else "")
+                  + f" ({some['draws']} draws; every draw ranks the estimates again):",
+                  f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>13}" for c in cols)]
+        for v, r in intervals.items():
+            cells = [(r[block] if block == "car" else r[block]["car"])[m] for _, block, m in cols]
+            lines.append(f"{v:<{name_w}} " + " ".join(
+                f"{'-' if c is None else f'[{c[0]:.1f}, {c[1]:.1f}]':>13}" for c in cells))
     return "\n".join(lines)
