@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 from _common import best_of  # noqa: E402
 from wirescene.core.boxes import box_corners  # noqa: E402
 from wirescene.core.groundplane import rotation_y  # noqa: E402
+from wirescene.eval.intervals import kitti_intervals  # noqa: E402
 from wirescene.eval.kitti_metrics import format_kitti_table, kitti_metrics, read_label_dirs  # noqa: E402
 from wirescene.io.kitti import Label, write_labels  # noqa: E402
 
@@ -92,6 +93,8 @@ def main():
     ap.add_argument("--fps", type=float, default=10.0, help="Mean false positives per frame.")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--io", action="store_true", help="Also time the evaluation of label directories on disk.")
+    ap.add_argument("--draws", type=int, default=0, help="Also time the APs' bootstrap intervals with this many draws.")
+    ap.add_argument("--drives", type=int, default=40, help="Drives the frames are dealt into for --draws.")
     args = ap.parse_args()
 
     t0 = time.perf_counter()
@@ -104,6 +107,13 @@ def main():
     seconds, result = best_of(lambda: kitti_metrics(gts, preds), repeat=args.repeat)
     print(f"kitti_metrics on label rows: {seconds:.2f} s (best of {args.repeat}, one core)")
     print(format_kitti_table(result))
+    if args.draws:
+        ids = [f"{i:06d}" for i in range(args.frames)]
+        drives = {f: f"drive{i * args.drives // args.frames}" for i, f in enumerate(ids)}
+        spread_s, spread = best_of(lambda: kitti_intervals(gts, preds, ids, drives, n_boot=args.draws), repeat=1)
+        print(f"kitti_intervals, {args.draws} draws over {args.drives} drives (moderate; 2D, AOS, BEV, 3D at IoU 0.7 "
+              f"and 0.5): {spread_s:.1f} s, {spread_s / seconds:.0f}x kitti_metrics; 3D AP@0.7 "
+              f"{result['car']['3d']['moderate']:.2f} [{spread['car']['3d'][0]:.2f}, {spread['car']['3d'][1]:.2f}]")
     if args.io:
         with tempfile.TemporaryDirectory() as tmp:
             gt_dir, pred_dir = Path(tmp, "gt"), Path(tmp, "pred")

@@ -35,6 +35,14 @@ def test_eval_prints_table_and_writes_json(tmp_path):
     assert interval["true_positives"] == 9 and interval["drives"] == 2 and interval["frames_alone"] == 0
     assert_close(interval["share"], data["loc_1m"])
     assert interval["interval"][0] <= interval["share"] <= interval["interval"][1]
+    # and the KITTI APs with theirs, every draw ranking the estimates again
+    assert "bootstrap interval over 2 drives (1000 draws" in r.output
+    spread = data["kitti_interval"]
+    assert spread["drives"] == 2 and spread["difficulty"] == "moderate"
+    for block, figures in ((spread["car"], data["kitti"]["car"]), (spread["iou_0.5"]["car"], data["kitti"]["iou_0.5"]["car"])):
+        for metric in ("2d", "bev", "3d"):
+            lo, hi = block[metric]
+            assert lo <= figures[metric]["moderate"] <= hi
 
 
 def test_fit_writes_all_outputs(tmp_path):

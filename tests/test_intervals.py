@@ -4,13 +4,16 @@ import numpy as np
 import pytest
 
 from conftest import assert_close
+from wirescene.core.labels import Label
 from wirescene.eval.intervals import (
     bootstrap_weights,
     clustered_share,
     format_intervals,
+    kitti_intervals,
     localisation_intervals,
     percentile_interval,
 )
+from wirescene.eval.kitti_metrics import kitti_metrics
 from wirescene.eval.metrics import EvaluationReport, TPRecord
 
 
@@ -72,3 +75,42 @@ def test_the_examples_run():
     from wirescene.eval import intervals
 
     assert doctest.testmod(intervals).failed == 0
+
+
+def _car(x, *, score=None, dz=0.0):
+    return Label("Car", 0.0, 0, 0.0, [100.0 + 200 * x, 100.0, 200.0 + 200 * x, 200.0], [1.5, 1.6, 3.9],
+                 [4.0 * x, 1.6, 20.0 + dz], 0.0, score)
+
+
+def test_kitti_intervals_ranked_again_in_every_draw():
+    # drive A: 30 frames whose car is found exactly; drive B: 30 whose estimate stands 2 m too far (no 3D match)
+    ids = [f"{i:06d}" for i in range(60)]
+    gts = [[_car(0)] for _ in ids]
+    preds = [[_car(0, score=0.9, dz=0.0 if i < 30 else 2.0)] for i in range(60)]
+    drives = {f: ("A" if i < 30 else "B") for i, f in enumerate(ids)}
+    out = kitti_intervals(gts, preds, ids, drives, n_boot=400, seed=1)
+    point = kitti_metrics(gts, preds)["car"]["3d"]["moderate"]
+    lo, hi = out["car"]["3d"]
+    assert lo <= point <= hi and lo < 10.0 and hi > 90.0  # two drives that disagree: anything between
+    assert_close(np.array(out["car"]["2d"]), np.array([100.0, 100.0]))  # every box is right on both drives
+    assert out["drives"] == 2 and out["frames_alone"] == 0 and out["draws"] == 400 and out["difficulty"] == "moderate"
+    # one drive of 60 frames that agree: no spread
+    same = kitti_intervals(gts, preds[:30] * 2, ids, {f: "A" for f in ids}, n_boot=50)
+    assert_close(np.array(same["iou_0.5"]["car"]["3d"]), np.array([100.0, 100.0]))
+    # frames of no known drive are drawn alone: 60 draws of one frame make a narrower interval than two drives
+    alone = kitti_intervals(gts, preds, ids, {}, n_boot=400, seed=1)
+    assert alone["drives"] == 0 and alone["frames_alone"] == 60
+    assert alone["car"]["3d"][1] - alone["car"]["3d"][0] < hi - lo
+
+
+def test_kitti_intervals_refuse_mismatches_and_say_none_where_kitti_has_no_figure():
+    ids = ["000001"]
+    with pytest.raises(ValueError, match="frame ids"):
+        kitti_intervals([[_car(0)]], [[_car(0, score=0.5)]], ["a", "b"], {})
+    with pytest.raises(ValueError, match="difficulty"):
+        kitti_intervals([[_car(0)]], [[_car(0, score=0.5)]], ids, {}, difficulty="medium")
+    no_alpha = Label("Car", 0.0, 0, -10.0, [100.0, 100.0, 200.0, 200.0], [1.5, 1.6, 3.9], [0.0, 1.6, 20.0], 0.0, 0.5)
+    out = kitti_intervals([[_car(0)]], [[no_alpha]], ids, {}, n_boot=20)
+    assert out["car"]["aos"] is None and out["car"]["3d"] is not None
+    empty = kitti_intervals([], [], [], {}, n_boot=20)
+    assert empty["car"]["3d"] is None and empty["drives"] == 0

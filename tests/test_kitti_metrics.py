@@ -11,6 +11,7 @@ from wirescene.core.errors import InputError
 from wirescene.eval.kitti_metrics import (
     DIFFICULTIES,
     N_SAMPLE_PTS,
+    _threshold_columns,
     average_precision,
     bev_corners,
     box_overlap_2d,
@@ -194,6 +195,10 @@ def test_average_precision_sample_points():
     assert average_precision(curve, recall_points=11) == pytest.approx(600 / 11)
     with pytest.raises(ValueError):
         average_precision(curve, recall_points=12)
+    # a stack of curves (bootstrap draws) gives an AP each
+    assert_close(average_precision(np.stack([curve, np.ones(N_SAMPLE_PTS)])), np.array([50.0, 100.0]))
+    with pytest.raises(ValueError, match="shape"):
+        average_precision(np.ones(40))
 
 
 # --------------------------------------------------------------------------- overlaps
@@ -293,6 +298,19 @@ def test_2d_overlap_criteria():
 # --------------------------------------------------------------------------- against a plain loop
 
 
+def _loop_thresholds(v, n_gt):
+    """The devkit's getThresholds as its loop: TP scores ``v`` sorted descending."""
+    thresholds, current = [], 0.0
+    for i, s in enumerate(v):
+        left = (i + 1) / n_gt
+        right = (i + 2) / n_gt if i < len(v) - 1 else left
+        if (right - current) < (current - left) and i < len(v) - 1:
+            continue
+        thresholds.append(s)
+        current += 1 / 40
+    return thresholds
+
+
 def _loop_curve(gts, preds, metric, difficulty, thr):
     """The rules of the module docstring as a literal per-frame, per-threshold loop."""
     from wirescene.eval.kitti_metrics import MAX_OCCLUSION, MAX_TRUNCATION, MIN_HEIGHT
@@ -368,14 +386,7 @@ def _loop_curve(gts, preds, metric, difficulty, thr):
     cleaned = [clean(g, d) for g, d in zip(gts, preds)]
     n_gt = sum(c[0].count(0) for c in cleaned)
     v = sorted((s for (g, d), c in zip(zip(gts, preds), cleaned) for s in stats(g, d, *c, None)[4]), reverse=True)
-    thresholds, current = [], 0.0
-    for i, s in enumerate(v):
-        left = (i + 1) / n_gt
-        right = (i + 2) / n_gt if i < len(v) - 1 else left
-        if (right - current) < (current - left) and i < len(v) - 1:
-            continue
-        thresholds.append(s)
-        current += 1 / 40
+    thresholds = _loop_thresholds(v, n_gt)
     prec, aos = np.zeros(41), np.zeros(41)
     for k, t in enumerate(thresholds):
         tp, fp, sim = 0, 0, 0.0
@@ -428,6 +439,50 @@ def test_vectorised_matching_equals_plain_loop(seed):
                 assert_close(got.precision, prec, msg=f"{metric} {name} {thr}")
                 if metric == "2d":
                     assert_close(got.orientation, aos, msg=f"aos {name} {thr}")
+
+
+@pytest.mark.parametrize("n_scores, n_gt", [(1, 1), (2, 2), (7, 80), (39, 40), (40, 40), (80, 80), (123, 300)])
+def test_threshold_positions_equal_the_devkit_loop(n_scores, n_gt):
+    rng = np.random.default_rng(n_scores)
+    counts = rng.integers(1, 4, size=n_scores).astype(float)  # repeated (tied or redrawn) scores
+    scores = np.sort(rng.random(n_scores))[::-1]
+    expanded = np.repeat(scores, counts.astype(int))
+    n_gt = max(n_gt, len(expanded))
+    columns = _threshold_columns(counts, float(n_gt))
+    assert_close(scores[columns], np.array(_loop_thresholds(list(expanded), n_gt)), atol=0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_frame_weights_equal_repeated_frames(seed):
+    # a bootstrap draw (frames drawn 0, 1, 2 or 3 times) evaluated at once equals the devkit on the repeated frames
+    gts, preds = crowded_scenes(40, seed)
+    weights = np.random.default_rng(seed).integers(0, 4, size=(3, 40)).astype(float)
+    weights[0] = 1.0
+    drawn = kitti_curves(gts, preds, min_overlaps=(0.7, 0.5), frame_weights=weights)
+    for b, w in enumerate(weights):
+        index = np.repeat(np.arange(40), w.astype(int))
+        plain = kitti_curves([gts[i] for i in index], [preds[i] for i in index], min_overlaps=(0.7, 0.5))
+        for thr in (0.7, 0.5):
+            for metric in ("2d", "bev", "3d"):
+                for name in DIFFICULTIES:
+                    got, want = drawn[thr][metric][name], plain[thr][metric][name]
+                    assert got.n_gt[b] == want.n_gt
+                    assert_close(got.precision[b], want.precision, msg=f"{metric} {name} {thr} draw {b}")
+                    assert_close(got.orientation[b], want.orientation, msg=f"aos {name} {thr} draw {b}")
+    assert_close(average_precision(drawn[0.7]["3d"]["moderate"].precision)[0],
+                 kitti_metrics(gts, preds)["car"]["3d"]["moderate"])
+
+
+def test_frame_weights_are_checked():
+    gts, preds = frames_of_one_car(4)
+    for bad, problem in ((np.ones((2, 3)), "frame_weights must have shape"), (np.full((1, 4), 0.5), "whole"),
+                         (-np.ones((1, 4)), "whole")):
+        with pytest.raises(ValueError, match=problem):
+            kitti_curves(gts, preds, frame_weights=bad)
+    with pytest.raises(ValueError, match="difficulties"):
+        kitti_curves(gts, preds, difficulties=("medium",))
+    only = kitti_curves(gts, preds, difficulties=("moderate",))[0.7]["3d"]
+    assert list(only) == ["moderate"]
 
 
 # --------------------------------------------------------------------------- files
