@@ -36,7 +36,7 @@ def test_eval_prints_table_and_writes_json(tmp_path):
     assert_close(interval["share"], data["loc_1m"])
     assert interval["interval"][0] <= interval["share"] <= interval["interval"][1]
     # and the KITTI APs with theirs, every draw ranking the estimates again
-    assert "bootstrap interval over 2 drives (1000 draws" in r.output
+    assert "bootstrap interval over 2 drives, moderate (1000 draws" in r.output
     spread = data["kitti_interval"]
     assert spread["drives"] == 2 and spread["difficulty"] == "moderate"
     for block, figures in ((spread["car"], data["kitti"]["car"]), (spread["iou_0.5"]["car"], data["kitti"]["iou_0.5"]["car"])):

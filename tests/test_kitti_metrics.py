@@ -548,16 +548,25 @@ def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
     gts = [read_labels(gt_dir / f"{f}.txt") for f in ("000002", "000010", "001545")]
     preds = [read_labels(pred / "000002.txt"), read_labels(pred / "000010.txt"), FrameLabels()]
     assert data["car"] == kitti_metrics(gts, preds)["car"]
+    # the moderate APs' interval over the three frames' drives, each draw evaluated by the devkit's rules
+    assert "90% bootstrap interval over 3 drives, moderate (1000 draws" in r.output
+    spread = data["kitti_interval"]
+    assert spread["drives"] == 3 and spread["frames_alone"] == 0
+    lo, hi = spread["car"]["3d"]
+    assert 0.0 <= lo <= data["car"]["3d"]["moderate"] <= hi <= 100.0
     # only the frames given: with every car found exactly, precision is 1 at each threshold
-    r = _cli("kitti-eval", gt_dir, pred, "--frames", "000010", "--json", out)
+    r = _cli("kitti-eval", gt_dir, pred, "--frames", "000010", "--json", out, "--draws", "0")
     assert r.exit_code == 0, r.output
+    assert "bootstrap" not in r.output
     one = json.loads(out.read_text())
+    assert "kitti_interval" not in one
     n = one["n_gt"]["car"]["moderate"]
     assert one["n_frames"] == 1 and one["car"]["3d"]["moderate"] == pytest.approx((n - 1) / 40 * 100)
 
 
 @pytest.mark.parametrize("case, problem", [("no_gt_dir", "not found"), ("bad_gt", "line 1"),
-                                           ("no_score", "score"), ("unknown_frame", "000009")])
+                                           ("no_score", "score"), ("unknown_frame", "000009"),
+                                           ("no_drive_map", "not a KITTI devkit mapping directory")])
 def test_cli_kitti_eval_bad_input_is_one_line_error(tmp_path, case, problem):
     gt_dir = tmp_path / "gt"
     pred = tmp_path / "pred"
@@ -571,8 +580,10 @@ def test_cli_kitti_eval_bad_input_is_one_line_error(tmp_path, case, problem):
         (gt_dir / "000001.txt").write_text("Car 0.0 0 1.0 10 20 30\n")
     elif case == "no_score":
         (pred / "000001.txt").write_text((gt_dir / "000001.txt").read_text())
-    else:
+    elif case == "unknown_frame":
         args = ["--frames", "000009"]
+    else:
+        args = ["--drive-map", tmp_path]
     line = _one_line_error(_cli("kitti-eval", gt_dir, pred, *args))
     assert problem in line
 
@@ -586,12 +597,15 @@ def test_cli_eval_adds_kitti_figures(tmp_path):
              "--json", out, "--predictions", pred)
     assert r.exit_code == 0, r.output
     assert "KITTI Car AP R40" in r.output
-    kitti = json.loads(out.read_text())["kitti"]
-    # the figures are those of the label files it wrote
+    written = json.loads(out.read_text())
+    kitti = written["kitti"]
+    # the figures are those of the label files it wrote, and so are their intervals (same drives, same draws)
     r2 = _cli("kitti-eval", KITTI_ROOT / "training" / "label_2", pred / "coarse", "--frames", "000010",
               "--json", tmp_path / "k.json")
     assert r2.exit_code == 0, r2.output
-    assert json.loads((tmp_path / "k.json").read_text()) == kitti
+    again = json.loads((tmp_path / "k.json").read_text())
+    assert again.pop("kitti_interval") == written["kitti_interval"]
+    assert again == kitti
     # 000010: 8 cars; 3 easy, 2 more occluded 1 (28.8 and 42 px), 2 more occluded 2, one truncated 0.8
     assert kitti["n_gt"]["car"] == {"easy": 3, "moderate": 5, "hard": 7}
     # --resume reuses the frame, with the same figures

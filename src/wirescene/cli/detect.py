@@ -45,7 +45,7 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
                    "leave-one-fold-out training.")
 @click.option("--threshold", type=float, default=0.5, show_default=True,
               help="With --kitti-root and a calibration: default detection threshold (confidence).")
-@drive_map_option
+@drive_map_option()
 @click.option("--support-weight", type=NON_NEGATIVE_FLOAT, default=SUPPORT_WEIGHT, show_default=True,
               help="With --kitti-root: margin a cluster of detections gains per e-fold of its votes (0: its best vote "
                    "alone).")

@@ -16,6 +16,7 @@ from wirescene.cli.options import (
     POSITIVE,
     check_output_dir,
     check_output_file,
+    drive_map_option,
     load_models,
     models_option,
     select_frames,
@@ -388,18 +389,33 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, s
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the figures as JSON.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every GT_DIR/*.txt).")
 @split_file_option
-def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames, split_file):
+@click.option("--draws", type=NON_NEGATIVE, default=1000, show_default=True,
+              help="Bootstrap draws of the moderate APs' 90% interval over drives (0: none).")
+@drive_map_option("the interval draws whole drives")
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Seed of the bootstrap draws.")
+def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames, split_file, draws, drive_mapping, seed):
     """KITTI object-benchmark AP of Car (2D, AOS, BEV, 3D; easy / moderate / hard; R40 and
     R11; IoU 0.7 and 0.5) of the label files in PRED_DIR against GT_DIR, by the devkit's
-    rules. A frame without a prediction file has no detections."""
-    from wirescene.eval.kitti_metrics import format_kitti_table, kitti_metrics, read_label_dirs
+    rules, and the moderate APs' bootstrap interval over drives. A frame without a
+    prediction file has no detections."""
+    from wirescene.eval.intervals import kitti_intervals
+    from wirescene.eval.kitti_metrics import format_kitti_intervals, format_kitti_table, kitti_metrics, read_label_dirs
+    from wirescene.io.folds import drive_map
+    from wirescene.io.wireframes import wireframe_gt_dir
 
     check_output_file(json_out, "--json")
     known = sorted(p.stem for p in gt_dir.glob("*.txt")) if gt_dir.is_dir() else []
     frame_ids = select_frames(frames, split_file, known, where=gt_dir, what="label file of frame") if known else None
-    _, gts, preds = read_label_dirs(gt_dir, pred_dir, frames=frame_ids)
+    # GT_DIR is ROOT/training/label_2 as KITTI lays it out; synthetic scenes (KITTI's ids too) are each drawn alone
+    root = gt_dir.resolve().parent.parent
+    synthetic = wireframe_gt_dir(gt_dir.resolve().parent).is_dir()
+    drives = {} if synthetic and drive_mapping is None else drive_map(root, mapping=drive_mapping)[0]
+    ids, gts, preds = read_label_dirs(gt_dir, pred_dir, frames=frame_ids)
     result = kitti_metrics(gts, preds)
     click.echo(format_kitti_table(result))
+    if draws:
+        result["kitti_interval"] = kitti_intervals(gts, preds, ids, drives, n_boot=draws, seed=seed)
+        click.echo("\n" + format_kitti_intervals({pred_dir.name or str(pred_dir): result["kitti_interval"]}))
     if json_out is not None:
         _write_json_atomic(json_out, result)
         click.echo(f"metrics written to {json_out}")

@@ -107,13 +107,13 @@ def split_file_option(f):
                              "ImageSets/val.txt); instead of --frames.")(f)
 
 
-def drive_map_option(f):
-    """``--drive-map DIR``: the KITTI devkit's mapping files, grouping frames by drive."""
+def drive_map_option(purpose: str = "the held-out calibrations' folds group the frames by recording drive"):
+    """``--drive-map DIR``: the KITTI devkit's mapping files, grouping frames by drive for ``purpose``."""
     return click.option("--drive-map", "drive_mapping", type=click.Path(file_okay=False, path_type=Path), default=None,
-                        help="KITTI devkit mapping directory (train_rand.txt, train_mapping.txt): the held-out "
-                             "calibrations' folds group the frames by recording drive (default: mapping/, "
-                             "devkit/mapping/ or devkit_object/mapping/ under the KITTI root when there, else the "
-                             "drives of the shared frames only; other frames are each their own group).")(f)
+                        help=f"KITTI devkit mapping directory (train_rand.txt, train_mapping.txt): {purpose} "
+                             "(default: mapping/, devkit/mapping/ or devkit_object/mapping/ under the KITTI root when "
+                             "there, else the drives of the shared frames only; other frames are each their own "
+                             "group).")
 
 
 def read_drive_map(dataset, mapping: Path | None) -> tuple[dict[str, str], Path | None]:

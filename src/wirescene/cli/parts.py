@@ -33,7 +33,7 @@ from wirescene.cli.options import check_output_file, drive_map_option, read_driv
               help="Default Gaussian smoothing of the response maps (sigma in box heights).")
 @click.option("--calibrate/--no-calibrate", default=False, show_default=True,
               help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root).")
-@drive_map_option
+@drive_map_option()
 @click.option("--synth-scenes", type=int, default=300, show_default=True,
               help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
 @click.option("--synth-seed", type=int, default=1000, show_default=True,

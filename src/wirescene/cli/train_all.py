@@ -46,7 +46,7 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
 @split_file_option
 @click.option("--folds", "n_folds", type=click.IntRange(min=2), default=4, show_default=True,
               help="Folds of the held-out calibrations (by drive where it is known, else by frame).")
-@drive_map_option
+@drive_map_option()
 @click.option("--set", "settings", multiple=True, metavar="STEP.KEY=VALUE",
               help="Change one option of a step's recipe (steps parts, detector, occlusion), e.g. "
                    "parts.synth_scenes=100 or detector.mining_rounds=2; repeatable.")

@@ -814,33 +814,48 @@ def format_kitti_table(result: dict, *, title: str = "") -> str:
     return "\n".join(lines)
 
 
+_SUMMARY_COLUMNS = (("2d@.7", "car", "2d"), ("aos@.7", "car", "aos"), ("bev@.7", "car", "bev"),
+                    ("3d@.7", "car", "3d"), ("bev@.5", "iou_0.5", "bev"), ("3d@.5", "iou_0.5", "3d"))
+
+
+def _summary_cells(result: dict, pick) -> list:
+    return [pick((result[block] if block == "car" else result[block]["car"])[metric])
+            for _, block, metric in _SUMMARY_COLUMNS]
+
+
 def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict] | None = None) -> str:
     """One line per variant of :func:`kitti_metrics` results ``{variant: result}``: R40
     AP at moderate difficulty, 2D / AOS / BEV / 3D at IoU 0.7 and BEV / 3D at 0.5; with
     ``intervals`` (``{variant: intervals}`` of :func:`wirescene.eval.intervals.kitti_intervals`)
-    a second table of their bootstrap intervals over drives."""
+    the table of :func:`format_kitti_intervals` below."""
     if not results:
         return ""
     first = next(iter(results.values()))
     n = first["n_gt"]["car"]
     name_w = max(len("variant"), *(len(v) for v in results))
-    cols = (("2d@.7", "car", "2d"), ("aos@.7", "car", "aos"), ("bev@.7", "car", "bev"), ("3d@.7", "car", "3d"),
-            ("bev@.5", "iou_0.5", "bev"), ("3d@.5", "iou_0.5", "3d"))
     lines = [f"KITTI Car AP R40 (%), moderate ({n['moderate']} cars in {first['n_frames']} frames; "
              f"easy {n['easy']}, hard {n['hard']} cars)",
-             f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>7}" for c in cols)]
+             f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>7}" for c in _SUMMARY_COLUMNS)]
     for v, r in results.items():
-        cells = [(r[block] if block == "car" else r[block]["car"])[m]["moderate"] for _, block, m in cols]
-        lines.append(f"{v:<{name_w}} " + " ".join(f"{_fmt(c):>7}" for c in cells))
+        lines.append(f"{v:<{name_w}} " + " ".join(f"{_fmt(c):>7}" for c in _summary_cells(r, lambda f: f["moderate"])))
     if intervals:
-        some = next(iter(intervals.values()))
-        alone = some["frames_alone"]
-        lines += ["", f"{some['level']:g}% bootstrap interval over {some['drives']} drives"
-                  + (f" and {alone} frame{'s' * (alone != 1)} of no known drive" if alone else "")
-                  + f" ({some['draws']} draws; every draw ranks the estimates again):",
-                  f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>13}" for c in cols)]
-        for v, r in intervals.items():
-            cells = [(r[block] if block == "car" else r[block]["car"])[m] for _, block, m in cols]
-            lines.append(f"{v:<{name_w}} " + " ".join(
-                f"{'-' if c is None else f'[{c[0]:.1f}, {c[1]:.1f}]':>13}" for c in cells))
+        lines += ["", format_kitti_intervals(intervals)]
+    return "\n".join(lines)
+
+
+def format_kitti_intervals(intervals: dict[str, dict]) -> str:
+    """A table of :func:`wirescene.eval.intervals.kitti_intervals` figures ``{name:
+    intervals}``, a line per name, in the columns of :func:`format_kitti_summary`."""
+    if not intervals:
+        return ""
+    some = next(iter(intervals.values()))
+    alone = some["frames_alone"]
+    name_w = max(len("variant"), *(len(v) for v in intervals))
+    lines = [f"{some['level']:g}% bootstrap interval over {some['drives']} drives"
+             + (f" and {alone} frame{'s' * (alone != 1)} of no known drive" if alone else "")
+             + f", {some['difficulty']} ({some['draws']} draws; every draw ranks the estimates again):",
+             f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>13}" for c in _SUMMARY_COLUMNS)]
+    for v, r in intervals.items():
+        cells = _summary_cells(r, lambda c: "-" if c is None else f"[{c[0]:.1f}, {c[1]:.1f}]")
+        lines.append(f"{v:<{name_w}} " + " ".join(f"{c:>13}" for c in cells))
     return "\n".join(lines)
