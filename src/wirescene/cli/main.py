@@ -305,7 +305,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         from wirescene.eval.report import write_report
 
         page = write_report(report_dir, reports, gallery=gallery, image_of=dataset.image, intervals=intervals,
-                            title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})")
+                            kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})")
         click.echo(f"report written to {page}")
 
 

@@ -153,8 +153,31 @@ def _metrics_table(reports, intervals=None) -> str:
     return f"<table><tr><th>variant</th>{head}</tr>{''.join(rows)}</table>"
 
 
+def _kitti_table(kitti: dict, kitti_intervals: dict | None) -> str:
+    """KITTI's moderate APs (R40) of each variant, each with its interval over drives if given."""
+    cols = [("3D AP@0.7", "car", "3d"), ("BEV AP@0.7", "car", "bev"), ("3D AP@0.5", "iou_0.5", "3d"),
+            ("2D AP@0.7", "car", "2d")]
+
+    def pick(result, block, metric):
+        return (result[block] if block == "car" else result[block]["car"])[metric]
+
+    rows = []
+    for name, result in kitti.items():
+        cells = []
+        for _, block, metric in cols:
+            v = pick(result, block, metric)["moderate"]
+            span = pick(kitti_intervals[name], block, metric) if kitti_intervals else None
+            cells.append("–" if v is None else f"{v:.1f}" + ("" if span is None else f" [{span[0]:.1f}, {span[1]:.1f}]"))
+        rows.append(f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    n = next(iter(kitti.values()))["n_gt"]["car"]["moderate"]
+    spread = " with its 90% bootstrap interval over drives" if kitti_intervals else ""
+    return (f"<p>KITTI's own measure (R40, moderate, {n} cars; the devkit's rules), each AP{spread}:</p>"
+            f"<table><tr><th>variant</th>{''.join(f'<th>{c[0]}</th>' for c in cols)}</tr>{''.join(rows)}</table>")
+
+
 def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gallery, image_of, title: str = "",
-                 n_gallery: int = 3, intervals: dict | None = None) -> Path:
+                 n_gallery: int = 3, intervals: dict | None = None, kitti: dict | None = None,
+                 kitti_intervals: dict | None = None) -> Path:
     """Write ``out_dir/index.html`` and its PNGs; returns the page's path.
 
     Parameters
@@ -170,6 +193,10 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
     intervals : dict, optional
         ``{variant: figures}`` of :func:`wirescene.eval.intervals.localisation_intervals`: the
         table then gives the 1 m share's interval over drives.
+    kitti, kitti_intervals : dict, optional
+        ``{variant: figures}`` of :func:`wirescene.eval.kitti_metrics.kitti_metrics` and of
+        :func:`wirescene.eval.intervals.kitti_intervals`: a second table gives KITTI's
+        moderate APs (with their intervals).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -219,6 +246,7 @@ img.wide {{ max-width: 70%; vertical-align: top; }} img.bev {{ max-width: 25%; v
 <p>{html.escape(title)} — {n_frames} frames; the paper's protocol (true-positive initialisations, IoU &gt; 0.5,
 viewpoint within 45°).</p>
 {_metrics_table(reports, intervals)}
+{_kitti_table(kitti, kitti_intervals) if kitti else ""}
 <div class="plots">{''.join(f'<img src="{name}" alt="{name}">' for name in plots)}</div>
 <h2>Gallery ({html.escape(lead)}): best and worst frames</h2>
 <p>Red: estimate (wireframe, hidden vertices faded); green: ground truth; yellow: pre-detections.
