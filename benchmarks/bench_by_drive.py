@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, run_tables  # noqa: E402  (benchmarks/ is on the path)
-from wirescene.eval.intervals import bootstrap_weights, clustered_share, percentile_interval
+from wirescene.eval.intervals import clustered_margin, clustered_share
 from wirescene.io.folds import DRIVE_FOLDS, frame_drives
 from wirescene.io.kitti import CAR_TYPES, KittiDataset
 
@@ -52,11 +52,6 @@ def drive_counts(table: dict, drives: Sequence[str], drive_of: dict[str, str], *
     n = np.bincount(rows, minlength=len(drives))
     k = np.bincount(rows, weights=np.asarray(table[column], float), minlength=len(drives)).astype(int)
     return n, k
-
-
-def _margin(k, n, k_ref, n_ref, axis=-1):
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return 100.0 * (np.sum(k, axis) / np.sum(n, axis) - np.sum(k_ref, axis) / np.sum(n_ref, axis))
 
 
 def margin_by_drive(k, n, k_ref, n_ref, *, n_boot: int = 10000, seed: int = 0) -> dict:
@@ -87,19 +82,11 @@ def margin_by_drive(k, n, k_ref, n_ref, *, n_boot: int = 10000, seed: int = 0) -
     >>> out["leave_one_out"].round(1).tolist()
     [-10.0, 25.0]
     """
+    margin, interval = clustered_margin(k, n, k_ref, n_ref, n_boot=n_boot, seed=seed)
     k, n, k_ref, n_ref = (np.asarray(a, float) for a in (k, n, k_ref, n_ref))
-    if not k.shape == n.shape == k_ref.shape == n_ref.shape or k.ndim != 1:
-        raise ValueError(f"per-drive counts of one shape (D,) expected, got {k.shape} {n.shape} {k_ref.shape} "
-                         f"{n_ref.shape}")
-    d = len(k)
-    keep = ~np.eye(d, dtype=bool)
-    loo = np.array([_margin(k[m], n[m], k_ref[m], n_ref[m]) for m in keep])
-    interval = None
-    if n_boot > 0:
-        w = np.concatenate(list(bootstrap_weights(d, n_boot, seed=seed)))
-        interval = percentile_interval(_margin(w * k, w * n, w * k_ref, w * n_ref))
-    return {"margin": float(_margin(k, n, k_ref, n_ref)), "interval": interval, "leave_one_out": loo,
-            "net": (k - k_ref).astype(int)}
+    keep = ~np.eye(len(k), dtype=bool)
+    loo = np.array([clustered_margin(k[m], n[m], k_ref[m], n_ref[m], n_boot=0)[0] for m in keep])
+    return {"margin": margin, "interval": interval, "leave_one_out": loo, "net": (k - k_ref).astype(int)}
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -156,7 +143,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         groups = {}
         for g in GROUPS:
             m = np.isin(drive_fold, g)
-            groups[str(g)] = float(_margin(k[m], n[m], k_ref[m], n_ref[m]))
+            groups[str(g)] = clustered_margin(k[m], n[m], k_ref[m], n_ref[m], n_boot=0)[0]
         loo = out["leave_one_out"]
         most = int(np.argmax(np.abs(loo - out["margin"])))
         spread = "no bootstrap" if out["interval"] is None else "drive bootstrap 90% [{:+.1f}, {:+.1f}]".format(

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
-from wirescene.eval.intervals import format_intervals, kitti_intervals, localisation_intervals
+from wirescene.eval.intervals import format_intervals, kitti_intervals, localisation_intervals, margin_intervals
 from wirescene.eval.kitti_metrics import kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
@@ -134,7 +134,8 @@ def main():
     print(format_table(reports, tables=("3d", "viewpoint")))
     drives = drive_map(dataset.base_dir)[0]
     within = localisation_intervals(reports, drives, seed=args.seed)
-    print("\n" + format_intervals(within))
+    margins = margin_intervals(reports, drives, reference="coarse+gp", seed=args.seed) if "coarse+gp" in reports else {}
+    print("\n" + format_intervals(within, margins=margins))
     kitti, spread = kitti_with_cv_scores({v: records[v] for v in variants}, gt, folds, drives, seed=args.seed)
 
     def fmt(v):

@@ -228,6 +228,7 @@ def test_eval_report_is_one_page_with_its_pictures(tmp_path):
     r = run("eval", KITTI_ROOT, "--variant", "coarse+gp", "--variant", "fg+gp", "--frames", "000002,000010",
             "--particles", 20, "--workers", 1, "--device", "numpy", "--report", out)
     assert r.exit_code == 0, r.output
+    assert "Margins over coarse+gp in points within 1 m" in r.output  # fg+gp against coarse+gp, paired by drive
     page = (out / "index.html").read_text()
     assert "90% over drives" in page and page.count("]%</td>") == 2  # each variant's 1 m share with its interval
     # and KITTI's moderate APs, four a variant, each with its interval over drives

@@ -7,10 +7,12 @@ from conftest import assert_close
 from wirescene.core.labels import Label
 from wirescene.eval.intervals import (
     bootstrap_weights,
+    clustered_margin,
     clustered_share,
     format_intervals,
     kitti_intervals,
     localisation_intervals,
+    margin_intervals,
     percentile_interval,
 )
 from wirescene.eval.kitti_metrics import kitti_metrics
@@ -114,3 +116,35 @@ def test_kitti_intervals_refuse_mismatches_and_say_none_where_kitti_has_no_figur
     assert out["car"]["aos"] is None and out["car"]["3d"] is not None
     empty = kitti_intervals([], [], [], {}, n_boot=20)
     assert empty["car"]["3d"] is None and empty["drives"] == 0
+
+
+def test_a_margin_draws_the_same_drives_for_both_variants():
+    # the same cars on two drives, each variant better on one: shares swing with the draw, their margin is paired
+    margin, (lo, hi) = clustered_margin([9, 1], [10, 10], [8, 0], [10, 10], n_boot=1000)
+    assert_close(margin, 10.0)
+    assert_close(np.array([lo, hi]), np.array([10.0, 10.0]))  # +1 car of 10 on each drive: +10 points in every draw
+    margin, (lo, hi) = clustered_margin([10, 0], [10, 10], [5, 5], [10, 10], n_boot=1000)
+    assert_close(margin, 0.0)
+    assert lo <= -40.0 and hi >= 40.0  # +50 on one drive, -50 on the other
+    margin, interval = clustered_margin([0], [0], [0], [1], n_boot=10)  # no car of the variant: no margin
+    assert np.isnan(margin) and interval is None
+    with pytest.raises(ValueError, match="one shape"):
+        clustered_margin([1, 2], [3, 3], [1], [3], n_boot=0)
+    with pytest.raises(ValueError, match="0 <= k <= n"):
+        clustered_margin([1], [0], [0], [1], n_boot=0)
+
+
+def test_margin_intervals_over_a_reference_and_formatted():
+    good = _report({"a1": [0.2, 0.3], "b1": [0.4, 2.0]})
+    base = _report({"a1": [0.2, 3.0], "b1": [0.4, 2.0]})
+    margins = margin_intervals({"coarse+gp": base, "full": good}, {"a1": "A", "b1": "B"}, reference="coarse+gp",
+                               n_boot=500)
+    assert list(margins) == ["full"] and margins["full"]["reference"] == "coarse+gp"
+    assert_close(margins["full"]["margin"], 25.0)
+    lo, hi = margins["full"]["interval"]
+    assert lo == 0.0 and hi == 50.0  # drive A twice: +50; drive B twice: 0
+    shares = localisation_intervals({"coarse+gp": base, "full": good}, {"a1": "A", "b1": "B"}, n_boot=100)
+    text = format_intervals(shares, margins=margins)
+    assert "Margins over coarse+gp" in text and "+25.0 [+0.0, +50.0]" in text
+    with pytest.raises(ValueError, match="reference"):
+        margin_intervals({"full": good}, {}, reference="coarse+gp")

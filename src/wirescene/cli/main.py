@@ -218,7 +218,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
              predictions, evidence, raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address,
              **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
-    from wirescene.eval.intervals import format_intervals, localisation_intervals
+    from wirescene.eval.intervals import format_intervals, localisation_intervals, margin_intervals
     from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
@@ -290,12 +290,15 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())
     click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if has_parts else ("3d", "viewpoint")))
     intervals = localisation_intervals(reports, drives, seed=seed)
-    click.echo("\n" + format_intervals(intervals))
+    # each variant against coarse+gp (the coarse stage with the shared plane, which the fine stage must beat)
+    reference = "coarse+gp" if "coarse+gp" in reports else next(iter(reports))
+    margins = margin_intervals(reports, drives, reference=reference, seed=seed) if len(reports) > 1 else {}
+    click.echo("\n" + format_intervals(intervals, margins=margins))
     kitti, kitti_spread = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions, drives=drives, seed=seed)
     click.echo("\n" + format_kitti_summary(kitti, intervals=kitti_spread))
     if json_out is not None:
         data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "kitti_interval": kitti_spread[v],
-                    "loc_1m_interval": intervals[v]}
+                    "loc_1m_interval": intervals[v], **({"loc_1m_margin": margins[v]} if v in margins else {})}
                 for v, r in reports.items()}
         if len(variants) == 1:
             data = data[variants[0]]

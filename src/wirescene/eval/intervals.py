@@ -108,6 +108,51 @@ def clustered_share(k, n, *, n_boot: int = N_BOOT, seed: int = 0,
     return float(share), percentile_interval(np.concatenate(draws), level=level)
 
 
+def clustered_margin(k, n, k_ref, n_ref, *, n_boot: int = N_BOOT, seed: int = 0,
+                     level: float = 90.0) -> tuple[float, tuple[float, float] | None]:
+    """A margin in points between two pooled shares over the same clusters, and its paired
+    bootstrap interval (each draw takes the same clusters for both).
+
+    Parameters
+    ----------
+    k, n : (C,) array_like
+        Per cluster, the cars that pass and the cars counted, of one variant.
+    k_ref, n_ref : (C,) array_like
+        The same of the reference.
+    n_boot, seed : int, keyword-only
+        Draws (0: none).
+    level : float, keyword-only
+
+    Returns
+    -------
+    margin : float
+        ``100 (sum k / sum n - sum k_ref / sum n_ref)`` (NaN without cars).
+    interval : (float, float) or None
+
+    Examples
+    --------
+    >>> margin, _ = clustered_margin([10, 1], [20, 10], [5, 2], [20, 10], n_boot=0)
+    >>> round(margin, 1)
+    13.3
+    """
+    counts = [np.asarray(a, float) for a in (k, n, k_ref, n_ref)]
+    if len({c.shape for c in counts}) != 1 or counts[0].ndim != 1:
+        raise ValueError(f"per-cluster counts of one shape (C,) expected, got {[c.shape for c in counts]}")
+    k, n, k_ref, n_ref = counts
+    if np.any(k < 0) or np.any(k > n) or np.any(k_ref < 0) or np.any(k_ref > n_ref):
+        raise ValueError("per-cluster counts need 0 <= k <= n")
+
+    def margin(w):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return 100.0 * ((w @ k) / (w @ n) - (w @ k_ref) / (w @ n_ref))
+
+    point = float(margin(np.ones(len(k))))
+    if n_boot <= 0 or not np.isfinite(point):
+        return point, None
+    draws = np.concatenate([margin(w) for w in bootstrap_weights(len(k), n_boot, seed=seed)])
+    return point, percentile_interval(draws, level=level) if np.isfinite(draws).any() else None
+
+
 def _clusters(frame_ids: Sequence[str], cluster_of: Mapping[str, str]) -> tuple[np.ndarray, int, int]:
     """Each frame's cluster index, the number of clusters and how many are lone frames of no known drive."""
     clusters = [cluster_of.get(f, (f,)) for f in frame_ids]  # a frame of no known drive: a cluster of its own
@@ -151,8 +196,50 @@ def localisation_intervals(reports: Mapping, cluster_of: Mapping[str, str], *, t
     return out
 
 
-def format_intervals(intervals: Mapping[str, dict], *, threshold: float = 1.0) -> str:
-    """Lines of :func:`localisation_intervals`' figures, a variant a line."""
+def margin_intervals(reports: Mapping, cluster_of: Mapping[str, str], *, reference: str, threshold: float = 1.0,
+                     n_boot: int = N_BOOT, seed: int = 0) -> dict[str, dict]:
+    """Per variant other than ``reference``, its margin over the reference in points of the
+    true positives within ``threshold`` metres, with a paired bootstrap interval over
+    clusters of frames (:func:`clustered_margin`: each draw takes the same drives for both).
+
+    Parameters
+    ----------
+    reports : mapping
+        ``{variant: EvaluationReport}``; must hold ``reference``.
+    cluster_of : mapping
+        ``{frame id: drive}``; a frame it lacks is a cluster of its own.
+    reference : str, keyword-only
+    threshold : float, keyword-only
+    n_boot, seed : int, keyword-only
+
+    Returns
+    -------
+    dict
+        ``{variant: {"reference", "margin", "interval"}}``.
+    """
+    if reference not in reports:
+        raise ValueError(f"reference variant {reference!r} is not among {sorted(reports)}")
+    out = {}
+    for variant, report in reports.items():
+        if variant == reference:
+            continue
+        pair = (report.records, reports[reference].records)
+        rows, n_clusters, _ = _clusters([r.frame_id for records in pair for r in records], cluster_of)
+        counts = []
+        for records, at in zip(pair, (rows[: len(pair[0])], rows[len(pair[0]):])):
+            within = np.array([r.loc_error < threshold for r in records], float)
+            counts += [np.bincount(at, weights=within, minlength=n_clusters),
+                       np.bincount(at, minlength=n_clusters).astype(float)]
+        margin, interval = clustered_margin(*counts, n_boot=n_boot, seed=seed)
+        out[variant] = {"reference": reference, "margin": margin if np.isfinite(margin) else None,
+                        "interval": interval}
+    return out
+
+
+def format_intervals(intervals: Mapping[str, dict], *, threshold: float = 1.0,
+                     margins: Mapping[str, dict] | None = None) -> str:
+    """Lines of :func:`localisation_intervals`' figures, a variant a line, and of
+    :func:`margin_intervals`' if given."""
     lines = [f"Within {threshold:g} m, 90% bootstrap interval over drives (other drives could move the share so far; "
              "a frame of no known drive is drawn alone):"]
     width = max([len(v) for v in intervals] + [7])
@@ -164,6 +251,12 @@ def format_intervals(intervals: Mapping[str, dict], *, threshold: float = 1.0) -
         alone = f" and {n_alone} frame{'s' * (n_alone != 1)} of no known drive" if n_alone else ""
         lines.append(f"  {variant.ljust(width)}  {f['share']:.1f}% [{f['interval'][0]:.1f}, {f['interval'][1]:.1f}] "
                      f"of {f['true_positives']} true positives, {f['drives']} drives{alone}")
+    if margins:
+        reference = next(iter(margins.values()))["reference"]
+        lines.append(f"Margins over {reference} in points within {threshold:g} m, the same drives drawn for both:")
+        for variant, f in margins.items():
+            span = "" if f["interval"] is None else " [{:+.1f}, {:+.1f}]".format(*f["interval"])
+            lines.append(f"  {variant.ljust(width)}  " + ("-" if f["margin"] is None else f"{f['margin']:+.1f}{span}"))
     return "\n".join(lines)
 
 
