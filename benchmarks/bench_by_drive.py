@@ -8,7 +8,8 @@ reference (default each run's ``coarse+gp``; ``NAME:VARIANT`` names one cell of 
 for all):
 
 * the pooled margin (points of the true positives within 1 m, or passing KITTI's IoU
-  0.7 with ``--metric iou``) and the margin on each fold group;
+  0.7 with ``--metric iou``) and the margin on each fold group, with the same bootstrap
+  over the group's own drives;
 * a drive-clustered bootstrap interval of the pooled margin (drives resampled with
   replacement, ``--bootstrap`` draws, 5th and 95th percentiles): the spread a set of
   other drives like these would show;
@@ -140,21 +141,25 @@ def main(argv: Sequence[str] | None = None) -> None:
             continue
         n_ref, k_ref = counts[ref]
         out = margin_by_drive(k, n, k_ref, n_ref, n_boot=args.bootstrap, seed=args.seed)
-        groups = {}
-        for g in GROUPS:
+        groups, group_intervals = {}, {}
+        for g in GROUPS:  # each group's margin with its own drives' bootstrap
             m = np.isin(drive_fold, g)
-            groups[str(g)] = clustered_margin(k[m], n[m], k_ref[m], n_ref[m], n_boot=0)[0]
+            groups[str(g)], group_intervals[str(g)] = clustered_margin(k[m], n[m], k_ref[m], n_ref[m],
+                                                                       n_boot=args.bootstrap, seed=args.seed)
+        in_group = {g: "" if i is None else " [{:+.1f}, {:+.1f}]".format(*i) for g, i in group_intervals.items()}
         loo = out["leave_one_out"]
         most = int(np.argmax(np.abs(loo - out["margin"])))
         spread = "no bootstrap" if out["interval"] is None else "drive bootstrap 90% [{:+.1f}, {:+.1f}]".format(
             *out["interval"])
         print(f"{name}:{variant}: {out['margin']:+.1f} ({int(k.sum())}/{int(n.sum())} against "
-              f"{int(k_ref.sum())}/{int(n_ref.sum())}); {{0, 1}} {groups[str(GROUPS[0])]:+.1f}, {{2, 3}} "
-              f"{groups[str(GROUPS[1])]:+.1f}; {spread}; one drive left out "
+              f"{int(k_ref.sum())}/{int(n_ref.sum())}); {{0, 1}} {groups[str(GROUPS[0])]:+.1f}"
+              f"{in_group[str(GROUPS[0])]}, {{2, 3}} {groups[str(GROUPS[1])]:+.1f}{in_group[str(GROUPS[1])]}; "
+              f"{spread}; one drive left out "
               f"{loo.min():+.1f} .. {loo.max():+.1f} (without {drives[most]} ({int(n[most])} cars, net "
               f"{int(out['net'][most]):+d}): {loo[most]:+.1f})")
         report[f"{name}:{variant}"] = {"reference": f"{ref[0]}:{ref[1]}", "margin": out["margin"],
-                                       "groups": groups, "interval": out["interval"],
+                                       "groups": groups, "group_intervals": group_intervals,
+                                       "interval": out["interval"],
                                        "leave_one_out": dict(zip(drives, loo.tolist())),
                                        "net": dict(zip(drives, out["net"].tolist()))}
     if not report:
