@@ -25,6 +25,7 @@ import numpy as np
 
 from wirescene.core.boxes import iou_2d
 from wirescene.core.viewpoints import angle_difference, viewpoint_bin
+from wirescene.io.wireframes import wireframe_gt_path
 
 NEIGHBOUR_TYPES = ("Van",)
 
@@ -181,6 +182,6 @@ def load_frame_gt(split_dir, frame_id: str, **kw) -> FrameGT:
 
     split_dir = Path(split_dir)
     labels = read_labels(split_dir / "label_2" / f"{frame_id}.txt")
-    wpath = split_dir / "wireframes" / f"{frame_id}.json"
+    wpath = wireframe_gt_path(split_dir, frame_id)
     wire = json.loads(wpath.read_text()) if wpath.is_file() else None
     return frame_gt(labels, wireframes=wire, **kw)

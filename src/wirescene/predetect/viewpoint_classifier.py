@@ -31,7 +31,7 @@ from wirescene.core.errors import InputError, check_shape
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.viewpoints import N_BINS, viewpoint_bin
 from wirescene.predetect.configurations import mirror_bin
-from wirescene.predetect.hog import crop_features, to_gray
+from wirescene.predetect.hog import crops_features, to_gray
 
 FORMAT_VERSION = 1
 ARTEFACT_KIND = "viewpoint-classifier"
@@ -60,9 +60,9 @@ def crop_viewpoint_features(image: np.ndarray, boxes) -> np.ndarray:
     rgb = Image.fromarray(np.ascontiguousarray(image[..., :3] if image.ndim == 3 else np.stack([image] * 3, -1)))
     gh, gw = COLOUR_GRID
     H, W = gray.shape
+    hogs = crops_features(gray, b, *HOG_GRID).reshape(len(b), -1)
     out = []
-    for x1, y1, x2, y2 in b:
-        hog = crop_features(gray, (x1, y1, x2, y2), *HOG_GRID).ravel()
+    for (x1, y1, x2, y2), hog in zip(b, hogs):
         # the colour of the part of the box inside the image (PIL resamples only from within it)
         cx1, cy1 = min(max(x1, 0.0), W - 1.0), min(max(y1, 0.0), H - 1.0)
         cx2, cy2 = max(min(x2, float(W)), cx1 + 1.0), max(min(y2, float(H)), cy1 + 1.0)

@@ -65,6 +65,7 @@ from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y, rotati
 from wirescene.core.raycast import first_hit_distance, mesh_intersector
 from wirescene.core.wireframe import VERTEX_NAMES
 from wirescene.io.kitti import FrameLabels, Label, write_labels
+from wirescene.io.wireframes import wireframe_gt_path
 from wirescene.render import render_scene
 from wirescene.synth.layout import Occluder, SceneLayout, place, sample_layout
 
@@ -634,7 +635,7 @@ def write_scene(out_dir, frame_id: str, scene: SyntheticScene) -> None:
     with atomic_path(calib) as tmp:
         write_kitti_calib(tmp, scene.camera.P)
     write_labels(split / "label_2" / f"{frame_id}.txt", scene.labels, with_score=False)
-    write_bytes(split / "wireframes" / f"{frame_id}.json",
+    write_bytes(wireframe_gt_path(split, frame_id),
                   (json.dumps(scene.wireframes, indent=1) + "\n").encode())
 
 

@@ -31,7 +31,7 @@ from wirescene.predetect.configurations import (
     learn_full_box_correction,
     select_configurations,
 )
-from wirescene.predetect.hog import CELL, N_FEAT, crop_features, feature_pyramid, pyramid_scales, to_gray
+from wirescene.predetect.hog import CELL, N_FEAT, crops_features, feature_pyramid, pyramid_scales, to_gray
 from wirescene.training.scale import single_threaded
 
 
@@ -153,11 +153,14 @@ def outside_cells_zeroed(f: np.ndarray, box, width: int) -> np.ndarray:
 
 
 def _window_features(gray, box, th: int, tw: int, truncated_windows: bool, offsets=None) -> np.ndarray:
-    if offsets is not None:  # (K, D): the window moved by each offset, as latent placement searches it
-        return np.stack([_window_features(gray, moved_box(box, o, th, tw), th, tw, truncated_windows)
-                         for o in offsets])
-    f = crop_features(gray, box, th, tw)
-    return (outside_cells_zeroed(f, box, gray.shape[1]) if truncated_windows else f).ravel()
+    """``(D,)`` template features of ``box``; with ``offsets`` ``(K, 3)`` those of the window moved by
+    each, ``(K, D)``, as latent placement searches it."""
+    boxes = [box] if offsets is None else [moved_box(box, o, th, tw) for o in offsets]
+    f = crops_features(gray, boxes, th, tw)
+    if truncated_windows:
+        f = np.stack([outside_cells_zeroed(fk, bk, gray.shape[1]) for fk, bk in zip(f, boxes)])
+    f = f.reshape(len(boxes), -1)
+    return f[0] if offsets is None else f
 
 
 def alignment_offsets(*, shift: float = 0.5, scale_steps: float = 1 / 6) -> np.ndarray:

@@ -48,6 +48,7 @@ from typing import Mapping
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from wirescene.io.wireframes import wireframe_gt_path
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, N_PARTS, PartDetector
 from wirescene.training.patches import PatchCollector, PatchData, _rng
@@ -598,7 +599,7 @@ def synth_eval_frames(root, *, split: str = "training", min_box_h: float = 40.0,
     d = Path(root) / split
     for img_path in sorted((d / "image_2").glob("*.png")):
         fid = img_path.stem
-        wf = json.loads((d / "wireframes" / f"{fid}.json").read_text())
+        wf = json.loads(wireframe_gt_path(d, fid).read_text())
         cars = _clean_cars(wf["cars"], min_box_h, clean)
         yield np.asarray(Image.open(img_path).convert("RGB")), cars
 
