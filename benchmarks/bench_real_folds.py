@@ -39,7 +39,7 @@ from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
 from wirescene.eval.sources import DetectionSource
 from wirescene.fitting.pipeline import FitOptions
-from wirescene.fitting.variants import VARIANTS
+from wirescene.fitting.variants import VARIANTS, get_variant
 from wirescene.io.folds import N_FOLDS, drive_map, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
@@ -126,6 +126,10 @@ def main():
         (args.out / VERIFICATION_FILE).write_text(json.dumps({"min_car_probability": tau}))
         print(f"verified held out at p(car) >= {tau:g}: {variants[0]} keeps "
               f"{sum(r.n_detections for r in records[variants[0]])} of {fitted} fitted cars", file=sys.stderr)
+        pooled = [v for v in variants if get_variant(v).fine]
+        # the car models learn from the records of the run's variants of each stage: other variants, other cars kept
+        print(f"(the fine variants' car models pool this run's {', '.join(pooled) or 'none'}; a run holding other "
+              f"variants verifies other cars)", file=sys.stderr)
     reports = {v: evaluate(records[v]) for v in variants}
     gt = {f: dataset.labels(f) for f in frames}
     n_cars = sum(len(g.of_type("Car")) for g in gt.values())
