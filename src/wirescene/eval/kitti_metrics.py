@@ -59,6 +59,12 @@ class only if at least one detection of the class has a valid 2D box (``x1 >= 0`
 and AOS) or location (``!= -1000``, for BEV and 3D), and an AP needs ground truth of the
 difficulty (the devkit would print 0 there, a division by zero in its recall).
 
+Resampled sets of frames (a bootstrap over drives, :func:`wirescene.eval.intervals.kitti_intervals`)
+are evaluated at once: :func:`kitti_curves` with ``frame_weights`` gives the curves of each
+set, frames counted as often as drawn, the same as the devkit on the repeated frames. The
+matching is per frame, so it runs once (the second pass at every level of each frame's own
+scores); each set picks its own thresholds and sums the frames' counts.
+
 Two things go beyond the official devkit, which evaluates Car at IoU 0.7 only: the
 ``"iou_0.5"`` block evaluates all four metrics at 0.5 (the common secondary setting of
 monocular 3D papers; note that OpenPCDet's "AP@0.70, 0.50, 0.50" keeps 2D and AOS at 0.7,
