@@ -610,10 +610,12 @@ def test_cli_eval_adds_kitti_figures(tmp_path):
     assert kitti["n_gt"]["car"] == {"easy": 3, "moderate": 5, "hard": 7}
     # --resume reuses the frame, with the same figures
     r3 = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--raw-scores", "--frames", "000010", "--workers", "1",
-              "--json", out, "--predictions", pred, "--resume")
+              "--json", out, "--predictions", pred, "--resume", "--draws", "0")
     assert r3.exit_code == 0, r3.output
     assert "resuming: 1 of 1" in r3.output
-    assert json.loads(out.read_text())["kitti"] == kitti
+    resumed = json.loads(out.read_text())
+    assert resumed["kitti"] == kitti
+    assert "kitti_interval" not in resumed and "every draw ranks" not in r3.output  # --draws 0: no AP intervals
     # without --predictions: the figures of the rows in memory (equal up to the files' rounding)
     r4 = _cli("eval", KITTI_ROOT, "--variant", "coarse", "--raw-scores", "--frames", "000010", "--workers", "1", "--json", out)
     assert r4.exit_code == 0, r4.output

@@ -14,6 +14,7 @@ from wirescene.cli.options import (
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
     POSITIVE,
+    ap_draws_option,
     check_output_dir,
     check_output_file,
     drive_map_option,
@@ -201,6 +202,7 @@ def _dask_client(address: str):
 @click.option("--raw-scores", is_flag=True, default=False,
               help="Write the pre-detection scores instead of calibrated confidences, and keep every box of our own "
                    "pre-detection (the data of `train scores`).")
+@ap_draws_option
 @click.option("--report", "report_dir", type=click.Path(path_type=Path), default=None,
               help="Write an HTML report with plots and a gallery of the best and worst frames to this directory.")
 @workers_option()
@@ -215,8 +217,8 @@ def _dask_client(address: str):
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_file, particles, seed, split, json_out,
-             predictions, evidence, raw_scores, report_dir, workers, allow_missing_detections, resume, dask_address,
-             **inference):
+             predictions, evidence, raw_scores, draws, report_dir, workers, allow_missing_detections, resume,
+             dask_address, **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.eval.intervals import format_intervals, localisation_intervals, margin_intervals
     from wirescene.eval.kitti_metrics import format_kitti_summary
@@ -294,11 +296,13 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     reference = "coarse+gp" if "coarse+gp" in reports else next(iter(reports))
     margins = margin_intervals(reports, drives, reference=reference, seed=seed) if len(reports) > 1 else {}
     click.echo("\n" + format_intervals(intervals, margins=margins))
-    kitti, kitti_spread = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions, drives=drives, seed=seed)
+    kitti, kitti_spread = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions, drives=drives, seed=seed,
+                                         draws=draws)
     click.echo("\n" + format_kitti_summary(kitti, intervals=kitti_spread))
     if json_out is not None:
-        data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "kitti_interval": kitti_spread[v],
-                    "loc_1m_interval": intervals[v], **({"loc_1m_margin": margins[v]} if v in margins else {})}
+        data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "loc_1m_interval": intervals[v],
+                    **({"kitti_interval": kitti_spread[v]} if v in kitti_spread else {}),
+                    **({"loc_1m_margin": margins[v]} if v in margins else {})}
                 for v, r in reports.items()}
         if len(variants) == 1:
             data = data[variants[0]]
@@ -363,10 +367,10 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     click.echo(f"{len(fitted)} frames fitted, {total - len(fitted)} kept from an earlier run; labels in {out}")
 
 
-def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, seed) -> tuple[dict, dict]:
+def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, seed, draws) -> tuple[dict, dict]:
     """KITTI benchmark figures (:func:`wirescene.eval.kitti_metrics.kitti_metrics`) of each
-    variant, and the moderate ones' bootstrap intervals over ``drives``
-    (:func:`wirescene.eval.intervals.kitti_intervals`): of its label files in ``predictions``
+    variant, and the moderate ones' bootstrap intervals over ``drives`` with ``draws`` draws
+    (:func:`wirescene.eval.intervals.kitti_intervals`; none for 0): of its label files in ``predictions``
     if given (so that fitted and resumed frames give the same figures, and ``kitti-eval`` on
     those files agrees), else of the label rows it predicted (``rows[variant][frame]``)."""
     from wirescene.eval.intervals import kitti_intervals
@@ -382,7 +386,8 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, s
         else:
             preds = [rows[v][f] for f in frame_ids]
         out[v] = kitti_metrics(gts, preds)
-        spread[v] = kitti_intervals(gts, preds, frame_ids, drives, seed=seed)
+        if draws:
+            spread[v] = kitti_intervals(gts, preds, frame_ids, drives, n_boot=draws, seed=seed)
     return out, spread
 
 
@@ -392,8 +397,7 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, s
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the figures as JSON.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every GT_DIR/*.txt).")
 @split_file_option
-@click.option("--draws", type=NON_NEGATIVE, default=1000, show_default=True,
-              help="Bootstrap draws of the moderate APs' 90% interval over drives (0: none).")
+@ap_draws_option
 @drive_map_option("the interval draws whole drives")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Seed of the bootstrap draws.")
 def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames, split_file, draws, drive_mapping, seed):

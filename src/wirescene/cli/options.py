@@ -107,6 +107,15 @@ def split_file_option(f):
                              "ImageSets/val.txt); instead of --frames.")(f)
 
 
+def ap_draws_option(f):
+    """``--draws N``: bootstrap draws of the KITTI APs' intervals over drives (0: none)."""
+    from wirescene.eval.intervals import N_BOOT_AP
+
+    return click.option("--draws", type=click.IntRange(min=0), default=N_BOOT_AP, show_default=True,
+                        help="Bootstrap draws of the moderate KITTI APs' 90% interval over drives (0: none; each "
+                             "draw evaluates the drawn frames again).")(f)
+
+
 def drive_map_option(purpose: str = "the held-out calibrations' folds group the frames by recording drive"):
     """``--drive-map DIR``: the KITTI devkit's mapping files, grouping frames by drive for ``purpose``."""
     return click.option("--drive-map", "drive_mapping", type=click.Path(file_okay=False, path_type=Path), default=None,
