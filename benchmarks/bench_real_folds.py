@@ -34,7 +34,7 @@ import numpy as np
 
 from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
 from wirescene.eval.intervals import format_intervals, kitti_intervals, localisation_intervals, margin_intervals
-from wirescene.eval.kitti_metrics import kitti_metrics
+from wirescene.eval.kitti_metrics import format_kitti_intervals, kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
 from wirescene.eval.sources import DetectionSource
@@ -46,18 +46,22 @@ from wirescene.lift import LiftingOptions
 from wirescene.training.scores import cross_validated_confidences
 
 
-def kitti_with_cv_scores(records, gt, folds, drives, *, seed):
-    """({variant: KITTI metrics}, {variant: their moderate figures' intervals over drives}) with each
-    fold's confidences from a model of the other folds."""
+def kitti_with_cv_scores(records, gt, folds, drives, *, seed, reference="coarse+gp"):
+    """({variant: KITTI metrics}, {variant: their moderate figures' intervals over drives}, {variant: the
+    intervals of its margins over ``reference``}) with each fold's confidences from a model of the other folds."""
     frames = sorted(gt)
-    out, spread = {}, {}
+    gts = [gt[f] for f in frames]
+    preds = {}
     for variant, results in records.items():
         by_frame = {r.frame_id: r for r in results}
         scores = cross_validated_confidences(records, folds, variant)
-        gts, preds = [gt[f] for f in frames], [by_frame[f].estimate_labels(scores[f]) for f in frames]
-        out[variant] = kitti_metrics(gts, preds)
-        spread[variant] = kitti_intervals(gts, preds, frames, drives, seed=seed)
-    return out, spread
+        preds[variant] = [by_frame[f].estimate_labels(scores[f]) for f in frames]
+    out = {v: kitti_metrics(gts, p) for v, p in preds.items()}
+    spread = {v: kitti_intervals(gts, p, frames, drives, seed=seed) for v, p in preds.items()}
+    margins = {v: kitti_intervals(gts, p, frames, drives, seed=seed, reference=reference,
+                                  reference_frames=preds[reference])
+               for v, p in preds.items() if reference in preds and v != reference}
+    return out, spread, margins
 
 
 def main():
@@ -140,7 +144,8 @@ def main():
     within = localisation_intervals(reports, drives, seed=args.seed)
     margins = margin_intervals(reports, drives, reference="coarse+gp", seed=args.seed) if "coarse+gp" in reports else {}
     print("\n" + format_intervals(within, margins=margins))
-    kitti, spread = kitti_with_cv_scores({v: records[v] for v in variants}, gt, folds, drives, seed=args.seed)
+    kitti, spread, kitti_margins = kitti_with_cv_scores({v: records[v] for v in variants}, gt, folds, drives,
+                                                        seed=args.seed)
 
     def fmt(v):
         return "    -" if v is None else f"{v:5.1f}"
@@ -160,8 +165,11 @@ def main():
                   for block, metric in (("car", "2d"), ("car", "aos"), ("car", "bev"), ("car", "3d"),
                                         ("iou_0.5", "bev"), ("iou_0.5", "3d"))]
         print(f"{v:10s} " + " ".join(f"{fmt(c['moderate']) + ' ' + fmt_interval(b):>20s}" for c, b in zip(cells, bounds)))
+    if kitti_margins:
+        print("\n" + format_kitti_intervals(kitti_margins))
     summary = {v: {"paper": reports[v].to_json_dict(include_records=False), "kitti": kitti[v],
-                   "kitti_interval": spread[v], "loc_1m_interval": within[v]} for v in variants}
+                   "kitti_interval": spread[v], "kitti_margin": kitti_margins.get(v),
+                   "loc_1m_interval": within[v]} for v in variants}
     summary["_run"] = {"frames": len(frames), "cars": n_cars, "detections": args.detections, "seed": args.seed,
                        "models": "shipped" if args.shipped else str(args.models), "seconds": elapsed,
                        "settings": args.settings}

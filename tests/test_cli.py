@@ -229,6 +229,7 @@ def test_eval_report_is_one_page_with_its_pictures(tmp_path):
             "--particles", 20, "--workers", 1, "--device", "numpy", "--report", out)
     assert r.exit_code == 0, r.output
     assert "Margins over coarse+gp in points within 1 m" in r.output  # fg+gp against coarse+gp, paired by drive
+    assert "AP margins over coarse+gp in points" in r.output  # and KITTI's APs the same way
     page = (out / "index.html").read_text()
     assert "90% over drives" in page and page.count("]%</td>") == 2  # each variant's 1 m share with its interval
     # and KITTI's moderate APs, four a variant, each with its interval over drives

@@ -105,6 +105,22 @@ def test_kitti_intervals_ranked_again_in_every_draw():
     assert alone["car"]["3d"][1] - alone["car"]["3d"][0] < hi - lo
 
 
+def test_kitti_margins_draw_the_same_drives_for_both():
+    # the reference misses every car of drive B, the variant none: the variant's margin is positive in every draw
+    # that holds drive B, and its AP margin interval is one-sided
+    ids = [f"{i:06d}" for i in range(60)]
+    gts = [[_car(0)] for _ in ids]
+    exact = [[_car(0, score=0.9)] for _ in ids]
+    half = [[_car(0, score=0.9, dz=0.0 if i < 30 else 2.0)] for i in range(60)]
+    drives = {f: ("A" if i < 30 else "B") for i, f in enumerate(ids)}
+    out = kitti_intervals(gts, exact, ids, drives, n_boot=400, seed=1, reference_frames=half, reference="half")
+    lo, hi = out["car"]["3d"]
+    assert out["margin_over"] == "half" and lo >= 0.0 and hi > 50.0
+    assert_close(np.array(out["car"]["2d"]), np.array([0.0, 0.0]))  # the same 2D boxes
+    with pytest.raises(ValueError, match="reference frames"):
+        kitti_intervals(gts, exact, ids, drives, n_boot=10, reference_frames=half[:10])
+
+
 def test_kitti_intervals_refuse_mismatches_and_say_none_where_kitti_has_no_figure():
     ids = ["000001"]
     with pytest.raises(ValueError, match="frame ids"):

@@ -296,12 +296,14 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     reference = "coarse+gp" if "coarse+gp" in reports else next(iter(reports))
     margins = margin_intervals(reports, drives, reference=reference, seed=seed) if len(reports) > 1 else {}
     click.echo("\n" + format_intervals(intervals, margins=margins))
-    kitti, kitti_spread = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions, drives=drives, seed=seed,
-                                         draws=draws)
-    click.echo("\n" + format_kitti_summary(kitti, intervals=kitti_spread))
+    kitti, kitti_spread, kitti_margins = _kitti_figures(dataset, frame_ids, reports, kitti_rows, predictions,
+                                                        drives=drives, seed=seed, draws=draws,
+                                                        reference=reference if margins else None)
+    click.echo("\n" + format_kitti_summary(kitti, intervals=kitti_spread, margins=kitti_margins))
     if json_out is not None:
         data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "loc_1m_interval": intervals[v],
                     **({"kitti_interval": kitti_spread[v]} if v in kitti_spread else {}),
+                    **({"kitti_margin": kitti_margins[v]} if v in kitti_margins else {}),
                     **({"loc_1m_margin": margins[v]} if v in margins else {})}
                 for v, r in reports.items()}
         if len(variants) == 1:
@@ -367,28 +369,34 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     click.echo(f"{len(fitted)} frames fitted, {total - len(fitted)} kept from an earlier run; labels in {out}")
 
 
-def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, seed, draws) -> tuple[dict, dict]:
+def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, seed, draws,
+                   reference) -> tuple[dict, dict, dict]:
     """KITTI benchmark figures (:func:`wirescene.eval.kitti_metrics.kitti_metrics`) of each
-    variant, and the moderate ones' bootstrap intervals over ``drives`` with ``draws`` draws
-    (:func:`wirescene.eval.intervals.kitti_intervals`; none for 0): of its label files in ``predictions``
-    if given (so that fitted and resumed frames give the same figures, and ``kitti-eval`` on
-    those files agrees), else of the label rows it predicted (``rows[variant][frame]``)."""
+    variant, the moderate ones' bootstrap intervals over ``drives`` with ``draws`` draws
+    (:func:`wirescene.eval.intervals.kitti_intervals`; none for 0) and those of each variant's
+    margins over ``reference`` (None: none): of its label files in ``predictions`` if given (so
+    that fitted and resumed frames give the same figures, and ``kitti-eval`` on those files
+    agrees), else of the label rows it predicted (``rows[variant][frame]``)."""
     from wirescene.eval.intervals import kitti_intervals
     from wirescene.eval.kitti_metrics import kitti_metrics
     from wirescene.io.kitti import read_labels
 
     frame_ids = list(frame_ids) if frame_ids else dataset.frame_ids()
     gts = [dataset.labels(f) for f in frame_ids]
-    out, spread = {}, {}
+    preds = {}
     for v in variants:
         if predictions is not None:
-            preds = [read_labels(Path(predictions) / v / f"{f}.txt") for f in frame_ids]
+            preds[v] = [read_labels(Path(predictions) / v / f"{f}.txt") for f in frame_ids]
         else:
-            preds = [rows[v][f] for f in frame_ids]
-        out[v] = kitti_metrics(gts, preds)
-        if draws:
-            spread[v] = kitti_intervals(gts, preds, frame_ids, drives, n_boot=draws, seed=seed)
-    return out, spread
+            preds[v] = [rows[v][f] for f in frame_ids]
+    out = {v: kitti_metrics(gts, p) for v, p in preds.items()}
+    if not draws:
+        return out, {}, {}
+    spread = {v: kitti_intervals(gts, p, frame_ids, drives, n_boot=draws, seed=seed) for v, p in preds.items()}
+    margins = {v: kitti_intervals(gts, p, frame_ids, drives, n_boot=draws, seed=seed, reference=reference,
+                                  reference_frames=preds[reference])
+               for v, p in preds.items() if reference is not None and v != reference}
+    return out, spread, margins
 
 
 @main.command("kitti-eval")

@@ -260,10 +260,32 @@ def format_intervals(intervals: Mapping[str, dict], *, threshold: float = 1.0,
     return "\n".join(lines)
 
 
+def _ap_draws(gt_frames, pred_frames, rows, n_clusters, *, difficulty, n_boot, seed) -> dict:
+    """``{(min overlap, metric): (n_boot,) AP draws}`` over clusters (``rows``: each frame's
+    cluster), NaN where a draw holds no car of the difficulty; none where KITTI gives no figure."""
+    overlaps = (MIN_OVERLAP["car"], 0.5)
+    draws: dict = {}
+    aos_valid = True
+    for w in bootstrap_weights(max(n_clusters, 1), n_boot, seed=seed) if len(rows) else ():
+        curves = kitti_curves(gt_frames, pred_frames, min_overlaps=overlaps, difficulties=(difficulty,),
+                              frame_weights=w[:, rows])
+        for thr in overlaps:
+            aos_valid = curves[thr]["aos_valid"]
+            for metric in ("2d", "aos", "bev", "3d"):
+                curve = curves[thr]["2d" if metric == "aos" else metric][difficulty]
+                if curve is None:
+                    continue
+                points = curve.orientation if metric == "aos" else curve.precision
+                draws.setdefault((thr, metric), []).append(np.where(curve.n_gt > 0, average_precision(points), np.nan))
+    return {key: np.concatenate(d) for key, d in draws.items() if aos_valid or key[1] != "aos"}
+
+
 def kitti_intervals(gt_frames: Sequence, pred_frames: Sequence, frame_ids: Sequence[str],
                     cluster_of: Mapping[str, str], *, difficulty: str = "moderate", n_boot: int = N_BOOT_AP,
-                    seed: int = 0, level: float = 90.0) -> dict:
-    """Bootstrap intervals over clusters of frames of the KITTI Car APs (R40) of one difficulty.
+                    seed: int = 0, level: float = 90.0, reference_frames: Sequence | None = None,
+                    reference: str | None = None) -> dict:
+    """Bootstrap intervals over clusters of frames of the KITTI Car APs (R40) of one difficulty,
+    or of their margins over a reference's.
 
     Each draw takes as many clusters (drives) as there are, with replacement, and evaluates
     the frames they hold by the devkit's rules (:func:`wirescene.eval.kitti_metrics.kitti_curves`
@@ -282,14 +304,19 @@ def kitti_intervals(gt_frames: Sequence, pred_frames: Sequence, frame_ids: Seque
     n_boot, seed : int, keyword-only
     level : float, keyword-only
         Width of the intervals in percent.
+    reference_frames : sequence, keyword-only
+        Another estimator's predictions of the same frames: the intervals are then of the
+        margin ``AP - reference AP`` in points, both evaluated on the same drawn drives.
+    reference : str, keyword-only
+        The reference's name, recorded as ``"margin_over"``.
 
     Returns
     -------
     dict
         ``{"car": {"2d"|"aos"|"bev"|"3d": [lo, hi] or None}, "iou_0.5": {"car": {...}},
-        "difficulty", "level", "draws", "drives", "frames_alone"}``, laid out as
-        :func:`~wirescene.eval.kitti_metrics.kitti_metrics` lays out its figures; None where
-        that gives no figure (or no draw holds a car of the difficulty).
+        "difficulty", "level", "draws", "drives", "frames_alone", "margin_over"}``, laid out
+        as :func:`~wirescene.eval.kitti_metrics.kitti_metrics` lays out its figures; None
+        where that gives no figure (or no draw holds a car of the difficulty).
 
     Examples
     --------
@@ -298,37 +325,34 @@ def kitti_intervals(gt_frames: Sequence, pred_frames: Sequence, frame_ids: Seque
     >>> out = kitti_intervals([[car]] * 50, [[car]] * 50, [f"{i:06d}" for i in range(50)], {}, n_boot=20)
     >>> out["car"]["3d"], out["drives"], out["frames_alone"]
     ([100.0, 100.0], 0, 50)
+    >>> kitti_intervals([[car]] * 50, [[car]] * 50, [f"{i:06d}" for i in range(50)], {}, n_boot=20,
+    ...                 reference_frames=[[car]] * 50)["car"]["3d"]
+    [0.0, 0.0]
     """
     if difficulty not in DIFFICULTIES:
         raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
-    if not (len(gt_frames) == len(pred_frames) == len(frame_ids)):
-        raise ValueError(f"{len(gt_frames)} ground-truth frames, {len(pred_frames)} prediction frames and "
-                         f"{len(frame_ids)} frame ids")
+    lengths = {len(gt_frames), len(pred_frames), len(frame_ids)} | (
+        set() if reference_frames is None else {len(reference_frames)})
+    if len(lengths) != 1:
+        raise ValueError(f"{len(gt_frames)} ground-truth frames, {len(pred_frames)} prediction frames"
+                         + ("" if reference_frames is None else f", {len(reference_frames)} reference frames")
+                         + f" and {len(frame_ids)} frame ids")
     rows, n_clusters, alone = _clusters(frame_ids, cluster_of)
-    overlaps = (MIN_OVERLAP["car"], 0.5)
-    draws: dict = {}
-    aos_valid = True
-    for w in bootstrap_weights(max(n_clusters, 1), n_boot, seed=seed) if len(frame_ids) else ():
-        curves = kitti_curves(gt_frames, pred_frames, min_overlaps=overlaps, difficulties=(difficulty,),
-                              frame_weights=w[:, rows])
-        for thr in overlaps:
-            aos_valid = curves[thr]["aos_valid"]
-            for metric in ("2d", "aos", "bev", "3d"):
-                curve = curves[thr]["2d" if metric == "aos" else metric][difficulty]
-                if curve is None:
-                    continue
-                points = curve.orientation if metric == "aos" else curve.precision
-                ap = np.where(curve.n_gt > 0, average_precision(points), np.nan)
-                draws.setdefault((thr, metric), []).append(ap)
+    options = {"difficulty": difficulty, "n_boot": n_boot, "seed": seed}
+    draws = _ap_draws(gt_frames, pred_frames, rows, n_clusters, **options)
+    if reference_frames is not None:  # the same seed and clusters: the same drawn drives for both
+        base = _ap_draws(gt_frames, reference_frames, rows, n_clusters, **options)
+        draws = {key: d - base[key] for key, d in draws.items() if key in base}
 
     def interval(thr, metric):
-        if (thr, metric) not in draws or (metric == "aos" and not aos_valid):
+        values = draws.get((thr, metric))
+        if values is None or not np.isfinite(values).any():
             return None
-        values = np.concatenate(draws[thr, metric])
-        return list(percentile_interval(values, level=level)) if np.isfinite(values).any() else None
+        return list(percentile_interval(values, level=level))
 
     def block(thr):
         return {m: interval(thr, m) for m in ("2d", "aos", "bev", "3d")}
 
-    return {"car": block(overlaps[0]), "iou_0.5": {"car": block(0.5)}, "difficulty": difficulty, "level": level,
-            "draws": n_boot, "drives": n_clusters - alone, "frames_alone": alone}
+    return {"car": block(MIN_OVERLAP["car"]), "iou_0.5": {"car": block(0.5)}, "difficulty": difficulty,
+            "level": level, "draws": n_boot, "drives": n_clusters - alone, "frames_alone": alone,
+            "margin_over": None if reference_frames is None else (reference or "reference")}

@@ -829,11 +829,13 @@ def _summary_cells(result: dict, pick) -> list:
             for _, block, metric in _SUMMARY_COLUMNS]
 
 
-def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict] | None = None) -> str:
+def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict] | None = None,
+                         margins: dict[str, dict] | None = None) -> str:
     """One line per variant of :func:`kitti_metrics` results ``{variant: result}``: R40
     AP at moderate difficulty, 2D / AOS / BEV / 3D at IoU 0.7 and BEV / 3D at 0.5; with
     ``intervals`` (``{variant: intervals}`` of :func:`wirescene.eval.intervals.kitti_intervals`)
-    the table of :func:`format_kitti_intervals` below."""
+    the table of :func:`format_kitti_intervals` below, and with ``margins`` (the same of the
+    margins over a reference) a table of those."""
     if not results:
         return ""
     first = next(iter(results.values()))
@@ -844,8 +846,9 @@ def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict]
              f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>7}" for c in _SUMMARY_COLUMNS)]
     for v, r in results.items():
         lines.append(f"{v:<{name_w}} " + " ".join(f"{_fmt(c):>7}" for c in _summary_cells(r, lambda f: f["moderate"])))
-    if intervals:
-        lines += ["", format_kitti_intervals(intervals)]
+    for table in (intervals, margins):
+        if table:
+            lines += ["", format_kitti_intervals(table)]
     return "\n".join(lines)
 
 
@@ -856,12 +859,16 @@ def format_kitti_intervals(intervals: dict[str, dict]) -> str:
         return ""
     some = next(iter(intervals.values()))
     alone = some["frames_alone"]
+    margin = some.get("margin_over")
     name_w = max(len("variant"), *(len(v) for v in intervals))
-    lines = [f"{some['level']:g}% bootstrap interval over {some['drives']} drives"
+    lines = [(f"AP margins over {margin} in points, " if margin else "")
+             + f"{some['level']:g}% bootstrap interval over {some['drives']} drives"
              + (f" and {alone} frame{'s' * (alone != 1)} of no known drive" if alone else "")
-             + f", {some['difficulty']} ({some['draws']} draws; every draw ranks the estimates again):",
-             f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>13}" for c in _SUMMARY_COLUMNS)]
+             + f", {some['difficulty']} ({some['draws']} draws; every draw ranks the estimates again"
+             + ("; the same drives for both" if margin else "") + "):",
+             f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>14}" for c in _SUMMARY_COLUMNS)]
+    shown = "[{:+.1f}, {:+.1f}]" if margin else "[{:.1f}, {:.1f}]"
     for v, r in intervals.items():
-        cells = _summary_cells(r, lambda c: "-" if c is None else f"[{c[0]:.1f}, {c[1]:.1f}]")
-        lines.append(f"{v:<{name_w}} " + " ".join(f"{c:>13}" for c in cells))
+        cells = _summary_cells(r, lambda c: "-" if c is None else shown.format(*c))
+        lines.append(f"{v:<{name_w}} " + " ".join(f"{c:>14}" for c in cells))
     return "\n".join(lines)
