@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
-from wirescene.eval.intervals import format_intervals, kitti_intervals, localisation_intervals, margin_intervals
+from wirescene.eval.intervals import format_intervals, kitti_variant_intervals, localisation_intervals, margin_intervals
 from wirescene.eval.kitti_metrics import format_kitti_intervals, kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
@@ -57,10 +57,8 @@ def kitti_with_cv_scores(records, gt, folds, drives, *, seed, reference="coarse+
         scores = cross_validated_confidences(records, folds, variant)
         preds[variant] = [by_frame[f].estimate_labels(scores[f]) for f in frames]
     out = {v: kitti_metrics(gts, p) for v, p in preds.items()}
-    spread = {v: kitti_intervals(gts, p, frames, drives, seed=seed) for v, p in preds.items()}
-    margins = {v: kitti_intervals(gts, p, frames, drives, seed=seed, reference=reference,
-                                  reference_frames=preds[reference])
-               for v, p in preds.items() if reference in preds and v != reference}
+    spread, margins = kitti_variant_intervals(gts, preds, frames, drives, seed=seed,
+                                              reference=reference if reference in preds else None)
     return out, spread, margins
 
 

@@ -11,6 +11,7 @@ from wirescene.eval.intervals import (
     clustered_share,
     format_intervals,
     kitti_intervals,
+    kitti_variant_intervals,
     localisation_intervals,
     margin_intervals,
     percentile_interval,
@@ -113,12 +114,18 @@ def test_kitti_margins_draw_the_same_drives_for_both():
     exact = [[_car(0, score=0.9)] for _ in ids]
     half = [[_car(0, score=0.9, dz=0.0 if i < 30 else 2.0)] for i in range(60)]
     drives = {f: ("A" if i < 30 else "B") for i, f in enumerate(ids)}
-    out = kitti_intervals(gts, exact, ids, drives, n_boot=400, seed=1, reference_frames=half, reference="half")
+    spread, margins = kitti_variant_intervals(gts, {"half": half, "exact": exact}, ids, drives, reference="half",
+                                              n_boot=400, seed=1)
+    out = margins["exact"]
     lo, hi = out["car"]["3d"]
-    assert out["margin_over"] == "half" and lo >= 0.0 and hi > 50.0
+    assert list(margins) == ["exact"] and out["margin_over"] == "half" and lo >= 0.0 and hi > 50.0
     assert_close(np.array(out["car"]["2d"]), np.array([0.0, 0.0]))  # the same 2D boxes
-    with pytest.raises(ValueError, match="reference frames"):
-        kitti_intervals(gts, exact, ids, drives, n_boot=10, reference_frames=half[:10])
+    # each name's own intervals are those kitti_intervals gives it alone
+    assert spread["half"] == kitti_intervals(gts, half, ids, drives, n_boot=400, seed=1)
+    with pytest.raises(ValueError, match="prediction frames of exact"):
+        kitti_variant_intervals(gts, {"half": half, "exact": exact[:10]}, ids, drives, n_boot=10)
+    with pytest.raises(ValueError, match="reference"):
+        kitti_variant_intervals(gts, {"exact": exact}, ids, drives, reference="half", n_boot=10)
 
 
 def test_kitti_intervals_refuse_mismatches_and_say_none_where_kitti_has_no_figure():

@@ -377,7 +377,7 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, s
     margins over ``reference`` (None: none): of its label files in ``predictions`` if given (so
     that fitted and resumed frames give the same figures, and ``kitti-eval`` on those files
     agrees), else of the label rows it predicted (``rows[variant][frame]``)."""
-    from wirescene.eval.intervals import kitti_intervals
+    from wirescene.eval.intervals import kitti_variant_intervals
     from wirescene.eval.kitti_metrics import kitti_metrics
     from wirescene.io.kitti import read_labels
 
@@ -392,10 +392,8 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, s
     out = {v: kitti_metrics(gts, p) for v, p in preds.items()}
     if not draws:
         return out, {}, {}
-    spread = {v: kitti_intervals(gts, p, frame_ids, drives, n_boot=draws, seed=seed) for v, p in preds.items()}
-    margins = {v: kitti_intervals(gts, p, frame_ids, drives, n_boot=draws, seed=seed, reference=reference,
-                                  reference_frames=preds[reference])
-               for v, p in preds.items() if reference is not None and v != reference}
+    spread, margins = kitti_variant_intervals(gts, preds, frame_ids, drives, reference=reference, n_boot=draws,
+                                              seed=seed)
     return out, spread, margins
 
 

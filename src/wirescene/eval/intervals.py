@@ -282,10 +282,8 @@ def _ap_draws(gt_frames, pred_frames, rows, n_clusters, *, difficulty, n_boot, s
 
 def kitti_intervals(gt_frames: Sequence, pred_frames: Sequence, frame_ids: Sequence[str],
                     cluster_of: Mapping[str, str], *, difficulty: str = "moderate", n_boot: int = N_BOOT_AP,
-                    seed: int = 0, level: float = 90.0, reference_frames: Sequence | None = None,
-                    reference: str | None = None) -> dict:
-    """Bootstrap intervals over clusters of frames of the KITTI Car APs (R40) of one difficulty,
-    or of their margins over a reference's.
+                    seed: int = 0, level: float = 90.0) -> dict:
+    """Bootstrap intervals over clusters of frames of the KITTI Car APs (R40) of one difficulty.
 
     Each draw takes as many clusters (drives) as there are, with replacement, and evaluates
     the frames they hold by the devkit's rules (:func:`wirescene.eval.kitti_metrics.kitti_curves`
@@ -304,11 +302,6 @@ def kitti_intervals(gt_frames: Sequence, pred_frames: Sequence, frame_ids: Seque
     n_boot, seed : int, keyword-only
     level : float, keyword-only
         Width of the intervals in percent.
-    reference_frames : sequence, keyword-only
-        Another estimator's predictions of the same frames: the intervals are then of the
-        margin ``AP - reference AP`` in points, both evaluated on the same drawn drives.
-    reference : str, keyword-only
-        The reference's name, recorded as ``"margin_over"``.
 
     Returns
     -------
@@ -316,7 +309,8 @@ def kitti_intervals(gt_frames: Sequence, pred_frames: Sequence, frame_ids: Seque
         ``{"car": {"2d"|"aos"|"bev"|"3d": [lo, hi] or None}, "iou_0.5": {"car": {...}},
         "difficulty", "level", "draws", "drives", "frames_alone", "margin_over"}``, laid out
         as :func:`~wirescene.eval.kitti_metrics.kitti_metrics` lays out its figures; None
-        where that gives no figure (or no draw holds a car of the difficulty).
+        where that gives no figure (or no draw holds a car of the difficulty);
+        ``margin_over`` None (see :func:`kitti_variant_intervals`).
 
     Examples
     --------
@@ -325,34 +319,74 @@ def kitti_intervals(gt_frames: Sequence, pred_frames: Sequence, frame_ids: Seque
     >>> out = kitti_intervals([[car]] * 50, [[car]] * 50, [f"{i:06d}" for i in range(50)], {}, n_boot=20)
     >>> out["car"]["3d"], out["drives"], out["frames_alone"]
     ([100.0, 100.0], 0, 50)
-    >>> kitti_intervals([[car]] * 50, [[car]] * 50, [f"{i:06d}" for i in range(50)], {}, n_boot=20,
-    ...                 reference_frames=[[car]] * 50)["car"]["3d"]
-    [0.0, 0.0]
+    """
+    spread, _ = kitti_variant_intervals(gt_frames, {"": pred_frames}, frame_ids, cluster_of, difficulty=difficulty,
+                                        n_boot=n_boot, seed=seed, level=level)
+    return spread[""]
+
+
+def kitti_variant_intervals(gt_frames: Sequence, preds: Mapping[str, Sequence], frame_ids: Sequence[str],
+                            cluster_of: Mapping[str, str], *, reference: str | None = None,
+                            difficulty: str = "moderate", n_boot: int = N_BOOT_AP, seed: int = 0,
+                            level: float = 90.0) -> tuple[dict[str, dict], dict[str, dict]]:
+    """:func:`kitti_intervals` of several estimators' predictions of the same frames, each
+    evaluated once per draw on the same drawn drives, and the intervals of their margins
+    ``AP - reference AP`` in points.
+
+    Parameters
+    ----------
+    gt_frames : sequence of FrameLabels or lists of Label
+    preds : mapping
+        ``{name: predictions of the frames}`` (e.g. a variant's).
+    frame_ids, cluster_of, difficulty, n_boot, seed, level
+        As :func:`kitti_intervals` takes them.
+    reference : str, keyword-only
+        A name in ``preds``: the margins are over its APs (None: no margins).
+
+    Returns
+    -------
+    intervals : dict
+        ``{name: intervals}`` as :func:`kitti_intervals` gives them.
+    margins : dict
+        ``{name: intervals of the margin}`` for every name but the reference, laid out
+        alike, with ``margin_over`` the reference.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 20.0], 0.0, 0.9)
+    >>> ids = [f"{i:06d}" for i in range(50)]
+    >>> _, margins = kitti_variant_intervals([[car]] * 50, {"a": [[car]] * 50, "b": [[car]] * 50}, ids, {},
+    ...                                      reference="a", n_boot=20)
+    >>> margins["b"]["car"]["3d"], margins["b"]["margin_over"]
+    ([0.0, 0.0], 'a')
     """
     if difficulty not in DIFFICULTIES:
         raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
-    lengths = {len(gt_frames), len(pred_frames), len(frame_ids)} | (
-        set() if reference_frames is None else {len(reference_frames)})
-    if len(lengths) != 1:
-        raise ValueError(f"{len(gt_frames)} ground-truth frames, {len(pred_frames)} prediction frames"
-                         + ("" if reference_frames is None else f", {len(reference_frames)} reference frames")
-                         + f" and {len(frame_ids)} frame ids")
+    if reference is not None and reference not in preds:
+        raise ValueError(f"reference {reference!r} is not among {sorted(preds)}")
+    for name, pred_frames in preds.items():
+        if not (len(gt_frames) == len(pred_frames) == len(frame_ids)):
+            raise ValueError(f"{len(gt_frames)} ground-truth frames, {len(pred_frames)} prediction frames"
+                             + (f" of {name}" if name else "") + f" and {len(frame_ids)} frame ids")
     rows, n_clusters, alone = _clusters(frame_ids, cluster_of)
-    options = {"difficulty": difficulty, "n_boot": n_boot, "seed": seed}
-    draws = _ap_draws(gt_frames, pred_frames, rows, n_clusters, **options)
-    if reference_frames is not None:  # the same seed and clusters: the same drawn drives for both
-        base = _ap_draws(gt_frames, reference_frames, rows, n_clusters, **options)
-        draws = {key: d - base[key] for key, d in draws.items() if key in base}
+    # the same seed and clusters for every name: the same drawn drives, so margins are paired
+    draws = {name: _ap_draws(gt_frames, p, rows, n_clusters, difficulty=difficulty, n_boot=n_boot, seed=seed)
+             for name, p in preds.items()}
 
-    def interval(thr, metric):
-        values = draws.get((thr, metric))
-        if values is None or not np.isfinite(values).any():
-            return None
-        return list(percentile_interval(values, level=level))
+    def layout(values: dict, margin_over) -> dict:
+        def interval(thr, metric):
+            v = values.get((thr, metric))
+            return None if v is None or not np.isfinite(v).any() else list(percentile_interval(v, level=level))
 
-    def block(thr):
-        return {m: interval(thr, m) for m in ("2d", "aos", "bev", "3d")}
+        def block(thr):
+            return {m: interval(thr, m) for m in ("2d", "aos", "bev", "3d")}
 
-    return {"car": block(MIN_OVERLAP["car"]), "iou_0.5": {"car": block(0.5)}, "difficulty": difficulty,
-            "level": level, "draws": n_boot, "drives": n_clusters - alone, "frames_alone": alone,
-            "margin_over": None if reference_frames is None else (reference or "reference")}
+        return {"car": block(MIN_OVERLAP["car"]), "iou_0.5": {"car": block(0.5)}, "difficulty": difficulty,
+                "level": level, "draws": n_boot, "drives": n_clusters - alone, "frames_alone": alone,
+                "margin_over": margin_over}
+
+    intervals = {name: layout(d, None) for name, d in draws.items()}
+    margins = {name: layout({k: v - draws[reference][k] for k, v in d.items() if k in draws[reference]}, reference)
+               for name, d in draws.items() if reference is not None and name != reference}
+    return intervals, margins
