@@ -156,12 +156,9 @@ def main():
     print(f"{'variant':10s} {'2D 0.7':>20s} {'AOS':>20s} {'BEV 0.7':>20s} {'3D 0.7':>20s} {'BEV 0.5':>20s} "
           f"{'3D 0.5':>20s}")
     for v, m in kitti.items():
-        cells = [(m[block] if block == "car" else m[block]["car"])[metric]
-                 for block, metric in (("car", "2d"), ("car", "aos"), ("car", "bev"), ("car", "3d"),
-                                       ("iou_0.5", "bev"), ("iou_0.5", "3d"))]
-        bounds = [(spread[v][block] if block == "car" else spread[v][block]["car"])[metric]
-                  for block, metric in (("car", "2d"), ("car", "aos"), ("car", "bev"), ("car", "3d"),
-                                        ("iou_0.5", "bev"), ("iou_0.5", "3d"))]
+        columns = (("car", "2d"), ("car", "aos"), ("car", "bev"), ("car", "3d"), ("iou_0.5", "bev"), ("iou_0.5", "3d"))
+        cells, bounds = ([(r[block] if block == "car" else r[block]["car"])[metric] for block, metric in columns]
+                         for r in (m, spread[v]))
         print(f"{v:10s} " + " ".join(f"{fmt(c['moderate']) + ' ' + fmt_interval(b):>20s}" for c, b in zip(cells, bounds)))
     if kitti_margins:
         print("\n" + format_kitti_intervals(kitti_margins))
