@@ -34,7 +34,7 @@ import numpy as np
 
 from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
 from wirescene.eval.intervals import format_intervals, kitti_variant_intervals, localisation_intervals, margin_intervals
-from wirescene.eval.kitti_metrics import format_kitti_intervals, kitti_metrics
+from wirescene.eval.kitti_metrics import format_kitti_intervals, kitti_figure, kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
 from wirescene.eval.sources import DetectionSource
@@ -157,8 +157,7 @@ def main():
           f"{'3D 0.5':>20s}")
     for v, m in kitti.items():
         columns = (("car", "2d"), ("car", "aos"), ("car", "bev"), ("car", "3d"), ("iou_0.5", "bev"), ("iou_0.5", "3d"))
-        cells, bounds = ([(r[block] if block == "car" else r[block]["car"])[metric] for block, metric in columns]
-                         for r in (m, spread[v]))
+        cells, bounds = ([kitti_figure(r, block, metric) for block, metric in columns] for r in (m, spread[v]))
         print(f"{v:10s} " + " ".join(f"{fmt(c['moderate']) + ' ' + fmt_interval(b):>20s}" for c, b in zip(cells, bounds)))
     if kitti_margins:
         print("\n" + format_kitti_intervals(kitti_margins))

@@ -18,6 +18,7 @@ from wirescene.cli.options import (
     check_output_dir,
     check_output_file,
     drive_map_option,
+    interval_drives,
     load_models,
     models_option,
     select_frames,
@@ -225,9 +226,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
-    from wirescene.io.folds import drive_map
     from wirescene.io.kitti import KittiDataset
-    from wirescene.io.wireframes import wireframe_gt_dir
 
     if resume and predictions is None:
         raise click.UsageError("--resume needs --predictions DIR, where finished frames are recorded")
@@ -242,9 +241,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     dataset = KittiDataset(kitti_root, split=split)
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.frame_ids(), where=dataset.split_dir)
-    # the drives of the shared frames and of a devkit mapping under the root (a bad one is an error before any fit);
-    # synthetic scenes (their ids are KITTI's too) and other frames each alone
-    drives = {} if wireframe_gt_dir(dataset.split_dir).is_dir() else drive_map(dataset.base_dir)[0]
+    drives = interval_drives(dataset.split_dir)  # read before any fit: a bad devkit mapping is an error now
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
@@ -413,16 +410,11 @@ def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames, split_file, draws, drive_
     prediction file has no detections."""
     from wirescene.eval.intervals import kitti_intervals
     from wirescene.eval.kitti_metrics import format_kitti_intervals, format_kitti_table, kitti_metrics, read_label_dirs
-    from wirescene.io.folds import drive_map
-    from wirescene.io.wireframes import wireframe_gt_dir
 
     check_output_file(json_out, "--json")
     known = sorted(p.stem for p in gt_dir.glob("*.txt")) if gt_dir.is_dir() else []
     frame_ids = select_frames(frames, split_file, known, where=gt_dir, what="label file of frame") if known else None
-    # GT_DIR is ROOT/training/label_2 as KITTI lays it out; synthetic scenes (KITTI's ids too) are each drawn alone
-    root = gt_dir.resolve().parent.parent
-    synthetic = wireframe_gt_dir(gt_dir.resolve().parent).is_dir()
-    drives = {} if synthetic and drive_mapping is None else drive_map(root, mapping=drive_mapping)[0]
+    drives = interval_drives(gt_dir.resolve().parent, drive_mapping)  # GT_DIR: ROOT/training/label_2
     ids, gts, preds = read_label_dirs(gt_dir, pred_dir, frames=frame_ids)
     result = kitti_metrics(gts, preds)
     click.echo(format_kitti_table(result))

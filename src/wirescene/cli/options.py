@@ -125,6 +125,18 @@ def drive_map_option(purpose: str = "the held-out calibrations' folds group the 
                              "group).")
 
 
+def interval_drives(split_dir: Path, mapping: Path | None = None) -> dict[str, str]:
+    """``{frame: drive}`` the bootstrap intervals over drives draw by: the shared frames' drives and
+    a devkit mapping (``mapping``, or found under the KITTI root above ``split_dir``); none for
+    synthetic scenes unless a mapping is given (their ids are KITTI's too: each is drawn alone)."""
+    from wirescene.io.folds import drive_map
+    from wirescene.io.wireframes import wireframe_gt_dir
+
+    if mapping is None and wireframe_gt_dir(split_dir).is_dir():
+        return {}
+    return drive_map(Path(split_dir).parent, mapping=mapping)[0]
+
+
 def read_drive_map(dataset, mapping: Path | None) -> tuple[dict[str, str], Path | None]:
     """``({frame: drive}, mapping directory or None)`` for the held-out calibrations of a training
     on ``dataset`` (a :class:`~wirescene.io.kitti.KittiDataset`, given as ROOT or ROOT/training):

@@ -820,13 +820,19 @@ def format_kitti_table(result: dict, *, title: str = "") -> str:
     return "\n".join(lines)
 
 
+def kitti_figure(result: dict, block: str, metric: str):
+    """One metric's figures in the layout of :func:`kitti_metrics` (and of the intervals of
+    :func:`wirescene.eval.intervals.kitti_intervals`): ``block`` ``"car"`` (IoU 0.7) or
+    ``"iou_0.5"``."""
+    return (result[block] if block == "car" else result[block]["car"])[metric]
+
+
 _SUMMARY_COLUMNS = (("2d@.7", "car", "2d"), ("aos@.7", "car", "aos"), ("bev@.7", "car", "bev"),
                     ("3d@.7", "car", "3d"), ("bev@.5", "iou_0.5", "bev"), ("3d@.5", "iou_0.5", "3d"))
 
 
 def _summary_cells(result: dict, pick) -> list:
-    return [pick((result[block] if block == "car" else result[block]["car"])[metric])
-            for _, block, metric in _SUMMARY_COLUMNS]
+    return [pick(kitti_figure(result, block, metric)) for _, block, metric in _SUMMARY_COLUMNS]
 
 
 def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict] | None = None,

@@ -27,6 +27,7 @@ from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.labels import Label
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.wireframe import EDGES
+from wirescene.eval.kitti_metrics import kitti_figure
 from wirescene.eval.metrics import EvaluationReport
 from wirescene.fitting.variants import get_variant
 from wirescene.io.pictures import birds_eye, overlay, plt, save_figure
@@ -158,15 +159,12 @@ def _kitti_table(kitti: dict, kitti_intervals: dict | None) -> str:
     cols = [("3D AP@0.7", "car", "3d"), ("BEV AP@0.7", "car", "bev"), ("3D AP@0.5", "iou_0.5", "3d"),
             ("2D AP@0.7", "car", "2d")]
 
-    def pick(result, block, metric):
-        return (result[block] if block == "car" else result[block]["car"])[metric]
-
     rows = []
     for name, result in kitti.items():
         cells = []
         for _, block, metric in cols:
-            v = pick(result, block, metric)["moderate"]
-            span = pick(kitti_intervals[name], block, metric) if kitti_intervals else None
+            v = kitti_figure(result, block, metric)["moderate"]
+            span = kitti_figure(kitti_intervals[name], block, metric) if kitti_intervals else None
             cells.append("–" if v is None else f"{v:.1f}" + ("" if span is None else f" [{span[0]:.1f}, {span[1]:.1f}]"))
         rows.append(f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     n = next(iter(kitti.values()))["n_gt"]["car"]["moderate"]
