@@ -6,7 +6,7 @@
 at a time) and ``feature_pyramid`` are swapped into the detector in turn, and the
 shipped bank's ``detect_cars`` runs on the same frames, alternating between them, on one
 core (BLAS threads limited to 1; CPU time of this process). It prints whether the two give
-identical detections, the CPU seconds per frame of each (best of ``--repeat`` passes) and
+identical detections (or how far apart they are), the CPU seconds per frame of each (best of ``--repeat`` passes) and
 their ratio, the same for ``crops_features`` on 256 windows of the refinement's grid, and for
 ``hog_cells`` alone on a 112 x 80 crop (the refinement's and the verifier's windows) and on a
 2x-upsampled frame (the pyramid's largest level).
@@ -19,6 +19,15 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import time
+
+
+def agreement(a, b) -> str:
+    """"identical", or the largest difference of two arrays of one shape."""
+    import numpy as np
+
+    if np.array_equal(a, b):
+        return "identical"
+    return f"within {np.abs(np.asarray(a, float) - np.asarray(b, float)).max():.2g}"
 
 
 def main() -> None:
@@ -84,10 +93,15 @@ def main() -> None:
                                       for im, cam in frames], 1)
             seconds[v] = min(seconds[v], t / len(frames))
     use("this")
-    same = all(np.array_equal(a.boxes, b.boxes) and np.array_equal(a.scores, b.scores)
-               and np.array_equal(a.alpha, b.alpha) for a, b in zip(dets["this"], dets["other"]))
+    pairs = list(zip(dets["this"], dets["other"]))
+    if not all(len(a.boxes) == len(b.boxes) and np.array_equal(a.alpha, b.alpha) for a, b in pairs):
+        same = "different detections"
+    else:
+        same = agreement(np.concatenate([a.boxes for a, _ in pairs]), np.concatenate([b.boxes for _, b in pairs]))
+        same += ", scores " + agreement(np.concatenate([a.scores for a, _ in pairs]),
+                                        np.concatenate([b.scores for _, b in pairs]))
     n = sum(len(d.boxes) for d in dets["this"])
-    print(f"detect_cars on {len(frames)} frames ({n} detections): identical {same}; CPU s/frame "
+    print(f"detect_cars on {len(frames)} frames ({n} detections): boxes {same}; CPU s/frame "
           f"this {seconds['this']:.2f}, other {seconds['other']:.2f}, other / this {seconds['other'] / seconds['this']:.2f}x")
 
     gray = hog.to_gray(frames[0][0])
@@ -95,17 +109,17 @@ def main() -> None:
     x, y = rng.uniform(0, gray.shape[1] - 120, 256), rng.uniform(100, gray.shape[0] - 60, 256)
     boxes = np.column_stack([x, y, x + rng.uniform(20, 120, 256), y + rng.uniform(15, 60, 256)])
     t = {v: cpu(lambda f=versions[v]["crops_features"]: f(gray, boxes, 8, 12), args.repeat + 1)[0] for v in versions}
-    equal = np.array_equal(versions["this"]["crops_features"](gray, boxes, 8, 12),
-                           versions["other"]["crops_features"](gray, boxes, 8, 12))
-    print(f"crops_features, 256 windows of 8 x 12 cells: identical {equal}; this {t['this'] * 1e3:.1f} ms, "
+    equal = agreement(versions["this"]["crops_features"](gray, boxes, 8, 12),
+                      versions["other"]["crops_features"](gray, boxes, 8, 12))
+    print(f"crops_features, 256 windows of 8 x 12 cells: {equal}; this {t['this'] * 1e3:.1f} ms, "
           f"other {t['other'] * 1e3:.1f} ms, other / this {t['other'] / t['this']:.2f}x")
     crop = np.ascontiguousarray(gray[100:212, 300:380])
     big = hog.resize(gray, 2 * gray.shape[1], 2 * gray.shape[0])
     for name, image, reps in (("112 x 80 crop", crop, 2000), (f"{big.shape[1]} x {big.shape[0]} level", big, 10)):
         t = {v: cpu(lambda f=versions[v]["hog_cells"], x=image, k=reps: [f(x) for _ in range(k)], args.repeat + 1)[0] / reps
              for v in versions}
-        equal = np.array_equal(versions["this"]["hog_cells"](image), versions["other"]["hog_cells"](image))
-        print(f"hog_cells, {name}: identical {equal}; this {t['this'] * 1e3:.3f} ms, other {t['other'] * 1e3:.3f} ms, "
+        equal = agreement(versions["this"]["hog_cells"](image), versions["other"]["hog_cells"](image))
+        print(f"hog_cells, {name}: {equal}; this {t['this'] * 1e3:.3f} ms, other {t['other'] * 1e3:.3f} ms, "
               f"other / this {t['other'] / t['this']:.2f}x")
 
 

@@ -180,6 +180,26 @@ def _fhog_by_loops(g, cell=8):
     return out
 
 
+def test_orientation_bins_follow_arctan2_round_the_circle():
+    import doctest
+
+    from wirescene.predetect import hog
+
+    rng = np.random.default_rng(4)
+    angle = np.r_[np.linspace(-np.pi, np.pi, 100_001), rng.uniform(-np.pi, np.pi, 100_000)]
+    length = np.exp(rng.uniform(-12, 2, angle.size))  # tiny to large gradients alike
+    gx, gy = (length * np.cos(angle)).astype(np.float32), (length * np.sin(angle)).astype(np.float32)
+    exact = (np.arctan2(gy.astype(float), gx.astype(float)) + np.pi) * 9 / np.pi
+    got = hog.orientation_bins(gx, gy)
+    assert got.dtype == np.float32 and got.shape == gx.shape
+    assert_close(got, exact, atol=2e-6, rtol=0)
+    # axes, diagonals and signed zeros: arctan2's conventions, -pi and pi both at a bin edge
+    edge = np.array([0.0, -0.0, 1.0, -1.0, 3.0, -3.0], np.float32)
+    gx, gy = np.meshgrid(edge, edge)
+    assert_close(hog.orientation_bins(gx, gy), (np.arctan2(gy, gx) + np.pi) * 9 / np.pi, atol=2e-6, rtol=0)
+    assert doctest.testmod(hog).failed == 0
+
+
 def test_hog_cells_match_the_definition():
     rng = np.random.default_rng(3)
     g = rng.random((27, 42)).astype(np.float32)  # 3 x 5 cells, ragged border dropped

@@ -36,6 +36,50 @@ def _edge_pad(x: np.ndarray) -> np.ndarray:
     return out
 
 
+# atan(t) * 9 / pi = t * P(t^2) on [0, 1], 20-degree bins: a weighted least-squares (near-minimax) fit,
+# off by at most 1.1e-7 bins (float64); tests/test_predetect.py checks the whole circle against arctan2
+_ATAN_BINS = np.array([2.86478707, -0.95483018, 0.57142702, -0.39845288, 0.27622858, -0.16017695, 0.0626327,
+                       -0.01161546], np.float32)
+
+
+def orientation_bins(gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+    """Float32 ``(arctan2(gy, gx) + pi) * 18 / (2 pi)``, the gradient's direction in 20-degree bins
+    in ``[0, 18]``, for float32 arrays of one shape.
+
+    Within 4e-6 bins of float32 ``np.arctan2`` (within 1.5e-6 of the exact value, which float32
+    ``arctan2`` misses by up to 2.6e-6) at 2.4x its speed: numpy's ``arctan2`` has no vectorised
+    loop without AVX-512 and was half of :func:`hog_cells`. Octant reduction, an odd polynomial, and
+    the quadrant restored by ``copysign`` (``np.where`` costs 20 multiplications); signed zeros
+    give ``arctan2``'s angles.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.predetect.hog import orientation_bins
+    >>> gx = np.array([1, 0, -1, 0, 1], np.float32)
+    >>> gy = np.array([0, 1, 0, -1, 1], np.float32)
+    >>> np.round(orientation_bins(gx, gy), 5).tolist()  # 0, 90, 180, -90 and 45 degrees
+    [9.0, 13.5, 18.0, 4.5, 11.25]
+    """
+    ax, ay = np.abs(gx), np.abs(gy)
+    t = np.minimum(ax, ay)
+    t /= np.maximum(np.maximum(ax, ay), np.float32(1e-30))
+    t2 = t * t
+    p = np.full_like(t, _ATAN_BINS[-1])
+    for c in _ATAN_BINS[-2::-1]:  # Horner in t^2
+        p *= t2
+        p += c
+    p *= t  # atan(min / max) in bins: [0, 2.25]
+    ax -= ay
+    for half, sign in ((np.float32(2.25), ax), (np.float32(4.5), gx)):  # unfold the octant, then the quadrant
+        np.subtract(half, p, out=p)
+        np.copysign(p, sign, out=p)
+        np.subtract(half, p, out=p)
+    np.copysign(p, gy, out=p)
+    p += np.float32(9)
+    return p
+
+
 def hog_cells(gray: np.ndarray, cell: int = CELL) -> np.ndarray:
     """(..., H // cell, W // cell, 31) float32 FHOG features of grey images ``(..., H, W)``
     (a stack of equal crops in one call: the same numbers as one call each, for far fewer
@@ -49,7 +93,7 @@ def hog_cells(gray: np.ndarray, cell: int = CELL) -> np.ndarray:
     gx = p[..., 1:-1, 2:] - p[..., 1:-1, :-2]
     gy = p[..., 2:, 1:-1] - p[..., :-2, 1:-1]
     mag = np.sqrt(gx * gx + gy * gy)
-    pos = (np.arctan2(gy, gx) + np.pi) * (_N_ORIENT / (2 * np.pi))  # [0, 18]
+    pos = orientation_bins(gx, gy)  # [0, 18]
     lower = np.floor(pos)
     f = pos - lower  # exact in float32: a fractional part
     b0 = lower.astype(np.intp)
@@ -148,9 +192,10 @@ def crop_features(gray: np.ndarray, box, th: int, tw: int) -> np.ndarray:
     return hog_cells(_warped_crop(gray, box, th, tw))[1:-1, 1:-1]
 
 
-def crops_features(gray: np.ndarray, boxes, th: int, tw: int, *, chunk: int = 256) -> np.ndarray:
+def crops_features(gray: np.ndarray, boxes, th: int, tw: int, *, chunk: int = 16) -> np.ndarray:
     """(D, th, tw, 31) :func:`crop_features` of ``boxes`` ``(D, 4)``, the same numbers, the
-    features of ``chunk`` crops at a time (memory: some 60 kB per crop and array)."""
+    features of ``chunk`` crops at a time (some 60 kB per crop and array: 16 keep the
+    temporaries in the CPU's cache, 1.9x faster than 256; ``benchmarks/bench_hog.py``)."""
     b = np.asarray(boxes, float).reshape(-1, 4)
     out = np.zeros((len(b), th, tw, N_FEAT), np.float32)
     for start in range(0, len(b), chunk):
