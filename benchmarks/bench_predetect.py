@@ -30,7 +30,7 @@ Usage:
   python benchmarks/bench_predetect.py --root ROOT --from-raw DIR --models-dir DIR        # then score them
   python benchmarks/bench_predetect.py --root ROOT --bank src/wirescene/data/detector_bank.npz   # a fixed bank
 Training options of the CV run: --partial, --mining-rounds, --C, --no-flips, --min-bin-examples,
---per-octave, --cut-paste, --pad-cells, --whiten, --align, --full-area, --partial-area, --synth-root [--synth-scenes N], --support-weight W (also --from-raw; the recipe's 0.3 by default, 0 for the best vote alone); --train-fraction F [--subset-seed S] trains each fold bank on a share F
+--per-octave, --cut-paste, --pad-cells, --whiten, --align, --share-deg, --full-area, --partial-area, --synth-root [--synth-scenes N], --support-weight W (also --from-raw; the recipe's 0.3 by default, 0 for the best vote alone); --train-fraction F [--subset-seed S] trains each fold bank on a share F
 of its training drives, each with all its frames (a learning curve: held-out AP against the amount of real training
 data; --subset-unit frame: a share of the frames).
 """
@@ -259,6 +259,8 @@ def main():
                          "the finished bank (0: the best vote alone)")
     ap.add_argument("--align", action="store_true", help="--cv: latent placement of the positive windows "
                     "(train_bank_on_frames align)")
+    ap.add_argument("--share-deg", type=float, default=0.0, help="--cv: cars within this many degrees of their "
+                    "viewpoint bin's edge also train the neighbouring bin (train_bank_on_frames share_deg)")
     ap.add_argument("--synth-root", default=None, help="--cv: a `wirescene synth` root whose rendered cars join "
                     "every fold bank's positives (negatives stay real)")
     ap.add_argument("--synth-scenes", type=int, default=None, help="--synth-root: its first N scenes (default: all)")
@@ -355,6 +357,7 @@ def main():
                                         label_boxes=args.label_boxes, per_octave=args.per_octave,
                                         cut_paste=args.cut_paste, pad_cells=args.pad_cells or 0,
                                         max_truncated=args.max_truncated, whiten=args.whiten, align=args.align,
+                                        share_deg=args.share_deg,
                                         synthetic=synthetic,
                                         full_area=args.full_area, partial_area=args.partial_area, progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wirescene.core.boxes import iou_2d
+from wirescene.core.groundplane import wrap_angle
 from wirescene.core.viewpoints import N_BINS
 from wirescene.core.wireframe import EDGES, MIRROR, N_VERTICES, VERTEX_NAMES
 
@@ -35,6 +36,11 @@ FULL = tuple(range(N_VERTICES))
 def mirror_bin(b):
     """Viewpoint bin of the horizontally flipped image (alpha -> pi - alpha)."""
     return (4 - np.asarray(b)) % N_BINS
+
+
+def mirror_alpha(alpha) -> float:
+    """Observation angle in the horizontally flipped image: ``pi - alpha``, in ``[-pi, pi)``."""
+    return float(wrap_angle(np.pi - float(alpha)))
 
 
 @dataclass
@@ -111,6 +117,7 @@ class CarExample:
     occ_frac: float
     truncated: float
     full_box: np.ndarray = field(default=None)
+    alpha: float = float("nan")  # KITTI observation angle (in the flipped frame if flipped); nan: unknown
 
     @property
     def clean(self) -> bool:
@@ -133,13 +140,14 @@ def examples_from_wireframes(wire: dict, labels, image_index: int, width: int, *
         geom = np.array([r not in ("self", "truncated") for r in reasons])
         b = int(viewpoint_bin(lab.alpha))
         kw = dict(occ_frac=float(car["occluded_fraction"]), truncated=float(lab.truncated))
-        out.append(CarExample(image_index, False, b, v2d, vis, geom, lab.box.copy(), **kw))
+        out.append(CarExample(image_index, False, b, v2d, vis, geom, lab.box.copy(), alpha=float(lab.alpha), **kw))
         if flips:
             fv = v2d[MIRROR].copy()
             fv[:, 0] = (width - 1) - fv[:, 0]
             box = lab.box.copy()
             box[[0, 2]] = (width - 1) - lab.box[[2, 0]]
-            out.append(CarExample(image_index, True, int(mirror_bin(b)), fv, vis[MIRROR], geom[MIRROR], box, **kw))
+            out.append(CarExample(image_index, True, int(mirror_bin(b)), fv, vis[MIRROR], geom[MIRROR], box,
+                                  alpha=mirror_alpha(lab.alpha), **kw))
     return out
 
 

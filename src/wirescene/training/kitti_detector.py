@@ -72,12 +72,14 @@ from typing import Mapping
 import numpy as np
 
 from wirescene.core.errors import InputError
-from wirescene.core.viewpoints import N_BINS, viewpoint_bin
+from wirescene.core.groundplane import wrap_angle
+from wirescene.core.viewpoints import BIN_WIDTH, N_BINS, bin_center, viewpoint_bin
 from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_pyramid, pad_pyramid, score_pyramid
 from wirescene.predetect.configurations import (
     CarExample,
     apply_full_box,
     learn_full_box_correction,
+    mirror_alpha,
     mirror_bin,
     select_configurations,
 )
@@ -210,7 +212,7 @@ def frame_examples(labels, camera, width: int, height: int, image_index: int, me
         occ = max(occ, {0: 0.0, 1: 0.1, 2: 0.4}.get(o.occluded, 0.6))
         b = int(viewpoint_bin(o.alpha))
         kw = dict(occ_frac=occ, truncated=float(o.truncated))
-        out.append(CarExample(image_index, False, b, uv.copy(), vis, geom, o.box.copy(), **kw))
+        out.append(CarExample(image_index, False, b, uv.copy(), vis, geom, o.box.copy(), alpha=float(o.alpha), **kw))
         if flips:
             out.append(mirrored_example(out[-1], width, image_index + 1))
     return out
@@ -227,7 +229,7 @@ def mirrored_example(e: CarExample, width: int, image: int) -> CarExample:
     fv[:, 0] = (width - 1) - fv[:, 0]
     return replace(e, image=image, flipped=not e.flipped, bin=int(mirror_bin(e.bin)), v2d=fv,
                    visible=e.visible[MIRROR], geom_visible=e.geom_visible[MIRROR],
-                   label_box=mirrored_boxes(e.label_box, width)[0], full_box=None)
+                   label_box=mirrored_boxes(e.label_box, width)[0], full_box=None, alpha=mirror_alpha(e.alpha))
 
 
 def mirrored_image(image: TrainImage, examples, index: int):
@@ -282,8 +284,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                          partial_area: float = 36, label_boxes: bool = False, per_octave: int = 6, box_weight: float = 2.0,
                          cluster_radius: float = 0.2, cut_paste: int = 0, max_negatives: int | None = DEFAULT_MAX_NEGATIVES,
                          pyramid_cache_mb: float = DEFAULT_CACHE_MB, pad_cells: int = 0, max_truncated: float = 0.15,
-                         whiten: bool = False, align: bool = False, synthetic=None, workers: int = 1,
-                         progress=None) -> DetectorBank:
+                         whiten: bool = False, align: bool = False, share_deg: float = 0.0, synthetic=None,
+                         workers: int = 1, progress=None) -> DetectorBank:
     """Train a :class:`DetectorBank` on real training images and their car examples.
 
     ``images``/``examples`` as returned by :func:`load_training_frames` (grey images and
@@ -330,6 +332,9 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     the current template scores highest; the first fit takes the unmoved windows. The 27
     windows of every positive are kept (at most 600 per configuration: about 3 GB for 32
     configurations at 1.5k floats each, whatever the number of frames).
+    ``share_deg``: a car whose observation angle lies within this many degrees of its bin's
+    edge also trains the neighbouring bin's configurations (viewpoints shared across bins;
+    bins sparse enough to borrow both neighbours' cars take no more).
     ``synthetic``: ``(images, examples)`` of rendered scenes (:func:`load_training_frames` of a
     ``wirescene synth`` root), whose cars join the positives only: the negatives, random and
     mined, and the full-box correction come from the real images.
@@ -372,7 +377,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     per_bin = np.bincount([e.bin for e in examples], minlength=N_BINS)
     # sparse viewpoints (side views are rare in KITTI) borrow the cars of both neighbouring bins
     examples = list(examples) + [replace(e, bin=b) for b in range(N_BINS) if per_bin[b] < min_bin_examples
-                                 for e in examples if e.bin in ((b + 1) % N_BINS, (b - 1) % N_BINS)]
+                                 for e in examples if e.bin in ((b + 1) % N_BINS, (b - 1) % N_BINS)] + \
+        shared_examples(examples, share_deg, skip=per_bin < min_bin_examples)
     configs = select_configurations(examples, n_partial=n_partial, min_height=min_height, full_area=full_area,
                                     partial_area=partial_area)
     say(f"{len(configs)} configurations; car examples per bin {per_bin.tolist()}")
@@ -438,6 +444,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
         bank.meta["whiten"] = True
     if align:
         bank.meta["align"] = True
+    if share_deg:
+        bank.meta["share_deg"] = float(share_deg)
     if n_synthetic:
         bank.meta["synthetic_examples"] = int(n_synthetic)
     if pad_cells:  # recorded where set: older banks and their detection stay as they were
@@ -445,6 +453,24 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     if any(n.offered > len(n) or len(n) == max_negatives for n in neg):
         bank.meta["max_negatives"] = int(max_negatives)  # recorded where the cap shaped the bank
     return bank
+
+
+def shared_examples(examples, share_deg: float, *, skip) -> list:
+    """Copies, in the neighbouring bin, of the ``examples`` whose ``alpha`` lies within
+    ``share_deg`` degrees of their bin's edge; none for a neighbour marked in ``skip`` ``(8,)``
+    or an example of unknown angle."""
+    from dataclasses import replace
+
+    if share_deg <= 0:
+        return []
+    out = []
+    for e in examples:
+        off = float(wrap_angle(e.alpha - bin_center(e.bin)))  # nan when unknown: never near an edge
+        if abs(off) > BIN_WIDTH / 2 - np.radians(share_deg):
+            b = (e.bin + (1 if off > 0 else -1)) % N_BINS
+            if not skip[b]:
+                out.append(replace(e, bin=b))
+    return out
 
 
 def hard_negatives(bank: DetectorBank, image: TrainImage, *, scales, min_height: float, max_height: float,
