@@ -30,7 +30,8 @@ def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | No
     K = P[:, :3]
     if K[2, 2] <= 0 or np.any(np.abs(K[[1, 2, 2], [0, 0, 1]]) > 1e-9 * max(abs(K[2, 2]), 1.0)):
         return "projection matrix is not a rectified pinhole camera (K must be upper triangular with K[2,2] > 0)"
-    K = K / K[2, 2]
+    with np.errstate(over="ignore"):  # a tiny K[2, 2] gives infinite focal lengths, refused below
+        K = K / K[2, 2]
     fx, fy = K[0, 0], K[1, 1]
     lo, hi = FOCAL_RANGE
     if not (lo <= fx <= hi and lo <= fy <= hi):
