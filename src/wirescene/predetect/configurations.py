@@ -38,9 +38,9 @@ def mirror_bin(b):
     return (4 - np.asarray(b)) % N_BINS
 
 
-def mirror_alpha(alpha) -> float:
-    """Observation angle in the horizontally flipped image: ``pi - alpha``, in ``[-pi, pi)``."""
-    return float(wrap_angle(np.pi - float(alpha)))
+def mirror_alpha(alpha):
+    """Observation angles ``(...)`` in the horizontally flipped image: ``pi - alpha``, in ``[-pi, pi)``."""
+    return wrap_angle(np.pi - np.asarray(alpha, dtype=float))
 
 
 @dataclass
@@ -147,7 +147,7 @@ def examples_from_wireframes(wire: dict, labels, image_index: int, width: int, *
             box = lab.box.copy()
             box[[0, 2]] = (width - 1) - lab.box[[2, 0]]
             out.append(CarExample(image_index, True, int(mirror_bin(b)), fv, vis[MIRROR], geom[MIRROR], box,
-                                  alpha=mirror_alpha(lab.alpha), **kw))
+                                  alpha=float(mirror_alpha(lab.alpha)), **kw))
     return out
 
 

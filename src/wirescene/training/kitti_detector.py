@@ -229,7 +229,8 @@ def mirrored_example(e: CarExample, width: int, image: int) -> CarExample:
     fv[:, 0] = (width - 1) - fv[:, 0]
     return replace(e, image=image, flipped=not e.flipped, bin=int(mirror_bin(e.bin)), v2d=fv,
                    visible=e.visible[MIRROR], geom_visible=e.geom_visible[MIRROR],
-                   label_box=mirrored_boxes(e.label_box, width)[0], full_box=None, alpha=mirror_alpha(e.alpha))
+                   label_box=mirrored_boxes(e.label_box, width)[0], full_box=None,
+                   alpha=float(mirror_alpha(e.alpha)))
 
 
 def mirrored_image(image: TrainImage, examples, index: int):
@@ -636,12 +637,12 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
 
 def image_cars(dataset, image: TrainImage) -> tuple[np.ndarray, np.ndarray]:
     """``(boxes (K, 4), alpha (K,))`` of the ``Car`` labels of a training image, mirrored
-    (``alpha -> pi - alpha``) for a flipped copy."""
+    (:func:`~wirescene.predetect.configurations.mirror_alpha`) for a flipped copy."""
     cars = [o for o in dataset.labels(image.frame).objects if o.type == "Car"]
     boxes = np.array([o.box for o in cars], float).reshape(-1, 4)
     alpha = np.array([o.alpha for o in cars], float)
     if image.flipped:
-        boxes, alpha = mirrored_boxes(boxes, image.size[0]), np.pi - alpha
+        boxes, alpha = mirrored_boxes(boxes, image.size[0]), mirror_alpha(alpha)
     return boxes, alpha
 
 
