@@ -72,14 +72,6 @@ def test_localisation_intervals_group_frames_by_drive_and_others_alone():
     assert "-" in format_intervals({"v": empty}) and "2 drives and 1 frame of no known drive" in format_intervals({"full": out})
 
 
-def test_the_examples_run():
-    import doctest
-
-    from wirescene.eval import intervals
-
-    assert doctest.testmod(intervals).failed == 0
-
-
 def _car(x, *, score=None, dz=0.0):
     return Label("Car", 0.0, 0, 0.0, [100.0 + 200 * x, 100.0, 200.0 + 200 * x, 200.0], [1.5, 1.6, 3.9],
                  [4.0 * x, 1.6, 20.0 + dz], 0.0, score)
