@@ -19,7 +19,11 @@ scenes and on the real KITTI frames (plain script).
        frames are the evaluation set: the shipped model never saw them.
 
 Usage: python benchmarks/bench_parts.py --root KITTI_ROOT [--frame 000010]
-       [--synth-root DIR] [--model PATH]
+       [--synth-root DIR] [--model PATH] [--fold K]
+
+``--fold K`` scores only the frames of fold K of the shared frames' drive folds
+(:mod:`wirescene.io.folds`): a fold model (``wirescene train parts --split-file`` of the
+other folds' frames) held out by drive.
 
 ``--root`` holds the labelled KITTI frames scored (``tests/data/kitti``, three frames, is
 a quick check of the script); without ``--synth-root`` the synthetic scenes are generated
@@ -40,9 +44,18 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from wirescene.io.folds import fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.parts.detector import PartDetector, response_maps  # noqa: E402
 from wirescene.training.parts import kitti_eval_frames, localisation, synth_eval_frames  # noqa: E402
+
+
+def fold_of_known(frame_id: str):
+    """The drive fold of a shared frame, None for a frame of no known drive."""
+    try:
+        return fold_of(frame_id)
+    except KeyError:
+        return None
 
 
 def _line(name, r, radii):
@@ -63,6 +76,7 @@ def main():
     ap.add_argument("--synth-seed", type=int, default=1)
     ap.add_argument("--model", default=None)
     ap.add_argument("--radius", type=float, nargs="+", default=[0.04, 0.10])
+    ap.add_argument("--fold", type=int, default=None, help="score only this drive fold's frames")
     args = ap.parse_args()
     if args.synth_seed >= 1000:
         ap.error("synthetic seeds >= 1000 are training data")
@@ -71,6 +85,10 @@ def main():
     print(f"model: kind {det.kind}, {det.n_trees} trees, depth {det.max_depth}, "
           f"{det.n_features} features; meta {det.meta}")
     ds = KittiDataset(args.root)
+    scored = None
+    if args.fold is not None:
+        scored = [f for f in ds.frame_ids() if fold_of_known(f) == args.fold]
+        print(f"fold {args.fold}: {len(scored)} frames")
     img = ds.image(args.frame)
     boxes = np.array([o.box for o in ds.labels(args.frame).of_type("Car")])
     response_maps(img[:50, :50], np.array([[5, 5, 40, 30]]), detector=det)  # warm-up
@@ -91,8 +109,8 @@ def main():
         radii = tuple(args.radius)
         rows = [
             ("synthetic held-out", lambda: synth_eval_frames(synth)),
-            ("real KITTI clean", lambda: kitti_eval_frames(args.root)),
-            ("real KITTI all cars", lambda: kitti_eval_frames(args.root, clean=False, min_box_h=0.0)),
+            ("real KITTI clean", lambda: kitti_eval_frames(args.root, frames=scored)),
+            ("real KITTI all cars", lambda: kitti_eval_frames(args.root, clean=False, min_box_h=0.0, frames=scored)),
         ]
         for name, frames in rows:
             r = localisation(det, frames(), radii=radii)

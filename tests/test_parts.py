@@ -377,3 +377,14 @@ def test_tiny_real_retraining_reproduces_the_pipeline(tiny_real, kitti_frame):
     for k, (i, j) in enumerate(ij):
         assert_close(b.probs[0, i, j], p[k], atol=2e-3)
         assert_close(R.log_ratio(np.broadcast_to(guv[i, j], (N_PARTS, 2)), 0), det.log_ratio_of(p[k]), atol=2e-2)
+
+
+def test_kitti_eval_frames_reads_the_frames_asked_for():
+    from wirescene.training.parts import kitti_eval_frames
+
+    every = list(kitti_eval_frames(KITTI_ROOT, clean=False, min_box_h=0.0))
+    one = list(kitti_eval_frames(KITTI_ROOT, clean=False, min_box_h=0.0, frames=["001545"]))
+    assert len(every) == 3 and len(one) == 1
+    image, cars = one[0]
+    assert_close(np.array([c[0] for c in cars]), np.array([c[0] for c in every[2][1]]))
+    assert image.shape == every[2][0].shape

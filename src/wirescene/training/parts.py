@@ -604,10 +604,11 @@ def synth_eval_frames(root, *, split: str = "training", min_box_h: float = 40.0,
         yield np.asarray(Image.open(img_path).convert("RGB")), cars
 
 
-def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True):
+def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True, frames=None):
     """``(image, cars)`` of real KITTI frames for :func:`localisation`: the mean wireframe
     placed at each ``Car`` label's pose (location = the label's bottom centre), visibility
-    by :func:`wirescene.infer.occlusion.self_occlusion`. EVALUATION ONLY: never train on these."""
+    by :func:`wirescene.infer.occlusion.self_occlusion`; ``frames``: the ids to read (default
+    all of ``root``). EVALUATION ONLY: never train on these."""
     from wirescene.core import wireframe
     from wirescene.core.groundplane import rotation_y, transform
     from wirescene.core.shape import load_default
@@ -616,7 +617,7 @@ def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True):
 
     ds = KittiDataset(root)
     mean = load_default().mean
-    for fid in ds.frame_ids():
+    for fid in ds.frame_ids() if frames is None else frames:
         cam = ds.camera(fid)
         cars = []
         for o in ds.labels(fid).of_type("Car"):
