@@ -44,18 +44,10 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.io.folds import fold_of  # noqa: E402
+from wirescene.io.folds import DRIVE_FOLDS, frame_drives  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.parts.detector import PartDetector, response_maps  # noqa: E402
 from wirescene.training.parts import kitti_eval_frames, localisation, synth_eval_frames  # noqa: E402
-
-
-def fold_of_known(frame_id: str):
-    """The drive fold of a shared frame, None for a frame of no known drive."""
-    try:
-        return fold_of(frame_id)
-    except KeyError:
-        return None
 
 
 def _line(name, r, radii):
@@ -87,7 +79,8 @@ def main():
     ds = KittiDataset(args.root)
     scored = None
     if args.fold is not None:
-        scored = [f for f in ds.frame_ids() if fold_of_known(f) == args.fold]
+        drives = frame_drives()  # frames of no known drive belong to no fold
+        scored = [f for f in ds.frame_ids() if DRIVE_FOLDS.get(drives.get(f)) == args.fold]
         print(f"fold {args.fold}: {len(scored)} frames")
     img = ds.image(args.frame)
     boxes = np.array([o.box for o in ds.labels(args.frame).of_type("Car")])
