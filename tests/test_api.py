@@ -35,7 +35,10 @@ def test_the_entry_points_and_returned_types_have_examples():
     # they run in test_examples.py; here: fit, detect and evaluate and the types they return show one each
     import wirescene.core.types as types
 
-    assert sum(len(t.examples) for t in doctest.DocTestFinder().find(wirescene.api)) >= 15
+    def count(module):
+        return sum(len(t.examples) for t in doctest.DocTestFinder().find(module))
+
+    assert count(wirescene.api) >= 15 and count(types) >= 20
     for cls in (types.Detections, types.ObjectEstimate, types.SceneEstimate):
         assert "Examples\n    --------\n    >>> " in cls.__doc__, cls.__name__
 
