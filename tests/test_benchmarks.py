@@ -411,3 +411,38 @@ def test_confidence_cues_read_the_box_fit_and_the_frame_scale(monkeypatch):
     assert_close(cues["own scale"], np.array([-1.0, 1.0]) * np.log(2.0) / 2)
     assert_close(cues["pitch"], np.full(2, 0.1 / (depth[1] - depth[0])))
     assert_close(cues["cars"], np.full(2, np.log(2.0)))
+
+
+def test_seed_comparison_pairs_runs_by_seed_and_cars_by_label(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_seeds import compare, sign_test
+
+    def table(rows):  # (frame, label index, within 1 m, 3D IoU)
+        f, g, loc, iou = zip(*rows)
+        return {"frame": np.array(f, dtype=object), "gt_index": np.array(g), "pass_loc": np.array(loc),
+                "iou": np.array(iou, float), "pass_iou": np.array(iou) > 0.7}
+
+    fold_of = {"a": 0, "b": 2}
+    # seed 1 of A also matches car a2, which no other run does: counted in its seed's figures, not car by car
+    runs_a = [table([("a", 0, True, 0.8), ("a", 1, False, 0.3), ("a", 2, False, 0.1), ("b", 0, True, 0.5)]),
+              table([("a", 0, True, 0.75), ("a", 1, True, 0.4), ("b", 0, False, 0.2)])]
+    runs_b = [table([("a", 0, True, 0.8), ("a", 1, True, 0.5), ("b", 0, True, 0.6)]),
+              table([("a", 0, True, 0.72), ("a", 1, True, 0.45), ("b", 0, True, 0.55)])]
+    report = compare(runs_a, runs_b, fold_of)
+    g = report["{0, 1}"]
+    assert g["seeds"]["true positives"] == {"A": [3, 2], "B": [2, 2]}
+    assert g["seeds"]["within 1 m"] == {"A": [1, 2], "B": [2, 2]} and g["summed"]["within 1 m"] == [3, 4]
+    assert g["B ahead / level / behind"]["within 1 m"] == [1, 1, 0]
+    assert g["summed"]["IoU > 0.7"] == [2, 2] and g["B ahead / level / behind"]["IoU > 0.7"] == [0, 2, 0]
+    assert_close(np.array(g["seeds"]["mean IoU"]["A"]), np.array([0.4, 0.575]))
+    assert_close(np.array(g["summed"]["mean IoU"]), np.array([(0.4 + 0.575) / 2, (0.65 + 0.585) / 2]))
+    # car by car over a0 and a1: B places a1 at both seeds, A at one
+    assert g["paired"]["within 1 m"] == {"cars": 2, "B more": 1, "B fewer": 0, "p": 1.0}
+    assert g["stability"]["A"]["within 1 m"] == {"every seed": 1, "some seeds": 1, "no seed": 0}
+    assert g["stability"]["B"]["within 1 m"] == {"every seed": 2, "some seeds": 0, "no seed": 0}
+    assert report["{2, 3}"]["summed"]["within 1 m"] == [1, 2] and report["all"]["summed"]["within 1 m"] == [4, 6]
+    assert report["all"]["paired"]["within 1 m"]["cars"] == 3
+    assert_close(sign_test(8, 0), 2 * 0.5 ** 8)
+    assert sign_test(0, 0) == 1.0
+    with pytest.raises(ValueError, match="same number of seeds"):
+        compare(runs_a, runs_b[:1], fold_of)

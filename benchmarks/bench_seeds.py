@@ -1,0 +1,200 @@
+"""Two settings fitted with several seeds: what a change does beyond the sampler's noise, car by car.
+
+The fine stage samples, and the seed alone moves a variant's count of cars within 1 m or
+passing KITTI's 3D IoU 0.7 by several cars on a fold group (the shipped part model's `full`
+passes IoU 0.7 for 64 to 78 of the 294 cars over five seeds; `benchmarks/RESULTS.md`, "A
+forest of 60 trees"). So a change is judged over several seeds, and its counts are read
+from the records rather than converted from percentages by hand. This reads runs of
+``bench_real_folds.py`` for two settings A and B, paired by seed (the k-th run of A with the
+k-th of B, same frames and boxes), and reports, per variant and fold group ({0, 1}, {2, 3},
+all):
+
+* per seed and summed, A -> B: the true positives, the cars within 1 m, the cars passing
+  3D IoU > 0.7 and the mean 3D IoU of the true positives (a measure with no threshold);
+* at how many seeds B is ahead, level and behind on each;
+* the sampler's share: of the cars that are true positives in every run of a setting, how
+  many pass at every seed, at some seeds only, at none;
+* car by car, over the cars that are true positives in every run of both: how many B
+  passes at more seeds than A and how many at fewer, with a two-sided sign test of the
+  two counts.
+
+    python benchmarks/bench_seeds.py --root KITTI A=RUN_A1,RUN_A2[,...] B=RUN_B1,RUN_B2[,...] \\
+        [--variant full --variant fg+gp] [--json OUT]
+
+True positives and passes are counted as :mod:`bench_error_budget` counts them (the
+evaluation's own matching; label boxes make every car a true positive).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from bench_error_budget import KITTI_CAMERA_HEIGHT, run_tables  # noqa: E402  (benchmarks/ is on the path)
+from wirescene.io.folds import DRIVE_FOLDS, frame_drives
+from wirescene.io.kitti import KittiDataset
+
+#: The fold groups of every choice (chosen on the first, read on the second), and all folds.
+GROUPS: dict[str, tuple[int, ...]] = {"{0, 1}": (0, 1), "{2, 3}": (2, 3), "all": (0, 1, 2, 3)}
+#: The tests counted per car: the paper's (centre within 1 m) and KITTI's (3D IoU > 0.7).
+TESTS: dict[str, str] = {"within 1 m": "pass_loc", "IoU > 0.7": "pass_iou"}
+
+
+def car_rows(table: Mapping[str, np.ndarray]) -> dict[tuple[str, int], tuple[bool, bool, float]]:
+    """``{(frame, label index): (within 1 m, IoU > 0.7, 3D IoU)}`` of one run's true positives
+    (a :func:`bench_error_budget.car_table`)."""
+    return {(str(f), int(g)): (bool(loc), bool(iou_ok), float(iou))
+            for f, g, loc, iou_ok, iou in zip(table["frame"], table["gt_index"], table["pass_loc"],
+                                             table["pass_iou"], table["iou"])}
+
+
+def sign_test(gained: int, lost: int) -> float:
+    """Two-sided p-value of ``gained`` against ``lost`` under no difference (1.0 when both are 0)."""
+    from scipy.stats import binomtest
+
+    n = gained + lost
+    return 1.0 if n == 0 else float(binomtest(gained, n, 0.5).pvalue)
+
+
+def _seed_figures(rows: Sequence[dict], keep) -> dict[str, list]:
+    """Per seed: true positives, cars passing each test, mean 3D IoU, over the cars ``keep`` admits."""
+    out = {"true positives": [], "mean IoU": []}
+    out.update({t: [] for t in TESTS})
+    for run in rows:
+        cars = [v for k, v in run.items() if keep(k)]
+        out["true positives"].append(len(cars))
+        out["within 1 m"].append(sum(c[0] for c in cars))
+        out["IoU > 0.7"].append(sum(c[1] for c in cars))
+        out["mean IoU"].append(float(np.mean([c[2] for c in cars])) if cars else float("nan"))
+    return out
+
+
+def _stability(rows: Sequence[dict], keys: Sequence) -> dict[str, dict[str, int]]:
+    """Of ``keys`` (true positives in every run), those passing each test at every seed, some, none."""
+    out = {}
+    for t, col in zip(TESTS, (0, 1)):
+        hits = np.array([[run[k][col] for k in keys] for run in rows], bool).sum(0) if keys else np.zeros(0, int)
+        out[t] = {"every seed": int((hits == len(rows)).sum()), "some seeds": int(((hits > 0) & (hits < len(rows))).sum()),
+                  "no seed": int((hits == 0).sum())}
+    return out
+
+
+def compare(runs_a: Sequence[Mapping], runs_b: Sequence[Mapping], fold_of: Mapping[str, int]) -> dict:
+    """Setting A against B over paired seeds, per fold group (module docstring).
+
+    Parameters
+    ----------
+    runs_a, runs_b : sequences of car tables
+        One :func:`bench_error_budget.car_table` of one variant per seed; the k-th of each
+        were fitted with the same seed.
+    fold_of : mapping
+        ``{frame id: fold}`` for every frame the tables hold.
+
+    Returns
+    -------
+    dict
+        ``{group: {"seeds": {figure: {"A": [...], "B": [...]}}, "summed": {figure: [A, B]},
+        "B ahead / level / behind": {figure: [n, n, n]}, "stability": {"A": ..., "B": ...},
+        "paired": {test: {"cars", "B more", "B fewer", "p"}}}}``.
+    """
+    if len(runs_a) != len(runs_b) or not runs_a:
+        raise ValueError(f"the settings need the same number of seeds, at least one: {len(runs_a)} and {len(runs_b)}")
+    rows_a, rows_b = [car_rows(t) for t in runs_a], [car_rows(t) for t in runs_b]
+    report = {}
+    for name, folds in GROUPS.items():
+        def keep(key, folds=folds):
+            return fold_of[key[0]] in folds
+
+        fig_a, fig_b = _seed_figures(rows_a, keep), _seed_figures(rows_b, keep)
+        group = {"seeds": {k: {"A": fig_a[k], "B": fig_b[k]} for k in fig_a}, "summed": {}, "B ahead / level / behind": {}}
+        for k in fig_a:
+            a, b = np.array(fig_a[k], float), np.array(fig_b[k], float)
+            group["summed"][k] = [float(a.mean()), float(b.mean())] if k == "mean IoU" else [int(a.sum()), int(b.sum())]
+            group["B ahead / level / behind"][k] = [int((b > a).sum()), int((b == a).sum()), int((b < a).sum())]
+        every = {}
+        for label, rows in (("A", rows_a), ("B", rows_b)):
+            every[label] = sorted(k for k in set.intersection(*(set(r) for r in rows)) if keep(k))
+        group["stability"] = {label: _stability(rows, every[label]) for label, rows in (("A", rows_a), ("B", rows_b))}
+        both = sorted(set(every["A"]) & set(every["B"]))
+        group["paired"] = {}
+        for t, col in zip(TESTS, (0, 1)):
+            ha = np.array([[r[k][col] for k in both] for r in rows_a], bool).sum(0) if both else np.zeros(0, int)
+            hb = np.array([[r[k][col] for k in both] for r in rows_b], bool).sum(0) if both else np.zeros(0, int)
+            more, fewer = int((hb > ha).sum()), int((hb < ha).sum())
+            group["paired"][t] = {"cars": len(both), "B more": more, "B fewer": fewer, "p": sign_test(more, fewer)}
+        report[name] = group
+    return report
+
+
+def format_report(variant: str, report: dict, names: tuple[str, str]) -> str:
+    """The printed form of one variant's :func:`compare`."""
+    a, b = names
+    lines = [f"## {variant}: {a} -> {b}, {len(report['all']['seeds']['true positives']['A'])} seeds"]
+    for group, g in report.items():
+        lines.append(f"{group}:")
+        for k, (sa, sb) in g["summed"].items():
+            per = ", ".join(f"{x:.3f} -> {y:.3f}" if k == "mean IoU" else f"{x} -> {y}"
+                            for x, y in zip(g["seeds"][k]["A"], g["seeds"][k]["B"]))
+            total = f"mean {sa:.4f} -> {sb:.4f}" if k == "mean IoU" else f"summed {sa} -> {sb} ({sb - sa:+d})"
+            ahead, level, behind = g["B ahead / level / behind"][k]
+            lines.append(f"  {k}: {total}; {b} ahead / level / behind at {ahead} / {level} / {behind} seeds; "
+                         f"per seed {per}")
+        for t, p in g["paired"].items():
+            st = " | ".join(f"{label}: every seed {s[t]['every seed']}, some {s[t]['some seeds']}, none {s[t]['no seed']}"
+                            for label, s in g["stability"].items())
+            lines.append(f"  {t}, car by car ({p['cars']} cars true positives in every run): {b} passes more seeds for "
+                         f"{p['B more']}, fewer for {p['B fewer']} (sign test p = {p['p']:.3f}); {st}")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """The command line (module docstring); ``argv`` as for :meth:`argparse.ArgumentParser.parse_args`."""
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("settings", nargs=2, metavar="NAME=RUN,RUN[,...]",
+                    help="two settings, each its bench_real_folds.py --out directories in seed order")
+    ap.add_argument("--root", required=True, help="the KITTI root the runs were fitted on (calibrations)")
+    ap.add_argument("--variant", action="append", help="variants to compare (default: those every run holds)")
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args(argv)
+    settings = {}
+    for item in args.settings:
+        name, sep, paths = item.partition("=")
+        if not sep or not name or not paths:
+            ap.error(f"{item!r}: expected NAME=RUN,RUN[,...]")
+        if name in settings:
+            ap.error(f"setting name {name!r} given twice")
+        settings[name] = [Path(p) for p in paths.split(",") if p]
+    (name_a, runs_a), (name_b, runs_b) = settings.items()
+    if len(runs_a) != len(runs_b):
+        ap.error(f"{name_a} has {len(runs_a)} runs and {name_b} {len(runs_b)}: pair them by seed")
+    dataset = KittiDataset(args.root)
+    tables = {name: [run_tables(r, dataset, camera_height=KITTI_CAMERA_HEIGHT)[2] for r in runs]
+              for name, runs in settings.items()}
+    common = set.intersection(*(set(t) for ts in tables.values() for t in ts))
+    variants = args.variant or sorted(common)
+    for v in variants:
+        if v not in common:
+            ap.error(f"--variant {v}: not in every run (common: {', '.join(sorted(common)) or 'none'})")
+    drive_of = frame_drives()
+    frames = {f for ts in tables.values() for t in ts for table in t.values() for f in table["frame"]}
+    missing = sorted(f for f in frames if f not in drive_of)
+    if missing:
+        ap.error(f"frame {missing[0]} has no drive in wirescene's drive map")
+    fold_of = {f: DRIVE_FOLDS[drive_of[f]] for f in frames}
+    out = {}
+    for v in variants:
+        out[v] = compare([t[v] for t in tables[name_a]], [t[v] for t in tables[name_b]], fold_of)
+        print(format_report(v, out[v], (name_a, name_b)))
+    if args.json:
+        args.json.write_text(json.dumps({"settings": {n: [str(r) for r in rs] for n, rs in settings.items()},
+                                         "variants": out}, indent=1))
+        print(f"json: {args.json}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
