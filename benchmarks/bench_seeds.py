@@ -2,8 +2,8 @@
 
 The fine stage samples, and the seed alone moves a variant's count of cars within 1 m or
 passing KITTI's 3D IoU 0.7 by several cars on a fold group (the shipped part model's `full`
-passes IoU 0.7 for 64 to 78 of the 294 cars over five seeds; `benchmarks/RESULTS.md`, "A
-forest of 60 trees"). So a change is judged over several seeds, and its counts are read
+passes IoU 0.7 for 64 to 79 of the 294 cars over seven seeds; `benchmarks/RESULTS.md`, "the
+same label boxes with another seed"). So a change is judged over several seeds, and its counts are read
 from the records rather than converted from percentages by hand. This reads runs of
 ``bench_real_folds.py`` for two settings A and B, paired by seed (the k-th run of A with the
 k-th of B, same frames and boxes), and reports, per variant and fold group ({0, 1}, {2, 3},
