@@ -16,7 +16,10 @@ all):
   many pass at every seed, at some seeds only, at none;
 * car by car, over the cars that are true positives in every run of both: how many B
   passes at more seeds than A and how many at fewer, with a two-sided sign test of the
-  two counts.
+  two counts;
+* the same car-by-car counts, and the passes summed over the seeds, by distance band,
+  KITTI occlusion flag and truncation (:func:`bench_error_budget.group_masks` of the
+  first run of A): where a change gains and where it loses.
 
     python benchmarks/bench_seeds.py --root KITTI A=RUN_A1,RUN_A2[,...] B=RUN_B1,RUN_B2[,...] \\
         [--variant full --variant fg+gp] [--json OUT]
@@ -35,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_error_budget import KITTI_CAMERA_HEIGHT, run_tables  # noqa: E402  (benchmarks/ is on the path)
+from bench_error_budget import KITTI_CAMERA_HEIGHT, group_masks, run_tables  # noqa: E402  (benchmarks/ is on the path)
 from wirescene.io.folds import DRIVE_FOLDS, frame_drives
 from wirescene.io.kitti import KittiDataset
 
@@ -84,7 +87,21 @@ def _stability(rows: Sequence[dict], keys: Sequence) -> dict[str, dict[str, int]
     return out
 
 
-def compare(runs_a: Sequence[Mapping], runs_b: Sequence[Mapping], fold_of: Mapping[str, int]) -> dict:
+def _paired(rows_a: Sequence[dict], rows_b: Sequence[dict], keys: Sequence) -> dict[str, dict]:
+    """Per test, over ``keys``: the cars, the passes summed over the seeds of A and of B, and
+    the cars B passes at more seeds than A and at fewer, with the sign test of those two."""
+    out = {}
+    for t, col in zip(TESTS, (0, 1)):
+        ha = np.array([[r[k][col] for k in keys] for r in rows_a], bool).sum(0) if keys else np.zeros(0, int)
+        hb = np.array([[r[k][col] for k in keys] for r in rows_b], bool).sum(0) if keys else np.zeros(0, int)
+        more, fewer = int((hb > ha).sum()), int((hb < ha).sum())
+        out[t] = {"cars": len(keys), "passes": [int(ha.sum()), int(hb.sum())], "B more": more, "B fewer": fewer,
+                  "p": sign_test(more, fewer)}
+    return out
+
+
+def compare(runs_a: Sequence[Mapping], runs_b: Sequence[Mapping], fold_of: Mapping[str, int], *,
+            classes: Mapping[str, set] | None = None) -> dict:
     """Setting A against B over paired seeds, per fold group (module docstring).
 
     Parameters
@@ -94,13 +111,17 @@ def compare(runs_a: Sequence[Mapping], runs_b: Sequence[Mapping], fold_of: Mappi
         were fitted with the same seed.
     fold_of : mapping
         ``{frame id: fold}`` for every frame the tables hold.
+    classes : mapping, optional
+        ``{class name: set of (frame, label index)}`` (e.g. distance bands): the car-by-car
+        counts again within each class.
 
     Returns
     -------
     dict
         ``{group: {"seeds": {figure: {"A": [...], "B": [...]}}, "summed": {figure: [A, B]},
         "B ahead / level / behind": {figure: [n, n, n]}, "stability": {"A": ..., "B": ...},
-        "paired": {test: {"cars", "B more", "B fewer", "p"}}}}``.
+        "paired": {test: {"cars", "passes", "B more", "B fewer", "p"}},
+        "by class": {class: {test: ...}}}}`` (``"by class"`` with ``classes`` only).
     """
     if len(runs_a) != len(runs_b) or not runs_a:
         raise ValueError(f"the settings need the same number of seeds, at least one: {len(runs_a)} and {len(runs_b)}")
@@ -121,12 +142,10 @@ def compare(runs_a: Sequence[Mapping], runs_b: Sequence[Mapping], fold_of: Mappi
             every[label] = sorted(k for k in set.intersection(*(set(r) for r in rows)) if keep(k))
         group["stability"] = {label: _stability(rows, every[label]) for label, rows in (("A", rows_a), ("B", rows_b))}
         both = sorted(set(every["A"]) & set(every["B"]))
-        group["paired"] = {}
-        for t, col in zip(TESTS, (0, 1)):
-            ha = np.array([[r[k][col] for k in both] for r in rows_a], bool).sum(0) if both else np.zeros(0, int)
-            hb = np.array([[r[k][col] for k in both] for r in rows_b], bool).sum(0) if both else np.zeros(0, int)
-            more, fewer = int((hb > ha).sum()), int((hb < ha).sum())
-            group["paired"][t] = {"cars": len(both), "B more": more, "B fewer": fewer, "p": sign_test(more, fewer)}
+        group["paired"] = _paired(rows_a, rows_b, both)
+        if classes is not None:
+            group["by class"] = {c: _paired(rows_a, rows_b, [k for k in both if k in members])
+                                 for c, members in classes.items()}
         report[name] = group
     return report
 
@@ -149,6 +168,10 @@ def format_report(variant: str, report: dict, names: tuple[str, str]) -> str:
                             for label, s in g["stability"].items())
             lines.append(f"  {t}, car by car ({p['cars']} cars true positives in every run): {b} passes more seeds for "
                          f"{p['B more']}, fewer for {p['B fewer']} (sign test p = {p['p']:.3f}); {st}")
+        for c, by_test in g.get("by class", {}).items():
+            lines.append(f"    {c}: " + "; ".join(
+                f"{t} {q['cars']} cars, passes {q['passes'][0]} -> {q['passes'][1]}, {b} more / fewer "
+                f"{q['B more']} / {q['B fewer']}" for t, q in by_test.items()))
     return "\n".join(lines)
 
 
@@ -188,7 +211,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     fold_of = {f: DRIVE_FOLDS[drive_of[f]] for f in frames}
     out = {}
     for v in variants:
-        out[v] = compare([t[v] for t in tables[name_a]], [t[v] for t in tables[name_b]], fold_of)
+        first = tables[name_a][0][v]
+        keys = list(zip(map(str, first["frame"]), map(int, first["gt_index"])))
+        classes = {c: {k for k, m in zip(keys, mask) if m} for c, mask in group_masks(first).items() if c != "all"}
+        out[v] = compare([t[v] for t in tables[name_a]], [t[v] for t in tables[name_b]], fold_of, classes=classes)
         print(format_report(v, out[v], (name_a, name_b)))
     if args.json:
         args.json.write_text(json.dumps({"settings": {n: [str(r) for r in rs] for n, rs in settings.items()},

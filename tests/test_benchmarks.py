@@ -428,7 +428,7 @@ def test_seed_comparison_pairs_runs_by_seed_and_cars_by_label(monkeypatch):
               table([("a", 0, True, 0.75), ("a", 1, True, 0.4), ("b", 0, False, 0.2)])]
     runs_b = [table([("a", 0, True, 0.8), ("a", 1, True, 0.5), ("b", 0, True, 0.6)]),
               table([("a", 0, True, 0.72), ("a", 1, True, 0.45), ("b", 0, True, 0.55)])]
-    report = compare(runs_a, runs_b, fold_of)
+    report = compare(runs_a, runs_b, fold_of, classes={"near": {("a", 0), ("b", 0)}})
     g = report["{0, 1}"]
     assert g["seeds"]["true positives"] == {"A": [3, 2], "B": [2, 2]}
     assert g["seeds"]["within 1 m"] == {"A": [1, 2], "B": [2, 2]} and g["summed"]["within 1 m"] == [3, 4]
@@ -437,7 +437,11 @@ def test_seed_comparison_pairs_runs_by_seed_and_cars_by_label(monkeypatch):
     assert_close(np.array(g["seeds"]["mean IoU"]["A"]), np.array([0.4, 0.575]))
     assert_close(np.array(g["summed"]["mean IoU"]), np.array([(0.4 + 0.575) / 2, (0.65 + 0.585) / 2]))
     # car by car over a0 and a1: B places a1 at both seeds, A at one
-    assert g["paired"]["within 1 m"] == {"cars": 2, "B more": 1, "B fewer": 0, "p": 1.0}
+    assert g["paired"]["within 1 m"] == {"cars": 2, "passes": [3, 4], "B more": 1, "B fewer": 0, "p": 1.0}
+    # by class: the near cars are a0 (group {0, 1}) and b0 (group {2, 3}), which B places at both seeds, A at one
+    assert g["by class"]["near"]["within 1 m"] == {"cars": 1, "passes": [2, 2], "B more": 0, "B fewer": 0, "p": 1.0}
+    assert report["all"]["by class"]["near"]["within 1 m"]["passes"] == [3, 4]
+    assert "by class" not in compare(runs_a, runs_b, fold_of)["all"]
     assert g["stability"]["A"]["within 1 m"] == {"every seed": 1, "some seeds": 1, "no seed": 0}
     assert g["stability"]["B"]["within 1 m"] == {"every seed": 2, "some seeds": 0, "no seed": 0}
     assert report["{2, 3}"]["summed"]["within 1 m"] == [1, 2] and report["all"]["summed"]["within 1 m"] == [4, 6]
