@@ -6,8 +6,8 @@ passes IoU 0.7 for 64 to 79 of the 294 cars over seven seeds; `benchmarks/RESULT
 same label boxes with another seed"). So a change is judged over several seeds, and its counts are read
 from the records rather than converted from percentages by hand. This reads runs of
 ``bench_real_folds.py`` for two settings A and B, paired by seed (the k-th run of A with the
-k-th of B, same frames and boxes), and reports, per variant and fold group ({0, 1}, {2, 3},
-all):
+k-th of B, same frames and boxes; the seeds the runs' summaries record must agree), and
+reports, per variant and fold group ({0, 1}, {2, 3}, all):
 
 * per seed and summed, A -> B: the true positives, the cars within 1 m, the cars passing
   3D IoU > 0.7 and the mean 3D IoU of the true positives (a measure with no threshold);
@@ -46,6 +46,15 @@ from wirescene.io.kitti import KittiDataset
 GROUPS: dict[str, tuple[int, ...]] = {"{0, 1}": (0, 1), "{2, 3}": (2, 3), "all": (0, 1, 2, 3)}
 #: The tests counted per car: the paper's (centre within 1 m) and KITTI's (3D IoU > 0.7).
 TESTS: dict[str, str] = {"within 1 m": "pass_loc", "IoU > 0.7": "pass_iou"}
+
+
+def run_seed(run: Path) -> int | None:
+    """The seed ``bench_real_folds.py`` recorded in ``RUN/summary.json`` (None if it recorded none)."""
+    path = Path(run) / "summary.json"
+    if not path.is_file():
+        return None
+    seed = json.loads(path.read_text()).get("_run", {}).get("seed")
+    return None if seed is None else int(seed)
 
 
 def car_rows(table: Mapping[str, np.ndarray]) -> dict[tuple[str, int], tuple[bool, bool, float]]:
@@ -195,6 +204,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     (name_a, runs_a), (name_b, runs_b) = settings.items()
     if len(runs_a) != len(runs_b):
         ap.error(f"{name_a} has {len(runs_a)} runs and {name_b} {len(runs_b)}: pair them by seed")
+    for ra, rb in zip(runs_a, runs_b):
+        sa, sb = run_seed(ra), run_seed(rb)
+        if sa is not None and sb is not None and sa != sb:
+            ap.error(f"{ra} was fitted with seed {sa} and {rb}, its pair, with seed {sb}")
     dataset = KittiDataset(args.root)
     tables = {name: [run_tables(r, dataset, camera_height=KITTI_CAMERA_HEIGHT)[2] for r in runs]
               for name, runs in settings.items()}

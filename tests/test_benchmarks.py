@@ -450,3 +450,14 @@ def test_seed_comparison_pairs_runs_by_seed_and_cars_by_label(monkeypatch):
     assert sign_test(0, 0) == 1.0
     with pytest.raises(ValueError, match="same number of seeds"):
         compare(runs_a, runs_b[:1], fold_of)
+
+
+def test_seed_comparison_reads_each_runs_recorded_seed(monkeypatch, tmp_path):
+    import json
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_seeds import run_seed
+
+    (tmp_path / "summary.json").write_text(json.dumps({"full": {}, "_run": {"seed": 3, "frames": 72}}))
+    assert run_seed(tmp_path) == 3
+    assert run_seed(tmp_path / "elsewhere") is None
