@@ -209,8 +209,17 @@ def main(argv: Sequence[str] | None = None) -> None:
         if sa is not None and sb is not None and sa != sb:
             ap.error(f"{ra} was fitted with seed {sa} and {rb}, its pair, with seed {sb}")
     dataset = KittiDataset(args.root)
-    tables = {name: [run_tables(r, dataset, camera_height=KITTI_CAMERA_HEIGHT)[2] for r in runs]
-              for name, runs in settings.items()}
+    tables, frames_of = {}, {}
+    for name, runs in settings.items():
+        tables[name] = []
+        for r in runs:
+            records, _, by_variant = run_tables(r, dataset, camera_height=KITTI_CAMERA_HEIGHT)
+            tables[name].append(by_variant)
+            frames_of[r] = {f.frame_id for rs in records.values() for f in rs}
+    first = runs_a[0]
+    for r, frames in frames_of.items():  # per-seed counts compare cars of the same frames only
+        if frames != frames_of[first]:
+            ap.error(f"{r} holds {len(frames)} frames and {first} {len(frames_of[first])}, not the same ones")
     common = set.intersection(*(set(t) for ts in tables.values() for t in ts))
     variants = args.variant or sorted(common)
     for v in variants:
