@@ -86,11 +86,16 @@ def _seed_figures(rows: Sequence[dict], keep) -> dict[str, list]:
     return out
 
 
+def _hits(rows: Sequence[dict], keys: Sequence, col: int) -> np.ndarray:
+    """``(len(keys),)``: at how many of the runs ``rows`` each car passes test ``col`` (0: 1 m, 1: IoU)."""
+    return np.array([[r[k][col] for k in keys] for r in rows], bool).sum(0) if keys else np.zeros(0, int)
+
+
 def _stability(rows: Sequence[dict], keys: Sequence) -> dict[str, dict[str, int]]:
     """Of ``keys`` (true positives in every run), those passing each test at every seed, some, none."""
     out = {}
     for t, col in zip(TESTS, (0, 1)):
-        hits = np.array([[run[k][col] for k in keys] for run in rows], bool).sum(0) if keys else np.zeros(0, int)
+        hits = _hits(rows, keys, col)
         out[t] = {"every seed": int((hits == len(rows)).sum()), "some seeds": int(((hits > 0) & (hits < len(rows))).sum()),
                   "no seed": int((hits == 0).sum())}
     return out
@@ -101,8 +106,7 @@ def _paired(rows_a: Sequence[dict], rows_b: Sequence[dict], keys: Sequence) -> d
     the cars B passes at more seeds than A and at fewer, with the sign test of those two."""
     out = {}
     for t, col in zip(TESTS, (0, 1)):
-        ha = np.array([[r[k][col] for k in keys] for r in rows_a], bool).sum(0) if keys else np.zeros(0, int)
-        hb = np.array([[r[k][col] for k in keys] for r in rows_b], bool).sum(0) if keys else np.zeros(0, int)
+        ha, hb = _hits(rows_a, keys, col), _hits(rows_b, keys, col)
         more, fewer = int((hb > ha).sum()), int((hb < ha).sum())
         out[t] = {"cars": len(keys), "passes": [int(ha.sum()), int(hb.sum())], "B more": more, "B fewer": fewer,
                   "p": sign_test(more, fewer)}
