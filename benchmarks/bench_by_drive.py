@@ -37,13 +37,13 @@ import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, run_tables  # noqa: E402  (benchmarks/ is on the path)
 from wirescene.eval.intervals import clustered_margin, clustered_share
-from wirescene.io.folds import DRIVE_FOLDS, frame_drives
+from wirescene.io.folds import DRIVE_FOLDS, FOLD_GROUPS, frame_drives
 from wirescene.io.kitti import CAR_TYPES, KittiDataset
 
 #: The columns of a car table (:func:`bench_error_budget.car_table`) each ``--metric`` counts.
 METRICS = {"loc": "pass_loc", "iou": "pass_iou"}
 #: The fold groups: choices are made on one and read on the other.
-GROUPS = ((0, 1), (2, 3))
+GROUPS = FOLD_GROUPS
 
 
 def drive_counts(table: dict, drives: Sequence[str], drive_of: dict[str, str], *, column: str) -> tuple:

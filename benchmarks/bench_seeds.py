@@ -39,11 +39,12 @@ from pathlib import Path
 import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, group_masks, run_tables  # noqa: E402  (benchmarks/ is on the path)
-from wirescene.io.folds import DRIVE_FOLDS, frame_drives
+from wirescene.io.folds import DRIVE_FOLDS, FOLD_GROUPS, frame_drives
 from wirescene.io.kitti import KittiDataset
 
 #: The fold groups of every choice (chosen on the first, read on the second), and all folds.
-GROUPS: dict[str, tuple[int, ...]] = {"{0, 1}": (0, 1), "{2, 3}": (2, 3), "all": (0, 1, 2, 3)}
+GROUPS: dict[str, tuple[int, ...]] = {"{" + ", ".join(map(str, g)) + "}": g for g in FOLD_GROUPS}
+GROUPS["all"] = tuple(f for g in FOLD_GROUPS for f in g)
 #: The tests counted per car: the paper's (centre within 1 m) and KITTI's (3D IoU > 0.7).
 TESTS: dict[str, str] = {"within 1 m": "pass_loc", "IoU > 0.7": "pass_iou"}
 
@@ -220,17 +221,16 @@ def main(argv: Sequence[str] | None = None) -> None:
             records, _, by_variant = run_tables(r, dataset, camera_height=KITTI_CAMERA_HEIGHT)
             tables[name].append(by_variant)
             frames_of[r] = {f.frame_id for rs in records.values() for f in rs}
-    first = runs_a[0]
-    for r, frames in frames_of.items():  # per-seed counts compare cars of the same frames only
-        if frames != frames_of[first]:
-            ap.error(f"{r} holds {len(frames)} frames and {first} {len(frames_of[first])}, not the same ones")
+    frames = frames_of[runs_a[0]]
+    for r, held in frames_of.items():  # per-seed counts compare cars of the same frames only
+        if held != frames:
+            ap.error(f"{r} holds {len(held)} frames and {runs_a[0]} {len(frames)}, not the same ones")
     common = set.intersection(*(set(t) for ts in tables.values() for t in ts))
     variants = args.variant or sorted(common)
     for v in variants:
         if v not in common:
             ap.error(f"--variant {v}: not in every run (common: {', '.join(sorted(common)) or 'none'})")
     drive_of = frame_drives()
-    frames = {f for ts in tables.values() for t in ts for table in t.values() for f in table["frame"]}
     missing = sorted(f for f in frames if f not in drive_of)
     if missing:
         ap.error(f"frame {missing[0]} has no drive in wirescene's drive map")
