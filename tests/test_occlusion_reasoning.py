@@ -108,6 +108,37 @@ def test_parts_outside_the_image_score_c_not_the_evidence():
     assert masks[1] == 0
 
 
+def test_parts_hidden_by_known_occluders_score_their_own_c():
+    # The border and the scene's other cars (gamma) hide parts for a known reason: with
+    # known_c those score known_c, the searched mask's parts keep c, the rest the evidence.
+    camera = KittiDataset(KITTI_ROOT).camera("000010")
+    model = load_default()
+    x, z, az = np.array([[6.5]]), np.array([[9.0]]), np.array([[0.3]])
+    p = SceneParticles(np.zeros((1, 1)), np.zeros((1, 1)), x, z, az, np.zeros((1, 1)), np.ones((1, 1, 3)))
+    theta = np.zeros((1, 1, 1, 8))
+    theta[..., 0], theta[..., 1], theta[..., 2] = (v[..., None] for v in _to_viewing(x, z, az))
+    floor, c, known_c = -2.0, 0.75, 0.25
+
+    class _Floor:
+        def log_ratio(self, uv, obj, scale):
+            return np.full(uv.shape[:-1], floor)
+
+    terms = _terms(camera, model, _Floor(), p, theta, 5, border_occludes=True)
+    uv, visible, border = terms.uv[0, 0, 0], ~terms.self_hidden[0, 0, 0], terms.border[0, 0, 0]
+    gamma = np.zeros((1, 1, 36), bool)
+    gamma[0, 0, np.flatnonzero(visible & ~border)[:3]] = True  # three parts behind another car
+    known = border | gamma[0, 0]
+    searched = [a for a in range(len(occluder_masks())) if (mask_hidden(uv, a) & visible & ~known).sum() >= 4][0]
+    by_mask = mask_hidden(uv, searched) & visible & ~known
+    mask = np.full((1, 1), searched)
+    free = visible & ~known & ~by_mask
+    expected = (floor * free.sum() + c * by_mask.sum() + known_c * (known & visible).sum()) / visible.sum()
+    assert_close(terms.value(c, mask, gamma, known_c=known_c)[0, 0, 0], expected)
+    assert_close(terms.value(c, mask, gamma, known_c=c)[0, 0, 0], terms.value(c, mask, gamma)[0, 0, 0])
+    plain = (floor * free.sum() + c * (visible & ~free).sum()) / visible.sum()
+    assert_close(terms.value(c, mask, gamma)[0, 0, 0], plain)
+
+
 def test_mask_weight_sums_equal_the_explicit_sums_over_all_masks():
     rng = np.random.default_rng(3)
     uv = rng.uniform(0, 300, size=(4, 3, 36, 2))

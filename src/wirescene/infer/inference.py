@@ -105,6 +105,9 @@ class InferenceOptions:
     polish_samples: int = 24
     # The paper's c, the log ratio charged to occluded parts (`wirescene train occlusion`).
     occluded_score: float = field(default_factory=load_occluded_score)
+    # The score of parts hidden by the scene's other cars or the image border, occluders the fit
+    # does not choose (None: occluded_score).
+    known_occluded_score: float | None = None
     # The coarse stage's box cost in the fine objective, so weak evidence cannot slide a car along its ray.
     box_weight: float = option(100.0, help="Weight of the detection box (KITTI convention) in the fine objective "
                                            "(0: the paper's part likelihood only; our own pre-detection's boxes: "
@@ -255,15 +258,17 @@ class _Terms:
 
         return _Terms(*(pick(getattr(self, f)) for f in self.__dataclass_fields__))
 
-    def value(self, c: float, mask=None, gamma=None) -> np.ndarray:
+    def value(self, c: float, mask=None, gamma=None, *, known_c: float | None = None) -> np.ndarray:
         """Objective ``(P, N, M)`` with vertices hidden by each object's occluder
-        ``mask`` ``(P, N)``, by ``gamma`` ``(P, N, 36)`` and by the image border."""
-        hidden = self.border
-        if mask is not None:
-            hidden = hidden | mask_hidden(self.uv, np.asarray(mask)[:, :, None])
-        if gamma is not None:
-            hidden = hidden | np.asarray(gamma)[:, :, None, :]
-        return object_likelihood(self.evidence, self.self_hidden, hidden, c=c) - self.penalty
+        ``mask`` ``(P, N)``, by ``gamma`` ``(P, N, 36)`` and by the image border; those
+        hidden by ``gamma`` or the border score ``known_c`` (None: ``c``) instead of ``c``."""
+        known = self.border if gamma is None else self.border | np.asarray(gamma)[:, :, None, :]
+        hidden = known if mask is None else known | mask_hidden(self.uv, np.asarray(mask)[:, :, None])
+        value = object_likelihood(self.evidence, self.self_hidden, hidden, c=c) - self.penalty
+        if known_c is None or known_c == c:
+            return value
+        visible = ~self.self_hidden
+        return value + (known_c - c) * (known & visible).sum(-1) / np.maximum(visible.sum(-1), 1)
 
 
 def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None, box_weight=0.0,
@@ -448,7 +453,7 @@ class FineObjective:
 
     def value(self, terms: "_Terms", mask, gamma) -> np.ndarray:
         """Objective ``(P, N, M)`` of ``terms`` under the occlusion ``mask``, ``gamma``."""
-        return terms.value(self.options.occluded_score, mask, gamma)
+        return terms.value(self.options.occluded_score, mask, gamma, known_c=self.options.known_occluded_score)
 
     def update_occlusion(self, current: "_Terms"):
         """Step 2 of Algorithm 1 on the current geometry: ``mask``, ``gamma``."""
