@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from conftest import KITTI_ROOT, assert_close
 from wirescene.core.shape import load_default
@@ -137,6 +138,10 @@ def test_parts_hidden_by_known_occluders_score_their_own_c():
     assert_close(terms.value(c, mask, gamma, known_c=c)[0, 0, 0], terms.value(c, mask, gamma)[0, 0, 0])
     plain = (floor * free.sum() + c * (visible & ~free).sum()) / visible.sum()
     assert_close(terms.value(c, mask, gamma)[0, 0, 0], plain)
+    from wirescene.infer.inference import InferenceOptions
+
+    with pytest.raises(ValueError, match="known_occluded_score"):
+        InferenceOptions(known_occluded_score="low")
 
 
 def test_mask_weight_sums_equal_the_explicit_sums_over_all_masks():

@@ -137,6 +137,11 @@ class InferenceOptions:
     # Where the likelihood's ray casting runs: "numpy" or a PyTorch device (see infer.torch_backend).
     device: str = "numpy"
 
+    def __post_init__(self):
+        c = self.known_occluded_score
+        if c is not None and not (isinstance(c, (int, float)) and np.isfinite(c)):
+            raise ValueError(f"known_occluded_score must be a finite number or None, got {c!r}")
+
 
 @dataclass
 class RefinedParticles:
