@@ -4,7 +4,7 @@ import pytest
 from conftest import KITTI_ROOT, assert_close
 from wirescene.core.shape import load_default
 from wirescene.core.types import SceneParticles
-from wirescene.infer.inference import _evaluate, _terms, _to_viewing, update_occlusion
+from wirescene.infer.inference import InferenceOptions, _evaluate, _terms, _to_viewing, update_occlusion
 from wirescene.infer.likelihood import outside_image
 from wirescene.infer.masks import (
     all_mask_hidden,
@@ -72,30 +72,42 @@ def test_deterministic_occlusion_hides_the_car_behind():
     assert gamma_do is None and mask_do[0, 1] != 0 and mask_do[0, 0] == 0
 
 
-def test_parts_outside_the_image_score_c_not_the_evidence():
-    # A car at the right image border, part of it beyond: with border occlusion its
-    # visible vertices outside the image score c, inside they keep the evidence (here
-    # a constant floor), as a mask hiding exactly those vertices would give.
+def _car_at_the_border():
+    """Camera, shape model, particles and viewing parameters ``(1, 1, 1, 8)`` of one car at
+    the right border of 000010's image, part of it beyond."""
     camera = KittiDataset(KITTI_ROOT).camera("000010")
-    model = load_default()
     x, z, az = np.array([[6.5]]), np.array([[9.0]]), np.array([[0.3]])
     p = SceneParticles(np.zeros((1, 1)), np.zeros((1, 1)), x, z, az, np.zeros((1, 1)), np.ones((1, 1, 3)))
     theta = np.zeros((1, 1, 1, 8))
     theta[..., 0], theta[..., 1], theta[..., 2] = (v[..., None] for v in _to_viewing(x, z, az))
+    return camera, load_default(), p, theta
+
+
+class _Floor:
+    """Part evidence of one constant log ratio everywhere."""
+
+    def __init__(self, floor):
+        self.floor = floor
+
+    def log_ratio(self, uv, obj, scale):
+        return np.full(uv.shape[:-1], self.floor)
+
+
+def test_parts_outside_the_image_score_c_not_the_evidence():
+    # A car at the right image border, part of it beyond: with border occlusion its
+    # visible vertices outside the image score c, inside they keep the evidence (here
+    # a constant floor), as a mask hiding exactly those vertices would give.
+    camera, model, p, theta = _car_at_the_border()
     floor, c = -2.0, 0.75
 
-    class _Floor:
-        def log_ratio(self, uv, obj, scale):
-            return np.full(uv.shape[:-1], floor)
-
-    terms = _terms(camera, model, _Floor(), p, theta, 5, border_occludes=True)
+    terms = _terms(camera, model, _Floor(floor), p, theta, 5, border_occludes=True)
     visible = ~terms.self_hidden[0, 0, 0]
     out = outside_image(camera, terms.uv[0, 0, 0]) & visible
     assert 3 <= out.sum() < visible.sum()  # truncated, not gone
     assert np.array_equal(terms.border[0, 0, 0], out)
     expected = (floor * (visible & ~out).sum() + c * out.sum()) / visible.sum()
-    assert_close(_evaluate(camera, model, _Floor(), p, theta, 5, c, border_occludes=True)[0, 0, 0], expected)
-    assert_close(_evaluate(camera, model, _Floor(), p, theta, 5, c)[0, 0, 0], floor)
+    assert_close(_evaluate(camera, model, _Floor(floor), p, theta, 5, c, border_occludes=True)[0, 0, 0], expected)
+    assert_close(_evaluate(camera, model, _Floor(floor), p, theta, 5, c)[0, 0, 0], floor)
     # Good evidence inside the image, the floor beyond it: without border occlusion the
     # searched mask must hide the outside vertices; with it, hiding anything costs.
 
@@ -112,19 +124,10 @@ def test_parts_outside_the_image_score_c_not_the_evidence():
 def test_parts_hidden_by_known_occluders_score_their_own_c():
     # The border and the scene's other cars (gamma) hide parts for a known reason: with
     # known_c those score known_c, the searched mask's parts keep c, the rest the evidence.
-    camera = KittiDataset(KITTI_ROOT).camera("000010")
-    model = load_default()
-    x, z, az = np.array([[6.5]]), np.array([[9.0]]), np.array([[0.3]])
-    p = SceneParticles(np.zeros((1, 1)), np.zeros((1, 1)), x, z, az, np.zeros((1, 1)), np.ones((1, 1, 3)))
-    theta = np.zeros((1, 1, 1, 8))
-    theta[..., 0], theta[..., 1], theta[..., 2] = (v[..., None] for v in _to_viewing(x, z, az))
+    camera, model, p, theta = _car_at_the_border()
     floor, c, known_c = -2.0, 0.75, 0.25
 
-    class _Floor:
-        def log_ratio(self, uv, obj, scale):
-            return np.full(uv.shape[:-1], floor)
-
-    terms = _terms(camera, model, _Floor(), p, theta, 5, border_occludes=True)
+    terms = _terms(camera, model, _Floor(floor), p, theta, 5, border_occludes=True)
     uv, visible, border = terms.uv[0, 0, 0], ~terms.self_hidden[0, 0, 0], terms.border[0, 0, 0]
     gamma = np.zeros((1, 1, 36), bool)
     gamma[0, 0, np.flatnonzero(visible & ~border)[:3]] = True  # three parts behind another car
@@ -138,8 +141,6 @@ def test_parts_hidden_by_known_occluders_score_their_own_c():
     assert_close(terms.value(c, mask, gamma, known_c=c)[0, 0, 0], terms.value(c, mask, gamma)[0, 0, 0])
     plain = (floor * free.sum() + c * (visible & ~free).sum()) / visible.sum()
     assert_close(terms.value(c, mask, gamma)[0, 0, 0], plain)
-    from wirescene.infer.inference import InferenceOptions
-
     with pytest.raises(ValueError, match="known_occluded_score"):
         InferenceOptions(known_occluded_score="low")
 
