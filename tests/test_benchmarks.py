@@ -461,3 +461,31 @@ def test_seed_comparison_reads_each_runs_recorded_seed(monkeypatch, tmp_path):
     (tmp_path / "summary.json").write_text(json.dumps({"full": {}, "_run": {"seed": 3, "frames": 72}}))
     assert run_seed(tmp_path) == 3
     assert run_seed(tmp_path / "elsewhere") is None
+
+
+def test_restarts_keep_the_lowest_objective_and_average_boxes(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_restarts import agreement, best_of, mean_boxes
+
+    def box(x, z, theta):  # a KITTI car's box at (x, 0, z)
+        return [x, 0.0, z, 1.5, 1.6, 3.9, theta]
+
+    label = np.array([box(0.0, 20.0, 0.0)])
+    # Three runs of one one-car frame: run 0 is 2 m long with the lowest objective, run 1 exact, run 2 2 m short.
+    fitted = np.array([[box(0.0, 22.0, 0.0)], [box(0.0, 20.0, np.pi)], [box(0.0, 18.0, 0.0)]])
+    cost = np.array([1.0, 2.0, 3.0])
+    loc = np.array([[False], [True], [False]])
+    iou = np.array([[0.3], [1.0], [0.3]])
+    cars = {"a": (cost, loc, iou > 0.7, iou, fitted, label)}
+    one = best_of(cars, ["a"], 1, 3)
+    assert_close(np.array([one[s]["within 1 m"] for s in ("objective", "oracle", "worst", "average")]), np.full(4, 1 / 3))
+    every = best_of(cars, ["a"], 3, 3)
+    assert every["objective"]["within 1 m"] == 0 and every["oracle"]["within 1 m"] == 1
+    assert every["worst"]["mean IoU"] == 0.3
+    # the mean of the three: at the label (a box turned by pi is the same box), so it passes both tests
+    assert every["average"]["within 1 m"] == 1 and every["average"]["IoU > 0.7"] == 1
+    mean = mean_boxes(fitted)
+    assert_close(mean.location, np.array([[0.0, 0.0, 20.0]]))
+    assert_close(np.cos(mean.rotation_y), np.ones(1))
+    # of the two pairs whose IoU differs, the lower objective is the better fit in (1, 2), not in (0, 1)
+    assert agreement(cars, ["a"]) == {"pairs": 2, "agree": 1, "share": 0.5}
