@@ -489,3 +489,42 @@ def test_restarts_keep_the_lowest_objective_and_average_boxes(monkeypatch):
     assert_close(np.cos(mean.rotation_y), np.ones(1))
     # of the two pairs whose IoU differs, the lower objective is the better fit in (1, 2), not in (0, 1)
     assert agreement(cars, ["a"]) == {"pairs": 2, "agree": 1, "share": 0.5}
+
+
+def test_range_profile_finds_the_evidence_range_of_a_car_placed_too_far(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_range_profile import STEPS, scene_profiles
+
+    from wirescene.core.shape import load_default
+    from wirescene.core.types import ObjectEstimate, SceneEstimate
+    from wirescene.fitting.variants import VARIANTS
+    from wirescene.infer.inference import _extent_corners
+    from wirescene.infer.likelihood import GaussianVertexEvidence, instantiate_wireframes
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.lift import project_boxes
+
+    camera = KittiDataset(KITTI_ROOT).camera("000010")
+    model = load_default()
+    place = dict(azimuth=np.array([0.4, -1.2]), shape=np.zeros((2, 5)), pitch=np.zeros(2), roll=np.zeros(2),
+                 height=1.65)
+    truth = instantiate_wireframes(camera, model, x=np.array([-3.0, 4.0]), z=np.array([15.0, 22.0]), **place)
+    # the 2D boxes KITTI would label: the projections of the cars' 3D boxes (the wireframes' extents)
+    extent = np.matmul(truth.vertices - truth.location[:, None], truth.R)
+    boxes = project_boxes(camera, _extent_corners(extent.min(1), extent.max(1)), truth.location, truth.R)[0]
+    evidence = GaussianVertexEvidence(truth.uv, ~truth.self_hidden)
+    # the first car fitted 1.5 m too far along its ray (on the plane), the second at the truth
+    ray = np.array([-3.0, 15.0]) / np.hypot(3.0, 15.0)
+    fitted = instantiate_wireframes(camera, model, x=np.array([-3.0 + 1.5 * ray[0], 4.0]),
+                                    z=np.array([15.0 + 1.5 * ray[1], 22.0]), **place)
+    cars = [ObjectEstimate(detection_index=j, box2d=boxes[j], score=1.0, location=fitted.location[j], R=fitted.R[j],
+                           dims=np.array([1.5, 1.6, 3.9]), cost=0.0, shape=np.zeros(5), vertices=fitted.vertices[j],
+                           occluder_mask=0) for j in range(2)]
+    scene = SceneEstimate(variant="full", objects=cars, camera_height=1.65, shared_plane=True)
+    profiles = scene_profiles(camera, scene, evidence, boxes, variant=VARIANTS["full"], c=0.75, box_weight=100.0)
+    for p, slide in zip(profiles, (-1.5, 0.0)):
+        for term in ("own parts", "box", "total"):
+            at = STEPS[np.argmin(p[term])] * p["range"]
+            assert abs(at - slide) < 0.2, (term, at, slide)
+    # the bottom side alone (ground contact) and the other three (image size) agree here: the car stands on the plane
+    at = [STEPS[np.argmin(profiles[0][t])] * profiles[0]["range"] for t in ("box bottom", "box sides, top")]
+    assert_close(np.array(at), np.full(2, -1.5), atol=0.2)
