@@ -46,16 +46,23 @@ from wirescene.lift import LiftingOptions
 from wirescene.training.scores import cross_validated_confidences
 
 
-def kitti_with_cv_scores(records, gt, folds, drives, *, seed, reference="coarse+gp"):
-    """({variant: KITTI metrics}, {variant: their moderate figures' intervals over drives}, {variant: the
-    intervals of its margins over ``reference``}) with each fold's confidences from a model of the other folds."""
-    frames = sorted(gt)
-    gts = [gt[f] for f in frames]
+def cv_predictions(records, frames, folds) -> dict:
+    """``{variant: [labels of each of frames]}``: a run's estimates with each fold's confidences
+    from a model of the other folds' records."""
     preds = {}
     for variant, results in records.items():
         by_frame = {r.frame_id: r for r in results}
         scores = cross_validated_confidences(records, folds, variant)
         preds[variant] = [by_frame[f].estimate_labels(scores[f]) for f in frames]
+    return preds
+
+
+def kitti_with_cv_scores(records, gt, folds, drives, *, seed, reference="coarse+gp"):
+    """({variant: KITTI metrics}, {variant: their moderate figures' intervals over drives}, {variant: the
+    intervals of its margins over ``reference``}) with each fold's confidences from a model of the other folds."""
+    frames = sorted(gt)
+    gts = [gt[f] for f in frames]
+    preds = cv_predictions(records, frames, folds)
     out = {v: kitti_metrics(gts, p) for v, p in preds.items()}
     spread, margins = kitti_variant_intervals(gts, preds, frames, drives, seed=seed,
                                               reference=reference if reference in preds else None)

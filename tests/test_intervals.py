@@ -11,6 +11,7 @@ from wirescene.eval.intervals import (
     clustered_share,
     format_intervals,
     kitti_intervals,
+    kitti_run_intervals,
     kitti_variant_intervals,
     localisation_intervals,
     margin_intervals,
@@ -118,6 +119,30 @@ def test_kitti_margins_draw_the_same_drives_for_both():
         kitti_variant_intervals(gts, {"half": half, "exact": exact[:10]}, ids, drives, n_boot=10)
     with pytest.raises(ValueError, match="reference"):
         kitti_variant_intervals(gts, {"exact": exact}, ids, drives, reference="half", n_boot=10)
+
+
+def test_kitti_intervals_over_runs_take_one_run_per_draw():
+    # two runs of the same 60 frames on two drives: one places every car, the other misses drive B's in 3D
+    ids = [f"{i:06d}" for i in range(60)]
+    gts = [[_car(0)] for _ in ids]
+    exact = [[_car(0, score=0.9)] for _ in ids]
+    half = [[_car(0, score=0.9, dz=0.0 if i < 30 else 2.0)] for i in range(60)]
+    drives = {f: ("A" if i < 30 else "B") for i, f in enumerate(ids)}
+    out = kitti_run_intervals(gts, [exact, half], ids, drives, n_boot=400, seed=1)
+    lo, hi = out["car"]["3d"]
+    # draws of the exact run are all 100; draws of the other run spread as that run's drive interval does
+    assert hi == 100.0 and lo <= kitti_intervals(gts, half, ids, drives, n_boot=400, seed=1)["car"]["3d"][1]
+    assert lo < 50.0 and out["runs"] == 2 and out["drives"] == 2 and out["draws"] == 400
+    # one run alone is that run's interval over drives, draw for draw
+    alone = kitti_run_intervals(gts, [half], ids, drives, n_boot=400, seed=1)
+    assert {k: v for k, v in alone.items() if k != "runs"} == kitti_intervals(gts, half, ids, drives, n_boot=400,
+                                                                               seed=1)
+    # two identical runs: the same as one
+    assert kitti_run_intervals(gts, [exact, exact], ids, drives, n_boot=50)["car"]["3d"] == [100.0, 100.0]
+    with pytest.raises(ValueError, match="run 1"):
+        kitti_run_intervals(gts, [exact, half[:10]], ids, drives, n_boot=10)
+    with pytest.raises(ValueError, match="no run"):
+        kitti_run_intervals(gts, [], ids, drives, n_boot=10)
 
 
 def test_kitti_intervals_refuse_mismatches_and_say_none_where_kitti_has_no_figure():

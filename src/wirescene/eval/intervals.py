@@ -16,6 +16,7 @@ Examples
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Iterator, Mapping, Sequence
 
 import numpy as np
@@ -260,24 +261,50 @@ def format_intervals(intervals: Mapping[str, dict], *, threshold: float = 1.0,
     return "\n".join(lines)
 
 
-def _ap_draws(gt_frames, pred_frames, rows, n_clusters, *, difficulty, n_boot, seed) -> dict:
+def _ap_draws(gt_frames, pred_runs, rows, n_clusters, *, difficulty, n_boot, seed) -> dict:
     """``{(min overlap, metric): (n_boot,) AP draws}`` over clusters (``rows``: each frame's
-    cluster), NaN where a draw holds no car of the difficulty; none where KITTI gives no figure."""
+    cluster), NaN where a draw holds no car of the difficulty; none where KITTI gives no figure.
+    ``pred_runs``: one or more runs' predictions of the frames; with several, each draw also
+    takes one run at random (a stream of its own, so the drawn clusters do not depend on it)."""
     overlaps = (MIN_OVERLAP["car"], 0.5)
     draws: dict = {}
     aos_valid = True
+    pick = np.random.default_rng([seed, len(pred_runs)]) if len(pred_runs) > 1 else None
     for w in bootstrap_weights(max(n_clusters, 1), n_boot, seed=seed) if len(rows) else ():
-        curves = kitti_curves(gt_frames, pred_frames, min_overlaps=overlaps, difficulties=(difficulty,),
-                              frame_weights=w[:, rows])
-        for thr in overlaps:
-            aos_valid = curves[thr]["aos_valid"]
-            for metric in ("2d", "aos", "bev", "3d"):
-                curve = curves[thr]["2d" if metric == "aos" else metric][difficulty]
-                if curve is None:
-                    continue
-                points = curve.orientation if metric == "aos" else curve.precision
-                draws.setdefault((thr, metric), []).append(np.where(curve.n_gt > 0, average_precision(points), np.nan))
+        run = np.zeros(len(w), int) if pick is None else pick.integers(len(pred_runs), size=len(w))
+        chunk: dict = {}
+        for r in np.unique(run):
+            sel = run == r
+            curves = kitti_curves(gt_frames, pred_runs[r], min_overlaps=overlaps, difficulties=(difficulty,),
+                                  frame_weights=w[sel][:, rows])
+            for thr in overlaps:
+                aos_valid = aos_valid and curves[thr]["aos_valid"]
+                for metric in ("2d", "aos", "bev", "3d"):
+                    curve = curves[thr]["2d" if metric == "aos" else metric][difficulty]
+                    if curve is None:
+                        continue
+                    points = curve.orientation if metric == "aos" else curve.precision
+                    ap = np.where(curve.n_gt > 0, average_precision(points), np.nan)
+                    chunk.setdefault((thr, metric), np.full(len(w), np.nan))[sel] = ap
+        for key, ap in chunk.items():
+            draws.setdefault(key, []).append(ap)
     return {key: np.concatenate(d) for key, d in draws.items() if aos_valid or key[1] != "aos"}
+
+
+def _layout(values: dict, *, difficulty: str, level: float, n_boot: int, n_clusters: int, alone: int,
+            margin_over) -> dict:
+    """Intervals of AP draws ``{(min overlap, metric): (n_boot,)}`` laid out as
+    :func:`~wirescene.eval.kitti_metrics.kitti_metrics` lays out its figures."""
+    def interval(thr, metric):
+        v = values.get((thr, metric))
+        return None if v is None or not np.isfinite(v).any() else list(percentile_interval(v, level=level))
+
+    def block(thr):
+        return {m: interval(thr, m) for m in ("2d", "aos", "bev", "3d")}
+
+    return {"car": block(MIN_OVERLAP["car"]), "iou_0.5": {"car": block(0.5)}, "difficulty": difficulty,
+            "level": level, "draws": n_boot, "drives": n_clusters - alone, "frames_alone": alone,
+            "margin_over": margin_over}
 
 
 def kitti_intervals(gt_frames: Sequence, pred_frames: Sequence, frame_ids: Sequence[str],
@@ -371,22 +398,58 @@ def kitti_variant_intervals(gt_frames: Sequence, preds: Mapping[str, Sequence], 
                              + (f" of {name}" if name else "") + f" and {len(frame_ids)} frame ids")
     rows, n_clusters, alone = _clusters(frame_ids, cluster_of)
     # the same seed and clusters for every name: the same drawn drives, so margins are paired
-    draws = {name: _ap_draws(gt_frames, p, rows, n_clusters, difficulty=difficulty, n_boot=n_boot, seed=seed)
+    draws = {name: _ap_draws(gt_frames, [p], rows, n_clusters, difficulty=difficulty, n_boot=n_boot, seed=seed)
              for name, p in preds.items()}
-
-    def layout(values: dict, margin_over) -> dict:
-        def interval(thr, metric):
-            v = values.get((thr, metric))
-            return None if v is None or not np.isfinite(v).any() else list(percentile_interval(v, level=level))
-
-        def block(thr):
-            return {m: interval(thr, m) for m in ("2d", "aos", "bev", "3d")}
-
-        return {"car": block(MIN_OVERLAP["car"]), "iou_0.5": {"car": block(0.5)}, "difficulty": difficulty,
-                "level": level, "draws": n_boot, "drives": n_clusters - alone, "frames_alone": alone,
-                "margin_over": margin_over}
-
-    intervals = {name: layout(d, None) for name, d in draws.items()}
-    margins = {name: layout({k: v - draws[reference][k] for k, v in d.items() if k in draws[reference]}, reference)
+    layout = partial(_layout, difficulty=difficulty, level=level, n_boot=n_boot, n_clusters=n_clusters, alone=alone)
+    intervals = {name: layout(d, margin_over=None) for name, d in draws.items()}
+    margins = {name: layout({k: v - draws[reference][k] for k, v in d.items() if k in draws[reference]},
+                            margin_over=reference)
                for name, d in draws.items() if reference is not None and name != reference}
     return intervals, margins
+
+
+def kitti_run_intervals(gt_frames: Sequence, runs: Sequence[Sequence], frame_ids: Sequence[str],
+                        cluster_of: Mapping[str, str], *, difficulty: str = "moderate", n_boot: int = N_BOOT_AP,
+                        seed: int = 0, level: float = 90.0) -> dict:
+    """:func:`kitti_intervals` of several runs of one estimator on the same frames (fits with
+    other seeds, say): each draw resamples the drives and takes one of the runs at random, so
+    the interval spans what one more run on another set of drives like these could show, the
+    sampler's spread and the drives' together.
+
+    Parameters
+    ----------
+    gt_frames : sequence of FrameLabels or lists of Label
+    runs : sequence of sequences
+        Each run's predictions of the frames, in the order of ``gt_frames``.
+    frame_ids, cluster_of, difficulty, n_boot, seed, level
+        As :func:`kitti_intervals` takes them.
+
+    Returns
+    -------
+    dict
+        As :func:`kitti_intervals`, with ``runs`` the number of runs.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 20.0], 0.0, 0.9)
+    >>> miss = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 25.0], 0.0, 0.9)
+    >>> ids = [f"{i:06d}" for i in range(50)]
+    >>> out = kitti_run_intervals([[car]] * 50, [[[car]] * 50, [[miss]] * 50], ids, {}, n_boot=40)
+    >>> out["car"]["3d"], out["runs"]
+    ([0.0, 100.0], 2)
+    """
+    if difficulty not in DIFFICULTIES:
+        raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
+    if not len(runs):
+        raise ValueError("no run given")
+    for i, pred_frames in enumerate(runs):
+        if not (len(gt_frames) == len(pred_frames) == len(frame_ids)):
+            raise ValueError(f"{len(gt_frames)} ground-truth frames, {len(pred_frames)} prediction frames of run {i} "
+                             f"and {len(frame_ids)} frame ids")
+    rows, n_clusters, alone = _clusters(frame_ids, cluster_of)
+    draws = _ap_draws(gt_frames, list(runs), rows, n_clusters, difficulty=difficulty, n_boot=n_boot, seed=seed)
+    out = _layout(draws, difficulty=difficulty, level=level, n_boot=n_boot, n_clusters=n_clusters, alone=alone,
+                  margin_over=None)
+    out["runs"] = len(runs)
+    return out
