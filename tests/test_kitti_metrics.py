@@ -622,3 +622,38 @@ def test_cli_eval_adds_kitti_figures(tmp_path):
     in_memory = json.loads(out.read_text())["kitti"]
     assert in_memory["car"]["3d"] == pytest.approx(kitti["car"]["3d"], rel=1e-5)
     assert in_memory["car"]["aos"] == pytest.approx(kitti["car"]["aos"], rel=1e-5)
+
+
+def test_cli_kitti_eval_of_several_runs_gives_each_their_mean_and_one_interval(tmp_path):
+    import json
+
+    from wirescene.io.kitti import write_labels
+
+    gt_dir = KITTI_ROOT / "training" / "label_2"
+    frames = ("000002", "000010", "001545")
+    runs = {"s1": 0.0, "s2": 3.0}  # the second run places every car 3 m too far: no 3D match at IoU 0.7
+    for name, dz in runs.items():
+        (tmp_path / name / "full").mkdir(parents=True)
+        for f in frames:
+            labels = read_labels(gt_dir / f"{f}.txt")
+            for o in labels.objects:
+                o.score = 1.0
+                o.location = np.asarray(o.location, float) + [0.0, 0.0, dz]
+            write_labels(tmp_path / name / "full" / f"{f}.txt", labels.objects)
+    out = tmp_path / "k.json"
+    dirs = [tmp_path / n / "full" for n in runs]
+    r = _cli("kitti-eval", gt_dir, *dirs, "--json", out, "--draws", "200")
+    assert r.exit_code == 0, r.output
+    data = json.loads(out.read_text())
+    # the two runs share a directory name, so they are named by their paths
+    assert list(data["runs"]) == [str(d) for d in dirs] and data["mean"]["runs"] == 2
+    exact, far = (data["runs"][str(d)]["car"]["3d"]["moderate"] for d in dirs)
+    # three frames' cars at 40 recall points: exact boxes score what their 2D boxes score
+    assert far == 0.0 and exact > 0.0 and exact == data["runs"][str(dirs[0])]["car"]["2d"]["moderate"]
+    assert data["mean"]["car"]["3d"]["moderate"] == pytest.approx(exact / 2)
+    assert data["mean"]["car"]["2d"] == data["runs"][str(dirs[0])]["car"]["2d"]  # the same 2D boxes
+    lo, hi = data["kitti_interval"]["car"]["3d"]
+    assert lo == 0.0 and hi >= data["mean"]["car"]["3d"]["moderate"] and data["kitti_interval"]["runs"] == 2
+    assert "mean of 2" in r.output and "takes one of the 2 runs" in r.output
+    line = _one_line_error(_cli("kitti-eval", gt_dir, dirs[0], dirs[0]))
+    assert "given twice" in line

@@ -396,31 +396,58 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, s
 
 @main.command("kitti-eval")
 @click.argument("gt_dir", type=click.Path(path_type=Path))
-@click.argument("pred_dir", type=click.Path(path_type=Path))
+@click.argument("pred_dirs", metavar="PRED_DIR...", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the figures as JSON.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every GT_DIR/*.txt).")
 @split_file_option
 @ap_draws_option
 @drive_map_option("the interval draws whole drives")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Seed of the bootstrap draws.")
-def kitti_eval_cmd(gt_dir, pred_dir, json_out, frames, split_file, draws, drive_mapping, seed):
+def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive_mapping, seed):
     """KITTI object-benchmark AP of Car (2D, AOS, BEV, 3D; easy / moderate / hard; R40 and
     R11; IoU 0.7 and 0.5) of the label files in PRED_DIR against GT_DIR, by the devkit's
     rules, and the moderate APs' bootstrap interval over drives. A frame without a
-    prediction file has no detections."""
-    from wirescene.eval.intervals import kitti_intervals
-    from wirescene.eval.kitti_metrics import format_kitti_intervals, format_kitti_table, kitti_metrics, read_label_dirs
+    prediction file has no detections. Several PRED_DIRs are runs of one method (other
+    seeds, say): each run's moderate APs, their mean, and an interval whose every draw
+    resamples the drives and takes one of the runs."""
+    from wirescene.eval.intervals import kitti_intervals, kitti_run_intervals
+    from wirescene.eval.kitti_metrics import (
+        format_kitti_intervals,
+        format_kitti_summary,
+        format_kitti_table,
+        kitti_metrics,
+        mean_kitti_metrics,
+        read_label_dirs,
+    )
 
     check_output_file(json_out, "--json")
     known = sorted(p.stem for p in gt_dir.glob("*.txt")) if gt_dir.is_dir() else []
     frame_ids = select_frames(frames, split_file, known, where=gt_dir, what="label file of frame") if known else None
     drives = interval_drives(gt_dir.resolve().parent, drive_mapping)  # GT_DIR: ROOT/training/label_2
-    ids, gts, preds = read_label_dirs(gt_dir, pred_dir, frames=frame_ids)
-    result = kitti_metrics(gts, preds)
-    click.echo(format_kitti_table(result))
-    if draws:
-        result["kitti_interval"] = kitti_intervals(gts, preds, ids, drives, n_boot=draws, seed=seed)
-        click.echo("\n" + format_kitti_intervals({pred_dir.name or str(pred_dir): result["kitti_interval"]}))
+    runs = [read_label_dirs(gt_dir, d, frames=frame_ids) for d in pred_dirs]
+    ids, gts = runs[0][0], runs[0][1]
+    preds = [r[2] for r in runs]
+    if len(preds) == 1:
+        result = kitti_metrics(gts, preds[0])
+        click.echo(format_kitti_table(result))
+        if draws:
+            result["kitti_interval"] = kitti_intervals(gts, preds[0], ids, drives, n_boot=draws, seed=seed)
+            click.echo("\n" + format_kitti_intervals({pred_dirs[0].name or str(pred_dirs[0]): result["kitti_interval"]}))
+    else:
+        names = [d.name or str(d) for d in pred_dirs]
+        if len(set(names)) < len(names):  # e.g. seed1/full and seed2/full
+            names = [str(d) for d in pred_dirs]
+        twice = [d for i, (d, n) in enumerate(zip(pred_dirs, names)) if n in names[:i]]
+        if twice:
+            raise InputError("prediction directory given twice", path=twice[0])
+        each = {n: kitti_metrics(gts, p) for n, p in zip(names, preds)}
+        mean = f"mean of {len(preds)}"
+        result = {"runs": each, "mean": mean_kitti_metrics(list(each.values()))}
+        click.echo(format_kitti_summary({**each, mean: result["mean"]}))
+        if draws:
+            result["kitti_interval"] = kitti_run_intervals(gts, preds, ids, drives, n_boot=draws, seed=seed)
+            click.echo(f"\nEach draw takes one of the {len(preds)} runs at random:")
+            click.echo(format_kitti_intervals({f"{len(preds)} runs": result["kitti_interval"]}))
     if json_out is not None:
         _write_json_atomic(json_out, result)
         click.echo(f"metrics written to {json_out}")

@@ -696,6 +696,37 @@ def kitti_metrics(
     }
 
 
+def mean_kitti_metrics(results: Sequence[dict]) -> dict:
+    """The mean of several :func:`kitti_metrics` results of the same frames (runs with other
+    seeds, say), figure by figure; ``None`` where a run has no figure.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 20.0], 0.0, 0.9)
+    >>> far = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 25.0], 0.0, 0.9)
+    >>> runs = [kitti_metrics([[car]] * 50, [[p]] * 50) for p in (car, far)]
+    >>> mean_kitti_metrics(runs)["car"]["3d"]["moderate"], mean_kitti_metrics(runs)["car"]["2d"]["moderate"]
+    (50.0, 100.0)
+    """
+    if not results:
+        raise ValueError("no result to average")
+
+    def mean(values):
+        if isinstance(values[0], dict):
+            return {k: mean([v[k] for v in values]) for k in values[0]}
+        if any(v is None for v in values):
+            return None
+        return float(np.mean(values))
+
+    same = ("recall_points", "min_overlap", "n_gt", "n_frames")
+    if any(r[k] != results[0][k] for r in results for k in same):
+        raise ValueError("the results are not of the same frames (their car or frame counts differ)")
+    out = {k: mean([r[k] for r in results]) for k in results[0] if k not in same}
+    out.update({k: results[0][k] for k in same}, runs=len(results))
+    return out
+
+
 def detection_ap_2d(detections, gt_frames: Sequence[FrameLabels | Sequence[Label]]) -> dict:
     """KITTI 2D AP and AOS (R40, Car) of 2D detections, by the devkit's rules.
 
