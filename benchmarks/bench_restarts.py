@@ -53,8 +53,9 @@ def frame_arrays(tables: Sequence[Mapping], records: Sequence[Sequence], variant
             raise ValueError("the runs' true positives differ: only runs on the same label boxes compare")
         keys = k
     frames = sorted({f for f, _ in keys})
-    cost = np.array([[float(np.sum(r.est_cost)) for r in sorted(rs, key=lambda r: r.frame_id)
-                      if r.frame_id in set(frames)] for rs in records])  # (R, frames)
+    held = set(frames)
+    cost = np.array([[float(np.sum(r.est_cost)) for r in sorted(rs, key=lambda r: r.frame_id) if r.frame_id in held]
+                     for rs in records])  # (R, frames)
     out = {}
     for i, f in enumerate(frames):
         rows = []

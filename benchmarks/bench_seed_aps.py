@@ -8,7 +8,8 @@ moderate KITTI APs (R40; the confidences cross-validated within each run, as
 ``bench_real_folds.py`` makes them) of every run, their mean, and a 90% interval whose every
 draw resamples the drives and takes one of the runs at random
 (:func:`wirescene.eval.intervals.kitti_run_intervals`): what one more run on other drives
-like these could show.
+like these could show. ``wirescene kitti-eval GT_DIR RUN1_DIR RUN2_DIR ...`` does the same for
+label files; this reads the runs' records, whose confidences it cross-validates first.
 
     python benchmarks/bench_seed_aps.py --root KITTI RUN1,RUN2,...,RUNn [--variant full] [--draws 1000] [--json OUT]
 """
@@ -21,13 +22,11 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path)
 from bench_real_folds import cv_predictions
 from bench_seeds import run_seed
 from wirescene.eval.intervals import N_BOOT_AP, kitti_run_intervals
-from wirescene.eval.kitti_metrics import kitti_figure, kitti_metrics
+from wirescene.eval.kitti_metrics import kitti_figure, kitti_metrics, mean_kitti_metrics
 from wirescene.io.folds import drive_map, fold_of
 from wirescene.io.kitti import KittiDataset
 
@@ -43,13 +42,12 @@ def seed_aps(preds_by_run: Sequence[dict], gts: Sequence, frames: Sequence[str],
     for v in variants:
         runs = [p[v] for p in preds_by_run]
         metrics = [kitti_metrics(gts, r) for r in runs]
+        mean = mean_kitti_metrics(metrics)
         spread = kitti_run_intervals(gts, runs, frames, drives, n_boot=n_boot, seed=seed)
-        out[v] = {}
-        for name, block, metric in FIGURES:
-            values = [kitti_figure(m, block, metric)["moderate"] for m in metrics]
-            out[v][name] = {"runs": values,
-                            "mean": None if None in values else float(np.mean(values)),
-                            "interval": kitti_figure(spread, block, metric)}
+        out[v] = {name: {"runs": [kitti_figure(m, block, metric)["moderate"] for m in metrics],
+                         "mean": kitti_figure(mean, block, metric)["moderate"],
+                         "interval": kitti_figure(spread, block, metric)}
+                  for name, block, metric in FIGURES}
     return out
 
 

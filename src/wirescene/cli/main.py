@@ -424,6 +424,12 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
     known = sorted(p.stem for p in gt_dir.glob("*.txt")) if gt_dir.is_dir() else []
     frame_ids = select_frames(frames, split_file, known, where=gt_dir, what="label file of frame") if known else None
     drives = interval_drives(gt_dir.resolve().parent, drive_mapping)  # GT_DIR: ROOT/training/label_2
+    names = [d.name or str(d) for d in pred_dirs]
+    if len(set(names)) < len(names):  # e.g. seed1/full and seed2/full
+        names = [str(d) for d in pred_dirs]
+    twice = [d for i, (d, n) in enumerate(zip(pred_dirs, names)) if n in names[:i]]
+    if twice:
+        raise InputError("prediction directory given twice", path=twice[0])
     runs = [read_label_dirs(gt_dir, d, frames=frame_ids) for d in pred_dirs]
     ids, gts = runs[0][0], runs[0][1]
     preds = [r[2] for r in runs]
@@ -432,14 +438,8 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
         click.echo(format_kitti_table(result))
         if draws:
             result["kitti_interval"] = kitti_intervals(gts, preds[0], ids, drives, n_boot=draws, seed=seed)
-            click.echo("\n" + format_kitti_intervals({pred_dirs[0].name or str(pred_dirs[0]): result["kitti_interval"]}))
+            click.echo("\n" + format_kitti_intervals({names[0]: result["kitti_interval"]}))
     else:
-        names = [d.name or str(d) for d in pred_dirs]
-        if len(set(names)) < len(names):  # e.g. seed1/full and seed2/full
-            names = [str(d) for d in pred_dirs]
-        twice = [d for i, (d, n) in enumerate(zip(pred_dirs, names)) if n in names[:i]]
-        if twice:
-            raise InputError("prediction directory given twice", path=twice[0])
         each = {n: kitti_metrics(gts, p) for n, p in zip(names, preds)}
         mean = f"mean of {len(preds)}"
         result = {"runs": each, "mean": mean_kitti_metrics(list(each.values()))}
