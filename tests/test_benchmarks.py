@@ -494,7 +494,6 @@ def test_restarts_keep_the_lowest_objective_and_average_boxes(monkeypatch):
 def test_range_profile_finds_the_evidence_range_of_a_car_placed_too_far(monkeypatch):
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_range_profile import STEPS, scene_profiles
-
     from wirescene.core.shape import load_default
     from wirescene.core.types import ObjectEstimate, SceneEstimate
     from wirescene.fitting.variants import VARIANTS
