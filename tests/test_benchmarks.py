@@ -527,3 +527,21 @@ def test_range_profile_finds_the_evidence_range_of_a_car_placed_too_far(monkeypa
     # the bottom side alone (ground contact) and the other three (image size) agree here: the car stands on the plane
     at = [STEPS[np.argmin(profiles[0][t])] * profiles[0]["range"] for t in ("box bottom", "box sides, top")]
     assert_close(np.array(at), np.full(2, -1.5), atol=0.2)
+
+
+def test_seed_aps_give_each_run_their_mean_and_one_interval(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_seed_aps import seed_aps
+    from wirescene.core.labels import Label
+
+    def car(z, score=None):
+        return Label("Car", 0.0, 0, 0.0, [100.0, 100.0, 200.0, 200.0], [1.5, 1.6, 3.9], [0.0, 1.6, z], 0.0, score)
+
+    frames = [f"{i:06d}" for i in range(50)]
+    gts = [[car(20.0)] for _ in frames]
+    runs = [{"full": [[car(20.0, 0.9)] for _ in frames]}, {"full": [[car(23.0, 0.9)] for _ in frames]}]
+    out = seed_aps(runs, gts, frames, {f: ("A" if i < 25 else "B") for i, f in enumerate(frames)}, variants=["full"],
+                   n_boot=50)["full"]
+    assert out["3D AP@0.7"]["runs"][1] == 0.0 and out["3D AP@0.7"]["runs"][0] > 90.0
+    assert_close(np.array(out["3D AP@0.7"]["mean"]), np.array(sum(out["3D AP@0.7"]["runs"]) / 2))
+    assert out["3D AP@0.7"]["interval"][0] == 0.0 and out["3D AP@0.7"]["interval"][1] > 90.0
