@@ -287,12 +287,13 @@ def true_positive_cars(results: Sequence[FrameResult], cameras: dict) -> dict[st
     }
 
 
-def car_table(cars: dict, *, camera_height: float) -> dict[str, np.ndarray]:
-    """Per car: the keys of :func:`true_positive_cars` that are not boxes, the errors of
-    :func:`error_components`, the one-pixel limit (``limit``) and the decomposition's
-    tests (``pass_iou`` / ``pass_loc`` for ``"as fitted"``, ``pass_iou:perfect range``,
-    ...)."""
-    out = {k: v for k, v in cars.items() if k not in ("fitted", "labels", "camera_centre")}
+def car_table(cars: dict, *, camera_height: float, keep_boxes: bool = False) -> dict[str, np.ndarray]:
+    """Per car: the keys of :func:`true_positive_cars` that are not boxes (with ``keep_boxes``
+    the ``fitted`` and ``labels`` :class:`Boxes` too), the errors of :func:`error_components`,
+    the one-pixel limit (``limit``) and the decomposition's tests (``pass_iou`` / ``pass_loc``
+    for ``"as fitted"``, ``pass_iou:perfect range``, ...)."""
+    dropped = ("camera_centre",) if keep_boxes else ("fitted", "labels", "camera_centre")
+    out = {k: v for k, v in cars.items() if k not in dropped}
     errors = error_components(cars["fitted"], cars["labels"], cars["camera_centre"])
     out.update(errors)
     out["limit"] = one_pixel_range_limit(errors["label_depth"], errors["label_range"], focal=cars["focal"],
@@ -303,17 +304,20 @@ def car_table(cars: dict, *, camera_height: float) -> dict[str, np.ndarray]:
     return out
 
 
-def run_tables(run, dataset: KittiDataset, *, camera_height: float = KITTI_CAMERA_HEIGHT) -> tuple[dict, str, dict]:
+def run_tables(run, dataset: KittiDataset, *, camera_height: float = KITTI_CAMERA_HEIGHT,
+               keep_boxes: bool = False) -> tuple[dict, str, dict]:
     """``(records, detections, tables)`` of a run: its records pooled over folds
     (:func:`_common.read_run`, verified held out), the detections spec, and per variant
-    the :func:`car_table` of its true positives (cameras read from ``dataset``)."""
+    the :func:`car_table` of its true positives (cameras read from ``dataset``; ``keep_boxes``
+    as :func:`car_table` takes it)."""
     records, detections = read_run(run)
     cameras = {}
     for f in sorted({r.frame_id for rs in records.values() for r in rs}):
         if not dataset.calib_path(f).is_file():
             raise InputError(f"frame {f} of {run} has no calibration under --root", path=dataset.calib_path(f))
         cameras[f] = dataset.calib(f).camera()
-    tables = {v: car_table(true_positive_cars(rs, cameras), camera_height=camera_height) for v, rs in records.items()}
+    tables = {v: car_table(true_positive_cars(rs, cameras), camera_height=camera_height, keep_boxes=keep_boxes)
+              for v, rs in records.items()}
     return records, detections, tables
 
 

@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_error_budget import KITTI_CAMERA_HEIGHT, Boxes, passes, run_tables, true_positive_cars  # noqa: E402  (benchmarks/ is on the path)
-from bench_seeds import GROUPS, run_seed
+from bench_error_budget import KITTI_CAMERA_HEIGHT, Boxes, passes, run_tables  # noqa: E402  (benchmarks/ is on the path)
+from bench_seeds import GROUPS, chosen_variants, seed_runs
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.io.folds import DRIVE_FOLDS, frame_drives
 from wirescene.io.kitti import KittiDataset
@@ -160,29 +160,17 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--variant", action="append", help="variants (default: those every run holds)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
-    runs = [Path(p) for p in args.runs.split(",") if p]
-    if len(runs) < 2:
-        ap.error("give at least two runs")
-    seeds = [run_seed(r) for r in runs]
-    if None not in seeds and len(set(seeds)) < len(seeds):
-        ap.error(f"two runs share a seed ({seeds}): restarts need different seeds")
+    runs, seeds = seed_runs(ap, args.runs)
     dataset = KittiDataset(args.root)
     tables, records = [], []
     for r in runs:
-        recs, _, by_variant = run_tables(r, dataset, camera_height=KITTI_CAMERA_HEIGHT)
-        cameras = {f: dataset.calib(f).camera() for f in {x.frame_id for rs in recs.values() for x in rs}}
-        for v, table in by_variant.items():  # the car table keeps no boxes; the same matching gives them
-            cars = true_positive_cars(recs[v], cameras)
-            table.update(fitted=cars["fitted"], labels=cars["labels"])
+        recs, _, by_variant = run_tables(r, dataset, camera_height=KITTI_CAMERA_HEIGHT, keep_boxes=True)
         tables.append(by_variant)
         records.append(recs)
-    common = set.intersection(*(set(t) for t in tables))
-    variants = args.variant or sorted(common)
+    variants = chosen_variants(ap, tables, args.variant)
     drive_of = frame_drives()
     out = {}
     for v in variants:
-        if v not in common:
-            ap.error(f"--variant {v}: not in every run (common: {', '.join(sorted(common)) or 'none'})")
         try:
             frames, cars = frame_arrays(tables, [rec[v] for rec in records], v)
         except ValueError as exc:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path)
 from bench_real_folds import cv_predictions
-from bench_seeds import run_seed
+from bench_seeds import chosen_variants, seed_runs
 from wirescene.eval.intervals import N_BOOT_AP, kitti_run_intervals
 from wirescene.eval.kitti_metrics import kitti_figure, kitti_metrics, mean_kitti_metrics
 from wirescene.io.folds import drive_map, fold_of
@@ -73,12 +73,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--draws", type=int, default=N_BOOT_AP, help="bootstrap draws of the interval")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
-    runs = [Path(p) for p in args.runs.split(",") if p]
-    if len(runs) < 2:
-        ap.error("give at least two runs")
-    seeds = [run_seed(r) for r in runs]
-    if None not in seeds and len(set(seeds)) < len(seeds):
-        ap.error(f"two runs share a seed ({seeds})")
+    runs, seeds = seed_runs(ap, args.runs)
     dataset = KittiDataset(args.root)
     records = [read_run(r)[0] for r in runs]
     frames = sorted({x.frame_id for rs in records[0].values() for x in rs})
@@ -86,11 +81,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         held = sorted({x.frame_id for rs in rec.values() for x in rs})
         if held != frames:
             ap.error(f"{r} holds {len(held)} frames and {runs[0]} {len(frames)}, not the same ones")
-    common = set.intersection(*(set(rec) for rec in records))
-    variants = args.variant or sorted(common)
-    for v in variants:
-        if v not in common:
-            ap.error(f"--variant {v}: not in every run (common: {', '.join(sorted(common)) or 'none'})")
+    variants = chosen_variants(ap, records, args.variant)
     folds = {f: fold_of(f) for f in frames}
     # each run's confidences come from its own variants' records, as its summary made them
     preds = [cv_predictions(rec, frames, folds) for rec in records]

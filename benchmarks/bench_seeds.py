@@ -58,6 +58,28 @@ def run_seed(run: Path) -> int | None:
     return None if seed is None else int(seed)
 
 
+def seed_runs(ap: argparse.ArgumentParser, text: str) -> tuple[list[Path], list[int | None]]:
+    """The runs of ``RUN,RUN[,...]`` (at least two) and the seeds they recorded; ``ap.error``
+    when fewer are given or two recorded the same seed."""
+    runs = [Path(p) for p in text.split(",") if p]
+    if len(runs) < 2:
+        ap.error("give at least two runs")
+    seeds = [run_seed(r) for r in runs]
+    if None not in seeds and len(set(seeds)) < len(seeds):
+        ap.error(f"two runs share a seed ({seeds})")
+    return runs, seeds
+
+
+def chosen_variants(ap: argparse.ArgumentParser, held: Sequence, asked: Sequence[str] | None) -> list[str]:
+    """``asked`` (default: the variants every run holds, sorted), each checked to be in every
+    one of ``held`` (each run's variants); ``ap.error`` otherwise."""
+    common = set.intersection(*(set(h) for h in held))
+    for v in asked or ():
+        if v not in common:
+            ap.error(f"--variant {v}: not in every run (common: {', '.join(sorted(common)) or 'none'})")
+    return list(asked) if asked else sorted(common)
+
+
 def car_rows(table: Mapping[str, np.ndarray]) -> dict[tuple[str, int], tuple[bool, bool, float]]:
     """``{(frame, label index): (within 1 m, IoU > 0.7, 3D IoU)}`` of one run's true positives
     (a :func:`bench_error_budget.car_table`)."""
@@ -225,11 +247,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     for r, held in frames_of.items():  # per-seed counts compare cars of the same frames only
         if held != frames:
             ap.error(f"{r} holds {len(held)} frames and {runs_a[0]} {len(frames)}, not the same ones")
-    common = set.intersection(*(set(t) for ts in tables.values() for t in ts))
-    variants = args.variant or sorted(common)
-    for v in variants:
-        if v not in common:
-            ap.error(f"--variant {v}: not in every run (common: {', '.join(sorted(common)) or 'none'})")
+    variants = chosen_variants(ap, [t for ts in tables.values() for t in ts], args.variant)
     drive_of = frame_drives()
     missing = sorted(f for f in frames if f not in drive_of)
     if missing:

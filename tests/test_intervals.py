@@ -78,12 +78,20 @@ def _car(x, *, score=None, dz=0.0):
                  [4.0 * x, 1.6, 20.0 + dz], 0.0, score)
 
 
-def test_kitti_intervals_ranked_again_in_every_draw():
-    # drive A: 30 frames whose car is found exactly; drive B: 30 whose estimate stands 2 m too far (no 3D match)
+def _two_drives():
+    """``(ids, gts, exact, half, drives)``: 60 one-car frames, 30 on drive A and 30 on B; ``exact``
+    places every car, ``half`` places drive B's 2 m too far (no 3D match)."""
     ids = [f"{i:06d}" for i in range(60)]
     gts = [[_car(0)] for _ in ids]
-    preds = [[_car(0, score=0.9, dz=0.0 if i < 30 else 2.0)] for i in range(60)]
+    exact = [[_car(0, score=0.9)] for _ in ids]
+    half = [[_car(0, score=0.9, dz=0.0 if i < 30 else 2.0)] for i in range(60)]
     drives = {f: ("A" if i < 30 else "B") for i, f in enumerate(ids)}
+    return ids, gts, exact, half, drives
+
+
+def test_kitti_intervals_ranked_again_in_every_draw():
+    # drive A: 30 frames whose car is found exactly; drive B: 30 whose estimate stands 2 m too far (no 3D match)
+    ids, gts, _, preds, drives = _two_drives()
     out = kitti_intervals(gts, preds, ids, drives, n_boot=400, seed=1)
     point = kitti_metrics(gts, preds)["car"]["3d"]["moderate"]
     lo, hi = out["car"]["3d"]
@@ -102,11 +110,7 @@ def test_kitti_intervals_ranked_again_in_every_draw():
 def test_kitti_margins_draw_the_same_drives_for_both():
     # the reference misses every car of drive B, the variant none: the variant's margin is positive in every draw
     # that holds drive B, and its AP margin interval is one-sided
-    ids = [f"{i:06d}" for i in range(60)]
-    gts = [[_car(0)] for _ in ids]
-    exact = [[_car(0, score=0.9)] for _ in ids]
-    half = [[_car(0, score=0.9, dz=0.0 if i < 30 else 2.0)] for i in range(60)]
-    drives = {f: ("A" if i < 30 else "B") for i, f in enumerate(ids)}
+    ids, gts, exact, half, drives = _two_drives()
     spread, margins = kitti_variant_intervals(gts, {"half": half, "exact": exact}, ids, drives, reference="half",
                                               n_boot=400, seed=1)
     out = margins["exact"]
@@ -123,11 +127,7 @@ def test_kitti_margins_draw_the_same_drives_for_both():
 
 def test_kitti_intervals_over_runs_take_one_run_per_draw():
     # two runs of the same 60 frames on two drives: one places every car, the other misses drive B's in 3D
-    ids = [f"{i:06d}" for i in range(60)]
-    gts = [[_car(0)] for _ in ids]
-    exact = [[_car(0, score=0.9)] for _ in ids]
-    half = [[_car(0, score=0.9, dz=0.0 if i < 30 else 2.0)] for i in range(60)]
-    drives = {f: ("A" if i < 30 else "B") for i, f in enumerate(ids)}
+    ids, gts, exact, half, drives = _two_drives()
     out = kitti_run_intervals(gts, [exact, half], ids, drives, n_boot=400, seed=1)
     lo, hi = out["car"]["3d"]
     # draws of the exact run are all 100; draws of the other run spread as that run's drive interval does
