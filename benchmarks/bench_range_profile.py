@@ -63,11 +63,15 @@ def scene_profiles(camera, scene, evidence, boxes, *, variant, c: float, box_wei
                    border_occludes: bool = True, steps=STEPS) -> list[dict]:
     """For each car of a fitted ``scene``, the objective's terms ``(S,)`` with that car slid
     along the ground plane by ``steps`` times its range (others as fitted), and the slide's
-    direction: ``[{"range", "u" (3,), "origin" (3,), TERM: (S,)}]``."""
+    direction: ``[{"range", "u" (3,), "location" (3,), TERM: (S,)}]``."""
     objs = scene.objects
     N = len(objs)
     verts = np.stack([o.vertices for o in objs])  # (N, 36, 3)
-    shape_model = load_shape_model()
+    masks = np.array([ob.occluder_mask for ob in objs]) if variant.searched_occluder else None
+    # the part detectors' scale: focal length times car length over the distance of the wireframe's origin
+    X_obj = load_shape_model().instantiate(np.stack([ob.shape for ob in objs]))  # (N, 36, 3)
+    origins = (verts - np.einsum("nvi,nji->nvj", X_obj, np.stack([ob.R for ob in objs]))).mean(axis=1)  # (N, 3)
+    length = np.ptp(X_obj[..., 0], axis=-1)
     out = []
     for j, o in enumerate(objs):
         normal = o.R[:, 1]  # the plane's normal (the object's y axis) in the camera frame
@@ -83,16 +87,10 @@ def scene_profiles(camera, scene, evidence, boxes, *, variant, c: float, box_wei
         hidden = outside_image(camera, uv) if border_occludes else np.zeros(uv.shape[:-1], bool)
         if variant.deterministic_occlusion and N > 1:
             hidden = hidden | inter_object_occlusion(scene_v, FACES, camera.center)
-        if variant.searched_occluder:
-            masks = np.array([ob.occluder_mask for ob in objs])
+        if masks is not None:
             hidden = hidden | mask_hidden(uv, np.broadcast_to(masks, (len(steps), N)))
-        # the part detectors' scale: focal length times car length over the origin's distance
-        X_obj = shape_model.instantiate(np.stack([ob.shape for ob in objs]))  # (N, 36, 3)
-        origin = np.einsum("nvi,nji->nvj", X_obj, np.stack([ob.R for ob in objs]))
-        origin = (verts - origin).mean(axis=1)  # (N, 3)
-        origin = np.broadcast_to(origin, (len(steps), N, 3)).copy()
+        origin = np.broadcast_to(origins, (len(steps), N, 3)).copy()
         origin[:, j] += shift[:, 0]
-        length = np.ptp(X_obj[..., 0], axis=-1)
         scale = camera.focal * length / np.maximum(np.linalg.norm(origin - camera.center, axis=-1), 0.5)
         e = evidence.log_ratio(uv, np.broadcast_to(np.arange(N), scale.shape), scale)
         lik = object_likelihood(e, self_hidden, hidden, c=c)  # (S, N)

@@ -291,6 +291,17 @@ def _ap_draws(gt_frames, pred_runs, rows, n_clusters, *, difficulty, n_boot, see
     return {key: np.concatenate(d) for key, d in draws.items() if aos_valid or key[1] != "aos"}
 
 
+def _check_frames(gt_frames, preds: Mapping[str, Sequence], frame_ids, difficulty: str) -> None:
+    """A ``ValueError`` unless ``difficulty`` is KITTI's and every named prediction sequence
+    (``""``: unnamed) has as many frames as ``gt_frames`` and ``frame_ids``."""
+    if difficulty not in DIFFICULTIES:
+        raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
+    for name, pred_frames in preds.items():
+        if not (len(gt_frames) == len(pred_frames) == len(frame_ids)):
+            raise ValueError(f"{len(gt_frames)} ground-truth frames, {len(pred_frames)} prediction frames"
+                             + (f" of {name}" if name else "") + f" and {len(frame_ids)} frame ids")
+
+
 def _layout(values: dict, *, difficulty: str, level: float, n_boot: int, n_clusters: int, alone: int,
             margin_over) -> dict:
     """Intervals of AP draws ``{(min overlap, metric): (n_boot,)}`` laid out as
@@ -388,14 +399,9 @@ def kitti_variant_intervals(gt_frames: Sequence, preds: Mapping[str, Sequence], 
     >>> margins["b"]["car"]["3d"], margins["b"]["margin_over"]
     ([0.0, 0.0], 'a')
     """
-    if difficulty not in DIFFICULTIES:
-        raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
+    _check_frames(gt_frames, preds, frame_ids, difficulty)
     if reference is not None and reference not in preds:
         raise ValueError(f"reference {reference!r} is not among {sorted(preds)}")
-    for name, pred_frames in preds.items():
-        if not (len(gt_frames) == len(pred_frames) == len(frame_ids)):
-            raise ValueError(f"{len(gt_frames)} ground-truth frames, {len(pred_frames)} prediction frames"
-                             + (f" of {name}" if name else "") + f" and {len(frame_ids)} frame ids")
     rows, n_clusters, alone = _clusters(frame_ids, cluster_of)
     # the same seed and clusters for every name: the same drawn drives, so margins are paired
     draws = {name: _ap_draws(gt_frames, [p], rows, n_clusters, difficulty=difficulty, n_boot=n_boot, seed=seed)
@@ -439,14 +445,9 @@ def kitti_run_intervals(gt_frames: Sequence, runs: Sequence[Sequence], frame_ids
     >>> out["car"]["3d"], out["runs"]
     ([0.0, 100.0], 2)
     """
-    if difficulty not in DIFFICULTIES:
-        raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
     if not len(runs):
         raise ValueError("no run given")
-    for i, pred_frames in enumerate(runs):
-        if not (len(gt_frames) == len(pred_frames) == len(frame_ids)):
-            raise ValueError(f"{len(gt_frames)} ground-truth frames, {len(pred_frames)} prediction frames of run {i} "
-                             f"and {len(frame_ids)} frame ids")
+    _check_frames(gt_frames, {f"run {i}": p for i, p in enumerate(runs)}, frame_ids, difficulty)
     rows, n_clusters, alone = _clusters(frame_ids, cluster_of)
     draws = _ap_draws(gt_frames, list(runs), rows, n_clusters, difficulty=difficulty, n_boot=n_boot, seed=seed)
     out = _layout(draws, difficulty=difficulty, level=level, n_boot=n_boot, n_clusters=n_clusters, alone=alone,
