@@ -168,6 +168,10 @@ CASES = {
     # detection directories
     "eval detections match no frame": (lambda t: _eval_case(t, "--detections", _dets_dir(t, {"10.csv": "x1,y1,x2,y2\n1,2,3,4\n"})),
                                        "none of the frames"),
+    # training inputs
+    "train parts --label-shapes not an artefact": (
+        lambda t: ["train", "parts", "--kitti-root", KITTI_ROOT, "--out", t / "p.npz", "--label-shapes",
+                   _file(t, "shapes.npz")], r"shapes\.npz.*corrupt artefact"),
     # synthetic scenes
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],
                                          "already holds scenes"),

@@ -545,3 +545,23 @@ def test_seed_aps_give_each_run_their_mean_and_one_interval(monkeypatch):
     assert out["3D AP@0.7"]["runs"][1] == 0.0 and out["3D AP@0.7"]["runs"][0] > 90.0
     assert_close(np.array(out["3D AP@0.7"]["mean"]), np.array(sum(out["3D AP@0.7"]["runs"]) / 2))
     assert out["3D AP@0.7"]["interval"][0] == 0.0 and out["3D AP@0.7"]["interval"][1] > 90.0
+
+
+def test_label_shapes_benchmark_writes_the_refits_it_measures(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_label_shapes import main, refit_frames, summary
+    from wirescene.core.resources import shipped_path
+    from wirescene.training.parts_real import load_label_shapes
+
+    models = tmp_path / "models"
+    models.mkdir()
+    for k in range(4):  # every fold's model the shipped one: enough to exercise the file handling
+        (models / f"parts_fold{k}.npz").symlink_to(shipped_path("parts_model"))
+    shapes, moves = refit_frames(KITTI_ROOT, models, ["000010"], shape_prior=1e6)
+    assert shapes["000010"].shape == (len(moves), 36, 3) and len(moves) > 3
+    assert summary(moves)["kept_mean_pct"] == 100.0  # an overwhelming prior keeps every car's mean shape
+    main(["--root", str(KITTI_ROOT), "--models", str(models), "--out", str(tmp_path / "s.npz"), "--frames", "000010",
+          "--shape-prior", "0", "--json", str(tmp_path / "s.json")])
+    written = load_label_shapes(tmp_path / "s.npz")["000010"]
+    assert written.shape == shapes["000010"].shape and not np.allclose(written, shapes["000010"])
+    assert (tmp_path / "s.json").is_file()

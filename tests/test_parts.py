@@ -388,3 +388,65 @@ def test_kitti_eval_frames_reads_the_frames_asked_for():
     image, cars = one[0]
     assert_close(np.array([c[0] for c in cars]), np.array([c[0] for c in every[2][1]]))
     assert image.shape == every[2][0].shape
+
+
+# ------------------------------------------------------------------ refitted label shapes (self-training)
+
+def test_refit_label_shapes_keep_the_box_and_never_score_below_the_mean():
+    from wirescene.core.errors import ShapeError
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.parts_real import kitti_car_wireframes, refit_label_shapes, scaled_mean_shape
+
+    ds = KittiDataset(KITTI_ROOT)
+    fid = "000010"
+    image, labels, camera = ds.image(fid), ds.labels(fid), ds.camera(fid)
+    cars = labels.of_type("Car")
+    means = np.stack([scaled_mean_shape(o.dims) for o in cars])
+    kw = dict(n_draws=60, rounds=1, round_draws=20)
+    # an overwhelming prior keeps the mean itself; the evidence alone moves it, inside the label's box
+    assert_close(refit_label_shapes(image, labels, camera, load_default(), shape_prior=1e6, **kw), means)
+    free = refit_label_shapes(image, labels, camera, load_default(), shape_prior=0.0, **kw)
+    assert free.shape == (len(cars), 36, 3) and not np.allclose(free, means)
+    assert_close(np.ptp(free, axis=1), np.array([[o.dims[2], o.dims[0], o.dims[1]] for o in cars]), atol=1e-9)
+    # the labelled wireframes take the given shapes, placed at the labels' poses
+    given = kitti_car_wireframes(labels, camera, shapes=free)
+    default = kitti_car_wireframes(labels, camera)
+    assert_close(np.stack([c.X for c in kitti_car_wireframes(labels, camera, shapes=means)]),
+                 np.stack([c.X for c in default]), atol=1e-9)
+    assert not np.allclose(np.stack([c.uv for c in given]), np.stack([c.uv for c in default]))
+    with pytest.raises(ShapeError):
+        kitti_car_wireframes(labels, camera, shapes=free[1:])
+
+
+def test_label_shapes_file_round_trip_and_refusal(tmp_path):
+    from wirescene.core.errors import InputError
+    from wirescene.training.parts_real import load_label_shapes, save_label_shapes
+
+    shapes = {"000010": np.random.default_rng(0).normal(size=(2, 36, 3))}
+    save_label_shapes(tmp_path / "s.npz", shapes)
+    back = load_label_shapes(tmp_path / "s.npz")
+    assert list(back) == ["000010"]
+    assert_close(back["000010"], shapes["000010"])
+    np.savez(tmp_path / "bad.npz", x=np.zeros(3))
+    with pytest.raises(InputError, match="bad.npz"):
+        load_label_shapes(tmp_path / "bad.npz")
+
+
+def test_real_patches_follow_the_label_shapes():
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.parts_real import make_real_patch_data, scaled_mean_shape
+
+    ds = KittiDataset(KITTI_ROOT)
+    means = np.stack([scaled_mean_shape(o.dims) for o in ds.labels("000010").of_type("Car")])
+    kw = dict(kinds=("ghog",), mirror=False, scale_samples=1, n_jitter=0, bg_per_car=2, bg_boxes=0)
+    base = make_real_patch_data(KITTI_ROOT, ["000010"], **kw)
+    same = make_real_patch_data(KITTI_ROOT, ["000010"], label_shapes={"000010": means}, **kw)
+    moved = make_real_patch_data(KITTI_ROOT, ["000010"], label_shapes={"000010": means * [1.0, 0.7, 1.0]}, **kw)
+    assert_close(same.X["ghog"], base.X["ghog"])
+    moved_parts, base_parts = moved.X["ghog"][moved.y < N_PARTS], base.X["ghog"][base.y < N_PARTS]
+    assert len(base_parts) > 20
+    assert moved_parts.shape != base_parts.shape or not np.allclose(moved_parts, base_parts)
+    from wirescene.core.errors import InputError
+
+    with pytest.raises(InputError, match="frame 000010 .* Car labels"):
+        make_real_patch_data(KITTI_ROOT, ["000010"], label_shapes={"000010": means[1:]}, **kw)

@@ -34,6 +34,9 @@ from wirescene.cli.options import check_output_file, drive_map_option, read_driv
 @click.option("--calibrate/--no-calibrate", default=False, show_default=True,
               help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root).")
 @drive_map_option()
+@click.option("--label-shapes", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="With --kitti-root: .npz of the labelled cars' own wireframes (frame id -> (N, 36, 3), object "
+                   "frame) in place of the mean shape scaled into each label's box.")
 @click.option("--synth-scenes", type=int, default=300, show_default=True,
               help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
 @click.option("--synth-seed", type=int, default=1000, show_default=True,
@@ -51,7 +54,7 @@ from wirescene.cli.options import check_output_file, drive_map_option, read_driv
               help="KITTI root whose car-free regions add background patches (off by default).")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
 def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, split_file, position, smooth, calibrate,
-          drive_mapping, synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog,
+          drive_mapping, label_shapes, synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog,
           kitti_background, report):
     """Train the 37-class part detector on real KITTI frames, synthetic shaded scenes
     and/or CAD renderings."""
@@ -61,6 +64,12 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
     check_output_file(report, "--report")
     if kitti_root is None and (frames is not None or split_file is not None):
         raise click.UsageError("--frames / --split-file need --kitti-root")
+    if label_shapes is not None:
+        if kitti_root is None:
+            raise click.UsageError("--label-shapes needs --kitti-root")
+        from wirescene.training.parts_real import load_label_shapes
+
+        label_shapes = load_label_shapes(label_shapes)
     if drive_mapping is not None and not (calibrate and kitti_root is not None):
         raise click.UsageError("--drive-map needs --kitti-root and --calibrate")
     folds = None
@@ -83,7 +92,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
                                  compare_kinds=("hog",) if compare_hog else (),
                                  kitti_background=kitti_background, kitti_root=kitti_root, frames=frames,
                                  position=position, calibrate_real=calibrate, smooth=smooth, synth_cache=synth_cache,
-                                 calibration_folds=folds, progress=click.echo)
+                                 calibration_folds=folds, label_shapes=label_shapes, progress=click.echo)
     if report:
         def conv(o):
             if isinstance(o, dict):

@@ -706,7 +706,8 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
                         min_samples_leaf: int = 2, augment: bool = False, kitti_root=None, frames=None,
                         position: bool = False, context: bool = False, calibrate_real: bool = False,
                         smooth: float = 0.0, calibration_folds: Mapping[str, int] | None = None, n_jobs: int = 1,
-                        synth_cache=None, max_real_patches: int | None = 600_000, progress=None):
+                        synth_cache=None, max_real_patches: int | None = 600_000, label_shapes=None,
+                        progress=None):
     """Generate training patches, optionally evaluate leave-models-out, fit the forest
     on all data and write the model ``.npz``.
 
@@ -748,6 +749,9 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
         sample of all (None: all), so that memory does not grow with the frames beyond
         it (about 0.4 kB a patch: 250 MB); the shipped model's 247,569 patches (real and
         synthetic) are below it
+    label_shapes : dict, optional -- ``{frame id: (N, 36, 3)}`` wireframes of the real frames'
+        ``Car`` labels (:func:`wirescene.training.parts_real.refit_label_shapes`) in place of
+        the mean shape scaled into each label's box
 
     Returns
     -------
@@ -780,7 +784,7 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
 
         frames = KittiDataset(kitti_root).frame_ids() if frames is None else list(frames)
         real = make_real_patch_data(kitti_root, frames, kinds=kinds, seed=seed, max_patches=max_real_patches,
-                                    progress=progress)
+                                    label_shapes=label_shapes, progress=progress)
         report["frames"] = frames
     other = data
     data = real if data is None else (data if real is None else _merge(real, data))
@@ -813,6 +817,7 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
             "kitti_background": str(kitti_background is not None), "synth_scenes": synth_scenes,
             "synth_seed": synth_seed, "class_weight": str(class_weight), "min_samples_leaf": min_samples_leaf,
             "augment": str(augment), "real_frames": ",".join(report.get("frames", [])), "position": str(position), "context": str(context), "smooth": smooth,
+            "label_shapes": str(label_shapes is not None),
             "calibrated": str(cal is not None)}
     det = fit_detector(data, kind=kind, position=position, context=context, smooth=smooth, meta=meta, **fit_kwargs)
     report["t_fit_s"] = time.time() - t1

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wirescene.core.errors import check_shape
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND
 from wirescene.training.patches import PatchCollector, _rng
@@ -71,7 +72,8 @@ def scaled_mean_shape(dims, mean=None) -> np.ndarray:
     return mean * np.array([l / ext[0], h / ext[1], w / ext[2]])
 
 
-def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True, mean=None) -> list:
+def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True, mean=None,
+                         shapes=None) -> list:
     """:class:`LabelledCar` of every ``Car`` label of a frame.
 
     Parameters
@@ -80,6 +82,8 @@ def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True
     camera : Camera -- the frame's ``P2`` camera
     image_size : (W, H), optional -- vertices outside the image are not visible
     scaled : bool -- scale the mean shape to the labelled dims (else the plain mean)
+    shapes : (N, 36, 3) array, optional -- each ``Car`` label's own wireframe in the object
+        frame (e.g. :func:`refit_label_shapes`), placed instead of the mean
     """
     from wirescene.core import wireframe
     from wirescene.core.groundplane import rotation_y, transform
@@ -92,8 +96,12 @@ def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True
     cars = labels.of_type("Car")
     if not cars:
         return []
-    X = np.stack([transform(scaled_mean_shape(o.dims, mean) if scaled else np.asarray(mean, float),
-                            np.asarray(o.location, float), rotation_y(o.rotation_y)) for o in cars])
+    if shapes is not None:
+        shapes = np.asarray(shapes, float)
+        check_shape("shapes", shapes, (len(cars), 36, 3))
+    X = np.stack([transform(shapes[i] if shapes is not None
+                            else scaled_mean_shape(o.dims, mean) if scaled else np.asarray(mean, float),
+                            np.asarray(o.location, float), rotation_y(o.rotation_y)) for i, o in enumerate(cars)])
     hidden = self_occlusion(X, wireframe.FACES, camera.center)
     # Other labelled cars hide vertices too (their wireframes approximate their bodies).
     hidden |= inter_object_occlusion(X, wireframe.FACES, camera.center)
@@ -162,7 +170,7 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
                          scale_samples: int = 3, n_jitter: int = 2, jitter: float = 2.0, bg_per_car: int = 60,
                          bg_boxes: int = 12, bg_per_box: int = 15, min_box_h: float = 25.0, max_occluded: int = 1,
                          min_dist: float = 8.0, box_jitter: float = 0.04, max_patches: int | None = None,
-                         progress=None):
+                         label_shapes=None, progress=None):
     """Descriptors of real part and background patches of labelled KITTI frames.
 
     For every ``Car`` with occlusion level <= ``max_occluded`` and box height >=
@@ -183,6 +191,10 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
     ``max_patches``: keep at most that many, a uniform random sample of all
     (:class:`~wirescene.training.patches.PatchCollector`; None: all).
 
+    ``label_shapes``: ``{frame id: (N, 36, 3)}`` wireframes of each frame's ``Car`` labels in
+    the object frame (:func:`refit_label_shapes`) instead of the scaled mean shape; frames
+    it does not hold keep the mean.
+
     Returns
     -------
     wirescene.training.parts.PatchData -- ``group`` is the frame's index in ``frame_ids``.
@@ -191,6 +203,14 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
 
     ds = KittiDataset(root)
     frame_ids = list(frame_ids)
+    if label_shapes is not None:  # refused before any patch is cut, naming the frame
+        from wirescene.core.errors import InputError
+
+        for fid in frame_ids:
+            n = len(ds.labels(fid).of_type("Car"))
+            if fid in label_shapes and np.shape(label_shapes[fid]) != (n, 36, 3):
+                raise InputError(f"label shapes of frame {fid} are {np.shape(label_shapes[fid])}, but it has {n} "
+                                 f"Car labels: (N, 36, 3) expected")
     patches = PatchCollector(kinds, max_patches=max_patches, seed=seed)
     add = patches.add
     t0 = time.time()
@@ -199,7 +219,8 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
         img0 = ds.image(fid)
         H, W = img0.shape[:2]
         lab = ds.labels(fid)
-        cars = kitti_car_wireframes(lab, ds.camera(fid), image_size=(W, H))
+        cars = kitti_car_wireframes(lab, ds.camera(fid), image_size=(W, H),
+                                    shapes=None if label_shapes is None else label_shapes.get(fid))
         other = np.array([o.box for o in list(lab.of_type("Car", "Van", "Truck")) + list(lab.dontcare)],
                          float).reshape(-1, 4)
         use = [i for i, c in enumerate(cars) if _usable(c, min_box_h=min_box_h, max_occluded=max_occluded,
@@ -255,3 +276,89 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
     if not len(patches):
         raise ValueError("no real training patches in these frames")
     return patches.data(frame_ids)
+
+
+#: Kind and version of a file of refitted label shapes (:func:`save_label_shapes`).
+LABEL_SHAPES_KIND = "label_shapes"
+LABEL_SHAPES_VERSION = 1
+
+
+def refit_label_shapes(image, labels, camera, detector, *, n_components: int = 10, n_draws: int = 2000,
+                       rounds: int = 3, round_draws: int = 500, c: float = 0.75, shape_prior: float = 1.0,
+                       seed: int = 0, shape_model=None) -> np.ndarray:
+    """Each ``Car`` label's own wireframe ``(N, 36, 3)`` (object frame), refitted to the part
+    evidence with the label's pose and box fixed: the fine objective's part term (mean
+    calibrated log ratio over the self-visible vertices, those hidden by the other labelled
+    cars or the image border scoring ``c``) minus ``shape_prior`` times half the squared shape
+    coefficients (the fit's prior at 1), over
+    ``n_draws`` prior draws and ``rounds`` of ``round_draws`` draws about the best (spread
+    halved a round); every candidate scaled per axis into the label's box, as
+    :func:`scaled_mean_shape`. The draw of zeros keeps the mean in the running.
+
+    ``detector`` must not have seen the frame's drive (its maps would echo its own labels).
+    """
+    from wirescene.core import wireframe
+    from wirescene.core.groundplane import rotation_y, transform
+    from wirescene.infer.likelihood import object_likelihood, outside_image
+    from wirescene.infer.occlusion import self_occlusion
+    from wirescene.parts.detector import response_maps
+
+    if shape_model is None:
+        from wirescene.core.shape import load_default
+
+        shape_model = load_default()
+    cars = labels.of_type("Car")
+    if not cars:
+        return np.zeros((0, 36, 3))
+    k = min(int(n_components), shape_model.n_components)
+    others_hide = np.array([~c_.visible for c_ in kitti_car_wireframes(labels, camera)])  # scaled means
+    maps = response_maps(image, np.array([o.box for o in cars], float), detector=detector)
+    rng = np.random.default_rng(seed)
+
+    def value(S, i, lhw, loc, R):
+        X = shape_model.instantiate(S)
+        X = X * (lhw / np.ptp(X, axis=-2))[..., None, :]
+        V = transform(X, loc, R)
+        uv, depth = camera.project_with_depth(V)
+        self_hidden = self_occlusion(V, wireframe.FACES, camera.center) | (depth <= 0.5)
+        known = outside_image(camera, uv) | others_hide[i]
+        e = maps.log_ratio(uv, i, bilinear=True).astype(float)
+        return object_likelihood(e, self_hidden, known, c=c) - 0.5 * shape_prior * np.sum(S ** 2, axis=-1), X
+
+    out = []
+    for i, o in enumerate(cars):
+        h, w, l = np.asarray(o.dims, float)
+        pose = (i, np.array([l, h, w]), np.asarray(o.location, float), rotation_y(o.rotation_y))
+        S = np.concatenate([np.zeros((1, k)), rng.standard_normal((n_draws - 1, k))])
+        v, X = value(S, *pose)
+        best = int(np.argmax(v))
+        s_best, v_best, x_best = S[best], v[best], X[best]
+        for r in range(rounds):
+            S = s_best + rng.standard_normal((round_draws, k)) * 0.5 ** (r + 1)
+            v, X = value(S, *pose)
+            j = int(np.argmax(v))
+            if v[j] > v_best:
+                s_best, v_best, x_best = S[j], v[j], X[j]
+        out.append(x_best)
+    return np.stack(out)
+
+
+def save_label_shapes(path, shapes: dict) -> None:
+    """Write ``{frame id: (N, 36, 3)}`` refitted label shapes as a versioned ``.npz``."""
+    from wirescene.core.artefacts import save_npz
+
+    save_npz(path, {str(f): np.asarray(s, float) for f, s in shapes.items()}, kind=LABEL_SHAPES_KIND,
+             version=LABEL_SHAPES_VERSION)
+
+
+def load_label_shapes(path) -> dict:
+    """``{frame id: (N, 36, 3)}`` written by :func:`save_label_shapes`; :class:`InputError`
+    naming the file if it is not one."""
+    from wirescene.core.artefacts import load_npz
+    from wirescene.core.errors import InputError
+
+    data = load_npz(path, kind=LABEL_SHAPES_KIND, version=LABEL_SHAPES_VERSION)
+    for f, s in data.items():
+        if s.ndim != 3 or s.shape[1:] != (36, 3):
+            raise InputError(f"label shapes of frame {f} are {s.shape}, not (N, 36, 3)", path=path)
+    return data
