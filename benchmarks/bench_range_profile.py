@@ -43,7 +43,7 @@ from wirescene.core.wireframe import FACES
 from wirescene.eval.sources import frame_seed
 from wirescene.fitting.pipeline import FitOptions, fit_frame, load_shape_model
 from wirescene.fitting.variants import VARIANTS
-from wirescene.infer.inference import BOX_ROBUST, _extent_corners, box_cost
+from wirescene.infer.inference import BOX_ROBUST, box_cost, extent_corners
 from wirescene.infer.likelihood import object_likelihood, outside_image
 from wirescene.infer.masks import mask_hidden
 from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion
@@ -104,7 +104,7 @@ def scene_profiles(camera, scene, evidence, boxes, *, variant, c: float, box_wei
                 "other cars": -(lik.sum(axis=1) - lik[:, j])}
         prof["total"] = prof["own parts"] + prof["box"] + prof["other cars"]
         # the box's bottom side alone (where the car meets the ground) and its other three (its image size)
-        projected, min_depth = project_boxes(camera, _extent_corners(*extent), loc, o.R[None])
+        projected, min_depth = project_boxes(camera, extent_corners(*extent), loc, o.R[None])
         r2 = box_residual(projected, det, min_depth) ** 2
         prof["box bottom"] = box_weight * BOX_ROBUST * np.log1p(r2[:, 3] / BOX_ROBUST)
         prof["box sides, top"] = box_weight * BOX_ROBUST * np.log1p(r2[:, :3].sum(axis=1) / BOX_ROBUST)
