@@ -392,7 +392,7 @@ def test_kitti_eval_frames_reads_the_frames_asked_for():
 
 # ------------------------------------------------------------------ refitted label shapes (self-training)
 
-def test_refit_label_shapes_keep_the_box_and_never_score_below_the_mean():
+def test_refit_label_shapes_keep_the_box_and_the_mean_under_a_strong_prior():
     from wirescene.core.errors import ShapeError
     from wirescene.io.kitti import KittiDataset
     from wirescene.training.parts_real import kitti_car_wireframes, refit_label_shapes, scaled_mean_shape
@@ -450,3 +450,19 @@ def test_real_patches_follow_the_label_shapes():
 
     with pytest.raises(InputError, match="frame 000010 .* Car labels"):
         make_real_patch_data(KITTI_ROOT, ["000010"], label_shapes={"000010": means[1:]}, **kw)
+
+
+def test_hidden_by_other_labels_leaves_self_occlusion_out(tmp_path):
+    from wirescene.io.kitti import KittiDataset, read_labels
+    from wirescene.training.parts_real import hidden_by_other_labels, kitti_car_wireframes
+
+    ds = KittiDataset(KITTI_ROOT)
+    labels, camera = ds.labels("000010"), ds.camera("000010")
+    others = hidden_by_other_labels(labels, camera)
+    unseen = ~np.stack([c.visible for c in kitti_car_wireframes(labels, camera)])
+    assert others.shape == unseen.shape and others.any()
+    assert not (others & ~unseen).any() and (unseen & ~others).sum() > others.sum()  # self-hidden ones excluded
+    one = tmp_path / "one.txt"
+    one.write_text(ds.label_path("000010").read_text().splitlines()[0] + "\n")
+    lone = read_labels(one)
+    assert len(lone.of_type("Car")) == 1 and not hidden_by_other_labels(lone, camera).any()

@@ -283,21 +283,39 @@ LABEL_SHAPES_KIND = "label_shapes"
 LABEL_SHAPES_VERSION = 1
 
 
+def hidden_by_other_labels(labels, camera) -> np.ndarray:
+    """``(N, 36)`` bool: the vertices of each ``Car`` label's scaled mean wireframe that another
+    labelled car's wireframe hides from the camera (not those the car hides itself)."""
+    from wirescene.core import wireframe
+    from wirescene.core.groundplane import rotation_y, transform
+    from wirescene.infer.occlusion import inter_object_occlusion
+
+    cars = labels.of_type("Car")
+    if not cars:
+        return np.zeros((0, 36), bool)
+    X = np.stack([transform(scaled_mean_shape(o.dims), np.asarray(o.location, float), rotation_y(o.rotation_y))
+                  for o in cars])
+    return inter_object_occlusion(X, wireframe.FACES, camera.center)
+
+
 def refit_label_shapes(image, labels, camera, detector, *, n_components: int = 10, n_draws: int = 2000,
                        rounds: int = 3, round_draws: int = 500, c: float = 0.75, shape_prior: float = 1.0,
                        seed: int = 0, shape_model=None) -> np.ndarray:
     """Each ``Car`` label's own wireframe ``(N, 36, 3)`` (object frame), refitted to the part
-    evidence with the label's pose and box fixed: the fine objective's part term (mean
-    calibrated log ratio over the self-visible vertices, those hidden by the other labelled
-    cars or the image border scoring ``c``) minus ``shape_prior`` times half the squared shape
-    coefficients (the fit's prior at 1), over
-    ``n_draws`` prior draws and ``rounds`` of ``round_draws`` draws about the best (spread
-    halved a round); every candidate scaled per axis into the label's box, as
-    :func:`scaled_mean_shape`. The draw of zeros keeps the mean in the running.
+    evidence with the label's pose and box fixed.
+
+    The objective is the fine stage's part term (the mean calibrated log ratio over the
+    self-visible vertices; those hidden by the other labelled cars, :func:`hidden_by_other_labels`,
+    or by the image border score ``c``) minus ``shape_prior`` times half the squared shape
+    coefficients (the fit's prior at 1). It is maximised over ``n_draws`` prior draws of the
+    first ``n_components`` coefficients, then ``rounds`` of ``round_draws`` draws about the best
+    (spread halved a round); every candidate is scaled per axis into the label's box, as
+    :func:`scaled_mean_shape`, and the draw of zeros keeps the mean in the running.
 
     ``detector`` must not have seen the frame's drive (its maps would echo its own labels).
     """
     from wirescene.core import wireframe
+    from wirescene.core.camera import NEAR_PLANE
     from wirescene.core.groundplane import rotation_y, transform
     from wirescene.infer.likelihood import object_likelihood, outside_image
     from wirescene.infer.occlusion import self_occlusion
@@ -311,7 +329,7 @@ def refit_label_shapes(image, labels, camera, detector, *, n_components: int = 1
     if not cars:
         return np.zeros((0, 36, 3))
     k = min(int(n_components), shape_model.n_components)
-    others_hide = np.array([~c_.visible for c_ in kitti_car_wireframes(labels, camera)])  # scaled means
+    others_hide = hidden_by_other_labels(labels, camera)
     maps = response_maps(image, np.array([o.box for o in cars], float), detector=detector)
     rng = np.random.default_rng(seed)
 
@@ -320,7 +338,7 @@ def refit_label_shapes(image, labels, camera, detector, *, n_components: int = 1
         X = X * (lhw / np.ptp(X, axis=-2))[..., None, :]
         V = transform(X, loc, R)
         uv, depth = camera.project_with_depth(V)
-        self_hidden = self_occlusion(V, wireframe.FACES, camera.center) | (depth <= 0.5)
+        self_hidden = self_occlusion(V, wireframe.FACES, camera.center) | (depth <= NEAR_PLANE)
         known = outside_image(camera, uv) | others_hide[i]
         e = maps.log_ratio(uv, i, bilinear=True).astype(float)
         return object_likelihood(e, self_hidden, known, c=c) - 0.5 * shape_prior * np.sum(S ** 2, axis=-1), X
