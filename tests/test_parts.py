@@ -433,6 +433,7 @@ def test_label_shapes_file_round_trip_and_refusal(tmp_path):
 
 
 def test_real_patches_follow_the_label_shapes():
+    from wirescene.core.errors import InputError
     from wirescene.io.kitti import KittiDataset
     from wirescene.training.parts_real import make_real_patch_data, scaled_mean_shape
 
@@ -446,8 +447,6 @@ def test_real_patches_follow_the_label_shapes():
     moved_parts, base_parts = moved.X["ghog"][moved.y < N_PARTS], base.X["ghog"][base.y < N_PARTS]
     assert len(base_parts) > 20
     assert moved_parts.shape != base_parts.shape or not np.allclose(moved_parts, base_parts)
-    from wirescene.core.errors import InputError
-
     with pytest.raises(InputError, match="frame 000010 .* Car labels"):
         make_real_patch_data(KITTI_ROOT, ["000010"], label_shapes={"000010": means[1:]}, **kw)
 
