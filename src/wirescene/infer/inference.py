@@ -91,7 +91,7 @@ class InferenceOptions:
 
     iterations: int = option(12, help="Inference iterations (Algorithm 1).")
     samples: int = option(12, minimum=2, help="Samples per object and iteration (the current value among them).")
-    n_shape: int = 5
+    n_shape: int = 5  # 3 or 8 place no more cars (RESULTS, "`n_shape` = 5")
     sigma_bearing_deg: float = 0.5  # the image pins the bearing tightly ...
     sigma_range_frac: float = 0.05  # ... and the range loosely
     sigma_azimuth_deg: float = 8.0
