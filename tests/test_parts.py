@@ -465,3 +465,22 @@ def test_hidden_by_other_labels_leaves_self_occlusion_out(tmp_path):
     one.write_text(ds.label_path("000010").read_text().splitlines()[0] + "\n")
     lone = read_labels(one)
     assert len(lone.of_type("Car")) == 1 and not hidden_by_other_labels(lone, camera).any()
+
+
+def test_train_parts_cli_trains_on_the_label_shapes_given(tmp_path):
+    from click.testing import CliRunner
+
+    from wirescene.cli.main import main
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.parts_real import save_label_shapes, scaled_mean_shape
+
+    cars = KittiDataset(KITTI_ROOT).labels("000010").of_type("Car")
+    save_label_shapes(tmp_path / "s.npz", {"000010": np.stack([scaled_mean_shape(o.dims) for o in cars]) * 1.02})
+    args = ["train", "parts", "--kitti-root", str(KITTI_ROOT), "--frames", "000010", "--n-trees", "2",
+            "--max-depth", "4", "--synth-scenes", "0", "--out", str(tmp_path / "p.npz")]
+    r = CliRunner().invoke(main, [*args, "--label-shapes", str(tmp_path / "s.npz")])
+    assert r.exit_code == 0, r.output
+    assert PartDetector.load(tmp_path / "p.npz").meta["label_shapes"] == "True"
+    r = CliRunner().invoke(main, ["train", "parts", "--out", str(tmp_path / "q.npz"), "--label-shapes",
+                                  str(tmp_path / "s.npz")])
+    assert r.exit_code == 2 and "--label-shapes needs --kitti-root" in r.output
