@@ -60,16 +60,25 @@ class LabelledCar:
 
 
 def scaled_mean_shape(dims, mean=None) -> np.ndarray:
-    """The mean wireframe ``(36, 3)`` (object frame: x forward, y down, z left) scaled per
-    axis to KITTI ``dims = (h, w, l)`` (scaled about the object origin: the bottom centre)."""
+    """The mean wireframe ``(36, 3)`` (object frame: x forward, y down, z left), or any
+    wireframes ``mean`` ``(..., 36, 3)``, scaled per axis to KITTI ``dims = (h, w, l)``
+    (scaled about the object origin: the bottom centre)."""
     if mean is None:
         from wirescene.core.shape import load_default
 
         mean = load_default().mean
     mean = np.asarray(mean, float)
     h, w, l = np.asarray(dims, float)
-    ext = np.ptp(mean, axis=0)
-    return mean * np.array([l / ext[0], h / ext[1], w / ext[2]])
+    return mean * (np.array([l, h, w]) / np.ptp(mean, axis=-2))[..., None, :]
+
+
+def _placed(cars, shapes) -> np.ndarray:
+    """Camera-frame wireframes ``(N, 36, 3)`` of labels ``cars``: object-frame ``shapes``
+    ``(N, 36, 3)`` at each label's bottom centre and ``rotation_y``."""
+    from wirescene.core.groundplane import rotation_y, transform
+
+    return np.stack([transform(x, np.asarray(o.location, float), rotation_y(o.rotation_y))
+                     for x, o in zip(shapes, cars)])
 
 
 def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True, mean=None,
@@ -86,7 +95,6 @@ def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True
         frame (e.g. :func:`refit_label_shapes`), placed instead of the mean
     """
     from wirescene.core import wireframe
-    from wirescene.core.groundplane import rotation_y, transform
     from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion
 
     if mean is None:
@@ -99,9 +107,9 @@ def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True
     if shapes is not None:
         shapes = np.asarray(shapes, float)
         check_shape("shapes", shapes, (len(cars), 36, 3))
-    X = np.stack([transform(shapes[i] if shapes is not None
-                            else scaled_mean_shape(o.dims, mean) if scaled else np.asarray(mean, float),
-                            np.asarray(o.location, float), rotation_y(o.rotation_y)) for i, o in enumerate(cars)])
+    else:
+        shapes = [scaled_mean_shape(o.dims, mean) if scaled else np.asarray(mean, float) for o in cars]
+    X = _placed(cars, shapes)
     hidden = self_occlusion(X, wireframe.FACES, camera.center)
     # Other labelled cars hide vertices too (their wireframes approximate their bodies).
     hidden |= inter_object_occlusion(X, wireframe.FACES, camera.center)
@@ -287,14 +295,12 @@ def hidden_by_other_labels(labels, camera) -> np.ndarray:
     """``(N, 36)`` bool: the vertices of each ``Car`` label's scaled mean wireframe that another
     labelled car's wireframe hides from the camera (not those the car hides itself)."""
     from wirescene.core import wireframe
-    from wirescene.core.groundplane import rotation_y, transform
     from wirescene.infer.occlusion import inter_object_occlusion
 
     cars = labels.of_type("Car")
     if not cars:
         return np.zeros((0, 36), bool)
-    X = np.stack([transform(scaled_mean_shape(o.dims), np.asarray(o.location, float), rotation_y(o.rotation_y))
-                  for o in cars])
+    X = _placed(cars, [scaled_mean_shape(o.dims) for o in cars])
     return inter_object_occlusion(X, wireframe.FACES, camera.center)
 
 
@@ -333,9 +339,8 @@ def refit_label_shapes(image, labels, camera, detector, *, n_components: int = 1
     maps = response_maps(image, np.array([o.box for o in cars], float), detector=detector)
     rng = np.random.default_rng(seed)
 
-    def value(S, i, lhw, loc, R):
-        X = shape_model.instantiate(S)
-        X = X * (lhw / np.ptp(X, axis=-2))[..., None, :]
+    def value(S, i, hwl, loc, R):
+        X = scaled_mean_shape(hwl, shape_model.instantiate(S))
         V = transform(X, loc, R)
         uv, depth = camera.project_with_depth(V)
         self_hidden = self_occlusion(V, wireframe.FACES, camera.center) | (depth <= NEAR_PLANE)
@@ -345,8 +350,7 @@ def refit_label_shapes(image, labels, camera, detector, *, n_components: int = 1
 
     out = []
     for i, o in enumerate(cars):
-        h, w, l = np.asarray(o.dims, float)
-        pose = (i, np.array([l, h, w]), np.asarray(o.location, float), rotation_y(o.rotation_y))
+        pose = (i, o.dims, np.asarray(o.location, float), rotation_y(o.rotation_y))
         S = np.concatenate([np.zeros((1, k)), rng.standard_normal((n_draws - 1, k))])
         v, X = value(S, *pose)
         best = int(np.argmax(v))
