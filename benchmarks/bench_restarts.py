@@ -21,17 +21,15 @@ frames and cars must agree.
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import json
 import sys
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, Boxes, passes, run_tables  # noqa: E402  (benchmarks/ is on the path)
-from bench_seeds import GROUPS, chosen_variants, seed_runs
+from bench_seeds import GROUPS, chosen_variants, seed_run_parser, seed_runs
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.io.folds import DRIVE_FOLDS, frame_drives
 from wirescene.io.kitti import KittiDataset
@@ -154,11 +152,7 @@ def format_report(variant: str, rep: Mapping) -> str:
 
 def main(argv: Sequence[str] | None = None) -> None:
     """The command line (module docstring); ``argv`` as for :meth:`argparse.ArgumentParser.parse_args`."""
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("runs", metavar="RUN,RUN[,...]", help="bench_real_folds.py --out directories of one setting")
-    ap.add_argument("--root", required=True, help="the KITTI root the runs were fitted on (calibrations)")
-    ap.add_argument("--variant", action="append", help="variants (default: those every run holds)")
-    ap.add_argument("--json", type=Path)
+    ap = seed_run_parser(__doc__)
     args = ap.parse_args(argv)
     runs, seeds = seed_runs(ap, args.runs)
     dataset = KittiDataset(args.root)

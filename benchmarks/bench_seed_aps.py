@@ -16,15 +16,13 @@ label files; this reads the runs' records, whose confidences it cross-validates 
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path)
 from bench_real_folds import cv_predictions
-from bench_seeds import chosen_variants, seed_runs
+from bench_seeds import chosen_variants, seed_run_parser, seed_runs
 from wirescene.eval.intervals import N_BOOT_AP, kitti_run_intervals
 from wirescene.eval.kitti_metrics import kitti_figure, kitti_metrics, mean_kitti_metrics
 from wirescene.io.folds import drive_map, fold_of
@@ -66,12 +64,8 @@ def format_report(report: dict, seeds: Sequence) -> str:
 
 def main(argv: Sequence[str] | None = None) -> None:
     """The command line (module docstring); ``argv`` as for :meth:`argparse.ArgumentParser.parse_args`."""
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("runs", metavar="RUN,RUN[,...]", help="bench_real_folds.py --out directories of one setting")
-    ap.add_argument("--root", required=True, help="the KITTI root the runs were fitted on")
-    ap.add_argument("--variant", action="append", help="variants (default: those every run holds)")
+    ap = seed_run_parser(__doc__)
     ap.add_argument("--draws", type=int, default=N_BOOT_AP, help="bootstrap draws of the interval")
-    ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     runs, seeds = seed_runs(ap, args.runs)
     dataset = KittiDataset(args.root)

@@ -58,6 +58,17 @@ def run_seed(run: Path) -> int | None:
     return None if seed is None else int(seed)
 
 
+def seed_run_parser(doc: str) -> argparse.ArgumentParser:
+    """The command line of a benchmark reading several seeds' runs of one setting:
+    ``RUN,RUN[,...] --root KITTI [--variant V ...] [--json OUT]`` (``doc`` its description)."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", metavar="RUN,RUN[,...]", help="bench_real_folds.py --out directories of one setting")
+    ap.add_argument("--root", required=True, help="the KITTI root the runs were fitted on")
+    ap.add_argument("--variant", action="append", help="variants (default: those every run holds)")
+    ap.add_argument("--json", type=Path)
+    return ap
+
+
 def seed_runs(ap: argparse.ArgumentParser, text: str) -> tuple[list[Path], list[int | None]]:
     """The runs of ``RUN,RUN[,...]`` (at least two) and the seeds they recorded; ``ap.error``
     when fewer are given or two recorded the same seed."""
