@@ -43,7 +43,7 @@ from wirescene.core.wireframe import FACES
 from wirescene.eval.sources import frame_seed
 from wirescene.fitting.pipeline import FitOptions, fit_frame, load_shape_model
 from wirescene.fitting.variants import VARIANTS
-from wirescene.infer.inference import BOX_ROBUST, box_cost, extent_corners
+from wirescene.infer.inference import BOX_ROBUST, extent_corners
 from wirescene.infer.likelihood import object_likelihood, outside_image
 from wirescene.infer.masks import mask_hidden
 from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion
@@ -95,19 +95,21 @@ def scene_profiles(camera, scene, evidence, boxes, *, variant, c: float, box_wei
         e = evidence.log_ratio(uv, np.broadcast_to(np.arange(N), scale.shape), scale)
         lik = object_likelihood(e, self_hidden, hidden, c=c)  # (S, N)
         Xj = (o.vertices - o.location) @ o.R
-        extent = (Xj.min(axis=0), Xj.max(axis=0))
         det = np.asarray(boxes[o.detection_index], float)[None]
         loc = o.location[None] + shift[:, 0]
-        bc = box_cost(camera, o.vertices[None] + shift, loc, o.R[None], det, extent)
-        box = box_weight * BOX_ROBUST * np.log1p(bc / BOX_ROBUST)
-        prof = {"range": rng_, "u": u, "location": o.location, "own parts": -lik[:, j], "box": box,
-                "other cars": -(lik.sum(axis=1) - lik[:, j])}
+        # the box term's squared side residuals (box_cost is their sum), kept apart to split the term
+        projected, min_depth = project_boxes(camera, extent_corners(Xj.min(axis=0), Xj.max(axis=0)), loc, o.R[None])
+        r2 = box_residual(projected, det, min_depth) ** 2
+
+        def robust(cost):
+            return box_weight * BOX_ROBUST * np.log1p(cost / BOX_ROBUST)
+
+        prof = {"range": rng_, "u": u, "location": o.location, "own parts": -lik[:, j],
+                "box": robust(np.sum(r2, axis=-1)), "other cars": -(lik.sum(axis=1) - lik[:, j])}
         prof["total"] = prof["own parts"] + prof["box"] + prof["other cars"]
         # the box's bottom side alone (where the car meets the ground) and its other three (its image size)
-        projected, min_depth = project_boxes(camera, extent_corners(*extent), loc, o.R[None])
-        r2 = box_residual(projected, det, min_depth) ** 2
-        prof["box bottom"] = box_weight * BOX_ROBUST * np.log1p(r2[:, 3] / BOX_ROBUST)
-        prof["box sides, top"] = box_weight * BOX_ROBUST * np.log1p(r2[:, :3].sum(axis=1) / BOX_ROBUST)
+        prof["box bottom"] = robust(r2[:, 3])
+        prof["box sides, top"] = robust(r2[:, :3].sum(axis=1))
         out.append(prof)
     return out
 
