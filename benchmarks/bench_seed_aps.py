@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path)
 from bench_real_folds import cv_predictions
-from bench_seeds import chosen_variants, seed_run_parser, seed_runs
+from bench_seeds import chosen_variants, same_frames, seed_run_parser, seed_runs
 from wirescene.eval.intervals import N_BOOT_AP, kitti_run_intervals
 from wirescene.eval.kitti_metrics import kitti_figure, kitti_metrics, mean_kitti_metrics
 from wirescene.io.folds import drive_map, fold_of
@@ -70,11 +70,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     runs, seeds = seed_runs(ap, args.runs)
     dataset = KittiDataset(args.root)
     records = [read_run(r)[0] for r in runs]
-    frames = sorted({x.frame_id for rs in records[0].values() for x in rs})
-    for r, rec in zip(runs, records):
-        held = sorted({x.frame_id for rs in rec.values() for x in rs})
-        if held != frames:
-            ap.error(f"{r} holds {len(held)} frames and {runs[0]} {len(frames)}, not the same ones")
+    frames = same_frames(ap, {r: {x.frame_id for rs in rec.values() for x in rs} for r, rec in zip(runs, records)})
     variants = chosen_variants(ap, records, args.variant)
     folds = {f: fold_of(f) for f in frames}
     # each run's confidences come from its own variants' records, as its summary made them

@@ -81,6 +81,16 @@ def seed_runs(ap: argparse.ArgumentParser, text: str) -> tuple[list[Path], list[
     return runs, seeds
 
 
+def same_frames(ap: argparse.ArgumentParser, frames_of: Mapping) -> list[str]:
+    """The sorted frames of ``frames_of`` (``{run: frame ids it holds}``, the first run first);
+    ``ap.error`` unless every run holds the same ones (per-seed counts compare the same cars)."""
+    (first, frames), *_ = frames_of.items()
+    for r, held in frames_of.items():
+        if set(held) != set(frames):
+            ap.error(f"{r} holds {len(set(held))} frames and {first} {len(set(frames))}, not the same ones")
+    return sorted(frames)
+
+
 def chosen_variants(ap: argparse.ArgumentParser, held: Sequence, asked: Sequence[str] | None) -> list[str]:
     """``asked`` (default: the variants every run holds, sorted), each checked to be in every
     one of ``held`` (each run's variants); ``ap.error`` otherwise."""
@@ -254,10 +264,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             records, _, by_variant = run_tables(r, dataset, camera_height=KITTI_CAMERA_HEIGHT)
             tables[name].append(by_variant)
             frames_of[r] = {f.frame_id for rs in records.values() for f in rs}
-    frames = frames_of[runs_a[0]]
-    for r, held in frames_of.items():  # per-seed counts compare cars of the same frames only
-        if held != frames:
-            ap.error(f"{r} holds {len(held)} frames and {runs_a[0]} {len(frames)}, not the same ones")
+    frames = same_frames(ap, frames_of)
     variants = chosen_variants(ap, [t for ts in tables.values() for t in ts], args.variant)
     drive_of = frame_drives()
     missing = sorted(f for f in frames if f not in drive_of)

@@ -565,3 +565,16 @@ def test_label_shapes_benchmark_writes_the_refits_it_measures(monkeypatch, tmp_p
     written = load_label_shapes(tmp_path / "s.npz")["000010"]
     assert written.shape == shapes["000010"].shape and not np.allclose(written, shapes["000010"])
     assert (tmp_path / "s.json").is_file()
+
+
+def test_seed_benchmarks_refuse_runs_of_other_frames(monkeypatch, capsys):
+    import argparse
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_seeds import same_frames
+
+    ap = argparse.ArgumentParser(prog="bench")
+    assert same_frames(ap, {"a": {"000010", "000002"}, "b": {"000002", "000010"}}) == ["000002", "000010"]
+    with pytest.raises(SystemExit):
+        same_frames(ap, {"a": {"000010", "000002"}, "b": {"000010"}})
+    assert "b holds 1 frames and a 2, not the same ones" in capsys.readouterr().err
