@@ -578,3 +578,19 @@ def test_seed_benchmarks_refuse_runs_of_other_frames(monkeypatch, capsys):
     with pytest.raises(SystemExit):
         same_frames(ap, {"a": {"000010", "000002"}, "b": {"000010"}})
     assert "b holds 1 frames and a 2, not the same ones" in capsys.readouterr().err
+
+
+def test_device_benchmark_compares_the_cars_of_each_configuration(monkeypatch, tmp_path, capsys):
+    import json
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_devices import main, positions
+
+    main(["--root", str(KITTI_ROOT), "--frames", "2", "--variant", "coarse", "--config", "numpy:1",
+          "--config", "numpy:2", "--out", str(tmp_path)])
+    runs = json.loads((tmp_path / "summary.json").read_text())["runs"]
+    assert [r["config"] for r in runs] == ["numpy:1", "numpy:2"]
+    # The same seed per frame in one process or two: the same cars, to the last digit written.
+    assert runs[1]["compared"] == runs[0]["cars"] > 0 and runs[1]["moved_over_1cm"] == 0
+    assert positions(tmp_path / "numpy_1", "coarse") == positions(tmp_path / "numpy_2", "coarse")
+    assert "numpy:2" in capsys.readouterr().out

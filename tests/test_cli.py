@@ -203,6 +203,29 @@ def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gp
         assert r.exit_code == 2 and "needs PyTorch" in r.output
 
 
+def test_device_auto_takes_the_gpu_only_when_frames_are_fitted_in_one_process(monkeypatch, tmp_path):
+    from types import SimpleNamespace
+
+    from wirescene.cli.main import _parallel, _resolve_device
+    from wirescene.infer import torch_backend
+
+    # A machine whose PyTorch sees a GPU, without importing torch.
+    monkeypatch.setattr(torch_backend, "available", lambda: True)
+    monkeypatch.setattr(torch_backend, "resolve_device", lambda name: SimpleNamespace(type="cuda"))
+    assert _resolve_device("auto") == "cuda"
+    assert _resolve_device("auto", parallel=True) == "numpy"
+    assert _resolve_device("numpy", parallel=False) == "numpy"
+    assert not _parallel(1, None, None) and not _parallel(4, ["000010"], None)
+    assert _parallel(4, None, None) and _parallel(2, ["000010", "000011"], None)
+    assert _parallel(1, ["000010", "000011"], "tcp://scheduler:8786")
+    # Several workers with the default device: numpy in each process, not a refusal of --workers.
+    out = tmp_path / "m.json"
+    r = run("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000002,000010", "--particles", "8", "--workers", "2",
+            "--draws", "0", "--json", out)
+    assert r.exit_code == 0, r.output
+    assert "fits frames in one process" not in r.output and out.is_file()
+
+
 def test_eval_with_the_torch_backend_equals_numpy(tmp_path):
     pytest.importorskip("torch")
     common = ["eval", KITTI_ROOT, "--variant", "full", "--frames", "000010", "--particles", "8", "--iterations", "3",

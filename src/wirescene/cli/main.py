@@ -84,15 +84,22 @@ def _frame_workers(workers: int | None, device: str) -> int:
     return n
 
 
+def _parallel(workers: int | None, frame_ids: list[str] | None, dask_address: str | None) -> bool:
+    """Whether frames will be fitted by several processes (local workers or Dask)."""
+    several_frames = frame_ids is None or len(frame_ids) > 1  # None: every frame of the split
+    return several_frames and (dask_address is not None or workers_count(workers) > 1)
+
+
 def _progress(desc: str, total: int | None = None):
     from tqdm import tqdm
 
     return lambda it: tqdm(it, desc=desc, unit="frame", total=total, leave=False, file=sys.stderr)
 
 
-def _fit_options(particles: int, seed: int, **inference):
+def _fit_options(particles: int, seed: int, *, parallel: bool = False, **inference):
     """The :class:`FitOptions` of a command's options: the stage options and ``--set``
-    (one mapping, :meth:`FitOptions.with_settings`), the models and the device."""
+    (one mapping, :meth:`FitOptions.with_settings`), the models and the device
+    (``parallel``: frames will be fitted by several processes, see :func:`_resolve_device`)."""
     from wirescene.fitting.models import with_models
     from wirescene.fitting.pipeline import FitOptions
     from wirescene.lift import LiftingOptions
@@ -107,7 +114,7 @@ def _fit_options(particles: int, seed: int, **inference):
     if unknown:  # a command passed an option no stage owns: a bug, not a user error
         raise TypeError(f"options no stage owns: {', '.join(sorted(unknown))}")
     if device is not None:
-        settings["inference.device"] = _resolve_device(device)
+        settings["inference.device"] = _resolve_device(device, parallel=parallel)
     options = FitOptions(lifting=LiftingOptions(n_particles=particles), seed=seed, calibrate_scores=calibrate_scores,
                          **models)
     try:
@@ -117,17 +124,20 @@ def _fit_options(particles: int, seed: int, **inference):
     return with_models(options, load_models(models_dir))
 
 
-def _resolve_device(name: str) -> str:
+def _resolve_device(name: str, *, parallel: bool = False) -> str:
     """The inference device for ``--device``: ``numpy``, or a PyTorch device name.
-    ``auto`` takes a CUDA GPU when PyTorch and one are there, else numpy (PyTorch is
-    imported only to look for the GPU, and only if it is installed)."""
+    ``auto`` takes a CUDA GPU when PyTorch and one are there and the frames are fitted in
+    one process anyway, else numpy (PyTorch is imported only to look for the GPU, and only
+    if it is installed). With ``parallel`` (several frame processes) it stays with numpy:
+    the GPU speeds up the ray casting alone, a fit 1.3x end to end, while CUDA would keep
+    the frames in one process (benchmarks/RESULTS.md, "The PyTorch backend on a GPU")."""
     from wirescene.infer import torch_backend
 
     key = name.strip().lower()
     if key == "numpy":
         return "numpy"
     if key == "auto":
-        if not torch_backend.available():
+        if parallel or not torch_backend.available():
             return "numpy"
         return "cuda" if torch_backend.resolve_device("auto").type == "cuda" else "numpy"
     return str(torch_backend.resolve_device(key))
@@ -154,7 +164,8 @@ def _inference_options(f):
                                         "shipped bank).")(f)
     f = click.option("--device", default="auto", show_default=True,
                      help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
-                          "(optional: pip install torch). auto: a CUDA GPU if PyTorch sees one, else numpy.")(f)
+                          "(optional: pip install torch). auto: a CUDA GPU if PyTorch sees one and the frames are "
+                          "fitted in one process (one image, --workers 1 or one core), else numpy.")(f)
     return f
 
 
@@ -246,7 +257,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
         inference["predetect__min_car_probability"] = 0.0
-    options = _fit_options(particles, seed, **inference)
+    options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address), **inference)
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections,
                              bank=options.detector_bank, classifier=options.viewpoint_classifier)
     on_gpu = options.inference.device.startswith("cuda")
@@ -350,7 +361,7 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
             detections = str(Path(detections).resolve())
     dataset = KittiDataset(kitti_root, split=split)
     frame_ids = select_frames(frames, split_file, dataset.image_ids(), where=dataset.split_dir, what="image")
-    options = _fit_options(particles, seed, **inference)
+    options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address), **inference)
     client = _dask_client(dask_address) if dask_address is not None else None
     total = len(frame_ids) if frame_ids else len(dataset.image_ids())
     try:
