@@ -19,7 +19,7 @@ scenes and on the real KITTI frames (plain script).
        frames are the evaluation set: the shipped model never saw them.
 
 Usage: python benchmarks/bench_parts.py --root KITTI_ROOT [--frame 000010]
-       [--synth-root DIR] [--model PATH] [--fold K]
+       [--synth-root DIR] [--model PATH] [--fold K] [--flip]
 
 ``--fold K`` scores only the frames of fold K of the shared frames' drive folds
 (:mod:`wirescene.io.folds`): a fold model (``wirescene train parts --split-file`` of the
@@ -69,6 +69,7 @@ def main():
     ap.add_argument("--model", default=None)
     ap.add_argument("--radius", type=float, nargs="+", default=[0.04, 0.10])
     ap.add_argument("--fold", type=int, default=None, help="score only this drive fold's frames")
+    ap.add_argument("--flip", action="store_true", help="also score each box's mirror image (response_maps(flip=))")
     args = ap.parse_args()
     if args.synth_seed >= 1000:
         ap.error("synthetic seeds >= 1000 are training data")
@@ -106,7 +107,7 @@ def main():
             ("real KITTI all cars", lambda: kitti_eval_frames(args.root, clean=False, min_box_h=0.0, frames=scored)),
         ]
         for name, frames in rows:
-            r = localisation(det, frames(), radii=radii)
+            r = localisation(det, frames(), radii=radii, flip=args.flip)
             print(_line(name, r, radii) + f"  [maps {r['t_maps_s']:.1f} s]")
 
 

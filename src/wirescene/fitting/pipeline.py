@@ -293,7 +293,8 @@ def fit_frame(
     if evidence is None and needs_evidence(detections, variants):
         if image is None:
             raise ValueError("image is needed for the part evidence of fine variants and unknown viewpoints")
-        evidence = part_evidence(image, detections, detector=_part_detector(options.parts_model))
+        evidence = part_evidence(image, detections, detector=_part_detector(options.parts_model),
+                                 flip=options.inference.flip_evidence)
     if not np.all(np.isfinite(detections.alpha)):
         # no image to score (given evidence, e.g. the oracle's): the viewpoint from the part evidence
         detections = viewpoint_from_evidence(camera, detections, evidence, load_shape_model())

@@ -33,11 +33,13 @@ class ResponseEvidence:
         return self.responses.log_ratio(uv, obj, bilinear=self.bilinear).astype(float)
 
 
-def part_evidence(image: np.ndarray, detections: Detections, *, detector=None, bilinear: bool = True) -> ResponseEvidence:
-    """Response maps of the part detectors inside the detection boxes of ``image``."""
+def part_evidence(image: np.ndarray, detections: Detections, *, detector=None, bilinear: bool = True,
+                  flip: bool = False) -> ResponseEvidence:
+    """Response maps of the part detectors inside the detection boxes of ``image`` (with
+    ``flip``, averaged with those of each box's mirror image)."""
     from wirescene.parts.detector import response_maps
 
-    return ResponseEvidence(response_maps(image, detections.boxes, detector=detector), bilinear=bilinear)
+    return ResponseEvidence(response_maps(image, detections.boxes, detector=detector, flip=flip), bilinear=bilinear)
 
 
 #: Peak, floor and width of oracle evidence, on the scale of the shipped part detectors,

@@ -443,9 +443,33 @@ def _context(inp, box, crop_origin, z):
     return feat.box_context(inp, (a[0], a[1], c[0], c[1]))
 
 
+def _mirrored_probs(detector: PartDetector, crop, edges, box, crop_origin, z: float, uu, vv) -> np.ndarray:
+    """``(gh, gw, N_CLASSES)`` class probabilities at the grid ``(uu, vv)`` read off the
+    mirror image of ``crop``: each point at its mirrored place, part ``MIRROR[j]``'s
+    probability as part ``j``'s (as the training's mirrored cars, ``parts_real.mirror_cars``)."""
+    from wirescene.core.wireframe import MIRROR
+
+    cx0, cy0 = crop_origin
+    last = crop.shape[1] - 1  # u -> last - u within the crop
+    e = None if edges is None else np.ascontiguousarray(np.asarray(edges)[:, ::-1])
+    inp = feat.canonical_inputs(np.ascontiguousarray(crop[:, ::-1]), z, detector.kind, edges=e)
+    rc = np.rint(feat.to_canonical(np.stack([last - (uu - cx0), vv - cy0], -1), z)).astype(np.int64).reshape(-1, 2)
+    X = feat.describe(inp, rc, detector.kind)
+    x1, y1, x2, y2 = np.asarray(box, dtype=float) - np.r_[cx0, cy0, cx0, cy0]
+    mirrored_box = np.array([last - x2, y1, last - x1, y2])
+    if detector.context:
+        X = np.concatenate([X, np.broadcast_to(_context(inp, mirrored_box, (0, 0), z), (len(X), feat.CONTEXT_DIM))],
+                           axis=1)
+    if detector.position:
+        pos = box_position(np.stack([uu, vv], -1).reshape(-1, 2), box)
+        pos[:, 0] = 1.0 - pos[:, 0]  # the mirrored point's place in the mirrored box
+        X = np.concatenate([X, pos], axis=1)
+    return detector.predict_proba(X).reshape(uu.shape + (N_CLASSES,))[..., np.append(MIRROR, BACKGROUND)]
+
+
 def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=DEFAULT_SCALES,
                   stride: float | None = None, pad: float = 0.1, eps: float = DEFAULT_EPS,
-                  edges: np.ndarray | None = None, smooth: float | None = None) -> PartResponses:
+                  edges: np.ndarray | None = None, smooth: float | None = None, flip: bool = False) -> PartResponses:
     """Dense multi-scale part responses inside detection boxes.
 
     Parameters
@@ -465,6 +489,8 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
         averaging them suppresses isolated false peaks (on real frames a sigma of about
         1/16 of the box height roughly doubles the vertices whose best-scoring location
         lies within 4% of the car length, ``benchmarks/bench_real.py``).
+    flip : bool -- also score each box's mirror image (left and right parts swapped back)
+        and average the two class probabilities before the log ratio
 
     Returns
     -------
@@ -505,6 +531,8 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
             if detector.position:
                 X = np.concatenate([X, box_position(np.stack([uu, vv], -1).reshape(-1, 2), box)], axis=1)
             probs[k] = detector.predict_proba(X).reshape(gh, gw, N_CLASSES)
+            if flip:
+                probs[k] = 0.5 * (probs[k] + _mirrored_probs(detector, crop, e, box, (cx0, cy0), z, uu, vv))
         lr = detector.log_ratio_of(probs, eps=eps).max(axis=0)
         sig = (detector.smooth if smooth is None else float(smooth)) * bh / st
         if sig > 0:
