@@ -81,7 +81,8 @@ def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=
             frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
         else:
             detector = None if models is None else PartDetector.load(models / f"parts_fold{fold_of(fid)}.npz")
-            frame_evidence = part_evidence(ds.image(fid), detections, detector=detector)
+            frame_evidence = part_evidence(ds.image(fid), detections, detector=detector,
+                                           flip=InferenceOptions().flip_evidence)
         lifted = lift_table(camera, detections)
         for name, kw in configs.items():
             kw = dict(kw)

@@ -61,7 +61,7 @@ def main():
     lifted = lift_table(camera, dets, options=LiftingOptions(n_particles=args.particles))
     t_lift, c_lift = time.perf_counter() - t, time.process_time() - c
     t, c = time.perf_counter(), time.process_time()
-    evidence = part_evidence(image, dets)
+    evidence = part_evidence(image, dets, flip=InferenceOptions().flip_evidence)  # as the fit reads it
     t_parts, c_parts = time.perf_counter() - t, time.process_time() - c
 
     # 1. batched vs naive likelihood on the same hypotheses

@@ -61,7 +61,8 @@ def frame_costs(dataset, frame_id, models: Path, variant: str, seed: int) -> dic
                                bank=detector_bank(options.detector_bank),
                                classifier=viewpoint_classifier(options.viewpoint_classifier))
     turned = Detections(rule.boxes, rule.scores, wrap_angle(rule.alpha + np.pi), rule.source)
-    evidence = part_evidence(image, rule, detector=_part_detector(options.parts_model))
+    evidence = part_evidence(image, rule, detector=_part_detector(options.parts_model),
+                             flip=options.inference.flip_evidence)
     costs = []
     for dets in (rule, turned):
         est = fit_frame(camera, dets, [variant], image=image, evidence=evidence, options=options).estimates[variant]

@@ -127,9 +127,9 @@ class InferenceOptions:
     # A part projected outside the image scores c like any occluded part, not the detectors' floor.
     border_occludes: bool = option(True, help="Count the parts a hypothesis projects outside the image as occluded "
                                               "by the image border.")
-    # Test-time mirroring of the part evidence (parts.detector.response_maps(flip=)); off: RESULTS.md says why.
-    flip_evidence: bool = option(False, help="Also read the part evidence off each box's mirror image and average "
-                                             "the two (the part detection takes twice as long).")
+    # Test-time mirroring of the part evidence (parts.detector.response_maps(flip=)): the forest is not mirror-symmetric.
+    flip_evidence: bool = option(True, help="Also read the part evidence off each box's mirror image and average "
+                                            "the two (the part detection takes twice as long).")
     # The paper's tolerance for a correct coarse viewpoint, around each pre-detection's (0: no window).
     viewpoint_window_deg: float = option(45.0, cli="viewpoint-window",
                                          help="Degrees the fine stage may turn a car's observation angle away from "

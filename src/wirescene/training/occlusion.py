@@ -34,8 +34,11 @@ def occlusion_accuracy_by_c(evidence, self_hidden, visible_gt, uv, grid) -> np.n
     return np.array(acc)
 
 
-def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None, detector=None, progress=None) -> dict:
-    """Pick ``c`` on ``n_scenes`` held-out synthetic scenes of stream ``seed``."""
+def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None, detector=None, progress=None,
+                             flip: bool = False) -> dict:
+    """Pick ``c`` on ``n_scenes`` held-out synthetic scenes of stream ``seed`` (``flip``: the
+    evidence also read off each box's mirror image, as the fit reads it by default; the
+    shipped c was chosen without, benchmarks/RESULTS.md "Test-time mirroring")."""
     from wirescene.parts.detector import load_default as load_parts
     from wirescene.parts.detector import response_maps
     from wirescene.synth.generate import generate_scene
@@ -50,7 +53,7 @@ def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None,
         if not cars:
             continue
         boxes = np.array([c["box"] for c in cars], float)
-        R = response_maps(sc.image, boxes, detector=detector)
+        R = response_maps(sc.image, boxes, detector=detector, flip=flip)
         uv = np.array([c["vertices_2d"] for c in cars], float)
         ev.append(R.log_ratio(uv, np.arange(len(cars)), bilinear=True))  # as the likelihood reads it
         sh.append(np.array([[r == "self" for r in c["visibility"]] for c in cars]))
