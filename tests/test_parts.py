@@ -297,17 +297,17 @@ def test_flipped_evidence_is_mirror_equivariant(kitti_frame):
     mirrored = np.ascontiguousarray(img[:, ::-1])
     mbox = np.array([[W - 1 - 600.0, 150.0, W - 1 - 500.0, 214.0]])
 
+    maps = {flip: response_maps(img, box, detector=det, flip=flip).boxes[0].log_ratio for flip in (False, True)}
+
     def agreement(flip):
-        a = response_maps(img, box, detector=det, flip=flip).boxes[0].log_ratio
         b = response_maps(mirrored, mbox, detector=det, flip=flip).boxes[0].log_ratio[:, ::-1][..., MIRROR]
-        return np.corrcoef(a.ravel(), b.ravel())[0, 1]
+        return np.corrcoef(maps[flip].ravel(), b.ravel())[0, 1]
 
     # The forest alone is not mirror-symmetric; averaged with the mirror image's reading it nearly is
     # (the rest: the crops' pixel rounding). Swapping no parts, or the wrong ones, breaks the symmetry.
     plain, flipped = agreement(False), agreement(True)
     assert flipped > 0.98 and flipped > plain + 0.02
-    R = response_maps(img, box, detector=det, flip=True)
-    assert R.boxes[0].log_ratio.shape == response_maps(img, box, detector=det).boxes[0].log_ratio.shape
+    assert maps[True].shape == maps[False].shape
 
 
 # ------------------------------------------------------------------ real training data (issue 18)

@@ -428,11 +428,19 @@ def box_descriptors(image, box, uv, kind: str, *, scale: float = 1.0, pad: float
     _, (cx0, cy0, cx1, cy1), (z,) = box_crop(box, (W, H), (scale,), pad=pad, radius=feat.context_radius(kind))
     e = None if edges is None else np.asarray(edges)[cy0:cy1, cx0:cx1]
     inp = feat.canonical_inputs(img[cy0:cy1, cx0:cx1], z, kind, edges=e)
-    uv = np.asarray(uv, dtype=float).reshape(-1, 2)
-    rc = np.rint(feat.to_canonical(uv - [cx0, cy0], z)).astype(np.int64)
+    return _descriptors(inp, np.asarray(uv, dtype=float).reshape(-1, 2), box, (cx0, cy0), z, kind,
+                        context=context, position=position)
+
+
+def _descriptors(inp, uv, box, crop_origin, z: float, kind: str, *, context: bool, position: bool) -> np.ndarray:
+    """Descriptors ``(N, D)`` at points ``uv (N, 2)`` of the crop at ``crop_origin`` whose
+    :func:`~wirescene.parts.features.canonical_inputs` are ``inp``: the descriptor, then the
+    box's context and the points' place in ``box`` as the model asks (``uv``, ``box`` in the
+    same pixel frame as ``crop_origin``)."""
+    rc = np.rint(feat.to_canonical(uv - np.asarray(crop_origin), z)).astype(np.int64)
     X = feat.describe(inp, rc, kind)
     if context:
-        X = np.concatenate([X, np.broadcast_to(_context(inp, box, (cx0, cy0), z), (len(X), feat.CONTEXT_DIM))], 1)
+        X = np.concatenate([X, np.broadcast_to(_context(inp, box, crop_origin, z), (len(X), feat.CONTEXT_DIM))], 1)
     return np.concatenate([X, box_position(uv, box)], axis=1) if position else X
 
 
@@ -443,28 +451,20 @@ def _context(inp, box, crop_origin, z):
     return feat.box_context(inp, (a[0], a[1], c[0], c[1]))
 
 
-def _mirrored_probs(detector: PartDetector, crop, edges, box, crop_origin, z: float, uu, vv) -> np.ndarray:
-    """``(gh, gw, N_CLASSES)`` class probabilities at the grid ``(uu, vv)`` read off the
-    mirror image of ``crop``: each point at its mirrored place, part ``MIRROR[j]``'s
-    probability as part ``j``'s (as the training's mirrored cars, ``parts_real.mirror_cars``)."""
+def _mirrored_probs(detector: PartDetector, crop, edges, box, crop_origin, z: float, uv) -> np.ndarray:
+    """``(N, N_CLASSES)`` class probabilities at points ``uv (N, 2)`` read off the mirror
+    image of ``crop``: each point at its mirrored place, part ``MIRROR[j]``'s probability as
+    part ``j``'s (as the training's mirrored cars, ``parts_real.mirror_cars``)."""
     from wirescene.core.wireframe import MIRROR
 
-    cx0, cy0 = crop_origin
-    last = crop.shape[1] - 1  # u -> last - u within the crop
+    last = crop.shape[1] - 1  # u -> last - u within the crop, whose origin is then (0, 0)
+    x1, y1, x2, y2 = np.asarray(box, dtype=float) - np.r_[crop_origin, crop_origin]
     e = None if edges is None else np.ascontiguousarray(np.asarray(edges)[:, ::-1])
     inp = feat.canonical_inputs(np.ascontiguousarray(crop[:, ::-1]), z, detector.kind, edges=e)
-    rc = np.rint(feat.to_canonical(np.stack([last - (uu - cx0), vv - cy0], -1), z)).astype(np.int64).reshape(-1, 2)
-    X = feat.describe(inp, rc, detector.kind)
-    x1, y1, x2, y2 = np.asarray(box, dtype=float) - np.r_[cx0, cy0, cx0, cy0]
-    mirrored_box = np.array([last - x2, y1, last - x1, y2])
-    if detector.context:
-        X = np.concatenate([X, np.broadcast_to(_context(inp, mirrored_box, (0, 0), z), (len(X), feat.CONTEXT_DIM))],
-                           axis=1)
-    if detector.position:
-        pos = box_position(np.stack([uu, vv], -1).reshape(-1, 2), box)
-        pos[:, 0] = 1.0 - pos[:, 0]  # the mirrored point's place in the mirrored box
-        X = np.concatenate([X, pos], axis=1)
-    return detector.predict_proba(X).reshape(uu.shape + (N_CLASSES,))[..., np.append(MIRROR, BACKGROUND)]
+    mirrored_uv = np.stack([last - (uv[:, 0] - crop_origin[0]), uv[:, 1] - crop_origin[1]], -1)
+    X = _descriptors(inp, mirrored_uv, np.array([last - x2, y1, last - x1, y2]), (0, 0), z, detector.kind,
+                     context=detector.context, position=detector.position)
+    return detector.predict_proba(X)[:, np.append(MIRROR, BACKGROUND)]
 
 
 def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=DEFAULT_SCALES,
@@ -521,18 +521,15 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
         if e is None and detector.kind in feat.EDGE_KINDS:
             e = feat.image_edges(crop)
         probs = np.empty((len(scales), gh, gw, N_CLASSES), dtype=np.float32)
+        uv = np.stack([uu, vv], -1).reshape(-1, 2)
         for k, z in enumerate(zs):
             inp = feat.canonical_inputs(crop, z, detector.kind, edges=e)
-            rc = np.rint(feat.to_canonical(np.stack([uu - cx0, vv - cy0], -1), z)).astype(np.int64).reshape(-1, 2)
-            X = feat.describe(inp, rc, detector.kind)
-            if detector.context:
-                ctx = _context(inp, box, (cx0, cy0), z)
-                X = np.concatenate([X, np.broadcast_to(ctx, (len(X), feat.CONTEXT_DIM))], axis=1)
-            if detector.position:
-                X = np.concatenate([X, box_position(np.stack([uu, vv], -1).reshape(-1, 2), box)], axis=1)
+            X = _descriptors(inp, uv, box, (cx0, cy0), z, detector.kind, context=detector.context,
+                             position=detector.position)
             probs[k] = detector.predict_proba(X).reshape(gh, gw, N_CLASSES)
             if flip:
-                probs[k] = 0.5 * (probs[k] + _mirrored_probs(detector, crop, e, box, (cx0, cy0), z, uu, vv))
+                mirrored = _mirrored_probs(detector, crop, e, box, (cx0, cy0), z, uv)
+                probs[k] = 0.5 * (probs[k] + mirrored.reshape(gh, gw, N_CLASSES))
         lr = detector.log_ratio_of(probs, eps=eps).max(axis=0)
         sig = (detector.smooth if smooth is None else float(smooth)) * bh / st
         if sig > 0:
