@@ -102,7 +102,7 @@ def main(argv=None):
         common = sorted(set(pos) & set(ref_pos))
         moves = [sum((a - b) ** 2 for a, b in zip(pos[k], ref_pos[k])) ** 0.5 for k in common]
         moved = sum(m > 0.01 for m in moves)
-        within = round(metrics["loc_1m"] * metrics["n_gt"] / 100)
+        within = sum(r["loc_error"] < 1.0 for r in metrics["records"])  # counted, as eval.metrics's loc_1m
         print(f"{config:<12}{seconds:8.1f}{ref_seconds / seconds:13.2f}x{seconds / len(frames):9.2f}"
               f"{metrics['n_gt']:6d}{within:6d}{moved:11d}{max(moves, default=0.0):12.3f}")
         summary.append({"config": config, "seconds": seconds, "cars": metrics["n_gt"], "within_1m": within,
