@@ -19,7 +19,7 @@ scenes and on the real KITTI frames (plain script).
        frames are the evaluation set: the shipped model never saw them.
 
 Usage: python benchmarks/bench_parts.py --root KITTI_ROOT [--frame 000010]
-       [--synth-root DIR] [--model PATH] [--fold K] [--flip]
+       [--synth-root DIR] [--model PATH] [--fold K] [--flip] [--smooth SIGMA] [--real-only]
 
 ``--fold K`` scores only the frames of fold K of the shared frames' drive folds
 (:mod:`wirescene.io.folds`): a fold model (``wirescene train parts --split-file`` of the
@@ -70,6 +70,9 @@ def main():
     ap.add_argument("--radius", type=float, nargs="+", default=[0.04, 0.10])
     ap.add_argument("--fold", type=int, default=None, help="score only this drive fold's frames")
     ap.add_argument("--flip", action="store_true", help="also score each box's mirror image (response_maps(flip=))")
+    ap.add_argument("--smooth", type=float, default=None,
+                    help="smoothing of the maps in box heights (response_maps(smooth=); default: the model's)")
+    ap.add_argument("--real-only", action="store_true", help="score the real frames only (no synthetic scenes)")
     args = ap.parse_args()
     if args.synth_seed >= 1000:
         ap.error("synthetic seeds >= 1000 are training data")
@@ -95,19 +98,19 @@ def main():
 
     with tempfile.TemporaryDirectory() as tmp:
         synth = Path(args.synth_root or tmp)
-        if not (synth / "training" / "wireframes").is_dir():
+        if not args.real_only and not (synth / "training" / "wireframes").is_dir():
             from wirescene.synth.generate import generate_dataset
 
             print(f"generating {args.synth_scenes} synthetic scenes (seed {args.synth_seed}) into {synth}")
             generate_dataset(synth, args.synth_scenes, seed=args.synth_seed)
         radii = tuple(args.radius)
-        rows = [
-            ("synthetic held-out", lambda: synth_eval_frames(synth)),
+        rows = [] if args.real_only else [("synthetic held-out", lambda: synth_eval_frames(synth))]
+        rows += [
             ("real KITTI clean", lambda: kitti_eval_frames(args.root, frames=scored)),
             ("real KITTI all cars", lambda: kitti_eval_frames(args.root, clean=False, min_box_h=0.0, frames=scored)),
         ]
         for name, frames in rows:
-            r = localisation(det, frames(), radii=radii, flip=args.flip)
+            r = localisation(det, frames(), radii=radii, flip=args.flip, smooth=args.smooth)
             print(_line(name, r, radii) + f"  [maps {r['t_maps_s']:.1f} s]")
 
 
