@@ -45,7 +45,8 @@ def parse_config(text: str) -> tuple[str, dict]:
 
 def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=1, models=None, log=print):
     """Fit ``variants`` under every configuration ``{name: options}`` on the frames of
-    ``root`` (label boxes as pre-detections; evidence and coarse grid once per frame).
+    ``root`` (label boxes as pre-detections; evidence once per frame and mirroring setting, the coarse
+    grid once per frame).
 
     Returns ``{(name, variant): [FrameResult]}``, ``{name: seconds}`` (CPU seconds of
     fitting, i.e. one core's time on a shared machine) and the number of frames.
@@ -67,6 +68,8 @@ def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=
     frame_ids = ds.frame_ids()[:frames]
     source = DetectionSource("gt")
     results = {(c, v): [] for c in configs for v in variants}
+    default_flip = InferenceOptions().flip_evidence
+    flips = sorted({kw.get("flip_evidence", default_flip) for kw in configs.values()})
     seconds = dict.fromkeys(configs, 0.0)
     t0 = time.perf_counter()
     for fid in frame_ids:
@@ -78,17 +81,18 @@ def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=
         if not len(detections):
             continue
         if evidence == "oracle":
-            frame_evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
+            box_gt = np.array([o.box for o in gt.objects]).reshape(-1, 4)
+            frame_evidence = dict.fromkeys(flips, oracle_evidence(detections, box_gt, vertex_gt))
         else:
             detector = None if models is None else PartDetector.load(models / f"parts_fold{fold_of(fid)}.npz")
-            frame_evidence = part_evidence(ds.image(fid), detections, detector=detector,
-                                           flip=InferenceOptions().flip_evidence)
+            # one reading per mirroring setting the configurations ask for
+            frame_evidence = {f: part_evidence(ds.image(fid), detections, detector=detector, flip=f) for f in flips}
         lifted = lift_table(camera, detections)
         for name, kw in configs.items():
             kw = dict(kw)
-            ev = frame_evidence
+            ev = frame_evidence[kw.get("flip_evidence", default_flip)]
             if "bilinear" in kw:
-                ev = copy.copy(frame_evidence)
+                ev = copy.copy(ev)
                 ev.bilinear = kw.pop("bilinear")
             options = FitOptions(inference=InferenceOptions(**kw), seed=seed)
             for v in variants:

@@ -594,3 +594,31 @@ def test_device_benchmark_compares_the_cars_of_each_configuration(monkeypatch, t
     assert runs[1]["compared"] == runs[0]["cars"] > 0 and runs[1]["moved_over_1cm"] == 0
     assert positions(tmp_path / "numpy_1", "coarse") == positions(tmp_path / "numpy_2", "coarse")
     assert "numpy:2" in capsys.readouterr().out
+
+
+def test_run_configs_fits_each_configuration_on_the_evidence_it_asks_for(monkeypatch):
+    """A configuration that turns the mirroring off is fitted on maps read without it."""
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import wirescene.fitting.pipeline as pipeline
+    import wirescene.infer.evidence as evidence
+    from _common import run_configs
+
+    read, fitted = {}, []
+    real_evidence, real_fit = evidence.part_evidence, pipeline.fit_scene
+
+    def spy_evidence(image, detections, *, flip, **kw):
+        read[flip] = real_evidence(image, detections, flip=flip, **kw)
+        return read[flip]
+
+    def spy_fit(*args, options, evidence, **kw):
+        fitted.append((options.inference.flip_evidence, evidence))
+        return real_fit(*args, options=options, evidence=evidence, **kw)
+
+    monkeypatch.setattr(evidence, "part_evidence", spy_evidence)
+    monkeypatch.setattr(pipeline, "fit_scene", spy_fit)
+    configs = {"mirrored": {}, "plain": {"flip_evidence": False}}
+    results, _, n_frames = run_configs(KITTI_ROOT, ["coarse"], configs, frames=1, log=lambda *a: None)
+    assert n_frames == 1 and sorted(read) == [False, True]
+    assert [flip for flip, _ in fitted] == [True, False]
+    assert all(ev is read[flip] for flip, ev in fitted)
+    assert len(results[("plain", "coarse")]) == 1

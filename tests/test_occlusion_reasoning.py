@@ -219,3 +219,24 @@ def test_c_calibration_round_trip_and_loud_failures(tmp_path):
     (tmp_path / "old.json").write_text('{"format": "wirescene-occlusion-v1", "c": 0.25}')
     with pytest.raises(InputError, match="format"):
         load_occluded_score(tmp_path / "old.json")
+
+
+def test_train_occlusion_records_whether_it_read_the_mirrored_evidence(tmp_path):
+    """`train occlusion --flip-evidence` calibrates c on the maps the fit reads by default,
+    and its record says so; the default stays the shipped recipe's (one reading)."""
+    import json
+
+    from click.testing import CliRunner
+
+    from wirescene.cli.main import main
+    from wirescene.infer.occluded_score import load_occluded_score
+
+    records = {}
+    for flag in ("--flip-evidence", "--no-flip-evidence"):
+        out = tmp_path / f"{flag}.json"
+        r = CliRunner().invoke(main, ["train", "occlusion", "--scenes", "1", flag, "--out", str(out)])
+        assert r.exit_code == 0, r.output
+        records[flag] = json.loads(out.read_text())
+        assert load_occluded_score(out) == records[flag]["c"]
+    assert records["--flip-evidence"]["flip"] is True and records["--no-flip-evidence"]["flip"] is False
+    assert records["--flip-evidence"]["accuracy"] != records["--no-flip-evidence"]["accuracy"]

@@ -72,4 +72,5 @@ def calibrate_occluded_score(*, seed: int = 2000, n_scenes: int = 30, grid=None,
         "n_cars": int(len(uv)),
         "seed": int(seed),
         "n_scenes": int(n_scenes),
+        "flip": bool(flip),
     }
