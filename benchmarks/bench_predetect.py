@@ -188,9 +188,11 @@ def training_subset(frames: list, fraction: float, *, seed, groups: dict | None 
 
 
 def with_clustering(bank: DetectorBank, args) -> DetectorBank:
-    """``bank`` with the clustering options given on the command line (``--box-weight``,
-    ``--cluster-rx``, ``--cluster-ry``) stored in its meta, where the detector reads them."""
-    for key, value in (("box_weight", args.box_weight), ("cluster_rx", args.cluster_rx), ("cluster_ry", args.cluster_ry)):
+    """``bank`` with the detection options given on the command line (clustering: ``--box-weight``,
+    ``--cluster-rx``, ``--cluster-ry``; candidates: ``--detect-per-octave``, ``--per-detector``)
+    stored in its meta, where the detector reads them."""
+    for key, value in (("box_weight", args.box_weight), ("cluster_rx", args.cluster_rx), ("cluster_ry", args.cluster_ry),
+                       ("per_octave", args.detect_per_octave), ("per_detector", args.per_detector)):
         if value is not None:
             bank.meta[key] = value
     return bank
@@ -272,6 +274,11 @@ def main():
                     "(default: each bank's)")
     ap.add_argument("--max-scale", type=float, help="--fold-models: the pyramid's largest upsampling (default: "
                     "each bank's)")
+    ap.add_argument("--detect-per-octave", type=int, help="pyramid levels per octave at detection, stored in each "
+                    "bank as the clustering options are (--cv: the steps after the templates too; default: each "
+                    "bank's, the levels it was trained on)")
+    ap.add_argument("--per-detector", type=int, help="windows each template keeps in a frame after its own "
+                    "suppression, stored likewise (default: each bank's, 30)")
     ap.add_argument("--time-frames", type=int, default=5)
     ap.add_argument("--pr-curve", default=None)
     ap.add_argument("--no-ground", action="store_true",

@@ -317,6 +317,22 @@ def test_padded_pyramid_adds_windows_past_the_sides_and_keeps_the_others():
     assert padded.boxes[:, 0].min() >= -48 - 1e-6 and padded.boxes[:, 2].max() <= W + 48 + 1e-6
 
 
+def test_each_template_keeps_the_banks_number_of_windows():
+    """`meta["per_detector"]` caps the windows a template votes with (30 where a bank does not say);
+    the argument overrides it."""
+    from dataclasses import replace
+
+    bank = load_default_bank()
+    img = read_image(KITTI_ROOT / "training" / "image_2" / "000010.png")[:, :600]
+    act = score_pyramid(bank, feature_pyramid(img, [0.5, 0.35]), threshold=-np.inf, min_height=10.0)
+    size = (img.shape[1], img.shape[0])
+    one = replace(bank, meta={**bank.meta, "per_detector": 1})
+    n = {name: len(merge_activations(act, b, size, threshold=None, cross_view_nms=None, **kw))
+         for name, b, kw in (("default", bank, {}), ("one", one, {}), ("one, 30 asked", one, {"per_detector": 30}))}
+    assert "per_detector" not in bank.meta
+    assert n["one"] <= len(np.unique(act.det)) < n["default"] == n["one, 30 asked"]
+
+
 def test_detect_command_writes_readable_files(tmp_path):
     import json
 

@@ -392,7 +392,7 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
 
 def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshold: float | None = None,
                 max_scale: float | None = None, per_octave: int | None = None, min_height: float | None = None,
-                per_detector: int = 30, cross_view_nms: float | None = 0.3, source: str = "bank",
+                per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
                 return_all: bool = False, camera=None) -> Detections:
     """Detect cars in an (H, W, 3) uint8 image with the configuration bank.
 
@@ -406,7 +406,8 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     :meth:`DetectorBank.confidence`) when it carries a calibration, else SVM margins;
     ``threshold`` is in the same units. ``max_scale``, ``per_octave`` (pyramid levels per
     octave) and ``min_height`` (smallest full-car height searched, px) default to the values
-    the bank was trained with (2.0, 4, 30 for banks that do not say).
+    the bank was trained with (2.0, 4, 30 for banks that do not say); ``per_detector`` (the
+    windows each template keeps after its own suppression) to ``meta["per_detector"]`` (30).
 
     ``camera`` (a :class:`~wirescene.core.camera.Camera`): when given and the bank carries a
     ground prior (``meta["ground_prior"]``, :mod:`wirescene.predetect.geometry`), every
@@ -445,7 +446,7 @@ def cluster_options(bank: DetectorBank) -> dict:
 
 
 def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float | None = None,
-                   calibrated: bool = True, min_height: float = 30.0, per_detector: int = 30,
+                   calibrated: bool = True, min_height: float = 30.0, per_detector: int | None = None,
                    cross_view_nms: float | None = 0.3, source: str = "bank",
                    horizon: float | None = None, center_column: float | None = None,
                    gray: np.ndarray | None = None, channels: np.ndarray | None = None) -> Detections:
@@ -474,7 +475,7 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
 
 
 def merge_activations(act: Activations, bank: DetectorBank, image_size, *, threshold: float | None,
-                      per_detector: int = 30, cross_view_nms: float | None = 0.3, source: str = "bank",
+                      per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
                       cluster_kw: dict | None = None, horizon: float | None = None,
                       center_column: float | None = None, gray: np.ndarray | None = None,
                       channels: np.ndarray | None = None) -> Detections:
@@ -489,6 +490,7 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     (``center_column``: the principal point's column, None to keep the winner's), threshold
     in margin units (None: keep all)."""
     W, H = image_size
+    per_detector = int(bank.meta.get("per_detector", 30)) if per_detector is None else int(per_detector)
     fb, fs, fbin = [], [], []
     for t in np.unique(act.det):
         sel = np.flatnonzero(act.det == t)
