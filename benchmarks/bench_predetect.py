@@ -187,7 +187,7 @@ def training_subset(frames: list, fraction: float, *, seed, groups: dict | None 
     return {f for f in frames if (groups[f] if groups is not None else f) in drawn}
 
 
-def with_clustering(bank: DetectorBank, args) -> DetectorBank:
+def with_detection_options(bank: DetectorBank, args) -> DetectorBank:
     """``bank`` with the detection options given on the command line (clustering: ``--box-weight``,
     ``--cluster-rx``, ``--cluster-ry``; candidates: ``--detect-per-octave``, ``--per-detector``)
     stored in its meta, where the detector reads them."""
@@ -335,7 +335,7 @@ def main():
         t0 = time.time()
         images, _ = load_training_frames(ds, ids, flips=False)
         for k in range(N_FOLDS):
-            fold_banks[k] = with_clustering(DetectorBank.load(Path(args.from_raw) / f"fold{k}_raw.npz"), args)
+            fold_banks[k] = with_detection_options(DetectorBank.load(Path(args.from_raw) / f"fold{k}_raw.npz"), args)
             fold_banks[k].meta["support_weight"] = args.support_weight  # as the recipe sets it on the finished bank
         for im in images:
             dets[im.frame] = detect_training_image(fold_banks[fold_of(im.frame)], im)
@@ -368,7 +368,7 @@ def main():
                                         synthetic=synthetic,
                                         full_area=args.full_area, partial_area=args.partial_area, progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
-            with_clustering(bank, args)  # the steps after the templates detect with it
+            with_detection_options(bank, args)  # the steps after the templates detect with it
             finish_bank(bank, train_images, ds, support_weight=args.support_weight,
                         progress=lambda m: print("   ", m, flush=True))
             if args.fold:
@@ -427,7 +427,7 @@ def main():
         for b in banks.values():
             if not ground:
                 b.calibration = None  # pool raw margins (monotone per fold)
-            with_clustering(b, args)
+            with_detection_options(b, args)
             if args.pad_cells is not None:
                 b.meta["pad_cells"] = args.pad_cells
             if args.min_height is not None:
@@ -446,7 +446,7 @@ def main():
             out["pooled_platt"] = allc.tolist()
             print("Platt calibration of the pooled held-out detections (a, b):", allc.tolist())
     else:
-        bank = with_clustering(DetectorBank.load(args.bank) if args.bank else load_default_bank(), args)
+        bank = with_detection_options(DetectorBank.load(args.bank) if args.bank else load_default_bank(), args)
         for f in ids:
             dets[f] = detect_cars(ds.image(f), bank=bank, return_all=True,
                                   camera=None if args.no_ground else ds.camera(f))
