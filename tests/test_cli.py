@@ -359,3 +359,31 @@ def test_train_viewpoints_writes_a_classifier_of_the_chosen_frames(tmp_path):
     assert clf.meta["frames"] == ["000002", "000010"] and clf.weights.shape[1] == 8
     r = CliRunner().invoke(main, ["train", "viewpoints", str(KITTI_ROOT), "--frames", "999999", "--out", str(out)])
     assert r.exit_code != 0
+
+
+def test_eval_with_several_seeds_reports_each_and_their_spread(tmp_path):
+    out, pred = tmp_path / "m.json", tmp_path / "pred"
+    common = ("eval", KITTI_ROOT, "--variant", "coarse+gp", "--variant", "full", "--frames", "000010", "--particles",
+              8, "--iterations", 3, "--workers", 1, "--device", "numpy", "--draws", 0)
+    r = run(*common, "--seed", 1, "--seed", 2, "--json", out, "--predictions", pred)
+    assert r.exit_code == 0, r.output
+    assert "=== seed 1" in r.output and "=== seed 2" in r.output and "Over 2 seeds (1, 2)" in r.output
+    data = json.loads(out.read_text())
+    assert set(data) == {"seeds", "over_seeds"} and set(data["seeds"]) == {"1", "2"}
+    # each seed fitted into its own folder, and its figures are those of that seed alone
+    assert sorted(p.name for p in pred.iterdir()) == ["seed-1", "seed-2"]
+    one = tmp_path / "one.json"
+    assert run(*common, "--seed", 2, "--json", one, "--predictions", tmp_path / "pred-one").exit_code == 0
+    alone = json.loads(one.read_text())
+    for v in ("coarse+gp", "full"):
+        assert data["seeds"]["2"][v]["loc_1m"] == pytest.approx(alone[v]["loc_1m"], abs=1e-9)
+        assert data["seeds"]["2"][v]["kitti"] == alone[v]["kitti"]
+        shares = [data["seeds"][s][v]["loc_1m"] for s in ("1", "2")]
+        f = data["over_seeds"][v]["<1m %"]
+        assert f["values"] == pytest.approx(shares) and f["mean"] == pytest.approx(sum(shares) / 2)
+        assert f["min"] == pytest.approx(min(shares)) and f["max"] == pytest.approx(max(shares))
+        assert data["over_seeds"][v]["TP"]["values"] == [data["seeds"][s][v]["n_tp"] for s in ("1", "2")]
+    # the fine stage samples: its two seeds differ somewhere, the coarse stage's figures too or not
+    assert data["seeds"]["1"]["full"]["records"] != data["seeds"]["2"]["full"]["records"]
+    r = CliRunner().invoke(main, [str(a) for a in (*common, "--seed", 1, "--seed", 1)])
+    assert r.exit_code == 2 and "each seed once" in r.output

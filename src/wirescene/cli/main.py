@@ -205,7 +205,10 @@ def _dask_client(address: str):
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all labelled frames).")
 @split_file_option
 @click.option("--particles", type=POSITIVE, default=250, show_default=True, help="Scene particles kept by the coarse stage.")
-@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
+@click.option("--seed", "seeds", type=NON_NEGATIVE, multiple=True, default=(0,), show_default=True,
+              help="Seed of the fit. Repeat it (--seed 1 --seed 2 --seed 3) to fit every frame once per seed: each "
+                   "seed's figures, then their mean and range over the seeds (the fit samples, so the seed alone "
+                   "moves the figures by a few cars); --predictions and --report then get a seed-S folder per seed.")
 @click.option("--split", default="training", show_default=True)
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the metrics as JSON.")
 @click.option("--predictions", type=click.Path(path_type=Path), default=None, help="Write KITTI label files per variant here.")
@@ -228,15 +231,11 @@ def _dask_client(address: str):
               help="Fit frames on this running Dask scheduler (e.g. tcp://host:8786) instead of local processes "
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
-def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_file, particles, seed, split, json_out,
+def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_file, particles, seeds, split, json_out,
              predictions, evidence, raw_scores, draws, report_dir, workers, allow_missing_detections, resume,
              dask_address, **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
-    from wirescene.eval.intervals import format_intervals, localisation_intervals, margin_intervals
-    from wirescene.eval.kitti_metrics import format_kitti_summary
-    from wirescene.eval.metrics import format_table
-    from wirescene.eval.runner import evaluate_dataset
-    from wirescene.eval.sources import DetectionSource
+    from wirescene.eval.seeds import format_over_seeds, over_seeds, seed_figures
     from wirescene.io.kitti import KittiDataset
 
     if resume and predictions is None:
@@ -257,14 +256,60 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
         inference["predetect__min_car_probability"] = 0.0
+    if len(set(seeds)) < len(seeds):
+        raise click.UsageError(f"--seed: each seed once (given {', '.join(map(str, seeds))})")
+    several = len(seeds) > 1
+    client = _dask_client(dask_address) if dask_address is not None else None
+    figures, data = {}, {}
+    try:
+        for k, seed in enumerate(seeds):
+            if several:
+                click.echo(("\n" if k else "") + f"=== seed {seed}")
+            reports, kitti, data[seed] = _evaluate_seed(
+                dataset, variants, frame_ids, drives, seed=seed, detections=detections, viewpoint_noise=viewpoint_noise,
+                particles=particles, predictions=_seed_dir(predictions, seed, several), evidence=evidence, draws=draws,
+                report_dir=_seed_dir(report_dir, seed, several), workers=workers,
+                allow_missing=allow_missing_detections, resume=resume, client=client, dask_address=dask_address,
+                inference=dict(inference))
+            figures[seed] = seed_figures({v: r.metrics["all"] for v, r in reports.items()}, kitti)
+    finally:
+        if client is not None:
+            client.close()
+    summary = over_seeds(figures) if several else None
+    if several:
+        click.echo("\n" + format_over_seeds(summary, seeds))
+    if json_out is not None:
+        out = data[seeds[0]] if not several else {"seeds": {str(s): d for s, d in data.items()}, "over_seeds": summary}
+        if len(variants) == 1 and not several:
+            out = out[variants[0]]
+        _write_json_atomic(json_out, out)
+        click.echo(f"metrics written to {json_out}")
+
+
+def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
+    """Where one seed of ``wirescene eval`` writes under an output folder: ``PATH/seed-S`` when
+    several seeds are evaluated, else ``PATH`` itself."""
+    return None if path is None else (Path(path) / f"seed-{seed}" if several else path)
+
+
+def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, viewpoint_noise, particles, predictions,
+                   evidence, draws, report_dir, workers, allow_missing, resume, client, dask_address,
+                   inference) -> tuple[dict, dict, dict]:
+    """One seed of ``wirescene eval``: fits, prints its tables and writes its report;
+    returns ``(reports, kitti figures, JSON data)`` by variant."""
+    from wirescene.eval.intervals import format_intervals, localisation_intervals, margin_intervals
+    from wirescene.eval.kitti_metrics import format_kitti_summary
+    from wirescene.eval.metrics import format_table
+    from wirescene.eval.runner import evaluate_dataset
+    from wirescene.eval.sources import DetectionSource
+
     options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address), **inference)
-    source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing_detections,
+    source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing,
                              bank=options.detector_bank, classifier=options.viewpoint_classifier)
     on_gpu = options.inference.device.startswith("cuda")
     if on_gpu and (workers or 1) > 1:
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
         raise click.UsageError("--device cuda fits frames in one process: drop --workers (or use --dask, one worker per GPU)")
-    client = _dask_client(dask_address) if dask_address is not None else None
     gallery = None
     if report_dir is not None:
         from wirescene.eval.report import Gallery
@@ -277,25 +322,21 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         if gallery is not None:
             gallery.add(frame_id, variant, estimate, *rest)
 
-    try:
-        reports = evaluate_dataset(
-            dataset,
-            variants,
-            frames=frame_ids,
-            source=source,
-            options=options,
-            predictions_dir=predictions,
-            resume=resume,
-            evidence=evidence,
-            workers=_frame_workers(workers, options.inference.device),
-            dask_client=client,
-            progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
-            notify=lambda message: click.echo(f"wirescene: {message}", err=True),
-            on_estimate=on_estimate,
-        )
-    finally:
-        if client is not None:
-            client.close()
+    reports = evaluate_dataset(
+        dataset,
+        variants,
+        frames=frame_ids,
+        source=source,
+        options=options,
+        predictions_dir=predictions,
+        resume=resume,
+        evidence=evidence,
+        workers=_frame_workers(workers, options.inference.device),
+        dask_client=client,
+        progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
+        notify=lambda message: click.echo(f"wirescene: {message}", err=True),
+        on_estimate=on_estimate,
+    )
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())
     click.echo(format_table(reports, tables=("3d", "viewpoint", "2d") if has_parts else ("3d", "viewpoint")))
@@ -308,22 +349,18 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
                                                         drives=drives, seed=seed, draws=draws,
                                                         reference=reference if margins else None)
     click.echo("\n" + format_kitti_summary(kitti, intervals=kitti_spread, margins=kitti_margins))
-    if json_out is not None:
-        data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "loc_1m_interval": intervals[v],
-                    **({"kitti_interval": kitti_spread[v]} if v in kitti_spread else {}),
-                    **({"kitti_margin": kitti_margins[v]} if v in kitti_margins else {}),
-                    **({"loc_1m_margin": margins[v]} if v in margins else {})}
-                for v, r in reports.items()}
-        if len(variants) == 1:
-            data = data[variants[0]]
-        _write_json_atomic(json_out, data)
-        click.echo(f"metrics written to {json_out}")
+    data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "loc_1m_interval": intervals[v],
+                **({"kitti_interval": kitti_spread[v]} if v in kitti_spread else {}),
+                **({"kitti_margin": kitti_margins[v]} if v in kitti_margins else {}),
+                **({"loc_1m_margin": margins[v]} if v in margins else {})}
+            for v, r in reports.items()}
     if report_dir is not None:
         from wirescene.eval.report import write_report
 
         page = write_report(report_dir, reports, gallery=gallery, image_of=dataset.image, intervals=intervals,
                             kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})")
         click.echo(f"report written to {page}")
+    return reports, kitti, data
 
 
 @main.command("predict")
