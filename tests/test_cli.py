@@ -383,7 +383,7 @@ def test_eval_with_several_seeds_reports_each_and_their_spread(tmp_path):
         assert f["values"] == pytest.approx(shares) and f["mean"] == pytest.approx(sum(shares) / 2)
         assert f["min"] == pytest.approx(min(shares)) and f["max"] == pytest.approx(max(shares))
         assert data["over_seeds"][v]["TP"]["values"] == [data["seeds"][s][v]["n_tp"] for s in ("1", "2")]
-    # the fine stage samples: its two seeds differ somewhere, the coarse stage's figures too or not
+    # the fine stage samples: the two seeds fit `full` differently
     assert data["seeds"]["1"]["full"]["records"] != data["seeds"]["2"]["full"]["records"]
     r = CliRunner().invoke(main, [str(a) for a in (*common, "--seed", 1, "--seed", 1)])
     assert r.exit_code == 2 and "each seed once" in r.output
