@@ -235,6 +235,8 @@ def main():
     ap.add_argument("--min-bin-examples", type=int, default=5)
     ap.add_argument("--no-flips", action="store_true")
     ap.add_argument("--per-octave", type=int, default=6, help="pyramid levels per octave")
+    ap.add_argument("--train-seed", type=int, default=0, help="--cv: seed of the templates' training (random "
+                    "negatives, the positives drawn and jittered; train_bank_on_frames seed; the recipe's 0)")
     ap.add_argument("--cut-paste", type=int, default=0,
                     help="cars pasted into a composite copy of every training frame (0: none)")
     ap.add_argument("--label-boxes", action="store_true",
@@ -366,7 +368,8 @@ def main():
                                         max_truncated=args.max_truncated, whiten=args.whiten, align=args.align,
                                         share_deg=args.share_deg,
                                         synthetic=synthetic,
-                                        full_area=args.full_area, partial_area=args.partial_area, progress=lambda m: print("   ", m, flush=True))
+                                        full_area=args.full_area, partial_area=args.partial_area, seed=args.train_seed,
+                                        progress=lambda m: print("   ", m, flush=True))
             train_images = [images[i] for i in tr]
             with_detection_options(bank, args)  # the steps after the templates detect with it
             finish_bank(bank, train_images, ds, support_weight=args.support_weight,
