@@ -270,7 +270,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
                 particles=particles, predictions=_seed_dir(predictions, seed, several), evidence=evidence, draws=draws,
                 report_dir=_seed_dir(report_dir, seed, several), workers=workers,
                 allow_missing=allow_missing_detections, resume=resume, client=client, dask_address=dask_address,
-                inference=dict(inference))
+                inference=dict(inference), as_json=json_out is not None)
             figures[seed] = seed_figures({v: r.metrics["all"] for v, r in reports.items()}, kitti)
     finally:
         if client is not None:
@@ -294,9 +294,10 @@ def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
 
 def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, viewpoint_noise, particles, predictions,
                    evidence, draws, report_dir, workers, allow_missing, resume, client, dask_address,
-                   inference) -> tuple[dict, dict, dict]:
+                   inference, as_json) -> tuple[dict, dict, dict | None]:
     """One seed of ``wirescene eval``: fits, prints its tables and writes its report;
-    returns ``(reports, kitti figures, JSON data)`` by variant."""
+    returns ``(reports, kitti figures, JSON data)`` by variant, the JSON data (every record
+    serialised) only ``as_json`` (else None)."""
     from wirescene.eval.intervals import format_intervals, localisation_intervals, margin_intervals
     from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
@@ -349,11 +350,12 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
                                                         drives=drives, seed=seed, draws=draws,
                                                         reference=reference if margins else None)
     click.echo("\n" + format_kitti_summary(kitti, intervals=kitti_spread, margins=kitti_margins))
-    data = {v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "loc_1m_interval": intervals[v],
-                **({"kitti_interval": kitti_spread[v]} if v in kitti_spread else {}),
-                **({"kitti_margin": kitti_margins[v]} if v in kitti_margins else {}),
-                **({"loc_1m_margin": margins[v]} if v in margins else {})}
-            for v, r in reports.items()}
+    data = None if not as_json else {
+        v: {**r.to_json_dict(include_records=True), "kitti": kitti[v], "loc_1m_interval": intervals[v],
+            **({"kitti_interval": kitti_spread[v]} if v in kitti_spread else {}),
+            **({"kitti_margin": kitti_margins[v]} if v in kitti_margins else {}),
+            **({"loc_1m_margin": margins[v]} if v in margins else {})}
+        for v, r in reports.items()}
     if report_dir is not None:
         from wirescene.eval.report import write_report
 
