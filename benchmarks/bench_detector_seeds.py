@@ -1,0 +1,114 @@
+"""Held-out detections of several detector runs side by side, by fold group, with their mean and range.
+
+Each run is the ``--save-dets`` file of ``bench_predetect.py --from-raw DIR`` (every frame
+detected by the fold bank trained without its drive): typically the same recipe trained
+with several ``--train-seed`` values, so that a detector change is read against the
+training's own noise. Per run: moderate 2D AP on each fold group
+(:data:`wirescene.io.folds.FOLD_GROUPS`), pooled easy / moderate / hard and moderate at IoU
+0.5 (devkit rules), and at the fit's threshold the detections, the cars found at IoU 0.5 per
+fold group, and the cars any detection reaches at IoU 0.5; then the mean and range of each
+figure over the runs.
+
+    python benchmarks/bench_detector_seeds.py --root ../shared/data/kitti s0=DETS0.npz s1=DETS1.npz [--json OUT]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from wirescene.core.boxes import iou_2d  # noqa: E402
+from wirescene.core.types import Detections  # noqa: E402
+from wirescene.eval.kitti_metrics import detection_ap_2d  # noqa: E402
+from wirescene.io.folds import FOLD_GROUPS, fold_of  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
+
+FIT_THRESHOLD = 0.3  # the fit's own threshold on our pre-detections (README, "The fit verifies")
+
+
+def read_detections(path: Path, frames: list[str]) -> dict[str, Detections]:
+    """``{frame: Detections}`` of a ``--save-dets`` file; a clear error where a frame is missing."""
+    with np.load(path) as z:
+        missing = [f for f in frames if f"{f}__boxes" not in z]
+        if missing:
+            raise SystemExit(f"{path}: no detections of frame {missing[0]} ({len(missing)} frames missing)")
+        return {f: Detections(z[f"{f}__boxes"].reshape(-1, 4), z[f"{f}__scores"], z[f"{f}__alpha"]) for f in frames}
+
+
+def cars_found(dets: dict, gts: dict, frames: list[str], *, threshold: float | None, iou: float = 0.5) -> int:
+    """Cars (``Car`` labels) with a detection at IoU >= ``iou`` scoring at least ``threshold`` (None: any score)."""
+    n = 0
+    for f in frames:
+        cars = np.array([o.box for o in gts[f].of_type("Car")], float).reshape(-1, 4)
+        d = dets[f]
+        boxes = d.boxes if threshold is None else d.boxes[np.asarray(d.scores) >= threshold]
+        if len(cars) and len(boxes):
+            n += int((iou_2d(cars[:, None], boxes[None]).max(1) >= iou).sum())
+    return n
+
+
+def run_figures(dets: dict, gts: dict, frames: list[str], *, threshold: float) -> dict:
+    groups = {"".join(map(str, g)): [f for f in frames if fold_of(f) in g] for g in FOLD_GROUPS}
+    pooled = detection_ap_2d([dets[f] for f in frames], [gts[f] for f in frames])
+    out = {f"moderate {{{','.join(g)}}}": detection_ap_2d([dets[f] for f in fr], [gts[f] for f in fr])["2d"]["moderate"]
+           for g, fr in groups.items()}
+    out.update({f"pooled {k}": pooled["2d"][k] for k in ("easy", "moderate", "hard")})
+    out["pooled moderate IoU 0.5"] = pooled["2d_iou_0.5"]["moderate"]
+    out[f"detections at {threshold:g}"] = int(sum(int((np.asarray(dets[f].scores) >= threshold).sum()) for f in frames))
+    for g, fr in groups.items():
+        out[f"found at {threshold:g} {{{','.join(g)}}}"] = cars_found(dets, gts, fr, threshold=threshold)
+    out["reached"] = cars_found(dets, gts, frames, threshold=None)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("runs", nargs="+", help="NAME=DETS.npz (bench_predetect.py --save-dets), two or more")
+    ap.add_argument("--root", required=True, help="the KITTI root the detections were scored on")
+    ap.add_argument("--threshold", type=float, default=FIT_THRESHOLD, help="the operating point of the counts")
+    ap.add_argument("--json", default=None, help="write every run's figures and their summary here")
+    args = ap.parse_args()
+    runs = {}
+    for spec in args.runs:
+        name, sep, path = spec.partition("=")
+        if not sep or not name or not path:
+            raise SystemExit(f"{spec}: expected NAME=DETS.npz")
+        if not Path(path).is_file():
+            raise SystemExit(f"{path}: no such detections file")
+        runs[name] = Path(path)
+    ds = KittiDataset(args.root)
+    frames = ds.frame_ids()
+    gts = {f: ds.labels(f) for f in frames}
+    cars = {"".join(map(str, g)): sum(len(gts[f].of_type("Car")) for f in frames if fold_of(f) in g) for g in FOLD_GROUPS}
+    figures = {name: run_figures(read_detections(p, frames), gts, frames, threshold=args.threshold)
+               for name, p in runs.items()}
+    first = next(iter(figures.values()))
+    keys = list(first)
+    width = max(len(n) for n in list(runs) + ["range"])
+    print(f"{len(frames)} frames; cars per fold group: " + ", ".join(f"{{{','.join(g)}}} {n}" for g, n in cars.items())
+          + "; found / reached: cars at IoU 0.5 (reached: by a detection at any score)")
+    print(" " * width + " | " + " | ".join(keys))
+    for name, fig in figures.items():
+        print(f"{name:<{width}} | " + " | ".join(f"{fig[k]:.1f}" if isinstance(fig[k], float) else str(fig[k])
+                                                 for k in keys))
+    summary = {}
+    for k in keys:
+        v = np.array([fig[k] for fig in figures.values()], float)
+        summary[k] = {"mean": float(v.mean()), "min": float(v.min()), "max": float(v.max())}
+    print(f"{'mean':<{width}} | " + " | ".join(f"{summary[k]['mean']:.1f}" for k in keys))
+    print(f"{'range':<{width}} | " + " | ".join(f"{summary[k]['min']:.{d}f}-{summary[k]['max']:.{d}f}"
+                                                for k in keys for d in [1 if isinstance(first[k], float) else 0]))
+    if args.json:
+        Path(args.json).write_text(json.dumps({"runs": figures, "summary": summary, "threshold": args.threshold}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
