@@ -28,10 +28,11 @@ import numpy as np  # noqa: E402
 from wirescene.core.boxes import iou_2d  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.eval.kitti_metrics import detection_ap_2d  # noqa: E402
+from wirescene.fitting.pipeline import PredetectOptions  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 
-FIT_THRESHOLD = 0.3  # the fit's own threshold on our pre-detections (README, "The fit verifies")
+FIT_THRESHOLD = PredetectOptions().threshold  # the fit's own threshold on our pre-detections
 
 
 def read_detections(path: Path, frames: list[str]) -> dict[str, Detections]:
