@@ -8,6 +8,13 @@ them and the number of cars placed within 1 m, the cars fitted and the false one
 pre-detection overlaps no labelled car at IoU 0.5, or one already taken: each is a 3D car
 in the output that is not there).
 
+With ``--funnel``, where the cars are lost on their way to a true positive, per fold group and
+pooled: the cars a fitted car's pre-detection matches (IoU > 0.5, first come by score, as the
+paper's test) before the fit verifies its cars, those still matched after it, those whose
+pre-detection's viewpoint then lies within 45 deg (the true positives) and of them the cars
+within 1 m. The run must hold every fitted car (a ``--detections bank`` run with its
+``verification.json``).
+
 With ``--paired``, every run after the first is also compared with the first on the cars
 that are true positives in both (the same label matched), per fold group: their median and
 mean localisation error (each clipped at :data:`CLIP` m, so that a lost car counts as one
@@ -15,7 +22,7 @@ far off), how many lie within 1 m and 1.5 m, and on how many cars the run is nea
 label than the first run or farther from it. A change that moves few cars across 1 m can
 still move the errors of all of them.
 
-    python benchmarks/bench_operating_point.py NAME=RUN [NAME=RUN ...] [--paired] [--json OUT.json]
+    python benchmarks/bench_operating_point.py NAME=RUN [NAME=RUN ...] [--paired] [--funnel] [--json OUT.json]
 """
 
 from __future__ import annotations
@@ -58,6 +65,18 @@ def figures(results) -> dict:
             "fitted": int(sum(len(r.det_boxes) for r in results)), "false_cars": sum(map(false_cars, results))}
 
 
+def funnel(unverified, verified) -> dict:
+    """Cars matched by a fitted car before (``unverified``) and after (``verified``) the
+    fit's verification, of those the true positives (viewpoint within 45 deg) and the cars
+    within 1 m: ``{"cars", "matched", "verified", "tp", "within_1m"}`` of two lists of
+    FrameResult of the same frames."""
+    before, after = evaluate(unverified), evaluate(verified)
+    m = after.metrics["all"]
+    n_tp = int(m["n_tp"])
+    return {"cars": int(m["n_gt"]), "matched": int(before.counts["matched"]), "verified": int(after.counts["matched"]),
+            "tp": n_tp, "within_1m": 0 if m["loc_1m"] is None else round(m["loc_1m"] * n_tp / 100)}
+
+
 #: Localisation errors are clipped here (m) before averaging in ``--paired``.
 CLIP = 5.0
 
@@ -89,6 +108,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", help="NAME=RUN_DIR (bench_real_folds.py --out, --detections bank)")
     ap.add_argument("--paired", action="store_true", help="compare every run with the first, car by car")
+    ap.add_argument("--funnel", action="store_true",
+                    help="where the cars are lost: matched before / after the fit's verification, true positives, within 1 m")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     out, errors = {}, {}
@@ -104,6 +125,16 @@ def main() -> None:
             print(f"{name:6s} {variant:10s} " + " | ".join(
                 f"{k}: TP {v['tp']}/{v['gt']}, {v['loc_1m']:.1f}% <1 m = {v['cars_within_1m']} cars, "
                 f"{v['false_cars']} false of {v['fitted']} fitted" for k, v in row.items()))
+        if args.funnel:
+            unverified, _ = read_run(Path(run), verified=False)
+            for variant, results in records.items():
+                rows = {str(g): funnel([r for r in unverified[variant] if fold_of(r.frame_id) in g],
+                                       [r for r in results if fold_of(r.frame_id) in g]) for g in FOLD_GROUPS}
+                rows["pooled"] = funnel(unverified[variant], results)
+                out[name][variant]["funnel"] = rows
+                print(f"{name:6s} {variant:10s} cars -> matched -> verified -> viewpoint (TP) -> within 1 m: "
+                      + " | ".join(f"{g}: {r['cars']} -> {r['matched']} -> {r['verified']} -> {r['tp']} -> "
+                                   f"{r['within_1m']}" for g, r in rows.items()))
     if args.paired and len(errors) > 1:
         first, *others = errors
         print(f"\ncars true positives in both runs, against {first}: median / mean of errors clipped at {CLIP:g} m, "

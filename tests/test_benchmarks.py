@@ -204,6 +204,33 @@ def test_operating_point_counts_boxes_on_no_car_and_second_boxes_as_false(monkey
     assert false_cars(result) == 3  # the second box on the car, the van, the empty road
 
 
+def test_funnel_says_where_cars_are_lost_on_the_way_to_a_true_positive(monkeypatch):
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_operating_point import funnel
+    from wirescene.core.labels import Label
+    from wirescene.eval.metrics import FrameResult
+
+    dims, ry = [1.5, 1.6, 4.0], 0.0
+    cars = [Label("Car", 0.0, 0, 0.0, [100 + 300 * i, 100, 200 + 300 * i, 160], dims, [5.0 * i, 1.6, 20.0], ry)
+            for i in range(3)]
+
+    def frame(keep, alpha, offset):  # detections on the cars `keep` and one on the empty road
+        boxes = np.array([cars[i].box for i in keep] + [[1000, 100, 1100, 160]], float)
+        n = len(boxes)
+        loc = np.array([cars[i].location for i in keep] + [[0.0, 1.6, 30.0]], float) + [0.0, 0.0, offset]
+        return FrameResult("000000", cars, boxes, np.asarray(alpha, float), np.linspace(0.9, 0.5, n), loc,
+                           np.tile(dims, (n, 1)), np.full(n, ry), np.zeros(n))
+
+    # before the verification the three cars are matched; it drops the third; the second's viewpoint is turned
+    before = frame([0, 1, 2], [0.0, np.pi, 0.0, 0.0], 0.0)
+    after = frame([0, 1], [0.0, np.pi, 0.0], 0.0)
+    assert funnel([before], [after]) == {"cars": 3, "matched": 3, "verified": 2, "tp": 1, "within_1m": 1}
+    # the same true positive placed 2 m too far is no longer within 1 m
+    assert funnel([before], [frame([0, 1], [0.0, np.pi, 0.0], 2.0)])["within_1m"] == 0
+
+
 def test_paired_comparison_counts_only_cars_both_runs_place(monkeypatch):
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_operating_point import CLIP, paired
