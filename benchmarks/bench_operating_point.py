@@ -57,24 +57,23 @@ def false_cars(result) -> int:
 
 
 def figures(results) -> dict:
-    """Paper-protocol figures of a list of FrameResult, with the false cars."""
-    m = evaluate(results).metrics["all"]
+    """Paper-protocol figures of a list of FrameResult, with the cars a pre-detection matches
+    (before the viewpoint test) and the false cars."""
+    ev = evaluate(results)
+    m = ev.metrics["all"]
     n_tp, n_gt = int(m["n_tp"]), int(m["n_gt"])
     within = 0 if m["loc_1m"] is None else round(m["loc_1m"] * n_tp / 100)
-    return {"tp": n_tp, "gt": n_gt, "loc_1m": m["loc_1m"], "cars_within_1m": within,
+    return {"tp": n_tp, "gt": n_gt, "loc_1m": m["loc_1m"], "cars_within_1m": within, "matched": int(ev.counts["matched"]),
             "fitted": int(sum(len(r.det_boxes) for r in results)), "false_cars": sum(map(false_cars, results))}
 
 
-def funnel(unverified, verified) -> dict:
-    """Cars matched by a fitted car before (``unverified``) and after (``verified``) the
-    fit's verification, of those the true positives (viewpoint within 45 deg) and the cars
-    within 1 m: ``{"cars", "matched", "verified", "tp", "within_1m"}`` of two lists of
-    FrameResult of the same frames."""
-    before, after = evaluate(unverified), evaluate(verified)
-    m = after.metrics["all"]
-    n_tp = int(m["n_tp"])
-    return {"cars": int(m["n_gt"]), "matched": int(before.counts["matched"]), "verified": int(after.counts["matched"]),
-            "tp": n_tp, "within_1m": 0 if m["loc_1m"] is None else round(m["loc_1m"] * n_tp / 100)}
+def funnel(unverified, verified: dict) -> dict:
+    """Cars matched by a fitted car before the fit's verification (``unverified``, a list of
+    FrameResult) and after it, of those the true positives (viewpoint within 45 deg) and the
+    cars within 1 m (``verified``: :func:`figures` of the verified records of the same frames):
+    ``{"cars", "matched", "verified", "tp", "within_1m"}``."""
+    return {"cars": verified["gt"], "matched": int(evaluate(unverified).counts["matched"]),
+            "verified": verified["matched"], "tp": verified["tp"], "within_1m": verified["cars_within_1m"]}
 
 
 #: Localisation errors are clipped here (m) before averaging in ``--paired``.
@@ -127,10 +126,10 @@ def main() -> None:
                 f"{v['false_cars']} false of {v['fitted']} fitted" for k, v in row.items()))
         if args.funnel:
             unverified, _ = read_run(Path(run), verified=False)
-            for variant, results in records.items():
+            for variant in records:
                 rows = {str(g): funnel([r for r in unverified[variant] if fold_of(r.frame_id) in g],
-                                       [r for r in results if fold_of(r.frame_id) in g]) for g in FOLD_GROUPS}
-                rows["pooled"] = funnel(unverified[variant], results)
+                                       out[name][variant][str(g)]) for g in FOLD_GROUPS}
+                rows["pooled"] = funnel(unverified[variant], out[name][variant]["pooled"])
                 out[name][variant]["funnel"] = rows
                 print(f"{name:6s} {variant:10s} cars -> matched -> verified -> viewpoint (TP) -> within 1 m: "
                       + " | ".join(f"{g}: {r['cars']} -> {r['matched']} -> {r['verified']} -> {r['tp']} -> "

@@ -208,7 +208,7 @@ def test_funnel_says_where_cars_are_lost_on_the_way_to_a_true_positive(monkeypat
     import numpy as np
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
-    from bench_operating_point import funnel
+    from bench_operating_point import figures, funnel
     from wirescene.core.labels import Label
     from wirescene.eval.metrics import FrameResult
 
@@ -226,9 +226,9 @@ def test_funnel_says_where_cars_are_lost_on_the_way_to_a_true_positive(monkeypat
     # before the verification the three cars are matched; it drops the third; the second's viewpoint is turned
     before = frame([0, 1, 2], [0.0, np.pi, 0.0, 0.0], 0.0)
     after = frame([0, 1], [0.0, np.pi, 0.0], 0.0)
-    assert funnel([before], [after]) == {"cars": 3, "matched": 3, "verified": 2, "tp": 1, "within_1m": 1}
+    assert funnel([before], figures([after])) == {"cars": 3, "matched": 3, "verified": 2, "tp": 1, "within_1m": 1}
     # the same true positive placed 2 m too far is no longer within 1 m
-    assert funnel([before], [frame([0, 1], [0.0, np.pi, 0.0], 2.0)])["within_1m"] == 0
+    assert funnel([before], figures([frame([0, 1], [0.0, np.pi, 0.0], 2.0)]))["within_1m"] == 0
 
 
 def test_paired_comparison_counts_only_cars_both_runs_place(monkeypatch):
