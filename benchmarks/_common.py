@@ -227,3 +227,69 @@ def jitter_rng(seed: int, frame_id: str):
     import numpy as np
 
     return np.random.default_rng([seed, zlib.crc32(frame_id.encode())])
+
+
+#: Box heights (px) by which :func:`operating_point` splits the cars found.
+HEIGHT_BANDS = (0.0, 25.0, 40.0, 60.0, float("inf"))
+
+
+def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict:
+    """What the fit receives at the detection ``threshold``: how many detections, the share
+    that overlap a ``Car`` label at IoU >= ``iou`` (precision), the share of the cars found
+    (recall, also by box height: :data:`HEIGHT_BANDS` px, by truncation and by KITTI's
+    occlusion flag), why the others are missed (no detection at any score overlaps them --
+    by box height, with how many of those have one at IoU >= 0.3 at least -- or only ones
+    below the threshold) and the viewpoint error of the detections on a car (over
+    45 deg; over 135 deg: front and back swapped)."""
+    import numpy as np
+
+    from wirescene.core.boxes import iou_2d
+
+    n_det = n_on = 0
+    found, best, heights, truncated, occluded, dalpha = [], [], [], [], [], []
+    for d, lab in zip(dets, labels):
+        cars = [o for o in lab.objects if o.type == "Car"]
+        gt = np.array([o.box for o in cars], float).reshape(-1, 4)
+        every = np.asarray(d.boxes, float).reshape(-1, 4)
+        best.append(iou_2d(every[:, None], gt[None]).max(0) if len(every) else np.zeros(len(gt)))  # any score
+        keep = np.asarray(d.scores) >= threshold
+        boxes, alpha = every[keep], np.asarray(d.alpha, float)[keep]
+        n_det += len(boxes)
+        heights.append(gt[:, 3] - gt[:, 1])
+        truncated.append(np.array([o.truncated > 0 for o in cars], bool))
+        occluded.append(np.array([min(int(o.occluded), 2) for o in cars], int))
+        if not len(gt):
+            continue
+        if not len(boxes):
+            found.append(np.zeros(len(gt), bool))
+            continue
+        ov = iou_2d(boxes[:, None], gt[None])
+        on = ov.max(1) >= iou
+        n_on += int(on.sum())
+        found.append(ov.max(0) >= iou)
+        truth = np.array([o.alpha for o in cars], float)[ov.argmax(1)[on]]
+        dalpha.append(np.abs(np.angle(np.exp(1j * (alpha[on] - truth)))))
+    found = np.concatenate(found) if found else np.zeros(0, bool)
+    best, heights = np.concatenate(best), np.concatenate(heights)
+    candidate = best >= iou
+    truncated, occluded = np.concatenate(truncated), np.concatenate(occluded)
+
+    def share(mask) -> list:  # [share of the cars found, cars]
+        return [float(found[mask].mean()) if mask.any() else None, int(mask.sum())]
+
+    dalpha = np.degrees(np.concatenate(dalpha)) if dalpha else np.zeros(0)
+    band = np.digitize(heights, HEIGHT_BANDS[1:-1])
+    return {"threshold": float(threshold), "iou": float(iou), "n_detections": int(n_det), "n_on_car": int(n_on),
+            "precision": n_on / max(n_det, 1), "n_cars": int(len(found)), "recall": float(found.mean()) if len(found) else 0.0,
+            "recall_by_height": {f"{HEIGHT_BANDS[b]:.0f}-{HEIGHT_BANDS[b + 1]:.0f}px": share(band == b)
+                                 for b in range(len(HEIGHT_BANDS) - 1)},
+            "recall_by_truncation": {"truncated": share(truncated), "whole": share(~truncated)},
+            "recall_by_occlusion": {str(k): share(occluded == k) for k in range(3)},
+            "missed_without_candidate": int((~found & ~candidate).sum()),
+            "missed_below_threshold": int((~found & candidate).sum()),
+            "missed_without_candidate_by_height": {  # [cars, of them with a detection at IoU >= 0.3]
+                f"{HEIGHT_BANDS[b]:.0f}-{HEIGHT_BANDS[b + 1]:.0f}px": [int((~candidate & (band == b)).sum()),
+                                                                      int((~candidate & (band == b) & (best >= 0.3)).sum())]
+                for b in range(len(HEIGHT_BANDS) - 1)},
+            "viewpoint_over_45": float(np.mean(dalpha > 45)) if len(dalpha) else None,
+            "viewpoint_over_135": float(np.mean(dalpha > 135)) if len(dalpha) else None}

@@ -6,8 +6,8 @@ with several ``--train-seed`` values, so that a detector change is read against 
 training's own noise. Per run: moderate 2D AP on each fold group
 (:data:`wirescene.io.folds.FOLD_GROUPS`), pooled easy / moderate / hard and moderate at IoU
 0.5 (devkit rules), and at the fit's threshold the detections, the cars found at IoU 0.5 per
-fold group, and the cars any detection reaches at IoU 0.5; then the mean and range of each
-figure over the runs.
+fold group, and the cars any detection reaches at IoU 0.5 (``_common.operating_point``);
+then the mean and range of each figure over the runs.
 
     python benchmarks/bench_detector_seeds.py --root ../shared/data/kitti s0=DETS0.npz s1=DETS1.npz [--json OUT]
 """
@@ -25,7 +25,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wirescene.core.boxes import iou_2d  # noqa: E402
+from _common import operating_point  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.eval.kitti_metrics import detection_ap_2d  # noqa: E402
 from wirescene.fitting.pipeline import PredetectOptions  # noqa: E402
@@ -44,18 +44,6 @@ def read_detections(path: Path, frames: list[str]) -> dict[str, Detections]:
         return {f: Detections(z[f"{f}__boxes"].reshape(-1, 4), z[f"{f}__scores"], z[f"{f}__alpha"]) for f in frames}
 
 
-def cars_found(dets: dict, gts: dict, frames: list[str], *, threshold: float | None, iou: float = 0.5) -> int:
-    """Cars (``Car`` labels) with a detection at IoU >= ``iou`` scoring at least ``threshold`` (None: any score)."""
-    n = 0
-    for f in frames:
-        cars = np.array([o.box for o in gts[f].of_type("Car")], float).reshape(-1, 4)
-        d = dets[f]
-        boxes = d.boxes if threshold is None else d.boxes[np.asarray(d.scores) >= threshold]
-        if len(cars) and len(boxes):
-            n += int((iou_2d(cars[:, None], boxes[None]).max(1) >= iou).sum())
-    return n
-
-
 def run_figures(dets: dict, gts: dict, frames: list[str], *, threshold: float) -> dict:
     groups = {"".join(map(str, g)): [f for f in frames if fold_of(f) in g] for g in FOLD_GROUPS}
     pooled = detection_ap_2d([dets[f] for f in frames], [gts[f] for f in frames])
@@ -63,10 +51,12 @@ def run_figures(dets: dict, gts: dict, frames: list[str], *, threshold: float) -
            for g, fr in groups.items()}
     out.update({f"pooled {k}": pooled["2d"][k] for k in ("easy", "moderate", "hard")})
     out["pooled moderate IoU 0.5"] = pooled["2d_iou_0.5"]["moderate"]
-    out[f"detections at {threshold:g}"] = int(sum(int((np.asarray(dets[f].scores) >= threshold).sum()) for f in frames))
-    for g, fr in groups.items():
-        out[f"found at {threshold:g} {{{','.join(g)}}}"] = cars_found(dets, gts, fr, threshold=threshold)
-    out["reached"] = cars_found(dets, gts, frames, threshold=None)
+    at = {g: operating_point([dets[f] for f in fr], [gts[f] for f in fr], threshold) for g, fr in groups.items()}
+    out[f"detections at {threshold:g}"] = sum(o["n_detections"] for o in at.values())
+    for g, o in at.items():  # the cars found lie among those a detection reaches at any score
+        missed = o["missed_without_candidate"] + o["missed_below_threshold"]
+        out[f"found at {threshold:g} {{{','.join(g)}}}"] = o["n_cars"] - missed
+    out["reached"] = sum(o["n_cars"] - o["missed_without_candidate"] for o in at.values())
     return out
 
 

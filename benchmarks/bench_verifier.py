@@ -218,7 +218,8 @@ def found_at_precision(dets, labels, precision: float) -> tuple[int, int]:
 
 
 def score(args) -> None:
-    from bench_predetect import fmt, fmt_operating_point, metrics, operating_point  # benchmarks/ is on the path
+    from _common import operating_point
+    from bench_predetect import fmt, fmt_operating_point, metrics  # benchmarks/ is on the path
 
     ds = KittiDataset(args.root)
     ids = ds.frame_ids()

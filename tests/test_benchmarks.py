@@ -73,7 +73,7 @@ def test_operating_point_says_why_cars_are_missed(monkeypatch):
     from wirescene.io.kitti import FrameLabels, Label
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
-    from bench_predetect import operating_point
+    from _common import operating_point
 
     def car(box, truncated=0.0, occluded=0):
         return Label("Car", truncated, occluded, 0.0, np.array(box, float), np.array([1.5, 1.6, 3.9]),
