@@ -293,3 +293,20 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
                 for b in range(len(HEIGHT_BANDS) - 1)},
             "viewpoint_over_45": float(np.mean(dalpha > 45)) if len(dalpha) else None,
             "viewpoint_over_135": float(np.mean(dalpha > 135)) if len(dalpha) else None}
+
+
+def read_saved_detections(path, frames=None) -> dict:
+    """``{frame: Detections}`` of a ``bench_predetect.py --save-dets`` file (arrays
+    ``{frame}__boxes`` / ``__scores`` / ``__alpha``), of ``frames`` (None: every frame it
+    holds); a one-line error naming the file where one of ``frames`` is missing."""
+    import numpy as np
+
+    from wirescene.core.types import Detections
+
+    with np.load(path, allow_pickle=False) as z:
+        held = sorted({k.rsplit("__", 1)[0] for k in z.files})
+        frames = held if frames is None else list(frames)
+        missing = sorted(set(frames) - set(held))
+        if missing:
+            raise SystemExit(f"{path}: no detections of frame {missing[0]} ({len(missing)} frames missing)")
+        return {f: Detections(z[f"{f}__boxes"].reshape(-1, 4), z[f"{f}__scores"], z[f"{f}__alpha"]) for f in frames}

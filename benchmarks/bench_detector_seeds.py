@@ -25,23 +25,13 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import operating_point  # noqa: E402  (benchmarks/ is on the path of a script run from it)
-from wirescene.core.types import Detections  # noqa: E402
+from _common import operating_point, read_saved_detections  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.eval.kitti_metrics import detection_ap_2d  # noqa: E402
 from wirescene.fitting.pipeline import PredetectOptions  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 
 FIT_THRESHOLD = PredetectOptions().threshold  # the fit's own threshold on our pre-detections
-
-
-def read_detections(path: Path, frames: list[str]) -> dict[str, Detections]:
-    """``{frame: Detections}`` of a ``--save-dets`` file; a clear error where a frame is missing."""
-    with np.load(path) as z:
-        missing = [f for f in frames if f"{f}__boxes" not in z]
-        if missing:
-            raise SystemExit(f"{path}: no detections of frame {missing[0]} ({len(missing)} frames missing)")
-        return {f: Detections(z[f"{f}__boxes"].reshape(-1, 4), z[f"{f}__scores"], z[f"{f}__alpha"]) for f in frames}
 
 
 def run_figures(dets: dict, gts: dict, frames: list[str], *, threshold: float) -> dict:
@@ -79,7 +69,7 @@ def main() -> None:
     frames = ds.frame_ids()
     gts = {f: ds.labels(f) for f in frames}
     cars = {"".join(map(str, g)): sum(len(gts[f].of_type("Car")) for f in frames if fold_of(f) in g) for g in FOLD_GROUPS}
-    figures = {name: run_figures(read_detections(p, frames), gts, frames, threshold=args.threshold)
+    figures = {name: run_figures(read_saved_detections(p, frames), gts, frames, threshold=args.threshold)
                for name, p in runs.items()}
     first = next(iter(figures.values()))
     keys = list(first)

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _common import read_saved_detections  # (benchmarks/ is on the path of a script run from it)
 from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import check_shape
 from wirescene.core.types import Detections
@@ -115,12 +116,10 @@ def fit_rescorer(X, y, *, n_trees: int = 150, depth: int = 3, rate: float = 0.05
 
 def load_dets(path: Path) -> dict[str, Detections]:
     """``{frame: Detections}`` of a ``--save-dets`` file, each sorted by descending score."""
-    with np.load(path, allow_pickle=False) as z:
-        frames = sorted({k.rsplit("__", 1)[0] for k in z.files})
-        out = {}
-        for f in frames:
-            order = np.argsort(-z[f"{f}__scores"], kind="stable")
-            out[f] = Detections(z[f"{f}__boxes"][order], z[f"{f}__scores"][order], z[f"{f}__alpha"][order])
+    out = {}
+    for f, d in read_saved_detections(path).items():
+        order = np.argsort(-d.scores, kind="stable")
+        out[f] = Detections(d.boxes[order], d.scores[order], d.alpha[order])
     return out
 
 
