@@ -295,6 +295,14 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
             "viewpoint_over_135": float(np.mean(dalpha > 135)) if len(dalpha) else None}
 
 
+def write_saved_detections(path, dets: dict) -> None:
+    """Write ``{frame: Detections}`` as a ``--save-dets`` file, the arrays ``{frame}__boxes`` /
+    ``__scores`` / ``__alpha`` that :func:`read_saved_detections` reads."""
+    import numpy as np
+
+    np.savez(path, **{f"{f}__{k}": getattr(d, k) for f, d in dets.items() for k in ("boxes", "scores", "alpha")})
+
+
 def read_saved_detections(path, frames=None) -> dict:
     """``{frame: Detections}`` of a ``bench_predetect.py --save-dets`` file (arrays
     ``{frame}__boxes`` / ``__scores`` / ``__alpha``), of ``frames`` (None: every frame it

@@ -43,6 +43,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _common import read_saved_detections  # noqa: E402
 from wirescene.core.boxes import iou_2d  # noqa: E402
 from wirescene.core.image import to_rgb_uint8  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
@@ -461,8 +462,8 @@ def main():
     r_acf = reach(acf, frames, labels)
     print(f"ACF reaches {np.mean(r_acf >= 0.5):.1%} of {len(r_acf)} cars at IoU 0.5, {np.mean(r_acf >= 0.7):.1%} at 0.7")
     if args.bank_dets:
-        saved = np.load(args.bank_dets)
-        bank = {f: (saved[f"{f}__boxes"], saved[f"{f}__scores"]) for f in frames}
+        saved = read_saved_detections(args.bank_dets, frames)
+        bank = {f: (saved[f].boxes, saved[f].scores) for f in frames}
         r_bank = reach(bank, frames, labels)
         both = np.maximum(r_acf, r_bank)
         h = np.concatenate([[o.box[3] - o.box[1] for o in lab.objects if o.type == "Car"] for lab in labels])
@@ -472,7 +473,7 @@ def main():
             sel = (h >= lo) & (h < hi)
             print(f"  {lo}-{hi} px ({int(sel.sum())} cars): bank {np.mean(r_bank[sel] >= 0.5):.0%}, ACF "
                   f"{np.mean(r_acf[sel] >= 0.5):.0%}, both {np.mean(both[sel] >= 0.5):.0%}")
-        bank_alpha = {f: (bank[f][0], bank[f][1], saved[f"{f}__alpha"]) for f in frames}
+        bank_alpha = {f: (bank[f][0], bank[f][1], saved[f].alpha) for f in frames}
         label_of = dict(zip(frames, labels))
         runs = {"the bank alone": [Detections(*bank_alpha[f]) for f in frames]}
         for name, first in (("both, fused", False), ("both, ACF only where no bank box is", True)):

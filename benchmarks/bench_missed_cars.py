@@ -23,6 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _common import read_saved_detections  # noqa: E402
 from wirescene.core.boxes import iou_2d  # noqa: E402
 from wirescene.core.viewpoints import N_BINS, viewpoint_bin  # noqa: E402
 from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
@@ -65,12 +66,12 @@ def main():
     args = ap.parse_args()
     ds = KittiDataset(args.root)
     banks = {k: DetectorBank.load(Path(args.fold_models) / f"fold{k}.npz") for k in range(N_FOLDS)}
-    saved = np.load(args.dets)
+    saved = read_saved_detections(args.dets, ds.frame_ids())
     tp, fp, missed = [], [], []
     for f in ds.frame_ids():
         cars = [o for o in ds.labels(f).objects if o.type == "Car"]
-        a, b, c = frame_logits(banks[fold_of(f)], ds.image(f), saved[f"{f}__boxes"], saved[f"{f}__scores"],
-                               saved[f"{f}__alpha"], cars, threshold=args.threshold)
+        a, b, c = frame_logits(banks[fold_of(f)], ds.image(f), saved[f].boxes, saved[f].scores,
+                               saved[f].alpha, cars, threshold=args.threshold)
         tp.append(a)
         fp.append(b)
         missed.append(c)

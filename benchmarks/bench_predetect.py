@@ -50,7 +50,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import operating_point  # noqa: E402  (benchmarks/ is on the path of a script run from it)
+from _common import operating_point, write_saved_detections  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.eval.kitti_metrics import N_SAMPLE_PTS, detection_ap_2d  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of, frame_drives  # noqa: E402
@@ -394,7 +394,7 @@ def main():
         time_bank = bank
         name = f"fixed bank {args.bank or 'shipped'}"
     if args.save_dets:
-        np.savez(args.save_dets, **{f"{f}__{k}": getattr(dets[f], k) for f in ids for k in ("boxes", "scores", "alpha")})
+        write_saved_detections(args.save_dets, {f: dets[f] for f in ids})
     per_fold = {}
     for k in range(N_FOLDS):
         fk = [f for f in ids if fold_of(f) == k]

@@ -607,6 +607,24 @@ def test_seed_benchmarks_refuse_runs_of_other_frames(monkeypatch, capsys):
     assert "b holds 1 frames and a 2, not the same ones" in capsys.readouterr().err
 
 
+def test_saved_detections_read_back_as_written_and_name_a_missing_frame(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from _common import read_saved_detections, write_saved_detections
+    from wirescene.core.types import Detections
+
+    dets = {"000010": Detections(np.array([[1.0, 2, 30, 40], [5, 6, 70, 80]]), np.array([0.9, 0.4]),
+                                 np.array([0.5, -2.0])),
+            "000002": Detections(np.zeros((0, 4)), np.zeros(0), np.zeros(0))}
+    write_saved_detections(tmp_path / "d.npz", dets)
+    back = read_saved_detections(tmp_path / "d.npz")
+    assert sorted(back) == ["000002", "000010"]
+    for f, d in dets.items():
+        for key in ("boxes", "scores", "alpha"):
+            assert_close(getattr(back[f], key), getattr(d, key))
+    with pytest.raises(SystemExit, match=r"d\.npz: no detections of frame 000003"):
+        read_saved_detections(tmp_path / "d.npz", ["000010", "000003"])
+
+
 def test_device_benchmark_compares_the_cars_of_each_configuration(monkeypatch, tmp_path, capsys):
     import json
 
