@@ -153,6 +153,8 @@ def main():
                     help="weights of the rows' agreement (the first: the main table; 0: each box alone)")
     ap.add_argument("--row-width", type=float, nargs="+", default=[ROW_WIDTH],
                     help="lateral widths of a row, metres (the first: the main table)")
+    ap.add_argument("--classifier-weight", type=float, nargs="+", default=[1.0],
+                    help="weights of the crop classifier's log-probabilities in the grid (the pipeline's: 1)")
     ap.add_argument("--evidence-weights", type=float, nargs="*", default=[0.1, 0.3, 1.0])
     ap.add_argument("--no-classifier", action="store_true",
                     help="skip the crop viewpoint classifiers (trained here, per fold, on the other folds' frames)")
@@ -320,7 +322,7 @@ def main():
             out["methods"][f"{s}/{name}"] = share(m)
             print(fmt(name, out["methods"][f"{s}/{name}"]))
     grid = [(u, m, r, w, c, rw, rs) for u in args.iou for m in args.floor_margin for r in spreads
-            for w in args.prior_weight for c in ((True, False) if classifiers else (False,))
+            for w in args.prior_weight for c in ([*args.classifier_weight, 0.0] if classifiers else (0.0,))
             for rw in args.row_weight for rs in (args.row_width if rw else args.row_width[:1])]
     if len(grid) > 1:
         print("--- grid of the bank's settings (label / jittered boxes): share within 45 deg by fold group")
@@ -329,8 +331,8 @@ def main():
             for s in sets:
                 sc = scores[s]
                 res = share(rows(floored(sc[f"templates@{u:g}"], sc[f"floor@{m:g}"]) + w * sc[f"prior@{r}"]
-                                 + (sc["classifier"] if c else 0.0), s, rw, rs))
-                name = f"iou={u:g} floor={m:g} road_spread={r} prior*{w:g} classifier={int(c)} rows={rw:g}@{rs:g}m"
+                                 + c * sc["classifier"], s, rw, rs))
+                name = f"iou={u:g} floor={m:g} road_spread={r} prior*{w:g} classifier*{c:g} rows={rw:g}@{rs:g}m"
                 out["grid"][f"{s}/{name}"] = res
                 line.append(" ".join(f"{g}={100 * res[g]['within45']:5.1f}% ({res[g]['n']:3d})"
                                      for g in res if g.startswith("folds") and res[g]["n"]))
