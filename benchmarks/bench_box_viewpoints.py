@@ -322,7 +322,7 @@ def main():
             out["methods"][f"{s}/{name}"] = share(m)
             print(fmt(name, out["methods"][f"{s}/{name}"]))
     grid = [(u, m, r, w, c, rw, rs) for u in args.iou for m in args.floor_margin for r in spreads
-            for w in args.prior_weight for c in ([*args.classifier_weight, 0.0] if classifiers else (0.0,))
+            for w in args.prior_weight for c in (dict.fromkeys([*args.classifier_weight, 0.0]) if classifiers else (0.0,))
             for rw in args.row_weight for rs in (args.row_width if rw else args.row_width[:1])]
     if len(grid) > 1:
         print("--- grid of the bank's settings (label / jittered boxes): share within 45 deg by fold group")
