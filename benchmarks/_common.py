@@ -244,6 +244,7 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
     import numpy as np
 
     from wirescene.core.boxes import iou_2d
+    from wirescene.core.viewpoints import angle_difference
 
     n_det = n_on = 0
     found, best, heights, truncated, occluded, dalpha = [], [], [], [], [], []
@@ -268,7 +269,7 @@ def operating_point(dets, labels, threshold: float, *, iou: float = 0.5) -> dict
         n_on += int(on.sum())
         found.append(ov.max(0) >= iou)
         truth = np.array([o.alpha for o in cars], float)[ov.argmax(1)[on]]
-        dalpha.append(np.abs(np.angle(np.exp(1j * (alpha[on] - truth)))))
+        dalpha.append(angle_difference(alpha[on], truth))
     found = np.concatenate(found) if found else np.zeros(0, bool)
     best, heights = np.concatenate(best), np.concatenate(heights)
     candidate = best >= iou

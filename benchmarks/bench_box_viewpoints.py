@@ -52,7 +52,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import jitter_rng, jittered  # noqa: E402  (benchmarks/ is on the path of a script run from it)
+from _common import HEIGHT_BANDS, jitter_rng, jittered  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.core.boxes import MEAN_CAR_DIMS, iou_2d  # noqa: E402
 from wirescene.core.shape import load_default as load_shape_model  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
@@ -77,7 +77,6 @@ from wirescene.predetect.geometry import horizon_row  # noqa: E402
 from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray  # noqa: E402
 from wirescene.predetect.viewpoint_classifier import train_on_kitti  # noqa: E402
 
-HEIGHT_BANDS = ((0, 25), (25, 40), (40, 60), (60, np.inf))
 GOOD, SWAP = np.radians(45.0), np.radians(135.0)
 
 
@@ -114,8 +113,8 @@ def summary(err: np.ndarray, rec: dict, sel: np.ndarray | None = None) -> dict:
         out[f"folds{''.join(map(str, g))}"] = one(base & np.isin(rec["fold"], g))
     for o in range(4):
         out[f"occ{o}"] = one(base & (rec["occluded"] == o))
-    for lo, hi in HEIGHT_BANDS:
-        out[f"h{lo}-{hi if np.isfinite(hi) else ''}"] = one(base & (rec["height"] >= lo) & (rec["height"] < hi))
+    for lo, hi in zip(HEIGHT_BANDS[:-1], HEIGHT_BANDS[1:]):
+        out[f"h{lo:g}-{f'{hi:g}' if np.isfinite(hi) else ''}"] = one(base & (rec["height"] >= lo) & (rec["height"] < hi))
     return out
 
 
