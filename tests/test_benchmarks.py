@@ -205,8 +205,6 @@ def test_operating_point_counts_boxes_on_no_car_and_second_boxes_as_false(monkey
 
 
 def test_funnel_says_where_cars_are_lost_on_the_way_to_a_true_positive(monkeypatch):
-    import numpy as np
-
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_operating_point import figures, funnel
     from wirescene.core.labels import Label
