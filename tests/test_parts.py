@@ -501,7 +501,7 @@ def test_train_parts_cli_trains_on_the_label_shapes_given(tmp_path):
     cars = KittiDataset(KITTI_ROOT).labels("000010").of_type("Car")
     save_label_shapes(tmp_path / "s.npz", {"000010": np.stack([scaled_mean_shape(o.dims) for o in cars]) * 1.02})
     args = ["train", "parts", "--kitti-root", str(KITTI_ROOT), "--frames", "000010", "--n-trees", "2",
-            "--max-depth", "4", "--synth-scenes", "0", "--out", str(tmp_path / "p.npz")]
+            "--max-depth", "4", "--synth-scenes", "0", "--no-calibrate", "--out", str(tmp_path / "p.npz")]
     r = CliRunner().invoke(main, [*args, "--label-shapes", str(tmp_path / "s.npz")])
     assert r.exit_code == 0, r.output
     assert PartDetector.load(tmp_path / "p.npz").meta["label_shapes"] == "True"

@@ -232,6 +232,9 @@ def test_a_bad_drive_map_is_refused_before_training(tmp_path):
     r = cli("train", "detector", "--out", tmp_path / "b.npz", "--drive-map", tmp_path)
     assert r.exit_code == 2 and "--drive-map need --kitti-root" in r.output + r.stderr
     r = cli("train", "parts", "--out", tmp_path / "p.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path)
+    assert "no train_rand.txt here" in one_line_error(r)  # the calibration is on by default: its folds read the map
+    r = cli("train", "parts", "--out", tmp_path / "p.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path,
+            "--no-calibrate")
     assert r.exit_code == 2 and "--drive-map needs --kitti-root and --calibrate" in r.output + r.stderr
     for without in (["--no-calibration"], ["--calibration", "9,1,0.4"]):  # no held-out calibration to group
         r = cli("train", "detector", "--out", tmp_path / "b.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path,
@@ -318,6 +321,23 @@ def test_train_all_needs_two_groups_and_known_options(tmp_path):
     line = one_line_error(cli("train", "all", KITTI_ROOT, "--out", tmp_path / "m", "--set", "parts.nope=1"))
     assert "--set" in line and "no option 'nope'" in line
     assert not (tmp_path / "m").exists()
+
+
+def test_train_parts_defaults_are_the_shipped_recipe(tmp_path):
+    from wirescene.cli.parts import parts
+    from wirescene.training.pipeline import RECIPE
+
+    recipe = RECIPE["parts"]
+    defaults = {p.name: p.default for p in parts.params}
+    assert {k: defaults[k] for k in ("kind", "position", "smooth", "synth_scenes")} == \
+        {k: recipe[k] for k in ("kind", "position", "smooth", "synth_scenes")}
+    assert recipe["calibrate_real"]  # on by default with --kitti-root: one frame holds no second fold out
+    out = tmp_path / "p.npz"
+    line = one_line_error(cli("train", "parts", "--kitti-root", KITTI_ROOT, "--frames", "000010", "--synth-scenes",
+                              "0", "--out", out))
+    assert line.startswith("wirescene: error: calibrate_real: ") and "--no-calibrate" in line, line
+    assert "--calibrate needs --kitti-root" in one_line_error(cli("train", "parts", "--calibrate", "--out", out))
+    assert not out.exists()
 
 
 def test_models_replace_the_bank_and_the_resume_fingerprint(trained, tmp_path):

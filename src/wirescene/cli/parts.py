@@ -8,6 +8,10 @@ from pathlib import Path
 import click
 
 from wirescene.cli.options import check_output_file, drive_map_option, read_drive_map, select_frames, split_file_option
+from wirescene.training.recipe import RECIPE
+
+#: The shipped model's options are this command's defaults (``train all`` trains the same).
+_RECIPE = RECIPE["parts"]
 
 
 @click.command("parts")
@@ -18,7 +22,7 @@ from wirescene.cli.options import check_output_file, drive_map_option, read_driv
               help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog only).")
 @click.option("--n-trees", type=int, default=30, show_default=True)
 @click.option("--max-depth", type=int, default=13, show_default=True)
-@click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc", "ghog_ms", "ghog_msc"]), default="ghog",
+@click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc", "ghog_ms", "ghog_msc"]), default=_RECIPE["kind"],
               show_default=True,
               help="Descriptor (ghog: gradient-orientation histograms of the grey image; ghog_ms: two cell sizes; "
                    "ghog_msc: ghog_ms plus colour).")
@@ -27,17 +31,18 @@ from wirescene.cli.options import check_output_file, drive_map_option, read_driv
                    "(the shipped model: ../shared/data/kitti, all 72 frames).")
 @click.option("--frames", default=None, help="Real training frames: comma-separated ids (default: all).")
 @split_file_option
-@click.option("--position/--no-position", default=False, show_default=True,
+@click.option("--position/--no-position", default=_RECIPE["position"], show_default=True,
               help="Append the point's position relative to the box to the descriptor.")
-@click.option("--smooth", type=float, default=0.0, show_default=True,
+@click.option("--smooth", type=float, default=_RECIPE["smooth"], show_default=True,
               help="Default Gaussian smoothing of the response maps (sigma in box heights).")
-@click.option("--calibrate/--no-calibrate", default=False, show_default=True,
-              help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root).")
+@click.option("--calibrate/--no-calibrate", default=None,
+              help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root; default: on with "
+                   "--kitti-root, as the shipped model).")
 @drive_map_option()
 @click.option("--label-shapes", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="With --kitti-root: .npz of the labelled cars' own wireframes (frame id -> (N, 36, 3), object "
                    "frame) in place of the mean shape scaled into each label's box.")
-@click.option("--synth-scenes", type=int, default=300, show_default=True,
+@click.option("--synth-scenes", type=int, default=_RECIPE["synth_scenes"], show_default=True,
               help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
 @click.option("--synth-seed", type=int, default=1000, show_default=True,
               help="Synthetic scene stream (>= 1000; lower seeds are evaluation scenes).")
@@ -57,8 +62,13 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
           drive_mapping, label_shapes, synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog,
           kitti_background, report):
     """Train the 37-class part detector on real KITTI frames, synthetic shaded scenes
-    and/or CAD renderings."""
+    and/or CAD renderings; the defaults are the shipped model's recipe."""
     from wirescene.training.parts import train_part_detector
+
+    if calibrate is None:
+        calibrate = bool(_RECIPE["calibrate_real"]) and kitti_root is not None
+    elif calibrate and kitti_root is None:
+        raise click.UsageError("--calibrate needs --kitti-root (held-out real patches)")
 
     check_output_file(out, "--out")
     check_output_file(report, "--report")

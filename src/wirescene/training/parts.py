@@ -48,6 +48,7 @@ from typing import Mapping
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from wirescene.core.errors import ArgumentError
 from wirescene.io.wireframes import wireframe_gt_path
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, N_PARTS, PartDetector
@@ -766,6 +767,14 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
         raise ValueError("no training data: n_views and synth_scenes are both 0 and no kitti_root")
     if calibrate_real and kitti_root is None:
         raise ValueError("calibrate_real needs kitti_root (real labelled frames)")
+    if calibrate_real:  # checked before any patch is made: the calibration holds out folds of the real frames
+        from wirescene.io.kitti import KittiDataset
+
+        ids = KittiDataset(kitti_root).frame_ids() if frames is None else list(frames)
+        if len(np.unique(real_folds(ids, calibration_folds))) < 2:
+            raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
+                                f"(drives); the {len(ids)} frame(s) given fall in one: train without it "
+                                "(--no-calibrate) or on frames of more drives")
     t0 = time.time()
     data = None
     report = {"cars": []}

@@ -59,6 +59,7 @@ from wirescene.training.kitti_detector import (
     check_calibration,
     heldout_bank_calibration,
 )
+from wirescene.training.recipe import RECIPE
 from wirescene.training.scale import CACHE
 
 __all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "check_options", "calibration_folds",
@@ -70,13 +71,6 @@ STEPS: tuple[str, ...] = ("parts", "detector", "score_calibration", "occlusion")
 STEP_OPTIONS: tuple[str, ...] = ("parts", "detector", "occlusion")
 _ARTEFACT = {"parts": "parts_model", "detector": "detector_bank", "score_calibration": "score_calibration",
              "occlusion": "occlusion"}
-
-#: The shipped artefacts' recipes (README, "Trained artefacts"): each step's options.
-RECIPE: dict[str, dict] = {
-    "parts": {"kind": "ghog_ms", "position": True, "smooth": 0.0625, "calibrate_real": True, "synth_scenes": 100},
-    "detector": {"threshold": 0.5},
-    "occlusion": {"seed": 2000, "n_scenes": 30},
-}
 
 
 def _parameters(fn, exclude: Iterable[str]) -> dict[str, object]:
