@@ -770,11 +770,11 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     if calibrate_real:  # checked before any patch is made: the calibration holds out folds of the real frames
         from wirescene.io.kitti import KittiDataset
 
-        ids = KittiDataset(kitti_root).frame_ids() if frames is None else list(frames)
-        if len(np.unique(real_folds(ids, calibration_folds))) < 2:
+        frames = KittiDataset(kitti_root).frame_ids() if frames is None else list(frames)
+        if len(np.unique(real_folds(frames, calibration_folds))) < 2:
             raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
-                                f"(drives); the {len(ids)} frame(s) given fall in one: train without it "
-                                "(--no-calibrate) or on frames of more drives")
+                                f"(drives); the {len(frames)} frame(s) given fall in one: train without it "
+                                "(calibrate_real=False, --no-calibrate) or on frames of more drives")
     t0 = time.time()
     data = None
     report = {"cars": []}
