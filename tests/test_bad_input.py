@@ -156,6 +156,8 @@ CASES = {
     "--workers 0": (lambda t: _eval_case(t, "--workers", "0"), "--workers"),
     "--prune-after -2": (lambda t: _fit_case(t, extra=("--prune-after", "-2")), "--prune-after"),
     "--viewpoint-noise nan": (lambda t: _eval_case(t, "--viewpoint-noise", "nan"), "--viewpoint-noise"),
+    "fit without --calib": (lambda t: ["fit", _fit_case(t)[1], "--out", t / "o"], r"--calib: missing \(required\)$"),
+    "fit without an image": (lambda t: ["fit", "--calib", "c.txt", "--out", t / "o"], r"IMAGE: missing \(required\)$"),
     "--frames twice": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", f"{FRAME},{FRAME}"], "listed twice"),
     "--frames unknown": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "424242"], "no frame 424242"),
     # outputs, refused before any fitting

@@ -38,11 +38,16 @@ def _usage_message(exc: click.UsageError) -> str:
     if isinstance(exc, click.BadParameter):
         hint = exc.param_hint
         if hint is None and exc.param is not None:
-            hint = "/".join(getattr(exc.param, "opts", None) or [exc.param.name or "?"])
+            if isinstance(exc.param, click.Argument):
+                hint = exc.param.human_readable_name  # IMAGE, as the usage line spells it
+            else:
+                hint = "/".join(getattr(exc.param, "opts", None) or [exc.param.name or "?"])
         if isinstance(hint, (list, tuple)):
             hint = "/".join(hint)
         if hint:
-            return f"{str(hint).strip(chr(39) + chr(34))}: {exc.message}"
+            # click leaves a missing parameter's message empty (its text is built in format_message)
+            problem = "missing (required)" if isinstance(exc, click.MissingParameter) else exc.message
+            return f"{str(hint).strip(chr(39) + chr(34))}: {problem}"
     return " ".join(exc.format_message().split())
 
 
