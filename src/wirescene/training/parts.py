@@ -757,6 +757,13 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     Returns
     -------
     (PartDetector, report dict)
+
+    Notes
+    -----
+    The defaults are the smallest recipe (what the tests' tiny trainings use); the shipped
+    model's is ``train_part_detector(out, kitti_root=ROOT, **RECIPE["parts"])`` with
+    :data:`wirescene.training.recipe.RECIPE`, as ``wirescene train parts`` and
+    ``wirescene train all`` call it.
     """
     say = progress or (lambda s: None)
     n_az = max(1, int(n_views) // len(ELEVATIONS)) if n_views else 0
