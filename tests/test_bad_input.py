@@ -174,6 +174,15 @@ CASES = {
     "train parts --label-shapes not an artefact": (
         lambda t: ["train", "parts", "--kitti-root", KITTI_ROOT, "--out", t / "p.npz", "--label-shapes",
                    _file(t, "shapes.npz")], r"shapes\.npz.*corrupt artefact"),
+    "train parts with no training data": (lambda t: ["train", "parts", "--out", t / "p.npz", "--synth-scenes", "0"],
+                                          "synth_scenes: no training data"),
+    "train parts --n-trees 0": (lambda t: ["train", "parts", "--out", t / "p.npz", "--n-trees", "0"], "--n-trees"),
+    "train parts --synth-seed 5": (lambda t: ["train", "parts", "--out", t / "p.npz", "--synth-seed", "5"],
+                                   "--synth-seed"),
+    "train detector --C 0": (lambda t: ["train", "detector", "--out", t / "b.npz", "--C", "0"], "--C: 0 is not above 0"),
+    "train detector --per-octave 0": (lambda t: ["train", "detector", "--out", t / "b.npz", "--per-octave", "0"],
+                                      "--per-octave"),
+    "train occlusion --scenes 0": (lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "0"], "--scenes"),
     # synthetic scenes
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],
                                          "already holds scenes"),

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from wirescene.cli.options import check_output_file
+from wirescene.cli.options import NON_NEGATIVE, check_output_file
 from wirescene.core.errors import InputError
 
 __all__ = ["cad", "shape", "draw_car"]
@@ -118,8 +118,8 @@ def show_cmd(name, out, cad_dir):
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Shape model .npz to write (the shipped one is src/wirescene/data/shape_model.npz); "
                    "cad_landmarks.json and cad_meshes.npz are written next to it.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the size augmentation.")
-@click.option("--augment", type=int, default=None, help="Size-augmented copies per exemplar (default 100).")
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Seed of the size augmentation.")
+@click.option("--augment", type=NON_NEGATIVE, default=None, help="Size-augmented copies per exemplar (default 100).")
 def shape(cad_dir, out, seed, augment):
     """Train the metric PCA wireframe shape model from CAD meshes."""
     from wirescene.cad.training import DEFAULT_AUGMENT, train_shape_model

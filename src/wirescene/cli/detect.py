@@ -9,8 +9,11 @@ from pathlib import Path
 import click
 
 from wirescene.cli.options import (
+    NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
     POSITIVE,
+    POSITIVE_FLOAT,
+    FiniteFloat,
     check_output_dir,
     check_output_file,
     drive_map_option,
@@ -43,24 +46,24 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
               help="With --kitti-root: Platt 'a,b,c' mapping margins and the verifier's logits to confidences, from "
                    "held-out detections of the same recipe (printed by benchmarks/bench_predetect.py); default: "
                    "leave-one-fold-out training.")
-@click.option("--threshold", type=float, default=0.5, show_default=True,
+@click.option("--threshold", type=FiniteFloat(), default=0.5, show_default=True,
               help="With --kitti-root and a calibration: default detection threshold (confidence).")
 @drive_map_option()
 @click.option("--support-weight", type=NON_NEGATIVE_FLOAT, default=SUPPORT_WEIGHT, show_default=True,
               help="With --kitti-root: margin a cluster of detections gains per e-fold of its votes (0: its best vote "
                    "alone).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random stream (synthetic: scenes; validation: seed+1).")
-@click.option("--scenes", "n_scenes", type=int, default=200, show_default=True, help="Synthetic training scenes.")
-@click.option("--partial", "n_partial", type=int, default=3, show_default=True,
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Random stream (synthetic: scenes; validation: seed+1).")
+@click.option("--scenes", "n_scenes", type=POSITIVE, default=200, show_default=True, help="Synthetic training scenes.")
+@click.option("--partial", "n_partial", type=NON_NEGATIVE, default=3, show_default=True,
               help="Partial configurations per viewpoint (plus one full-car configuration).")
-@click.option("--per-octave", type=int, default=6, show_default=True,
+@click.option("--per-octave", type=POSITIVE, default=6, show_default=True,
               help="With --kitti-root: HOG pyramid levels per octave (stored with the bank for detection).")
-@click.option("--cut-paste", type=int, default=0, show_default=True,
+@click.option("--cut-paste", type=NON_NEGATIVE, default=0, show_default=True,
               help="With --kitti-root: cars of other frames pasted into a composite copy of every training frame.")
-@click.option("--mining-rounds", type=int, default=None, help="Hard-negative mining rounds [synthetic 2, real 3].")
-@click.option("--mining-images", type=int, default=80, show_default=True, help="Synthetic only.")
-@click.option("--val-scenes", "n_val", type=int, default=20, show_default=True, help="Synthetic only.")
-@click.option("--C", "C", type=float, default=0.01, show_default=True, help="Linear SVM regularisation.")
+@click.option("--mining-rounds", type=NON_NEGATIVE, default=None, help="Hard-negative mining rounds [synthetic 2, real 3].")
+@click.option("--mining-images", type=POSITIVE, default=80, show_default=True, help="Synthetic only.")
+@click.option("--val-scenes", "n_val", type=NON_NEGATIVE, default=20, show_default=True, help="Synthetic only.")
+@click.option("--C", "C", type=POSITIVE_FLOAT, default=0.01, show_default=True, help="Linear SVM regularisation.")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
 @click.option("--max-negatives", type=POSITIVE, default=DEFAULT_MAX_NEGATIVES, show_default=True,
               help="With --kitti-root: cap of each configuration's negatives (reservoir, then the hardest).")
@@ -114,7 +117,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
               help="Classifier to write (the shipped one is src/wirescene/data/viewpoint_classifier.npz).")
 @click.option("--frames", default=None, help="Comma-separated training frame ids (default: all).")
 @split_file_option
-@click.option("--seed", type=int, default=0, show_default=True, help="Random stream of the jittered copies.")
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Random stream of the jittered copies.")
 def viewpoints(kitti_root, out, frames, split_file, seed):
     """Train the crop viewpoint classifier that gives boxes of other detectors a viewpoint."""
     from wirescene.io.kitti import KittiDataset

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_file, load_models, models_option
+from wirescene.cli.options import NON_NEGATIVE, POSITIVE, check_output_file, load_models, models_option
 
 
 @click.command("occlusion")
-@click.option("--seed", default=2000, show_default=True, help="Synthetic stream of the held-out scenes.")
-@click.option("--scenes", default=30, show_default=True)
+@click.option("--seed", type=NON_NEGATIVE, default=2000, show_default=True, help="Synthetic stream of the held-out scenes.")
+@click.option("--scenes", type=POSITIVE, default=30, show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Record to write (the shipped one is src/wirescene/data/occlusion.json).")
 @click.option("--flip-evidence/--no-flip-evidence", default=False, show_default=True,

@@ -17,12 +17,13 @@ NON_NEGATIVE = click.IntRange(min=0)
 
 
 class FiniteFloat(click.ParamType):
-    """A finite float, at least ``min`` (NaN and infinities refused)."""
+    """A finite float, at least ``min`` (above it with ``strict``; NaN and infinities refused)."""
 
     name = "float"
 
-    def __init__(self, min: float | None = None):
+    def __init__(self, min: float | None = None, *, strict: bool = False):
         self.min = min
+        self.strict = strict
 
     def convert(self, value, param, ctx):
         try:
@@ -31,12 +32,13 @@ class FiniteFloat(click.ParamType):
             self.fail(f"{value!r} is not a number", param, ctx)
         if not math.isfinite(number):
             self.fail(f"{value!r} is not finite", param, ctx)
-        if self.min is not None and number < self.min:
-            self.fail(f"{number:g} is below the minimum {self.min:g}", param, ctx)
+        if self.min is not None and (number <= self.min if self.strict else number < self.min):
+            self.fail(f"{number:g} is {'not above' if self.strict else 'below the minimum'} {self.min:g}", param, ctx)
         return number
 
 
 NON_NEGATIVE_FLOAT = FiniteFloat(min=0.0)
+POSITIVE_FLOAT = FiniteFloat(min=0.0, strict=True)
 
 
 def _first_existing(path: Path) -> Path:

@@ -7,7 +7,16 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_file, drive_map_option, read_drive_map, select_frames, split_file_option
+from wirescene.cli.options import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_FLOAT,
+    POSITIVE,
+    check_output_file,
+    drive_map_option,
+    read_drive_map,
+    select_frames,
+    split_file_option,
+)
 from wirescene.training.recipe import RECIPE
 
 #: The shipped model's options are this command's defaults (``train all`` trains the same).
@@ -17,11 +26,11 @@ _RECIPE = RECIPE["parts"]
 @click.command("parts")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Model .npz to write (the shipped one is src/wirescene/data/parts_model.npz).")
-@click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--n-views", type=int, default=0, show_default=True,
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
+@click.option("--n-views", type=NON_NEGATIVE, default=0, show_default=True,
               help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog only).")
-@click.option("--n-trees", type=int, default=30, show_default=True)
-@click.option("--max-depth", type=int, default=13, show_default=True)
+@click.option("--n-trees", type=POSITIVE, default=30, show_default=True)
+@click.option("--max-depth", type=POSITIVE, default=13, show_default=True)
 @click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc", "ghog_ms", "ghog_msc"]), default=_RECIPE["kind"],
               show_default=True,
               help="Descriptor (ghog: gradient-orientation histograms of the grey image; ghog_ms: two cell sizes; "
@@ -33,7 +42,7 @@ _RECIPE = RECIPE["parts"]
 @split_file_option
 @click.option("--position/--no-position", default=_RECIPE["position"], show_default=True,
               help="Append the point's position relative to the box to the descriptor.")
-@click.option("--smooth", type=float, default=_RECIPE["smooth"], show_default=True,
+@click.option("--smooth", type=NON_NEGATIVE_FLOAT, default=_RECIPE["smooth"], show_default=True,
               help="Default Gaussian smoothing of the response maps (sigma in box heights).")
 @click.option("--calibrate/--no-calibrate", default=None,
               help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root; default: on with "
@@ -42,17 +51,17 @@ _RECIPE = RECIPE["parts"]
 @click.option("--label-shapes", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="With --kitti-root: .npz of the labelled cars' own wireframes (frame id -> (N, 36, 3), object "
                    "frame) in place of the mean shape scaled into each label's box.")
-@click.option("--synth-scenes", type=int, default=_RECIPE["synth_scenes"], show_default=True,
+@click.option("--synth-scenes", type=NON_NEGATIVE, default=_RECIPE["synth_scenes"], show_default=True,
               help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
-@click.option("--synth-seed", type=int, default=1000, show_default=True,
+@click.option("--synth-seed", type=click.IntRange(min=1000), default=1000, show_default=True,
               help="Synthetic scene stream (>= 1000; lower seeds are evaluation scenes).")
 @click.option("--synth-cache", type=click.Path(file_okay=False), default=None,
               help="Directory keeping the synthetic scenes' patches, read back by later trainings with the same "
                    "synthetic options (e.g. one per fold).")
 @click.option("--class-weight", type=click.Choice(["balanced", "balanced_subsample", "none"]), default="balanced",
               show_default=True, help="Forest class weights.")
-@click.option("--n-aug", type=int, default=2, show_default=True, help="Renderings per view (first unaugmented).")
-@click.option("--heldout", type=int, default=0, show_default=True,
+@click.option("--n-aug", type=POSITIVE, default=2, show_default=True, help="Renderings per view (first unaugmented).")
+@click.option("--heldout", type=NON_NEGATIVE, default=0, show_default=True,
               help="First evaluate with this many CAD models held out.")
 @click.option("--compare-hog/--no-compare-hog", default=False, help="Also evaluate HOG held-out.")
 @click.option("--kitti-background", type=click.Path(file_okay=False), default=None,

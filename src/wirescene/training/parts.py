@@ -769,11 +769,13 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     n_az = max(1, int(n_views) // len(ELEVATIONS)) if n_views else 0
     kinds = tuple(dict.fromkeys((kind,) + tuple(compare_kinds)))
     if n_az and any(k in GREY_KINDS for k in kinds):
-        raise ValueError(f"CAD edge renderings have no grey image: use n_views=0 with kinds {GREY_KINDS}")
+        raise ArgumentError("n_views", f"CAD edge renderings (--n-views) have no grey image: use n_views=0 with "
+                                       f"kinds {GREY_KINDS}")
     if not n_az and not synth_scenes and kitti_root is None:
-        raise ValueError("no training data: n_views and synth_scenes are both 0 and no kitti_root")
+        raise ArgumentError("synth_scenes", "no training data: n_views and synth_scenes (--n-views, --synth-scenes) "
+                                            "are both 0 and no kitti_root (--kitti-root) is given")
     if calibrate_real and kitti_root is None:
-        raise ValueError("calibrate_real needs kitti_root (real labelled frames)")
+        raise ArgumentError("calibrate_real", "needs kitti_root (--kitti-root), the real labelled frames")
     if calibrate_real:  # checked before any patch is made: the calibration holds out folds of the real frames
         from wirescene.io.kitti import KittiDataset
 
