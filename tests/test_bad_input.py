@@ -57,6 +57,17 @@ def _fit_case(tmp, *, calib=None, dets=None, image=None, extra=()):
     return ["fit", img, "--calib", c, "--detections", d, "--out", tmp / "out", "--variant", "coarse", *extra]
 
 
+def _carless_root(tmp):
+    """A KITTI root of one frame whose label holds no Car (a DontCare region only)."""
+    split = tmp / "carless" / "training"
+    for sub, ext in (("image_2", "png"), ("calib", "txt")):
+        (split / sub).mkdir(parents=True)
+        shutil.copy(SPLIT / sub / f"{FRAME}.{ext}", split / sub / f"{FRAME}.{ext}")
+    (split / "label_2").mkdir()
+    (split / "label_2" / f"{FRAME}.txt").write_text("DontCare -1 -1 -10 1000 160 1040 190 -1 -1 -1 -1000 -1000 -1000 -10\n")
+    return split.parent
+
+
 def _eval_case(tmp, *extra):
     return ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", FRAME, "--workers", "1", *extra]
 
@@ -182,6 +193,12 @@ CASES = {
     "train detector --C 0": (lambda t: ["train", "detector", "--out", t / "b.npz", "--C", "0"], "--C: 0 is not above 0"),
     "train detector --per-octave 0": (lambda t: ["train", "detector", "--out", t / "b.npz", "--per-octave", "0"],
                                       "--per-octave"),
+    "train parts on frames without a car": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-root", _carless_root(t), "--synth-scenes", "0"],
+        "frames: none of the 1 real training frame.s. has a labelled Car"),
+    "train detector on frames without a car": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", _carless_root(t), "--no-calibration"],
+        "none of the 1 training frame.s. has a labelled Car"),
     "train occlusion --scenes 0": (lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "0"], "--scenes"),
     # synthetic scenes
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],

@@ -1003,6 +1003,8 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
         ids = [f for f in ids if fold_of(f) in set(folds)]
     if not ids:
         raise ValueError("no training frames selected")
+    if not any(len(ds.labels(f).of_type("Car")) for f in ids):  # else an empty bank, written without a word
+        raise InputError(f"none of the {len(ids)} training frame(s) has a labelled Car to learn from", path=ds.split_dir)
     report = {"frames": ids}
     # the recipe trains a verifier (finish_bank), weighted by the calibration's third number
     calib = None if calibration is None else check_calibration(calibration, size=3)

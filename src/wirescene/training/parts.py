@@ -776,11 +776,17 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
                                             "are both 0 and no kitti_root (--kitti-root) is given")
     if calibrate_real and kitti_root is None:
         raise ArgumentError("calibrate_real", "needs kitti_root (--kitti-root), the real labelled frames")
-    if calibrate_real:  # checked before any patch is made: the calibration holds out folds of the real frames
+    real_only = kitti_root is not None and not n_az and not synth_scenes
+    if real_only or calibrate_real:  # checked before any patch is made
         from wirescene.io.kitti import KittiDataset
 
-        frames = KittiDataset(kitti_root).frame_ids() if frames is None else list(frames)
-        if len(np.unique(real_folds(frames, calibration_folds))) < 2:
+        ds = KittiDataset(kitti_root)
+        frames = ds.frame_ids() if frames is None else list(frames)
+        if real_only and not any(len(ds.labels(f).of_type("Car")) for f in frames):
+            raise ArgumentError("frames", f"none of the {len(frames)} real training frame(s) has a labelled Car, and no "
+                                          "synthetic scenes (--synth-scenes) or CAD views (--n-views) add car parts")
+        # the calibration holds out folds of the real frames
+        if calibrate_real and len(np.unique(real_folds(frames, calibration_folds))) < 2:
             raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
                                 f"(drives); the {len(frames)} frame(s) given fall in one: train without it "
                                 "(calibrate_real=False, --no-calibrate) or on frames of more drives")
