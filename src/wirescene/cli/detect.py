@@ -89,7 +89,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
             raise click.BadParameter(str(exc), param_hint="--calibration") from None
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
-        fl = [int(k) for k in folds.split(",") if k.strip()] if folds else None
+        fl = _fold_list(folds)
         drives = read_drive_map(ds, drive_mapping)[0] if not no_calibration and given is None else None
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
                                            n_partial=n_partial, calibration_folds=not no_calibration,
@@ -109,6 +109,21 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
                                      mining_images=mining_images, n_val=n_val, progress=click.echo)
     if report:
         write_text(report, json.dumps(rep, indent=1, default=float))
+
+
+def _fold_list(text: str | None) -> list[int] | None:
+    """``--folds`` ("0,1,3") as fold numbers, each one of the N_FOLDS folds."""
+    from wirescene.io.folds import N_FOLDS
+
+    if not text:
+        return None
+    try:
+        folds = sorted({int(k) for k in text.split(",") if k.strip()})
+    except ValueError:
+        raise click.BadParameter(f"{text!r} is not a comma-separated list of fold numbers", param_hint="--folds") from None
+    if not folds or not set(folds) <= set(range(N_FOLDS)):
+        raise click.BadParameter(f"{text!r}: the folds are 0 to {N_FOLDS - 1}", param_hint="--folds")
+    return folds
 
 
 @click.command("viewpoints")

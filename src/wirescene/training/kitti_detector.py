@@ -71,7 +71,7 @@ from typing import Mapping
 
 import numpy as np
 
-from wirescene.core.errors import InputError
+from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.groundplane import wrap_angle
 from wirescene.core.viewpoints import BIN_WIDTH, N_BINS, bin_center, viewpoint_bin
 from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_pyramid, pad_pyramid, score_pyramid
@@ -1000,9 +1000,11 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     ds = KittiDataset(kitti_root, split=split)
     ids = list(frames) if frames else ds.frame_ids()
     if folds is not None:
-        ids = [f for f in ids if fold_of(f) in set(folds)]
+        given, ids = len(ids), [f for f in ids if fold_of(f) in set(folds)]
+        if not ids:
+            raise ArgumentError("folds", f"none of the {given} frame(s) given lies in folds {sorted(set(folds))} (--folds)")
     if not ids:
-        raise ValueError("no training frames selected")
+        raise ArgumentError("frames", "no training frames selected")
     if not any(len(ds.labels(f).of_type("Car")) for f in ids):  # else an empty bank, written without a word
         raise InputError(f"none of the {len(ids)} training frame(s) has a labelled Car to learn from", path=ds.split_dir)
     report = {"frames": ids}
