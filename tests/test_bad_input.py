@@ -58,15 +58,20 @@ def _fit_case(tmp, *, calib=None, dets=None, image=None, extra=()):
     return ["fit", img, "--calib", c, "--detections", d, "--out", tmp / "out", "--variant", "coarse", *extra]
 
 
-def _carless_root(tmp):
-    """A KITTI root of one frame whose label holds no Car (a DontCare region only)."""
-    split = tmp / "carless" / "training"
+def _frame_root(tmp, label: str):
+    """A KITTI root (``tmp/kitti``) of a copy of the test frame whose label file holds ``label``."""
+    split = tmp / "kitti" / "training"
     for sub, ext in (("image_2", "png"), ("calib", "txt")):
         (split / sub).mkdir(parents=True)
-        shutil.copy(SPLIT / sub / f"{FRAME}.{ext}", split / sub / f"{FRAME}.{ext}")
+        shutil.copy(SPLIT / sub / f"{FRAME}.{ext}", split / sub)
     (split / "label_2").mkdir()
-    (split / "label_2" / f"{FRAME}.txt").write_text("DontCare -1 -1 -10 1000 160 1040 190 -1 -1 -1 -1000 -1000 -1000 -10\n")
+    (split / "label_2" / f"{FRAME}.txt").write_text(label)
     return split.parent
+
+
+def _carless_root(tmp):
+    """A KITTI root of one frame whose label holds no Car (a DontCare region only)."""
+    return _frame_root(tmp, "DontCare -1 -1 -10 1000 160 1040 190 -1 -1 -1 -1000 -1000 -1000 -10\n")
 
 
 def _eval_case(tmp, *extra):
@@ -79,13 +84,8 @@ LABEL_ROWS = len((SPLIT / "label_2" / f"{FRAME}.txt").read_text().splitlines())
 def _eval_label_case(tmp, row):
     """``eval`` of a copy of the test frame whose label file ends with ``row``; outputs asked
     for, so that any partial output would show."""
-    split = tmp / "kitti" / "training"
-    for sub, ext in (("image_2", "png"), ("calib", "txt"), ("label_2", "txt")):
-        (split / sub).mkdir(parents=True)
-        shutil.copy(SPLIT / sub / f"{FRAME}.{ext}", split / sub)
-    label = split / "label_2" / f"{FRAME}.txt"
-    label.write_text(label.read_text() + row + "\n")
-    return ["eval", tmp / "kitti", "--variant", "coarse", "--frames", FRAME, "--workers", "1",
+    root = _frame_root(tmp, (SPLIT / "label_2" / f"{FRAME}.txt").read_text() + row + "\n")
+    return ["eval", root, "--variant", "coarse", "--frames", FRAME, "--workers", "1",
             "--predictions", tmp / "pred", "--json", tmp / "metrics.json", "--report", tmp / "report"]
 
 
