@@ -163,6 +163,8 @@ def test_dataset_from_root_and_split_dir(kitti_root):
     assert_close(P2[0], [7.215377e02, 0.0, 6.095593e02, 4.485728e01])
     assert_close(cam.P, P2)
     assert ds.image("000002").shape[:2] == (375, 1242)
+    assert ds.car_counts(["000002", "000010", "001545"]) == {"000002": 1, "000010": 8, "001545": 6}
+    assert ds.car_counts([10]) == {10: 8}  # keyed as given
 
 
 def test_dataset_without_labels_and_bad_roots(kitti_root, tmp_path):

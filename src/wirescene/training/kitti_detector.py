@@ -1005,7 +1005,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
             raise ArgumentError("folds", f"none of the {given} frame(s) given lies in folds {sorted(set(folds))} (--folds)")
     if not ids:
         raise ArgumentError("frames", "no training frames selected")
-    if not any(len(ds.labels(f).of_type("Car")) for f in ids):  # else an empty bank, written without a word
+    if not any(ds.car_counts(ids).values()):  # else an empty bank, written without a word
         raise InputError(f"none of the {len(ids)} training frame(s) has a labelled Car to learn from", path=ds.split_dir)
     report = {"frames": ids}
     # the recipe trains a verifier (finish_bank), weighted by the calibration's third number
@@ -1052,8 +1052,8 @@ def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4,
     drives = frame_drives() if drives is None else drives
     group = {f: drives.get(f, f) for f in frames}
     cars: dict[str, int] = {}
-    for f in frames:
-        cars[group[f]] = cars.get(group[f], 0) + len(dataset.labels(f).of_type("Car"))
+    for f, n in dataset.car_counts(frames).items():
+        cars[group[f]] = cars.get(group[f], 0) + n
     if len(cars) < 2:
         raise InputError(f"held-out calibration needs frames of at least two drives (or two frames of unknown drive); "
                          f"got {len(frames)} frame(s) of one", path=dataset.split_dir)

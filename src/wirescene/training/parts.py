@@ -782,7 +782,7 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
 
         ds = KittiDataset(kitti_root)
         frames = ds.frame_ids() if frames is None else list(frames)
-        if real_only and not any(len(ds.labels(f).of_type("Car")) for f in frames):
+        if real_only and not any(ds.car_counts(frames).values()):
             raise ArgumentError("frames", f"none of the {len(frames)} real training frame(s) has a labelled Car, and no "
                                           "synthetic scenes (--synth-scenes) or CAD views (--n-views) add car parts")
         # the calibration holds out folds of the real frames

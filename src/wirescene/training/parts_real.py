@@ -214,8 +214,7 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
     if label_shapes is not None:  # refused before any patch is cut, naming the frame
         from wirescene.core.errors import InputError
 
-        for fid in frame_ids:
-            n = len(ds.labels(fid).of_type("Car"))
+        for fid, n in ds.car_counts(frame_ids).items():
             if fid in label_shapes and np.shape(label_shapes[fid]) != (n, 36, 3):
                 raise InputError(f"label shapes of frame {fid} are {np.shape(label_shapes[fid])}, but it has {n} "
                                  f"Car labels: (N, 36, 3) expected")

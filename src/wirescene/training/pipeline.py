@@ -286,7 +286,7 @@ def _previous_steps(out: Path, resume: bool) -> dict:
 def _new_manifest(dataset, ids: list[str], folds: dict[str, int], split_file, *, drives: Mapping[str, str],
                   mapping_dir: Path | None) -> dict:
     """The manifest of a run before its steps: data, split file and folds (grouped by ``drives``)."""
-    cars = sum(len(dataset.labels(f).of_type("Car")) for f in ids)
+    cars = sum(dataset.car_counts(ids).values())
     data = {"kitti_root": str(Path(dataset.split_dir).resolve()), "frames": len(ids), "cars": cars,
             "frames_sha256": _frames_sha256(ids), "frame_ids": ids}
     if split_file is not None:
