@@ -315,7 +315,7 @@ class KittiDataset:
         size = self.image_size(frame_id) if image.is_file() else None  # no image: checked where it is read
         return read_labels(self.label_path(frame_id), image_size=size)
 
-    def car_counts(self, frame_ids) -> dict[str, int]:
+    def car_counts(self, frame_ids) -> dict[str | int, int]:
         """``{frame: number of its Car labels}`` for ``frame_ids`` (keyed as given): what the
         training commands check before they learn (a bank or a part model needs labelled cars)."""
         return {f: len(self.labels(f).of_type("Car")) for f in frame_ids}
