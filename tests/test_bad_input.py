@@ -25,7 +25,7 @@ from wirescene.cli.main import main
 from wirescene.core.camera import read_kitti_calib
 from wirescene.core.errors import InputError
 from wirescene.io.detections import read_detections
-from wirescene.io.folds import fold_of
+from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset, read_image, read_labels
 
 SPLIT = KITTI_ROOT / "training"
@@ -206,7 +206,7 @@ CASES = {
                                             "--folds", "7"], "--folds: '7': the folds are 0 to 3"),
     "train detector, no frame in --folds": (
         lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--frames", FRAME,
-                   "--folds", str((fold_of(FRAME) + 1) % 4), "--no-calibration"], "folds: none of the 1 frame.s. given"),
+                   "--folds", str((fold_of(FRAME) + 1) % N_FOLDS), "--no-calibration"], "folds: none of the 1 frame.s. given"),
     "train occlusion --scenes 0": (lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "0"], "--scenes"),
     # synthetic scenes
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],

@@ -1000,9 +1000,10 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     ds = KittiDataset(kitti_root, split=split)
     ids = list(frames) if frames else ds.frame_ids()
     if folds is not None:
-        given, ids = len(ids), [f for f in ids if fold_of(f) in set(folds)]
+        wanted = set(folds)
+        given, ids = len(ids), [f for f in ids if fold_of(f) in wanted]
         if not ids:
-            raise ArgumentError("folds", f"none of the {given} frame(s) given lies in folds {sorted(set(folds))} (--folds)")
+            raise ArgumentError("folds", f"none of the {given} frame(s) given lies in folds {sorted(wanted)} (--folds)")
     if not ids:
         raise ArgumentError("frames", "no training frames selected")
     if not any(ds.car_counts(ids).values()):  # else an empty bank, written without a word
