@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,20 @@ KITTI_ROOT = DATA / "kitti"
 # a detector bank trained in seconds on two frames (train_bank_on_frames options)
 TINY_BANK = dict(n_partial=0, mining_rounds=1, neg_per_image=10, min_pos=20, min_height=40.0, max_scale=1.0,
                  per_octave=2)
+
+
+def kitti_copy(dest: Path, frames, *, subdirs=("image_2", "calib", "label_2"), split="training",
+               rename=None) -> Path:
+    """A KITTI root at ``dest`` whose ``split`` holds copies of the test frames ``frames`` (only the
+    ``subdirs`` given); ``rename`` maps a frame to the id its copy takes. Returns ``dest``."""
+    rename = rename or {}
+    for sub in subdirs:
+        (dest / split / sub).mkdir(parents=True, exist_ok=True)
+        ext = "png" if sub == "image_2" else "txt"
+        for frame in frames:
+            shutil.copy(KITTI_ROOT / "training" / sub / f"{frame}.{ext}",
+                        dest / split / sub / f"{rename.get(frame, frame)}.{ext}")
+    return dest
 
 
 def assert_close(actual, expected, *, atol=1e-6, rtol=1e-6, msg=""):

@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import wirescene.io.kitti
-from conftest import KITTI_ROOT
+from conftest import KITTI_ROOT, kitti_copy
 from wirescene.cli.main import main
 from wirescene.core.camera import read_kitti_calib
 from wirescene.core.errors import InputError
@@ -60,13 +60,10 @@ def _fit_case(tmp, *, calib=None, dets=None, image=None, extra=()):
 
 def _frame_root(tmp, label: str):
     """A KITTI root (``tmp/kitti``) of a copy of the test frame whose label file holds ``label``."""
-    split = tmp / "kitti" / "training"
-    for sub, ext in (("image_2", "png"), ("calib", "txt")):
-        (split / sub).mkdir(parents=True)
-        shutil.copy(SPLIT / sub / f"{FRAME}.{ext}", split / sub)
-    (split / "label_2").mkdir()
-    (split / "label_2" / f"{FRAME}.txt").write_text(label)
-    return split.parent
+    root = kitti_copy(tmp / "kitti", [FRAME], subdirs=("image_2", "calib"))
+    (root / "training" / "label_2").mkdir()
+    (root / "training" / "label_2" / f"{FRAME}.txt").write_text(label)
+    return root
 
 
 def _carless_root(tmp):

@@ -7,7 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
-from conftest import assert_close
+from conftest import assert_close, kitti_copy
 from wirescene.core.errors import InputError
 from wirescene.io import (
     CAR_TYPES,
@@ -168,9 +168,7 @@ def test_dataset_from_root_and_split_dir(kitti_root):
 
 
 def test_dataset_without_labels_and_bad_roots(kitti_root, tmp_path):
-    split = tmp_path / "testing"
-    for sub in ("image_2", "calib"):
-        shutil.copytree(kitti_root / "training" / sub, split / sub)
+    split = kitti_copy(tmp_path, ["000002", "000010", "001545"], subdirs=("image_2", "calib"), split="testing") / "testing"
     ds = KittiDataset(tmp_path, split="testing")
     assert not ds.has_labels and ds.frame_ids() == ["000002", "000010", "001545"]
     with pytest.raises(InputError, match="no label_2"):

@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 import wirescene
-from conftest import KITTI_ROOT, assert_close
+from conftest import KITTI_ROOT, assert_close, kitti_copy
 from wirescene.cli.main import main
 from wirescene.core.errors import InputError
 from wirescene.core.resources import ARTEFACTS, DATA_DIR, MANIFEST_FILE, resolve_models, shipped_path
@@ -198,13 +198,7 @@ def test_held_out_folds_are_drives_where_known_and_frames_otherwise(tmp_path):
     from wirescene.training.pipeline import calibration_folds
 
     # 000002 and 000010 are frames of known drives; a copy under an unknown id is a group of its own
-    root = tmp_path / "kitti" / "training"
-    for sub, ext in (("image_2", "png"), ("calib", "txt"), ("label_2", "txt")):
-        (root / sub).mkdir(parents=True)
-        for frame in ("000002", "000010"):
-            shutil.copy(KITTI_ROOT / "training" / sub / f"{frame}.{ext}", root / sub / f"{frame}.{ext}")
-        shutil.copy(KITTI_ROOT / "training" / sub / f"001545.{ext}", root / sub / f"900001.{ext}")
-    dataset = KittiDataset(tmp_path / "kitti")
+    dataset = KittiDataset(kitti_copy(tmp_path / "kitti", ["000002", "000010", "001545"], rename={"001545": "900001"}))
     folds = calibration_folds(dataset, ["000002", "000010", "900001"], n_folds=2)
     # cars: 000010 8, 900001 6, 000002 1 -> the largest group alone, the other two together
     assert folds == {"000010": 0, "900001": 1, "000002": 1}
