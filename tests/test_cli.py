@@ -137,6 +137,13 @@ def test_gt_command_draws_frame(tmp_path):
 def test_train_and_cad_commands_are_registered():
     r = run("--help")
     assert "train" in r.output and "cad" in r.output
+    from wirescene.lift import LiftingOptions
+
+    planes = len(LiftingOptions().plane_grid()[0])
+    for command in ("eval", "fit", "predict"):  # --particles names the grid's cap on it
+        help_text = " ".join(run(command, "--help").output.split())
+        assert f"at most one per plane of its grid ({planes} planes" in help_text, command
+        assert f"default: {LiftingOptions().n_particles}" in help_text, command
     r = run("cad", "list", "--cad-dir", KITTI_ROOT.parent / "cad")
     assert r.exit_code == 0, r.output
     assert "road" in r.output

@@ -134,6 +134,13 @@ def test_particles_sorted_and_configurable(dataset):
     indep = select_particles(table, shared_plane=False).cost[0]
     shared = select_particles(table, shared_plane=True).cost[0]
     assert indep <= shared + 1e-12
+    # at most one particle per plane of the grid (pitch +-3 deg, roll +-1.5 deg): a coarser grid gives fewer
+    coarse = LiftingOptions(pitch_step=1.0, roll_step=1.0)
+    planes = len(coarse.plane_grid()[0])
+    assert planes == 7 * 5 and len(LiftingOptions().plane_grid()[0]) == 25 * 13
+    for shared in (False, True):
+        assert select_particles(lift_table(camera, dets, options=coarse), shared_plane=shared,
+                                n_particles=40).n_particles == planes
 
 
 def test_unknown_viewpoint_searches_full_circle(dataset):

@@ -21,6 +21,7 @@ from wirescene.cli.options import (
     interval_drives,
     load_models,
     models_option,
+    particles_option,
     select_frames,
     settings_option,
     split_file_option,
@@ -209,7 +210,7 @@ def _dask_client(address: str):
               help="Std. dev. (deg) of noise on the GT viewpoint before binning.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all labelled frames).")
 @split_file_option
-@click.option("--particles", type=POSITIVE, default=250, show_default=True, help="Scene particles kept by the coarse stage.")
+@particles_option
 @click.option("--seed", "seeds", type=NON_NEGATIVE, multiple=True, default=(0,), show_default=True,
               help="Seed of the fit. Repeat it (--seed 1 --seed 2 --seed 3) to fit every frame once per seed: each "
                    "seed's figures, then their mean and range over the seeds (the fit samples, so the seed alone "
@@ -383,7 +384,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
               help="With --detections DIR: images without a detection file get an empty label file.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every image).")
 @split_file_option
-@click.option("--particles", type=POSITIVE, default=250, show_default=True)
+@particles_option
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @workers_option()
 @click.option("--resume/--no-resume", default=False, show_default=True,
@@ -516,7 +517,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
                    "default: our own pre-detection from raw pixels.")
 @click.option("--gt", type=click.Path(path_type=Path), default=None, help="KITTI label file drawn in green for comparison.")
 @click.option("--variant", type=click.Choice(_variants()), default="coarse+gp", show_default=True)
-@click.option("--particles", type=POSITIVE, default=250, show_default=True)
+@particles_option
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
 @_inference_options

@@ -170,6 +170,17 @@ def workers_option(what: str = "fitting frames"):
                         help=f"Processes {what} in parallel (default: all cores).")
 
 
+def particles_option(f):
+    """``--particles N``: scene particles the coarse stage hands the fine one (``LiftingOptions.n_particles``)."""
+    from wirescene.lift import LiftingOptions
+
+    options = LiftingOptions()
+    planes = len(options.plane_grid()[0])
+    return click.option("--particles", type=POSITIVE, default=options.n_particles, show_default=True,
+                        help=f"Scene particles kept by the coarse stage: at most one per plane of its grid "
+                             f"({planes} planes with the default steps).")(f)
+
+
 def workers_count(workers: int | None) -> int:
     """The processes of ``--workers`` (None: all cores)."""
     return workers or os.cpu_count() or 1
