@@ -137,16 +137,21 @@ def test_gt_command_draws_frame(tmp_path):
 def test_train_and_cad_commands_are_registered():
     r = run("--help")
     assert "train" in r.output and "cad" in r.output
-    from wirescene.lift import LiftingOptions
-
-    planes = len(LiftingOptions().plane_grid()[0])
-    for command in ("eval", "fit", "predict"):  # --particles names the grid's cap on it
-        help_text = " ".join(run(command, "--help").output.split())
-        assert f"at most one per plane of its grid ({planes} planes" in help_text, command
-        assert f"default: {LiftingOptions().n_particles}" in help_text, command
     r = run("cad", "list", "--cad-dir", KITTI_ROOT.parent / "cad")
     assert r.exit_code == 0, r.output
     assert "road" in r.output
+
+
+def test_particles_option_names_the_coarse_grids_cap():
+    """``--particles`` of eval, fit and predict: the default of ``LiftingOptions``, and the help says that the
+    coarse stage keeps at most one particle per plane of its grid."""
+    from wirescene.lift import LiftingOptions
+
+    planes = len(LiftingOptions().plane_grid()[0])
+    for command in ("eval", "fit", "predict"):
+        help_text = " ".join(run(command, "--help").output.split())
+        assert f"at most one per plane of its grid ({planes} planes" in help_text, command
+        assert f"default: {LiftingOptions().n_particles}" in help_text, command
 
 
 def test_eval_runs_unchanged_on_synth_and_uses_vertex_ground_truth(tmp_path):
