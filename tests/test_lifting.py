@@ -138,9 +138,9 @@ def test_particles_sorted_and_configurable(dataset):
     coarse = LiftingOptions(pitch_step=1.0, roll_step=1.0)
     planes = len(coarse.plane_grid()[0])
     assert planes == 7 * 5 and len(LiftingOptions().plane_grid()[0]) == 25 * 13
+    coarse_table = lift_table(camera, dets, options=coarse)
     for shared in (False, True):
-        assert select_particles(lift_table(camera, dets, options=coarse), shared_plane=shared,
-                                n_particles=40).n_particles == planes
+        assert select_particles(coarse_table, shared_plane=shared, n_particles=40).n_particles == planes
 
 
 def test_unknown_viewpoint_searches_full_circle(dataset):
