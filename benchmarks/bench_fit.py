@@ -2,7 +2,9 @@
 
 1. Likelihood evaluations per second: the batched implementation (one call for
    particles x objects x samples) against a naive loop calling it once per hypothesis,
-   measured side by side in this run, reported as a ratio.
+   measured side by side in this run, reported as a ratio; likewise the lifting's box
+   projection (two terms an axis) against projecting the 8 placed corners, on the
+   lifting's batch (cars x planes x azimuths).
 2. One full fit per variant, per stage (lifting, part evidence, inference), and the peak
    resident memory of the process.
 
@@ -24,6 +26,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners, box_extent_object, project_points_to_box  # noqa: E402
+from wirescene.core.groundplane import object_pose  # noqa: E402
 from wirescene.core.shape import load_default  # noqa: E402
 from wirescene.fitting.pipeline import FitOptions, fit_scene  # noqa: E402
 from wirescene.infer.evidence import part_evidence  # noqa: E402
@@ -31,13 +35,39 @@ from wirescene.infer.inference import InferenceOptions  # noqa: E402
 from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood  # noqa: E402
 from wirescene.io.detections import detections_from_labels  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.lift import LiftingOptions, lift_table, select_particles  # noqa: E402
+from wirescene.lift import LiftingOptions, lift_table, project_boxes, select_particles  # noqa: E402
 
 
 def likelihood_batch(camera, model, evidence, x, z, az, s, obj, c):
     b = instantiate_wireframes(camera, model, x=x, z=z, azimuth=az, pitch=np.zeros_like(x), roll=np.zeros_like(x),
                                shape=s, height=1.65)
     return wireframe_likelihood(b, evidence, obj, c=c)
+
+
+def box_projection_ratio(camera, lifted, n_azimuths: int, repeats: int = 5) -> tuple[float, float]:
+    """Seconds of one box projection of the lifting's batch, closed form and 8 corners."""
+    n, G = lifted.cost.shape
+    rng = np.random.default_rng(0)
+    shape = (n, G, n_azimuths)
+    loc, R = object_pose(lifted.x[..., None] + rng.normal(0, 0.1, shape), lifted.z[..., None] + rng.normal(0, 0.1, shape),
+                         rng.uniform(-np.pi, np.pi, shape), lifted.pitch[:, None], lifted.roll[:, None])
+    dims = np.broadcast_to(MEAN_CAR_DIMS, shape + (3,))
+    lo, hi = box_extent_object(MEAN_CAR_DIMS)
+
+    def corners():
+        X = box_corners(dims, loc, R)
+        return project_points_to_box(camera, X), camera.project_with_depth(X)[1].min(axis=-1)
+
+    timings = {}
+    for name, f in (("closed", lambda: project_boxes(camera, lo, hi, loc, R)), ("corners", corners)):
+        f()
+        t = time.perf_counter()
+        for _ in range(repeats):
+            out = f()
+        timings[name] = (time.perf_counter() - t) / repeats, out
+    (t_closed, a), (t_corners, b) = timings["closed"], timings["corners"]
+    assert np.allclose(a[0], b[0], atol=1e-6) and np.allclose(a[1], b[1], atol=1e-9)
+    return t_closed, t_corners
 
 
 def main():
@@ -87,6 +117,10 @@ def main():
     assert np.allclose(naive, batched[:n_naive])
     print(f"{args.frame}: {len(dets)} cars, {p.n_particles} particles -> {H} hypotheses")
     print(f"likelihood: batched {H / t_batch:,.0f} hyp/s, naive {H / t_naive:,.0f} hyp/s, ratio {t_naive / t_batch:.1f}x")
+    n_az = len(LiftingOptions().alpha_offsets(True))
+    t_closed, t_corners = box_projection_ratio(camera, lifted, n_az)
+    print(f"lifting's box projection ({len(dets)} x {lifted.cost.shape[1]} x {n_az} boxes): closed form "
+          f"{t_closed * 1e3:.1f} ms, 8 corners {t_corners * 1e3:.1f} ms, ratio {t_corners / t_closed:.1f}x")
 
     # 2. full fits, per stage
     # Wall and CPU time of this process: on a busy machine the CPU time is the figure

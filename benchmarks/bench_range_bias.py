@@ -44,7 +44,7 @@ def corrected_within_1m(cars: dict) -> list[dict]:
 
 def projected_label_boxes(root: Path) -> dict:
     """Median ratios of the projected 3D label box to the labelled 2D box, by depth band."""
-    from wirescene.core.boxes import box_corners_object
+    from wirescene.core.boxes import box_extent_object
     from wirescene.core.groundplane import rotation_y
     from wirescene.io.kitti import KittiDataset
     from wirescene.lift import project_boxes
@@ -56,7 +56,7 @@ def projected_label_boxes(root: Path) -> dict:
         for o in ds.labels(f).objects:
             if o.type != "Car" or o.truncated > 0.05 or o.occluded > 0:
                 continue
-            p, _ = project_boxes(camera, box_corners_object(np.asarray(o.dims, float)), np.asarray(o.location, float),
+            p, _ = project_boxes(camera, *box_extent_object(np.asarray(o.dims, float)), np.asarray(o.location, float),
                                  rotation_y(o.rotation_y))
             g = o.box
             rows.append([(p[2] - p[0]) / (g[2] - g[0]), (p[3] - p[1]) / (g[3] - g[1]), p[3] - g[3], o.location[2]])

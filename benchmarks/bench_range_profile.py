@@ -43,7 +43,7 @@ from wirescene.core.wireframe import FACES
 from wirescene.eval.sources import frame_seed
 from wirescene.fitting.pipeline import FitOptions, fit_frame, load_shape_model
 from wirescene.fitting.variants import VARIANTS
-from wirescene.infer.inference import BOX_ROBUST, extent_corners
+from wirescene.infer.inference import BOX_ROBUST
 from wirescene.infer.likelihood import object_likelihood, outside_image
 from wirescene.infer.masks import mask_hidden
 from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion
@@ -98,7 +98,7 @@ def scene_profiles(camera, scene, evidence, boxes, *, variant, c: float, box_wei
         det = np.asarray(boxes[o.detection_index], float)[None]
         loc = o.location[None] + shift[:, 0]
         # the box term's squared side residuals (box_cost is their sum), kept apart to split the term
-        projected, min_depth = project_boxes(camera, extent_corners(Xj.min(axis=0), Xj.max(axis=0)), loc, o.R[None])
+        projected, min_depth = project_boxes(camera, Xj.min(axis=0), Xj.max(axis=0), loc, o.R[None])
         r2 = box_residual(projected, det, min_depth) ** 2
 
         def robust(cost):

@@ -522,7 +522,6 @@ def test_range_profile_finds_the_evidence_range_of_a_car_placed_too_far(monkeypa
     from wirescene.core.shape import load_default
     from wirescene.core.types import ObjectEstimate, SceneEstimate
     from wirescene.fitting.variants import VARIANTS
-    from wirescene.infer.inference import extent_corners
     from wirescene.infer.likelihood import GaussianVertexEvidence, instantiate_wireframes
     from wirescene.io.kitti import KittiDataset
     from wirescene.lift import project_boxes
@@ -534,7 +533,7 @@ def test_range_profile_finds_the_evidence_range_of_a_car_placed_too_far(monkeypa
     truth = instantiate_wireframes(camera, model, x=np.array([-3.0, 4.0]), z=np.array([15.0, 22.0]), **place)
     # the 2D boxes KITTI would label: the projections of the cars' 3D boxes (the wireframes' extents)
     extent = np.matmul(truth.vertices - truth.location[:, None], truth.R)
-    boxes = project_boxes(camera, extent_corners(extent.min(1), extent.max(1)), truth.location, truth.R)[0]
+    boxes = project_boxes(camera, extent.min(1), extent.max(1), truth.location, truth.R)[0]
     evidence = GaussianVertexEvidence(truth.uv, ~truth.self_hidden)
     # the first car fitted 1.5 m too far along its ray (on the plane), the second at the truth
     ray = np.array([-3.0, 15.0]) / np.hypot(3.0, 15.0)

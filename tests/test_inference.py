@@ -259,14 +259,14 @@ def test_spread_grows_on_flat_and_shrinks_at_a_peak(synthetic_scene, plane):
 def test_plane_refinement_and_box_term_recover_a_tilted_plane(synthetic_scene):
     """Started on the coarse grid, the sampled plane moves towards the true (0.7, -0.3)
     deg plane, objects following along their rays; the objective never decreases."""
-    from wirescene.infer.inference import _extent, extent_corners
+    from wirescene.infer.inference import _extent
     from wirescene.lift import project_boxes
 
     camera, model, truth, dets, evidence = synthetic_scene
     # boxes in KITTI's convention: the projected 3D box of each true wireframe
     b = instantiate_wireframes(camera, model, pitch=np.full(4, np.deg2rad(0.7)), roll=np.full(4, np.deg2rad(-0.3)),
                                height=1.65, **truth)
-    boxes, _ = project_boxes(camera, extent_corners(*_extent(b.vertices, b.location, b.R)), b.location, b.R)
+    boxes, _ = project_boxes(camera, *_extent(b.vertices, b.location, b.R), b.location, b.R)
     dets = Detections(boxes, 1.0, dets.alpha)
     # The boxes-only start (no road prior, whose start here is already within 0.37 m).
     lifted = lift_table(camera, dets, options=LiftingOptions(road_prior=0.0))

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, assert_close
-from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners, project_points_to_box
+from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners, box_extent_object, project_points_to_box
 from wirescene.core.groundplane import object_pose
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
@@ -13,6 +13,7 @@ from wirescene.lift import (
     LiftingOptions,
     lift_detections,
     lift_table,
+    project_boxes,
     road_alignment_cost,
     select_particles,
     solve_positions,
@@ -32,6 +33,24 @@ def _synthetic_boxes(camera, poses, dims=MEAN_CAR_DIMS):
         boxes.append(project_points_to_box(camera, box_corners(dims, loc, R)))
         alphas.append(az - np.arctan2(x, z))
     return np.array(boxes), np.array(alphas)
+
+
+def test_project_boxes_is_the_projection_of_the_eight_corners(dataset):
+    """The closed-form box projection (two terms an axis) equals projecting the 8 placed
+    corners, over a broadcast batch of sizes, planes and headings, one box reaching behind
+    the camera."""
+    camera = dataset.camera("000010")
+    rng = np.random.default_rng(3)
+    dims = MEAN_CAR_DIMS * rng.uniform(0.8, 1.2, (4, 1, 3))  # (4, 1, 3): a size per row
+    x, z = rng.uniform(-8, 8, (4, 5)), rng.uniform(4, 60, (4, 5))
+    z[0, 0] = 1.0  # a car beside the camera: corners behind it
+    loc, R = object_pose(x, z, rng.uniform(-np.pi, np.pi, (4, 5)), rng.normal(0, 0.03, (4, 5)), rng.normal(0, 0.02, (1, 5)))
+    box, min_depth = project_boxes(camera, *box_extent_object(dims), loc, R)
+    corners = box_corners(np.broadcast_to(dims, (4, 5, 3)), loc, R)
+    assert box.shape == (4, 5, 4) and min_depth.shape == (4, 5)
+    assert_close(box, project_points_to_box(camera, corners), atol=1e-6)
+    assert_close(min_depth, camera.project_with_depth(corners)[1].min(axis=-1), atol=1e-9)
+    assert min_depth[0, 0] <= 0 < min_depth[1:].min()
 
 
 def test_solve_positions_exact_when_model_is_exact(dataset):

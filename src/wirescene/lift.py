@@ -23,15 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wirescene.core.arrays import point_bounds
-from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners_object
+from wirescene.core.boxes import MEAN_CAR_DIMS, box_extent_object
 from wirescene.core.camera import Camera
 from wirescene.core.groundplane import (
     KITTI_CAMERA_HEIGHT,
     plane_normal,
     plane_rotation,
-    point_on_plane,
-    rotation_y,
     wrap_angle,
 )
 from wirescene.core.settings import option
@@ -82,17 +79,44 @@ def _symmetric_range(half: float, step: float) -> np.ndarray:
     return np.arange(-n, n + 1) * step
 
 
-def project_boxes(camera: Camera, corners_obj, location, R) -> tuple[np.ndarray, np.ndarray]:
-    """2D boxes ``(..., 4)`` of 3D boxes with object-frame corners ``corners_obj``
-    ``(..., 8, 3)`` (see :func:`wirescene.core.boxes.box_corners_object`), clipped to the
-    image when its size is known, and the minimum corner depth ``(...)`` (<= 0 means the
-    box reaches behind the camera)."""
-    uv, depth = camera.project_placed(corners_obj, location, R)
-    box = np.concatenate(point_bounds(uv), axis=-1)
+def project_boxes(camera: Camera, lo, hi, location, R) -> tuple[np.ndarray, np.ndarray]:
+    """2D boxes ``(..., 4)`` of the object-frame boxes spanning ``lo`` to ``hi`` ``(..., 3)``
+    (see :func:`wirescene.core.boxes.box_extent_object`) placed at ``location`` ``(..., 3)``
+    with rotation ``R`` ``(..., 3, 3)``, clipped to the image when its size is known, and
+    the minimum corner depth ``(...)`` (<= 0 means the box reaches behind the camera)."""
+    lo, hi, location, R = (np.asarray(a, dtype=float) for a in (lo, hi, location, R))
+    nd = max(lo.ndim - 1, hi.ndim - 1, location.ndim - 1, R.ndim - 2)  # batch axes
+    P3 = camera.P[:, :3]
+    M = _components_first(np.matmul(P3, R), nd, 2)  # (3 rows, 3 object axes, batch...)
+    offset = _components_first(location @ P3.T + camera.P[:, 3], nd)
+    return _projected_extent(camera, lo, hi, (M[:, 0], M[:, 1], M[:, 2]), offset)
+
+
+def _components_first(a: np.ndarray, nd: int, k: int = 1) -> np.ndarray:
+    """``a`` ``(batch..., 3)`` (``k = 1``) or ``(batch..., 3, 3)`` (``k = 2``) with its ``k``
+    component axes first and its batch axes padded to ``nd``, so the batch broadcasts."""
+    moved = np.moveaxis(a, tuple(range(a.ndim - k, a.ndim)), tuple(range(k)))
+    return moved.reshape(moved.shape[:k] + (1,) * (nd - (a.ndim - k)) + moved.shape[k:])
+
+
+def _projected_extent(camera: Camera, lo, hi, axes, offset) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`project_boxes` from the homogeneous image directions ``axes`` (three
+    ``(3, batch...)``, components first) of the object's axes and the image point
+    ``offset`` ``(3, batch...)`` of its origin, all with the batch's number of axes."""
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    # A corner takes lo or hi along each axis, so its image point is the offset plus one of
+    # two terms per axis: 2 x 3 products a box instead of an (8 x 3) @ (3 x 3) one.
+    t = [np.stack(np.broadcast_arrays(a * lo[..., k], a * hi[..., k])) for k, a in enumerate(axes)]
+    uvw = offset + t[0][:, None, None] + t[1][None, :, None] + t[2][None, None, :]
+    uvw = uvw.reshape((8,) + uvw.shape[3:])  # corners, then components: elementwise minima
+    w = uvw[:, 2]
+    safe = np.where(np.abs(w) < 1e-9, 1e-9, w)
+    u, v = uvw[:, 0] / safe, uvw[:, 1] / safe
+    box = np.stack([u.min(axis=0), v.min(axis=0), u.max(axis=0), v.max(axis=0)], axis=-1)
     if camera.image_size is not None:
-        w, h = camera.image_size
-        box = np.clip(box, 0.0, [w - 1, h - 1, w - 1, h - 1])
-    return box, depth.min(axis=-1)
+        width, height = camera.image_size
+        box = np.clip(box, 0.0, [width - 1, height - 1, width - 1, height - 1])
+    return box, w.min(axis=0)
 
 
 def box_residual(projected: np.ndarray, detected: np.ndarray, min_depth: np.ndarray) -> np.ndarray:
@@ -146,19 +170,26 @@ def solve_positions(
     """
     shape = np.broadcast_shapes(boxes.shape[:-1], np.shape(alpha), np.shape(pitch), np.shape(roll), dims.shape[:-1])
     boxes = np.broadcast_to(boxes, shape + (4,))
-    corners = box_corners_object(dims)  # before broadcasting: once per distinct size
+    lo, hi = box_extent_object(dims)  # before broadcasting: once per distinct size
+    # The plane's rotation and normal once per distinct plane; the azimuth turns the
+    # plane's axes in closed form (R = R_gp @ R_y), elementwise over the batch.
+    R_gp = plane_rotation(pitch, roll)
+    normal = R_gp[..., :, 1]
+    P3, p4 = camera.P[:, :3], camera.P[:, 3]
+    A = _components_first(np.matmul(P3, R_gp), len(shape), 2)  # (3 rows, 3 plane axes, batch...)
+    a0, a1, a2 = A[:, 0], A[:, 1], A[:, 2]
     dims = np.broadcast_to(dims, shape + (3,))
     alpha = np.broadcast_to(alpha, shape)
-    R_gp = np.broadcast_to(plane_rotation(pitch, roll), shape + (3, 3))
     pitch = np.broadcast_to(pitch, shape)
     roll = np.broadcast_to(roll, shape)
 
     def residual(x, logz):
         z = np.exp(logz)
-        az = wrap_angle(alpha + np.arctan2(x, z))
-        loc = point_on_plane(x, z, pitch, roll, height)
-        R = R_gp @ rotation_y(az)
-        proj, min_depth = project_boxes(camera, corners, loc, R)
+        az = alpha + np.arctan2(x, z)
+        c, s = np.cos(az), np.sin(az)
+        y = (height - normal[..., 0] * x - normal[..., 2] * z) / normal[..., 1]  # on the plane
+        offset = np.stack([P3[i, 0] * x + P3[i, 1] * y + P3[i, 2] * z + p4[i] for i in range(3)])
+        proj, min_depth = _projected_extent(camera, lo, hi, (c * a0 - s * a2, a1, s * a0 + c * a2), offset)
         return box_residual(proj, boxes, min_depth)
 
     x, z = _initial_position(camera, boxes, pitch, roll, height, dims)

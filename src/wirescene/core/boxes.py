@@ -33,6 +33,22 @@ def box_corners_object(dims) -> np.ndarray:
     return _UNIT_CORNERS * scale[..., None, :]
 
 
+def box_extent_object(dims) -> tuple[np.ndarray, np.ndarray]:
+    """Object-frame ``lo, hi`` ``(..., 3)`` of boxes with ``dims`` ``(..., 3)`` = (h, w, l):
+    the opposite corners of :func:`box_corners_object`.
+
+    Examples
+    --------
+    >>> lo, hi = box_extent_object(np.array([1.5, 1.6, 4.0]))
+    >>> lo.tolist(), hi.tolist()
+    ([-2.0, -1.5, -0.8], [2.0, 0.0, 0.8])
+    """
+    dims = np.asarray(dims, dtype=float)
+    check_shape("dims", dims, (..., 3))
+    half_l, h, half_w = dims[..., 2] / 2, dims[..., 0], dims[..., 1] / 2
+    return np.stack([-half_l, -h, -half_w], axis=-1), np.stack([half_l, np.zeros_like(h), half_w], axis=-1)
+
+
 def box_corners(dims, location, R) -> np.ndarray:
     """Camera-frame corners ``(..., 8, 3)`` of boxes placed at ``location`` with rotation ``R``."""
     return transform(box_corners_object(dims), np.asarray(location, float), np.asarray(R, float))

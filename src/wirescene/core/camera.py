@@ -76,20 +76,6 @@ class Camera:
         safe = np.where(np.abs(w) < 1e-9, 1e-9, w)
         return uvw[..., :2] / safe[..., None], w
 
-    def project_placed(self, points_obj: np.ndarray, location: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`project_with_depth` of object-frame points ``(..., V, 3)`` placed at
-        ``location`` ``(..., 3)`` with rotation ``R`` ``(..., 3, 3)``.
-
-        Composes the placement with the projection (one ``3 x 3`` product per object
-        instead of one pass over the points), for the lifting's grid search.
-        """
-        M = self.P[:, :3] @ np.asarray(R, dtype=float)  # (..., 3, 3)
-        offset = np.asarray(location, dtype=float) @ self.P[:, :3].T + self.P[:, 3]
-        uvw = np.matmul(np.asarray(points_obj, dtype=float), np.swapaxes(M, -1, -2)) + offset[..., None, :]
-        w = uvw[..., 2]
-        safe = np.where(np.abs(w) < 1e-9, 1e-9, w)
-        return uvw[..., :2] / safe[..., None], w
-
     def rays(self, uv: np.ndarray) -> np.ndarray:
         """Unit viewing directions ``(..., 3)`` through pixels ``uv`` ``(..., 2)``."""
         uv = np.asarray(uv, dtype=float)

@@ -216,20 +216,6 @@ def _extent(vertices, location, R):
     return X.min(axis=-2), X.max(axis=-2)
 
 
-def extent_corners(lo, hi):
-    """Corners ``(..., 8, 3)`` of the axis-aligned boxes ``lo, hi`` ``(..., 3)`` (e.g. a
-    wireframe's extent in its object frame).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> extent_corners(np.zeros(3), np.array([4.0, 1.5, 1.6]))[[0, -1]].tolist()
-    [[0.0, 0.0, 0.0], [4.0, 1.5, 1.6]]
-    """
-    sel = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], bool)  # (8, 3)
-    return np.where(sel, hi[..., None, :], lo[..., None, :])
-
-
 def box_cost(camera, vertices, location, R, boxes, extent=None) -> np.ndarray:
     """The coarse stage's lifting cost of placed wireframes against detection ``boxes``
     (broadcast to ``vertices.shape[:-2] + (4,)``): squared side differences, over the
@@ -237,7 +223,7 @@ def box_cost(camera, vertices, location, R, boxes, extent=None) -> np.ndarray:
     wireframe's extent (``extent``, see :func:`_extent`) clipped to the image --
     KITTI's label convention, the one the coarse stage fits with mean-size boxes."""
     lo, hi = _extent(vertices, location, R) if extent is None else extent
-    projected, min_depth = project_boxes(camera, extent_corners(lo, hi), location, R)
+    projected, min_depth = project_boxes(camera, lo, hi, location, R)
     return np.sum(box_residual(projected, boxes, min_depth) ** 2, axis=-1)
 
 
