@@ -259,14 +259,13 @@ def test_spread_grows_on_flat_and_shrinks_at_a_peak(synthetic_scene, plane):
 def test_plane_refinement_and_box_term_recover_a_tilted_plane(synthetic_scene):
     """Started on the coarse grid, the sampled plane moves towards the true (0.7, -0.3)
     deg plane, objects following along their rays; the objective never decreases."""
-    from wirescene.infer.inference import _extent
     from wirescene.lift import project_boxes
 
     camera, model, truth, dets, evidence = synthetic_scene
     # boxes in KITTI's convention: the projected 3D box of each true wireframe
     b = instantiate_wireframes(camera, model, pitch=np.full(4, np.deg2rad(0.7)), roll=np.full(4, np.deg2rad(-0.3)),
                                height=1.65, **truth)
-    boxes, _ = project_boxes(camera, *_extent(b.vertices, b.location, b.R), b.location, b.R)
+    boxes, _ = project_boxes(camera, *b.extent, b.location, b.R)
     dets = Detections(boxes, 1.0, dets.alpha)
     # The boxes-only start (no road prior, whose start here is already within 0.37 m).
     lifted = lift_table(camera, dets, options=LiftingOptions(road_prior=0.0))
@@ -286,7 +285,7 @@ def test_plane_refinement_and_box_term_recover_a_tilted_plane(synthetic_scene):
 
 def test_box_cost_is_the_lifting_cost_in_kitti_convention(synthetic_scene):
     """The fine stage's box term of a mean-size box equals the coarse lifting cost."""
-    from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners_object
+    from wirescene.core.boxes import MEAN_CAR_DIMS, box_extent_object
     from wirescene.core.groundplane import object_pose
     from wirescene.infer.inference import box_cost
     from wirescene.lift import solve_positions
@@ -295,9 +294,7 @@ def test_box_cost_is_the_lifting_cost_in_kitti_convention(synthetic_scene):
     dims = np.broadcast_to(MEAN_CAR_DIMS, (len(dets), 3))
     x, z, az, cost = solve_positions(camera, dets.boxes, dets.alpha, 0.0, 0.0, dims)
     loc, R = object_pose(x, z, az, 0.0, 0.0)
-    corners = box_corners_object(dims)
-    vertices = np.matmul(corners, np.swapaxes(R, -1, -2)) + loc[:, None, :]
-    assert_close(box_cost(camera, vertices, loc, R, dets.boxes), cost, atol=1e-9)
+    assert_close(box_cost(camera, box_extent_object(dims), loc, R, dets.boxes), cost, atol=1e-9)
 
 
 
@@ -306,7 +303,7 @@ def test_size_prior_is_the_negative_log_density_of_kitti_car_sizes(synthetic_sce
     deviations per dimension; the objective's penalty grows by size_prior times the
     size_cost of each hypothesis' wireframe box, so a much shortened car costs more."""
     from wirescene.core.boxes import KITTI_CAR_SIZE
-    from wirescene.infer.inference import _extent, _geometry, _terms, _to_viewing, size_cost
+    from wirescene.infer.inference import _geometry, _terms, _to_viewing, size_cost
 
     (l, w, h), (sl, _, sh) = KITTI_CAR_SIZE["mean"], KITTI_CAR_SIZE["std"]
     lo = np.array([[-l / 2, -h, -w / 2], [-l / 2 - sl, -h - 2 * sh, -w / 2]])
@@ -322,7 +319,7 @@ def test_size_prior_is_the_negative_log_density_of_kitti_car_sizes(synthetic_sce
     priored = _terms(camera, model, evidence, particles, theta, 5, size_prior=2.0)
     added = priored.penalty - plain.penalty
     batch = _geometry(camera, model, (particles.pitch, particles.roll), particles.height, theta, 5)
-    lo, hi = _extent(batch.vertices, batch.location, batch.R)
+    lo, hi = batch.extent
     assert_close(added, 2.0 * size_cost(lo, hi), atol=1e-6, rtol=1e-2)
     assert np.all(added[..., 1] > added[..., 0] + 1.0)
 

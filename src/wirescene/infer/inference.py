@@ -209,21 +209,14 @@ def _geometry(camera, shape_model, plane, height, theta, n_shape, device="numpy"
     )
 
 
-def _extent(vertices, location, R):
-    """Object-frame ``lo, hi`` ``(..., 3)`` of the axis-aligned extent of placed
-    wireframes ``vertices`` ``(..., 36, 3)`` (the 3D box KITTI would label)."""
-    X = np.matmul(vertices - location[..., None, :], R)  # back to the object frame
-    return X.min(axis=-2), X.max(axis=-2)
-
-
-def box_cost(camera, vertices, location, R, boxes, extent=None) -> np.ndarray:
+def box_cost(camera, extent, location, R, boxes) -> np.ndarray:
     """The coarse stage's lifting cost of placed wireframes against detection ``boxes``
-    (broadcast to ``vertices.shape[:-2] + (4,)``): squared side differences, over the
+    (broadcast to ``location.shape[:-1] + (4,)``): squared side differences, over the
     detection diagonal, between the detection and the projected 3D box of each
-    wireframe's extent (``extent``, see :func:`_extent`) clipped to the image --
-    KITTI's label convention, the one the coarse stage fits with mean-size boxes."""
-    lo, hi = _extent(vertices, location, R) if extent is None else extent
-    projected, min_depth = project_boxes(camera, lo, hi, location, R)
+    wireframe's object-frame ``extent`` (``lo, hi``, see :class:`~wirescene.infer.likelihood.WireframeBatch`)
+    clipped to the image -- KITTI's label convention, the one the coarse stage fits
+    with mean-size boxes."""
+    projected, min_depth = project_boxes(camera, *extent, location, R)
     return np.sum(box_residual(projected, boxes, min_depth) ** 2, axis=-1)
 
 
@@ -290,12 +283,11 @@ def _terms(camera, shape_model, evidence, particles, theta, n_shape, boxes=None,
     e = evidence.log_ratio(batch.uv, obj, batch.scale)
     penalty = np.zeros(theta.shape[:-1])
     box = box_weight and boxes is not None
-    extent = _extent(batch.vertices, batch.location, batch.R) if box or size_prior else None
     if box:
-        cost = box_cost(camera, batch.vertices, batch.location, batch.R, boxes[None, :, None, :], extent)
+        cost = box_cost(camera, batch.extent, batch.location, batch.R, boxes[None, :, None, :])
         penalty = box_weight * (BOX_ROBUST * np.log1p(cost / BOX_ROBUST))
     if size_prior:
-        penalty = penalty + size_prior * size_cost(*extent)
+        penalty = penalty + size_prior * size_cost(*batch.extent)
     if shape_prior:
         penalty = penalty + 0.5 * shape_prior * np.sum(theta[..., 3:3 + n_shape] ** 2, axis=-1)
     if np.any(road_prior):  # a weight, or (P, N, 1) weights per car

@@ -18,6 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
+from wirescene.core.arrays import point_bounds
 from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import object_pose, transform
@@ -81,6 +82,7 @@ class WireframeBatch:
     depth: np.ndarray  # (..., 36)
     self_hidden: np.ndarray  # (..., 36) bool
     scale: np.ndarray  # (...) projected length in pixels
+    extent: tuple[np.ndarray, np.ndarray]  # object-frame lo, hi (..., 3): the 3D box KITTI would label
 
 
 def instantiate_wireframes(
@@ -102,9 +104,10 @@ def instantiate_wireframes(
     uv, depth = camera.project_with_depth(vertices)
     hidden = self_occlusion(vertices, FACES, camera.center, device=device)
     # The projected car length sets the part-detector scale.
-    length = np.ptp(X_obj[..., 0], axis=-1)
+    lo, hi = point_bounds(X_obj)
+    length = hi[..., 0] - lo[..., 0]
     scale = camera.focal * length / np.maximum(np.linalg.norm(location - camera.center, axis=-1), 0.5)
-    return WireframeBatch(vertices, location, R, uv, depth, hidden, scale)
+    return WireframeBatch(vertices, location, R, uv, depth, hidden, scale, (lo, hi))
 
 
 def wireframe_likelihood(
