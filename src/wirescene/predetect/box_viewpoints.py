@@ -158,37 +158,47 @@ def _region_features(gray: np.ndarray, scale: float, rect) -> np.ndarray:
     return f[R0 - y0:R1 - y0, C0 - x0:C1 - x0]
 
 
-def _best_votes(bank: DetectorBank, t: int, scale: float, R: np.ndarray, origin, boxes: np.ndarray, image_size,
+def _best_votes(bank: DetectorBank, scale: float, responses, origin, boxes: np.ndarray, image_size,
                 iou: float) -> np.ndarray:
-    """``(N,)`` best response in ``R`` (template ``t`` at pyramid ``scale``; entry ``(r, q)``
-    scores the window whose top-left cell is ``origin + (r, q)``) among the windows whose
-    vote overlaps each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``; -inf where none does."""
+    """``(N, 8)`` best response per box and viewpoint bin among the windows of the response
+    maps ``responses`` ``[(t, R)]`` of templates ``t`` at pyramid ``scale`` (entry ``(r, q)``
+    of ``R`` scores the window whose top-left cell is ``origin + (r, q)``) whose vote
+    overlaps each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``; -inf where none does. All
+    templates of a level at once: one box regression and one overlap test for their windows."""
     W, H = image_size
-    config = bank.configs[t]
-    th, tw = config.template
     step = CELL / scale
     o_r, o_q = origin
-    near, r0, r1, q0, q1 = _window_ranges(config, scale, boxes, iou)
-    r0, r1 = np.maximum(r0, o_r), np.minimum(r1, o_r + R.shape[0])
-    q0, q1 = np.maximum(q0, o_q), np.minimum(q1, o_q + R.shape[1])
-    out = np.full(len(boxes), -np.inf)
-    idx, rows, cols = [], [], []
-    for i in np.flatnonzero(near & (r1 > r0) & (q1 > q0)):
-        nr, nq = r1[i] - r0[i], q1[i] - q0[i]
-        rows.append(np.repeat(np.arange(r0[i], r1[i]), nq))
-        cols.append(np.tile(np.arange(q0[i], q1[i]), nr))
-        idx.append(np.full(nr * nq, i))
+    out = np.full((len(boxes), N_BINS), -np.inf)
+    idx, rows, cols, vote0, bins, values = [], [], [], [], [], []
+    for t, R in responses:
+        config = bank.configs[t]
+        th, tw = config.template
+        near, r0, r1, q0, q1 = _window_ranges(config, scale, boxes, iou)
+        r0, r1 = np.maximum(r0, o_r), np.minimum(r1, o_r + R.shape[0])
+        q0, q1 = np.maximum(q0, o_q), np.minimum(q1, o_q + R.shape[1])
+        sel = np.flatnonzero(near & (r1 > r0) & (q1 > q0))
+        if not len(sel):
+            continue
+        # each selected box's rectangle of windows, row by row
+        nq, counts = (q1 - q0)[sel], (r1 - r0)[sel] * (q1 - q0)[sel]
+        k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        nq_w = np.repeat(nq, counts)
+        r, q = np.repeat(r0[sel], counts) + k // nq_w, np.repeat(q0[sel], counts) + k % nq_w
+        idx.append(np.repeat(sel, counts))
+        rows.append(r)
+        cols.append(q)
+        vote0.append(np.broadcast_to(config.full_box(np.array([[0.0, 0.0, tw * step, th * step]])), (len(r), 4)))
+        bins.append(np.full(len(r), config.bin))
+        values.append(R[r - o_r, q - o_q].astype(float))
     if not idx:
         return out
-    idx, rows, cols = np.concatenate(idx), np.concatenate(rows), np.concatenate(cols)
-    vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]
-    votes = clip_boxes(vote[None] + step * np.column_stack([cols, rows, cols, rows]), W, H)
+    idx, rows, cols, bins = (np.concatenate(a) for a in (idx, rows, cols, bins))
+    votes = clip_boxes(np.concatenate(vote0) + step * np.column_stack([cols, rows, cols, rows]), W, H)
     regression = bank.meta.get("box_regression")
     if regression is not None:
-        votes = clip_boxes(apply_box_regression(regression, votes, np.full(len(votes), config.bin), (W, H)),
-                           W, H)
+        votes = clip_boxes(apply_box_regression(regression, votes, bins, (W, H)), W, H)
     ok = iou_2d(votes, boxes[idx]) >= iou
-    np.maximum.at(out, idx[ok], R[rows[ok] - o_r, cols[ok] - o_q].astype(float))
+    np.maximum.at(out, (idx[ok], bins[ok]), np.concatenate(values)[ok])
     return out
 
 
@@ -240,10 +250,9 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
         for li, scale, rect, templates in _plan(bank, levels, b, iou):
             R0, R1, C0, C1 = rect
             F = _region_features(gray, scale, rect) if pyramid is None else pyramid[li][1][R0:R1, C0:C1]
-            for t, _, _, R in template_responses(bank, [(scale, F)], min_height=0.0, max_height=np.inf,
-                                                 detectors=templates):
-                k = bank.configs[t].bin
-                best[:, k] = np.maximum(best[:, k], _best_votes(bank, t, scale, R, (R0, C0), b, (W, H), iou))
+            responses = [(t, R) for t, _, _, R in template_responses(bank, [(scale, F)], min_height=0.0,
+                                                                     max_height=np.inf, detectors=templates)]
+            best = np.maximum(best, _best_votes(bank, scale, responses, (R0, C0), b, (W, H), iou))
     best = np.maximum(best, floor_margin)
     if bank.calibration is not None:
         a, c = (float(v) for v in bank.calibration)
