@@ -150,7 +150,7 @@ def needs_evidence(detections: Detections, variants: Iterable[str | Variant]) ->
 
 
 def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarray, *, bank=None,
-                        classifier=None) -> Detections:
+                        classifier=None, pyramid: list | None = None) -> Detections:
     """Detections whose unknown viewpoints (NaN ``alpha``, e.g. boxes of an external
     detector) are scored inside each box by the detector bank's templates and the crop
     viewpoint classifier, with the camera's road prior
@@ -166,6 +166,8 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
         Default: the shipped bank.
     classifier : ViewpointClassifier, optional
         Default: the shipped one.
+    pyramid : list of (float, ndarray), optional
+        The image's :func:`~wirescene.predetect.bank.bank_pyramid` if already computed.
 
     Returns
     -------
@@ -190,7 +192,8 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     bank = detector_bank(None) if bank is None else bank
     classifier = viewpoint_classifier(None) if classifier is None else classifier
     alpha = detections.alpha.copy()
-    alpha[unknown] = box_viewpoints(bank, image, detections.boxes[unknown], camera=camera, classifier=classifier)
+    alpha[unknown] = box_viewpoints(bank, image, detections.boxes[unknown], camera=camera, classifier=classifier,
+                                    pyramid=pyramid)
     return Detections(detections.boxes, detections.scores, alpha, detections.source)
 
 
@@ -215,13 +218,19 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     (0, 4)
     """
     from wirescene.predetect import detect_cars
+    from wirescene.predetect.bank import bank_pyramid
 
     bank = detector_bank(None) if bank is None else bank
-    found = detect_cars(image, bank=bank, camera=camera, threshold=threshold) if detections is None else detections
+    pyramid = None
+    if detections is None:
+        pyramid = bank_pyramid(bank, image)  # the templates' features, read again by the box rule
+        found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, pyramid=pyramid)
+    else:
+        found = detections
     if camera is None or not len(found):
         return found
     unknown = Detections(found.boxes, found.scores, np.full(len(found), np.nan), found.source)
-    return complete_viewpoints(camera, unknown, image, bank=bank, classifier=classifier)
+    return complete_viewpoints(camera, unknown, image, bank=bank, classifier=classifier, pyramid=pyramid)
 
 
 def fit_frame(

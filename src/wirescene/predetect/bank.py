@@ -393,7 +393,7 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
 def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshold: float | None = None,
                 max_scale: float | None = None, per_octave: int | None = None, min_height: float | None = None,
                 per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
-                return_all: bool = False, camera=None) -> Detections:
+                return_all: bool = False, camera=None, pyramid: list | None = None) -> Detections:
     """Detect cars in an (H, W, 3) uint8 image with the configuration bank.
 
     HOG pyramid once -> every template as a linear filter -> NMS per detector (IoU 0.5 on
@@ -415,7 +415,8 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     horizon; banks trained on KITTI were calibrated with this term, so pass the camera
     whenever it is known. With a viewpoint prior (``meta["viewpoint_prior"]``) the camera
     also lets each detection's viewpoint weigh where it stands in the traffic
-    (:mod:`wirescene.predetect.viewpoint_prior`)."""
+    (:mod:`wirescene.predetect.viewpoint_prior`). ``pyramid``: the image's
+    :func:`bank_pyramid` if already computed (e.g. to score given boxes' viewpoints on it too)."""
     bank = load_default_bank() if bank is None else bank
     max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
     min_height = float(bank.meta.get("min_height", 30.0)) if min_height is None else min_height
@@ -425,15 +426,25 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     if image.ndim not in (2, 3) or image.shape[0] < 16 or image.shape[1] < 16:
         raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
     H, W = image.shape[:2]
-    scales = pyramid_scales(W, H, max_scale=max_scale, per_octave=per_octave)
-    pyr = feature_pyramid(image, scales)
+    if pyramid is None:
+        pyramid = feature_pyramid(image, pyramid_scales(W, H, max_scale=max_scale, per_octave=per_octave))
     gray = None if bank.refinement is None and bank.verifier is None else to_gray(image)
     channels = integral_channels(image) if bank.needs_channels else None
     horizon = None if camera is None else horizon_row(camera)
     center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
-    return detect_pyramid(bank, pyr, (W, H), threshold=None if return_all else thr, min_height=min_height,
+    return detect_pyramid(bank, pyramid, (W, H), threshold=None if return_all else thr, min_height=min_height,
                           per_detector=per_detector, cross_view_nms=cross_view_nms, source=source, horizon=horizon,
                           center_column=center_column, gray=gray, channels=channels)
+
+
+def bank_pyramid(bank: DetectorBank, image: np.ndarray) -> list[tuple[float, np.ndarray]]:
+    """The HOG :func:`~wirescene.predetect.hog.feature_pyramid` of ``image`` at the levels the
+    bank was trained with (``meta["max_scale"]``, ``meta["per_octave"]``): what
+    :func:`detect_cars` computes with its defaults, to share with the box rule
+    (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`)."""
+    H, W = np.asarray(image).shape[:2]
+    return feature_pyramid(image, pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
+                                                 per_octave=int(bank.meta.get("per_octave", 4))))
 
 
 def cluster_options(bank: DetectorBank) -> dict:
