@@ -15,8 +15,11 @@ Metrics (all on the pooled held-out detections):
   the share on a car (IoU >= ``--min-iou``), the share of cars found, by box height (< 25,
   25-40, 40-60, > 60 px), and the viewpoint error of the detections on a car (> 45 deg, and
   > 135 deg: front and back swapped);
-* seconds per frame of :func:`wirescene.predetect.detect_cars` on one core (whole image:
-  pyramid + templates + clustering), measured on ``--time-frames`` frames.
+* seconds per frame on one core of :func:`wirescene.predetect.detect_cars` (whole image:
+  pyramid + templates + clustering), and side by side without the verifier and of the
+  pipeline's own pre-detection (:func:`wirescene.fitting.pipeline.detect_own` at the fit's
+  threshold: the bank, then the box rule's viewpoints), on ``--time-frames`` frames spread
+  evenly over the scored ones (the first frames of a set may hold few cars).
 
 Detection passes each frame's camera, so banks with a ground prior score with it
 (:mod:`wirescene.predetect.geometry`; pooled scores are then each fold bank's calibrated
@@ -219,7 +222,8 @@ def main():
                     "bank's, the levels it was trained on)")
     ap.add_argument("--per-detector", type=int, help="windows each template keeps in a frame after its own "
                     "suppression, stored likewise (default: each bank's, 30)")
-    ap.add_argument("--time-frames", type=int, default=5)
+    ap.add_argument("--time-frames", type=int, default=12,
+                    help="frames timed, spread evenly over the scored frames (0: no timing)")
     ap.add_argument("--pr-curve", default=None)
     ap.add_argument("--no-ground", action="store_true",
                     help="score without the banks' ground prior (no camera passed; raw margins pooled)")
@@ -418,11 +422,13 @@ def main():
                                                       iou=args.min_iou) for t in thresholds]
         for o in pooled["operating_points"]:
             print("   ", fmt_operating_point(o))
-    from wirescene.fitting.pipeline import detect_own
+    from wirescene.fitting.pipeline import PredetectOptions, detect_own
 
     cpu, plain, own = [], [], []
     unverified = replace(time_bank, verifier=None)
-    for f in ids[: args.time_frames]:  # side by side, frame by frame: load falls on all three alike
+    fit_threshold = PredetectOptions().threshold
+    timed = list(dict.fromkeys(ids[i] for i in np.linspace(0, len(ids) - 1, args.time_frames).round().astype(int)))
+    for f in timed:  # side by side, frame by frame: load falls on all three alike
         img = ds.image(f)
         use_ground = not args.no_ground and time_bank.calibration is not None and time_bank.meta.get("ground_prior")
         camera = ds.camera(f) if use_ground else None
@@ -434,7 +440,7 @@ def main():
         detect_cars(img, bank=unverified, return_all=True, camera=camera)
         plain.append(time.process_time() - c)
         c = time.process_time()
-        detect_own(camera, img, bank=time_bank)  # the pipeline's: at the threshold, the box rule's viewpoints
+        detect_own(camera, img, bank=time_bank, threshold=fit_threshold)  # the pipeline's: the box rule's viewpoints
         own.append(time.process_time() - c)
     # CPU time of this single-threaded process = seconds on one free core (wall time grows
     # with whatever else shares the machine)
@@ -442,7 +448,8 @@ def main():
         print(f"time per frame (detect_cars, 1 thread, {len(times)} frames): CPU {np.mean(cpu):.2f} s (max "
               f"{np.max(cpu):.2f}), wall {np.mean(times):.2f} s (load average {os.getloadavg()[0]:.1f}); side by side: "
               f"without the verifier {np.mean(plain):.2f} s, the pipeline's own pre-detection "
-              f"(fitting.pipeline.detect_own, shipped viewpoint classifier) {np.mean(own):.2f} s")
+              f"(fitting.pipeline.detect_own at the fit's threshold {fit_threshold}, shipped viewpoint classifier) "
+              f"{np.mean(own):.2f} s (max {np.max(own):.2f})")
         out.update(seconds_per_frame=float(np.mean(times)), cpu_seconds_per_frame=float(np.mean(cpu)))
     out.update(pooled=public(pooled), per_fold=per_fold, per_group=per_group)
     if args.pr_curve:
