@@ -299,6 +299,26 @@ def test_detect_cars_on_kitti_image_well_formed():
     assert np.all((det.scores > 0) & (det.scores < 1)) and 0 < bank.threshold < 1
 
 
+def test_early_cut_spares_the_verifier_the_clusters_far_below_the_threshold(monkeypatch):
+    """``verify_within``: clusters more than that below the threshold skip the refinement and
+    the verifier; a wide cut changes nothing, a tight one verifies fewer clusters, and the
+    shared pyramid gives what the image gives."""
+    import wirescene.predetect.bank as bank_module
+
+    bank = load_default_bank()
+    img = read_image(KITTI_ROOT / "training" / "image_2" / "000010.png")
+    seen = []
+    original = bank_module.verification_logits
+    monkeypatch.setattr(bank_module, "verification_logits",
+                        lambda b, gray, boxes, bins, **kw: seen.append(len(boxes)) or original(b, gray, boxes, bins, **kw))
+    pyramid = bank_module.bank_pyramid(bank, img)
+    plain = detect_cars(img, bank=bank, threshold=0.3)
+    wide = detect_cars(img, bank=bank, threshold=0.3, pyramid=pyramid, verify_within=10.0)
+    tight = detect_cars(img, bank=bank, threshold=0.3, pyramid=pyramid, verify_within=0.0)
+    assert np.array_equal(wide.boxes, plain.boxes) and np.array_equal(wide.scores, plain.scores)
+    assert seen[0] == seen[1] > seen[2] > 0 and np.all(tight.scores > 0.3)
+
+
 def test_padded_pyramid_adds_windows_past_the_sides_and_keeps_the_others():
     bank = load_default_bank()
     img = read_image(KITTI_ROOT / "training" / "image_2" / "000010.png")[:, :400]

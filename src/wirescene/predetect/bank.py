@@ -393,7 +393,8 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
 def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshold: float | None = None,
                 max_scale: float | None = None, per_octave: int | None = None, min_height: float | None = None,
                 per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
-                return_all: bool = False, camera=None, pyramid: list | None = None) -> Detections:
+                return_all: bool = False, camera=None, pyramid: list | None = None,
+                verify_within: float | None = None) -> Detections:
     """Detect cars in an (H, W, 3) uint8 image with the configuration bank.
 
     HOG pyramid once -> every template as a linear filter -> NMS per detector (IoU 0.5 on
@@ -434,7 +435,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
     return detect_pyramid(bank, pyramid, (W, H), threshold=None if return_all else thr, min_height=min_height,
                           per_detector=per_detector, cross_view_nms=cross_view_nms, source=source, horizon=horizon,
-                          center_column=center_column, gray=gray, channels=channels)
+                          center_column=center_column, gray=gray, channels=channels, verify_within=verify_within)
 
 
 def bank_pyramid(bank: DetectorBank, image: np.ndarray) -> list[tuple[float, np.ndarray]]:
@@ -460,7 +461,8 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
                    calibrated: bool = True, min_height: float = 30.0, per_detector: int | None = None,
                    cross_view_nms: float | None = 0.3, source: str = "bank",
                    horizon: float | None = None, center_column: float | None = None,
-                   gray: np.ndarray | None = None, channels: np.ndarray | None = None) -> Detections:
+                   gray: np.ndarray | None = None, channels: np.ndarray | None = None,
+                   verify_within: float | None = None) -> Detections:
     """:func:`detect_cars` on a precomputed feature pyramid of an image of ``image_size``
     ``(W, H)``; ``threshold`` (None: keep all) in the units of the returned scores
     (``calibrated``: :meth:`DetectorBank.confidence`, else raw margins); ``horizon``: image
@@ -479,7 +481,8 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
                         pad_cells=int(bank.meta.get("pad_cells", 0)))
     det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
                             cross_view_nms=cross_view_nms, source=source, cluster_kw=cluster_options(bank),
-                            horizon=horizon, center_column=center_column, gray=gray, channels=channels)
+                            horizon=horizon, center_column=center_column, gray=gray, channels=channels,
+                            verify_within=verify_within)
     if calibrated and bank.calibration is not None:
         det = Detections(det.boxes, bank.confidence(det.scores), det.alpha, det.source)
     return det
@@ -489,7 +492,7 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
                       per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
                       cluster_kw: dict | None = None, horizon: float | None = None,
                       center_column: float | None = None, gray: np.ndarray | None = None,
-                      channels: np.ndarray | None = None) -> Detections:
+                      channels: np.ndarray | None = None, verify_within: float | None = None) -> Detections:
     """Activations -> Detections: NMS per detector, full-box votes, clustering per
     viewpoint (a cluster's score: its best vote, plus ``meta["support_weight"]`` times the log of
     its number of votes where a bank sets it), clip to image, box regression, box refinement from the grey image ``gray``
@@ -499,7 +502,9 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     image row of the horizon, None to skip; :func:`ground_margin`), optional NMS across
     viewpoints with each kept detection's viewpoint chosen by :func:`traffic_viewpoints`
     (``center_column``: the principal point's column, None to keep the winner's), threshold
-    in margin units (None: keep all)."""
+    in margin units (None: keep all). ``verify_within`` (margin units; None: off): with a
+    threshold, clusters more than this below it before the box refinement and the verifier
+    are dropped first, sparing the two HOG crops each costs."""
     W, H = image_size
     per_detector = int(bank.meta.get("per_detector", 30)) if per_detector is None else int(per_detector)
     fb, fs, fbin = [], [], []
@@ -516,6 +521,9 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
         scores = scores + float(bank.meta.get("support_weight", 0.0)) * np.log(support)
     else:
         boxes, scores, bins = np.zeros((0, 4)), np.zeros(0), np.zeros(0, int)
+    if threshold is not None and verify_within is not None:
+        near = scores >= threshold - verify_within
+        boxes, scores, bins = boxes[near], scores[near], bins[near]
     if len(boxes):
         boxes = clip_boxes(boxes, W, H)
         if "box_regression" in bank.meta:
