@@ -417,7 +417,9 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     whenever it is known. With a viewpoint prior (``meta["viewpoint_prior"]``) the camera
     also lets each detection's viewpoint weigh where it stands in the traffic
     (:mod:`wirescene.predetect.viewpoint_prior`). ``pyramid``: the image's
-    :func:`bank_pyramid` if already computed (e.g. to score given boxes' viewpoints on it too)."""
+    :func:`bank_pyramid` if already computed (e.g. to score given boxes' viewpoints on it too).
+    ``verify_within``: see :func:`merge_activations` (off by default; ``benchmarks/RESULTS.md``,
+    "An early cut before the box refinement and the verifier")."""
     bank = load_default_bank() if bank is None else bank
     max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
     min_height = float(bank.meta.get("min_height", 30.0)) if min_height is None else min_height
