@@ -11,11 +11,10 @@ wireframe vertex:
 Both are vectorised over any leading batch (samples x objects), with no Python loop
 over hypotheses or vertices; see ``benchmarks/bench_occlusion.py``.
 
-A back-facing pre-test (skip faces turned away from the camera) was considered and not
-used: it is exact only for closed, consistently outward-oriented meshes with the camera
-outside, which the wireframe's face list does not guarantee, and in the batched
-formulation every (vertex, face) pair is evaluated by one matrix product anyway, so
-masking faces would not save work.
+A back-facing pre-test (skip faces turned away from the camera) is not used: the face
+list is closed and consistently oriented, but deformed shapes can fold through
+themselves, and then the faces turned to the camera miss some hidden vertices
+(``benchmarks/bench_occlusion.py`` counts them; ``benchmarks/RESULTS.md``).
 """
 
 from __future__ import annotations
