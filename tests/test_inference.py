@@ -320,6 +320,10 @@ def test_size_prior_is_the_negative_log_density_of_kitti_car_sizes(synthetic_sce
     added = priored.penalty - plain.penalty
     batch = _geometry(camera, model, (particles.pitch, particles.roll), particles.height, theta, 5)
     lo, hi = batch.extent
+    # the extent kept at placement is the placed wireframe's, turned back into the object frame
+    X = np.matmul(batch.vertices - batch.location[..., None, :], batch.R)
+    assert_close(lo, X.min(axis=-2), atol=1e-9)
+    assert_close(hi, X.max(axis=-2), atol=1e-9)
     assert_close(added, 2.0 * size_cost(lo, hi), atol=1e-6, rtol=1e-2)
     assert np.all(added[..., 1] > added[..., 0] + 1.0)
 
