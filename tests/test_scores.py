@@ -32,10 +32,10 @@ def test_train_scores_from_eval_runs_and_use_them(tmp_path):
     assert r.exit_code != 0 and "--detections bank" in r.output and not cal.exists()  # label boxes are all cars
     # Our own pre-detections, at a low threshold so that some boxes are not cars; unverified.
     r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--detections", "bank", "--predictions", str(own),
-                                  "--detection-threshold", "0.05", *common])  # --raw-scores: every box kept
+                                  "--detection-threshold", "0.2", *common])  # --raw-scores: every box kept
     assert r.exit_code == 0, r.output
     config = json.loads(next((own / ".frames").glob("*.json")).read_text())["config"]
-    assert config["options"]["predetect"] == {"threshold": 0.05, "min_car_probability": 0.0, "box_weight": 30.0}
+    assert config["options"]["predetect"] == {"threshold": 0.2, "min_car_probability": 0.0, "box_weight": 30.0}
     r = CliRunner().invoke(main, ["train", "scores", str(pred), str(own), "--out", str(cal)])
     assert r.exit_code == 0, r.output
     record = json.loads(cal.read_text())
