@@ -421,16 +421,14 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     ``verify_within``: see :func:`merge_activations` (off by default; ``benchmarks/RESULTS.md``,
     "An early cut before the box refinement and the verifier")."""
     bank = load_default_bank() if bank is None else bank
-    max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
     min_height = float(bank.meta.get("min_height", 30.0)) if min_height is None else min_height
-    per_octave = int(bank.meta.get("per_octave", 4)) if per_octave is None else per_octave
     thr = bank.threshold if threshold is None else float(threshold)
     image = np.asarray(image)
     if image.ndim not in (2, 3) or image.shape[0] < 16 or image.shape[1] < 16:
         raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
     H, W = image.shape[:2]
     if pyramid is None:
-        pyramid = feature_pyramid(image, pyramid_scales(W, H, max_scale=max_scale, per_octave=per_octave))
+        pyramid = feature_pyramid(image, bank_scales(bank, W, H, max_scale=max_scale, per_octave=per_octave))
     gray = None if bank.refinement is None and bank.verifier is None else to_gray(image)
     channels = integral_channels(image) if bank.needs_channels else None
     horizon = None if camera is None else horizon_row(camera)
@@ -440,14 +438,22 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
                           center_column=center_column, gray=gray, channels=channels, verify_within=verify_within)
 
 
+def bank_scales(bank: DetectorBank, width: int, height: int, *, max_scale: float | None = None,
+                per_octave: int | None = None) -> list[float]:
+    """Pyramid scales of a ``width x height`` image at the levels the bank was trained with
+    (``meta["max_scale"]``, ``meta["per_octave"]``; 2.0 and 4 for banks that do not say),
+    unless ``max_scale`` / ``per_octave`` are given."""
+    max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
+    per_octave = int(bank.meta.get("per_octave", 4)) if per_octave is None else per_octave
+    return pyramid_scales(width, height, max_scale=max_scale, per_octave=per_octave)
+
+
 def bank_pyramid(bank: DetectorBank, image: np.ndarray) -> list[tuple[float, np.ndarray]]:
-    """The HOG :func:`~wirescene.predetect.hog.feature_pyramid` of ``image`` at the levels the
-    bank was trained with (``meta["max_scale"]``, ``meta["per_octave"]``): what
-    :func:`detect_cars` computes with its defaults, to share with the box rule
-    (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`)."""
+    """The HOG :func:`~wirescene.predetect.hog.feature_pyramid` of ``image`` at the bank's
+    levels (:func:`bank_scales`): what :func:`detect_cars` computes with its defaults, to
+    share with the box rule (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`)."""
     H, W = np.asarray(image).shape[:2]
-    return feature_pyramid(image, pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
-                                                 per_octave=int(bank.meta.get("per_octave", 4))))
+    return feature_pyramid(image, bank_scales(bank, W, H))
 
 
 def cluster_options(bank: DetectorBank) -> dict:

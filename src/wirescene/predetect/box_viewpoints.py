@@ -43,12 +43,13 @@ from wirescene.core.viewpoints import N_BINS, bin_center
 from wirescene.predetect.bank import (
     DetectorBank,
     apply_box_regression,
+    bank_scales,
     clip_boxes,
     template_responses,
     traffic_log_prior,
 )
 from wirescene.predetect.geometry import horizon_row
-from wirescene.predetect.hog import CELL, hog_cells, level_image, level_size, pyramid_scales, to_gray
+from wirescene.predetect.hog import CELL, hog_cells, level_image, level_size, to_gray
 
 #: Overlap (IoU of a window's predicted car box with the given box) for a window to vote.
 IOU = 0.5
@@ -241,8 +242,7 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
     best = np.full((len(b), N_BINS), -np.inf)
     if len(b):
         if pyramid is None:
-            scales = pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
-                                    per_octave=int(bank.meta.get("per_octave", 4)))
+            scales = bank_scales(bank, W, H)
             gray = to_gray(image)
             levels = [(li, s, tuple(n // CELL for n in level_size(W, H, s)[::-1])) for li, s in enumerate(scales)]
         else:

@@ -74,7 +74,14 @@ import numpy as np
 from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.groundplane import wrap_angle
 from wirescene.core.viewpoints import BIN_WIDTH, N_BINS, bin_center, viewpoint_bin
-from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_pyramid, pad_pyramid, score_pyramid
+from wirescene.predetect.bank import (
+    SUPPORT_WEIGHT,
+    DetectorBank,
+    bank_scales,
+    detect_pyramid,
+    pad_pyramid,
+    score_pyramid,
+)
 from wirescene.predetect.configurations import (
     CarExample,
     apply_full_box,
@@ -564,8 +571,7 @@ def training_gt_boxes(dataset, images) -> list:
 def detect_training_image(bank: DetectorBank, image: TrainImage, **kw):
     """Raw (uncalibrated, unthresholded) detections of a training image from its (cached) pyramid."""
     W, H = image.size
-    pyramid = image.hog_pyramid(pyramid_scales(W, H, max_scale=float(bank.meta.get("max_scale", 2.0)),
-                                               per_octave=int(bank.meta.get("per_octave", 4))))
+    pyramid = image.hog_pyramid(bank_scales(bank, W, H))
     kw.setdefault("min_height", float(bank.meta.get("min_height", 30.0)))
     gray = None if bank.refinement is None and bank.verifier is None else image.gray.astype(np.float32) / 255.0
     channels = image.channels if bank.needs_channels else None
