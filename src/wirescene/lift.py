@@ -27,7 +27,6 @@ from wirescene.core.boxes import MEAN_CAR_DIMS, box_extent_object
 from wirescene.core.camera import Camera
 from wirescene.core.groundplane import (
     KITTI_CAMERA_HEIGHT,
-    plane_normal,
     plane_rotation,
     wrap_angle,
 )
@@ -127,16 +126,16 @@ def box_residual(projected: np.ndarray, detected: np.ndarray, min_depth: np.ndar
     return np.where((min_depth > 0.5)[..., None], r, 10.0)
 
 
-def _initial_position(camera: Camera, boxes, pitch, roll, height, dims):
+def _initial_position(camera: Camera, boxes, normal, height, dims):
     """Start each search where the ray through the bottom-centre of the 2D box meets the
     plane, pushed back by a quarter car length (the box bottom is the nearest part of the
-    car); above-horizon rays fall back to the depth implied by the box height."""
+    car); above-horizon rays fall back to the depth implied by the box height. ``normal``:
+    the planes' downward unit normals ``(..., 3)``."""
     uv = np.stack([(boxes[..., 0] + boxes[..., 2]) / 2, boxes[..., 3]], axis=-1)
     ray = camera.rays(uv)
-    n = plane_normal(pitch, roll)
     c = camera.center
-    denom = np.sum(n * ray, axis=-1)
-    t = (height - np.sum(n * c, axis=-1)) / np.where(np.abs(denom) < 1e-6, 1e-6, denom)
+    denom = np.sum(normal * ray, axis=-1)
+    t = (height - np.sum(normal * c, axis=-1)) / np.where(np.abs(denom) < 1e-6, 1e-6, denom)
     hit = c + t[..., None] * ray
     box_h = np.maximum(boxes[..., 3] - boxes[..., 1], 1.0)
     z_from_height = camera.focal * dims[..., 0] / box_h
@@ -180,8 +179,6 @@ def solve_positions(
     a0, a1, a2 = A[:, 0], A[:, 1], A[:, 2]
     dims = np.broadcast_to(dims, shape + (3,))
     alpha = np.broadcast_to(alpha, shape)
-    pitch = np.broadcast_to(pitch, shape)
-    roll = np.broadcast_to(roll, shape)
 
     def residual(x, logz):
         z = np.exp(logz)
@@ -192,7 +189,7 @@ def solve_positions(
         proj, min_depth = _projected_extent(camera, lo, hi, (c * a0 - s * a2, a1, s * a0 + c * a2), offset)
         return box_residual(proj, boxes, min_depth)
 
-    x, z = _initial_position(camera, boxes, pitch, roll, height, dims)
+    x, z = _initial_position(camera, boxes, normal, height, dims)
     logz = np.log(np.maximum(z, 1.0))
     lam = np.full(shape, 1e-2)
     r = residual(x, logz)
