@@ -12,7 +12,7 @@ group and pooled.
 Usage:
   python benchmarks/bench_verify_within.py --root ../shared/data/kitti --fold-models DIR --within 1 2 3 4
   [--folds 0 1 --json A.json]   (one fold group a process, the other beside it)
-  (DIR holds bank_fold{k}.npz or fold{k}.npz, each trained without fold k's drives)
+  (DIR holds fold{k}.npz, each trained without fold k's drives; or a path pattern with {k})
 """
 
 from __future__ import annotations
@@ -39,17 +39,11 @@ from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars  # 
 GROUPS = ((0, 1), (2, 3))
 
 
-def fold_bank_path(directory: Path, k: int) -> Path:
-    for name in (f"bank_fold{k}.npz", f"fold{k}.npz"):
-        if (directory / name).exists():
-            return directory / name
-    raise SystemExit(f"{directory}: no bank_fold{k}.npz or fold{k}.npz")
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--root", required=True)
-    ap.add_argument("--fold-models", required=True, type=Path)
+    ap.add_argument("--fold-models", required=True,
+                    help="fold banks DIR/fold{k}.npz (or a path pattern with {k}), each trained without fold k")
     ap.add_argument("--within", type=float, nargs="+", default=[1.0, 2.0, 3.0, 4.0])
     ap.add_argument("--thresholds", type=float, nargs="+", default=None,
                     help="calibrated thresholds (default: the fit's and each bank's own)")
@@ -58,7 +52,8 @@ def main():
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     ds = KittiDataset(args.root)
-    banks = {k: DetectorBank.load(fold_bank_path(args.fold_models, k)) for k in range(N_FOLDS)}
+    pattern = args.fold_models if "{k}" in args.fold_models else str(Path(args.fold_models) / "fold{k}.npz")
+    banks = {k: DetectorBank.load(pattern.format(k=k)) for k in range(N_FOLDS)}
     thresholds = args.thresholds or sorted({PredetectOptions().threshold, float(banks[0].threshold)})
     ids = [f for f in ds.frame_ids()[:: args.frames or 1] if args.folds is None or fold_of(f) in args.folds]
     settings = [None, *args.within]
