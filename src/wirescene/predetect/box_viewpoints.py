@@ -102,8 +102,9 @@ def _check_boxes(boxes, image_size=None) -> np.ndarray:
 
 def _window_ranges(config, scale: float, boxes: np.ndarray, iou: float):
     """Windows (top-left cells) of template ``config`` at pyramid ``scale`` whose vote may
-    overlap each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``: ``(near (N,) bool, r0, r1, q0, q1)``,
-    the half-open row and column ranges ``(N,)`` (unclipped; meaningless where not ``near``)."""
+    overlap each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``: ``(near (N,) bool, r0, r1, q0, q1, vote)``,
+    the half-open row and column ranges ``(N,)`` (unclipped; meaningless where not ``near``) and
+    the vote ``(4,)`` of window ``(0, 0)``, which window ``(r, q)``'s shifts by ``CELL / scale * (q, r)``."""
     th, tw = config.template
     step = CELL / scale
     vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]  # the vote of window (0, 0)
@@ -118,7 +119,7 @@ def _window_ranges(config, scale: float, boxes: np.ndarray, iou: float):
     cy = (boxes[:, 1] + boxes[:, 3] - vote[1] - vote[3]) / 2
     q0, q1 = np.ceil((cx - rx) / step).astype(int), np.floor((cx + rx) / step).astype(int) + 1
     r0, r1 = np.ceil((cy - ry) / step).astype(int), np.floor((cy + ry) / step).astype(int) + 1
-    return near, r0, r1, q0, q1
+    return near, r0, r1, q0, q1, vote
 
 
 def _plan(bank: DetectorBank, levels, boxes: np.ndarray, iou: float) -> list:
@@ -132,7 +133,7 @@ def _plan(bank: DetectorBank, levels, boxes: np.ndarray, iou: float) -> list:
             th, tw = config.template
             if th > Hc or tw > Wc:
                 continue
-            near, r0, r1, q0, q1 = _window_ranges(config, scale, boxes, iou)
+            near, r0, r1, q0, q1, _ = _window_ranges(config, scale, boxes, iou)
             r0, r1 = np.maximum(r0, 0), np.minimum(r1, Hc - th + 1)
             q0, q1 = np.maximum(q0, 0), np.minimum(q1, Wc - tw + 1)
             ok = near & (r1 > r0) & (q1 > q0)
@@ -173,8 +174,7 @@ def _best_votes(bank: DetectorBank, scale: float, responses, origin, boxes: np.n
     idx, rows, cols, vote0, bins, values = [], [], [], [], [], []
     for t, R in responses:
         config = bank.configs[t]
-        th, tw = config.template
-        near, r0, r1, q0, q1 = _window_ranges(config, scale, boxes, iou)
+        near, r0, r1, q0, q1, vote = _window_ranges(config, scale, boxes, iou)
         r0, r1 = np.maximum(r0, o_r), np.minimum(r1, o_r + R.shape[0])
         q0, q1 = np.maximum(q0, o_q), np.minimum(q1, o_q + R.shape[1])
         sel = np.flatnonzero(near & (r1 > r0) & (q1 > q0))
@@ -188,7 +188,7 @@ def _best_votes(bank: DetectorBank, scale: float, responses, origin, boxes: np.n
         idx.append(np.repeat(sel, counts))
         rows.append(r)
         cols.append(q)
-        vote0.append(np.broadcast_to(config.full_box(np.array([[0.0, 0.0, tw * step, th * step]])), (len(r), 4)))
+        vote0.append(np.broadcast_to(vote, (len(r), 4)))
         bins.append(np.full(len(r), config.bin))
         values.append(R[r - o_r, q - o_q].astype(float))
     if not idx:
