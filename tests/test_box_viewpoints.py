@@ -16,8 +16,10 @@ from wirescene.core.viewpoints import bin_center, viewpoint_bin
 from wirescene.fitting.pipeline import fit_frame
 from wirescene.io.kitti import KittiDataset
 from wirescene.predetect import load_default_bank
-from wirescene.predetect.bank import detect_pyramid
+from wirescene.predetect.bank import apply_box_regression, clip_boxes, detect_pyramid, template_responses
 from wirescene.predetect.box_viewpoints import (
+    FLOOR_MARGIN,
+    IOU,
     PRIOR_WEIGHT,
     ROW_WEIGHT,
     box_bin_log_odds,
@@ -26,7 +28,7 @@ from wirescene.predetect.box_viewpoints import (
     box_viewpoints,
     row_coherent_bins,
 )
-from wirescene.predetect.hog import feature_pyramid, pyramid_scales, to_gray
+from wirescene.predetect.hog import CELL, feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.viewpoint_classifier import (
     ViewpointClassifier,
     crop_viewpoint_features,
@@ -111,6 +113,30 @@ def test_only_the_cells_the_boxes_need_give_the_whole_pyramid_scores(scene):
     alone = box_bin_log_odds(scene["bank"], scene["image"], scene["boxes"])
     assert alone.shape == scene["templates"].shape
     assert np.allclose(alone, scene["templates"], rtol=0, atol=1e-4)
+
+
+def test_the_windows_the_rule_searches_are_all_that_can_vote(scene):
+    # every window of every template and level, each placed, regressed and clipped: the rule prunes
+    # windows by their vote's size and place and skips those under the floor, and finds the same best votes
+    bank, boxes, (H, W) = scene["bank"], scene["boxes"], scene["image"].shape[:2]
+    best = np.full((len(boxes), 8), -np.inf)
+    for t, _, s, R in template_responses(bank, scene["pyramid"], min_height=0.0, max_height=np.inf):
+        config = bank.configs[t]
+        th, tw = config.template
+        r, q = np.divmod(np.arange(R.size), R.shape[1])
+        windows = np.column_stack([q, r, q + tw, r + th]) * CELL / s
+        bins = np.full(len(windows), config.bin)
+        votes = clip_boxes(config.full_box(windows), W, H)
+        votes = clip_boxes(apply_box_regression(bank.meta["box_regression"], votes, bins, (W, H)), W, H)
+        ok = iou_2d(votes[:, None], boxes[None]) >= IOU  # (windows, boxes)
+        values = np.where(ok, R.ravel()[:, None].astype(float), -np.inf).max(0)
+        best[:, config.bin] = np.maximum(best[:, config.bin], values)
+    a, c = bank.calibration
+    assert_close(scene["templates"], a * np.maximum(best, FLOOR_MARGIN) + c, atol=1e-9)
+    # no window under the floor changes a bin: the floor applied after a search without one
+    unfloored = box_bin_log_odds(bank, scene["image"], boxes, pyramid=scene["pyramid"], floor_margin=-np.inf)
+    assert np.array_equal(scene["templates"], np.maximum(unfloored, a * FLOOR_MARGIN + c))
+    assert (best > FLOOR_MARGIN).sum() >= len(boxes)  # (cars whose bins some window scores above the floor)
 
 
 def test_the_road_prior_puts_front_and_back_along_the_road(scene):

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, assert_close
+from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
@@ -111,6 +112,18 @@ def test_clustering_merges_same_viewpoint_only():
 def test_nms_and_configuration_topology():
     keep = nms(np.array([[0, 0, 10, 10], [1, 0, 11, 10], [50, 50, 60, 60]], float), np.array([0.5, 0.9, 0.1]))
     assert keep.tolist() == [1, 2]
+    # the greedy definition with core.boxes.iou_2d, on crowded boxes with tied scores and empty boxes
+    rng = np.random.default_rng(5)
+    xy = rng.uniform(0, 100, (300, 2))
+    boxes = np.column_stack([xy, xy + rng.uniform(0, 30, (300, 2))])
+    boxes[::37, 2] = boxes[::37, 0]  # no area
+    scores = rng.integers(0, 40, 300).astype(float)
+    for iou, max_keep in ((0.5, None), (0.3, 7), (0.0, None)):
+        order, want = list(np.argsort(-scores, kind="stable")), []
+        while order and (max_keep is None or len(want) < max_keep):
+            want.append(order.pop(0))
+            order = [j for j in order if iou_2d(boxes[want[-1]], boxes[j]) <= iou]
+        assert nms(boxes, scores, iou, max_keep).tolist() == want
     edges = {tuple(sorted(e)) for e in EDGES.tolist()}
     subsets = connected_subsets()
     assert all(len(s) in (3, 4) for s in subsets) and len(set(subsets)) == len(subsets)
@@ -147,6 +160,10 @@ def test_many_crops_at_once_give_each_crop_s_features():
     assert crops_features(g, np.zeros((0, 4)), 8, 12).shape == (0, 8, 12, N_FEAT)
     stack = rng.random((3, 40, 56)).astype(np.float32)
     assert np.array_equal(hog_cells(stack), np.stack([hog_cells(x) for x in stack]))
+    # past the image's sides a crop reads its edge pixels repeated: the crop of an edge-padded copy
+    pad = 40
+    padded = np.pad(g, pad, mode="edge")
+    assert np.array_equal(many[:3], crops_features(padded, boxes[:3] + pad, 8, 12))
 
 
 def _fhog_by_loops(g, cell=8):
@@ -202,6 +219,8 @@ def test_hog_cells_match_the_definition():
     g = rng.random((27, 42)).astype(np.float32)  # 3 x 5 cells, ragged border dropped
     g[5:15, 10:30] += 1.0  # a bright block: strong, oriented edges
     assert_close(hog_cells(g), _fhog_by_loops(g.astype(float)[:24, :40]), atol=2e-5)
+    # read a cell row at a time or all at once: the same sums in the same order
+    assert np.array_equal(hog_cells(g, strip_pixels=1), hog_cells(g, strip_pixels=10**9))
     flat = hog_cells(np.full((16, 24), 0.5, np.float32))
     assert_close(flat, np.zeros((2, 3, N_FEAT)))
 
@@ -248,7 +267,6 @@ def test_bank_npz_round_trip(tmp_path):
 # ------------------------------------------------------------------ retraining
 
 def test_retrain_tiny_bank_finds_cars(tmp_path):
-    from wirescene.core.boxes import iou_2d
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.synth.generate import generate_scene
     from wirescene.training.detector import train_detector_bank

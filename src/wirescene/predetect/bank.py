@@ -34,7 +34,6 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.artefacts import load_npz, save_npz
-from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import InputError
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
@@ -223,6 +222,7 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
     ``min_height..max_height`` px high. Per level and chunk of templates ONE matrix product
     of the cell features with all their template cells, then shifted sums."""
     dets = range(len(bank)) if detectors is None else detectors
+    buf = np.empty(0, np.float32)  # the products' memory, reused: a fresh one per level cost page faults
     for li, (s, F) in enumerate(pyramid):
         Hc, Wc = F.shape[:2]
         active = []
@@ -243,7 +243,9 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
                 cols += int(np.prod(bank.configs[active[i]].template))
                 i += 1
             W = np.concatenate([bank.weights[t].reshape(-1, N_FEAT) for t in group], 0)  # (M, 31)
-            P = (W @ Fm.T).reshape(-1, Hc, Wc)  # (M, Hc, Wc)
+            if buf.size < len(W) * len(Fm) or buf.dtype != np.result_type(W, Fm):
+                buf = np.empty(len(W) * len(Fm), np.result_type(W, Fm))
+            P = np.matmul(W, Fm.T, out=buf[:len(W) * len(Fm)].reshape(len(W), len(Fm))).reshape(-1, Hc, Wc)  # (M, Hc, Wc)
             o = 0
             for t in group:
                 th, tw = bank.configs[t].template
@@ -312,28 +314,41 @@ def nms(boxes: np.ndarray, scores: np.ndarray, iou: float = 0.5, max_keep: int |
     """Greedy non-maximum suppression; indices kept, best first."""
     order = np.argsort(-np.asarray(scores), kind="stable")
     keep = []
-    boxes = np.asarray(boxes, float)
+    x1, y1, x2, y2 = np.asarray(boxes, float).reshape(-1, 4).T
+    area = np.clip(x2 - x1, 0, None) * np.clip(y2 - y1, 0, None)
     while len(order):
         i = order[0]
         keep.append(i)
         if max_keep is not None and len(keep) >= max_keep:
             break
         rest = order[1:]
-        order = rest[iou_2d(boxes[i][None], boxes[rest]) <= iou]
+        # core.boxes.iou_2d of box i and the rest, operation for operation, the areas computed once
+        iw = np.clip(np.minimum(x2[i], x2[rest]) - np.maximum(x1[i], x1[rest]), 0, None)
+        ih = np.clip(np.minimum(y2[i], y2[rest]) - np.maximum(y1[i], y1[rest]), 0, None)
+        inter = iw * ih
+        union = area[i] + area[rest] - inter
+        overlap = np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+        order = rest[overlap <= iou]
     return np.array(keep, int)
 
 
 # --------------------------------------------------------------------------- clustering
 
 
-def _pair_dist(b: np.ndarray, rx: float, ry: float, rs: float) -> np.ndarray:
-    """(n, n) distance in (x, y, scale) between boxes; 'nearby' means < 1."""
-    cx, cy = (b[:, 0] + b[:, 2]) / 2, (b[:, 1] + b[:, 3]) / 2
-    w, h = np.maximum(b[:, 2] - b[:, 0], 1e-6), np.maximum(b[:, 3] - b[:, 1], 1e-6)
-    ls = 0.5 * np.log(w * h)
-    mw, mh = (w[:, None] + w[None]) / 2, (h[:, None] + h[None]) / 2
-    d = np.maximum(np.abs(cx[:, None] - cx[None]) / (rx * mw), np.abs(cy[:, None] - cy[None]) / (ry * mh))
-    return np.maximum(d, np.abs(ls[:, None] - ls[None]) / rs)
+def _box_dist(a: np.ndarray, b: np.ndarray, rx: float, ry: float, rs: float) -> np.ndarray:
+    """Distance in (x, y, scale) between boxes ``a`` and ``b`` ``(..., 4)`` (broadcasting);
+    'nearby' means < 1."""
+    (cxa, cya, wa, ha, lsa), (cxb, cyb, wb, hb, lsb) = _box_terms(a), _box_terms(b)
+    mw, mh = (wa + wb) / 2, (ha + hb) / 2
+    d = np.maximum(np.abs(cxa - cxb) / (rx * mw), np.abs(cya - cyb) / (ry * mh))
+    return np.maximum(d, np.abs(lsa - lsb) / rs)
+
+
+def _box_terms(b: np.ndarray):
+    """Centre, size and log scale of boxes ``(..., 4)``: what :func:`_box_dist` compares."""
+    cx, cy = (b[..., 0] + b[..., 2]) / 2, (b[..., 1] + b[..., 3]) / 2
+    w, h = np.maximum(b[..., 2] - b[..., 0], 1e-6), np.maximum(b[..., 3] - b[..., 1], 1e-6)
+    return cx, cy, w, h, 0.5 * np.log(w * h)
 
 
 def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4, rs: float = 0.4,
@@ -360,7 +375,7 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
         wsum = w.copy()
         mean = boxes[sel].copy()
         alive = np.ones(len(sel), bool)
-        D = _pair_dist(mean, rx, ry, rs)
+        D = _box_dist(mean[:, None], mean[None], rx, ry, rs)
         np.fill_diagonal(D, np.inf)
         while len(sel) > 1:
             k = int(np.argmin(D))
@@ -374,7 +389,7 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
             mean[i] = sums[i] / wsum[i]
             alive[j] = False
             D[j, :] = D[:, j] = np.inf
-            d = _pair_dist(np.vstack([mean[i][None], mean]), rx, ry, rs)[0, 1:]
+            d = _box_dist(mean[i], mean, rx, ry, rs)  # the merged cluster's row only
             d[~alive] = np.inf
             d[i] = np.inf
             D[i, :] = D[:, i] = d

@@ -100,49 +100,57 @@ def _check_boxes(boxes, image_size=None) -> np.ndarray:
     return b.astype(float)
 
 
-def _window_ranges(config, scale: float, boxes: np.ndarray, iou: float):
-    """Windows (top-left cells) of template ``config`` at pyramid ``scale`` whose vote may
-    overlap each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``: ``(near (N,) bool, r0, r1, q0, q1, vote)``,
-    the half-open row and column ranges ``(N,)`` (unclipped; meaningless where not ``near``) and
-    the vote ``(4,)`` of window ``(0, 0)``, which window ``(r, q)``'s shifts by ``CELL / scale * (q, r)``."""
-    th, tw = config.template
+def _window_ranges(bank: DetectorBank, templates, scale: float, boxes: np.ndarray, iou: float):
+    """Windows (top-left cells) of the bank's ``templates`` ``(T,)`` at pyramid ``scale`` whose
+    vote may overlap each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``: ``(near (T, N) bool, r0, r1,
+    q0, q1, votes)``, the half-open row and column ranges ``(T, N)`` (unclipped; meaningless
+    where not ``near``) and the votes ``(T, 4)`` of window ``(0, 0)``, which window ``(r, q)``'s
+    shift by ``CELL / scale * (q, r)``. All templates at once, each number as one at a time."""
+    configs = [bank.configs[t] for t in templates]
+    th = np.array([c.template[0] for c in configs], float)[:, None]
+    tw = np.array([c.template[1] for c in configs], float)[:, None]
     step = CELL / scale
-    vote = config.full_box(np.array([[0.0, 0.0, tw * step, th * step]]))[0]  # the vote of window (0, 0)
-    vw, vh = vote[2] - vote[0], vote[3] - vote[1]
+    wh = np.column_stack([tw * step, th * step])  # the window (0, 0): (0, 0, tw * step, th * step)
+    votes = np.column_stack([np.zeros((len(configs), 2)), wh]) + np.array([c.offsets for c in configs], float).reshape(
+        -1, 4) * np.concatenate([wh, wh], 1)  # Configuration.full_box of each template's window (0, 0)
+    v0, v1, v2, v3 = (votes[:, i, None] for i in range(4))
+    vw, vh = v2 - v0, v3 - v1
     gw, gh = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
     # the regression moves a height by < 25% and clipping only shrinks it: no IoU >= iou beyond these ratios
     near = (vh >= iou / _REGRESSION_SLACK * gh) & (vh <= _REGRESSION_SLACK / iou * gh)
     # the vote of window (r, q) is that of (0, 0) shifted by step * (q, r): votes that intersect the
     # box, with room for the regression's shift
     rx, ry = 0.5 * (gw + vw) + 0.25 * vw, 0.5 * (gh + vh) + 0.25 * vh
-    cx = (boxes[:, 0] + boxes[:, 2] - vote[0] - vote[2]) / 2
-    cy = (boxes[:, 1] + boxes[:, 3] - vote[1] - vote[3]) / 2
+    cx = (boxes[:, 0] + boxes[:, 2] - v0 - v2) / 2
+    cy = (boxes[:, 1] + boxes[:, 3] - v1 - v3) / 2
     q0, q1 = np.ceil((cx - rx) / step).astype(int), np.floor((cx + rx) / step).astype(int) + 1
     r0, r1 = np.ceil((cy - ry) / step).astype(int), np.floor((cy + ry) / step).astype(int) + 1
-    return near, r0, r1, q0, q1, vote
+    return near, r0, r1, q0, q1, votes
 
 
 def _plan(bank: DetectorBank, levels, boxes: np.ndarray, iou: float) -> list:
     """Per pyramid level ``(index, scale, (Hc, Wc) cells)`` of ``levels``, the templates that can
-    vote for some box and the cell rectangle ``(R0, R1, C0, C1)`` their windows cover:
-    ``[(index, scale, rectangle, templates)]``; levels no template can use are left out."""
+    vote for some box, the cell rectangle ``(R0, R1, C0, C1)`` their windows cover and their
+    :func:`_window_ranges` by template: ``[(index, scale, rectangle, templates, {t: ranges})]``;
+    levels no template can use are left out."""
     out = []
+    shapes = np.array([c.template for c in bank.configs], int).reshape(-1, 2)
     for li, scale, (Hc, Wc) in levels:
-        rect, templates = [Hc, 0, Wc, 0], []
-        for t, config in enumerate(bank.configs):
-            th, tw = config.template
-            if th > Hc or tw > Wc:
-                continue
-            near, r0, r1, q0, q1, _ = _window_ranges(config, scale, boxes, iou)
-            r0, r1 = np.maximum(r0, 0), np.minimum(r1, Hc - th + 1)
-            q0, q1 = np.maximum(q0, 0), np.minimum(q1, Wc - tw + 1)
-            ok = near & (r1 > r0) & (q1 > q0)
-            if ok.any():
-                templates.append(t)
-                rect = [min(rect[0], int(r0[ok].min())), max(rect[1], int(r1[ok].max()) + th - 1),
-                        min(rect[2], int(q0[ok].min())), max(rect[3], int(q1[ok].max()) + tw - 1)]
-        if templates:
-            out.append((li, scale, tuple(rect), templates))
+        fits = np.flatnonzero((shapes[:, 0] <= Hc) & (shapes[:, 1] <= Wc))
+        if not len(fits):
+            continue
+        ranges = _window_ranges(bank, fits, scale, boxes, iou)
+        near, r0, r1, q0, q1, _ = ranges
+        th, tw = shapes[fits, 0, None], shapes[fits, 1, None]
+        r0, r1 = np.maximum(r0, 0), np.minimum(r1, Hc - th + 1)
+        q0, q1 = np.maximum(q0, 0), np.minimum(q1, Wc - tw + 1)
+        ok = near & (r1 > r0) & (q1 > q0)
+        use = np.flatnonzero(ok.any(1))
+        if not len(use):
+            continue
+        rect = (int(r0[ok].min()), int((r1 + th - 1)[ok].max()), int(q0[ok].min()), int((q1 + tw - 1)[ok].max()))
+        out.append((li, scale, rect, [int(t) for t in fits[use]],
+                    {int(fits[i]): tuple(a[i] for a in ranges) for i in use}))
     return out
 
 
@@ -160,21 +168,24 @@ def _region_features(gray: np.ndarray, scale: float, rect) -> np.ndarray:
     return f[R0 - y0:R1 - y0, C0 - x0:C1 - x0]
 
 
-def _best_votes(bank: DetectorBank, scale: float, responses, origin, boxes: np.ndarray, image_size,
-                iou: float) -> np.ndarray:
+def _best_votes(bank: DetectorBank, scale: float, responses, ranges, origin, boxes: np.ndarray, image_size,
+                iou: float, floor: float) -> np.ndarray:
     """``(N, 8)`` best response per box and viewpoint bin among the windows of the response
     maps ``responses`` ``[(t, R)]`` of templates ``t`` at pyramid ``scale`` (entry ``(r, q)``
-    of ``R`` scores the window whose top-left cell is ``origin + (r, q)``) whose vote
-    overlaps each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``; -inf where none does. All
-    templates of a level at once: one box regression and one overlap test for their windows."""
+    of ``R`` scores the window whose top-left cell is ``origin + (r, q)``; ``ranges``: their
+    :func:`_window_ranges` by template, as :func:`_plan` gives them) whose vote
+    overlaps each of ``boxes`` ``(N, 4)`` by IoU >= ``iou``; ``floor`` where none above
+    ``floor`` does (windows at or below it are not placed: what they would give, the floor
+    replaces). All templates of a level at once: one box regression and one overlap test
+    for their windows."""
     W, H = image_size
     step = CELL / scale
     o_r, o_q = origin
-    out = np.full((len(boxes), N_BINS), -np.inf)
+    out = np.full((len(boxes), N_BINS), float(floor))
     idx, rows, cols, vote0, bins, values = [], [], [], [], [], []
     for t, R in responses:
         config = bank.configs[t]
-        near, r0, r1, q0, q1, vote = _window_ranges(config, scale, boxes, iou)
+        near, r0, r1, q0, q1, vote = ranges[t]
         r0, r1 = np.maximum(r0, o_r), np.minimum(r1, o_r + R.shape[0])
         q0, q1 = np.maximum(q0, o_q), np.minimum(q1, o_q + R.shape[1])
         sel = np.flatnonzero(near & (r1 > r0) & (q1 > q0))
@@ -185,15 +196,19 @@ def _best_votes(bank: DetectorBank, scale: float, responses, origin, boxes: np.n
         k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
         nq_w = np.repeat(nq, counts)
         r, q = np.repeat(r0[sel], counts) + k // nq_w, np.repeat(q0[sel], counts) + k % nq_w
-        idx.append(np.repeat(sel, counts))
-        rows.append(r)
-        cols.append(q)
-        vote0.append(np.broadcast_to(vote, (len(r), 4)))
-        bins.append(np.full(len(r), config.bin))
-        values.append(R[r - o_r, q - o_q].astype(float))
+        value = R[r - o_r, q - o_q].astype(float)
+        above = value > floor
+        idx.append(np.repeat(sel, counts)[above])
+        rows.append(r[above])
+        cols.append(q[above])
+        vote0.append(np.broadcast_to(vote, (int(above.sum()), 4)))
+        bins.append(np.full(len(rows[-1]), config.bin))
+        values.append(value[above])
     if not idx:
         return out
     idx, rows, cols, bins = (np.concatenate(a) for a in (idx, rows, cols, bins))
+    if not len(idx):
+        return out
     votes = clip_boxes(np.concatenate(vote0) + step * np.column_stack([cols, rows, cols, rows]), W, H)
     regression = bank.meta.get("box_regression")
     if regression is not None:
@@ -247,12 +262,13 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
             levels = [(li, s, tuple(n // CELL for n in level_size(W, H, s)[::-1])) for li, s in enumerate(scales)]
         else:
             levels = [(li, s, F.shape[:2]) for li, (s, F) in enumerate(pyramid)]
-        for li, scale, rect, templates in _plan(bank, levels, b, iou):
+        for li, scale, rect, templates, ranges in _plan(bank, levels, b, iou):
             R0, R1, C0, C1 = rect
             F = _region_features(gray, scale, rect) if pyramid is None else pyramid[li][1][R0:R1, C0:C1]
             responses = [(t, R) for t, _, _, R in template_responses(bank, [(scale, F)], min_height=0.0,
                                                                      max_height=np.inf, detectors=templates)]
-            best = np.maximum(best, _best_votes(bank, scale, responses, (R0, C0), b, (W, H), iou))
+            best = np.maximum(best, _best_votes(bank, scale, responses, ranges, (R0, C0), b, (W, H), iou,
+                                                floor_margin))
     best = np.maximum(best, floor_margin)
     if bank.calibration is not None:
         a, c = (float(v) for v in bank.calibration)

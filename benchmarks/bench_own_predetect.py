@@ -1,0 +1,102 @@
+"""The pipeline's own pre-detection of this checkout against another checkout's, side by side.
+
+:func:`wirescene.fitting.pipeline.detect_own` (the shipped bank at the fit's threshold, then the
+box rule's viewpoints) runs in two worker processes, one importing this checkout's ``src``, the
+other ``--other``'s (e.g. ``git worktree add /tmp/base REV``, then ``--other /tmp/base/src``),
+each on one core (BLAS threads 1). They take the frames in turn, frame by frame, so that a
+change in the machine's speed falls on both alike; each reports the CPU seconds of its call
+(= seconds on one free core). Prints the mean seconds a frame of each, their ratio, and whether
+the two give the same detections (boxes, scores and viewpoints to the bit, or how far apart).
+
+    python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other /tmp/base/src [--frames 24]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+_WORKER = r"""
+import json, sys, time
+from threadpoolctl import threadpool_limits
+threadpool_limits(1)
+from wirescene.fitting.pipeline import PredetectOptions, detect_own, detector_bank
+from wirescene.io.kitti import KittiDataset
+ds, bank = KittiDataset(sys.argv[1]), detector_bank(None)
+threshold = PredetectOptions().threshold if sys.argv[2] == "fit" else float(sys.argv[2])
+for line in sys.stdin:
+    f = line.strip()
+    camera, image = ds.camera(f), ds.image(f)
+    c = time.process_time()
+    d = detect_own(camera, image, bank=bank, threshold=threshold)
+    cpu = time.process_time() - c
+    rows = [[float(v) for v in (*b, s, a)] for b, s, a in zip(d.boxes, d.scores, d.alpha)]
+    print(json.dumps({"frame": f, "cpu": cpu, "detections": rows}), flush=True)
+"""
+
+
+def worker(src: str, root: str, threshold: str) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(Path(src).resolve()), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    return subprocess.Popen([sys.executable, "-c", _WORKER, root, threshold], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True, env=env)
+
+
+def ask(proc: subprocess.Popen, frame: str) -> dict:
+    proc.stdin.write(frame + "\n")
+    proc.stdin.flush()
+    line = proc.stdout.readline()
+    if not line:
+        raise SystemExit(f"a worker stopped on frame {frame} (exit code {proc.poll()})")
+    return json.loads(line)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--root", required=True, help="KITTI root (e.g. ../shared/data/kitti)")
+    ap.add_argument("--other", required=True, help="src/ folder of the other checkout")
+    ap.add_argument("--frames", type=int, default=24, help="frames timed, spread evenly over the root's")
+    ap.add_argument("--threshold", default="fit", help="the bank's threshold (default: the fit's)")
+    args = ap.parse_args()
+
+    from wirescene.io.kitti import KittiDataset
+
+    ids = KittiDataset(args.root).frame_ids()
+    frames = list(dict.fromkeys(ids[i] for i in np.linspace(0, len(ids) - 1, args.frames).round().astype(int)))
+    here = str(Path(__file__).resolve().parents[1] / "src")
+    procs = {"this": worker(here, args.root, args.threshold), "other": worker(args.other, args.root, args.threshold)}
+    try:
+        ask(procs["this"], frames[0]), ask(procs["other"], frames[0])  # imports and caches, untimed
+        cpu = {k: [] for k in procs}
+        same, gap, n_det = 0, 0.0, 0
+        for i, f in enumerate(frames):
+            order = ("this", "other") if i % 2 == 0 else ("other", "this")
+            got = {k: ask(procs[k], f) for k in order}
+            for k in procs:
+                cpu[k].append(got[k]["cpu"])
+            a, b = (np.array(got[k]["detections"], float).reshape(-1, 6) for k in ("this", "other"))
+            n_det += len(a)
+            if a.shape == b.shape and np.array_equal(a, b):
+                same += 1
+            elif a.shape == b.shape:
+                gap = max(gap, float(np.abs(a - b).max()))
+            else:
+                gap = np.inf
+    finally:
+        for p in procs.values():
+            p.stdin.close()
+            p.wait()
+    t, o = np.mean(cpu["this"]), np.mean(cpu["other"])
+    print(f"detect_own on {len(frames)} frames ({n_det} detections here), CPU s a frame on one core: this {t:.2f} "
+          f"(max {np.max(cpu['this']):.2f}), other {o:.2f} (max {np.max(cpu['other']):.2f}), other / this {o / t:.2f}x; "
+          f"detections identical on {same} of {len(frames)} frames"
+          + ("" if same == len(frames) else f" (largest difference {gap:.3g})"))
+
+
+if __name__ == "__main__":
+    main()
