@@ -139,6 +139,21 @@ def test_the_windows_the_rule_searches_are_all_that_can_vote(scene):
     assert (best > FLOOR_MARGIN).sum() >= len(boxes)  # (cars whose bins some window scores above the floor)
 
 
+def test_the_rule_reads_the_response_maps_the_bank_left(scene):
+    bank, image, boxes, pyr = scene["bank"], scene["image"], scene["boxes"], scene["pyramid"]
+    h, w = image.shape[:2]
+    maps = {}
+    detect_pyramid(bank, pyr, (w, h), threshold=bank.threshold, responses=maps)
+    assert 0 < len(maps) < len(bank) * len(pyr)  # (templates too large or small for a level: the rule computes them)
+    for (t, li), R in maps.items():
+        th, tw = bank.configs[t].template
+        assert R.shape == (pyr[li][1].shape[0] - th + 1, pyr[li][1].shape[1] - tw + 1)
+    read = box_bin_log_odds(bank, image, boxes, pyramid=pyr, responses=maps)
+    assert_close(read, scene["templates"], atol=1e-5)  # the same products, summed in other blocks
+    raised = {k: R + 5.0 for k, R in maps.items()}  # ... and they are read, not computed again
+    assert np.all(box_bin_log_odds(bank, image, boxes, pyramid=pyr, responses=raised) > read + 1.0)
+
+
 def test_the_road_prior_puts_front_and_back_along_the_road(scene):
     bank, camera = scene["bank"], scene["camera"]
     prior = scene["prior"]

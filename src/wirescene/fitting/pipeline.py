@@ -150,7 +150,7 @@ def needs_evidence(detections: Detections, variants: Iterable[str | Variant]) ->
 
 
 def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarray, *, bank=None,
-                        classifier=None, pyramid: list | None = None) -> Detections:
+                        classifier=None, pyramid: list | None = None, responses: dict | None = None) -> Detections:
     """Detections whose unknown viewpoints (NaN ``alpha``, e.g. boxes of an external
     detector) are scored inside each box by the detector bank's templates and the crop
     viewpoint classifier, with the camera's road prior
@@ -168,6 +168,9 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
         Default: the shipped one.
     pyramid : list of (float, ndarray), optional
         The image's :func:`~wirescene.predetect.bank.bank_pyramid` if already computed.
+    responses : dict, optional
+        The bank's template response maps on ``pyramid`` (``detect_cars(responses=)``), if
+        already computed.
 
     Returns
     -------
@@ -193,7 +196,7 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     classifier = viewpoint_classifier(None) if classifier is None else classifier
     alpha = detections.alpha.copy()
     alpha[unknown] = box_viewpoints(bank, image, detections.boxes[unknown], camera=camera, classifier=classifier,
-                                    pyramid=pyramid)
+                                    pyramid=pyramid, responses=responses)
     return Detections(detections.boxes, detections.scores, alpha, detections.source)
 
 
@@ -221,16 +224,18 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     from wirescene.predetect.bank import bank_pyramid
 
     bank = detector_bank(None) if bank is None else bank
-    pyramid = None
+    pyramid, responses = None, None
     if detections is None:
-        pyramid = bank_pyramid(bank, image)  # the templates' features, read again by the box rule
-        found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, pyramid=pyramid)
+        # the templates' features and responses, read again by the box rule
+        pyramid, responses = bank_pyramid(bank, image), {}
+        found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, pyramid=pyramid, responses=responses)
     else:
         found = detections
     if camera is None or not len(found):
         return found
     unknown = Detections(found.boxes, found.scores, np.full(len(found), np.nan), found.source)
-    return complete_viewpoints(camera, unknown, image, bank=bank, classifier=classifier, pyramid=pyramid)
+    return complete_viewpoints(camera, unknown, image, bank=bank, classifier=classifier, pyramid=pyramid,
+                               responses=responses)
 
 
 def fit_frame(

@@ -260,19 +260,25 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
 
 def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k: int = 200,
                   min_height: float = 30.0, max_height: float = 2000.0, chunk_cols: int = 800,
-                  detectors=None, pad_cells: int = 0) -> Activations:
+                  detectors=None, pad_cells: int = 0, responses: dict | None = None) -> Activations:
     """Apply every template to every pyramid level where the full object it implies is
     ``min_height..max_height`` px high (:func:`template_responses`). Keeps per detector
     and level the ``top_k`` windows scoring above ``threshold``. ``pad_cells`` columns of
     empty cells left and right of every level (:func:`pad_pyramid`) let windows reach past
     the image's sides (cars it truncates) while at least half of each stays inside
-    (:func:`half_inside`); their boxes keep image coordinates and ``cell`` the padded grid's."""
+    (:func:`half_inside`); their boxes keep image coordinates and ``cell`` the padded grid's.
+    ``responses`` (a dict), where given, receives every response map ``R`` as ``{(t, level): R}``
+    over the windows inside the unpadded level (entry ``(r, q)``: the window whose top-left
+    cell is ``(r, q)``), for the box rule to read
+    (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`)."""
     out = {k: [] for k in ("det", "boxes", "scores", "level", "cell")}
     pyramid = pad_pyramid(pyramid, pad_cells)
     for t, li, s, R in template_responses(bank, pyramid, min_height=min_height, max_height=max_height,
                                           chunk_cols=chunk_cols, detectors=detectors):
         th, tw = bank.configs[t].template
         Wr = R.shape[1]
+        if responses is not None:  # (windows wholly inside: never masked below)
+            responses[(t, li)] = R[:, pad_cells:Wr - pad_cells]
         if pad_cells:
             R[:, ~half_inside(np.arange(Wr), tw, R.shape[1] + tw - 1 - 2 * pad_cells, pad_cells)] = -np.inf
         flat = R.ravel()
@@ -409,7 +415,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
                 max_scale: float | None = None, per_octave: int | None = None, min_height: float | None = None,
                 per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
                 return_all: bool = False, camera=None, pyramid: list | None = None,
-                verify_within: float | None = None) -> Detections:
+                verify_within: float | None = None, responses: dict | None = None) -> Detections:
     """Detect cars in an (H, W, 3) uint8 image with the configuration bank.
 
     HOG pyramid once -> every template as a linear filter -> NMS per detector (IoU 0.5 on
@@ -434,7 +440,9 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     (:mod:`wirescene.predetect.viewpoint_prior`). ``pyramid``: the image's
     :func:`bank_pyramid` if already computed (e.g. to score given boxes' viewpoints on it too).
     ``verify_within``: see :func:`merge_activations` (off by default; ``benchmarks/RESULTS.md``,
-    "An early cut before the box refinement and the verifier")."""
+    "An early cut before the box refinement and the verifier"). ``responses``: a dict to receive
+    the templates' response maps (:func:`score_pyramid`), which the box rule then reads instead
+    of computing them again."""
     bank = load_default_bank() if bank is None else bank
     min_height = float(bank.meta.get("min_height", 30.0)) if min_height is None else min_height
     thr = bank.threshold if threshold is None else float(threshold)
@@ -450,7 +458,8 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
     return detect_pyramid(bank, pyramid, (W, H), threshold=None if return_all else thr, min_height=min_height,
                           per_detector=per_detector, cross_view_nms=cross_view_nms, source=source, horizon=horizon,
-                          center_column=center_column, gray=gray, channels=channels, verify_within=verify_within)
+                          center_column=center_column, gray=gray, channels=channels, verify_within=verify_within,
+                          responses=responses)
 
 
 def bank_scales(bank: DetectorBank, width: int, height: int, *, max_scale: float | None = None,
@@ -485,7 +494,7 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
                    cross_view_nms: float | None = 0.3, source: str = "bank",
                    horizon: float | None = None, center_column: float | None = None,
                    gray: np.ndarray | None = None, channels: np.ndarray | None = None,
-                   verify_within: float | None = None) -> Detections:
+                   verify_within: float | None = None, responses: dict | None = None) -> Detections:
     """:func:`detect_cars` on a precomputed feature pyramid of an image of ``image_size``
     ``(W, H)``; ``threshold`` (None: keep all) in the units of the returned scores
     (``calibrated``: :meth:`DetectorBank.confidence`, else raw margins); ``horizon``: image
@@ -496,12 +505,13 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
     :func:`~wirescene.predetect.channels.integral_channels`, for a verifier that reads them
     (:attr:`DetectorBank.needs_channels`). A bank's ``meta["pad_cells"]`` (default 0: banks
     trained with windows inside the image) lets windows reach past the image's sides
-    (:func:`score_pyramid`; ``train_bank_on_frames(pad_cells=)``)."""
+    (:func:`score_pyramid`; ``train_bank_on_frames(pad_cells=)``). ``responses``: a dict to
+    receive the templates' response maps (:func:`score_pyramid`)."""
     W, H = image_size
     raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
     floor = min(raw_thr if raw_thr is not None else -0.5, -0.5) - 0.5
     act = score_pyramid(bank, pyramid, threshold=floor, min_height=min_height, max_height=3.0 * H,
-                        pad_cells=int(bank.meta.get("pad_cells", 0)))
+                        pad_cells=int(bank.meta.get("pad_cells", 0)), responses=responses)
     det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
                             cross_view_nms=cross_view_nms, source=source, cluster_kw=cluster_options(bank),
                             horizon=horizon, center_column=center_column, gray=gray, channels=channels,

@@ -219,7 +219,7 @@ def _best_votes(bank: DetectorBank, scale: float, responses, ranges, origin, box
 
 
 def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=None, iou: float = IOU,
-                     floor_margin: float = FLOOR_MARGIN) -> np.ndarray:
+                     floor_margin: float = FLOOR_MARGIN, responses: dict | None = None) -> np.ndarray:
     """Score the 8 viewpoint bins inside given boxes with the bank's templates.
 
     Parameters
@@ -236,6 +236,10 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
         Overlap of a window's predicted car box with a box for the window to vote.
     floor_margin : float, optional
         Margin each bin scores at least.
+    responses : dict, optional
+        The templates' response maps on ``pyramid`` by ``(template, level)``, as the bank's
+        detection left them (:func:`~wirescene.predetect.bank.detect_cars`'s ``responses``):
+        read where they cover a level's windows, computed where they do not.
 
     Returns
     -------
@@ -264,11 +268,15 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
             levels = [(li, s, F.shape[:2]) for li, (s, F) in enumerate(pyramid)]
         for li, scale, rect, templates, ranges in _plan(bank, levels, b, iou):
             R0, R1, C0, C1 = rect
-            F = _region_features(gray, scale, rect) if pyramid is None else pyramid[li][1][R0:R1, C0:C1]
-            responses = [(t, R) for t, _, _, R in template_responses(bank, [(scale, F)], min_height=0.0,
-                                                                     max_height=np.inf, detectors=templates)]
-            best = np.maximum(best, _best_votes(bank, scale, responses, ranges, (R0, C0), b, (W, H), iou,
-                                                floor_margin))
+            known = [] if pyramid is None or responses is None else [t for t in templates if (t, li) in responses]
+            maps = [(t, responses[(t, li)][R0:R1 - bank.configs[t].template[0] + 1,
+                                           C0:C1 - bank.configs[t].template[1] + 1]) for t in known]
+            rest = [t for t in templates if t not in known]
+            if rest:
+                F = _region_features(gray, scale, rect) if pyramid is None else pyramid[li][1][R0:R1, C0:C1]
+                maps += [(t, R) for t, _, _, R in template_responses(bank, [(scale, F)], min_height=0.0,
+                                                                     max_height=np.inf, detectors=rest)]
+            best = np.maximum(best, _best_votes(bank, scale, maps, ranges, (R0, C0), b, (W, H), iou, floor_margin))
     best = np.maximum(best, floor_margin)
     if bank.calibration is not None:
         a, c = (float(v) for v in bank.calibration)
@@ -333,7 +341,8 @@ def box_log_prior(bank: DetectorBank, boxes, camera, *, road_spread: float | Non
 
 def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None, classifier=None, iou: float = IOU,
                    floor_margin: float = FLOOR_MARGIN, prior_weight: float = PRIOR_WEIGHT,
-                   road_spread: float | None = ROAD_SPREAD, pyramid=None, row_weight: float = ROW_WEIGHT) -> np.ndarray:
+                   road_spread: float | None = ROAD_SPREAD, pyramid=None, row_weight: float = ROW_WEIGHT,
+                   responses: dict | None = None) -> np.ndarray:
     """The viewpoint of each given box, scored by the bank's configuration detectors (and a
     crop classifier): the bin maximising the templates' log-odds, plus the classifier's
     log-probability, plus ``prior_weight`` times the road prior; given the camera, the boxes
@@ -359,6 +368,8 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
         See :func:`box_log_prior`.
     pyramid : list of (float, ndarray), optional
         The image's feature pyramid if already computed (see :func:`box_bin_log_odds`).
+    responses : dict, optional
+        The templates' response maps on ``pyramid`` (see :func:`box_bin_log_odds`).
     row_weight : float, optional
         Weight of the rows' agreement (:data:`ROW_WEIGHT`; 0: each box alone). Pass every box
         of the frame at once: the rows are made of the boxes given.
@@ -381,7 +392,7 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     b = _check_boxes(boxes, (W, H))
     if not len(b):
         return np.zeros(0)
-    scores = box_bin_log_odds(bank, image, b, pyramid=pyramid, iou=iou, floor_margin=floor_margin)
+    scores = box_bin_log_odds(bank, image, b, pyramid=pyramid, iou=iou, floor_margin=floor_margin, responses=responses)
     if classifier is not None:
         scores = scores + classifier.log_probs(image, b)
     prior = None if camera is None else box_log_prior(bank, b, camera, road_spread=road_spread)
