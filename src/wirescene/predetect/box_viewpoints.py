@@ -111,8 +111,9 @@ def _window_ranges(bank: DetectorBank, templates, scale: float, boxes: np.ndarra
     tw = np.array([c.template[1] for c in configs], float)[:, None]
     step = CELL / scale
     wh = np.column_stack([tw * step, th * step])  # the window (0, 0): (0, 0, tw * step, th * step)
-    votes = np.column_stack([np.zeros((len(configs), 2)), wh]) + np.array([c.offsets for c in configs], float).reshape(
-        -1, 4) * np.concatenate([wh, wh], 1)  # Configuration.full_box of each template's window (0, 0)
+    offsets = np.array([c.offsets for c in configs], float).reshape(-1, 4)
+    # Configuration.full_box of each template's window (0, 0), operation for operation
+    votes = np.column_stack([np.zeros((len(configs), 2)), wh]) + offsets * np.concatenate([wh, wh], 1)
     v0, v1, v2, v3 = (votes[:, i, None] for i in range(4))
     vw, vh = v2 - v0, v3 - v1
     gw, gh = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
@@ -239,7 +240,8 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
     responses : dict, optional
         The templates' response maps on ``pyramid`` by ``(template, level)``, as the bank's
         detection left them (:func:`~wirescene.predetect.bank.detect_cars`'s ``responses``):
-        read where they cover a level's windows, computed where they do not.
+        read where they hold a level's template, computed where they do not (all computed
+        without ``pyramid``).
 
     Returns
     -------
