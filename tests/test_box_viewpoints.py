@@ -16,7 +16,13 @@ from wirescene.core.viewpoints import bin_center, viewpoint_bin
 from wirescene.fitting.pipeline import fit_frame
 from wirescene.io.kitti import KittiDataset
 from wirescene.predetect import load_default_bank
-from wirescene.predetect.bank import apply_box_regression, clip_boxes, detect_pyramid, template_responses
+from wirescene.predetect.bank import (
+    apply_box_regression,
+    bank_pyramid,
+    clip_boxes,
+    detect_pyramid,
+    template_responses,
+)
 from wirescene.predetect.box_viewpoints import (
     FLOOR_MARGIN,
     IOU,
@@ -200,6 +206,11 @@ def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
     assert np.array_equal(own.boxes, raw.boxes) and np.array_equal(own.scores, raw.scores)
     expected = box_viewpoints(bank, image, raw.boxes, camera=camera, classifier=load_default_classifier())
     assert np.allclose(own.alpha, expected)
+    # detections made elsewhere, with the pyramid and response maps they came from (`wirescene detect --out`)
+    pyramid, maps = bank_pyramid(bank, image), {}
+    kept = detect_cars(image, bank=bank, camera=camera, pyramid=pyramid, responses=maps)
+    given = detect_own(camera, image, bank=bank, detections=kept, pyramid=pyramid, responses=maps)
+    assert np.array_equal(given.boxes, own.boxes) and np.array_equal(given.alpha, own.alpha)
     # fit_frame's own pre-detection is this one at the fit's lower threshold, its cars verified by the fit
     from dataclasses import replace
 

@@ -172,7 +172,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     from wirescene.fitting.pipeline import detect_own
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
-    from wirescene.predetect.bank import DetectorBank, detect_cars
+    from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars
 
     check_output_dir(out_dir, "--out")
     check_output_file(pr_curve, "--pr-curve")
@@ -186,11 +186,14 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
         for fid in ids:
             img = ds.image(fid)
             t = time.perf_counter()
-            d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=ds.camera(fid))
+            # the features and templates' responses, kept for the viewpoints of the boxes written
+            pyramid, responses = bank_pyramid(bank, img), ({} if out_dir is not None else None)
+            d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=ds.camera(fid), pyramid=pyramid,
+                            responses=responses)
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:
-                kept = detect_own(ds.camera(fid), img, bank=bank, detections=kept)
+                kept = detect_own(ds.camera(fid), img, bank=bank, detections=kept, pyramid=pyramid, responses=responses)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
                 write_text(out_dir / f"{fid}.json", json.dumps({"detections": entries}, indent=1))

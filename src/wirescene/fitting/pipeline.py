@@ -201,7 +201,8 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
 
 
 def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
-               detections: Detections | None = None, threshold: float | None = None) -> Detections:
+               detections: Detections | None = None, threshold: float | None = None, pyramid: list | None = None,
+               responses: dict | None = None) -> Detections:
     """Our own pre-detection (stage 1): the detector bank's cars at its threshold
     (:func:`wirescene.predetect.detect_cars`, with the camera), each box's viewpoint then
     chosen as for the boxes of any other detector (:func:`complete_viewpoints`: the bank's
@@ -211,8 +212,10 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     (``benchmarks/RESULTS.md``). Without a camera (``None``) the detector's own
     viewpoints stay. ``image``, ``bank`` and ``classifier`` as in :func:`complete_viewpoints`;
     ``detections``: the bank's detections of ``image`` if already made (e.g. at another
-    threshold); ``threshold``: the bank's score threshold (None: its own, the 2D operating
-    point). Returns the bank's boxes and calibrated scores with the rule's viewpoints.
+    threshold), with ``pyramid`` and ``responses``, the :func:`~wirescene.predetect.bank.bank_pyramid`
+    and the response maps (``detect_cars(responses=)``) they were made from, if kept, for the
+    viewpoint rule to read; ``threshold``: the bank's score threshold (None: its own, the 2D
+    operating point). Returns the bank's boxes and calibrated scores with the rule's viewpoints.
 
     Examples
     --------
@@ -224,7 +227,6 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     from wirescene.predetect.bank import bank_pyramid
 
     bank = detector_bank(None) if bank is None else bank
-    pyramid, responses = None, None
     if detections is None:
         # the templates' features and responses, read again by the box rule
         pyramid, responses = bank_pyramid(bank, image), {}
