@@ -7,8 +7,13 @@ each on one core (BLAS threads 1). They take the frames in turn, frame by frame,
 change in the machine's speed falls on both alike; each reports the CPU seconds of its call
 (= seconds on one free core). Prints the mean seconds a frame of each, their ratio, and whether
 the two give the same detections (boxes, scores and viewpoints to the bit, or how far apart).
+``--fold-banks`` / ``--fold-classifiers`` (path patterns with ``{k}``) detect each frame with the
+bank and crop classifier of its fold (:func:`wirescene.io.folds.fold_of`), trained without its
+drives: the models the README's held-out figures from our own boxes come from.
 
     python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other /tmp/base/src [--frames 24]
+    python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other /tmp/base/src --frames 72 \
+        --fold-banks 'M/bank_fold{k}.npz' --fold-classifiers 'M/viewpoint_classifier_fold{k}.npz'
 """
 
 from __future__ import annotations
@@ -26,25 +31,33 @@ _WORKER = r"""
 import json, sys, time
 from threadpoolctl import threadpool_limits
 threadpool_limits(1)
-from wirescene.fitting.pipeline import PredetectOptions, detect_own, detector_bank
+from wirescene.fitting.pipeline import PredetectOptions, detect_own, detector_bank, viewpoint_classifier
+from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
-ds, bank = KittiDataset(sys.argv[1]), detector_bank(None)
+from wirescene.predetect.bank import DetectorBank
+from wirescene.predetect.viewpoint_classifier import ViewpointClassifier
+ds = KittiDataset(sys.argv[1])
 threshold = PredetectOptions().threshold if sys.argv[2] == "fit" else float(sys.argv[2])
+banks = [DetectorBank.load(sys.argv[3].format(k=k)) for k in range(N_FOLDS)] if sys.argv[3] else None
+classifiers = [ViewpointClassifier.load(sys.argv[4].format(k=k)) for k in range(N_FOLDS)] if sys.argv[4] else None
 for line in sys.stdin:
     f = line.strip()
     camera, image = ds.camera(f), ds.image(f)
+    bank = detector_bank(None) if banks is None else banks[fold_of(f)]
+    classifier = viewpoint_classifier(None) if classifiers is None else classifiers[fold_of(f)]
     c = time.process_time()
-    d = detect_own(camera, image, bank=bank, threshold=threshold)
+    d = detect_own(camera, image, bank=bank, classifier=classifier, threshold=threshold)
     cpu = time.process_time() - c
     rows = [[float(v) for v in (*b, s, a)] for b, s, a in zip(d.boxes, d.scores, d.alpha)]
     print(json.dumps({"frame": f, "cpu": cpu, "detections": rows}), flush=True)
 """
 
 
-def worker(src: str, root: str, threshold: str) -> subprocess.Popen:
+def worker(src: str, args) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=str(Path(src).resolve()), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return subprocess.Popen([sys.executable, "-c", _WORKER, root, threshold], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True, env=env)
+    return subprocess.Popen([sys.executable, "-c", _WORKER, args.root, args.threshold, args.fold_banks or "",
+                             args.fold_classifiers or ""], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            env=env)
 
 
 def ask(proc: subprocess.Popen, frame: str) -> dict:
@@ -62,14 +75,20 @@ def main() -> None:
     ap.add_argument("--other", required=True, help="src/ folder of the other checkout")
     ap.add_argument("--frames", type=int, default=24, help="frames timed, spread evenly over the root's")
     ap.add_argument("--threshold", default="fit", help="the bank's threshold (default: the fit's)")
+    ap.add_argument("--fold-banks", help="fold banks, a path pattern with {k} (default: the shipped bank)")
+    ap.add_argument("--fold-classifiers", help="fold crop classifiers, a path pattern with {k} (default: the shipped one)")
     args = ap.parse_args()
+    for name in ("fold_banks", "fold_classifiers"):
+        pattern = getattr(args, name)
+        if pattern and "{k}" not in pattern:
+            raise SystemExit(f"--{name.replace('_', '-')} {pattern}: a path pattern with {{k}} for the fold")
 
     from wirescene.io.kitti import KittiDataset
 
     ids = KittiDataset(args.root).frame_ids()
     frames = list(dict.fromkeys(ids[i] for i in np.linspace(0, len(ids) - 1, args.frames).round().astype(int)))
     here = str(Path(__file__).resolve().parents[1] / "src")
-    procs = {"this": worker(here, args.root, args.threshold), "other": worker(args.other, args.root, args.threshold)}
+    procs = {"this": worker(here, args), "other": worker(args.other, args)}
     try:
         ask(procs["this"], frames[0]), ask(procs["other"], frames[0])  # imports and caches, untimed
         cpu = {k: [] for k in procs}
