@@ -2,7 +2,7 @@
 
 :func:`wirescene.fitting.pipeline.detect_own` (the shipped bank at the fit's threshold, then the
 box rule's viewpoints) runs in two worker processes, one importing this checkout's ``src``, the
-other ``--other``'s (e.g. ``git worktree add /tmp/base REV``, then ``--other /tmp/base/src``),
+other ``--other``'s (e.g. ``git worktree add BASE REV``, then ``--other BASE/src``),
 each on one core (BLAS threads 1). They take the frames in turn, frame by frame, so that a
 change in the machine's speed falls on both alike; each reports the CPU seconds of its call
 (= seconds on one free core). Prints the mean seconds a frame of each, their ratio, and whether
@@ -11,8 +11,8 @@ the two give the same detections (boxes, scores and viewpoints to the bit, or ho
 bank and crop classifier of its fold (:func:`wirescene.io.folds.fold_of`), trained without its
 drives: the models the README's held-out figures from our own boxes come from.
 
-    python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other /tmp/base/src [--frames 24]
-    python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other /tmp/base/src --frames 72 \
+    python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other BASE/src [--frames 24]
+    python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other BASE/src --frames 72 \
         --fold-banks 'M/bank_fold{k}.npz' --fold-classifiers 'M/viewpoint_classifier_fold{k}.npz'
 """
 
