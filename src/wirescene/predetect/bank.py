@@ -243,8 +243,9 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
                 cols += int(np.prod(bank.configs[active[i]].template))
                 i += 1
             W = np.concatenate([bank.weights[t].reshape(-1, N_FEAT) for t in group], 0)  # (M, 31)
-            if buf.size < len(W) * len(Fm) or buf.dtype != np.result_type(W, Fm):
-                buf = np.empty(len(W) * len(Fm), np.result_type(W, Fm))
+            dtype = np.result_type(W, Fm)
+            if buf.size < len(W) * len(Fm) or buf.dtype != dtype:
+                buf = np.empty(len(W) * len(Fm), dtype)
             P = np.matmul(W, Fm.T, out=buf[:len(W) * len(Fm)].reshape(len(W), len(Fm))).reshape(-1, Hc, Wc)  # (M, Hc, Wc)
             o = 0
             for t in group:
@@ -451,7 +452,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
         raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
     H, W = image.shape[:2]
     if pyramid is None:
-        pyramid = feature_pyramid(image, bank_scales(bank, W, H, max_scale=max_scale, per_octave=per_octave))
+        pyramid = bank_pyramid(bank, image, max_scale=max_scale, per_octave=per_octave)
     gray = None if bank.refinement is None and bank.verifier is None else to_gray(image)
     channels = integral_channels(image) if bank.needs_channels else None
     horizon = None if camera is None else horizon_row(camera)
@@ -472,12 +473,13 @@ def bank_scales(bank: DetectorBank, width: int, height: int, *, max_scale: float
     return pyramid_scales(width, height, max_scale=max_scale, per_octave=per_octave)
 
 
-def bank_pyramid(bank: DetectorBank, image: np.ndarray) -> list[tuple[float, np.ndarray]]:
+def bank_pyramid(bank: DetectorBank, image: np.ndarray, *, max_scale: float | None = None,
+                 per_octave: int | None = None) -> list[tuple[float, np.ndarray]]:
     """The HOG :func:`~wirescene.predetect.hog.feature_pyramid` of ``image`` at the bank's
-    levels (:func:`bank_scales`): what :func:`detect_cars` computes with its defaults, to
-    share with the box rule (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`)."""
+    levels (:func:`bank_scales`, with its ``max_scale`` / ``per_octave``): what :func:`detect_cars`
+    computes, to share with the box rule (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`)."""
     H, W = np.asarray(image).shape[:2]
-    return feature_pyramid(image, bank_scales(bank, W, H))
+    return feature_pyramid(image, bank_scales(bank, W, H, max_scale=max_scale, per_octave=per_octave))
 
 
 def cluster_options(bank: DetectorBank) -> dict:

@@ -131,9 +131,9 @@ def _window_ranges(bank: DetectorBank, templates, scale: float, boxes: np.ndarra
 
 def _plan(bank: DetectorBank, levels, boxes: np.ndarray, iou: float) -> list:
     """Per pyramid level ``(index, scale, (Hc, Wc) cells)`` of ``levels``, the templates that can
-    vote for some box, the cell rectangle ``(R0, R1, C0, C1)`` their windows cover and their
-    :func:`_window_ranges` by template: ``[(index, scale, rectangle, templates, {t: ranges})]``;
-    levels no template can use are left out."""
+    vote for some box (in bank order) with their :func:`_window_ranges`, and the cell rectangle
+    ``(R0, R1, C0, C1)`` their windows cover: ``[(index, scale, rectangle, {t: ranges})]``; levels
+    no template can use are left out."""
     out = []
     shapes = np.array([c.template for c in bank.configs], int).reshape(-1, 2)
     for li, scale, (Hc, Wc) in levels:
@@ -150,8 +150,7 @@ def _plan(bank: DetectorBank, levels, boxes: np.ndarray, iou: float) -> list:
         if not len(use):
             continue
         rect = (int(r0[ok].min()), int((r1 + th - 1)[ok].max()), int(q0[ok].min()), int((q1 + tw - 1)[ok].max()))
-        out.append((li, scale, rect, [int(t) for t in fits[use]],
-                    {int(fits[i]): tuple(a[i] for a in ranges) for i in use}))
+        out.append((li, scale, rect, {int(fits[i]): tuple(a[i] for a in ranges) for i in use}))
     return out
 
 
@@ -268,12 +267,12 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
             levels = [(li, s, tuple(n // CELL for n in level_size(W, H, s)[::-1])) for li, s in enumerate(scales)]
         else:
             levels = [(li, s, F.shape[:2]) for li, (s, F) in enumerate(pyramid)]
-        for li, scale, rect, templates, ranges in _plan(bank, levels, b, iou):
+        for li, scale, rect, ranges in _plan(bank, levels, b, iou):
             R0, R1, C0, C1 = rect
-            known = [] if pyramid is None or responses is None else [t for t in templates if (t, li) in responses]
+            known = [] if pyramid is None or responses is None else [t for t in ranges if (t, li) in responses]
             maps = [(t, responses[(t, li)][R0:R1 - bank.configs[t].template[0] + 1,
                                            C0:C1 - bank.configs[t].template[1] + 1]) for t in known]
-            rest = [t for t in templates if t not in known]
+            rest = [t for t in ranges if t not in known]
             if rest:
                 F = _region_features(gray, scale, rect) if pyramid is None else pyramid[li][1][R0:R1, C0:C1]
                 maps += [(t, R) for t, _, _, R in template_responses(bank, [(scale, F)], min_height=0.0,

@@ -112,7 +112,7 @@ def hog_cells(gray: np.ndarray, cell: int = CELL, *, strip_pixels: int = 1 << 16
     """(..., H // cell, W // cell, 31) float32 FHOG features of grey images ``(..., H, W)``
     (a stack of equal crops in one call: the same numbers as one call each, for far fewer
     numpy calls). The pixels are read in strips of whole cell rows, some ``strip_pixels`` at
-    a time: the same sums in the same order, with the temporaries in the CPU's cache (1.8x
+    a time: the same sums in the same order, with the temporaries in the CPU's cache (1.4-1.8x
     faster on a 750 x 2484 pyramid level; ``benchmarks/bench_hog.py``)."""
     g = np.asarray(gray, dtype=np.float32)
     lead = g.shape[:-2]
