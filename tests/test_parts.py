@@ -105,6 +105,22 @@ def test_numpy_forest_equals_sklearn(sk_forest, tmp_path):
     assert np.mean(p.argmax(1) == sk_forest.predict(X)) > 0.99
 
 
+def test_numpy_forest_at_its_thresholds_and_in_any_chunks(sk_forest):
+    """Inputs equal to the split thresholds (float32, as sklearn compares) go left as in
+    sklearn, through the renumbered traversal tables; the chunking changes nothing."""
+    rng = np.random.default_rng(2)
+    X = rng.normal(size=(1500, 12)).astype(np.float32)
+    for est in sk_forest.estimators_:  # every inner node's threshold, on its own feature
+        t = est.tree_
+        inner = np.flatnonzero(t.children_left >= 0)
+        rows = rng.integers(0, len(X), len(inner))
+        X[rows, t.feature[inner]] = t.threshold[inner].astype(np.float32)
+    exact = PartDetector.from_sklearn(sk_forest, kind="sc", quantize=False)
+    p = exact.predict_proba(X)
+    assert_close(p, sk_forest.predict_proba(X), atol=1e-12)
+    assert np.array_equal(exact.predict_proba(X, chunk=7), p)
+
+
 # ------------------------------------------------------------------ tiny retraining
 
 @pytest.fixture(scope="module")

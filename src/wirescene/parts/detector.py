@@ -193,8 +193,11 @@ class PartDetector:
     def n_trees(self) -> int:
         return len(self.roots)
 
-    def predict_proba(self, X, *, chunk: int = 16384) -> np.ndarray:
-        """``(N, 37)`` class probabilities (mean of the trees' leaf distributions)."""
+    def predict_proba(self, X, *, chunk: int = 1024) -> np.ndarray:
+        """``(N, 37)`` class probabilities (mean of the trees' leaf distributions).
+
+        ``chunk`` rows are traversed at a time: some thousand rows keep the traversal's
+        temporaries in the CPU's cache (``benchmarks/bench_parts.py`` times it)."""
         X = np.asarray(X, dtype=np.float32)
         check_shape("X", X, (None, self.n_features))
         out = np.empty((len(X), N_CLASSES), dtype=np.float64)
@@ -203,35 +206,57 @@ class PartDetector:
         return out
 
     def _tables(self):
-        """Traversal tables (cached): ``child (N, 2)`` (leaves point to themselves),
-        ``feature`` (0 at leaves), float32 thresholds equivalent to the float64 ones for
-        float32 inputs (the largest float32 <= the threshold), float32 leaf values."""
+        """Traversal tables (cached).
+
+        The nodes are renumbered so that each inner node's right child directly follows
+        its left one: a step is then ``left + (x > threshold)``. ``nodes`` holds one
+        16-byte record a node (left child, feature, float32 threshold, leaf row), so a
+        step gathers one record instead of three arrays. Leaves point to themselves with
+        an infinite threshold (nothing, NaN included, goes right of it). The float32
+        thresholds are equivalent to the float64 ones for float32 inputs (the largest
+        float32 <= the threshold). Returns ``nodes`` (N,) complex128 (the records' raw
+        bytes), the renumbered ``roots`` and the float32 leaf values over the trees.
+        """
         t = self.__dict__.get("_tab")
         if t is None:
-            idx = np.arange(len(self.left), dtype=np.int32)
-            leaf = self.left < 0
-            child = np.stack([np.where(leaf, idx, self.left), np.where(leaf, idx, self.right)], 1).astype(np.int32)
+            left, right = self.left.astype(np.intp), self.right.astype(np.intp)
+            leaf = left < 0
+            new = np.empty(len(left), dtype=np.intp)
+            level = self.roots.astype(np.intp)
+            new[level] = np.arange(len(level))
+            start = len(level)
+            while len(level):  # one level of all trees at a time: the children in pairs
+                inner = level[~leaf[level]]
+                pair = start + 2 * np.arange(len(inner))
+                new[left[inner]], new[right[inner]] = pair, pair + 1
+                start += 2 * len(inner)
+                level = np.stack([left[inner], right[inner]], 1).ravel()
             thr = self.threshold.astype(np.float32)
             over = thr.astype(np.float64) > self.threshold
             thr[over] = np.nextafter(thr[over], np.float32(-np.inf))
+            thr[leaf] = np.inf
+            nodes = np.zeros((len(left), 4), dtype=np.int32)
+            nodes[new, 0] = np.where(leaf, new, new[np.where(leaf, 0, left)])
+            nodes[new, 1] = np.maximum(self.feature, 0)
+            nodes[new, 2] = thr.view(np.int32)
+            nodes[new, 3] = self.leaf
             vals = self.values.astype(np.float32) / np.float32(self.value_scale * self.n_trees)
-            t = (child, np.maximum(self.feature, 0).astype(np.intp), thr, vals)
+            t = (nodes.view(np.complex128).ravel(), new[self.roots], vals)
             self.__dict__["_tab"] = t
         return t
 
     def _predict(self, X):
-        child, feature, thr, vals = self._tables()
-        n = len(X)
-        node = np.broadcast_to(self.roots[None, :], (n, self.n_trees)).copy()
+        nodes, roots, vals = self._tables()
+        n, T = len(X), self.n_trees
+        node = np.broadcast_to(roots[None, :], (n, T)).copy()
         flat = np.ascontiguousarray(X).ravel()
-        rows = (np.arange(n) * X.shape[1])[:, None]
-        child = child.ravel()
+        rows = (np.arange(n, dtype=np.intp) * X.shape[1])[:, None]
         for _ in range(self.max_depth):
-            go_right = flat[rows + feature[node]] > thr[node]
-            node = child[2 * node + go_right]
-        leaves = self.leaf[node]
+            rec = np.take(nodes, node).view(np.int32).reshape(n, T, 4)
+            node = rec[..., 0] + (np.take(flat, rows + rec[..., 1]) > rec[..., 2].view(np.float32))
+        leaves = np.take(nodes, node).view(np.int32).reshape(n, T, 4)[..., 3]
         p = np.zeros((n, N_CLASSES), np.float32)
-        for t in range(self.n_trees):
+        for t in range(T):
             p += vals[leaves[:, t]]
         p = p.astype(np.float64)
         if self.value_scale != 1.0:
