@@ -271,12 +271,13 @@ def _orientation_votes(grey_map) -> np.ndarray:
     w1 = (pos - fl).astype(np.float32)
     b0 = np.mod(fl.astype(np.int64), GHOG_BINS)
     b1 = np.mod(b0 + 1, GHOG_BINS)
-    out = np.empty(g.shape + (GHOG_BINS,), np.float32)
-    a0 = mag * (1 - w1)
-    a1 = mag * w1
-    for b in range(GHOG_BINS):
-        out[..., b] = np.where(b0 == b, a0, 0) + np.where(b1 == b, a1, 0)
-    return out
+    # Each pixel votes into its two bins (b1 is b0's neighbour, never b0 itself): two
+    # scatters into zeros instead of a pass over the map per bin.
+    out = np.zeros((g.size, GHOG_BINS), np.float32)
+    pixel = np.arange(g.size)
+    out[pixel, b0.ravel()] = (mag * (1 - w1)).ravel()
+    out[pixel, b1.ravel()] = (mag * w1).ravel()
+    return out.reshape(g.shape + (GHOG_BINS,))
 
 
 def _cells_of_votes(votes, cell: int) -> np.ndarray:
@@ -319,10 +320,9 @@ def ghog_at(cells, points, *, offsets=GHOG_OFFSETS) -> np.ndarray:
     rows = p[:, 0, None, None] + off[None, :, None]
     cols = p[:, 1, None, None] + off[None, None, :]
     ok = (rows >= 0) & (cols >= 0) & (rows < H) & (cols < W)
-    # one flat gather (float32: this is the response maps' hot path)
-    flat = c.reshape(-1)
-    idx = (np.clip(rows, 0, H - 1) * W + np.clip(cols, 0, W - 1))[..., None] * B + np.arange(B)
-    v = flat[idx]  # (N, 4, 4, B)
+    # one gather of whole cells (float32: this is the response maps' hot path)
+    cell = np.clip(rows, 0, H - 1) * W + np.clip(cols, 0, W - 1)
+    v = np.take(c.reshape(-1, B), cell, axis=0)  # (N, 4, 4, B)
     if not ok.all():
         v *= ok[..., None]
     v = v.reshape(len(p), -1)
