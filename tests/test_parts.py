@@ -56,6 +56,19 @@ def test_ghog_sees_orientation_and_is_translation_equivariant():
     assert np.all(feat.ghog_at(cells, np.array([[40, 10]])) == 0)
 
 
+def test_orientation_votes_split_linearly_between_the_two_nearest_bins():
+    yy, xx = np.mgrid[:20, :30].astype(np.float64)
+    for theta in (0.3, 2.0, 3.1):
+        g = (xx * np.cos(theta) + yy * np.sin(theta)).astype(np.float32)  # gradient (cos, sin): magnitude 1
+        votes = feat._orientation_votes(g)[5:15, 5:25]
+        pos = np.mod(theta, np.pi) * feat.GHOG_BINS / np.pi - 0.5
+        b0, frac = int(np.floor(pos)) % feat.GHOG_BINS, pos - np.floor(pos)
+        expected = np.zeros(feat.GHOG_BINS)
+        expected[b0] += 1 - frac
+        expected[(b0 + 1) % feat.GHOG_BINS] += frac
+        assert_close(votes, np.broadcast_to(expected, votes.shape), atol=1e-4)
+
+
 def test_dense_sc_equals_sparse():
     e = _pattern()
     d = feat.extract(e, "sc")
