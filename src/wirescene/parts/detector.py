@@ -254,10 +254,10 @@ class PartDetector:
         for _ in range(self.max_depth):
             rec = np.take(nodes, node).view(np.int32).reshape(n, T, 4)
             node = rec[..., 0] + (np.take(flat, rows + rec[..., 1]) > rec[..., 2].view(np.float32))
-        leaves = np.take(nodes, node).view(np.int32).reshape(n, T, 4)[..., 3]
+        leaves = np.ascontiguousarray(np.take(nodes, node).view(np.int32).reshape(n, T, 4)[..., 3].T)
         p = np.zeros((n, N_CLASSES), np.float32)
-        for t in range(T):
-            p += vals[leaves[:, t]]
+        for t in range(T):  # tree by tree, in order: the sums are the same to the bit
+            p += np.take(vals, leaves[t], axis=0)
         p = p.astype(np.float64)
         if self.value_scale != 1.0:
             p /= np.maximum(p.sum(axis=1, keepdims=True), 1e-12)
