@@ -119,8 +119,9 @@ def test_numpy_forest_equals_sklearn(sk_forest, tmp_path):
 
 
 def test_numpy_forest_at_its_thresholds_and_in_any_chunks(sk_forest):
-    """Inputs equal to the split thresholds (float32, as sklearn compares) go left as in
-    sklearn, through the renumbered traversal tables; the chunking changes nothing."""
+    """Inputs at the split thresholds (rounded to float32, the dtype sklearn compares in)
+    go the way sklearn sends them through the renumbered traversal tables; the chunking
+    changes nothing."""
     rng = np.random.default_rng(2)
     X = rng.normal(size=(1500, 12)).astype(np.float32)
     for est in sk_forest.estimators_:  # every inner node's threshold, on its own feature

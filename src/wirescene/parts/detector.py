@@ -197,7 +197,7 @@ class PartDetector:
         """``(N, 37)`` class probabilities (mean of the trees' leaf distributions).
 
         ``chunk`` rows are traversed at a time: some thousand rows keep the traversal's
-        temporaries in the CPU's cache (``benchmarks/bench_parts.py`` times it)."""
+        temporaries in the CPU's cache (``benchmarks/bench_forest.py`` times it)."""
         X = np.asarray(X, dtype=np.float32)
         check_shape("X", X, (None, self.n_features))
         out = np.empty((len(X), N_CLASSES), dtype=np.float64)
