@@ -215,3 +215,27 @@ def test_detect_and_evaluate_entry_points(frame):
         wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["424242"])
     with pytest.raises(wirescene.ArgumentError, match="^variants: "):
         wirescene.evaluate(KITTI_ROOT, variants=["coarse", "nope"])
+
+
+def test_pictures_leave_the_callers_matplotlib_backend_and_pyplot_alone(tmp_path):
+    """A notebook's backend stays (the pictures never call ``matplotlib.use``), pyplot is
+    not imported for them, and a figure the caller made with pyplot is closed once saved."""
+    script = f"""
+import sys
+import matplotlib
+matplotlib.use("svg")
+from wirescene.io.pictures import birds_eye, save_figure
+from wirescene.predetect.ap import plot_pr
+import numpy as np
+save_figure(birds_eye(), {str(tmp_path / "bev.png")!r})
+plot_pr({{"x": {{"recall": np.linspace(0, 1, 5), "precision": np.ones(5), "ap": 1.0}}}}, {str(tmp_path / "pr.png")!r})
+assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
+assert "matplotlib.pyplot" not in sys.modules
+import matplotlib.pyplot as plt
+fig = plt.figure()
+save_figure(fig, {str(tmp_path / "own.png")!r})
+assert not plt.fignum_exists(fig.number)
+"""
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert all((tmp_path / f).stat().st_size > 1000 for f in ("bev.png", "pr.png", "own.png"))

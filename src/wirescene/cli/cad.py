@@ -36,16 +36,15 @@ def _find(cad_dir: Path, name: str) -> Path:
 
 def draw_car(vertices, faces, X, *, title: str = "", out=None):
     """Three orthographic views (side, top, front) of a mesh with the 36 landmarks, their
-    names and the wireframe edges. Returns the matplotlib figure (Agg backend)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    names and the wireframe edges. Returns the matplotlib figure
+    (:func:`wirescene.io.pictures.new_figure`)."""
     from matplotlib.collections import LineCollection, PolyCollection
 
     from wirescene.core.wireframe import EDGES, N_PER_SIDE, VERTEX_NAMES
+    from wirescene.io.pictures import new_figure
 
-    fig, axes = plt.subplots(3, 1, figsize=(14, 16), gridspec_kw={"height_ratios": [1.0, 1.4, 1.0]})
+    fig = new_figure(figsize=(14, 16))
+    axes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [1.0, 1.4, 1.0]})
     # (horizontal axis, vertical axis, sign of vertical) in object coordinates
     views = (("side (left, x fwd)", 0, 1, -1.0, 2), ("top (x fwd, z left up)", 0, 2, 1.0, 1),
              ("front (z left, looking from the front at the car)", 2, 1, -1.0, 0))
@@ -72,7 +71,6 @@ def draw_car(vertices, faces, X, *, title: str = "", out=None):
     fig.tight_layout()
     if out is not None:
         fig.savefig(out, dpi=90)
-        plt.close(fig)
     return fig
 
 

@@ -30,7 +30,7 @@ from wirescene.core.wireframe import EDGES
 from wirescene.eval.kitti_metrics import kitti_figure
 from wirescene.eval.metrics import EvaluationReport
 from wirescene.fitting.variants import get_variant
-from wirescene.io.pictures import birds_eye, overlay, plt, save_figure
+from wirescene.io.pictures import birds_eye, new_figure, overlay, save_figure
 
 
 @dataclass
@@ -53,7 +53,8 @@ def depth_error_per_pixel(z, focal: float, camera_height: float = KITTI_CAMERA_H
 
 
 def _plot_error_vs_depth(reports, focal, path):
-    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=100)
+    fig = new_figure(figsize=(7, 4.2), dpi=100)
+    ax = fig.subplots()
     zmax = 5.0
     for name, rep in reports.items():
         z = np.array([np.nan if r.gt_depth is None else r.gt_depth for r in rep.records], float)
@@ -77,7 +78,8 @@ def _plot_error_vs_depth(reports, focal, path):
 
 
 def _plot_error_cdf(reports, path):
-    fig, ax = plt.subplots(figsize=(5.5, 4.2), dpi=100)
+    fig = new_figure(figsize=(5.5, 4.2), dpi=100)
+    ax = fig.subplots()
     d = np.linspace(0, 5, 201)
     for name, rep in reports.items():
         err = np.sort([r.loc_error for r in rep.records])
@@ -94,7 +96,8 @@ def _plot_error_cdf(reports, path):
 
 
 def _plot_azimuth_histogram(reports, path):
-    fig, ax = plt.subplots(figsize=(5.5, 4.2), dpi=100)
+    fig = new_figure(figsize=(5.5, 4.2), dpi=100)
+    ax = fig.subplots()
     bins = np.concatenate([np.arange(0, 30, 2.5), [30, 90, 180]])
     for name, rep in reports.items():
         err = np.array([r.az3d_error for r in rep.records])

@@ -1,25 +1,26 @@
 """Pictures of what the model did: image overlays and bird's-eye views.
 
 Estimates are drawn in red, ground truth in green, as in the paper's figures. All
-functions draw into a new matplotlib figure (Agg backend, no display needed) and
-return it; :func:`save_figure` writes it atomically.
+functions draw into a new :class:`matplotlib.figure.Figure` (:func:`new_figure`) and
+return it; :func:`save_figure` writes it atomically. No pyplot: the figures belong to
+no window manager, need no display, and the caller's matplotlib backend (a notebook's,
+say) is left as it was.
 """
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Sequence
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from wirescene.core.atomic import atomic_path  # noqa: E402
-from wirescene.core.boxes import box_corners  # noqa: E402
-from wirescene.core.camera import NEAR_PLANE, Camera  # noqa: E402
-from wirescene.core.groundplane import rotation_y  # noqa: E402
+from wirescene.core.atomic import atomic_path
+from wirescene.core.boxes import box_corners
+from wirescene.core.camera import NEAR_PLANE, Camera
+from wirescene.core.groundplane import rotation_y
 
 EST_COLOR = "#e8302a"
 GT_COLOR = "#2fbf40"
@@ -70,7 +71,7 @@ def overlay(
         Wireframe edges, used for objects that carry ``vertices``.
     """
     h, w = image.shape[:2]
-    fig = plt.figure(figsize=(w / 100, h / 100), dpi=100)
+    fig = new_figure(figsize=(w / 100, h / 100), dpi=100)
     ax = fig.add_axes([0, 0, 1, 1])
     ax.imshow(image)
     ax.set_xlim(0, w)
@@ -78,7 +79,7 @@ def overlay(
     ax.axis("off")
     if detections is not None:
         for b in detections.boxes:
-            ax.add_patch(plt.Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
+            ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
     for g in gt:
         _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0)
     if estimate is not None:
@@ -107,7 +108,8 @@ def birds_eye(
 ):
     """Top-down view (x right, z up the page) of estimated (red) and GT (green) cars,
     with the camera's field of view."""
-    fig, ax = plt.subplots(figsize=(5, 6), dpi=100)
+    fig = new_figure(figsize=(5, 6), dpi=100)
+    ax = fig.subplots()
     pts = [np.zeros(2)]
 
     def draw(dims, location, R, color):
@@ -150,12 +152,28 @@ def birds_eye(
     return fig
 
 
+def new_figure(**kwargs) -> Figure:
+    """A :class:`matplotlib.figure.Figure` (``kwargs`` as its constructor's) outside pyplot.
+
+    Examples
+    --------
+    >>> fig = new_figure(figsize=(2, 1), dpi=50)
+    >>> ax = fig.subplots()
+    >>> [int(v) for v in fig.get_size_inches() * fig.dpi]
+    [100, 50]
+    """
+    return Figure(**kwargs)
+
+
 def save_figure(fig, path: str | Path) -> Path:
-    """Save ``fig`` as PNG atomically (temporary file, then rename) and close it."""
+    """Save ``fig`` as PNG atomically (temporary file, then rename); a figure pyplot
+    manages (the caller's) is closed too."""
     path = Path(path)
     try:
         with atomic_path(path, suffix=".png") as tmp:
             fig.savefig(tmp, format="png")
     finally:
-        plt.close(fig)
+        pyplot = sys.modules.get("matplotlib.pyplot")
+        if pyplot is not None:
+            pyplot.close(fig)
     return path

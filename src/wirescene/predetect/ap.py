@@ -153,13 +153,12 @@ def summary(res: dict) -> dict:
 
 
 def plot_pr(results: dict, path, *, title: str = "Car pre-detection") -> Path:
-    """Precision-recall curves ``{name: result}`` to a PNG (matplotlib Agg)."""
-    import matplotlib
+    """Precision-recall curves ``{name: result}`` to a PNG
+    (:func:`wirescene.io.pictures.new_figure`)."""
+    from wirescene.io.pictures import new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5, 4.5))
+    fig = new_figure(figsize=(5, 4.5))
+    ax = fig.subplots()
     for name, r in results.items():
         ax.plot(r["recall"], r["precision"], label=f"{name} (AP {100 * r['ap']:.1f}%)")
     ax.set_xlim(0, 1)
@@ -172,7 +171,6 @@ def plot_pr(results: dict, path, *, title: str = "Car pre-detection") -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100, bbox_inches="tight")
-    plt.close(fig)
     return path
 
 
