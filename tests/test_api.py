@@ -239,3 +239,34 @@ assert not plt.fignum_exists(fig.number)
     run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     assert all((tmp_path / f).stat().st_size > 1000 for f in ("bev.png", "pr.png", "own.png"))
+
+
+def test_draw_shows_the_fitted_wireframes_and_the_labels_where_they_stand(frame, tmp_path):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    image, camera, labels = frame
+    cars = labels.of_type("Car")[:2]
+    boxes = np.array([c.box for c in cars])
+    scene = wirescene.fit(image, camera.P, boxes, variant="coarse", particles=20)
+    label_file = tmp_path / "gt.txt"
+    label_file.write_text("".join(line + "\n" for line in scene.to_kitti().splitlines()))  # any KITTI label file
+    fig = wirescene.draw(image, camera.P, scene, gt=labels, boxes=boxes)
+    assert [int(v) for v in fig.get_size_inches() * fig.dpi] == [image.shape[1], image.shape[0]]
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    rgb = np.asarray(canvas.buffer_rgba())[..., :3].astype(int)
+    red = (rgb[..., 0] > 200) & (rgb[..., 1] < 80) & (rgb[..., 2] < 80)  # the estimates' colour
+    green = (rgb[..., 1] > 160) & (rgb[..., 0] < 90) & (rgb[..., 2] < 100)  # the labels'
+    for b in boxes.astype(int):  # each fitted car's wireframe and its label's box lie in its 2D box
+        assert red[b[1]:b[3], b[0]:b[2]].sum() > 50
+        assert green[b[1]:b[3], b[0]:b[2]].sum() > 50
+    assert red.sum() < 0.2 * red.size and not red[:, :150].any()  # nothing drawn far left of the cars
+    assert len(wirescene.draw(image, camera.P, scene, view="bev", gt=label_file).axes) == 1
+    with pytest.raises(wirescene.ArgumentError, match="^view: "):
+        wirescene.draw(image, camera.P, scene, view="side")
+    with pytest.raises(wirescene.ArgumentError, match="^scene: "):
+        wirescene.draw(image, camera.P, scene.to_dict())
+    with pytest.raises(wirescene.ArgumentError, match="^gt: "):
+        wirescene.draw(image, camera.P, scene, gt=[1, 2])
+    with pytest.raises(wirescene.InputError, match="missing.txt"):
+        wirescene.draw(image, camera.P, scene, gt=tmp_path / "missing.txt")

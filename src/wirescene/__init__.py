@@ -7,12 +7,13 @@ The public API (see :mod:`wirescene.api`)::
 
     scene = wirescene.fit(image, calib, boxes=None, variant="full")
     dets = wirescene.detect(image)
+    fig = wirescene.draw(image, calib, scene)          # a matplotlib figure of the fit
     reports = wirescene.evaluate(kitti_root, variants=["coarse+gp", "full"])
 
 Importing the package reads no data file; trained artefacts are loaded on first use.
 """
 
-from wirescene.api import detect, evaluate, fit
+from wirescene.api import detect, draw, evaluate, fit
 from wirescene.core.camera import Camera, read_kitti_calib
 from wirescene.core.errors import ArgumentError, InputError, ShapeError, WiresceneError
 from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate
@@ -24,7 +25,7 @@ from wirescene.infer.inference import InferenceOptions
 from wirescene.lift import LiftingOptions
 
 __all__ = [
-    "fit", "detect", "evaluate", "Camera", "read_kitti_calib", "Detections", "ObjectEstimate", "SceneEstimate",
+    "fit", "detect", "draw", "evaluate", "Camera", "read_kitti_calib", "Detections", "ObjectEstimate", "SceneEstimate",
     "FitOptions", "InferenceOptions", "LiftingOptions", "EvaluationReport", "VARIANTS",
     "ArgumentError", "InputError", "ShapeError", "WiresceneError", "__version__",
 ]

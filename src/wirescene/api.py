@@ -24,7 +24,7 @@ from wirescene.fitting.variants import VARIANTS
 from wirescene.infer.inference import InferenceOptions
 from wirescene.lift import LiftingOptions
 
-__all__ = ["fit", "detect", "evaluate", "as_image", "as_camera", "as_detections"]
+__all__ = ["fit", "detect", "draw", "evaluate", "as_image", "as_camera", "as_detections"]
 
 
 def as_image(image, *, name: str = "image") -> np.ndarray:
@@ -262,6 +262,84 @@ def detect(image, calib=None, *, models=None) -> Detections:
     found = _models(models)
     bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
     return detect_own(camera, rgb, bank=bank)
+
+
+DRAW_VIEWS = ("overlay", "bev")
+
+
+def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overlay", gt=None, boxes=None,
+         title: str | None = None):
+    """A picture of what the model did, as a matplotlib figure.
+
+    Parameters
+    ----------
+    image : path or ndarray
+        As in :func:`fit`.
+    calib : path, (3, 4) array or Camera
+        As in :func:`fit`.
+    scene : SceneEstimate, optional
+        What :func:`fit` returned: its cars are drawn red (the fitted wireframes, hidden
+        vertices blue, in the ``overlay``; footprints and headings in the ``bev``).
+    view : str
+        ``"overlay"`` (the image, full size) or ``"bev"`` (bird's-eye view, x right, z up
+        the page, the camera's field of view dotted).
+    gt : path or sequence of Label, optional
+        A KITTI label file (or its labels): its cars' 3D boxes are drawn green.
+    boxes : (N, 4) array or Detections, optional
+        2D boxes drawn dashed yellow in the ``overlay`` (e.g. :func:`detect`'s).
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Not managed by pyplot: a notebook shows it as a cell's value, ``fig.savefig(path)``
+        writes it, and the caller's matplotlib backend is left as it was.
+
+    Examples
+    --------
+    >>> import numpy as np, wirescene
+    >>> P = np.array([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
+    >>> image = np.full((375, 1242, 3), 128, np.uint8)
+    >>> scene = wirescene.fit(image, P, [[300, 180, 520, 300]], variant="coarse", particles=20)
+    >>> fig = wirescene.draw(image, P, scene, boxes=[[300, 180, 520, 300]])
+    >>> [int(v) for v in fig.get_size_inches() * fig.dpi]  # the image's own size
+    [1242, 375]
+    >>> type(wirescene.draw(image, P, scene, view="bev")).__name__
+    'Figure'
+    """
+    from wirescene.core.wireframe import EDGES
+    from wirescene.io.pictures import birds_eye, overlay
+
+    if view not in DRAW_VIEWS:
+        raise ArgumentError("view", f"expected one of {', '.join(DRAW_VIEWS)}, got {view!r}")
+    if scene is not None and not isinstance(scene, SceneEstimate):
+        raise ArgumentError("scene", f"expected what wirescene.fit returns (SceneEstimate), got {type(scene).__name__}")
+    rgb = as_image(image)
+    size = (rgb.shape[1], rgb.shape[0])
+    camera = as_camera(calib, size)
+    cars = _gt_cars(gt)
+    if view == "bev":
+        return birds_eye(scene, gt=cars, camera=camera, title=title)
+    dets = None if boxes is None else as_detections(boxes, size)
+    return overlay(rgb, camera, scene, gt=cars, detections=dets, title=title, edges=EDGES)
+
+
+def _gt_cars(gt) -> list:
+    """The ``Car`` labels of a KITTI label file, or of a sequence of labels (None: none)."""
+    from wirescene.core.labels import FrameLabels, Label
+
+    if gt is None:
+        return []
+    if isinstance(gt, (str, Path)):
+        from wirescene.io.kitti import read_labels
+
+        return read_labels(gt).of_type("Car")  # InputError naming the file
+    if isinstance(gt, FrameLabels):
+        return gt.of_type("Car")
+    labels = list(gt)
+    if not all(isinstance(g, Label) for g in labels):
+        raise ArgumentError("gt", "expected a KITTI label file or a sequence of wirescene.core.labels.Label")
+    return [g for g in labels if g.type == "Car"]
 
 
 def evaluate(
