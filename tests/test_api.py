@@ -266,7 +266,8 @@ def test_draw_shows_the_fitted_wireframes_and_the_labels_where_they_stand(frame,
         wirescene.draw(image, camera.P, scene, view="side")
     with pytest.raises(wirescene.ArgumentError, match="^scene: "):
         wirescene.draw(image, camera.P, scene.to_dict())
-    with pytest.raises(wirescene.ArgumentError, match="^gt: "):
-        wirescene.draw(image, camera.P, scene, gt=[1, 2])
+    for bad in ([1, 2], 3):
+        with pytest.raises(wirescene.ArgumentError, match="^gt: "):
+            wirescene.draw(image, camera.P, scene, gt=bad)
     with pytest.raises(wirescene.InputError, match="missing.txt"):
         wirescene.draw(image, camera.P, scene, gt=tmp_path / "missing.txt")

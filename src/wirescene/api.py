@@ -336,7 +336,7 @@ def _gt_cars(gt) -> list:
         return read_labels(gt).of_type("Car")  # InputError naming the file
     if isinstance(gt, FrameLabels):
         return gt.of_type("Car")
-    labels = list(gt)
+    labels = list(gt) if isinstance(gt, Iterable) else [gt]
     if not all(isinstance(g, Label) for g in labels):
         raise ArgumentError("gt", "expected a KITTI label file or a sequence of wirescene.core.labels.Label")
     return [g for g in labels if g.type == "Car"]
