@@ -211,6 +211,17 @@ def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
     kept = detect_cars(image, bank=bank, camera=camera, pyramid=pyramid, responses=maps)
     given = detect_own(camera, image, bank=bank, detections=kept, pyramid=pyramid, responses=maps)
     assert np.array_equal(given.boxes, own.boxes) and np.array_equal(given.alpha, own.alpha)
+    # a pyramid alone is read by the detection too, not computed again
+    import wirescene.predetect.bank as bank_module
+
+    def no_pyramid(*args, **kwargs):
+        raise AssertionError("the given pyramid was computed again")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(bank_module, "bank_pyramid", no_pyramid)
+        mp.setattr(bank_module, "feature_pyramid", no_pyramid)
+        alone = detect_own(camera, image, bank=bank, pyramid=pyramid)
+    assert np.array_equal(alone.boxes, own.boxes) and np.array_equal(alone.alpha, own.alpha)
     # fit_frame's own pre-detection is this one at the fit's lower threshold, its cars verified by the fit
     from dataclasses import replace
 

@@ -212,9 +212,10 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     (``benchmarks/RESULTS.md``). Without a camera (``None``) the detector's own
     viewpoints stay. ``image``, ``bank`` and ``classifier`` as in :func:`complete_viewpoints`;
     ``detections``: the bank's detections of ``image`` if already made (e.g. at another
-    threshold), with ``pyramid`` and ``responses``, the :func:`~wirescene.predetect.bank.bank_pyramid`
-    and the response maps (``detect_cars(responses=)``) they were made from, if kept, for the
-    viewpoint rule to read; ``threshold``: the bank's score threshold (None: its own, the 2D
+    threshold), with ``responses``, the response maps (``detect_cars(responses=)``) they were
+    made from, if kept, for the viewpoint rule to read; ``pyramid``: the image's
+    :func:`~wirescene.predetect.bank.bank_pyramid` if already computed (read by the detection
+    and the rule); ``threshold``: the bank's score threshold (None: its own, the 2D
     operating point). Returns the bank's boxes and calibrated scores with the rule's viewpoints.
 
     Examples
@@ -229,7 +230,7 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     bank = detector_bank(None) if bank is None else bank
     if detections is None:
         # the templates' features and responses, read again by the box rule
-        pyramid, responses = bank_pyramid(bank, image), {}
+        pyramid, responses = (bank_pyramid(bank, image) if pyramid is None else pyramid), {}
         found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, pyramid=pyramid, responses=responses)
     else:
         found = detections
