@@ -664,3 +664,51 @@ def test_run_configs_fits_each_configuration_on_the_evidence_it_asks_for(monkeyp
     assert [flip for flip, _ in fitted] == [True, False]
     assert all(ev is read[flip] for flip, ev in fitted)
     assert len(results[("plain", "coarse")]) == 1
+
+
+def test_fold_model_splits_hold_each_frame_in_every_fold_but_its_own(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from train_fold_models import write_splits
+    from wirescene.io.folds import N_FOLDS, fold_of
+
+    splits = write_splits(KITTI_ROOT, tmp_path)
+    frames = {"000002", "000010", "001545"}  # the bundled labelled frames, of folds 0, 3 and 1
+    held = {k: set(splits[k].read_text().split()) for k in range(N_FOLDS)}
+    for k in range(N_FOLDS):
+        assert held[k] == {f for f in frames if fold_of(f) != k}
+    assert held[0] == {"000010", "001545"} and held[2] == frames
+
+
+def test_fold_model_steps_skip_what_exists_and_name_what_failed(monkeypatch, tmp_path, capsys):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from train_fold_models import run_all
+
+    done, made, failing = tmp_path / "done.npz", tmp_path / "made.npz", tmp_path / "never.npz"
+    done.write_text("")
+    py = sys.executable
+    todo = [("kept", done, [py, "-c", "raise SystemExit(3)"]),  # exists: never run
+            ("made", made, [py, "-c", f"open({str(made)!r}, 'w').write('x')"]),
+            ("bad", failing, [py, "-c", "raise SystemExit(2)"])]
+    with pytest.raises(SystemExit, match="failed steps: bad"):
+        run_all(todo, tmp_path / "logs", jobs=2)
+    out = capsys.readouterr().out
+    assert "kept: " in out and "skipped" in out and "made: done" in out and "bad: FAILED (exit 2" in out
+    assert made.read_text() == "x" and not failing.exists() and (tmp_path / "logs" / "bad.log").exists()
+
+
+def test_parts_scale_projection_caps_the_real_patches_and_scales_the_forests(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_train_parts_scale import MAX_REAL_PATCHES, project
+
+    rows = [{"frames": 20, "real_patches": 40_000, "patches": 140_000, "patches_s": 200.0, "final_forest_s": 100.0,
+             "calibration_s": 300.0},
+            {"frames": 60, "real_patches": 120_000, "patches": 220_000, "patches_s": 600.0, "final_forest_s": 200.0,
+             "calibration_s": 600.0}]
+    out = project(rows)
+    assert out["patches_s"] == {"a": 0.0, "b_per_frame": 10.0}
+    assert out["real_patches_per_frame"] == 2000.0
+    assert out["patches_3712"] == MAX_REAL_PATCHES + 100_000  # 2,000 a frame would be 7.4 million: capped
+    k = np.log(800 / 400) / np.log(220 / 140)
+    assert_close(out["forests_exponent"], round(k, 2))
+    assert_close(out["projection_3712_h"]["patches"], round(10.0 * 3712 / 3600, 1))
+    assert_close(out["projection_3712_h"]["forests"], round(800 * (700_000 / 220_000) ** k / 3600, 1))
