@@ -4,7 +4,7 @@ bounded real part patches, and per-image passes in worker processes that train t
 import numpy as np
 import pytest
 
-from conftest import KITTI_ROOT, TINY_BANK
+from conftest import KITTI_ROOT, TINY_BANK, kitti_copy
 from wirescene.training.scale import FrameCache, NegativePool, can_fork, map_images
 
 
@@ -184,3 +184,52 @@ def test_row_sample_is_the_plain_rows_below_the_cap_and_a_uniform_ordered_sample
     assert np.all(np.diff(X[:, 0]) > 0)  # arrival order kept
     assert np.all(X[:, 0] == T)  # the columns stay aligned row by row
     assert X[:, 0].min() < 200 and X[:, 0].max() > 800  # spread over the whole stream
+
+
+def test_training_passes_from_vote_clusters_detect_and_fit_what_whole_passes_do(tmp_path):
+    """finish_bank computes each image's vote clusters once and finishes every later pass's
+    detections from them: at every stage of the bank those are the whole passes' detections,
+    and each step fitted from them is the same, array for array (an image without a car
+    among them: the box regression reads only those with one)."""
+    from dataclasses import replace
+
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.kitti_detector import (
+        detect_training_image,
+        fit_box_refinement,
+        fit_box_regression,
+        load_training_frames,
+        training_clusters,
+        training_detections,
+        training_gt_boxes,
+        verifier_training_rows,
+    )
+
+    root = kitti_copy(tmp_path, ["000002", "000010", "001545"])
+    (root / "training" / "label_2" / "000002.txt").write_text("")  # a frame without a car
+    ds = KittiDataset(root)
+    bank = _tiny_bank()
+    bank.verifier["gain"] = np.float32(0.5)  # so that the last stage applies it
+    images, _ = load_training_frames(ds, ["000002", "000010", "001545"])
+    gt = training_gt_boxes(ds, images)
+    assert sum(len(g) == 0 for g in gt) > 0 and sum(len(g) > 0 for g in gt) > 0
+    templates = replace(bank, meta={k: v for k, v in bank.meta.items() if k != "box_regression"}, refinement=None,
+                        verifier=None)
+    clusters = [training_clusters(templates, im) for im in images]  # from another bank with the same templates
+    stages = [templates, replace(bank, refinement=None, verifier=None), replace(bank, verifier=None), bank]
+    for stage in stages:
+        for im, c in zip(images, clusters):
+            whole, finished = detect_training_image(stage, im), detect_training_image(stage, im, clusters=c)
+            assert len(whole) > 0
+            for a, b in ((whole.boxes, finished.boxes), (whole.scores, finished.scores), (whole.alpha, finished.alpha)):
+                np.testing.assert_array_equal(a, b)
+    regression = fit_box_regression(bank, images, gt, clusters=clusters)
+    assert regression == fit_box_regression(bank, images, gt) and regression["n"] > 0
+    refinement = fit_box_refinement(bank, images, ds, clusters=clusters)
+    for key, value in fit_box_refinement(bank, images, ds).items():
+        np.testing.assert_array_equal(value, refinement[key])
+    plain = replace(bank, verifier=None)
+    detections = list(training_detections(plain, images, clusters=clusters))
+    for a, b in zip(verifier_training_rows(plain, images, ds, detections=detections),
+                    verifier_training_rows(plain, images, ds)):
+        np.testing.assert_array_equal(a, b)

@@ -509,18 +509,33 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
     trained with windows inside the image) lets windows reach past the image's sides
     (:func:`score_pyramid`; ``train_bank_on_frames(pad_cells=)``). ``responses``: a dict to
     receive the templates' response maps (:func:`score_pyramid`)."""
-    W, H = image_size
-    raw_thr = None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
-    floor = min(raw_thr if raw_thr is not None else -0.5, -0.5) - 0.5
+    raw_thr = raw_threshold(bank, threshold, calibrated=calibrated)
+    clusters = pyramid_clusters(bank, pyramid, image_size, threshold=raw_thr, min_height=min_height,
+                                per_detector=per_detector, responses=responses)
+    return finish_clusters(clusters, bank, image_size, threshold=raw_thr, calibrated=calibrated,
+                           cross_view_nms=cross_view_nms, source=source, horizon=horizon,
+                           center_column=center_column, gray=gray, channels=channels, verify_within=verify_within)
+
+
+def raw_threshold(bank: DetectorBank, threshold: float | None, *, calibrated: bool = True) -> float | None:
+    """``threshold`` in margin units (None stays None): :meth:`DetectorBank.margin_of` of a
+    calibrated one."""
+    return None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
+
+
+def pyramid_clusters(bank: DetectorBank, pyramid, image_size, *, threshold: float | None = None,
+                     min_height: float = 30.0, per_detector: int | None = None,
+                     responses: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The first half of :func:`detect_pyramid`: the templates' activations on ``pyramid``
+    (:func:`score_pyramid`, down to a margin floor below ``threshold``, in margin units) and
+    their votes clustered into cars (:func:`vote_clusters`). They depend only on the
+    templates and on the bank's clustering options, so a training pass that changes only
+    the steps after them can reuse them (:func:`finish_clusters`)."""
+    H = image_size[1]
+    floor = min(threshold if threshold is not None else -0.5, -0.5) - 0.5
     act = score_pyramid(bank, pyramid, threshold=floor, min_height=min_height, max_height=3.0 * H,
                         pad_cells=int(bank.meta.get("pad_cells", 0)), responses=responses)
-    det = merge_activations(act, bank, (W, H), threshold=raw_thr, per_detector=per_detector,
-                            cross_view_nms=cross_view_nms, source=source, cluster_kw=cluster_options(bank),
-                            horizon=horizon, center_column=center_column, gray=gray, channels=channels,
-                            verify_within=verify_within)
-    if calibrated and bank.calibration is not None:
-        det = Detections(det.boxes, bank.confidence(det.scores), det.alpha, det.source)
-    return det
+    return vote_clusters(act, bank, per_detector=per_detector, cluster_kw=cluster_options(bank))
 
 
 def merge_activations(act: Activations, bank: DetectorBank, image_size, *, threshold: float | None,
@@ -540,7 +555,16 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
     in margin units (None: keep all). ``verify_within`` (margin units; None: off): with a
     threshold, clusters more than this below it before the box refinement and the verifier
     are dropped first, sparing the two HOG crops each costs."""
-    W, H = image_size
+    clusters = vote_clusters(act, bank, per_detector=per_detector, cluster_kw=cluster_kw)
+    return finish_clusters(clusters, bank, image_size, threshold=threshold, calibrated=False,
+                           cross_view_nms=cross_view_nms, source=source, horizon=horizon,
+                           center_column=center_column, gray=gray, channels=channels, verify_within=verify_within)
+
+
+def vote_clusters(act: Activations, bank: DetectorBank, *, per_detector: int | None = None,
+                  cluster_kw: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(boxes (C, 4), scores (C,), bins (C,))``: the first steps of :func:`merge_activations`
+    (NMS per detector, full-box votes, clustering per viewpoint, the vote count)."""
     per_detector = int(bank.meta.get("per_detector", 30)) if per_detector is None else int(per_detector)
     fb, fs, fbin = [], [], []
     for t in np.unique(act.det):
@@ -556,6 +580,21 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
         scores = scores + float(bank.meta.get("support_weight", 0.0)) * np.log(support)
     else:
         boxes, scores, bins = np.zeros((0, 4)), np.zeros(0), np.zeros(0, int)
+    return boxes, scores, bins
+
+
+def finish_clusters(clusters, bank: DetectorBank, image_size, *, threshold: float | None,
+                    calibrated: bool = False, cross_view_nms: float | None = 0.3, source: str = "bank",
+                    horizon: float | None = None, center_column: float | None = None,
+                    gray: np.ndarray | None = None, channels: np.ndarray | None = None,
+                    verify_within: float | None = None) -> Detections:
+    """The rest of :func:`merge_activations` on the vote ``clusters`` of
+    :func:`vote_clusters` (or :func:`pyramid_clusters`): clip, box regression, refinement,
+    verifier, ground term, suppression across viewpoints, ``threshold`` (margin units);
+    ``calibrated``: the returned scores are the bank's calibrated confidences (where it
+    has a calibration)."""
+    W, H = image_size
+    boxes, scores, bins = clusters
     if threshold is not None and verify_within is not None:
         near = scores >= threshold - verify_within
         boxes, scores, bins = boxes[near], scores[near], bins[near]
@@ -586,6 +625,8 @@ def merge_activations(act: Activations, bank: DetectorBank, image_size, *, thres
         boxes, scores, bins = boxes[sel], scores[sel], bins[sel]
     order = np.argsort(-scores, kind="stable")
     boxes, scores, bins = boxes[order], scores[order], bins[order]
+    if calibrated and bank.calibration is not None:
+        scores = bank.confidence(scores)
     return Detections(boxes, scores, bin_center(bins) if len(bins) else np.zeros(0), source)
 
 

@@ -79,7 +79,9 @@ from wirescene.predetect.bank import (
     DetectorBank,
     bank_scales,
     detect_pyramid,
+    finish_clusters,
     pad_pyramid,
+    pyramid_clusters,
     score_pyramid,
 )
 from wirescene.predetect.configurations import (
@@ -568,22 +570,45 @@ def training_gt_boxes(dataset, images) -> list:
     return out
 
 
-def detect_training_image(bank: DetectorBank, image: TrainImage, **kw):
-    """Raw (uncalibrated, unthresholded) detections of a training image from its (cached) pyramid."""
+def training_clusters(bank: DetectorBank, image: TrainImage):
+    """The vote clusters of a training image (:func:`~wirescene.predetect.bank.pyramid_clusters`
+    on its cached pyramid, every cluster kept): the costly half of a detection, which depends
+    only on the bank's templates and clustering options, so that the passes of
+    :func:`finish_bank`, which change only the steps after them, compute it once."""
     W, H = image.size
-    pyramid = image.hog_pyramid(bank_scales(bank, W, H))
-    kw.setdefault("min_height", float(bank.meta.get("min_height", 30.0)))
+    return pyramid_clusters(bank, image.hog_pyramid(bank_scales(bank, W, H)), (W, H),
+                            min_height=float(bank.meta.get("min_height", 30.0)))
+
+
+def detect_training_image(bank: DetectorBank, image: TrainImage, *, clusters=None, **kw):
+    """Raw (uncalibrated, unthresholded) detections of a training image from its (cached)
+    pyramid, or from its ``clusters`` (:func:`training_clusters` of a bank with the same
+    templates and clustering options: the same detections, without the pyramid)."""
+    W, H = image.size
     gray = None if bank.refinement is None and bank.verifier is None else image.gray.astype(np.float32) / 255.0
     channels = image.channels if bank.needs_channels else None
+    if clusters is not None:
+        return finish_clusters(clusters, bank, (W, H), threshold=None, gray=gray, channels=channels, **kw)
+    pyramid = image.hog_pyramid(bank_scales(bank, W, H))
+    kw.setdefault("min_height", float(bank.meta.get("min_height", 30.0)))
     return detect_pyramid(bank, pyramid, (W, H), calibrated=False, threshold=None, gray=gray, channels=channels, **kw)
 
 
-def training_detections(bank: DetectorBank, images, *, workers: int = 1, progress=None, name: str = "detections",
-                        **kw):
+def _detect_with_clusters(bank: DetectorBank, item, **kw):
+    image, clusters = item
+    return detect_training_image(bank, image, clusters=clusters, **kw)
+
+
+def training_detections(bank: DetectorBank, images, *, clusters=None, workers: int = 1, progress=None,
+                        name: str = "detections", **kw):
     """:func:`detect_training_image` of every image, in order, in ``workers`` processes
-    (:func:`~wirescene.training.scale.map_images`); an iterator."""
-    return map_images(partial(detect_training_image, bank, **kw), images, workers=workers, progress=progress,
-                      name=name)
+    (:func:`~wirescene.training.scale.map_images`), from each image's ``clusters`` where
+    given (a list in the order of ``images``); an iterator."""
+    if clusters is None:
+        return map_images(partial(detect_training_image, bank, **kw), images, workers=workers, progress=progress,
+                          name=name)
+    return map_images(partial(_detect_with_clusters, bank, **kw), list(zip(images, clusters)), workers=workers,
+                      progress=progress, name=name)
 
 
 def _matched(boxes, gt, min_iou: float):
@@ -605,14 +630,14 @@ def _side_offsets(moved, target) -> np.ndarray:
 
 
 def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.0, min_iou: float = 0.5,
-                       workers: int = 1, progress=None) -> dict:
+                       clusters=None, workers: int = 1, progress=None) -> dict:
     """The bank's box regression (:func:`wirescene.predetect.bank.apply_box_regression`)
     by ridge regression on its own detections of ``images`` (``TrainImage``; without any
     regression) that overlap a box of ``gt_boxes`` (one ``(K, 4)`` array per image) with
     IoU >= ``min_iou``: targets are each side's offset to the best-overlapping box in
     units of the detection's width or height (clipped to +-0.5). ``reg`` is the ridge
-    weight on everything but the constant. ``workers``, ``progress``: of the detection pass
-    (:func:`training_detections`)."""
+    weight on everything but the constant. ``clusters``, ``workers``, ``progress``: of the detection
+    pass (:func:`training_detections`)."""
     from dataclasses import replace
 
     from wirescene.predetect.bank import REGRESSION_FEATURES, regression_features
@@ -620,8 +645,11 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
     plain = replace(bank, meta={k: v for k, v in bank.meta.items() if k != "box_regression"}, refinement=None)
     X, T = [], []
     gt_boxes = [np.asarray(gt, float).reshape(-1, 4) for gt in gt_boxes]
-    with_cars = [im for im, gt in zip(images, gt_boxes) if len(gt)]
-    found = training_detections(plain, with_cars, workers=workers, progress=progress, name="box regression")
+    with_cars = [i for i, gt in enumerate(gt_boxes) if len(gt)]
+    found = training_detections(plain, [images[i] for i in with_cars], workers=workers, progress=progress,
+                                clusters=None if clusters is None else [clusters[i] for i in with_cars],
+                                name="box regression")
+    with_cars = [images[i] for i in with_cars]
     for im, gt, det in zip(with_cars, [gt for gt in gt_boxes if len(gt)], found):
         if not len(det):
             continue
@@ -654,8 +682,8 @@ def image_cars(dataset, image: TrainImage) -> tuple[np.ndarray, np.ndarray]:
 
 def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20, sigma: float = 0.12,
                        reg: float = 1e5, min_iou: float = 0.4, per_image: int = 60, min_height: float = 20.0,
-                       seed: int = 0, max_rows: int | None = DEFAULT_MAX_REFINEMENT_ROWS, workers: int = 1,
-                       progress=None) -> dict:
+                       seed: int = 0, max_rows: int | None = DEFAULT_MAX_REFINEMENT_ROWS, clusters=None,
+                       workers: int = 1, progress=None) -> dict:
     """The bank's image-based box refinement (:mod:`wirescene.predetect.refine`), a ridge
     regression (weight ``reg`` on standardised features) fitted on ``images``
     (``TrainImage``, flipped copies included) from two sources: ``jitter`` copies of every
@@ -667,8 +695,9 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     on the held-out folds (0.08-0.16 x 3e4-1e5: all gained 2.6-7.4 points of moderate AP).
     ``max_rows``: at most that many rows, a uniform sample (:class:`~wirescene.training.scale.RowSample`;
     the 72 shared frames give 11,572, below the default, so memory stops growing at about
-    16k x 12 kB = 0.2 GB, and the ridge fit adds only its normal equations). ``workers``,
-    ``progress``: of the per-image pass (the bank's detections and every row's features)."""
+    16k x 12 kB = 0.2 GB, and the ridge fit adds only its normal equations). ``clusters``
+    (:func:`training_detections`), ``workers``, ``progress``: of the per-image pass (the bank's
+    detections and every row's features)."""
     from dataclasses import replace
 
     from wirescene.predetect.refine import fit_ridge
@@ -679,7 +708,7 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
     # the jittered copies are drawn here in image order (the random stream of a serial pass);
     # the detections and every row's features are computed per image, in the workers
     tasks = []
-    for im in images:
+    for i, im in enumerate(images):
         boxes, alpha = image_cars(dataset, im)
         jittered = []
         for g, a in zip(boxes, alpha):
@@ -690,7 +719,7 @@ def fit_box_refinement(bank: DetectorBank, images, dataset, *, jitter: int = 20,
             ok = np.all(moved[:, 2:] - moved[:, :2] > 8, axis=1)
             if ok.any():
                 jittered.append((moved[ok], g, np.full(int(ok.sum()), viewpoint_bin(a))))
-        tasks.append((im, boxes, jittered))
+        tasks.append((im, boxes, jittered, None if clusters is None else clusters[i]))
     rows_of = partial(_refinement_rows, plain, per_image=per_image, min_iou=min_iou)
     for found in map_images(rows_of, tasks, workers=workers, progress=progress, name="box refinement"):
         for X, T in found:
@@ -711,7 +740,7 @@ def _refinement_rows(bank: DetectorBank, task, *, per_image: int, min_iou: float
     from wirescene.predetect.bank import regression_features
     from wirescene.predetect.refine import refinement_features
 
-    image, boxes, jittered = task
+    image, boxes, jittered, clusters = task
     gray = image.gray.astype(np.float32) / 255.0
 
     def rows(moved, target, bins):
@@ -719,7 +748,7 @@ def _refinement_rows(bank: DetectorBank, task, *, per_image: int, min_iou: float
         return X, _side_offsets(moved, target)
 
     out = [rows(*j) for j in jittered]
-    det = detect_training_image(bank, image)
+    det = detect_training_image(bank, image, clusters=clusters)
     d = det.boxes[:per_image]
     if len(d) and len(boxes):
         keep, targets = _matched(d, boxes, min_iou)
@@ -729,20 +758,22 @@ def _refinement_rows(bank: DetectorBank, task, *, per_image: int, min_iou: float
 
 
 def fit_bank_ground_prior(bank: DetectorBank, images, dataset, *, per_image: int = 30,
-                          max_overlap: float = 0.1, workers: int = 1, progress=None) -> dict:
+                          max_overlap: float = 0.1, detections=None, workers: int = 1, progress=None) -> dict:
     """The bank's ground prior (:mod:`wirescene.predetect.geometry`) from its training
     images: the ``Car`` labels' boxes (each frame once) against the ``per_image``
     best-scoring detections (with the bank's box regression and refinement, without any ground term) that
     overlap no labelled object or DontCare region by more than ``max_overlap`` IoU.
-    ``workers``, ``progress``: of the detection pass (:func:`training_detections`)."""
+    ``detections``: those of every image (a list in the order of ``images``; None: detected
+    here); ``workers``, ``progress``: of the detection pass (:func:`training_detections`)."""
     from wirescene.core.boxes import iou_2d
 
     cars, background, seen = [], [], set()
     for im in images:
         if im.horizon is None:
             raise ValueError(f"training image {im.frame} has no horizon (camera) for the ground prior")
-    for im, det in zip(images, training_detections(bank, images, workers=workers, progress=progress,
-                                                   name="ground prior")):
+    if detections is None:
+        detections = training_detections(bank, images, workers=workers, progress=progress, name="ground prior")
+    for im, det in zip(images, detections):
         if im.frame not in seen:
             seen.add(im.frame)
             cars.append(bottom_ratio(kitti_gt_boxes(dataset.labels(im.frame)), im.horizon))
@@ -755,7 +786,8 @@ def fit_bank_ground_prior(bank: DetectorBank, images, dataset, *, per_image: int
 
 def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 150, max_rows: int | None = 40_000,
                       C: float = VERIFIER_C, car_iou: float = 0.5, view_groups: bool = False,
-                      channels: bool = VERIFIER_CHANNELS, seed: int = 0, workers: int = 1, progress=None) -> dict:
+                      channels: bool = VERIFIER_CHANNELS, seed: int = 0, detections=None, workers: int = 1,
+                      progress=None) -> dict:
     """The bank's verifier (:mod:`wirescene.predetect.verifier`), fitted on the rows of
     :func:`verifier_training_rows` (the same options): one regression for all boxes, or with
     ``view_groups`` one per viewpoint group (:data:`~wirescene.predetect.verifier.VIEW_GROUPS`;
@@ -765,8 +797,8 @@ def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 1
     from wirescene.predetect.verifier import VIEW_GROUPS, fit_verifier
 
     X, y, bins, offered = verifier_training_rows(bank, images, dataset, per_image=per_image, max_rows=max_rows,
-                                                 car_iou=car_iou, channels=channels, seed=seed, workers=workers,
-                                                 progress=progress)
+                                                 car_iou=car_iou, channels=channels, seed=seed,
+                                                 detections=detections, workers=workers, progress=progress)
     out = fit_verifier(X, y, C=C, groups=VIEW_GROUPS[bins] if view_groups else None)
     out["gain"] = np.float32(0.0)
     out["channels"] = bool(channels)
@@ -778,7 +810,7 @@ def fit_bank_verifier(bank: DetectorBank, images, dataset, *, per_image: int = 1
 
 def verifier_training_rows(bank: DetectorBank, images, dataset, *, per_image: int = 150,
                            max_rows: int | None = 40_000, car_iou: float = 0.5, channels: bool = VERIFIER_CHANNELS,
-                           seed: int = 0, workers: int = 1,
+                           seed: int = 0, detections=None, workers: int = 1,
                            progress=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """``(features (N, F) float32, labels (N,), viewpoint bins (N,), rows offered)`` the
     bank's verifier trains on, from its training ``images`` (flipped copies included): the
@@ -790,17 +822,19 @@ def verifier_training_rows(bank: DetectorBank, images, dataset, *, per_image: in
     it keeps IoU >= ``car_iou``); with ``channels``, the features include the boxes' colour
     channels (:func:`~wirescene.predetect.verifier.verifier_features`). ``max_rows``: a
     uniform sample of at most that many rows (:class:`~wirescene.training.scale.RowSample`).
-    ``workers``, ``progress``: of the per-image pass."""
+    ``detections``: the bank's detections of every image (without its verifier; a list in the
+    order of ``images``; None: detected here); ``workers``, ``progress``: of the per-image pass."""
     from dataclasses import replace
 
     rng = np.random.default_rng([seed, 11])
     plain = replace(bank, verifier=None)
     tasks = []
-    for im in images:
+    for i, im in enumerate(images):
         boxes, alpha = image_cars(dataset, im)
         size = np.tile(np.column_stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]]), 2)
         moved = boxes + np.clip(rng.normal(0.0, 0.05, boxes.shape), -0.2, 0.2) * size
-        tasks.append((im, boxes, np.concatenate([boxes, moved]), np.tile(viewpoint_bin(alpha), 2)))
+        tasks.append((im, boxes, np.concatenate([boxes, moved]), np.tile(viewpoint_bin(alpha), 2),
+                      None if detections is None else detections[i]))
     rows = RowSample(max_rows, seed=seed)
     for X, y, bins in map_images(partial(_verifier_rows, plain, per_image=per_image, car_iou=car_iou,
                                          channels=channels), tasks,
@@ -816,9 +850,9 @@ def _verifier_rows(bank: DetectorBank, task, *, per_image: int, car_iou: float =
     from wirescene.predetect.bank import regression_features
     from wirescene.predetect.verifier import verifier_features
 
-    image, cars, positives, positive_bins = task
+    image, cars, positives, positive_bins, det = task
     gray = image.gray.astype(np.float32) / 255.0
-    det = detect_training_image(bank, image)
+    det = detect_training_image(bank, image) if det is None else det
     boxes, bins = det.boxes[:per_image], viewpoint_bin(det.alpha[:per_image])
     y = np.zeros(len(boxes), int)
     if len(boxes) and len(cars):
@@ -860,14 +894,22 @@ def finish_bank(bank: DetectorBank, images, dataset, *, support_weight: float | 
     (:func:`add_verifier`); they detect without a vote count, and ``support_weight`` (None:
     the bank's meta left as it is) is stored last, for the bank's own detections
     (:func:`~wirescene.predetect.bank.merge_activations`). ``workers``: processes of their
-    detection passes (0 or 1 serial; the bank is the same)."""
+    detection passes (0 or 1 serial; the bank is the same).
+
+    The templates do not change after the SVMs, so each image's vote clusters
+    (:func:`training_clusters`) are computed once, in the first pass, and every later pass
+    finishes its detections from them; the ground prior and the verifier read the same
+    detections (with the box regression and refinement), made once. The bank is the one
+    four separate detection passes give, array for array."""
     say = progress or (lambda msg: None)
     passes = dict(workers=workers, progress=say)
-    bank.meta["box_regression"] = fit_box_regression(bank, images, training_gt_boxes(dataset, images), **passes)
+    clusters = list(map_images(partial(training_clusters, bank), images, name="vote clusters", **passes))
+    bank.meta["box_regression"] = fit_box_regression(bank, images, training_gt_boxes(dataset, images),
+                                                     clusters=clusters, **passes)
     say(f"box regression fitted on {bank.meta['box_regression']['n']} detections")
     # a handful of training frames may hold too few cars for either; the bank then goes without
     try:
-        refinement = fit_box_refinement(bank, images, dataset, **passes)
+        refinement = fit_box_refinement(bank, images, dataset, clusters=clusters, **passes)
     except ValueError as exc:
         say(f"no box refinement: {exc}")
     else:
@@ -876,8 +918,14 @@ def finish_bank(bank: DetectorBank, images, dataset, *, support_weight: float | 
             bank.meta["box_refinement"]["sampled_from"] = refinement.pop("sampled_from")
         bank.refinement = refinement
         say(f"box refinement fitted on {bank.meta['box_refinement']['n']} boxes")
+    # what the ground prior and the verifier read: the detections with the regression and the
+    # refinement, before any verifier (a bank given with one keeps the passes apart)
+    shared = None
+    if bank.verifier is None:
+        shared = list(training_detections(bank, images, clusters=clusters, name="detections", **passes))
+    del clusters
     try:
-        gp = bank.meta["ground_prior"] = fit_bank_ground_prior(bank, images, dataset, **passes)
+        gp = bank.meta["ground_prior"] = fit_bank_ground_prior(bank, images, dataset, detections=shared, **passes)
     except ValueError as exc:
         say(f"no ground prior: {exc}")
     else:
@@ -889,21 +937,22 @@ def finish_bank(bank: DetectorBank, images, dataset, *, support_weight: float | 
         say(f"no viewpoint prior: {exc}")
     else:
         say(f"viewpoint prior: {vp['n']} cars, bandwidth {vp['bandwidth']:.2f} camera heights")
-    add_verifier(bank, images, dataset, **passes)
+    add_verifier(bank, images, dataset, detections=shared, **passes)
     if support_weight is not None:
         bank.meta["support_weight"] = float(support_weight)
     return bank
 
 
 def add_verifier(bank: DetectorBank, images, dataset, *, car_iou: float = 0.5, view_groups: bool = False,
-                 channels: bool = VERIFIER_CHANNELS, workers: int = 1, progress=None) -> DetectorBank:
-    """Fit the bank's verifier (:func:`fit_bank_verifier`) on its training ``images``, the
-    last step of :func:`finish_bank` (nothing before it reads the verifier); its gain stays 0
-    until a calibration sets it (:func:`set_calibration`)."""
+                 channels: bool = VERIFIER_CHANNELS, detections=None, workers: int = 1,
+                 progress=None) -> DetectorBank:
+    """Fit the bank's verifier (:func:`fit_bank_verifier`; ``detections`` as there) on its
+    training ``images``, the last step of :func:`finish_bank` (nothing before it reads the
+    verifier); its gain stays 0 until a calibration sets it (:func:`set_calibration`)."""
     say = progress or (lambda msg: None)
     try:
         verifier = fit_bank_verifier(bank, images, dataset, car_iou=car_iou, view_groups=view_groups,
-                                     channels=channels, workers=workers, progress=say)
+                                     channels=channels, detections=detections, workers=workers, progress=say)
     except ValueError as exc:
         say(f"no verifier: {exc}")
         return bank
