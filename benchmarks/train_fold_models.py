@@ -35,8 +35,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_train_parts_scale import fill_synth_cache  # noqa: E402
+from bench_train_scale import labelled_frames  # noqa: E402
 from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
-from wirescene.io.kitti import KittiDataset  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 STEPS = ("parts", "viewpoints", "banks")
@@ -44,8 +44,7 @@ STEPS = ("parts", "viewpoints", "banks")
 
 def write_splits(root: Path, out: Path) -> dict[int, Path]:
     """``{k: OUT/splits/train_fold{k}.txt}``: the labelled frames of the folds other than k."""
-    dataset = KittiDataset(root)
-    frames = sorted(f for f in dataset.frame_ids() if dataset.label_path(f).is_file())
+    frames = labelled_frames(root)
     (out / "splits").mkdir(parents=True, exist_ok=True)
     paths = {}
     for k in range(N_FOLDS):
