@@ -649,8 +649,8 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
     found = training_detections(plain, [images[i] for i in with_cars], workers=workers, progress=progress,
                                 clusters=None if clusters is None else [clusters[i] for i in with_cars],
                                 name="box regression")
-    with_cars = [images[i] for i in with_cars]
-    for im, gt, det in zip(with_cars, [gt for gt in gt_boxes if len(gt)], found):
+    for i, det in zip(with_cars, found):
+        im, gt = images[i], gt_boxes[i]
         if not len(det):
             continue
         keep, g = _matched(det.boxes, gt, min_iou)
