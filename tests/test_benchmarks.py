@@ -8,6 +8,8 @@ its figures.
 from __future__ import annotations
 
 import importlib.util
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -309,6 +311,38 @@ def test_train_scale_checks_its_two_worker_points_against_the_serial_law(monkeyp
     # 800 frames: 4,800 s serial, 60% of it with 2 workers at a parallel share of 0.8
     assert out["two_workers"] == [{"frames": 800, "seconds": 3000.0, "projected_s": 2880.0, "peak_mb": 1600,
                                    "peak_over_first_serial": 1.6}]
+
+
+def test_eval_scale_repeats_the_labelled_frames_and_projects_parent_plus_workers(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_eval_scale import descendants, project, repeated_root
+    from wirescene.io.kitti import KittiDataset
+
+    root, ids = repeated_root(KITTI_ROOT, tmp_path, 5)
+    source = KittiDataset(KITTI_ROOT)
+    labelled = sorted(f for f in source.frame_ids() if source.label_path(f).is_file())
+    m = len(labelled)
+    assert ids == ["000000", "000001", "000002", "000003", "000004"] and 1 < m < 5
+    dataset = KittiDataset(root)
+    assert dataset.frame_ids() == ids
+    for i, f in enumerate(ids):  # frame i is the (i mod m)-th labelled frame, every file of it
+        assert dataset.label_path(f).read_text() == source.label_path(labelled[i % m]).read_text()
+        assert dataset.image_path(f).resolve() == source.image_path(labelled[i % m]).resolve()
+        assert dataset.calib_path(f).resolve() == source.calib_path(labelled[i % m]).resolve()
+    assert repeated_root(KITTI_ROOT, tmp_path, 5)[1] == ids  # a second run relinks in place
+    rows = [{"frames": 100, "parent_mb": 60, "worker_max_mb": 900},
+            {"frames": 300, "parent_mb": 80, "worker_max_mb": 1000}]
+    out = project(rows, frames=1100, machine_gb=4)
+    # the parent grows 0.1 MB a frame: 50 + 110 = 160 MB at 1,100 frames, plus W x the largest worker
+    assert out["parent_mb"] == {"c": 50, "d_per_frame": 0.1, "at_1100": 160} and out["worker_mb"] == 1000
+    assert out["total_mb_at_1100"] == {"1": 1160, "2": 2160, "8": 8160, "16": 16160}
+    assert out["workers_in_4_gb"] == 3  # (4,096 - 160) // 1,000
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert child.pid in descendants(os.getpid())
+    finally:
+        child.kill()
+        child.wait()
 
 
 def test_plane_height_bound_moves_cars_along_their_rays(monkeypatch):
