@@ -110,6 +110,14 @@ def _file(tmp, name, text="x"):
     return path
 
 
+def _truncated_copy(tmp, frames, broken):
+    """A KITTI root (``tmp/kitti``) of copies of the test ``frames`` whose image of frame ``broken`` is cut short."""
+    root = kitti_copy(tmp / "kitti", frames)
+    image = root / "training" / "image_2" / f"{broken}.png"
+    image.write_bytes(image.read_bytes()[:3000])
+    return root
+
+
 def _dets_dir(tmp, files):
     d = tmp / "dets"
     d.mkdir()
@@ -175,6 +183,25 @@ CASES = {
     "--predictions is a file": (lambda t: _eval_case(t, "--predictions", _file(t, "f")), "is a file"),
     "fit --out is a file": (lambda t: [*_fit_case(t), "--out", _file(t, "o")], "is a file"),
     "demo --out is a file": (lambda t: ["demo", "--out", _file(t, "o")], "is a file"),
+    # os.access says yes to root and knows nothing of pseudo file systems: a real try refuses these
+    "fit --out under /proc": (lambda t: [*_fit_case(t), "--out", "/proc/wirescene-check/out"],
+                              r"--out: /proc/wirescene-check/out: /proc is not writable"),
+    "kitti-eval --json under /proc": (lambda t: ["kitti-eval", SPLIT / "label_2", SPLIT / "label_2", "--json",
+                                                 "/proc/wirescene-check/k.json"], "--json: .*/proc is not writable"),
+    "gt --out is a directory": (lambda t: ["gt", KITTI_ROOT, FRAME, "--out", t], "--out: .* is a directory"),
+    "gt --out under a file": (lambda t: ["gt", KITTI_ROOT, FRAME, "--out", _file(t, "f") / "gt.png"], "--out: .*is a file"),
+    "cad show --out under a file": (lambda t: ["cad", "show", "acura-nsx-sz", "--cad-dir", Path(__file__).parent / "data" / "cad",
+                                               "--out", _file(t, "f") / "car.png"], "--out: .*is a file"),
+    "synth OUT_DIR under /proc": (lambda t: ["synth", "/proc/wirescene-check", "--scenes", "1"],
+                                  "OUT_DIR: .*/proc is not writable"),
+    "synth --cars-per-scene 5-2": (lambda t: ["synth", t / "s", "--cars-per-scene", "5-2"],
+                                   r"^wirescene: error: --cars-per-scene: need 1 <= A <= B, got '5-2'$"),
+    "detect --threshold nan": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--threshold", "nan"],
+                               "--threshold: 'nan' is not finite"),
+    # a frame that fails after others were detected: none of their files is left behind
+    "detect --out, a later image truncated": (
+        lambda t: ["detect", _truncated_copy(t, ["000002", FRAME], FRAME), "--frames", f"000002,{FRAME}",
+                   "--out", t / "dets"], rf"image_2/{FRAME}\.png: corrupt or truncated image"),
     "eval devkit mapping malformed": (_eval_mapping_case, r"train_rand\.txt.*entry 2 \('x'\)"),
     # detection directories
     "eval detections match no frame": (lambda t: _eval_case(t, "--detections", _dets_dir(t, {"10.csv": "x1,y1,x2,y2\n1,2,3,4\n"})),
@@ -255,6 +282,37 @@ def test_eval_refuses_label_boxes_that_cannot_be_naming_file_and_row(tmp_path, c
     lines = [ln for ln in r.stderr.splitlines() if ln.strip() and not ln.startswith("eval: ")]
     assert len(lines) == 1, r.stderr
     assert re.match(rf"wirescene: error: \S+/label_2/{FRAME}\.txt: line {LABEL_ROWS + 1}: {problem}", lines[0]), lines[0]
+    assert set(tmp_path.rglob("*")) <= before, f"{case} left {sorted(set(tmp_path.rglob('*')) - before)}"
+
+
+def _predict_without_p2_case(tmp):
+    """``predict`` of a copy of the test frame whose calibration lacks P2 (found by the frame's fit)."""
+    root = kitti_copy(tmp / "kitti", [FRAME], subdirs=("image_2", "calib"))
+    (root / "training" / "calib" / f"{FRAME}.txt").write_text(CALIB_TEXT.replace(P2_LINE + "\n", ""))
+    return ["predict", root, "--split", "training", "--variant", "coarse", "--detections",
+            _dets_dir(tmp, {f"{FRAME}.txt": CAR + "\n"}), "--workers", "1", "--out", tmp / "submission"]
+
+
+# Runs that fail after their fits began: the report's pictures already drawn, the settings' record of
+# `predict`, appear only with the whole (or with a finished frame), so nothing is left behind.
+FAILING_RUNS = {
+    # the coarse fit of label boxes never reads the image; the report's overlay does, after the plots
+    "eval --report, image truncated": (
+        lambda t: ["eval", _truncated_copy(t, [FRAME], FRAME), "--variant", "coarse", "--frames", FRAME, "--workers",
+                   "1", "--draws", "0", "--report", t / "report"], rf"image_2/{FRAME}\.png: corrupt or truncated"),
+    "predict, calibration without P2": (_predict_without_p2_case, "calibration has no P2"),
+}
+
+
+@pytest.mark.parametrize("case", FAILING_RUNS)
+def test_runs_failing_at_a_frame_leave_no_output(tmp_path, case):
+    make, problem = FAILING_RUNS[case]
+    args = [str(a) for a in make(tmp_path)]
+    before = set(tmp_path.rglob("*"))
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2, (case, r.output, r.exception)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip() and not re.match(r"(eval|predict): ", ln)]
+    assert len(lines) == 1 and re.match(rf"wirescene: error: .*{problem}", lines[0]), r.stderr
     assert set(tmp_path.rglob("*")) <= before, f"{case} left {sorted(set(tmp_path.rglob('*')) - before)}"
 
 

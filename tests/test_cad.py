@@ -185,7 +185,7 @@ def test_cli_list_and_show(tmp_path):
     r = CliRunner().invoke(cad, ["list", "--cad-dir", str(CAD)])
     assert r.exit_code == 0, r.output
     assert "NON-ROAD" in r.output and "buggy" in r.output
-    out = tmp_path / "nsx.png"
+    out = tmp_path / "pictures" / "nsx.png"  # its directory made as the picture is written
     r = CliRunner().invoke(cad, ["show", "acura-nsx-sz", "--out", str(out), "--cad-dir", str(CAD)])
     assert r.exit_code == 0, r.output
     assert out.stat().st_size > 10_000

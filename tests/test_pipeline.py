@@ -195,8 +195,8 @@ def test_eval_cli_resume_needs_predictions_and_dask_needs_distributed(monkeypatc
     monkeypatch.setitem(sys.modules, "distributed", None)  # import fails as if not installed
     r = _run("eval", KITTI_ROOT, "--frames", "000002", "--dask", "tcp://127.0.0.1:8786")
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
-    assert r.exit_code == 1
-    assert lines == ["Error: --dask needs the 'distributed' package: pip install wirescene[dask]"]
+    assert r.exit_code == 2  # the one-line error of any refused input, not click's "Error:" with code 1
+    assert lines == ["wirescene: error: --dask needs the 'distributed' package: pip install wirescene[dask]"]
 
 
 def test_frame_result_leaves_out_the_cars_the_fit_dropped():

@@ -70,7 +70,10 @@ def draw_car(vertices, faces, X, *, title: str = "", out=None):
     fig.suptitle(title)
     fig.tight_layout()
     if out is not None:
-        fig.savefig(out, dpi=90)
+        from wirescene.core.atomic import atomic_path
+
+        with atomic_path(out, suffix=Path(out).suffix or ".png") as tmp:  # the suffix keeps savefig's format
+            fig.savefig(tmp, dpi=90)
     return fig
 
 
@@ -102,6 +105,7 @@ def show_cmd(name, out, cad_dir):
     from wirescene.cad.landmarks import annotate
     from wirescene.cad.mesh import load_car, road_car_check
 
+    check_output_file(Path(out or f"{name}.png"), "--out")  # the default is the car's name in the working directory
     car = load_car(_find(_cad_dir(cad_dir), name))
     is_road, reason = road_car_check(car)
     X = annotate(car.vertices, car.faces, name=car.name)

@@ -154,7 +154,7 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @models_option
 @click.option("--bank", "bank_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Detector bank .npz (default: --models' or the shipped one).")
-@click.option("--threshold", type=float, default=None, help="Score threshold (default: the bank's).")
+@click.option("--threshold", type=FiniteFloat(), default=None, help="Score threshold (default: the bank's).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Write FRAME.json detection files here (readable by --detections of `eval`).")
 @click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PR curve PNG.")
@@ -182,6 +182,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
     dets_all, gts, times = [], [], []
+    files: dict[str, str] = {}  # FRAME.json of --out, written once every frame is done (no partial output)
     with single_thread():
         for fid in ids:
             img = ds.image(fid)
@@ -196,11 +197,13 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
                 kept = detect_own(ds.camera(fid), img, bank=bank, detections=kept, pyramid=pyramid, responses=responses)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
-                write_text(out_dir / f"{fid}.json", json.dumps({"detections": entries}, indent=1))
+                files[f"{fid}.json"] = json.dumps({"detections": entries}, indent=1)
             dets_all.append(d)
             if ds.has_labels:
                 gts.append((load_frame_gt(ds.split_dir, fid), ds.labels(fid)))
             click.echo(f"{fid}: {len(kept)} detections above {thr:.3f} ({times[-1]:.2f}s)")
+    for name, text in files.items():
+        write_text(out_dir / name, text)
     result = {"frames": len(ids), "threshold": thr, "seconds_per_frame": float(np.mean(times)) if times else 0.0}
     if gts:
         res = evaluate_detections(dets_all, [g[0] for g in gts])

@@ -66,6 +66,9 @@ class _Group(click.Group):
         except click.UsageError as exc:
             click.echo(f"wirescene: error: {_usage_message(exc)}", err=True)
             sys.exit(2)
+        except click.ClickException as exc:  # e.g. an unreachable --dask scheduler, a failed write of `synth`
+            click.echo(f"wirescene: error: {' '.join(exc.format_message().split())}", err=True)
+            sys.exit(2)
 
 
 @click.group(cls=_Group)
@@ -612,6 +615,7 @@ def gt_cmd(kitti_root, frame, out, split):
     from wirescene.io.kitti import KittiDataset
     from wirescene.io.pictures import overlay, save_figure
 
+    check_output_file(out, "--out")
     dataset = KittiDataset(kitti_root, split=split)
     camera = dataset.camera(frame)
     cars = dataset.labels(frame).of_type("Car")

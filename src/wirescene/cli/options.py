@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import tempfile
 from pathlib import Path
 
 import click
@@ -48,13 +49,27 @@ def _first_existing(path: Path) -> Path:
     return Path(".")
 
 
+def _writable_problem(directory: Path) -> str | None:
+    """Why nothing can be created in ``directory``, or None: permission bits first, then a
+    real try (a directory made and removed again), since ``os.access`` says yes to root and
+    knows nothing of pseudo file systems (``/proc``, ``/sys``)."""
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return "is not writable"
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".wirescene-check.", dir=directory))
+    except OSError as exc:
+        return f"is not writable ({exc.strerror or exc.__class__.__name__})"
+    return None
+
+
 def _check_creatable(path: Path, option: str) -> None:
     """The directories above ``path`` exist or can be created and written."""
     base = _first_existing(path.parent)
     if not base.is_dir():
         raise click.BadParameter(f"{path}: {base} is a file, not a directory", param_hint=option)
-    if not os.access(base, os.W_OK | os.X_OK):
-        raise click.BadParameter(f"{path}: {base} is not writable", param_hint=option)
+    problem = _writable_problem(base)
+    if problem:
+        raise click.BadParameter(f"{path}: {base} {problem}", param_hint=option)
 
 
 def check_output_file(path: Path | None, option: str) -> None:
@@ -77,8 +92,9 @@ def check_output_dir(path: Path | None, option: str) -> None:
     if path.exists():
         if not path.is_dir():
             raise click.BadParameter(f"{path} is a file, expected a directory", param_hint=option)
-        if not os.access(path, os.W_OK | os.X_OK):
-            raise click.BadParameter(f"{path} is not writable", param_hint=option)
+        problem = _writable_problem(path)
+        if problem:
+            raise click.BadParameter(f"{path} {problem}", param_hint=option)
         return
     _check_creatable(path, option)
 

@@ -9,17 +9,18 @@ from pathlib import Path
 
 import click
 
+from wirescene.cli.options import check_output_dir
 from wirescene.core.errors import WiresceneError
 
 
 def _parse_range(value: str) -> tuple[int, int]:
     m = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", value or "")
     if not m:
-        raise click.BadParameter(f"expected A-B or N (e.g. 2-8), got {value!r}")
+        raise click.BadParameter(f"expected A-B or N (e.g. 2-8), got {value!r}", param_hint="--cars-per-scene")
     a = int(m.group(1))
     b = int(m.group(2)) if m.group(2) is not None else a
     if not 1 <= a <= b:
-        raise click.BadParameter(f"need 1 <= A <= B, got {value!r}")
+        raise click.BadParameter(f"need 1 <= A <= B, got {value!r}", param_hint="--cars-per-scene")
     return a, b
 
 
@@ -43,6 +44,7 @@ def synth(out_dir, scenes, seed, cars, occluders, overwrite):
     from wirescene.synth.generate import generate_dataset
 
     rng_cars = _parse_range(cars)
+    check_output_dir(Path(out_dir), "OUT_DIR")
     split = Path(out_dir) / "training"
     if split.is_dir() and any(split.iterdir()):
         if not overwrite:

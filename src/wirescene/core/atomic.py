@@ -4,6 +4,7 @@ leaves a partial output behind."""
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -33,3 +34,29 @@ def write_bytes(path: str | Path, data: bytes) -> None:
 def write_text(path: str | Path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+@contextmanager
+def atomic_dir(path: str | Path):
+    """Yield an empty staging directory beside ``path``; when the block succeeds its files
+    move into ``path`` (created if needed; files of the same name replaced), when it raises
+    the staging directory goes and so do the directories above ``path`` made for it, so
+    that a set of files (a report's page and pictures) appears whole or not at all."""
+    path = Path(path)
+    made = [p for p in (path.parent, *path.parent.parents) if not p.exists()]  # deepest first
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        yield staging
+        path.mkdir(exist_ok=True)
+        for entry in sorted(staging.iterdir()):
+            os.replace(entry, path / entry.name)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        for directory in made:
+            try:
+                directory.rmdir()
+            except OSError:
+                break
+        raise
+    shutil.rmtree(staging, ignore_errors=True)

@@ -105,12 +105,15 @@ def predict_dataset(
         if stored != config:
             raise InputError(f"label files were written with other settings (or {CONFIG_FILE} is missing): "
                              "cannot resume into this directory", path=out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_text(config_path, json.dumps(config, indent=1))
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
     job = _PredictJob(dataset, variant, source, options)
     with ExitStack() as stack:
-        for frame_id, text in progress(fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)):
+        for k, (frame_id, text) in enumerate(progress(fit_frames(job, todo, workers=workers,
+                                                                 dask_client=dask_client, stack=stack))):
+            if k == 0:  # the settings' record with the first label file: a run failing before leaves nothing
+                write_text(config_path, json.dumps(config, indent=1))
             write_text(out / f"{frame_id}.txt", text)
+    if not todo:
+        write_text(config_path, json.dumps(config, indent=1))
     return todo

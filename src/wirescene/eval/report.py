@@ -9,8 +9,9 @@
   variant (ranked by :func:`frame_scores`, which counts missed and false cars as well as
   errors) with overlays and bird's-eye views.
 
-Everything is written atomically into one directory; the page references its PNGs by
-relative path, so the directory can be moved or served as it is.
+Everything is written atomically into one directory (the page and its pictures appear
+together or not at all); the page references its PNGs by relative path, so the
+directory can be moved or served as it is.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.core.atomic import write_text
+from wirescene.core.atomic import atomic_dir, write_text
 from wirescene.core.camera import Camera
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.labels import Label
@@ -199,8 +200,15 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
         :func:`wirescene.eval.intervals.kitti_intervals`: a second table gives KITTI's
         moderate APs (with their intervals).
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    with atomic_dir(out_dir) as staging:  # the page and its pictures appear together or not at all
+        _write_report(staging, reports, gallery=gallery, image_of=image_of, title=title, n_gallery=n_gallery,
+                      intervals=intervals, kitti=kitti, kitti_intervals=kitti_intervals)
+    return Path(out_dir) / "index.html"
+
+
+def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, intervals, kitti,
+                  kitti_intervals) -> None:
+    """:func:`write_report`'s files, written into the directory ``out``."""
     focal = next((c.focal for c, *_ in gallery.frames.values()), 721.5)
     plots = {
         "error_vs_depth.png": _plot_error_vs_depth(reports, focal, out / "error_vs_depth.png"),
@@ -257,4 +265,3 @@ max(0, 1 &minus; error / {SCORE_ZERO_ERROR:g} m) &minus; false detections) / lab
 </body></html>
 """
     write_text(out / "index.html", page)
-    return out / "index.html"
