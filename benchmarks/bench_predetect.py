@@ -172,6 +172,8 @@ def main():
     ap.add_argument("--save-dets", default=None, help="write the held-out detections to this .npz")
     ap.add_argument("--partial", type=int, default=3)
     ap.add_argument("--mining-rounds", type=int, default=3)
+    ap.add_argument("--mining-images", type=int, default=None,
+                    help="--cv: the most training images a mining round searches (default: all)")
     ap.add_argument("--C", type=float, default=0.01)
     ap.add_argument("--min-bin-examples", type=int, default=5)
     ap.add_argument("--no-flips", action="store_true")
@@ -308,7 +310,7 @@ def main():
                                         label_boxes=args.label_boxes, per_octave=args.per_octave,
                                         cut_paste=args.cut_paste, pad_cells=args.pad_cells or 0,
                                         max_truncated=args.max_truncated, whiten=args.whiten, align=args.align,
-                                        share_deg=args.share_deg,
+                                        share_deg=args.share_deg, mining_images=args.mining_images,
                                         synthetic=synthetic,
                                         full_area=args.full_area, partial_area=args.partial_area, seed=args.train_seed,
                                         progress=lambda m: print("   ", m, flush=True))

@@ -142,6 +142,42 @@ def test_capped_negatives_bound_every_pool():
     assert bank.meta["max_negatives"] == 12 and max(bank.meta["n_negatives"]) == 12
 
 
+def test_mining_rounds_search_at_most_mining_images_each_and_every_image_between_them(monkeypatch):
+    import wirescene.training.kitti_detector as kd
+    from wirescene.io.kitti import KittiDataset
+
+    subsets = kd.mining_subsets(10, 3, 4, seed=0)
+    assert [len(s) for s in subsets] == [4, 4, 4] and all(np.all(np.diff(s) > 0) for s in subsets)
+    assert sorted(set(np.concatenate(subsets).tolist())) == list(range(10))  # 12 slots reach all 10 images
+    for cap in (None, 10, 99):  # no cap, or one the images do not reach: every round searches every image
+        assert [s.tolist() for s in kd.mining_subsets(10, 2, cap)] == [list(range(10))] * 2
+    assert [s.tolist() for s in kd.mining_subsets(10, 3, 4, seed=1)] != [s.tolist() for s in subsets]
+    with pytest.raises(ValueError, match="mining_images"):
+        kd.mining_subsets(10, 3, 0)
+
+    searched = []
+    real = kd.hard_negatives
+
+    def counting(bank, image, **kw):
+        searched.append((image.frame, image.flipped))
+        return real(bank, image, **kw)
+
+    monkeypatch.setattr(kd, "hard_negatives", counting)
+    images, examples = kd.load_training_frames(KittiDataset(KITTI_ROOT), ["000010", "001545"])  # and mirrors: 4
+    options = {**TINY_BANK, "mining_rounds": 2}
+    plain = kd.train_bank_on_frames(images, examples, **options)
+    assert len(searched) == 8 and "mining_images" not in plain.meta
+    searched.clear()
+    same = kd.train_bank_on_frames(images, examples, **options, mining_images=4)  # not below the images: no cap
+    assert len(searched) == 8 and "mining_images" not in same.meta
+    for a, b in zip(_arrays(plain)[0], _arrays(same)[0]):
+        np.testing.assert_array_equal(a, b)
+    searched.clear()
+    capped = kd.train_bank_on_frames(images, examples, **options, mining_images=2)
+    assert len(searched) == 4 and len(set(searched)) == 4  # two rounds of two: every image once
+    assert capped.meta["mining_images"] == 2
+
+
 def test_padded_training_shows_truncated_cars_as_detection_sees_them():
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.bank import score_pyramid

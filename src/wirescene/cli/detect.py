@@ -61,7 +61,8 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
 @click.option("--cut-paste", type=NON_NEGATIVE, default=0, show_default=True,
               help="With --kitti-root: cars of other frames pasted into a composite copy of every training frame.")
 @click.option("--mining-rounds", type=NON_NEGATIVE, default=None, help="Hard-negative mining rounds [synthetic 2, real 3].")
-@click.option("--mining-images", type=POSITIVE, default=80, show_default=True, help="Synthetic only.")
+@click.option("--mining-images", type=POSITIVE, default=None,
+              help="The most training images a hard-negative mining round searches [synthetic 80, real: all].")
 @click.option("--val-scenes", "n_val", type=NON_NEGATIVE, default=20, show_default=True, help="Synthetic only.")
 @click.option("--C", "C", type=POSITIVE_FLOAT, default=0.01, show_default=True, help="Linear SVM regularisation.")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
@@ -96,7 +97,8 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
                                            calibration=given, threshold=threshold, support_weight=support_weight,
                                            mining_rounds=3 if mining_rounds is None else mining_rounds,
                                            per_octave=per_octave, cut_paste=cut_paste, max_negatives=max_negatives,
-                                           pyramid_cache_mb=pyramid_cache_mb, workers=workers_count(workers),
+                                           mining_images=mining_images, pyramid_cache_mb=pyramid_cache_mb,
+                                           workers=workers_count(workers),
                                            drives=drives, progress=click.echo)
     else:
         if frames or split_file or folds or cut_paste or per_octave != 6 or drive_mapping:
@@ -106,7 +108,8 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
 
         _, rep = train_detector_bank(out, seed=seed, n_scenes=n_scenes, n_partial=n_partial, C=C,
                                      mining_rounds=2 if mining_rounds is None else mining_rounds,
-                                     mining_images=mining_images, n_val=n_val, progress=click.echo)
+                                     mining_images=80 if mining_images is None else mining_images, n_val=n_val,
+                                     progress=click.echo)
     if report:
         write_text(report, json.dumps(rep, indent=1, default=float))
 

@@ -21,7 +21,8 @@ linear HOG template trained as a linear SVM -- from the labelled frames of a KIT
    the examples of its two neighbouring bins (real KITTI has almost no side views).
 4. Negatives: random windows of the training images (original and flipped) that overlap
    no labelled object (Car, Van, Truck, Tram, Misc, DontCare; overlap <= 30% of the
-   window), then ``mining_rounds`` rounds of hard-negative mining on all training images.
+   window), then ``mining_rounds`` rounds of hard-negative mining on all training images
+   (at most ``mining_images`` of them a round, where set).
 5. The bank's scores are SVM margins of the best member of each cluster of votes; a Platt
    calibration (``a * margin + b`` -> probability that the detection is a car with IoU >=
    0.5) fitted on *held-out* detections (:func:`fit_platt`, used by the cross-validation in
@@ -295,7 +296,7 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
                          cluster_radius: float = 0.2, cut_paste: int = 0, max_negatives: int | None = DEFAULT_MAX_NEGATIVES,
                          pyramid_cache_mb: float = DEFAULT_CACHE_MB, pad_cells: int = 0, max_truncated: float = 0.15,
                          whiten: bool = False, align: bool = False, share_deg: float = 0.0, synthetic=None,
-                         workers: int = 1, progress=None) -> DetectorBank:
+                         mining_images: int | None = None, workers: int = 1, progress=None) -> DetectorBank:
     """Train a :class:`DetectorBank` on real training images and their car examples.
 
     ``images``/``examples`` as returned by :func:`load_training_frames` (grey images and
@@ -348,6 +349,9 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     ``synthetic``: ``(images, examples)`` of rendered scenes (:func:`load_training_frames` of a
     ``wirescene synth`` root), whose cars join the positives only: the negatives, random and
     mined, and the full-box correction come from the real images.
+    ``mining_images``: the most training images a mining round searches (None: all of them);
+    where there are more, the rounds take consecutive stretches of one random order of the
+    images, so that together they search as many different images as they can.
     ``pyramid_cache_mb``: budget of the process's cache of grey images and HOG pyramids
     (:data:`~wirescene.training.scale.CACHE`, set here); the default holds the 72 shared
     frames' (nothing is computed twice), more frames are read and described again in
@@ -424,11 +428,13 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
         say(f"background statistics of {len(levels)} levels [{time.time() - t0:.0f}s]")
     weights, biases = fit_svms(configs, pos, [n.items for n in neg], C=C, seed=seed, whiteners=whiteners)
     bank = DetectorBank(configs, weights, biases)
-    for rnd in range(mining_rounds):
+    rounds_images = mining_subsets(len(negative_images), mining_rounds, mining_images, seed=seed)
+    for rnd, subset in enumerate(rounds_images):
         mine = partial(hard_negatives, bank, scales=scales, min_height=min_height, max_height=3.0 * H,
                        per_image=hard_per_image, pad_cells=pad_cells)
         n_new = 0
-        for found in map_images(mine, negative_images, workers=workers, progress=say, name=f"mining round {rnd + 1}"):
+        mined = [negative_images[i] for i in subset]
+        for found in map_images(mine, mined, workers=workers, progress=say, name=f"mining round {rnd + 1}"):
             for t, feats in found:
                 for x in feats:
                     neg[t].add_hard(x)
@@ -456,6 +462,8 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
         bank.meta["align"] = True
     if share_deg:
         bank.meta["share_deg"] = float(share_deg)
+    if mining_images is not None and mining_images < len(negative_images):
+        bank.meta["mining_images"] = int(mining_images)  # recorded where the cap shaped the bank
     if n_synthetic:
         bank.meta["synthetic_examples"] = int(n_synthetic)
     if pad_cells:  # recorded where set: older banks and their detection stay as they were
@@ -463,6 +471,28 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     if any(n.offered > len(n) or len(n) == max_negatives for n in neg):
         bank.meta["max_negatives"] = int(max_negatives)  # recorded where the cap shaped the bank
     return bank
+
+
+def mining_subsets(n_images: int, rounds: int, per_round: int | None, *, seed: int = 0) -> list[np.ndarray]:
+    """Indices of the images each of ``rounds`` mining rounds searches, in image order: all
+    ``n_images`` where ``per_round`` is None or not below it; else round ``r`` takes the
+    ``r``-th stretch of ``per_round`` images of one random order (wrapping round), so that the
+    rounds search ``min(n_images, rounds * per_round)`` different images.
+
+    Examples
+    --------
+    >>> [s.tolist() for s in mining_subsets(5, 2, None)]
+    [[0, 1, 2, 3, 4], [0, 1, 2, 3, 4]]
+    >>> subsets = mining_subsets(6, 3, 2)
+    >>> sorted(i for s in subsets for i in s.tolist())
+    [0, 1, 2, 3, 4, 5]
+    """
+    if per_round is not None and per_round < 1:
+        raise ValueError(f"mining_images must be at least 1, got {per_round}")
+    if per_round is None or per_round >= n_images:
+        return [np.arange(n_images) for _ in range(rounds)]
+    order = np.random.default_rng([seed, 2]).permutation(n_images)  # its own stream: the other draws stay
+    return [np.sort(order[np.arange(r * per_round, (r + 1) * per_round) % n_images]) for r in range(rounds)]
 
 
 def shared_examples(examples, share_deg: float, *, skip) -> list:
