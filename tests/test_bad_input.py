@@ -206,6 +206,10 @@ CASES = {
     # detection directories
     "eval detections match no frame": (lambda t: _eval_case(t, "--detections", _dets_dir(t, {"10.csv": "x1,y1,x2,y2\n1,2,3,4\n"})),
                                        "none of the frames"),
+    "eval detections: two files for one frame": (
+        lambda t: _eval_case(t, "--detections", _dets_dir(t, {f"{FRAME}.json": '{"detections": []}',
+                                                              f"{FRAME}.txt": ""})),
+        rf"dets: frame {FRAME} has 2 detection files \({FRAME}\.json, {FRAME}\.txt\): keep one"),
     # training inputs
     "train parts --label-shapes not an artefact": (
         lambda t: ["train", "parts", "--kitti-root", KITTI_ROOT, "--out", t / "p.npz", "--label-shapes",

@@ -41,12 +41,13 @@ class DetectionSource:
         return folder
 
     def detection_file(self, frame_id: str) -> Path | None:
-        """The frame's file in the detections directory (None if it has none)."""
-        for ext in (".json", ".csv", ".txt"):
-            path = self.folder / f"{frame_id}{ext}"
-            if path.is_file():
-                return path
-        return None
+        """The frame's file in the detections directory (None if it has none); an
+        :class:`InputError` if it has two (which one holds the detections meant is unknown)."""
+        found = [p for p in (self.folder / f"{frame_id}{ext}" for ext in (".json", ".csv", ".txt")) if p.is_file()]
+        if len(found) > 1:
+            raise InputError(f"frame {frame_id} has {len(found)} detection files ({', '.join(p.name for p in found)}): "
+                             "keep one", path=self.folder)
+        return found[0] if found else None
 
     def missing_frames(self, frame_ids: list[str]) -> list[str]:
         """Frames without a detection file; an :class:`InputError` naming the directory

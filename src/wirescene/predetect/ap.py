@@ -168,9 +168,11 @@ def plot_pr(results: dict, path, *, title: str = "Car pre-detection") -> Path:
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left")
+    from wirescene.core.atomic import atomic_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100, bbox_inches="tight")
+    with atomic_path(path, suffix=".png") as tmp:  # a failed save leaves no partial picture
+        fig.savefig(tmp, format="png", dpi=100, bbox_inches="tight")
     return path
 
 
