@@ -207,3 +207,42 @@ def test_inter_object_occlusion_pair_culling_is_exact():
     assert 0.05 < hidden.mean() < 0.6
     behind = (X[..., 2] <= center[2]).any(-1)
     assert behind.any() and (~behind).any()
+
+
+def test_without_embree_rendering_says_what_to_install_or_warns_of_the_slow_tracer(monkeypatch):
+    import sys
+    import types
+
+    from wirescene.core.errors import DependencyError
+    from wirescene.core.raycast import has_embree, require_ray_tracer
+
+    require_ray_tracer()  # this machine has Embree: silent
+    assert has_embree()
+    monkeypatch.setitem(sys.modules, "embreex", None)  # as where pip installed no embreex
+    assert not has_embree()
+    monkeypatch.setitem(sys.modules, "rtree", None)
+    with pytest.raises(DependencyError, match="pip install embreex"):
+        require_ray_tracer()
+    with pytest.raises(DependencyError):
+        first_hit_distance(np.eye(3), np.array([[0, 1, 2]]), np.zeros(3), np.array([[1.0, 1.0, 1.0]]))
+    monkeypatch.setitem(sys.modules, "rtree", types.ModuleType("rtree"))  # trimesh's slow tracer is there
+    with pytest.warns(RuntimeWarning, match="slow ray tracer"):
+        require_ray_tracer()
+
+
+def test_embreex_is_required_where_it_has_wheels_only():
+    """pip must not try to build embreex from source (no wheels: Linux aarch64, macOS arm64
+    before 13); fitting and evaluating do not need it."""
+    from importlib.metadata import requires
+
+    from packaging.requirements import Requirement
+
+    (req,) = [Requirement(r) for r in requires("wirescene") if r.startswith("embreex")]
+    env = {"extra": ""}
+    for machine, system, release, wanted in [("x86_64", "linux", "6.1.0", True), ("AMD64", "win32", "10", True),
+                                             ("x86_64", "darwin", "21.6.0", True), ("arm64", "darwin", "22.6.0", True),
+                                             ("arm64", "darwin", "24.1.0", True), ("arm64", "darwin", "21.6.0", False),
+                                             ("aarch64", "linux", "6.1.0", False), ("ARM64", "win32", "10", False)]:
+        got = req.marker.evaluate({**env, "platform_machine": machine, "sys_platform": system,
+                                   "platform_release": release})
+        assert got == wanted, (machine, system, release)

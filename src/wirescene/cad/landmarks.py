@@ -46,6 +46,7 @@ import numpy as np
 
 from wirescene.cad.sideview import SideView, find_arches, side_view
 from wirescene.core.errors import InputError
+from wirescene.core.raycast import require_ray_tracer
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.wireframe import MIRROR, N_PER_SIDE, PART_NAMES, VERTEX_INDEX, VERTEX_NAMES
 
@@ -99,6 +100,7 @@ def auto_landmarks(vertices, faces, *, res: float = 0.01, view: SideView | None 
 
     # Head/tail lights: rays along the length axis onto the front/rear face.
     mesh = trimesh.Trimesh(v, np.asarray(faces), process=False)
+    require_ray_tracer()
     for light, prefix, sign in (("headlight", "nose", 1.0), ("taillight", "tail", -1.0)):
         top, bot = left[f"{prefix}_top"], left[f"{prefix}_bottom"]
         y = 0.5 * (top[1] + bot[1])

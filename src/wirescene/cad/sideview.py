@@ -32,6 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from wirescene.core.raycast import require_ray_tracer
+
 SKIN_DEPTH = 0.10
 GAP = 0.03
 ARCH_RISE = 0.15
@@ -111,6 +113,7 @@ def side_view(vertices, faces, *, res: float = 0.01) -> SideView:
     X, H = np.meshgrid(xs, hs)
     origins = np.stack([X.ravel(), -H.ravel(), np.full(X.size, hi[2] + 1.0)], axis=1)
     dirs = np.tile([0.0, 0.0, -1.0], (X.size, 1))
+    require_ray_tracer()
     loc, ray_idx, _ = mesh.ray.intersects_location(origins, dirs, multiple_hits=False)
     depth = np.full(X.size, np.nan)
     depth[ray_idx] = loc[:, 2]

@@ -19,6 +19,11 @@ class InputError(WiresceneError):
     """A file given by the user is missing, unreadable or malformed."""
 
 
+class DependencyError(WiresceneError, ImportError):
+    """An optional package that a command needs is not installed; the message says what to
+    install."""
+
+
 class ShapeError(WiresceneError, ValueError):
     """An array does not satisfy the documented shape contract of a function."""
 

@@ -20,7 +20,7 @@ import warnings
 import numpy as np
 
 from wirescene.core.arrays import point_bounds
-from wirescene.core.errors import ShapeError, check_shape
+from wirescene.core.errors import DependencyError, ShapeError, check_shape
 
 # Default relative tolerance on the segment parameter t (0 at the origin, 1 at the
 # target). A hit only blocks the segment if 0 < t < 1 - eps. 1e-6 of the segment
@@ -255,6 +255,23 @@ def has_embree() -> bool:
     return True
 
 
+def require_ray_tracer() -> None:
+    """Check that trimesh can cast rays against a mesh here: with Embree (``embreex``,
+    installed with wirescene where it has wheels: x86-64 Linux, Windows and macOS, arm64
+    macOS 13 and later), or with trimesh's pure-Python tracer, which needs ``rtree`` and is
+    much slower (a warning says so); a :class:`~wirescene.core.errors.DependencyError`
+    saying what to install otherwise. Only rendering needs it (synthetic scenes, the CAD
+    tools, training on rendered cars); fitting and evaluating do not."""
+    if has_embree():
+        return
+    try:
+        import rtree  # noqa: F401
+    except ImportError:
+        raise DependencyError("rendering meshes needs a ray tracer: pip install embreex (wheels for x86-64 and "
+                              "arm64 macOS 13+), or pip install rtree for trimesh's slow one") from None
+    warnings.warn("embreex not installed: falling back to trimesh's slow ray tracer", RuntimeWarning, stacklevel=3)
+
+
 def mesh_intersector(mesh_vertices, mesh_faces):
     """A trimesh ray intersector for a triangle mesh: Embree if available, else
     trimesh's (much slower) pure-Python one, with a warning.
@@ -268,11 +285,11 @@ def mesh_intersector(mesh_vertices, mesh_faces):
     check_shape("mesh_vertices", mesh_vertices, (None, 3))
     check_shape("mesh_faces", mesh_faces, (None, 3))
     mesh = trimesh.Trimesh(mesh_vertices, mesh_faces, process=False, validate=False)
+    require_ray_tracer()
     if has_embree():
         from trimesh.ray.ray_pyembree import RayMeshIntersector
 
         return RayMeshIntersector(mesh, scale_to_box=True)
-    warnings.warn("embreex not installed: falling back to trimesh's slow ray tracer", RuntimeWarning, stacklevel=2)
     from trimesh.ray.ray_triangle import RayMeshIntersector
 
     return RayMeshIntersector(mesh)
