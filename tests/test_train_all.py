@@ -436,3 +436,13 @@ def test_train_all_takes_a_given_calibration_and_refuses_a_bad_one(tmp_path):
                                   "--set", f"detector.calibration={bad}"))
         assert "--set" in line and "detector.calibration" in line, (bad, line)
         assert not (tmp_path / "bad").exists()
+
+
+def test_peak_memory_is_unknown_not_an_import_error_where_the_os_has_no_resource_module(monkeypatch):
+    import sys
+
+    from wirescene.training import pipeline
+
+    assert pipeline._peak_memory_mb() > 10
+    monkeypatch.setitem(sys.modules, "resource", None)  # as on Windows
+    assert pipeline._peak_memory_mb() is None

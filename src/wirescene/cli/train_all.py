@@ -84,7 +84,9 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
         if record.get("source") == "shipped":
             click.echo(f"{step:18s} shipped ({record['why']})")
         else:
-            click.echo(f"{step:18s} {record['artefact']}: {record['seconds']:.0f} s, peak {record['peak_rss_mb']:.0f} MB")
+            peak = record.get("peak_rss_mb")
+            click.echo(f"{step:18s} {record['artefact']}: {record['seconds']:.0f} s"
+                       + ("" if peak is None else f", peak {peak:.0f} MB"))
     folds = manifest["calibration_folds"]
     click.echo(f"models written to {out} ({manifest['data']['frames']} frames, {manifest['data']['cars']} cars; "
                f"{folds['frames_with_known_drive']} frames of known drive"

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import hashlib
 import inspect
-import resource
 import sys
 import time
 from dataclasses import dataclass
@@ -109,7 +108,12 @@ def _reset_peak_memory() -> bool:
         return False
 
 
-def _peak_memory_mb() -> float:
+def _peak_memory_mb() -> float | None:
+    """The process's peak resident memory in MB; None where the OS does not say (Windows)."""
+    try:
+        import resource  # Unix only
+    except ImportError:
+        return None
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return round(peak / (1 << 20 if sys.platform == "darwin" else 1 << 10), 1)  # bytes on macOS, KiB on Linux
 
@@ -337,7 +341,8 @@ class _Run:
         record.update(done=True, sha256=file_sha256(path), seconds=round(time.perf_counter() - t0, 1),
                       peak_rss_mb=_peak_memory_mb(), peak_rss_of="step" if exact else "process so far",
                       finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
-        self.say(f"{step}: {record['seconds']:.0f} s, peak {record['peak_rss_mb']:.0f} MB")
+        peak = record["peak_rss_mb"]
+        self.say(f"{step}: {record['seconds']:.0f} s" + ("" if peak is None else f", peak {peak:.0f} MB"))
         return record
 
     def run_parts(self, record: dict) -> None:
