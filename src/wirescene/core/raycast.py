@@ -257,9 +257,9 @@ def has_embree() -> bool:
 
 def require_ray_tracer() -> None:
     """Check that trimesh can cast rays against a mesh here: with Embree (``embreex``,
-    installed with wirescene where it has wheels: x86-64 Linux, Windows and macOS, arm64
-    macOS 13 and later), or with trimesh's pure-Python tracer, which needs ``rtree`` and is
-    much slower (a warning says so); a :class:`~wirescene.core.errors.DependencyError`
+    installed with wirescene on x86-64; the ``render`` extra elsewhere, where wheels exist:
+    arm64 macOS 13 and later), or with trimesh's pure-Python tracer, which needs ``rtree``
+    and is much slower (a warning says so); a :class:`~wirescene.core.errors.DependencyError`
     saying what to install otherwise. Only rendering needs it (synthetic scenes, the CAD
     tools, training on rendered cars); fitting and evaluating do not."""
     if has_embree():
@@ -268,7 +268,7 @@ def require_ray_tracer() -> None:
         import rtree  # noqa: F401
     except ImportError:
         raise DependencyError("rendering meshes needs a ray tracer: pip install embreex (wheels for x86-64 and "
-                              "arm64 macOS 13+), or pip install rtree for trimesh's slow one") from None
+                              "arm64 macOS 13+; the 'render' extra), or pip install rtree for trimesh's slow one") from None
     warnings.warn("embreex not installed: falling back to trimesh's slow ray tracer", RuntimeWarning, stacklevel=3)
 
 
