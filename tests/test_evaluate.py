@@ -263,3 +263,24 @@ def test_report_gallery_ranks_missed_and_false_cars_below_many_cars_found_well()
     assert_close([scores["few"], scores["many"], scores["none"]], [0.0, 4 * 0.75 / 5, -1 / 5])
     assert sorted(scores, key=scores.get, reverse=True) == ["many", "few", "none"]
     assert frame_scores(report, {"many": (4, 4)})["many"] == pytest.approx(0.75)  # only the frames asked for
+
+
+def test_workers_off_linux_watch_their_parent_instead_of_failing(monkeypatch):
+    """The pool's initializer must not raise where there is no prctl (Windows: ctypes.CDLL(None)
+    is a TypeError there, which broke every worker); it watches the parent's id instead."""
+    import ctypes
+    import os
+    import sys
+    import threading
+
+    from wirescene.eval import runner
+
+    def no_libc(*args, **kwargs):
+        raise TypeError("LoadLibrary() argument 1 must be str, not None")
+
+    monkeypatch.setattr(sys, "platform", "win32")
+    monkeypatch.setattr(ctypes, "CDLL", no_libc)
+    before = {t.ident for t in threading.enumerate()}
+    runner._die_with_parent(os.getppid())  # our parent lives on: the watcher keeps waiting
+    watchers = [t for t in threading.enumerate() if t.ident not in before and t.name == "wirescene-parent-watch"]
+    assert len(watchers) == 1 and watchers[0].daemon

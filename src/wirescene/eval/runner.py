@@ -111,15 +111,16 @@ def _die_with_parent(parent: int) -> None:
     """Worker initializer: end this worker when the process that started it is gone,
     even if it was killed (SIGKILL leaves no chance to shut the pool down). Linux gets
     the kernel's parent-death signal; elsewhere a daemon thread polls the parent id."""
-    try:
-        import ctypes
+    if sys.platform.startswith("linux"):  # elsewhere there is no prctl (and on Windows no CDLL(None))
+        try:
+            import ctypes
 
-        libc = ctypes.CDLL(None, use_errno=True)
-        PR_SET_PDEATHSIG = 1
-        if libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0 and os.getppid() == parent:
-            return
-    except (OSError, AttributeError):
-        pass
+            libc = ctypes.CDLL(None, use_errno=True)
+            PR_SET_PDEATHSIG = 1
+            if libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0 and os.getppid() == parent:
+                return
+        except (OSError, AttributeError, TypeError):
+            pass
 
     def watch():
         while os.getppid() == parent:
