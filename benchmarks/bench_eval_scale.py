@@ -38,6 +38,10 @@ import threading
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_train_scale import fit_line, labelled_frames  # noqa: E402
+
 KITTI_VAL_FRAMES = 3769
 MACHINE_GB = 24
 SUBDIRS = ("image_2", "calib", "label_2")
@@ -49,7 +53,7 @@ def repeated_root(source: Path, work: Path, n: int) -> tuple[Path, list[str]]:
     from wirescene.io.kitti import KittiDataset
 
     dataset = KittiDataset(source)
-    frames = sorted(f for f in dataset.frame_ids() if dataset.label_path(f).is_file())
+    frames = labelled_frames(source)
     if not frames:
         raise SystemExit(f"{source}: no labelled frames")
     paths = {f: (dataset.image_path(f), dataset.calib_path(f), dataset.label_path(f)) for f in frames}
@@ -163,11 +167,8 @@ def run_eval(root: Path, ids: list[str], work: Path, *, workers: int, eval_args:
 
 def project(rows: list[dict], *, frames: int = KITTI_VAL_FRAMES, machine_gb: float = MACHINE_GB) -> dict:
     """The parent's law ``c + d N`` over ``rows`` and the memory of ``frames`` frames on W workers."""
-    import numpy as np
-
-    n = np.array([r["frames"] for r in rows], float)
-    parent = np.array([r["parent_mb"] for r in rows], float)
-    d, c = np.polyfit(n, parent, 1) if len(rows) > 1 else (0.0, float(parent[0]))
+    n, parent = [r["frames"] for r in rows], [r["parent_mb"] for r in rows]
+    c, d = fit_line(n, parent) if len(rows) > 1 else (float(parent[0]), 0.0)
     worker = max(r["worker_max_mb"] for r in rows)
     parent_at = c + d * frames
     return {"parent_mb": {"c": round(float(c)), "d_per_frame": round(float(d), 3), f"at_{frames}": round(float(parent_at))},

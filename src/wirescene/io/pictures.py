@@ -165,13 +165,14 @@ def new_figure(**kwargs) -> Figure:
     return Figure(**kwargs)
 
 
-def save_figure(fig, path: str | Path) -> Path:
+def save_figure(fig, path: str | Path, **savefig_kw) -> Path:
     """Save ``fig`` as PNG atomically (temporary file, then rename); a figure pyplot
-    manages (the caller's) is closed too."""
+    manages (the caller's) is closed too. ``savefig_kw``: further options of
+    :meth:`~matplotlib.figure.Figure.savefig` (``dpi``, ``bbox_inches``)."""
     path = Path(path)
     try:
         with atomic_path(path, suffix=".png") as tmp:
-            fig.savefig(tmp, format="png")
+            fig.savefig(tmp, format="png", **savefig_kw)
     finally:
         pyplot = sys.modules.get("matplotlib.pyplot")
         if pyplot is not None:

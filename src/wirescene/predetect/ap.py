@@ -155,7 +155,7 @@ def summary(res: dict) -> dict:
 def plot_pr(results: dict, path, *, title: str = "Car pre-detection") -> Path:
     """Precision-recall curves ``{name: result}`` to a PNG
     (:func:`wirescene.io.pictures.new_figure`)."""
-    from wirescene.io.pictures import new_figure
+    from wirescene.io.pictures import new_figure, save_figure
 
     fig = new_figure(figsize=(5, 4.5))
     ax = fig.subplots()
@@ -168,12 +168,7 @@ def plot_pr(results: dict, path, *, title: str = "Car pre-detection") -> Path:
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left")
-    from wirescene.core.atomic import atomic_path
-
-    path = Path(path)
-    with atomic_path(path, suffix=".png") as tmp:  # a failed save leaves no partial picture
-        fig.savefig(tmp, format="png", dpi=100, bbox_inches="tight")
-    return path
+    return save_figure(fig, path, dpi=100, bbox_inches="tight")
 
 
 def load_frame_gt(split_dir, frame_id: str, **kw) -> FrameGT:
