@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, TINY_BANK, kitti_copy
+from wirescene.training.detector import mining_subsets
 from wirescene.training.scale import FrameCache, NegativePool, can_fork, map_images
 
 
@@ -146,14 +147,14 @@ def test_mining_rounds_search_at_most_mining_images_each_and_every_image_between
     import wirescene.training.kitti_detector as kd
     from wirescene.io.kitti import KittiDataset
 
-    subsets = kd.mining_subsets(10, 3, 4, seed=0)
+    subsets = mining_subsets(10, 3, 4, seed=0)
     assert [len(s) for s in subsets] == [4, 4, 4] and all(np.all(np.diff(s) > 0) for s in subsets)
     assert sorted(set(np.concatenate(subsets).tolist())) == list(range(10))  # 12 slots reach all 10 images
     for cap in (None, 10, 99):  # no cap, or one the images do not reach: every round searches every image
-        assert [s.tolist() for s in kd.mining_subsets(10, 2, cap)] == [list(range(10))] * 2
-    assert [s.tolist() for s in kd.mining_subsets(10, 3, 4, seed=1)] != [s.tolist() for s in subsets]
+        assert [s.tolist() for s in mining_subsets(10, 2, cap)] == [list(range(10))] * 2
+    assert [s.tolist() for s in mining_subsets(10, 3, 4, seed=1)] != [s.tolist() for s in subsets]
     with pytest.raises(ValueError, match="mining_images"):
-        kd.mining_subsets(10, 3, 0)
+        mining_subsets(10, 3, 0)
 
     searched = []
     real = kd.hard_negatives

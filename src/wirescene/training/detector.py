@@ -9,7 +9,8 @@
    windows of the scenes' feature pyramids overlapping no car by more than 30% of the
    window; configurations with fewer than ``min_pos`` positives get jittered copies
    (shift +-5%, scale +-7%, at most 4 per example); a linear SVM; then ``mining_rounds`` rounds of hard-negative mining (windows
-   scoring above -1 that overlap no car), retraining on all negatives.
+   scoring above -1 that overlap no car; each round on ``mining_images`` scenes, :func:`mining_subsets`), retraining on
+   all negatives.
 4. The default threshold maximises F1 on ``n_val`` held-out scenes (stream ``seed + 1``).
 """
 
@@ -43,6 +44,28 @@ def _overlap_frac(windows: np.ndarray, cars: np.ndarray) -> np.ndarray:
     ih = np.clip(np.minimum(windows[:, None, 3], cars[None, :, 3]) - np.maximum(windows[:, None, 1], cars[None, :, 1]), 0, None)
     area = np.maximum((windows[:, 2] - windows[:, 0]) * (windows[:, 3] - windows[:, 1]), 1e-9)
     return (iw * ih).max(1) / area
+
+
+def mining_subsets(n_images: int, rounds: int, per_round: int | None, *, seed: int = 0) -> list[np.ndarray]:
+    """Indices of the images each of ``rounds`` mining rounds searches, in image order: all
+    ``n_images`` where ``per_round`` is None or not below it; else round ``r`` takes the
+    ``r``-th stretch of ``per_round`` images of one random order (wrapping round), so that the
+    rounds search ``min(n_images, rounds * per_round)`` different images.
+
+    Examples
+    --------
+    >>> [s.tolist() for s in mining_subsets(5, 2, None)]
+    [[0, 1, 2, 3, 4], [0, 1, 2, 3, 4]]
+    >>> subsets = mining_subsets(6, 3, 2)
+    >>> sorted(i for s in subsets for i in s.tolist())
+    [0, 1, 2, 3, 4, 5]
+    """
+    if per_round is not None and per_round < 1:
+        raise ValueError(f"mining_images must be at least 1, got {per_round}")
+    if per_round is None or per_round >= n_images:
+        return [np.arange(n_images) for _ in range(rounds)]
+    order = np.random.default_rng([seed, 2]).permutation(n_images)  # its own stream: the other draws stay
+    return [np.sort(order[np.arange(r * per_round, (r + 1) * per_round) % n_images]) for r in range(rounds)]
 
 
 def _valid_levels(cfg, pyr, H, min_height):
@@ -316,10 +339,7 @@ def train_detector_bank(out_path, *, seed: int = 0, n_scenes: int = 200, n_parti
     weights, biases = fit_svms(configs, pos, neg, C=C, seed=seed)
     say(f"initial SVMs trained [{time.time() - t0:.0f}s]")
     bank = DetectorBank(configs, weights, biases)
-    for rnd in range(mining_rounds):
-        imgs = order[(rnd + 1) * mining_images % max(n_scenes, 1):][:mining_images]
-        if len(imgs) < mining_images:
-            imgs = np.concatenate([imgs, order[: mining_images - len(imgs)]])
+    for rnd, imgs in enumerate(mining_subsets(n_scenes, mining_rounds, mining_images, seed=seed)):
         n_new = np.zeros(len(configs), int)
         for i in imgs:
             pyr = feature_pyramid(grays[i], scales)

@@ -103,6 +103,7 @@ from wirescene.training.detector import (
     align_positives,
     alignment_offsets,
     fit_svms,
+    mining_subsets,
     positive_features,
     sample_random_negatives,
 )
@@ -471,28 +472,6 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     if any(n.offered > len(n) or len(n) == max_negatives for n in neg):
         bank.meta["max_negatives"] = int(max_negatives)  # recorded where the cap shaped the bank
     return bank
-
-
-def mining_subsets(n_images: int, rounds: int, per_round: int | None, *, seed: int = 0) -> list[np.ndarray]:
-    """Indices of the images each of ``rounds`` mining rounds searches, in image order: all
-    ``n_images`` where ``per_round`` is None or not below it; else round ``r`` takes the
-    ``r``-th stretch of ``per_round`` images of one random order (wrapping round), so that the
-    rounds search ``min(n_images, rounds * per_round)`` different images.
-
-    Examples
-    --------
-    >>> [s.tolist() for s in mining_subsets(5, 2, None)]
-    [[0, 1, 2, 3, 4], [0, 1, 2, 3, 4]]
-    >>> subsets = mining_subsets(6, 3, 2)
-    >>> sorted(i for s in subsets for i in s.tolist())
-    [0, 1, 2, 3, 4, 5]
-    """
-    if per_round is not None and per_round < 1:
-        raise ValueError(f"mining_images must be at least 1, got {per_round}")
-    if per_round is None or per_round >= n_images:
-        return [np.arange(n_images) for _ in range(rounds)]
-    order = np.random.default_rng([seed, 2]).permutation(n_images)  # its own stream: the other draws stay
-    return [np.sort(order[np.arange(r * per_round, (r + 1) * per_round) % n_images]) for r in range(rounds)]
 
 
 def shared_examples(examples, share_deg: float, *, skip) -> list:
