@@ -241,6 +241,16 @@ assert not plt.fignum_exists(fig.number)
     assert all((tmp_path / f).stat().st_size > 1000 for f in ("bev.png", "pr.png", "own.png"))
 
 
+def test_pictures_are_saved_in_the_format_their_suffix_names_else_png(tmp_path):
+    from wirescene.io.pictures import birds_eye, save_figure
+
+    magic = {"bev.svg": b"<?xml", "bev.pdf": b"%PDF", "bev.png": b"\x89PNG", "bev.picture": b"\x89PNG", "bev": b"\x89PNG"}
+    for name, start in magic.items():
+        assert save_figure(birds_eye(), tmp_path / name) == tmp_path / name
+        assert (tmp_path / name).read_bytes().startswith(start), name
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(magic)  # no temporary file left
+
+
 def test_draw_shows_the_fitted_wireframes_and_the_labels_where_they_stand(frame, tmp_path):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 

@@ -70,10 +70,9 @@ def draw_car(vertices, faces, X, *, title: str = "", out=None):
     fig.suptitle(title)
     fig.tight_layout()
     if out is not None:
-        from wirescene.core.atomic import atomic_path
+        from wirescene.io.pictures import save_figure
 
-        with atomic_path(out, suffix=Path(out).suffix or ".png") as tmp:  # the suffix keeps savefig's format
-            fig.savefig(tmp, dpi=90)
+        save_figure(fig, out, dpi=90)
     return fig
 
 
@@ -97,7 +96,7 @@ def list_cmd(cad_dir):
 
 @cad.command("show")
 @click.argument("name")
-@click.option("--out", type=click.Path(dir_okay=False), default=None, help="PNG to write (default: NAME.png).")
+@click.option("--out", type=click.Path(dir_okay=False), default=None, help="Picture to write, in the format its suffix names (.png, .pdf, .svg; default: NAME.png).")
 @click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
               help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
 def show_cmd(name, out, cad_dir):

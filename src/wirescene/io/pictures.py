@@ -166,13 +166,17 @@ def new_figure(**kwargs) -> Figure:
 
 
 def save_figure(fig, path: str | Path, **savefig_kw) -> Path:
-    """Save ``fig`` as PNG atomically (temporary file, then rename); a figure pyplot
+    """Save ``fig`` atomically (temporary file, then rename) in the format its suffix names
+    (``.pdf``, ``.svg``, ...), PNG where matplotlib knows no such format; a figure pyplot
     manages (the caller's) is closed too. ``savefig_kw``: further options of
     :meth:`~matplotlib.figure.Figure.savefig` (``dpi``, ``bbox_inches``)."""
     path = Path(path)
+    fmt = path.suffix[1:].lower()
+    if fmt not in fig.canvas.get_supported_filetypes():
+        fmt = "png"
     try:
-        with atomic_path(path, suffix=".png") as tmp:
-            fig.savefig(tmp, format="png", **savefig_kw)
+        with atomic_path(path, suffix=f".{fmt}") as tmp:
+            fig.savefig(tmp, format=fmt, **savefig_kw)
     finally:
         pyplot = sys.modules.get("matplotlib.pyplot")
         if pyplot is not None:
