@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import shutil
+import stat
 
 import numpy as np
 import pytest
@@ -104,6 +106,23 @@ def test_write_is_atomic(tmp_path):
         write_labels(out, [ok, bad])
     assert out.read_text() == GOOD + "\n"  # old file untouched
     assert sorted(p.name for p in tmp_path.iterdir()) == ["det.txt"]  # no temp file left
+
+
+@pytest.mark.skipif(os.name != "posix", reason="file modes and the umask are POSIX's")
+def test_written_files_get_the_permissions_of_any_new_file(tmp_path):
+    from wirescene.core.atomic import atomic_dir, write_text
+
+    old = os.umask(0o022)
+    try:
+        write_text(tmp_path / "a.txt", "x")
+        with atomic_dir(tmp_path / "report") as staging:
+            (staging / "page.html").write_text("x")
+        os.umask(0o077)
+        write_text(tmp_path / "b.txt", "x")
+    finally:
+        os.umask(old)
+    modes = {p: stat.S_IMODE((tmp_path / p).stat().st_mode) for p in ("a.txt", "report", "report/page.html", "b.txt")}
+    assert modes == {"a.txt": 0o644, "report": 0o755, "report/page.html": 0o644, "b.txt": 0o600}
 
 
 @pytest.mark.parametrize(

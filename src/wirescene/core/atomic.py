@@ -4,6 +4,7 @@ leaves a partial output behind."""
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
 import tempfile
 from contextlib import contextmanager
@@ -16,14 +17,27 @@ def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     succeeds and is removed when it raises."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
-    os.close(fd)
+    tmp = _new_file(path.parent, prefix=f".{path.name}.", suffix=suffix)
     try:
         yield Path(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _new_file(directory: Path, *, prefix: str, suffix: str) -> str:
+    """Create an empty file of a new name in ``directory`` with the permissions any new file
+    gets there (``0o666`` less the umask: ``tempfile.mkstemp``'s ``0o600`` would make every
+    output unreadable to others)."""
+    for _ in range(100):
+        name = str(directory / f"{prefix}{secrets.token_hex(6)}{suffix}")
+        try:
+            os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            continue
+        return name
+    raise FileExistsError(f"{directory}: no free temporary name for {prefix}*{suffix}")
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:
