@@ -417,32 +417,39 @@ class _Curve:
     n_gt: int | np.ndarray  # or (B,) float
 
 
-def _levels(frame: np.ndarray, score: np.ndarray, n_frames: int):
-    """Where each detection stands in its frame and how to find a threshold's level.
+@dataclass
+class _Levels:
+    """Where each detection stands in its frame, for curves of weighted frames (:func:`_levels`)."""
 
-    Returns ``level`` (D,): the frame's detections scoring strictly higher (a threshold
-    admitting ``j`` of a frame's detections admits those of level ``< j``), and
-    ``count(t)``: ``(F, K)`` detections of each frame scoring at least each threshold ``t``
-    (K,), which must be among the scores."""
+    level: np.ndarray  # (D,) the frame's detections scoring strictly higher
+    top: np.ndarray  # (D,) the frame's detections scoring at least as high (itself and its ties)
+    leader: np.ndarray  # (D,) bool: one detection of each run of equal scores in a frame
+    order: np.ndarray  # (D,) the detections by descending score
+    ascending: np.ndarray  # (D,) the scores, ascending
+
+    def admitted(self, thresholds: np.ndarray) -> np.ndarray:
+        """How many detections score at least each threshold ``(K,)``: a prefix of :attr:`order`."""
+        return len(self.ascending) - np.searchsorted(self.ascending, thresholds, side="left")
+
+
+def _levels(frame: np.ndarray, score: np.ndarray, n_frames: int) -> _Levels:
+    """Each detection's place in its frame (a threshold admitting ``j`` of a frame's
+    detections admits those of ``level < j``; one at a detection's score admits ``top``)."""
     order = np.lexsort((score, frame))  # by frame, scores ascending
     s, f = score[order], frame[order]
     frame_end = np.searchsorted(f, np.arange(n_frames), side="right")
     positions = np.arange(len(s))
-    # Ties share the level of the run's last position: none of them scores higher than another.
+    # Ties share their run's place: none of them scores higher than another.
     ends_run = np.ones(len(s), dtype=bool)
     ends_run[:-1] = (f[1:] != f[:-1]) | (s[1:] != s[:-1])
+    starts_run = np.roll(ends_run, 1)
     run_last = np.minimum.accumulate(np.where(ends_run, positions, len(s))[::-1])[::-1] if len(s) else positions
-    level = np.empty(len(s), dtype=int)
+    run_first = np.maximum.accumulate(np.where(starts_run, positions, 0)) if len(s) else positions
+    level, top, leader = np.empty(len(s), dtype=int), np.empty(len(s), dtype=int), np.empty(len(s), dtype=bool)
     level[order] = frame_end[f] - 1 - run_last
-    distinct = np.unique(s)
-    key = f.astype(np.int64) * (len(distinct) + 1) + np.searchsorted(distinct, s)
-
-    def count(thresholds: np.ndarray) -> np.ndarray:
-        rank = np.searchsorted(distinct, thresholds)
-        query = np.arange(n_frames, dtype=np.int64)[:, None] * (len(distinct) + 1) + rank[None, :]
-        return (frame_end[:, None] - np.searchsorted(key, query)).astype(np.int32)
-
-    return level, count
+    top[order] = frame_end[f] - run_first
+    leader[order] = ends_run
+    return _Levels(level, top, leader, np.argsort(-score, kind="stable"), np.sort(score))
 
 
 def _per_frame(frame: np.ndarray, values: np.ndarray, n_frames: int) -> np.ndarray:
@@ -493,9 +500,8 @@ def _evaluate(gt: _Rows, det: _Rows, dc_hit: np.ndarray | None, overlap: np.ndar
         thresholds = distinct[_threshold_columns(np.bincount(tp_column, minlength=len(distinct)), n_gt)] if n_gt else []
         available = score[:, None] >= np.asarray(thresholds)[None, :]  # (D, K)
     else:  # any threshold leaves each frame at one of the levels its own scores make
-        level, count = levels
         frame_size = np.bincount(det.frame, minlength=n_frames)
-        available = level[:, None] < np.arange(int(frame_size.max(initial=0)) + 1)[None, :]  # (D, L)
+        available = levels.level[:, None] < np.arange(int(frame_size.max(initial=0)) + 1)[None, :]  # (D, L)
     # Pass 2: non-ignored candidate of largest overlap, else the first ignored one.
     ignored_key = det_ignored[cd].astype(int)
     chosen, assigned = _greedy(cg, cd, rank, [cd, np.where(det_ignored[cd], 0.0, -cov), ignored_key], available)
@@ -510,9 +516,14 @@ def _evaluate(gt: _Rows, det: _Rows, dc_hit: np.ndarray | None, overlap: np.ndar
         return _Curve(precision, orientation, int(n_gt))
     # per frame and level: TP, FP, similarity
     tables = np.stack([_per_frame(gt.frame, tp_mask, n_frames), _per_frame(det.frame, fp_mask, n_frames),
-                       _per_frame(gt.frame, similarity, n_frames)]).reshape(3, -1)  # (3, F x L)
-    # (U, F): where each frame's row of the tables stands at each threshold a draw may pick
-    at = (count(distinct) + (np.arange(n_frames) * available.shape[1])[:, None]).T.copy()
+                       _per_frame(gt.frame, similarity, n_frames)])  # (3, F, L)
+    # A threshold leaves each frame at the level of its detections scoring at least that much, so a draw's
+    # sums there add up the step each run of equal scores makes in its frame's tables, over the detections
+    # scoring at least the threshold (a prefix by descending score), each weighted by its frame's weight.
+    f = det.frame
+    steps = np.where(levels.leader, tables[:, f, levels.top] - tables[:, f, levels.level], 0.0)[:, levels.order]
+    step_frame = f[levels.order]
+    admitted = levels.admitted(distinct)  # >= 1: a TP score admits its own detection
     n_gt = weights @ n_gt_frame
     precision = np.zeros((len(weights), N_SAMPLE_PTS))
     orientation = np.zeros((len(weights), N_SAMPLE_PTS))
@@ -520,7 +531,11 @@ def _evaluate(gt: _Rows, det: _Rows, dc_hit: np.ndarray | None, overlap: np.ndar
         if n_gt[b] == 0:
             continue
         columns = _threshold_columns(np.bincount(tp_column, weights=wb[tp_frame], minlength=len(distinct)), n_gt[b])
-        precision[b], orientation[b] = _points(*(tables[:, at[columns]] @ wb))
+        if not len(columns):  # no true positive: every point 0
+            continue
+        reach = admitted[columns]
+        sums = np.cumsum(steps[:, : reach[-1]] * wb[step_frame[: reach[-1]]], axis=1)
+        precision[b], orientation[b] = _points(*sums[:, reach - 1])
     return _Curve(precision, orientation, n_gt)
 
 
