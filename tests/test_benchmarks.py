@@ -448,6 +448,16 @@ def test_acf_fusion_features_read_the_other_source_where_boxes_overlap(monkeypat
     assert_close(xa[:, 2], xa[:, 0] * xa[:, 1])
 
 
+def test_worker_memory_fits_the_same_frames_pass_after_pass_and_reads_the_resident_set(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_worker_memory import passes
+
+    rows = list(passes(str(KITTI_ROOT), frames=1, n_passes=2, variants=["coarse"], detections="gt"))
+    assert [r[0] for r in rows] == [0, 1]
+    for _, seconds, rss, trimmed, peak in rows:
+        assert seconds > 0 and 20 < trimmed <= rss + 1 and rss <= peak + 1  # MB of a Python process with numpy
+
+
 def test_confidence_cues_read_the_box_fit_and_the_frame_scale(monkeypatch):
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_confidence_cues import _MEAN_HEIGHT, CUES, cue_features
