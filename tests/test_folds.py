@@ -11,6 +11,8 @@ import pytest
 from wirescene.io.folds import DRIVE_FOLDS, FOLD_GROUPS, N_FOLDS, assign_folds, fold_of, frame_drives
 
 SHARED_KITTI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kitti" / "training"
+# The label files of the 72 shared frames, copied: the folds are checked wherever the tests run.
+SHARED_LABELS = Path(__file__).resolve().parent / "data" / "shared_labels"
 
 
 def test_assign_folds_deals_the_largest_drive_first_to_the_lightest_fold():
@@ -32,10 +34,17 @@ def test_every_known_frame_has_a_fold_and_the_groups_split_the_folds():
 
 
 @pytest.mark.skipif(not SHARED_KITTI.is_dir(), reason="the shared KITTI frames are not beside the checkout")
+def test_the_copied_labels_are_the_shared_frames_labels():
+    copies = sorted(SHARED_LABELS.glob("*.txt"))
+    assert [p.name for p in copies] == sorted(p.name for p in (SHARED_KITTI / "label_2").iterdir())
+    for copy in copies:
+        assert copy.read_bytes() == (SHARED_KITTI / "label_2" / copy.name).read_bytes(), copy.name
+
+
 def test_shipped_drive_folds_are_assign_folds_of_the_shared_frames():
     cars = collections.Counter()
     for frame, drive in frame_drives().items():
-        rows = (SHARED_KITTI / "label_2" / f"{frame}.txt").read_text().splitlines()
+        rows = (SHARED_LABELS / f"{frame}.txt").read_text().splitlines()
         cars[drive] += sum(1 for r in rows if r.split()[:1] == ["Car"])
     assert sum(cars.values()) == 294
     assert assign_folds(cars) == DRIVE_FOLDS
