@@ -140,6 +140,9 @@ CASES = {
                          "implausible focal"),
     "calib far principal point": (lambda t: _fit_case(t, calib=_with_p2("721 0 90000 44 0 721 172 0.2 0 0 1 0.003")),
                                   "principal point"),
+    "calib of 8 numbers": (lambda t: _fit_case(t, calib="721 0 609 0 721 172 0 0\n"), "found 8 numbers"),
+    "calib of words": (lambda t: _fit_case(t, calib="fx 721 cx 609\n"), "not a number"),
+    "calib K not upper triangular": (lambda t: _fit_case(t, calib="721 0 609 0 721 172 0.5 0 1\n"), "upper triangular"),
     # labels and detections
     "txt x2 < x1": (lambda t: _fit_case(t, dets=(".txt", CAR.replace("354.43 185.52 549.52", "549.52 185.52 354.43"))),
                     "empty or inverted"),

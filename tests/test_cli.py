@@ -61,6 +61,25 @@ def test_fit_writes_all_outputs(tmp_path):
     assert len(js["objects"]) == 8 and js["variant"] == "coarse"
 
 
+def test_fit_takes_a_calibration_of_the_numbers_of_p_or_k(tmp_path):
+    from wirescene.core.camera import read_kitti_calib
+
+    P2 = read_kitti_calib(SPLIT / "calib" / "000010.txt").P2
+    (tmp_path / "P.txt").write_text("\n".join(" ".join(f"{v:.12e}" for v in row) for row in P2))
+    (tmp_path / "K.txt").write_text(", ".join(f"{v:.12e}" for v in P2[:, :3].ravel()))
+    located = {}
+    for name, calib in (("kitti", SPLIT / "calib" / "000010.txt"), ("P", tmp_path / "P.txt"), ("K", tmp_path / "K.txt")):
+        r = run("fit", SPLIT / "image_2" / "000010.png", "--calib", calib, "--detections", SPLIT / "label_2" / "000010.txt",
+                "--variant", "coarse+gp", "--out", tmp_path / name)
+        assert r.exit_code == 0, r.output
+        located[name] = np.array([o["location"] for o in json.loads((tmp_path / name / "000010.json").read_text())["objects"]])
+    assert_close(located["P"], located["kitti"], atol=1e-9)
+    # K alone puts the colour camera at the origin; P2 places it 6 cm left of KITTI's reference camera, so every x
+    # is 6 cm larger (the shared plane moves the cars by a few cm more)
+    offset = P2[0, 3] / P2[0, 0]
+    assert_close(located["K"] - [offset, 0, 0], located["kitti"], atol=0.05)
+
+
 @pytest.mark.parametrize(
     "case, problem",
     [

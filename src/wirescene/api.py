@@ -14,8 +14,8 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from wirescene.core.camera import Camera, read_kitti_calib
-from wirescene.core.errors import ArgumentError, ShapeError
+from wirescene.core.camera import Camera, read_projection
+from wirescene.core.errors import ArgumentError, InputError, ShapeError
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.validate import boxes_problem, projection_problem
@@ -45,17 +45,26 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
 
 
 def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Camera:
-    """The camera of a KITTI calibration path (``P2``), a ``(3, 4)`` projection matrix or
-    a :class:`Camera`, with ``image_size`` ``(width, height)`` set; checked for sanity
+    """The camera of a calibration path (:func:`wirescene.core.camera.read_projection`: a
+    KITTI file's ``P2``, or the numbers of ``K`` or ``P``), a ``(3, 4)`` projection matrix, a
+    ``(3, 3)`` intrinsic matrix ``K`` (``P = K [I | 0]``) or a :class:`Camera`, with
+    ``image_size`` ``(width, height)`` set; checked for sanity
     (:func:`wirescene.core.validate.projection_problem`)."""
     if isinstance(calib, (str, Path)):
-        return read_kitti_calib(calib).camera(image_size)  # InputError naming the file
+        P = read_projection(calib)  # InputError naming the file
+        problem = projection_problem(P, image_size)
+        if problem:
+            raise InputError(problem, path=calib)
+        return Camera(P, image_size)
     if isinstance(calib, Camera):
         P = calib.P
     elif isinstance(calib, (np.ndarray, list, tuple)):
         P = np.asarray(calib)
+        if P.shape == (3, 3):
+            P = np.hstack([P, np.zeros((3, 1), dtype=P.dtype)])
     else:
-        raise ArgumentError(name, f"expected a calibration path, a (3, 4) matrix or a Camera, got {type(calib).__name__}")
+        raise ArgumentError(name, f"expected a calibration path, a (3, 4) matrix P, a (3, 3) matrix K or a Camera, "
+                                  f"got {type(calib).__name__}")
     problem = projection_problem(P, image_size)
     if problem:
         raise ArgumentError(name, problem)

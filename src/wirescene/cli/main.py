@@ -514,7 +514,9 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 
 @main.command("fit")
 @click.argument("image", type=click.Path(path_type=Path))
-@click.option("--calib", type=click.Path(path_type=Path), required=True, help="KITTI calibration file (P2 is used).")
+@click.option("--calib", type=click.Path(path_type=Path), required=True,
+              help="Camera calibration: a KITTI calibration file (P2 is used), or a text file of the 9 numbers of the "
+                   "intrinsics K or the 12 of the projection P.")
 @click.option("--detections", type=click.Path(path_type=Path), default=None,
               help="2D car detections: .json, .csv or KITTI label .txt (see `wirescene.io.detections.read_detections`); "
                    "default: our own pre-detection from raw pixels.")
@@ -526,8 +528,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 @_inference_options
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **inference):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
-    from wirescene.api import fit
-    from wirescene.core.camera import read_kitti_calib
+    from wirescene.api import as_camera, fit
     from wirescene.io.detections import read_detections
     from wirescene.io.kitti import read_image, read_labels
     from wirescene.io.outputs import write_fit_outputs
@@ -535,7 +536,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     check_output_dir(out, "--out")
     options = _fit_options(particles, seed, **inference)  # a bad --set fails before any file is read
     img = read_image(image)
-    camera = read_kitti_calib(calib).camera((img.shape[1], img.shape[0]))
+    camera = as_camera(calib, (img.shape[1], img.shape[0]))
     dets = read_detections(detections, image_size=(img.shape[1], img.shape[0])) if detections is not None else None
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
     estimate = fit(img, camera, dets, variant=variant, options=options)

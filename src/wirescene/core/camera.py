@@ -117,6 +117,56 @@ class KittiCalib:
         return Camera(self.P2, image_size)
 
 
+def read_projection(path: str | Path) -> np.ndarray:
+    """The ``(3, 4)`` projection matrix of a calibration file: a KITTI calibration's ``P2``
+    (lines ``KEY: numbers``), or a file holding only the numbers of one matrix (spaces,
+    commas or lines between them): 12, the projection ``P`` row by row, or 9, the
+    intrinsics ``K`` of a camera at the frame's origin (``P = K [I | 0]``).
+
+    The fit places that camera as KITTI's: about 1.65 m above a road it looks along
+    (``LiftingOptions.camera_height`` for another rig).
+
+    Raises
+    ------
+    InputError
+        If the file is missing or unreadable, holds another count of numbers, or its
+        matrix is no street camera's (:func:`wirescene.core.validate.projection_problem`).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> path = Path(tempfile.mkdtemp()) / "K.txt"
+    >>> _ = path.write_text("721.5 0 609.6  0 721.5 172.9  0 0 1")
+    >>> read_projection(path)[:, 3].tolist()
+    [0.0, 0.0, 0.0]
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("calibration file not found", path=path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read calibration file ({exc.__class__.__name__})", path=path) from exc
+    if ":" in text:
+        return read_kitti_calib(path).P2
+    try:
+        numbers = np.array([float(v) for v in text.replace(",", " ").split()])
+    except ValueError as exc:
+        raise InputError("expected a KITTI calibration ('KEY: numbers' lines) or the 9 numbers of K or 12 of P, "
+                         "found text that is not a number", path=path) from exc
+    if numbers.size == 12:
+        P = numbers.reshape(3, 4)
+    elif numbers.size == 9:
+        P = np.hstack([numbers.reshape(3, 3), np.zeros((3, 1))])
+    else:
+        raise InputError(f"expected a KITTI calibration ('KEY: numbers' lines) or the 9 numbers of K or 12 of P, "
+                         f"found {numbers.size} numbers", path=path)
+    problem = projection_problem(P)
+    if problem:
+        raise InputError(problem, path=path)
+    return P
+
+
 def read_kitti_calib(path: str | Path) -> KittiCalib:
     """Parse a KITTI object calibration file.
 
