@@ -96,7 +96,8 @@ def list_cmd(cad_dir):
 
 @cad.command("show")
 @click.argument("name")
-@click.option("--out", type=click.Path(dir_okay=False), default=None, help="Picture to write, in the format its suffix names (.png, .pdf, .svg; default: NAME.png).")
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Picture to write, in the format its suffix names (.png, .pdf, .svg; default: NAME.png).")
 @click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
               help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
 def show_cmd(name, out, cad_dir):
