@@ -224,6 +224,8 @@ def main():
                     "bank's, the levels it was trained on)")
     ap.add_argument("--per-detector", type=int, help="windows each template keeps in a frame after its own "
                     "suppression, stored likewise (default: each bank's, 30)")
+    ap.add_argument("--smallest-car", type=float, default=None,
+                    help="also time the pipeline's pre-detection with predetect.smallest_car at this height (px)")
     ap.add_argument("--time-frames", type=int, default=12,
                     help="frames timed, spread evenly over the scored frames (0: no timing)")
     ap.add_argument("--pr-curve", default=None)
@@ -426,7 +428,7 @@ def main():
             print("   ", fmt_operating_point(o))
     from wirescene.fitting.pipeline import PredetectOptions, detect_own
 
-    cpu, plain, own = [], [], []
+    cpu, plain, own, small = [], [], [], []
     unverified = replace(time_bank, verifier=None)
     fit_threshold = PredetectOptions().threshold
     timed = list(dict.fromkeys(ids[i] for i in np.linspace(0, len(ids) - 1, args.time_frames).round().astype(int)))
@@ -444,6 +446,10 @@ def main():
         c = time.process_time()
         detect_own(camera, img, bank=time_bank, threshold=fit_threshold)  # the pipeline's: the box rule's viewpoints
         own.append(time.process_time() - c)
+        if args.smallest_car:
+            c = time.process_time()
+            detect_own(camera, img, bank=time_bank, threshold=fit_threshold, smallest_car=args.smallest_car)
+            small.append(time.process_time() - c)
     # CPU time of this single-threaded process = seconds on one free core (wall time grows
     # with whatever else shares the machine)
     if times:  # (--time-frames 0: no timing)
@@ -452,6 +458,9 @@ def main():
               f"without the verifier {np.mean(plain):.2f} s, the pipeline's own pre-detection "
               f"(fitting.pipeline.detect_own at the fit's threshold {fit_threshold}, shipped viewpoint classifier) "
               f"{np.mean(own):.2f} s (max {np.max(own):.2f})")
+        if small:
+            print(f"  the same searching cars down to {args.smallest_car:g} px (predetect.smallest_car): "
+                  f"{np.mean(small):.2f} s (max {np.max(small):.2f}), {np.mean(small) / np.mean(own):.2f}x")
         out.update(seconds_per_frame=float(np.mean(times)), cpu_seconds_per_frame=float(np.mean(cpu)))
     out.update(pooled=public(pooled), per_fold=per_fold, per_group=per_group)
     if args.pr_curve:

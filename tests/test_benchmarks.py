@@ -458,6 +458,28 @@ def test_worker_memory_fits_the_same_frames_pass_after_pass_and_reads_the_reside
         assert seconds > 0 and 20 < trimmed <= rss + 1 and rss <= peak + 1  # MB of a Python process with numpy
 
 
+def test_resolution_root_resizes_images_calibrations_and_boxes_alike(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_resolution import resized_root, scaled_projection
+    from wirescene.io.kitti import KittiDataset
+
+    frames = resized_root(KITTI_ROOT, tmp_path / "kitti", 1.5)
+    source, resized = KittiDataset(KITTI_ROOT), KittiDataset(tmp_path / "kitti")
+    assert resized.frame_ids() == frames and len(frames) >= 2
+    for f in frames:
+        h, w = source.image(f).shape[:2]
+        assert resized.image(f).shape[:2] == (round(1.5 * h), round(1.5 * w))
+        P, P15 = source.camera(f).P, resized.camera(f).P
+        X = np.array([[2.0, 1.6, 15.0], [-4.0, 1.5, 30.0]])
+        uv, uv15 = source.camera(f).project(X), resized.camera(f).project(X)
+        assert_close(uv15, 1.5 * (uv + 0.5) - 0.5, atol=1e-9)  # a pixel centre goes where the resized image puts it
+        assert_close(P15, scaled_projection(P, 1.5))
+        for a, b in zip(source.labels(f).objects, resized.labels(f).objects):
+            assert_close(np.asarray(b.box), 1.5 * (np.asarray(a.box) + 0.5) - 0.5, atol=0.006)
+            assert_close(np.asarray(b.location), np.asarray(a.location))
+            assert b.type == a.type
+
+
 def test_confidence_cues_read_the_box_fit_and_the_frame_scale(monkeypatch):
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_confidence_cues import _MEAN_HEIGHT, CUES, cue_features

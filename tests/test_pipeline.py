@@ -237,3 +237,32 @@ def test_own_boxes_weigh_by_the_predetect_stage():
     assert np.array_equal(as_own, locations(replace(unverified, inference=replace(OPTS.inference, box_weight=30.0)),
                                             False))
     assert not np.allclose(as_own, locations(unverified, False))  # inference.box_weight: 100
+
+
+def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it():
+    """``predetect.smallest_car``: at half the resolution the frame's cars fall below the bank's
+    25 px; searched down to 12 px they are found again, boxes under 25 px among them."""
+    from PIL import Image
+
+    from wirescene.core.camera import Camera
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.fitting.pipeline import PredetectOptions, detect_own
+
+    ds = KittiDataset(KITTI_ROOT)
+    image, camera = ds.image("000010"), ds.camera("000010")
+    h, w = image.shape[:2]
+    small = np.asarray(Image.fromarray(image).resize((w // 2, h // 2), Image.LANCZOS))
+    P = camera.P.copy()
+    P[:2] = 0.5 * P[:2] - 0.25 * P[2]  # pixel centres: u -> (u + 0.5) / 2 - 0.5
+    half = Camera(P, (w // 2, h // 2))
+    heights = {}
+    for smallest in (None, 12.0):
+        found = detect_own(half, small, threshold=0.3, smallest_car=smallest)
+        heights[smallest] = found.boxes[:, 3] - found.boxes[:, 1]
+    assert (heights[None] >= 24).all()  # the bank's own range (a box may shrink a little in its refinement)
+    assert (heights[12.0] < 24).sum() >= 2 and len(heights[12.0]) > len(heights[None])
+    # the evaluation's detections take the option from the fit's options
+    via_source = DetectionSource("bank").for_frame(ds, "000010", np.random.default_rng(0),
+                                                   predetect=PredetectOptions(threshold=0.3, smallest_car=12.0))
+    direct = detect_own(camera, image, threshold=0.3, smallest_car=12.0)
+    assert np.array_equal(via_source.boxes, direct.boxes)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,6 +13,9 @@ from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
 from wirescene.io.detections import detections_from_labels, read_detections
 from wirescene.io.kitti import KittiDataset
+
+if TYPE_CHECKING:  # imported where the bank runs
+    from wirescene.fitting.pipeline import PredetectOptions
 
 
 @dataclass(frozen=True)
@@ -67,15 +71,18 @@ class DetectionSource:
         return self.spec == "bank"
 
     def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator, *,
-                  threshold: float | None = None) -> Detections:
-        """The detections of one frame; ``threshold``: our own pre-detection's (None: the bank's)."""
+                  predetect: PredetectOptions | None = None) -> Detections:
+        """The detections of one frame; ``predetect``: the threshold and smallest car of our own
+        pre-detection (:func:`~wirescene.fitting.pipeline.detect_own`; None: the bank's own)."""
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
         if self.spec == "bank":
             from wirescene.fitting.pipeline import detect_own, detector_bank, viewpoint_classifier
 
             return detect_own(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
-                              classifier=viewpoint_classifier(self.classifier), threshold=threshold)
+                              classifier=viewpoint_classifier(self.classifier),
+                              threshold=None if predetect is None else predetect.threshold,
+                              smallest_car=None if predetect is None else predetect.smallest_car)
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:
