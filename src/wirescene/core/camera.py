@@ -117,6 +117,16 @@ class KittiCalib:
         return Camera(self.P2, image_size)
 
 
+def _calibration_text(path: Path) -> str:
+    """The text of a calibration file; an :class:`InputError` naming it if it cannot be read."""
+    if not path.is_file():
+        raise InputError("calibration file not found", path=path)
+    try:
+        return path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read calibration file ({exc.__class__.__name__})", path=path) from exc
+
+
 def read_projection(path: str | Path) -> np.ndarray:
     """The ``(3, 4)`` projection matrix of a calibration file: a KITTI calibration's ``P2``
     (lines ``KEY: numbers``), or a file holding only the numbers of one matrix (spaces,
@@ -141,12 +151,7 @@ def read_projection(path: str | Path) -> np.ndarray:
     [0.0, 0.0, 0.0]
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("calibration file not found", path=path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read calibration file ({exc.__class__.__name__})", path=path) from exc
+    text = _calibration_text(path)
     if ":" in text:
         return read_kitti_calib(path).P2
     try:
@@ -176,12 +181,7 @@ def read_kitti_calib(path: str | Path) -> KittiCalib:
         If the file is missing, a line is malformed or ``P2`` is absent.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("calibration file not found", path=path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read calibration file ({exc.__class__.__name__})", path=path) from exc
+    text = _calibration_text(path)
     values: dict[str, np.ndarray] = {}
     for lineno, line in enumerate(text.splitlines(), 1):
         if not line.strip():
