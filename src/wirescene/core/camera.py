@@ -153,19 +153,18 @@ def read_projection(path: str | Path) -> np.ndarray:
     path = Path(path)
     text = _calibration_text(path)
     if ":" in text:
-        return read_kitti_calib(path).P2
+        return _parse_kitti_calib(text, path).P2
+    expected = "expected a KITTI calibration ('KEY: numbers' lines) or the 9 numbers of K or 12 of P"
     try:
         numbers = np.array([float(v) for v in text.replace(",", " ").split()])
     except ValueError as exc:
-        raise InputError("expected a KITTI calibration ('KEY: numbers' lines) or the 9 numbers of K or 12 of P, "
-                         "found text that is not a number", path=path) from exc
+        raise InputError(f"{expected}, found text that is not a number", path=path) from exc
     if numbers.size == 12:
         P = numbers.reshape(3, 4)
     elif numbers.size == 9:
         P = np.hstack([numbers.reshape(3, 3), np.zeros((3, 1))])
     else:
-        raise InputError(f"expected a KITTI calibration ('KEY: numbers' lines) or the 9 numbers of K or 12 of P, "
-                         f"found {numbers.size} numbers", path=path)
+        raise InputError(f"{expected}, found {numbers.size} numbers", path=path)
     problem = projection_problem(P)
     if problem:
         raise InputError(problem, path=path)
@@ -181,7 +180,11 @@ def read_kitti_calib(path: str | Path) -> KittiCalib:
         If the file is missing, a line is malformed or ``P2`` is absent.
     """
     path = Path(path)
-    text = _calibration_text(path)
+    return _parse_kitti_calib(_calibration_text(path), path)
+
+
+def _parse_kitti_calib(text: str, path: Path) -> KittiCalib:
+    """:func:`read_kitti_calib` of the text of the file ``path`` (named in errors)."""
     values: dict[str, np.ndarray] = {}
     for lineno, line in enumerate(text.splitlines(), 1):
         if not line.strip():
