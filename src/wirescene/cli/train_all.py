@@ -61,7 +61,7 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
 
     from wirescene.cli.options import parse_frames
     from wirescene.io.kitti import KittiDataset
-    from wirescene.training.pipeline import train_all
+    from wirescene.training.pipeline import step_cost, train_all
 
     check_output_dir(out, "--out")
     options = parse_settings(settings)
@@ -84,9 +84,7 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
         if record.get("source") == "shipped":
             click.echo(f"{step:18s} shipped ({record['why']})")
         else:
-            peak = record.get("peak_rss_mb")
-            click.echo(f"{step:18s} {record['artefact']}: {record['seconds']:.0f} s"
-                       + ("" if peak is None else f", peak {peak:.0f} MB"))
+            click.echo(f"{step:18s} {record['artefact']}: {step_cost(record)}")
     folds = manifest["calibration_folds"]
     click.echo(f"models written to {out} ({manifest['data']['frames']} frames, {manifest['data']['cars']} cars; "
                f"{folds['frames_with_known_drive']} frames of known drive"

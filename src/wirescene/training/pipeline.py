@@ -108,6 +108,13 @@ def _reset_peak_memory() -> bool:
         return False
 
 
+def step_cost(record: dict) -> str:
+    """A finished step's time and peak memory as the manifest records them, in words
+    (``"412 s, peak 2048 MB"``; no peak where the OS did not say)."""
+    peak = record.get("peak_rss_mb")
+    return f"{record['seconds']:.0f} s" + ("" if peak is None else f", peak {peak:.0f} MB")
+
+
 def _peak_memory_mb() -> float | None:
     """The process's peak resident memory in MB; None where the OS does not say (Windows)."""
     try:
@@ -341,8 +348,7 @@ class _Run:
         record.update(done=True, sha256=file_sha256(path), seconds=round(time.perf_counter() - t0, 1),
                       peak_rss_mb=_peak_memory_mb(), peak_rss_of="step" if exact else "process so far",
                       finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
-        peak = record["peak_rss_mb"]
-        self.say(f"{step}: {record['seconds']:.0f} s" + ("" if peak is None else f", peak {peak:.0f} MB"))
+        self.say(f"{step}: {step_cost(record)}")
         return record
 
     def run_parts(self, record: dict) -> None:
