@@ -29,8 +29,11 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from wirescene.core.camera import read_kitti_calib, write_kitti_calib
-from wirescene.io.kitti import KittiDataset
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_train_scale import labelled_frames  # noqa: E402
+from wirescene.core.camera import read_kitti_calib, write_kitti_calib  # noqa: E402
+from wirescene.io.kitti import KittiDataset  # noqa: E402
 
 
 def scaled_projection(P: np.ndarray, scale: float) -> np.ndarray:
@@ -55,7 +58,7 @@ def resized_root(source: Path, out: Path, scale: float) -> list[str]:
     """Write ``out/training/{image_2,calib,label_2}`` of the labelled frames of ``source``
     resized by ``scale``; returns the frame ids."""
     dataset = KittiDataset(source)
-    frames = [f for f in dataset.frame_ids() if dataset.label_path(f).is_file()]
+    frames = labelled_frames(source)
     if not frames:
         raise SystemExit(f"{source}: no labelled frames")
     split = out / "training"

@@ -32,6 +32,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_eval_scale import _rss_kb  # noqa: E402
+from bench_train_scale import labelled_frames  # noqa: E402
 
 
 def trim() -> None:
@@ -50,7 +51,7 @@ def passes(root: str, *, frames: int, n_passes: int, variants: list[str], detect
     from wirescene.io.kitti import KittiDataset
 
     dataset = KittiDataset(root)
-    ids = [f for f in dataset.frame_ids() if dataset.label_path(f).is_file()][:frames]
+    ids = labelled_frames(root)[:frames]
     job = _FrameJob(dataset, tuple(variants), DetectionSource(detections), FitOptions(), "parts")
     for k in range(n_passes):
         t0 = time.time()
