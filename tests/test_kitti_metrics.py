@@ -452,6 +452,22 @@ def test_threshold_positions_equal_the_devkit_loop(n_scores, n_gt):
     assert_close(scores[columns], np.array(_loop_thresholds(list(expanded), n_gt)), atol=0)
 
 
+def test_threshold_positions_of_many_weighted_sets_equal_each_set_alone():
+    # the bootstrap's draws at once: rows of weighted counts (zeros, an empty row, no ground truth among them)
+    rng = np.random.default_rng(5)
+    counts = rng.integers(0, 4, size=(30, 57)).astype(float)
+    counts[3] = 0.0
+    n_gt = counts.sum(axis=1) + rng.integers(0, 90, size=30)
+    n_gt[7] = 0.0
+    counts[7] = 0.0
+    rows = _threshold_columns(counts, n_gt)
+    assert rows.shape == (30, 41)
+    for b in range(30):
+        alone = _threshold_columns(counts[b], n_gt[b]) if n_gt[b] else np.zeros(0, dtype=int)
+        assert_close(rows[b][rows[b] >= 0], alone, atol=0, msg=f"row {b}")
+        assert (rows[b][len(alone):] == -1).all()
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_frame_weights_equal_repeated_frames(seed):
     # a bootstrap draw (frames drawn 0, 1, 2 or 3 times) evaluated at once equals the devkit on the repeated frames

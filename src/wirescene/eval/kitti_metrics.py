@@ -387,27 +387,42 @@ def _greedy(pg, pd, rank, priority_keys, available):
     return chosen, assigned
 
 
-def _threshold_columns(counts: np.ndarray, n_gt: float) -> np.ndarray:
+def _threshold_columns(counts: np.ndarray, n_gt) -> np.ndarray:
     """The devkit's score thresholds for evenly spaced recall (``getThresholds``).
 
     ``counts`` (U,) says how often each distinct TP score occurs, scores in descending
     order. Walking along the scores, one is kept whenever its recall ``(i + 1) / n_gt`` is
     the closest to the next recall step 0, 1/40, 2/40, ...; the last is always kept.
-    Returns the positions in ``counts`` of the kept scores, ascending."""
-    n = int(round(float(np.sum(counts))))
-    if n == 0:
-        return np.zeros(0, dtype=int)
+    Returns the positions in ``counts`` of the kept scores, ascending. Counts ``(B, U)``
+    with ``n_gt`` ``(B,)`` (B weighted sets of frames at once) give ``(B, 41)`` positions,
+    each row's kept ones first and -1 after them."""
+    counts = np.asarray(counts, dtype=float)
+    rows = np.atleast_2d(counts)
+    n_gt = np.broadcast_to(np.asarray(n_gt, dtype=float), (len(rows),))[:, None]
+    n = np.round(rows.sum(axis=1))[:, None]
     last = n - 1
-    i = np.arange(last, dtype=float)
-    left, right = (i + 1) / n_gt, (i + 2) / n_gt
     # The recall steps as the devkit accumulates them (cumsum adds in sequence, as its loop does).
     current = np.concatenate([[0.0], np.cumsum(np.full(N_SAMPLE_PTS - 1, 1.0 / (N_SAMPLE_PTS - 1.0)))])
-    keep = (right[None, :] - current[:, None]) >= (current[:, None] - left[None, :])  # (K, last), monotone in i
-    first = np.where(keep.any(axis=1), keep.argmax(axis=1), last) if last else np.zeros(len(current), dtype=int)
+    # The devkit keeps score i at step c once (i + 2) / n_gt - c >= c - (i + 1) / n_gt, i.e. from about
+    # i = c n_gt - 1.5 on: its own float test decides among the few integers around that.
+    start = np.maximum(np.floor(current[None, :] * n_gt - 1.5) - 1, 0)  # (B, K), below the first kept
+    i = start[:, :, None] + np.arange(5)  # (B, K, 5)
+    c = current[None, :, None]
+    with np.errstate(divide="ignore", invalid="ignore"):  # a set without ground truth keeps nothing (n = 0)
+        keep = (i < last[:, :, None]) & (((i + 2) / n_gt[:, :, None] - c) >= (c - (i + 1) / n_gt[:, :, None]))
+    first = np.where(keep.any(axis=2), np.take_along_axis(i, keep.argmax(axis=2)[:, :, None], 2)[:, :, 0], last)
     steps = np.arange(len(current))
-    taken = np.maximum.accumulate(first - steps) + steps  # a step's score lies past the previous step's
-    taken = np.append(taken[taken < last], last)
-    return np.searchsorted(np.cumsum(counts), taken, side="right")
+    taken = np.maximum.accumulate(first - steps, axis=1) + steps  # a step's score lies past the previous step's
+    kept = taken < last
+    # the kept ones, then the last (-1 marks the rest)
+    taken = np.where(kept, taken, -1.0)
+    taken[np.arange(len(rows)), kept.sum(axis=1)] = last[:, 0]
+    # every row's positions by one search: row b's counts shifted past all of row b - 1's
+    shift = np.arange(len(rows))[:, None] * (n.max(initial=0) + 2)
+    flat = (np.cumsum(rows, axis=1) + shift).ravel()
+    columns = np.searchsorted(flat, (taken + shift).ravel(), side="right").reshape(taken.shape)
+    columns = np.where((taken >= 0) & (n > 0), columns - np.arange(len(rows))[:, None] * rows.shape[1], -1)
+    return columns if counts.ndim == 2 else columns[0][columns[0] >= 0]
 
 
 @dataclass
@@ -527,11 +542,14 @@ def _evaluate(gt: _Rows, det: _Rows, dc_hit: np.ndarray | None, overlap: np.ndar
     n_gt = weights @ n_gt_frame
     precision = np.zeros((len(weights), N_SAMPLE_PTS))
     orientation = np.zeros((len(weights), N_SAMPLE_PTS))
+    by_column = np.argsort(tp_column, kind="stable")  # every column holds a TP score: no empty group
+    starts = np.searchsorted(tp_column[by_column], np.arange(len(distinct)))
+    tp_counts = np.add.reduceat(weights[:, tp_frame[by_column]], starts, axis=1) if len(distinct) else (
+        np.zeros((len(weights), 0)))
+    all_columns = _threshold_columns(tp_counts, n_gt)
     for b, wb in enumerate(weights):
-        if n_gt[b] == 0:
-            continue
-        columns = _threshold_columns(np.bincount(tp_column, weights=wb[tp_frame], minlength=len(distinct)), n_gt[b])
-        if not len(columns):  # no true positive: every point 0
+        columns = all_columns[b][all_columns[b] >= 0]
+        if n_gt[b] == 0 or not len(columns):  # no true positive: every point 0
             continue
         reach = admitted[columns]
         sums = np.cumsum(steps[:, : reach[-1]] * wb[step_frame[: reach[-1]]], axis=1)
