@@ -17,8 +17,10 @@ import wirescene
 import wirescene.api
 from conftest import KITTI_ROOT, assert_close
 from wirescene.cli.main import main
+from wirescene.fitting.pipeline import FitOptions
 from wirescene.io.detections import read_detections
 from wirescene.io.kitti import KittiDataset
+from wirescene.lift import LiftingOptions
 
 SPLIT = KITTI_ROOT / "training"
 FRAME = "000010"
@@ -99,6 +101,15 @@ def test_image_encodings_and_calib_forms_agree(frame, tmp_path):
             assert_close(a.location, b.location, atol=1e-9)
 
 
+def test_integer_images_holding_8_bit_values_are_read_as_8_bit(frame):
+    from wirescene.core.image import to_rgb_uint8
+
+    image = frame[0]
+    for dtype in (np.int16, np.int32, np.int64):  # e.g. after arithmetic on the pixels
+        assert (to_rgb_uint8(image.astype(dtype)) == image).all(), dtype
+    assert (to_rgb_uint8(image.astype(np.uint16) * 257) == image).all()  # a 16-bit PNG's range
+
+
 @pytest.mark.parametrize(
     "kwargs, name",
     [
@@ -115,7 +126,21 @@ def test_image_encodings_and_calib_forms_agree(frame, tmp_path):
         (dict(boxes=[[5000, 10, 5100, 50]]), "boxes"),
         (dict(boxes=np.zeros((2, 3))), "boxes"),
         (dict(boxes="1 2 3 4"), "boxes"),
+        (dict(boxes=[[1, 2, 3, 4], [1, 2]]), "boxes"),
+        (dict(calib=[[1, 2], [3]]), "calib"),
         (dict(variant="fancy"), "variant"),
+        (dict(variant=None), "variant"),
+        (dict(variant=["full", "coarse"]), "variant"),
+        (dict(settings={"lifting.n_particles": 0}), "settings"),
+        (dict(settings={"inference.samples": 1}), "settings"),
+        (dict(settings={"lifting.pitch_step": 0}), "settings"),
+        (dict(settings={"inference.box_weight": float("nan")}), "settings"),
+        (dict(settings={"lifting.camera_height": -1.0}), "settings"),
+        (dict(settings={"inference.keep_fraction": 1.5}), "settings"),
+        (dict(settings={"lifting.n_particles": 20.5}), "settings"),
+        (dict(settings={"inference.flip_evidence": 1}), "settings"),
+        (dict(options=FitOptions(lifting=LiftingOptions(n_particles=0))), "options"),
+        (dict(options=FitOptions(seed=-1)), "options"),
         (dict(particles=0), "particles"),
         (dict(particles=2.5), "particles"),
         (dict(seed=-1), "seed"),
@@ -133,6 +158,82 @@ def test_bad_arguments_raise_value_errors_that_name_them(kwargs, name):
         wirescene.fit(image, calib, boxes, **args)
     assert isinstance(info.value, wirescene.ArgumentError)
     assert str(info.value).startswith(f"{name}: ")
+
+
+def test_detections_check_their_shapes():
+    from wirescene.core.types import Detections
+
+    assert Detections([300, 180, 520, 300], 0.9, np.nan).boxes.shape == (1, 4)  # one box
+    assert Detections([], [], []).boxes.shape == (0, 4)
+    for boxes, scores, says in ((np.zeros((2, 5)), 1.0, r"boxes must have shape \(\*, 4\), got \(2, 5\)"),
+                                (np.zeros((4, 5)), 1.0, "boxes must have shape"),  # was read as 5 boxes
+                                (np.zeros(8), 1.0, "boxes must have shape"),
+                                (np.zeros((2, 4)), [1, 1, 1], r"scores must have shape \(2,\)"),
+                                (np.zeros((2, 4)), np.ones((2, 1)), "scores must have shape")):
+        with pytest.raises(wirescene.ShapeError, match=says):
+            Detections(boxes, scores, np.nan)
+    with pytest.raises(wirescene.ShapeError, match="alpha must have shape"):
+        Detections(np.zeros((2, 4)), 1.0, [0.1, 0.2, 0.3])
+    with pytest.raises(wirescene.ArgumentError, match="^boxes: expected numbers"):
+        Detections([[1, 2, 3, 4], [1, 2]], 1.0, np.nan)
+
+
+def test_camera_checks_its_arguments():
+    from wirescene.core.camera import Camera
+
+    assert Camera(P2, np.array([1242, 375])).image_size == (1242, 375)
+    for size in (5, (1242.0, 375), (0, 375), (1242, 375, 3)):
+        with pytest.raises(wirescene.ShapeError, match="image_size must be"):
+            Camera(P2, size)
+    with pytest.raises(wirescene.ShapeError, match="P must be finite"):
+        Camera(np.full((3, 4), np.nan))
+    camera = Camera(P2, (1242, 375))
+    with pytest.raises(wirescene.ShapeError, match=r"depth must have shape \(5,\)"):
+        camera.backproject(np.zeros((5, 2)), np.ones(3))
+    uv = np.array([[600.0, 200.0], [100.0, 300.0]])
+    assert_close(camera.project(camera.backproject(uv, 12.0)), uv, atol=1e-9)  # one depth for all
+
+
+def test_fit_takes_what_read_kitti_calib_returns(frame):
+    image, camera, _ = frame
+    calib = wirescene.read_kitti_calib(SPLIT / "calib" / f"{FRAME}.txt")
+    a = wirescene.fit(image, calib, [[300, 180, 520, 300]], variant="coarse", particles=10)
+    b = wirescene.fit(image, camera, [[300, 180, 520, 300]], variant="coarse", particles=10)
+    assert a.to_kitti() == b.to_kitti()
+
+
+def test_fit_frame_checks_its_arguments(frame):
+    from wirescene.fitting.pipeline import fit_frame
+
+    image, camera, _ = frame
+    dets = wirescene.Detections([[300, 180, 520, 300]], 1.0, 0.0)
+    with pytest.raises(wirescene.ShapeError, match=r"image must have shape \(375, 1242, 3\), got \(188, 621, 3\)"):
+        fit_frame(camera, dets, ["coarse"], image=image[::2, ::2])  # another size than the camera's
+    with pytest.raises(wirescene.ArgumentError, match="^image: expected uint8"):
+        fit_frame(camera, dets, ["coarse"], image=image / 255.0)
+    with pytest.raises(wirescene.ArgumentError, match="^camera: expected a Camera"):
+        fit_frame(camera.P, dets, ["coarse"])
+    with pytest.raises(wirescene.ArgumentError, match="^options: expected FitOptions"):
+        fit_frame(camera, dets, ["coarse"], options={})
+    with pytest.raises(wirescene.ArgumentError, match="^options: inference.samples must be at least 2, got 1"):
+        fit_frame(camera, dets, ["coarse"], options=FitOptions(inference=wirescene.api.InferenceOptions(samples=1)))
+    one = fit_frame(camera, dets, "coarse", options=FitOptions(lifting=LiftingOptions(n_particles=10)))
+    assert list(one.estimates) == ["coarse"]  # a variant's name alone, not its letters
+
+
+def test_evaluate_takes_one_frame_id_and_refuses_none_and_what_is_no_path(tmp_path):
+    from wirescene.core.resources import DATA_DIR
+
+    root = DATA_DIR / "sample" / "kitti"
+    with pytest.raises(wirescene.ArgumentError, match="^kitti_root: expected a directory path, got int"):
+        wirescene.evaluate(5, variants="coarse")
+    with pytest.raises(wirescene.ArgumentError, match="^predictions: expected a directory path"):
+        wirescene.evaluate(root, variants="coarse", predictions=5)
+    with pytest.raises(wirescene.ArgumentError, match="^frames: no frame given"):
+        wirescene.evaluate(root, variants="coarse", frames=[], particles=10)
+    one = wirescene.evaluate(root, variants="coarse", frames="000010", particles=10)
+    listed = wirescene.evaluate(root, variants="coarse", frames=["000010"], particles=10)
+    assert one["coarse"].metrics["all"]["n_gt"] == listed["coarse"].metrics["all"]["n_gt"] > 0
 
 
 def test_cli_fit_and_api_fit_give_identical_results(tmp_path, frame):

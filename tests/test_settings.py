@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from wirescene.core.errors import ArgumentError
@@ -36,6 +37,26 @@ def test_replace_fields_checks_names_and_keeps_the_rest():
     assert isinstance(replace_fields(LiftingOptions(), {"road_prior": 0}).road_prior, float)
     with pytest.raises(ValueError, match="no option 'box_wieght'.*box_weight"):
         replace_fields(base, {"box_wieght": 1})
+
+
+def test_every_number_of_the_stage_options_is_checked_against_its_kind_and_limits():
+    options = FitOptions()
+    assert options.checked() is options  # the defaults pass
+    for setting, says in (({"lifting.n_particles": 0}, "at least 1"), ({"lifting.n_particles": 2.0}, "an integer"),
+                          ({"lifting.n_particles": True}, "an integer"), ({"inference.size_prior": "inf"}, "finite"),
+                          ({"inference.size_prior": None}, "a finite number"),
+                          ({"inference.keep_fraction": 1.01}, "at most 1"),
+                          ({"lifting.azimuth_halfwidth": 181}, "at most 180"),
+                          ({"inference.flip_evidence": 0}, "true or false"), ({"predetect.box_weight": -1}, "at least 0")):
+        with pytest.raises(ValueError, match=says):
+            options.with_settings(setting)
+    assert options.with_settings({"lifting.n_particles": np.int64(7)}).lifting.n_particles == 7
+    assert options.with_settings({"inference.flip_evidence": np.bool_(False)}).inference.flip_evidence is not True
+    assert options.with_settings({"inference.known_occluded_score": 0.5}).inference.known_occluded_score == 0.5
+    with pytest.raises(ArgumentError, match="^options: lifting.camera_height must be at least 0.1, got 0.0"):
+        FitOptions(lifting=LiftingOptions(camera_height=0.0)).checked()
+    with pytest.raises(ArgumentError, match="^options: seed must be a non-negative integer"):
+        FitOptions(seed=1.5).checked()
 
 
 def test_with_settings_reaches_every_stage_and_refuses_unknown_ones():
@@ -104,7 +125,9 @@ def test_set_on_the_command_line_is_checked(tmp_path):
 
     frame = sample_root() / "training"
     for item, says in (("inference.nope=1", "no option 'nope'"), ("inference.box_weight=x", "box_weight"),
-                       ("box_weight=1", "SCOPE.KEY=VALUE")):
+                       ("box_weight=1", "SCOPE.KEY=VALUE"), ("inference.samples=1", "at least 2"),
+                       ("lifting.pitch_step=0", "lifting.pitch_step must be at least 0.01"),
+                       ("inference.box_weight=nan", "finite")):
         r = CliRunner().invoke(main, ["fit", str(frame / "image_2" / "000010.png"), "--calib",
                                       str(frame / "calib" / "000010.txt"), "--out", str(tmp_path / "o"),
                                       "--set", item])

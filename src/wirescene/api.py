@@ -14,7 +14,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from wirescene.core.camera import Camera, read_projection
+from wirescene.core.camera import Camera, KittiCalib, read_projection
 from wirescene.core.errors import ArgumentError, InputError, ShapeError
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.types import Detections, SceneEstimate
@@ -58,8 +58,13 @@ def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Cam
         return Camera(P, image_size)
     if isinstance(calib, Camera):
         P = calib.P
+    elif isinstance(calib, KittiCalib):
+        P = calib.P2
     elif isinstance(calib, (np.ndarray, list, tuple)):
-        P = np.asarray(calib)
+        try:
+            P = np.asarray(calib, dtype=float)
+        except (TypeError, ValueError):
+            raise ArgumentError(name, "expected a matrix of numbers (rows of equal length)") from None
         if P.shape == (3, 3):
             P = np.hstack([P, np.zeros((3, 1), dtype=P.dtype)])
     else:
@@ -78,9 +83,12 @@ def as_detections(boxes, image_size: tuple[int, int], *, name: str = "boxes") ->
     if isinstance(boxes, Detections):
         dets = boxes
     else:
-        b = np.asarray(boxes) if isinstance(boxes, (np.ndarray, list, tuple)) else None
-        if b is None:
+        if not isinstance(boxes, (np.ndarray, list, tuple)):
             raise ArgumentError(name, f"expected an (N, 4) array or Detections, got {type(boxes).__name__}")
+        try:
+            b = np.asarray(boxes)
+        except ValueError:
+            raise ArgumentError(name, "expected an (N, 4) array: rows of 4 numbers, all of one length") from None
         if b.size == 0:
             b = b.reshape(0, 4)
         problem = boxes_problem(b)
@@ -110,6 +118,8 @@ def _seed(value) -> int:
 
 
 def _variant_names(variant, name: str = "variant") -> list[str]:
+    if not isinstance(variant, str) and not isinstance(variant, Iterable):
+        raise ArgumentError(name, f"expected a variant name, got {type(variant).__name__}; available: {', '.join(VARIANTS)}")
     names = [variant] if isinstance(variant, str) else list(variant)
     for v in names:
         if v not in VARIANTS:
@@ -134,6 +144,7 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
     if options is not None:
         if not isinstance(options, FitOptions):
             raise ArgumentError("options", f"expected FitOptions, got {type(options).__name__}")
+        options.checked()
     else:
         options = FitOptions(lifting=LiftingOptions(n_particles=_positive_int(particles, "particles")),
                              inference=InferenceOptions(), seed=_seed(seed))
@@ -166,9 +177,12 @@ def fit(
     image : path or ndarray
         An image file, or an ``(H, W, 3)`` / ``(H, W)`` array (uint8, uint16 or float
         in [0, 1]).
-    calib : path, (3, 4) array or Camera
-        A KITTI calibration file (``P2`` is used), a projection matrix in the KITTI
-        rectified camera frame (x right, y down, z forward, metres), or a camera.
+    calib : path, (3, 4) array, (3, 3) array, KittiCalib or Camera
+        A KITTI calibration file (``P2`` is used) or a text file of the 12 numbers of a
+        projection matrix or the 9 of the intrinsics ``K``; a projection matrix ``P`` in
+        the KITTI rectified camera frame (x right, y down, z forward, metres); ``K``
+        (``P = K [I | 0]``); :func:`wirescene.read_kitti_calib`'s result (its ``P2``); or a
+        camera.
     boxes : None, (N, 4) array or Detections
         2D car boxes ``x1 y1 x2 y2`` in pixels from any detector (viewpoints are then
         taken from the box rule, :func:`wirescene.fitting.pipeline.complete_viewpoints`),
@@ -181,7 +195,8 @@ def fit(
         Model variant (paper Sec. 5.2): ``coarse``, ``coarse+gp``, ``fg``, ``fg+so``,
         ``fg+do``, ``fg+gp`` or ``full``.
     particles : int
-        Scene particles kept by the coarse stage (ignored when ``options`` is given).
+        Scene particles kept by the coarse stage (ignored when ``options`` is given, and
+        overridden by ``settings["lifting.n_particles"]``).
     seed : int
         Seed of the inference's random sampling; equal seeds give equal results.
     options : FitOptions, optional
@@ -199,13 +214,22 @@ def fit(
     -------
     SceneEstimate
         ``.cars`` (each with ``location`` (3,), ``rotation_y``, ``dimensions`` (h, w, l),
-        ``vertices`` (36, 3), ``visible`` (36,), ``box``, ``score``, ``cad_model``),
-        ``.ground_plane``, ``.to_kitti()`` and ``.to_dict()``.
+        ``vertices`` (36, 3), ``visible`` (36,), ``box``, ``score``, ``cad_model``; the
+        coarse variants fit no wireframe: their ``vertices``, ``visible`` and
+        ``cad_model`` are None), ``.ground_plane`` (None for a variant without ``+gp``
+        or ``full``), ``.to_kitti()`` and ``.to_dict()``.
 
     Raises
     ------
     ArgumentError
-        A ``ValueError`` naming the argument that is wrong.
+        A ``ValueError`` naming the argument that is wrong (a setting or option out of
+        its range included).
+    ShapeError
+        A ``ValueError``: ``boxes`` given as :class:`Detections` of the wrong shape.
+    InputError
+        A file (image, calibration, a model of ``models``) is missing or malformed.
+    DeviceError
+        ``settings["inference.device"]`` names a device this machine lacks.
 
     Examples
     --------
@@ -225,7 +249,10 @@ def fit(
     size = (rgb.shape[1], rgb.shape[0])
     camera = as_camera(calib, size)
     dets = None if boxes is None else as_detections(boxes, size)
-    (name,) = _variant_names(variant)
+    names = _variant_names(variant)
+    if len(names) != 1:
+        raise ArgumentError("variant", f"fit takes one variant, got {len(names)}; fit_frame or evaluate fit several")
+    (name,) = names
     fitted = fit_frame(camera, dets, [name], image=rgb, options=_options(options, particles, seed, models, settings))
     return fitted.estimates[name]
 
@@ -414,6 +441,9 @@ def evaluate(
     from wirescene.io.kitti import KittiDataset
 
     names = _variant_names(variants, "variants")
+    for name, value in (("kitti_root", kitti_root), ("predictions", predictions)):
+        if not (isinstance(value, (str, Path)) or (value is None and name == "predictions")):
+            raise ArgumentError(name, f"expected a directory path, got {type(value).__name__}")
     dataset = KittiDataset(kitti_root)
     if not isinstance(detections, (str, Path)):
         raise ArgumentError("detections", f"expected 'gt', 'bank' or a directory, got {type(detections).__name__}")
@@ -421,7 +451,9 @@ def evaluate(
         raise ArgumentError("split_file", "frames and split_file both choose the frames: give one")
     frame_ids = None
     if frames is not None:
-        frame_ids = list(dict.fromkeys(str(f) for f in frames))
+        frame_ids = list(dict.fromkeys(str(f) for f in ([frames] if isinstance(frames, (str, int)) else frames)))
+        if not frame_ids:
+            raise ArgumentError("frames", "no frame given")
         missing = sorted(set(frame_ids) - set(dataset.frame_ids()))
         if missing:
             raise ArgumentError("frames", f"not in {dataset.split_dir}: {', '.join(missing[:5])}")

@@ -30,7 +30,7 @@ from wirescene.core.groundplane import (
     plane_rotation,
     wrap_angle,
 )
-from wirescene.core.settings import option
+from wirescene.core.settings import bounded, option
 from wirescene.core.types import Detections, SceneParticles
 
 #: Width (degrees) of the road-alignment prior (:func:`road_alignment_cost`), one for
@@ -44,18 +44,18 @@ class LiftingOptions:
     were chosen (the study, its command and figures): ``benchmarks/RESULTS.md``."""
 
     # KITTI's camera is rigidly mounted: roads tilt by a few degrees in pitch, much less in roll.
-    pitch_range: float = 3.0
-    pitch_step: float = 0.25
-    roll_range: float = 1.5
-    roll_step: float = 0.25
-    azimuth_halfwidth: float = 22.5  # search +- this around the detection's viewpoint
-    azimuth_step: float = 2.5
-    unknown_viewpoint_step: float = 5.0  # full circle when the detector gives none
-    iterations: int = 8
+    pitch_range: float = bounded(3.0, minimum=0)
+    pitch_step: float = bounded(0.25, minimum=0.01)
+    roll_range: float = bounded(1.5, minimum=0)
+    roll_step: float = bounded(0.25, minimum=0.01)
+    azimuth_halfwidth: float = bounded(22.5, minimum=0, maximum=180)  # search +- this around the detection's viewpoint
+    azimuth_step: float = bounded(2.5, minimum=0.01)
+    unknown_viewpoint_step: float = bounded(5.0, minimum=0.01)  # full circle when the detector gives none
+    iterations: int = bounded(8, minimum=0)
     # Cap of each object's shared-plane vote, near a fitting car's cost: a box no car explains is an outlier.
-    robust_cost: float = 0.01
-    camera_height: float = KITTI_CAMERA_HEIGHT
-    n_particles: int = 250
+    robust_cost: float = bounded(0.01, minimum=0)
+    camera_height: float = bounded(KITTI_CAMERA_HEIGHT, minimum=0.1)  # metres above the road
+    n_particles: int = bounded(250, minimum=1)
     # Weight of the prior that cars head along the road (:func:`road_alignment_cost`), which a box leaves open; 0: off.
     road_prior: float = option(0.03, help="Weight of the coarse stage's prior that cars head along the road "
                                           "(0: none).")

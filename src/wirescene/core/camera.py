@@ -8,12 +8,13 @@ camera, so the optical centre is not exactly at the origin.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from wirescene.core.errors import InputError, check_shape
+from wirescene.core.errors import InputError, ShapeError, check_shape
 from wirescene.core.validate import projection_problem
 
 KITTI_CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam")
@@ -40,7 +41,15 @@ class Camera:
     def __post_init__(self):
         P = np.asarray(self.P, dtype=float)
         check_shape("P", P, (3, 4))
+        if not np.all(np.isfinite(P)):
+            raise ShapeError("P must be finite, got non-finite values")
         object.__setattr__(self, "P", P)
+        if self.image_size is not None:
+            size = tuple(np.ravel(np.asarray(self.image_size, dtype=object)))
+            if len(size) != 2 or not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) and v > 0
+                                         for v in size):
+                raise ShapeError(f"image_size must be (width, height), two positive integers, got {self.image_size!r}")
+            object.__setattr__(self, "image_size", (int(size[0]), int(size[1])))
 
     @property
     def K(self) -> np.ndarray:
@@ -92,6 +101,12 @@ class Camera:
         uv = np.asarray(uv, dtype=float)
         check_shape("uv", uv, (..., 2))
         depth = np.asarray(depth, dtype=float)
+        try:
+            fits = np.broadcast_shapes(depth.shape, uv.shape[:-1]) == uv.shape[:-1]
+        except ValueError:
+            fits = False
+        if not fits:
+            raise ShapeError(f"depth must have shape {uv.shape[:-1]} (one per pixel) or broadcast to it, got {depth.shape}")
         homog = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1) * depth[..., None]
         return (homog - self.P[:, 3]) @ np.linalg.inv(self.K).T
 

@@ -1,7 +1,7 @@
 """Image arrays: one conversion to RGB uint8 and one to grey, used by every stage.
 
 Integer images are scaled by their type's range (uint8 /255, uint16 /65535: a 16-bit
-PNG is not all white); float images are taken as [0, 1] when their maximum is at most
+PNG is not all white), signed and 32/64-bit ones holding values up to 255 by 255; float images are taken as [0, 1] when their maximum is at most
 1, else as [0, 255].
 """
 
@@ -20,8 +20,8 @@ def _values_and_range(img: np.ndarray) -> tuple[np.ndarray, float]:
         return img.astype(np.float32), 1.0
     if np.issubdtype(img.dtype, np.integer):
         top = 255.0 if img.dtype.itemsize == 1 else float(np.iinfo(img.dtype).max)
-        if img.dtype.itemsize > 2 and (img.size == 0 or img.max() <= 255):
-            top = 255.0  # int32/int64 arrays holding 8-bit values (e.g. from arithmetic)
+        if (img.dtype.itemsize > 2 or img.dtype.kind == "i") and (img.size == 0 or img.max() <= 255):
+            top = 255.0  # signed or 32/64-bit arrays holding 8-bit values (e.g. from arithmetic)
         return img.astype(np.float32), top
     if not np.issubdtype(img.dtype, np.floating):
         raise ShapeError(f"image must have a numeric dtype, got {img.dtype}")

@@ -14,16 +14,21 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
+import numbers
 from typing import Any, Mapping
 
-__all__ = ["option", "exposed_fields", "field_default", "parse_value", "parse_assignment", "replace_fields"]
+import numpy as np
+
+__all__ = ["option", "bounded", "exposed_fields", "field_default", "parse_value", "parse_assignment",
+           "replace_fields", "check_value", "check_fields"]
 
 
 def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, minimum: float = 0,
-           default_factory=dataclasses.MISSING):
+           maximum: float | None = None, default_factory=dataclasses.MISSING):
     """A dataclass field that users may set: ``help`` is its one-line description on the
     command line; ``cli`` the option name there (default: the field name with dashes);
-    ``minimum`` the least value a number may take.
+    ``minimum`` and ``maximum`` (None: none) the least and largest value a number may take.
 
     Examples
     --------
@@ -34,7 +39,31 @@ def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, mi
     >>> [(f.name, cli) for f, cli, _ in exposed_fields(Stage)]
     [('weight', 'weight')]
     """
-    metadata = {"help": help, "cli": cli, "minimum": minimum}
+    metadata = {"help": help, "cli": cli, "minimum": minimum, "maximum": maximum}
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata=metadata)
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+def bounded(default=dataclasses.MISSING, *, minimum: float, maximum: float | None = None,
+            default_factory=dataclasses.MISSING):
+    """A dataclass field with no named command-line option (set through ``settings`` /
+    ``--set`` only) whose numbers must lie in ``[minimum, maximum]`` (:func:`check_value`).
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Stage:
+    ...     step: float = bounded(0.25, minimum=0.01)
+    >>> exposed_fields(Stage)
+    []
+    >>> check_value(dataclasses.fields(Stage)[0], 0.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: step must be at least 0.01, got 0.0
+    """
+    metadata = {"minimum": minimum, "maximum": maximum}
     if default_factory is not dataclasses.MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=metadata)
     return dataclasses.field(default=default, metadata=metadata)
@@ -109,7 +138,47 @@ def replace_fields(obj, values: Mapping[str, Any], *, scope: str = ""):
                 value = parse_value(value, default)
             except ValueError as exc:
                 raise ValueError(f"{scope + '.' if scope else ''}{key}: {exc}") from None
-        elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        elif isinstance(default, float) and isinstance(value, numbers.Integral) and not isinstance(value, bool):
             value = float(value)  # the same configuration (and resume record) as the float
-        changes[key] = value
+        changes[key] = check_value(fields[key], value, scope=scope)
     return dataclasses.replace(obj, **changes)
+
+
+def check_value(f: dataclasses.Field, value, *, scope: str = ""):
+    """``value`` for dataclass field ``f`` if it is of the default's kind (a bool, an
+    integer, a finite real number) and within the field's ``minimum`` / ``maximum``
+    (:func:`option`, :func:`bounded`); a ``ValueError`` naming the field otherwise. Fields
+    whose default is not a number or a bool (None, text, a list) take any value."""
+    default = field_default(f)
+    name = f"{scope}.{f.name}" if scope else f.name
+
+    def fail(problem: str):
+        raise ValueError(f"{name} must be {problem}, got {value!r}")
+
+    if isinstance(default, bool):
+        if not isinstance(value, (bool, np.bool_)):
+            fail("true or false")
+        return bool(value)  # numpy's as Python's: the run records are JSON
+    if isinstance(default, numbers.Integral):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+            fail("an integer")
+        value = int(value)
+    elif isinstance(default, numbers.Real):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+            fail("a finite number")
+        value = float(value) if isinstance(default, float) else value
+    else:
+        return value
+    low, high = f.metadata.get("minimum"), f.metadata.get("maximum")
+    if low is not None and value < low:
+        fail(f"at least {low:g}")
+    if high is not None and value > high:
+        fail(f"at most {high:g}")
+    return value
+
+
+def check_fields(obj, *, scope: str = "") -> None:
+    """:func:`check_value` of every field of dataclass ``obj`` (options built directly,
+    not through :func:`replace_fields`)."""
+    for f in dataclasses.fields(obj):
+        check_value(f, getattr(obj, f.name), scope=scope)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wirescene.core.boxes import box_centers
-from wirescene.core.errors import check_shape
+from wirescene.core.errors import ArgumentError, ShapeError, check_shape
 from wirescene.core.groundplane import (
     KITTI_CAMERA_HEIGHT,
     GroundPlane,
@@ -22,6 +22,15 @@ from wirescene.core.groundplane import (
     rotation_y_of,
 )
 from wirescene.core.labels import Label, format_labels
+
+
+def _numbers(name: str, values) -> np.ndarray:
+    """``values`` as a float array; an :class:`ArgumentError` naming ``name`` where they are no
+    numbers or ragged rows."""
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ArgumentError(name, f"expected numbers (rows of equal length), {str(exc).splitlines()[0]}") from None
 
 
 @dataclass
@@ -63,10 +72,16 @@ class Detections:
     source: str = ""
 
     def __post_init__(self):
-        self.boxes = np.asarray(self.boxes, dtype=float).reshape(-1, 4)
+        self.boxes = _numbers("boxes", self.boxes)
+        if self.boxes.size == 0 or self.boxes.shape == (4,):  # no box, or one box
+            self.boxes = self.boxes.reshape(-1, 4)
+        check_shape("boxes", self.boxes, (None, 4))
         n = len(self.boxes)
-        self.scores = np.broadcast_to(np.asarray(self.scores, dtype=float), (n,)).copy()
-        self.alpha = np.broadcast_to(np.asarray(self.alpha, dtype=float), (n,)).copy()
+        for name in ("scores", "alpha"):
+            values = _numbers(name, getattr(self, name))
+            if values.shape not in ((), (n,)):
+                raise ShapeError(f"{name} must have shape ({n},) (one per box) or be one number, got {values.shape}")
+            setattr(self, name, np.broadcast_to(values, (n,)).copy())
 
     def __len__(self) -> int:
         return len(self.boxes)

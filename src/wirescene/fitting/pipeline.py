@@ -8,6 +8,7 @@ I/O: inputs are arrays and typed objects, outputs a :class:`FrameFit`.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import Iterable, Mapping
@@ -15,6 +16,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from wirescene.core.camera import Camera
+from wirescene.core.errors import ArgumentError, check_shape
 from wirescene.core.settings import option
 from wirescene.core.shape import load_default as load_shape_model
 from wirescene.core.types import Detections, SceneEstimate
@@ -90,6 +92,30 @@ class FitOptions:
             by_stage.setdefault(stage, {})[key] = value
         changed = {stage: replace_fields(getattr(self, stage), values, scope=stage) for stage, values in by_stage.items()}
         return replace(self, **changed)
+
+    def checked(self) -> "FitOptions":
+        """These options, once every stage's numbers are checked against their fields'
+        kinds and limits (:func:`wirescene.core.settings.check_fields`) and the seed is a
+        non-negative integer; an :class:`~wirescene.core.errors.ArgumentError` naming the
+        field otherwise (options built directly bypass :meth:`with_settings`' checks).
+
+        Examples
+        --------
+        >>> FitOptions(lifting=LiftingOptions(n_particles=0)).checked()
+        Traceback (most recent call last):
+        ...
+        wirescene.core.errors.ArgumentError: options: lifting.n_particles must be at least 1, got 0
+        """
+        from wirescene.core.settings import check_fields
+
+        try:
+            for stage in STAGES:
+                check_fields(getattr(self, stage), scope=stage)
+        except ValueError as exc:
+            raise ArgumentError("options", str(exc)) from None
+        if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral) or self.seed < 0:
+            raise ArgumentError("options", f"seed must be a non-negative integer, got {self.seed!r}")
+        return self
 
 
 #: The stages whose options :meth:`FitOptions.with_settings` reaches, by attribute of :class:`FitOptions`.
@@ -299,8 +325,22 @@ def fit_frame(
         The estimates per variant; every variant starts from the same detections and
         the same coarse lifting, which does not depend on the variant.
     """
-    options = FitOptions() if options is None else options
-    variants = [_variant(v) for v in variants]
+    if options is None:
+        options = FitOptions()
+    elif not isinstance(options, FitOptions):
+        raise ArgumentError("options", f"expected FitOptions, got {type(options).__name__}")
+    else:
+        options = options.checked()
+    if not isinstance(camera, Camera):
+        raise ArgumentError("camera", f"expected a Camera, got {type(camera).__name__}")
+    if detections is not None and not isinstance(detections, Detections):
+        raise ArgumentError("detections", f"expected Detections or None, got {type(detections).__name__}")
+    if image is not None:
+        size = camera.image_size
+        check_shape("image", image, (None, None, 3) if size is None else (size[1], size[0], 3))
+        if image.dtype != np.uint8:
+            raise ArgumentError("image", f"expected uint8 pixels, got {image.dtype}")
+    variants = [_variant(v) for v in ([variants] if isinstance(variants, (str, Variant)) else variants)]
     if detections is None:
         if image is None:
             raise ValueError("image is needed to detect the cars (or pass detections)")

@@ -53,7 +53,7 @@ from wirescene.core.boxes import KITTI_CAR_SIZE
 from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.errors import check_shape
 from wirescene.core.groundplane import plane_normal, point_on_plane, wrap_angle
-from wirescene.core.settings import option
+from wirescene.core.settings import bounded, option
 from wirescene.core.shape import ShapeModel
 from wirescene.core.types import ObjectEstimate, SceneEstimate, SceneParticles
 from wirescene.core.wireframe import FACES, N_VERTICES
@@ -91,18 +91,18 @@ class InferenceOptions:
 
     iterations: int = option(12, help="Inference iterations (Algorithm 1).")
     samples: int = option(12, minimum=2, help="Samples per object and iteration (the current value among them).")
-    n_shape: int = 5  # 3 or 8 place no more cars (RESULTS, "`n_shape` = 5")
-    sigma_bearing_deg: float = 0.5  # the image pins the bearing tightly ...
-    sigma_range_frac: float = 0.05  # ... and the range loosely
-    sigma_azimuth_deg: float = 8.0
-    sigma_shape: float = 0.6
+    n_shape: int = bounded(5, minimum=1)  # 3 or 8 place no more cars (RESULTS, "`n_shape` = 5")
+    sigma_bearing_deg: float = bounded(0.5, minimum=0)  # the image pins the bearing tightly ...
+    sigma_range_frac: float = bounded(0.05, minimum=0)  # ... and the range loosely
+    sigma_azimuth_deg: float = bounded(8.0, minimum=0)
+    sigma_shape: float = bounded(0.6, minimum=0)
     # Successive halving: particles far behind after ``prune_after`` iterations practically never win.
     prune_after: int = option(4, help="Keep only the best quarter of the particles after this many iterations "
                                        "(0: never).")
-    keep_fraction: float = 0.25
+    keep_fraction: float = bounded(0.25, minimum=0, maximum=1)
     # The polish: more iterations on the MAP rows alone, spent where the answer is.
     polish_iterations: int = option(24, help="Extra iterations on the MAP scene after Algorithm 1 (0: none).")
-    polish_samples: int = 24
+    polish_samples: int = bounded(24, minimum=2)
     # The paper's c, the log ratio charged to occluded parts (`wirescene train occlusion`).
     occluded_score: float = field(default_factory=load_occluded_score)
     # The score of parts hidden by the scene's other cars or the image border, occluders the fit
@@ -135,8 +135,8 @@ class InferenceOptions:
                                          help="Degrees the fine stage may turn a car's observation angle away from "
                                               "its pre-detection's viewpoint (0: unlimited).")
     # Starting spreads of the plane block: 0.1 deg of pitch moves a car at 30 m by about 1 m (0.1-0.4 read alike).
-    sigma_pitch_deg: float = 0.2
-    sigma_roll_deg: float = 0.2
+    sigma_pitch_deg: float = bounded(0.2, minimum=0)
+    sigma_roll_deg: float = bounded(0.2, minimum=0)
     # Where the likelihood's ray casting runs: "numpy" or a PyTorch device (see infer.torch_backend).
     device: str = "numpy"
 
