@@ -13,10 +13,16 @@ KITTI's difficulties count pixels (moderate: boxes of at least 25 px), so at ano
 the moderate cars are not the same ones and APs are not comparable; the shares of all 294
 cars (found, within 1 m) are.
 
+``--boxes`` also runs the pre-detection (``--bank``, default the shipped one; the fit's
+threshold 0.3) on both roots and prints how the boxes of the resized images, mapped back to
+the original pixels, compare with the original's and with the label boxes (median height
+ratio, median IoU): whether the bank's boxes keep their size at another resolution.
+
 Usage:
   python benchmarks/bench_resolution.py --root ../shared/data/kitti --scale 1.5 --out WORK/kitti_x1.5
   python benchmarks/bench_real_folds.py --root WORK/kitti_x1.5 --models FOLD_MODELS --detections bank \\
       --variant coarse+gp --variant full --seed 1 --out RUN_X1.5
+  python benchmarks/bench_resolution.py --root ../shared/data/kitti --scale 1.5 --out WORK/kitti_x1.5 --boxes
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ from PIL import Image
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_train_scale import labelled_frames  # noqa: E402
+from wirescene.core.boxes import iou_2d  # noqa: E402
 from wirescene.core.camera import read_kitti_calib, write_kitti_calib  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 
@@ -77,16 +84,67 @@ def resized_root(source: Path, out: Path, scale: float) -> list[str]:
     return frames
 
 
+def box_agreement(source: Path, resized: Path, scale: float, frames: list[str], *, bank=None,
+                  threshold: float = 0.3) -> dict:
+    """The pre-detection's boxes of ``frames`` in the ``source`` root and in its copy
+    ``resized`` by ``scale`` (mapped back to the source's pixels): ``{"detections": (n, n_resized),
+    "matched": [(height ratio, IoU)] of each source box and the resized box it overlaps most
+    (IoU > 0.5), "labelled": [[(height / label's, IoU)] for each root] of the boxes on a
+    labelled car (IoU > 0.5)}``."""
+    from wirescene.fitting.pipeline import detect_own
+
+    roots = (KittiDataset(source), KittiDataset(resized))
+    out = {"detections": [0, 0], "matched": [], "labelled": [[], []]}
+    for f in frames:
+        boxes = []
+        for k, root in enumerate(roots):
+            b = detect_own(root.camera(f), root.image(f), bank=bank, threshold=threshold).boxes
+            boxes.append(b if k == 0 else (b + 0.5) / scale - 0.5)
+            out["detections"][k] += len(b)
+        labels = np.array([o.box for o in roots[0].labels(f).of_type("Car")], float).reshape(-1, 4)
+        for k, b in enumerate(boxes):
+            pairs = iou_2d(b[:, None], labels[None]) if len(b) and len(labels) else np.zeros((len(b), 0))
+            for i, j in enumerate(pairs.argmax(axis=1) if pairs.shape[1] else []):
+                if pairs[i, j] > 0.5:
+                    out["labelled"][k].append(((b[i, 3] - b[i, 1]) / (labels[j, 3] - labels[j, 1]), pairs[i, j]))
+        if len(boxes[0]) and len(boxes[1]):
+            pairs = iou_2d(boxes[0][:, None], boxes[1][None])
+            for i, j in enumerate(pairs.argmax(axis=1)):
+                if pairs[i, j] > 0.5:
+                    ratio = (boxes[1][j, 3] - boxes[1][j, 1]) / (boxes[0][i, 3] - boxes[0][i, 1])
+                    out["matched"].append((ratio, pairs[i, j]))
+    return out
+
+
+def _medians(pairs) -> str:
+    v = np.array(pairs, float).reshape(-1, 2)
+    return "none" if not len(v) else f"height ratio {np.median(v[:, 0]):.4f}, IoU {np.median(v[:, 1]):.3f} (medians)"
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--root", required=True, type=Path, help="KITTI root with labelled frames")
     ap.add_argument("--scale", required=True, type=float, help="resize factor of the images (e.g. 0.75, 1.5, 2)")
     ap.add_argument("--out", required=True, type=Path, help="the resized KITTI root to write")
+    ap.add_argument("--boxes", action="store_true", help="also compare the pre-detection's boxes on both roots")
+    ap.add_argument("--bank", type=Path, help="detector bank for --boxes (default: the shipped one)")
+    ap.add_argument("--frames", type=int, help="for --boxes: only the first N labelled frames")
     args = ap.parse_args(argv)
     if not args.scale > 0:
         ap.error("--scale must be positive")
     frames = resized_root(args.root, args.out, args.scale)
     print(f"{len(frames)} frames resized by {args.scale:g} into {args.out}", file=sys.stderr)
+    if args.boxes:
+        from wirescene.predetect.bank import DetectorBank
+
+        frames = frames[: args.frames] if args.frames else frames
+        bank = DetectorBank.load(args.bank) if args.bank else None
+        got = box_agreement(args.root, args.out, args.scale, frames, bank=bank)
+        n, n_resized = got["detections"]
+        print(f"{len(frames)} frames, {n} / {n_resized} detections at 1 / {args.scale:g}x")
+        print(f"  resized against original ({len(got['matched'])} boxes matched): {_medians(got['matched'])}")
+        for name, pairs in zip(("original", f"{args.scale:g}x"), got["labelled"]):
+            print(f"  {name} against the labels ({len(pairs)} boxes on a car): {_medians(pairs)}")
 
 
 if __name__ == "__main__":

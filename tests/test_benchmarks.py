@@ -480,6 +480,19 @@ def test_resolution_root_resizes_images_calibrations_and_boxes_alike(monkeypatch
             assert b.type == a.type
 
 
+def test_resolution_box_agreement_maps_the_resized_boxes_back(monkeypatch, tmp_path):
+    # a copy at scale 1 gives every box back in place; the comparison must find that
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_resolution import box_agreement, resized_root
+
+    frames = resized_root(KITTI_ROOT, tmp_path / "kitti", 1.0)[:1]
+    got = box_agreement(KITTI_ROOT, tmp_path / "kitti", 1.0, frames)
+    n, n_copy = got["detections"]
+    assert n == n_copy and len(got["matched"]) == n > 0
+    assert_close(np.array(got["matched"]), np.ones((n, 2)), atol=1e-6)
+    assert len(got["labelled"][0]) == len(got["labelled"][1]) > 0
+
+
 def test_confidence_cues_read_the_box_fit_and_the_frame_scale(monkeypatch):
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     from bench_confidence_cues import _MEAN_HEIGHT, CUES, cue_features
