@@ -28,7 +28,34 @@ __all__ = ["fit", "detect", "draw", "evaluate", "as_image", "as_camera", "as_det
 
 
 def as_image(image, *, name: str = "image") -> np.ndarray:
-    """``(H, W, 3)`` uint8 RGB from a path or an ``(H, W)`` / ``(H, W, 3|4)`` array."""
+    """The image every entry point reads: ``(H, W, 3)`` uint8 RGB.
+
+    Parameters
+    ----------
+    image : path or ndarray
+        An image file, or an ``(H, W)`` / ``(H, W, 1|3|4)`` array: uint8, uint16 (a 16-bit
+        PNG's range), other integers holding 8-bit values, bool, or float in [0, 1] (or
+        [0, 255] when larger); an alpha channel is dropped.
+    name : str
+        The argument's name in error messages.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+
+    Raises
+    ------
+    ArgumentError
+        Not an image array (shape, dtype, non-finite values, under 16 px a side).
+    InputError
+        An image file that is missing or unreadable.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> as_image(np.ones((20, 30))).shape, as_image(np.ones((20, 30))).max()
+    ((20, 30, 3), np.uint8(255))
+    """
     if isinstance(image, (str, Path)):
         from wirescene.io.kitti import read_image
 
@@ -47,9 +74,24 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
 def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Camera:
     """The camera of a calibration path (:func:`wirescene.core.camera.read_projection`: a
     KITTI file's ``P2``, or the numbers of ``K`` or ``P``), a ``(3, 4)`` projection matrix, a
-    ``(3, 3)`` intrinsic matrix ``K`` (``P = K [I | 0]``) or a :class:`Camera`, with
-    ``image_size`` ``(width, height)`` set; checked for sanity
-    (:func:`wirescene.core.validate.projection_problem`)."""
+    ``(3, 3)`` intrinsic matrix ``K`` (``P = K [I | 0]``), a :class:`KittiCalib` (its
+    ``P2``) or a :class:`Camera`, with ``image_size`` ``(width, height)`` set; checked for
+    sanity (:func:`wirescene.core.validate.projection_problem`): an
+    :class:`ArgumentError` naming ``name`` otherwise (an :class:`InputError` naming the
+    file for a path).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = [[721.5, 0, 609.6], [0, 721.5, 172.9], [0, 0, 1]]
+    >>> camera = as_camera(K, (1242, 375))
+    >>> camera.P.shape, camera.image_size
+    ((3, 4), (1242, 375))
+    >>> as_camera(np.eye(3), (1242, 375))
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ArgumentError: calib: ...
+    """
     if isinstance(calib, (str, Path)):
         P = read_projection(calib)  # InputError naming the file
         problem = projection_problem(P, image_size)
@@ -79,7 +121,15 @@ def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Cam
 def as_detections(boxes, image_size: tuple[int, int], *, name: str = "boxes") -> Detections:
     """:class:`Detections` from an ``(N, 4)`` array of ``x1 y1 x2 y2`` (score 1, unknown
     viewpoint) or from :class:`Detections`; boxes must be finite, non-empty and overlap
-    the image."""
+    the ``image_size`` ``(width, height)`` image: an :class:`ArgumentError` naming ``name``
+    otherwise.
+
+    Examples
+    --------
+    >>> dets = as_detections([[300, 180, 520, 300]], (1242, 375))
+    >>> dets.boxes.shape, dets.scores.tolist(), bool(np.isnan(dets.alpha[0]))
+    ((1, 4), [1.0], True)
+    """
     if isinstance(boxes, Detections):
         dets = boxes
     else:
