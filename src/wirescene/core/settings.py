@@ -25,10 +25,10 @@ __all__ = ["option", "bounded", "exposed_fields", "field_default", "parse_value"
 
 
 def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, minimum: float = 0,
-           maximum: float | None = None, default_factory=dataclasses.MISSING):
+           default_factory=dataclasses.MISSING):
     """A dataclass field that users may set: ``help`` is its one-line description on the
     command line; ``cli`` the option name there (default: the field name with dashes);
-    ``minimum`` and ``maximum`` (None: none) the least and largest value a number may take.
+    ``minimum`` the least value a number may take (:func:`check_value`).
 
     Examples
     --------
@@ -39,7 +39,7 @@ def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, mi
     >>> [(f.name, cli) for f, cli, _ in exposed_fields(Stage)]
     [('weight', 'weight')]
     """
-    metadata = {"help": help, "cli": cli, "minimum": minimum, "maximum": maximum}
+    metadata = {"help": help, "cli": cli, "minimum": minimum}
     if default_factory is not dataclasses.MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=metadata)
     return dataclasses.field(default=default, metadata=metadata)
