@@ -377,6 +377,9 @@ def test_draw_shows_the_fitted_wireframes_and_the_labels_where_they_stand(frame,
         wirescene.draw(image, camera.P, scene, view="side")
     with pytest.raises(wirescene.ArgumentError, match="^scene: "):
         wirescene.draw(image, camera.P, scene.to_dict())
+    for view in ("overlay", "bev"):  # boxes the bird's-eye view does not draw are checked all the same
+        with pytest.raises(wirescene.ArgumentError, match="^boxes: "):
+            wirescene.draw(image, camera.P, scene, view=view, boxes=[[1, 2, np.nan, 4]])
     for bad in ([1, 2], 3):
         with pytest.raises(wirescene.ArgumentError, match="^gt: "):
             wirescene.draw(image, camera.P, scene, gt=bad)

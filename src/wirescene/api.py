@@ -372,7 +372,8 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
     gt : path or sequence of Label, optional
         A KITTI label file (or its labels): its cars' 3D boxes are drawn green.
     boxes : (N, 4) array or Detections, optional
-        2D boxes drawn dashed yellow in the ``overlay`` (e.g. :func:`detect`'s).
+        2D boxes drawn dashed yellow in the ``overlay`` (e.g. :func:`detect`'s); checked
+        but not drawn in the ``bev``.
     title : str, optional
 
     Returns
@@ -404,9 +405,9 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
     size = (rgb.shape[1], rgb.shape[0])
     camera = as_camera(calib, size)
     cars = _gt_cars(gt)
+    dets = None if boxes is None else as_detections(boxes, size)  # checked in either view
     if view == "bev":
         return birds_eye(scene, gt=cars, camera=camera, title=title)
-    dets = None if boxes is None else as_detections(boxes, size)
     return overlay(rgb, camera, scene, gt=cars, detections=dets, title=title, edges=EDGES)
 
 
