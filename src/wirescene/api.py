@@ -53,8 +53,9 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     Examples
     --------
     >>> import numpy as np
-    >>> as_image(np.ones((20, 30))).shape, as_image(np.ones((20, 30))).max()
-    ((20, 30, 3), np.uint8(255))
+    >>> rgb = as_image(np.ones((20, 30)))  # grey, float in [0, 1]
+    >>> rgb.shape, rgb.dtype.name, int(rgb.max())
+    ((20, 30, 3), 'uint8', 255)
     """
     if isinstance(image, (str, Path)):
         from wirescene.io.kitti import read_image
@@ -274,8 +275,6 @@ def fit(
     ArgumentError
         A ``ValueError`` naming the argument that is wrong (a setting or option out of
         its range included).
-    ShapeError
-        A ``ValueError``: ``boxes`` given as :class:`Detections` of the wrong shape.
     InputError
         A file (image, calibration, a model of ``models``) is missing or malformed.
     DeviceError
