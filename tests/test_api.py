@@ -185,7 +185,7 @@ def test_camera_checks_its_arguments():
     for size in (5, (1242.0, 375), (0, 375), (1242, 375, 3)):
         with pytest.raises(wirescene.ShapeError, match="image_size must be"):
             Camera(P2, size)
-    with pytest.raises(wirescene.ShapeError, match="P must be finite"):
+    with pytest.raises(wirescene.ArgumentError, match="^P: must be finite"):
         Camera(np.full((3, 4), np.nan))
     camera = Camera(P2, (1242, 375))
     with pytest.raises(wirescene.ShapeError, match=r"depth must have shape \(5,\)"):

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.core.errors import InputError, ShapeError, check_shape
+from wirescene.core.errors import ArgumentError, InputError, ShapeError, check_shape
 from wirescene.core.validate import projection_problem
 
 KITTI_CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam")
@@ -42,7 +42,7 @@ class Camera:
         P = np.asarray(self.P, dtype=float)
         check_shape("P", P, (3, 4))
         if not np.all(np.isfinite(P)):
-            raise ShapeError("P must be finite, got non-finite values")
+            raise ArgumentError("P", "must be finite, got non-finite values")
         object.__setattr__(self, "P", P)
         if self.image_size is not None:
             size = tuple(np.ravel(np.asarray(self.image_size, dtype=object)))
