@@ -18,6 +18,12 @@ output exists is skipped, so an interrupted run resumes; ``--jobs N`` runs N ste
 (each step uses one core; about 10 min a part model, 30 min and 6.5 GB a bank on the 72
 shared frames). Each step's output goes to ``OUT/logs/STEP.log``.
 
+The README's models were trained on a CPU without AVX-512. On one with AVX-512, OpenBLAS picks
+other kernels and the models differ in their last digits (held-out figures within a training
+seed's spread); ``OPENBLAS_CORETYPE=Haswell`` before the command gives the README's banks and
+crop classifiers there, not its part models (benchmarks/RESULTS.md, "The held-out figures on a
+CPU with AVX-512").
+
 Usage:
   python benchmarks/train_fold_models.py --root ../shared/data/kitti --out FOLD_MODELS [--jobs 2]
       [--steps parts,viewpoints,banks] [--folds 0,1,2,3]
