@@ -1,8 +1,8 @@
 """Image arrays: one conversion to RGB uint8 and one to grey, used by every stage.
 
 Integer images are scaled by their type's range (uint8 /255, uint16 /65535: a 16-bit
-PNG is not all white), signed and 32/64-bit ones holding values up to 255 by 255; float images are taken as [0, 1] when their maximum is at most
-1, else as [0, 255].
+PNG is not all white), signed and 32/64-bit ones holding values up to 255 by 255; float
+images are taken as [0, 1] when their maximum is at most 1, else as [0, 255].
 """
 
 from __future__ import annotations
