@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
+from wirescene.core.version import environment
 from wirescene.eval.intervals import format_intervals, kitti_variant_intervals, localisation_intervals, margin_intervals
 from wirescene.eval.kitti_metrics import format_kitti_intervals, kitti_figure, kitti_metrics
 from wirescene.eval.metrics import evaluate, format_table
@@ -173,7 +174,7 @@ def main():
                    "loc_1m_interval": within[v]} for v in variants}
     summary["_run"] = {"frames": len(frames), "cars": n_cars, "detections": args.detections, "seed": args.seed,
                        "models": "shipped" if args.shipped else str(args.models), "seconds": elapsed,
-                       "settings": args.settings}
+                       "settings": args.settings, "environment": environment()}
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1, default=lambda o: None))
     print(f"\nsummary: {args.out / 'summary.json'}")
 

@@ -4,6 +4,7 @@ importing the package root (which loads the API and every layer under it)."""
 
 from __future__ import annotations
 
+import platform
 from importlib.metadata import PackageNotFoundError, version
 
 try:
@@ -11,4 +12,39 @@ try:
 except PackageNotFoundError:  # a source tree on sys.path that was never installed
     __version__ = "0+unknown"
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "environment"]
+
+#: The installed packages whose versions a run's figures may depend on.
+_PACKAGES = ("numpy", "scipy", "scikit-learn", "scikit-image", "pillow", "trimesh", "embreex")
+
+
+def environment() -> dict:
+    """What a run's figures depend on beside the code: the package versions, and the BLAS
+    library with the kernels it chose for this CPU (``kernels``: OpenBLAS's core type, e.g.
+    ``Haswell`` or ``SkylakeX``; ``OPENBLAS_CORETYPE`` sets it). Models trained with other
+    kernels differ in their last digits (``benchmarks/RESULTS.md``, "The held-out figures on
+    a CPU with AVX-512").
+
+    Examples
+    --------
+    >>> import numpy
+    >>> env = environment()
+    >>> env["numpy"] == numpy.__version__, sorted(env["blas"][0]) if env["blas"] else []
+    (True, ['kernels', 'library', 'version'])
+    """
+    import numpy  # noqa: F401  (its BLAS must be loaded for threadpoolctl to see it)
+
+    out: dict = {"wirescene": __version__, "python": platform.python_version()}
+    for name in _PACKAGES:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = None
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:  # scikit-learn brings it; without it the kernels are unknown
+        out["blas"] = None
+    else:
+        out["blas"] = [{"library": i.get("internal_api"), "version": i.get("version"), "kernels": i.get("architecture")}
+                       for i in threadpool_info() if i.get("user_api") == "blas"]
+    return out
