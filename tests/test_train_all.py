@@ -262,6 +262,8 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     manifest = json.loads((out / MANIFEST_FILE).read_text())
     assert manifest["format"] == "wirescene-models/1" and manifest["complete"] is True
     assert manifest["wirescene"] == wirescene.__version__
+    assert manifest["environment"]["numpy"] == np.__version__  # with the BLAS kernels: they change trained files
+    assert "blas" in manifest["environment"]
     assert manifest["artefacts"] == ["parts_model", "detector_bank", "occlusion"]
     assert manifest["shipped"] == ["score_calibration"]
     data = manifest["data"]

@@ -22,8 +22,9 @@ frame is a group of its own, and the groups are dealt to folds balanced by cars
 (:func:`wirescene.io.folds.assign_folds`).
 
 ``MODELS_DIR/models.json`` (format ``wirescene-models/1``) records the data (root, split
-file, frames), the folds, and per step its options, inputs, artefact hash, wall time and
-peak resident memory. It is rewritten after every step, ``"complete": false`` until the
+file, frames), the folds, the packages and BLAS kernels it ran with
+(:func:`wirescene.core.version.environment`), and per step its options, inputs, artefact
+hash, wall time and peak resident memory. It is rewritten after every step, ``"complete": false`` until the
 last; :func:`wirescene.core.resources.resolve_models` refuses an unfinished directory.
 With ``resume``, a step whose record matches the current data, options, inputs and
 package version, and whose file is unchanged, is not run again.
@@ -50,7 +51,7 @@ from wirescene.core.resources import (
     file_sha256,
     shipped_path,
 )
-from wirescene.core.version import __version__
+from wirescene.core.version import __version__, environment
 from wirescene.io.folds import drive_map
 from wirescene.training.kitti_detector import (
     calibration_folds,
@@ -308,8 +309,9 @@ def _new_manifest(dataset, ids: list[str], folds: dict[str, int], split_file, *,
                    "devkit_mapping": None if mapping_dir is None else str(Path(mapping_dir).resolve()),
                    "frames_per_fold": {str(k): sum(1 for j in folds.values() if j == k) for k in fold_ids},
                    "fold_of": folds}
-    return {"wirescene": __version__, "complete": False, "data": data, "calibration_folds": fold_record,
-            "artefacts": [], "shipped": [], "steps": {}}
+    # the packages and BLAS kernels: another CPU's kernels train files that differ in their last digits
+    return {"wirescene": __version__, "environment": environment(), "complete": False, "data": data,
+            "calibration_folds": fold_record, "artefacts": [], "shipped": [], "steps": {}}
 
 
 @dataclass
