@@ -103,17 +103,22 @@ def box_agreement(source: Path, resized: Path, scale: float, frames: list[str], 
             out["detections"][k] += len(b)
         labels = np.array([o.box for o in roots[0].labels(f).of_type("Car")], float).reshape(-1, 4)
         for k, b in enumerate(boxes):
-            pairs = iou_2d(b[:, None], labels[None]) if len(b) and len(labels) else np.zeros((len(b), 0))
-            for i, j in enumerate(pairs.argmax(axis=1) if pairs.shape[1] else []):
-                if pairs[i, j] > 0.5:
-                    out["labelled"][k].append(((b[i, 3] - b[i, 1]) / (labels[j, 3] - labels[j, 1]), pairs[i, j]))
-        if len(boxes[0]) and len(boxes[1]):
-            pairs = iou_2d(boxes[0][:, None], boxes[1][None])
-            for i, j in enumerate(pairs.argmax(axis=1)):
-                if pairs[i, j] > 0.5:
-                    ratio = (boxes[1][j, 3] - boxes[1][j, 1]) / (boxes[0][i, 3] - boxes[0][i, 1])
-                    out["matched"].append((ratio, pairs[i, j]))
+            out["labelled"][k] += [(_height(b)[i] / _height(labels)[j], iou) for i, j, iou in _best_overlaps(b, labels)]
+        out["matched"] += [(_height(boxes[1])[j] / _height(boxes[0])[i], iou)
+                           for i, j, iou in _best_overlaps(boxes[0], boxes[1])]
     return out
+
+
+def _height(boxes: np.ndarray) -> np.ndarray:
+    return boxes[:, 3] - boxes[:, 1]
+
+
+def _best_overlaps(a: np.ndarray, b: np.ndarray) -> list[tuple[int, int, float]]:
+    """``(i, j, IoU)`` of each box ``a[i]`` and the box ``b[j]`` it overlaps most, where that IoU exceeds 0.5."""
+    if not len(a) or not len(b):
+        return []
+    pairs = iou_2d(a[:, None], b[None])
+    return [(i, j, pairs[i, j]) for i, j in enumerate(pairs.argmax(axis=1)) if pairs[i, j] > 0.5]
 
 
 def _medians(pairs) -> str:
