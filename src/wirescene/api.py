@@ -195,7 +195,6 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
     if options is not None:
         if not isinstance(options, FitOptions):
             raise ArgumentError("options", f"expected FitOptions, got {type(options).__name__}")
-        options.checked()
     else:
         options = FitOptions(lifting=LiftingOptions(n_particles=_positive_int(particles, "particles")),
                              inference=InferenceOptions(), seed=_seed(seed))
