@@ -24,8 +24,9 @@ frame is a group of its own, and the groups are dealt to folds balanced by cars
 ``MODELS_DIR/models.json`` (format ``wirescene-models/1``) records the data (root, split
 file, frames), the folds, the packages and BLAS kernels it ran with
 (:func:`wirescene.core.version.environment`), and per step its options, inputs, artefact
-hash, wall time and peak resident memory. It is rewritten after every step, ``"complete": false`` until the
-last; :func:`wirescene.core.resources.resolve_models` refuses an unfinished directory.
+hash, wall time and peak resident memory. It is rewritten after every step,
+``"complete": false`` until the last; :func:`wirescene.core.resources.resolve_models`
+refuses an unfinished directory.
 With ``resume``, a step whose record matches the current data, options, inputs and
 package version, and whose file is unchanged, is not run again.
 """
