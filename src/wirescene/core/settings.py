@@ -138,8 +138,6 @@ def replace_fields(obj, values: Mapping[str, Any], *, scope: str = ""):
                 value = parse_value(value, default)
             except ValueError as exc:
                 raise ValueError(f"{scope + '.' if scope else ''}{key}: {exc}") from None
-        elif isinstance(default, float) and isinstance(value, numbers.Integral) and not isinstance(value, bool):
-            value = float(value)  # the same configuration (and resume record) as the float
         changes[key] = check_value(fields[key], value, scope=scope)
     return dataclasses.replace(obj, **changes)
 
@@ -166,7 +164,7 @@ def check_value(f: dataclasses.Field, value, *, scope: str = ""):
     elif isinstance(default, numbers.Real):
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or not math.isfinite(value):
             fail("a finite number")
-        value = float(value) if isinstance(default, float) else value
+        value = float(value) if isinstance(default, float) else value  # an int given: the same record as the float
     else:
         return value
     low, high = f.metadata.get("minimum"), f.metadata.get("maximum")
