@@ -169,7 +169,7 @@ def _seed(value) -> int:
 
 
 def _variant_names(variant, name: str = "variant") -> list[str]:
-    if not isinstance(variant, str) and not isinstance(variant, Iterable):
+    if not isinstance(variant, Iterable):  # a name (str) is iterable too
         raise ArgumentError(name, f"expected a variant name, got {type(variant).__name__}; available: {', '.join(VARIANTS)}")
     names = [variant] if isinstance(variant, str) else list(variant)
     for v in names:
