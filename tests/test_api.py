@@ -110,6 +110,24 @@ def test_integer_images_holding_8_bit_values_are_read_as_8_bit(frame):
     assert (to_rgb_uint8(image.astype(np.uint16) * 257) == image).all()  # a 16-bit PNG's range
 
 
+def test_pil_images_are_read_as_their_files_are(frame, tmp_path):
+    from PIL import Image
+
+    from wirescene.api import as_image
+
+    image = frame[0]
+    with Image.open(KITTI_ROOT / "training" / "image_2" / f"{FRAME}.png") as png:
+        assert (as_image(png) == image).all()
+    grey16 = Image.fromarray(image[..., 1].astype(np.uint16) * 257)  # mode I;16, as a 16-bit PNG opens
+    grey16.save(tmp_path / "grey16.png")
+    assert (as_image(grey16) == as_image(tmp_path / "grey16.png")).all()
+    assert (as_image(grey16)[..., 0] == image[..., 1]).all()
+    for mode in ("L", "P", "RGBA"):
+        converted = Image.fromarray(image).convert(mode)
+        converted.save(tmp_path / f"{mode}.png")
+        assert (as_image(converted) == as_image(tmp_path / f"{mode}.png")).all(), mode
+
+
 @pytest.mark.parametrize(
     "kwargs, name",
     [
@@ -176,6 +194,20 @@ def test_detections_check_their_shapes():
         Detections(np.zeros((2, 4)), 1.0, [0.1, 0.2, 0.3])
     with pytest.raises(wirescene.ArgumentError, match="^boxes: expected numbers"):
         Detections([[1, 2, 3, 4], [1, 2]], 1.0, np.nan)
+
+
+def test_detections_refuse_angles_that_are_no_radians():
+    from wirescene.core.types import Detections
+
+    boxes = np.zeros((3, 4))
+    alpha = Detections(boxes, 1.0, [np.nan, -np.pi, 6.0]).alpha  # NaN: no viewpoint; wrapped values taken
+    assert np.isnan(alpha[0])
+    assert_close(alpha[1:], [-np.pi, 6.0])
+    for alpha, says in (([np.nan, 90.0, 0.1], r"got 90 \(degrees\?\)"),
+                        ([0.1, -10.0, 0.2], "got -10 .KITTI's -10, not estimated, is NaN here"),
+                        ([0.1, 0.2, np.inf], "got inf$")):
+        with pytest.raises(wirescene.ArgumentError, match="^alpha: expected radians within one turn.*" + says):
+            Detections(boxes, 1.0, alpha)
 
 
 def test_camera_checks_its_arguments():

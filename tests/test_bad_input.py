@@ -159,6 +159,10 @@ CASES = {
                           "not a usable JSON"),
     "score NaN": (lambda t: _fit_case(t, dets=(".json", '[{"box": [300, 180, 520, 300], "score": NaN}]')),
                   "score must be finite"),
+    "txt alpha in degrees": (lambda t: _fit_case(t, dets=(".txt", CAR.replace("Car 0.00 0 1.95", "Car 0.00 0 111.7"))),
+                             r"alpha must be radians within one turn, got 111\.7 \(degrees\?\)"),
+    "JSON alpha in degrees": (lambda t: _fit_case(t, dets=(".json", '[{"box": [300, 180, 520, 300], "alpha": -45}]')),
+                              "alpha must be radians within one turn"),
     # images
     "16-bit image is fine": None,  # behaviour test below
     "decompression bomb": (lambda t: _fit_case(t, image=lambda p: p.write_bytes(_png_header(100000, 100000))),

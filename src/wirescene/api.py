@@ -9,6 +9,7 @@ Every wrong argument raises :class:`~wirescene.core.errors.ArgumentError` (a
 from __future__ import annotations
 
 import numbers
+import sys
 from pathlib import Path
 from typing import Iterable, Mapping
 
@@ -27,15 +28,22 @@ from wirescene.lift import LiftingOptions
 __all__ = ["fit", "detect", "draw", "evaluate", "as_image", "as_camera", "as_detections"]
 
 
+def _is_pil_image(image) -> bool:
+    """Whether ``image`` is a PIL image (without importing PIL for other inputs)."""
+    pil = sys.modules.get("PIL.Image")
+    return pil is not None and isinstance(image, pil.Image)
+
+
 def as_image(image, *, name: str = "image") -> np.ndarray:
     """The image every entry point reads: ``(H, W, 3)`` uint8 RGB.
 
     Parameters
     ----------
-    image : path or ndarray
-        An image file, or an ``(H, W)`` / ``(H, W, 1|3|4)`` array: uint8, uint16 (a 16-bit
-        PNG's range), other integers holding 8-bit values, bool, or float in [0, 1] (or
-        [0, 255] when larger); an alpha channel is dropped.
+    image : path, ndarray or PIL image
+        An image file, a PIL image (read as its file would be), or an ``(H, W)`` /
+        ``(H, W, 1|3|4)`` array: uint8, uint16 (a 16-bit PNG's range), other integers
+        holding 8-bit values, bool, or float in [0, 1] (or [0, 255] when larger); an alpha
+        channel is dropped.
     name : str
         The argument's name in error messages.
 
@@ -61,12 +69,20 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
         from wirescene.io.kitti import read_image
 
         return read_image(image)
-    if not isinstance(image, np.ndarray):
-        raise ArgumentError(name, f"expected a path or a numpy array, got {type(image).__name__}")
+    pil = _is_pil_image(image)
+    if not pil and not isinstance(image, np.ndarray):
+        raise ArgumentError(name, f"expected a path, a numpy array or a PIL image, got {type(image).__name__}")
     try:
-        rgb = to_rgb_uint8(image)
+        if pil:
+            from wirescene.io.kitti import rgb_of_pil
+
+            rgb = rgb_of_pil(image)
+        else:
+            rgb = to_rgb_uint8(image)
     except ShapeError as exc:
         raise ArgumentError(name, exc.problem) from None
+    except (OSError, ValueError) as exc:  # a PIL image that cannot be converted
+        raise ArgumentError(name, f"unreadable PIL image ({' '.join(str(exc).split())})") from None
     if min(rgb.shape[:2]) < 16:
         raise ArgumentError(name, f"image of {rgb.shape[1]}x{rgb.shape[0]} px is too small")
     return rgb
@@ -224,9 +240,9 @@ def fit(
 
     Parameters
     ----------
-    image : path or ndarray
-        An image file, or an ``(H, W, 3)`` / ``(H, W)`` array (uint8, uint16 or float
-        in [0, 1]).
+    image : path, ndarray or PIL image
+        An image file, a PIL image, or an ``(H, W, 3)`` / ``(H, W)`` array (uint8, uint16
+        or float in [0, 1]); see :func:`as_image`.
     calib : path, (3, 4) array, (3, 3) array, KittiCalib or Camera
         A KITTI calibration file (``P2`` is used) or a text file of the 12 numbers of a
         projection matrix or the 9 of the intrinsics ``K``; a projection matrix ``P`` in
@@ -310,7 +326,7 @@ def detect(image, calib=None, *, models=None) -> Detections:
 
     Parameters
     ----------
-    image : path or ndarray
+    image : path, ndarray or PIL image
         As in :func:`fit`.
     calib : path, (3, 4) array or Camera, optional
         The camera; when given, each detection's score also weighs how well its box's
@@ -357,7 +373,7 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
 
     Parameters
     ----------
-    image : path or ndarray
+    image : path, ndarray or PIL image
         As in :func:`fit`.
     calib : path, (3, 4) array or Camera
         As in :func:`fit`.

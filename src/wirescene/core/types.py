@@ -23,6 +23,10 @@ from wirescene.core.groundplane import (
 )
 from wirescene.core.labels import Label, format_labels
 
+# Largest |alpha| a detection may carry: one turn. A detector's angles lie in [-pi, pi] (KITTI's range; wrapped
+# values are taken), so anything beyond is an angle in degrees.
+MAX_ALPHA = 2 * np.pi
+
 
 def _numbers(name: str, values) -> np.ndarray:
     """``values`` as a float array; an :class:`ArgumentError` naming ``name`` where they are no
@@ -43,8 +47,8 @@ class Detections:
         ``x1, y1, x2, y2`` in pixels.
     scores : (D,) float array
     alpha : (D,) float array
-        Coarse viewpoint (observation angle, radians) of each detection, typically the
-        centre of one of 8 bins; NaN where the detector gives no viewpoint.
+        Coarse viewpoint (observation angle, radians, within one turn) of each detection,
+        typically the centre of one of 8 bins; NaN where the detector gives no viewpoint.
     source : str
         Where the detections came from (``"gt"``, a file name, ...).
 
@@ -82,6 +86,12 @@ class Detections:
             if values.shape not in ((), (n,)):
                 raise ShapeError(f"{name} must have shape ({n},) (one per box) or be one number, got {values.shape}")
             setattr(self, name, np.broadcast_to(values, (n,)).copy())
+        bad = np.abs(np.nan_to_num(self.alpha, nan=0.0, posinf=np.inf, neginf=np.inf)) > MAX_ALPHA
+        if bad.any():
+            v = float(self.alpha[bad.argmax()])
+            hint = {-10.0: " (KITTI's -10, not estimated, is NaN here)"}.get(v, " (degrees?)" if np.isfinite(v) else "")
+            raise ArgumentError("alpha", f"expected radians within one turn (|alpha| <= 2 pi; NaN: no viewpoint), got "
+                                         f"{v:g}{hint}")
 
     def __len__(self) -> int:
         return len(self.boxes)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.errors import InputError
-from wirescene.core.types import Detections
+from wirescene.core.types import MAX_ALPHA, Detections
 from wirescene.core.validate import boxes_problem
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
 from wirescene.io.kitti import ALPHA_NOT_ESTIMATED, CAR_TYPES, FrameLabels, read_labels
@@ -73,6 +73,8 @@ def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
             raise InputError(f"{where}: alpha must be a number (radians)", path=path) from None
         if not np.isfinite(alpha):
             raise InputError(f"{where}: alpha must be finite (radians), got {alpha}", path=path)
+        if alpha != ALPHA_NOT_ESTIMATED and abs(alpha) > MAX_ALPHA:
+            raise InputError(f"{where}: alpha must be radians within one turn, got {alpha:g} (degrees?)", path=path)
         return float(_binned_viewpoint(alpha))
     return float("nan")
 
@@ -141,7 +143,8 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
       ``alpha`` binned and their score (16th column) if present.
 
     An ``alpha`` of ``-10`` (KITTI's "not estimated", as 2D-only detectors write) is an
-    unknown viewpoint (NaN), in every format.
+    unknown viewpoint (NaN), in every format; any other beyond one turn (2 pi) is refused as an
+    angle in degrees.
 
     With ``image_size`` (width, height), every box must overlap the image
     (:func:`wirescene.core.validate.boxes_problem`).
@@ -149,15 +152,20 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     Raises
     ------
     InputError
-        Missing or malformed file, a file without any detection, or (with
-        ``image_size``) a box outside the image.
+        Missing or malformed file, a file without any detection, an ``alpha`` beyond one
+        turn, or (with ``image_size``) a box outside the image.
     """
     path = Path(path)
     if not path.is_file():
         raise InputError("detections file not found", path=path)
     suffix = path.suffix.lower()
     if suffix == ".txt":
-        dets = detections_from_labels(read_labels(path, image_size=image_size), source=str(path))
+        labels = read_labels(path, image_size=image_size)
+        for o in labels.of_type(*CAR_TYPES):
+            if o.alpha != ALPHA_NOT_ESTIMATED and abs(o.alpha) > MAX_ALPHA:
+                raise InputError(f"a Car row's alpha must be radians within one turn, got {o.alpha:g} (degrees?)",
+                                 path=path)
+        dets = detections_from_labels(labels, source=str(path))
     elif suffix == ".json":
         try:
             data = json.loads(path.read_text(encoding="utf-8-sig"))

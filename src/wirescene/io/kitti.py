@@ -191,14 +191,20 @@ def read_image(path: str | Path) -> np.ndarray:
     try:
         with img:
             img.load()
-            if img.mode.startswith("I"):  # 16-bit (or 32-bit integer) grey
-                return to_rgb_uint8(np.clip(np.asarray(img), 0, 65535).astype(np.uint16))
-            if img.mode == "F":
-                return to_rgb_uint8(np.asarray(img, dtype=np.float32))
-            rgb = img.convert("RGB")
+            return rgb_of_pil(img)
     except (OSError, ValueError, SyntaxError, ShapeError) as exc:
         raise InputError(f"corrupt or truncated image ({' '.join(str(exc).split())})", path=path) from None
-    return np.asarray(rgb, dtype=np.uint8)
+
+
+def rgb_of_pil(img) -> np.ndarray:
+    """A loaded PIL image as an ``(H, W, 3)`` uint8 RGB array: 16-bit and float images
+    scaled by their range (:func:`wirescene.core.image.to_rgb_uint8`), palette, grey and
+    alpha images converted to RGB."""
+    if img.mode.startswith("I"):  # 16-bit (or 32-bit integer) grey
+        return to_rgb_uint8(np.clip(np.asarray(img), 0, 65535).astype(np.uint16))
+    if img.mode == "F":
+        return to_rgb_uint8(np.asarray(img, dtype=np.float32))
+    return np.asarray(img.convert("RGB"), dtype=np.uint8)
 
 
 def image_size(path: str | Path) -> tuple[int, int]:
