@@ -2,6 +2,7 @@
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -159,6 +160,30 @@ def test_train_and_cad_commands_are_registered():
     r = run("cad", "list", "--cad-dir", KITTI_ROOT.parent / "cad")
     assert r.exit_code == 0, r.output
     assert "road" in r.output
+
+
+def test_info_lists_every_file_a_run_reads_with_its_hash(tmp_path):
+    import hashlib
+
+    from wirescene.core.resources import DATA_DIR
+
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "occlusion.json").write_text((DATA_DIR / "occlusion.json").read_text().replace("\n", "\n "))
+    r = run("info", "--models", models, "--json", tmp_path / "info.json")
+    assert r.exit_code == 0, r.output
+    record = json.loads((tmp_path / "info.json").read_text())
+    files = {f["file"]: f for f in record["files"]}
+    assert set(files) == {p.name for p in DATA_DIR.iterdir() if p.suffix in (".npz", ".json")}
+    for name, f in files.items():
+        assert f["sha256"] == hashlib.sha256(Path(f["path"]).read_bytes()).hexdigest(), name
+        assert (f["source"], Path(f["path"]).parent) == (("models", models.resolve()) if name == "occlusion.json"
+                                                          else ("shipped", DATA_DIR)), name
+        assert f"{name} " in r.output and f["sha256"][:16] in r.output
+    assert files["occlusion.json"]["sha256"] != hashlib.sha256((DATA_DIR / "occlusion.json").read_bytes()).hexdigest()
+    assert files["parts_model.npz"]["format"] == "wirescene-parts-forest/2"
+    assert record["environment"]["numpy"] == np.__version__ and f"numpy {np.__version__}" in r.output
+    assert run("info", "--models", tmp_path / "none").exit_code == 2  # the models directory is checked
 
 
 def test_particles_option_names_the_coarse_grids_cap():

@@ -638,6 +638,7 @@ def _register_commands():
     of silently dropping commands."""
     from wirescene.cli.cad import cad, shape
     from wirescene.cli.detect import detect, detector, viewpoints
+    from wirescene.cli.info import info
     from wirescene.cli.occlusion import occlusion
     from wirescene.cli.parts import parts
     from wirescene.cli.scores import scores
@@ -647,6 +648,7 @@ def _register_commands():
     main.add_command(synth)
     main.add_command(cad)
     main.add_command(detect)
+    main.add_command(info)
     train = click.Group("train", help="Train the model's artefacts from documented data.")
     for command in (shape, parts, detector, viewpoints, occlusion, scores, train_all_cmd):
         train.add_command(command)

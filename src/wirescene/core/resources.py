@@ -135,3 +135,43 @@ def _sha256(path: Path, size: int, mtime_ns: int) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def artefact_files(models: Models = SHIPPED) -> list[dict]:
+    """Every trained or bundled data file a run reads (the ``.npz`` / ``.json`` files of
+    :data:`DATA_DIR`, those of ``models`` in place of the shipped ones they replace): one
+    ``{"file", "source" ("shipped" or "models"), "path", "bytes", "sha256", "format"}`` each,
+    ``format`` the tag stored in the file (None where it has none).
+
+    Examples
+    --------
+    >>> files = {f["file"]: f for f in artefact_files()}
+    >>> files["parts_model.npz"]["source"], files["parts_model.npz"]["format"]
+    ('shipped', 'wirescene-parts-forest/2')
+    """
+    replaced = {ARTEFACTS[name]: models.path(name) for name in models.own}
+    out = []
+    for shipped in sorted([*DATA_DIR.glob("*.npz"), *DATA_DIR.glob("*.json")]):
+        path = replaced.get(shipped.name, shipped)
+        out.append({"file": shipped.name, "source": "models" if shipped.name in replaced else "shipped",
+                    "path": str(path), "bytes": path.stat().st_size, "sha256": file_sha256(path),
+                    "format": _format_tag(path)})
+    return out
+
+
+def _format_tag(path: Path) -> str | None:
+    """The format tag a data file stores (``"wirescene-KIND/VERSION"``), None without one."""
+    import json
+    import zipfile
+
+    import numpy as np
+
+    try:
+        if path.suffix == ".npz":
+            with np.load(path, allow_pickle=False) as z:
+                return str(z["format"]) if "format" in z.files else None
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"corrupt data file ({exc.__class__.__name__})", path=path) from None
+    return record.get("format") if isinstance(record, dict) else None
+
