@@ -316,6 +316,34 @@ def test_response_map_smoothing(tiny, kitti_frame):
     assert R1.boxes[0].log_ratio.std() < R0.boxes[0].log_ratio.std()
 
 
+def test_boxes_far_past_the_image_or_flatter_than_a_car_stay_cheap(tiny, kitti_frame, monkeypatch):
+    import wirescene.parts.detector as detector
+
+    det = PartDetector.load(tiny[0])
+    img, boxes = kitti_frame
+    H, W = img.shape[:2]
+    near = np.array([-800.0, 100.0, 600.0, 900.0])  # a near car's box from an amodal detector
+    kept = response_maps(img, near, detector=det, scales=(1.0,), smooth=0.0).boxes[0]
+    gh, gw = kept.log_ratio.shape[:2]
+    uv = kept.grid_uv()
+    assert uv[..., 0].min() >= -0.25 * W and uv[..., 0].max() <= 1.25 * W and uv[..., 1].max() <= 1.25 * H
+    own = [response_maps(img, box, detector=det, scales=(1.0,)).boxes[0].log_ratio for box in boxes]
+    monkeypatch.setattr(detector, "GRID_MARGIN", 1e6)  # no limit
+    whole = response_maps(img, near, detector=det, scales=(1.0,), smooth=0.0).boxes[0]
+    assert whole.log_ratio.shape[0] * whole.log_ratio.shape[1] > 2 * gh * gw
+    # the points kept are the whole grid's, scored alike
+    i0, j0 = np.rint((kept.origin[::-1] - whole.origin[::-1]) / kept.stride).astype(int)
+    assert_close(whole.grid_uv()[i0:i0 + gh, j0:j0 + gw], uv)
+    assert_close(whole.log_ratio[i0:i0 + gh, j0:j0 + gw], kept.log_ratio)
+    # the boxes of the image's own cars are scored as without the limit
+    for box, lr in zip(boxes, own):
+        assert_close(response_maps(img, box, detector=det, scales=(1.0,)).boxes[0].log_ratio, lr, atol=0, rtol=0)
+    monkeypatch.undo()
+    # a sliver one pixel high across the image would need a crop of 40 M canonical pixels: no evidence
+    sliver = response_maps(img, [0.0, 200.0, W - 1.0, 201.0], detector=det).boxes[0]
+    assert (sliver.log_ratio == 0).all() and sliver.log_ratio.shape[1] <= 1.25 * W
+
+
 def test_flipped_evidence_is_mirror_equivariant(kitti_frame):
     from wirescene.core.wireframe import MIRROR
 

@@ -47,6 +47,13 @@ load with none of them."""
 DEFAULT_MODEL_PATH = DATA_DIR / "parts_model.npz"
 DEFAULT_SCALES = (0.85, 1.0, 1.2)
 DEFAULT_EPS = 1e-3
+#: How far past the image a box's grid of responses reaches, as a share of the image's side (310 px
+#: left and right at KITTI's size; a truncated car's padded box reaches 0.1 x its width past the side;
+#: parts beyond the image are hidden by its border in the fit).
+GRID_MARGIN = 0.25
+#: Most pixels a box's crop may have at its canonical scale; a box far flatter than a car (a
+#: sliver 1 px high across the image would need 40 M) gets no part evidence instead.
+MAX_CANONICAL_PIXELS = 4_000_000
 
 
 @dataclass
@@ -432,6 +439,16 @@ def box_crop(box, image_size, scales=DEFAULT_SCALES, *, pad: float = 0.1, radius
     return region, (cx0, cy0, cx1, cy1), zs
 
 
+def _grid_within(start: float, n: int, step: float, size: int) -> tuple[float, int]:
+    """The points ``start + step * k`` (``k < n``) that lie at most :data:`GRID_MARGIN` x the
+    image's side ``size`` past it, as ``(first point, count)`` (at least one): the same
+    points, so a box reaching further is scored alike inside the image."""
+    m = GRID_MARGIN * size
+    k0 = min(max(0, int(np.ceil((-m - start) / step))), n - 1)
+    k1 = max(min(n, int(np.floor((size + m - start) / step)) + 1), k0 + 1)
+    return start + step * k0, k1 - k0
+
+
 def box_position(uv, box) -> np.ndarray:
     """``(..., 2)`` float32 position of points ``uv (..., 2)`` relative to ``box``:
     ``((u - x1) / w, (v - y1) / h)`` (0..1 inside the box)."""
@@ -520,6 +537,15 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
     Returns
     -------
     PartResponses
+
+    Notes
+    -----
+    Two bounds keep a box that is no car's from costing minutes and gigabytes: the grid
+    stops :data:`GRID_MARGIN` x the image's width / height past the image (the same points,
+    so the responses inside the image do not change), and a box whose crop at its canonical
+    scale would exceed :data:`MAX_CANONICAL_PIXELS` (a sliver far flatter than a car) gets
+    no evidence (log ratio 0 everywhere). Neither binds for any label box or detection of
+    the 72 shared KITTI frames.
     """
     detector = load_default() if detector is None else detector
     img = np.asarray(image)
@@ -538,9 +564,16 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
                                                                   radius=feat.context_radius(detector.kind))
         gw = int(np.floor((rx1 - rx0) / st)) + 1
         gh = int(np.floor((ry1 - ry0) / st)) + 1
+        (rx0, gw), (ry0, gh) = _grid_within(rx0, gw, st, W), _grid_within(ry0, gh, st, H)
         gu = rx0 + st * np.arange(gw)
         gv = ry0 + st * np.arange(gh)
         uu, vv = np.meshgrid(gu, gv)
+        if (cx1 - cx0) * (cy1 - cy0) * max(zs) ** 2 > MAX_CANONICAL_PIXELS:  # no car's box: no evidence
+            out.append(BoxResponses(box=box.copy(), region=np.array([rx0, ry0, rx1, ry1]), origin=np.array([rx0, ry0]),
+                                    stride=st, scales=scales,
+                                    probs=np.full((len(scales), gh, gw, N_CLASSES), 1 / N_CLASSES, np.float16),
+                                    log_ratio=np.zeros((gh, gw, N_PARTS), np.float32)))
+            continue
         crop = img[cy0:cy1, cx0:cx1]
         e = None if edges is None else np.asarray(edges)[cy0:cy1, cx0:cx1]
         if e is None and detector.kind in feat.EDGE_KINDS:
