@@ -87,7 +87,6 @@ def test_fit_takes_a_calibration_of_the_numbers_of_p_or_k(tmp_path):
         ("missing_calib", "calibration file not found"),
         ("corrupt_image", "000010.png"),
         ("malformed_label", "line 1"),
-        ("empty_detections", "no car detections"),
     ],
 )
 def test_bad_input_is_one_line_error_without_partial_output(tmp_path, case, problem):
@@ -103,8 +102,6 @@ def test_bad_input_is_one_line_error_without_partial_output(tmp_path, case, prob
         image.write_bytes(image.read_bytes()[:500])
     elif case == "malformed_label":
         dets.write_text("Car 0.0 0 1.0 10 20 30\n")
-    elif case == "empty_detections":
-        dets.write_text("Pedestrian 0.00 0 -0.20 712.40 143.00 810.73 307.92 1.89 0.48 1.20 1.84 1.47 8.41 0.01\n")
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["fit", str(image), "--calib", str(calib), "--detections", str(dets), "--out", str(out)])
     assert r.exit_code == 2
@@ -113,6 +110,25 @@ def test_bad_input_is_one_line_error_without_partial_output(tmp_path, case, prob
     assert len(lines) == 1 and lines[0].startswith("wirescene: error:"), err
     assert problem in lines[0]
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_fit_of_a_frame_without_cars_writes_an_empty_scene_and_says_so(tmp_path):
+    from PIL import Image
+
+    dets = tmp_path / "dets.txt"  # another tool's file for a frame with a pedestrian only
+    dets.write_text("Pedestrian 0.00 0 -0.20 712.40 143.00 810.73 307.92 1.89 0.48 1.20 1.84 1.47 8.41 0.01\n")
+    black = tmp_path / "black.png"  # raw pixels without a car
+    Image.new("RGB", (1242, 375)).save(black)
+    calib = SPLIT / "calib" / "000010.txt"
+    for name, args, says in (("file", [SPLIT / "image_2" / "000010.png", "--detections", dets], "no car detections"),
+                             ("pixels", [black], "no car found")):
+        r = run("fit", *args, "--calib", calib, "--variant", "full", "--out", tmp_path / name)
+        assert r.exit_code == 0, r.output
+        assert f"wirescene: {args[-1]}: {says}; writing an empty scene" in r.output
+        written = {p.name: p for p in (tmp_path / name).iterdir()}
+        stem = args[0].stem
+        assert {f"{stem}.txt", f"{stem}.json", f"{stem}_overlay.png", f"{stem}_bev.png"} <= set(written)
+        assert written[f"{stem}.txt"].read_text() == "" and json.loads(written[f"{stem}.json"].read_text())["objects"] == []
 
 
 def test_eval_on_missing_root_fails_cleanly(tmp_path):
@@ -143,6 +159,25 @@ def test_detection_formats(tmp_path):
         read_detections(bad)
     with pytest.raises(InputError, match="no car detections"):
         read_detections(c, min_score=0.9)
+
+
+def test_detection_files_of_other_tools_keep_only_their_cars(tmp_path):
+    coco = tmp_path / "coco.json"  # COCO's result format: category_id 3 is a car, 1 a person
+    coco.write_text(json.dumps([{"image_id": 10, "category_id": 3, "bbox": [354, 185, 195, 109], "score": 0.9},
+                                {"image_id": 10, "category_id": 1, "bbox": [859, 160, 20, 61], "score": 0.95},
+                                {"image_id": 10, "category_name": "Car", "bbox": [600, 170, 80, 60]},
+                                {"image_id": 10, "label": "truck", "bbox": [700, 170, 80, 60]}]))
+    d = read_detections(coco)
+    assert_close(d.boxes, [[354, 185, 549, 294], [600, 170, 680, 230]])
+    csv = tmp_path / "d.csv"
+    csv.write_text("x1,y1,x2,y2,score,alpha,class\n10,20,110,80,0.8,nan,car\n10,20,110,80,0.8,0.1,person\n")
+    d = read_detections(csv)  # NaN: no viewpoint, as in Detections
+    assert len(d) == 1 and np.isnan(d.alpha).all()
+    kitti = tmp_path / "d.txt"  # lower-case types, as other tools write them (KITTI's devkit reads any case)
+    kitti.write_text("car -1 -1 1.95 354.43 185.52 549.52 294.49 -1 -1 -1 -1000 -1000 -1000 -10 0.9\n"
+                     "pedestrian -1 -1 0.1 859 160 879 221 -1 -1 -1 -1000 -1000 -1000 -10 0.9\n")
+    d = read_detections(kitti)
+    assert_close(d.boxes, [[354.43, 185.52, 549.52, 294.49]]) and not np.isnan(d.alpha).any()
 
 
 def test_gt_command_draws_frame(tmp_path):

@@ -557,6 +557,7 @@ def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
     r = _cli("kitti-eval", gt_dir, pred, "--json", out)
     assert r.exit_code == 0, r.output
     assert "KITTI Car AP" in r.output and "moderate" in r.output
+    assert f"{pred}: 1 of 3 frames have no prediction file (no detections)" in r.output
     rows = [ln.split() for ln in r.output.splitlines() if ln.split()[:1] in (["2d"], ["aos"], ["bev"], ["3d"])]
     assert len(rows) == 12
     data = json.loads(out.read_text())
@@ -582,7 +583,9 @@ def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
 
 @pytest.mark.parametrize("case, problem", [("no_gt_dir", "not found"), ("bad_gt", "line 1"),
                                            ("no_score", "score"), ("unknown_frame", "000009"),
-                                           ("no_drive_map", "not a KITTI devkit mapping directory")])
+                                           ("no_drive_map", "not a KITTI devkit mapping directory"),
+                                           ("no_predictions", "pred: no prediction file of any of the 1 frames"),
+                                           ("a_run_of_variants", "it holds folders of them (full): give one")])
 def test_cli_kitti_eval_bad_input_is_one_line_error(tmp_path, case, problem):
     gt_dir = tmp_path / "gt"
     pred = tmp_path / "pred"
@@ -598,6 +601,11 @@ def test_cli_kitti_eval_bad_input_is_one_line_error(tmp_path, case, problem):
         (pred / "000001.txt").write_text((gt_dir / "000001.txt").read_text())
     elif case == "unknown_frame":
         args = ["--frames", "000009"]
+    elif case == "a_run_of_variants":  # `eval --predictions pred` keeps one folder per variant
+        (pred / "full").mkdir()
+        (pred / "full" / "000001.txt").write_text("")
+    elif case == "no_predictions":
+        pass
     else:
         args = ["--drive-map", tmp_path]
     line = _one_line_error(_cli("kitti-eval", gt_dir, pred, *args))

@@ -491,6 +491,11 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
         raise InputError("prediction directory given twice", path=twice[0])
     runs = [read_label_dirs(gt_dir, d, frames=frame_ids) for d in pred_dirs]
     ids, gts = runs[0][0], runs[0][1]
+    for d in pred_dirs:
+        missing = sum(not (d / f"{f}.txt").exists() for f in ids)
+        if missing:
+            click.echo(f"wirescene: {d}: {missing} of {len(ids)} frames have no prediction file (no detections)",
+                       err=True)
     preds = [r[2] for r in runs]
     if len(preds) == 1:
         result = kitti_metrics(gts, preds[0])
@@ -529,7 +534,8 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **inference):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from wirescene.api import as_camera, fit
-    from wirescene.io.detections import read_detections
+    from wirescene.core.types import Detections
+    from wirescene.io.detections import NO_CARS, read_detections
     from wirescene.io.kitti import read_image, read_labels
     from wirescene.io.outputs import write_fit_outputs
 
@@ -537,11 +543,19 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     options = _fit_options(particles, seed, **inference)  # a bad --set fails before any file is read
     img = read_image(image)
     camera = as_camera(calib, (img.shape[1], img.shape[0]))
-    dets = read_detections(detections, image_size=(img.shape[1], img.shape[0])) if detections is not None else None
+    dets = None
+    if detections is not None:
+        try:
+            dets = read_detections(detections, image_size=(img.shape[1], img.shape[0]))
+        except InputError as exc:  # a frame without cars is a frame, as in eval and predict
+            if exc.problem != NO_CARS:
+                raise
+            dets = Detections.empty(str(detections))
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
     estimate = fit(img, camera, dets, variant=variant, options=options)
-    if not estimate.cars and dets is None:
-        raise InputError("pre-detection found no car in the image", path=image)
+    if not estimate.cars:
+        click.echo(f"wirescene: {detections if dets is not None else image}: "
+                   f"{'no car detections' if dets is not None else 'no car found'}; writing an empty scene", err=True)
     paths = write_fit_outputs(out, Path(image).stem, image=img, camera=camera, estimate=estimate,
                               detections=estimate.detections, gt=gt_objs)
     for kind, p in paths.items():

@@ -841,9 +841,9 @@ def read_label_dirs(
     Raises
     ------
     InputError
-        If a directory is missing, a ground-truth file of a frame is missing, any file is
-        unreadable or malformed (see :func:`wirescene.io.kitti.read_labels`), or a
-        prediction row has no score.
+        If a directory is missing, a ground-truth file of a frame is missing, no frame has
+        a prediction file, any file is unreadable or malformed (see
+        :func:`wirescene.io.kitti.read_labels`), or a prediction row has no score.
     """
     gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
     if not gt_dir.is_dir():
@@ -854,6 +854,11 @@ def read_label_dirs(
     if not ids:
         raise InputError("no ground-truth label files (*.txt)", path=gt_dir)
     gts = [read_labels(gt_dir / f"{f}.txt") for f in ids]
+    if not any((pred_dir / f"{f}.txt").exists() for f in ids):  # a wrong folder, not a method that saw nothing
+        inner = sorted(d.name for d in pred_dir.iterdir() if d.is_dir() and any(d.glob("*.txt")))
+        raise InputError(f"no prediction file of any of the {len(ids)} frames (FRAME.txt)"
+                         + (f"; it holds folders of them ({', '.join(inner[:4])}): give one" if inner else ""),
+                         path=pred_dir)
     preds = []
     for f in ids:
         path = pred_dir / f"{f}.txt"

@@ -11,7 +11,7 @@ import numpy as np
 
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
-from wirescene.io.detections import detections_from_labels, read_detections
+from wirescene.io.detections import NO_CARS, detections_from_labels, read_detections
 from wirescene.io.kitti import KittiDataset
 
 if TYPE_CHECKING:  # imported where the bank runs
@@ -91,7 +91,7 @@ class DetectionSource:
         try:
             return read_detections(path, image_size=dataset.image_size(frame_id))
         except InputError as exc:
-            if exc.problem == "no car detections in file":
+            if exc.problem == NO_CARS:
                 return Detections.empty(str(path))
             raise
 

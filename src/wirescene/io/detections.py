@@ -30,6 +30,31 @@ def _binned_viewpoint(alpha) -> np.ndarray:
     return np.where(known, bin_center(viewpoint_bin(np.where(known, alpha, 0.0))), np.nan)
 
 
+def _of_types(labels: FrameLabels, types) -> list:
+    """The objects of ``labels`` of one of ``types``, whatever their case (as KITTI's devkit
+    reads types: other detectors write ``car``)."""
+    wanted = {t.lower() for t in types}
+    return [o for o in labels.objects if o.type.lower() in wanted]
+
+
+#: The problem of a detection file without a car (a frame without cars to ``eval`` and ``fit``).
+NO_CARS = "no car detections in file"
+
+#: COCO's category id of a car (``category_id`` in COCO result files).
+COCO_CAR_ID = 3
+
+
+def _is_car(entry: dict) -> bool:
+    """Whether a JSON / CSV entry is a car: its ``category`` / ``category_name`` / ``label`` /
+    ``class`` (``car``, or ``3``), or its COCO ``category_id`` (3); an entry naming none is one."""
+    for key in ("category", "category_name", "label", "class"):
+        if entry.get(key) not in (None, ""):
+            return str(entry[key]).strip().lower() in ("car", str(COCO_CAR_ID))
+    if entry.get("category_id") not in (None, ""):
+        return str(entry["category_id"]).strip() in (str(COCO_CAR_ID), f"{COCO_CAR_ID}.0")
+    return True
+
+
 def detections_from_labels(
     labels: FrameLabels,
     *,
@@ -45,7 +70,7 @@ def detections_from_labels(
     would), unknown (NaN) where the label's ``alpha`` is KITTI's ``-10``; the score is
     1, or the label's score if it has one.
     """
-    objs = labels.of_type(*types)
+    objs = _of_types(labels, types)
     if not objs:
         return Detections.empty(source)
     alpha = np.array([o.alpha for o in objs])
@@ -71,6 +96,8 @@ def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
             alpha = float(entry["alpha"])
         except (TypeError, ValueError, OverflowError):
             raise InputError(f"{where}: alpha must be a number (radians)", path=path) from None
+        if np.isnan(alpha):  # NaN: no viewpoint, as in Detections
+            return float("nan")
         if not np.isfinite(alpha):
             raise InputError(f"{where}: alpha must be finite (radians), got {alpha}", path=path)
         if alpha != ALPHA_NOT_ESTIMATED and abs(alpha) > MAX_ALPHA:
@@ -112,7 +139,7 @@ def _from_entries(entries: list, path: Path) -> Detections:
         where = f"detection {i}"
         if not isinstance(entry, dict):
             raise InputError(f"{where}: expected an object with a box", path=path)
-        if "category" in entry and str(entry["category"]).lower() not in ("car", "3"):
+        if not _is_car(entry):
             continue
         boxes.append(_box_of(entry, path, where))
         try:
@@ -136,14 +163,17 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     * ``.json``: a list of objects, or ``{"detections": [...]}``; each object has
       ``box`` ``[x1, y1, x2, y2]`` (or COCO ``bbox`` ``[x, y, w, h]``, or keys
       ``x1 y1 x2 y2``), optional ``score``, optional ``viewpoint_bin`` (0..7) or
-      ``alpha`` (radians) and optional ``category`` (non-car entries are skipped).
+      ``alpha`` (radians) and an optional class: ``category``, ``category_name``,
+      ``label`` or ``class`` (``car`` in any case, or ``3``), or COCO's ``category_id``
+      (3 is a car); entries of another class are skipped.
     * ``.csv``: a header with ``x1,y1,x2,y2`` and optional ``score``, ``viewpoint_bin``,
-      ``alpha``.
-    * ``.txt``: a KITTI label file (15 or 16 columns); Car rows are used, with their
-      ``alpha`` binned and their score (16th column) if present.
+      ``alpha`` and class columns as in JSON.
+    * ``.txt``: a KITTI label file (15 or 16 columns); Car rows (``car`` in any case, as
+      KITTI's devkit reads them) are used, with their ``alpha`` binned and their score (16th
+      column) if present.
 
-    An ``alpha`` of ``-10`` (KITTI's "not estimated", as 2D-only detectors write) is an
-    unknown viewpoint (NaN), in every format; any other beyond one turn (2 pi) is refused as an
+    An ``alpha`` of ``-10`` (KITTI's "not estimated", as 2D-only detectors write) or NaN is an
+    unknown viewpoint, in every format; any other beyond one turn (2 pi) is refused as an
     angle in degrees.
 
     With ``image_size`` (width, height), every box must overlap the image
@@ -161,7 +191,7 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     suffix = path.suffix.lower()
     if suffix == ".txt":
         labels = read_labels(path, image_size=image_size)
-        for o in labels.of_type(*CAR_TYPES):
+        for o in _of_types(labels, CAR_TYPES):
             if o.alpha != ALPHA_NOT_ESTIMATED and abs(o.alpha) > MAX_ALPHA:
                 raise InputError(f"a Car row's alpha must be radians within one turn, got {o.alpha:g} (degrees?)",
                                  path=path)
@@ -194,7 +224,7 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     keep = dets.scores >= min_score
     dets = dets.subset(keep)
     if len(dets) == 0:
-        raise InputError("no car detections in file", path=path)
+        raise InputError(NO_CARS, path=path)
     problem = boxes_problem(dets.boxes, image_size)
     if problem:
         raise InputError(problem, path=path)
