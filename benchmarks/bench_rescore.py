@@ -145,8 +145,9 @@ def operating_point(dets, labels, threshold: float) -> dict:
 
 def refined_again(ds, dets: dict, banks: dict, times: int) -> dict:
     """``dets`` with each frame's fold bank's box refinement applied ``times`` more times."""
+    from wirescene.core.boxes import clip_boxes
     from wirescene.core.viewpoints import viewpoint_bin
-    from wirescene.predetect.bank import clip_boxes, regression_features
+    from wirescene.predetect.bank import regression_features
     from wirescene.predetect.hog import to_gray
     from wirescene.predetect.refine import apply_box_refinement
 

@@ -110,6 +110,19 @@ def test_integer_images_holding_8_bit_values_are_read_as_8_bit(frame):
     assert (to_rgb_uint8(image.astype(np.uint16) * 257) == image).all()  # a 16-bit PNG's range
 
 
+def test_boxes_past_the_image_are_fitted_and_written_clipped(frame):
+    image, camera, _ = frame
+    W, H = camera.image_size
+    amodal = [[-300.0, 200.0, 85.9, 420.0], [1013.4, 182.5, 1300.0, 380.0]]  # another detector's cut cars
+    clipped = [[0.0, 200.0, 85.9, H - 1.0], [1013.4, 182.5, W - 1.0, H - 1.0]]
+    a = wirescene.fit(image, camera, amodal, variant="coarse+gp", particles=20)
+    b = wirescene.fit(image, camera, clipped, variant="coarse+gp", particles=20)
+    assert_close([c.box for c in a.cars], clipped)  # as KITTI's labelled boxes are: the 2D AP reads them
+    assert_close([c.location for c in a.cars], [c.location for c in b.cars], atol=0, rtol=0)
+    last = wirescene.fit(image, camera, [[W - 0.5, 100.0, W + 50.0, 150.0]], variant="coarse", particles=20)
+    assert_close(last.cars[0].box, [W - 2.0, 100.0, W - 1.0, 150.0])  # a box in the last column keeps a pixel
+
+
 def test_pil_images_are_read_as_their_files_are(frame, tmp_path):
     from PIL import Image
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import KITTI_ROOT, assert_close
-from wirescene.core.boxes import iou_2d
+from wirescene.core.boxes import clip_boxes, iou_2d
 from wirescene.core.camera import Camera
 from wirescene.core.errors import ArgumentError, InputError, ShapeError
 from wirescene.core.types import Detections
@@ -19,7 +19,6 @@ from wirescene.predetect import load_default_bank
 from wirescene.predetect.bank import (
     apply_box_regression,
     bank_pyramid,
-    clip_boxes,
     detect_pyramid,
     template_responses,
 )

@@ -72,6 +72,13 @@ def project_points_to_box(camera: Camera, points: np.ndarray, *, clip: bool = Tr
     return box
 
 
+def clip_boxes(boxes: np.ndarray, W: int, H: int) -> np.ndarray:
+    """Boxes ``(D, 4)`` clipped to the pixels of a ``W x H`` image (``[0, W - 1] x [0, H - 1]``,
+    as KITTI's labelled boxes and the lifting's projected ones are)."""
+    return np.column_stack([np.clip(boxes[:, 0], 0, W - 1), np.clip(boxes[:, 1], 0, H - 1),
+                            np.clip(boxes[:, 2], 0, W - 1), np.clip(boxes[:, 3], 0, H - 1)])
+
+
 def iou_2d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Intersection over union of 2D boxes ``(..., 4)`` (broadcasting)."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)

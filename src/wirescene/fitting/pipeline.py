@@ -15,6 +15,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from wirescene.core.boxes import clip_boxes
 from wirescene.core.camera import Camera
 from wirescene.core.errors import ArgumentError, check_shape
 from wirescene.core.settings import option
@@ -278,6 +279,28 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
                                responses=responses)
 
 
+def inside_image(detections: Detections, image_size: tuple[int, int]) -> Detections:
+    """``detections`` with their boxes clipped to the image's pixels, as the lifting clips the
+    boxes it projects and KITTI clips its labelled ones: another detector's box of a car the
+    image cuts may reach past it. A box left under a pixel wide or high (one lying in the
+    image's last column or row) keeps one pixel.
+
+    Examples
+    --------
+    >>> dets = Detections([[-300.0, 200.0, 85.9, 420.0]], 0.9, np.nan)
+    >>> inside_image(dets, (1242, 375)).boxes
+    array([[  0. , 200. ,  85.9, 374. ]])
+    """
+    W, H = image_size
+    boxes = clip_boxes(detections.boxes, W, H)
+    clipped = np.any(boxes != detections.boxes, axis=1)
+    if not clipped.any():
+        return detections
+    boxes[clipped, 0] = np.minimum(boxes[clipped, 0], boxes[clipped, 2] - 1.0)
+    boxes[clipped, 1] = np.minimum(boxes[clipped, 1], boxes[clipped, 3] - 1.0)
+    return Detections(boxes, detections.scores, detections.alpha, detections.source)
+
+
 def fit_frame(
     camera: Camera,
     detections: Detections | None,
@@ -353,6 +376,9 @@ def fit_frame(
     if len(detections) == 0:
         return FrameFit(detections, {v.name: SceneEstimate(variant=v.name, objects=[], shared_plane=v.shared_plane,
                                                            detections=detections) for v in variants})
+    size = camera.image_size if camera.image_size is not None else (None if image is None else image.shape[1::-1])
+    if size is not None:
+        detections = inside_image(detections, size)
     if image is not None and not np.all(np.isfinite(detections.alpha)):
         # Boxes without a viewpoint (external detectors): the bank's templates and the crop
         # classifier score the 8 bins inside each box, for every variant alike.

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.artefacts import load_npz, save_npz
+from wirescene.core.boxes import clip_boxes
 from wirescene.core.errors import InputError
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
@@ -685,12 +686,6 @@ def traffic_log_prior(bank: DetectorBank, boxes, horizon: float, center_column: 
     if not prior or bank.calibration is None:
         return None
     return viewpoint_log_prior(prior, lateral_position(boxes, horizon, center_column))
-
-
-def clip_boxes(boxes: np.ndarray, W: int, H: int) -> np.ndarray:
-    """Boxes ``(D, 4)`` clipped to the pixels of a ``W x H`` image."""
-    return np.column_stack([np.clip(boxes[:, 0], 0, W - 1), np.clip(boxes[:, 1], 0, H - 1),
-                            np.clip(boxes[:, 2], 0, W - 1), np.clip(boxes[:, 3], 0, H - 1)])
 
 
 # --------------------------------------------------------------------------- box regression

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wirescene.core.boxes import iou_2d
+from wirescene.core.boxes import clip_boxes, iou_2d
 from wirescene.core.errors import ArgumentError, InputError, check_shape
 from wirescene.core.groundplane import rotation_y_from_alpha
 from wirescene.core.validate import boxes_problem
@@ -44,7 +44,6 @@ from wirescene.predetect.bank import (
     DetectorBank,
     apply_box_regression,
     bank_scales,
-    clip_boxes,
     template_responses,
     traffic_log_prior,
 )
