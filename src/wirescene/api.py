@@ -256,7 +256,8 @@ def fit(
         pre-detection, whose boxes the fit verifies (cars it finds unlikely are dropped:
         ``settings={"predetect.min_car_probability": 0}`` keeps them all) and weighs less than
         given boxes (``predetect.box_weight`` 30 against ``inference.box_weight`` 100: they
-        miss the car's outline by more).
+        miss the car's outline by more). A box reaching past the image is clipped to it
+        (:func:`wirescene.fitting.pipeline.inside_image`).
     variant : str
         Model variant (paper Sec. 5.2): ``coarse``, ``coarse+gp``, ``fg``, ``fg+so``,
         ``fg+do``, ``fg+gp`` or ``full``.
