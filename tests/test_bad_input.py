@@ -359,6 +359,20 @@ def test_csv_with_a_byte_order_mark_is_read(tmp_path):
     assert len(dets) == 1 and dets.scores[0] == pytest.approx(0.9)
 
 
+def test_label_calib_and_split_files_with_a_byte_order_mark_are_read_whole(tmp_path):
+    from wirescene.io.splits import read_split_file
+
+    split = KITTI_ROOT / "training"
+    for kind in ("label_2", "calib"):
+        (tmp_path / f"{kind}.txt").write_bytes((split / kind / "000010.txt").read_text().encode("utf-8-sig"))
+    labels = wirescene.io.kitti.read_labels(tmp_path / "label_2.txt")
+    assert [o.type for o in labels.objects] == [o.type for o in wirescene.io.kitti.read_labels(
+        split / "label_2" / "000010.txt").objects]  # the first object was typed "\ufeffCar" and lost as a car
+    assert (read_kitti_calib(tmp_path / "calib.txt").P2 == read_kitti_calib(split / "calib" / "000010.txt").P2).all()
+    (tmp_path / "split.txt").write_bytes("000010\n".encode("utf-8-sig"))
+    assert read_split_file(tmp_path / "split.txt") == ["000010"]
+
+
 def test_missing_detection_files_are_allowed_only_when_asked(tmp_path):
     d = _dets_dir(tmp_path, {"000002.json": json.dumps([{"box": [600, 170, 680, 230]}])})
     args = ["eval", str(KITTI_ROOT), "--variant", "coarse", "--frames", f"000002,{FRAME}", "--workers", "1",

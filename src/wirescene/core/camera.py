@@ -137,7 +137,7 @@ def _calibration_text(path: Path) -> str:
     if not path.is_file():
         raise InputError("calibration file not found", path=path)
     try:
-        return path.read_text()
+        return path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read calibration file ({exc.__class__.__name__})", path=path) from exc
 

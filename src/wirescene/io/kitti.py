@@ -129,7 +129,7 @@ def read_labels(path: str | Path, *, image_size: tuple[int, int] | None = None) 
     if not path.is_file():
         raise InputError("label file not found" if not path.exists() else "label path is not a file", path=path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (editors write one) is no part of a type
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read label file ({exc.__class__.__name__})", path=path) from exc
     out = FrameLabels()

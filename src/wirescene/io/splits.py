@@ -44,7 +44,7 @@ def read_split_file(path: str | Path, *, known: Iterable[str] | None = None, wha
     if not path.is_file():
         raise InputError("split file not found", path=path)
     try:
-        lines = path.read_text().splitlines()
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"unreadable split file ({exc.__class__.__name__})", path=path) from None
     known = None if known is None else set(known)
