@@ -242,6 +242,18 @@ CASES = {
     "train detector, no frame in --folds": (
         lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--frames", FRAME,
                    "--folds", str((fold_of(FRAME) + 1) % N_FOLDS), "--no-calibration"], "folds: none of the 1 frame.s. given"),
+    "train detector on one drive": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--frames", FRAME],
+        "form a single group .one drive., so no held-out calibration can be fitted: give one"),
+    "train detector of truncated cars only": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", _frame_root(t, CAR.replace(
+            "Car 0.00", "Car 0.60") + "\n"), "--no-calibration"], "no detector can be trained: none of the 2 car examples"),
+    "train detector --folds of other frames": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", kitti_copy(t / "k", [FRAME], rename={
+            FRAME: "005000"}), "--folds", "0,1", "--no-calibration"], "folds: frame 005000 is not one of the shared"),
+    "train viewpoints of one bin": (
+        lambda t: ["train", "viewpoints", _frame_root(t, CAR + "\n"), "--out", t / "v.npz"],
+        "show one viewpoint bin"),
     "train occlusion --scenes 0": (lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "0"], "--scenes"),
     # synthetic scenes
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],

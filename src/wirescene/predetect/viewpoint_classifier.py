@@ -169,6 +169,7 @@ def kitti_examples(dataset, frames, *, jitter: float = JITTER, seed: int = 0):
     :class:`~wirescene.io.kitti.KittiDataset`: each label box, its mirror image and one copy
     of each with the sides moved by N(0, ``jitter``) of the box's width / height."""
     rng = np.random.default_rng(seed)
+    frames = list(frames)
     feats, bins = [], []
     for f in frames:
         cars = [o for o in dataset.labels(f).objects if o.type == "Car"]
@@ -187,13 +188,18 @@ def kitti_examples(dataset, frames, *, jitter: float = JITTER, seed: int = 0):
             feats.append(crop_viewpoint_features(im, np.concatenate([bx, moved])))
             bins.append(np.tile(mirror_bin(b) if flip else b, 2))
     if not feats:
-        raise InputError("no labelled cars to train a viewpoint classifier on")
+        raise InputError(f"no labelled cars in the {len(frames)} frames to train a viewpoint classifier on",
+                         path=dataset.split_dir)
     return np.concatenate(feats), np.concatenate(bins)
 
 
 def train_on_kitti(dataset, frames, *, C: float = C, seed: int = 0) -> ViewpointClassifier:
     """:func:`fit_viewpoint_classifier` of :func:`kitti_examples` of ``frames``."""
+    frames = list(frames)
     x, y = kitti_examples(dataset, frames, seed=seed)
+    if len(np.unique(y)) < 2:  # mirror images turn every bin but the two pure side views into another
+        raise InputError(f"the labelled cars of the {len(frames)} frames show one viewpoint bin (with their mirror "
+                         "images); a viewpoint classifier needs two or more", path=dataset.split_dir)
     return fit_viewpoint_classifier(x, y, C=C, meta={"frames": [str(f) for f in frames], "seed": seed})
 
 

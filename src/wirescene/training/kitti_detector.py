@@ -397,6 +397,9 @@ def train_bank_on_frames(images, examples, *, seed: int = 0, n_partial: int = 3,
     configs = select_configurations(examples, n_partial=n_partial, min_height=min_height, full_area=full_area,
                                     partial_area=partial_area)
     say(f"{len(configs)} configurations; car examples per bin {per_bin.tolist()}")
+    if not configs:  # else a bank without a detector, which finds nothing, written without a word
+        raise InputError(f"no detector can be trained: none of the {int(per_bin.sum())} car examples (labelled cars "
+                         f"and their mirror images) is whole (not truncated) and at least {min_height:g} px high")
 
     # ---- positives
     cands, counts = positive_features(
@@ -1039,8 +1042,9 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     these :mod:`wirescene.io.folds` folds. With ``calibration_folds`` the Platt calibration
     and default threshold come from held-out detections (:func:`heldout_bank_calibration`)
     over the folds of :func:`calibration_folds` (drives, else frames, balanced by cars), or
-    over a given ``{frame: fold}`` mapping; frames of a single group leave the bank
-    uncalibrated (scores are margins, threshold 0). ``calibration``: given Platt
+    over a given ``{frame: fold}`` mapping; frames of a single group (one drive) cannot
+    hold any out, an :class:`InputError` (give a ``calibration``, or
+    ``calibration_folds=False`` for an uncalibrated bank). ``calibration``: given Platt
     ``(a, b, c)`` (``c``: the verifier's weight, :func:`set_calibration`) -- e.g. the pooled
     held-out fit printed by ``benchmarks/bench_predetect.py`` for the same recipe -- instead
     of the leave-one-fold-out run (saves four trainings).
@@ -1056,7 +1060,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     user's devkit mapping).
     Returns ``(bank, report)``.
     """
-    from wirescene.io.folds import fold_of
+    from wirescene.io.folds import fold_of, frame_drives
     from wirescene.io.kitti import KittiDataset
 
     say = progress or (lambda msg: None)
@@ -1065,6 +1069,10 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     ids = list(frames) if frames else ds.frame_ids()
     if folds is not None:
         wanted = set(folds)
+        unknown = [f for f in ids if f not in frame_drives()]
+        if unknown:  # the study's folds are those of the shared frames' drives
+            raise ArgumentError("folds", f"frame {unknown[0]} is not one of the shared frames, whose drives the folds "
+                                         "are made of (--folds is for their studies)")
         given, ids = len(ids), [f for f in ids if fold_of(f) in wanted]
         if not ids:
             raise ArgumentError("folds", f"none of the {given} frame(s) given lies in folds {sorted(wanted)} (--folds)")
@@ -1079,7 +1087,11 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
         report["calibration"] = calibration_record(calib, source="given")
     elif calibration_folds:
         folds = calibration_folds if isinstance(calibration_folds, Mapping) else _frame_folds(ds, ids, drives)
-        if folds is not None:
+        if folds is None:
+            raise InputError(f"the {len(ids)} training frames form a single group (one drive), so no held-out "
+                             "calibration can be fitted: give one (--calibration A,B,C) or train an uncalibrated "
+                             "bank (--no-calibration)", path=ds.split_dir)
+        else:
             report["calibration"] = heldout_bank_calibration(kitti_root, folds, split=split, seed=seed, progress=say,
                                                              workers=workers, support_weight=support_weight,
                                                              **train_kw)
