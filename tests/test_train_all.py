@@ -5,6 +5,7 @@ files that name the frames of ``tests/data/kitti`` (000010 is in train, 000002 a
 in val).
 """
 
+import functools
 import hashlib
 import json
 import shutil
@@ -309,6 +310,53 @@ def test_train_all_resume_skips_finished_steps(trained):
         {f: t for f, t in before.items() if f != "occlusion.json"}
     assert json.loads((out / MANIFEST_FILE).read_text())["steps"]["occlusion"]["key"]["options"]["n_scenes"] == 1
     assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")
+
+
+def test_resume_sees_changed_frames_and_a_failed_one_leaves_the_directory_as_it_was(tmp_path, monkeypatch):
+    import wirescene.training.occlusion as occlusion
+
+    root = kitti_copy(tmp_path / "kitti", ["000010", "001545"])
+    out = tmp_path / "models"
+    args = ["train", "all", root, "--out", out, *TINY, "--workers", "1"]
+    assert cli(*args).exit_code == 0
+    finished = (out / MANIFEST_FILE).read_bytes()
+    mtimes = _mtimes(out)
+
+    @functools.wraps(occlusion.calibrate_occluded_score)  # its options stay those --set checks
+    def broken(*a, **k):
+        raise RuntimeError("the occlusion step broke")
+
+    with monkeypatch.context() as patch:  # a step that fails after two kept ones
+        patch.setattr(occlusion, "calibrate_occluded_score", broken)
+        r = cli(*args, "--set", "occlusion.n_scenes=3", "--resume")
+    assert isinstance(r.exception, RuntimeError) and r.stderr.count("done in an earlier run, kept") == 2
+    assert (out / MANIFEST_FILE).read_bytes() == finished and _mtimes(out) == mtimes
+    assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")  # still usable
+    image = root / "training" / "image_2" / "001545.png"
+    image.rename(tmp_path / "away.png")  # a missing image is found before any step, not inside one
+    line = one_line_error(cli(*args, "--resume"))
+    assert f"{image}: frame 001545's image is missing" in line and (out / MANIFEST_FILE).read_bytes() == finished
+    (tmp_path / "away.png").rename(image)
+    label = root / "training" / "label_2" / "001545.txt"
+    rows = label.read_text().splitlines(keepends=True)
+    first = next(i for i, ln in enumerate(rows) if ln.startswith("Car"))
+    label.write_text("".join(rows[:first] + rows[first + 1:]))  # a car less: every step learns from other data
+    r = cli(*args, "--resume")
+    assert r.exit_code == 0, r.output + r.stderr
+    assert "done in an earlier run, kept" not in r.stderr and r.stderr.count("does not match") == 3
+    assert json.loads((out / MANIFEST_FILE).read_text())["data"]["cars"] == 13
+
+
+def test_a_first_step_that_fails_leaves_no_directory(tmp_path, monkeypatch):
+    import wirescene.training.parts as parts
+
+    @functools.wraps(parts.train_part_detector)  # its options stay those --set checks
+    def broken(*a, **k):
+        raise RuntimeError("the parts step broke")
+
+    monkeypatch.setattr(parts, "train_part_detector", broken)
+    r = cli("train", "all", KITTI_ROOT, "--out", tmp_path / "new" / "models", *TINY)
+    assert isinstance(r.exception, RuntimeError) and not (tmp_path / "new" / "models").exists()
 
 
 def test_train_all_needs_two_groups_and_known_options(tmp_path):

@@ -24,17 +24,22 @@ frame is a group of its own, and the groups are dealt to folds balanced by cars
 ``MODELS_DIR/models.json`` (format ``wirescene-models/1``) records the data (root, split
 file, frames), the folds, the packages and BLAS kernels it ran with
 (:func:`wirescene.core.version.environment`), and per step its options, inputs, artefact
-hash, wall time and peak resident memory. It is rewritten after every step,
-``"complete": false`` until the last; :func:`wirescene.core.resources.resolve_models`
-refuses an unfinished directory.
-With ``resume``, a step whose record matches the current data, options, inputs and
-package version, and whose file is unchanged, is not run again.
+hash, wall time and peak resident memory. It is rewritten after every step from the first
+one trained on, ``"complete": false`` until the last;
+:func:`wirescene.core.resources.resolve_models` refuses an unfinished directory.
+With ``resume``, a step whose record matches the current data (the frames, their label
+and calibration files, their images' sizes and their folds), options, inputs and package
+version, and whose file is unchanged, is not run again; the earlier run's records stand
+until their steps are replaced, so a resumed run that fails before it trains a step
+leaves the directory as it was. The frames' cars, images and calibrations are checked
+before any step trains, and a first run whose first step fails leaves no directory.
 """
 
 from __future__ import annotations
 
 import hashlib
 import inspect
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -225,34 +230,67 @@ def train_all(
     if not dataset.has_labels:
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
     ids = _training_frames(dataset, frames, split_file)
+    data_sha256 = _check_frames(dataset, ids)  # before anything is trained or written
     drives, mapping_dir = drive_map(dataset.base_dir, mapping=drive_mapping)
     folds = calibration_folds(dataset, ids, n_folds=n_folds, drives=drives)
     previous = _previous_steps(out, resume)
     manifest = _new_manifest(dataset, ids, folds, split_file, drives=drives, mapping_dir=mapping_dir)
+    # what a step learns from: the frames' labels, calibrations and images, and the folds they are dealt to
     key_data = {"kitti_root": manifest["data"]["kitti_root"], "frames_sha256": manifest["data"]["frames_sha256"],
-                "n_folds": n_folds}
-    if mapping_dir is not None:  # other drives, other folds: a resumed step must not keep the old ones
-        key_data["folds_sha256"] = hashlib.sha256(str(sorted(folds.items())).encode()).hexdigest()
+                "n_folds": n_folds, "files_sha256": data_sha256,
+                "folds_sha256": hashlib.sha256(str(sorted(folds.items())).encode()).hexdigest()}
     run = _Run(out, kitti_root, ids, folds, opts, workers, progress or (lambda message: None),
                iterate or (lambda items, name: items))
+    # the earlier run's records stand until a step replaces them, so that a run that fails keeps them
+    manifest["steps"] = {s: r for s, r in previous.items() if s in STEPS}
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    run.write(manifest)
-    for step in run.wrap(STEPS, "train all"):
-        if step == "score_calibration":
-            manifest["shipped"].append(_ARTEFACT[step])
-            manifest["steps"][step] = {
-                "done": True, "source": "shipped", "sha256": file_sha256(shipped_path(_ARTEFACT[step])),
-                "why": "an honest calibration needs evaluation records of fold models on every frame "
-                       "(eval --raw-scores per fold, then train scores): not trained by train all"}
-        else:
-            key = _normalised({"data": key_data, "options": opts[step], "wirescene": __version__,
-                               "inputs": {s: manifest["steps"][s]["sha256"] for s in _INPUTS[step]}})
-            manifest["steps"][step] = run.step(step, key, previous.get(step))
-            manifest["artefacts"].append(_ARTEFACT[step])
-        run.write(manifest)
+    changed = False  # the directory is rewritten from the first step trained on: until then it is as it was
+    try:
+        for step in run.wrap(STEPS, "train all"):
+            if step == "score_calibration":
+                manifest["shipped"].append(_ARTEFACT[step])
+                manifest["steps"][step] = {
+                    "done": True, "source": "shipped", "sha256": file_sha256(shipped_path(_ARTEFACT[step])),
+                    "why": "an honest calibration needs evaluation records of fold models on every frame "
+                           "(eval --raw-scores per fold, then train scores): not trained by train all"}
+            else:
+                key = _normalised({"data": key_data, "options": opts[step], "wirescene": __version__,
+                                   "inputs": {s: manifest["steps"][s]["sha256"] for s in _INPUTS[step]}})
+                record = run.step(step, key, previous.get(step))
+                changed |= record is not previous.get(step)
+                manifest["steps"][step] = record
+                manifest["artefacts"].append(_ARTEFACT[step])
+            if changed:
+                run.write(manifest)
+    except BaseException:
+        if created and not any(out.iterdir()):  # a first step that failed leaves no directory behind
+            out.rmdir()
+        raise
     manifest["complete"] = True
     run.write(manifest)
     return manifest
+
+
+def _check_frames(dataset, ids: list[str]) -> str:
+    """Check that the training frames hold labelled cars and each its image and calibration
+    (an :class:`InputError` naming the first missing file), before any step trains; return a
+    SHA-256 of their label and calibration files and their images' sizes (a resumed step
+    whose frames changed is trained again)."""
+    counts = dataset.car_counts(ids)
+    if not any(counts.values()):
+        raise InputError(f"none of the {len(ids)} training frames has a labelled Car", path=dataset.split_dir)
+    digest = hashlib.sha256()
+    for f in ids:
+        for path in (dataset.image_path(f), dataset.calib_path(f)):
+            if not path.is_file():
+                raise InputError(f"frame {f}'s {'image' if path.suffix == '.png' else 'calibration'} is missing",
+                                 path=path)
+        digest.update(f"{f}\n".encode())
+        digest.update(dataset.label_path(f).read_bytes())
+        digest.update(dataset.calib_path(f).read_bytes())
+        digest.update(str(dataset.image_path(f).stat().st_size).encode())
+    return digest.hexdigest()
 
 
 #: Steps whose artefacts another step trains from (part of the resume key).
@@ -360,8 +398,9 @@ class _Run:
         _, report = train_part_detector(self.path_of("parts"), kitti_root=self.kitti_root, frames=self.ids,
                                         calibration_folds=self.folds, progress=self.say, **self.opts["parts"])
         record["train_accuracy"] = float(report["train_acc"])
-        if "calibration" in report:
-            record["calibration"] = {k: float(v) for k, v in report["calibration"].items()}
+        if "calibration" in report:  # JSON has no NaN (a fold without cars gives one)
+            record["calibration"] = {k: float(v) if math.isfinite(float(v)) else None
+                                     for k, v in report["calibration"].items()}
 
     def run_detector(self, record: dict) -> None:
         from wirescene.training.kitti_detector import train_detector_bank_kitti
