@@ -367,6 +367,21 @@ def test_train_all_needs_two_groups_and_known_options(tmp_path):
     assert not (tmp_path / "m").exists()
 
 
+@pytest.mark.parametrize("setting, problem", [
+    ("parts.n_trees=0", "parts.n_trees must be at least 1, got 0"),  # was a traceback of scikit-learn
+    ("parts.kind=foo", "parts.kind must be one of sc, hog, ghog"),
+    ("detector.C=nan", "detector.C must be a finite number"),  # was a traceback after the whole parts step
+    ("occlusion.n_scenes=0", "occlusion.n_scenes must be at least 1"),
+    ("detector.threshold=2", "detector.threshold must be at most 1"),  # was a bank that never detects
+    ("detector.mining_rounds=-1", "detector.mining_rounds must be at least 0"),
+    ("detector.mining_images=0", "detector.mining_images must be at least 1"),
+])
+def test_train_all_checks_the_values_it_is_set_before_any_step(tmp_path, setting, problem):
+    line = one_line_error(cli("train", "all", KITTI_ROOT, "--out", tmp_path / "m", "--set", setting))
+    assert "--set" in line and problem in line
+    assert not (tmp_path / "m").exists()
+
+
 def test_train_parts_defaults_are_the_shipped_recipe(tmp_path):
     from wirescene.cli.parts import parts
     from wirescene.training.pipeline import RECIPE

@@ -147,14 +147,56 @@ def option_default(step: str, key: str):
     return known[step][key]
 
 
+#: ``{step: {option: (minimum, maximum)}}`` of the numeric options that a value of 0 (the
+#: least any number of a step takes) would break; ``maximum`` None: none.
+OPTION_LIMITS: dict[str, dict[str, tuple]] = {
+    "parts": {"n_trees": (1, None), "max_depth": (1, None), "min_samples_leaf": (1, None),
+              "max_real_patches": (1, None), "n_jobs": (1, None)},
+    "detector": {"C": (1e-9, None), "max_pos": (1, None), "min_pos": (1, None), "neg_per_image": (1, None),
+                 "min_height": (1, None), "max_scale": (0.01, None), "full_area": (1, None), "partial_area": (1, None),
+                 "per_octave": (1, None), "cluster_radius": (0.01, None), "max_negatives": (1, None),
+                 "max_truncated": (0, 1), "mining_images": (1, None), "threshold": (0, 1)},
+    "occlusion": {"n_scenes": (1, None)},
+}
+#: The options that take one of a few words.
+OPTION_CHOICES: dict[str, dict[str, tuple]] = {"parts": {"class_weight": ("balanced", None)}}
+
+
+def _checked_value(step: str, key: str, value):
+    """``value`` of option ``key`` of ``step`` if it is of its default's kind (an integer, a
+    finite number, true or false) and within :data:`OPTION_LIMITS` (at least 0 otherwise);
+    a ``ValueError`` naming the option before any step trains."""
+    import dataclasses
+
+    from wirescene.core.settings import check_value
+
+    default = option_default(step, key)
+    choices = dict(OPTION_CHOICES.get(step, {}))
+    if step == "parts":
+        from wirescene.parts.features import KINDS
+
+        choices["kind"] = KINDS
+    if key in choices:
+        if value not in choices[key]:
+            raise ValueError(f"{step}.{key} must be one of {', '.join(map(str, choices[key]))}, got {value!r}")
+        return value
+    low, high = OPTION_LIMITS.get(step, {}).get(key, (0, None))
+    if default is None and value is not None and key in OPTION_LIMITS.get(step, {}):  # a number or none
+        default = 0
+    if default is None:
+        return value
+    field = dataclasses.field(default=default, metadata={"minimum": low, "maximum": high})
+    field.name = key
+    return check_value(field, value, scope=step)
+
+
 def check_options(overrides: Mapping[str, Mapping[str, object]]) -> dict[str, dict]:
-    """The recipe with ``overrides`` (``{step: {option: value}}``), every name checked
-    (and a given ``detector.calibration``); a ``ValueError`` says what is wrong."""
+    """The recipe with ``overrides`` (``{step: {option: value}}``), every name and value
+    checked (and a given ``detector.calibration``); a ``ValueError`` says what is wrong."""
     out = {step: dict(RECIPE.get(step, {})) for step in STEP_OPTIONS}
     for step, values in overrides.items():
         for key, value in values.items():
-            option_default(step, key)
-            out[step][key] = value
+            out[step][key] = _checked_value(step, key, value)
     given = out["detector"].get("calibration")
     if given is not None:  # checked here, not after the parts step has trained
         try:
