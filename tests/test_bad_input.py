@@ -254,6 +254,9 @@ CASES = {
     "train viewpoints of one bin": (
         lambda t: ["train", "viewpoints", _frame_root(t, CAR + "\n"), "--out", t / "v.npz"],
         "show one viewpoint bin"),
+    "train scores of a run given twice": (
+        lambda t: ["train", "scores", t / "run", t / "x" / ".." / "run", "--out", t / "s.json"],
+        "evaluation run given twice"),
     "train occlusion --scenes 0": (lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "0"], "--scenes"),
     # synthetic scenes
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],

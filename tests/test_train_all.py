@@ -150,6 +150,13 @@ def test_models_directory_rules(tmp_path):
     manifest.update(artefacts=["occlusion"])
     (tmp_path / MANIFEST_FILE).write_text(json.dumps(manifest))
     assert resolve_models(tmp_path).own == ("occlusion",)
+    written = hashlib.sha256((tmp_path / "occlusion.json").read_bytes()).hexdigest()
+    manifest["steps"]["occlusion"] = {"done": True, "artefact": "occlusion.json", "sha256": written}
+    (tmp_path / MANIFEST_FILE).write_text(json.dumps(manifest))
+    assert resolve_models(tmp_path).own == ("occlusion",)
+    (tmp_path / "occlusion.json").write_text((tmp_path / "occlusion.json").read_text() + " ")  # replaced by hand
+    with pytest.raises(InputError, match="occlusion.json: not the file its training wrote"):
+        resolve_models(tmp_path)
     line = one_line_error(cli("eval", KITTI_ROOT, "--frames", "000002", "--models", tmp_path / "nope"))
     assert "models directory not found" in line
 

@@ -30,6 +30,11 @@ def scores(predictions_dirs, frames, split_file, out, right):
     from wirescene.training.scores import fit_score_calibration, read_run_sources
 
     check_output_file(out, "--out")
+    seen: dict = {}
+    for folder in predictions_dirs:  # a run given twice would count every record twice
+        first = seen.setdefault(Path(folder).resolve(), folder)
+        if first is not folder:
+            raise InputError(f"evaluation run given twice (as {first} and {folder})", path=folder)
     recorded = sorted({p.stem for folder in predictions_dirs for p in (Path(folder) / RECORDS_DIR).glob("*.json")})
     where = ", ".join(str(d) for d in predictions_dirs)
     frame_ids = select_frames(frames, split_file, recorded, where=where, what="frame record") if recorded else None

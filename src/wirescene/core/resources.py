@@ -82,7 +82,8 @@ def resolve_models(models_dir: str | Path | None) -> Models:
     InputError
         Naming the directory or file: not a directory; a manifest that is corrupt, of
         another format, lists an unknown or missing artefact, disagrees with the files
-        present, or marks an unfinished training; no manifest and no known artefact.
+        present (or with their hashes), or marks an unfinished training; no manifest and
+        no known artefact.
     """
     if models_dir is None:
         return SHIPPED
@@ -115,6 +116,13 @@ def resolve_models(models_dir: str | Path | None) -> Models:
     if extra:
         raise InputError(f"{extra[0]} is not listed in {MANIFEST_FILE} (add it to 'artefacts' or remove the file)",
                          path=root)
+    written = {s.get("artefact"): s.get("sha256") for s in (record.get("steps") or {}).values() if isinstance(s, dict)}
+    for name in listed:  # a file replaced after the training would make the manifest describe another model
+        expected = written.get(ARTEFACTS[name])
+        if expected and file_sha256(root / ARTEFACTS[name]) != expected:
+            raise InputError(f"not the file its training wrote (its SHA-256 differs from {MANIFEST_FILE}'s): retrain "
+                             f"it (--resume) or, for a directory put together by hand, remove {MANIFEST_FILE}",
+                             path=root / ARTEFACTS[name])
     return Models(root.resolve(), tuple(n for n in ARTEFACTS if n in listed))
 
 
