@@ -254,6 +254,11 @@ CASES = {
     "train viewpoints of one bin": (
         lambda t: ["train", "viewpoints", _frame_root(t, CAR + "\n"), "--out", t / "v.npz"],
         "show one viewpoint bin"),
+    "train parts --synth-cache under a file": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--synth-cache", _file(t, "f") / "cache"], "is a file"),
+    "train all parts.synth_cache under a file": (
+        lambda t: ["train", "all", KITTI_ROOT, "--out", t / "m", "--set", f"parts.synth_cache={_file(t, 'f') / 'c'}"],
+        "--set parts.synth_cache: .* is a file"),
     "train scores of a run given twice": (
         lambda t: ["train", "scores", t / "run", t / "x" / ".." / "run", "--out", t / "s.json"],
         "evaluation run given twice"),

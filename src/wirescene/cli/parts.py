@@ -11,6 +11,7 @@ from wirescene.cli.options import (
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
     POSITIVE,
+    check_output_dir,
     check_output_file,
     drive_map_option,
     read_drive_map,
@@ -81,6 +82,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
 
     check_output_file(out, "--out")
     check_output_file(report, "--report")
+    check_output_dir(synth_cache, "--synth-cache")
     if kitti_root is None and (frames is not None or split_file is not None):
         raise click.UsageError("--frames / --split-file need --kitti-root")
     if label_shapes is not None:
