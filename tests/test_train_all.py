@@ -435,7 +435,9 @@ def test_models_replace_the_bank_and_the_resume_fingerprint(trained, tmp_path):
     pred = tmp_path / "pred"
     common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--particles", 10, "--workers", 1,
               "--detections", "bank", "--predictions", pred]
-    assert cli(*common, "--models", out).exit_code == 0
+    r = cli(*common, "--models", out)
+    assert r.exit_code == 0
+    assert f"1 of the 1 frames evaluated are among those {out} was trained on (e.g. 000010)" in r.stderr
     record = json.loads((pred / ".frames" / "000010.json").read_text())
     from wirescene.eval.metrics import FrameResult
 

@@ -261,6 +261,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.frame_ids(), where=dataset.split_dir)
     drives = interval_drives(dataset.split_dir)  # read before any fit: a bad devkit mapping is an error now
+    _say_if_trained_on(inference.get("models"), dataset, frame_ids)
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
@@ -293,6 +294,17 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
             out = out[variants[0]]
         _write_json_atomic(json_out, out)
         click.echo(f"metrics written to {json_out}")
+
+
+def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str]) -> None:
+    """A line on standard error where ``--models`` was trained on some of the frames evaluated:
+    their figures are not held out."""
+    from wirescene.core.resources import resolve_models, trained_on
+
+    seen = trained_on(resolve_models(models_dir), dataset.split_dir, frame_ids)
+    if seen:
+        click.echo(f"wirescene: {len(seen)} of the {len(frame_ids)} frames evaluated are among those {models_dir} was "
+                   f"trained on (e.g. {seen[0]}): their figures are not held out", err=True)
 
 
 def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:

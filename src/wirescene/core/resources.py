@@ -126,6 +126,20 @@ def resolve_models(models_dir: str | Path | None) -> Models:
     return Models(root.resolve(), tuple(n for n in ARTEFACTS if n in listed))
 
 
+def trained_on(models: Models, split_dir: str | Path, frame_ids) -> list[str]:
+    """The frames of ``frame_ids`` (of the KITTI split directory ``split_dir``) that the
+    models directory's own artefacts were trained on, as its manifest records them (none
+    for the shipped models or a directory without a manifest)."""
+    manifest = None if models.root is None else models.root / MANIFEST_FILE
+    if manifest is None or not manifest.is_file() or not models.own:
+        return []
+    data = load_json(manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("data") or {}
+    if not isinstance(data.get("frame_ids"), list) or data.get("kitti_root") != str(Path(split_dir).resolve()):
+        return []
+    trained = set(map(str, data["frame_ids"]))
+    return [f for f in frame_ids if str(f) in trained]
+
+
 def file_sha256(path: str | Path) -> str:
     """SHA-256 (hex) of a file's bytes, computed once per file version (path, size, mtime)."""
     path = Path(path).resolve()
