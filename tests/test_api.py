@@ -387,6 +387,28 @@ assert not plt.fignum_exists(fig.number)
     assert all((tmp_path / f).stat().st_size > 1000 for f in ("bev.png", "pr.png", "own.png"))
 
 
+def test_overlay_cuts_what_reaches_behind_the_camera_and_keys_its_colours(frame):
+    from matplotlib.collections import LineCollection
+
+    from wirescene.core.labels import Label
+    from wirescene.core.wireframe import EDGES
+    from wirescene.io.pictures import overlay
+
+    image, camera, _ = frame
+    # a car beside the camera, its rear corners behind it (a truncated neighbour, as in trk0001_000005)
+    beside = Label("Car", 0.6, 0, -1.6, [1000.0, 150.0, 1241.0, 374.0], [1.5, 1.7, 4.2], [3.0, 1.6, 0.8], -1.6)
+    fig = overlay(image, camera, gt=[beside])
+    ax = fig.axes[0]
+    segments = np.concatenate([c.get_segments() for c in ax.collections if isinstance(c, LineCollection)])
+    assert len(segments) > 0 and np.isfinite(segments).all()  # was: the whole box left out
+    assert segments[..., 0].max() > image.shape[1] * 0.8 and np.abs(segments).max() < 1e5  # no flipped projection
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["ground truth"]
+    scene = wirescene.fit(image, camera, [[354, 185, 549, 294]], variant="full", particles=20)
+    legend = overlay(image, camera, scene, detections=scene.detections, edges=EDGES).axes[0].get_legend()
+    key = [t.get_text() for t in legend.get_texts()]
+    assert key[0] == "estimate" and key[-1] == "pre-detection"
+
+
 def test_pictures_are_saved_in_the_format_their_suffix_names_else_png(tmp_path):
     from wirescene.io.pictures import birds_eye, save_figure
 

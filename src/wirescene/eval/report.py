@@ -223,8 +223,8 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
     for r in reports[lead].records:
         errors.setdefault(r.frame_id, []).append(r.loc_error)
     ranked = sorted(scores, key=lambda f: (-scores[f], f))  # best first; ties by frame id
-    k = min(n_gallery, max(1, len(ranked) // 2))  # best and worst never share a frame
-    picks = [("best", f) for f in ranked[:k]] + [("worst", f) for f in ranked[::-1][:min(n_gallery, len(ranked) - k)]]
+    k = min(n_gallery, max(1, len(ranked) // 2))  # best and worst never share a frame, nor take the middle one
+    picks = [("best", f) for f in ranked[:k]] + [("worst", f) for f in ranked[::-1][:min(k, len(ranked) - k)]]
     seen, cards = set(), []
     for kind, frame_id in picks:
         if frame_id in seen:
@@ -258,7 +258,8 @@ viewpoint within 45°).</p>
 {_kitti_table(kitti, kitti_intervals) if kitti else ""}
 <div class="plots">{''.join(f'<img src="{name}" alt="{name}">' for name in plots)}</div>
 <h2>Gallery ({html.escape(lead)}): best and worst frames</h2>
-<p>Red: estimate (wireframe, hidden vertices faded); green: ground truth; yellow: pre-detections.
+<p>Red: estimate ({"wireframe, hidden vertices blue" if get_variant(lead).fine else "3D box, a cross on its front"});
+green: ground truth; yellow: pre-detections.
 Frames ranked by a score that counts missed and false cars: (sum over true positives of
 max(0, 1 &minus; error / {SCORE_ZERO_ERROR:g} m) &minus; false detections) / labelled cars.</p>
 {''.join(cards)}

@@ -16,6 +16,18 @@ from wirescene.io.kitti import write_labels
 from wirescene.io.pictures import birds_eye, overlay, save_figure
 
 
+def boxes_in_words(source: str) -> str:
+    """What a fit started from, for a picture's title: ``Detections.source`` in words.
+
+    Examples
+    --------
+    >>> boxes_in_words("gt"), boxes_in_words("bank"), boxes_in_words("dets/000010.json")
+    ('label boxes', 'own pre-detection', 'boxes of 000010.json')
+    """
+    named = {"gt": "label boxes", "bank": "own pre-detection", "api": "given boxes", "": "given boxes"}
+    return named.get(source, f"boxes of {Path(source).name}")
+
+
 def write_fit_outputs(
     out_dir: Path,
     stem: str,
@@ -34,8 +46,9 @@ def write_fit_outputs(
     out_dir.mkdir(parents=True, exist_ok=True)
     payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
     fitted = detections.subset(sorted(o.detection_index for o in estimate.objects))
-    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted, title=f"{stem}  {estimate.variant}", edges=EDGES)
-    fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=f"{stem}  {estimate.variant}")
+    title = f"{stem}  {estimate.variant}, {boxes_in_words(detections.source)}"
+    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted, title=title, edges=EDGES)
+    fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=title)
     paths = {
         "labels": out_dir / f"{stem}.txt",
         "json": out_dir / f"{stem}.json",

@@ -30,22 +30,46 @@ _BOX_EDGES = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0
 _FRONT_FACE = [(0, 3), (1, 2)]  # cross on the front face marks the heading
 
 
+HIDDEN_COLOR = "#2f6fe8"
+
+
+def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: float) -> None:
+    """The segments ``edges`` ``(E, 2)`` between 3D ``points`` ``(P, 3)``, each cut at the
+    camera's near plane (a car next to or beside the camera keeps the part in front of it)."""
+    from matplotlib.collections import LineCollection
+
+    e = np.asarray(edges, int).reshape(-1, 2)
+    _, depth = camera.project_with_depth(points)
+    a, b = points[e[:, 0]], points[e[:, 1]]
+    da, db = depth[e[:, 0]], depth[e[:, 1]]
+    keep = (da > NEAR_PLANE) | (db > NEAR_PLANE)
+    a, b, da, db = a[keep], b[keep], da[keep], db[keep]
+    with np.errstate(divide="ignore", invalid="ignore"):  # depth is affine along a segment: cut where it is NEAR_PLANE
+        s = np.clip((NEAR_PLANE * 1.001 - da) / (db - da), 0.0, 1.0)[:, None]
+    cut = a + s * (b - a)
+    a, b = np.where((da <= NEAR_PLANE)[:, None], cut, a), np.where((db <= NEAR_PLANE)[:, None], cut, b)
+    uv = camera.project(np.concatenate([a, b]))
+    ax.add_collection(LineCollection(np.stack([uv[:len(a)], uv[len(a):]], axis=1), colors=color, linewidths=lw))
+
+
 def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float = 1.5):
-    uv, depth = camera.project_with_depth(corners)
-    if np.any(depth <= NEAR_PLANE):
-        return
-    for i, j in _BOX_EDGES + _FRONT_FACE:
-        ax.plot(uv[[i, j], 0], uv[[i, j], 1], color=color, lw=lw if (i, j) not in _FRONT_FACE else lw * 0.6)
+    _draw_edges(ax, camera, corners, _BOX_EDGES, color, lw)
+    _draw_edges(ax, camera, corners, _FRONT_FACE, color, lw * 0.6)
 
 
 def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR):
-    """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``; hidden vertices in blue."""
-    uv = camera.project(vertices)
-    for i, j in edges:
-        ax.plot(uv[[i, j], 0], uv[[i, j], 1], color=color, lw=1.0)
+    """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``; hidden vertices in blue, dots
+    sized by the car's height in the image (a far car's dots would hide it)."""
+    vertices = np.asarray(vertices, float)
+    _draw_edges(ax, camera, vertices, edges, color, 1.0)
+    uv, depth = camera.project_with_depth(vertices)
+    front = depth > NEAR_PLANE
+    if not front.any():
+        return
+    size = float(np.clip(np.ptp(uv[front, 1]) / 8.0, 1.0, 10.0))
     vis = np.ones(len(uv), bool) if visible is None else np.asarray(visible, bool)
-    ax.scatter(uv[vis, 0], uv[vis, 1], s=10, c=color, zorder=3)
-    ax.scatter(uv[~vis, 0], uv[~vis, 1], s=10, c="#2f6fe8", zorder=3)
+    ax.scatter(uv[vis & front, 0], uv[vis & front, 1], s=size, c=color, zorder=3)
+    ax.scatter(uv[~vis & front, 0], uv[~vis & front, 1], s=size, c=HIDDEN_COLOR, zorder=3)
 
 
 def overlay(
@@ -80,16 +104,32 @@ def overlay(
     if detections is not None:
         for b in detections.boxes:
             ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
-    for g in gt:
+    for g in sorted(gt, key=lambda g: -g.location[2]):  # far to near: a near car is drawn over a far one
         _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0)
-    if estimate is not None:
-        for o in estimate.objects:
-            if o.vertices is not None and edges is not None:
-                draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility)
-            else:
-                _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), EST_COLOR)
+    objects = [] if estimate is None else sorted(estimate.objects, key=lambda o: -o.location[2])
+    wireframes = edges is not None and any(o.vertices is not None for o in objects)
+    for o in objects:
+        if o.vertices is not None and edges is not None:
+            draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility)
+        else:
+            _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), EST_COLOR)
     if title:
         ax.text(5, 15, title, color="white", fontsize=10, bbox=dict(facecolor="black", alpha=0.5, lw=0))
+    key = []  # what each colour means, for the parts drawn
+    if objects:
+        key.append(("-", EST_COLOR, "estimate" + (" (a cross marks the front)" if not wireframes else "")))
+        if wireframes and any(o.visibility is not None and not np.all(o.visibility) for o in objects):
+            key.append(("o", HIDDEN_COLOR, "hidden part"))
+    if len(gt):
+        key.append(("-", GT_COLOR, "ground truth"))
+    if detections is not None and len(detections.boxes):
+        key.append(("--", DET_COLOR, "pre-detection"))
+    if key:
+        from matplotlib.lines import Line2D
+
+        handles = [Line2D([], [], color=c, ls="none" if s == "o" else s, marker="o" if s == "o" else None, ms=4)
+                   for s, c, _ in key]
+        ax.legend(handles, [k[2] for k in key], loc="upper right", fontsize=7, framealpha=0.6, borderpad=0.4)
     return fig
 
 
@@ -139,13 +179,13 @@ def birds_eye(
     ax.plot([0], [0], marker="^", color="black")
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
-    ax.set_aspect("equal")
+    ax.set_aspect("equal", adjustable="datalim")  # a deep scene widens x rather than shrinking to a strip
     ax.set_xlabel("x [m]")
     ax.set_ylabel("z [m]")
     ax.grid(alpha=0.3)
-    ax.plot([], [], color=EST_COLOR, label="estimate")
+    ax.plot([], [], color=EST_COLOR, label="estimate (a line marks the front)")
     ax.plot([], [], color=GT_COLOR, label="ground truth")
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8, frameon=False)  # off the cars
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
