@@ -55,7 +55,7 @@ def _usage_message(exc: click.UsageError) -> str:
 class _Group(click.Group):
     """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
     on standard error and exit code 2, without a traceback (typed errors of the package,
-    bad option values and usage errors alike)."""
+    bad option values and usage errors alike); Ctrl-C ends with exit code 130."""
 
     def invoke(self, ctx):
         try:
@@ -69,6 +69,9 @@ class _Group(click.Group):
         except click.ClickException as exc:  # e.g. an unreachable --dask scheduler, a failed write of `synth`
             click.echo(f"wirescene: error: {' '.join(exc.format_message().split())}", err=True)
             sys.exit(2)
+        except KeyboardInterrupt:  # Ctrl-C: the shell's convention (128 + SIGINT), not click's "Aborted!" and 1
+            click.echo("wirescene: interrupted", err=True)
+            sys.exit(130)
 
 
 @click.group(cls=_Group)
