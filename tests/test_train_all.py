@@ -369,6 +369,11 @@ def test_a_first_step_that_fails_leaves_no_directory(tmp_path, monkeypatch):
 def test_train_all_needs_two_groups_and_known_options(tmp_path):
     line = one_line_error(cli("train", "all", KITTI_ROOT, "--frames", "000010", "--out", tmp_path / "m"))
     assert "at least two drives" in line
+    # with the part calibration off and the bank's given, no fold is held out: one drive will do
+    r = cli("train", "all", KITTI_ROOT, "--frames", "000010", "--out", tmp_path / "one", *TINY, "--set",
+            "detector.calibration=[4.0416, -2.3012, 0.6323]")
+    assert r.exit_code == 0, r.output + r.stderr
+    assert json.loads((tmp_path / "one" / MANIFEST_FILE).read_text())["calibration_folds"]["n_folds"] == 0
     line = one_line_error(cli("train", "all", KITTI_ROOT, "--out", tmp_path / "m", "--set", "parts.nope=1"))
     assert "--set" in line and "no option 'nope'" in line
     assert not (tmp_path / "m").exists()

@@ -274,7 +274,9 @@ def train_all(
     ids = _training_frames(dataset, frames, split_file)
     data_sha256 = _check_frames(dataset, ids)  # before anything is trained or written
     drives, mapping_dir = drive_map(dataset.base_dir, mapping=drive_mapping)
-    folds = calibration_folds(dataset, ids, n_folds=n_folds, drives=drives)
+    # held-out folds serve the part calibration and the bank's, unless both are off or given (one drive is then enough)
+    held_out = bool(opts["parts"].get("calibrate_real")) or opts["detector"].get("calibration") is None
+    folds = calibration_folds(dataset, ids, n_folds=n_folds, drives=drives) if held_out else {}
     previous = _previous_steps(out, resume)
     manifest = _new_manifest(dataset, ids, folds, split_file, drives=drives, mapping_dir=mapping_dir)
     # what a step learns from: the frames' labels, calibrations and images, and the folds they are dealt to
