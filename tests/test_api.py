@@ -110,6 +110,20 @@ def test_integer_images_holding_8_bit_values_are_read_as_8_bit(frame):
     assert (to_rgb_uint8(image.astype(np.uint16) * 257) == image).all()  # a 16-bit PNG's range
 
 
+def test_detect_returns_the_fits_own_boxes_and_viewpoints_above_its_threshold(frame):
+    from wirescene.fitting.pipeline import PredetectOptions, detect_own
+
+    image, camera, _ = frame
+    own = detect_own(camera, image, threshold=PredetectOptions().threshold)  # what the fit starts from
+    both = wirescene.detect(image, camera, threshold=PredetectOptions().threshold)
+    assert_close(both.boxes, own.boxes, atol=0, rtol=0) and assert_close(both.alpha, own.alpha, atol=0, rtol=0)
+    shown = wirescene.detect(image, camera)  # the bank's 2D operating point, 0.5
+    assert (shown.scores > 0.5).all() and len(shown) == int((own.scores > 0.5).sum())
+    assert_close(shown.alpha, own.alpha[own.scores > 0.5], atol=0, rtol=0)  # the same viewpoints, whatever the threshold
+    with pytest.raises(wirescene.ArgumentError, match="^threshold: "):
+        wirescene.detect(image, camera, threshold=float("nan"))
+
+
 def test_boxes_past_the_image_are_fitted_and_written_clipped(frame):
     image, camera, _ = frame
     W, H = camera.image_size

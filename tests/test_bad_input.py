@@ -264,6 +264,8 @@ CASES = {
         "evaluation run given twice"),
     "train occlusion --scenes 0": (lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "0"], "--scenes"),
     # synthetic scenes
+    "synth into an empty path": (lambda t: ["synth", "", "--scenes", "1"], "OUT_DIR: empty path"),
+    "synth of 10^20 scenes": (lambda t: ["synth", t / "s", "--scenes", "99999999999999999999"], "--scenes"),
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],
                                          "already holds scenes"),
 }

@@ -322,7 +322,7 @@ def fit(
     return fitted.estimates[name]
 
 
-def detect(image, calib=None, *, models=None) -> Detections:
+def detect(image, calib=None, *, models=None, threshold: float | None = None) -> Detections:
     """wirescene's own 2D pre-detection of cars (paper Sec. 3.4).
 
     Parameters
@@ -339,6 +339,11 @@ def detect(image, calib=None, *, models=None) -> Detections:
         viewpoints stay.
     models : path, optional
         A models directory whose detector bank replaces the shipped one.
+    threshold : float, optional
+        Keep the detections scoring above it (default: the bank's own, 0.5 for the shipped
+        one, its 2D operating point). The fit's own pre-detection keeps those above 0.3
+        (``PredetectOptions.threshold``) and verifies them after the fit; the viewpoints
+        are the fit's whatever the threshold (the box rule reads the boxes above 0.3).
 
     Returns
     -------
@@ -356,13 +361,17 @@ def detect(image, calib=None, *, models=None) -> Detections:
     >>> bool((dets.scores > 0.5).all())  # above the shipped bank's threshold
     True
     """
-    from wirescene.fitting.pipeline import detect_own, detector_bank
+    from wirescene.fitting.pipeline import detect_own, detector_bank, rule_threshold
 
+    if threshold is not None and not (isinstance(threshold, numbers.Real) and np.isfinite(threshold)):
+        raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
     bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
-    return detect_own(camera, rgb, bank=bank)
+    keep = bank.threshold if threshold is None else float(threshold)
+    dets = detect_own(camera, rgb, bank=bank, threshold=rule_threshold(bank, keep))
+    return dets.subset(dets.scores > keep)
 
 
 DRAW_VIEWS = ("overlay", "bev")

@@ -157,7 +157,9 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @models_option
 @click.option("--bank", "bank_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Detector bank .npz (default: --models' or the shipped one).")
-@click.option("--threshold", type=FiniteFloat(), default=None, help="Score threshold (default: the bank's).")
+@click.option("--threshold", type=FiniteFloat(), default=None,
+              help="Score threshold (default: the bank's, 0.5 for the shipped one; the fit's own pre-detection keeps "
+                   "the boxes above 0.3, and --out writes the fit's viewpoints at any threshold).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Write FRAME.json detection files here (readable by --detections of `eval`).")
 @click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PR curve PNG.")
@@ -172,7 +174,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
 
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import detect_own
+    from wirescene.fitting.pipeline import detect_own, rule_threshold
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars
@@ -196,8 +198,10 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
                             responses=responses)
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
-            if out_dir is not None:
-                kept = detect_own(ds.camera(fid), img, bank=bank, detections=kept, pyramid=pyramid, responses=responses)
+            if out_dir is not None:  # the viewpoints of the fit's pre-detection: the rule reads the boxes it reads
+                read = d.subset(d.scores > rule_threshold(bank, thr))
+                read = detect_own(ds.camera(fid), img, bank=bank, detections=read, pyramid=pyramid, responses=responses)
+                kept = read.subset(read.scores > thr)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
                 files[f"{fid}.json"] = json.dumps({"detections": entries}, indent=1)

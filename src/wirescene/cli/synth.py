@@ -26,7 +26,8 @@ def _parse_range(value: str) -> tuple[int, int]:
 
 @click.command("synth")
 @click.argument("out_dir", type=click.Path(file_okay=False))
-@click.option("--scenes", default=10, show_default=True, type=click.IntRange(min=1), help="Number of scenes.")
+@click.option("--scenes", default=10, show_default=True, type=click.IntRange(min=1, max=10_000_000),
+              help="Number of scenes.")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Random seed; scene i is drawn from (seed, i).")
 @click.option("--cars-per-scene", "cars", default="2-8", show_default=True,
@@ -44,6 +45,8 @@ def synth(out_dir, scenes, seed, cars, occluders, overwrite):
     from wirescene.synth.generate import generate_dataset
 
     rng_cars = _parse_range(cars)
+    if not str(out_dir).strip():
+        raise click.BadParameter("empty path (give a directory, e.g. '.')", param_hint="OUT_DIR")
     check_output_dir(Path(out_dir), "OUT_DIR")
     split = Path(out_dir) / "training"
     if split.is_dir() and any(split.iterdir()):
@@ -60,4 +63,4 @@ def synth(out_dir, scenes, seed, cars, occluders, overwrite):
         raise click.ClickException(str(exc)) from None
     except OSError as exc:
         raise click.ClickException(f"cannot write to {out_dir}: {exc.strerror or exc}") from None
-    click.echo(f"wrote {len(ids)} scenes to {out_dir}/training")
+    click.echo(f"wrote {len(ids)} scenes to {split}")

@@ -231,6 +231,15 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     return Detections(detections.boxes, detections.scores, alpha, detections.source)
 
 
+def rule_threshold(bank, threshold: float) -> float:
+    """The score down to which the box rule reads a calibrated bank's boxes when only those
+    above ``threshold`` are kept: at least the fit's own pre-detection's (cars of one row agree,
+    so a box's viewpoint depends on the boxes beside it: every caller sees the fit's)."""
+    if bank.calibration is None:  # margins, not probabilities: no common scale
+        return threshold
+    return min(threshold, PredetectOptions().threshold)
+
+
 def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
                detections: Detections | None = None, threshold: float | None = None, pyramid: list | None = None,
                responses: dict | None = None, smallest_car: float | None = None) -> Detections:

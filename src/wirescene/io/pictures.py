@@ -168,7 +168,7 @@ def birds_eye(
     if extent is None:
         xmin, zmax = allp[:, 0].min() - 3, max(allp[:, 1].max() + 3, 10)
         xmax = allp[:, 0].max() + 3
-        half = max(abs(xmin), abs(xmax), 8)
+        half = max(abs(xmin), abs(xmax), 8, 0.4 * (zmax + 2))  # a deep scene widens x rather than becoming a strip
         extent = (-half, half, -2, zmax)
     if camera is not None and camera.image_size is not None:
         w = camera.image_size[0]
@@ -179,7 +179,7 @@ def birds_eye(
     ax.plot([0], [0], marker="^", color="black")
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
-    ax.set_aspect("equal", adjustable="datalim")  # a deep scene widens x rather than shrinking to a strip
+    ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("z [m]")
     ax.grid(alpha=0.3)
