@@ -222,7 +222,9 @@ def _dask_client(address: str):
                    "seed's figures, then their mean and range over the seeds (the fit samples, so the seed alone "
                    "moves the figures by a few cars); --predictions and --report then get a seed-S folder per seed.")
 @click.option("--split", default="training", show_default=True)
-@click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the metrics as JSON.")
+@click.option("--json", "json_out", type=click.Path(path_type=Path), default=None,
+              help="Write the metrics as JSON: one variant's at the top level, several keyed by variant (and by seed "
+                   "under 'seeds' with several --seed).")
 @click.option("--predictions", type=click.Path(path_type=Path), default=None, help="Write KITTI label files per variant here.")
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
               help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
