@@ -558,6 +558,10 @@ def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
     assert r.exit_code == 0, r.output
     assert "KITTI Car AP" in r.output and "moderate" in r.output
     assert f"{pred}: 1 of 3 frames have no prediction file (no detections)" in r.output
+    n = kitti_metrics([read_labels(gt_dir / f"{f}.txt") for f in ("000002", "000010", "001545")],
+                      [FrameLabels()] * 3)["n_gt"]["car"]  # fewer than 40 cars: the devkit's ceiling is said
+    assert (f"at most (N - 1) / 40: easy {100 * (n['easy'] - 1) / 40:.1f}, moderate {100 * (n['moderate'] - 1) / 40:.1f}"
+            in r.output)
     rows = [ln.split() for ln in r.output.splitlines() if ln.split()[:1] in (["2d"], ["aos"], ["bev"], ["3d"])]
     assert len(rows) == 12
     data = json.loads(out.read_text())

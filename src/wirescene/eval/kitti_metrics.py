@@ -886,6 +886,10 @@ def format_kitti_table(result: dict, *, title: str = "") -> str:
             row = figures[metric]
             lines.append(f"{metric:<7} {iou:>4} {points:>6} {_fmt(row['easy']):>8} {_fmt(row['moderate']):>9} "
                          f"{_fmt(row['hard']):>8}")
+    few = {d: k for d, k in n.items() if 0 < k < 40}
+    if few:  # the devkit's thresholds sit at every 40th of the cars: fewer than 40 fill fewer of its recall points
+        lines.append("note: with fewer than 40 cars the devkit's R40 AP is at most (N - 1) / 40: "
+                     + ", ".join(f"{d} {100 * (k - 1) / 40:.1f}" for d, k in few.items()))
     return "\n".join(lines)
 
 

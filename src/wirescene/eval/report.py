@@ -173,7 +173,8 @@ def _kitti_table(kitti: dict, kitti_intervals: dict | None) -> str:
         rows.append(f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     n = next(iter(kitti.values()))["n_gt"]["car"]["moderate"]
     spread = " with its 90% bootstrap interval over drives" if kitti_intervals else ""
-    return (f"<p>KITTI's own measure (R40, moderate, {n} cars; the devkit's rules), each AP{spread}:</p>"
+    ceiling = f" With fewer than 40 cars the devkit's AP is at most {100 * (n - 1) / 40:.1f}." if 0 < n < 40 else ""
+    return (f"<p>KITTI's own measure (R40, moderate, {n} cars; the devkit's rules), each AP{spread}:{ceiling}</p>"
             f"<table><tr><th>variant</th>{''.join(f'<th>{c[0]}</th>' for c in cols)}</tr>{''.join(rows)}</table>")
 
 
