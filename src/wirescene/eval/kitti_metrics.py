@@ -886,11 +886,17 @@ def format_kitti_table(result: dict, *, title: str = "") -> str:
             row = figures[metric]
             lines.append(f"{metric:<7} {iou:>4} {points:>6} {_fmt(row['easy']):>8} {_fmt(row['moderate']):>9} "
                          f"{_fmt(row['hard']):>8}")
+    note = _ceiling_note(n)
+    return "\n".join(lines + ([note] if note else []))
+
+
+def _ceiling_note(n: dict) -> str:
+    """A line on the devkit's ceiling of R40 AP where a difficulty of ``n`` (``{difficulty:
+    cars}``) has fewer than 40 cars: its thresholds sit at every 40th of the cars, so fewer
+    fill fewer of its recall points."""
     few = {d: k for d, k in n.items() if 0 < k < 40}
-    if few:  # the devkit's thresholds sit at every 40th of the cars: fewer than 40 fill fewer of its recall points
-        lines.append("note: with fewer than 40 cars the devkit's R40 AP is at most (N - 1) / 40: "
-                     + ", ".join(f"{d} {100 * (k - 1) / 40:.1f}" for d, k in few.items()))
-    return "\n".join(lines)
+    return ("note: with fewer than 40 cars the devkit's R40 AP is at most (N - 1) / 40: "
+            + ", ".join(f"{d} {100 * (k - 1) / 40:.1f}" for d, k in few.items())) if few else ""
 
 
 def kitti_figure(result: dict, block: str, metric: str):
@@ -925,6 +931,8 @@ def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict]
              f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>7}" for c in _SUMMARY_COLUMNS)]
     for v, r in results.items():
         lines.append(f"{v:<{name_w}} " + " ".join(f"{_fmt(c):>7}" for c in _summary_cells(r, lambda f: f["moderate"])))
+    note = _ceiling_note(n)
+    lines += [note] if note else []
     for table in (intervals, margins):
         if table:
             lines += ["", format_kitti_intervals(table)]
