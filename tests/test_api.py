@@ -116,12 +116,20 @@ def test_detect_returns_the_fits_own_boxes_and_viewpoints_above_its_threshold(fr
     image, camera, _ = frame
     own = detect_own(camera, image, threshold=PredetectOptions().threshold)  # what the fit starts from
     both = wirescene.detect(image, camera, threshold=PredetectOptions().threshold)
-    assert_close(both.boxes, own.boxes, atol=0, rtol=0) and assert_close(both.alpha, own.alpha, atol=0, rtol=0)
+    assert_close(both.boxes, own.boxes, atol=0, rtol=0)
+    assert_close(both.alpha, own.alpha, atol=0, rtol=0)
     shown = wirescene.detect(image, camera)  # the bank's 2D operating point, 0.5
     assert (shown.scores > 0.5).all() and len(shown) == int((own.scores > 0.5).sum())
     assert_close(shown.alpha, own.alpha[own.scores > 0.5], atol=0, rtol=0)  # the same viewpoints, whatever the threshold
+    more = wirescene.detect(image, camera, threshold=0.05)  # the rule reads more boxes; the fit's keep their viewpoints
+    fits = more.scores > PredetectOptions().threshold
+    assert len(more) > len(own) and fits.sum() == len(own)
+    assert_close(more.boxes[fits], own.boxes, atol=0, rtol=0)
+    assert_close(more.alpha[fits], own.alpha, atol=0, rtol=0)
     with pytest.raises(wirescene.ArgumentError, match="^threshold: "):
         wirescene.detect(image, camera, threshold=float("nan"))
+    with pytest.raises(wirescene.ArgumentError, match="^threshold: "):
+        wirescene.detect(image, camera, threshold=True)
 
 
 def test_boxes_past_the_image_are_fitted_and_written_clipped(frame):
@@ -135,6 +143,8 @@ def test_boxes_past_the_image_are_fitted_and_written_clipped(frame):
     assert_close([c.location for c in a.cars], [c.location for c in b.cars], atol=0, rtol=0)
     last = wirescene.fit(image, camera, [[W - 0.5, 100.0, W + 50.0, 150.0]], variant="coarse", particles=20)
     assert_close(last.cars[0].box, [W - 2.0, 100.0, W - 1.0, 150.0])  # a box in the last column keeps a pixel
+    first = wirescene.fit(image, camera, [[-300.0, 200.0, 0.5, 330.0]], variant="coarse", particles=20)
+    assert_close(first.cars[0].box, [0.0, 200.0, 1.0, 330.0])  # and one in the first, inside the image
 
 
 def test_pil_images_are_read_as_their_files_are(frame, tmp_path):

@@ -166,9 +166,11 @@ def test_detection_files_of_other_tools_keep_only_their_cars(tmp_path):
     coco.write_text(json.dumps([{"image_id": 10, "category_id": 3, "bbox": [354, 185, 195, 109], "score": 0.9},
                                 {"image_id": 10, "category_id": 1, "bbox": [859, 160, 20, 61], "score": 0.95},
                                 {"image_id": 10, "category_name": "Car", "bbox": [600, 170, 80, 60]},
-                                {"image_id": 10, "label": "truck", "bbox": [700, 170, 80, 60]}]))
+                                {"image_id": 10, "label": "truck", "bbox": [700, 170, 80, 60]},
+                                {"image_id": 10, "type": "Pedestrian", "bbox": [800, 170, 20, 60]},
+                                {"image_id": 10, "label": 3.0, "bbox": [100, 170, 80, 60]}]))
     d = read_detections(coco)
-    assert_close(d.boxes, [[354, 185, 549, 294], [600, 170, 680, 230]])
+    assert_close(d.boxes, [[354, 185, 549, 294], [600, 170, 680, 230], [100, 170, 180, 230]])
     csv = tmp_path / "d.csv"
     csv.write_text("x1,y1,x2,y2,score,alpha,class\n10,20,110,80,0.8,nan,car\n10,20,110,80,0.8,0.1,person\n")
     d = read_detections(csv)  # NaN: no viewpoint, as in Detections
@@ -177,7 +179,8 @@ def test_detection_files_of_other_tools_keep_only_their_cars(tmp_path):
     kitti.write_text("car -1 -1 1.95 354.43 185.52 549.52 294.49 -1 -1 -1 -1000 -1000 -1000 -10 0.9\n"
                      "pedestrian -1 -1 0.1 859 160 879 221 -1 -1 -1 -1000 -1000 -1000 -10 0.9\n")
     d = read_detections(kitti)
-    assert_close(d.boxes, [[354.43, 185.52, 549.52, 294.49]]) and not np.isnan(d.alpha).any()
+    assert_close(d.boxes, [[354.43, 185.52, 549.52, 294.49]])
+    assert not np.isnan(d.alpha).any()
 
 
 def test_gt_command_draws_frame(tmp_path):

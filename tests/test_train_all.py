@@ -387,11 +387,19 @@ def test_train_all_needs_two_groups_and_known_options(tmp_path):
     ("detector.threshold=2", "detector.threshold must be at most 1"),  # was a bank that never detects
     ("detector.mining_rounds=-1", "detector.mining_rounds must be at least 0"),
     ("detector.mining_images=0", "detector.mining_images must be at least 1"),
+    ("parts.synth_seed=5", "parts.synth_seed must be at least 1000"),  # was a traceback in the parts step
+    ("occlusion.grid=abc", "occlusion.grid must be a list of numbers"),  # was one after two steps
+    ("parts.n_jobs=0", "parts.n_jobs must not be 0"),
 ])
 def test_train_all_checks_the_values_it_is_set_before_any_step(tmp_path, setting, problem):
+    from wirescene.training.pipeline import check_options
+
     line = one_line_error(cli("train", "all", KITTI_ROOT, "--out", tmp_path / "m", "--set", setting))
     assert "--set" in line and problem in line
     assert not (tmp_path / "m").exists()
+    documented = {"parts": {"class_weight": "balanced_subsample", "max_real_patches": None, "n_jobs": -1},
+                  "detector": {"mining_images": None}, "occlusion": {"grid": [0.5, 0.75]}}
+    assert check_options(documented)["parts"]["n_jobs"] == -1  # what the steps document is taken
 
 
 def test_train_parts_defaults_are_the_shipped_recipe(tmp_path):

@@ -361,17 +361,21 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None) ->
     >>> bool((dets.scores > 0.5).all())  # above the shipped bank's threshold
     True
     """
-    from wirescene.fitting.pipeline import detect_own, detector_bank, rule_threshold
+    from wirescene.fitting.pipeline import PredetectOptions, detections_above, detector_bank
+    from wirescene.predetect.bank import bank_pyramid, detect_cars
 
-    if threshold is not None and not (isinstance(threshold, numbers.Real) and np.isfinite(threshold)):
+    if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, numbers.Real)
+                                  or not np.isfinite(threshold)):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
     bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
     keep = bank.threshold if threshold is None else float(threshold)
-    dets = detect_own(camera, rgb, bank=bank, threshold=rule_threshold(bank, keep))
-    return dets.subset(dets.scores > keep)
+    read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
+    pyramid, responses = bank_pyramid(bank, rgb), {}
+    dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses)
+    return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses)
 
 
 DRAW_VIEWS = ("overlay", "bev")

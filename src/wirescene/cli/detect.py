@@ -174,7 +174,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
 
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import detect_own, rule_threshold
+    from wirescene.fitting.pipeline import detections_above
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars
@@ -198,10 +198,8 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
                             responses=responses)
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
-            if out_dir is not None:  # the viewpoints of the fit's pre-detection: the rule reads the boxes it reads
-                read = d.subset(d.scores > rule_threshold(bank, thr))
-                read = detect_own(ds.camera(fid), img, bank=bank, detections=read, pyramid=pyramid, responses=responses)
-                kept = read.subset(read.scores > thr)
+            if out_dir is not None:  # with the viewpoints the fit gives the boxes it keeps
+                kept = detections_above(ds.camera(fid), img, d, thr, bank=bank, pyramid=pyramid, responses=responses)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
                 files[f"{fid}.json"] = json.dumps({"detections": entries}, indent=1)

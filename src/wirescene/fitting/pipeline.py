@@ -231,13 +231,29 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     return Detections(detections.boxes, detections.scores, alpha, detections.source)
 
 
-def rule_threshold(bank, threshold: float) -> float:
-    """The score down to which the box rule reads a calibrated bank's boxes when only those
-    above ``threshold`` are kept: at least the fit's own pre-detection's (cars of one row agree,
-    so a box's viewpoint depends on the boxes beside it: every caller sees the fit's)."""
-    if bank.calibration is None:  # margins, not probabilities: no common scale
-        return threshold
-    return min(threshold, PredetectOptions().threshold)
+def detections_above(camera: Camera | None, image: np.ndarray, found: Detections, threshold: float, *, bank,
+                     pyramid: list | None = None, responses: dict | None = None) -> Detections:
+    """The bank's detections ``found`` of ``image`` (every score down to ``threshold`` at least)
+    above ``threshold``, each box that the fit's own pre-detection also keeps (above
+    ``PredetectOptions.threshold``, for a calibrated bank) with the viewpoint the fit gives it:
+    cars of one row agree, so a box's viewpoint depends on the boxes the rule reads beside it
+    (:func:`detect_own`; ``pyramid`` and ``responses`` as there)."""
+    keep = found.subset(found.scores > threshold)
+    if camera is None:
+        return keep
+    fit_threshold = PredetectOptions().threshold
+    if bank.calibration is None:  # margins, not probabilities: no common scale with the fit's threshold
+        return detect_own(camera, image, bank=bank, detections=keep, pyramid=pyramid, responses=responses)
+    read = detect_own(camera, image, bank=bank, detections=found.subset(found.scores > min(threshold, fit_threshold)),
+                      pyramid=pyramid, responses=responses)
+    out = read.subset(read.scores > threshold)
+    if threshold < fit_threshold:  # the rule read more boxes than the fit's: the fit's set decides its own boxes
+        fit = detect_own(camera, image, bank=bank, detections=found.subset(found.scores > fit_threshold),
+                         pyramid=pyramid, responses=responses)
+        alpha = out.alpha.copy()
+        alpha[out.scores > fit_threshold] = fit.alpha
+        out = Detections(out.boxes, out.scores, alpha, out.source)
+    return out
 
 
 def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
@@ -305,8 +321,9 @@ def inside_image(detections: Detections, image_size: tuple[int, int]) -> Detecti
     clipped = np.any(boxes != detections.boxes, axis=1)
     if not clipped.any():
         return detections
-    boxes[clipped, 0] = np.minimum(boxes[clipped, 0], boxes[clipped, 2] - 1.0)
-    boxes[clipped, 1] = np.minimum(boxes[clipped, 1], boxes[clipped, 3] - 1.0)
+    for lo, hi, size in ((0, 2, W), (1, 3, H)):  # a box left under a pixel keeps one, inside the image
+        boxes[clipped, lo] = np.clip(np.minimum(boxes[clipped, lo], boxes[clipped, hi] - 1.0), 0.0, size - 2.0)
+        boxes[clipped, hi] = np.maximum(boxes[clipped, hi], boxes[clipped, lo] + 1.0)
     return Detections(boxes, detections.scores, detections.alpha, detections.source)
 
 

@@ -45,13 +45,17 @@ COCO_CAR_ID = 3
 
 
 def _is_car(entry: dict) -> bool:
-    """Whether a JSON / CSV entry is a car: its ``category`` / ``category_name`` / ``label`` /
-    ``class`` (``car``, or ``3``), or its COCO ``category_id`` (3); an entry naming none is one."""
-    for key in ("category", "category_name", "label", "class"):
-        if entry.get(key) not in (None, ""):
-            return str(entry[key]).strip().lower() in ("car", str(COCO_CAR_ID))
-    if entry.get("category_id") not in (None, ""):
-        return str(entry["category_id"]).strip() in (str(COCO_CAR_ID), f"{COCO_CAR_ID}.0")
+    """Whether a JSON / CSV entry is a car: its class under ``category``, ``category_name``,
+    ``label``, ``class``, ``type`` or COCO's ``category_id``: ``car`` in any case, or the
+    number 3 (COCO's id of a car); an entry naming no class is one."""
+    for key in ("category", "category_name", "label", "class", "type", "category_id"):
+        value = entry.get(key)
+        if value in (None, ""):
+            continue
+        try:
+            return float(value) == COCO_CAR_ID
+        except (TypeError, ValueError):
+            return str(value).strip().lower() == "car"
     return True
 
 
@@ -164,17 +168,18 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
       ``box`` ``[x1, y1, x2, y2]`` (or COCO ``bbox`` ``[x, y, w, h]``, or keys
       ``x1 y1 x2 y2``), optional ``score``, optional ``viewpoint_bin`` (0..7) or
       ``alpha`` (radians) and an optional class: ``category``, ``category_name``,
-      ``label`` or ``class`` (``car`` in any case, or ``3``), or COCO's ``category_id``
-      (3 is a car); entries of another class are skipped.
+      ``label``, ``class``, ``type`` or COCO's ``category_id``, ``car`` in any case or the
+      number 3 (COCO's id of a car; a detector numbering its classes otherwise must name
+      them); entries of another class are skipped.
     * ``.csv``: a header with ``x1,y1,x2,y2`` and optional ``score``, ``viewpoint_bin``,
       ``alpha`` and class columns as in JSON.
     * ``.txt``: a KITTI label file (15 or 16 columns); Car rows (``car`` in any case, as
       KITTI's devkit reads them) are used, with their ``alpha`` binned and their score (16th
       column) if present.
 
-    An ``alpha`` of ``-10`` (KITTI's "not estimated", as 2D-only detectors write) or NaN is an
-    unknown viewpoint, in every format; any other beyond one turn (2 pi) is refused as an
-    angle in degrees.
+    An ``alpha`` of ``-10`` (KITTI's "not estimated", as 2D-only detectors write) is an
+    unknown viewpoint in every format, and so is NaN in JSON and CSV; any other beyond one
+    turn (2 pi) is refused as an angle in degrees.
 
     With ``image_size`` (width, height), every box must overlap the image
     (:func:`wirescene.core.validate.boxes_problem`).

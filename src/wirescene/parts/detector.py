@@ -441,8 +441,9 @@ def box_crop(box, image_size, scales=DEFAULT_SCALES, *, pad: float = 0.1, radius
 
 def _grid_within(start: float, n: int, step: float, size: int) -> tuple[float, int]:
     """The points ``start + step * k`` (``k < n``) that lie at most :data:`GRID_MARGIN` x the
-    image's side ``size`` past it, as ``(first point, count)`` (at least one): the same
-    points, so a box reaching further is scored alike inside the image."""
+    image's side ``size`` past it, as ``(first point, count)`` (at least one): a subset of the
+    same points, each scored as before (the fit clips its boxes to the image first, so for
+    its boxes the bound never binds)."""
     m = GRID_MARGIN * size
     k0 = min(max(0, int(np.ceil((-m - start) / step))), n - 1)
     k1 = max(min(n, int(np.floor((size + m - start) / step)) + 1), k0 + 1)
@@ -542,7 +543,8 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
     -----
     Two bounds keep a box that is no car's from costing minutes and gigabytes: the grid
     stops :data:`GRID_MARGIN` x the image's width / height past the image (the same points,
-    so the responses inside the image do not change), and a box whose crop at its canonical
+    scored alike; within the smoothing's reach of the cut edge the smoothed responses differ),
+    and a box whose crop at its canonical
     scale would exceed :data:`MAX_CANONICAL_PIXELS` (a sliver far flatter than a car) gets
     no evidence (log ratio 0 everywhere). Neither binds for any label box or detection of
     the 72 shared KITTI frames.

@@ -40,6 +40,7 @@ from __future__ import annotations
 import hashlib
 import inspect
 import math
+import numbers
 import sys
 import time
 from dataclasses import dataclass
@@ -151,7 +152,7 @@ def option_default(step: str, key: str):
 #: least any number of a step takes) would break; ``maximum`` None: none.
 OPTION_LIMITS: dict[str, dict[str, tuple]] = {
     "parts": {"n_trees": (1, None), "max_depth": (1, None), "min_samples_leaf": (1, None),
-              "max_real_patches": (1, None), "n_jobs": (1, None)},
+              "max_real_patches": (1, None), "n_jobs": (-1, None), "synth_seed": (1000, None)},
     "detector": {"C": (1e-9, None), "max_pos": (1, None), "min_pos": (1, None), "neg_per_image": (1, None),
                  "min_height": (1, None), "max_scale": (0.01, None), "full_area": (1, None), "partial_area": (1, None),
                  "per_octave": (1, None), "cluster_radius": (0.01, None), "max_negatives": (1, None),
@@ -159,7 +160,9 @@ OPTION_LIMITS: dict[str, dict[str, tuple]] = {
     "occlusion": {"n_scenes": (1, None)},
 }
 #: The options that take one of a few words.
-OPTION_CHOICES: dict[str, dict[str, tuple]] = {"parts": {"class_weight": ("balanced", None)}}
+OPTION_CHOICES: dict[str, dict[str, tuple]] = {"parts": {"class_weight": ("balanced", "balanced_subsample", None)}}
+#: The numeric options that None also sets (all: no cap).
+OPTION_NONE: dict[str, tuple] = {"parts": ("max_real_patches",), "detector": ("mining_images",)}
 
 
 def _checked_value(step: str, key: str, value):
@@ -180,6 +183,13 @@ def _checked_value(step: str, key: str, value):
         if value not in choices[key]:
             raise ValueError(f"{step}.{key} must be one of {', '.join(map(str, choices[key]))}, got {value!r}")
         return value
+    if value is None and key in OPTION_NONE.get(step, ()):
+        return None
+    if (step, key) == ("occlusion", "grid") and value is not None:  # the c values the calibration tries
+        if not isinstance(value, (list, tuple)) or not value or not all(
+                isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+            raise ValueError(f"occlusion.grid must be a list of numbers, got {value!r}")
+        return value
     low, high = OPTION_LIMITS.get(step, {}).get(key, (0, None))
     if default is None and value is not None and key in OPTION_LIMITS.get(step, {}):  # a number or none
         default = 0
@@ -187,7 +197,10 @@ def _checked_value(step: str, key: str, value):
         return value
     field = dataclasses.field(default=default, metadata={"minimum": low, "maximum": high})
     field.name = key
-    return check_value(field, value, scope=step)
+    value = check_value(field, value, scope=step)
+    if (step, key) == ("parts", "n_jobs") and value == 0:  # scikit-learn's: -1 all cores, 0 none
+        raise ValueError("parts.n_jobs must not be 0 (-1: all cores)")
+    return value
 
 
 def check_options(overrides: Mapping[str, Mapping[str, object]]) -> dict[str, dict]:
