@@ -116,7 +116,9 @@ def resolve_models(models_dir: str | Path | None) -> Models:
     if extra:
         raise InputError(f"{extra[0]} is not listed in {MANIFEST_FILE} (add it to 'artefacts' or remove the file)",
                          path=root)
-    written = {s.get("artefact"): s.get("sha256") for s in (record.get("steps") or {}).values() if isinstance(s, dict)}
+    steps = record.get("steps") if isinstance(record.get("steps"), dict) else {}
+    written = {s["artefact"]: s.get("sha256") for s in steps.values() if isinstance(s, dict)
+               and isinstance(s.get("artefact"), str)}
     for name in listed:  # a file replaced after the training would make the manifest describe another model
         expected = written.get(ARTEFACTS[name])
         if expected and file_sha256(root / ARTEFACTS[name]) != expected:
