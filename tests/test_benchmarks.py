@@ -791,3 +791,20 @@ def test_parts_scale_projection_caps_the_real_patches_and_scales_the_forests(mon
     assert_close(out["forests_exponent"], round(k, 2))
     assert_close(out["projection_3712_h"]["patches"], round(10.0 * 3712 / 3600, 1))
     assert_close(out["projection_3712_h"]["forests"], round(800 * (700_000 / 220_000) ** k / 3600, 1))
+
+
+def test_viewpoint_classifier_study_trains_the_shipped_recipe_examples_by_default(monkeypatch):
+    from conftest import KITTI_ROOT
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import bench_viewpoint_classifier as bench
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.viewpoint_classifier import kitti_examples
+
+    ds = KittiDataset(KITTI_ROOT)
+    frames = ds.frame_ids()
+    x, y = bench.training_examples(ds, frames)
+    shipped_x, shipped_y = kitti_examples(ds, frames)
+    assert (x == shipped_x).all() and (y == shipped_y).all()  # the study's baseline is the shipped recipe
+    more, bins = bench.training_examples(ds, frames, n_jitter=3, photometric=True)
+    assert len(more) == len(bins) > len(x)
