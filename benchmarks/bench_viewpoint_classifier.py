@@ -31,49 +31,14 @@ import numpy as np  # noqa: E402
 
 import wirescene.predetect.viewpoint_classifier as vc  # noqa: E402
 from _common import jitter_rng, jittered  # noqa: E402  (benchmarks/ is on the path of a script run from it)
-from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin  # noqa: E402
+from wirescene.core.viewpoints import angle_difference, bin_center  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
-from wirescene.predetect.configurations import mirror_bin  # noqa: E402
 
 #: ``{name: (training options, C)}`` of ``--study copies``.
-COPIES = {"shipped recipe": ({}, vc.C), "three jittered copies": ({"n_jitter": 3}, vc.C),
+COPIES = {"shipped recipe": ({}, vc.C), "three jittered copies": ({"copies": 3}, vc.C),
           "a brightness / contrast copy": ({"photometric": True}, vc.C), "C = 0.003": ({}, 0.003),
           "C = 0.03": ({}, 0.03)}
-
-
-def training_examples(ds, frames, *, n_jitter: int = 1, photometric: bool = False, seed: int = 0):
-    """``(features, bins)`` as :func:`wirescene.predetect.viewpoint_classifier.kitti_examples`
-    makes them (``n_jitter`` = 1, no photometric copy: the same examples), with ``n_jitter``
-    jittered copies of each box and, with ``photometric``, a brightness / contrast copy."""
-    rng = np.random.default_rng(seed)
-    feats, bins = [], []
-    for f in frames:
-        cars = ds.labels(f).of_type("Car")
-        if not cars:
-            continue
-        image = ds.image(f)
-        W = image.shape[1]
-        boxes = np.array([o.box for o in cars], float)
-        b = viewpoint_bin(np.array([o.alpha for o in cars]))
-        for flip in (False, True):
-            im = np.ascontiguousarray(image[:, ::-1]) if flip else image
-            bx = np.column_stack([W - boxes[:, 2], boxes[:, 1], W - boxes[:, 0], boxes[:, 3]]) if flip else boxes
-            wh = np.tile(np.column_stack([bx[:, 2] - bx[:, 0], bx[:, 3] - bx[:, 1]]), 2)
-            every = [bx]
-            for _ in range(n_jitter):
-                moved = bx + rng.normal(0.0, vc.JITTER, bx.shape) * wh
-                moved[:, 2:] = np.maximum(moved[:, 2:], moved[:, :2] + 2.0)
-                every.append(moved)
-            feats.append(vc.crop_viewpoint_features(im, np.concatenate(every)))
-            mb = mirror_bin(b) if flip else b
-            bins.append(np.tile(mb, 1 + n_jitter))
-            if photometric:
-                gain, offset = rng.uniform(0.6, 1.4), rng.uniform(-30, 30)
-                lit = np.clip(im.astype(np.float32) * gain + offset, 0, 255).astype(np.uint8)
-                feats.append(vc.crop_viewpoint_features(lit, bx))
-                bins.append(mb)
-    return np.concatenate(feats), np.concatenate(bins)
 
 
 def held_out_boxes(ds, frames):
@@ -96,7 +61,7 @@ def study_copies(ds, frames, tests) -> None:
         t0 = time.time()
         errors: dict = {}
         for k in range(N_FOLDS):
-            x, y = training_examples(ds, [f for f in frames if fold_of(f) != k], **options)
+            x, y = vc.kitti_examples(ds, [f for f in frames if fold_of(f) != k], **options)
             model = vc.fit_viewpoint_classifier(x, y, C=C)
             for which in (0, 1):
                 for boxes in tests[k]:
@@ -124,7 +89,7 @@ def study_front_back(ds, frames, tests) -> None:
                                                                  random_state=0), slice(None)),
         "RBF SVM": (lambda: SVC(C=1.0, gamma="scale"), slice(None)),
     }
-    train = {k: training_examples(ds, [f for f in frames if fold_of(f) != k]) for k in range(N_FOLDS)}
+    train = {k: vc.kitti_examples(ds, [f for f in frames if fold_of(f) != k]) for k in range(N_FOLDS)}
     for g in FOLD_GROUPS:
         alpha = np.concatenate([b[2] for k in g for b in tests[k]])
         seen = np.abs(np.sin(alpha)) > 0.5

@@ -799,12 +799,13 @@ def test_viewpoint_classifier_study_trains_the_shipped_recipe_examples_by_defaul
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     import bench_viewpoint_classifier as bench
     from wirescene.io.kitti import KittiDataset
-    from wirescene.predetect.viewpoint_classifier import kitti_examples
+    from wirescene.predetect.viewpoint_classifier import C, kitti_examples
 
+    assert bench.COPIES["shipped recipe"] == ({}, C)  # the study's baseline is the shipped recipe
     ds = KittiDataset(KITTI_ROOT)
     frames = ds.frame_ids()
-    x, y = bench.training_examples(ds, frames)
-    shipped_x, shipped_y = kitti_examples(ds, frames)
-    assert (x == shipped_x).all() and (y == shipped_y).all()  # the study's baseline is the shipped recipe
-    more, bins = bench.training_examples(ds, frames, n_jitter=3, photometric=True)
-    assert len(more) == len(bins) > len(x)
+    cars = sum(len(ds.labels(f).of_type("Car")) for f in frames)
+    x, y = kitti_examples(ds, frames)
+    assert len(x) == len(y) == 4 * cars  # each box and one jittered copy, and their mirror images
+    more, bins = kitti_examples(ds, frames, **bench.COPIES["three jittered copies"][0], photometric=True)
+    assert len(more) == len(bins) == 10 * cars > len(x)

@@ -164,10 +164,13 @@ def fit_viewpoint_classifier(features, bins, *, C: float = C, meta: dict | None 
     return ViewpointClassifier(mean, scale, weights, bias, dict(meta or {}, C=C, n=int(len(y))))
 
 
-def kitti_examples(dataset, frames, *, jitter: float = JITTER, seed: int = 0):
+def kitti_examples(dataset, frames, *, jitter: float = JITTER, seed: int = 0, copies: int = 1,
+                   photometric: bool = False):
     """Training ``(features (M, F), bins (M,))`` of the labelled cars of ``frames`` of a
-    :class:`~wirescene.io.kitti.KittiDataset`: each label box, its mirror image and one copy
-    of each with the sides moved by N(0, ``jitter``) of the box's width / height."""
+    :class:`~wirescene.io.kitti.KittiDataset`: each label box, its mirror image and ``copies``
+    copies of each with the sides moved by N(0, ``jitter``) of the box's width / height (the
+    recipe: one); with ``photometric`` (a study's option, ``benchmarks/bench_viewpoint_classifier.py``)
+    also each box of an image copy of other brightness and contrast."""
     rng = np.random.default_rng(seed)
     frames = list(frames)
     feats, bins = [], []
@@ -183,10 +186,18 @@ def kitti_examples(dataset, frames, *, jitter: float = JITTER, seed: int = 0):
             im = np.ascontiguousarray(image[:, ::-1]) if flip else image
             bx = np.column_stack([W - boxes[:, 2], boxes[:, 1], W - boxes[:, 0], boxes[:, 3]]) if flip else boxes
             wh = np.tile(np.column_stack([bx[:, 2] - bx[:, 0], bx[:, 3] - bx[:, 1]]), 2)
-            moved = bx + rng.normal(0.0, jitter, bx.shape) * wh
-            moved[:, 2:] = np.maximum(moved[:, 2:], moved[:, :2] + 2.0)
-            feats.append(crop_viewpoint_features(im, np.concatenate([bx, moved])))
-            bins.append(np.tile(mirror_bin(b) if flip else b, 2))
+            every = [bx]
+            for _ in range(copies):
+                moved = bx + rng.normal(0.0, jitter, bx.shape) * wh
+                moved[:, 2:] = np.maximum(moved[:, 2:], moved[:, :2] + 2.0)
+                every.append(moved)
+            feats.append(crop_viewpoint_features(im, np.concatenate(every)))
+            bins.append(np.tile(mirror_bin(b) if flip else b, 1 + copies))
+            if photometric:
+                gain, offset = rng.uniform(0.6, 1.4), rng.uniform(-30, 30)
+                lit = np.clip(im.astype(np.float32) * gain + offset, 0, 255).astype(np.uint8)
+                feats.append(crop_viewpoint_features(lit, bx))
+                bins.append(mirror_bin(b) if flip else b)
     if not feats:
         raise InputError(f"no labelled cars in the {len(frames)} frames to train a viewpoint classifier on",
                          path=dataset.split_dir)
