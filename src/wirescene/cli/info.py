@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import click
@@ -20,15 +19,9 @@ def info_record(models) -> dict:
     (:func:`wirescene.core.resources.artefact_files`)."""
     from wirescene.core.raycast import has_embree
     from wirescene.core.resources import artefact_files
-    from wirescene.core.version import environment
+    from wirescene.core.version import environment, package_versions
 
-    optional = {}
-    for name in ("torch", "dask", "distributed"):
-        try:
-            optional[name] = version(name)
-        except PackageNotFoundError:
-            optional[name] = None
-    return {"environment": environment(), "optional": optional,
+    return {"environment": environment(), "optional": package_versions(("torch", "dask", "distributed")),
             "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE"),
             "ray_tracer": "embree" if has_embree() else None,
             "models": models.describe(), "files": artefact_files(models)}

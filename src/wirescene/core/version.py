@@ -12,10 +12,21 @@ try:
 except PackageNotFoundError:  # a source tree on sys.path that was never installed
     __version__ = "0+unknown"
 
-__all__ = ["__version__", "environment"]
+__all__ = ["__version__", "environment", "package_versions"]
 
 #: The installed packages whose versions a run's figures may depend on.
 _PACKAGES = ("numpy", "scipy", "scikit-learn", "scikit-image", "pillow", "trimesh", "embreex")
+
+
+def package_versions(names) -> dict:
+    """``{name: installed version or None}`` of the distributions ``names``."""
+    out: dict = {}
+    for name in names:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = None
+    return out
 
 
 def environment() -> dict:
@@ -34,12 +45,7 @@ def environment() -> dict:
     """
     import numpy  # noqa: F401  (its BLAS must be loaded for threadpoolctl to see it)
 
-    out: dict = {"wirescene": __version__, "python": platform.python_version()}
-    for name in _PACKAGES:
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = None
+    out: dict = {"wirescene": __version__, "python": platform.python_version(), **package_versions(_PACKAGES)}
     try:
         from threadpoolctl import threadpool_info
     except ImportError:  # scikit-learn brings it; without it the kernels are unknown
