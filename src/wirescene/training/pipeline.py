@@ -285,13 +285,13 @@ def train_all(
     if not dataset.has_labels:
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
     ids = _training_frames(dataset, frames, split_file)
-    data_sha256 = _check_frames(dataset, ids)  # before anything is trained or written
+    data_sha256, cars = _check_frames(dataset, ids)  # before anything is trained or written
     drives, mapping_dir = drive_map(dataset.base_dir, mapping=drive_mapping)
     # held-out folds serve the part calibration and the bank's, unless both are off or given (one drive is then enough)
     held_out = bool(opts["parts"].get("calibrate_real")) or opts["detector"].get("calibration") is None
     folds = calibration_folds(dataset, ids, n_folds=n_folds, drives=drives) if held_out else {}
     previous = _previous_steps(out, resume)
-    manifest = _new_manifest(dataset, ids, folds, split_file, drives=drives, mapping_dir=mapping_dir)
+    manifest = _new_manifest(dataset, ids, cars, folds, split_file, drives=drives, mapping_dir=mapping_dir)
     # what a step learns from: the frames' labels, calibrations and images, and the folds they are dealt to
     key_data = {"kitti_root": manifest["data"]["kitti_root"], "frames_sha256": manifest["data"]["frames_sha256"],
                 "n_folds": n_folds, "files_sha256": data_sha256,
@@ -329,11 +329,11 @@ def train_all(
     return manifest
 
 
-def _check_frames(dataset, ids: list[str]) -> str:
+def _check_frames(dataset, ids: list[str]) -> tuple[str, int]:
     """Check that the training frames hold labelled cars and each its image and calibration
     (an :class:`InputError` naming the first missing file), before any step trains; return a
     SHA-256 of their label and calibration files and their images' sizes (a resumed step
-    whose frames changed is trained again)."""
+    whose frames changed is trained again), and their number of cars."""
     counts = dataset.car_counts(ids)
     if not any(counts.values()):
         raise InputError(f"none of the {len(ids)} training frames has a labelled Car", path=dataset.split_dir)
@@ -347,7 +347,7 @@ def _check_frames(dataset, ids: list[str]) -> str:
         digest.update(dataset.label_path(f).read_bytes())
         digest.update(dataset.calib_path(f).read_bytes())
         digest.update(str(dataset.image_path(f).stat().st_size).encode())
-    return digest.hexdigest()
+    return digest.hexdigest(), sum(counts.values())
 
 
 #: Steps whose artefacts another step trains from (part of the resume key).
@@ -391,10 +391,10 @@ def _previous_steps(out: Path, resume: bool) -> dict:
     return {}
 
 
-def _new_manifest(dataset, ids: list[str], folds: dict[str, int], split_file, *, drives: Mapping[str, str],
-                  mapping_dir: Path | None) -> dict:
-    """The manifest of a run before its steps: data, split file and folds (grouped by ``drives``)."""
-    cars = sum(dataset.car_counts(ids).values())
+def _new_manifest(dataset, ids: list[str], cars: int, folds: dict[str, int], split_file, *,
+                  drives: Mapping[str, str], mapping_dir: Path | None) -> dict:
+    """The manifest of a run before its steps: data (``cars``: their labelled cars), split file
+    and folds (grouped by ``drives``)."""
     data = {"kitti_root": str(Path(dataset.split_dir).resolve()), "frames": len(ids), "cars": cars,
             "frames_sha256": _frames_sha256(ids), "frame_ids": ids}
     if split_file is not None:
