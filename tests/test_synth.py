@@ -158,3 +158,40 @@ def test_cli_errors(tmp_path):
     labels = (tmp_path / "o" / "training" / "label_2" / "000000.txt").read_text().splitlines()
     wf = json.loads((tmp_path / "o" / "training" / "wireframes" / "000000.json").read_text())
     assert len(labels) + len(wf["hidden_cars"]) <= 2 and wf["occluders"] == []
+
+
+def test_cli_writes_a_set_whole_or_not_at_all(tmp_path, monkeypatch):
+    import functools
+
+    from click.testing import CliRunner
+
+    import wirescene.synth.generate as generate
+    from wirescene.cli.synth import synth
+
+    out = tmp_path / "o"
+    args = [str(out), "--cars-per-scene", "2", "--no-occluders"]
+    assert CliRunner().invoke(synth, [*args, "--scenes", "2"]).exit_code == 0
+    before = _files(out)
+    real = generate.generate_scene
+
+    @functools.wraps(real)
+    def interrupted(seed, index, **kwargs):
+        if index == 1:
+            raise KeyboardInterrupt
+        return real(seed, index, **kwargs)
+
+    # an interrupted --overwrite keeps the old set whole and leaves no staging directory
+    monkeypatch.setattr(generate, "generate_scene", interrupted)
+    r = CliRunner().invoke(synth, [*args, "--scenes", "2", "--seed", "5", "--overwrite"])
+    assert r.exit_code != 0
+    assert _files(out) == before and sorted(p.name for p in out.iterdir()) == ["training"]
+    # an interrupted first run leaves nothing, not even the directories made for it
+    r = CliRunner().invoke(synth, [str(tmp_path / "new" / "set"), "--scenes", "2"])
+    assert r.exit_code != 0 and not (tmp_path / "new").exists()
+    monkeypatch.undo()
+    # a finished --overwrite replaces the whole set: no stale scene of the old one is left
+    assert CliRunner().invoke(synth, [*args, "--scenes", "1", "--seed", "5", "--overwrite"]).exit_code == 0
+    after = _files(out)
+    assert sorted(after) == sorted(k for k in before if "000000" in k)
+    assert after["training/image_2/000000.png"] != before["training/image_2/000000.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["training"]

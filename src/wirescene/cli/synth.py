@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import re
-import shutil
 import sys
 from pathlib import Path
 
 import click
 
 from wirescene.cli.options import check_output_dir
+from wirescene.core.atomic import replaced_dir
 from wirescene.core.errors import WiresceneError
 
 
@@ -35,11 +35,13 @@ def _parse_range(value: str) -> tuple[int, int]:
 @click.option("--occluders/--no-occluders", default=True, show_default=True,
               help="Add 0-3 unmodelled occluders (poles, boxes, bushes) per scene.")
 @click.option("--overwrite", is_flag=True, default=False,
-              help="Replace the scenes already in OUT_DIR/training (otherwise a non-empty one is an error).")
+              help="Replace the scenes already in OUT_DIR/training (otherwise a non-empty one is an error); "
+                   "they are removed only once the new set is complete.")
 def synth(out_dir, scenes, seed, cars, occluders, overwrite):
     """Generate synthetic KITTI-layout scenes in OUT_DIR/training: image_2, label_2,
     calib, edges_2 (edge renderings) and wireframes (per-car 36-vertex ground truth with
-    per-vertex visibility)."""
+    per-vertex visibility). The set appears whole or not at all: an interrupted or failed
+    run leaves OUT_DIR as it was."""
     from tqdm import tqdm
 
     from wirescene.synth.generate import generate_dataset
@@ -53,12 +55,12 @@ def synth(out_dir, scenes, seed, cars, occluders, overwrite):
         if not overwrite:
             raise click.BadParameter(f"{split} already holds scenes; stale ones would mix with new ones "
                                      "(use --overwrite or another directory)", param_hint="OUT_DIR")
-        shutil.rmtree(split)
     try:
-        ids = generate_dataset(
-            out_dir, scenes, seed, cars=rng_cars, occluders=occluders,
-            progress=lambda it: tqdm(it, desc="synth", unit="scene", file=sys.stderr, leave=False),
-        )
+        with replaced_dir(split) as staging:
+            ids = generate_dataset(
+                staging.parent, scenes, seed, cars=rng_cars, occluders=occluders, split=staging.name,
+                progress=lambda it: tqdm(it, desc="synth", unit="scene", file=sys.stderr, leave=False),
+            )
     except WiresceneError as exc:
         raise click.ClickException(str(exc)) from None
     except OSError as exc:

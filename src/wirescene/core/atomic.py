@@ -50,6 +50,19 @@ def write_text(path: str | Path, text: str) -> None:
         tmp.write_text(text)
 
 
+def _missing_parents(path: Path) -> list[Path]:
+    """The directories above ``path`` that do not exist yet, deepest first."""
+    return [p for p in (path.parent, *path.parent.parents) if not p.exists()]
+
+
+def _remove_made(made: list[Path]) -> None:
+    for directory in made:
+        try:
+            directory.rmdir()
+        except OSError:
+            break
+
+
 @contextmanager
 def atomic_dir(path: str | Path):
     """Yield an empty staging directory beside ``path``; when the block succeeds its files
@@ -57,7 +70,7 @@ def atomic_dir(path: str | Path):
     the staging directory goes and so do the directories above ``path`` made for it, so
     that a set of files (a report's page and pictures) appears whole or not at all."""
     path = Path(path)
-    made = [p for p in (path.parent, *path.parent.parents) if not p.exists()]  # deepest first
+    made = _missing_parents(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
     try:
@@ -67,10 +80,41 @@ def atomic_dir(path: str | Path):
             os.replace(entry, path / entry.name)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
-        for directory in made:
-            try:
-                directory.rmdir()
-            except OSError:
-                break
+        _remove_made(made)
         raise
     shutil.rmtree(staging, ignore_errors=True)
+
+
+@contextmanager
+def replaced_dir(path: str | Path):
+    """Yield an empty staging directory beside ``path`` that takes ``path``'s place whole
+    when the block succeeds (a directory there before is removed only then); when the
+    block raises the staging directory goes, ``path`` is left as it was, and so are the
+    directories above it (those made for it are removed).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> root = Path(tempfile.mkdtemp())
+    >>> with replaced_dir(root / "set") as staging:
+    ...     _ = (staging / "a.txt").write_text("new")
+    >>> sorted(p.name for p in (root / "set").iterdir())
+    ['a.txt']
+    """
+    path = Path(path)
+    made = _missing_parents(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        yield staging
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        _remove_made(made)
+        raise
+    old = None
+    if path.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+        os.replace(path, old / path.name)
+    os.replace(staging, path)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)

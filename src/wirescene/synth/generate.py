@@ -626,9 +626,9 @@ def _png_bytes(array: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def write_scene(out_dir, frame_id: str, scene: SyntheticScene) -> None:
-    """Write one scene in KITTI layout under ``out_dir/training`` (each file atomically)."""
-    split = Path(out_dir) / "training"
+def write_scene(out_dir, frame_id: str, scene: SyntheticScene, *, split: str = "training") -> None:
+    """Write one scene in KITTI layout under ``out_dir/split`` (each file atomically)."""
+    split = Path(out_dir) / split
     write_bytes(split / "image_2" / f"{frame_id}.png", _png_bytes(scene.image))
     write_bytes(split / "edges_2" / f"{frame_id}.png", _png_bytes(scene.edges.astype(np.uint8) * 255))
     calib = split / "calib" / f"{frame_id}.txt"
@@ -640,8 +640,9 @@ def write_scene(out_dir, frame_id: str, scene: SyntheticScene) -> None:
 
 
 def generate_dataset(out_dir, n_scenes: int, seed: int = 0, *, cars=(2, 8), occluders: bool = True,
-                     progress=None) -> list:
-    """Generate and write ``n_scenes`` scenes (frame ids 000000, 000001, ...); returns the ids.
+                     progress=None, split: str = "training") -> list:
+    """Generate and write ``n_scenes`` scenes (frame ids 000000, 000001, ...) under
+    ``out_dir/split``; returns the ids.
 
     ``progress`` wraps the index iterable (e.g. tqdm)."""
     if n_scenes < 0:
@@ -655,6 +656,6 @@ def generate_dataset(out_dir, n_scenes: int, seed: int = 0, *, cars=(2, 8), occl
     for index in (progress(indices) if progress else indices):
         scene = generate_scene(seed, index, cars=cars, occluders=occluders, camera=camera, library=library)
         fid = f"{index:06d}"
-        write_scene(out_dir, fid, scene)
+        write_scene(out_dir, fid, scene, split=split)
         ids.append(fid)
     return ids
