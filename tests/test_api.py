@@ -7,6 +7,7 @@ import json
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -441,6 +442,11 @@ def test_pictures_are_saved_in_the_format_their_suffix_names_else_png(tmp_path):
         assert save_figure(birds_eye(), tmp_path / name) == tmp_path / name
         assert (tmp_path / name).read_bytes().startswith(start), name
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(magic)  # no temporary file left
+    # the same figure saved again (a second later: a date would differ) gives the same bytes
+    time.sleep(1.1)
+    for name in ("bev.svg", "bev.pdf", "bev.png"):
+        again = save_figure(birds_eye(), tmp_path / f"again_{name}")
+        assert again.read_bytes() == (tmp_path / name).read_bytes(), name
 
 
 def test_draw_shows_the_fitted_wireframes_and_the_labels_where_they_stand(frame, tmp_path):

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from matplotlib import rc_context
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
@@ -205,17 +206,24 @@ def new_figure(**kwargs) -> Figure:
     return Figure(**kwargs)
 
 
+# no date in a vector picture, and SVG ids from a fixed salt: the same figure gives the same bytes
+_UNDATED = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}
+
+
 def save_figure(fig, path: str | Path, **savefig_kw) -> Path:
     """Save ``fig`` atomically (temporary file, then rename) in the format its suffix names
     (``.pdf``, ``.svg``, ...), PNG where matplotlib knows no such format; a figure pyplot
-    manages (the caller's) is closed too. ``savefig_kw``: further options of
-    :meth:`~matplotlib.figure.Figure.savefig` (``dpi``, ``bbox_inches``)."""
+    manages (the caller's) is closed too. PNG, SVG and PDF files are the same bytes run to
+    run (no creation date). ``savefig_kw``: further options of
+    :meth:`~matplotlib.figure.Figure.savefig` (``dpi``, ``bbox_inches``, ``metadata``)."""
     path = Path(path)
     fmt = path.suffix[1:].lower()
     if fmt not in fig.canvas.get_supported_filetypes():
         fmt = "png"
+    if fmt in _UNDATED:
+        savefig_kw.setdefault("metadata", _UNDATED[fmt])
     try:
-        with atomic_path(path, suffix=f".{fmt}") as tmp:
+        with atomic_path(path, suffix=f".{fmt}") as tmp, rc_context({"svg.hashsalt": "wirescene"}):
             fig.savefig(tmp, format=fmt, **savefig_kw)
     finally:
         pyplot = sys.modules.get("matplotlib.pyplot")
