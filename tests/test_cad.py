@@ -89,6 +89,12 @@ def test_ac3d_errors(tmp_path):
     assert "bad.ac" in str(e.value) and "\n" not in str(e.value)
     with pytest.raises(InputError):
         read_ac3d(tmp_path / "missing.acc")
+    # a file cut inside an object is an error; one that ends where a kid would begin is not
+    # (Speed Dreams' cars declare more kids than they hold, and its loader stops at the end)
+    with pytest.raises(InputError, match="unexpected end of file"):
+        parse_ac3d(MINI_AC[:MINI_AC.index("SURF 0x14")])
+    more_kids = MINI_AC.replace("OBJECT group\nloc 1 0 0\nkids 1", "OBJECT group\nloc 1 0 0\nkids 3")
+    assert_close(parse_ac3d(more_kids).vertices, parse_ac3d(MINI_AC).vertices)
 
 
 @pytest.mark.parametrize("name", ROAD)
@@ -191,3 +197,12 @@ def test_cli_list_and_show(tmp_path):
     assert out.stat().st_size > 10_000
     r = CliRunner().invoke(cad, ["list", "--cad-dir", str(tmp_path / "nope")])
     assert r.exit_code != 0 and isinstance(r.exception, InputError)
+    # a folder per car (Speed Dreams' layout) is searched one level down; formats not read are named
+    per_car = tmp_path / "per_car"
+    (per_car / "nsx").mkdir(parents=True)
+    (per_car / "nsx" / "acura-nsx-sz.acc").write_bytes((CAD / "acura-nsx-sz.acc").read_bytes())
+    r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
+    assert r.exit_code == 0 and r.output.startswith("acura-nsx-sz"), r.output
+    (per_car / "nsx" / "acura-nsx-sz.acc").rename(per_car / "nsx" / "body.joe")
+    r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
+    assert isinstance(r.exception, InputError) and ".joe (VDrift's format) not read" in str(r.exception)

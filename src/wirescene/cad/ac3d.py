@@ -137,6 +137,8 @@ def _read_object(cur, rot, loc, out_v, out_f, names, face_obj, n_verts):
             face_obj.append(obj_index)
         n_verts[0] += len(verts)
     for _ in range(kids):
+        if cur.peek() is None:  # Speed Dreams' cars declare more kids than they hold: stop at the end, as its loader
+            break
         header = cur.next().split()
         if header[0] != "OBJECT":
             raise cur.error(f"expected OBJECT for a kid, got {header[0]!r}")

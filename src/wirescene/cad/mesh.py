@@ -59,6 +59,8 @@ __all__ = [
 ]
 
 MESH_SUFFIXES = (".acc", ".ac", ".obj", ".ply", ".off", ".stl")
+_UNREAD_MESHES = {".joe": "VDrift's format", ".blend": "Blender's format", ".fbx": "Autodesk FBX",
+                  ".dae": "COLLADA", ".3ds": "3D Studio"}
 
 MIN_ROAD_HEIGHT = 1.0
 MIN_ROAD_WIDTH = 1.5
@@ -106,13 +108,19 @@ def default_cad_dir() -> Path:
 
 
 def list_cad_files(cad_dir) -> list[Path]:
-    """Sorted mesh files (by suffix) in ``cad_dir``; :class:`InputError` if there are none."""
+    """Sorted mesh files (by suffix) in ``cad_dir`` and in its subfolders one level down
+    (Speed Dreams keeps one folder per car); :class:`InputError` if there are none."""
     cad_dir = Path(cad_dir)
     if not cad_dir.is_dir():
         raise InputError("CAD directory not found (set --cad-dir or WIRESCENE_CAD_DIR)", path=cad_dir)
-    files = sorted(p for p in cad_dir.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
+    found = [*cad_dir.glob("*"), *cad_dir.glob("*/*")]
+    files = sorted((p for p in found if p.suffix.lower() in MESH_SUFFIXES and p.is_file()),
+                   key=lambda p: (p.name, p.as_posix()))
     if not files:
-        raise InputError(f"no mesh files ({', '.join(MESH_SUFFIXES)}) in CAD directory", path=cad_dir)
+        others = sorted({p.suffix.lower() for p in found if p.is_file() and p.suffix.lower() in _UNREAD_MESHES})
+        unread = f"; {', '.join(f'{s} ({_UNREAD_MESHES[s]})' for s in others)} not read" if others else ""
+        raise InputError(f"no mesh files ({', '.join(MESH_SUFFIXES)}) in CAD directory or its subfolders{unread}",
+                         path=cad_dir)
     return files
 
 
