@@ -354,6 +354,23 @@ def test_resume_sees_changed_frames_and_a_failed_one_leaves_the_directory_as_it_
     assert json.loads((out / MANIFEST_FILE).read_text())["data"]["cars"] == 13
 
 
+def test_the_resume_key_sees_an_image_replaced_by_another_of_the_same_size(tmp_path):
+    from PIL import Image
+
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.pipeline import _check_frames
+
+    root = kitti_copy(tmp_path / "kitti", ["000010"])
+    image = root / "training" / "image_2" / "000010.png"
+    rgb = np.asarray(Image.open(image).convert("RGB"))
+    Image.fromarray(rgb).save(image, compress_level=0)  # stored: its size is the pixels', whatever they show
+    before, size = _check_frames(KittiDataset(root), ["000010"]), image.stat().st_size
+    Image.fromarray(rgb[:, ::-1].copy()).save(image, compress_level=0)  # the frame mirrored
+    assert image.stat().st_size == size
+    after = _check_frames(KittiDataset(root), ["000010"])
+    assert after[1] == before[1] == 8 and after[0] != before[0]
+
+
 def test_a_first_step_that_fails_leaves_no_directory(tmp_path, monkeypatch):
     import wirescene.training.parts as parts
 
