@@ -307,6 +307,11 @@ def test_train_all_resume_skips_finished_steps(trained):
     assert r.exit_code == 0, r.output + r.stderr
     assert r.stderr.count("done in an earlier run, kept") == 3
     assert _mtimes(out) == before
+    # options set to their defaults train the same: every step is kept
+    r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "parts.n_jobs=1",
+            "--set", "detector.whiten=false", "--set", "occlusion.flip=false", "--resume")
+    assert r.exit_code == 0 and r.stderr.count("done in an earlier run, kept") == 3, r.output + r.stderr
+    assert _mtimes(out) == before
     # another option of the last step: only that step runs again
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "occlusion.n_scenes=1",
             "--resume")

@@ -433,7 +433,7 @@ class _Run:
     def step(self, step: str, key: dict, old: dict | None) -> dict:
         """The record of ``step``: the earlier run's where its key and file match, else trained now."""
         path = self.path_of(step)
-        if (old and old.get("done") and old.get("key") == key and path.is_file()
+        if (old and old.get("done") and _same_key(step, old.get("key"), key) and path.is_file()
                 and file_sha256(path) == old.get("sha256")):
             self.say(f"{step}: done in an earlier run, kept ({path.name})")
             return old
@@ -490,6 +490,20 @@ class _Run:
         save_occluded_score(self.path_of("occlusion"), result)
         record["c"] = result["c"]
         self.say(f"occlusion: c = {result['c']} ({result['n_cars']} cars)")
+
+
+def _same_key(step: str, old, new: dict) -> bool:
+    """Resume keys equal but for options that one sets to their default and the other
+    leaves out: both train the same."""
+    if not isinstance(old, dict):
+        return False
+    defaults = _normalised(step_options()[step])
+
+    def chosen(key: dict) -> dict:
+        options = key.get("options") if isinstance(key.get("options"), dict) else {}
+        return {**key, "options": {k: v for k, v in options.items() if k not in defaults or v != defaults[k]}}
+
+    return chosen(old) == chosen(new)
 
 
 def _normalised(value):
