@@ -385,7 +385,7 @@ def test_a_first_step_that_fails_leaves_no_directory(tmp_path, monkeypatch):
 
     monkeypatch.setattr(parts, "train_part_detector", broken)
     r = cli("train", "all", KITTI_ROOT, "--out", tmp_path / "new" / "models", *TINY)
-    assert isinstance(r.exception, RuntimeError) and not (tmp_path / "new" / "models").exists()
+    assert isinstance(r.exception, RuntimeError) and not (tmp_path / "new").exists()
 
 
 def test_train_all_needs_two_groups_and_known_options(tmp_path):

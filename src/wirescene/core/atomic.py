@@ -50,12 +50,15 @@ def write_text(path: str | Path, text: str) -> None:
         tmp.write_text(text)
 
 
-def _missing_parents(path: Path) -> list[Path]:
-    """The directories above ``path`` that do not exist yet, deepest first."""
-    return [p for p in (path.parent, *path.parent.parents) if not p.exists()]
+def missing_dirs(path: str | Path) -> list[Path]:
+    """``path`` and the directories above it that do not exist yet, deepest first: those
+    a ``mkdir(parents=True)`` would make, for :func:`remove_empty` to take back."""
+    path = Path(path)
+    return [p for p in (path, *path.parents) if not p.exists()]
 
 
-def _remove_made(made: list[Path]) -> None:
+def remove_empty(made: list[Path]) -> None:
+    """Remove the directories of ``made`` (deepest first) up to the first one not empty."""
     for directory in made:
         try:
             directory.rmdir()
@@ -70,7 +73,7 @@ def atomic_dir(path: str | Path):
     the staging directory goes and so do the directories above ``path`` made for it, so
     that a set of files (a report's page and pictures) appears whole or not at all."""
     path = Path(path)
-    made = _missing_parents(path)
+    made = missing_dirs(path.parent)
     path.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
     try:
@@ -80,7 +83,7 @@ def atomic_dir(path: str | Path):
             os.replace(entry, path / entry.name)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
-        _remove_made(made)
+        remove_empty(made)
         raise
     shutil.rmtree(staging, ignore_errors=True)
 
@@ -102,14 +105,14 @@ def replaced_dir(path: str | Path):
     ['a.txt']
     """
     path = Path(path)
-    made = _missing_parents(path)
+    made = missing_dirs(path.parent)
     path.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
     try:
         yield staging
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
-        _remove_made(made)
+        remove_empty(made)
         raise
     old = None
     if path.exists():

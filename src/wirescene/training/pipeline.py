@@ -49,6 +49,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Mapping
 
 from wirescene.core.artefacts import load_json, save_json
+from wirescene.core.atomic import missing_dirs, remove_empty
 from wirescene.core.errors import InputError
 from wirescene.core.resources import (
     ARTEFACTS,
@@ -300,7 +301,7 @@ def train_all(
                iterate or (lambda items, name: items))
     # the earlier run's records stand until a step replaces them, so that a run that fails keeps them
     manifest["steps"] = {s: r for s, r in previous.items() if s in STEPS}
-    created = not out.exists()
+    made = missing_dirs(out)
     out.mkdir(parents=True, exist_ok=True)
     changed = False  # the directory is rewritten from the first step trained on: until then it is as it was
     try:
@@ -321,8 +322,7 @@ def train_all(
             if changed:
                 run.write(manifest)
     except BaseException:
-        if created and not any(out.iterdir()):  # a first step that failed leaves no directory behind
-            out.rmdir()
+        remove_empty(made)  # a first step that failed leaves no directory behind, nor those made for it
         raise
     manifest["complete"] = True
     run.write(manifest)
