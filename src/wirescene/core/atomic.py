@@ -67,24 +67,32 @@ def remove_empty(made: list[Path]) -> None:
 
 
 @contextmanager
+def _staged(path: Path):
+    """A new empty directory beside ``path`` (the directories above it made); when the
+    block raises it goes, and so do the directories made for it."""
+    made = missing_dirs(path.parent)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        yield staging
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        remove_empty(made)
+        raise
+
+
+@contextmanager
 def atomic_dir(path: str | Path):
     """Yield an empty staging directory beside ``path``; when the block succeeds its files
     move into ``path`` (created if needed; files of the same name replaced), when it raises
     the staging directory goes and so do the directories above ``path`` made for it, so
     that a set of files (a report's page and pictures) appears whole or not at all."""
     path = Path(path)
-    made = missing_dirs(path.parent)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
-    try:
+    with _staged(path) as staging:
         yield staging
         path.mkdir(exist_ok=True)
         for entry in sorted(staging.iterdir()):
             os.replace(entry, path / entry.name)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        remove_empty(made)
-        raise
     shutil.rmtree(staging, ignore_errors=True)
 
 
@@ -105,19 +113,16 @@ def replaced_dir(path: str | Path):
     ['a.txt']
     """
     path = Path(path)
-    made = missing_dirs(path.parent)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
-    try:
+    with _staged(path) as staging:
         yield staging
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        remove_empty(made)
-        raise
-    old = None
-    if path.exists():
         old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
-        os.replace(path, old / path.name)
-    os.replace(staging, path)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+        try:
+            if path.exists():
+                os.replace(path, old / path.name)
+            os.replace(staging, path)
+        except BaseException:
+            if (old / path.name).exists():  # the swap failed half-way: the old set goes back
+                os.replace(old / path.name, path)
+            raise
+        finally:
+            shutil.rmtree(old, ignore_errors=True)
