@@ -202,7 +202,7 @@ CASES = {
     "synth OUT_DIR under /proc": (lambda t: ["synth", "/proc/wirescene-check", "--scenes", "1"],
                                   "OUT_DIR: .*/proc is not writable"),
     "synth --cars-per-scene 5-2": (lambda t: ["synth", t / "s", "--cars-per-scene", "5-2"],
-                                   r"^wirescene: error: --cars-per-scene: need 1 <= A <= B, got '5-2'$"),
+                                   r"^wirescene: error: --cars-per-scene: need 1 <= A <= B <= 1000, got '5-2'$"),
     "detect --threshold nan": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--threshold", "nan"],
                                "--threshold: 'nan' is not finite"),
     # a frame that fails after others were detected: none of their files is left behind

@@ -153,6 +153,8 @@ def test_cli_errors(tmp_path):
 
     r = CliRunner().invoke(synth, [str(tmp_path / "o"), "--scenes", "1", "--cars-per-scene", "5-2"])
     assert r.exit_code == 2 and "A <= B" in r.output
+    r = CliRunner().invoke(synth, [str(tmp_path / "o"), "--scenes", "1", "--cars-per-scene", "9" * 23])
+    assert r.exit_code == 2 and "B <= 1000" in r.output and not (tmp_path / "o").exists()
     r = CliRunner().invoke(synth, [str(tmp_path / "o"), "--scenes", "1", "--cars-per-scene", "2", "--no-occluders"])
     assert r.exit_code == 0, r.output
     labels = (tmp_path / "o" / "training" / "label_2" / "000000.txt").read_text().splitlines()
@@ -172,6 +174,8 @@ def test_cli_writes_a_set_whole_or_not_at_all(tmp_path, monkeypatch):
     args = [str(out), "--cars-per-scene", "2", "--no-occluders"]
     assert CliRunner().invoke(synth, [*args, "--scenes", "2"]).exit_code == 0
     before = _files(out)
+    # the set's directory has the permissions of any new directory there (a staging one's are 0o700)
+    assert (out / "training").stat().st_mode & 0o777 == (out / "training" / "image_2").stat().st_mode & 0o777
     real = generate.generate_scene
 
     @functools.wraps(real)

@@ -12,6 +12,8 @@ from wirescene.cli.options import check_output_dir
 from wirescene.core.atomic import replaced_dir
 from wirescene.core.errors import WiresceneError
 
+MAX_CARS = 1000
+
 
 def _parse_range(value: str) -> tuple[int, int]:
     m = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", value or "")
@@ -19,8 +21,8 @@ def _parse_range(value: str) -> tuple[int, int]:
         raise click.BadParameter(f"expected A-B or N (e.g. 2-8), got {value!r}", param_hint="--cars-per-scene")
     a = int(m.group(1))
     b = int(m.group(2)) if m.group(2) is not None else a
-    if not 1 <= a <= b:
-        raise click.BadParameter(f"need 1 <= A <= B, got {value!r}", param_hint="--cars-per-scene")
+    if not 1 <= a <= b <= MAX_CARS:  # a street holds some 20 cars: more only asks the layout in vain
+        raise click.BadParameter(f"need 1 <= A <= B <= {MAX_CARS}, got {value!r}", param_hint="--cars-per-scene")
     return a, b
 
 

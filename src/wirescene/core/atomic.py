@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import secrets
 import shutil
-import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -34,6 +33,20 @@ def _new_file(directory: Path, *, prefix: str, suffix: str) -> str:
         name = str(directory / f"{prefix}{secrets.token_hex(6)}{suffix}")
         try:
             os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            continue
+        return name
+    raise FileExistsError(f"{directory}: no free temporary name for {prefix}*{suffix}")
+
+
+def _new_dir(directory: Path, *, prefix: str, suffix: str) -> Path:
+    """Create an empty directory of a new name in ``directory`` with the permissions any new
+    directory gets there (``tempfile.mkdtemp``'s ``0o700`` would stay on a set that takes
+    a directory's place)."""
+    for _ in range(100):
+        name = directory / f"{prefix}{secrets.token_hex(6)}{suffix}"
+        try:
+            os.mkdir(name, 0o777)
         except FileExistsError:
             continue
         return name
@@ -72,7 +85,7 @@ def _staged(path: Path):
     block raises it goes, and so do the directories made for it."""
     made = missing_dirs(path.parent)
     path.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    staging = _new_dir(path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         yield staging
     except BaseException:
@@ -115,7 +128,7 @@ def replaced_dir(path: str | Path):
     path = Path(path)
     with _staged(path) as staging:
         yield staging
-        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+        old = _new_dir(path.parent, prefix=f".{path.name}.", suffix=".old")
         try:
             if path.exists():
                 os.replace(path, old / path.name)
