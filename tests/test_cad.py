@@ -203,6 +203,16 @@ def test_cli_list_and_show(tmp_path):
     (per_car / "nsx" / "acura-nsx-sz.acc").write_bytes((CAD / "acura-nsx-sz.acc").read_bytes())
     r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
     assert r.exit_code == 0 and r.output.startswith("acura-nsx-sz"), r.output
+    # a mesh that is no car, or has no finite coordinates, is named with its problem
+    import trimesh
+
+    trimesh.creation.box(extents=(10.0, 1.5, 2.0)).export(per_car / "zz_truck.obj")
+    r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
+    assert isinstance(r.exception, InputError) and str(r.exception).startswith(f"{per_car / 'zz_truck.obj'}: ")
+    (per_car / "zz_truck.obj").write_text("v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n")
+    r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
+    assert isinstance(r.exception, InputError) and "not finite" in str(r.exception) and "zz_truck.obj" in str(r.exception)
+    (per_car / "zz_truck.obj").unlink()
     (per_car / "nsx" / "acura-nsx-sz.acc").rename(per_car / "nsx" / "body.joe")
     r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
     assert isinstance(r.exception, InputError) and ".joe (VDrift's format) not read" in str(r.exception)

@@ -137,6 +137,20 @@ def test_retrain_on_tiny_subset(tmp_path):
     meshes = load_cad_meshes(tmp_path / "cad_meshes.npz")
     V, F = meshes["155-DTM"]
     assert V.dtype == np.float32 and F.dtype == np.int32 and F.max() < len(V)
+    # files whose cars lack faces or vertices are refused naming the file, not met later as index errors
+    from wirescene.core.artefacts import load_npz, save_npz
+    from wirescene.core.errors import InputError
+
+    arrays = dict(load_npz(tmp_path / "cad_meshes.npz", kind="cad-meshes", version=1))
+    arrays["faces"] = arrays["faces"] + 10_000
+    save_npz(tmp_path / "bad_meshes.npz", arrays, kind="cad-meshes", version=1)
+    with pytest.raises(InputError, match="faces past its") as e:
+        load_cad_meshes(tmp_path / "bad_meshes.npz")
+    assert "bad_meshes.npz" in str(e.value)
+    del lm["cars"][0]["vertices"]["nose_top_left"]
+    (tmp_path / "bad_landmarks.json").write_text(json.dumps(lm))
+    with pytest.raises(InputError, match="lacks vertex 'nose_top_left'"):
+        load_cad_landmarks(tmp_path / "bad_landmarks.json")
 
 
 def test_committed_artefacts_agree(model):

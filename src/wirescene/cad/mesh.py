@@ -39,6 +39,7 @@ higher; measured 0.20 m on the baja-bug and at most 0.055 m on the road cars). M
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -56,6 +57,7 @@ __all__ = [
     "list_cad_files",
     "default_cad_dir",
     "MESH_SUFFIXES",
+    "naming_the_file",
 ]
 
 MESH_SUFFIXES = (".acc", ".ac", ".obj", ".ply", ".off", ".stl")
@@ -124,6 +126,18 @@ def list_cad_files(cad_dir) -> list[Path]:
     return files
 
 
+@contextmanager
+def naming_the_file(path):
+    """Re-raise an :class:`InputError` of the block that names no file as one naming
+    ``path`` (the mesh a canonicalisation or landmarking failed on)."""
+    try:
+        yield
+    except InputError as exc:
+        if exc.path is not None:
+            raise
+        raise InputError(exc.problem, path=path) from None
+
+
 def read_mesh(path) -> tuple[np.ndarray, np.ndarray]:
     """Read a triangle mesh in its file's own frame.
 
@@ -141,7 +155,15 @@ def read_mesh(path) -> tuple[np.ndarray, np.ndarray]:
         from wirescene.cad.ac3d import read_ac3d
 
         m = read_ac3d(path)
-        return m.vertices, m.faces
+        vertices, faces = m.vertices, m.faces
+    else:
+        vertices, faces = _read_with_trimesh(path, suffix)
+    if not np.isfinite(vertices).all():
+        raise InputError("mesh has vertex coordinates that are not finite numbers", path=path)
+    return vertices, faces
+
+
+def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]:
     if suffix not in MESH_SUFFIXES:
         raise InputError(f"unsupported mesh format {suffix!r} (use one of {', '.join(MESH_SUFFIXES)})", path=path)
     if not path.is_file():
@@ -262,7 +284,8 @@ def load_car(path, *, units: str = "auto", up: int | None = None) -> CarMesh:
     """Read a mesh file and canonicalise it; see :func:`canonicalize`."""
     path = Path(path)
     v, f = read_mesh(path)
-    v, f, info = canonicalize(v, f, units=units, up=up)
+    with naming_the_file(path):
+        v, f, info = canonicalize(v, f, units=units, up=up)
     return CarMesh(path.stem, v, f, str(path), info)
 
 

@@ -57,7 +57,7 @@ def train_shape_model(cad_dir, out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, au
         Called with one line per car.
     """
     from wirescene.cad.landmarks import annotate, load_corrections
-    from wirescene.cad.mesh import list_cad_files, load_car, road_car_check
+    from wirescene.cad.mesh import list_cad_files, load_car, naming_the_file, road_car_check
     from wirescene.cad.sideview import side_view
 
     out_path = Path(out_path)
@@ -70,7 +70,8 @@ def train_shape_model(cad_dir, out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, au
         record = {"name": car.name, "source": path.name, "dimensions_lwh": [round(float(d), 4) for d in car.dimensions],
                   "road_car": is_road, "reason": reason}
         if is_road:
-            X = annotate(car.vertices, car.faces, name=car.name, corrections=corrections)
+            with naming_the_file(path):
+                X = annotate(car.vertices, car.faces, name=car.name, corrections=corrections)
             record["vertices"] = {n: [round(float(c), 4) for c in X[i]] for i, n in enumerate(VERTEX_NAMES)}
             wireframes.append(X)
             names.append(car.name)
@@ -111,11 +112,26 @@ def load_cad_meshes(path=None) -> dict:
         V, F = z["vertices"], z["faces"]
     except KeyError as e:
         raise InputError(f"not a CAD mesh file (missing {e})", path=path) from None
-    return {str(n): (V[nv[i]:nv[i + 1]], F[nf[i]:nf[i + 1]]) for i, n in enumerate(names)}
+    out = {}
+    for i, n in enumerate(names):
+        v, f = V[nv[i]:nv[i + 1]], F[nf[i]:nf[i + 1]]
+        if len(f) == 0 or f.min() < 0 or f.max() >= len(v) or not np.isfinite(v).all():
+            raise InputError(f"car {str(n)!r} has no faces, faces past its {len(v)} vertices or vertices that "
+                             "are not finite", path=path)
+        out[str(n)] = (v, f)
+    return out
 
 
 def load_cad_landmarks(path=None) -> dict:
     """``cad_landmarks.json`` as ``{name: (36, 3) array}`` for the road cars."""
     path = DATA_DIR / "cad_landmarks.json" if path is None else Path(path)
     data = load_json(path, kind="cad-landmarks", version=1)
-    return {c["name"]: np.array([c["vertices"][n] for n in VERTEX_NAMES]) for c in data["cars"] if c.get("road_car")}
+    out = {}
+    for c in data.get("cars", []):
+        if c.get("road_car"):
+            missing = [n for n in VERTEX_NAMES if n not in c.get("vertices", {})]
+            if missing:
+                raise InputError(f"car {c.get('name')!r} lacks vertex {missing[0]!r} ({len(missing)} of 36 missing)",
+                                 path=path)
+            out[c["name"]] = np.array([c["vertices"][n] for n in VERTEX_NAMES], dtype=float)
+    return out

@@ -103,12 +103,14 @@ def list_cmd(cad_dir):
 def show_cmd(name, out, cad_dir):
     """Picture of one car: three orthographic views with the 36 annotated vertices."""
     from wirescene.cad.landmarks import annotate
-    from wirescene.cad.mesh import load_car, road_car_check
+    from wirescene.cad.mesh import load_car, naming_the_file, road_car_check
 
     check_output_file(Path(out or f"{name}.png"), "--out")  # the default is the car's name in the working directory
-    car = load_car(_find(_cad_dir(cad_dir), name))
+    path = _find(_cad_dir(cad_dir), name)
+    car = load_car(path)
     is_road, reason = road_car_check(car)
-    X = annotate(car.vertices, car.faces, name=car.name)
+    with naming_the_file(path):
+        X = annotate(car.vertices, car.faces, name=car.name)
     out = out or f"{car.name}.png"
     draw_car(car.vertices, car.faces, X, title=f"{car.name}: {reason}", out=out)
     click.echo(out)
