@@ -432,6 +432,8 @@ def test_overlay_cuts_what_reaches_behind_the_camera_and_keys_its_colours(frame)
     legend = overlay(image, camera, scene, detections=scene.detections, edges=EDGES).axes[0].get_legend()
     key = [t.get_text() for t in legend.get_texts()]
     assert key[0] == "estimate" and key[-1] == "pre-detection"
+    legend = overlay(image, camera, scene, edges=EDGES, estimate_name="mean wireframe").axes[0].get_legend()
+    assert legend.get_texts()[0].get_text() == "mean wireframe"  # wirescene gt draws no estimate
 
 
 def test_pictures_are_saved_in_the_format_their_suffix_names_else_png(tmp_path):

@@ -288,10 +288,10 @@ def project_landmarks(
     ----------
     points : (K, 3) array
         Landmarks, object frame.
-    vertices : (V, 3) array, faces : (F, 3) int array
+    vertices, faces : (V, 3) array, (F, 3) int array
         The object's mesh, object frame.
     camera : Camera
-    location : (3,) array, R : (3, 3) array
+    location, R : (3,) array, (3, 3) array
         Object pose, ``X_cam = R @ X_obj + location``.
     tolerance : float, optional
         Metres. A landmark is visible if the first surface hit on the ray from the

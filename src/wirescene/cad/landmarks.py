@@ -223,6 +223,9 @@ def annotate(vertices, faces, *, name: str | None = None, corrections: dict | No
         Car name looked up in ``corrections``.
     corrections : dict, optional
         Defaults to :func:`load_corrections` ().
+    res : float, optional
+        Metres per pixel of the side-view silhouette the automatic landmarks are read
+        from (:func:`auto_landmarks`).
 
     Returns
     -------

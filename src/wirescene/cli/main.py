@@ -659,7 +659,7 @@ def gt_cmd(kitti_root, frame, out, split):
         hidden = self_occlusion(vertices, FACES, camera.center)
         objects.append(ObjectEstimate(i, g.box, 1.0, g.location, R, g.dims, 0.0, vertices=vertices, visibility=~hidden))
     fig = overlay(dataset.image(frame), camera, SceneEstimate("gt", objects), gt=cars, edges=EDGES,
-                  title=f"{frame}: mean wireframe at GT poses")
+                  title=f"{frame}: mean wireframe at GT poses", estimate_name="mean wireframe at the label's pose")
     click.echo(save_figure(fig, out))
 
 

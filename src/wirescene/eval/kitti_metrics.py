@@ -68,7 +68,7 @@ scores); each set picks its own thresholds and sums the frames' counts.
 Two things go beyond the official devkit, which evaluates Car at IoU 0.7 only: the
 ``"iou_0.5"`` block evaluates all four metrics at 0.5 (the common secondary setting of
 monocular 3D papers; note that OpenPCDet's "AP@0.70, 0.50, 0.50" keeps 2D and AOS at 0.7,
-which equal our ``iou_0.7`` figures), and a frame without a prediction file counts as a
+which equal our top-level (``"car"``, IoU 0.7) figures), and a frame without a prediction file counts as a
 frame without detections (the official devkit refuses to evaluate then).
 """
 

@@ -340,6 +340,8 @@ def match_detections(
     det_boxes : (D, 4) array
     det_scores : (D,) array
     gt_boxes : (G, 4) array
+    iou_threshold : float, optional
+        A match needs an IoU above it (the paper's 0.5).
 
     Returns
     -------

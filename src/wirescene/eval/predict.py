@@ -72,13 +72,25 @@ def predict_dataset(
     ----------
     dataset : KittiDataset
         Any split; labels are not needed unless ``source`` is ``"gt"``.
+    out_dir : path
+        Where the label files and the run's settings (``.predict.json``) are written.
     variant : str
         The model variant written.
-    source : DetectionSource
-        Pre-detections; default our own (``"bank"``).
+    source : DetectionSource, optional
+        Pre-detections; default (None) our own (``"bank"``).
+    options : FitOptions, optional
+        The fit's options (default: ``FitOptions()``).
+    frames : iterable of str, optional
+        The frames to fit (default: every image of the split).
     resume : bool
         Keep the label files of a previous run with the same settings and fit only the
         missing frames. Without it, ``out_dir`` must not hold label files already.
+    workers : int
+        Local processes fitting frames in parallel (the files do not depend on it).
+    dask_client : distributed.Client, optional
+        Fit the frames on this Dask cluster instead of local processes.
+    progress : callable
+        Wraps the iterable of finished frames (e.g. ``tqdm``).
 
     Returns
     -------

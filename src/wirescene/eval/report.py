@@ -185,12 +185,16 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
 
     Parameters
     ----------
+    out_dir : path
+        The report's directory (made if needed; files of the same names replaced).
     reports : dict
         ``{variant: EvaluationReport}`` of one run.
     gallery : Gallery
         The run's estimates (see :meth:`Gallery.add`).
     image_of : callable
         ``image_of(frame_id)`` -> ``(H, W, 3)`` uint8 image, for the overlays.
+    title : str
+        The page's heading.
     n_gallery : int
         Number of best and of worst frames shown.
     intervals : dict, optional

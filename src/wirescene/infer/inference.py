@@ -686,11 +686,18 @@ def refine_particles(
 
     Parameters
     ----------
+    camera : Camera
     particles : SceneParticles
         Coarse-stage particles ``(P, N)``; their ground planes stay fixed unless
         ``options.plane_refinement``.
     evidence : PartEvidence
         Per-vertex image evidence; object ``j`` of the particles is detection ``j``.
+    shape_model : ShapeModel
+        The cars' shape space (its first ``options.n_shape`` components are searched).
+    options : InferenceOptions, optional
+        The search's settings (default: ``InferenceOptions()``).
+    rng : numpy.random.Generator, optional
+        The sampling's generator (default: seeded with 0).
     boxes : (N, 4) array, optional
         Detection boxes, used with ``options.box_weight``.
     searched_occluder, deterministic_occlusion : bool

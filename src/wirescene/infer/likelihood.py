@@ -138,6 +138,11 @@ class GaussianVertexEvidence:
         True vertex positions of each detection's car.
     visible : (N, 36) bool array
         Which true vertices have evidence (occluded ones have none).
+    sigma_frac : float, optional
+        The Gaussian's width, a fraction of the car's projected length.
+    peak, floor : float, optional
+        The log ratio at the true position and far from it (and at vertices without
+        evidence).
     """
 
     def __init__(self, uv_true, visible, *, sigma_frac: float = 0.03, peak: float = 2.0, floor: float = -1.0):

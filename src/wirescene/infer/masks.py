@@ -149,6 +149,13 @@ def fit_mask(uv: np.ndarray, occluded: np.ndarray, candidates: np.ndarray, *, we
         E.g. the deterministic inter-object occlusion ``Gamma``.
     candidates : (..., V) bool array
         The vertices that count (not self-occluded).
+    weight_occluded : float, optional
+        What an occluded vertex counts against a visible one.
+
+    Returns
+    -------
+    (...) int array
+        The index of the best mask of :func:`occluder_masks`.
     """
     occ = np.asarray(occluded, bool)
     cand = np.asarray(candidates, bool)

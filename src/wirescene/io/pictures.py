@@ -82,6 +82,7 @@ def overlay(
     detections=None,
     title: str | None = None,
     edges: np.ndarray | None = None,
+    estimate_name: str = "estimate",
 ):
     """Image with detections (yellow), estimated 3D boxes or wireframes (red) and
     ground-truth 3D boxes (green).
@@ -89,11 +90,17 @@ def overlay(
     Parameters
     ----------
     image : (H, W, 3) uint8 array
+    camera : Camera
+        The image's camera (``P2``).
     estimate : SceneEstimate, optional
     gt : sequence of kitti ``Label``
     detections : Detections, optional
+    title : str, optional
+        A line written at the top left.
     edges : (E, 2) int array, optional
         Wireframe edges, used for objects that carry ``vertices``.
+    estimate_name : str, optional
+        What the key calls the red objects (``wirescene gt`` draws no estimate).
     """
     h, w = image.shape[:2]
     fig = new_figure(figsize=(w / 100, h / 100), dpi=100)
@@ -118,7 +125,7 @@ def overlay(
         ax.text(5, 15, title, color="white", fontsize=10, bbox=dict(facecolor="black", alpha=0.5, lw=0))
     key = []  # what each colour means, for the parts drawn
     if objects:
-        key.append(("-", EST_COLOR, "estimate" + (" (a cross marks the front)" if not wireframes else "")))
+        key.append(("-", EST_COLOR, estimate_name + (" (a cross marks the front)" if not wireframes else "")))
         if wireframes and any(o.visibility is not None and not np.all(o.visibility) for o in objects):
             key.append(("o", HIDDEN_COLOR, "hidden part"))
     if len(gt):

@@ -753,6 +753,11 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     label_shapes : dict, optional -- ``{frame id: (N, 36, 3)}`` wireframes of the real frames'
         ``Car`` labels (:func:`wirescene.training.parts_real.refit_label_shapes`) in place of
         the mean shape scaled into each label's box
+    min_samples_leaf : int -- the forest's smallest leaf (scikit-learn's option)
+    n_jobs : int -- processes of the forest's fit (scikit-learn's; -1: all cores)
+    synth_cache : path, optional -- a directory where the synthetic scenes' patches are
+        kept and read again by a training of the same scenes and options
+    progress : callable(str), optional -- called with one line per stage
 
     Returns
     -------
@@ -760,8 +765,8 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
 
     Notes
     -----
-    The defaults are the smallest recipe (what the tests' tiny trainings use); the shipped
-    model's is ``train_part_detector(out, kitti_root=ROOT, **RECIPE["parts"])`` with
+    The defaults are the function's own (``kind="ghog"``, 300 synthetic scenes, no position
+    or real calibration; the tests pass smaller values); the shipped model's recipe is ``train_part_detector(out, kitti_root=ROOT, **RECIPE["parts"])`` with
     :data:`wirescene.training.recipe.RECIPE`, as ``wirescene train parts`` and
     ``wirescene train all`` call it.
     """

@@ -91,6 +91,8 @@ def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True
     camera : Camera -- the frame's ``P2`` camera
     image_size : (W, H), optional -- vertices outside the image are not visible
     scaled : bool -- scale the mean shape to the labelled dims (else the plain mean)
+    mean : (36, 3) array, optional -- the mean shape placed (default: the shipped shape
+        model's)
     shapes : (N, 36, 3) array, optional -- each ``Car`` label's own wireframe in the object
         frame (e.g. :func:`refit_label_shapes`), placed instead of the mean
     """
