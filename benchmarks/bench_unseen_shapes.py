@@ -54,9 +54,9 @@ from wirescene.synth.generate import default_camera, generate_scene, load_car_li
 AUGMENT, AUGMENT_SEED = 100, 0  # the shipped model's (`wirescene train shape` defaults)
 
 
-def scenes(work: Path, names, per_car: int, seed: int) -> dict[str, str]:
-    """``{frame id: exemplar}``: ``per_car`` scenes of each exemplar alone under ``work/kitti``."""
-    root, library, camera = work / "kitti", load_car_library(), default_camera()
+def scenes(root: Path, library: dict, per_car: int, seed: int) -> dict[str, str]:
+    """``{frame id: exemplar}``: ``per_car`` scenes of each exemplar of ``library`` alone under ``root``."""
+    camera, names = default_camera(), sorted(library)
     out = {}
     for k, name in enumerate(names):
         for j in range(per_car):
@@ -89,17 +89,27 @@ def main():
     ap.add_argument("--scenes", type=int, default=2, help="scenes per exemplar")
     ap.add_argument("--seed", type=int, default=8128, help="scene stream")
     ap.add_argument("--variant", default="fg+gp", choices=[v for v, spec in VARIANTS.items() if spec.fine])
+    ap.add_argument("--library", type=Path, default=None,
+                    help="directory of another collection's cad_meshes.npz and cad_landmarks.json (see above)")
     ap.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = ap.parse_args()
     shipped, spec, options = load_default(), VARIANTS[args.variant], InferenceOptions()
     t0 = time.perf_counter()
-    frame_car = scenes(args.work_dir, shipped.exemplar_names, args.scenes, args.seed)
+    if args.library is None:
+        library, root = load_car_library(), args.work_dir / "kitti"
+        library = {n: library[n] for n in shipped.exemplar_names}
+    else:
+        library = load_car_library(args.library / "cad_meshes.npz", args.library / "cad_landmarks.json")
+        library, root = {n: m for n, m in library.items() if n not in shipped.exemplar_names}, args.work_dir / "library"
+        if not library:
+            ap.error(f"{args.library}: no car the shipped model has not seen")
+    frame_car = scenes(root, library, args.scenes, args.seed)
     print(f"{len(frame_car)} scenes ready in {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-    ds = KittiDataset(args.work_dir / "kitti")
-    results = {m: {} for m in ("seen", "unseen")}
+    ds = KittiDataset(root)
+    results = {m: {} for m in (("seen", "unseen") if args.library is None else ("unseen",))}
     ceiling, approx = {m: [] for m in results}, {m: [] for m in results}
-    for name in shipped.exemplar_names:
-        models = {"seen": shipped, "unseen": leave_one_out(shipped, name)}
+    for name in sorted(library):
+        models = {"seen": shipped, "unseen": leave_one_out(shipped, name)} if args.library is None else {"unseen": shipped}
         for fid in [f for f, n in frame_car.items() if n == name]:
             labels, camera = ds.labels(fid), ds.camera(fid)
             path = wireframe_gt_path(ds.split_dir, fid)
@@ -121,7 +131,7 @@ def main():
                 approx[key].append(err)
         print(f"{name} done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
     out = {"variant": args.variant, "scenes_per_exemplar": args.scenes, "seed": args.seed,
-           "n_shape": options.n_shape}
+           "n_shape": options.n_shape, "library": None if args.library is None else sorted(library)}
     for key, per_car in results.items():
         out[key] = {"all": summary([f for fs in per_car.values() for f in fs]),
                     "ceiling_parts_70": round(float(evaluate(ceiling[key]).metrics["all"]["parts_70"]), 2),
@@ -135,10 +145,11 @@ def main():
         print(f"{key:7s} {a['n_tp']:4d} {a['loc_1m']:6.1f} {a['median_loc']:6.2f} {a['median_az3d']:6.2f} "
               f"{a['parts_70']:9.1f} {a['n_parts_70_eligible']:4d} {out[key]['ceiling_parts_70']:9.1f} "
               f"{out[key]['approx_median_m']:8.3f}")
-    print(f"{'exemplar':14s} {'cars':>4s} {'seen <1m':>8s} {'unseen <1m':>10s} {'seen p70':>8s} {'unseen p70':>10s}")
-    for n in shipped.exemplar_names:
-        s, u = out["seen"]["per_exemplar"][n], out["unseen"]["per_exemplar"][n]
-        print(f"{n:14s} {s['n_tp']:4d} {s['loc_1m']:8.1f} {u['loc_1m']:10.1f} {s['parts_70']:8.1f} {u['parts_70']:10.1f}")
+    print(f"{'exemplar':16s} {'cars':>4s} {'seen <1m':>8s} {'unseen <1m':>10s} {'seen p70':>8s} {'unseen p70':>10s}")
+    for n in sorted(library):
+        u = out["unseen"]["per_exemplar"][n]
+        s = out["seen"]["per_exemplar"][n] if "seen" in out else {"loc_1m": float("nan"), "parts_70": float("nan")}
+        print(f"{n:16s} {u['n_tp']:4d} {s['loc_1m']:8.1f} {u['loc_1m']:10.1f} {s['parts_70']:8.1f} {u['parts_70']:10.1f}")
     if args.json:
         args.json.write_text(json.dumps(out, indent=1) + "\n")
 
