@@ -484,3 +484,21 @@ def test_draw_shows_the_fitted_wireframes_and_the_labels_where_they_stand(frame,
             wirescene.draw(image, camera.P, scene, gt=bad)
     with pytest.raises(wirescene.InputError, match="missing.txt"):
         wirescene.draw(image, camera.P, scene, gt=tmp_path / "missing.txt")
+
+
+def test_the_api_resolves_and_checks_the_device_before_any_work(frame, monkeypatch):
+    from wirescene.infer import torch_backend
+
+    image, camera, labels = frame
+    boxes = [o.box for o in labels.of_type("Car")][:1]
+    calls = []
+    monkeypatch.setattr("wirescene.api.fit_frame", lambda *a, **k: calls.append(1))
+    with pytest.raises(torch_backend.DeviceError, match="unknown device 'tpu'"):
+        wirescene.fit(image, camera, boxes, variant="coarse+gp", settings={"inference.device": "tpu"})
+    assert not calls  # refused before the fit, whatever the variant
+    monkeypatch.undo()
+    scene = wirescene.fit(image, camera, boxes, variant="coarse", particles=10, settings={"inference.device": " NUMPY"})
+    assert len(scene.objects) == 1
+    if not torch_backend.available():  # auto without PyTorch: numpy, as on the command line
+        assert len(wirescene.fit(image, camera, boxes, variant="coarse", particles=10,
+                                 settings={"inference.device": "auto"}).objects) == 1

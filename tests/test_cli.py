@@ -278,10 +278,14 @@ def test_eval_with_external_boxes_without_viewpoint(tmp_path):
 
 
 def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gpu(tmp_path):
-    from wirescene.cli.main import _resolve_device
     from wirescene.infer import torch_backend
+    from wirescene.infer.torch_backend import choose_device as _resolve_device
 
     r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "fg", "--frames", "000002", "--device", "tpu"])
+    assert r.exit_code == 2 and "unknown device 'tpu'" in r.output and len(r.output.strip().splitlines()) == 1
+    # --set inference.device is the device too (it was overridden by --device's default), checked as early
+    r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "coarse", "--frames", "000002", "--set",
+                                  "inference.device=tpu"])
     assert r.exit_code == 2 and "unknown device 'tpu'" in r.output and len(r.output.strip().splitlines()) == 1
     if torch_backend.available():
         import torch
@@ -300,8 +304,9 @@ def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gp
 def test_device_auto_takes_the_gpu_only_when_frames_are_fitted_in_one_process(monkeypatch, tmp_path):
     from types import SimpleNamespace
 
-    from wirescene.cli.main import _parallel, _resolve_device
+    from wirescene.cli.main import _parallel
     from wirescene.infer import torch_backend
+    from wirescene.infer.torch_backend import choose_device as _resolve_device
 
     # A machine whose PyTorch sees a GPU, without importing torch.
     monkeypatch.setattr(torch_backend, "available", lambda: True)
@@ -318,6 +323,10 @@ def test_device_auto_takes_the_gpu_only_when_frames_are_fitted_in_one_process(mo
             "--draws", "0", "--json", out)
     assert r.exit_code == 0, r.output
     assert "fits frames in one process" not in r.output and out.is_file()
+    # one frame with --workers 2: auto takes the GPU, and the workers a single frame never uses are no error
+    r = run("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000002", "--particles", "8", "--workers", "2",
+            "--draws", "0")
+    assert r.exit_code == 0, r.output
 
 
 def test_eval_with_the_torch_backend_equals_numpy(tmp_path):

@@ -85,6 +85,18 @@ def test_resolve_device_without_pytorch_gives_the_install_hint(monkeypatch):
         tb.self_occlusion(np.zeros((1, N_VERTICES, 3)), FACES, CENTER, device="cpu")
 
 
+def test_a_pytorch_that_cannot_be_imported_is_numpy_for_auto_and_named_for_a_device(monkeypatch):
+    import sys
+
+    monkeypatch.setattr(tb, "available", lambda: True)
+    monkeypatch.setitem(sys.modules, "torch", None)  # installed, but its import fails
+    assert tb.choose_device("auto") == "numpy" and tb.choose_device(" NumPy ") == "numpy"
+    with pytest.raises(tb.DeviceError, match=r"^PyTorch is installed but cannot be imported \((ModuleNotFound|Import)Error: "):
+        tb.choose_device("cpu")
+    with pytest.raises(tb.DeviceError, match="expected numpy, cpu, cuda, cuda:N or auto"):
+        tb.choose_device("tpu")
+
+
 def test_resolve_device_names(torch):
     assert tb.resolve_device("cpu") == torch.device("cpu")
     assert tb.resolve_device(" CPU ") == torch.device("cpu")

@@ -205,8 +205,14 @@ def _models(models):
     return resolve_models(models)  # InputError naming the directory or file
 
 
-def _options(options: FitOptions | None, particles, seed, models=None, settings=None) -> FitOptions:
+def _options(options: FitOptions | None, particles, seed, models=None, settings=None, *,
+             parallel: bool = False) -> FitOptions:
+    """The fit's options of the API's arguments, the device resolved and checked before
+    any work (:func:`wirescene.infer.torch_backend.choose_device`, as the CLI's)."""
+    from dataclasses import replace
+
     from wirescene.fitting.models import with_models
+    from wirescene.infer.torch_backend import choose_device
 
     if options is not None:
         if not isinstance(options, FitOptions):
@@ -221,7 +227,8 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
             options = options.with_settings(settings)
         except (ValueError, TypeError) as exc:
             raise ArgumentError("settings", str(exc)) from None
-    return with_models(options, _models(models))
+    device = choose_device(options.inference.device, parallel=parallel)
+    return with_models(replace(options, inference=replace(options.inference, device=device)), _models(models))
 
 
 def fit(
@@ -543,7 +550,8 @@ def evaluate(
             raise ArgumentError("split_file", f"expected a path, got {type(split_file).__name__}")
         frame_ids = read_split_file(split_file, known=dataset.frame_ids(), what="labelled frame",
                                     where=dataset.split_dir)
-    options = _options(None, particles, seed, models, settings)
+    several = frame_ids is None or len(frame_ids) > 1
+    options = _options(None, particles, seed, models, settings, parallel=several and _positive_int(workers, "workers") > 1)
     return evaluate_dataset(dataset, names, frames=frame_ids,
                             source=DetectionSource(str(detections), bank=options.detector_bank,
                                                    classifier=options.viewpoint_classifier),

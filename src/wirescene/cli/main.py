@@ -111,9 +111,11 @@ def _progress(desc: str, total: int | None = None):
 def _fit_options(particles: int, seed: int, *, parallel: bool = False, **inference):
     """The :class:`FitOptions` of a command's options: the stage options and ``--set``
     (one mapping, :meth:`FitOptions.with_settings`), the models and the device
-    (``parallel``: frames will be fitted by several processes, see :func:`_resolve_device`)."""
+    (``parallel``: frames will be fitted by several processes, see
+    :func:`wirescene.infer.torch_backend.choose_device`)."""
     from wirescene.fitting.models import with_models
     from wirescene.fitting.pipeline import FitOptions
+    from wirescene.infer.torch_backend import choose_device
     from wirescene.lift import LiftingOptions
 
     models_dir = inference.pop("models", None)
@@ -125,8 +127,8 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, **inferen
     unknown = set(inference) - set(models)
     if unknown:  # a command passed an option no stage owns: a bug, not a user error
         raise TypeError(f"options no stage owns: {', '.join(sorted(unknown))}")
-    if device is not None:
-        settings["inference.device"] = _resolve_device(device, parallel=parallel)
+    # --device, else --set inference.device=..., else auto: resolved and checked here, before any fit
+    settings["inference.device"] = choose_device(device or settings.get("inference.device", "auto"), parallel=parallel)
     options = FitOptions(lifting=LiftingOptions(n_particles=particles), seed=seed, calibrate_scores=calibrate_scores,
                          **models)
     try:
@@ -134,25 +136,6 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, **inferen
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--set") from None
     return with_models(options, load_models(models_dir))
-
-
-def _resolve_device(name: str, *, parallel: bool = False) -> str:
-    """The inference device for ``--device``: ``numpy``, or a PyTorch device name.
-    ``auto`` takes a CUDA GPU when PyTorch and one are there and the frames are fitted in
-    one process anyway, else numpy (PyTorch is imported only to look for the GPU, and only
-    if it is installed). With ``parallel`` (several frame processes) it stays with numpy:
-    the GPU speeds up the ray casting alone, a fit 1.3x end to end, while CUDA would keep
-    the frames in one process (benchmarks/RESULTS.md, "The PyTorch backend on a GPU")."""
-    from wirescene.infer import torch_backend
-
-    key = name.strip().lower()
-    if key == "numpy":
-        return "numpy"
-    if key == "auto":
-        if parallel or not torch_backend.available():
-            return "numpy"
-        return "cuda" if torch_backend.resolve_device("auto").type == "cuda" else "numpy"
-    return str(torch_backend.resolve_device(key))
 
 
 def _inference_options(f):
@@ -174,10 +157,11 @@ def _inference_options(f):
     f = click.option("--bank", "detector_bank", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                      default=None, help="Detector bank file for our own pre-detection (default: --models' or the "
                                         "shipped bank).")(f)
-    f = click.option("--device", default="auto", show_default=True,
+    f = click.option("--device", default=None,
                      help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
-                          "(optional: pip install torch). auto: a CUDA GPU if PyTorch sees one and the frames are "
-                          "fitted in one process (one image, --workers 1 or one core), else numpy.")(f)
+                          "(optional: pip install torch). auto (the default, unless --set inference.device=... "
+                          "names one): a CUDA GPU if PyTorch sees one and the frames are fitted in one process "
+                          "(one image, --workers 1 or one core), else numpy.")(f)
     return f
 
 
@@ -334,7 +318,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing,
                              bank=options.detector_bank, classifier=options.viewpoint_classifier)
     on_gpu = options.inference.device.startswith("cuda")
-    if on_gpu and (workers or 1) > 1:
+    if on_gpu and _parallel(workers, frame_ids, None):  # one frame needs no workers to drop
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
         raise click.UsageError("--device cuda fits frames in one process: drop --workers (or use --dask, one worker per GPU)")
     gallery = None
@@ -598,7 +582,7 @@ def demo_cmd(out, particles, variants, models):
     from wirescene.io.outputs import write_fit_outputs
 
     check_output_dir(out, "--out")
-    options = _fit_options(particles, 0, models=models)
+    options = _fit_options(particles, 0, models=models, device="numpy")  # the README's demo figures, to the bit
     t0 = time.perf_counter()
     dataset = KittiDataset(sample_root())
     first = dataset.frame_ids()[0]

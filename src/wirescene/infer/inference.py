@@ -137,7 +137,8 @@ class InferenceOptions:
     # Starting spreads of the plane block: 0.1 deg of pitch moves a car at 30 m by about 1 m (0.1-0.4 read alike).
     sigma_pitch_deg: float = bounded(0.2, minimum=0)
     sigma_roll_deg: float = bounded(0.2, minimum=0)
-    # Where the likelihood's ray casting runs: "numpy" or a PyTorch device (see infer.torch_backend).
+    # Where the likelihood's ray casting runs: "numpy" or a PyTorch device; the CLI and the API take "auto"
+    # too and resolve it before a fit (infer.torch_backend.choose_device).
     device: str = "numpy"
 
     def __post_init__(self):

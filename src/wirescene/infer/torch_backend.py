@@ -83,12 +83,52 @@ def available() -> bool:
 
 
 def _torch():
-    """``import torch``, or a :class:`DeviceError` with the install hint."""
+    """``import torch``, or a :class:`DeviceError`: the install hint where it is missing,
+    the import's own error where an installed PyTorch cannot be loaded (a missing CUDA
+    library, a build for another Python)."""
     try:
         import torch
-    except ImportError as exc:
-        raise DeviceError("the PyTorch backend needs PyTorch: pip install torch") from exc
+    except Exception as exc:  # a broken build raises OSError, RuntimeError, ... as well
+        if isinstance(exc, ImportError) and not available():
+            raise DeviceError("the PyTorch backend needs PyTorch: pip install torch") from exc
+        problem = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        raise DeviceError(f"PyTorch is installed but cannot be imported ({problem}); use --device numpy") from exc
     return torch
+
+
+def choose_device(name="auto", *, parallel: bool = False) -> str:
+    """The inference device for a ``--device`` / ``inference.device`` value: ``"numpy"``
+    or a PyTorch device name (``"cpu"``, ``"cuda"``, ``"cuda:N"``), checked here.
+
+    ``"auto"`` takes a CUDA GPU when PyTorch sees one and the frames are fitted in one
+    process anyway, else numpy: with ``parallel`` (several frame processes) it stays with
+    numpy, the GPU speeding up the ray casting alone (a fit 1.3x end to end) while CUDA
+    would keep the frames in one process (benchmarks/RESULTS.md, "The PyTorch backend on a
+    GPU"); a PyTorch that is missing or cannot be imported is numpy too. PyTorch is
+    imported only to look for the GPU, and only if it is installed.
+
+    Raises
+    ------
+    DeviceError (a ValueError)
+        A name other than ``numpy``, ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (case and
+        surrounding blanks ignored), or a PyTorch device this machine lacks.
+
+    Examples
+    --------
+    >>> choose_device(" NumPy "), choose_device("auto", parallel=True)
+    ('numpy', 'numpy')
+    """
+    key = name.strip().lower() if isinstance(name, str) else name
+    if key == "numpy":
+        return "numpy"
+    if key == "auto":
+        if parallel or not available():
+            return "numpy"
+        try:
+            return "cuda" if resolve_device("auto").type == "cuda" else "numpy"
+        except DeviceError:  # installed but broken: auto asked for nothing that needs it
+            return "numpy"
+    return str(resolve_device(key))
 
 
 def resolve_device(name="auto"):
@@ -113,7 +153,7 @@ def resolve_device(name="auto"):
             raise DeviceError(f"device must be a string such as 'cpu', 'cuda', 'cuda:0' or 'auto', got {name!r}")
     key = name.strip().lower()
     if key not in ("cpu", "cuda", "auto") and not (key.startswith("cuda:") and key[5:].isdigit()):
-        raise DeviceError(f"unknown device {name!r}: expected cpu, cuda, cuda:N or auto")
+        raise DeviceError(f"unknown device {name!r}: expected numpy, cpu, cuda, cuda:N or auto")
     if not available():
         raise DeviceError(_INSTALL_HINT.format(name=key))
     torch = _torch()
