@@ -464,6 +464,44 @@ def test_train_viewpoints_writes_a_classifier_of_the_chosen_frames(tmp_path):
     assert r.exit_code != 0
 
 
+def test_a_report_written_again_resumed_or_with_an_unreadable_image_says_what_it_shows(tmp_path):
+    import re
+
+    from conftest import kitti_copy
+
+    root = kitti_copy(tmp_path / "kitti", ["000002", "000010", "001545"])
+    common = ["eval", root, "--variant", "coarse", "--particles", 8, "--workers", 1, "--draws", 0]
+    out, pred = tmp_path / "report", tmp_path / "pred"
+    assert run(*common, "--frames", "000002,000010", "--report", out).exit_code == 0
+    before = {p.name for p in out.glob("*_overlay.png")}
+    # a frame's image unreadable at the end: the figures and the JSON stand, the frame is not pictured
+    image = root / "training" / "image_2" / "001545.png"
+    image.write_bytes(image.read_bytes()[:2000])
+    r = run(*common, "--frames", "001545,000010", "--predictions", pred, "--report", out, "--json", tmp_path / "m.json")
+    assert r.exit_code == 0, r.output
+    page = (out / "index.html").read_text()
+    assert "001545 — its image could not be read" in page and (tmp_path / "m.json").is_file()
+    pictured = {p.name for p in out.glob("*_overlay.png")}
+    assert pictured == set(re.findall(r'src="([^"]+_overlay\.png)"', page))  # the earlier gallery is gone
+    assert pictured != before
+    # resumed: the reused frames are in the tables, and the page says they are not pictured
+    r = run(*common, "--frames", "001545,000010", "--predictions", pred, "--resume", "--report", out)
+    assert r.exit_code == 0, r.output
+    assert "2 frames reused from an earlier run's records are in the tables, not pictured" in \
+        (out / "index.html").read_text()
+
+
+def test_a_frame_without_its_image_or_calibration_is_found_before_any_fit(tmp_path):
+    from conftest import kitti_copy
+
+    root = kitti_copy(tmp_path / "kitti", ["000002", "000010"])
+    (root / "training" / "calib" / "000010.txt").unlink()
+    pred = tmp_path / "pred"
+    r = run("eval", root, "--variant", "coarse", "--particles", 8, "--workers", 1, "--draws", 0, "--predictions", pred)
+    assert r.exit_code == 2 and "000010.txt: calibration file not found" in r.output
+    assert not pred.exists()  # 000002 was not fitted first
+
+
 def test_eval_with_several_seeds_reports_each_and_their_spread(tmp_path):
     out, pred = tmp_path / "m.json", tmp_path / "pred"
     common = ("eval", KITTI_ROOT, "--variant", "coarse+gp", "--variant", "full", "--frames", "000010", "--particles",
@@ -490,3 +528,70 @@ def test_eval_with_several_seeds_reports_each_and_their_spread(tmp_path):
     assert data["seeds"]["1"]["full"]["records"] != data["seeds"]["2"]["full"]["records"]
     r = CliRunner().invoke(main, [str(a) for a in (*common, "--seed", 1, "--seed", 1)])
     assert r.exit_code == 2 and "each seed once" in r.output
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "killpg"), reason="process groups are POSIX")
+def test_ctrl_c_stops_parallel_workers_at_once_even_twice(tmp_path):
+    """Ctrl-C (SIGINT to the terminal's process group) with --workers 2: exit 130 soon,
+    also when pressed twice (a worker interrupted in its queue's read hung the parent),
+    with no worker left behind and the finished frames' label files kept."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    frames = ",".join(sorted(p.stem for p in (KITTI_ROOT / "training" / "label_2").glob("*.txt"))[:3])
+    pred = tmp_path / "pred"
+    cmd = [sys.executable, "-c", "from wirescene.cli.main import main; main()", "predict", str(KITTI_ROOT),
+           "--split", "training", "--variant", "full", "--frames", frames, "--workers", "2", "--out", str(pred)]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 240
+        while not list(pred.glob("*.txt")) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+        assert proc.poll() is None, "the run ended before a frame was recorded"
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        time.sleep(0.5)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)
+        assert proc.wait(timeout=30) == 130
+        assert time.monotonic() - t0 < 2.5  # the frames being fitted (about 4 s each) are not waited for
+        assert b"interrupted" in proc.stderr.read()
+        time.sleep(0.5)
+        left = subprocess.run(["ps", "-o", "pid=", "-g", str(proc.pid)], capture_output=True, text=True).stdout.split()
+        assert not left, f"workers left: {left}"
+        assert list(pred.glob("*.txt"))
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def _slow_frame(seconds):
+    import signal
+    import time
+
+    time.sleep(seconds)
+    return signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+
+
+def test_a_pool_stopped_by_an_error_does_not_wait_for_its_frames():
+    import os
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    from wirescene.eval.runner import _pool_closer, _worker_init
+
+    pool = ProcessPoolExecutor(max_workers=2, initializer=_worker_init, initargs=(os.getpid(), 1))
+    assert pool.submit(_slow_frame, 0).result() is True  # workers leave Ctrl-C to the parent
+    futures = [pool.submit(_slow_frame, 60) for _ in range(3)]
+    time.sleep(0.5)
+    processes = list(pool._processes.values())
+    t0 = time.monotonic()
+    _pool_closer(pool)(KeyboardInterrupt, KeyboardInterrupt(), None)  # as the ExitStack calls it on Ctrl-C
+    assert time.monotonic() - t0 < 5
+    for process in processes:
+        process.join(timeout=5)
+        assert not process.is_alive()
+    assert futures[-1].cancelled() or futures[-1].done()

@@ -8,6 +8,7 @@ from click.testing import CliRunner
 
 from conftest import KITTI_ROOT
 from wirescene.cli.main import main
+from wirescene.core.errors import InputError
 from wirescene.eval.metrics import FrameResult
 from wirescene.eval.records import RECORDS_DIR
 from wirescene.eval.runner import _FrameJob, evaluate_dataset
@@ -117,6 +118,9 @@ def test_resume_reuses_finished_frames_and_equals_uninterrupted_run(reference, t
     shutil.copytree(ref_dir, pred)
     (pred / RECORDS_DIR / "001545.json").unlink()  # interrupted before this frame was complete
     (pred / "fg" / "000002.txt").unlink()  # a lost label file of a complete frame comes back
+    (pred / "coarse+gp" / "000002.txt").write_text("Car 0 0 0 0 0 1 1 1 1 1 1 1 1 1\n")  # so does another run's
+    with pytest.raises(InputError, match="holds the records of an earlier run"):  # no mixing without --resume
+        evaluate_dataset(KittiDataset(KITTI_ROOT), VARIANTS, frames=FRAMES, options=OPTS, predictions_dir=pred)
     fitted, seen, notes = set(), [], []
     resumed = evaluate_dataset(
         KittiDataset(KITTI_ROOT), VARIANTS, frames=FRAMES, options=OPTS, predictions_dir=pred, resume=True,

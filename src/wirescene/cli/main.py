@@ -224,7 +224,8 @@ def _dask_client(address: str):
                    "(their number is reported) instead of an error.")
 @click.option("--resume/--no-resume", default=False, show_default=True,
               help="Reuse the frames already finished in --predictions DIR (recorded in DIR/.frames/) and fit only the "
-                   "rest; a record written with other settings is fitted again.")
+                   "rest; a record written with other settings is fitted again. Without it, a DIR holding an earlier "
+                   "run's records is refused (its frames would mix with this run's).")
 @click.option("--dask", "dask_address", metavar="ADDRESS", default=None,
               help="Fit frames on this running Dask scheduler (e.g. tcp://host:8786) instead of local processes "
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")

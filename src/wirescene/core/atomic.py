@@ -95,15 +95,21 @@ def _staged(path: Path):
 
 
 @contextmanager
-def atomic_dir(path: str | Path):
+def atomic_dir(path: str | Path, *, stale: tuple[str, ...] = ()):
     """Yield an empty staging directory beside ``path``; when the block succeeds its files
-    move into ``path`` (created if needed; files of the same name replaced), when it raises
-    the staging directory goes and so do the directories above ``path`` made for it, so
-    that a set of files (a report's page and pictures) appears whole or not at all."""
+    move into ``path`` (created if needed; files of the same name replaced, and those of
+    ``path`` matching a glob pattern of ``stale`` that the new set lacks removed), when it
+    raises the staging directory goes and so do the directories above ``path`` made for
+    it, so that a set of files (a report's page and pictures) appears whole or not at all."""
     path = Path(path)
     with _staged(path) as staging:
         yield staging
         path.mkdir(exist_ok=True)
+        new = {entry.name for entry in staging.iterdir()}
+        for pattern in stale:
+            for old in path.glob(pattern):
+                if old.name not in new and old.is_file():
+                    old.unlink()
         for entry in sorted(staging.iterdir()):
             os.replace(entry, path / entry.name)
     shutil.rmtree(staging, ignore_errors=True)

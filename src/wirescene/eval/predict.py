@@ -119,6 +119,7 @@ def predict_dataset(
                              "cannot resume into this directory", path=out)
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
+    dataset.check_frames(todo, labels=source.spec == "gt")
     job = _PredictJob(dataset, variant, source, options)
     with ExitStack() as stack:
         for k, (frame_id, text) in enumerate(progress(fit_frames(job, todo, workers=workers,

@@ -125,8 +125,18 @@ class FrameRecords:
         return fits
 
     def restore_labels(self, frame_id: str, fits: dict[str, tuple[str, FrameResult]]) -> None:
-        """Rewrite label files of a reused frame that have gone missing since."""
+        """Rewrite label files of a reused frame that have gone missing or differ from its
+        record since (a run of other settings stopped between a frame's labels and its
+        record)."""
         for v, (labels, _) in fits.items():
             path = self.labels_path(v, frame_id)
-            if not path.is_file():
+            try:
+                same = path.read_text() == labels
+            except (OSError, UnicodeDecodeError):
+                same = False
+            if not same:
                 write_text(path, labels)
+
+    def recorded_frames(self) -> list[str]:
+        """The frames this directory holds records of (whatever their settings)."""
+        return sorted(p.stem for p in (self.root / RECORDS_DIR).glob("*.json"))

@@ -24,6 +24,7 @@ import numpy as np
 
 from wirescene.core.atomic import atomic_dir, write_text
 from wirescene.core.camera import Camera
+from wirescene.core.errors import InputError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.labels import Label
 from wirescene.core.types import Detections, SceneEstimate
@@ -205,7 +206,9 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
         :func:`wirescene.eval.intervals.kitti_intervals`: a second table gives KITTI's
         moderate APs (with their intervals).
     """
-    with atomic_dir(out_dir) as staging:  # the page and its pictures appear together or not at all
+    # the page and its pictures appear together or not at all, and an earlier report's gallery goes
+    with atomic_dir(out_dir, stale=("best_*_overlay.png", "best_*_bev.png", "worst_*_overlay.png",
+                                    "worst_*_bev.png")) as staging:
         _write_report(staging, reports, gallery=gallery, image_of=image_of, title=title, n_gallery=n_gallery,
                       intervals=intervals, kitti=kitti, kitti_intervals=kitti_intervals)
     return Path(out_dir) / "index.html"
@@ -238,7 +241,13 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
         camera, cars, dets, estimates = gallery.frames[frame_id]
         estimate = estimates[lead]
         stem = f"{kind}_{frame_id}"
-        save_figure(overlay(image_of(frame_id), camera, estimate, gt=cars, detections=dets, edges=EDGES,
+        try:
+            image = image_of(frame_id)
+        except InputError as exc:  # the run's figures stand; this frame is not pictured
+            cards.append(f"<p>{kind}: {html.escape(frame_id)} — its image could not be read "
+                         f"({html.escape(str(exc))}): not pictured.</p>")
+            continue
+        save_figure(overlay(image, camera, estimate, gt=cars, detections=dets, edges=EDGES,
                             title=f"{frame_id}  {lead}"), out / f"{stem}_overlay.png")
         save_figure(birds_eye(estimate, gt=cars, camera=camera, title=f"{frame_id}  {lead}"), out / f"{stem}_bev.png")
         found = errors.get(frame_id, [])
@@ -247,7 +256,11 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
                      f'{len(found)} of {len(cars)} cars found{mean}, {len(dets) - len(found)} false detections '
                      f'({lead})</figcaption><img class="wide" src="{stem}_overlay.png">'
                      f'<img class="bev" src="{stem}_bev.png"></figure>')
-    n_frames = len(gallery.frames) or max((r.counts.get("frames", 0) for r in reports.values()), default=0)
+    evaluated = max((r.counts.get("frames", 0) for r in reports.values()), default=0)
+    n_frames = max(len(gallery.frames), evaluated)
+    reused = evaluated - len(gallery.frames)
+    unpictured = (f"<p>The gallery ranks the {len(gallery.frames)} frames fitted by this run; {reused} frames "
+                  "reused from an earlier run's records are in the tables, not pictured.</p>") if reused > 0 else ""
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>wirescene report {html.escape(title)}</title>
 <style>
@@ -267,7 +280,7 @@ viewpoint within 45°).</p>
 green: ground truth; yellow: pre-detections.
 Frames ranked by a score that counts missed and false cars: (sum over true positives of
 max(0, 1 &minus; error / {SCORE_ZERO_ERROR:g} m) &minus; false detections) / labelled cars.</p>
-{''.join(cards)}
+{unpictured}{''.join(cards)}
 </body></html>
 """
     write_text(out / "index.html", page)

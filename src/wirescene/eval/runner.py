@@ -108,10 +108,12 @@ class _FrameJob:
         return frame_id, camera, fitted.detections, gt, fits
 
 def _worker_init(parent: int, threads: int) -> None:
-    """Worker initializer: end with the parent (:func:`_die_with_parent`), and let a
-    PyTorch the parent imported use the worker's share of the cores (each worker taking
-    them all made ``--device cpu`` with 2 workers 3.5x slower than numpy on 2 cores)."""
+    """Worker initializer: end with the parent (:func:`_die_with_parent`), leave Ctrl-C to
+    the parent (which stops the pool: a worker interrupted in its queue's read hung a
+    second Ctrl-C), and let a PyTorch the parent imported use the worker's share of the
+    cores (each worker taking them all made ``--device cpu`` 3-4x slower)."""
     _die_with_parent(parent)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     torch = sys.modules.get("torch")
     if torch is not None:
         torch.set_num_threads(threads)
@@ -156,11 +158,27 @@ def fit_frames(
         n = min(workers, len(frame_ids))
         pool = ProcessPoolExecutor(max_workers=n, initializer=_worker_init,
                                    initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // n)))
-        stack.callback(pool.shutdown, cancel_futures=True)
+        stack.push(_pool_closer(pool))
         # As completed rather than in order: a finished frame is recorded at once, so an
         # interrupted run loses only the frames still being fitted.
         return (future.result() for future in as_completed([pool.submit(job, f) for f in frame_ids]))
     return map(job, frame_ids)
+
+
+def _pool_closer(pool):
+    """An exit callback of ``pool``: shut down when the frames are done; on an error or
+    Ctrl-C its workers end at once, the frames they are fitting not waited for."""
+
+    def close(exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            pool.shutdown(cancel_futures=True)
+            return False
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            process.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        return False
+
+    return close
 
 
 def _fit_frames_dask(job, frame_ids: list[str], dask_client: str | Client, stack: ExitStack) -> Iterator:
@@ -282,8 +300,14 @@ def evaluate_dataset(
         # The artefacts' content, not only their paths: a model retrained in place refits.
         config["models"] = models_fingerprint(options)
         records = FrameRecords(Path(predictions_dir), config)
+        earlier = records.recorded_frames()
+        if earlier and not resume:  # frames of this run beside an earlier run's would pass for one run
+            raise InputError(f"holds the records of an earlier run ({len(earlier)} frames): resume it (--resume reuses "
+                             "the frames of the same settings and fits the rest) or choose another directory",
+                             path=predictions_dir)
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
+    dataset.check_frames(todo, labels=True)
     with ExitStack() as stack:
         fitted = fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
         by_frame = _collect_frames(fitted, reused, records, progress, on_estimate)

@@ -321,6 +321,16 @@ class KittiDataset:
         size = self.image_size(frame_id) if image.is_file() else None  # no image: checked where it is read
         return read_labels(self.label_path(frame_id), image_size=size)
 
+    def check_frames(self, frame_ids, *, labels: bool = False) -> None:
+        """Read every frame's calibration, image header and (``labels``) label file: an
+        :class:`InputError` naming the first missing or malformed one, before a run fits
+        any frame (a hole found at frame N of thousands would cost N fits and leave their
+        outputs). Images are not decoded: a truncated image is found where it is read."""
+        for f in frame_ids:
+            self.camera(f)
+            if labels:
+                self.labels(f)
+
     def car_counts(self, frame_ids) -> dict[str | int, int]:
         """``{frame: number of its Car labels}`` for ``frame_ids`` (keyed as given): what the
         training commands check before they learn (a bank or a part model needs labelled cars)."""
