@@ -24,7 +24,6 @@ import numpy as np
 
 from wirescene.core.atomic import atomic_dir, write_text
 from wirescene.core.camera import Camera
-from wirescene.core.errors import InputError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.labels import Label
 from wirescene.core.types import Detections, SceneEstimate
@@ -241,13 +240,7 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
         camera, cars, dets, estimates = gallery.frames[frame_id]
         estimate = estimates[lead]
         stem = f"{kind}_{frame_id}"
-        try:
-            image = image_of(frame_id)
-        except InputError as exc:  # the run's figures stand; this frame is not pictured
-            cards.append(f"<p>{kind}: {html.escape(frame_id)} — its image could not be read "
-                         f"({html.escape(str(exc))}): not pictured.</p>")
-            continue
-        save_figure(overlay(image, camera, estimate, gt=cars, detections=dets, edges=EDGES,
+        save_figure(overlay(image_of(frame_id), camera, estimate, gt=cars, detections=dets, edges=EDGES,
                             title=f"{frame_id}  {lead}"), out / f"{stem}_overlay.png")
         save_figure(birds_eye(estimate, gt=cars, camera=camera, title=f"{frame_id}  {lead}"), out / f"{stem}_bev.png")
         found = errors.get(frame_id, [])
