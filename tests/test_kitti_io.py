@@ -108,6 +108,52 @@ def test_write_is_atomic(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["det.txt"]  # no temp file left
 
 
+def test_a_set_that_cannot_take_its_place_leaves_the_old_one_whole(tmp_path, monkeypatch):
+    from pathlib import Path
+
+    import wirescene.core.atomic as atomic
+
+    (tmp_path / "set").mkdir()
+    (tmp_path / "set" / "old.txt").write_text("old")
+    real = os.replace
+
+    def failing_from(n):  # os.replace failing from its n-th call on: 1 moves the old set aside, 2 the new one in
+        calls = []
+
+        def replace(src, dst):
+            calls.append(src)
+            if len(calls) >= n:
+                raise OSError("device busy")
+            return real(src, dst)
+        return replace
+
+    # the new set cannot move in, and the old one cannot move back: it is kept where it is, and named
+    monkeypatch.setattr(atomic.os, "replace", failing_from(2))
+    with pytest.raises(OSError, match="the old one is left in") as info:
+        with atomic.replaced_dir(tmp_path / "set") as staging:
+            (staging / "new.txt").write_text("new")
+    monkeypatch.undo()
+    kept = Path(str(info.value).rsplit(" left in ", 1)[1])
+    assert (kept / "old.txt").read_text() == "old"
+    real(kept, tmp_path / "set")
+    kept.parent.rmdir()
+    # the new set cannot move in, the old one moves back: as it was, nothing else left
+    calls = []
+
+    def fail_second(src, dst):
+        calls.append(src)
+        if len(calls) == 2:
+            raise OSError("device busy")
+        return real(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", fail_second)
+    with pytest.raises(OSError, match="device busy"):
+        with atomic.replaced_dir(tmp_path / "set") as staging:
+            (staging / "new.txt").write_text("new")
+    assert len(calls) == 3 and sorted(p.name for p in (tmp_path / "set").iterdir()) == ["old.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["set"]
+
+
 @pytest.mark.skipif(os.name != "posix", reason="file modes and the umask are POSIX's")
 def test_written_files_get_the_permissions_of_any_new_file(tmp_path):
     from wirescene.core.atomic import atomic_dir, write_text

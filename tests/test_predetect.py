@@ -732,3 +732,39 @@ def test_bank_refinement_round_trip(tmp_path):
     np.savez(tmp_path / "bad.npz", **z)
     with pytest.raises(InputError, match="refinement"):
         DetectorBank.load(tmp_path / "bad.npz")
+
+
+def test_the_priors_read_a_box_as_kittis_camera_would_see_it_from_any_height():
+    from wirescene.core.camera import Camera
+    from wirescene.predetect.geometry import bottom_ratio, road_horizon
+    from wirescene.predetect.viewpoint_prior import lateral_position
+
+    camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    car_height, x, z = 1.5, 3.0, 20.0
+    seen = {}
+    for height in (1.3, 1.65, 2.0):  # a car standing on the road, seen from a camera that high
+        bottom, top, centre = 170 + 720 * height / z, 170 + 720 * (height - car_height) / z, 600 + 720 * x / z
+        box = np.array([[centre - 40, top, centre + 40, bottom]])
+        horizon = road_horizon(camera, height)
+        seen[height] = (bottom_ratio(box, horizon)[0], lateral_position(box, horizon, 600.0)[0])
+    for ratio, lateral in seen.values():  # KITTI's 1.65 m over the car's height, its offset in KITTI's camera heights
+        assert_close([ratio, lateral], [1.65 / car_height, x / 1.65])
+    assert road_horizon(camera).scale == 1.0  # KITTI's rig: the learned priors as they are
+    with pytest.raises(ValueError, match="camera_height"):
+        road_horizon(camera, 0.0)
+
+
+def test_detect_takes_the_camera_height_and_checks_it():
+    import wirescene
+    from wirescene.core.errors import ArgumentError
+    from wirescene.core.resources import DATA_DIR
+
+    frame = DATA_DIR / "sample" / "kitti" / "training"
+    image, calib = frame / "image_2" / "000010.png", frame / "calib" / "000010.txt"
+    with pytest.raises(ArgumentError, match="camera_height"):
+        wirescene.detect(image, calib, camera_height=-1.0)
+    kitti = wirescene.detect(image, calib)
+    assert_close(wirescene.detect(image, calib, camera_height=1.65).scores, kitti.scores, atol=0)
+    # told the camera stands at 2.2 m, the same boxes stand nearer the horizon than such a camera sees cars
+    assert not np.array_equal(wirescene.detect(image, calib, camera_height=2.2, threshold=0.05).scores,
+                              wirescene.detect(image, calib, threshold=0.05).scores)

@@ -17,6 +17,7 @@ import numpy as np
 
 from wirescene.core.camera import Camera, KittiCalib, read_projection
 from wirescene.core.errors import ArgumentError, InputError, ShapeError
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.validate import boxes_problem, projection_problem
@@ -329,7 +330,8 @@ def fit(
     return fitted.estimates[name]
 
 
-def detect(image, calib=None, *, models=None, threshold: float | None = None) -> Detections:
+def detect(image, calib=None, *, models=None, threshold: float | None = None,
+           camera_height: float = KITTI_CAMERA_HEIGHT) -> Detections:
     """wirescene's own 2D pre-detection of cars (paper Sec. 3.4).
 
     Parameters
@@ -351,6 +353,10 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None) ->
         one, its 2D operating point). The fit's own pre-detection keeps those above 0.3
         (``PredetectOptions.threshold``) and verifies them after the fit; the viewpoints
         are the fit's whatever the threshold (the box rule reads the boxes above 0.3).
+    camera_height : float, optional
+        The camera's height above the road in metres (KITTI's 1.65 m by default), for the
+        ground and traffic priors, which were learned at KITTI's; the fit reads it from
+        ``settings={"lifting.camera_height": H}``.
 
     Returns
     -------
@@ -374,6 +380,9 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None) ->
     if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, numbers.Real)
                                   or not np.isfinite(threshold)):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
+    if (isinstance(camera_height, bool) or not isinstance(camera_height, numbers.Real) or not np.isfinite(camera_height)
+            or camera_height <= 0):
+        raise ArgumentError("camera_height", f"expected a positive number of metres, got {camera_height!r}")
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
@@ -381,8 +390,10 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None) ->
     keep = bank.threshold if threshold is None else float(threshold)
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
     pyramid, responses = bank_pyramid(bank, rgb), {}
-    dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses)
-    return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses)
+    dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
+                       camera_height=camera_height)
+    return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses,
+                            camera_height=camera_height)
 
 
 DRAW_VIEWS = ("overlay", "bev")
@@ -475,6 +486,7 @@ def evaluate(
     seed: int = 0,
     workers: int = 1,
     predictions=None,
+    resume: bool = False,
     models=None,
     settings=None,
 ):
@@ -500,7 +512,11 @@ def evaluate(
     workers : int
         Processes fitting frames in parallel.
     predictions : path, optional
-        Also write KITTI label files per variant there.
+        Also write KITTI label files per variant there, and each finished frame's record
+        (``.frames/``); a directory holding an earlier run's records needs ``resume``.
+    resume : bool
+        Reuse the records in ``predictions`` written with the same settings and fit only
+        the other frames (``eval --resume``).
     models : path, optional
         A models directory replacing the shipped artefacts, as in :func:`fit`.
     settings : mapping, optional
@@ -551,9 +567,12 @@ def evaluate(
         frame_ids = read_split_file(split_file, known=dataset.frame_ids(), what="labelled frame",
                                     where=dataset.split_dir)
     several = frame_ids is None or len(frame_ids) > 1
+    if resume and predictions is None:
+        raise ArgumentError("resume", "needs predictions, the directory where finished frames are recorded")
     options = _options(None, particles, seed, models, settings, parallel=several and _positive_int(workers, "workers") > 1)
     return evaluate_dataset(dataset, names, frames=frame_ids,
                             source=DetectionSource(str(detections), bank=options.detector_bank,
                                                    classifier=options.viewpoint_classifier),
                             options=options, workers=_positive_int(workers, "workers"),
-                            predictions_dir=None if predictions is None else Path(predictions))
+                            predictions_dir=None if predictions is None else Path(predictions),
+                            resume=bool(resume))

@@ -123,6 +123,12 @@ def list_cad_files(cad_dir) -> list[Path]:
         unread = f"; {', '.join(f'{s} ({_UNREAD_MESHES[s]})' for s in others)} not read" if others else ""
         raise InputError(f"no mesh files ({', '.join(MESH_SUFFIXES)}) in CAD directory or its subfolders{unread}",
                          path=cad_dir)
+    seen: dict[str, Path] = {}
+    for f in files:  # a car is its file's name: two alike (car_a/model.obj, car_b/model.obj) would be one
+        if f.stem in seen:
+            raise InputError(f"two meshes named {f.stem!r}: {seen[f.stem].relative_to(cad_dir)} and "
+                             f"{f.relative_to(cad_dir)} (a car is named by its file: rename one)", path=cad_dir)
+        seen[f.stem] = f
     return files
 
 

@@ -259,6 +259,11 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     if len(set(seeds)) < len(seeds):
         raise click.UsageError(f"--seed: each seed once (given {', '.join(map(str, seeds))})")
     several = len(seeds) > 1
+    if predictions is not None and not resume:  # every seed's folder, before the first seed's fits
+        from wirescene.eval.records import refuse_earlier_run
+
+        for seed in seeds:
+            refuse_earlier_run(_seed_dir(predictions, seed, several))
     client = _dask_client(dask_address) if dask_address is not None else None
     figures, data = {}, {}
     try:
@@ -319,7 +324,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing,
                              bank=options.detector_bank, classifier=options.viewpoint_classifier)
     on_gpu = options.inference.device.startswith("cuda")
-    if on_gpu and _parallel(workers, frame_ids, None):  # one frame needs no workers to drop
+    if on_gpu and workers is not None and workers > 1 and _parallel(workers, frame_ids, None):  # asked for, and usable
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
         raise click.UsageError("--device cuda fits frames in one process: drop --workers (or use --dask, one worker per GPU)")
     gallery = None

@@ -106,12 +106,12 @@ def atomic_dir(path: str | Path, *, stale: tuple[str, ...] = ()):
         yield staging
         path.mkdir(exist_ok=True)
         new = {entry.name for entry in staging.iterdir()}
-        for pattern in stale:
+        for entry in sorted(staging.iterdir()):
+            os.replace(entry, path / entry.name)
+        for pattern in stale:  # after the new files are in: an interruption leaves no page without its pictures
             for old in path.glob(pattern):
                 if old.name not in new and old.is_file():
                     old.unlink()
-        for entry in sorted(staging.iterdir()):
-            os.replace(entry, path / entry.name)
     shutil.rmtree(staging, ignore_errors=True)
 
 
@@ -141,7 +141,11 @@ def replaced_dir(path: str | Path):
             os.replace(staging, path)
         except BaseException:
             if (old / path.name).exists():  # the swap failed half-way: the old set goes back
-                os.replace(old / path.name, path)
+                try:
+                    os.replace(old / path.name, path)
+                except OSError:  # nor could it: the old set stays where it is, and the error says so
+                    raise OSError(f"{path}: the new set could not take its place, and the old one is left in "
+                                  f"{old / path.name}") from None
+            old.rmdir()
             raise
-        finally:
-            shutil.rmtree(old, ignore_errors=True)
+        shutil.rmtree(old, ignore_errors=True)

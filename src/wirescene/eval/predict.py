@@ -37,7 +37,8 @@ class _PredictJob:
     def __call__(self, frame_id: str) -> tuple[str, str]:
         camera = self.dataset.camera(frame_id)
         detections = self.source.for_frame(self.dataset, frame_id, frame_seed(self.options.seed, frame_id),
-                                           predetect=self.options.predetect)
+                                           predetect=self.options.predetect,
+                                           camera_height=self.options.lifting.camera_height)
         image = self.dataset.image(frame_id)
         fitted = fit_frame(camera, detections, [self.variant], image=image, options=self.options,
                            own=self.source.own)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Iterable
 
 from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_text
+from wirescene.core.errors import InputError
 from wirescene.core.version import __version__
 from wirescene.eval.metrics import FrameResult
 from wirescene.io.kitti import KittiDataset
@@ -137,6 +138,17 @@ class FrameRecords:
             if not same:
                 write_text(path, labels)
 
-    def recorded_frames(self) -> list[str]:
-        """The frames this directory holds records of (whatever their settings)."""
-        return sorted(p.stem for p in (self.root / RECORDS_DIR).glob("*.json"))
+
+def recorded_frames(predictions_dir) -> list[str]:
+    """The frames a predictions directory holds records of (whatever their settings)."""
+    return sorted(p.stem for p in (Path(predictions_dir) / RECORDS_DIR).glob("*.json"))
+
+
+def refuse_earlier_run(predictions_dir) -> None:
+    """An :class:`InputError` if ``predictions_dir`` holds an earlier run's records: a run
+    that does not resume it would leave its frames beside the other's, to pass for one run."""
+    earlier = recorded_frames(predictions_dir)
+    if earlier:
+        raise InputError(f"holds the records of an earlier run ({len(earlier)} frames): resume it (--resume reuses "
+                         "the frames of the same settings and fits the rest) or choose another directory",
+                         path=predictions_dir)

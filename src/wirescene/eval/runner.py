@@ -23,12 +23,13 @@ from wirescene.core.camera import Camera
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
-from wirescene.eval.records import FrameRecords, StaleRecord, run_config
+from wirescene.eval.records import FrameRecords, StaleRecord, refuse_earlier_run, run_config
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint
 from wirescene.fitting.pipeline import FitOptions, fit_frame, needs_evidence
 from wirescene.fitting.variants import get_variant
 from wirescene.infer.evidence import oracle_evidence
+from wirescene.infer.torch_backend import TORCH_THREADS_ENV
 from wirescene.io.kitti import FrameLabels, KittiDataset
 from wirescene.io.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
 
@@ -91,7 +92,8 @@ class _FrameJob:
         gt_path = wireframe_gt_path(dataset.split_dir, frame_id)
         vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
         detections = self.source.for_frame(dataset, frame_id, frame_seed(self.options.seed, frame_id),
-                                           predetect=self.options.predetect)
+                                           predetect=self.options.predetect,
+                                           camera_height=self.options.lifting.camera_height)
         camera = dataset.camera(frame_id)
         image = evidence = None
         if needs_evidence(detections, self.variants):
@@ -114,8 +116,9 @@ def _worker_init(parent: int, threads: int) -> None:
     cores (each worker taking them all made ``--device cpu`` 3-4x slower)."""
     _die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ[TORCH_THREADS_ENV] = str(threads)  # read where PyTorch is imported later (spawned workers)
     torch = sys.modules.get("torch")
-    if torch is not None:
+    if torch is not None:  # imported before the fork
         torch.set_num_threads(threads)
 
 
@@ -174,7 +177,7 @@ def _pool_closer(pool):
             pool.shutdown(cancel_futures=True)
             return False
         for process in list((getattr(pool, "_processes", None) or {}).values()):
-            process.terminate()
+            process.kill()  # workers write no file (results come back through the pool); SIGTERM may be handled
         pool.shutdown(wait=False, cancel_futures=True)
         return False
 
@@ -300,11 +303,8 @@ def evaluate_dataset(
         # The artefacts' content, not only their paths: a model retrained in place refits.
         config["models"] = models_fingerprint(options)
         records = FrameRecords(Path(predictions_dir), config)
-        earlier = records.recorded_frames()
-        if earlier and not resume:  # frames of this run beside an earlier run's would pass for one run
-            raise InputError(f"holds the records of an earlier run ({len(earlier)} frames): resume it (--resume reuses "
-                             "the frames of the same settings and fits the rest) or choose another directory",
-                             path=predictions_dir)
+        if not resume:
+            refuse_earlier_run(predictions_dir)
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
     dataset.check_frames(todo, labels=True)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from wirescene.core.errors import InputError
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.types import Detections
 from wirescene.io.detections import NO_CARS, detections_from_labels, read_detections
 from wirescene.io.kitti import KittiDataset
@@ -71,9 +72,10 @@ class DetectionSource:
         return self.spec == "bank"
 
     def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator, *,
-                  predetect: PredetectOptions | None = None) -> Detections:
+                  predetect: PredetectOptions | None = None, camera_height: float = KITTI_CAMERA_HEIGHT) -> Detections:
         """The detections of one frame; ``predetect``: the threshold and smallest car of our own
-        pre-detection (:func:`~wirescene.fitting.pipeline.detect_own`; None: the bank's own)."""
+        pre-detection (:func:`~wirescene.fitting.pipeline.detect_own`; None: the bank's own);
+        ``camera_height``: the camera's height above the road, for its priors."""
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
         if self.spec == "bank":
@@ -82,7 +84,8 @@ class DetectionSource:
             return detect_own(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
                               classifier=viewpoint_classifier(self.classifier),
                               threshold=None if predetect is None else predetect.threshold,
-                              smallest_car=None if predetect is None else predetect.smallest_car)
+                              smallest_car=None if predetect is None else predetect.smallest_car,
+                              camera_height=camera_height)
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:

@@ -69,6 +69,9 @@ CHUNK_ENV = "WIRESCENE_TORCH_CHUNK"
 
 _INSTALL_HINT = "--device {name} needs PyTorch: pip install torch"
 
+#: Threads PyTorch may use in this process, set by a frame worker for its share of the cores.
+TORCH_THREADS_ENV = "WIRESCENE_TORCH_THREADS"
+
 
 class DeviceError(WiresceneError, ValueError):
     """A ``--device`` that cannot be used here (unknown name, PyTorch missing, no CUDA)."""
@@ -93,6 +96,9 @@ def _torch():
             raise DeviceError("the PyTorch backend needs PyTorch: pip install torch") from exc
         problem = f"{type(exc).__name__}: {exc}".splitlines()[0]
         raise DeviceError(f"PyTorch is installed but cannot be imported ({problem}); use --device numpy") from exc
+    threads = os.environ.get(TORCH_THREADS_ENV, "")
+    if threads.isdigit() and int(threads) > 0 and torch.get_num_threads() != int(threads):
+        torch.set_num_threads(int(threads))
     return torch
 
 

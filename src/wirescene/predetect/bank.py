@@ -36,13 +36,14 @@ import numpy as np
 from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.boxes import clip_boxes
 from wirescene.core.errors import InputError
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import N_VERTICES
 from wirescene.predetect.channels import integral_channels
 from wirescene.predetect.configurations import Configuration
-from wirescene.predetect.geometry import ground_log_ratio, horizon_row
+from wirescene.predetect.geometry import Horizon, ground_log_ratio, road_horizon
 from wirescene.predetect.hog import CELL, N_FEAT, feature_pyramid, pyramid_scales, to_gray
 from wirescene.predetect.refine import apply_box_refinement
 from wirescene.predetect.verifier import N_VIEW_GROUPS, VIEW_GROUPS, verifier_features, verifier_logits
@@ -96,7 +97,7 @@ class DetectorBank:
         a, b = (float(v) for v in self.calibration)
         return 1.0 / (1.0 + np.exp(-(a * m + b)))
 
-    def ground_log_ratio(self, boxes, horizon: float) -> np.ndarray:
+    def ground_log_ratio(self, boxes, horizon: float | Horizon) -> np.ndarray:
         """``(D,)`` log ratio of the bank's ground prior for ``boxes`` ``(D, 4)`` under the
         horizon row ``horizon`` (:func:`wirescene.predetect.geometry.ground_log_ratio`);
         zeros for a bank without a ground prior."""
@@ -417,7 +418,8 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
                 max_scale: float | None = None, per_octave: int | None = None, min_height: float | None = None,
                 per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
                 return_all: bool = False, camera=None, pyramid: list | None = None,
-                verify_within: float | None = None, responses: dict | None = None) -> Detections:
+                verify_within: float | None = None, responses: dict | None = None,
+                camera_height: float = KITTI_CAMERA_HEIGHT) -> Detections:
     """Detect cars in an (H, W, 3) uint8 image with the configuration bank.
 
     HOG pyramid once -> every template as a linear filter -> NMS per detector (IoU 0.5 on
@@ -439,7 +441,8 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     horizon; banks trained on KITTI were calibrated with this term, so pass the camera
     whenever it is known. With a viewpoint prior (``meta["viewpoint_prior"]``) the camera
     also lets each detection's viewpoint weigh where it stands in the traffic
-    (:mod:`wirescene.predetect.viewpoint_prior`). ``pyramid``: the image's
+    (:mod:`wirescene.predetect.viewpoint_prior`); both priors were learned at KITTI's camera
+    height, ``camera_height`` (metres above the road) is the camera's. ``pyramid``: the image's
     :func:`bank_pyramid` if already computed (e.g. to score given boxes' viewpoints on it too).
     ``verify_within``: see :func:`merge_activations` (off by default; ``benchmarks/RESULTS.md``,
     "An early cut before the box refinement and the verifier"). ``responses``: a dict to receive
@@ -456,7 +459,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
         pyramid = bank_pyramid(bank, image, max_scale=max_scale, per_octave=per_octave)
     gray = None if bank.refinement is None and bank.verifier is None else to_gray(image)
     channels = integral_channels(image) if bank.needs_channels else None
-    horizon = None if camera is None else horizon_row(camera)
+    horizon = None if camera is None else road_horizon(camera, camera_height)
     center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
     return detect_pyramid(bank, pyramid, (W, H), threshold=None if return_all else thr, min_height=min_height,
                           per_detector=per_detector, cross_view_nms=cross_view_nms, source=source, horizon=horizon,
@@ -495,7 +498,7 @@ def cluster_options(bank: DetectorBank) -> dict:
 def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float | None = None,
                    calibrated: bool = True, min_height: float = 30.0, per_detector: int | None = None,
                    cross_view_nms: float | None = 0.3, source: str = "bank",
-                   horizon: float | None = None, center_column: float | None = None,
+                   horizon: float | Horizon | None = None, center_column: float | None = None,
                    gray: np.ndarray | None = None, channels: np.ndarray | None = None,
                    verify_within: float | None = None, responses: dict | None = None) -> Detections:
     """:func:`detect_cars` on a precomputed feature pyramid of an image of ``image_size``
@@ -541,7 +544,7 @@ def pyramid_clusters(bank: DetectorBank, pyramid, image_size, *, threshold: floa
 
 def merge_activations(act: Activations, bank: DetectorBank, image_size, *, threshold: float | None,
                       per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
-                      cluster_kw: dict | None = None, horizon: float | None = None,
+                      cluster_kw: dict | None = None, horizon: float | Horizon | None = None,
                       center_column: float | None = None, gray: np.ndarray | None = None,
                       channels: np.ndarray | None = None, verify_within: float | None = None) -> Detections:
     """Activations -> Detections: NMS per detector, full-box votes, clustering per
@@ -586,7 +589,7 @@ def vote_clusters(act: Activations, bank: DetectorBank, *, per_detector: int | N
 
 def finish_clusters(clusters, bank: DetectorBank, image_size, *, threshold: float | None,
                     calibrated: bool = False, cross_view_nms: float | None = 0.3, source: str = "bank",
-                    horizon: float | None = None, center_column: float | None = None,
+                    horizon: float | Horizon | None = None, center_column: float | None = None,
                     gray: np.ndarray | None = None, channels: np.ndarray | None = None,
                     verify_within: float | None = None) -> Detections:
     """The rest of :func:`merge_activations` on the vote ``clusters`` of
@@ -650,7 +653,7 @@ def verification_logits(bank: DetectorBank, gray: np.ndarray, boxes, bins, *,
     return verifier_logits(bank.verifier, features, groups=VIEW_GROUPS[bins % 8])
 
 
-def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:
+def ground_margin(bank: DetectorBank, boxes, horizon: float | Horizon) -> np.ndarray:
     """``(D,)`` margin added to detections ``boxes`` by the bank's ground prior: the log
     ratio of :func:`wirescene.predetect.geometry.ground_log_ratio` divided by the Platt slope,
     so that the calibrated confidence is ``sigmoid(a * margin + b + log ratio)``. Zero for
@@ -661,7 +664,7 @@ def ground_margin(bank: DetectorBank, boxes, horizon: float) -> np.ndarray:
     return bank.ground_log_ratio(boxes, horizon) / float(bank.calibration[0])
 
 
-def traffic_viewpoints(bank: DetectorBank, kept, kept_bins, clusters, horizon: float, center_column: float, *,
+def traffic_viewpoints(bank: DetectorBank, kept, kept_bins, clusters, horizon: float | Horizon, center_column: float, *,
                        iou: float) -> np.ndarray:
     """``(D,)`` viewpoint bins of the detections ``kept`` ``(D, 4)`` that survived the
     cross-view NMS (at IoU ``iou``) of ``clusters`` ``(boxes (C, 4), margins (C,), bins (C,))``:
@@ -677,7 +680,7 @@ def traffic_viewpoints(bank: DetectorBank, kept, kept_bins, clusters, horizon: f
                              iou=iou)
 
 
-def traffic_log_prior(bank: DetectorBank, boxes, horizon: float, center_column: float) -> np.ndarray | None:
+def traffic_log_prior(bank: DetectorBank, boxes, horizon: float | Horizon, center_column: float) -> np.ndarray | None:
     """``(D, 8)`` log P(bin | lateral position) of ``boxes`` ``(D, 4)`` under the bank's
     viewpoint prior (:func:`wirescene.predetect.viewpoint_prior.viewpoint_log_prior`), or None
     for a bank without that prior or without a calibration (its margins are no log-odds the

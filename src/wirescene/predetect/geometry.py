@@ -20,11 +20,26 @@ and a detection's score gains their log ratio (naive Bayes: the SVM margin and t
 box's position are taken as independent given car / not car). The horizon is the row
 of the camera's principal point: the KITTI camera frame's y axis is the road normal up
 to the small pitch of the rig, and the horizon of a plane with normal y is ``v = K[1, 2]``.
+Both priors were learned at KITTI's camera height; for a camera ``Hcam`` above the road a
+box's distance below the horizon is taken times ``1.65 / Hcam`` (:class:`Horizon`), the
+distance at which KITTI's camera would see that car.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
+
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+
+
+class Horizon(NamedTuple):
+    """The horizon's image ``row`` and the camera's height above the road as the priors
+    read it: ``scale`` = KITTI's camera height over the camera's (1 for KITTI's rig)."""
+
+    row: float
+    scale: float = 1.0
 
 #: Share of real cars allowed to follow the background density of ``r`` (cars on steep
 #: slopes, boxes cut by the image's bottom edge), so no car's score collapses.
@@ -37,10 +52,35 @@ def horizon_row(camera) -> float:
     return float(np.asarray(camera.K, float)[1, 2])
 
 
-def bottom_ratio(boxes, horizon: float) -> np.ndarray:
-    """``(D,)`` ratio ``(bottom - horizon) / height`` of boxes ``(D, 4)`` (x1 y1 x2 y2)."""
+def road_horizon(camera, camera_height: float = KITTI_CAMERA_HEIGHT) -> Horizon:
+    """The :class:`Horizon` of ``camera`` mounted ``camera_height`` metres above the road.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> road_horizon(camera, 3.3)  # twice KITTI's height: boxes read as half as far below the horizon
+    Horizon(row=170.0, scale=0.5)
+    """
+    if not np.isfinite(camera_height) or camera_height <= 0:
+        raise ValueError(f"camera_height must be a positive number of metres, got {camera_height!r}")
+    return Horizon(horizon_row(camera), float(KITTI_CAMERA_HEIGHT / camera_height))
+
+
+def below_horizon(rows, horizon) -> np.ndarray:
+    """How far image ``rows`` lie below the ``horizon`` (a :class:`Horizon`, or a row for
+    KITTI's rig), in pixels of KITTI's camera height."""
+    if isinstance(horizon, Horizon):
+        return (np.asarray(rows, float) - horizon.row) * horizon.scale
+    return np.asarray(rows, float) - float(horizon)
+
+
+def bottom_ratio(boxes, horizon) -> np.ndarray:
+    """``(D,)`` ratio ``(bottom - horizon) / height`` of boxes ``(D, 4)`` (x1 y1 x2 y2);
+    ``horizon`` as in :func:`below_horizon`."""
     b = np.asarray(boxes, float).reshape(-1, 4)
-    return (b[:, 3] - float(horizon)) / np.maximum(b[:, 3] - b[:, 1], 1.0)
+    return below_horizon(b[:, 3], horizon) / np.maximum(b[:, 3] - b[:, 1], 1.0)
 
 
 def _log_normal(x, mean: float, sigma: float) -> np.ndarray:
@@ -63,7 +103,7 @@ def fit_ground_prior(car_ratios, background_ratios) -> dict:
             "outlier_share": OUTLIER_SHARE, "n_car": int(len(rc)), "n_background": int(len(rb))}
 
 
-def ground_log_ratio(prior: dict, boxes, horizon: float) -> np.ndarray:
+def ground_log_ratio(prior: dict, boxes, horizon: float | Horizon) -> np.ndarray:
     """``(D,)`` log p(r | car) - log p(r | background) of boxes ``(D, 4)``; the car density
     is mixed with ``outlier_share`` of the background density, so the ratio is bounded
     below by ``log(outlier_share)``."""

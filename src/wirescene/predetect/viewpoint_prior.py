@@ -28,18 +28,21 @@ import numpy as np
 
 from wirescene.core.boxes import iou_2d
 from wirescene.core.viewpoints import N_BINS
+from wirescene.predetect.geometry import below_horizon
 
 PSEUDO_COUNT = 1.0
 MIN_CARS = 5
 
 
-def lateral_position(boxes, horizon: float, center_column: float) -> np.ndarray:
-    """``(D,)`` lateral position ``s`` (camera heights, right positive) of boxes ``(D, 4)``
-    standing on the road below the horizon row, seen by a camera whose principal point lies
-    in column ``center_column``. Boxes whose bottom is less than half their height below the
-    horizon (no car on the road) are measured as if it were half their height."""
+def lateral_position(boxes, horizon, center_column: float) -> np.ndarray:
+    """``(D,)`` lateral position ``s`` (in KITTI's camera heights, 1.65 m; right positive) of
+    boxes ``(D, 4)`` standing on the road below the horizon (a row, or a
+    :class:`~wirescene.predetect.geometry.Horizon` for another camera height), seen by a
+    camera whose principal point lies in column ``center_column``. Boxes whose bottom is less
+    than half their height below the horizon (no car on the road) are measured as if it
+    were half their height."""
     b = np.asarray(boxes, float).reshape(-1, 4)
-    below = np.maximum(b[:, 3] - float(horizon), 0.5 * np.maximum(b[:, 3] - b[:, 1], 1.0))
+    below = np.maximum(below_horizon(b[:, 3], horizon), 0.5 * np.maximum(b[:, 3] - b[:, 1], 1.0))
     return ((b[:, 0] + b[:, 2]) / 2 - float(center_column)) / below
 
 

@@ -61,7 +61,7 @@ from wirescene.core.atomic import atomic_path, write_bytes
 from wirescene.core.boxes import box_corners, project_points_to_box
 from wirescene.core.camera import Camera, read_kitti_calib, write_kitti_calib
 from wirescene.core.errors import InputError
-from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y, rotation_y_of
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, alpha_from_rotation_y, rotation_y, rotation_y_of
 from wirescene.core.raycast import first_hit_distance, mesh_intersector
 from wirescene.core.wireframe import VERTEX_NAMES
 from wirescene.io.kitti import FrameLabels, Label, write_labels
@@ -565,8 +565,10 @@ def _annotate(camera: Camera, layout: SceneLayout, instances, poses, meshes, obj
 
 
 def generate_scene(seed: int, index: int, *, cars=(2, 8), occluders: bool = True,
-                   camera: Camera | None = None, library: dict | None = None) -> SyntheticScene:
-    """Sample, render and annotate scene ``index`` of the stream ``seed``."""
+                   camera: Camera | None = None, library: dict | None = None,
+                   camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch_deg: float = 0.0) -> SyntheticScene:
+    """Sample, render and annotate scene ``index`` of the stream ``seed`` (with KITTI's
+    camera, 1.65 m above the road, unless told otherwise: see :func:`sample_layout`)."""
     camera = default_camera() if camera is None else camera
     library = load_car_library() if library is None else library
     W, H = camera.image_size
@@ -574,7 +576,8 @@ def generate_scene(seed: int, index: int, *, cars=(2, 8), occluders: bool = True
     n_cars = int(rng.integers(cars[0], cars[1] + 1))
     n_occ = int(rng.integers(0, 4)) if occluders else 0
     dims = {k: m.dims for k, m in library.items()}
-    layout = sample_layout(rng, camera, dims, n_cars=n_cars, n_occluders=n_occ)
+    layout = sample_layout(rng, camera, dims, n_cars=n_cars, n_occluders=n_occ, camera_height=camera_height,
+                           camera_pitch_deg=camera_pitch_deg)
     colour_rng = np.random.default_rng([int(seed), int(index), 1])
     noise_rng = np.random.default_rng([int(seed), int(index), 2])
 

@@ -340,9 +340,14 @@ def sample_occluders(rng, street: Street, cars: list, n: int) -> list:
 
 
 def sample_layout(rng: np.random.Generator, camera: Camera, dims: dict, *, n_cars: int,
-                  n_occluders: int = 0) -> SceneLayout:
-    """A full scene layout. ``dims`` maps CAD model names to ``(h, w, l)``."""
-    plane = sample_plane(rng)
+                  n_occluders: int = 0, camera_height: float = KITTI_CAMERA_HEIGHT,
+                  camera_pitch_deg: float = 0.0) -> SceneLayout:
+    """A full scene layout. ``dims`` maps CAD model names to ``(h, w, l)``; the camera stands
+    ``camera_height`` above the road, pitched ``camera_pitch_deg`` further down than the
+    sampled rig pitch (the road's horizon rises above the principal point's row)."""
+    plane = sample_plane(rng, height=camera_height)
+    if camera_pitch_deg:
+        plane = GroundPlane(plane.pitch + np.deg2rad(camera_pitch_deg), plane.roll, plane.height)
     street = sample_street(rng)
     cars = sample_cars(rng, street, plane, camera, dims, n_cars)
     occluders = sample_occluders(rng, street, cars, n_occluders)
