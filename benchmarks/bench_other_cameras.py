@@ -17,7 +17,7 @@ rotation, projected and clipped): the generator's KITTI label box is the level b
 
 Usage:
   python benchmarks/bench_other_cameras.py --setting height-1.3 [--scenes 30] [--seed 11] [--particles 50]
-      [--variant coarse+gp --variant fg+gp] [--detect] [--json out.json]
+      [--variant coarse+gp --variant fg+gp] [--detect] [--set STAGE.KEY=VALUE ...] [--json out.json]
 """
 
 from __future__ import annotations
@@ -80,9 +80,12 @@ def main() -> None:
     ap.add_argument("--variant", dest="variants", action="append", default=None,
                     help="fitted variants (default coarse+gp and fg+gp)")
     ap.add_argument("--detect", action="store_true", help="also our own pre-detection's recall")
+    ap.add_argument("--set", dest="settings", action="append", default=[], metavar="STAGE.KEY=VALUE",
+                    help="a fit option for both modes (e.g. lifting.pitch_range=6)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     camera, height, pitch = SETTINGS[args.setting]
+    given = dict(s.split("=", 1) for s in args.settings)
     camera = default_camera() if camera is None else camera
     variants = args.variants or ["coarse+gp", "fg+gp"]
     modes = {"assumed": KITTI_CAMERA_HEIGHT} | ({"told": height} if height != KITTI_CAMERA_HEIGHT else {})
@@ -99,7 +102,7 @@ def main() -> None:
             else np.array([o.box for o in cars], float)
         truth = np.array([o.location for o in cars], float)
         for mode, assumed in modes.items():
-            options = FitOptions(seed=1).with_settings({"lifting.n_particles": args.particles,
+            options = FitOptions(seed=1).with_settings({"lifting.n_particles": args.particles, **given,
                                                         "lifting.camera_height": assumed})
             fitted = fit_frame(scene.camera, Detections(boxes, 1.0, np.nan, "gt"), variants, image=scene.image,
                                options=options)
@@ -113,7 +116,7 @@ def main() -> None:
                 found[mode][0] += int(np.sum(hit))
                 found[mode][1] += len(easy)
     out = {"setting": args.setting, "scenes": args.scenes, "seed": args.seed, "camera_height": height,
-           "camera_pitch_deg": pitch, "seconds": round(time.perf_counter() - t0)}
+           "camera_pitch_deg": pitch, "settings": given, "seconds": round(time.perf_counter() - t0)}
     print(f"{args.setting}: {args.scenes} scenes of stream {args.seed}, camera {height:.2f} m high, "
           f"pitched {pitch:+.1f} deg, {camera.image_size[0]} x {camera.image_size[1]}, f = {camera.K[0, 0]:.0f} px")
     for (mode, v), e in errors.items():
