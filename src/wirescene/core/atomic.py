@@ -18,39 +18,39 @@ def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = _new_file(path.parent, prefix=f".{path.name}.", suffix=suffix)
     try:
-        yield Path(tmp)
+        yield tmp
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 
-def _new_file(directory: Path, *, prefix: str, suffix: str) -> str:
-    """Create an empty file of a new name in ``directory`` with the permissions any new file
-    gets there (``0o666`` less the umask: ``tempfile.mkstemp``'s ``0o600`` would make every
-    output unreadable to others)."""
+def _new_entry(directory: Path, create, *, prefix: str, suffix: str) -> Path:
+    """``create(name)`` at a new name in ``directory`` (``prefix``, random letters,
+    ``suffix``), another name where one exists already."""
     for _ in range(100):
-        name = str(directory / f"{prefix}{secrets.token_hex(6)}{suffix}")
+        name = directory / f"{prefix}{secrets.token_hex(6)}{suffix}"
         try:
-            os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            create(name)
         except FileExistsError:
             continue
         return name
     raise FileExistsError(f"{directory}: no free temporary name for {prefix}*{suffix}")
+
+
+def _new_file(directory: Path, *, prefix: str, suffix: str) -> Path:
+    """Create an empty file of a new name in ``directory`` with the permissions any new file
+    gets there (``0o666`` less the umask: ``tempfile.mkstemp``'s ``0o600`` would make every
+    output unreadable to others)."""
+    return _new_entry(directory, lambda name: os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)),
+                      prefix=prefix, suffix=suffix)
 
 
 def _new_dir(directory: Path, *, prefix: str, suffix: str) -> Path:
     """Create an empty directory of a new name in ``directory`` with the permissions any new
     directory gets there (``tempfile.mkdtemp``'s ``0o700`` would stay on a set that takes
     a directory's place)."""
-    for _ in range(100):
-        name = directory / f"{prefix}{secrets.token_hex(6)}{suffix}"
-        try:
-            os.mkdir(name, 0o777)
-        except FileExistsError:
-            continue
-        return name
-    raise FileExistsError(f"{directory}: no free temporary name for {prefix}*{suffix}")
+    return _new_entry(directory, lambda name: os.mkdir(name, 0o777), prefix=prefix, suffix=suffix)
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:
