@@ -20,7 +20,7 @@ from wirescene.core.errors import ArgumentError, InputError, ShapeError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.types import Detections, SceneEstimate
-from wirescene.core.validate import boxes_problem, projection_problem
+from wirescene.core.validate import boxes_problem, finite_real, projection_problem
 from wirescene.fitting.pipeline import FitOptions, fit_frame
 from wirescene.fitting.variants import VARIANTS
 from wirescene.infer.inference import InferenceOptions
@@ -377,11 +377,9 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     from wirescene.fitting.pipeline import PredetectOptions, detections_above, detector_bank
     from wirescene.predetect.bank import bank_pyramid, detect_cars
 
-    if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, numbers.Real)
-                                  or not np.isfinite(threshold)):
+    if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
-    if (isinstance(camera_height, bool) or not isinstance(camera_height, numbers.Real) or not np.isfinite(camera_height)
-            or camera_height <= 0):
+    if not finite_real(camera_height) or camera_height <= 0:
         raise ArgumentError("camera_height", f"expected a positive number of metres, got {camera_height!r}")
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))

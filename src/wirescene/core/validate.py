@@ -5,12 +5,32 @@ with a name, a click ``BadParameter``)."""
 
 from __future__ import annotations
 
+import math
+import numbers
+
 import numpy as np
 
 # Focal lengths outside this range (pixels) are not a street camera: KITTI's is ~720.
 FOCAL_RANGE = (10.0, 1e5)
 # No image is this large (pixels): a box coordinate beyond it is a corrupted number.
 MAX_PIXEL = 1e5
+
+
+def finite_real(value) -> bool:
+    """Whether ``value`` is a finite real number (not a bool, not a string, not NaN, not an
+    integer too large for a float).
+
+    Examples
+    --------
+    >>> [finite_real(v) for v in (1, 2.5, float("nan"), True, "3", 10**400)]
+    [True, True, False, False, False, False]
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | None:

@@ -40,7 +40,6 @@ from __future__ import annotations
 import hashlib
 import inspect
 import math
-import numbers
 import sys
 import time
 from dataclasses import dataclass
@@ -59,6 +58,7 @@ from wirescene.core.resources import (
     file_sha256,
     shipped_path,
 )
+from wirescene.core.validate import finite_real
 from wirescene.core.version import __version__, environment
 from wirescene.io.folds import drive_map
 from wirescene.training.kitti_detector import (
@@ -187,8 +187,7 @@ def _checked_value(step: str, key: str, value):
     if value is None and key in OPTION_NONE.get(step, ()):
         return None
     if (step, key) == ("occlusion", "grid") and value is not None:  # the c values the calibration tries
-        if not isinstance(value, (list, tuple)) or not value or not all(
-                isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+        if not isinstance(value, (list, tuple)) or not value or not all(finite_real(v) for v in value):
             raise ValueError(f"occlusion.grid must be a list of numbers, got {value!r}")
         return value
     low, high = OPTION_LIMITS.get(step, {}).get(key, (0, None))
