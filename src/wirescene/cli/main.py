@@ -324,7 +324,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing,
                              bank=options.detector_bank, classifier=options.viewpoint_classifier)
     on_gpu = options.inference.device.startswith("cuda")
-    if on_gpu and workers is not None and workers > 1 and _parallel(workers, frame_ids, None):  # asked for, and usable
+    if on_gpu and workers is not None and _parallel(workers, frame_ids, None):  # --workers asked for, and usable
         # Forked processes cannot share the parent's CUDA state; the GPU is the parallelism.
         raise click.UsageError("--device cuda fits frames in one process: drop --workers (or use --dask, one worker per GPU)")
     gallery = None
