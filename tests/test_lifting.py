@@ -88,6 +88,24 @@ def test_shared_plane_recovers_synthetic_scene(dataset):
     assert np.all(particles.object_cost[best] < 1e-3)
 
 
+
+def test_a_camera_told_its_pitch_searches_the_plane_about_it(dataset):
+    """A camera looking 5 deg down sees a road 1 deg uphill pitched by 6 deg, past the level
+    rig's +-3 deg grid; told the pitch (``camera_pitch``), the grid is searched about it."""
+    camera = dataset.camera("000010")
+    pitch = np.deg2rad(6.0)
+    poses = [(-4.0, 10.0, 0.3, pitch, 0.0), (3.0, 18.0, -1.6, pitch, 0.0), (5.0, 30.0, 1.5, pitch, 0.0)]
+    boxes, alpha = _synthetic_boxes(camera, poses)
+    dets = Detections(boxes, 1.0, bin_center(viewpoint_bin(alpha)))
+    grid = np.rad2deg(LiftingOptions(camera_pitch=5.0).plane_grid()[0])
+    assert_close([grid.min(), grid.max()], [2.0, 8.0], atol=1e-9)
+    truth = np.array(poses)
+    for told, close in ((0.0, False), (5.0, True)):
+        particles = lift_detections(camera, dets, shared_plane=True, options=LiftingOptions(camera_pitch=told))
+        best = int(np.argmin(particles.cost))
+        assert (abs(particles.pitch[best, 0] - pitch) <= np.deg2rad(0.25) + 1e-9) == close
+        assert np.all(np.abs(particles.z[best] - truth[:, 1]) < 0.1 * truth[:, 1]) == close
+
 def test_lifting_gt_boxes_recovers_kitti_centres(dataset):
     """Lifting the GT 2D boxes of real KITTI cars (with the true viewpoint bin) puts the
     unoccluded, untruncated ones near their labelled 3D centre."""

@@ -754,7 +754,28 @@ def test_the_priors_read_a_box_as_kittis_camera_would_see_it_from_any_height():
         road_horizon(camera, 0.0)
 
 
-def test_detect_takes_the_camera_height_and_checks_it():
+
+def test_the_priors_read_a_pitched_cameras_boxes_from_its_horizon():
+    """A camera looking down sees the road's horizon ``f tan(pitch)`` higher: told the pitch,
+    a car on the road has the level rig's ratio at every depth; not told, far cars fall off it."""
+    from wirescene.core.camera import Camera
+    from wirescene.core.groundplane import plane_rotation
+    from wirescene.predetect.geometry import bottom_ratio, road_horizon
+
+    camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    for pitch in (-3.0, 2.0, 4.0):
+        R = plane_rotation(np.deg2rad(pitch), 0.0)  # the road as a camera pitched that far down sees it
+        for x, z in ((3.0, 8.0), (-2.0, 20.0), (5.0, 45.0)):
+            (ub, vb), (_, vt) = camera.project(np.array([[x, 1.65, z], [x, 1.65 - 1.5, z]]) @ R.T)
+            box = np.array([[ub - 40, vt, ub + 40, vb]])
+            assert_close(bottom_ratio(box, road_horizon(camera, 1.65, pitch)), [1.1], atol=3e-3)
+            if z > 15:
+                assert abs(bottom_ratio(box, road_horizon(camera))[0] - 1.1) > 0.4
+    assert road_horizon(camera, camera_pitch=0.0) == road_horizon(camera)
+    with pytest.raises(ValueError, match="camera_pitch"):
+        road_horizon(camera, 1.65, float("nan"))
+
+def test_detect_takes_the_camera_height_and_pitch_and_checks_them():
     import wirescene
     from wirescene.core.errors import ArgumentError
     from wirescene.core.resources import DATA_DIR
@@ -767,4 +788,9 @@ def test_detect_takes_the_camera_height_and_checks_it():
     assert_close(wirescene.detect(image, calib, camera_height=1.65).scores, kitti.scores, atol=0)
     # told the camera stands at 2.2 m, the same boxes stand nearer the horizon than such a camera sees cars
     assert not np.array_equal(wirescene.detect(image, calib, camera_height=2.2, threshold=0.05).scores,
+                              wirescene.detect(image, calib, threshold=0.05).scores)
+    with pytest.raises(ArgumentError, match="camera_pitch"):
+        wirescene.detect(image, calib, camera_pitch=60.0)
+    assert_close(wirescene.detect(image, calib, camera_pitch=0.0).scores, kitti.scores, atol=0)
+    assert not np.array_equal(wirescene.detect(image, calib, camera_pitch=3.0, threshold=0.05).scores,
                               wirescene.detect(image, calib, threshold=0.05).scores)

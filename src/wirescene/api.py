@@ -331,7 +331,7 @@ def fit(
 
 
 def detect(image, calib=None, *, models=None, threshold: float | None = None,
-           camera_height: float = KITTI_CAMERA_HEIGHT) -> Detections:
+           camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> Detections:
     """wirescene's own 2D pre-detection of cars (paper Sec. 3.4).
 
     Parameters
@@ -357,6 +357,10 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         The camera's height above the road in metres (KITTI's 1.65 m by default), for the
         ground and traffic priors, which were learned at KITTI's; the fit reads it from
         ``settings={"lifting.camera_height": H}``.
+    camera_pitch : float, optional
+        Degrees the camera looks down from the road (KITTI's rig: level, 0), which raises the
+        horizon those priors read by ``f tan(pitch)`` pixels; the fit reads it from
+        ``settings={"lifting.camera_pitch": D}``.
 
     Returns
     -------
@@ -381,6 +385,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
     if not finite_real(camera_height) or camera_height <= 0:
         raise ArgumentError("camera_height", f"expected a positive number of metres, got {camera_height!r}")
+    if not finite_real(camera_pitch) or abs(camera_pitch) > 45:
+        raise ArgumentError("camera_pitch", f"expected a number of degrees within +-45, got {camera_pitch!r}")
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
@@ -389,9 +395,9 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
     pyramid, responses = bank_pyramid(bank, rgb), {}
     dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
-                       camera_height=camera_height)
+                       camera_height=camera_height, camera_pitch=camera_pitch)
     return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses,
-                            camera_height=camera_height)
+                            camera_height=camera_height, camera_pitch=camera_pitch)
 
 
 DRAW_VIEWS = ("overlay", "bev")

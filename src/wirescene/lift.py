@@ -44,7 +44,7 @@ class LiftingOptions:
     were chosen (the study, its command and figures): ``benchmarks/RESULTS.md``."""
 
     # KITTI's camera is rigidly mounted: roads tilt by a few degrees in pitch, much less in roll.
-    pitch_range: float = bounded(3.0, minimum=0)
+    pitch_range: float = bounded(3.0, minimum=0)  # searched about camera_pitch
     pitch_step: float = bounded(0.25, minimum=0.01)
     roll_range: float = bounded(1.5, minimum=0)
     roll_step: float = bounded(0.25, minimum=0.01)
@@ -55,14 +55,17 @@ class LiftingOptions:
     # Cap of each object's shared-plane vote, near a fitting car's cost: a box no car explains is an outlier.
     robust_cost: float = bounded(0.01, minimum=0)
     camera_height: float = bounded(KITTI_CAMERA_HEIGHT, minimum=0.1)  # metres above the road
+    # Degrees the camera looks down from the road (a dashcam's tilt; KITTI's rig is level to +-1 deg).
+    camera_pitch: float = bounded(0.0, minimum=-45.0, maximum=45.0)
     n_particles: int = bounded(250, minimum=1)
     # Weight of the prior that cars head along the road (:func:`road_alignment_cost`), which a box leaves open; 0: off.
     road_prior: float = option(0.03, help="Weight of the coarse stage's prior that cars head along the road "
                                           "(0: none).")
 
     def plane_grid(self) -> tuple[np.ndarray, np.ndarray]:
-        """Flattened pitch and roll grids (radians), shape ``(G,)`` each."""
-        pitch = np.deg2rad(_symmetric_range(self.pitch_range, self.pitch_step))
+        """Flattened pitch and roll grids (radians), shape ``(G,)`` each: the pitch about the
+        camera's (a camera looking down sees the road pitched by as much)."""
+        pitch = np.deg2rad(self.camera_pitch + _symmetric_range(self.pitch_range, self.pitch_step))
         roll = np.deg2rad(_symmetric_range(self.roll_range, self.roll_step))
         pp, rr = np.meshgrid(pitch, roll, indexing="ij")
         return pp.ravel(), rr.ravel()

@@ -26,6 +26,7 @@ from wirescene.cli.options import (
     workers_option,
 )
 from wirescene.core.atomic import write_text
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.predetect.bank import SUPPORT_WEIGHT
 from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, single_thread
 
@@ -165,7 +166,14 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PR curve PNG.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write AP and timing as JSON.")
-def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out):
+@click.option("--camera-height", type=FiniteFloat(min=0.1), default=KITTI_CAMERA_HEIGHT, show_default=True,
+              help="The camera's height above the road (m), for the ground and traffic priors learned at KITTI's "
+                   "(the fit's --set lifting.camera_height).")
+@click.option("--camera-pitch", type=FiniteFloat(min=-45.0, max=45.0), default=0.0, show_default=True,
+              help="Degrees the camera looks down from the road, which raises the horizon those priors read "
+                   "(the fit's --set lifting.camera_pitch).")
+def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out,
+           camera_height, camera_pitch):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
 
     The files of --out hold the detections above the threshold with the viewpoints the
@@ -195,11 +203,12 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
             # the features and templates' responses, kept for the viewpoints of the boxes written
             pyramid, responses = bank_pyramid(bank, img), ({} if out_dir is not None else None)
             d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=ds.camera(fid), pyramid=pyramid,
-                            responses=responses)
+                            responses=responses, camera_height=camera_height, camera_pitch=camera_pitch)
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:  # with the viewpoints the fit gives the boxes it keeps
-                kept = detections_above(ds.camera(fid), img, d, thr, bank=bank, pyramid=pyramid, responses=responses)
+                kept = detections_above(ds.camera(fid), img, d, thr, bank=bank, pyramid=pyramid, responses=responses,
+                                        camera_height=camera_height, camera_pitch=camera_pitch)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
                 files[f"{fid}.json"] = json.dumps({"detections": entries}, indent=1)

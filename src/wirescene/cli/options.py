@@ -18,13 +18,15 @@ NON_NEGATIVE = click.IntRange(min=0)
 
 
 class FiniteFloat(click.ParamType):
-    """A finite float, at least ``min`` (above it with ``strict``; NaN and infinities refused)."""
+    """A finite float, at least ``min`` (above it with ``strict``) and at most ``max`` (NaN and
+    infinities refused)."""
 
     name = "float"
 
-    def __init__(self, min: float | None = None, *, strict: bool = False):
+    def __init__(self, min: float | None = None, *, strict: bool = False, max: float | None = None):
         self.min = min
         self.strict = strict
+        self.max = max
 
     def convert(self, value, param, ctx):
         try:
@@ -35,6 +37,8 @@ class FiniteFloat(click.ParamType):
             self.fail(f"{value!r} is not finite", param, ctx)
         if self.min is not None and (number <= self.min if self.strict else number < self.min):
             self.fail(f"{number:g} is {'not above' if self.strict else 'below the minimum'} {self.min:g}", param, ctx)
+        if self.max is not None and number > self.max:
+            self.fail(f"{number:g} is above the maximum {self.max:g}", param, ctx)
         return number
 
 

@@ -37,8 +37,7 @@ class _PredictJob:
     def __call__(self, frame_id: str) -> tuple[str, str]:
         camera = self.dataset.camera(frame_id)
         detections = self.source.for_frame(self.dataset, frame_id, frame_seed(self.options.seed, frame_id),
-                                           predetect=self.options.predetect,
-                                           camera_height=self.options.lifting.camera_height)
+                                           predetect=self.options.predetect, lifting=self.options.lifting)
         image = self.dataset.image(frame_id)
         fitted = fit_frame(camera, detections, [self.variant], image=image, options=self.options,
                            own=self.source.own)

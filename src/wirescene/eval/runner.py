@@ -92,8 +92,7 @@ class _FrameJob:
         gt_path = wireframe_gt_path(dataset.split_dir, frame_id)
         vertex_gt = read_wireframe_gt(gt_path) if gt_path.is_file() else None
         detections = self.source.for_frame(dataset, frame_id, frame_seed(self.options.seed, frame_id),
-                                           predetect=self.options.predetect,
-                                           camera_height=self.options.lifting.camera_height)
+                                           predetect=self.options.predetect, lifting=self.options.lifting)
         camera = dataset.camera(frame_id)
         image = evidence = None
         if needs_evidence(detections, self.variants):

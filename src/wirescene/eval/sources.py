@@ -17,6 +17,7 @@ from wirescene.io.kitti import KittiDataset
 
 if TYPE_CHECKING:  # imported where the bank runs
     from wirescene.fitting.pipeline import PredetectOptions
+    from wirescene.lift import LiftingOptions
 
 
 @dataclass(frozen=True)
@@ -72,10 +73,10 @@ class DetectionSource:
         return self.spec == "bank"
 
     def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator, *,
-                  predetect: PredetectOptions | None = None, camera_height: float = KITTI_CAMERA_HEIGHT) -> Detections:
+                  predetect: PredetectOptions | None = None, lifting: LiftingOptions | None = None) -> Detections:
         """The detections of one frame; ``predetect``: the threshold and smallest car of our own
         pre-detection (:func:`~wirescene.fitting.pipeline.detect_own`; None: the bank's own);
-        ``camera_height``: the camera's height above the road, for its priors."""
+        ``lifting``: the camera's height above the road and pitch, for its priors (None: KITTI's)."""
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
         if self.spec == "bank":
@@ -85,7 +86,8 @@ class DetectionSource:
                               classifier=viewpoint_classifier(self.classifier),
                               threshold=None if predetect is None else predetect.threshold,
                               smallest_car=None if predetect is None else predetect.smallest_car,
-                              camera_height=camera_height)
+                              camera_height=KITTI_CAMERA_HEIGHT if lifting is None else lifting.camera_height,
+                              camera_pitch=0.0 if lifting is None else lifting.camera_pitch)
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:

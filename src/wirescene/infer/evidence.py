@@ -75,10 +75,13 @@ def oracle_evidence(detections: Detections, gt_boxes: np.ndarray, vertex_gt: Wir
     return GaussianVertexEvidence(uv, visible, **kwargs)
 
 
-def viewpoint_from_evidence(camera, detections: Detections, evidence, shape_model, *, c: float = 0.0) -> Detections:
+def viewpoint_from_evidence(camera, detections: Detections, evidence, shape_model, *, c: float = 0.0,
+                            lifting=None) -> Detections:
     """Detections whose unknown viewpoints (NaN ``alpha``, e.g. boxes of an external
-    detector) are set to the bin whose mean-shape wireframe, lifted onto a level ground
-    plane at that viewpoint, best explains the part evidence; known viewpoints are kept."""
+    detector) are set to the bin whose mean-shape wireframe, lifted onto the road plane of
+    the camera's mount (``lifting``: :class:`~wirescene.lift.LiftingOptions`, default KITTI's
+    level rig 1.65 m above the road) at that viewpoint, best explains the part evidence;
+    known viewpoints are kept."""
     from wirescene.core.viewpoints import N_BINS, bin_center
     from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood
     from wirescene.lift import LiftingOptions, solve_positions
@@ -89,10 +92,11 @@ def viewpoint_from_evidence(camera, detections: Detections, evidence, shape_mode
     boxes = detections.boxes[unknown][:, None, :]  # (U, 1, 4)
     alpha = bin_center(np.arange(N_BINS))[None, :]  # (1, 8)
     dims = np.broadcast_to(MEAN_CAR_DIMS, (len(unknown), N_BINS, 3))
-    opts = LiftingOptions()
-    x, z, az, _ = solve_positions(camera, boxes, alpha, 0.0, 0.0, dims, height=opts.camera_height,
+    opts = LiftingOptions() if lifting is None else lifting
+    pitch = np.deg2rad(opts.camera_pitch)
+    x, z, az, _ = solve_positions(camera, boxes, alpha, pitch, 0.0, dims, height=opts.camera_height,
                                   iterations=opts.iterations)
-    batch = instantiate_wireframes(camera, shape_model, x=x, z=z, azimuth=az, pitch=np.zeros_like(x),
+    batch = instantiate_wireframes(camera, shape_model, x=x, z=z, azimuth=az, pitch=np.full_like(x, pitch),
                                    roll=np.zeros_like(x), shape=np.zeros(x.shape + (1,)), height=opts.camera_height)
     score = wireframe_likelihood(batch, evidence, np.broadcast_to(unknown[:, None], x.shape), c=c)
     out = detections.alpha.copy()

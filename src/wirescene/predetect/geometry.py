@@ -19,7 +19,8 @@ boxes) and background (the bank's own detections that overlap no labelled object
 and a detection's score gains their log ratio (naive Bayes: the SVM margin and the
 box's position are taken as independent given car / not car). The horizon is the row
 of the camera's principal point: the KITTI camera frame's y axis is the road normal up
-to the small pitch of the rig, and the horizon of a plane with normal y is ``v = K[1, 2]``.
+to the small pitch of the rig, and the horizon of a plane with normal y is ``v = K[1, 2]``;
+a camera pitched down by ``theta`` sees it ``K[1, 1] tan(theta)`` pixels higher.
 Both priors were learned at KITTI's camera height; for a camera ``Hcam`` above the road a
 box's distance below the horizon is taken times ``1.65 / Hcam`` (:class:`Horizon`), the
 distance at which KITTI's camera would see that car.
@@ -52,8 +53,9 @@ def horizon_row(camera) -> float:
     return float(np.asarray(camera.K, float)[1, 2])
 
 
-def road_horizon(camera, camera_height: float = KITTI_CAMERA_HEIGHT) -> Horizon:
-    """The :class:`Horizon` of ``camera`` mounted ``camera_height`` metres above the road.
+def road_horizon(camera, camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> Horizon:
+    """The :class:`Horizon` of ``camera`` mounted ``camera_height`` metres above the road and
+    pitched ``camera_pitch`` degrees down from it (``LiftingOptions.camera_pitch``).
 
     Examples
     --------
@@ -62,10 +64,15 @@ def road_horizon(camera, camera_height: float = KITTI_CAMERA_HEIGHT) -> Horizon:
     >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
     >>> road_horizon(camera, 3.3)  # twice KITTI's height: boxes read as half as far below the horizon
     Horizon(row=170.0, scale=0.5)
+    >>> round(road_horizon(camera, camera_pitch=4.0).row, 1)  # looking down 4 deg: the horizon 50 px higher
+    119.7
     """
     if not np.isfinite(camera_height) or camera_height <= 0:
         raise ValueError(f"camera_height must be a positive number of metres, got {camera_height!r}")
-    return Horizon(horizon_row(camera), float(KITTI_CAMERA_HEIGHT / camera_height))
+    if not np.isfinite(camera_pitch) or abs(camera_pitch) >= 90:
+        raise ValueError(f"camera_pitch must be a number of degrees within +-90, got {camera_pitch!r}")
+    row = horizon_row(camera) - float(np.asarray(camera.K, float)[1, 1]) * np.tan(np.deg2rad(camera_pitch))
+    return Horizon(float(row), float(KITTI_CAMERA_HEIGHT / camera_height))
 
 
 def below_horizon(rows, horizon) -> np.ndarray:
