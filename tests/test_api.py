@@ -502,3 +502,50 @@ def test_the_api_resolves_and_checks_the_device_before_any_work(frame, monkeypat
     if not torch_backend.available():  # auto without PyTorch: numpy, as on the command line
         assert len(wirescene.fit(image, camera, boxes, variant="coarse", particles=10,
                                  settings={"inference.device": "auto"}).objects) == 1
+
+
+def test_a_model_retrained_in_place_is_loaded_anew(tmp_path):
+    """Models are loaded once per version of their file: one retrained (or broken) at the same
+    path, in a notebook or a long-lived process, is read again, never the cached one."""
+    import shutil
+
+    from wirescene.core.errors import InputError
+    from wirescene.core.resources import shipped_path
+    from wirescene.fitting.confidence import load_score_calibration, save_score_calibration
+    from wirescene.fitting.pipeline import detector_bank
+    from wirescene.infer.occluded_score import load_occluded_score, save_occluded_score
+
+    occlusion = tmp_path / "occlusion.json"
+    save_occluded_score(occlusion, {"c": 0.75})
+    assert load_occluded_score(occlusion) == 0.75 and load_occluded_score(occlusion) == 0.75
+    save_occluded_score(occlusion, {"c": -3.0})  # written to a new file moved onto the path
+    assert load_occluded_score(occlusion) == -3.0
+    scores = tmp_path / "score_calibration.json"
+    shutil.copy(shipped_path("score_calibration"), scores)
+    record = load_score_calibration(scores)
+    save_score_calibration(scores, {**record, "note": "retrained"})
+    assert load_score_calibration(scores)["note"] == "retrained"
+    bank = tmp_path / "detector_bank.npz"
+    shutil.copy(shipped_path("detector_bank"), bank)
+    assert detector_bank(str(bank)) is detector_bank(str(bank))  # loaded once
+    bank.write_bytes(b"not a bank")  # overwritten in place
+    with pytest.raises(InputError, match="detector_bank.npz"):
+        detector_bank(str(bank))
+
+
+def test_estimates_hold_their_own_arrays_and_print_in_a_line_a_car():
+    """A result keeps no view into the search's (particles, cars) arrays, and a notebook shows
+    it as one line a car, not every array of the fit."""
+    from wirescene.core.groundplane import rotation_y
+    from wirescene.core.types import ObjectEstimate, SceneEstimate
+
+    search = np.zeros((250, 15, 3))  # a search's locations, (particles, cars, 3)
+    cars = [ObjectEstimate(detection_index=j, box2d=[0.0, 0.0, 10.0, 10.0], score=0.5, location=search[0, j],
+                           R=rotation_y(0.1), dims=np.array([1.5, 1.6, 3.9]), cost=0.0,
+                           vertices=np.zeros((36, 3)), visibility=np.ones(36, bool), exemplar="golf")
+            for j in range(15)]
+    assert not any(np.shares_memory(car.location, search) for car in cars)
+    assert isinstance(cars[0].box2d, np.ndarray)
+    text = repr(SceneEstimate(variant="full", objects=cars, shared_plane=True))
+    assert text.count("\n") == 16 and len(text) < 3000 and "array(" not in text
+    assert "exemplar='golf'" in text and "rotation_y=0.100" in text

@@ -205,6 +205,8 @@ CASES = {
                                    r"^wirescene: error: --cars-per-scene: need 1 <= A <= B <= 1000, got '5-2'$"),
     "detect --threshold nan": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--threshold", "nan"],
                                "--threshold: 'nan' is not finite"),
+    "detect --camera-pitch 60": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--camera-pitch", "60"],
+                                 "--camera-pitch: 60 is above the maximum 45"),
     # a frame that fails after others were detected: none of their files is left behind
     "detect --out, a later image truncated": (
         lambda t: ["detect", _truncated_copy(t, ["000002", FRAME], FRAME), "--frames", f"000002,{FRAME}",

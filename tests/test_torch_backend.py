@@ -135,6 +135,27 @@ def test_tf32_is_off_during_cuda_kernels_and_restored(torch):
         matmul.fp32_precision = old
 
 
+
+def test_overlapping_cuda_calls_restore_the_callers_tf32_setting():
+    """Fits in threads overlap: the flag stays off until the last call leaves, then is the
+    caller's again (a stand-in for torch's process-wide flag; no GPU needed)."""
+    from types import SimpleNamespace
+
+    matmul = SimpleNamespace(fp32_precision="tf32")  # the caller's choice
+    fake = SimpleNamespace(backends=SimpleNamespace(cuda=SimpleNamespace(matmul=matmul)))
+    cuda = SimpleNamespace(type="cuda")
+    a, b = tb._ieee_matmul(fake, cuda), tb._ieee_matmul(fake, cuda)
+    a.__enter__()
+    b.__enter__()  # a second fit's kernels start while the first's run
+    a.__exit__(None, None, None)  # the first leaves before the second
+    assert matmul.fp32_precision == "ieee"
+    b.__exit__(None, None, None)
+    assert matmul.fp32_precision == "tf32"
+    legacy = SimpleNamespace(allow_tf32=True)  # PyTorch < 2.9
+    with tb._ieee_matmul(SimpleNamespace(backends=SimpleNamespace(cuda=SimpleNamespace(matmul=legacy))), cuda):
+        assert legacy.allow_tf32 is False
+    assert legacy.allow_tf32 is True
+
 def test_dtype_and_chunk_arguments(torch, monkeypatch):
     with pytest.raises(ValueError, match="dtype"):
         tb.segment_blocked(np.zeros(3), np.ones((1, 3)), np.ones((1, 3, 3)), dtype="float16")

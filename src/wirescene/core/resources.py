@@ -12,7 +12,9 @@ error, as is an unfinished training or a listed file that is missing.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import os
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -142,18 +144,65 @@ def trained_on(models: Models, split_dir: str | Path, frame_ids) -> list[str]:
     return [f for f in frame_ids if str(f) in trained]
 
 
-def file_sha256(path: str | Path) -> str:
-    """SHA-256 (hex) of a file's bytes, computed once per file version (path, size, mtime)."""
-    path = Path(path).resolve()
+def file_version(path: str | Path) -> tuple[int, int, int] | None:
+    """``(inode, size, mtime in ns)`` of the file at ``path`` (None where it cannot be read):
+    a file rewritten or replaced at the same path has another version."""
     try:
-        stat = path.stat()
+        stat = os.stat(path)
     except OSError:
-        raise InputError("artefact file is missing", path=path) from None
-    return _sha256(path, stat.st_size, stat.st_mtime_ns)
+        return None
+    return stat.st_ino, stat.st_size, stat.st_mtime_ns
+
+
+def cached_by_file(maxsize: int):
+    """Decorate a loader ``load(path=None)`` to load each version of a file once
+    (:func:`file_version`): a model retrained in place is loaded anew, in a notebook as in
+    a long-lived process. ``None`` (the shipped file) is loaded once; a path that cannot be
+    read goes to the loader, which names the problem.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> @cached_by_file(maxsize=4)
+    ... def load(path=None):
+    ...     return Path(path).read_text()
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     f = Path(d) / "model.txt"
+    ...     _ = f.write_text("one")
+    ...     first = load(f)
+    ...     _ = f.write_text("three")
+    ...     first, load(f)
+    ('one', 'three')
+    """
+    def decorate(load):
+        @lru_cache(maxsize=maxsize)
+        def cached(path, version):
+            return load(path)
+
+        @functools.wraps(load)
+        def loader(path=None):
+            if path is None:
+                return cached(None, None)
+            version = file_version(path)
+            return load(path) if version is None else cached(path, version)
+
+        loader.cache_clear = cached.cache_clear
+        return loader
+
+    return decorate
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's bytes, computed once per file version (:func:`file_version`)."""
+    path = Path(path).resolve()
+    version = file_version(path)
+    if version is None:
+        raise InputError("artefact file is missing", path=path)
+    return _sha256(path, version)
 
 
 @lru_cache(maxsize=64)
-def _sha256(path: Path, size: int, mtime_ns: int) -> str:
+def _sha256(path: Path, version: tuple[int, int, int]) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):

@@ -226,6 +226,20 @@ class ObjectEstimate:
     # estimate (wirescene.fitting.confidence), written as KITTI's 16th column.
     detection_score: float | None = None
 
+    def __post_init__(self):
+        # own copies: a view into the search's (particles, cars, ...) arrays would keep them all alive
+        for name in ("box2d", "location", "R", "dims", "shape", "vertices", "visibility"):
+            value = getattr(self, name)
+            if value is not None:
+                setattr(self, name, np.array(value))
+
+    def __repr__(self) -> str:
+        extra = "" if self.exemplar is None else f", exemplar={self.exemplar!r}"
+        return (f"ObjectEstimate(detection_index={self.detection_index}, "
+                f"location={np.round(np.asarray(self.location, float), 2).tolist()}, "
+                f"rotation_y={self.rotation_y:.3f}, dims={np.round(np.asarray(self.dims, float), 2).tolist()}, "
+                f"score={self.score:.3f}{extra})")
+
     @property
     def rotation_y(self) -> float:
         """Azimuth about the camera's y axis (KITTI ``rotation_y``), radians."""
@@ -343,6 +357,11 @@ class SceneEstimate:
     extras: dict = field(default_factory=dict)
     # The pre-detections the scene was fitted to (viewpoints completed), one per car.
     detections: Detections | None = None
+
+    def __repr__(self) -> str:  # a notebook's display: the cars' own reprs, not every array of the fit
+        cars = "".join(f"\n    {car!r}," for car in self.cars)
+        return (f"SceneEstimate(variant={self.variant!r}, shared_plane={self.shared_plane}, "
+                f"n_particles={self.n_particles}, cars=[{cars}{chr(10) if cars else ''}])")
 
     @property
     def cars(self) -> list[ObjectEstimate]:

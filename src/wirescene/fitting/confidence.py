@@ -28,14 +28,13 @@ evaluation records of labelled real frames and stored in ``data/score_calibratio
 
 from __future__ import annotations
 
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
 from wirescene.core.artefacts import load_json, save_json
 from wirescene.core.errors import InputError
-from wirescene.core.resources import DATA_DIR
+from wirescene.core.resources import DATA_DIR, cached_by_file
 from wirescene.core.types import SceneEstimate
 
 DEFAULT_PATH = DATA_DIR / "score_calibration.json"
@@ -69,7 +68,7 @@ def save_score_calibration(path: str | Path, record: dict) -> Path:
     return save_json(path, record, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
 
-@lru_cache(maxsize=8)
+@cached_by_file(maxsize=8)
 def load_score_calibration(path: str | Path | None = None) -> dict:
     """The calibration: per stage ``mean`` and ``scale`` (feature standardisation),
     ``weights`` and ``bias`` of the logistic model, for each of :data:`TARGETS`."""

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 from typing import Iterable, Mapping
 
 import numpy as np
@@ -19,6 +18,7 @@ from wirescene.core.boxes import clip_boxes
 from wirescene.core.camera import Camera
 from wirescene.core.errors import ArgumentError, check_shape
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+from wirescene.core.resources import cached_by_file
 from wirescene.core.settings import option
 from wirescene.core.shape import load_default as load_shape_model
 from wirescene.core.types import Detections, SceneEstimate
@@ -124,24 +124,24 @@ class FitOptions:
 STAGES: tuple[str, ...] = ("lifting", "inference", "predetect")
 
 
-@lru_cache(maxsize=4)
+@cached_by_file(maxsize=4)
 def _part_detector(path: str | None):
     from wirescene.parts.detector import PartDetector, load_default
 
     return load_default() if path is None else PartDetector.load(path)
 
 
-@lru_cache(maxsize=4)
+@cached_by_file(maxsize=4)
 def viewpoint_classifier(path: str | None):
-    """The crop viewpoint classifier at ``path`` (None: the shipped one), loaded once per process."""
+    """The crop viewpoint classifier at ``path`` (None: the shipped one), loaded once per version of the file."""
     from wirescene.predetect.viewpoint_classifier import ViewpointClassifier, load_default_classifier
 
     return load_default_classifier() if path is None else ViewpointClassifier.load(path)
 
 
-@lru_cache(maxsize=4)
+@cached_by_file(maxsize=4)
 def detector_bank(path: str | None):
-    """The detector bank at ``path`` (None: the shipped one), loaded once per process."""
+    """The detector bank at ``path`` (None: the shipped one), loaded once per version of the file."""
     from wirescene.predetect import DetectorBank, load_default_bank
 
     return load_default_bank() if path is None else DetectorBank.load(path)

@@ -5,12 +5,11 @@ fallback value would change every fine-grained fit without a trace."""
 
 from __future__ import annotations
 
-from functools import lru_cache
 from pathlib import Path
 
 from wirescene.core.artefacts import load_json, save_json
 from wirescene.core.errors import InputError
-from wirescene.core.resources import DATA_DIR
+from wirescene.core.resources import DATA_DIR, cached_by_file
 
 DEFAULT_PATH = DATA_DIR / "occlusion.json"
 ARTEFACT_KIND = "occlusion"
@@ -22,7 +21,7 @@ def save_occluded_score(path: str | Path, record: dict) -> Path:
     return save_json(path, record, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
 
-@lru_cache(maxsize=8)
+@cached_by_file(maxsize=8)
 def _load(path: Path) -> float:
     record = load_json(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
     try:

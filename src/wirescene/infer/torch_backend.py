@@ -41,6 +41,7 @@ import contextlib
 import importlib.util
 import math
 import os
+import threading
 
 import numpy as np
 
@@ -203,10 +204,17 @@ def default_chunk(device) -> int:
     return DEFAULT_CHUNK_CUDA if getattr(device, "type", "cpu") == "cuda" else DEFAULT_CHUNK_CPU
 
 
+#: The calls inside :func:`_ieee_matmul` (fits in threads overlap) and the caller's setting they saved.
+_IEEE_LOCK = threading.Lock()
+_IEEE_USERS: dict = {"count": 0, "saved": None}
+
+
 @contextlib.contextmanager
 def _ieee_matmul(torch, dev):
     """Float32 matrix products in full precision on CUDA for the duration: TF32 (10-bit
-    mantissa), if a caller enabled it globally, would break the ray/edge tests."""
+    mantissa), if a caller enabled it globally, would break the ray/edge tests. The flag is
+    process-wide: the first of overlapping calls (threads) saves the caller's setting and
+    the last one restores it."""
     if getattr(dev, "type", "cpu") != "cuda":
         yield
         return
@@ -215,12 +223,18 @@ def _ieee_matmul(torch, dev):
     # legacy allow_tf32 flag is only touched on older versions (mixing the two APIs
     # makes torch.get_float32_matmul_precision raise).
     name = "fp32_precision" if hasattr(matmul, "fp32_precision") else "allow_tf32"
-    old = getattr(matmul, name)
-    setattr(matmul, name, "ieee" if name == "fp32_precision" else False)
+    with _IEEE_LOCK:
+        if _IEEE_USERS["count"] == 0:
+            _IEEE_USERS["saved"] = getattr(matmul, name)
+            setattr(matmul, name, "ieee" if name == "fp32_precision" else False)
+        _IEEE_USERS["count"] += 1
     try:
         yield
     finally:
-        setattr(matmul, name, old)
+        with _IEEE_LOCK:
+            _IEEE_USERS["count"] -= 1
+            if _IEEE_USERS["count"] == 0:
+                setattr(matmul, name, _IEEE_USERS["saved"])
 
 
 def _setup(device, dtype, chunk):
