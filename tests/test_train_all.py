@@ -347,7 +347,7 @@ def test_resume_sees_changed_frames_and_a_failed_one_leaves_the_directory_as_it_
     image = root / "training" / "image_2" / "001545.png"
     image.rename(tmp_path / "away.png")  # a missing image is found before any step, not inside one
     line = one_line_error(cli(*args, "--resume"))
-    assert f"{image}: frame 001545's image is missing" in line and (out / MANIFEST_FILE).read_bytes() == finished
+    assert f"{image}: image file not found" in line and (out / MANIFEST_FILE).read_bytes() == finished
     (tmp_path / "away.png").rename(image)
     label = root / "training" / "label_2" / "001545.txt"
     rows = label.read_text().splitlines(keepends=True)

@@ -329,20 +329,19 @@ def train_all(
 
 
 def _check_frames(dataset, ids: list[str]) -> tuple[str, int]:
-    """Check that the training frames hold labelled cars and each its image and calibration
-    (an :class:`InputError` naming the first missing file), before any step trains; return a
-    SHA-256 of their label, calibration and image files (a resumed step whose frames changed
-    is trained again; an image replaced by another of the same size too), and their number
-    of cars."""
+    """Check the training frames' calibrations and image headers
+    (:meth:`~wirescene.io.kitti.KittiDataset.check_frames`) and labels (read to count the cars):
+    an :class:`InputError` naming the first missing or malformed file, or saying that they hold
+    no labelled car, before any step trains;
+    return a SHA-256 of their label, calibration and image files (a resumed step whose frames
+    changed is trained again; an image replaced by another of the same size too), and their
+    number of cars."""
+    dataset.check_frames(ids)
     counts = dataset.car_counts(ids)
     if not any(counts.values()):
         raise InputError(f"none of the {len(ids)} training frames has a labelled Car", path=dataset.split_dir)
     digest = hashlib.sha256()
     for f in ids:
-        for path in (dataset.image_path(f), dataset.calib_path(f)):
-            if not path.is_file():
-                raise InputError(f"frame {f}'s {'image' if path.suffix == '.png' else 'calibration'} is missing",
-                                 path=path)
         digest.update(f"{f}\n".encode())
         digest.update(dataset.label_path(f).read_bytes())
         digest.update(dataset.calib_path(f).read_bytes())
