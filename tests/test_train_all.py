@@ -349,6 +349,12 @@ def test_resume_sees_changed_frames_and_a_failed_one_leaves_the_directory_as_it_
     line = one_line_error(cli(*args, "--resume"))
     assert f"{image}: image file not found" in line and (out / MANIFEST_FILE).read_bytes() == finished
     (tmp_path / "away.png").rename(image)
+    calib = root / "training" / "calib" / "001545.txt"
+    kept = calib.read_bytes()
+    calib.write_text("P2: 1 2 3\n")  # malformed: found before any step too
+    line = one_line_error(cli(*args, "--resume"))
+    assert str(calib) in line and (out / MANIFEST_FILE).read_bytes() == finished
+    calib.write_bytes(kept)
     label = root / "training" / "label_2" / "001545.txt"
     rows = label.read_text().splitlines(keepends=True)
     first = next(i for i, ln in enumerate(rows) if ln.startswith("Car"))
