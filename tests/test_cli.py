@@ -495,6 +495,33 @@ def test_a_report_written_again_or_resumed_says_what_it_shows(tmp_path):
         (out / "index.html").read_text()
 
 
+def test_eval_report_of_several_seeds_links_their_pages_and_replaces_an_earlier_one_whole(tmp_path, monkeypatch):
+    import wirescene.eval.report as report
+
+    out, metrics = tmp_path / "report", tmp_path / "m.json"
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000002", "--particles", 8, "--workers", 1,
+              "--draws", 0, "--report", out]
+    assert run(*common).exit_code == 0
+    r = run(*common, "--seed", 0, "--seed", 1, "--json", metrics)
+    assert r.exit_code == 0, r.output
+    assert f"report written to {out / 'index.html'}, one page a seed in {out / 'seed-0'}, {out / 'seed-1'}" in r.output
+    assert {p.name for p in out.iterdir()} == {"index.html", "seed-0", "seed-1"}  # the one-seed page's plots went
+    top = (out / "index.html").read_text()
+    tp = json.loads(metrics.read_text())["over_seeds"]["coarse"]["TP"]  # the figures printed and in --json
+    assert f"<td>{tp['mean']:.1f}<br><small>{tp['min']:.0f}-{tp['max']:.0f}</small></td>" in top
+    assert all(f'<a href="seed-{s}/index.html">' in top and (out / f"seed-{s}" / "index.html").is_file() for s in (0, 1))
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def fails(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(report, "write_seeds_page", fails)
+    with pytest.raises(RuntimeError, match="disk full"):  # after both seeds' pages: none of them is left
+        run(*common, "--seed", 2, "--seed", 3)
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.json", "report"]
+
+
 def test_an_earlier_runs_predictions_are_resumed_or_refused_before_any_fit(tmp_path):
     import wirescene
     from wirescene.core.errors import ArgumentError

@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from conftest import assert_close
+from conftest import KITTI_ROOT, assert_close
 from wirescene.core.errors import ShapeError
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
 from wirescene.eval.metrics import FrameResult, evaluate, format_table, match_detections
+from wirescene.eval.report import write_report
 from wirescene.io import KittiDataset, Label
 
 
@@ -263,6 +264,160 @@ def test_report_gallery_ranks_missed_and_false_cars_below_many_cars_found_well()
     assert_close([scores["few"], scores["many"], scores["none"]], [0.0, 4 * 0.75 / 5, -1 / 5])
     assert sorted(scores, key=scores.get, reverse=True) == ["many", "few", "none"]
     assert frame_scores(report, {"many": (4, 4)})["many"] == pytest.approx(0.75)  # only the frames asked for
+
+
+#: A frame id with characters that need quoting in a URL and escaping in HTML.
+ODD = 'hit a#1"?&<b>'
+
+
+def _made_up_run(frames=("good", ODD, "far", "farther", "empty")):
+    """``(reports, gallery)`` of a made-up run of the variant ``coarse`` on the frames named:
+    ``good`` one car found exactly; ``ODD`` three cars, two found exactly, the third's
+    pre-detection dropped by the fit, and a false car; ``far`` and ``farther`` one car found
+    3 m and 5 m off (both score 0); ``empty`` no labelled car and nothing output."""
+    from wirescene.core.groundplane import rotation_y
+    from wirescene.core.labels import FrameLabels
+    from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate
+    from wirescene.eval.report import Gallery
+    from wirescene.eval.runner import frame_result
+
+    camera = KittiDataset(KITTI_ROOT).camera("000010")
+    boxes = [[100.0 + 250 * i, 150.0, 300.0 + 250 * i, 250.0] for i in range(4)]
+    cars = [car(boxes[i], x=-6.0 + 4 * i, z=20.0) for i in range(4)]
+    off = lambda i, dx: cars[i].location + [dx, 0.0, 0.0]  # noqa: E731
+    # {frame: (labelled cars, pre-detection boxes, {detection kept: estimated bottom centre})}
+    spec = {"good": ([0], [0], {0: off(0, 0.0)}),
+            ODD: ([0, 1, 2], [0, 1, 2, 3], {0: off(0, 0.0), 1: off(1, 0.0), 3: np.array([9.0, 1.65, 40.0])}),
+            "far": ([0], [0], {0: off(0, 3.0)}), "farther": ([0], [0], {0: off(0, 5.0)}), "empty": ([], [], {})}
+    gallery, results = Gallery(), []
+    for frame_id in frames:
+        labelled, det_boxes, kept = spec[frame_id]
+        gt = FrameLabels([cars[i] for i in labelled])
+        dets = Detections(np.array([boxes[i] for i in det_boxes]).reshape(-1, 4), 1.0, np.nan, "bank")
+        estimate = SceneEstimate("coarse", [ObjectEstimate(detection_index=d, box2d=dets.boxes[d], score=1.0,
+                                                           location=loc, R=rotation_y(0.0), dims=cars[0].dims, cost=0.0)
+                                            for d, loc in kept.items()])
+        results.append(frame_result(frame_id, gt, dets, estimate, camera=camera))
+        gallery.add(frame_id, "coarse", estimate, camera, dets, gt)
+    return {"coarse": evaluate(results)}, gallery
+
+
+def _blank(frame_id):
+    return np.zeros((375, 1242, 3), np.uint8)
+
+
+def test_gallery_ranks_frames_with_cars_and_breaks_ties_by_the_mean_error():
+    from wirescene.eval.report import frame_scores, rank_frames
+
+    reports, gallery = _made_up_run()
+    counts = {f: (len(cars), len(est["coarse"].objects)) for f, (_, cars, _, est) in gallery.frames.items()}
+    scores = frame_scores(reports["coarse"], counts)
+    assert_close([scores[f] for f in ("good", ODD, "far", "farther", "empty")], [1.0, (2 - 1) / 3, 0.0, 0.0, 0.0])
+    # "empty" (nothing to get right or wrong) is no candidate; of the two 0 scores the 5 m one is the worse
+    assert rank_frames(reports["coarse"], counts) == ["good", ODD, "far", "farther"]
+    # a missed car scores 0 too, and ranks below a car found too far off
+    assert rank_frames(reports["coarse"], {**counts, "a_missed": (1, 0)})[-1] == "a_missed"
+
+
+def test_report_gallery_counts_and_draws_the_cars_output_with_quoted_links(tmp_path, monkeypatch):
+    import html
+    import re
+    import urllib.parse
+    from html.parser import HTMLParser
+
+    import wirescene.eval.report as report
+
+    drawn = {}
+
+    def spy(image, camera, estimate, *, detections, **kw):
+        drawn[kw["title"].split("  ")[0]] = detections.boxes
+        return overlay(image, camera, estimate, detections=detections, **kw)
+
+    overlay = report.overlay
+    monkeypatch.setattr(report, "overlay", spy)
+    reports, gallery = _made_up_run()
+    page = report.write_report(tmp_path / "r", reports, gallery=gallery, image_of=_blank, n_gallery=2).read_text()
+    captions = re.findall(r"<figcaption>(\w+): (.*?) — score", page)
+    assert captions == [("best", "good"), ("best", html.escape(ODD)), ("worst", "farther"), ("worst", "far")]
+    # the fit dropped one of ODD's 4 pre-detections: 3 cars output, 2 of them true positives
+    assert f"{html.escape(ODD)} — score 0.33: 2 of 3 cars found, mean localisation error 0.00 m; 1 of the 3 cars " \
+           f"output false" in page
+    kept = gallery.frames[ODD][2].boxes[[0, 1, 3]]
+    assert_close(drawn[ODD], kept)  # the overlay draws the boxes of the cars output, not the dropped one
+
+    class Sources(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            found.extend(v for k, v in attrs if k in ("src", "href"))
+
+    found = []
+    Sources().feed(page)
+    assert len(found) == 3 + 2 * 4  # the plots and each frame's two pictures
+    for src in found:  # each link names its file as a browser reads it
+        assert (tmp_path / "r" / urllib.parse.unquote(src)).is_file(), src
+    assert any("%23" in src and "%22" in src for src in found)
+
+
+def test_error_vs_distance_plot_keeps_the_errors_above_its_top():
+    from wirescene.eval.metrics import EvaluationReport, TPRecord
+    from wirescene.eval.report import ERROR_AXIS_CAP, _plot_error_vs_depth
+
+    records = [TPRecord("f", i, i, 0.8, err, 1.0, 1.0, True, None, 0, gt_depth=z)
+               for i, (err, z) in enumerate([(0.5, 10.0), (12.0, 20.0), (30.0, 35.0)])]
+    fig = _plot_error_vs_depth({"coarse": EvaluationReport({"all": {"n_gt": 3}}, records, "kitti_flag", "applied")},
+                               721.5)
+    ax = fig.axes[0]
+    assert ax.get_ylim()[1] == ERROR_AXIS_CAP
+    points = np.concatenate([c.get_offsets() for c in ax.collections])
+    assert_close(points[np.argsort(points[:, 0])], [[10.0, 0.5], [20.0, ERROR_AXIS_CAP], [35.0, ERROR_AXIS_CAP]])
+    assert "coarse (3 TP, 2 over 10 m: ▲ on the top edge)" in [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "2 errors over 10 m drawn as ▲ on the top edge" in ax.get_title()
+
+
+def test_report_says_the_bases_of_its_two_within_1m_shares(tmp_path):
+    from wirescene.eval.report import _plot_error_cdf
+
+    reports, gallery = _made_up_run(("good", "empty"))
+    assert _plot_error_cdf(reports).axes[0].get_ylabel() == "share of labelled cars within d (%)"
+    page = write_report(tmp_path / "r", reports, gallery=gallery, image_of=_blank).read_text()
+    assert "<th>&lt;1 m (of TPs)</th>" in page and "<th>&lt;1.5 m (of TPs)</th>" in page
+    assert "the plot of cars localised within d metres counts\nevery labelled car" in page
+
+
+def test_a_report_of_either_layout_replaces_the_other_and_a_failed_one_nothing(tmp_path):
+    from wirescene.eval.report import staged_report, write_seeds_page
+    from wirescene.eval.seeds import over_seeds
+
+    def files(where):
+        return {str(p.relative_to(where)): p.read_bytes() for p in sorted(where.rglob("*")) if p.is_file()}
+
+    reports, gallery = _made_up_run(("empty",))  # nothing to picture: a page and its plots
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "notes.txt").write_text("not the report's")
+    write_report(out, reports, gallery=gallery, image_of=_blank)
+    summary = over_seeds({0: {"coarse": {"TP": 9.0, "<1m %": 50.0}}, 1: {"coarse": {"TP": 11.0, "<1m %": 60.0}}})
+    with staged_report(out) as staging:
+        for seed in (0, 1):
+            write_report(staging / f"seed-{seed}", reports, gallery=gallery, image_of=_blank)
+        write_seeds_page(staging, summary, [0, 1], title="two seeds")
+    assert {p.name for p in out.iterdir()} == {"index.html", "notes.txt", "seed-0", "seed-1"}  # one page's plots gone
+    top = (out / "index.html").read_text()
+    assert "over 2 seeds" in top and "seeds 0, 1" in top and "<td>10.0<br><small>9-11</small></td>" in top
+    assert "<td>55.0<br><small>50.0-60.0</small></td>" in top and "&lt;1m % (of TPs)" in top
+    assert '<a href="seed-0/index.html">' in top and '<a href="seed-1/index.html">' in top
+    (out / "seed-1" / "full").mkdir()
+    (out / "seed-1" / "full" / "000010.txt").write_text("predictions beside the page")
+    before = files(out)
+    with pytest.raises(RuntimeError, match="seed 2 failed"):
+        with staged_report(out) as staging:
+            write_report(staging / "seed-2", reports, gallery=gallery, image_of=_blank)
+            raise RuntimeError("seed 2 failed")
+    assert files(out) == before and sorted(p.name for p in tmp_path.iterdir()) == ["report"]
+    write_report(out, reports, gallery=gallery, image_of=_blank)  # one seed again: the seeds' pages go
+    assert {p.name for p in out.iterdir()} == {"index.html", "notes.txt", "error_vs_depth.png", "error_cdf.png",
+                                               "azimuth_hist.png", "seed-1"}
+    assert files(out / "seed-1") == {"full/000010.txt": b"predictions beside the page"}
+    assert "No frame of this run has a labelled car or a car output" in (out / "index.html").read_text()
 
 
 def test_workers_off_linux_watch_their_parent_instead_of_failing(monkeypatch):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from contextlib import ExitStack
 from importlib import resources
 from pathlib import Path
 
@@ -204,7 +205,8 @@ def _dask_client(address: str):
 @click.option("--seed", "seeds", type=NON_NEGATIVE, multiple=True, default=(0,), show_default=True,
               help="Seed of the fit. Repeat it (--seed 1 --seed 2 --seed 3) to fit every frame once per seed: each "
                    "seed's figures, then their mean and range over the seeds (the fit samples, so the seed alone "
-                   "moves the figures by a few cars); --predictions and --report then get a seed-S folder per seed.")
+                   "moves the figures by a few cars); --predictions and --report then get a seed-S folder per seed, "
+                   "and --report a page of the mean and range over the seeds that links them.")
 @click.option("--split", default="training", show_default=True)
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None,
               help="Write the metrics as JSON: one variant's at the top level, several keyed by variant (and by seed "
@@ -266,23 +268,35 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
             refuse_earlier_run(_seed_dir(predictions, seed, several))
     client = _dask_client(dask_address) if dask_address is not None else None
     figures, data = {}, {}
-    try:
+    with ExitStack() as stack:
+        if client is not None:
+            stack.callback(client.close)
+        pages = report_dir
+        if several and report_dir is not None:
+            from wirescene.eval.report import staged_report
+
+            # the seeds' pages and the page over them replace an earlier report together, after the last seed
+            pages = stack.enter_context(staged_report(report_dir))
         for k, seed in enumerate(seeds):
             if several:
                 click.echo(("\n" if k else "") + f"=== seed {seed}")
             reports, kitti, data[seed] = _evaluate_seed(
                 dataset, variants, frame_ids, drives, seed=seed, detections=detections, viewpoint_noise=viewpoint_noise,
                 particles=particles, predictions=_seed_dir(predictions, seed, several), evidence=evidence, draws=draws,
-                report_dir=_seed_dir(report_dir, seed, several), workers=workers,
+                report_dir=_seed_dir(pages, seed, several), workers=workers,
                 allow_missing=allow_missing_detections, resume=resume, client=client, dask_address=dask_address,
                 inference=dict(inference), as_json=json_out is not None)
             figures[seed] = seed_figures({v: r.metrics["all"] for v, r in reports.items()}, kitti)
-    finally:
-        if client is not None:
-            client.close()
-    summary = over_seeds(figures) if several else None
+        summary = over_seeds(figures) if several else None
+        if several and report_dir is not None:
+            from wirescene.eval.report import write_seeds_page
+
+            write_seeds_page(pages, summary, seeds, title=f"{dataset.split_dir} ({detections} pre-detections)")
     if several:
         click.echo("\n" + format_over_seeds(summary, seeds))
+    if report_dir is not None:
+        each = f", one page a seed in {', '.join(str(_seed_dir(report_dir, s, True)) for s in seeds)}" if several else ""
+        click.echo(f"report written to {Path(report_dir) / 'index.html'}{each}")
     if json_out is not None:
         out = data[seeds[0]] if not several else {"seeds": {str(s): d for s, d in data.items()}, "over_seeds": summary}
         if len(variants) == 1 and not several:
@@ -305,7 +319,9 @@ def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str]) -
 def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
     """Where one seed of ``wirescene eval`` writes under an output folder: ``PATH/seed-S`` when
     several seeds are evaluated, else ``PATH`` itself."""
-    return None if path is None else (Path(path) / f"seed-{seed}" if several else path)
+    from wirescene.eval.seeds import seed_folder
+
+    return None if path is None else (Path(path) / seed_folder(seed) if several else path)
 
 
 def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, viewpoint_noise, particles, predictions,
@@ -375,9 +391,8 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
     if report_dir is not None:
         from wirescene.eval.report import write_report
 
-        page = write_report(report_dir, reports, gallery=gallery, image_of=dataset.image, intervals=intervals,
-                            kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})")
-        click.echo(f"report written to {page}")
+        write_report(report_dir, reports, gallery=gallery, image_of=dataset.image, intervals=intervals,
+                     kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})")
     return reports, kitti, data
 
 

@@ -97,22 +97,49 @@ def _staged(path: Path):
 @contextmanager
 def atomic_dir(path: str | Path, *, stale: tuple[str, ...] = ()):
     """Yield an empty staging directory beside ``path``; when the block succeeds its files
-    move into ``path`` (created if needed; files of the same name replaced, and those of
-    ``path`` matching a glob pattern of ``stale`` that the new set lacks removed), when it
+    move into ``path`` (created if needed), those in folders of the staging directory into
+    the same folders of ``path``: files of the same name are replaced, and those of ``path``
+    matching a glob pattern of ``stale`` (relative to ``path``, e.g. ``"seed-*/index.html"``)
+    that the new set lacks are removed, with the folders they leave empty. When the block
     raises the staging directory goes and so do the directories above ``path`` made for
-    it, so that a set of files (a report's page and pictures) appears whole or not at all."""
+    it, so that a set of files (a report's pages and pictures) appears whole or not at all.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as root:
+    ...     report = Path(root) / "set"
+    ...     (report / "old").mkdir(parents=True)
+    ...     _ = (report / "old" / "a.txt").write_text("old")
+    ...     with atomic_dir(report, stale=("*/a.txt",)) as staging:
+    ...         (staging / "new").mkdir()
+    ...         _ = (staging / "new" / "a.txt").write_text("new")
+    ...     sorted(p.relative_to(report).as_posix() for p in report.rglob("*"))
+    ['new', 'new/a.txt']
+    """
     path = Path(path)
     with _staged(path) as staging:
         yield staging
-        path.mkdir(exist_ok=True)
-        new = {entry.name for entry in staging.iterdir()}
-        for entry in sorted(staging.iterdir()):
-            os.replace(entry, path / entry.name)
+        new = {entry.relative_to(staging) for entry in staging.rglob("*") if not entry.is_dir()}
+        _move_into(staging, path)
         for pattern in stale:  # after the new files are in: an interruption leaves no page without its pictures
             for old in path.glob(pattern):
-                if old.name not in new and old.is_file():
+                where = old.relative_to(path)
+                if where not in new and old.is_file():
                     old.unlink()
+                    remove_empty([path / folder for folder in list(where.parents)[:-1]])
     shutil.rmtree(staging, ignore_errors=True)
+
+
+def _move_into(source: Path, target: Path) -> None:
+    """Move the entries of ``source`` into ``target`` (made if needed), a folder into the folder of
+    its name there; folders first and pages (``.html``) last, so that a page comes after what it shows."""
+    target.mkdir(exist_ok=True)
+    for entry in sorted(source.iterdir(), key=lambda e: (not e.is_dir(), e.suffix == ".html", e.name)):
+        if entry.is_dir() and not entry.is_symlink() and (target / entry.name).is_dir():
+            _move_into(entry, target / entry.name)
+        else:
+            os.replace(entry, target / entry.name)
 
 
 @contextmanager

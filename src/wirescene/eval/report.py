@@ -3,20 +3,25 @@
 * localisation error against ground-truth depth, with the physical limit of a
   monocular estimate: a car's depth comes from where it touches the ground in the image,
   so one pixel of error there moves it by ``z**2 / (f * H)`` metres (camera height ``H``);
-* the distribution of localisation errors (fraction of true positives within d metres)
-  and a histogram of 3D azimuth errors, per variant;
+* the distribution of localisation errors (share of the labelled cars within d metres; the
+  table's shares are of the true positives) and a histogram of 3D azimuth errors, per variant;
 * a gallery of the best and worst frames of the first fine variant, else the first
-  variant (ranked by :func:`frame_scores`, which counts missed and false cars as well as
+  variant (ranked by :func:`rank_frames`, which counts missed and false cars as well as
   errors) with overlays and bird's-eye views.
 
 Everything is written atomically into one directory (the page and its pictures appear
 together or not at all); the page references its PNGs by relative path, so the
-directory can be moved or served as it is.
+directory can be moved or served as it is. An evaluation over several seeds writes one
+such page a seed in ``seed-S`` folders under a page of the figures' mean and range over
+the seeds (:func:`write_seeds_page`), all staged by :func:`staged_report` and put in place
+together; either layout removes the other's files of an earlier report.
 """
 
 from __future__ import annotations
 
 import html
+import urllib.parse
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,8 +35,19 @@ from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.wireframe import EDGES
 from wirescene.eval.kitti_metrics import kitti_figure
 from wirescene.eval.metrics import EvaluationReport
+from wirescene.eval.seeds import mean_and_range, seed_folder
 from wirescene.fitting.variants import get_variant
+from wirescene.io.outputs import fitted_detections
 from wirescene.io.pictures import birds_eye, new_figure, overlay, save_figure
+
+#: Localisation error (m) at the top of the error-vs-distance plot; larger errors are drawn on its top edge.
+ERROR_AXIS_CAP = 10.0
+
+#: The files of one report page (globs): the page, its plots and its gallery.
+PAGE_FILES = ("index.html", "error_vs_depth.png", "error_cdf.png", "azimuth_hist.png", "best_*_overlay.png",
+              "best_*_bev.png", "worst_*_overlay.png", "worst_*_bev.png")
+#: The files a report of either layout leaves in its directory (a page, or a page a seed in its folder).
+REPORT_FILES = PAGE_FILES + tuple(f"{seed_folder('[0-9]*')}/{name}" for name in PAGE_FILES)
 
 
 @dataclass
@@ -53,15 +69,26 @@ def depth_error_per_pixel(z, focal: float, camera_height: float = KITTI_CAMERA_H
     return z**2 / (focal * camera_height)
 
 
-def _plot_error_vs_depth(reports, focal, path):
+def _plot_error_vs_depth(reports, focal):
+    """The figure of localisation error against ground-truth depth; errors above
+    :data:`ERROR_AXIS_CAP` are drawn as triangles on the top edge and counted in the legend."""
     fig = new_figure(figsize=(7, 4.2), dpi=100)
     ax = fig.subplots()
     zmax = 5.0
+    largest = max((r.loc_error for rep in reports.values() for r in rep.records if r.gt_depth is not None), default=0.0)
+    top = max(4.0, min(ERROR_AXIS_CAP, 1.05 * largest))
+    off_scale = 0
     for name, rep in reports.items():
         z = np.array([np.nan if r.gt_depth is None else r.gt_depth for r in rep.records], float)
         err = np.array([r.loc_error for r in rep.records], float)
         ok = np.isfinite(z)
-        ax.scatter(z[ok], err[ok], s=12, alpha=0.7, label=f"{name} ({ok.sum()} TP)")
+        over = ok & (err > top)
+        n_over = int(over.sum())
+        label = f"{name} ({ok.sum()} TP" + (f", {n_over} over {top:g} m: ▲ on the top edge)" if n_over else ")")
+        dots = ax.scatter(z[ok & ~over], err[ok & ~over], s=12, alpha=0.7, label=label)
+        if n_over:  # unclipped on the edge: no car leaves the plot while the legend counts it
+            ax.scatter(z[over], np.full(n_over, top), s=30, marker="^", color=dots.get_facecolor()[0], clip_on=False)
+        off_scale += n_over
         if ok.any():
             zmax = max(zmax, float(z[ok].max()))
     zz = np.linspace(0, zmax * 1.05, 100)
@@ -71,14 +98,16 @@ def _plot_error_vs_depth(reports, focal, path):
     ax.axhline(1.0, color="grey", lw=0.8, ls=":")
     ax.set_xlabel("ground-truth depth z (m)")
     ax.set_ylabel("localisation error (m)")
-    ax.set_ylim(0, max(4.0, ax.get_ylim()[1] if ax.get_ylim()[1] < 10 else 10))
+    ax.set_ylim(0, top)
     ax.legend(fontsize=7, loc="upper left")
-    ax.set_title("Localisation error vs distance (paper threshold 1 m dotted)")
+    off = f"\n{off_scale} errors over {top:g} m drawn as ▲ on the top edge" if off_scale else ""
+    ax.set_title(f"Localisation error vs distance (paper threshold 1 m dotted){off}")
     fig.tight_layout()
-    return save_figure(fig, path)
+    return fig
 
 
-def _plot_error_cdf(reports, path):
+def _plot_error_cdf(reports):
+    """The figure of the share of labelled cars (not of true positives) localised within d metres."""
     fig = new_figure(figsize=(5.5, 4.2), dpi=100)
     ax = fig.subplots()
     d = np.linspace(0, 5, 201)
@@ -88,15 +117,16 @@ def _plot_error_cdf(reports, path):
         ax.plot(d, np.searchsorted(err, d, side="right") / n_gt * 100, label=name)
     ax.axvline(1.0, color="grey", lw=0.8, ls=":")
     ax.set_xlabel("localisation error d (m)")
-    ax.set_ylabel("% of ground-truth cars within d")
+    ax.set_ylabel("share of labelled cars within d (%)")
     ax.set_ylim(0, 100)
     ax.legend(fontsize=8)
-    ax.set_title("Cars localised within d metres")
+    ax.set_title("Labelled cars localised within d metres")
     fig.tight_layout()
-    return save_figure(fig, path)
+    return fig
 
 
-def _plot_azimuth_histogram(reports, path):
+def _plot_azimuth_histogram(reports):
+    """The figure of the 3D azimuth errors' histogram, as shares of the true positives."""
     fig = new_figure(figsize=(5.5, 4.2), dpi=100)
     ax = fig.subplots()
     bins = np.concatenate([np.arange(0, 30, 2.5), [30, 90, 180]])
@@ -111,7 +141,7 @@ def _plot_azimuth_histogram(reports, path):
     ax.legend(fontsize=8)
     ax.set_title("Azimuth error")
     fig.tight_layout()
-    return save_figure(fig, path)
+    return fig
 
 
 #: Localisation error (m) at which a found car's share of the gallery score falls to 0.
@@ -119,29 +149,69 @@ SCORE_ZERO_ERROR = 2.0
 
 
 def frame_scores(report: EvaluationReport, counts: dict[str, tuple[int, int]]) -> dict[str, float]:
-    """Per frame: (sum over true positives of max(0, 1 - error / 2 m) - false detections) / labelled cars.
+    """Per frame: (sum over true positives of max(0, 1 - error / 2 m) - false cars) / labelled cars.
 
-    ``counts`` is ``{frame_id: (labelled cars, detections)}``; a false detection is any
-    that is not a true positive (unmatched, or of a wrong viewpoint). A frame scores 1
-    when every car is found exactly and nothing else is detected; a missed car adds
-    nothing and a false detection costs what a perfect car earns, so a few cars found
-    precisely do not outrank many found well. A frame without labelled cars divides by 1.
+    ``counts`` is ``{frame_id: (labelled cars, cars output)}`` (the cars the variant output,
+    not the pre-detections its fit dropped); a false car is any output that is not a true
+    positive (unmatched, or of a wrong viewpoint). A frame scores 1 when every car is found
+    exactly and nothing else is output; a missed car adds nothing and a false car costs what
+    a perfect car earns, so a few cars found precisely do not outrank many found well. A
+    frame without labelled cars divides by 1.
     """
     credit: dict[str, float] = {}
     found: dict[str, int] = {}
     for r in report.records:
         credit[r.frame_id] = credit.get(r.frame_id, 0.0) + max(0.0, 1.0 - r.loc_error / SCORE_ZERO_ERROR)
         found[r.frame_id] = found.get(r.frame_id, 0) + 1
-    return {f: (credit.get(f, 0.0) - (n_dets - found.get(f, 0))) / max(n_cars, 1)
-            for f, (n_cars, n_dets) in counts.items()}
+    return {f: (credit.get(f, 0.0) - (n_out - found.get(f, 0))) / max(n_cars, 1)
+            for f, (n_cars, n_out) in counts.items()}
+
+
+def _errors_by_frame(report: EvaluationReport) -> dict[str, list[float]]:
+    """The localisation errors of each frame's true positives."""
+    errors: dict[str, list[float]] = {}
+    for r in report.records:
+        errors.setdefault(r.frame_id, []).append(r.loc_error)
+    return errors
+
+
+def rank_frames(report: EvaluationReport, counts: dict[str, tuple[int, int]]) -> list[str]:
+    """The frames of ``counts`` the gallery may show, best first.
+
+    The order: by :func:`frame_scores`, highest first; equal scores by the mean localisation
+    error of the frame's true positives, smallest first (a frame without one after those
+    with one), then by frame id. The worst frames are the list read from its end: the
+    lowest score first and, of equal scores, the largest mean error first. A frame with
+    neither a labelled car nor a car output is left out: nothing in it is right or wrong.
+
+    Parameters
+    ----------
+    report : EvaluationReport
+        The variant's evaluation (its true positives).
+    counts : dict
+        ``{frame_id: (labelled cars, cars output)}``, as of :func:`frame_scores`.
+
+    Returns
+    -------
+    list of str
+    """
+    scores = frame_scores(report, counts)
+    mean = {f: float(np.mean(e)) for f, e in _errors_by_frame(report).items()}
+    candidates = [f for f, (n_cars, n_out) in counts.items() if n_cars or n_out]
+    return sorted(candidates, key=lambda f: (-scores[f], mean.get(f, np.inf), f))
+
+
+def _href(name: str) -> str:
+    """A file name of the report as a relative URL inside an HTML attribute."""
+    return html.escape(urllib.parse.quote(name))
 
 
 def _metrics_table(reports, intervals=None) -> str:
-    cols = [("n_gt", "GT cars", "{:.0f}"), ("n_tp", "TP", "{:.0f}"), ("loc_1m", "&lt;1 m", "{:.0f}%"),
-            ("loc_1_5m", "&lt;1.5 m", "{:.0f}%"), ("median_loc", "median loc. (m)", "{:.2f}"),
-            ("az_5", "az &lt;5°", "{:.0f}%"), ("median_az3d", "median az (°)", "{:.1f}")]
+    cols = [("n_gt", "GT cars", "{:.0f}"), ("n_tp", "TP", "{:.0f}"), ("loc_1m", "&lt;1 m (of TPs)", "{:.0f}%"),
+            ("loc_1_5m", "&lt;1.5 m (of TPs)", "{:.0f}%"), ("median_loc", "median loc. (m)", "{:.2f}"),
+            ("az_5", "az &lt;5° (of TPs)", "{:.0f}%"), ("median_az3d", "median az (°)", "{:.1f}")]
     if intervals is not None:  # beside the 1 m share: how far other drives could move it
-        cols.insert(3, ("loc_1m_interval", "&lt;1 m, 90% over drives", "[{:.0f}, {:.0f}]%"))
+        cols.insert(3, ("loc_1m_interval", "&lt;1 m (of TPs), 90% over drives", "[{:.0f}, {:.0f}]%"))
     head = "".join(f"<th>{c[1]}</th>" for c in cols)
     rows = []
     for name, rep in reports.items():
@@ -186,7 +256,9 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
     Parameters
     ----------
     out_dir : path
-        The report's directory (made if needed; files of the same names replaced).
+        The report's directory (made if needed): files of the same names are replaced and an
+        earlier report's files this one lacks removed, ``seed-S`` pages of several seeds
+        included (see :func:`staged_report`); other files stay.
     reports : dict
         ``{variant: EvaluationReport}`` of one run.
     gallery : Gallery
@@ -205,12 +277,82 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
         :func:`wirescene.eval.intervals.kitti_intervals`: a second table gives KITTI's
         moderate APs (with their intervals).
     """
-    # the page and its pictures appear together or not at all, and an earlier report's gallery goes
-    with atomic_dir(out_dir, stale=("best_*_overlay.png", "best_*_bev.png", "worst_*_overlay.png",
-                                    "worst_*_bev.png")) as staging:
+    with staged_report(out_dir) as staging:
         _write_report(staging, reports, gallery=gallery, image_of=image_of, title=title, n_gallery=n_gallery,
                       intervals=intervals, kitti=kitti, kitti_intervals=kitti_intervals)
     return Path(out_dir) / "index.html"
+
+
+@contextmanager
+def staged_report(out_dir):
+    """Yield an empty staging directory for a report's files (one page, or a page a seed in
+    ``seed-S`` folders and :func:`write_seeds_page`'s page above them) that take their
+    place in ``out_dir`` when the block succeeds: an earlier report's files of either layout
+    that the new set lacks go then (:data:`REPORT_FILES`; other files stay). When the block
+    raises, ``out_dir`` is left as it was.
+
+    Parameters
+    ----------
+    out_dir : path
+        The report's directory (made if needed).
+    """
+    with atomic_dir(out_dir, stale=REPORT_FILES) as staging:
+        yield staging
+
+
+#: Headers of the figures over seeds that are shares of the true positives, saying so.
+_OF_TPS = {"<1m %": "<1m % (of TPs)", "<1.5m %": "<1.5m % (of TPs)"}
+
+
+def write_seeds_page(out_dir, summary: dict, seeds, *, title: str = "") -> Path:
+    """Write ``out_dir/index.html`` of an evaluation over several seeds: the seeds, the mean and
+    range over them of each variant's figures, and a link to each seed's page (``seed-S/index.html``,
+    written by :func:`write_report`); returns the page's path.
+
+    Parameters
+    ----------
+    out_dir : path
+        The report's directory (a :func:`staged_report` staging directory).
+    summary : dict
+        ``{variant: {column: figure}}`` of :func:`wirescene.eval.seeds.over_seeds` (what
+        ``wirescene eval`` prints and writes as ``over_seeds`` in ``--json``).
+    seeds : sequence of int
+        The seeds, in the order evaluated.
+    title : str
+        The page's heading.
+    """
+    seeds = [int(s) for s in seeds]
+    if not seeds or not summary:
+        raise ValueError("write_seeds_page: no seeds or no variants to summarise")
+    columns = list(next(iter(summary.values())))
+    rows = []
+    for variant, figures in summary.items():
+        cells = [mean_and_range(figures[c], c) for c in columns]
+        rows.append(f"<tr><td>{html.escape(variant)}</td>"
+                    + "".join(f"<td>{mean}<br><small>{spread}</small></td>" for mean, spread in cells) + "</tr>")
+    links = "".join(f'<li><a href="{_href(seed_folder(s) + "/index.html")}">seed {s}</a></li>' for s in seeds)
+    page = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>wirescene report {html.escape(title)}</title>
+<style>
+body {{ font-family: sans-serif; margin: 1.5em; color: #222; }}
+table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: right; }}
+td:first-child {{ text-align: left; }} small {{ color: #666; }}
+</style></head><body>
+<h1>wirescene evaluation report over {len(seeds)} seeds</h1>
+<p>{html.escape(title)} — every frame fitted once with each of the seeds {", ".join(map(str, seeds))}; the fine
+stage samples, so the seed alone moves the figures. Each cell: the mean over the seeds, below it the range
+(min–max).</p>
+<table><tr><th>variant</th>{"".join(f"<th>{html.escape(_OF_TPS.get(c, c))}</th>" for c in columns)}</tr>{"".join(rows)}</table>
+<p>TP: true positives; &lt;1m % and &lt;1.5m %: shares of the true positives localised within 1 and 1.5 m;
+med az: median 3D azimuth error (°) of the true positives; 2d@.7, bev@.7, 3d@.7 and 3d@.5: KITTI's moderate
+APs (R40) at IoU 0.7 and 0.5.</p>
+<h2>Each seed's page</h2>
+<ul>{links}</ul>
+</body></html>
+"""
+    out = Path(out_dir) / "index.html"
+    write_text(out, page)
+    return out
 
 
 def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, intervals, kitti,
@@ -218,18 +360,18 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
     """:func:`write_report`'s files, written into the directory ``out``."""
     focal = next((c.focal for c, *_ in gallery.frames.values()), 721.5)
     plots = {
-        "error_vs_depth.png": _plot_error_vs_depth(reports, focal, out / "error_vs_depth.png"),
-        "error_cdf.png": _plot_error_cdf(reports, out / "error_cdf.png"),
-        "azimuth_hist.png": _plot_azimuth_histogram(reports, out / "azimuth_hist.png"),
+        "error_vs_depth.png": _plot_error_vs_depth(reports, focal),
+        "error_cdf.png": _plot_error_cdf(reports),
+        "azimuth_hist.png": _plot_azimuth_histogram(reports),
     }
+    for name, fig in plots.items():
+        save_figure(fig, out / name)
     fine = [v for v in reports if get_variant(v).fine]
     lead = fine[0] if fine else next(iter(reports))
-    counts = {f: (len(cars), len(dets)) for f, (_, cars, dets, _) in gallery.frames.items()}
+    counts = {f: (len(cars), len(estimates[lead].objects)) for f, (_, cars, _, estimates) in gallery.frames.items()}
     scores = frame_scores(reports[lead], counts)
-    errors: dict[str, list[float]] = {}
-    for r in reports[lead].records:
-        errors.setdefault(r.frame_id, []).append(r.loc_error)
-    ranked = sorted(scores, key=lambda f: (-scores[f], f))  # best first; ties by frame id
+    errors = _errors_by_frame(reports[lead])
+    ranked = rank_frames(reports[lead], counts)
     k = min(n_gallery, max(1, len(ranked) // 2))  # best and worst never share a frame, nor take the middle one
     picks = [("best", f) for f in ranked[:k]] + [("worst", f) for f in ranked[::-1][:min(k, len(ranked) - k)]]
     seen, cards = set(), []
@@ -240,20 +382,23 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
         camera, cars, dets, estimates = gallery.frames[frame_id]
         estimate = estimates[lead]
         stem = f"{kind}_{frame_id}"
-        save_figure(overlay(image_of(frame_id), camera, estimate, gt=cars, detections=dets, edges=EDGES,
-                            title=f"{frame_id}  {lead}"), out / f"{stem}_overlay.png")
+        save_figure(overlay(image_of(frame_id), camera, estimate, gt=cars, detections=fitted_detections(dets, estimate),
+                            edges=EDGES, title=f"{frame_id}  {lead}"), out / f"{stem}_overlay.png")
         save_figure(birds_eye(estimate, gt=cars, camera=camera, title=f"{frame_id}  {lead}"), out / f"{stem}_bev.png")
         found = errors.get(frame_id, [])
+        n_out = len(estimate.objects)
         mean = f", mean localisation error {np.mean(found):.2f} m" if found else ""
         cards.append(f'<figure><figcaption>{kind}: {html.escape(frame_id)} — score {scores[frame_id]:.2f}: '
-                     f'{len(found)} of {len(cars)} cars found{mean}, {len(dets) - len(found)} false detections '
-                     f'({lead})</figcaption><img class="wide" src="{stem}_overlay.png">'
-                     f'<img class="bev" src="{stem}_bev.png"></figure>')
+                     f'{len(found)} of {len(cars)} cars found{mean}; {n_out - len(found)} of the {n_out} cars output '
+                     f'false ({html.escape(lead)})</figcaption><img class="wide" src="{_href(stem + "_overlay.png")}">'
+                     f'<img class="bev" src="{_href(stem + "_bev.png")}"></figure>')
     evaluated = max((r.counts.get("frames", 0) for r in reports.values()), default=0)
     n_frames = max(len(gallery.frames), evaluated)
     reused = evaluated - len(gallery.frames)
     unpictured = (f"<p>The gallery ranks the {len(gallery.frames)} frames fitted by this run; {reused} frames "
                   "reused from an earlier run's records are in the tables, not pictured.</p>") if reused > 0 else ""
+    if not ranked:
+        unpictured += "<p>No frame of this run has a labelled car or a car output: the gallery is empty.</p>"
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>wirescene report {html.escape(title)}</title>
 <style>
@@ -266,13 +411,16 @@ img.wide {{ max-width: 70%; vertical-align: top; }} img.bev {{ max-width: 25%; v
 <p>{html.escape(title)} — {n_frames} frames; the paper's protocol (true-positive initialisations, IoU &gt; 0.5,
 viewpoint within 45°).</p>
 {_metrics_table(reports, intervals)}
+<p>The table's shares are of the true positives (TP); the plot of cars localised within d metres counts
+every labelled car (a missed car is never within d), so its value at 1 m is the lower one.</p>
 {_kitti_table(kitti, kitti_intervals) if kitti else ""}
-<div class="plots">{''.join(f'<img src="{name}" alt="{name}">' for name in plots)}</div>
+<div class="plots">{''.join(f'<img src="{_href(name)}" alt="{html.escape(name)}">' for name in plots)}</div>
 <h2>Gallery ({html.escape(lead)}): best and worst frames</h2>
 <p>Red: estimate ({"wireframe, hidden vertices blue" if get_variant(lead).fine else "3D box, a cross on its front"});
-green: ground truth; yellow: pre-detections.
+green: ground truth; yellow: the pre-detections of the cars output (those the fit dropped are not drawn).
 Frames ranked by a score that counts missed and false cars: (sum over true positives of
-max(0, 1 &minus; error / {SCORE_ZERO_ERROR:g} m) &minus; false detections) / labelled cars.</p>
+max(0, 1 &minus; error / {SCORE_ZERO_ERROR:g} m) &minus; false cars output) / labelled cars; equal scores by the
+mean localisation error; frames with neither a labelled car nor a car output are not ranked.</p>
 {unpictured}{''.join(cards)}
 </body></html>
 """

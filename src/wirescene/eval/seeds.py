@@ -32,6 +32,18 @@ FIGURES: tuple = (
 COUNTS = ("TP",)
 
 
+def seed_folder(seed) -> str:
+    """The folder of one seed's outputs (its predictions, its report page) where an evaluation
+    has several seeds.
+
+    Examples
+    --------
+    >>> seed_folder(3)
+    'seed-3'
+    """
+    return f"seed-{seed}"
+
+
 def _finite(v) -> float | None:
     return None if v is None or not math.isfinite(float(v)) else float(v)
 
@@ -95,9 +107,24 @@ def over_seeds(per_seed: Mapping[int, Mapping[str, Mapping[str, float | None]]])
     return out
 
 
+def mean_and_range(figure: Mapping, column: str) -> tuple[str, str]:
+    """One figure of :func:`over_seeds` in words: its mean (one decimal) and its range ``min-max``
+    over the seeds (without decimals for a count of :data:`COUNTS`); ``-`` where no seed has it.
+
+    Examples
+    --------
+    >>> mean_and_range(over_seeds({1: {"full": {"TP": 9.0}}, 2: {"full": {"TP": 11.0}}})["full"]["TP"], "TP")
+    ('10.0', '9-11')
+    """
+    digits = 0 if column in COUNTS else 1
+    mean = "-" if figure["mean"] is None else f"{figure['mean']:.1f}"
+    spread = "-" if figure["min"] is None else f"{figure['min']:.{digits}f}-{figure['max']:.{digits}f}"
+    return mean, spread
+
+
 def format_over_seeds(summary: Mapping[str, Mapping[str, dict]], seeds) -> str:
     """A table of :func:`over_seeds`: per variant and figure the mean and, below it, the range
-    ``min-max`` over ``seeds``.
+    ``min-max`` over ``seeds`` (:func:`mean_and_range`).
 
     Examples
     --------
@@ -110,17 +137,10 @@ def format_over_seeds(summary: Mapping[str, Mapping[str, dict]], seeds) -> str:
     seeds = list(seeds)
     columns = list(next(iter(summary.values())))
     name_w = max(len("variant"), *(len(v) for v in summary))
-
-    def cell(x, digits: int = 1) -> str:
-        return "-" if x is None else f"{x:.{digits}f}"
-
-    def spread(f, column: str) -> str:
-        digits = 0 if column in COUNTS else 1
-        return "-" if f["min"] is None else f"{f['min']:.{digits}f}-{f['max']:.{digits}f}"
-
     lines = [f"Over {len(seeds)} seeds ({', '.join(map(str, seeds))}): mean, and below it min-max",
              f"{'variant':<{name_w}} " + " ".join(f"{c:>11}" for c in columns)]
     for v, figures in summary.items():
-        lines.append(f"{v:<{name_w}} " + " ".join(f"{cell(figures[c]['mean']):>11}" for c in columns))
-        lines.append(f"{'':<{name_w}} " + " ".join(f"{spread(figures[c], c):>11}" for c in columns))
+        cells = [mean_and_range(figures[c], c) for c in columns]
+        lines.append(f"{v:<{name_w}} " + " ".join(f"{mean:>11}" for mean, _ in cells))
+        lines.append(f"{'':<{name_w}} " + " ".join(f"{spread:>11}" for _, spread in cells))
     return "\n".join(lines)

@@ -28,6 +28,23 @@ def boxes_in_words(source: str) -> str:
     return named.get(source, f"boxes of {Path(source).name}")
 
 
+def fitted_detections(detections: Detections, estimate: SceneEstimate) -> Detections:
+    """The pre-detections of the cars of ``estimate``, in detection order: those the fit's
+    verification dropped (our own pre-detection's) are left out, as from the fit's output.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.types import ObjectEstimate
+    >>> dets = Detections([[0, 0, 10, 10], [20, 0, 30, 10], [40, 0, 50, 10]], 1.0, np.nan)
+    >>> car = ObjectEstimate(detection_index=2, box2d=dets.boxes[2], score=1.0, location=np.array([0.0, 1.65, 9.0]),
+    ...                      R=np.eye(3), dims=np.array([1.5, 1.6, 3.9]), cost=0.0)
+    >>> fitted_detections(dets, SceneEstimate(variant="coarse", objects=[car])).boxes
+    array([[40.,  0., 50., 10.]])
+    """
+    return detections.subset(np.array(sorted(o.detection_index for o in estimate.objects), dtype=int))
+
+
 def write_fit_outputs(
     out_dir: Path,
     stem: str,
@@ -45,7 +62,7 @@ def write_fit_outputs(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
-    fitted = detections.subset(sorted(o.detection_index for o in estimate.objects))
+    fitted = fitted_detections(detections, estimate)
     title = f"{stem}  {estimate.variant}, {boxes_in_words(detections.source)}"
     fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted, title=title, edges=EDGES)
     fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=title)
