@@ -253,7 +253,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.frame_ids(), where=dataset.split_dir)
     drives = interval_drives(dataset.split_dir)  # read before any fit: a bad devkit mapping is an error now
-    _say_if_trained_on(inference.get("models"), dataset, frame_ids)
+    _say_if_trained_on(inference.get("models"), dataset, frame_ids, variants=variants, detections=detections,
+                       replaced=[k for k in ("parts_model", "detector_bank") if inference.get(k) is not None])
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
@@ -305,12 +306,23 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         click.echo(f"metrics written to {json_out}")
 
 
-def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str]) -> None:
-    """A line on standard error where ``--models`` was trained on some of the frames evaluated:
-    their figures are not held out."""
+def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str], *, variants, detections: str,
+                       replaced=()) -> None:
+    """A line on standard error where the run reads a model of ``--models`` that was trained on
+    some of the frames evaluated: their figures are not held out. The frame-trained models are
+    the part model (read by the fine variants) and the detector bank (read for our own
+    detections and for boxes given without a viewpoint), unless ``replaced`` (``--parts-model``,
+    ``--bank``) by another file."""
     from wirescene.core.resources import resolve_models, trained_on
+    from wirescene.fitting.variants import get_variant
 
-    seen = trained_on(resolve_models(models_dir), dataset.split_dir, frame_ids)
+    models = resolve_models(models_dir)
+    read = {"parts_model"} if any(get_variant(v).fine for v in variants) else set()
+    if detections != "gt":
+        read.add("detector_bank")
+    if not (read - set(replaced)) & set(models.own):
+        return
+    seen = trained_on(models, dataset.split_dir, frame_ids)
     if seen:
         click.echo(f"wirescene: {len(seen)} of the {len(frame_ids)} frames evaluated are among those {models_dir} was "
                    f"trained on (e.g. {seen[0]}): their figures are not held out", err=True)
