@@ -207,6 +207,13 @@ CASES = {
                                "--threshold: 'nan' is not finite"),
     "detect --camera-pitch 60": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--camera-pitch", "60"],
                                  "--camera-pitch: 60 is above the maximum 45"),
+    "detect --smallest-car 3": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--smallest-car", "3"],
+                                r"--smallest-car: 3 is below the minimum 10 \(0: the bank's own\)"),
+    "fit --smallest-car 2": (lambda t: [*_fit_case(t), "--smallest-car", "2", "--out", t / "o"],
+                             r"--smallest-car: 2 is below the minimum 10 \(0: the bank's own\)"),
+    "eval --set predetect.smallest_car=5": (
+        lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", FRAME, "--set", "predetect.smallest_car=5"],
+        r"predetect.smallest_car must be 0 \(the bank's own\) or at least 10, got 5.0"),
     # a frame that fails after others were detected: none of their files is left behind
     "detect --out, a later image truncated": (
         lambda t: ["detect", _truncated_copy(t, ["000002", FRAME], FRAME), "--frames", f"000002,{FRAME}",

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import KITTI_ROOT
+from conftest import KITTI_ROOT, assert_close
 from wirescene.cli.main import main
 from wirescene.core.errors import InputError
 from wirescene.eval.metrics import FrameResult
@@ -265,6 +265,16 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
         heights[smallest] = found.boxes[:, 3] - found.boxes[:, 1]
     assert (heights[None] >= 24).all()  # the bank's own range (a box may shrink a little in its refinement)
     assert (heights[12.0] < 24).sum() >= 2 and len(heights[12.0]) > len(heights[None])
+    # the API's and the detector command's pre-detection search as far
+    import wirescene
+    from wirescene.core.errors import ArgumentError
+
+    assert_close(wirescene.detect(small, half, threshold=0.3, smallest_car=12.0).boxes, found.boxes, atol=0)
+    with pytest.raises(ArgumentError, match="smallest_car"):  # 2 px would upsample 25x: some 40 GB
+        wirescene.detect(small, half, smallest_car=2.0)
+    with pytest.raises(ValueError, match=r"predetect.smallest_car must be 0 \(the bank's own\) or at least 10"):
+        FitOptions().with_settings({"predetect.smallest_car": 5.0})
+    assert FitOptions().with_settings({"predetect.smallest_car": 0}).predetect.smallest_car == 0
     # the evaluation's detections take the option from the fit's options
     via_source = DetectionSource("bank").for_frame(ds, "000010", np.random.default_rng(0),
                                                    predetect=PredetectOptions(threshold=0.3, smallest_car=12.0))

@@ -331,7 +331,8 @@ def fit(
 
 
 def detect(image, calib=None, *, models=None, threshold: float | None = None,
-           camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> Detections:
+           camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0,
+           smallest_car: float | None = None) -> Detections:
     """wirescene's own 2D pre-detection of cars (paper Sec. 3.4).
 
     Parameters
@@ -361,6 +362,11 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         Degrees the camera looks down from the road (KITTI's rig: level, 0), which raises the
         horizon those priors read by ``f tan(pitch)`` pixels; the fit reads it from
         ``settings={"lifting.camera_pitch": D}``.
+    smallest_car : float, optional
+        The smallest car height searched in pixels, at least 10 (None or 0: the bank's own,
+        25 px), the image upsampled to reach it: e.g. scaled by the focal length for a camera
+        of longer focal length than KITTI's 721 px, or 16.7 for KITTI's farther cars; the fit
+        reads it from ``settings={"predetect.smallest_car": S}``.
 
     Returns
     -------
@@ -379,7 +385,7 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     True
     """
     from wirescene.fitting.pipeline import PredetectOptions, detections_above, detector_bank
-    from wirescene.predetect.bank import bank_pyramid, detect_cars
+    from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
@@ -387,15 +393,18 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         raise ArgumentError("camera_height", f"expected a positive number of metres, got {camera_height!r}")
     if not finite_real(camera_pitch) or abs(camera_pitch) > 45:
         raise ArgumentError("camera_pitch", f"expected a number of degrees within +-45, got {camera_pitch!r}")
+    if smallest_car is not None and not finite_real(smallest_car):
+        raise ArgumentError("smallest_car", f"expected a number of pixels or None, got {smallest_car!r}")
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
     bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
     keep = bank.threshold if threshold is None else float(threshold)
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
-    pyramid, responses = bank_pyramid(bank, rgb), {}
+    min_height, max_scale = smallest_car_search(bank, smallest_car)
+    pyramid, responses = bank_pyramid(bank, rgb, max_scale=max_scale), {}
     dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
-                       camera_height=camera_height, camera_pitch=camera_pitch)
+                       min_height=min_height, camera_height=camera_height, camera_pitch=camera_pitch)
     return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses,
                             camera_height=camera_height, camera_pitch=camera_pitch)
 

@@ -27,7 +27,7 @@ from wirescene.cli.options import (
 )
 from wirescene.core.atomic import write_text
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
-from wirescene.predetect.bank import SUPPORT_WEIGHT
+from wirescene.predetect.bank import MIN_SMALLEST_CAR, SUPPORT_WEIGHT
 from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, single_thread
 
 
@@ -172,8 +172,11 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--camera-pitch", type=FiniteFloat(min=-45.0, max=45.0), default=0.0, show_default=True,
               help="Degrees the camera looks down from the road, which raises the horizon those priors read "
                    "(the fit's --set lifting.camera_pitch).")
+@click.option("--smallest-car", type=FiniteFloat(min=MIN_SMALLEST_CAR, zero="the bank's own"), default=0.0,
+              show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
+                                      "upsampled to reach it (the fit's --smallest-car).")
 def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out,
-           camera_height, camera_pitch):
+           camera_height, camera_pitch, smallest_car):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
 
     The files of --out hold the detections above the threshold with the viewpoints the
@@ -185,7 +188,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     from wirescene.fitting.pipeline import detections_above
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
-    from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars
+    from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars, smallest_car_search
 
     check_output_dir(out_dir, "--out")
     check_output_file(pr_curve, "--pr-curve")
@@ -194,6 +197,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     bank = DetectorBank.load(bank_path if bank_path else load_models(models).path("detector_bank"))
     ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
+    min_height, max_scale = smallest_car_search(bank, smallest_car)
     dets_all, gts, times = [], [], []
     files: dict[str, str] = {}  # FRAME.json of --out, written once every frame is done (no partial output)
     with single_thread():
@@ -201,9 +205,10 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
             img = ds.image(fid)
             t = time.perf_counter()
             # the features and templates' responses, kept for the viewpoints of the boxes written
-            pyramid, responses = bank_pyramid(bank, img), ({} if out_dir is not None else None)
+            pyramid, responses = bank_pyramid(bank, img, max_scale=max_scale), ({} if out_dir is not None else None)
             d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=ds.camera(fid), pyramid=pyramid,
-                            responses=responses, camera_height=camera_height, camera_pitch=camera_pitch)
+                            responses=responses, min_height=min_height, camera_height=camera_height,
+                            camera_pitch=camera_pitch)
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:  # with the viewpoints the fit gives the boxes it keeps

@@ -18,15 +18,17 @@ NON_NEGATIVE = click.IntRange(min=0)
 
 
 class FiniteFloat(click.ParamType):
-    """A finite float, at least ``min`` (above it with ``strict``) and at most ``max`` (NaN and
-    infinities refused)."""
+    """A finite float, at least ``min`` (above it with ``strict``; 0 too with ``zero``, what 0
+    means) and at most ``max`` (NaN and infinities refused)."""
 
     name = "float"
 
-    def __init__(self, min: float | None = None, *, strict: bool = False, max: float | None = None):
+    def __init__(self, min: float | None = None, *, strict: bool = False, max: float | None = None,
+                 zero: str | None = None):
         self.min = min
         self.strict = strict
         self.max = max
+        self.zero = zero
 
     def convert(self, value, param, ctx):
         try:
@@ -35,8 +37,11 @@ class FiniteFloat(click.ParamType):
             self.fail(f"{value!r} is not a number", param, ctx)
         if not math.isfinite(number):
             self.fail(f"{value!r} is not finite", param, ctx)
+        if self.zero and number == 0:
+            return number
         if self.min is not None and (number <= self.min if self.strict else number < self.min):
-            self.fail(f"{number:g} is {'not above' if self.strict else 'below the minimum'} {self.min:g}", param, ctx)
+            self.fail(f"{number:g} is {'not above' if self.strict else 'below the minimum'} {self.min:g}"
+                      + (f" (0: {self.zero})" if self.zero else ""), param, ctx)
         if self.max is not None and number > self.max:
             self.fail(f"{number:g} is above the maximum {self.max:g}", param, ctx)
         return number
@@ -240,7 +245,7 @@ def stage_options(cls, scope: str):
             elif isinstance(default, int):
                 flag, kind = f"--{name}", click.IntRange(min=int(field.metadata["minimum"]))
             else:
-                flag, kind = f"--{name}", FiniteFloat(min=float(field.metadata["minimum"]))
+                flag, kind = f"--{name}", FiniteFloat(min=float(field.metadata["minimum"]), zero=field.metadata.get("zero"))
             f = click.option(flag, param, type=kind, default=None, help=f"{text} Default: {default}.")(f)
         return f
 

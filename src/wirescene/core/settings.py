@@ -25,10 +25,11 @@ __all__ = ["option", "bounded", "exposed_fields", "field_default", "parse_value"
 
 
 def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, minimum: float = 0,
-           default_factory=dataclasses.MISSING):
+           zero: str | None = None, default_factory=dataclasses.MISSING):
     """A dataclass field that users may set: ``help`` is its one-line description on the
     command line; ``cli`` the option name there (default: the field name with dashes);
-    ``minimum`` the least value a number may take (:func:`check_value`).
+    ``minimum`` the least value a number may take (:func:`check_value`), and ``zero`` what 0
+    means where it is allowed below a positive ``minimum`` (e.g. "the bank's own").
 
     Examples
     --------
@@ -39,7 +40,7 @@ def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, mi
     >>> [(f.name, cli) for f, cli, _ in exposed_fields(Stage)]
     [('weight', 'weight')]
     """
-    metadata = {"help": help, "cli": cli, "minimum": minimum}
+    metadata = {"help": help, "cli": cli, "minimum": minimum, "zero": zero}
     if default_factory is not dataclasses.MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=metadata)
     return dataclasses.field(default=default, metadata=metadata)
@@ -167,9 +168,9 @@ def check_value(f: dataclasses.Field, value, *, scope: str = ""):
         value = float(value) if isinstance(default, float) else value  # an int given: the same record as the float
     else:
         return value
-    low, high = f.metadata.get("minimum"), f.metadata.get("maximum")
-    if low is not None and value < low:
-        fail(f"at least {low:g}")
+    low, high, zero = f.metadata.get("minimum"), f.metadata.get("maximum"), f.metadata.get("zero")
+    if low is not None and value < low and not (zero and value == 0):
+        fail(f"0 ({zero}) or at least {low:g}" if zero else f"at least {low:g}")
     if high is not None and value > high:
         fail(f"at most {high:g}")
     return value

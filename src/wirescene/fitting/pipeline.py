@@ -28,6 +28,7 @@ from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
 from wirescene.infer.likelihood import PartEvidence
 from wirescene.lift import LiftingOptions, LiftingTable, lift_table, plane_vote_weights, select_particles
+from wirescene.predetect.bank import MIN_SMALLEST_CAR, smallest_car_search
 
 
 @dataclass(frozen=True)
@@ -48,9 +49,10 @@ class PredetectOptions:
                                help="Weight of our own pre-detection's boxes in the fine objective (boxes from files "
                                     "or the API take the inference stage's --box-weight).")
     # Off: held out, 16.7 px gave 7 more true positives and 8 fewer cars within 1 m at 1.7x the time (RESULTS).
-    smallest_car: float = option(0.0, help="Smallest car height (px) our own pre-detection searches, its pyramid "
-                                           "upsampled to reach it (0: the bank's own, 25 px; 16.7 finds more small, "
-                                           "far cars at 1.7x the pre-detection's time).")
+    smallest_car: float = option(0.0, minimum=MIN_SMALLEST_CAR, zero="the bank's own",
+                                 help="Smallest car height (px) our own pre-detection searches, its pyramid "
+                                      "upsampled to reach it (0: the bank's own, 25 px; 16.7 finds more small, "
+                                      "far cars at 1.7x the pre-detection's time; at least 10).")
 
 
 @dataclass(frozen=True)
@@ -300,10 +302,7 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
 
     bank = detector_bank(None) if bank is None else bank
     if detections is None:
-        min_height = max_scale = None
-        if smallest_car:  # the same templates on finer levels: a car of min_height px fits the smallest
-            min_height = float(smallest_car)
-            max_scale = float(bank.meta.get("max_scale", 2.0)) * float(bank.meta.get("min_height", 30.0)) / min_height
+        min_height, max_scale = smallest_car_search(bank, smallest_car)
         # the templates' features and responses, read again by the box rule
         pyramid, responses = (bank_pyramid(bank, image, max_scale=max_scale) if pyramid is None else pyramid), {}
         found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, pyramid=pyramid, responses=responses,

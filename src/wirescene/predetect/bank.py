@@ -35,7 +35,7 @@ import numpy as np
 
 from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.boxes import clip_boxes
-from wirescene.core.errors import InputError
+from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
@@ -477,6 +477,33 @@ def bank_scales(bank: DetectorBank, width: int, height: int, *, max_scale: float
     max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
     per_octave = int(bank.meta.get("per_octave", 4)) if per_octave is None else per_octave
     return pyramid_scales(width, height, max_scale=max_scale, per_octave=per_octave)
+
+
+#: The smallest car (px) a search may be asked to reach: 10 px upsamples a KITTI frame 5x (6.6 s, 0.9 GB), 2 px
+#: would need 25x and some 40 GB.
+MIN_SMALLEST_CAR = 10.0
+
+
+def smallest_car_search(bank: DetectorBank, smallest_car: float | None) -> tuple[float | None, float | None]:
+    """``(min_height, max_scale)`` of :func:`detect_cars` and :func:`bank_pyramid` that search cars
+    down to ``smallest_car`` px (None or 0: the bank's own): the same templates on finer levels,
+    a car that high fitting the smallest.
+
+    Examples
+    --------
+    >>> from wirescene.predetect import load_default_bank
+    >>> smallest_car_search(load_default_bank(), 12.5)  # the shipped bank: 25 px at 2x
+    (12.5, 4.0)
+    >>> smallest_car_search(load_default_bank(), 0)
+    (None, None)
+    """
+    if not smallest_car:
+        return None, None
+    if not np.isfinite(smallest_car) or smallest_car < MIN_SMALLEST_CAR:
+        raise ArgumentError("smallest_car", f"expected 0 (the bank's own) or at least {MIN_SMALLEST_CAR:g} px, "
+                                            f"got {smallest_car!r}")
+    min_height = float(smallest_car)
+    return min_height, float(bank.meta.get("max_scale", 2.0)) * float(bank.meta.get("min_height", 30.0)) / min_height
 
 
 def bank_pyramid(bank: DetectorBank, image: np.ndarray, *, max_scale: float | None = None,
