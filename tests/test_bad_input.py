@@ -209,6 +209,8 @@ CASES = {
                                  "--camera-pitch: 60 is above the maximum 45"),
     "detect --smallest-car 3": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--smallest-car", "3"],
                                 r"--smallest-car: 3 is below the minimum 10 \(0: the bank's own\)"),
+    "fit --samples 100000": (lambda t: [*_fit_case(t), "--samples", "100000", "--out", t / "o"],
+                             r"--samples: 100000 is not in the range 2<=x<=200"),
     "fit --smallest-car 2": (lambda t: [*_fit_case(t), "--smallest-car", "2", "--out", t / "o"],
                              r"--smallest-car: 2 is below the minimum 10 \(0: the bank's own\)"),
     "eval --set predetect.smallest_car=5": (

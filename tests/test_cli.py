@@ -62,6 +62,24 @@ def test_fit_writes_all_outputs(tmp_path):
     assert len(js["objects"]) == 8 and js["variant"] == "coarse"
 
 
+
+def test_a_request_the_machine_cannot_hold_ends_in_one_line(tmp_path, monkeypatch):
+    """Out of memory is a line saying what to ask for instead, exit code 1, no output left."""
+    import functools
+
+    import wirescene.api
+
+    @functools.wraps(wirescene.api.fit)
+    def too_big(*args, **kwargs):
+        raise MemoryError("Unable to allocate 10.4 GiB for an array with shape (250, 7, 100000, 8)")
+
+    monkeypatch.setattr(wirescene.api, "fit", too_big)
+    out = tmp_path / "out"
+    r = run("fit", SPLIT / "image_2" / "000010.png", "--calib", SPLIT / "calib" / "000010.txt", "--out", out)
+    lines = r.stderr.strip().splitlines()
+    assert r.exit_code == 1 and len(lines) == 1 and not out.exists(), r.stderr
+    assert lines[0].startswith("wirescene: error: out of memory (Unable to allocate 10.4 GiB") and "--samples" in lines[0]
+
 def test_fit_takes_a_calibration_of_the_numbers_of_p_or_k(tmp_path):
     from wirescene.core.camera import read_kitti_calib
 

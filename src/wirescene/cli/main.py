@@ -70,6 +70,10 @@ class _Group(click.Group):
         except click.ClickException as exc:  # e.g. an unreachable --dask scheduler, a failed write of `synth`
             click.echo(f"wirescene: error: {' '.join(exc.format_message().split())}", err=True)
             sys.exit(2)
+        except MemoryError as exc:  # a request this machine cannot hold: a line, not a traceback
+            click.echo(f"wirescene: error: out of memory ({' '.join(str(exc).split()) or 'MemoryError'}); ask for less "
+                       "(fewer --samples or --workers, a larger --smallest-car) or use a larger machine", err=True)
+            sys.exit(1)
         except KeyboardInterrupt:  # Ctrl-C: the shell's convention (128 + SIGINT), not click's "Aborted!" and 1
             click.echo("wirescene: interrupted", err=True)
             sys.exit(130)

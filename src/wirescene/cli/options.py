@@ -243,9 +243,12 @@ def stage_options(cls, scope: str):
             if isinstance(default, bool):
                 flag, kind = f"--{name}/--no-{name}", None
             elif isinstance(default, int):
-                flag, kind = f"--{name}", click.IntRange(min=int(field.metadata["minimum"]))
+                high = field.metadata.get("maximum")
+                flag, kind = f"--{name}", click.IntRange(min=int(field.metadata["minimum"]),
+                                                         max=None if high is None else int(high))
             else:
-                flag, kind = f"--{name}", FiniteFloat(min=float(field.metadata["minimum"]), zero=field.metadata.get("zero"))
+                flag, kind = f"--{name}", FiniteFloat(min=float(field.metadata["minimum"]),
+                                                      max=field.metadata.get("maximum"), zero=field.metadata.get("zero"))
             f = click.option(flag, param, type=kind, default=None, help=f"{text} Default: {default}.")(f)
         return f
 

@@ -25,11 +25,12 @@ __all__ = ["option", "bounded", "exposed_fields", "field_default", "parse_value"
 
 
 def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, minimum: float = 0,
-           zero: str | None = None, default_factory=dataclasses.MISSING):
+           maximum: float | None = None, zero: str | None = None, default_factory=dataclasses.MISSING):
     """A dataclass field that users may set: ``help`` is its one-line description on the
     command line; ``cli`` the option name there (default: the field name with dashes);
-    ``minimum`` the least value a number may take (:func:`check_value`), and ``zero`` what 0
-    means where it is allowed below a positive ``minimum`` (e.g. "the bank's own").
+    ``minimum`` and ``maximum`` the least and largest values a number may take
+    (:func:`check_value`), and ``zero`` what 0 means where it is allowed below a positive
+    ``minimum`` (e.g. "the bank's own").
 
     Examples
     --------
@@ -40,7 +41,7 @@ def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, mi
     >>> [(f.name, cli) for f, cli, _ in exposed_fields(Stage)]
     [('weight', 'weight')]
     """
-    metadata = {"help": help, "cli": cli, "minimum": minimum, "zero": zero}
+    metadata = {"help": help, "cli": cli, "minimum": minimum, "maximum": maximum, "zero": zero}
     if default_factory is not dataclasses.MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=metadata)
     return dataclasses.field(default=default, metadata=metadata)

@@ -90,7 +90,9 @@ class InferenceOptions:
     """
 
     iterations: int = option(12, help="Inference iterations (Algorithm 1).")
-    samples: int = option(12, minimum=2, help="Samples per object and iteration (the current value among them).")
+    # Memory grows with it (some 11 MB a sample for a 5-car frame): 200 keeps a 20-car frame under 8 GB.
+    samples: int = option(12, minimum=2, maximum=200,
+                          help="Samples per object and iteration (the current value among them; at most 200).")
     n_shape: int = bounded(5, minimum=1)  # 3 or 8 place no more cars (RESULTS, "`n_shape` = 5")
     sigma_bearing_deg: float = bounded(0.5, minimum=0)  # the image pins the bearing tightly ...
     sigma_range_frac: float = bounded(0.05, minimum=0)  # ... and the range loosely
@@ -102,7 +104,7 @@ class InferenceOptions:
     keep_fraction: float = bounded(0.25, minimum=0, maximum=1)
     # The polish: more iterations on the MAP rows alone, spent where the answer is.
     polish_iterations: int = option(24, help="Extra iterations on the MAP scene after Algorithm 1 (0: none).")
-    polish_samples: int = bounded(24, minimum=2)
+    polish_samples: int = bounded(24, minimum=2, maximum=1000)
     # The paper's c, the log ratio charged to occluded parts (`wirescene train occlusion`).
     occluded_score: float = field(default_factory=load_occluded_score)
     # The score of parts hidden by the scene's other cars or the image border, occluders the fit
