@@ -7,8 +7,12 @@ the helpers that need it import it when called.
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import importlib
+import sys
 import time
+from pathlib import Path
 
 
 def best_of(fn, repeat: int = 3, *, warmup: bool = False):
@@ -21,6 +25,54 @@ def best_of(fn, repeat: int = 3, *, warmup: bool = False):
         out = fn()
         times.append(time.perf_counter() - t0)
     return min(times), out
+
+
+def _is_wirescene(name: str) -> bool:
+    return name == "wirescene" or name.startswith("wirescene.")
+
+
+class Checkout:
+    """The ``wirescene`` package of a checkout's ``src`` directory, imported beside the one
+    this process runs (``src=None``: that one), so that a benchmark can time two revisions
+    side by side in one run, alternating: ``with other.active(): other.module("wirescene").fit(...)``.
+
+    The other revision's modules stay out of ``sys.modules`` except inside :meth:`active`,
+    where they stand in for this process's and its ``src`` leads ``sys.path``, so that the
+    imports its functions make when called resolve to the same revision. Give both
+    revisions plain arrays: an object one of them made is of a class the other does not
+    know. Each revision keeps its own caches (models load once per revision).
+    """
+
+    def __init__(self, src=None, modules=("wirescene",)):
+        self.src = None if src is None else str(Path(src).resolve())
+        self._modules: dict = {}
+        with self.active():
+            for name in modules:
+                importlib.import_module(name)
+            where = Path(sys.modules["wirescene"].__file__).resolve()
+        if self.src is not None and Path(self.src) not in where.parents:
+            raise SystemExit(f"{src}: wirescene imported from {where}, not from this directory")
+        self.path = where.parent
+
+    @contextlib.contextmanager
+    def active(self):
+        if self.src is None:
+            yield self
+            return
+        own = {k: sys.modules.pop(k) for k in list(sys.modules) if _is_wirescene(k)}
+        sys.modules.update(self._modules)
+        sys.path.insert(0, self.src)
+        try:
+            yield self
+        finally:
+            sys.path.remove(self.src)
+            self._modules = {k: sys.modules.pop(k) for k in list(sys.modules) if _is_wirescene(k)}
+            sys.modules.update(own)
+
+    def module(self, name: str):
+        """The revision's module ``name`` (imported if need be)."""
+        with self.active():
+            return importlib.import_module(name)
 
 
 def parse_config(text: str) -> tuple[str, dict]:

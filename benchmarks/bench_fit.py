@@ -7,9 +7,19 @@
    lifting's batch (cars x planes x azimuths).
 2. One full fit per variant, per stage (lifting, part evidence, inference), and the peak
    resident memory of the process.
+3. ``--against SRC`` (another checkout's ``src`` directory, e.g. a ``git worktree`` of the
+   revision before a change): this checkout and that one side by side in one process,
+   alternating, best of ``--repeats``: ``wirescene.fit`` per variant from plain boxes (the
+   whole frame: the box rule's viewpoints, lifting, part maps, inference) and
+   ``wirescene.detect``, then each stage alone (viewpoints, lifting, part maps, each
+   variant's inference), on every ``--frame``; the ratio is the other revision's seconds
+   over this one's (> 1: this one is faster), and every fit and detection is compared to
+   the bit (``--no-stages``: the whole frame and detect only).
 
 Usage: python benchmarks/bench_fit.py [--root tests/data/kitti] [--frame 000010] [--cars 5] [--particles 250]
        [--variants fg fg+gp full]
+       python benchmarks/bench_fit.py --against OTHER/src --root ../shared/data/kitti --frame 000010 000095 000098
+       [--variants coarse+gp fg+gp full] [--repeats 3] [--no-stages]
 """
 
 from __future__ import annotations
@@ -20,6 +30,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import resource  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -70,15 +81,132 @@ def box_projection_ratio(camera, lifted, n_azimuths: int, repeats: int = 5) -> t
     return t_closed, t_corners
 
 
+def _record(scene) -> str:
+    """A fit to the bit: its JSON and the raw bytes of every car's arrays."""
+    cars = [{k: v.tobytes().hex() if isinstance(v, np.ndarray) else v for k, v in vars(o).items()}
+            for o in scene.objects]
+    return json.dumps([scene.to_dict(), cars], sort_keys=True, default=str)
+
+
+def _detection_record(d) -> bytes:
+    return b"".join(np.ascontiguousarray(a).tobytes() for a in (d.boxes, d.scores, d.alpha))
+
+
+def side_by_side(args) -> None:
+    """Section 3 of the module docstring."""
+    from _common import Checkout
+
+    modules = ("wirescene", "wirescene.api", "wirescene.fitting.pipeline", "wirescene.lift", "wirescene.infer.evidence",
+               "wirescene.infer.inference")
+    revisions = {"this": Checkout(None, modules), "other": Checkout(args.against, modules)}
+    print(f"this: {revisions['this'].path}\nother: {revisions['other'].path}")
+    ds = KittiDataset(args.root)
+    seconds: dict = {}  # (row, revision) -> summed best-of seconds
+    differ: list = []
+    for fid in args.frame:
+        _frame_side_by_side(args, revisions, ds, fid, seconds, differ)
+    rows = list(dict.fromkeys(r for r, _ in seconds))
+    print(f"\n{len(args.frame)} frames ({', '.join(args.frame)}), best of {args.repeats} each, summed over the frames:")
+    print(f"| {'':22s} | this (s) | other (s) | other / this |")
+    for r in rows:
+        a, b = seconds[(r, "this")], seconds[(r, "other")]
+        print(f"| {r:22s} | {a:8.2f} | {b:9.2f} | {b / a:11.2f}x |")
+    print("every result the same to the bit" if not differ else f"DIFFERENT results: {', '.join(differ)}")
+
+
+def _frame_side_by_side(args, revisions: dict, ds, fid: str, seconds: dict, differ: list) -> None:
+    """One frame of :func:`side_by_side`: every row timed for both revisions, alternating."""
+
+    def timed(row: str, calls: dict) -> None:
+        """Best of ``args.repeats`` for both revisions, alternating; ``calls`` maps each
+        revision to ``(call, record of its result)``."""
+        best, out = dict.fromkeys(revisions, np.inf), {}
+        for _ in range(args.repeats):
+            for name, rev in revisions.items():
+                with rev.active():
+                    t = time.perf_counter()
+                    out[name] = calls[name][0]()
+                    best[name] = min(best[name], time.perf_counter() - t)
+        same = calls["this"][1](out["this"]) == calls["other"][1](out["other"])
+        if not same:
+            differ.append(f"{row} {fid}")
+        for name in revisions:
+            seconds[(row, name)] = seconds.get((row, name), 0.0) + best[name]
+        print(f"  {fid} {row:22s} this {best['this']:7.3f} s, other {best['other']:7.3f} s, "
+              f"ratio {best['other'] / best['this']:.2f}x, {'same' if same else 'DIFFERENT'}", flush=True)
+
+    image, P2 = ds.image(fid), ds.calib(fid).P2
+    boxes = detections_from_labels(ds.labels(fid)).boxes
+    if args.cars is not None:
+        boxes = boxes[:args.cars]
+    settings = {"lifting.n_particles": args.particles}
+    api = {name: rev.module("wirescene") for name, rev in revisions.items()}
+    for name, rev in revisions.items():  # warm-up: each revision loads its models
+        with rev.active():
+            api[name].fit(image, P2, boxes[:1], variant="full", particles=20)
+            api[name].detect(image, P2)
+    print(f"{fid}: {len(boxes)} cars")
+    for v in args.variants:
+        timed(f"fit {v}", {name: (lambda a=a, v=v: a.fit(image, P2, boxes, variant=v, settings=settings), _record)
+                           for name, a in api.items()})
+    timed("detect", {name: (lambda a=a: a.detect(image, P2), _detection_record) for name, a in api.items()})
+    if not args.stages:
+        return
+    stages = {name: _stage_calls(rev, image, P2, boxes, args.particles) for name, rev in revisions.items()}
+    for row in stages["this"]:
+        if row.startswith("inference") and row.split()[1] not in args.variants:
+            continue
+        timed(row, {name: stages[name][row] for name in revisions})
+
+
+def _stage_calls(rev, image, P2, boxes, particles: int) -> dict:
+    """``{row: (call, record)}`` of the stages of a fit in revision ``rev``, each with the
+    inputs the stages before it made (in that revision)."""
+    with rev.active():
+        api, pipe = rev.module("wirescene.api"), rev.module("wirescene.fitting.pipeline")
+        lift, evidence_of = rev.module("wirescene.lift"), rev.module("wirescene.infer.evidence").part_evidence
+        camera = api.as_camera(P2, (image.shape[1], image.shape[0]))
+        dets = pipe.inside_image(api.as_detections(boxes, camera.image_size), camera.image_size)
+        bank, classifier = pipe.detector_bank(None), pipe.viewpoint_classifier(None)
+        known = pipe.complete_viewpoints(camera, dets, image, bank=bank, classifier=classifier)
+        options = pipe.FitOptions(lifting=lift.LiftingOptions(n_particles=particles))
+        lifted = lift.lift_table(camera, known, options=options.lifting)
+        flip = rev.module("wirescene.infer.inference").InferenceOptions().flip_evidence
+        evidence = evidence_of(image, known, flip=flip)
+    calls = {
+        "viewpoints": (lambda: pipe.complete_viewpoints(camera, dets, image, bank=bank, classifier=classifier),
+                       _detection_record),
+        "lifting": (lambda: lift.lift_table(camera, known, options=options.lifting),
+                    lambda t: b"".join(np.ascontiguousarray(getattr(t, f)).tobytes() for f in ("x", "z", "azimuth", "cost"))),
+        "part maps": (lambda: evidence_of(image, known, flip=flip),
+                      lambda e: b"".join(b.log_ratio.tobytes() for b in e.responses.boxes)),
+    }
+    for v in ("fg+gp", "full", "fg", "fg+so", "fg+do"):
+        calls[f"inference {v}"] = (lambda v=v: pipe.fit_scene(camera, known, variant=v, options=options, lifted=lifted,
+                                                              evidence=evidence), _record)
+    return calls
+
+
 def main():
     ap = argparse.ArgumentParser()
     # The real frames the repository itself carries, so that a fresh clone can run it.
     ap.add_argument("--root", default=str(Path(__file__).resolve().parents[1] / "tests" / "data" / "kitti"))
-    ap.add_argument("--frame", default="000010")
+    ap.add_argument("--frame", nargs="+", default=["000010"], help="frame(s); several with --against")
     ap.add_argument("--particles", type=int, default=250)
     ap.add_argument("--cars", type=int, default=None, help="use only the first N labelled cars of the frame")
-    ap.add_argument("--variants", nargs="+", default=["fg", "fg+gp", "full"])
+    ap.add_argument("--variants", nargs="+", default=None,
+                    help="default: fg fg+gp full; coarse+gp fg+gp full with --against")
+    ap.add_argument("--against", default=None, help="another checkout's src directory, timed side by side")
+    ap.add_argument("--repeats", type=int, default=3, help="best of this many calls (--against)")
+    ap.add_argument("--no-stages", dest="stages", action="store_false", help="--against: the whole frame only")
     args = ap.parse_args()
+    if args.against is not None:
+        args.variants = args.variants or ["coarse+gp", "fg+gp", "full"]
+        return side_by_side(args)
+    args.variants = args.variants or ["fg", "fg+gp", "full"]
+    if len(args.frame) != 1:
+        raise SystemExit("one --frame without --against")
+    args.frame = args.frame[0]
     ds = KittiDataset(args.root)
     camera, image = ds.camera(args.frame), ds.image(args.frame)
     dets = detections_from_labels(ds.labels(args.frame))

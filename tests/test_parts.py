@@ -288,6 +288,58 @@ def test_log_ratio_bilinear(tiny, kitti_frame):
     assert np.all(R.log_ratio(far, 0, bilinear=True) == R.floor)
 
 
+def test_log_ratio_reads_each_corner_like_a_four_index_gather():
+    """The lookup gathers by flat index (the rows' and columns' offsets shared by the corners
+    on one grid line): the same values, to the bit, as indexing the stacked maps
+    ``lr[b, i, j, part]`` at each corner, inside the grids, on their last lines, just past
+    them, far away and at NaN, nearest and bilinear."""
+    from wirescene.parts.detector import BoxResponses, PartResponses
+
+    rng = np.random.default_rng(3)
+    boxes = [BoxResponses(np.zeros(4), np.zeros(4), np.array(origin), stride, (1.0,), np.zeros(0),
+                          rng.normal(size=(gh, gw, N_PARTS)).astype(np.float32))
+             for origin, stride, gh, gw in (((10.0, 20.0), 2.5, 7, 11), ((-30.0, 5.0), 4.0, 12, 5), ((300.0, 40.0), 1.0, 3, 3))]
+    R = PartResponses(boxes, eps=1e-3)
+    b = rng.integers(0, len(boxes), (200, 3))
+    origin = np.array([boxes[k].origin for k in b.ravel()]).reshape(200, 3, 1, 2)
+    stride = np.array([boxes[k].stride for k in b.ravel()]).reshape(200, 3, 1, 1)
+    size = np.array([boxes[k].log_ratio.shape[1::-1] for k in b.ravel()]).reshape(200, 3, 1, 2)
+    cell = rng.uniform(-1.5, 1.0, (200, 3, N_PARTS, 2)) * (size + 1)
+    cell[:50] = np.round(cell[:50])  # on the grid lines, the last ones and those just past them included
+    uv = origin + stride * cell
+    uv[::17, :, 4] = np.nan
+    uv[::13, :, 5] = -1e9
+
+    def reference(bilinear, outside=None):  # the former lookup
+        lr, shape, org, st = R._stacked()
+        bb = b[..., None]
+        fj, fi = (uv[..., 0] - org[bb, 0]) / st[bb], (uv[..., 1] - org[bb, 1]) / st[bb]
+        h, w, part = shape[bb, 0], shape[bb, 1], np.arange(N_PARTS)
+        value = np.float32(R.floor if outside is None else outside)
+
+        def at(i, j):
+            ok = (i >= 0) & (j >= 0) & (i < h) & (j < w)
+            return np.where(ok, lr[bb, np.where(ok, i, 0).astype(np.int64), np.where(ok, j, 0).astype(np.int64), part],
+                            value)
+
+        if not bilinear:
+            return at(np.rint(fi), np.rint(fj)).astype(np.float32)
+        i0, j0 = np.floor(fi), np.floor(fj)
+        ti, tj = fi - i0, fj - j0
+        top = (1 - tj) * at(i0, j0) + tj * at(i0, j0 + 1)
+        bottom = (1 - tj) * at(i0 + 1, j0) + tj * at(i0 + 1, j0 + 1)
+        return ((1 - ti) * top + ti * bottom).astype(np.float32)
+
+    with np.errstate(invalid="ignore"):
+        for bilinear in (False, True):
+            for outside in (None, -1.5):
+                got = R.log_ratio(uv, b, bilinear=bilinear, outside=outside)
+                want = reference(bilinear, outside)
+                assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
+                if not bilinear:  # a NaN pixel is off the grid (bilinear weights of NaN give NaN)
+                    assert np.all(got[::17, :, 4] == np.float32(R.floor if outside is None else outside))
+
+
 # ------------------------------------------------------------------ shipped model
 
 def test_committed_model_on_real_kitti_box(kitti_frame):

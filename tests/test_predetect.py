@@ -371,6 +371,46 @@ def test_each_template_keeps_the_banks_number_of_windows():
     assert n["one"] <= len(np.unique(act.det)) < n["default"] == n["one, 30 asked"]
 
 
+def test_template_responses_add_the_cells_in_order_like_a_loop():
+    """Each response map is the bias plus its template's cells' products added one after the
+    other in float32 (one reduction over the shifted products): equal to the bit to a loop of
+    in-place adds of the same products, also for float64 weights (a bank not yet stored,
+    rounded to float32 after every add). Fails if the sum is taken in another order."""
+    from dataclasses import replace
+
+    from wirescene.predetect.bank import template_responses
+
+    bank = load_default_bank()
+    rng = np.random.default_rng(5)
+    pyramid = [(1.0, rng.normal(size=(14, 30, N_FEAT)).astype(np.float32)),
+               (0.5, rng.normal(size=(9, 13, N_FEAT)).astype(np.float32))]
+
+    def loop(b):
+        out = {}
+        for li, (_, F) in enumerate(pyramid):
+            Hc, Wc = F.shape[:2]
+            for t in range(len(b)):
+                th, tw = b.configs[t].template
+                if th > Hc or tw > Wc:
+                    continue
+                # the products as template_responses makes them, one template a group
+                P = np.matmul(b.weights[t].reshape(-1, N_FEAT), F.reshape(-1, N_FEAT).T).reshape(-1, Hc, Wc)
+                R = np.full((Hc - th + 1, Wc - tw + 1), b.biases[t], np.float32)
+                for dy in range(th):
+                    for dx in range(tw):
+                        R += P[dy * tw + dx, dy:dy + R.shape[0], dx:dx + R.shape[1]]
+                out[(t, li)] = R
+        return out
+
+    for b in (bank, replace(bank, weights=[w.astype(np.float64) for w in bank.weights])):
+        got = {(t, li): R for t, li, _, R in template_responses(b, pyramid, min_height=0.0, max_height=np.inf,
+                                                                chunk_cols=1)}
+        want = loop(b)
+        assert got.keys() == want.keys() and len(got) > len(bank)
+        for k, R in got.items():
+            assert R.dtype == np.float32 and R.shape == want[k].shape and R.tobytes() == want[k].tobytes(), k
+
+
 def test_detect_command_writes_readable_files(tmp_path):
     import json
 

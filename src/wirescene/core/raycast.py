@@ -37,6 +37,8 @@ DEFAULT_CHUNK = 1 << 17
 
 # Corner order B, C, A: the second factor of the edge cross products in _blocked_chunk.
 _NEXT_CORNER = np.array([1, 2, 0])
+# A triangle's corners A, B, C, then B, C, A: one gather gives both factors of its edge cross products.
+_CORNERS_AND_NEXT = np.array([0, 1, 2, 1, 2, 0])
 
 
 def check_eps(eps: float) -> None:
@@ -123,7 +125,12 @@ def segment_blocked(
     origins, targets, triangles, batch = segment_inputs(origins, targets, triangles, eps)
     F = triangles.shape[-3]
     tri = np.broadcast_to(triangles, batch + (F, 3, 3)).reshape((int(np.prod(batch, dtype=int)), F, 3, 3))
-    return _run_chunks(origins, targets, batch, F, lambda d, o, sl: tri[sl] - o[:, None, None, :], eps, ignore, chunk)
+
+    def corners(d, o, sl):
+        t = np.ascontiguousarray((tri[sl] - o[:, None, None, :]).transpose(0, 3, 2, 1))  # (b, xyz, corner, F)
+        return t, t[:, :, _NEXT_CORNER]
+
+    return _run_chunks(origins, targets, batch, F, corners, eps, ignore, chunk)
 
 
 def mesh_vertices_blocked(
@@ -166,13 +173,20 @@ def mesh_vertices_blocked(
     check_shape("faces", faces, (None, 3))
     check_eps(eps)
     batch = _batch_shape(origins.shape[:-1], vertices.shape[:-2])
-    return _run_chunks(origins, vertices, batch, len(faces), lambda d, o, sl: d[:, faces], eps, ignore, chunk)
+    columns = np.ascontiguousarray(faces[:, _CORNERS_AND_NEXT].T)  # (6, F): corners A, B, C, then B, C, A
+
+    def corners(d, o, sl):
+        g = np.take(np.ascontiguousarray(d.transpose(0, 2, 1)), columns, axis=2)  # (b, xyz, 6, F)
+        return g[:, :, :3], g[:, :, 3:]
+
+    return _run_chunks(origins, vertices, batch, len(faces), corners, eps, ignore, chunk)
 
 
 def _run_chunks(origins, targets, batch, F, triangles_of, eps, ignore, chunk):
     """:func:`_blocked_chunk` over the flattened ``batch``, a chunk of rows at a time;
-    returns ``(*batch, P)``. ``triangles_of(d, o, sl)`` gives the ``F`` triangles of
-    rows ``sl`` relative to their origins ``o``, ``d`` being the targets relative to them."""
+    returns ``(*batch, P)``. ``triangles_of(d, o, sl)`` gives the corners of the ``F``
+    triangles of rows ``sl`` relative to their origins ``o`` and the corners that follow
+    them (B, C, A), both ``(b, xyz, corner, F)``, ``d`` being the targets relative to them."""
     P = targets.shape[-2]
     if P == 0 or F == 0 or 0 in batch:
         return np.zeros(batch + (P,), dtype=bool)
@@ -187,14 +201,15 @@ def _run_chunks(origins, targets, batch, F, triangles_of, eps, ignore, chunk):
         sl = slice(start, min(B, start + step))
         rows = None if keep is None else (keep if keep.shape[0] == 1 else keep[sl])
         d = x[sl] - o[sl, None, :]
-        out[sl] = _blocked_chunk(d, triangles_of(d, o[sl], sl), eps, rows)
+        out[sl] = _blocked_chunk(d, *triangles_of(d, o[sl], sl), eps, rows)
     return out.reshape(batch + (P,))
 
 
-def _blocked_chunk(d, t, eps, keep):
-    """Segments from the origin to ``d`` (b, P, 3) against triangles ``t`` (b, F, 3, 3),
-    both relative to the rows' shared origin; ``keep`` (1 or b, P, F) says which pairs
-    are tested.
+def _blocked_chunk(d, t, nxt, eps, keep):
+    """Segments from the origin to ``d`` (b, P, 3) against the triangles of corners ``t``
+    (b, 3 xyz, 3 corners, F), both relative to the rows' shared origin, ``nxt`` being
+    each triangle's corners in the order B, C, A; ``keep`` (1 or b, P, F) says which
+    pairs are tested.
 
     With the triangle corners A, B, C, the direction D of a
     segment lies in the triangle's viewing cone iff ``s D.(A x B)``, ``s D.(B x C)`` and
@@ -213,36 +228,49 @@ def _blocked_chunk(d, t, eps, keep):
     share an edge compute the same cross product with opposite sign, exactly (also
     after rounding to float32), so a ray through the edge passes the test of at least
     one of them. A triangle whose plane contains the origin (seen edge-on) never blocks.
+
+    The per-triangle terms are computed component-major (``(b, xyz, edge, F)``, the
+    cone's layout: whole-array operations along rows of ``F``, not along axes of 3), and
+    the sign ``s`` is applied as the cone is rounded to float32 and to ``n`` after its
+    sum (a sign flip is exact: the values of signing ``m`` first). ``det`` and the depth
+    test stay einsum's over contiguous rows of 3: over strided rows einsum sums in another
+    order (``(a0 b0 + a1 b1) + a2 b2`` instead of numpy's SIMD ``(a0 b0 + a2 b2) + a1 b1``),
+    which moves ``det`` in its last bit.
     """
-    b, F = t.shape[:2]
+    b, F = t.shape[0], t.shape[-1]
     P = d.shape[1]
-    # Edge normals m[:, :, e] = corner_e x corner_(e+1), i.e. A x B, B x C, C x A, in a
-    # few whole-array operations.
-    nxt = t[:, :, _NEXT_CORNER]
-    m = np.empty_like(t)  # (b, F, 3 edges, 3 xyz)
-    m[..., 0] = t[..., 1] * nxt[..., 2] - t[..., 2] * nxt[..., 1]
-    m[..., 1] = t[..., 2] * nxt[..., 0] - t[..., 0] * nxt[..., 2]
-    m[..., 2] = t[..., 0] * nxt[..., 1] - t[..., 1] * nxt[..., 0]
-    det = np.einsum("bfi,bfi->bf", t[:, :, 0], m[:, :, 1])
+    # Edge normals m[:, :, e] = corner_e x corner_(e+1), i.e. A x B, B x C, C x A.
+    m = np.empty((b, 3, 3, F))  # (b, xyz, edge, F)
+    m[:, 0] = t[:, 1] * nxt[:, 2] - t[:, 2] * nxt[:, 1]
+    m[:, 1] = t[:, 2] * nxt[:, 0] - t[:, 0] * nxt[:, 2]
+    m[:, 2] = t[:, 0] * nxt[:, 1] - t[:, 1] * nxt[:, 0]
+    det = np.einsum("bfi,bfi->bf", _rows(t[:, :, 0]), _rows(m[:, :, 1]))  # A . (B x C)
     s = np.sign(det)
-    m *= s[:, :, None, None]
-    cone = m.astype(np.float32).transpose(0, 3, 2, 1)  # (b, xyz, edge, F)
-    c = np.matmul(d.astype(np.float32), np.ascontiguousarray(cone).reshape(b, 3, 3 * F)).reshape(b, P, 3, F)
-    inside = c[:, :, 0] >= 0
-    inside &= c[:, :, 1] >= 0
-    inside &= c[:, :, 2] >= 0
+    cone = np.empty((b, 3, 3, F), np.float32)  # (b, xyz, edge, F): s m, rounded to float32
+    np.multiply(m, s[:, None, None, :], out=cone, casting="same_kind")
+    c = np.matmul(d.astype(np.float32), cone.reshape(b, 3, 3 * F)).reshape(b, P, 3, F)
+    ge = c >= 0  # one pass over the whole product, then the three edges' flags combined
+    inside = ge[:, :, 0] & ge[:, :, 1]
+    inside &= ge[:, :, 2]
     if keep is not None:
         inside &= keep
     pair = np.flatnonzero(inside)  # (one flat index array is much cheaper than three)
     ray, face = pair // F, pair % F
     tri_row = ray // P * F + face
-    n = (m[:, :, 0] + m[:, :, 1] + m[:, :, 2]).reshape(b * F, 3)  # s (B - A) x (C - A) = s (A x B + B x C + C x A)
+    # s (B - A) x (C - A) = s (A x B + B x C + C x A)
+    n = _rows((m[:, :, 0] + m[:, :, 1] + m[:, :, 2]) * s[:, None, :]).reshape(b * F, 3)
     with np.errstate(divide="ignore"):
         thr = np.where(det != 0, np.abs(det) / (1.0 - eps), np.inf).reshape(b * F)
-    hit = np.einsum("ij,ij->i", d.reshape(b * P, 3)[ray], n[tri_row]) > thr[tri_row]
+    hit = np.einsum("ij,ij->i", np.take(d.reshape(b * P, 3), ray, axis=0), np.take(n, tri_row, axis=0)) \
+        > np.take(thr, tri_row)
     out = np.zeros(b * P, dtype=bool)
     out[ray[hit]] = True
     return out.reshape(b, P)
+
+
+def _rows(a: np.ndarray) -> np.ndarray:
+    """Component-major vectors ``(b, 3, F)`` as contiguous rows ``(b, F, 3)``."""
+    return np.ascontiguousarray(a.transpose(0, 2, 1))
 
 
 def has_embree() -> bool:

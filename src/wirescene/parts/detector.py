@@ -393,22 +393,33 @@ class PartResponses:
         s = stride[b]
         fj = (uv[..., 0] - origin[b, 0]) / s
         fi = (uv[..., 1] - origin[b, 1]) / s
-        part = np.arange(N_PARTS)
         out_value = np.float32(self.floor if outside is None else outside)
         h, w = shape[b, 0], shape[b, 1]
+        # Entry (b, i, j, part) of the stacked maps read by its flat index: the row's and the
+        # column's offsets are computed once for each grid line a corner lies on (shared by
+        # two of the four corners) and the values gathered with one take, the same values as
+        # indexing lr[b, i, j, part] (1.5x faster, benchmarks/RESULTS.md).
+        gw = lr.shape[2]
+        flat = lr.reshape(-1)
+        base = b * (lr.shape[1] * gw * N_PARTS) + np.arange(N_PARTS)
 
-        def at(i, j):
-            ok = (i >= 0) & (j >= 0) & (i < h) & (j < w)
-            ii = np.where(ok, i, 0).astype(np.int64)
-            jj = np.where(ok, j, 0).astype(np.int64)
-            return np.where(ok, lr[b, ii, jj, part], out_value)
+        def line(k, n, step):
+            """Whether grid lines ``k`` lie in ``[0, n)``, and their flat offsets (0 where not)."""
+            ok = (k >= 0) & (k < n)
+            return ok, np.where(ok, k, 0).astype(np.int64) * step
+
+        def at(row, col):
+            (ok_i, ii), (ok_j, jj) = row, col
+            return np.where(ok_i & ok_j, flat.take(base + ii + jj), out_value)
 
         if not bilinear:
-            return at(np.rint(fi), np.rint(fj)).astype(np.float32)
+            return at(line(np.rint(fi), h, gw * N_PARTS), line(np.rint(fj), w, N_PARTS)).astype(np.float32)
         i0, j0 = np.floor(fi), np.floor(fj)
         ti, tj = fi - i0, fj - j0
-        top = (1 - tj) * at(i0, j0) + tj * at(i0, j0 + 1)
-        bottom = (1 - tj) * at(i0 + 1, j0) + tj * at(i0 + 1, j0 + 1)
+        r0, r1 = line(i0, h, gw * N_PARTS), line(i0 + 1, h, gw * N_PARTS)
+        c0, c1 = line(j0, w, N_PARTS), line(j0 + 1, w, N_PARTS)
+        top = (1 - tj) * at(r0, c0) + tj * at(r0, c1)
+        bottom = (1 - tj) * at(r1, c0) + tj * at(r1, c1)
         return ((1 - ti) * top + ti * bottom).astype(np.float32)
 
 

@@ -222,9 +222,14 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
     included; entry ``(r, q)`` scores the window whose top-left cell is ``(r, q)``) of every
     template ``t`` at every pyramid level where the full object it implies is
     ``min_height..max_height`` px high. Per level and chunk of templates ONE matrix product
-    of the cell features with all their template cells, then shifted sums."""
+    of the cell features with all their template cells, then shifted sums: the bias plus
+    every cell's product in the cell order, added one after the other in float32 (one
+    reduction along the first axis of a copy of the shifted products, which numpy sums row
+    after row -- pairwise summation is only along a contiguous axis -- so the same additions
+    in the same order as a loop of in-place adds, without a numpy call per cell)."""
     dets = range(len(bank)) if detectors is None else detectors
     buf = np.empty(0, np.float32)  # the products' memory, reused: a fresh one per level cost page faults
+    stack = np.empty(0, np.float32)  # a template's shifted products, reused likewise
     for li, (s, F) in enumerate(pyramid):
         Hc, Wc = F.shape[:2]
         active = []
@@ -253,12 +258,32 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
             for t in group:
                 th, tw = bank.configs[t].template
                 Hr, Wr = Hc - th + 1, Wc - tw + 1
-                R = np.full((Hr, Wr), bank.biases[t], np.float32)
-                for dy in range(th):
-                    for dx in range(tw):
-                        R += P[o + dy * tw + dx, dy:dy + Hr, dx:dx + Wr]
+                if P.dtype == np.float32:
+                    stack = _shifted_products(P[o:o + th * tw], th, tw, stack)
+                    R = np.add.reduce(stack[:th * tw * Hr * Wr].reshape(th * tw, Hr, Wr), axis=0,
+                                      initial=np.float32(bank.biases[t]))
+                else:  # (float64 products, e.g. weights not yet stored: rounded to float32 after every add)
+                    R = np.full((Hr, Wr), bank.biases[t], np.float32)
+                    for dy in range(th):
+                        for dx in range(tw):
+                            R += P[o + dy * tw + dx, dy:dy + Hr, dx:dx + Wr]
                 o += th * tw
                 yield t, li, s, R
+
+
+def _shifted_products(P: np.ndarray, th: int, tw: int, stack: np.ndarray) -> np.ndarray:
+    """Write ``P[dy * tw + dx, dy:dy + Hr, dx:dx + Wr]`` for the ``th x tw`` cells of a
+    template, in that order, to the front of ``stack`` (grown if need be; returned): one
+    copy from a strided view of the products ``P`` ``(th * tw, Hc, Wc)`` of its cells."""
+    n, Hc, Wc = P.shape
+    Hr, Wr = Hc - th + 1, Wc - tw + 1
+    if stack.size < n * Hr * Wr or stack.dtype != P.dtype:
+        stack = np.empty(n * Hr * Wr, P.dtype)
+    a, b, c = P.strides
+    # element (dy, dx, r, q) of the view: P[dy * tw + dx, dy + r, dx + q]
+    shifted = np.lib.stride_tricks.as_strided(P, (th, tw, Hr, Wr), (tw * a + b, a + c, b, c), writeable=False)
+    stack[:n * Hr * Wr].reshape(th, tw, Hr, Wr)[...] = shifted
+    return stack
 
 
 def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k: int = 200,
