@@ -822,8 +822,9 @@ def test_detect_takes_the_camera_height_and_pitch_and_checks_them():
 
     frame = DATA_DIR / "sample" / "kitti" / "training"
     image, calib = frame / "image_2" / "000010.png", frame / "calib" / "000010.txt"
-    with pytest.raises(ArgumentError, match="camera_height"):
-        wirescene.detect(image, calib, camera_height=-1.0)
+    for height in (-1.0, 0.05):  # the bounds of --set lifting.camera_height and `detect --camera-height`
+        with pytest.raises(ArgumentError, match="camera_height: must be at least 0.1"):
+            wirescene.detect(image, calib, camera_height=height)
     kitti = wirescene.detect(image, calib)
     assert_close(wirescene.detect(image, calib, camera_height=1.65).scores, kitti.scores, atol=0)
     # told the camera stands at 2.2 m, the same boxes stand nearer the horizon than such a camera sees cars

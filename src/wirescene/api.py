@@ -8,6 +8,7 @@ Every wrong argument raises :class:`~wirescene.core.errors.ArgumentError` (a
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
 import sys
 from pathlib import Path
@@ -19,6 +20,7 @@ from wirescene.core.camera import Camera, KittiCalib, read_projection
 from wirescene.core.errors import ArgumentError, InputError, ShapeError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.image import to_rgb_uint8
+from wirescene.core.settings import check_value
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.validate import boxes_problem, finite_real, projection_problem
 from wirescene.fitting.pipeline import FitOptions, fit_frame
@@ -389,10 +391,12 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
-    if not finite_real(camera_height) or camera_height <= 0:
-        raise ArgumentError("camera_height", f"expected a positive number of metres, got {camera_height!r}")
-    if not finite_real(camera_pitch) or abs(camera_pitch) > 45:
-        raise ArgumentError("camera_pitch", f"expected a number of degrees within +-45, got {camera_pitch!r}")
+    rig = {f.name: f for f in dataclasses.fields(LiftingOptions)}  # the bounds `--set lifting.NAME` checks
+    for name, value in (("camera_height", camera_height), ("camera_pitch", camera_pitch)):
+        try:
+            check_value(rig[name], value)
+        except ValueError as exc:
+            raise ArgumentError(name, str(exc).removeprefix(f"{name} ")) from None
     if smallest_car is not None and not finite_real(smallest_car):
         raise ArgumentError("smallest_car", f"expected a number of pixels or None, got {smallest_car!r}")
     rgb = as_image(image)

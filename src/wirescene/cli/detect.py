@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -17,6 +18,7 @@ from wirescene.cli.options import (
     check_output_dir,
     check_output_file,
     drive_map_option,
+    field_type,
     load_models,
     models_option,
     read_drive_map,
@@ -27,8 +29,14 @@ from wirescene.cli.options import (
 )
 from wirescene.core.atomic import write_text
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
-from wirescene.predetect.bank import MIN_SMALLEST_CAR, SUPPORT_WEIGHT
+from wirescene.fitting.pipeline import PredetectOptions
+from wirescene.lift import LiftingOptions
+from wirescene.predetect.bank import SUPPORT_WEIGHT
 from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, single_thread
+
+#: The fit's own fields of the options `detect` shares with it: the same bounds on both.
+LIFTING = {f.name: f for f in dataclasses.fields(LiftingOptions)}
+PREDETECT = {f.name: f for f in dataclasses.fields(PredetectOptions)}
 
 
 @click.command("detector")
@@ -166,13 +174,13 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PR curve PNG.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write AP and timing as JSON.")
-@click.option("--camera-height", type=FiniteFloat(min=0.1), default=KITTI_CAMERA_HEIGHT, show_default=True,
+@click.option("--camera-height", type=field_type(LIFTING["camera_height"]), default=KITTI_CAMERA_HEIGHT, show_default=True,
               help="The camera's height above the road (m), for the ground and traffic priors learned at KITTI's "
                    "(the fit's --set lifting.camera_height).")
-@click.option("--camera-pitch", type=FiniteFloat(min=-45.0, max=45.0), default=0.0, show_default=True,
+@click.option("--camera-pitch", type=field_type(LIFTING["camera_pitch"]), default=0.0, show_default=True,
               help="Degrees the camera looks down from the road, which raises the horizon those priors read "
                    "(the fit's --set lifting.camera_pitch).")
-@click.option("--smallest-car", type=FiniteFloat(min=MIN_SMALLEST_CAR, zero="the bank's own"), default=0.0,
+@click.option("--smallest-car", type=field_type(PREDETECT["smallest_car"]), default=0.0,
               show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
                                       "upsampled to reach it (the fit's --smallest-car).")
 def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out,

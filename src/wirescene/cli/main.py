@@ -56,7 +56,8 @@ def _usage_message(exc: click.UsageError) -> str:
 class _Group(click.Group):
     """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
     on standard error and exit code 2, without a traceback (typed errors of the package,
-    bad option values and usage errors alike); Ctrl-C ends with exit code 130."""
+    bad option values and usage errors alike); running out of memory one line too, exit
+    code 1; Ctrl-C ends with exit code 130."""
 
     def invoke(self, ctx):
         try:

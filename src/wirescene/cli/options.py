@@ -229,6 +229,15 @@ def load_models(models_dir: Path | None):
     return models
 
 
+def field_type(field) -> click.ParamType:
+    """The click type of a number field of stage options (:func:`wirescene.core.settings.option`,
+    :func:`~wirescene.core.settings.bounded`): its kind and bounds, as ``--set`` checks them."""
+    low, high = field.metadata.get("minimum"), field.metadata.get("maximum")
+    if isinstance(field.default, int) and not isinstance(field.default, bool):
+        return click.IntRange(min=None if low is None else int(low), max=None if high is None else int(high))
+    return FiniteFloat(min=low, max=high, zero=field.metadata.get("zero"))
+
+
 def stage_options(cls, scope: str):
     """Click options for the fields of stage options ``cls`` declared with
     :func:`wirescene.core.settings.option`: ``--NAME`` (booleans ``--NAME/--no-NAME``),
@@ -242,13 +251,8 @@ def stage_options(cls, scope: str):
             param = f"{scope}__{field.name}"
             if isinstance(default, bool):
                 flag, kind = f"--{name}/--no-{name}", None
-            elif isinstance(default, int):
-                high = field.metadata.get("maximum")
-                flag, kind = f"--{name}", click.IntRange(min=int(field.metadata["minimum"]),
-                                                         max=None if high is None else int(high))
             else:
-                flag, kind = f"--{name}", FiniteFloat(min=float(field.metadata["minimum"]),
-                                                      max=field.metadata.get("maximum"), zero=field.metadata.get("zero"))
+                flag, kind = f"--{name}", field_type(field)
             f = click.option(flag, param, type=kind, default=None, help=f"{text} Default: {default}.")(f)
         return f
 

@@ -149,7 +149,7 @@ def read_projection(path: str | Path) -> np.ndarray:
     intrinsics ``K`` of a camera at the frame's origin (``P = K [I | 0]``).
 
     The fit places that camera as KITTI's: about 1.65 m above a road it looks along
-    (``LiftingOptions.camera_height`` for another rig).
+    (``LiftingOptions.camera_height`` and ``camera_pitch`` for another rig).
 
     Raises
     ------

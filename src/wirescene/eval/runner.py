@@ -31,6 +31,7 @@ from wirescene.fitting.variants import get_variant
 from wirescene.infer.evidence import oracle_evidence
 from wirescene.infer.torch_backend import TORCH_THREADS_ENV
 from wirescene.io.kitti import FrameLabels, KittiDataset
+from wirescene.io.outputs import fitted_detections
 from wirescene.io.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
 
 if TYPE_CHECKING:  # an optional dependency, imported where dask mode runs
@@ -52,7 +53,7 @@ def frame_result(
     kept = np.array([o.detection_index for o in objs], dtype=int)
     if len(np.unique(kept)) != len(kept) or (len(kept) and (kept.min() < 0 or kept.max() >= len(detections))):
         raise ValueError("estimate must hold at most one object per detection")
-    detections = detections.subset(kept)
+    detections = fitted_detections(detections, estimate)
     fine = camera is not None and objs and all(o.vertices is not None for o in objs)
     return FrameResult(
         frame_id=frame_id,

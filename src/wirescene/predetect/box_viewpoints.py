@@ -23,12 +23,13 @@ its bin's centre.
 Held out by drive on the 72 shared KITTI frames (``benchmarks/bench_box_viewpoints.py``:
 each fold's bank and classifier trained without its drives; settings chosen on fold group
 (0, 1), 148 cars, reported on (2, 3), 146 cars), label boxes given without a viewpoint come
-out within 45 deg for 83.6% of the cars of (2, 3) (84.5% on (0, 1); 77.4% with the boxes
-jittered by 5% of their size); each box alone 77.4% (81.1%; 74.7%), the templates alone
-63.0%, the classifier alone 72.6%, the part evidence
+out within 45 deg for 80.8% of the cars of (2, 3) (81.8% on (0, 1); 77.4% with the boxes
+jittered by 5% of their size) with the README's fold banks, 83.6% (84.5%) with the banks the
+rule's weights were chosen with; there each box alone 77.4% (81.1%; 74.7%), the templates
+alone 63.0%, the classifier alone 72.6%, the part evidence
 (:func:`~wirescene.infer.evidence.viewpoint_from_evidence`) 55%, and adding it to the
-rule gains nothing on (0, 1). On the 189 cars the bank itself finds at the fit's threshold,
-the rule gets 84.7% right, the bank's own detections 83.1%.
+rule gains nothing on (0, 1). On the 169 cars the README's fold banks find at the fit's
+threshold, the rule gets 84.6% right, the bank's own detections 82.8% (benchmarks/RESULTS.md).
 """
 
 from __future__ import annotations
