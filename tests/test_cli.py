@@ -79,6 +79,16 @@ def test_a_request_the_machine_cannot_hold_ends_in_one_line(tmp_path, monkeypatc
     lines = r.stderr.strip().splitlines()
     assert r.exit_code == 1 and len(lines) == 1 and not out.exists(), r.stderr
     assert lines[0].startswith("wirescene: error: out of memory (Unable to allocate 10.4 GiB") and "--samples" in lines[0]
+    from concurrent.futures.process import BrokenProcessPool
+
+    @functools.wraps(wirescene.api.fit)
+    def killed(*args, **kwargs):  # a worker stopped by the system's out-of-memory killer
+        raise BrokenProcessPool("A process in the process pool was terminated abruptly")
+
+    monkeypatch.setattr(wirescene.api, "fit", killed)
+    r = run("fit", SPLIT / "image_2" / "000010.png", "--calib", SPLIT / "calib" / "000010.txt", "--out", out)
+    lines = r.stderr.strip().splitlines()
+    assert r.exit_code == 1 and len(lines) == 1 and "worker process was stopped" in lines[0] and not out.exists()
 
 def test_fit_takes_a_calibration_of_the_numbers_of_p_or_k(tmp_path):
     from wirescene.core.camera import read_kitti_calib

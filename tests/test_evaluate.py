@@ -439,3 +439,36 @@ def test_workers_off_linux_watch_their_parent_instead_of_failing(monkeypatch):
     runner._die_with_parent(os.getppid())  # our parent lives on: the watcher keeps waiting
     watchers = [t for t in threading.enumerate() if t.ident not in before and t.name == "wirescene-parent-watch"]
     assert len(watchers) == 1 and watchers[0].daemon
+
+
+def test_a_report_never_writes_or_removes_through_a_link_and_refuses_a_file_where_a_folder_goes(tmp_path):
+    """A symbolic link in the report's folder (a seed's folder pointing at a web site) is never
+    swept or written through; a new folder whose place holds a file or a link is refused before
+    anything moves, the earlier report left whole."""
+    from wirescene.core.errors import InputError
+    from wirescene.eval.report import staged_report
+
+    site = tmp_path / "site"
+    site.mkdir()
+    for name in ("index.html", "error_cdf.png"):
+        (site / name).write_text("theirs")
+    rep = tmp_path / "rep"
+    rep.mkdir()
+    (rep / "seed-9").symlink_to(site)
+    with staged_report(rep) as staging:  # a one-page report sweeps the seed pages of an earlier one
+        (staging / "index.html").write_text("new")
+    assert sorted(p.name for p in site.iterdir()) == ["error_cdf.png", "index.html"]
+    (rep / "seed-1").mkdir()
+    (rep / "seed-1" / "index.html").write_text("old")
+    (rep / "seed-2").write_text("a file")
+    before = {p.relative_to(rep).as_posix(): p.read_bytes() for p in rep.rglob("*") if p.is_file()}
+    for blocked, problem in (("seed-2", "seed-2 is a file where the new set has a folder"),
+                             ("seed-9", "seed-9 is a symbolic link where the new set has a folder")):
+        with pytest.raises(InputError, match=problem):
+            with staged_report(rep) as staging:
+                for name in ("seed-1", blocked):
+                    (staging / name).mkdir()
+                    (staging / name / "index.html").write_text("new")
+                (staging / "index.html").write_text("new")
+        after = {p.relative_to(rep).as_posix(): p.read_bytes() for p in rep.rglob("*") if p.is_file()}
+        assert after == before and sorted(p.name for p in tmp_path.iterdir()) == ["rep", "site"]

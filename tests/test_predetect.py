@@ -825,6 +825,8 @@ def test_detect_takes_the_camera_height_and_pitch_and_checks_them():
     for height in (-1.0, 0.05):  # the bounds of --set lifting.camera_height and `detect --camera-height`
         with pytest.raises(ArgumentError, match="camera_height: must be at least 0.1"):
             wirescene.detect(image, calib, camera_height=height)
+    with pytest.raises(ArgumentError, match="camera_height: must be a finite number"):
+        wirescene.detect(image, calib, camera_height=10**400)  # too large for a float: refused, not an OverflowError
     kitti = wirescene.detect(image, calib)
     assert_close(wirescene.detect(image, calib, camera_height=1.65).scores, kitti.scores, atol=0)
     # told the camera stands at 2.2 m, the same boxes stand nearer the horizon than such a camera sees cars

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import ExitStack
 from importlib import resources
 from pathlib import Path
@@ -56,8 +57,8 @@ def _usage_message(exc: click.UsageError) -> str:
 class _Group(click.Group):
     """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
     on standard error and exit code 2, without a traceback (typed errors of the package,
-    bad option values and usage errors alike); running out of memory one line too, exit
-    code 1; Ctrl-C ends with exit code 130."""
+    bad option values and usage errors alike); running out of memory (or a worker process
+    stopped by the system) one line too, exit code 1; Ctrl-C ends with exit code 130."""
 
     def invoke(self, ctx):
         try:
@@ -71,9 +72,12 @@ class _Group(click.Group):
         except click.ClickException as exc:  # e.g. an unreachable --dask scheduler, a failed write of `synth`
             click.echo(f"wirescene: error: {' '.join(exc.format_message().split())}", err=True)
             sys.exit(2)
-        except MemoryError as exc:  # a request this machine cannot hold: a line, not a traceback
-            click.echo(f"wirescene: error: out of memory ({' '.join(str(exc).split()) or 'MemoryError'}); ask for less "
-                       "(fewer --samples or --workers, a larger --smallest-car) or use a larger machine", err=True)
+        except (MemoryError, BrokenProcessPool) as exc:  # a request the machine cannot hold: a line, no traceback
+            what = ("a worker process was stopped (by the system, for memory?)" if isinstance(exc, BrokenProcessPool)
+                    else f"out of memory ({' '.join(str(exc).split()) or 'MemoryError'})")
+            click.echo(f"wirescene: error: {what}; ask for less (fewer --samples or --workers, a larger "
+                       "--smallest-car) or use a larger machine; frames an --out or --predictions folder holds stay "
+                       "(remove it to run with other settings)", err=True)
             sys.exit(1)
         except KeyboardInterrupt:  # Ctrl-C: the shell's convention (128 + SIGINT), not click's "Aborted!" and 1
             click.echo("wirescene: interrupted", err=True)

@@ -9,6 +9,8 @@ import shutil
 from contextlib import contextmanager
 from pathlib import Path
 
+from wirescene.core.errors import InputError
+
 
 @contextmanager
 def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
@@ -100,9 +102,11 @@ def atomic_dir(path: str | Path, *, stale: tuple[str, ...] = ()):
     move into ``path`` (created if needed), those in folders of the staging directory into
     the same folders of ``path``: files of the same name are replaced, and those of ``path``
     matching a glob pattern of ``stale`` (relative to ``path``, e.g. ``"seed-*/index.html"``)
-    that the new set lacks are removed, with the folders they leave empty. When the block
-    raises the staging directory goes and so do the directories above ``path`` made for
-    it, so that a set of files (a report's pages and pictures) appears whole or not at all.
+    that the new set lacks are removed, with the folders they leave empty (never through a
+    symbolic link). When the block raises the staging directory goes and so do the
+    directories above ``path`` made for it, so that a set of files (a report's pages and
+    pictures) appears whole or not at all; a new folder whose place in ``path`` holds a file
+    or a symbolic link is an :class:`InputError` before anything moves.
 
     Examples
     --------
@@ -120,15 +124,37 @@ def atomic_dir(path: str | Path, *, stale: tuple[str, ...] = ()):
     path = Path(path)
     with _staged(path) as staging:
         yield staging
+        problem = _merge_problem(staging, path) if path.is_dir() else None
+        if problem is not None:  # before anything moves: a half-merged set would mix two runs
+            raise InputError(problem, path=path)
         new = {entry.relative_to(staging) for entry in staging.rglob("*") if not entry.is_dir()}
         _move_into(staging, path)
         for pattern in stale:  # after the new files are in: an interruption leaves no page without its pictures
             for old in path.glob(pattern):
                 where = old.relative_to(path)
-                if where not in new and old.is_file():
+                through_link = any((path / folder).is_symlink() for folder in list(where.parents)[:-1])
+                if where not in new and old.is_file() and not through_link:
                     old.unlink()
                     remove_empty([path / folder for folder in list(where.parents)[:-1]])
     shutil.rmtree(staging, ignore_errors=True)
+
+
+def _merge_problem(source: Path, target: Path) -> str | None:
+    """Why the staged folders of ``source`` cannot be merged into ``target``: a symbolic link
+    where one goes (the merge would write outside ``target``) or a file (or a folder where
+    a file goes); None when they can."""
+    for entry in source.iterdir():
+        there = target / entry.name
+        if entry.is_dir() and there.is_symlink():
+            return f"{entry.name} is a symbolic link where the new set has a folder"
+        if there.exists() and entry.is_dir() != there.is_dir():
+            new, old = ("folder", "file") if entry.is_dir() else ("file", "folder")
+            return f"{entry.name} is a {old} where the new set has a {new}"
+        if entry.is_dir() and there.is_dir():
+            problem = _merge_problem(entry, there)
+            if problem is not None:
+                return f"{entry.name}/{problem}"
+    return None
 
 
 def _move_into(source: Path, target: Path) -> None:

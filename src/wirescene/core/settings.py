@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import numbers
 from typing import Any, Mapping
 
 import numpy as np
+
+from wirescene.core.validate import finite_real
 
 __all__ = ["option", "bounded", "exposed_fields", "field_default", "parse_value", "parse_assignment",
            "replace_fields", "check_value", "check_fields"]
@@ -164,7 +165,7 @@ def check_value(f: dataclasses.Field, value, *, scope: str = ""):
             fail("an integer")
         value = int(value)
     elif isinstance(default, numbers.Real):
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        if isinstance(value, np.bool_) or not finite_real(value):  # an int too large for a float too
             fail("a finite number")
         value = float(value) if isinstance(default, float) else value  # an int given: the same record as the float
     else:
