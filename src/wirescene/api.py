@@ -8,7 +8,6 @@ Every wrong argument raises :class:`~wirescene.core.errors.ArgumentError` (a
 
 from __future__ import annotations
 
-import dataclasses
 import numbers
 import sys
 from pathlib import Path
@@ -20,7 +19,7 @@ from wirescene.core.camera import Camera, KittiCalib, read_projection
 from wirescene.core.errors import ArgumentError, InputError, ShapeError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.image import to_rgb_uint8
-from wirescene.core.settings import check_value
+from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.validate import boxes_problem, finite_real, projection_problem
 from wirescene.fitting.pipeline import FitOptions, fit_frame
@@ -391,14 +390,14 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
-    rig = {f.name: f for f in dataclasses.fields(LiftingOptions)}  # the bounds `--set lifting.NAME` checks
-    for name, value in (("camera_height", camera_height), ("camera_pitch", camera_pitch)):
+    # the bounds `--set lifting.NAME` / `--set predetect.NAME` and the detect command check
+    for stage, name, value in ((LiftingOptions, "camera_height", camera_height),
+                               (LiftingOptions, "camera_pitch", camera_pitch),
+                               (PredetectOptions, "smallest_car", 0.0 if smallest_car is None else smallest_car)):
         try:
-            check_value(rig[name], value)
+            check_value(stage_field(stage, name), value)
         except ValueError as exc:
             raise ArgumentError(name, str(exc).removeprefix(f"{name} ")) from None
-    if smallest_car is not None and not finite_real(smallest_car):
-        raise ArgumentError("smallest_car", f"expected a number of pixels or None, got {smallest_car!r}")
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)

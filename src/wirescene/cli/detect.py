@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -29,14 +28,11 @@ from wirescene.cli.options import (
 )
 from wirescene.core.atomic import write_text
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+from wirescene.core.settings import stage_field
 from wirescene.fitting.pipeline import PredetectOptions
 from wirescene.lift import LiftingOptions
 from wirescene.predetect.bank import SUPPORT_WEIGHT
 from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, single_thread
-
-#: The fit's own fields of the options `detect` shares with it: the same bounds on both.
-LIFTING = {f.name: f for f in dataclasses.fields(LiftingOptions)}
-PREDETECT = {f.name: f for f in dataclasses.fields(PredetectOptions)}
 
 
 @click.command("detector")
@@ -174,13 +170,13 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PR curve PNG.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write AP and timing as JSON.")
-@click.option("--camera-height", type=field_type(LIFTING["camera_height"]), default=KITTI_CAMERA_HEIGHT, show_default=True,
+@click.option("--camera-height", type=field_type(stage_field(LiftingOptions, "camera_height")), default=KITTI_CAMERA_HEIGHT, show_default=True,
               help="The camera's height above the road (m), for the ground and traffic priors learned at KITTI's "
                    "(the fit's --set lifting.camera_height).")
-@click.option("--camera-pitch", type=field_type(LIFTING["camera_pitch"]), default=0.0, show_default=True,
+@click.option("--camera-pitch", type=field_type(stage_field(LiftingOptions, "camera_pitch")), default=0.0, show_default=True,
               help="Degrees the camera looks down from the road, which raises the horizon those priors read "
                    "(the fit's --set lifting.camera_pitch).")
-@click.option("--smallest-car", type=field_type(PREDETECT["smallest_car"]), default=0.0,
+@click.option("--smallest-car", type=field_type(stage_field(PredetectOptions, "smallest_car")), default=0.0,
               show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
                                       "upsampled to reach it (the fit's --smallest-car).")
 def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out,

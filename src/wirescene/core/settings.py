@@ -21,7 +21,7 @@ import numpy as np
 
 from wirescene.core.validate import finite_real
 
-__all__ = ["option", "bounded", "exposed_fields", "field_default", "parse_value", "parse_assignment",
+__all__ = ["option", "bounded", "exposed_fields", "stage_field", "field_default", "parse_value", "parse_assignment",
            "replace_fields", "check_value", "check_fields"]
 
 
@@ -77,6 +77,19 @@ def exposed_fields(cls) -> list[tuple[dataclasses.Field, str, str]]:
     :func:`option`, in declaration order."""
     return [(f, f.metadata.get("cli") or f.name.replace("_", "-"), f.metadata["help"])
             for f in dataclasses.fields(cls) if "help" in f.metadata]
+
+
+def stage_field(cls, name: str) -> dataclasses.Field:
+    """The field ``name`` of stage options ``cls``, whose kind and bounds (:func:`check_value`)
+    an entry point that takes the option under a name of its own checks too.
+
+    Examples
+    --------
+    >>> from wirescene.lift import LiftingOptions
+    >>> stage_field(LiftingOptions, "camera_pitch").metadata["maximum"]
+    45.0
+    """
+    return next(f for f in dataclasses.fields(cls) if f.name == name)
 
 
 def field_default(f: dataclasses.Field):

@@ -109,6 +109,7 @@ class _FrameJob:
                 for v, estimate in fitted.estimates.items()}
         return frame_id, camera, fitted.detections, gt, fits
 
+
 def _worker_init(parent: int, threads: int) -> None:
     """Worker initializer: end with the parent (:func:`_die_with_parent`), leave Ctrl-C to
     the parent (which stops the pool: a worker interrupted in its queue's read hung a

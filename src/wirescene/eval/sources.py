@@ -10,7 +10,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from wirescene.core.errors import InputError
-from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.types import Detections
 from wirescene.io.detections import NO_CARS, detections_from_labels, read_detections
 from wirescene.io.kitti import KittiDataset
@@ -81,13 +80,14 @@ class DetectionSource:
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
         if self.spec == "bank":
             from wirescene.fitting.pipeline import detect_own, detector_bank, viewpoint_classifier
+            from wirescene.lift import LiftingOptions
 
+            rig = LiftingOptions() if lifting is None else lifting
             return detect_own(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
                               classifier=viewpoint_classifier(self.classifier),
                               threshold=None if predetect is None else predetect.threshold,
                               smallest_car=None if predetect is None else predetect.smallest_car,
-                              camera_height=KITTI_CAMERA_HEIGHT if lifting is None else lifting.camera_height,
-                              camera_pitch=0.0 if lifting is None else lifting.camera_pitch)
+                              camera_height=rig.camera_height, camera_pitch=rig.camera_pitch)
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:

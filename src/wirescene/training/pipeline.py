@@ -332,10 +332,9 @@ def _check_frames(dataset, ids: list[str]) -> tuple[str, int]:
     """Check the training frames' calibrations and image headers
     (:meth:`~wirescene.io.kitti.KittiDataset.check_frames`) and labels (read to count the cars):
     an :class:`InputError` naming the first missing or malformed file, or saying that they hold
-    no labelled car, before any step trains;
-    return a SHA-256 of their label, calibration and image files (a resumed step whose frames
-    changed is trained again; an image replaced by another of the same size too), and their
-    number of cars."""
+    no labelled car, before any step trains; return a SHA-256 of their label, calibration and
+    image files (a resumed step whose frames changed is trained again; an image replaced by
+    another of the same size too), and their number of cars."""
     dataset.check_frames(ids)
     counts = dataset.car_counts(ids)
     if not any(counts.values()):
