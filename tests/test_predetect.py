@@ -8,10 +8,12 @@ import pytest
 from conftest import KITTI_ROOT, assert_close
 from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import InputError
+from wirescene.core.groundplane import Mount
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import EDGES
 from wirescene.io.kitti import FrameLabels, Label, read_image
+from wirescene.lift import LiftingOptions
 from wirescene.predetect.ap import FrameGT, evaluate_detections, frame_gt, voc_average_precision
 from wirescene.predetect.bank import (
     Activations,
@@ -785,13 +787,13 @@ def test_the_priors_read_a_box_as_kittis_camera_would_see_it_from_any_height():
     for height in (1.3, 1.65, 2.0):  # a car standing on the road, seen from a camera that high
         bottom, top, centre = 170 + 720 * height / z, 170 + 720 * (height - car_height) / z, 600 + 720 * x / z
         box = np.array([[centre - 40, top, centre + 40, bottom]])
-        horizon = road_horizon(camera, height)
+        horizon = road_horizon(camera, Mount(height))
         seen[height] = (bottom_ratio(box, horizon)[0], lateral_position(box, horizon, 600.0)[0])
     for ratio, lateral in seen.values():  # KITTI's 1.65 m over the car's height, its offset in KITTI's camera heights
         assert_close([ratio, lateral], [1.65 / car_height, x / 1.65])
     assert road_horizon(camera).scale == 1.0  # KITTI's rig: the learned priors as they are
     with pytest.raises(ValueError, match="camera_height"):
-        road_horizon(camera, 0.0)
+        road_horizon(camera, Mount(0.0))
 
 
 
@@ -808,12 +810,13 @@ def test_the_priors_read_a_pitched_cameras_boxes_from_its_horizon():
         for x, z in ((3.0, 8.0), (-2.0, 20.0), (5.0, 45.0)):
             (ub, vb), (_, vt) = camera.project(np.array([[x, 1.65, z], [x, 1.65 - 1.5, z]]) @ R.T)
             box = np.array([[ub - 40, vt, ub + 40, vb]])
-            assert_close(bottom_ratio(box, road_horizon(camera, 1.65, pitch)), [1.1], atol=3e-3)
+            assert_close(bottom_ratio(box, road_horizon(camera, Mount(1.65, pitch))), [1.1], atol=3e-3)
             if z > 15:
                 assert abs(bottom_ratio(box, road_horizon(camera))[0] - 1.1) > 0.4
-    assert road_horizon(camera, camera_pitch=0.0) == road_horizon(camera)
+    assert road_horizon(camera, Mount(pitch=0.0)) == road_horizon(camera)
+    assert LiftingOptions(camera_pitch=4.0).mount == Mount(1.65, 4.0)  # the fit's options name the same mount
     with pytest.raises(ValueError, match="camera_pitch"):
-        road_horizon(camera, 1.65, float("nan"))
+        road_horizon(camera, Mount(1.65, float("nan")))
 
 def test_detect_takes_the_camera_height_and_pitch_and_checks_them():
     import wirescene

@@ -17,7 +17,7 @@ import numpy as np
 
 from wirescene.core.camera import Camera, KittiCalib, read_projection
 from wirescene.core.errors import ArgumentError, InputError, ShapeError
-from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate
@@ -398,6 +398,7 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
             check_value(stage_field(stage, name), value)
         except ValueError as exc:
             raise ArgumentError(name, str(exc).removeprefix(f"{name} ")) from None
+    mount = Mount(float(camera_height), float(camera_pitch))
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
@@ -407,9 +408,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     min_height, max_scale = smallest_car_search(bank, smallest_car)
     pyramid, responses = bank_pyramid(bank, rgb, max_scale=max_scale), {}
     dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
-                       min_height=min_height, camera_height=camera_height, camera_pitch=camera_pitch)
-    return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses,
-                            camera_height=camera_height, camera_pitch=camera_pitch)
+                       min_height=min_height, mount=mount)
+    return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses, mount=mount)
 
 
 DRAW_VIEWS = ("overlay", "bev")

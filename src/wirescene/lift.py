@@ -27,6 +27,7 @@ from wirescene.core.boxes import MEAN_CAR_DIMS, box_extent_object
 from wirescene.core.camera import Camera
 from wirescene.core.groundplane import (
     KITTI_CAMERA_HEIGHT,
+    Mount,
     plane_rotation,
     wrap_angle,
 )
@@ -61,6 +62,11 @@ class LiftingOptions:
     # Weight of the prior that cars head along the road (:func:`road_alignment_cost`), which a box leaves open; 0: off.
     road_prior: float = option(0.03, help="Weight of the coarse stage's prior that cars head along the road "
                                           "(0: none).")
+
+    @property
+    def mount(self) -> Mount:
+        """The camera's :class:`~wirescene.core.groundplane.Mount` (``camera_height``, ``camera_pitch``)."""
+        return Mount(self.camera_height, self.camera_pitch)
 
     def plane_grid(self) -> tuple[np.ndarray, np.ndarray]:
         """Flattened pitch and roll grids (radians), shape ``(G,)`` each: the pitch about the

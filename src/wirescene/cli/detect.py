@@ -27,7 +27,7 @@ from wirescene.cli.options import (
     workers_option,
 )
 from wirescene.core.atomic import write_text
-from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.settings import stage_field
 from wirescene.fitting.pipeline import PredetectOptions
 from wirescene.lift import LiftingOptions
@@ -202,6 +202,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
     min_height, max_scale = smallest_car_search(bank, smallest_car)
+    mount = Mount(camera_height, camera_pitch)
     dets_all, gts, times = [], [], []
     files: dict[str, str] = {}  # FRAME.json of --out, written once every frame is done (no partial output)
     with single_thread():
@@ -211,13 +212,12 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
             # the features and templates' responses, kept for the viewpoints of the boxes written
             pyramid, responses = bank_pyramid(bank, img, max_scale=max_scale), ({} if out_dir is not None else None)
             d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=ds.camera(fid), pyramid=pyramid,
-                            responses=responses, min_height=min_height, camera_height=camera_height,
-                            camera_pitch=camera_pitch)
+                            responses=responses, min_height=min_height, mount=mount)
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:  # with the viewpoints the fit gives the boxes it keeps
                 kept = detections_above(ds.camera(fid), img, d, thr, bank=bank, pyramid=pyramid, responses=responses,
-                                        camera_height=camera_height, camera_pitch=camera_pitch)
+                                        mount=mount)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
                 files[f"{fid}.json"] = json.dumps({"detections": entries}, indent=1)

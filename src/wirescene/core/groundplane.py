@@ -15,10 +15,29 @@ of hypotheses (particles x objects).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 KITTI_CAMERA_HEIGHT = 1.65  # metres, the KITTI recording platform
+
+
+class Mount(NamedTuple):
+    """Where a camera sits on its car: ``height`` metres above the road, looking ``pitch``
+    degrees down from it (``LiftingOptions.camera_height`` and ``camera_pitch``; KITTI's
+    rig, :data:`KITTI_MOUNT`: 1.65 m, level).
+
+    Examples
+    --------
+    >>> Mount(1.3, pitch=4.0)
+    Mount(height=1.3, pitch=4.0)
+    """
+
+    height: float = KITTI_CAMERA_HEIGHT
+    pitch: float = 0.0
+
+
+KITTI_MOUNT = Mount()
 
 
 def rotation_x(angle) -> np.ndarray:

@@ -75,19 +75,18 @@ class DetectionSource:
                   predetect: PredetectOptions | None = None, lifting: LiftingOptions | None = None) -> Detections:
         """The detections of one frame; ``predetect``: the threshold and smallest car of our own
         pre-detection (:func:`~wirescene.fitting.pipeline.detect_own`; None: the bank's own);
-        ``lifting``: the camera's height above the road and pitch, for its priors (None: KITTI's)."""
+        ``lifting``: the camera's mount (``LiftingOptions.mount``), for its priors (None: KITTI's)."""
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
         if self.spec == "bank":
             from wirescene.fitting.pipeline import detect_own, detector_bank, viewpoint_classifier
             from wirescene.lift import LiftingOptions
 
-            rig = LiftingOptions() if lifting is None else lifting
             return detect_own(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
                               classifier=viewpoint_classifier(self.classifier),
                               threshold=None if predetect is None else predetect.threshold,
                               smallest_car=None if predetect is None else predetect.smallest_car,
-                              camera_height=rig.camera_height, camera_pitch=rig.camera_pitch)
+                              mount=(LiftingOptions() if lifting is None else lifting).mount)
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:

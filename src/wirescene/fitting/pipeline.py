@@ -17,7 +17,7 @@ import numpy as np
 from wirescene.core.boxes import clip_boxes
 from wirescene.core.camera import Camera
 from wirescene.core.errors import ArgumentError, check_shape
-from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+from wirescene.core.groundplane import KITTI_MOUNT, Mount
 from wirescene.core.resources import cached_by_file
 from wirescene.core.settings import option
 from wirescene.core.shape import load_default as load_shape_model
@@ -185,7 +185,7 @@ def needs_evidence(detections: Detections, variants: Iterable[str | Variant]) ->
 
 def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarray, *, bank=None,
                         classifier=None, pyramid: list | None = None, responses: dict | None = None,
-                        camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> Detections:
+                        mount: Mount = KITTI_MOUNT) -> Detections:
     """Detections whose unknown viewpoints (NaN ``alpha``, e.g. boxes of an external
     detector) are scored inside each box by the detector bank's templates and the crop
     viewpoint classifier, with the camera's road prior
@@ -206,9 +206,10 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     responses : dict, optional
         The bank's template response maps on ``pyramid`` (``detect_cars(responses=)``), if
         already computed.
-    camera_height, camera_pitch : float, optional
-        The camera's height above the road (m; ``LiftingOptions.camera_height``) and pitch
-        down from it (deg; ``LiftingOptions.camera_pitch``), for the road prior.
+    mount : Mount, optional
+        The camera's height above the road and pitch down from it
+        (:class:`~wirescene.core.groundplane.Mount`; ``LiftingOptions.mount``), for the road
+        prior.
 
     Returns
     -------
@@ -234,33 +235,31 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
     classifier = viewpoint_classifier(None) if classifier is None else classifier
     alpha = detections.alpha.copy()
     alpha[unknown] = box_viewpoints(bank, image, detections.boxes[unknown], camera=camera, classifier=classifier,
-                                    pyramid=pyramid, responses=responses, camera_height=camera_height,
-                                    camera_pitch=camera_pitch)
+                                    pyramid=pyramid, responses=responses, mount=mount)
     return Detections(detections.boxes, detections.scores, alpha, detections.source)
 
 
 def detections_above(camera: Camera | None, image: np.ndarray, found: Detections, threshold: float, *, bank,
                      pyramid: list | None = None, responses: dict | None = None,
-                     camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> Detections:
+                     mount: Mount = KITTI_MOUNT) -> Detections:
     """The bank's detections ``found`` of ``image`` (every score down to ``threshold`` at least)
     above ``threshold``, each box that the fit's own pre-detection also keeps (above
     ``PredetectOptions.threshold``, for a calibrated bank) with the viewpoint the fit gives it:
     cars of one row agree, so a box's viewpoint depends on the boxes the rule reads beside it
-    (:func:`detect_own`; ``pyramid``, ``responses``, ``camera_height`` and ``camera_pitch`` as
-    there)."""
+    (:func:`detect_own`; ``pyramid``, ``responses`` and ``mount`` as there)."""
     keep = found.subset(found.scores > threshold)
     if camera is None:
         return keep
     fit_threshold = PredetectOptions().threshold
     if bank.calibration is None:  # margins, not probabilities: no common scale with the fit's threshold
         return detect_own(camera, image, bank=bank, detections=keep, pyramid=pyramid, responses=responses,
-                          camera_height=camera_height, camera_pitch=camera_pitch)
+                          mount=mount)
     read = detect_own(camera, image, bank=bank, detections=found.subset(found.scores > min(threshold, fit_threshold)),
-                      pyramid=pyramid, responses=responses, camera_height=camera_height, camera_pitch=camera_pitch)
+                      pyramid=pyramid, responses=responses, mount=mount)
     out = read.subset(read.scores > threshold)
     if threshold < fit_threshold:  # the rule read more boxes than the fit's: the fit's set decides its own boxes
         fit = detect_own(camera, image, bank=bank, detections=found.subset(found.scores > fit_threshold),
-                         pyramid=pyramid, responses=responses, camera_height=camera_height, camera_pitch=camera_pitch)
+                         pyramid=pyramid, responses=responses, mount=mount)
         alpha = out.alpha.copy()
         alpha[out.scores > fit_threshold] = fit.alpha
         out = Detections(out.boxes, out.scores, alpha, out.source)
@@ -270,7 +269,7 @@ def detections_above(camera: Camera | None, image: np.ndarray, found: Detections
 def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
                detections: Detections | None = None, threshold: float | None = None, pyramid: list | None = None,
                responses: dict | None = None, smallest_car: float | None = None,
-               camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> Detections:
+               mount: Mount = KITTI_MOUNT) -> Detections:
     """Our own pre-detection (stage 1): the detector bank's cars at its threshold
     (:func:`wirescene.predetect.detect_cars`, with the camera), each box's viewpoint then
     chosen as for the boxes of any other detector (:func:`complete_viewpoints`: the bank's
@@ -286,9 +285,9 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     and the rule); ``threshold``: the bank's score threshold (None: its own, the 2D
     operating point); ``smallest_car``: the smallest car height searched (px; None or 0: the
     bank's own), the pyramid's largest scale moved so that the bank's smallest templates reach
-    it; ``camera_height`` and ``camera_pitch``: the camera's height above the road (m;
-    ``LiftingOptions.camera_height``) and pitch down from it (deg; ``LiftingOptions.camera_pitch``),
-    for the ground and traffic priors learned at KITTI's level rig. Returns the bank's boxes and
+    it; ``mount``: the camera's height above the road and pitch down from it
+    (:class:`~wirescene.core.groundplane.Mount`; ``LiftingOptions.mount``), for the ground and
+    traffic priors learned at KITTI's level rig. Returns the bank's boxes and
     calibrated scores with the rule's viewpoints.
 
     Examples
@@ -306,14 +305,14 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
         # the templates' features and responses, read again by the box rule
         pyramid, responses = (bank_pyramid(bank, image, max_scale=max_scale) if pyramid is None else pyramid), {}
         found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, pyramid=pyramid, responses=responses,
-                            min_height=min_height, camera_height=camera_height, camera_pitch=camera_pitch)
+                            min_height=min_height, mount=mount)
     else:
         found = detections
     if camera is None or not len(found):
         return found
     unknown = Detections(found.boxes, found.scores, np.full(len(found), np.nan), found.source)
     return complete_viewpoints(camera, unknown, image, bank=bank, classifier=classifier, pyramid=pyramid,
-                               responses=responses, camera_height=camera_height, camera_pitch=camera_pitch)
+                               responses=responses, mount=mount)
 
 
 def inside_image(detections: Detections, image_size: tuple[int, int]) -> Detections:
@@ -408,7 +407,7 @@ def fit_frame(
         detections = detect_own(camera, image, bank=detector_bank(options.detector_bank),
                                 classifier=viewpoint_classifier(options.viewpoint_classifier),
                                 threshold=options.predetect.threshold, smallest_car=options.predetect.smallest_car,
-                                camera_height=options.lifting.camera_height, camera_pitch=options.lifting.camera_pitch)
+                                mount=options.lifting.mount)
         own = True
     if own:
         options = replace(options, inference=replace(options.inference, box_weight=options.predetect.box_weight))
@@ -423,8 +422,7 @@ def fit_frame(
         # classifier score the 8 bins inside each box, for every variant alike.
         detections = complete_viewpoints(camera, detections, image, bank=detector_bank(options.detector_bank),
                                          classifier=viewpoint_classifier(options.viewpoint_classifier),
-                                         camera_height=options.lifting.camera_height,
-                                         camera_pitch=options.lifting.camera_pitch)
+                                         mount=options.lifting.mount)
     if evidence is None and needs_evidence(detections, variants):
         if image is None:
             raise ValueError("image is needed for the part evidence of fine variants and unknown viewpoints")

@@ -36,7 +36,7 @@ import numpy as np
 from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.boxes import clip_boxes
 from wirescene.core.errors import ArgumentError, InputError
-from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+from wirescene.core.groundplane import KITTI_MOUNT, Mount
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import bin_center
@@ -444,7 +444,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
                 per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
                 return_all: bool = False, camera=None, pyramid: list | None = None,
                 verify_within: float | None = None, responses: dict | None = None,
-                camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> Detections:
+                mount: Mount = KITTI_MOUNT) -> Detections:
     """Detect cars in an (H, W, 3) uint8 image with the configuration bank.
 
     HOG pyramid once -> every template as a linear filter -> NMS per detector (IoU 0.5 on
@@ -467,9 +467,8 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     whenever it is known. With a viewpoint prior (``meta["viewpoint_prior"]``) the camera
     also lets each detection's viewpoint weigh where it stands in the traffic
     (:mod:`wirescene.predetect.viewpoint_prior`); both priors were learned at KITTI's camera
-    height and level mount, ``camera_height`` (metres above the road) and ``camera_pitch``
-    (degrees down from the road; :func:`~wirescene.predetect.geometry.road_horizon`) are the
-    camera's. ``pyramid``: the image's
+    height and level mount, ``mount`` is the camera's
+    (:class:`~wirescene.core.groundplane.Mount`; :func:`~wirescene.predetect.geometry.road_horizon`). ``pyramid``: the image's
     :func:`bank_pyramid` if already computed (e.g. to score given boxes' viewpoints on it too).
     ``verify_within``: see :func:`merge_activations` (off by default; ``benchmarks/RESULTS.md``,
     "An early cut before the box refinement and the verifier"). ``responses``: a dict to receive
@@ -486,7 +485,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
         pyramid = bank_pyramid(bank, image, max_scale=max_scale, per_octave=per_octave)
     gray = None if bank.refinement is None and bank.verifier is None else to_gray(image)
     channels = integral_channels(image) if bank.needs_channels else None
-    horizon = None if camera is None else road_horizon(camera, camera_height, camera_pitch)
+    horizon = None if camera is None else road_horizon(camera, mount)
     center_column = None if camera is None else float(np.asarray(camera.K, float)[0, 2])
     return detect_pyramid(bank, pyramid, (W, H), threshold=None if return_all else thr, min_height=min_height,
                           per_detector=per_detector, cross_view_nms=cross_view_nms, source=source, horizon=horizon,

@@ -38,7 +38,7 @@ import numpy as np
 
 from wirescene.core.boxes import clip_boxes, iou_2d
 from wirescene.core.errors import ArgumentError, InputError, check_shape
-from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, rotation_y_from_alpha
+from wirescene.core.groundplane import KITTI_MOUNT, Mount, rotation_y_from_alpha
 from wirescene.core.validate import boxes_problem
 from wirescene.core.viewpoints import N_BINS, bin_center
 from wirescene.predetect.bank import (
@@ -286,7 +286,7 @@ def box_bin_log_odds(bank: DetectorBank, image: np.ndarray, boxes, *, pyramid=No
 
 
 def box_log_prior(bank: DetectorBank, boxes, camera, *, road_spread: float | None = ROAD_SPREAD,
-                  camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> np.ndarray | None:
+                  mount: Mount = KITTI_MOUNT) -> np.ndarray | None:
     """Log prior of the 8 viewpoint bins of boxes from where they stand on the road.
 
     The bank's traffic prior (:func:`~wirescene.predetect.bank.traffic_log_prior`) gives
@@ -306,11 +306,11 @@ def box_log_prior(bank: DetectorBank, boxes, camera, *, road_spread: float | Non
     camera : Camera
     road_spread : float or None, optional
         None: the traffic prior alone, as for the bank's own detections.
-    camera_height : float, optional
-        The camera's height above the road (m); the traffic prior was learned at KITTI's.
-    camera_pitch : float, optional
-        Degrees the camera looks down from the road (KITTI's rig: level), which moves the
-        horizon (:func:`~wirescene.predetect.geometry.road_horizon`).
+    mount : Mount, optional
+        The camera's height above the road (m) and pitch down from it (deg;
+        :class:`~wirescene.core.groundplane.Mount`), which place the horizon
+        (:func:`~wirescene.predetect.geometry.road_horizon`); the traffic prior was learned
+        on KITTI's level rig.
 
     Returns
     -------
@@ -329,7 +329,7 @@ def box_log_prior(bank: DetectorBank, boxes, camera, *, road_spread: float | Non
     """
     b = _check_boxes(boxes)
     K = np.asarray(camera.K, float)
-    log_prior = traffic_log_prior(bank, b, road_horizon(camera, camera_height, camera_pitch), float(K[0, 2])) if len(b) else None
+    log_prior = traffic_log_prior(bank, b, road_horizon(camera, mount), float(K[0, 2])) if len(b) else None
     if log_prior is None or road_spread is None:
         return log_prior
     p = np.exp(log_prior)
@@ -349,8 +349,7 @@ def box_log_prior(bank: DetectorBank, boxes, camera, *, road_spread: float | Non
 def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None, classifier=None, iou: float = IOU,
                    floor_margin: float = FLOOR_MARGIN, prior_weight: float = PRIOR_WEIGHT,
                    road_spread: float | None = ROAD_SPREAD, pyramid=None, row_weight: float = ROW_WEIGHT,
-                   responses: dict | None = None, camera_height: float = KITTI_CAMERA_HEIGHT,
-                   camera_pitch: float = 0.0) -> np.ndarray:
+                   responses: dict | None = None, mount: Mount = KITTI_MOUNT) -> np.ndarray:
     """The viewpoint of each given box, scored by the bank's configuration detectors (and a
     crop classifier): the bin maximising the templates' log-odds, plus the classifier's
     log-probability, plus ``prior_weight`` times the road prior; given the camera, the boxes
@@ -381,9 +380,9 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     row_weight : float, optional
         Weight of the rows' agreement (:data:`ROW_WEIGHT`; 0: each box alone). Pass every box
         of the frame at once: the rows are made of the boxes given.
-    camera_height, camera_pitch : float, optional
-        The camera's height above the road (m) and pitch down from it (deg), for the road
-        prior (:func:`box_log_prior`).
+    mount : Mount, optional
+        The camera's height above the road and pitch down from it, for the road prior
+        (:func:`box_log_prior`).
 
     Returns
     -------
@@ -407,7 +406,7 @@ def box_viewpoints(bank: DetectorBank, image: np.ndarray, boxes, *, camera=None,
     if classifier is not None:
         scores = scores + classifier.log_probs(image, b)
     prior = None if camera is None else box_log_prior(bank, b, camera, road_spread=road_spread,
-                                                       camera_height=camera_height, camera_pitch=camera_pitch)
+                                                       mount=mount)
     if prior is not None:
         scores = scores + prior_weight * prior
     if camera is None:

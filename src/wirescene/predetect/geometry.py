@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
+from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, KITTI_MOUNT, Mount
 
 
 class Horizon(NamedTuple):
@@ -53,26 +53,28 @@ def horizon_row(camera) -> float:
     return float(np.asarray(camera.K, float)[1, 2])
 
 
-def road_horizon(camera, camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0) -> Horizon:
-    """The :class:`Horizon` of ``camera`` mounted ``camera_height`` metres above the road and
-    pitched ``camera_pitch`` degrees down from it (``LiftingOptions.camera_pitch``).
+def road_horizon(camera, mount: Mount = KITTI_MOUNT) -> Horizon:
+    """The :class:`Horizon` of ``camera`` on its ``mount``
+    (:class:`~wirescene.core.groundplane.Mount`: metres above the road, degrees down from it).
 
     Examples
     --------
     >>> import numpy as np
     >>> from wirescene.core.camera import Camera
+    >>> from wirescene.core.groundplane import Mount
     >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
-    >>> road_horizon(camera, 3.3)  # twice KITTI's height: boxes read as half as far below the horizon
+    >>> road_horizon(camera, Mount(3.3))  # twice KITTI's height: boxes read as half as far below the horizon
     Horizon(row=170.0, scale=0.5)
-    >>> round(road_horizon(camera, camera_pitch=4.0).row, 1)  # looking down 4 deg: the horizon 50 px higher
+    >>> round(road_horizon(camera, Mount(pitch=4.0)).row, 1)  # looking down 4 deg: the horizon 50 px higher
     119.7
     """
-    if not np.isfinite(camera_height) or camera_height <= 0:
-        raise ValueError(f"camera_height must be a positive number of metres, got {camera_height!r}")
-    if not np.isfinite(camera_pitch) or abs(camera_pitch) >= 90:
-        raise ValueError(f"camera_pitch must be a number of degrees within +-90, got {camera_pitch!r}")
-    row = horizon_row(camera) - float(np.asarray(camera.K, float)[1, 1]) * np.tan(np.deg2rad(camera_pitch))
-    return Horizon(float(row), float(KITTI_CAMERA_HEIGHT / camera_height))
+    height, pitch = mount
+    if not np.isfinite(height) or height <= 0:
+        raise ValueError(f"camera_height must be a positive number of metres, got {height!r}")
+    if not np.isfinite(pitch) or abs(pitch) >= 90:
+        raise ValueError(f"camera_pitch must be a number of degrees within +-90, got {pitch!r}")
+    row = horizon_row(camera) - float(np.asarray(camera.K, float)[1, 1]) * np.tan(np.deg2rad(pitch))
+    return Horizon(float(row), float(KITTI_CAMERA_HEIGHT / height))
 
 
 def below_horizon(rows, horizon) -> np.ndarray:
