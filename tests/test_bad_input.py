@@ -118,6 +118,23 @@ def _truncated_copy(tmp, frames, broken):
     return root
 
 
+def _jpeg_split(tmp):
+    """A KITTI root (``tmp/kitti``) whose testing split holds the test frame as a JPEG (no .png)."""
+    from PIL import Image
+
+    root = kitti_copy(tmp / "kitti", [FRAME], subdirs=("calib",), split="testing")
+    (root / "testing" / "image_2").mkdir()
+    Image.open(SPLIT / "image_2" / f"{FRAME}.png").convert("RGB").save(root / "testing" / "image_2" / f"{FRAME}.jpg")
+    return root
+
+
+def _unlabelled_split(tmp):
+    """A KITTI root (``tmp/kitti``) whose training split has images and calibrations but an empty ``label_2/``."""
+    root = kitti_copy(tmp / "kitti", [FRAME], subdirs=("image_2", "calib"))
+    (root / "training" / "label_2").mkdir()
+    return root
+
+
 def _dets_dir(tmp, files):
     d = tmp / "dets"
     d.mkdir()
@@ -184,6 +201,14 @@ CASES = {
     "fit without an image": (lambda t: ["fit", "--calib", "c.txt", "--out", t / "o"], r"IMAGE: missing \(required\)$"),
     "--frames twice": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", f"{FRAME},{FRAME}"], "listed twice"),
     "--frames unknown": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "424242"], "no frame 424242"),
+    "predict of a split without .png images": (
+        lambda t: ["predict", _jpeg_split(t), "--out", t / "submission", "--workers", "1"],
+        r"testing/image_2: no \.png file \(it holds \.jpg files; KITTI's images are \.png\)$"),
+    "detect on a split without .png images": (
+        lambda t: ["detect", _jpeg_split(t), "--split", "testing", "--out", t / "dets"],
+        r"testing/image_2: no \.png file \(it holds \.jpg files; KITTI's images are \.png\)$"),
+    "eval of a split without label files": (
+        lambda t: ["eval", _unlabelled_split(t), "--variant", "coarse"], r"training/label_2: no \.txt file \(it is empty\)$"),
     # outputs, refused before any fitting
     "--json is a directory": (lambda t: _eval_case(t, "--json", t), "is a directory"),
     "--json under a file": (lambda t: _eval_case(t, "--json", _file(t, "f") / "m.json"), "is a file"),
@@ -411,7 +436,7 @@ def test_missing_detection_files_are_allowed_only_when_asked(tmp_path):
     args = ["eval", str(KITTI_ROOT), "--variant", "coarse", "--frames", f"000002,{FRAME}", "--workers", "1",
             "--detections", str(d)]
     r = CliRunner().invoke(main, args)
-    assert r.exit_code == 2 and "1 of 2 frames" in r.stderr
+    assert r.exit_code == 2 and f"1 of 2 frames have no detection file (e.g. no {FRAME}.json" in r.stderr
     r = CliRunner().invoke(main, args + ["--allow-missing-detections"])
     assert r.exit_code == 0, r.output
     assert "1 of 2 frames have no detection file" in r.stderr

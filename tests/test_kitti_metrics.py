@@ -685,3 +685,31 @@ def test_cli_kitti_eval_of_several_runs_gives_each_their_mean_and_one_interval(t
     assert "mean of 2" in r.output and "takes one of the 2 runs" in r.output
     line = _one_line_error(_cli("kitti-eval", gt_dir, dirs[0], dirs[0]))
     assert "given twice" in line
+
+
+def test_cli_kitti_eval_warns_of_unscored_files_and_another_splits_predictions(tmp_path):
+    import json
+
+    from wirescene.eval.predict import CONFIG_FILE
+    from wirescene.io.kitti import write_labels
+
+    gt_dir = KITTI_ROOT / "training" / "label_2"
+    pred = tmp_path / "pred"
+    pred.mkdir()
+    for f in ("000002", "424242"):  # 424242: no such labelled frame
+        labels = read_labels(gt_dir / "000002.txt")
+        for o in labels.objects:
+            o.score = 1.0
+        write_labels(pred / f"{f}.txt", labels.objects)
+    r = _cli("kitti-eval", gt_dir, pred, "--draws", "0")
+    assert r.exit_code == 0, r.output
+    assert (f"{pred}: 1 prediction files have no label file in {gt_dir} and are not scored (e.g. 424242.txt)"
+            in r.stderr)
+    r = _cli("kitti-eval", gt_dir, pred, "--frames", "000002", "--draws", "0")  # frames chosen: the rest is expected
+    assert r.exit_code == 0 and "not scored" not in r.stderr
+    (pred / CONFIG_FILE).write_text(json.dumps({"dataset": str(tmp_path / "kitti" / "testing")}))
+    r = _cli("kitti-eval", gt_dir, pred, "--frames", "000002", "--draws", "0")
+    assert r.exit_code == 0, r.output
+    assert f"predicted from the images of {tmp_path / 'kitti' / 'testing'}, scored against the labels" in r.stderr
+    (pred / CONFIG_FILE).write_text(json.dumps({"dataset": str(tmp_path / "moved" / "training")}))
+    assert "predicted from" not in _cli("kitti-eval", gt_dir, pred, "--frames", "000002", "--draws", "0").stderr

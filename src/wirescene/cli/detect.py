@@ -23,6 +23,7 @@ from wirescene.cli.options import (
     read_drive_map,
     select_frames,
     split_file_option,
+    split_option,
     workers_count,
     workers_option,
 )
@@ -94,7 +95,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--calibration") from None
         ds = KittiDataset(kitti_root)
-        ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
+        ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir)
         fl = _fold_list(folds)
         drives = read_drive_map(ds, drive_mapping)[0] if not no_calibration and given is None else None
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
@@ -148,7 +149,7 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 
     check_output_file(out, "--out")
     ds = KittiDataset(kitti_root)
-    ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir, what="frame") or ds.frame_ids()
+    ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
     clf = train_on_kitti(ds, ids, seed=seed)
     clf.save(out)
     click.echo(f"viewpoint classifier: {clf.meta['n']} crops of {len(ids)} frames -> {out}")
@@ -158,7 +159,7 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.argument("kitti_root", type=click.Path(path_type=Path))
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all).")
 @split_file_option
-@click.option("--split", default="training", show_default=True)
+@split_option()
 @models_option
 @click.option("--bank", "bank_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Detector bank .npz (default: --models' or the shipped one).")
@@ -199,7 +200,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     check_output_file(json_out, "--json")
     ds = KittiDataset(kitti_root, split=split)
     bank = DetectorBank.load(bank_path if bank_path else load_models(models).path("detector_bank"))
-    ids = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir, what="frame") or ds.frame_ids()
+    ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
     min_height, max_scale = smallest_car_search(bank, smallest_car)
     mount = Mount(camera_height, camera_pitch)

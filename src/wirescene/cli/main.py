@@ -27,6 +27,7 @@ from wirescene.cli.options import (
     select_frames,
     settings_option,
     split_file_option,
+    split_option,
     stage_options,
     stage_settings,
     workers_count,
@@ -216,7 +217,7 @@ def _dask_client(address: str):
                    "seed's figures, then their mean and range over the seeds (the fit samples, so the seed alone "
                    "moves the figures by a few cars); --predictions and --report then get a seed-S folder per seed, "
                    "and --report a page of the mean and range over the seeds that links them.")
-@click.option("--split", default="training", show_default=True)
+@split_option()
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None,
               help="Write the metrics as JSON: one variant's at the top level, several keyed by variant (and by seed "
                    "under 'seeds' with several --seed).")
@@ -260,7 +261,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     check_output_dir(report_dir, "--report")
     dataset = KittiDataset(kitti_root, split=split)
     variants = list(variants) or _variants()
-    frame_ids = select_frames(frames, split_file, dataset.frame_ids(), where=dataset.split_dir)
+    frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
     drives = interval_drives(dataset.split_dir)  # read before any fit: a bad devkit mapping is an error now
     _say_if_trained_on(inference.get("models"), dataset, frame_ids, variants=variants, detections=detections,
                        replaced=[k for k in ("parts_model", "detector_bank") if inference.get(k) is not None])
@@ -419,7 +420,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 
 @main.command("predict")
 @click.argument("kitti_root", type=click.Path(path_type=Path))
-@click.option("--split", default="testing", show_default=True)
+@split_option("testing")
 @click.option("--out", type=click.Path(path_type=Path), required=True,
               help="Directory of KITTI label files, one FRAME.txt per image (the benchmark's submission layout).")
 @click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True)
@@ -451,7 +452,8 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())
     dataset = KittiDataset(kitti_root, split=split)
-    frame_ids = select_frames(frames, split_file, dataset.image_ids(), where=dataset.split_dir, what="image")
+    frame_ids = select_frames(frames, split_file, dataset.require_frames(images=True), where=dataset.split_dir,
+                              what="image")
     options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address), **inference)
     client = _dask_client(dask_address) if dask_address is not None else None
     total = len(frame_ids) if frame_ids else len(dataset.image_ids())
@@ -496,6 +498,28 @@ def _kitti_figures(dataset, frame_ids, variants, rows, predictions, *, drives, s
     return out, spread, margins
 
 
+def _prediction_dir_warnings(pred_dir: Path, gt_dir: Path, ids: list[str], *, chosen: bool) -> list[str]:
+    """What a user scoring ``pred_dir`` against ``gt_dir`` should know: label files of frames
+    that ``gt_dir`` has not (not scored, unless ``chosen``: frames were selected), and a
+    ``wirescene predict`` folder (its ``.predict.json``) made of another split than ``gt_dir``'s
+    (``testing`` scored against ``training/label_2``)."""
+    from wirescene.eval.predict import CONFIG_FILE
+
+    warnings = []
+    extra = [] if chosen else sorted({p.stem for p in pred_dir.glob("*.txt")} - set(ids))
+    if extra:
+        warnings.append(f"{len(extra)} prediction files have no label file in {gt_dir} and are not scored "
+                        f"(e.g. {extra[0]}.txt)")
+    try:
+        made_of = json.loads((pred_dir / CONFIG_FILE).read_text(encoding="utf-8"))["dataset"]
+    except (OSError, ValueError, TypeError, KeyError):  # not a predict folder, or a record this check cannot read
+        return warnings
+    # by the split's folder name: a KITTI folder moved since the prediction is no mistake
+    if isinstance(made_of, str) and Path(made_of).name != gt_dir.resolve().parent.name:
+        warnings.append(f"predicted from the images of {made_of}, scored against the labels of {gt_dir}")
+    return warnings
+
+
 @main.command("kitti-eval")
 @click.argument("gt_dir", type=click.Path(path_type=Path))
 @click.argument("pred_dirs", metavar="PRED_DIR...", nargs=-1, required=True, type=click.Path(path_type=Path))
@@ -509,7 +533,8 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
     """KITTI object-benchmark AP of Car (2D, AOS, BEV, 3D; easy / moderate / hard; R40 and
     R11; IoU 0.7 and 0.5) of the label files in PRED_DIR against GT_DIR, by the devkit's
     rules, and the moderate APs' bootstrap interval over drives. A frame without a
-    prediction file has no detections. Several PRED_DIRs are runs of one method (other
+    prediction file has no detections; a prediction file of a frame GT_DIR lacks is not
+    scored (said). Several PRED_DIRs are runs of one method (other
     seeds, say): each run's moderate APs, their mean, and an interval whose every draw
     resamples the drives and takes one of the runs."""
     from wirescene.eval.intervals import kitti_intervals, kitti_run_intervals
@@ -539,6 +564,8 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
         if missing:
             click.echo(f"wirescene: {d}: {missing} of {len(ids)} frames have no prediction file (no detections)",
                        err=True)
+        for warning in _prediction_dir_warnings(d, gt_dir, ids, chosen=frame_ids is not None):
+            click.echo(f"wirescene: {d}: {warning}", err=True)
     preds = [r[2] for r in runs]
     if len(preds) == 1:
         result = kitti_metrics(gts, preds[0])
@@ -661,7 +688,7 @@ def demo_cmd(out, particles, variants, models):
 @click.argument("kitti_root", type=click.Path(path_type=Path))
 @click.argument("frame")
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Output PNG.")
-@click.option("--split", default="training", show_default=True)
+@split_option()
 def gt_cmd(kitti_root, frame, out, split):
     """Draw a frame's ground truth with the mean wireframe at every GT car pose
     (self-occluded vertices in blue): a check of geometry, shape model and labels."""

@@ -134,6 +134,13 @@ def split_file_option(f):
                              "ImageSets/val.txt); instead of --frames.")(f)
 
 
+def split_option(default: str = "training"):
+    """``--split NAME``: the split folder of ``KITTI_ROOT`` a command reads."""
+    return click.option("--split", default=default, show_default=True,
+                        help="The split folder under KITTI_ROOT (a split folder given as KITTI_ROOT is read as it "
+                             "is).")
+
+
 def ap_draws_option(f):
     """``--draws N``: bootstrap draws of the KITTI APs' intervals over drives (0: none)."""
     from wirescene.eval.intervals import N_BOOT_AP

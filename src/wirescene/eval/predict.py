@@ -96,12 +96,20 @@ def predict_dataset(
     -------
     list of str
         The frames fitted by this call (not those kept from a previous run).
+
+    Raises
+    ------
+    InputError
+        Before any fit: no frame to predict (no ``.png`` image in ``image_2/``), a frame
+        without its detection file, calibration or image, or ``out_dir`` holding another
+        run's label files.
     """
     source = DetectionSource("bank") if source is None else source
     options = FitOptions() if options is None else options
     variant = get_variant(variant).name
     out = Path(out_dir)
-    frame_ids = list(frames) if frames is not None else dataset.image_ids()
+    # a submission of no file is refused here, not by the server
+    frame_ids = list(frames) if frames is not None else dataset.require_frames(images=True)
     source.missing_frames(frame_ids)
     config = _config(dataset, variant, source, options)
     config_path = out / CONFIG_FILE

@@ -292,7 +292,7 @@ def evaluate_dataset(
     if notify is None:
         notify = _notify_stderr
     variants = [get_variant(v).name for v in variants]
-    frame_ids = list(frames) if frames is not None else dataset.frame_ids()
+    frame_ids = list(frames) if frames is not None else dataset.require_frames()
     missing = source.missing_frames(frame_ids)
     if missing:
         notify(f"{len(missing)} of {len(frame_ids)} frames have no detection file in {source.folder} "

@@ -61,8 +61,9 @@ class DetectionSource:
             return []
         missing = [f for f in frame_ids if self.detection_file(f) is None]
         if missing and not self.allow_missing:
-            what = "none of the" if len(missing) == len(frame_ids) else f"{len(missing)} of {len(frame_ids)}"
-            raise InputError(f"{what} frames have a detection file (e.g. no {missing[0]}.json, .csv or .txt); "
+            what = ("none of the frames have a detection file" if len(missing) == len(frame_ids)
+                    else f"{len(missing)} of {len(frame_ids)} frames have no detection file")
+            raise InputError(f"{what} (e.g. no {missing[0]}.json, .csv or .txt); "
                              "--allow-missing-detections treats such frames as having none", path=self.folder)
         return missing
 

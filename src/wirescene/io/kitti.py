@@ -278,6 +278,25 @@ class KittiDataset:
         """Sorted ids of every image in ``image_2`` (labelled or not)."""
         return sorted(p.stem for p in (self.split_dir / "image_2").glob("*.png"))
 
+    def require_frames(self, *, images: bool = False) -> list[str]:
+        """:meth:`frame_ids` (``images``: :meth:`image_ids`), refusing a split without any.
+
+        Raises
+        ------
+        InputError
+            Naming the folder read (``label_2/`` or ``image_2/``) and what it holds instead,
+            so that a run over no frame stops here rather than reporting nothing.
+        """
+        ids = self.image_ids() if images else self.frame_ids()
+        if not ids:
+            labels = self.has_labels and not images
+            folder, kind = (self.split_dir / "label_2", ".txt") if labels else (self.split_dir / "image_2", ".png")
+            others = sorted({p.suffix or p.name for p in folder.iterdir() if p.is_file()})
+            held = f"it holds {', '.join(others)} files" if others else "it is empty"
+            hint = "; KITTI's images are .png" if others and not labels else ""
+            raise InputError(f"no {kind} file ({held}{hint})", path=folder)
+        return ids
+
     def __len__(self) -> int:
         return len(self.frame_ids())
 
