@@ -214,16 +214,27 @@ CASES = {
     "--json under a file": (lambda t: _eval_case(t, "--json", _file(t, "f") / "m.json"), "is a file"),
     "--predictions is a file": (lambda t: _eval_case(t, "--predictions", _file(t, "f")), "is a file"),
     "fit --out is a file": (lambda t: [*_fit_case(t), "--out", _file(t, "o")], "is a file"),
+    "fit --out holding a folder of an output's name": (
+        lambda t: [*_fit_case(t), "--out", _file(t, f"o/{FRAME}_overlay.png/x").parents[1]],
+        rf"o/{FRAME}_overlay\.png: a folder where the fit writes a file$"),
     "demo --out is a file": (lambda t: ["demo", "--out", _file(t, "o")], "is a file"),
     # os.access says yes to root and knows nothing of pseudo file systems: a real try refuses these
     "fit --out under /proc": (lambda t: [*_fit_case(t), "--out", "/proc/wirescene-check/out"],
                               r"--out: /proc/wirescene-check/out: /proc is not writable"),
     "kitti-eval --json under /proc": (lambda t: ["kitti-eval", SPLIT / "label_2", SPLIT / "label_2", "--json",
                                                  "/proc/wirescene-check/k.json"], "--json: .*/proc is not writable"),
+    "gt of a frame not in the split": (lambda t: ["gt", KITTI_ROOT, "999999", "--out", t / "gt.png"],
+                                       r"^wirescene: error: FRAME: no frame 999999 in .*training \(its image_2 holds "
+                                       r"\d+ frames, e.g\. \d{6}\)$"),
     "gt --out is a directory": (lambda t: ["gt", KITTI_ROOT, FRAME, "--out", t], "--out: .* is a directory"),
     "gt --out under a file": (lambda t: ["gt", KITTI_ROOT, FRAME, "--out", _file(t, "f") / "gt.png"], "--out: .*is a file"),
+    "gt --out of no picture format": (lambda t: ["gt", KITTI_ROOT, FRAME, "--out", t / "gt.txt"],
+                                      r"^wirescene: error: --out: .*gt\.txt: \.txt is not a picture format \(\.png, "),
     "cad show --out under a file": (lambda t: ["cad", "show", "acura-nsx-sz", "--cad-dir", Path(__file__).parent / "data" / "cad",
                                                "--out", _file(t, "f") / "car.png"], "--out: .*is a file"),
+    "cad show --out of no picture format": (
+        lambda t: ["cad", "show", "acura-nsx-sz", "--cad-dir", Path(__file__).parent / "data" / "cad", "--out",
+                   t / "car.json"], r"--out: .*car\.json: \.json is not a picture format"),
     "synth OUT_DIR under /proc": (lambda t: ["synth", "/proc/wirescene-check", "--scenes", "1"],
                                   "OUT_DIR: .*/proc is not writable"),
     "synth --cars-per-scene 5-2": (lambda t: ["synth", t / "s", "--cars-per-scene", "5-2"],
@@ -304,6 +315,9 @@ CASES = {
     "synth of 10^20 scenes": (lambda t: ["synth", t / "s", "--scenes", "99999999999999999999"], "--scenes"),
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],
                                          "already holds scenes"),
+    "synth where OUT_DIR/training is a file": (
+        lambda t: ["synth", _file(t, "s/training", "mine").parent, "--scenes", "1", "--overwrite"],
+        r"^wirescene: error: OUT_DIR: \S+/s/training is a file, not a folder of scenes"),
 }
 
 

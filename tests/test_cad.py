@@ -183,6 +183,19 @@ def test_corrections_applied_with_mirror(tmp_path, cars):
         load_corrections(path)
 
 
+def test_cad_picture_has_a_key_to_its_colours():
+    """Red and orange dots are landmarks on the near and the far side of each view, blue lines
+    the wireframe, grey the mesh: the picture says so."""
+    from wirescene.cli.cad import draw_car
+    from wirescene.core.shape import load_default
+
+    X = load_default().mean
+    fig = draw_car(X, np.array([[0, 1, 2]]), X, title="mean wireframe")
+    keys = [t.get_text() for legend in [*fig.legends, *(ax.get_legend() for ax in fig.axes)] if legend is not None
+            for t in legend.get_texts()]
+    assert keys == ["landmark, near side (named)", "landmark, far side", "wireframe edge", "mesh"]
+
+
 def test_cli_list_and_show(tmp_path):
     from click.testing import CliRunner
 

@@ -62,6 +62,31 @@ def test_fit_writes_all_outputs(tmp_path):
     assert len(js["objects"]) == 8 and js["variant"] == "coarse"
 
 
+def test_fit_outputs_are_replaced_as_a_set_or_not_at_all(tmp_path, monkeypatch):
+    """A picture that cannot be drawn (out of memory on a huge image, a full disk) leaves an earlier
+    run's four files as they were, none of this run's and no folder made for it."""
+    import wirescene.io.outputs
+
+    args = ["fit", SPLIT / "image_2" / "000010.png", "--calib", SPLIT / "calib" / "000010.txt",
+            "--detections", SPLIT / "label_2" / "000010.txt", "--variant", "coarse", "--particles", 5]
+    out = tmp_path / "out"
+    assert run(*args, "--out", out).exit_code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    save = wirescene.io.outputs.save_figure
+
+    def fails_on_the_bev(fig, path, **kw):
+        if "_bev.png" in Path(path).name:
+            raise InputError("cannot draw", path=path)
+        return save(fig, path, **kw)
+
+    monkeypatch.setattr(wirescene.io.outputs, "save_figure", fails_on_the_bev)
+    for where in (out, tmp_path / "new" / "out"):
+        r = CliRunner().invoke(main, [str(a) for a in (*args, "--seed", 1, "--out", where)])
+        assert r.exit_code == 2, r.output
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
 
 def test_a_request_the_machine_cannot_hold_ends_in_one_line(tmp_path, monkeypatch):
     """Out of memory is a line saying what to ask for instead, exit code 1, no output left."""
@@ -250,6 +275,25 @@ def test_info_lists_every_file_a_run_reads_with_its_hash(tmp_path):
     assert files["parts_model.npz"]["format"] == "wirescene-parts-forest/2"
     assert record["environment"]["numpy"] == np.__version__ and f"numpy {np.__version__}" in r.output
     assert run("info", "--models", tmp_path / "none").exit_code == 2  # the models directory is checked
+
+
+def test_info_in_a_fresh_process_names_scipys_blas_and_matplotlib(tmp_path):
+    """`info` runs in a process that has loaded nothing else: it lists scipy's BLAS beside numpy's (as a
+    training's record, taken after scipy's linear algebra ran, does) and the matplotlib drawing the pictures."""
+    import subprocess
+    import sys
+
+    import matplotlib
+
+    out = tmp_path / "info.json"
+    subprocess.run([sys.executable, "-m", "wirescene.cli.main", "info", "--json", str(out)], check=True,
+                   capture_output=True)
+    env = json.loads(out.read_text())["environment"]
+    loaded = subprocess.run([sys.executable, "-c", "import json, numpy, scipy.linalg, threadpoolctl; print(json.dumps("
+                             "[i['version'] for i in threadpoolctl.threadpool_info() if i['user_api'] == 'blas']))"],
+                            check=True, capture_output=True, text=True).stdout
+    assert sorted(b["version"] for b in env["blas"]) == sorted(json.loads(loaded))
+    assert env["matplotlib"] == matplotlib.__version__
 
 
 def test_particles_option_names_the_coarse_grids_cap():

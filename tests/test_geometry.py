@@ -76,6 +76,19 @@ def test_write_calib_roundtrip(tmp_path, camera):
     assert_close(read_kitti_calib(tmp_path / "c.txt").P2, camera.P, atol=1e-9)
 
 
+def test_written_calib_has_kittis_seven_lines_and_lidar_axes(tmp_path, camera):
+    """The seven lines of a KITTI object calibration in their order (mmdetection3d's converter reads the
+    seventh, Tr_imu_to_velo), and a Tr_velo_to_cam of KITTI's axes (LiDAR x forward, y left, z up), so that a
+    label box taken into the LiDAR frame (OpenPCDet, mmdetection3d) stands upright and faces forward."""
+    write_kitti_calib(tmp_path / "c.txt", camera.P)
+    lines = (tmp_path / "c.txt").read_text().splitlines()
+    assert [ln.split(":")[0] for ln in lines] == ["P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam", "Tr_imu_to_velo"]
+    velo_to_cam = np.array(lines[5].split()[1:], float).reshape(3, 4)
+    assert_close(velo_to_cam[:, :3] @ np.eye(3), [[0, -1, 0], [0, 0, -1], [1, 0, 0]])  # forward, left, up -> z, -x, -y
+    assert_close(np.array(lines[6].split()[1:], float).reshape(3, 4), np.eye(4)[:3])
+    assert_close(read_kitti_calib(tmp_path / "c.txt").Tr_velo_to_cam, velo_to_cam)
+
+
 def test_shape_contract():
     with pytest.raises(ShapeError, match=r"\(3, 4\)"):
         Camera(np.eye(3))

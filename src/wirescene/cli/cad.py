@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from wirescene.cli.options import NON_NEGATIVE, check_output_file
+from wirescene.cli.options import NON_NEGATIVE, check_output_file, check_picture_file
 from wirescene.core.errors import InputError
 
 __all__ = ["cad", "shape", "draw_car"]
@@ -36,9 +36,11 @@ def _find(cad_dir: Path, name: str) -> Path:
 
 def draw_car(vertices, faces, X, *, title: str = "", out=None):
     """Three orthographic views (side, top, front) of a mesh with the 36 landmarks, their
-    names and the wireframe edges. Returns the matplotlib figure
+    names and the wireframe edges, and a key to the colours (landmarks on the near side of
+    a view red and named, on the far side orange). Returns the matplotlib figure
     (:func:`wirescene.io.pictures.new_figure`)."""
     from matplotlib.collections import LineCollection, PolyCollection
+    from matplotlib.lines import Line2D
 
     from wirescene.core.wireframe import EDGES, N_PER_SIDE, VERTEX_NAMES
     from wirescene.io.pictures import new_figure
@@ -68,7 +70,11 @@ def draw_car(vertices, faces, X, *, title: str = "", out=None):
         ax.set_title(label, fontsize=9)
         ax.grid(alpha=0.3)
     fig.suptitle(title)
-    fig.tight_layout()
+    key = [Line2D([], [], ls="none", marker="o", ms=5, color="tab:red"), Line2D([], [], ls="none", marker="o", ms=4,
+           color="tab:orange"), Line2D([], [], color="tab:blue", lw=1.0), Line2D([], [], color="0.7", lw=0.6)]
+    fig.legend(key, ["landmark, near side (named)", "landmark, far side", "wireframe edge", "mesh"], loc="lower center",
+               ncol=4, fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0.02, 1, 1))  # room for the key below the views
     if out is not None:
         from wirescene.io.pictures import save_figure
 
@@ -105,7 +111,7 @@ def show_cmd(name, out, cad_dir):
     from wirescene.cad.landmarks import annotate
     from wirescene.cad.mesh import load_car, naming_the_file, road_car_check
 
-    check_output_file(Path(out or f"{name}.png"), "--out")  # the default is the car's name in the working directory
+    check_picture_file(Path(out or f"{name}.png"), "--out")  # the default is the car's name in the working directory
     path = _find(_cad_dir(cad_dir), name)
     car = load_car(path)
     is_road, reason = road_car_check(car)

@@ -19,6 +19,7 @@ from wirescene.cli.options import (
     ap_draws_option,
     check_output_dir,
     check_output_file,
+    check_picture_file,
     drive_map_option,
     interval_drives,
     load_models,
@@ -607,9 +608,12 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     from wirescene.core.types import Detections
     from wirescene.io.detections import NO_CARS, read_detections
     from wirescene.io.kitti import read_image, read_labels
-    from wirescene.io.outputs import write_fit_outputs
+    from wirescene.io.outputs import fit_output_paths, fit_outputs_problem, write_fit_outputs
 
     check_output_dir(out, "--out")
+    problem = fit_outputs_problem(fit_output_paths(out, Path(image).stem))
+    if problem:  # before the fit, not at its end
+        raise click.BadParameter(f"{problem[0]}: {problem[1]}", param_hint="--out")
     options = _fit_options(particles, seed, **inference)  # a bad --set fails before any file is read
     img = read_image(image)
     camera = as_camera(calib, (img.shape[1], img.shape[0]))
@@ -687,7 +691,8 @@ def demo_cmd(out, particles, variants, models):
 @main.command("gt")
 @click.argument("kitti_root", type=click.Path(path_type=Path))
 @click.argument("frame")
-@click.option("--out", type=click.Path(path_type=Path), required=True, help="Output PNG.")
+@click.option("--out", type=click.Path(path_type=Path), required=True,
+              help="Picture to write, in the format its suffix names (.png, .pdf, .svg; PNG without a suffix).")
 @split_option()
 def gt_cmd(kitti_root, frame, out, split):
     """Draw a frame's ground truth with the mean wireframe at every GT car pose
@@ -700,8 +705,12 @@ def gt_cmd(kitti_root, frame, out, split):
     from wirescene.io.kitti import KittiDataset
     from wirescene.io.pictures import overlay, save_figure
 
-    check_output_file(out, "--out")
+    check_picture_file(out, "--out")
     dataset = KittiDataset(kitti_root, split=split)
+    ids = dataset.image_ids()
+    if frame not in ids:  # said as such, not as its missing calibration file
+        held = f"its image_2 holds {len(ids)} frames, e.g. {ids[0]}" if ids else "its image_2 holds no .png image"
+        raise click.BadParameter(f"no frame {frame} in {dataset.split_dir} ({held})", param_hint="FRAME")
     camera = dataset.camera(frame)
     cars = dataset.labels(frame).of_type("Car")
     mean = load_default().mean

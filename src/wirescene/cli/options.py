@@ -93,6 +93,20 @@ def check_output_file(path: Path | None, option: str) -> None:
     _check_creatable(path, option)
 
 
+def check_picture_file(path: Path | None, option: str) -> None:
+    """``path`` can be written as a file (:func:`check_output_file`) and its suffix, if it has
+    one, names a format matplotlib writes (``.png``, ``.pdf``, ``.svg``, ...): the picture of
+    a ``.txt`` or ``.json`` path would be a PNG under a name that says otherwise."""
+    if path is None:
+        return
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    suffix = Path(path).suffix
+    if suffix and suffix[1:].lower() not in FigureCanvasBase.get_supported_filetypes():
+        raise click.BadParameter(f"{path}: {suffix} is not a picture format (.png, .pdf, .svg, ...)", param_hint=option)
+    check_output_file(path, option)
+
+
 def check_output_dir(path: Path | None, option: str) -> None:
     """``path`` is (or can be created as) a writable directory."""
     if path is None:

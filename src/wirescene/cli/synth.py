@@ -53,6 +53,9 @@ def synth(out_dir, scenes, seed, cars, occluders, overwrite):
         raise click.BadParameter("empty path (give a directory, e.g. '.')", param_hint="OUT_DIR")
     check_output_dir(Path(out_dir), "OUT_DIR")
     split = Path(out_dir) / "training"
+    if split.exists() and not split.is_dir():  # not scenes: --overwrite would remove it
+        raise click.BadParameter(f"{split} is a file, not a folder of scenes (move it or give another directory)",
+                                 param_hint="OUT_DIR")
     if split.is_dir() and any(split.iterdir()):
         if not overwrite:
             raise click.BadParameter(f"{split} already holds scenes; stale ones would mix with new ones "

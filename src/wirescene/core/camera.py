@@ -232,12 +232,20 @@ def _parse_kitti_calib(text: str, path: Path) -> KittiCalib:
     return KittiCalib(**out, source=str(path))
 
 
+#: ``Tr_velo_to_cam`` of a LiDAR at the camera with KITTI's LiDAR axes (x forward, y left, z up).
+VELO_TO_CAM_AXES = np.array([[0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [1.0, 0.0, 0.0, 0.0]])
+
+
 def write_kitti_calib(path: str | Path, P2: np.ndarray) -> None:
-    """Write a minimal KITTI calibration file whose P0..P3 are ``P2`` and R0 is identity."""
+    """Write a minimal KITTI calibration file, the seven lines of KITTI's in their order:
+    P0..P3 are ``P2``, R0 is identity, ``Tr_velo_to_cam`` that of a LiDAR at the camera
+    with KITTI's axes (:data:`VELO_TO_CAM_AXES`; tools that take label boxes into the LiDAR
+    frame need them), ``Tr_imu_to_velo`` identity."""
     P2 = np.asarray(P2, dtype=float)
     check_shape("P2", P2, (3, 4))
     fmt = lambda a: " ".join(f"{v:.12e}" for v in np.asarray(a).ravel())  # noqa: E731
     lines = [f"P{i}: {fmt(P2)}" for i in range(4)]
     lines.append(f"R0_rect: {fmt(np.eye(3))}")
-    lines.append(f"Tr_velo_to_cam: {fmt(np.eye(4)[:3])}")
+    lines.append(f"Tr_velo_to_cam: {fmt(VELO_TO_CAM_AXES)}")
+    lines.append(f"Tr_imu_to_velo: {fmt(np.eye(4)[:3])}")
     Path(path).write_text("\n".join(lines) + "\n")

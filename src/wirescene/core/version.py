@@ -14,8 +14,8 @@ except PackageNotFoundError:  # a source tree on sys.path that was never install
 
 __all__ = ["__version__", "environment", "package_versions"]
 
-#: The installed packages whose versions a run's figures may depend on.
-_PACKAGES = ("numpy", "scipy", "scikit-learn", "scikit-image", "pillow", "trimesh", "embreex")
+#: The installed packages whose versions a run's figures (and pictures: matplotlib) may depend on.
+_PACKAGES = ("numpy", "scipy", "scikit-learn", "scikit-image", "pillow", "trimesh", "embreex", "matplotlib")
 
 
 def package_versions(names) -> dict:
@@ -31,8 +31,9 @@ def package_versions(names) -> dict:
 
 def environment() -> dict:
     """What a run's figures depend on beside the code: the package versions, and the BLAS
-    library with the kernels it chose for this CPU (``kernels``: OpenBLAS's core type, e.g.
-    ``Haswell`` or ``SkylakeX``; ``OPENBLAS_CORETYPE`` sets it). Models trained with other
+    libraries (numpy's and scipy's, which wheels ship apart) with the kernels they chose for
+    this CPU (``kernels``: OpenBLAS's core type, e.g. ``Haswell`` or ``SkylakeX``;
+    ``OPENBLAS_CORETYPE`` sets it), whatever the caller has imported. Models trained with other
     kernels differ in their last digits (``benchmarks/RESULTS.md``, "The held-out figures on
     a CPU with AVX-512").
 
@@ -43,7 +44,8 @@ def environment() -> dict:
     >>> env["numpy"] == numpy.__version__, sorted(env["blas"][0]) if env["blas"] else []
     (True, ['kernels', 'library', 'version'])
     """
-    import numpy  # noqa: F401  (its BLAS must be loaded for threadpoolctl to see it)
+    import numpy  # noqa: F401  (their BLAS must be loaded for threadpoolctl to see them)
+    import scipy.linalg  # noqa: F401
 
     out: dict = {"wirescene": __version__, "python": platform.python_version(), **package_versions(_PACKAGES)}
     try:

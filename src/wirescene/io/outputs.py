@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
-from wirescene.core.atomic import write_text
+from wirescene.core.atomic import atomic_path, missing_dirs, remove_empty, write_text
 from wirescene.core.camera import Camera
+from wirescene.core.errors import InputError
 from wirescene.core.labels import Label
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.wireframe import EDGES
@@ -45,6 +47,22 @@ def fitted_detections(detections: Detections, estimate: SceneEstimate) -> Detect
     return detections.subset(np.array(sorted(o.detection_index for o in estimate.objects), dtype=int))
 
 
+def fit_output_paths(out_dir: Path, stem: str) -> dict[str, Path]:
+    """``{"labels", "json", "overlay", "bev": path}``: the files :func:`write_fit_outputs` writes."""
+    out_dir = Path(out_dir)
+    return {"labels": out_dir / f"{stem}.txt", "json": out_dir / f"{stem}.json",
+            "overlay": out_dir / f"{stem}_overlay.png", "bev": out_dir / f"{stem}_bev.png"}
+
+
+def fit_outputs_problem(paths: dict[str, Path]) -> tuple[Path, str] | None:
+    """``(path, problem)`` of the first of ``paths`` (:func:`fit_output_paths`) that cannot be
+    written as a file (a folder of its name is there), or None."""
+    for path in paths.values():
+        if path.is_dir():
+            return path, "a folder where the fit writes a file"
+    return None
+
+
 def write_fit_outputs(
     out_dir: Path,
     stem: str,
@@ -57,33 +75,29 @@ def write_fit_outputs(
 ) -> dict[str, Path]:
     """Write ``STEM.txt`` (KITTI labels), ``STEM.json``, ``STEM_overlay.png`` and
     ``STEM_bev.png``. The overlay draws the pre-detections of the fitted cars (not those
-    the fit's verification dropped). Everything is rendered in memory first; if any write
-    fails the files already written by this call are removed, so no partial result remains."""
+    the fit's verification dropped). The four files are written to temporary files in
+    ``out_dir`` first and renamed into place only when all are complete: if any fails (a
+    picture too large to draw, a full disk) ``out_dir`` is left as it was, an earlier run's
+    files of ``STEM`` included, and the directories made for it are removed."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = fit_output_paths(out_dir, stem)
+    problem = fit_outputs_problem(paths)
+    if problem:
+        raise InputError(problem[1], path=problem[0])
+    made = missing_dirs(out_dir)
     payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
     fitted = fitted_detections(detections, estimate)
     title = f"{stem}  {estimate.variant}, {boxes_in_words(detections.source)}"
     fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted, title=title, edges=EDGES)
     fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=title)
-    paths = {
-        "labels": out_dir / f"{stem}.txt",
-        "json": out_dir / f"{stem}.json",
-        "overlay": out_dir / f"{stem}_overlay.png",
-        "bev": out_dir / f"{stem}_bev.png",
-    }
-    written: list[Path] = []
     try:
-        write_labels(paths["labels"], estimate.to_labels())
-        written.append(paths["labels"])
-        write_text(paths["json"], payload)
-        written.append(paths["json"])
-        save_figure(fig_overlay, paths["overlay"])
-        written.append(paths["overlay"])
-        save_figure(fig_bev, paths["bev"])
-        written.append(paths["bev"])
+        with ExitStack() as stack:  # each temporary file replaces its path as the block ends without error
+            tmp = {kind: stack.enter_context(atomic_path(path, suffix=path.suffix)) for kind, path in paths.items()}
+            write_labels(tmp["labels"], estimate.to_labels())
+            write_text(tmp["json"], payload)
+            save_figure(fig_overlay, tmp["overlay"])
+            save_figure(fig_bev, tmp["bev"])
     except BaseException:
-        for p in written:
-            p.unlink(missing_ok=True)
+        remove_empty(made)
         raise
     return paths
