@@ -110,6 +110,14 @@ def _file(tmp, name, text="x"):
     return path
 
 
+def _shape_case(tmp, beside):
+    """``train shape --out tmp/s.npz`` where a directory takes the place of ``beside``, a file
+    the shape model's training writes next to it."""
+    (tmp / beside).mkdir()
+    return ["train", "shape", "--cad-dir", Path(__file__).parent / "data" / "cad", "--out", tmp / "s.npz",
+            "--augment", "0"]
+
+
 def _truncated_copy(tmp, frames, broken):
     """A KITTI root (``tmp/kitti``) of copies of the test ``frames`` whose image of frame ``broken`` is cut short."""
     root = kitti_copy(tmp / "kitti", frames)
@@ -310,6 +318,35 @@ CASES = {
         lambda t: ["train", "scores", t / "run", t / "x" / ".." / "run", "--out", t / "s.json"],
         "evaluation run given twice"),
     "train occlusion --scenes 0": (lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "0"], "--scenes"),
+    "train occlusion with a broken part model": (
+        lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "1", "--models",
+                   _file(t, "models/parts_model.npz").parent], r"models/parts_model\.npz: corrupt artefact file"),
+    "train shape, cad_meshes.npz beside --out a directory": (
+        lambda t: _shape_case(t, "cad_meshes.npz"), r"--out: .*cad_meshes\.npz is a directory, expected a file path"),
+    "train shape --augment 10^10": (
+        lambda t: ["train", "shape", "--cad-dir", Path(__file__).parent / "data" / "cad", "--out", t / "s.npz",
+                   "--augment", "10000000000"], r"--augment: 10000000000 is not in the range 0<=x<=10000"),
+    # a part model smoothed over more than its box (1e300: the fit's Gaussian kernel cannot be made)
+    "train parts --smooth 2": (lambda t: ["train", "parts", "--out", t / "p.npz", "--smooth", "2", "--synth-scenes", "0"],
+                               "--smooth: 2 is above the maximum 1"),
+    "train all parts.smooth=1e300": (
+        lambda t: ["train", "all", KITTI_ROOT, "--out", t / "m", "--set", "parts.smooth=1e300", "--frames", "424242"],
+        r"--set: parts\.smooth must be at most 1"),
+    "train parts --n-views with the box position": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--n-views", "2", "--kind", "sc", "--synth-scenes", "0"],
+        r"n_views: CAD edge renderings \(--n-views\) carry no box position"),
+    "train parts --kitti-background without --n-views": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-background", KITTI_ROOT, "--synth-scenes", "0"],
+        "--kitti-background need --n-views"),
+    "train detector --threshold 7": (lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", t / "none",
+                                                "--threshold", "7"], "--threshold: 7 is above the maximum 1"),
+    # options of the real frames' training given to the synthetic one, and the other way round: refused, not ignored
+    "train detector --calibration without --kitti-root": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--calibration", "4,-2,0.6", "--scenes", "2",
+                   "--val-scenes", "0", "--mining-rounds", "0", "--partial", "0"], "--calibration need --kitti-root"),
+    "train detector --scenes with --kitti-root": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--frames", FRAME,
+                   "--scenes", "3"], "--scenes: synthetic training only, not with --kitti-root"),
     # synthetic scenes
     "synth into an empty path": (lambda t: ["synth", "", "--scenes", "1"], "OUT_DIR: empty path"),
     "synth of 10^20 scenes": (lambda t: ["synth", t / "s", "--scenes", "99999999999999999999"], "--scenes"),

@@ -157,6 +157,22 @@ def test_tiny_retraining_loads_and_learns(tiny):
     assert det.meta["n_trees"] == "3"
 
 
+def test_a_model_smoothed_beyond_its_box_is_refused_naming_the_file(tiny, tmp_path):
+    """The fit's Gaussian kernel of a smoothing of 1e300 box heights cannot be made (a traceback
+    in every fit): the file is refused as it is read, as `train parts --smooth` refuses it."""
+    from wirescene.core.errors import InputError
+
+    det = PartDetector.load(tiny[0])
+    for smooth in (1e300, float("nan"), -0.1):
+        det.smooth = smooth
+        det.save(tmp_path / "smooth.npz")
+        with pytest.raises(InputError, match=r"smooth\.npz: part model's smoothing .* is not within 0 to 1 box heights"):
+            PartDetector.load(tmp_path / "smooth.npz")
+    det.smooth = 1.0
+    det.save(tmp_path / "smooth.npz")
+    assert PartDetector.load(tmp_path / "smooth.npz").smooth == 1.0
+
+
 def test_training_is_deterministic(tiny):
     from wirescene.training.parts import make_patch_data
 

@@ -79,6 +79,24 @@ def test_map_images_in_workers_keeps_the_order():
     assert list(map_images(np.square, [], workers=3)) == []
 
 
+def _interrupted(item):
+    """How a worker takes Ctrl-C, which reaches every process of the group."""
+    import signal
+
+    try:
+        signal.raise_signal(signal.SIGINT)
+    except SystemExit:  # the process ends without a word (multiprocessing prints no traceback for it)
+        return "ends quietly"
+    except KeyboardInterrupt:  # the process ends printing a traceback, every worker its own
+        return "traceback"
+    return "ignored"
+
+
+@pytest.mark.skipif(not can_fork(), reason="no fork start method")
+def test_a_worker_interrupted_by_ctrl_c_ends_without_a_traceback():
+    assert list(map_images(_interrupted, [0, 1], workers=2)) == ["ends quietly"] * 2
+
+
 def test_patch_collector_cap_keeps_a_uniform_sample_in_order():
     from wirescene.training.patches import PatchCollector
 

@@ -17,11 +17,13 @@ augmentation).
 
 from __future__ import annotations
 
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
 from wirescene.core.artefacts import load_json, load_npz, save_json, save_npz
+from wirescene.core.atomic import atomic_path
 from wirescene.core.errors import InputError
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.shape import DEFAULT_MODEL_PATH, ShapeModel, fit_shape_model
@@ -84,21 +86,23 @@ def train_shape_model(cad_dir, out_path=DEFAULT_MODEL_PATH, *, seed: int = 0, au
     W = np.round(np.stack(wireframes), 4)  # the JSON precision, so that both files agree
     model = fit_shape_model(W, names, n_components=n_components, augment=augment, rng=np.random.default_rng(seed))
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    model.save(out_path)
-    if landmarks_path is not False:
-        lp = Path(landmarks_path) if landmarks_path else out_path.parent / "cad_landmarks.json"
-        save_json(lp, {"frame": "object (x forward, y down, z left; metres)", "cars": records},
-                  kind="cad-landmarks", version=1)
-    if meshes_path is not False:
-        mp = Path(meshes_path) if meshes_path else out_path.parent / "cad_meshes.npz"
-        nv = np.cumsum([0] + [len(m.vertices) for m in meshes])
-        nf = np.cumsum([0] + [len(m.faces) for m in meshes])
-        save_npz(mp, dict(
-            names=np.array([m.name for m in meshes], dtype=str),
-            vertex_offsets=nv.astype(np.int64), face_offsets=nf.astype(np.int64),
-            vertices=np.concatenate([m.vertices for m in meshes]).astype(np.float32),
-            faces=np.concatenate([m.faces for m in meshes]).astype(np.int32),
-        ), kind="cad-meshes", version=1)
+    with ExitStack() as files:  # each file written beside its place, which all take once all are written
+        staged = lambda path: files.enter_context(atomic_path(path))  # noqa: E731
+        model.save(staged(out_path))
+        if landmarks_path is not False:
+            lp = Path(landmarks_path) if landmarks_path else out_path.parent / "cad_landmarks.json"
+            save_json(staged(lp), {"frame": "object (x forward, y down, z left; metres)", "cars": records},
+                      kind="cad-landmarks", version=1)
+        if meshes_path is not False:
+            mp = Path(meshes_path) if meshes_path else out_path.parent / "cad_meshes.npz"
+            nv = np.cumsum([0] + [len(m.vertices) for m in meshes])
+            nf = np.cumsum([0] + [len(m.faces) for m in meshes])
+            save_npz(staged(mp), dict(
+                names=np.array([m.name for m in meshes], dtype=str),
+                vertex_offsets=nv.astype(np.int64), face_offsets=nf.astype(np.int64),
+                vertices=np.concatenate([m.vertices for m in meshes]).astype(np.float32),
+                faces=np.concatenate([m.faces for m in meshes]).astype(np.int32),
+            ), kind="cad-meshes", version=1)
     return model
 
 

@@ -14,6 +14,10 @@ from wirescene.core.errors import InputError
 
 __all__ = ["cad", "shape", "draw_car"]
 
+#: Most size-augmented copies per exemplar `train shape` makes: 14 exemplars x 10,000 copies of 108
+#: numbers are 120 MB for the PCA; 10^7 would be 120 GB.
+MAX_AUGMENT = 10_000
+
 
 def _cad_dir(value) -> Path:
     from wirescene.cad.mesh import default_cad_dir
@@ -129,12 +133,16 @@ def show_cmd(name, out, cad_dir):
               help="Shape model .npz to write (the shipped one is src/wirescene/data/shape_model.npz); "
                    "cad_landmarks.json and cad_meshes.npz are written next to it.")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Seed of the size augmentation.")
-@click.option("--augment", type=NON_NEGATIVE, default=None, help="Size-augmented copies per exemplar (default 100).")
+@click.option("--augment", type=click.IntRange(min=0, max=MAX_AUGMENT), default=None,
+              help=f"Size-augmented copies per exemplar (default 100; at most {MAX_AUGMENT:,}, the PCA holding them "
+                   "all in memory).")
 def shape(cad_dir, out, seed, augment):
     """Train the metric PCA wireframe shape model from CAD meshes."""
     from wirescene.cad.training import DEFAULT_AUGMENT, train_shape_model
 
     check_output_file(out, "--out")
+    for beside in ("cad_landmarks.json", "cad_meshes.npz"):  # written next to --out, checked as it is
+        check_output_file(out.parent / beside, "--out")
     model = train_shape_model(_cad_dir(cad_dir), out, seed=seed,
                               augment=DEFAULT_AUGMENT if augment is None else augment, progress=click.echo)
     ev = ", ".join(f"{v:.3f}" for v in model.explained_variance_ratio[:8])

@@ -52,8 +52,8 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
               help="With --kitti-root: Platt 'a,b,c' mapping margins and the verifier's logits to confidences, from "
                    "held-out detections of the same recipe (printed by benchmarks/bench_predetect.py); default: "
                    "leave-one-fold-out training.")
-@click.option("--threshold", type=FiniteFloat(), default=0.5, show_default=True,
-              help="With --kitti-root and a calibration: default detection threshold (confidence).")
+@click.option("--threshold", type=FiniteFloat(min=0.0, max=1.0), default=0.5, show_default=True,
+              help="With --kitti-root and a calibration: default detection threshold (confidence, 0 to 1).")
 @drive_map_option()
 @click.option("--support-weight", type=NON_NEGATIVE_FLOAT, default=SUPPORT_WEIGHT, show_default=True,
               help="With --kitti-root: margin a cluster of detections gains per e-fold of its votes (0: its best vote "
@@ -86,6 +86,18 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
     if drive_mapping is not None and (no_calibration or calibration is not None):
         raise click.UsageError("--drive-map groups the held-out calibration's folds: not with --no-calibration or "
                                "--calibration")
+    # each option given for the other kind of training is refused, not ignored
+    other = ({"--scenes": n_scenes != 200, "--val-scenes": n_val != 20} if kitti_root is not None else
+             {"--frames": frames, "--split-file": split_file, "--folds": folds, "--no-calibration": no_calibration,
+              "--calibration": calibration is not None, "--threshold": threshold != 0.5,
+              "--drive-map": drive_mapping, "--support-weight": support_weight != SUPPORT_WEIGHT,
+              "--per-octave": per_octave != 6, "--cut-paste": cut_paste, "--max-negatives":
+              max_negatives != DEFAULT_MAX_NEGATIVES, "--pyramid-cache-mb": pyramid_cache_mb != DEFAULT_CACHE_MB,
+              "--workers": workers is not None})
+    given = [name for name, value in other.items() if value]
+    if given:
+        raise click.UsageError(" / ".join(given) + (": synthetic training only, not with --kitti-root"
+                                                     if kitti_root is not None else " need --kitti-root"))
     if kitti_root is not None:
         from wirescene.io.kitti import KittiDataset
         from wirescene.training.kitti_detector import check_calibration, train_detector_bank_kitti
@@ -107,9 +119,6 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
                                            workers=workers_count(workers),
                                            drives=drives, progress=click.echo)
     else:
-        if frames or split_file or folds or cut_paste or per_octave != 6 or drive_mapping:
-            raise click.UsageError("--frames / --split-file / --folds / --per-octave / --cut-paste / --drive-map need "
-                                   "--kitti-root")
         from wirescene.training.detector import train_detector_bank
 
         _, rep = train_detector_bank(out, seed=seed, n_scenes=n_scenes, n_partial=n_partial, C=C,

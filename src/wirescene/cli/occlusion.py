@@ -12,7 +12,7 @@ from wirescene.cli.options import NON_NEGATIVE, POSITIVE, check_output_file, loa
 
 @click.command("occlusion")
 @click.option("--seed", type=NON_NEGATIVE, default=2000, show_default=True, help="Synthetic stream of the held-out scenes.")
-@click.option("--scenes", type=POSITIVE, default=30, show_default=True)
+@click.option("--scenes", type=POSITIVE, default=30, show_default=True, help="Held-out synthetic scenes scored.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Record to write (the shipped one is src/wirescene/data/occlusion.json).")
 @click.option("--flip-evidence/--no-flip-evidence", default=False, show_default=True,
@@ -24,12 +24,15 @@ def occlusion(seed, scenes, out, flip_evidence, models):
     the part detectors of --models (default: the shipped ones)."""
     from tqdm import tqdm
 
+    from wirescene.core.resources import resolve_models
     from wirescene.infer.occluded_score import save_occluded_score
     from wirescene.parts.detector import PartDetector
     from wirescene.training.occlusion import calibrate_occluded_score
 
     check_output_file(out, "--out")
-    detector = PartDetector.load(load_models(models).path("parts_model"))
+    found = resolve_models(models)
+    detector = PartDetector.load(found.path("parts_model"))
+    load_models(models)  # says which models, once its part model is read (a broken one: the error line alone)
     result = calibrate_occluded_score(seed=seed, n_scenes=scenes, detector=detector, flip=flip_evidence,
                                       progress=lambda it: tqdm(it, desc="scenes", leave=False, file=sys.stderr))
     save_occluded_score(out, result)

@@ -9,8 +9,8 @@ import click
 
 from wirescene.cli.options import (
     NON_NEGATIVE,
-    NON_NEGATIVE_FLOAT,
     POSITIVE,
+    FiniteFloat,
     check_output_dir,
     check_output_file,
     drive_map_option,
@@ -18,6 +18,7 @@ from wirescene.cli.options import (
     select_frames,
     split_file_option,
 )
+from wirescene.parts import MAX_SMOOTH
 from wirescene.training.recipe import RECIPE
 
 #: The shipped model's options are this command's defaults (``train all`` trains the same).
@@ -27,11 +28,13 @@ _RECIPE = RECIPE["parts"]
 @click.command("parts")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Model .npz to write (the shipped one is src/wirescene/data/parts_model.npz).")
-@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
+@click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True,
+              help="Random stream of the patches' sampling and augmentation and of the forest.")
 @click.option("--n-views", type=NON_NEGATIVE, default=0, show_default=True,
-              help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog only).")
-@click.option("--n-trees", type=POSITIVE, default=30, show_default=True)
-@click.option("--max-depth", type=POSITIVE, default=13, show_default=True)
+              help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog and --no-position "
+                   "only).")
+@click.option("--n-trees", type=POSITIVE, default=30, show_default=True, help="Trees of the random forest.")
+@click.option("--max-depth", type=POSITIVE, default=13, show_default=True, help="Depth limit of each tree.")
 @click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc", "ghog_ms", "ghog_msc"]), default=_RECIPE["kind"],
               show_default=True,
               help="Descriptor (ghog: gradient-orientation histograms of the grey image; ghog_ms: two cell sizes; "
@@ -43,8 +46,8 @@ _RECIPE = RECIPE["parts"]
 @split_file_option
 @click.option("--position/--no-position", default=_RECIPE["position"], show_default=True,
               help="Append the point's position relative to the box to the descriptor.")
-@click.option("--smooth", type=NON_NEGATIVE_FLOAT, default=_RECIPE["smooth"], show_default=True,
-              help="Default Gaussian smoothing of the response maps (sigma in box heights).")
+@click.option("--smooth", type=FiniteFloat(min=0.0, max=MAX_SMOOTH), default=_RECIPE["smooth"], show_default=True,
+              help="Default Gaussian smoothing of the response maps (sigma in box heights, at most 1).")
 @click.option("--calibrate/--no-calibrate", default=None,
               help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root; default: on with "
                    "--kitti-root, as the shipped model).")
@@ -61,12 +64,14 @@ _RECIPE = RECIPE["parts"]
                    "synthetic options (e.g. one per fold).")
 @click.option("--class-weight", type=click.Choice(["balanced", "balanced_subsample", "none"]), default="balanced",
               show_default=True, help="Forest class weights.")
-@click.option("--n-aug", type=POSITIVE, default=2, show_default=True, help="Renderings per view (first unaugmented).")
+@click.option("--n-aug", type=POSITIVE, default=2, show_default=True,
+              help="With --n-views: renderings per view (first unaugmented).")
 @click.option("--heldout", type=NON_NEGATIVE, default=0, show_default=True,
-              help="First evaluate with this many CAD models held out.")
-@click.option("--compare-hog/--no-compare-hog", default=False, help="Also evaluate HOG held-out.")
-@click.option("--kitti-background", type=click.Path(file_okay=False), default=None,
-              help="KITTI root whose car-free regions add background patches (off by default).")
+              help="With --n-views: first evaluate with this many CAD models held out.")
+@click.option("--compare-hog/--no-compare-hog", default=False, help="With --n-views: also evaluate HOG held-out.")
+@click.option("--kitti-background", type=click.Path(file_okay=False, exists=True), default=None,
+              help="With --n-views: labelled KITTI root whose car-free regions add background patches (off by "
+                   "default).")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
 def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, split_file, position, smooth, calibrate,
           drive_mapping, label_shapes, synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog,
@@ -85,6 +90,20 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
     check_output_dir(synth_cache, "--synth-cache")
     if kitti_root is None and (frames is not None or split_file is not None):
         raise click.UsageError("--frames / --split-file need --kitti-root")
+    if not n_views:  # options of the CAD renderings, else ignored
+        given = [name for name, value in (("--n-aug", n_aug != 2), ("--heldout", heldout), ("--compare-hog", compare_hog),
+                                          ("--kitti-background", kitti_background is not None)) if value]
+        if given:
+            raise click.UsageError(f"{' / '.join(given)} need --n-views (CAD edge renderings)")
+    if kitti_background is not None:  # read after the renderings: checked before them
+        from wirescene.core.errors import InputError
+        from wirescene.io.kitti import KittiDataset
+
+        background = KittiDataset(kitti_background)
+        if not background.has_labels:
+            raise InputError("--kitti-background needs label_2/ (the cars its background leaves out)",
+                             path=background.split_dir)
+        background.require_frames()
     if label_shapes is not None:
         if kitti_root is None:
             raise click.UsageError("--label-shapes needs --kitti-root")

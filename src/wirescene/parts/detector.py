@@ -27,6 +27,7 @@ from scipy.ndimage import gaussian_filter
 
 from wirescene.core.errors import InputError, ShapeError, check_shape
 from wirescene.core.resources import DATA_DIR
+from wirescene.parts import MAX_SMOOTH
 from wirescene.parts import features as feat
 
 __all__ = [
@@ -185,11 +186,15 @@ class PartDetector:
             d = {k: z[k] for k in ("roots", "left", "right", "feature", "threshold", "leaf", "values")}
             meta = dict(zip(z["meta_keys"].tolist(), z["meta_values"].tolist()))
             has_cal = "calib_scale" in z
+            smooth = float(z["smooth"]) if "smooth" in z else 0.0
+            if not 0.0 <= smooth <= MAX_SMOOTH:  # NaN too
+                raise InputError(f"part model's smoothing {smooth:g} is not within 0 to {MAX_SMOOTH:g} box heights",
+                                 path=path)
             return cls(**d, value_scale=float(z["value_scale"]), kind=str(z["kind"]),
                        max_depth=int(z["max_depth"]), n_features=int(z["n_features"]), meta=meta,
                        position=bool(z["position"]) if "position" in z else False,
                        context=bool(z["context"]) if "context" in z else False,
-                       smooth=float(z["smooth"]) if "smooth" in z else 0.0,
+                       smooth=smooth,
                        calib_scale=z["calib_scale"] if has_cal else None,
                        calib_offset=z["calib_offset"] if has_cal else None)
         except (KeyError, ValueError) as e:

@@ -718,7 +718,7 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
         the shipped model unless asked
     seed : int -- drives augmentation, background sampling, forest
     n_views : int -- CAD edge renderings: total views per car, split evenly over the 2
-        elevations (144: the paper's 72 x 2); 0: none (edge-map kinds only)
+        elevations (144: the paper's 72 x 2); 0: none (edge-map kinds, without position or context, only)
     n_trees, max_depth : forest size (paper: 30, 13)
     kind : descriptor of the written model (see :mod:`wirescene.parts.features`)
     n_aug : renderings per view (the first unaugmented)
@@ -776,6 +776,9 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     if n_az and any(k in GREY_KINDS for k in kinds):
         raise ArgumentError("n_views", f"CAD edge renderings (--n-views) have no grey image: use n_views=0 with "
                                        f"kinds {GREY_KINDS}")
+    if n_az and (position or context):  # else refused by design_matrix once every patch is made
+        raise ArgumentError("n_views", "CAD edge renderings (--n-views) carry no box position or context: train "
+                                       "them with position=False (--no-position) and context=False")
     if not n_az and not synth_scenes and kitti_root is None:
         raise ArgumentError("synth_scenes", "no training data: n_views and synth_scenes (--n-views, --synth-scenes) "
                                             "are both 0 and no kitti_root (--kitti-root) is given")

@@ -61,6 +61,7 @@ from wirescene.core.resources import (
 from wirescene.core.validate import finite_real
 from wirescene.core.version import __version__, environment
 from wirescene.io.folds import drive_map
+from wirescene.parts import MAX_SMOOTH
 from wirescene.training.kitti_detector import (
     calibration_folds,
     calibration_record,
@@ -153,7 +154,8 @@ def option_default(step: str, key: str):
 #: least any number of a step takes) would break; ``maximum`` None: none.
 OPTION_LIMITS: dict[str, dict[str, tuple]] = {
     "parts": {"n_trees": (1, None), "max_depth": (1, None), "min_samples_leaf": (1, None),
-              "max_real_patches": (1, None), "n_jobs": (-1, None), "synth_seed": (1000, None)},
+              "max_real_patches": (1, None), "n_jobs": (-1, None), "synth_seed": (1000, None),
+              "smooth": (0, MAX_SMOOTH)},
     "detector": {"C": (1e-9, None), "max_pos": (1, None), "min_pos": (1, None), "neg_per_image": (1, None),
                  "min_height": (1, None), "max_scale": (0.01, None), "full_area": (1, None), "partial_area": (1, None),
                  "per_octave": (1, None), "cluster_radius": (0.01, None), "max_negatives": (1, None),

@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import multiprocessing
+import signal
 import time
 from collections import OrderedDict
 from typing import Callable, Iterator, Sequence
@@ -199,6 +200,14 @@ def _run_task(index: int):
 def _worker_init() -> None:
     # what the parent held is shared (copy-on-write); a worker keeps nothing new
     CACHE.max_bytes = 0
+    signal.signal(signal.SIGINT, _end_quietly)
+
+
+def _end_quietly(signum, frame) -> None:
+    """A worker's Ctrl-C (it reaches the whole process group): the worker ends, as it would by
+    default, without the traceback every worker would print; the parent says it was interrupted.
+    Not ignored: the pool's shutdown would wait on a worker that still sends a result."""
+    raise SystemExit(1)
 
 
 def single_thread():
