@@ -7,9 +7,10 @@ them from their label boxes (``fit_frame``, ``--particles`` particles, seed 1, v
 from the box rule), once as the fit's defaults assume KITTI's rig (``assumed``) and, for a
 setting of another height or pitch, once told the camera's mount (``told``:
 ``lifting.camera_height``, ``lifting.camera_pitch``: the pitch the setting adds to the rig's
-random +-2 deg). Reported per variant: the cars, the median bird's-eye error to
+random +-2 deg), and once as KITTI's rig with the pitch read off the frame's boxes
+(``read``: ``lifting.estimate_pitch``, ``wirescene.detect(estimate_pitch=True)``). Reported per variant: the cars, the median bird's-eye error to
 the label location and the share within 1 m. With ``--detect``, our own pre-detection
-(``wirescene.detect`` at 0.3, assumed and told as above) and its recall at IoU 0.5 of the
+(``wirescene.detect`` at 0.3, assumed, told and read as above) and its recall at IoU 0.5 of the
 cars with occlusion <= 1 and truncation < 0.3.
 
 With a pitched camera the label boxes are those of the cars as they stand (their true
@@ -90,7 +91,8 @@ def main() -> None:
     camera = default_camera() if camera is None else camera
     variants = args.variants or ["coarse+gp", "fg+gp"]
     kitti_rig = (KITTI_CAMERA_HEIGHT, 0.0)
-    modes = {"assumed": kitti_rig} | ({"told": (height, pitch)} if (height, pitch) != kitti_rig else {})
+    modes = {"assumed": kitti_rig} | ({"told": (height, pitch)} if (height, pitch) != kitti_rig else {}) \
+        | {"read": kitti_rig}
     errors = {(m, v): [] for m in modes for v in variants}
     found = {m: [0, 0] for m in modes}
     t0 = time.perf_counter()
@@ -106,7 +108,8 @@ def main() -> None:
         for mode, (assumed, assumed_pitch) in modes.items():
             options = FitOptions(seed=1).with_settings({"lifting.n_particles": args.particles, **given,
                                                         "lifting.camera_height": assumed,
-                                                        "lifting.camera_pitch": assumed_pitch})
+                                                        "lifting.camera_pitch": assumed_pitch,
+                                                        "lifting.estimate_pitch": mode == "read"})
             fitted = fit_frame(scene.camera, Detections(boxes, 1.0, np.nan, "gt"), variants, image=scene.image,
                                options=options)
             for v in variants:
@@ -115,7 +118,7 @@ def main() -> None:
             if args.detect:
                 easy = np.array([o.box for o in cars if o.occluded <= 1 and o.truncated < 0.3], float).reshape(-1, 4)
                 dets = wirescene.detect(scene.image, scene.camera, threshold=0.3, camera_height=assumed,
-                                        camera_pitch=assumed_pitch)
+                                        camera_pitch=assumed_pitch, estimate_pitch=mode == "read")
                 hit = (iou_2d(easy[:, None], dets.boxes[None]).max(axis=1) >= 0.5) if len(dets) else np.zeros(len(easy))
                 found[mode][0] += int(np.sum(hit))
                 found[mode][1] += len(easy)

@@ -840,3 +840,65 @@ def test_detect_takes_the_camera_height_and_pitch_and_checks_them():
     assert_close(wirescene.detect(image, calib, camera_pitch=0.0).scores, kitti.scores, atol=0)
     assert not np.array_equal(wirescene.detect(image, calib, camera_pitch=3.0, threshold=0.05).scores,
                               wirescene.detect(image, calib, threshold=0.05).scores)
+
+
+def test_the_pitch_is_read_off_the_boxes_of_cars_on_the_road():
+    """Cars on a road seen by a camera pitched down: the horizon that gives their boxes the
+    ratio the ground prior expects of cars is the camera's; boxes of no car, a box cut by the
+    image's bottom edge and a box of weight 0 do not move it; without a box the pitch told."""
+    from wirescene.core.camera import Camera
+    from wirescene.core.groundplane import plane_rotation
+    from wirescene.predetect.geometry import pitch_from_boxes
+
+    prior = load_default_bank().meta["ground_prior"]
+    camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    for pitch in (-2.0, 0.0, 4.0, 7.0):
+        R = plane_rotation(np.deg2rad(pitch), 0.0)
+        boxes = []
+        for x, z, height in ((3.0, 8.0, 1.5), (-2.0, 14.0, 1.45), (5.0, 22.0, 1.55), (-4.0, 35.0, 1.5)):
+            (ub, vb), (_, vt) = camera.project(np.array([[x, 1.65, z], [x, 1.65 - height, z]]) @ R.T)
+            boxes.append([ub - 40, vt, ub + 40, vb])
+        clutter = [[100, 20, 160, 60], [900, 0, 1000, 120]]  # a facade's windows, a tree
+        found = pitch_from_boxes(prior, camera, boxes + clutter)
+        assert abs(found - pitch) < 0.5, (pitch, found)
+        cut = [[300, 200, 700, 369]]  # a near car the image's bottom edge cuts: its bottom is not its own
+        assert pitch_from_boxes(prior, camera, boxes + clutter + cut) == found
+        weights = [1.0] * len(boxes) + [0.0, 0.0]
+        assert abs(pitch_from_boxes(prior, camera, boxes + clutter, weights=weights) - pitch) < 0.3
+    assert pitch_from_boxes(prior, camera, np.zeros((0, 4)), told=Mount(1.65, 2.5)) == 2.5
+    with pytest.raises(ValueError, match="one value per box"):
+        pitch_from_boxes(prior, camera, boxes, weights=[1.0])
+
+
+def test_detect_reads_the_pitch_of_a_camera_that_was_not_told_it():
+    """The frame's calibration with the principal point 50 px lower: the road's horizon lies
+    50 px above the one its priors read, as for a camera pitched down by 4 deg. Told nothing, the
+    ground prior scores the frame's cars as boxes standing off the road; reading the pitch
+    off the boxes, it finds the level rig's cars again."""
+    import wirescene
+    from wirescene.core.camera import Camera, read_projection
+    from wirescene.core.errors import ArgumentError
+    from wirescene.core.resources import DATA_DIR
+    from wirescene.fitting.pipeline import detector_bank, image_mount
+
+    frame = DATA_DIR / "sample" / "kitti" / "training"
+    image = read_image(frame / "image_2" / "000010.png")
+    P = read_projection(frame / "calib" / "000010.txt")
+    moved = P.copy()
+    moved[1, 2] += 50.0
+    level = wirescene.detect(image, P)
+    shifted = Camera(moved, (image.shape[1], image.shape[0]))
+    pitch = image_mount(shifted, image, bank=detector_bank(None)).pitch
+    assert abs(pitch - np.rad2deg(np.arctan(50.0 / P[1, 1]))) < 1.0, pitch
+    read = wirescene.detect(image, moved, estimate_pitch=True)
+    not_told = wirescene.detect(image, moved)
+
+    def found(dets):  # the level rig's cars found again
+        return int((iou_2d(level.boxes[:, None], dets.boxes[None]).max(1) >= 0.5).sum()) if len(dets) else 0
+
+    assert found(read) >= len(level) - 1 and found(read) > found(not_told) + 3, (len(level), found(read),
+                                                                                found(not_told))
+    told = wirescene.detect(image, moved, camera_pitch=float(np.rad2deg(np.arctan(50.0 / P[1, 1]))))
+    assert_close(told.boxes, level.boxes, atol=1e-6)  # told, the pitch is the principal point's row
+    with pytest.raises(ArgumentError, match="estimate_pitch"):
+        wirescene.detect(image, P, estimate_pitch="yes")

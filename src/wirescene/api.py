@@ -332,7 +332,7 @@ def fit(
 
 
 def detect(image, calib=None, *, models=None, threshold: float | None = None,
-           camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0,
+           camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0, estimate_pitch: bool = False,
            smallest_car: float | None = None) -> Detections:
     """wirescene's own 2D pre-detection of cars (paper Sec. 3.4).
 
@@ -363,6 +363,11 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         Degrees the camera looks down from the road (KITTI's rig: level, 0), which raises the
         horizon those priors read by ``f tan(pitch)`` pixels; the fit reads it from
         ``settings={"lifting.camera_pitch": D}``.
+    estimate_pitch : bool, optional
+        Read the camera's pitch off the boxes the bank finds without those priors, about
+        ``camera_pitch`` (:func:`wirescene.fitting.pipeline.image_mount`; a camera whose tilt is
+        not known; the pre-detection then takes 1.7x as long); the fit reads it from
+        ``settings={"lifting.estimate_pitch": True}``.
     smallest_car : float, optional
         The smallest car height searched in pixels, at least 10 (None or 0: the bank's own,
         25 px), the image upsampled to reach it: e.g. scaled by the focal length for a camera
@@ -385,11 +390,13 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     >>> bool((dets.scores > 0.5).all())  # above the shipped bank's threshold
     True
     """
-    from wirescene.fitting.pipeline import PredetectOptions, detections_above, detector_bank
+    from wirescene.fitting.pipeline import PredetectOptions, detections_above, detector_bank, image_mount
     from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
+    if not isinstance(estimate_pitch, bool):
+        raise ArgumentError("estimate_pitch", f"expected True or False, got {estimate_pitch!r}")
     # the bounds `--set lifting.NAME` / `--set predetect.NAME` and the detect command check
     for stage, name, value in ((LiftingOptions, "camera_height", camera_height),
                                (LiftingOptions, "camera_pitch", camera_pitch),
@@ -407,6 +414,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
     min_height, max_scale = smallest_car_search(bank, smallest_car)
     pyramid, responses = bank_pyramid(bank, rgb, max_scale=max_scale), {}
+    if estimate_pitch and camera is not None:
+        mount = image_mount(camera, rgb, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
     dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
                        min_height=min_height, mount=mount)
     return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses, mount=mount)

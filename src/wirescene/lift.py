@@ -58,6 +58,11 @@ class LiftingOptions:
     camera_height: float = bounded(KITTI_CAMERA_HEIGHT, minimum=0.1)  # metres above the road
     # Degrees the camera looks down from the road (a dashcam's tilt; KITTI's rig is level to +-1 deg).
     camera_pitch: float = bounded(0.0, minimum=-45.0, maximum=45.0)
+    # Off: on KITTI's level rig reading it costs `coarse` 9 of 148 cars within 1 m (benchmarks/RESULTS.md,
+    # "A camera's pitch read off its boxes").
+    estimate_pitch: bool = option(False, help="Read the camera's pitch off each frame's boxes, within 15 deg of "
+                                              "lifting.camera_pitch (a camera whose tilt is not known; our own "
+                                              "pre-detection then takes 1.7x as long).")
     n_particles: int = bounded(250, minimum=1)
     # Weight of the prior that cars head along the road (:func:`road_alignment_cost`), which a box leaves open; 0: off.
     road_prior: float = option(0.03, help="Weight of the coarse stage's prior that cars head along the road "

@@ -186,11 +186,14 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--camera-pitch", type=field_type(stage_field(LiftingOptions, "camera_pitch")), default=0.0, show_default=True,
               help="Degrees the camera looks down from the road, which raises the horizon those priors read "
                    "(the fit's --set lifting.camera_pitch).")
+@click.option("--estimate-pitch", is_flag=True, default=False,
+              help="Read each frame's camera pitch off the boxes found without those priors, about --camera-pitch "
+                   "(a camera whose tilt is not known; 1.7x the detection's time; the fit's --estimate-pitch).")
 @click.option("--smallest-car", type=field_type(stage_field(PredetectOptions, "smallest_car")), default=0.0,
               show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
                                       "upsampled to reach it (the fit's --smallest-car).")
 def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out,
-           camera_height, camera_pitch, smallest_car):
+           camera_height, camera_pitch, estimate_pitch, smallest_car):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
 
     The files of --out hold the detections above the threshold with the viewpoints the
@@ -199,7 +202,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
 
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import detections_above
+    from wirescene.fitting.pipeline import detections_above, image_mount
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars, smallest_car_search
@@ -212,7 +215,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
     min_height, max_scale = smallest_car_search(bank, smallest_car)
-    mount = Mount(camera_height, camera_pitch)
+    told = Mount(camera_height, camera_pitch)
     dets_all, gts, times = [], [], []
     files: dict[str, str] = {}  # FRAME.json of --out, written once every frame is done (no partial output)
     with single_thread():
@@ -221,6 +224,8 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
             t = time.perf_counter()
             # the features and templates' responses, kept for the viewpoints of the boxes written
             pyramid, responses = bank_pyramid(bank, img, max_scale=max_scale), ({} if out_dir is not None else None)
+            mount = told if not estimate_pitch else image_mount(ds.camera(fid), img, bank=bank, told=told,
+                                                                pyramid=pyramid, min_height=min_height)
             d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=ds.camera(fid), pyramid=pyramid,
                             responses=responses, min_height=min_height, mount=mount)
             times.append(time.perf_counter() - t)

@@ -83,11 +83,12 @@ class DetectionSource:
             from wirescene.fitting.pipeline import detect_own, detector_bank, viewpoint_classifier
             from wirescene.lift import LiftingOptions
 
+            rig = LiftingOptions() if lifting is None else lifting
             return detect_own(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
                               classifier=viewpoint_classifier(self.classifier),
                               threshold=None if predetect is None else predetect.threshold,
                               smallest_car=None if predetect is None else predetect.smallest_car,
-                              mount=(LiftingOptions() if lifting is None else lifting).mount)
+                              mount=rig.mount, estimate_pitch=rig.estimate_pitch)
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:

@@ -19,7 +19,7 @@ from wirescene.core.camera import Camera
 from wirescene.core.errors import ArgumentError, check_shape
 from wirescene.core.groundplane import KITTI_MOUNT, Mount
 from wirescene.core.resources import cached_by_file
-from wirescene.core.settings import option
+from wirescene.core.settings import option, stage_field
 from wirescene.core.shape import load_default as load_shape_model
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.fitting.confidence import apply_confidence, keep_likely_cars
@@ -266,10 +266,54 @@ def detections_above(camera: Camera | None, image: np.ndarray, found: Detections
     return out
 
 
+#: Score down to which the templates' boxes, found without the priors, tell a frame's pitch
+#: (:func:`detect_own` with ``estimate_pitch``): below the fit's threshold, as the ground
+#: term the priors would add is missing; each box weighs its score.
+PITCH_THRESHOLD = 0.1
+
+
+def frame_pitch(camera: Camera, detections: Detections, *, bank, told: Mount = KITTI_MOUNT,
+                weighted: bool = False) -> float:
+    """The camera's pitch read off a frame's boxes
+    (:func:`~wirescene.predetect.geometry.pitch_from_boxes` with ``bank``'s ground prior,
+    about ``told``; ``weighted``: each box by its score, a probability of a car), within
+    ``LiftingOptions.camera_pitch``'s bounds; ``told.pitch`` for a bank without a ground prior.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> frame_pitch(camera, Detections.empty("none"), bank=detector_bank(None))  # no box: the pitch told
+    0.0
+    """
+    from wirescene.predetect.geometry import pitch_from_boxes
+
+    prior = bank.meta.get("ground_prior")
+    if not prior:
+        return float(told.pitch)
+    weights = np.clip(detections.scores, 0.0, 1.0) if weighted else None
+    pitch = pitch_from_boxes(prior, camera, detections.boxes, weights=weights, told=told)
+    bounds = stage_field(LiftingOptions, "camera_pitch").metadata
+    return min(max(pitch, bounds["minimum"]), bounds["maximum"])
+
+
+def image_mount(camera: Camera, image: np.ndarray, *, bank, told: Mount = KITTI_MOUNT, pyramid: list | None = None,
+                min_height: float | None = None) -> Mount:
+    """``told`` with the pitch read off the boxes ``bank``'s templates find in ``image``
+    without the priors, which need the pitch (:func:`frame_pitch`, down to
+    :data:`PITCH_THRESHOLD`, each box weighed by its score); ``pyramid`` and ``min_height`` as
+    in :func:`~wirescene.predetect.bank.detect_cars`."""
+    from wirescene.predetect import detect_cars
+
+    raw = detect_cars(image, bank=bank, threshold=PITCH_THRESHOLD, pyramid=pyramid, min_height=min_height)
+    return Mount(told.height, frame_pitch(camera, raw, bank=bank, told=told, weighted=True))
+
+
 def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
                detections: Detections | None = None, threshold: float | None = None, pyramid: list | None = None,
                responses: dict | None = None, smallest_car: float | None = None,
-               mount: Mount = KITTI_MOUNT) -> Detections:
+               mount: Mount = KITTI_MOUNT, estimate_pitch: bool = False) -> Detections:
     """Our own pre-detection (stage 1): the detector bank's cars at its threshold
     (:func:`wirescene.predetect.detect_cars`, with the camera), each box's viewpoint then
     chosen as for the boxes of any other detector (:func:`complete_viewpoints`: the bank's
@@ -287,7 +331,9 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     bank's own), the pyramid's largest scale moved so that the bank's smallest templates reach
     it; ``mount``: the camera's height above the road and pitch down from it
     (:class:`~wirescene.core.groundplane.Mount`; ``LiftingOptions.mount``), for the ground and
-    traffic priors learned at KITTI's level rig. Returns the bank's boxes and
+    traffic priors learned at KITTI's level rig; ``estimate_pitch``: the priors read the
+    camera's pitch off the boxes the templates find without them (:func:`frame_pitch` about
+    ``mount``'s; ``LiftingOptions.estimate_pitch``). Returns the bank's boxes and
     calibrated scores with the rule's viewpoints.
 
     Examples
@@ -304,6 +350,8 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
         min_height, max_scale = smallest_car_search(bank, smallest_car)
         # the templates' features and responses, read again by the box rule
         pyramid, responses = (bank_pyramid(bank, image, max_scale=max_scale) if pyramid is None else pyramid), {}
+        if estimate_pitch and camera is not None:
+            mount = image_mount(camera, image, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
         found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, pyramid=pyramid, responses=responses,
                             min_height=min_height, mount=mount)
     else:
@@ -407,8 +455,13 @@ def fit_frame(
         detections = detect_own(camera, image, bank=detector_bank(options.detector_bank),
                                 classifier=viewpoint_classifier(options.viewpoint_classifier),
                                 threshold=options.predetect.threshold, smallest_car=options.predetect.smallest_car,
-                                mount=options.lifting.mount)
+                                mount=options.lifting.mount, estimate_pitch=options.lifting.estimate_pitch)
         own = True
+    if options.lifting.estimate_pitch and len(detections):
+        # the fit's plane and priors about the pitch its boxes tell (our own weighed by their scores)
+        pitch = frame_pitch(camera, detections, bank=detector_bank(options.detector_bank), told=options.lifting.mount,
+                            weighted=own)
+        options = replace(options, lifting=replace(options.lifting, camera_pitch=pitch, estimate_pitch=False))
     if own:
         options = replace(options, inference=replace(options.inference, box_weight=options.predetect.box_weight))
     if len(detections) == 0:

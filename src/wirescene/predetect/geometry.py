@@ -121,3 +121,70 @@ def ground_log_ratio(prior: dict, boxes, horizon: float | Horizon) -> np.ndarray
     eps = float(prior.get("outlier_share", OUTLIER_SHARE))
     car = np.logaddexp(np.log1p(-eps) + _log_normal(r, *prior["car"]), np.log(eps) + bg)
     return car - bg
+
+
+
+#: Spread (degrees) of the pitch's prior about the one told (``LiftingOptions.camera_pitch``):
+#: a dashcam's tilt, not a free search.
+PITCH_SPREAD = 5.0
+
+
+def pitch_from_boxes(prior: dict, camera, boxes, *, weights=None, told: Mount = KITTI_MOUNT) -> float:
+    """The camera's pitch (degrees down from the road) under which ``boxes`` stand on the
+    road as cars do, its height above the road told.
+
+    A car's box lies ``f Hcam / Z`` below the horizon and is ``f Hc / Z`` high: the ratio of
+    the two is the same for every car (:func:`bottom_ratio`), and the horizon that gives the
+    frame's boxes the ratios the ground ``prior`` expects of cars (its car density, mixed
+    with the background's for boxes that are no car's; ``weights`` per box, e.g. their
+    probability of a car, default 1) is the camera's pitch, searched on a grid of 0.1 deg
+    within 15 deg of ``told.pitch`` under a normal prior about it (:data:`PITCH_SPREAD`).
+    Boxes cut by the image's bottom edge say nothing of where their car stands and are left
+    out; without a box the told pitch is returned. The height is not estimated: the boxes
+    fix the ratio of the camera's height to the cars' only, and a car's height varies by
+    10%.
+
+    Parameters
+    ----------
+    prior : dict
+        A ground prior (:func:`fit_ground_prior`; a bank's ``meta["ground_prior"]``).
+    camera : Camera
+    boxes : (D, 4) array
+        ``x1 y1 x2 y2`` in pixels.
+    weights : (D,) array, optional
+    told : Mount, optional
+        The camera's height, and the pitch the prior is centred on.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> prior = {"car": [1.1, 0.08], "background": [0.5, 1.0]}
+    >>> z = np.array([8.0, 12.0, 20.0, 30.0])  # cars 1.5 m high seen from 1.65 m, the horizon 50 px up
+    >>> bottom, top = 120 + 720 * 1.65 / z, 120 + 720 * (1.65 - 1.5) / z
+    >>> boxes = np.stack([np.full(4, 500.0), top, np.full(4, 600.0), bottom], axis=1)
+    >>> round(pitch_from_boxes(prior, camera, boxes), 1)
+    4.0
+    """
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    w = np.ones(len(b)) if weights is None else np.asarray(weights, float).reshape(-1)
+    if len(w) != len(b):
+        raise ValueError(f"weights must have one value per box ({len(b)}), got {len(w)}")
+    size = getattr(camera, "image_size", None)
+    keep = np.isfinite(b).all(1) & np.isfinite(w) & (w > 0) & (b[:, 3] - b[:, 1] >= 1)
+    if size is not None:
+        keep &= b[:, 3] < size[1] - 2  # cut by the bottom edge: its bottom is not the car's
+    if not keep.any():
+        return float(told.pitch)
+    pitch = told.pitch + np.arange(-150, 151) / 10.0  # (G,) degrees
+    ratios = np.stack([bottom_ratio(b[keep], road_horizon(camera, Mount(told.height, p))) for p in pitch])  # (G, D)
+    eps = float(prior.get("outlier_share", OUTLIER_SHARE))
+    density = np.logaddexp(np.log1p(-eps) + _log_normal(ratios, *prior["car"]),
+                           np.log(eps) + _log_normal(ratios, *prior["background"]))
+    score = density @ w[keep] - 0.5 * ((pitch - told.pitch) / PITCH_SPREAD) ** 2
+    return float(pitch[np.argmax(score)])
