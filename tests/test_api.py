@@ -504,6 +504,34 @@ def test_the_api_resolves_and_checks_the_device_before_any_work(frame, monkeypat
                                  settings={"inference.device": "auto"}).objects) == 1
 
 
+def test_the_api_looks_for_no_gpu_when_no_variant_casts_rays(frame, monkeypatch):
+    """``inference.device`` ``auto`` with only coarse variants is numpy, PyTorch never imported
+    to look for a GPU; a fine variant looks (a machine whose PyTorch sees one, faked)."""
+    from collections import defaultdict
+    from types import SimpleNamespace
+
+    import wirescene.eval.runner
+    from wirescene.infer import torch_backend
+
+    image, camera, labels = frame
+    boxes = [o.box for o in labels.of_type("Car")][:1]
+    looked, devices = [], []
+    monkeypatch.setattr(torch_backend, "available", lambda: True)
+    monkeypatch.setattr(torch_backend, "resolve_device",
+                        lambda name: looked.append(name) or SimpleNamespace(type="cuda"))
+    monkeypatch.setattr("wirescene.api.fit_frame", lambda *a, options, **k: devices.append(options.inference.device)
+                        or SimpleNamespace(estimates=defaultdict(lambda: None)))
+    monkeypatch.setattr(wirescene.eval.runner, "evaluate_dataset", lambda *a, options, **k: devices.append(
+        options.inference.device))
+    auto = {"inference.device": "auto"}
+    wirescene.fit(image, camera, boxes, variant="coarse+gp", settings=auto)
+    wirescene.evaluate(KITTI_ROOT, variants=("coarse", "coarse+gp"), frames=[FRAME], settings=auto)
+    assert devices == ["numpy", "numpy"] and not looked
+    wirescene.fit(image, camera, boxes, variant="fg", settings=auto)
+    wirescene.evaluate(KITTI_ROOT, variants=("coarse", "full"), frames=[FRAME], settings=auto)
+    assert devices[2:] == ["cuda", "cuda"] and looked == ["auto", "auto"]
+
+
 def test_a_model_retrained_in_place_is_loaded_anew(tmp_path):
     """Models are loaded once per version of their file: one retrained (or broken) at the same
     path, in a notebook or a long-lived process, is read again, never the cached one."""

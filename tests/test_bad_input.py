@@ -257,6 +257,11 @@ CASES = {
                              r"--samples: 100000 is not in the range 2<=x<=200"),
     "fit --smallest-car 2": (lambda t: [*_fit_case(t), "--smallest-car", "2", "--out", t / "o"],
                              r"--smallest-car: 2 is below the minimum 10 \(0: the bank's own\)"),
+    "fit --set a plane grid too fine": (
+        lambda t: [*_fit_case(t), "--set", "lifting.pitch_step=0.01", "--set", "lifting.roll_step=0.01", "--set",
+                   "lifting.roll_range=3", "--out", t / "o"],
+        r"^wirescene: error: --set: lifting.pitch_range, lifting.pitch_step, lifting.roll_range, lifting.roll_step give "
+        r"601 pitches x 601 rolls = 361,201 ground planes, at most 250,000"),
     "eval --set predetect.smallest_car=5": (
         lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", FRAME, "--set", "predetect.smallest_car=5"],
         r"predetect.smallest_car must be 0 \(the bank's own\) or at least 10, got 5.0"),

@@ -400,12 +400,37 @@ def test_device_auto_takes_the_gpu_only_when_frames_are_fitted_in_one_process(mo
             "--draws", "0")
     assert r.exit_code == 0, r.output
     # --device cuda on several frames: one process without --workers (said), a refusal with --workers 2
-    monkeypatch.setattr(torch_backend, "choose_device", lambda name, parallel=False: "cuda" if name == "cuda" else "numpy")
+    monkeypatch.setattr(torch_backend, "choose_device", lambda name, **_: "cuda" if name == "cuda" else "numpy")
     frames = ["--variant", "coarse", "--frames", "000002,000010", "--particles", "8", "--draws", "0", "--device", "cuda"]
     r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), *frames])
     assert r.exit_code == 0 and "fits frames in one process, not" in r.stderr, r.output
     r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), *frames, "--workers", "2"])
     assert r.exit_code == 2 and "drop --workers" in r.output
+
+
+def test_device_auto_looks_for_no_gpu_when_only_coarse_variants_are_fitted(monkeypatch, tmp_path):
+    """The coarse variants cast no rays: ``fit``, ``eval`` and ``predict`` resolve ``auto`` to
+    numpy without importing PyTorch to look for a GPU; a fine variant still looks."""
+    from types import SimpleNamespace
+
+    from wirescene.cli.main import _fit_options
+    from wirescene.infer import torch_backend
+
+    looked = []
+    monkeypatch.setattr(torch_backend, "available", lambda: True)  # a machine whose PyTorch sees a GPU
+    monkeypatch.setattr(torch_backend, "resolve_device",
+                        lambda name: looked.append(name) or SimpleNamespace(type="cuda"))
+    frame = ["--calib", SPLIT / "calib" / "000010.txt", "--detections", SPLIT / "label_2" / "000010.txt"]
+    r = run("fit", SPLIT / "image_2" / "000010.png", *frame, "--variant", "coarse", "--particles", "8",
+            "--out", tmp_path / "fit")
+    assert r.exit_code == 0 and not looked, (r.output, looked)
+    r = run("eval", KITTI_ROOT, "--variant", "coarse", "--variant", "coarse+gp", "--frames", "000010",
+            "--particles", "8", "--draws", "0")
+    assert r.exit_code == 0 and not looked, (r.output, looked)
+    r = run("predict", KITTI_ROOT, "--split", "training", "--variant", "coarse+gp", "--frames", "000010",
+            "--particles", "8", "--detections", "gt", "--out", tmp_path / "pred")
+    assert r.exit_code == 0 and not looked, (r.output, looked)
+    assert _fit_options(8, 0).inference.device == "cuda" and looked == ["auto"]
 
 
 def test_eval_with_the_torch_backend_equals_numpy(tmp_path):

@@ -59,6 +59,28 @@ def test_every_number_of_the_stage_options_is_checked_against_its_kind_and_limit
         FitOptions(seed=1.5).checked()
 
 
+def test_the_coarse_grid_is_bounded_in_planes_whatever_step_is_refined():
+    """One check on the plane grid's size (pitches x rolls), not per step: the finest steps
+    over the default ranges pass, and so does either step refined alone; more than
+    MAX_GRID_PLANES planes is a ValueError naming the four options."""
+    from wirescene.lift import MAX_GRID_PLANES
+
+    options = FitOptions()
+    finest = options.with_settings({"lifting.pitch_step": 0.01, "lifting.roll_step": 0.01}).lifting
+    assert len(finest.plane_grid()[0]) == 601 * 301 <= MAX_GRID_PLANES and LiftingOptions().combined_problem() is None
+    assert options.with_settings({"lifting.pitch_range": 45, "lifting.pitch_step": 0.01}).lifting.pitch_step == 0.01
+    names = "lifting.pitch_range, lifting.pitch_step, lifting.roll_range, lifting.roll_step"
+    with pytest.raises(ValueError, match=f"^{names} give 601 pitches x 601 rolls = 361,201 ground planes, "
+                                         "at most 250,000: take coarser steps or narrower ranges$"):
+        options.with_settings({"lifting.pitch_step": 0.01, "lifting.roll_step": "0.01", "lifting.roll_range": 3})
+    with pytest.raises(ValueError, match=r"give 8e\+300 pitches x 13 rolls"):  # counted, never built
+        options.with_settings({"lifting.pitch_range": 1e300})
+    with pytest.raises(ArgumentError, match=f"^options: {names} give 2,001 pitches"):  # options built directly
+        FitOptions(lifting=LiftingOptions(pitch_range=10, pitch_step=0.01, roll_step=0.01)).checked()
+    with pytest.raises(ArgumentError, match="pitch_step must be at least 0.01"):  # a bad step: its own message
+        FitOptions(lifting=LiftingOptions(pitch_step=0.0)).checked()
+
+
 def test_with_settings_reaches_every_stage_and_refuses_unknown_ones():
     out = FitOptions().with_settings({"inference.polish_samples": "6", "lifting.iterations": 2})
     assert out.inference.polish_samples == 6 and out.lifting.iterations == 2
@@ -116,6 +138,10 @@ def test_api_settings_errors_name_the_argument():
         wirescene.fit(image, P, [[50, 40, 120, 80]], settings={"inference.nope": 1})
     with pytest.raises(ArgumentError, match="settings"):
         wirescene.fit(image, P, [[50, 40, 120, 80]], settings=["inference.box_weight=1"])
+    with pytest.raises(ArgumentError, match="^settings: lifting.pitch_range, lifting.pitch_step, lifting.roll_range, "
+                                            "lifting.roll_step give 601 pitches x 601 rolls"):
+        wirescene.fit(image, P, [[50, 40, 120, 80]], settings={"lifting.pitch_step": 0.01, "lifting.roll_step": 0.01,
+                                                               "lifting.roll_range": 3})
 
 
 def test_set_on_the_command_line_is_checked(tmp_path):

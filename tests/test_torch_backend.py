@@ -97,6 +97,25 @@ def test_a_pytorch_that_cannot_be_imported_is_numpy_for_auto_and_named_for_a_dev
         tb.choose_device("tpu")
 
 
+def test_auto_imports_no_pytorch_when_nothing_casts_rays(monkeypatch):
+    """The coarse variants cast no rays: ``auto`` is numpy at once, without importing PyTorch
+    to look for a GPU; a device named is checked as before."""
+    looked = []
+
+    class Cuda(str):  # a torch.device of a GPU: its type, and its name as a string
+        type = "cuda"
+
+    def gpu(name):
+        looked.append(name)
+        return Cuda("cuda")
+
+    monkeypatch.setattr(tb, "available", lambda: True)
+    monkeypatch.setattr(tb, "resolve_device", gpu)
+    assert tb.choose_device("auto", casts_rays=False) == "numpy" and not looked
+    assert tb.choose_device("cuda", casts_rays=False) == "cuda" and looked == ["cuda"]
+    assert tb.choose_device("auto") == "cuda"
+
+
 def test_resolve_device_names(torch):
     assert tb.resolve_device("cpu") == torch.device("cpu")
     assert tb.resolve_device(" CPU ") == torch.device("cpu")

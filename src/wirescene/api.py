@@ -23,7 +23,7 @@ from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.validate import boxes_problem, finite_real, projection_problem
 from wirescene.fitting.pipeline import FitOptions, fit_frame
-from wirescene.fitting.variants import VARIANTS
+from wirescene.fitting.variants import VARIANTS, casts_rays
 from wirescene.infer.inference import InferenceOptions
 from wirescene.lift import LiftingOptions
 
@@ -208,9 +208,10 @@ def _models(models):
 
 
 def _options(options: FitOptions | None, particles, seed, models=None, settings=None, *,
-             parallel: bool = False) -> FitOptions:
+             parallel: bool = False, casts_rays: bool = True) -> FitOptions:
     """The fit's options of the API's arguments, the device resolved and checked before
-    any work (:func:`wirescene.infer.torch_backend.choose_device`, as the CLI's)."""
+    any work (:func:`wirescene.infer.torch_backend.choose_device`, as the CLI's; ``casts_rays``:
+    a variant to be fitted is a fine one, :func:`wirescene.fitting.variants.casts_rays`)."""
     from dataclasses import replace
 
     from wirescene.fitting.models import with_models
@@ -229,7 +230,7 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
             options = options.with_settings(settings)
         except (ValueError, TypeError) as exc:
             raise ArgumentError("settings", str(exc)) from None
-    device = choose_device(options.inference.device, parallel=parallel)
+    device = choose_device(options.inference.device, parallel=parallel, casts_rays=casts_rays)
     return with_models(replace(options, inference=replace(options.inference, device=device)), _models(models))
 
 
@@ -327,7 +328,8 @@ def fit(
     if len(names) != 1:
         raise ArgumentError("variant", f"fit takes one variant, got {len(names)}; fit_frame or evaluate fit several")
     (name,) = names
-    fitted = fit_frame(camera, dets, [name], image=rgb, options=_options(options, particles, seed, models, settings))
+    fitted = fit_frame(camera, dets, [name], image=rgb,
+                       options=_options(options, particles, seed, models, settings, casts_rays=casts_rays(names)))
     return fitted.estimates[name]
 
 
@@ -594,7 +596,8 @@ def evaluate(
     several = frame_ids is None or len(frame_ids) > 1
     if resume and predictions is None:
         raise ArgumentError("resume", "needs predictions, the directory where finished frames are recorded")
-    options = _options(None, particles, seed, models, settings, parallel=several and _positive_int(workers, "workers") > 1)
+    options = _options(None, particles, seed, models, settings, parallel=several and _positive_int(workers, "workers") > 1,
+                       casts_rays=casts_rays(names))
     return evaluate_dataset(dataset, names, frames=frame_ids,
                             source=DetectionSource(str(detections), bank=options.detector_bank,
                                                    classifier=options.viewpoint_classifier),

@@ -3,7 +3,8 @@ size standing on a ground plane, by a grid search over ground-plane pitch and ro
 object azimuth, with the object's position on the plane solved for each grid cell so
 that the projected box matches the detected 2D box.
 
-The search is one vectorised computation over (detections x planes x azimuths): for every
+The search is vectorised over (detections x planes x azimuths), a block of cells at a time
+(:data:`LIFT_BLOCK_CELLS`: the memory does not grow with the grid): for every
 cell a few damped Gauss-Newton steps on (x, log z) minimise the squared difference of the
 projected and detected box sides, normalised by the detection's diagonal, and each
 (detection, plane) keeps the azimuth that best fits its box under a prior that cars head
@@ -33,10 +34,22 @@ from wirescene.core.groundplane import (
 )
 from wirescene.core.settings import bounded, option
 from wirescene.core.types import Detections, SceneParticles
+from wirescene.core.validate import finite_real
 
 #: Width (degrees) of the road-alignment prior (:func:`road_alignment_cost`), one for
 #: both stages: the fine stage's prior and its gate act on what the coarse prior settled.
 ROAD_PRIOR_WIDTH = 20.0
+
+#: (detection, plane, azimuth) cells the grid search solves at once (:func:`lift_table`): about
+#: 930 bytes of temporaries a cell, 120 MB whatever the grid and the detections. The default grid
+#: of a frame of up to 21 cars is one block: smaller ones made a fresh process slower, its
+#: allocator returning and faulting the blocks' memory again and again.
+LIFT_BLOCK_CELLS = 1 << 17
+
+#: Most ground planes (pitches x rolls) the coarse grid may hold: its table keeps some 40 bytes
+#: a (detection, plane), so 100 detections take 1 GB at most; 0.01 deg steps over the default
+#: ranges make 180,901 planes, the defaults 325.
+MAX_GRID_PLANES = 250_000
 
 
 @dataclass(frozen=True)
@@ -81,6 +94,29 @@ class LiftingOptions:
         pp, rr = np.meshgrid(pitch, roll, indexing="ij")
         return pp.ravel(), rr.ravel()
 
+    def combined_problem(self) -> tuple[tuple[str, ...], str] | None:
+        """The fields whose values together break a limit and the problem, or None: a plane
+        grid of more than :data:`MAX_GRID_PLANES` planes (read by
+        :func:`wirescene.core.settings.check_combined`).
+
+        Examples
+        --------
+        >>> LiftingOptions().combined_problem() is None
+        True
+        >>> LiftingOptions(pitch_range=10, pitch_step=0.01, roll_step=0.01).combined_problem()[1]
+        'give 2,001 pitches x 301 rolls = 602,301 ground planes, at most 250,000: take coarser steps or narrower ranges'
+        """
+        sides = ((self.pitch_range, self.pitch_step), (self.roll_range, self.roll_step))
+        if not all(finite_real(half) and finite_real(step) and half >= 0 and step > 0 for half, step in sides):
+            return None  # the fields' own checks name what is wrong
+        n_pitch, n_roll = (_symmetric_count(half, step) for half, step in sides)
+        if n_pitch * n_roll <= MAX_GRID_PLANES:
+            return None
+        count = lambda n: f"{n:,}" if n < 1e12 else f"{n:.3g}"  # noqa: E731
+        return (("pitch_range", "pitch_step", "roll_range", "roll_step"),
+                f"give {count(n_pitch)} pitches x {count(n_roll)} rolls = {count(n_pitch * n_roll)} ground planes, "
+                f"at most {MAX_GRID_PLANES:,}: take coarser steps or narrower ranges")
+
     def alpha_offsets(self, known: bool) -> np.ndarray:
         if known:
             return np.deg2rad(_symmetric_range(self.azimuth_halfwidth, self.azimuth_step))
@@ -90,6 +126,12 @@ class LiftingOptions:
 def _symmetric_range(half: float, step: float) -> np.ndarray:
     n = int(round(half / step))
     return np.arange(-n, n + 1) * step
+
+
+def _symmetric_count(half: float, step: float) -> float:
+    """``len(_symmetric_range(half, step))`` without building it (a float where no array could hold it)."""
+    n = half / step
+    return 2 * round(n) + 1 if n < 1e15 else 2 * n + 1
 
 
 def project_boxes(camera: Camera, lo, hi, location, R) -> tuple[np.ndarray, np.ndarray]:
@@ -283,22 +325,39 @@ def lift_table(
         off = offsets_known if known[j] else offsets_unknown
         base = detections.alpha[j] if known[j] else 0.0
         alpha[j] = base + np.concatenate([off, np.full(n_az - len(off), off[-1])])
-    x, z, az, cost = solve_positions(
-        camera,
-        detections.boxes[:, None, None, :],
-        alpha[:, None, :],
-        pitch_g[None, :, None],
-        roll_g[None, :, None],
-        dims[:, None, None, :],
-        height=options.camera_height,
-        iterations=options.iterations,
-    )
-    choice = cost
-    if options.road_prior:
-        choice = cost + road_alignment_cost(az, weight=options.road_prior, width=ROAD_PRIOR_WIDTH)
-    best_a = np.argmin(choice, axis=2)[..., None]  # (N, G, 1)
-    take = lambda a: np.take_along_axis(a, best_a, axis=2)[..., 0]  # noqa: E731
-    return LiftingTable(pitch_g, roll_g, take(x), take(z), take(az), take(cost), np.array(dims), options.camera_height)
+    G = len(pitch_g)
+    x, z, az, cost = (np.empty((n, G)) for _ in range(4))
+    # A cell's temporaries take about 1 kB: a block of cells at a time, whose bits no other cell changes.
+    rows_per, planes_per = _block_shape(n, G, n_az, cells=LIFT_BLOCK_CELLS)
+    for d in range(0, n, rows_per):
+        for g in range(0, G, planes_per):
+            rows, cols = slice(d, d + rows_per), slice(g, g + planes_per)
+            block = solve_positions(
+                camera,
+                detections.boxes[rows, None, None, :],
+                alpha[rows, None, :],
+                pitch_g[None, cols, None],
+                roll_g[None, cols, None],
+                dims[rows, None, None, :],
+                height=options.camera_height,
+                iterations=options.iterations,
+            )
+            choice = block[3]
+            if options.road_prior:
+                choice = block[3] + road_alignment_cost(block[2], weight=options.road_prior, width=ROAD_PRIOR_WIDTH)
+            best_a = np.argmin(choice, axis=2)[..., None]  # (rows, planes, 1)
+            for out, a in zip((x, z, az, cost), block):
+                out[rows, cols] = np.take_along_axis(a, best_a, axis=2)[..., 0]
+    return LiftingTable(pitch_g, roll_g, x, z, az, cost, np.array(dims), options.camera_height)
+
+
+def _block_shape(n: int, planes: int, azimuths: int, *, cells: int) -> tuple[int, int]:
+    """Detections and planes of one block of the grid search: all detections and as many
+    planes as fit ``cells`` (detection, plane, azimuth) cells, or, where one plane of all
+    detections does not, one plane of as many detections as fit (at least one)."""
+    planes_per = min(planes, max(1, cells // (n * azimuths)))
+    rows_per = min(n, max(1, cells // (planes_per * azimuths)))
+    return rows_per, planes_per
 
 
 def road_alignment_cost(azimuth, *, weight: float, width: float) -> np.ndarray:

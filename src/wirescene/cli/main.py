@@ -120,10 +120,11 @@ def _progress(desc: str, total: int | None = None):
     return lambda it: tqdm(it, desc=desc, unit="frame", total=total, leave=False, file=sys.stderr)
 
 
-def _fit_options(particles: int, seed: int, *, parallel: bool = False, **inference):
+def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_rays: bool = True, **inference):
     """The :class:`FitOptions` of a command's options: the stage options and ``--set``
     (one mapping, :meth:`FitOptions.with_settings`), the models and the device
-    (``parallel``: frames will be fitted by several processes, see
+    (``parallel``: frames will be fitted by several processes; ``casts_rays``: a variant to be
+    fitted is a fine one, :func:`wirescene.fitting.variants.casts_rays`; see
     :func:`wirescene.infer.torch_backend.choose_device`)."""
     from wirescene.fitting.models import with_models
     from wirescene.fitting.pipeline import FitOptions
@@ -140,7 +141,8 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, **inferen
     if unknown:  # a command passed an option no stage owns: a bug, not a user error
         raise TypeError(f"options no stage owns: {', '.join(sorted(unknown))}")
     # --device, else --set inference.device=..., else auto: resolved and checked here, before any fit
-    settings["inference.device"] = choose_device(device or settings.get("inference.device", "auto"), parallel=parallel)
+    settings["inference.device"] = choose_device(device or settings.get("inference.device", "auto"), parallel=parallel,
+                                                 casts_rays=casts_rays)
     options = FitOptions(lifting=LiftingOptions(n_particles=particles), seed=seed, calibrate_scores=calibrate_scores,
                          **models)
     try:
@@ -172,8 +174,8 @@ def _inference_options(f):
     f = click.option("--device", default=None,
                      help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
                           "(optional: pip install torch). auto (the default, unless --set inference.device=... "
-                          "names one): a CUDA GPU if PyTorch sees one and the frames are fitted in one process "
-                          "(one image, --workers 1 or one core), else numpy.")(f)
+                          "names one): a CUDA GPU if PyTorch sees one, a fine variant is fitted and the frames are "
+                          "fitted in one process (one image, --workers 1 or one core), else numpy.")(f)
     return f
 
 
@@ -358,8 +360,10 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
     from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
+    from wirescene.fitting.variants import casts_rays
 
-    options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address), **inference)
+    options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address),
+                           casts_rays=casts_rays(variants), **inference)
     source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing,
                              bank=options.detector_bank, classifier=options.viewpoint_classifier)
     on_gpu = options.inference.device.startswith("cuda")
@@ -445,6 +449,7 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     """Write KITTI label files (with scores) for every image of a split, labelled or not."""
     from wirescene.eval.predict import predict_dataset
     from wirescene.eval.sources import DetectionSource
+    from wirescene.fitting.variants import casts_rays
     from wirescene.io.kitti import KittiDataset
 
     check_output_dir(out, "--out")
@@ -455,7 +460,8 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     dataset = KittiDataset(kitti_root, split=split)
     frame_ids = select_frames(frames, split_file, dataset.require_frames(images=True), where=dataset.split_dir,
                               what="image")
-    options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address), **inference)
+    options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address),
+                           casts_rays=casts_rays([variant]), **inference)
     client = _dask_client(dask_address) if dask_address is not None else None
     total = len(frame_ids) if frame_ids else len(dataset.image_ids())
     try:
@@ -606,6 +612,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from wirescene.api import as_camera, fit
     from wirescene.core.types import Detections
+    from wirescene.fitting.variants import casts_rays
     from wirescene.io.detections import NO_CARS, read_detections
     from wirescene.io.kitti import read_image, read_labels
     from wirescene.io.outputs import fit_output_paths, fit_outputs_problem, write_fit_outputs
@@ -614,7 +621,8 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     problem = fit_outputs_problem(fit_output_paths(out, Path(image).stem))
     if problem:  # before the fit, not at its end
         raise click.BadParameter(f"{problem[0]}: {problem[1]}", param_hint="--out")
-    options = _fit_options(particles, seed, **inference)  # a bad --set fails before any file is read
+    # a bad --set fails before any file is read
+    options = _fit_options(particles, seed, casts_rays=casts_rays([variant]), **inference)
     img = read_image(image)
     camera = as_camera(calib, (img.shape[1], img.shape[0]))
     dets = None

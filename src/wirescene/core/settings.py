@@ -22,7 +22,7 @@ import numpy as np
 from wirescene.core.validate import finite_real
 
 __all__ = ["option", "bounded", "exposed_fields", "stage_field", "field_default", "parse_value", "parse_assignment",
-           "replace_fields", "check_value", "check_fields"]
+           "replace_fields", "check_value", "check_fields", "check_combined"]
 
 
 def option(default=dataclasses.MISSING, *, help: str, cli: str | None = None, minimum: float = 0,
@@ -155,7 +155,9 @@ def replace_fields(obj, values: Mapping[str, Any], *, scope: str = ""):
             except ValueError as exc:
                 raise ValueError(f"{scope + '.' if scope else ''}{key}: {exc}") from None
         changes[key] = check_value(fields[key], value, scope=scope)
-    return dataclasses.replace(obj, **changes)
+    out = dataclasses.replace(obj, **changes)
+    check_combined(out, scope=scope)
+    return out
 
 
 def check_value(f: dataclasses.Field, value, *, scope: str = ""):
@@ -196,3 +198,30 @@ def check_fields(obj, *, scope: str = "") -> None:
     not through :func:`replace_fields`)."""
     for f in dataclasses.fields(obj):
         check_value(f, getattr(obj, f.name), scope=scope)
+    check_combined(obj, scope=scope)
+
+
+def check_combined(obj, *, scope: str = "") -> None:
+    """A ``ValueError`` naming the fields of dataclass ``obj`` whose values together break a
+    limit (e.g. a grid whose steps and ranges, each within its bounds, would make too many
+    cells), as ``obj.combined_problem()`` says where the class defines it; nothing otherwise.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Grid:
+    ...     rows: int = bounded(3, minimum=1)
+    ...     columns: int = bounded(4, minimum=1)
+    ...     def combined_problem(self):
+    ...         return (("rows", "columns"), "give too many cells") if self.rows * self.columns > 100 else None
+    >>> check_combined(Grid(20, 20), scope="grid")
+    Traceback (most recent call last):
+    ...
+    ValueError: grid.rows, grid.columns give too many cells
+    """
+    combined = getattr(obj, "combined_problem", None)
+    found = combined() if callable(combined) else None
+    if found is not None:
+        names, problem = found
+        raise ValueError(f"{', '.join(f'{scope}.{n}' if scope else n for n in names)} {problem}")

@@ -6,6 +6,7 @@ Only variants whose stages exist are registered; each names the switches it turn
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Iterable
 
 
 @dataclass(frozen=True)
@@ -52,3 +53,15 @@ def get_variant(name: str) -> Variant:
         return VARIANTS[name]
     except KeyError:
         raise ValueError(f"unknown variant {name!r}; available: {', '.join(VARIANTS)}") from None
+
+
+def casts_rays(names: Iterable[str]) -> bool:
+    """Whether fitting the variants ``names`` casts rays: the fine stage's occlusion reasoning,
+    the work ``--device`` moves to PyTorch, which the coarse variants never do.
+
+    Examples
+    --------
+    >>> casts_rays(["coarse", "coarse+gp"]), casts_rays(["coarse", "fg"])
+    (False, True)
+    """
+    return any(get_variant(name).fine for name in names)

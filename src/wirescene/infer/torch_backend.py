@@ -103,7 +103,7 @@ def _torch():
     return torch
 
 
-def choose_device(name="auto", *, parallel: bool = False) -> str:
+def choose_device(name="auto", *, parallel: bool = False, casts_rays: bool = True) -> str:
     """The inference device for a ``--device`` / ``inference.device`` value: ``"numpy"``
     or a PyTorch device name (``"cpu"``, ``"cuda"``, ``"cuda:N"``), checked here.
 
@@ -112,7 +112,9 @@ def choose_device(name="auto", *, parallel: bool = False) -> str:
     numpy, the GPU speeding up the ray casting alone (a fit 1.3x end to end) while CUDA
     would keep the frames in one process (benchmarks/RESULTS.md, "The PyTorch backend on a
     GPU"); a PyTorch that is missing or cannot be imported is numpy too. PyTorch is
-    imported only to look for the GPU, and only if it is installed.
+    imported only to look for the GPU, and only if it is installed and ``casts_rays``: without
+    it (no variant to be fitted is a fine one, the only stage that casts rays) ``"auto"`` is
+    numpy at once.
 
     Raises
     ------
@@ -122,14 +124,14 @@ def choose_device(name="auto", *, parallel: bool = False) -> str:
 
     Examples
     --------
-    >>> choose_device(" NumPy "), choose_device("auto", parallel=True)
-    ('numpy', 'numpy')
+    >>> choose_device(" NumPy "), choose_device("auto", parallel=True), choose_device("auto", casts_rays=False)
+    ('numpy', 'numpy', 'numpy')
     """
     key = name.strip().lower() if isinstance(name, str) else name
     if key == "numpy":
         return "numpy"
     if key == "auto":
-        if parallel or not available():
+        if parallel or not casts_rays or not available():
             return "numpy"
         try:
             return "cuda" if resolve_device("auto").type == "cuda" else "numpy"
