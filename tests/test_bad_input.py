@@ -345,10 +345,13 @@ CASES = {
         "--kitti-background need --n-views"),
     "train detector --threshold 7": (lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", t / "none",
                                                 "--threshold", "7"], "--threshold: 7 is above the maximum 1"),
+    "train detector --threshold with --no-calibration": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--frames", FRAME,
+                   "--no-calibration", "--threshold", "0.7"], "--threshold is a calibrated bank's"),
     # options of the real frames' training given to the synthetic one, and the other way round: refused, not ignored
     "train detector --calibration without --kitti-root": (
         lambda t: ["train", "detector", "--out", t / "b.npz", "--calibration", "4,-2,0.6", "--scenes", "2",
-                   "--val-scenes", "0", "--mining-rounds", "0", "--partial", "0"], "--calibration need --kitti-root"),
+                   "--val-scenes", "0", "--mining-rounds", "0", "--partial", "0"], "--calibration needs --kitti-root"),
     "train detector --scenes with --kitti-root": (
         lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--frames", FRAME,
                    "--scenes", "3"], "--scenes: synthetic training only, not with --kitti-root"),

@@ -94,7 +94,26 @@ def _interrupted(item):
 
 @pytest.mark.skipif(not can_fork(), reason="no fork start method")
 def test_a_worker_interrupted_by_ctrl_c_ends_without_a_traceback():
-    assert list(map_images(_interrupted, [0, 1], workers=2)) == ["ends quietly"] * 2
+    import signal
+
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)  # as a terminal's run has it
+    try:
+        assert list(map_images(_interrupted, [0, 1], workers=2)) == ["ends quietly"] * 2
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+@pytest.mark.skipif(not can_fork(), reason="no fork start method")
+def test_workers_of_a_parent_that_ignores_ctrl_c_ignore_it_too():
+    """A run started in the background of a script ignores Ctrl-C: a worker that ended on it
+    would leave the parent waiting for its result for ever."""
+    import signal
+
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        assert list(map_images(_interrupted, [0, 1], workers=2)) == ["ignored"] * 2
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 def test_patch_collector_cap_keeps_a_uniform_sample_in_order():

@@ -86,6 +86,8 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
     if drive_mapping is not None and (no_calibration or calibration is not None):
         raise click.UsageError("--drive-map groups the held-out calibration's folds: not with --no-calibration or "
                                "--calibration")
+    if no_calibration and threshold != 0.5:  # an uncalibrated bank keeps its margins' threshold, 0
+        raise click.UsageError("--threshold is a calibrated bank's (a confidence): not with --no-calibration")
     # each option given for the other kind of training is refused, not ignored
     other = ({"--scenes": n_scenes != 200, "--val-scenes": n_val != 20} if kitti_root is not None else
              {"--frames": frames, "--split-file": split_file, "--folds": folds, "--no-calibration": no_calibration,
@@ -97,7 +99,8 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
     given = [name for name, value in other.items() if value]
     if given:
         raise click.UsageError(" / ".join(given) + (": synthetic training only, not with --kitti-root"
-                                                     if kitti_root is not None else " need --kitti-root"))
+                                                     if kitti_root is not None else
+                                                     " need" + ("s" if len(given) == 1 else "") + " --kitti-root"))
     if kitti_root is not None:
         from wirescene.io.kitti import KittiDataset
         from wirescene.training.kitti_detector import check_calibration, train_detector_bank_kitti

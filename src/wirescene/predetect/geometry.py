@@ -123,7 +123,6 @@ def ground_log_ratio(prior: dict, boxes, horizon: float | Horizon) -> np.ndarray
     return car - bg
 
 
-
 #: Spread (degrees) of the pitch's prior about the one told (``LiftingOptions.camera_pitch``):
 #: a dashcam's tilt, not a free search.
 PITCH_SPREAD = 5.0

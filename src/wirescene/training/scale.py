@@ -200,7 +200,8 @@ def _run_task(index: int):
 def _worker_init() -> None:
     # what the parent held is shared (copy-on-write); a worker keeps nothing new
     CACHE.max_bytes = 0
-    signal.signal(signal.SIGINT, _end_quietly)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:  # a parent that ignores Ctrl-C waits on its workers
+        signal.signal(signal.SIGINT, _end_quietly)
 
 
 def _end_quietly(signum, frame) -> None:
