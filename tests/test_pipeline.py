@@ -312,3 +312,20 @@ def test_a_fit_told_to_estimate_the_pitch_reads_it_off_its_boxes():
     # the option leaves a level rig's fit where it was, to within the estimate's tenths of a degree
     level = np.linalg.norm(locations(camera, {"lifting.estimate_pitch": True}) - truth, axis=1)
     assert np.median(level) < 0.5, np.median(level)
+
+
+def test_a_bank_without_ground_prior_spends_no_detection_on_the_pitch(monkeypatch):
+    """The pitch is read with the bank's ground prior: a bank without one (a synthetic one)
+    keeps the pitch told and runs no detection pass for it (1.7x the pre-detection's time)."""
+    from types import SimpleNamespace
+
+    import wirescene.predetect
+    from wirescene.core.groundplane import Mount
+    from wirescene.fitting.pipeline import image_mount
+
+    ds = KittiDataset(KITTI_ROOT)
+    calls = []
+    monkeypatch.setattr(wirescene.predetect, "detect_cars", lambda *a, **k: calls.append(a))
+    told = Mount(1.3, 2.0)
+    assert image_mount(ds.camera("000010"), ds.image("000010"), bank=SimpleNamespace(meta={}), told=told) == told
+    assert not calls

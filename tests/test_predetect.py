@@ -852,19 +852,26 @@ def test_the_pitch_is_read_off_the_boxes_of_cars_on_the_road():
 
     prior = load_default_bank().meta["ground_prior"]
     camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
-    for pitch in (-2.0, 0.0, 4.0, 7.0):
-        R = plane_rotation(np.deg2rad(pitch), 0.0)
-        boxes = []
+
+    def cars(pitch):  # the boxes of four cars on the road, the camera pitched down by `pitch`
+        R, boxes = plane_rotation(np.deg2rad(pitch), 0.0), []
         for x, z, height in ((3.0, 8.0, 1.5), (-2.0, 14.0, 1.45), (5.0, 22.0, 1.55), (-4.0, 35.0, 1.5)):
             (ub, vb), (_, vt) = camera.project(np.array([[x, 1.65, z], [x, 1.65 - height, z]]) @ R.T)
             boxes.append([ub - 40, vt, ub + 40, vb])
+        return boxes
+
+    for pitch in (-2.0, 0.0, 4.0, 7.0):
+        boxes = cars(pitch)
         clutter = [[100, 20, 160, 60], [900, 0, 1000, 120]]  # a facade's windows, a tree
         found = pitch_from_boxes(prior, camera, boxes + clutter)
         assert abs(found - pitch) < 0.5, (pitch, found)
         cut = [[300, 200, 700, 369]]  # a near car the image's bottom edge cuts: its bottom is not its own
         assert pitch_from_boxes(prior, camera, boxes + clutter + cut) == found
-        weights = [1.0] * len(boxes) + [0.0, 0.0]
-        assert abs(pitch_from_boxes(prior, camera, boxes + clutter, weights=weights) - pitch) < 0.3
+        # three times as many cars as seen 5 deg further down: they move it, unless weighed 0
+        misled = boxes + 3 * cars(pitch + 5.0)
+        assert abs(pitch_from_boxes(prior, camera, misled) - pitch) > 2.0
+        weights = [1.0] * len(boxes) + [0.0] * 12
+        assert pitch_from_boxes(prior, camera, misled, weights=weights) == pitch_from_boxes(prior, camera, boxes)
     assert pitch_from_boxes(prior, camera, np.zeros((0, 4)), told=Mount(1.65, 2.5)) == 2.5
     with pytest.raises(ValueError, match="one value per box"):
         pitch_from_boxes(prior, camera, boxes, weights=[1.0])
@@ -901,5 +908,6 @@ def test_detect_reads_the_pitch_of_a_camera_that_was_not_told_it(monkeypatch):
                                                                                 found(not_told))
     told = wirescene.detect(image, moved, camera_pitch=float(np.rad2deg(np.arctan(50.0 / P[1, 1]))))
     assert_close(told.boxes, level.boxes, atol=1e-6)  # told, the pitch is the principal point's row
-    with pytest.raises(ArgumentError, match="estimate_pitch"):
-        wirescene.detect(image, P, estimate_pitch="yes")
+    for bad in ("yes", 1):  # checked as --set lifting.estimate_pitch is (numpy's bools taken)
+        with pytest.raises(ArgumentError, match=f"^estimate_pitch: must be true or false, got {bad!r}$"):
+            wirescene.detect(image, P, estimate_pitch=bad)

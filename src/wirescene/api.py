@@ -397,11 +397,10 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
-    if not isinstance(estimate_pitch, bool):
-        raise ArgumentError("estimate_pitch", f"expected True or False, got {estimate_pitch!r}")
     # the bounds `--set lifting.NAME` / `--set predetect.NAME` and the detect command check
     for stage, name, value in ((LiftingOptions, "camera_height", camera_height),
                                (LiftingOptions, "camera_pitch", camera_pitch),
+                               (LiftingOptions, "estimate_pitch", estimate_pitch),
                                (PredetectOptions, "smallest_car", 0.0 if smallest_car is None else smallest_car)):
         try:
             check_value(stage_field(stage, name), value)

@@ -306,6 +306,8 @@ def image_mount(camera: Camera, image: np.ndarray, *, bank, told: Mount = KITTI_
     in :func:`~wirescene.predetect.bank.detect_cars`."""
     from wirescene.predetect import detect_cars
 
+    if not bank.meta.get("ground_prior"):  # no prior to read the pitch with: no detection pass spent on it
+        return told
     raw = detect_cars(image, bank=bank, threshold=PITCH_THRESHOLD, pyramid=pyramid, min_height=min_height)
     return Mount(told.height, frame_pitch(camera, raw, bank=bank, told=told, weighted=True))
 
