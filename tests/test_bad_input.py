@@ -342,7 +342,7 @@ CASES = {
         r"n_views: CAD edge renderings \(--n-views\) carry no box position"),
     "train parts --kitti-background without --n-views": (
         lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-background", KITTI_ROOT, "--synth-scenes", "0"],
-        "--kitti-background need --n-views"),
+        "--kitti-background needs --n-views"),
     "train detector --threshold 7": (lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", t / "none",
                                                 "--threshold", "7"], "--threshold: 7 is above the maximum 1"),
     "train detector --threshold with --no-calibration": (

@@ -232,7 +232,7 @@ def test_a_bad_drive_map_is_refused_before_training(tmp_path):
     assert "no train_rand.txt here" in line and str(tmp_path) in line
     assert not (tmp_path / "m").exists()
     r = cli("train", "detector", "--out", tmp_path / "b.npz", "--drive-map", tmp_path)
-    assert r.exit_code == 2 and "--drive-map need --kitti-root" in r.output + r.stderr
+    assert r.exit_code == 2 and "--drive-map needs --kitti-root" in r.output + r.stderr
     r = cli("train", "parts", "--out", tmp_path / "p.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path)
     assert "no train_rand.txt here" in one_line_error(r)  # the calibration is on by default: its folds read the map
     r = cli("train", "parts", "--out", tmp_path / "p.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path,

@@ -94,7 +94,8 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
         given = [name for name, value in (("--n-aug", n_aug != 2), ("--heldout", heldout), ("--compare-hog", compare_hog),
                                           ("--kitti-background", kitti_background is not None)) if value]
         if given:
-            raise click.UsageError(f"{' / '.join(given)} need --n-views (CAD edge renderings)")
+            raise click.UsageError(f"{' / '.join(given)} need{'s' if len(given) == 1 else ''} --n-views (CAD edge "
+                                   "renderings)")
     if kitti_background is not None:  # read after the renderings: checked before them
         from wirescene.core.errors import InputError
         from wirescene.io.kitti import KittiDataset
