@@ -458,12 +458,12 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())
     dataset = KittiDataset(kitti_root, split=split)
-    frame_ids = select_frames(frames, split_file, dataset.require_frames(images=True), where=dataset.split_dir,
-                              what="image")
+    images = dataset.require_frames(images=True)
+    frame_ids = select_frames(frames, split_file, images, where=dataset.split_dir, what="image")
     options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address),
                            casts_rays=casts_rays([variant]), **inference)
     client = _dask_client(dask_address) if dask_address is not None else None
-    total = len(frame_ids) if frame_ids else len(dataset.image_ids())
+    total = len(frame_ids) if frame_ids else len(images)
     try:
         fitted = predict_dataset(dataset, out, variant=variant, options=options, frames=frame_ids, resume=resume,
                                  source=DetectionSource(detections, allow_missing=allow_missing_detections,

@@ -112,14 +112,19 @@ def fit_ground_prior(car_ratios, background_ratios) -> dict:
             "outlier_share": OUTLIER_SHARE, "n_car": int(len(rc)), "n_background": int(len(rb))}
 
 
+def _log_densities(prior: dict, r) -> tuple[np.ndarray, np.ndarray]:
+    """``(log p(r | car), log p(r | background))`` of ratios ``r``: the car density mixed with
+    ``outlier_share`` of the background density (no car's ratio is impossible)."""
+    bg = _log_normal(r, *prior["background"])
+    eps = float(prior.get("outlier_share", OUTLIER_SHARE))
+    return np.logaddexp(np.log1p(-eps) + _log_normal(r, *prior["car"]), np.log(eps) + bg), bg
+
+
 def ground_log_ratio(prior: dict, boxes, horizon: float | Horizon) -> np.ndarray:
     """``(D,)`` log p(r | car) - log p(r | background) of boxes ``(D, 4)``; the car density
     is mixed with ``outlier_share`` of the background density, so the ratio is bounded
     below by ``log(outlier_share)``."""
-    r = bottom_ratio(boxes, horizon)
-    bg = _log_normal(r, *prior["background"])
-    eps = float(prior.get("outlier_share", OUTLIER_SHARE))
-    car = np.logaddexp(np.log1p(-eps) + _log_normal(r, *prior["car"]), np.log(eps) + bg)
+    car, bg = _log_densities(prior, bottom_ratio(boxes, horizon))
     return car - bg
 
 
@@ -182,8 +187,6 @@ def pitch_from_boxes(prior: dict, camera, boxes, *, weights=None, told: Mount = 
         return float(told.pitch)
     pitch = told.pitch + np.arange(-150, 151) / 10.0  # (G,) degrees
     ratios = np.stack([bottom_ratio(b[keep], road_horizon(camera, Mount(told.height, p))) for p in pitch])  # (G, D)
-    eps = float(prior.get("outlier_share", OUTLIER_SHARE))
-    density = np.logaddexp(np.log1p(-eps) + _log_normal(ratios, *prior["car"]),
-                           np.log(eps) + _log_normal(ratios, *prior["background"]))
+    density, _ = _log_densities(prior, ratios)
     score = density @ w[keep] - 0.5 * ((pitch - told.pitch) / PITCH_SPREAD) ** 2
     return float(pitch[np.argmax(score)])
