@@ -466,10 +466,10 @@ def test_draw_shows_the_fitted_wireframes_and_the_labels_where_they_stand(frame,
     canvas.draw()
     rgb = np.asarray(canvas.buffer_rgba())[..., :3].astype(int)
     red = (rgb[..., 0] > 200) & (rgb[..., 1] < 80) & (rgb[..., 2] < 80)  # the estimates' colour
-    green = (rgb[..., 1] > 160) & (rgb[..., 0] < 90) & (rgb[..., 2] < 100)  # the labels'
+    cyan = (rgb[..., 2] > 200) & (rgb[..., 1] > 150) & (rgb[..., 0] < 100)  # the labels'
     for b in boxes.astype(int):  # each fitted car's wireframe and its label's box lie in its 2D box
         assert red[b[1]:b[3], b[0]:b[2]].sum() > 50
-        assert green[b[1]:b[3], b[0]:b[2]].sum() > 50
+        assert cyan[b[1]:b[3], b[0]:b[2]].sum() > 50
     assert red.sum() < 0.2 * red.size and not red[:, :150].any()  # nothing drawn far left of the cars
     assert len(wirescene.draw(image, camera.P, scene, view="bev", gt=label_file).axes) == 1
     with pytest.raises(wirescene.ArgumentError, match="^view: "):

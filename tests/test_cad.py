@@ -196,6 +196,32 @@ def test_cad_picture_has_a_key_to_its_colours():
     assert keys == ["landmark, near side (named)", "landmark, far side", "wireframe edge", "mesh"]
 
 
+def test_cad_picture_names_its_axes_in_metres_and_keeps_the_landmark_names_apart():
+    """Each view's axes say which object axis they are, in metres; no two landmark names of a
+    view overlap (the front view's wheel, arch and nose names used to sit on each other)."""
+    import itertools
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.text import Text
+
+    from wirescene.cli.cad import draw_car
+    from wirescene.core.shape import load_default
+
+    X = load_default().mean
+    fig = draw_car(X, np.array([[0, 1, 2]]), X, title="mean wireframe")
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    assert [(ax.get_xlabel(), ax.get_ylabel()) for ax in fig.axes] == [
+        ("x: forward (m)", "height above the ground (m)"), ("x: forward (m)", "z: to the car's left (m)"),
+        ("z: to the car's left (m)", "height above the ground (m)")]
+    for ax in fig.axes:
+        names = {t.get_text(): Text.get_window_extent(t, renderer) for t in ax.texts}  # the name, not its line
+        assert len(names) >= 9
+        for (a, box_a), (b, box_b) in itertools.combinations(names.items(), 2):
+            assert not box_a.overlaps(box_b), (ax.get_title(), a, b)
+
+
 def test_cli_list_and_show(tmp_path):
     from click.testing import CliRunner
 

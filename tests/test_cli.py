@@ -464,6 +464,9 @@ def test_eval_report_is_one_page_with_its_pictures(tmp_path):
     assert "90% over drives" in page and page.count("]%</td>") == 2  # each variant's 1 m share with its interval
     # and KITTI's moderate APs, four a variant, each with its interval over drives
     assert "KITTI's own measure" in page and len(re.findall(r"<td>\d+\.\d \[\d+\.\d, \d+\.\d\]</td>", page)) == 8
+    # and what made it: the seed, the particles, the device and the model files' hashes
+    assert "<h2>How this run was made</h2>" in page and "<tr><td>scene particles</td><td>20</td></tr>" in page
+    assert "<tr><td>device</td><td>numpy</td></tr>" in page and "parts model</td><td>shipped (SHA-256 " in page
     images = re.findall(r'src="([^"]+\.png)"', page)
     assert {"error_vs_depth.png", "error_cdf.png", "azimuth_hist.png"} <= set(images)
     assert any(i.startswith("best_") for i in images) and any(i.startswith("worst_") for i in images)

@@ -339,6 +339,7 @@ def test_report_gallery_counts_and_draws_the_cars_output_with_quoted_links(tmp_p
     page = report.write_report(tmp_path / "r", reports, gallery=gallery, image_of=_blank, n_gallery=2).read_text()
     captions = re.findall(r"<figcaption>(\w+): (.*?) — score", page)
     assert captions == [("best", "good"), ("best", html.escape(ODD)), ("worst", "farther"), ("worst", "far")]
+    assert "<h2>Gallery (coarse): best 2 and worst 2 of the 4 ranked frames</h2>" in page  # of how many
     # the fit dropped one of ODD's 4 pre-detections: 3 cars output, 2 of them true positives
     assert f"{html.escape(ODD)} — score 0.33: 2 of 3 cars found, mean localisation error 0.00 m; 1 of the 3 cars " \
            f"output false" in page
@@ -355,6 +356,46 @@ def test_report_gallery_counts_and_draws_the_cars_output_with_quoted_links(tmp_p
     for src in found:  # each link names its file as a browser reads it
         assert (tmp_path / "r" / urllib.parse.unquote(src)).is_file(), src
     assert any("%23" in src and "%22" in src for src in found)
+
+
+def test_report_says_how_the_run_was_made(tmp_path):
+    """Which package, pre-detections, seed, particles and model files made the figures, and
+    which options differ from the defaults: the page says so."""
+    from wirescene.eval.report import run_settings
+    from wirescene.fitting.models import models_fingerprint
+    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.lift import LiftingOptions
+
+    options = FitOptions(lifting=LiftingOptions(n_particles=50), seed=3).with_settings({"inference.box_weight": 50})
+    run = run_settings(options, detections="bank")
+    assert run["seed"] == "3" and run["scene particles"] == "50" and run["pre-detections"] == "own pre-detection"
+    assert run["parts model"] == f"shipped (SHA-256 {models_fingerprint(options)['parts_model'][:12]}…)"
+    assert run["options changed from the defaults"] == "inference.box_weight=50.0"
+    reports, gallery = _made_up_run(("good",))
+    page = write_report(tmp_path / "r", reports, gallery=gallery, image_of=_blank, run=run).read_text()
+    assert "<h2>How this run was made</h2>" in page and "<tr><td>seed</td><td>3</td></tr>" in page
+    assert "<td>inference.box_weight=50.0</td>" in page
+
+
+def test_report_plots_keep_variants_apart_and_the_azimuth_bins_say_their_edges():
+    """Variants differ by colour-blind-safe colour and by marker or line style; the azimuth
+    histogram's unequal bins have their edges on the ticks, 180 included."""
+    from matplotlib.colors import to_hex
+
+    from wirescene.eval.report import VARIANT_COLORS, _plot_azimuth_histogram, _plot_error_cdf, _plot_error_vs_depth
+
+    reports, _ = _made_up_run(("good", "far"))
+    several = {name: reports["coarse"] for name in ("coarse", "coarse+gp", "fg+gp", "full")}
+    ax = _plot_azimuth_histogram(several).axes[0]
+    assert [t.get_text() for t in ax.get_xticklabels()][-3:] == ["30", "90", "180"]
+    assert list(ax.get_xticks()) == list(range(15)) and ax.get_xlim() == (0, 14)
+    styles = [(to_hex(p.get_edgecolor()), str(p.get_linestyle())) for p in ax.patches]
+    assert len(set(styles)) == 4 and [s[0] for s in styles] == list(VARIANT_COLORS[:4])
+    lines = _plot_error_cdf(several).axes[0].get_lines()[:4]
+    assert len({(to_hex(line.get_color()), str(line.get_linestyle())) for line in lines}) == 4
+    dots = _plot_error_vs_depth(several, 721.5).axes[0].collections[:4]
+    assert len({d.get_paths()[0].vertices.tobytes() for d in dots}) == 4  # four markers
+    assert "#2ca02c" not in VARIANT_COLORS and "#d62728" not in VARIANT_COLORS  # not the default cycle's green and red
 
 
 def test_error_vs_distance_plot_keeps_the_errors_above_its_top():

@@ -436,13 +436,15 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
     calib : path, (3, 4) array or Camera
         As in :func:`fit`.
     scene : SceneEstimate, optional
-        What :func:`fit` returned: its cars are drawn red (the fitted wireframes, hidden
-        vertices blue, in the ``overlay``; footprints and headings in the ``bev``).
+        What :func:`fit` returned: its cars are drawn red, each numbered as in
+        :attr:`SceneEstimate.cars` (``#1`` the first) with its confidence (the fitted
+        wireframes, hidden vertices as open dots on dashed edges, in the ``overlay``;
+        footprints and headings in the ``bev``).
     view : str
         ``"overlay"`` (the image, full size) or ``"bev"`` (bird's-eye view, x right, z up
         the page, the camera's field of view dotted).
     gt : path or sequence of Label, optional
-        A KITTI label file (or its labels): its cars' 3D boxes are drawn green.
+        A KITTI label file (or its labels): its cars' 3D boxes are drawn cyan.
     boxes : (N, 4) array or Detections, optional
         2D boxes drawn dashed yellow in the ``overlay`` (e.g. :func:`detect`'s); checked
         but not drawn in the ``bev``.

@@ -38,10 +38,36 @@ def _find(cad_dir: Path, name: str) -> Path:
     raise InputError(f"no CAD model named {name!r} (have: {', '.join(f.stem for f in files)})", path=cad_dir)
 
 
+def _name_landmarks(fig, ax, points, names, *, fontsize: float = 7) -> None:
+    """Write ``names`` by ``points`` (data units of ``ax``), each up and right of its point
+    where there is room, else moved clear of the other names and dots with a line to its
+    point (:func:`wirescene.io.pictures.place_labels`, in the figure's pixels as laid out)."""
+    from wirescene.io.pictures import place_labels, text_size
+
+    if not len(names):
+        return
+    ax.apply_aspect()  # the equal aspect's final scale, before the points are measured
+    per_point = fig.dpi / 72
+    xy = ax.transData.transform(points)
+    x, y = xy[:, 0], fig.bbox.height - xy[:, 1]  # y down, as place_labels measures
+    gap = 2 * per_point
+    dots = [(u - gap, v - gap, u + gap, v + gap) for u, v in zip(x, y)]
+    sizes = [text_size(n, fontsize, per_point, 0) for n in names]
+    corners = place_labels([(u + gap, v - gap, u + gap, v - gap) for u, v in zip(x, y)], sizes, fig.bbox.width,
+                           fig.bbox.height, reserved=dots)
+    for name, point, u, v, (cx, cy), (_, th) in zip(names, points, x, y, corners, sizes):
+        dx, dy = (cx - u) / per_point, (v - cy) / per_point  # offset of the name's top-left corner, points, y up
+        moved = np.hypot(dx - 2, dy - 2 - th / per_point) > 6
+        ax.annotate(name, point, xytext=(dx, dy),
+                    textcoords="offset points", fontsize=fontsize, ha="left", va="top",
+                    arrowprops=dict(arrowstyle="-", lw=0.4, color="0.4") if moved else None)
+
+
 def draw_car(vertices, faces, X, *, title: str = "", out=None):
     """Three orthographic views (side, top, front) of a mesh with the 36 landmarks, their
     names and the wireframe edges, and a key to the colours (landmarks on the near side of
-    a view red and named, on the far side orange). Returns the matplotlib figure
+    a view red and named, on the far side open orange dots), the axes in metres of the object frame
+    (x forward, y down, z to the car's left). Returns the matplotlib figure
     (:func:`wirescene.io.pictures.new_figure`)."""
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.lines import Line2D
@@ -50,35 +76,42 @@ def draw_car(vertices, faces, X, *, title: str = "", out=None):
     from wirescene.io.pictures import new_figure
 
     fig = new_figure(figsize=(14, 16))
+    named = []  # (axes, points, names): written once the layout is fixed, clear of each other
     axes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [1.0, 1.4, 1.0]})
-    # (horizontal axis, vertical axis, sign of vertical) in object coordinates
-    views = (("side (left, x fwd)", 0, 1, -1.0, 2), ("top (x fwd, z left up)", 0, 2, 1.0, 1),
-             ("front (z left, looking from the front at the car)", 2, 1, -1.0, 0))
-    for ax, (label, a, b, sb, depth_axis) in zip(axes, views):
-        h_sign = -1.0 if a == 2 else 1.0  # front view: the car's left appears on the right
-        tri = np.stack([h_sign * vertices[faces][..., a], sb * vertices[faces][..., b]], axis=-1)
+    # (title, horizontal axis, vertical axis, sign of vertical, depth axis, axis labels) in object coordinates; the
+    # front view's +z (the car's left) on the right, as seen standing in front of the car
+    forward, left, height = "x: forward (m)", "z: to the car's left (m)", "height above the ground (m)"
+    views = (("side (the left side)", 0, 1, -1.0, 2, forward, height), ("top (seen from above)", 0, 2, 1.0, 1, forward, left),
+             ("front (looking at the car's front; names on its left side)", 2, 1, -1.0, 0, left, height))
+    for ax, (label, a, b, sb, depth_axis, xlabel, ylabel) in zip(axes, views):
+        tri = np.stack([vertices[faces][..., a], sb * vertices[faces][..., b]], axis=-1)
         ax.add_collection(PolyCollection(tri, facecolor="none", edgecolor="0.7", linewidths=0.2))
-        P = np.stack([h_sign * X[:, a], sb * X[:, b]], axis=1)
+        P = np.stack([X[:, a], sb * X[:, b]], axis=1)
         near = X[:, depth_axis] >= 0 if depth_axis == 2 else np.ones(len(X), bool)
         if depth_axis == 0:
             near = X[:, 0] >= np.median(X[:, 0])
         ax.add_collection(LineCollection(P[EDGES], colors="tab:blue", linewidths=1.0))
-        ax.scatter(P[~near, 0], P[~near, 1], s=14, c="tab:orange", zorder=3)
+        # the far side's dots open (not only orange): red and orange look alike to a red-green deficient reader
+        ax.scatter(P[~near, 0], P[~near, 1], s=16, facecolors="white", edgecolors="tab:orange", linewidths=1.0,
+                   zorder=3)
         ax.scatter(P[near, 0], P[near, 1], s=18, c="tab:red", zorder=4)
-        for i in range(len(X)):
-            if near[i] and (depth_axis != 1 or i < N_PER_SIDE):
-                ax.annotate(VERTEX_NAMES[i].replace("_left", "").replace("_right", ""), P[i], fontsize=7,
-                            xytext=(3, 3), textcoords="offset points")
+        # one side's names where both sides show (top, front): half the clutter
+        shown = [i for i in range(len(X)) if near[i] and (depth_axis == 2 or i < N_PER_SIDE)]
+        named.append((ax, P[shown], [VERTEX_NAMES[i].replace("_left", "").replace("_right", "") for i in shown]))
         ax.set_aspect("equal")
         ax.autoscale_view()
         ax.set_title(label, fontsize=9)
+        ax.set_xlabel(xlabel, fontsize=8)
+        ax.set_ylabel(ylabel, fontsize=8)
         ax.grid(alpha=0.3)
     fig.suptitle(title)
     key = [Line2D([], [], ls="none", marker="o", ms=5, color="tab:red"), Line2D([], [], ls="none", marker="o", ms=4,
-           color="tab:orange"), Line2D([], [], color="tab:blue", lw=1.0), Line2D([], [], color="0.7", lw=0.6)]
+           color="tab:orange", mfc="white"), Line2D([], [], color="tab:blue", lw=1.0), Line2D([], [], color="0.7", lw=0.6)]
     fig.legend(key, ["landmark, near side (named)", "landmark, far side", "wireframe edge", "mesh"], loc="lower center",
                ncol=4, fontsize=9, frameon=False)
     fig.tight_layout(rect=(0, 0.02, 1, 1))  # room for the key below the views
+    for ax, points, names in named:
+        _name_landmarks(fig, ax, points, names)
     if out is not None:
         from wirescene.io.pictures import save_figure
 

@@ -259,7 +259,8 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
                    f"max recall {res['max_recall']:.2f}; viewpoint bin accuracy of TPs {res['viewpoint_bin_acc']:.2f}, "
                    f"within 45 deg {res['viewpoint_within_45']:.2f}")
         if pr_curve is not None:
-            plot_pr({"detector bank": res}, pr_curve)
+            plot_pr({"detector bank": res}, pr_curve,  # the AP printed above, not KITTI's: the title says which
+                    title="Car pre-detection: IoU 0.5, cars over 50 px,\nat least 20% visible (not KITTI's AP)")
     click.echo(f"{result['seconds_per_frame']:.2f} s per frame")
     if json_out is not None:
         write_text(json_out, json.dumps(result, indent=1))

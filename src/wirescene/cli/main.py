@@ -416,10 +416,11 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
             **({"loc_1m_margin": margins[v]} if v in margins else {})}
         for v, r in reports.items()}
     if report_dir is not None:
-        from wirescene.eval.report import write_report
+        from wirescene.eval.report import run_settings, write_report
 
         write_report(report_dir, reports, gallery=gallery, image_of=dataset.image, intervals=intervals,
-                     kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})")
+                     kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})",
+                     run=run_settings(options, detections=detections, evidence=evidence))
     return reports, kitti, data
 
 
@@ -704,7 +705,7 @@ def demo_cmd(out, particles, variants, models):
 @split_option()
 def gt_cmd(kitti_root, frame, out, split):
     """Draw a frame's ground truth with the mean wireframe at every GT car pose
-    (self-occluded vertices in blue): a check of geometry, shape model and labels."""
+    (self-occluded vertices as open dots): a check of geometry, shape model and labels."""
     from wirescene.core.groundplane import rotation_y, transform
     from wirescene.core.shape import load_default
     from wirescene.core.types import ObjectEstimate, SceneEstimate
@@ -729,7 +730,8 @@ def gt_cmd(kitti_root, frame, out, split):
         hidden = self_occlusion(vertices, FACES, camera.center)
         objects.append(ObjectEstimate(i, g.box, 1.0, g.location, R, g.dims, 0.0, vertices=vertices, visibility=~hidden))
     fig = overlay(dataset.image(frame), camera, SceneEstimate("gt", objects), gt=cars, edges=EDGES,
-                  title=f"{frame}: mean wireframe at GT poses", estimate_name="mean wireframe at the label's pose")
+                  title=f"{frame}: mean wireframe at GT poses", estimate_name="mean wireframe at the label's pose",
+                  scores=False)
     click.echo(save_figure(fig, out))
 
 

@@ -7,7 +7,9 @@
   table's shares are of the true positives) and a histogram of 3D azimuth errors, per variant;
 * a gallery of the best and worst frames of the first fine variant, else the first
   variant (ranked by :func:`rank_frames`, which counts missed and false cars as well as
-  errors) with overlays and bird's-eye views.
+  errors) with overlays and bird's-eye views, the cars numbered alike in both;
+* how the run was made (:func:`run_settings`): package, pre-detections, seed, particles,
+  device, the model files' hashes and the options changed from their defaults.
 
 Everything is written atomically into one directory (the page and its pictures appear
 together or not at all); the page references its PNGs by relative path, so the
@@ -37,11 +39,31 @@ from wirescene.eval.kitti_metrics import kitti_figure
 from wirescene.eval.metrics import EvaluationReport
 from wirescene.eval.seeds import mean_and_range, seed_folder
 from wirescene.fitting.variants import get_variant
-from wirescene.io.outputs import fitted_detections
+from wirescene.io.outputs import dropped_detections, fitted_detections
 from wirescene.io.pictures import birds_eye, new_figure, overlay, save_figure
 
 #: Localisation error (m) at the top of the error-vs-distance plot; larger errors are drawn on its top edge.
 ERROR_AXIS_CAP = 10.0
+
+#: The variants' colours in the plots (Okabe and Ito's, told apart with any common colour-vision
+#: deficiency; matplotlib's default cycle has red and green third and fourth), each variant with its
+#: own marker and line style as well, so that a grey print keeps them apart too.
+VARIANT_COLORS = ("#0072b2", "#e69f00", "#009e73", "#cc79a7", "#56b4e9", "#d55e00", "#000000")
+_MARKERS = ("o", "s", "D", "v", "P", "X", "*")  # not "^": it marks the errors off the scale
+_LINESTYLES = ("-", "--", "-.", ":", (0, (5, 1)), (0, (3, 1, 1, 1)), (0, (1, 1)))
+
+
+def variant_style(i: int) -> dict:
+    """``{"color", "marker", "linestyle"}`` of the ``i``-th variant of a report's plots.
+
+    Examples
+    --------
+    >>> variant_style(0)
+    {'color': '#0072b2', 'marker': 'o', 'linestyle': '-'}
+    """
+    return {"color": VARIANT_COLORS[i % len(VARIANT_COLORS)], "marker": _MARKERS[i % len(_MARKERS)],
+            "linestyle": _LINESTYLES[i % len(_LINESTYLES)]}
+
 
 #: The files of one report page (globs): the page, its plots and its gallery.
 PAGE_FILES = ("index.html", "error_vs_depth.png", "error_cdf.png", "azimuth_hist.png", "best_*_overlay.png",
@@ -78,16 +100,18 @@ def _plot_error_vs_depth(reports, focal):
     largest = max((r.loc_error for rep in reports.values() for r in rep.records if r.gt_depth is not None), default=0.0)
     top = max(4.0, min(ERROR_AXIS_CAP, 1.05 * largest))
     off_scale = 0
-    for name, rep in reports.items():
+    for i, (name, rep) in enumerate(reports.items()):
+        style = variant_style(i)
         z = np.array([np.nan if r.gt_depth is None else r.gt_depth for r in rep.records], float)
         err = np.array([r.loc_error for r in rep.records], float)
         ok = np.isfinite(z)
         over = ok & (err > top)
         n_over = int(over.sum())
         label = f"{name} ({ok.sum()} TP" + (f", {n_over} over {top:g} m: ▲ on the top edge)" if n_over else ")")
-        dots = ax.scatter(z[ok & ~over], err[ok & ~over], s=12, alpha=0.7, label=label)
+        ax.scatter(z[ok & ~over], err[ok & ~over], s=14, alpha=0.75, label=label, color=style["color"],
+                   marker=style["marker"])
         if n_over:  # unclipped on the edge: no car leaves the plot while the legend counts it
-            ax.scatter(z[over], np.full(n_over, top), s=30, marker="^", color=dots.get_facecolor()[0], clip_on=False)
+            ax.scatter(z[over], np.full(n_over, top), s=30, marker="^", color=style["color"], clip_on=False)
         off_scale += n_over
         if ok.any():
             zmax = max(zmax, float(z[ok].max()))
@@ -111,10 +135,12 @@ def _plot_error_cdf(reports):
     fig = new_figure(figsize=(5.5, 4.2), dpi=100)
     ax = fig.subplots()
     d = np.linspace(0, 5, 201)
-    for name, rep in reports.items():
+    for i, (name, rep) in enumerate(reports.items()):
+        style = variant_style(i)
         err = np.sort([r.loc_error for r in rep.records])
         n_gt = rep.metrics["all"].get("n_gt", len(err)) or max(len(err), 1)
-        ax.plot(d, np.searchsorted(err, d, side="right") / n_gt * 100, label=name)
+        ax.plot(d, np.searchsorted(err, d, side="right") / n_gt * 100, label=name, color=style["color"],
+                ls=style["linestyle"])
     ax.axvline(1.0, color="grey", lw=0.8, ls=":")
     ax.set_xlabel("localisation error d (m)")
     ax.set_ylabel("share of labelled cars within d (%)")
@@ -126,17 +152,21 @@ def _plot_error_cdf(reports):
 
 
 def _plot_azimuth_histogram(reports):
-    """The figure of the 3D azimuth errors' histogram, as shares of the true positives."""
+    """The figure of the 3D azimuth errors' histogram, as shares of the true positives: bins of
+    2.5 deg up to 30 deg, then 30-90 and 90-180, drawn equally wide with their edges on the ticks."""
     fig = new_figure(figsize=(5.5, 4.2), dpi=100)
     ax = fig.subplots()
     bins = np.concatenate([np.arange(0, 30, 2.5), [30, 90, 180]])
-    for name, rep in reports.items():
+    for i, (name, rep) in enumerate(reports.items()):
+        style = variant_style(i)
         err = np.array([r.az3d_error for r in rep.records])
         counts, _ = np.histogram(np.clip(err, 0, 179.9), bins=bins)
-        ax.step(np.arange(len(counts)), counts / max(len(err), 1) * 100, where="mid", label=name)
-    ax.set_xticks(np.arange(len(bins) - 1))
-    ax.set_xticklabels([f"{b:g}" for b in bins[:-1]], rotation=60, fontsize=7)
-    ax.set_xlabel("3D azimuth error (deg, bin start)")
+        ax.stairs(counts / max(len(err), 1) * 100, np.arange(len(bins)), label=name, color=style["color"],
+                  ls=style["linestyle"], lw=1.5)
+    ax.set_xticks(np.arange(len(bins)))
+    ax.set_xticklabels([f"{b:g}" for b in bins], rotation=60, fontsize=7)
+    ax.set_xlim(0, len(bins) - 1)
+    ax.set_xlabel("3D azimuth error (deg; the last two bins are 30-90 and 90-180)")
     ax.set_ylabel("% of true positives")
     ax.legend(fontsize=8)
     ax.set_title("Azimuth error")
@@ -206,6 +236,55 @@ def _href(name: str) -> str:
     return html.escape(urllib.parse.quote(name))
 
 
+def run_settings(options, *, detections: str, evidence: str = "parts") -> dict[str, str]:
+    """What made an evaluation run, for its report page: the package, the pre-detections, the
+    seed, the scene particles, the device, the trained models the fit reads (file, or
+    ``shipped``, and the start of its SHA-256) and every option changed from its default.
+
+    Parameters
+    ----------
+    options : FitOptions
+        The run's options (models and ``--set`` applied).
+    detections : str
+        The pre-detections: ``gt``, ``bank`` or a directory of detection files.
+    evidence : str
+        The fine variants' evidence (``parts`` or ``oracle``).
+
+    Returns
+    -------
+    dict
+        ``{what: value}``, in the page's order.
+    """
+    from dataclasses import asdict
+
+    from wirescene.core.version import __version__
+    from wirescene.fitting.models import models_fingerprint
+    from wirescene.fitting.pipeline import FitOptions
+
+    named = {"gt": "label boxes", "bank": "own pre-detection"}
+    out = {"wirescene": __version__, "pre-detections": named.get(detections, f"files in {detections}"),
+           "evidence of the fine variants": evidence, "seed": str(options.seed),
+           "scene particles": str(options.lifting.n_particles), "device": str(options.inference.device)}
+    files = {"parts_model": options.parts_model, "detector_bank": options.detector_bank}
+    for name, digest in models_fingerprint(options).items():
+        out[name.replace("_", " ")] = f"{files.get(name) or 'shipped'} (SHA-256 {digest[:12]}…)"
+    shown = {"seed", "lifting.n_particles", "inference.device", "parts_model", "detector_bank"}
+    default = asdict(FitOptions())
+    changed = []
+    for key, value in asdict(options).items():
+        # a stage's options are one level down (lifting.n_particles); the others sit at the top (seed)
+        pairs = ({f"{key}.{k}": (v, default[key].get(k)) for k, v in value.items()} if isinstance(value, dict)
+                 else {key: (value, default.get(key))})
+        changed += [f"{name}={now}" for name, (now, was) in pairs.items() if name not in shown and now != was]
+    out["options changed from the defaults"] = ", ".join(changed) or "none"
+    return out
+
+
+def _run_table(run: dict) -> str:
+    rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(str(v))}</td></tr>" for k, v in run.items())
+    return f'<h2>How this run was made</h2>\n<table class="run">{rows}</table>'
+
+
 def _metrics_table(reports, intervals=None) -> str:
     cols = [("n_gt", "GT cars", "{:.0f}"), ("n_tp", "TP", "{:.0f}"), ("loc_1m", "&lt;1 m (of TPs)", "{:.0f}%"),
             ("loc_1_5m", "&lt;1.5 m (of TPs)", "{:.0f}%"), ("median_loc", "median loc. (m)", "{:.2f}"),
@@ -250,7 +329,7 @@ def _kitti_table(kitti: dict, kitti_intervals: dict | None) -> str:
 
 def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gallery, image_of, title: str = "",
                  n_gallery: int = 3, intervals: dict | None = None, kitti: dict | None = None,
-                 kitti_intervals: dict | None = None) -> Path:
+                 kitti_intervals: dict | None = None, run: dict | None = None) -> Path:
     """Write ``out_dir/index.html`` and its PNGs; returns the page's path.
 
     Parameters
@@ -276,10 +355,12 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
         ``{variant: figures}`` of :func:`wirescene.eval.kitti_metrics.kitti_metrics` and of
         :func:`wirescene.eval.intervals.kitti_intervals`: a second table gives KITTI's
         moderate APs (with their intervals).
+    run : dict, optional
+        ``{what: value}`` of :func:`run_settings`: the page says how the run was made.
     """
     with staged_report(out_dir) as staging:
         _write_report(staging, reports, gallery=gallery, image_of=image_of, title=title, n_gallery=n_gallery,
-                      intervals=intervals, kitti=kitti, kitti_intervals=kitti_intervals)
+                      intervals=intervals, kitti=kitti, kitti_intervals=kitti_intervals, run=run)
     return Path(out_dir) / "index.html"
 
 
@@ -356,7 +437,7 @@ APs (R40) at IoU 0.7 and 0.5.</p>
 
 
 def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, intervals, kitti,
-                  kitti_intervals) -> None:
+                  kitti_intervals, run=None) -> None:
     """:func:`write_report`'s files, written into the directory ``out``."""
     focal = next((c.focal for c, *_ in gallery.frames.values()), 721.5)
     plots = {
@@ -374,6 +455,9 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
     ranked = rank_frames(reports[lead], counts)
     k = min(n_gallery, max(1, len(ranked) // 2))  # best and worst never share a frame, nor take the middle one
     picks = [("best", f) for f in ranked[:k]] + [("worst", f) for f in ranked[::-1][:min(k, len(ranked) - k)]]
+    n_best, n_worst = sum(kind == "best" for kind, _ in picks), sum(kind == "worst" for kind, _ in picks)
+    shown = (f"best {n_best} and worst {n_worst} of the {len(ranked)} ranked frame{'s' * (len(ranked) != 1)}"
+             if ranked else "best and worst frames")
     seen, cards = set(), []
     for kind, frame_id in picks:
         if frame_id in seen:
@@ -383,7 +467,8 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
         estimate = estimates[lead]
         stem = f"{kind}_{frame_id}"
         save_figure(overlay(image_of(frame_id), camera, estimate, gt=cars, detections=fitted_detections(dets, estimate),
-                            edges=EDGES, title=f"{frame_id}  {lead}"), out / f"{stem}_overlay.png")
+                            dropped=dropped_detections(dets, estimate), edges=EDGES, title=f"{frame_id}  {lead}"),
+                    out / f"{stem}_overlay.png")
         save_figure(birds_eye(estimate, gt=cars, camera=camera, title=f"{frame_id}  {lead}"), out / f"{stem}_bev.png")
         found = errors.get(frame_id, [])
         n_out = len(estimate.objects)
@@ -406,22 +491,26 @@ body {{ font-family: sans-serif; margin: 1.5em; color: #222; }}
 table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: right; }}
 td:first-child {{ text-align: left; }} .plots img {{ max-width: 32%; }} figure {{ margin: 1em 0; }}
 img.wide {{ max-width: 70%; vertical-align: top; }} img.bev {{ max-width: 25%; vertical-align: top; }}
+table.run td {{ text-align: left; }}
 </style></head><body>
 <h1>wirescene evaluation report</h1>
 <p>{html.escape(title)} — {n_frames} frames; the paper's protocol (true-positive initialisations, IoU &gt; 0.5,
-viewpoint within 45°).</p>
+viewpoint within 45°).{" How the run was made (models, seed, settings): at the end of the page." if run else ""}</p>
 {_metrics_table(reports, intervals)}
 <p>The table's shares are of the true positives (TP); the plot of cars localised within d metres counts
 every labelled car (a missed car is never within d), so its value at 1 m is the lower one.</p>
 {_kitti_table(kitti, kitti_intervals) if kitti else ""}
 <div class="plots">{''.join(f'<img src="{_href(name)}" alt="{html.escape(name)}">' for name in plots)}</div>
-<h2>Gallery ({html.escape(lead)}): best and worst frames</h2>
-<p>Red: estimate ({"wireframe, hidden vertices blue" if get_variant(lead).fine else "3D box, a cross on its front"});
-green: ground truth; yellow: the pre-detections of the cars output (those the fit dropped are not drawn).
+<h2>Gallery ({html.escape(lead)}): {shown}</h2>
+<p>Red: estimate ({"wireframe, hidden parts as open dots on dashed edges" if get_variant(lead).fine
+else "3D box, a cross on its front"}), each numbered #n as in the label file with its confidence (the same number
+in the bird's-eye view); cyan: ground truth; dashed yellow: the pre-detections of the cars output; dotted grey:
+those the fit dropped.
 Frames ranked by a score that counts missed and false cars: (sum over true positives of
 max(0, 1 &minus; error / {SCORE_ZERO_ERROR:g} m) &minus; false cars output) / labelled cars; equal scores by the
 mean localisation error; frames with neither a labelled car nor a car output are not ranked.</p>
 {unpictured}{''.join(cards)}
+{_run_table(run) if run else ""}
 </body></html>
 """
     write_text(out / "index.html", page)

@@ -47,6 +47,26 @@ def fitted_detections(detections: Detections, estimate: SceneEstimate) -> Detect
     return detections.subset(np.array(sorted(o.detection_index for o in estimate.objects), dtype=int))
 
 
+def dropped_detections(detections: Detections, estimate: SceneEstimate) -> Detections:
+    """The pre-detections of ``detections`` that no car of ``estimate`` was fitted to: those
+    the fit's verification dropped (our own pre-detection's), in detection order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.types import ObjectEstimate
+    >>> dets = Detections([[0, 0, 10, 10], [20, 0, 30, 10], [40, 0, 50, 10]], 1.0, np.nan)
+    >>> car = ObjectEstimate(detection_index=2, box2d=dets.boxes[2], score=1.0, location=np.array([0.0, 1.65, 9.0]),
+    ...                      R=np.eye(3), dims=np.array([1.5, 1.6, 3.9]), cost=0.0)
+    >>> dropped_detections(dets, SceneEstimate(variant="coarse", objects=[car])).boxes
+    array([[ 0.,  0., 10., 10.],
+           [20.,  0., 30., 10.]])
+    """
+    kept = np.zeros(len(detections), bool)
+    kept[[o.detection_index for o in estimate.objects]] = True
+    return detections.subset(~kept)
+
+
 def fit_output_paths(out_dir: Path, stem: str) -> dict[str, Path]:
     """``{"labels", "json", "overlay", "bev": path}``: the files :func:`write_fit_outputs` writes."""
     out_dir = Path(out_dir)
@@ -74,11 +94,12 @@ def write_fit_outputs(
     gt: list[Label] = (),
 ) -> dict[str, Path]:
     """Write ``STEM.txt`` (KITTI labels), ``STEM.json``, ``STEM_overlay.png`` and
-    ``STEM_bev.png``. The overlay draws the pre-detections of the fitted cars (not those
-    the fit's verification dropped). The four files are written to temporary files in
-    ``out_dir`` first and renamed into place only when all are complete: if any fails (a
-    picture too large to draw, a full disk) ``out_dir`` is left as it was, an earlier run's
-    files of ``STEM`` included, and the directories made for it are removed."""
+    ``STEM_bev.png``. The overlay draws the pre-detections of the fitted cars dashed and
+    those the fit's verification dropped dotted grey. The four files are written to
+    temporary files in ``out_dir`` first and renamed into place only when all are
+    complete: if any fails (a picture too large to draw, a full disk) ``out_dir`` is left
+    as it was, an earlier run's files of ``STEM`` included, and the directories made for
+    it are removed."""
     out_dir = Path(out_dir)
     paths = fit_output_paths(out_dir, stem)
     problem = fit_outputs_problem(paths)
@@ -88,7 +109,8 @@ def write_fit_outputs(
     payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
     fitted = fitted_detections(detections, estimate)
     title = f"{stem}  {estimate.variant}, {boxes_in_words(detections.source)}"
-    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted, title=title, edges=EDGES)
+    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted,
+                          dropped=dropped_detections(detections, estimate), title=title, edges=EDGES)
     fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=title)
     try:
         with ExitStack() as stack:  # each temporary file replaces its path as the block ends without error

@@ -1,6 +1,10 @@
 """Pictures of what the model did: image overlays and bird's-eye views.
 
-Estimates are drawn in red, ground truth in green, as in the paper's figures. All
+Estimates are drawn in red, ground truth in cyan (not the paper's green: red and green
+look alike to one reader in twelve, red and cyan differ for every common colour-vision
+deficiency), pre-detections dashed yellow; hidden parts of a wireframe are open dots on
+dashed edges, so that they differ by shape as well as colour. Each estimated car carries
+its number (its line in the KITTI label file) and its confidence, in both views. All
 functions draw into a new :class:`matplotlib.figure.Figure` (:func:`new_figure`) and
 return it; :func:`save_figure` writes it atomically. No pyplot: the figures belong to
 no window manager, need no display, and the caller's matplotlib backend (a notebook's,
@@ -14,9 +18,10 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-from matplotlib import rc_context
+from matplotlib import rc_context, transforms
 from matplotlib.figure import Figure
-from matplotlib.patches import Rectangle
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, Rectangle
 
 from wirescene.core.atomic import atomic_path
 from wirescene.core.boxes import box_corners
@@ -24,17 +29,20 @@ from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.groundplane import rotation_y
 
 EST_COLOR = "#e8302a"
-GT_COLOR = "#2fbf40"
+GT_COLOR = "#33bbee"
 DET_COLOR = "#f5d90a"
+#: Pre-detections the fit's verification dropped (not cars, by the fit).
+DROPPED_COLOR = "#d9d9d9"
+#: Face of a hidden vertex's dot (an open dot, edged in the estimate's colour).
+HIDDEN_FACE = "white"
+#: Font size (points) of the cars' numbers.
+NUMBER_FONTSIZE = 7
 # Box edges as corner index pairs for the corner order of boxes.box_corners_object.
 _BOX_EDGES = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)]
 _FRONT_FACE = [(0, 3), (1, 2)]  # cross on the front face marks the heading
 
 
-HIDDEN_COLOR = "#2f6fe8"
-
-
-def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: float) -> None:
+def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: float, ls="-") -> None:
     """The segments ``edges`` ``(E, 2)`` between 3D ``points`` ``(P, 3)``, each cut at the
     camera's near plane (a car next to or beside the camera keeps the part in front of it)."""
     from matplotlib.collections import LineCollection
@@ -50,7 +58,8 @@ def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: f
     cut = a + s * (b - a)
     a, b = np.where((da <= NEAR_PLANE)[:, None], cut, a), np.where((db <= NEAR_PLANE)[:, None], cut, b)
     uv = camera.project(np.concatenate([a, b]))
-    ax.add_collection(LineCollection(np.stack([uv[:len(a)], uv[len(a):]], axis=1), colors=color, linewidths=lw))
+    ax.add_collection(LineCollection(np.stack([uv[:len(a)], uv[len(a):]], axis=1), colors=color, linewidths=lw,
+                                     linestyles=ls))
 
 
 def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float = 1.5):
@@ -59,18 +68,93 @@ def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float =
 
 
 def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR):
-    """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``; hidden vertices in blue, dots
-    sized by the car's height in the image (a far car's dots would hide it)."""
+    """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``: visible vertices as dots of
+    ``color``, hidden ones as open dots and the edges between two hidden vertices dashed;
+    dots sized by the car's height in the image (a far car's dots would hide it)."""
     vertices = np.asarray(vertices, float)
-    _draw_edges(ax, camera, vertices, edges, color, 1.0)
+    edges = np.asarray(edges, int).reshape(-1, 2)
+    vis = np.ones(len(vertices), bool) if visible is None else np.asarray(visible, bool)
+    behind = ~vis[edges[:, 0]] & ~vis[edges[:, 1]]
+    _draw_edges(ax, camera, vertices, edges[~behind], color, 1.0)
+    if behind.any():
+        _draw_edges(ax, camera, vertices, edges[behind], color, 0.8, ls=(0, (3, 2)))
     uv, depth = camera.project_with_depth(vertices)
     front = depth > NEAR_PLANE
     if not front.any():
         return
     size = float(np.clip(np.ptp(uv[front, 1]) / 8.0, 1.0, 10.0))
-    vis = np.ones(len(uv), bool) if visible is None else np.asarray(visible, bool)
     ax.scatter(uv[vis & front, 0], uv[vis & front, 1], s=size, c=color, zorder=3)
-    ax.scatter(uv[~vis & front, 0], uv[~vis & front, 1], s=size, c=HIDDEN_COLOR, zorder=3)
+    ax.scatter(uv[~vis & front, 0], uv[~vis & front, 1], s=size * 1.5, facecolors=HIDDEN_FACE, edgecolors=color,
+               linewidths=0.6, zorder=3)
+
+
+def car_numbers(estimate) -> dict[int, int]:
+    """``{id(car): n}``: each car of ``estimate`` numbered as the KITTI label file and the
+    JSON file list it (:attr:`SceneEstimate.cars`, detection order), from 1."""
+    return {} if estimate is None else {id(o): n for n, o in enumerate(estimate.cars, 1)}
+
+
+def _car_label(n: int, score: float | None) -> str:
+    return f"#{n}" if score is None or not np.isfinite(score) else f"#{n} {score:.2f}"
+
+
+def text_size(text: str, fontsize: float, scale: float, pad: float) -> tuple[float, float]:
+    """Width and height (data units, ``scale`` of them a point) of ``text`` in a box padded
+    by ``pad`` font sizes, measured from the font's outlines (no renderer needed)."""
+    from matplotlib.textpath import TextPath
+
+    width = TextPath((0, 0), text, size=fontsize).get_extents().width
+    return (width + 2 * pad * fontsize + 2) * scale, (1.25 * fontsize + 2 * pad * fontsize + 2) * scale
+
+
+def _overlap(a, b) -> float:
+    """The area shared by rectangles ``(x0, y0, x1, y1)``."""
+    return max(0.0, min(a[2], b[2]) - max(a[0], b[0])) * max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+
+
+def place_labels(boxes, sizes, width: float, height: float, *, reserved=()) -> list[tuple[float, float]]:
+    """Top-left corners (``x``, ``y`` down) of labels of ``sizes`` ``(w, h)``, one by each of
+    ``boxes`` ``(x1, y1, x2, y2)``: above the box's top-left corner where there is room,
+    else inside its top, below it or stacked above, always inside the ``width`` x
+    ``height`` picture, clear of each other and of the ``reserved`` rectangles where
+    any candidate place is (else the least covered one). Labels are placed in order.
+
+    Examples
+    --------
+    >>> place_labels([[10, 50, 60, 90], [12, 52, 62, 92]], [(30, 10)] * 2, 100, 100)  # the second inside its box
+    [(10.0, 39.0), (12.0, 53.0)]
+    >>> place_labels([[-5, 2, 20, 30]], [(30, 10)], 100, 100)  # cut by the image's corner: kept inside
+    [(0.0, 0.0)]
+    """
+    taken = [tuple(map(float, r)) for r in reserved]
+    out = []
+    for (x1, y1, x2, y2), (tw, th) in zip(np.asarray(boxes, float), sizes):
+        above = [(x1, y1 - th - 1 - k * (th + 1)) for k in range(4)]
+        candidates = above[:1] + [(x1, y1 + 1), (x2 - tw, y1 - th - 1), (x1, y2 + 1)] + above[1:]
+        best = None
+        for cx, cy in candidates:
+            cx = float(min(max(cx, 0.0), max(width - tw, 0.0)))
+            cy = float(min(max(cy, 0.0), max(height - th, 0.0)))
+            covered = sum(_overlap(r, (cx, cy, cx + tw, cy + th)) for r in taken)
+            if best is None or covered < best[0]:
+                best = (covered, cx, cy)
+            if covered == 0:
+                break
+        _, cx, cy = best
+        taken.append((cx, cy, cx + tw, cy + th))
+        out.append((cx, cy))
+    return out
+
+
+def _image_box(camera: Camera, o, edges) -> np.ndarray | None:
+    """The image rectangle of a car: its pre-detection's box, else its projection."""
+    box = np.asarray(o.box2d, float) if o.box2d is not None else np.full(4, np.nan)
+    if np.isfinite(box).all() and box[2] > box[0]:
+        return box
+    points = o.vertices if o.vertices is not None else box_corners(o.dims, o.location, o.R)
+    uv, depth = camera.project_with_depth(np.asarray(points, float))
+    uv = uv[depth > NEAR_PLANE]
+    return None if not len(uv) else np.concatenate([uv.min(axis=0), uv.max(axis=0)])
 
 
 def overlay(
@@ -80,12 +164,14 @@ def overlay(
     *,
     gt: Sequence = (),
     detections=None,
+    dropped=None,
     title: str | None = None,
     edges: np.ndarray | None = None,
     estimate_name: str = "estimate",
+    scores: bool = True,
 ):
-    """Image with detections (yellow), estimated 3D boxes or wireframes (red) and
-    ground-truth 3D boxes (green).
+    """Image with detections (dashed yellow), estimated 3D boxes or wireframes (red, each
+    numbered as in the label file, with its confidence) and ground-truth 3D boxes (cyan).
 
     Parameters
     ----------
@@ -93,14 +179,22 @@ def overlay(
     camera : Camera
         The image's camera (``P2``).
     estimate : SceneEstimate, optional
+        Its cars, numbered ``#n`` as :func:`car_numbers` (the label file's order); an
+        estimate without cars says so in the key.
     gt : sequence of kitti ``Label``
     detections : Detections, optional
+        The pre-detections of the cars drawn.
+    dropped : Detections, optional
+        Pre-detections the fit's verification dropped, drawn dotted grey.
     title : str, optional
         A line written at the top left.
     edges : (E, 2) int array, optional
         Wireframe edges, used for objects that carry ``vertices``.
     estimate_name : str, optional
         What the key calls the red objects (``wirescene gt`` draws no estimate).
+    scores : bool, optional
+        Whether each car's number is followed by its confidence (``wirescene gt``'s cars
+        have none).
     """
     h, w = image.shape[:2]
     fig = new_figure(figsize=(w / 100, h / 100), dpi=100)
@@ -109,6 +203,11 @@ def overlay(
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     ax.axis("off")
+    scale = w / (fig.get_figwidth() * 72)  # image pixels a point: the axes fill the figure
+    if dropped is not None:
+        for b in dropped.boxes:
+            ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DROPPED_COLOR, lw=1,
+                                   ls=":"))
     if detections is not None:
         for b in detections.boxes:
             ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
@@ -121,24 +220,55 @@ def overlay(
             draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility)
         else:
             _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), EST_COLOR)
+    reserved = []
     if title:
-        ax.text(5, 15, title, color="white", fontsize=10, bbox=dict(facecolor="black", alpha=0.5, lw=0))
+        ax.text(4 * scale, 4 * scale, title, color="white", fontsize=10, va="top",
+                bbox=dict(facecolor="black", alpha=0.5, lw=0, boxstyle="square,pad=0.25"))
+        tw, th = text_size(title, 10, scale, 0.25)
+        reserved.append((0, 0, tw + 4 * scale, th + 4 * scale))
     key = []  # what each colour means, for the parts drawn
+    if estimate is not None and not objects:
+        key.append(("none", "none", f"no car {'estimated' if estimate_name == 'estimate' else 'drawn'}"))
     if objects:
         key.append(("-", EST_COLOR, estimate_name + (" (a cross marks the front)" if not wireframes else "")))
         if wireframes and any(o.visibility is not None and not np.all(o.visibility) for o in objects):
-            key.append(("o", HIDDEN_COLOR, "hidden part"))
+            key.append(("hidden", EST_COLOR, "hidden part"))
+        key.append(("tag", EST_COLOR, "#n c: car n (line n of the label file), confidence c" if scores
+                    else "#n: the label file's n-th car"))
     if len(gt):
         key.append(("-", GT_COLOR, "ground truth"))
     if detections is not None and len(detections.boxes):
         key.append(("--", DET_COLOR, "pre-detection"))
+    if dropped is not None and len(dropped.boxes):
+        key.append((":", DROPPED_COLOR, "pre-detection the fit dropped"))
     if key:
-        from matplotlib.lines import Line2D
-
-        handles = [Line2D([], [], color=c, ls="none" if s == "o" else s, marker="o" if s == "o" else None, ms=4)
-                   for s, c, _ in key]
-        ax.legend(handles, [k[2] for k in key], loc="upper right", fontsize=7, framealpha=0.6, borderpad=0.4)
+        handles = [Patch(facecolor=c, alpha=0.85, lw=0) if s == "tag" else
+                   Line2D([], [], color=c, ls="--" if s == "hidden" else s, marker="o" if s == "hidden" else None,
+                          mfc=HIDDEN_FACE, ms=4) for s, c, _ in key]
+        legend = ax.legend(handles, [k[2] for k in key], loc="upper right", fontsize=7, framealpha=0.6,
+                           borderpad=0.4)
+        # the key's corner, estimated from its rows and longest entry (no renderer needed): no number under it
+        longest = max(text_size(k[2], 7, scale, 0)[0] for k in key)
+        reserved.append((w - longest - 40 * scale, 0, w, (len(key) * 1.5 * 7 + 12) * scale))
+        legend.set_zorder(5)
+    _number_cars(ax, estimate, objects, camera, edges, w, h, scale, reserved, scores)
     return fig
+
+
+def _number_cars(ax, estimate, objects, camera, edges, w, h, scale, reserved, scores) -> None:
+    """Write each car's number (and confidence) by its box, inside the picture, clear of the
+    other numbers, the title and the key where there is room."""
+    numbers = car_numbers(estimate)
+    placed = [(o, _image_box(camera, o, edges)) for o in reversed(objects)]  # near cars choose first
+    placed = [(o, box) for o, box in placed if box is not None]
+    texts = [_car_label(numbers[id(o)], o.score if scores else None) for o, _ in placed]
+    pad = 0.2
+    sizes = [text_size(t, NUMBER_FONTSIZE, scale, pad) for t in texts]
+    corners = place_labels([box for _, box in placed], sizes, w, h, reserved=reserved)
+    for text, (x, y) in zip(texts, corners):
+        ax.text(x + (pad * NUMBER_FONTSIZE + 1) * scale, y + (pad * NUMBER_FONTSIZE + 1) * scale, text,
+                fontsize=NUMBER_FONTSIZE, color="white", va="top", ha="left", zorder=4,
+                bbox=dict(facecolor=EST_COLOR, alpha=0.85, lw=0, boxstyle=f"square,pad={pad}"))
 
 
 def _footprint(dims, location, R):
@@ -154,11 +284,14 @@ def birds_eye(
     extent: tuple[float, float, float, float] | None = None,
     title: str | None = None,
 ):
-    """Top-down view (x right, z up the page) of estimated (red) and GT (green) cars,
-    with the camera's field of view."""
+    """Top-down view in KITTI's camera frame (x to the camera's right, z ahead of it,
+    metres; the camera a triangle at the origin) of estimated (red, numbered as in the
+    overlay and the label file) and ground-truth (cyan) cars, with the camera's field of
+    view (dotted)."""
     fig = new_figure(figsize=(5, 6), dpi=100)
     ax = fig.subplots()
     pts = [np.zeros(2)]
+    numbers = car_numbers(estimate)
 
     def draw(dims, location, R, color):
         fp = _footprint(dims, location, R)
@@ -166,37 +299,55 @@ def birds_eye(
         front = fp[[0, 1]].mean(axis=0)  # corners 0 and 1 are the front face
         ax.plot([location[0], front[0]], [location[2], front[1]], color=color, lw=1.0)
         pts.append(fp)
+        return fp
 
     for g in gt:
         draw(g.dims, g.location, rotation_y(g.rotation_y), GT_COLOR)
+    labels = []
     if estimate is not None:
         for o in estimate.objects:
-            draw(o.dims, o.location, o.R, EST_COLOR)
+            labels.append((draw(o.dims, o.location, o.R, EST_COLOR), numbers[id(o)]))
     allp = np.vstack([np.atleast_2d(p) for p in pts])
     if extent is None:
         xmin, zmax = allp[:, 0].min() - 3, max(allp[:, 1].max() + 3, 10)
         xmax = allp[:, 0].max() + 3
         half = max(abs(xmin), abs(xmax), 8, 0.4 * (zmax + 2))  # a deep scene widens x rather than becoming a strip
         extent = (-half, half, -2, zmax)
+    key = []
+    if estimate is not None:
+        key.append((Line2D([], [], color=EST_COLOR), "estimate (#n: car n; a line marks the front)"))
+    if len(gt):
+        key.append((Line2D([], [], color=GT_COLOR), "ground truth"))
     if camera is not None and camera.image_size is not None:
         w = camera.image_size[0]
         for u in (0, w - 1):
             d = camera.rays(np.array([u, camera.K[1, 2]], float))
             t = extent[3] / max(d[2], 1e-3)
             ax.plot([0, d[0] * t], [0, d[2] * t], color="0.6", lw=0.8, ls=":")
-    ax.plot([0], [0], marker="^", color="black")
+        key.append((Line2D([], [], color="0.6", lw=0.8, ls=":"), "field of view"))
+    ax.plot([0], [0], marker="^", color="black", ls="none")
+    key.append((Line2D([], [], marker="^", color="black", ls="none"), "camera"))
+    room = extent[1] - 0.12 * (extent[1] - extent[0])  # right of it a number would leave the axes
+    for fp, n in labels:  # the number beside the footprint, on its right unless at the right edge
+        on_right = fp[:, 0].max() < room
+        ax.text(fp[:, 0].max() + 0.3 if on_right else fp[:, 0].min() - 0.3, fp[:, 1].mean(), f"#{n}", color=EST_COLOR,
+                fontsize=7, va="center", ha="left" if on_right else "right", clip_on=True)
+    if estimate is not None and not estimate.objects:
+        ax.text(0.5, 0.5, "no car estimated", transform=ax.transAxes, ha="center", va="center", color="0.3")
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
     ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("z [m]")
+    ax.set_xlabel("x: right of the camera (m)")
+    ax.set_ylabel("z: ahead of the camera (m)")
     ax.grid(alpha=0.3)
-    ax.plot([], [], color=EST_COLOR, label="estimate (a line marks the front)")
-    ax.plot([], [], color=GT_COLOR, label="ground truth")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8, frameon=False)  # off the cars
     if title:
         ax.set_title(title, fontsize=10)
-    fig.tight_layout()
+    rows = (len(key) + 1) // 2
+    fig.tight_layout(rect=(0, (rows * 12 + 8) / (72 * fig.get_figheight()), 1, 1))  # room for the key's rows
+    # the key right under the x axis's label, however short the equal-aspect axes are: off the cars and the label
+    below = transforms.offset_copy(ax.transAxes, fig=fig, y=-34, units="points")
+    fig.legend([k[0] for k in key], [k[1] for k in key], loc="upper center", bbox_to_anchor=(0.5, 0.0),
+               bbox_transform=below, ncol=2, fontsize=8, frameon=False)
     return fig
 
 

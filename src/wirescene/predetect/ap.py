@@ -154,18 +154,21 @@ def summary(res: dict) -> dict:
 
 def plot_pr(results: dict, path, *, title: str = "Car pre-detection") -> Path:
     """Precision-recall curves ``{name: result}`` to a PNG
-    (:func:`wirescene.io.pictures.new_figure`)."""
+    (:func:`wirescene.io.pictures.new_figure`); a result's ``n_gt``, where it has one, is
+    counted in the key (an AP over a few cars is not one over many). ``title`` says the
+    protocol (an AP of this one is not KITTI's)."""
     from wirescene.io.pictures import new_figure, save_figure
 
     fig = new_figure(figsize=(5, 4.5))
     ax = fig.subplots()
     for name, r in results.items():
-        ax.plot(r["recall"], r["precision"], label=f"{name} (AP {100 * r['ap']:.1f}%)")
+        cars = f", {r['n_gt']} cars" if "n_gt" in r else ""
+        ax.plot(r["recall"], r["precision"], label=f"{name} (AP {100 * r['ap']:.1f}%{cars})")
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1.02)
     ax.set_xlabel("recall")
     ax.set_ylabel("precision")
-    ax.set_title(title)
+    ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left")
     return save_figure(fig, path, dpi=100, bbox_inches="tight")
