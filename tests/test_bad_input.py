@@ -24,6 +24,7 @@ from conftest import KITTI_ROOT, kitti_copy
 from wirescene.cli.main import main
 from wirescene.core.camera import read_kitti_calib
 from wirescene.core.errors import InputError
+from wirescene.core.resources import DATA_DIR
 from wirescene.io.detections import read_detections
 from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset, read_image, read_labels
@@ -141,6 +142,29 @@ def _unlabelled_split(tmp):
     root = kitti_copy(tmp / "kitti", [FRAME], subdirs=("image_2", "calib"))
     (root / "training" / "label_2").mkdir()
     return root
+
+
+def _shape_model_file(tmp, *, components=None, mean=None):
+    """A shape model file ``tmp/shape.npz``: the shipped one's first ``components`` components,
+    or with ``mean`` for its mean (arrays of another shape)."""
+    from wirescene.core.artefacts import save_npz
+    from wirescene.core.shape import load_default
+
+    m = load_default()
+    k = m.n_components if components is None else components
+    save_npz(tmp / "shape.npz", dict(mean=m.mean if mean is None else mean, components=m.components[:k],
+                                     stds=m.stds[:k], explained_variance_ratio=m.explained_variance_ratio[:k],
+                                     exemplar_names=np.asarray(m.exemplar_names), exemplars=m.exemplars),
+             kind="shape-model", version=1)
+    return tmp / "shape.npz"
+
+
+def _classifier_file(tmp, features: int):
+    """A viewpoint classifier file ``tmp/v.npz`` of ``features`` features (the crops have 1957)."""
+    from wirescene.predetect.viewpoint_classifier import ViewpointClassifier
+
+    ViewpointClassifier(np.zeros(features), np.ones(features), np.zeros((features, 8)), np.zeros(8)).save(tmp / "v.npz")
+    return tmp / "v.npz"
 
 
 def _dets_dir(tmp, files):
@@ -270,6 +294,33 @@ CASES = {
         lambda t: ["detect", _truncated_copy(t, ["000002", FRAME], FRAME), "--frames", f"000002,{FRAME}",
                    "--out", t / "dets"], rf"image_2/{FRAME}\.png: corrupt or truncated image"),
     "eval devkit mapping malformed": (_eval_mapping_case, r"train_rand\.txt.*entry 2 \('x'\)"),
+    # trained files the fit reads: refused naming the file before any frame is read
+    "fit --shape-model of another kind": (
+        lambda t: _fit_case(t, extra=("--shape-model", DATA_DIR / "viewpoint_classifier.npz")),
+        r"viewpoint_classifier\.npz: format 'wirescene-viewpoint-classifier/1', expected 'wirescene-shape-model/1'"),
+    "fit --shape-model of arrays of another shape": (
+        lambda t: _fit_case(t, extra=("--shape-model", _shape_model_file(t, mean=np.zeros((30, 3))))),
+        r"shape\.npz: malformed shape model \(mean of shape \(30, 3\), expected \(36, 3\)\)$"),
+    "fit --shape-model of fewer components than searched": (
+        lambda t: _fit_case(t, extra=("--shape-model", _shape_model_file(t, components=3), "--variant", "fg")),
+        r"shape\.npz: shape model of 3 components, the fine stage searches 5 \(--set inference.n_shape=N"),
+    "fit --viewpoint-classifier corrupt": (lambda t: _fit_case(t, extra=("--viewpoint-classifier", _file(t, "v.npz"))),
+                                           r"v\.npz: corrupt artefact file"),
+    "fit --viewpoint-classifier of other features": (
+        lambda t: _fit_case(t, extra=("--viewpoint-classifier", _classifier_file(t, 10))),
+        r"v\.npz: viewpoint classifier of 10 features, expected 1957$"),
+    "fit --score-calibration malformed": (
+        lambda t: _fit_case(t, extra=("--score-calibration", _file(t, "s.json", json.dumps(
+            {"format": "wirescene-score-calibration/2", "coarse": {}})))), r"s\.json: malformed score calibration"),
+    "eval --models with a broken shape model": (
+        lambda t: _eval_case(t, "--models", _file(t, "models/shape_model.npz").parent),
+        r"models/shape_model\.npz: corrupt artefact file"),
+    "detect --viewpoint-classifier without --out": (
+        lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--viewpoint-classifier", DATA_DIR / "viewpoint_classifier.npz"],
+        "--viewpoint-classifier gives the boxes --out writes their viewpoints: it needs --out"),
+    "detect --viewpoint-classifier corrupt": (
+        lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--out", t / "dets", "--viewpoint-classifier",
+                   _file(t, "v.npz")], r"v\.npz: corrupt artefact file"),
     # detection directories
     "eval detections match no frame": (lambda t: _eval_case(t, "--detections", _dets_dir(t, {"10.csv": "x1,y1,x2,y2\n1,2,3,4\n"})),
                                        "none of the frames"),
@@ -323,6 +374,9 @@ CASES = {
         lambda t: ["train", "scores", t / "run", t / "x" / ".." / "run", "--out", t / "s.json"],
         "evaluation run given twice"),
     "train occlusion --scenes 0": (lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "0"], "--scenes"),
+    "train occlusion --parts-model broken": (
+        lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "1", "--parts-model", _file(t, "p.npz")],
+        r"p\.npz: corrupt artefact file"),
     "train occlusion with a broken part model": (
         lambda t: ["train", "occlusion", "--out", t / "c.json", "--scenes", "1", "--models",
                    _file(t, "models/parts_model.npz").parent], r"models/parts_model\.npz: corrupt artefact file"),

@@ -173,10 +173,9 @@ def test_models_directory_replaces_c_and_an_explicit_file_wins(tmp_path):
     assert options.parts_model == str((tmp_path / "parts_model.npz").resolve())
     assert options.detector_bank == "my_bank.npz"
     shutil.copy(shipped_path("score_calibration"), tmp_path / "score_calibration.json")
-    with pytest.raises(InputError, match="score calibration cannot be used yet"):
-        with_models(FitOptions(), resolve_models(tmp_path))
-    # raw scores do not read it
-    assert with_models(FitOptions(calibrate_scores=False), resolve_models(tmp_path)).inference.occluded_score == -2.75
+    options = with_models(FitOptions(shape_model="my_shape.npz"), resolve_models(tmp_path))
+    assert options.score_calibration == str((tmp_path / "score_calibration.json").resolve())
+    assert options.shape_model == "my_shape.npz" and options.viewpoint_classifier is None  # kept; what it lacks: shipped
     (tmp_path / "score_calibration.json").unlink()
     # the CLI's and the API's options go through the same resolver
     from wirescene.api import _options
@@ -265,6 +264,7 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     from wirescene.infer.occluded_score import load_occluded_score
     from wirescene.parts.detector import PartDetector
     from wirescene.predetect.bank import DetectorBank
+    from wirescene.predetect.viewpoint_classifier import ViewpointClassifier
 
     out, split, r = trained
     manifest = json.loads((out / MANIFEST_FILE).read_text())
@@ -272,7 +272,7 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert manifest["wirescene"] == wirescene.__version__
     assert manifest["environment"]["numpy"] == np.__version__  # with the BLAS kernels: they change trained files
     assert "blas" in manifest["environment"]
-    assert manifest["artefacts"] == ["parts_model", "detector_bank", "occlusion"]
+    assert manifest["artefacts"] == ["parts_model", "detector_bank", "viewpoint_classifier", "occlusion"]
     assert manifest["shipped"] == ["score_calibration"]
     data = manifest["data"]
     assert data["frames"] == 2 and data["frame_ids"] == ["000010", "001545"] and data["cars"] == 14
@@ -280,8 +280,8 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert manifest["calibration_folds"]["fold_of"] == {"000010": 0, "001545": 1}
     assert manifest["calibration_folds"]["frames_with_known_drive"] == 2  # the shared frames' drives
     assert manifest["calibration_folds"]["devkit_mapping"] is None  # tests/data/kitti holds no devkit
-    assert list(manifest["steps"]) == ["parts", "detector", "score_calibration", "occlusion"]
-    for step in ("parts", "detector", "occlusion"):
+    assert list(manifest["steps"]) == ["parts", "detector", "viewpoints", "score_calibration", "occlusion"]
+    for step in ("parts", "detector", "viewpoints", "occlusion"):
         record = manifest["steps"][step]
         assert record["done"] and record["seconds"] >= 0 and record["peak_rss_mb"] > 10
         assert record["sha256"] == hashlib.sha256((out / record["artefact"]).read_bytes()).hexdigest()
@@ -294,7 +294,12 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert bank.calibration is not None and bank.threshold == 0.5
     assert bank.meta["support_weight"] == SUPPORT_WEIGHT  # the recipe's, set on the finished bank
     assert np.isfinite(load_occluded_score(out / "occlusion.json"))
-    assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")
+    classifier = ViewpointClassifier.load(out / "viewpoint_classifier.npz")
+    assert classifier.meta["frames"] == ["000010", "001545"] and manifest["steps"]["viewpoints"]["crops"] == 56
+    alone = out.parent / "viewpoints_alone.npz"  # the step is the recipe of `train viewpoints`, byte for byte
+    assert cli("train", "viewpoints", KITTI_ROOT, "--split-file", split, "--out", alone).exit_code == 0
+    assert alone.read_bytes() == (out / "viewpoint_classifier.npz").read_bytes()
+    assert resolve_models(out).own == ("parts_model", "detector_bank", "viewpoint_classifier", "occlusion")
     assert "shipped" in r.output and "models written to" in r.output and "2 frames of known drive)" in r.output
 
 
@@ -305,12 +310,13 @@ def test_train_all_resume_skips_finished_steps(trained):
     assert "already holds models" in line and "--resume" in line
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--resume")
     assert r.exit_code == 0, r.output + r.stderr
-    assert r.stderr.count("done in an earlier run, kept") == 3
+    assert r.stderr.count("done in an earlier run, kept") == 4
     assert _mtimes(out) == before
     # options set to their defaults train the same: every step is kept
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "parts.n_jobs=1",
-            "--set", "detector.whiten=false", "--set", "occlusion.flip=false", "--resume")
-    assert r.exit_code == 0 and r.stderr.count("done in an earlier run, kept") == 3, r.output + r.stderr
+            "--set", "detector.whiten=false", "--set", "viewpoints.seed=0", "--set", "occlusion.flip=false",
+            "--resume")
+    assert r.exit_code == 0 and r.stderr.count("done in an earlier run, kept") == 4, r.output + r.stderr
     assert _mtimes(out) == before
     # another option of the last step: only that step runs again
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "occlusion.n_scenes=1",
@@ -321,7 +327,20 @@ def test_train_all_resume_skips_finished_steps(trained):
     assert {f: t for f, t in after.items() if f != "occlusion.json"} == \
         {f: t for f, t in before.items() if f != "occlusion.json"}
     assert json.loads((out / MANIFEST_FILE).read_text())["steps"]["occlusion"]["key"]["options"]["n_scenes"] == 1
+    assert resolve_models(out).own == ("parts_model", "detector_bank", "viewpoint_classifier", "occlusion")
+    # a directory of an older `train all`, without the classifier step: it loads, and a resumed run adds the step
+    manifest = json.loads((out / MANIFEST_FILE).read_text())
+    classifier = (out / "viewpoint_classifier.npz").read_bytes()
+    del manifest["steps"]["viewpoints"]
+    manifest["artefacts"].remove("viewpoint_classifier")
+    (out / MANIFEST_FILE).write_text(json.dumps(manifest))
+    (out / "viewpoint_classifier.npz").unlink()
     assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")
+    r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "occlusion.n_scenes=1",
+            "--resume")
+    assert r.exit_code == 0 and r.stderr.count("done in an earlier run, kept") == 3, r.output + r.stderr
+    assert (out / "viewpoint_classifier.npz").read_bytes() == classifier
+    assert resolve_models(out).own == ("parts_model", "detector_bank", "viewpoint_classifier", "occlusion")
 
 
 def test_resume_sees_changed_frames_and_a_failed_one_leaves_the_directory_as_it_was(tmp_path, monkeypatch):
@@ -338,12 +357,12 @@ def test_resume_sees_changed_frames_and_a_failed_one_leaves_the_directory_as_it_
     def broken(*a, **k):
         raise RuntimeError("the occlusion step broke")
 
-    with monkeypatch.context() as patch:  # a step that fails after two kept ones
+    with monkeypatch.context() as patch:  # a step that fails after three kept ones
         patch.setattr(occlusion, "calibrate_occluded_score", broken)
         r = cli(*args, "--set", "occlusion.n_scenes=3", "--resume")
-    assert isinstance(r.exception, RuntimeError) and r.stderr.count("done in an earlier run, kept") == 2
+    assert isinstance(r.exception, RuntimeError) and r.stderr.count("done in an earlier run, kept") == 3
     assert (out / MANIFEST_FILE).read_bytes() == finished and _mtimes(out) == mtimes
-    assert resolve_models(out).own == ("parts_model", "detector_bank", "occlusion")  # still usable
+    assert resolve_models(out).own == ("parts_model", "detector_bank", "viewpoint_classifier", "occlusion")
     image = root / "training" / "image_2" / "001545.png"
     image.rename(tmp_path / "away.png")  # a missing image is found before any step, not inside one
     line = one_line_error(cli(*args, "--resume"))
@@ -361,7 +380,7 @@ def test_resume_sees_changed_frames_and_a_failed_one_leaves_the_directory_as_it_
     label.write_text("".join(rows[:first] + rows[first + 1:]))  # a car less: every step learns from other data
     r = cli(*args, "--resume")
     assert r.exit_code == 0, r.output + r.stderr
-    assert "done in an earlier run, kept" not in r.stderr and r.stderr.count("does not match") == 3
+    assert "done in an earlier run, kept" not in r.stderr and r.stderr.count("does not match") == 4
     assert json.loads((out / MANIFEST_FILE).read_text())["data"]["cars"] == 13
 
 

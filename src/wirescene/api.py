@@ -214,7 +214,7 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
     a variant to be fitted is a fine one, :func:`wirescene.fitting.variants.casts_rays`)."""
     from dataclasses import replace
 
-    from wirescene.fitting.models import with_models
+    from wirescene.fitting.models import check_model_files, with_models
     from wirescene.infer.torch_backend import choose_device
 
     if options is not None:
@@ -231,7 +231,8 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
         except (ValueError, TypeError) as exc:
             raise ArgumentError("settings", str(exc)) from None
     device = choose_device(options.inference.device, parallel=parallel, casts_rays=casts_rays)
-    return with_models(replace(options, inference=replace(options.inference, device=device)), _models(models))
+    options = with_models(replace(options, inference=replace(options.inference, device=device)), _models(models))
+    return check_model_files(options, fine=casts_rays)  # a bad model file: an InputError naming it, before any work
 
 
 def fit(
@@ -277,11 +278,14 @@ def fit(
     seed : int
         Seed of the inference's random sampling; equal seeds give equal results.
     options : FitOptions, optional
-        Every stage's options (overrides ``particles`` and ``seed``).
+        Every stage's options (overrides ``particles`` and ``seed``), with the trained files
+        the fit reads (``parts_model``, ``detector_bank``, ``viewpoint_classifier``,
+        ``score_calibration``, ``shape_model``; None: the shipped file).
     models : path, optional
         A models directory (``wirescene train all --out MODELS_DIR``): its part model,
-        detector bank and occluded-part score replace the shipped ones (a part model or
-        bank file set in ``options`` is kept); what it lacks stays shipped.
+        detector bank, crop viewpoint classifier, score calibration, shape model and
+        occluded-part score replace the shipped ones (a file set in ``options`` is kept);
+        what it lacks stays shipped.
     settings : mapping, optional
         ``{"STAGE.FIELD": value}`` changes to the stages' options, by the names of the
         command line's ``--set`` (e.g. ``{"inference.box_weight": 50}``; stages
@@ -351,7 +355,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         (:func:`wirescene.fitting.pipeline.detect_own`); without it the detector's own
         viewpoints stay.
     models : path, optional
-        A models directory whose detector bank replaces the shipped one.
+        A models directory whose detector bank and crop viewpoint classifier replace the
+        shipped ones.
     threshold : float, optional
         Keep the detections scoring above it (default: the bank's own, 0.5 for the shipped
         one, its 2D operating point). The fit's own pre-detection keeps those above 0.3
@@ -392,7 +397,13 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     >>> bool((dets.scores > 0.5).all())  # above the shipped bank's threshold
     True
     """
-    from wirescene.fitting.pipeline import PredetectOptions, detections_above, detector_bank, image_mount
+    from wirescene.fitting.pipeline import (
+        PredetectOptions,
+        detections_above,
+        detector_bank,
+        image_mount,
+        viewpoint_classifier,
+    )
     from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
 
     if threshold is not None and not finite_real(threshold):
@@ -411,6 +422,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
     bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
+    classifier = viewpoint_classifier(str(found.path("viewpoint_classifier"))
+                                      if "viewpoint_classifier" in found.own else None)
     keep = bank.threshold if threshold is None else float(threshold)
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
     min_height, max_scale = smallest_car_search(bank, smallest_car)
@@ -419,7 +432,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         mount = image_mount(camera, rgb, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
     dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
                        min_height=min_height, mount=mount)
-    return detections_above(camera, rgb, dets, keep, bank=bank, pyramid=pyramid, responses=responses, mount=mount)
+    return detections_above(camera, rgb, dets, keep, bank=bank, classifier=classifier, pyramid=pyramid,
+                            responses=responses, mount=mount)
 
 
 DRAW_VIEWS = ("overlay", "bev")

@@ -18,9 +18,9 @@ from wirescene.cli.options import (
     check_output_file,
     drive_map_option,
     field_type,
-    load_models,
     models_option,
     read_drive_map,
+    say_models,
     select_frames,
     split_file_option,
     split_option,
@@ -175,6 +175,9 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @models_option
 @click.option("--bank", "bank_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Detector bank .npz (default: --models' or the shipped one).")
+@click.option("--viewpoint-classifier", "classifier_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Crop viewpoint classifier .npz of the viewpoints --out writes (default: --models' "
+                                 "or the shipped one).")
 @click.option("--threshold", type=FiniteFloat(), default=None,
               help="Score threshold (default: the bank's, 0.5 for the shipped one; the fit's own pre-detection keeps "
                    "the boxes above 0.3, and --out writes the fit's viewpoints at any threshold).")
@@ -195,17 +198,18 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--smallest-car", type=field_type(stage_field(PredetectOptions, "smallest_car")), default=0.0,
               show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
                                       "upsampled to reach it (the fit's --smallest-car).")
-def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, out_dir, pr_curve, json_out,
-           camera_height, camera_pitch, estimate_pitch, smallest_car):
+def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_path, threshold, out_dir, pr_curve,
+           json_out, camera_height, camera_pitch, estimate_pitch, smallest_car):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
 
     The files of --out hold the detections above the threshold with the viewpoints the
     pipeline gives them (the box rule of `fit`); AP and AOS score the bank's own."""
     import numpy as np
 
+    from wirescene.core.resources import resolve_models
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import detections_above, image_mount
+    from wirescene.fitting.pipeline import detections_above, image_mount, viewpoint_classifier
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars, smallest_car_search
@@ -213,8 +217,17 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
     check_output_dir(out_dir, "--out")
     check_output_file(pr_curve, "--pr-curve")
     check_output_file(json_out, "--json")
+    if classifier_path is not None and out_dir is None:  # refused, not ignored
+        raise click.UsageError("--viewpoint-classifier gives the boxes --out writes their viewpoints: it needs --out")
     ds = KittiDataset(kitti_root, split=split)
-    bank = DetectorBank.load(bank_path if bank_path else load_models(models).path("detector_bank"))
+    found = resolve_models(models)
+    bank = DetectorBank.load(bank_path if bank_path else found.path("detector_bank"))
+    if classifier_path is None and "viewpoint_classifier" in found.own:
+        classifier_path = found.path("viewpoint_classifier")
+    # the viewpoints of the boxes --out writes (None: the shipped one), read before any frame: a bad file is refused
+    classifier = None if out_dir is None else viewpoint_classifier(None if classifier_path is None
+                                                                   else str(classifier_path))
+    say_models(found)  # once its files are read (a broken one: the error line alone)
     ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
     min_height, max_scale = smallest_car_search(bank, smallest_car)
@@ -234,8 +247,8 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, threshold, 
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:  # with the viewpoints the fit gives the boxes it keeps
-                kept = detections_above(ds.camera(fid), img, d, thr, bank=bank, pyramid=pyramid, responses=responses,
-                                        mount=mount)
+                kept = detections_above(ds.camera(fid), img, d, thr, bank=bank, classifier=classifier, pyramid=pyramid,
+                                        responses=responses, mount=mount)
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
                 files[f"{fid}.json"] = json.dumps({"detections": entries}, indent=1)

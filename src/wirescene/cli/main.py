@@ -22,9 +22,9 @@ from wirescene.cli.options import (
     check_picture_file,
     drive_map_option,
     interval_drives,
-    load_models,
     models_option,
     particles_option,
+    say_models,
     select_frames,
     settings_option,
     split_file_option,
@@ -126,15 +126,16 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_ray
     (``parallel``: frames will be fitted by several processes; ``casts_rays``: a variant to be
     fitted is a fine one, :func:`wirescene.fitting.variants.casts_rays`; see
     :func:`wirescene.infer.torch_backend.choose_device`)."""
-    from wirescene.fitting.models import with_models
+    from wirescene.core.resources import resolve_models
+    from wirescene.fitting.models import MODEL_FILES, check_model_files, with_models
     from wirescene.fitting.pipeline import FitOptions
     from wirescene.infer.torch_backend import choose_device
     from wirescene.lift import LiftingOptions
 
     models_dir = inference.pop("models", None)
-    # False: the pre-detection scores (`eval --raw-scores`), with which a models directory's own calibration is moot.
+    # False: the pre-detection scores (`eval --raw-scores`, the data of `train scores`).
     calibrate_scores = inference.pop("calibrate_scores", True)
-    models = {k: None if inference.get(k) is None else str(inference[k]) for k in ("parts_model", "detector_bank")}
+    models = {k: None if inference.get(k) is None else str(inference[k]) for k in MODEL_FILES}
     settings = stage_settings(inference, inference.pop("settings", ()))
     device = inference.pop("device", None)
     unknown = set(inference) - set(models)
@@ -149,7 +150,11 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_ray
         options = options.with_settings(settings)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--set") from None
-    return with_models(options, load_models(models_dir))
+    models = resolve_models(models_dir)
+    # a missing or malformed model file is refused naming it (the error line alone), before any frame is read
+    options = check_model_files(with_models(options, models), fine=casts_rays)
+    say_models(models)
+    return options
 
 
 def _inference_options(f):
@@ -171,6 +176,17 @@ def _inference_options(f):
     f = click.option("--bank", "detector_bank", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                      default=None, help="Detector bank file for our own pre-detection (default: --models' or the "
                                         "shipped bank).")(f)
+    f = click.option("--viewpoint-classifier", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                     default=None, help="Crop viewpoint classifier file (`wirescene train viewpoints`) that gives our "
+                                        "own boxes and boxes without a viewpoint theirs (default: --models' or the "
+                                        "shipped one).")(f)
+    f = click.option("--score-calibration", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                     default=None, help="Score calibration file (`wirescene train scores`) of the cars' confidences "
+                                        "and of the verification of our own boxes (default: --models' or the "
+                                        "shipped one).")(f)
+    f = click.option("--shape-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+                     help="Shape model file (`wirescene train shape`) of the fine variants' wireframes (default: "
+                          "--models' or the shipped one).")(f)
     f = click.option("--device", default=None,
                      help="Where the likelihood's ray casting runs: numpy, or PyTorch on cpu, cuda or cuda:N "
                           "(optional: pip install torch). auto (the default, unless --set inference.device=... "
@@ -267,7 +283,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
     drives = interval_drives(dataset.split_dir)  # read before any fit: a bad devkit mapping is an error now
     _say_if_trained_on(inference.get("models"), dataset, frame_ids, variants=variants, detections=detections,
-                       replaced=[k for k in ("parts_model", "detector_bank") if inference.get(k) is not None])
+                       replaced=[k for k in ("parts_model", "detector_bank", "viewpoint_classifier")
+                                 if inference.get(k) is not None])
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
@@ -323,16 +340,16 @@ def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str], *
                        replaced=()) -> None:
     """A line on standard error where the run reads a model of ``--models`` that was trained on
     some of the frames evaluated: their figures are not held out. The frame-trained models are
-    the part model (read by the fine variants) and the detector bank (read for our own
-    detections and for boxes given without a viewpoint), unless ``replaced`` (``--parts-model``,
-    ``--bank``) by another file."""
+    the part model (read by the fine variants), the detector bank and the crop viewpoint
+    classifier (read for our own detections and for boxes given without a viewpoint), unless
+    ``replaced`` (``--parts-model``, ``--bank``, ``--viewpoint-classifier``) by another file."""
     from wirescene.core.resources import resolve_models, trained_on
     from wirescene.fitting.variants import get_variant
 
     models = resolve_models(models_dir)
     read = {"parts_model"} if any(get_variant(v).fine for v in variants) else set()
-    if detections != "gt":
-        read.add("detector_bank")
+    if detections != "gt":  # label boxes carry their viewpoints: neither the bank nor the classifier is read
+        read |= {"detector_bank", "viewpoint_classifier"}
     if not (read - set(replaced)) & set(models.own):
         return
     seen = trained_on(models, dataset.split_dir, frame_ids)

@@ -19,9 +19,12 @@ from wirescene.cli.options import NON_NEGATIVE, POSITIVE, check_output_file, loa
               help="Also read each box's part evidence off its mirror image, as the fit does by default "
                    "(the shipped c was chosen without; benchmarks/RESULTS.md, 'c = 0.5 with the mirrored evidence').")
 @models_option
-def occlusion(seed, scenes, out, flip_evidence, models):
+@click.option("--parts-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Part detector file whose evidence is scored (default: --models' or the shipped model), e.g. one "
+                   "of `wirescene train parts`.")
+def occlusion(seed, scenes, out, flip_evidence, models, parts_model):
     """Choose the likelihood's occluded-part score c on held-out synthetic scenes, with
-    the part detectors of --models (default: the shipped ones)."""
+    the part detectors of --parts-model or --models (default: the shipped ones)."""
     from tqdm import tqdm
 
     from wirescene.core.resources import resolve_models
@@ -30,8 +33,7 @@ def occlusion(seed, scenes, out, flip_evidence, models):
     from wirescene.training.occlusion import calibrate_occluded_score
 
     check_output_file(out, "--out")
-    found = resolve_models(models)
-    detector = PartDetector.load(found.path("parts_model"))
+    detector = PartDetector.load(parts_model if parts_model is not None else resolve_models(models).path("parts_model"))
     load_models(models)  # says which models, once its part model is read (a broken one: the error line alone)
     result = calibrate_occluded_score(seed=seed, n_scenes=scenes, detector=detector, flip=flip_evidence,
                                       progress=lambda it: tqdm(it, desc="scenes", leave=False, file=sys.stderr))

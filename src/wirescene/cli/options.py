@@ -235,8 +235,9 @@ def workers_count(workers: int | None) -> int:
 def models_option(f):
     """``--models MODELS_DIR``: trained artefacts that replace the shipped ones."""
     return click.option("--models", "models", type=click.Path(path_type=Path), default=None,
-                        help="Models directory (`wirescene train all --out`): its parts_model.npz, detector_bank.npz "
-                             "and occlusion.json replace the shipped ones; what it lacks stays shipped.")(f)
+                        help="Models directory (`wirescene train all --out`): its parts_model.npz, detector_bank.npz, "
+                             "viewpoint_classifier.npz, score_calibration.json, shape_model.npz and occlusion.json "
+                             "replace the shipped ones; what it lacks stays shipped.")(f)
 
 
 def load_models(models_dir: Path | None):
@@ -244,7 +245,12 @@ def load_models(models_dir: Path | None):
     it), said on standard error so that a run's log tells which models it used."""
     from wirescene.core.resources import resolve_models
 
-    models = resolve_models(models_dir)
+    return say_models(resolve_models(models_dir))
+
+
+def say_models(models):
+    """``models`` (a :class:`~wirescene.core.resources.Models`), said on standard error unless
+    they are the shipped ones."""
     if models.root is not None:
         click.echo(f"wirescene: {models.describe()}", err=True)
     return models

@@ -40,23 +40,23 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
 @click.command("all")
 @click.argument("kitti_root", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
-              help="Models directory to write (parts_model.npz, detector_bank.npz, occlusion.json, models.json); "
-                   "use it with --models of fit, eval, predict and detect.")
+              help="Models directory to write (parts_model.npz, detector_bank.npz, viewpoint_classifier.npz, "
+                   "occlusion.json, models.json); use it with --models of fit, eval, predict and detect.")
 @click.option("--frames", default=None, help="Comma-separated training frame ids (default: every labelled frame).")
 @split_file_option
 @click.option("--folds", "n_folds", type=click.IntRange(min=2), default=4, show_default=True,
               help="Folds of the held-out calibrations (by drive where it is known, else by frame).")
 @drive_map_option()
 @click.option("--set", "settings", multiple=True, metavar="STEP.KEY=VALUE",
-              help="Change one option of a step's recipe (steps parts, detector, occlusion), e.g. "
+              help="Change one option of a step's recipe (steps parts, detector, viewpoints, occlusion), e.g. "
                    "parts.synth_scenes=100 or detector.mining_rounds=2; repeatable.")
 @click.option("--resume/--no-resume", default=False, show_default=True,
               help="Keep the steps already done in --out with the same data, options and inputs; train the rest.")
 @workers_option("of the detector step's per-image passes (mining, detections)")
 def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, settings, resume, workers):
-    """Train part detectors, detector bank (held-out calibration), occluded-part score c
-    (the score calibration stays the shipped one) on the labelled frames of KITTI_ROOT,
-    in order, into a models directory with a manifest."""
+    """Train part detectors, detector bank (held-out calibration), crop viewpoint classifier,
+    occluded-part score c (the score calibration stays the shipped one) on the labelled
+    frames of KITTI_ROOT, in order, into a models directory with a manifest."""
     from tqdm import tqdm
 
     from wirescene.cli.options import parse_frames

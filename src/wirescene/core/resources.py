@@ -30,8 +30,10 @@ DATA_DIR = Path(__file__).resolve().parent.parent / "data"
 ARTEFACTS: dict[str, str] = {
     "parts_model": "parts_model.npz",
     "detector_bank": "detector_bank.npz",
+    "viewpoint_classifier": "viewpoint_classifier.npz",
     "score_calibration": "score_calibration.json",
     "occlusion": "occlusion.json",
+    "shape_model": "shape_model.npz",
 }
 MANIFEST_FILE = "models.json"
 MANIFEST_KIND = "models"

@@ -122,18 +122,49 @@ class ShapeModel:
 
     @staticmethod
     def load(path) -> "ShapeModel":
-        """Read a model written by :meth:`save`; :class:`InputError` if missing,
-        unreadable or of another format version."""
+        """Read a model written by :meth:`save`; :class:`InputError` naming the file if
+        missing, unreadable, of another kind or format version, or of arrays that do not
+        make a model of the 36-vertex wireframe (:func:`_arrays_problem`)."""
         data = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
         missing = {"mean", "components", "stds", "explained_variance_ratio", "exemplar_names", "exemplars"} - set(data)
         if missing:
             raise InputError(f"not a shape model file (missing {', '.join(sorted(missing))})", path=path)
+        problem = _arrays_problem(data)
+        if problem:
+            raise InputError(f"malformed shape model ({problem})", path=path)
         return ShapeModel(
             mean=data["mean"], components=data["components"], stds=data["stds"],
             explained_variance_ratio=data["explained_variance_ratio"],
             exemplar_names=tuple(str(n) for n in data["exemplar_names"]),
             exemplars=data["exemplars"], version=FORMAT_VERSION,
         )
+
+
+def _arrays_problem(data: dict) -> str | None:
+    """What keeps the arrays of a shape model file from making a model (None: nothing):
+    shapes other than ``mean (36, 3)``, ``components (K, 36, 3)``, ``stds (K,)``,
+    ``explained_variance_ratio (K,)``, ``exemplars (M, 36, 3)`` and ``M`` names with ``K``
+    and ``M`` at least 1; numbers that are not finite, or standard deviations not above 0."""
+    expected = {"mean": ("", N_VERTICES, 3), "components": ("K", N_VERTICES, 3), "stds": ("K",),
+                "explained_variance_ratio": ("K",), "exemplars": ("M", N_VERTICES, 3), "exemplar_names": ("M",)}
+    for key, shape in expected.items():
+        want = tuple(d for d in shape if d != "")
+        found = np.shape(data[key])
+        if len(found) != len(want) or any(isinstance(w, int) and f != w for f, w in zip(found, want)):
+            return f"{key} of shape {found}, expected ({', '.join(map(str, want))})"
+    k, m = len(data["components"]), len(data["exemplars"])
+    if k < 1 or m < 1:
+        return f"{k} components and {m} exemplars, at least one of each needed"
+    if len(data["stds"]) != k or len(data["explained_variance_ratio"]) != k:
+        return f"{k} components but {len(data['stds'])} stds and {len(data['explained_variance_ratio'])} variance ratios"
+    if len(data["exemplar_names"]) != m:
+        return f"{m} exemplars but {len(data['exemplar_names'])} names"
+    for key in ("mean", "components", "stds", "exemplars"):
+        if not np.issubdtype(np.asarray(data[key]).dtype, np.number) or not np.all(np.isfinite(data[key])):
+            return f"{key} holds values that are not finite numbers"
+    if np.any(np.asarray(data["stds"]) <= 0):
+        return "stds must be above 0"
+    return None
 
 
 def augment_to_kitti_sizes(wireframes, *, n_per_exemplar: int, rng=None,

@@ -1,18 +1,24 @@
 """The trained artefacts a fit uses, as :class:`~wirescene.fitting.pipeline.FitOptions`
 carry them: a models directory (:func:`wirescene.core.resources.resolve_models`) applied
-to the options, and the content fingerprint of what the options load (part of every
-resume record, so that a retrained model is never mistaken for the one a record was
-fitted with)."""
+to the options, the files checked before any fit, and the content fingerprint of what the
+options load (part of every resume record, so that a retrained model is never mistaken
+for the one a record was fitted with)."""
 
 from __future__ import annotations
 
 import dataclasses
 
-from wirescene.core.errors import InputError
 from wirescene.core.resources import Models, file_sha256, shipped_path
 from wirescene.fitting.pipeline import FitOptions
 
-__all__ = ["with_models", "models_fingerprint"]
+__all__ = ["MODEL_FILES", "with_models", "check_model_files", "reads_score_calibration", "models_fingerprint"]
+
+#: The artefacts a fit reads from a file that :class:`FitOptions` names (the field of the
+#: same name; None: the shipped file): each an explicit option (``--parts-model``, ``--bank``,
+#: ``--viewpoint-classifier``, ``--score-calibration``, ``--shape-model``) that wins over
+#: a models directory's file. The occluded-part score is a number in the options instead.
+MODEL_FILES: tuple[str, ...] = ("parts_model", "detector_bank", "viewpoint_classifier", "score_calibration",
+                                "shape_model")
 
 
 def with_models(options: FitOptions, models: Models) -> FitOptions:
@@ -21,28 +27,23 @@ def with_models(options: FitOptions, models: Models) -> FitOptions:
     Parameters
     ----------
     options : FitOptions
-        A part model or detector bank file set in it (``--parts-model``, ``--bank``) is
+        A file of :data:`MODEL_FILES` set in it (``--parts-model``, ``--bank``, ...) is
         kept: an explicit file wins over the directory's.
     models : Models
-        Its part model, detector bank and occluded-part score ``c`` replace the shipped
-        ones; what it lacks stays shipped.
+        Its part model, detector bank, crop viewpoint classifier, score calibration, shape
+        model and occluded-part score ``c`` replace the shipped ones; what it lacks stays
+        shipped.
 
-    Raises
-    ------
-    InputError
-        If ``models`` holds its own score calibration and ``options`` calibrate the
-        scores: the fit cannot load another calibration than the shipped one yet.
+    Examples
+    --------
+    >>> from wirescene.core.resources import SHIPPED
+    >>> with_models(FitOptions(shape_model="mine.npz"), SHIPPED).shape_model
+    'mine.npz'
     """
     if models.root is None:
         return options
-    if "score_calibration" in models.own and options.calibrate_scores:
-        raise InputError("a models directory's own score calibration cannot be used yet (the fit reads the "
-                         "shipped one): remove the file, or write raw scores", path=models.path("score_calibration"))
-    changes = {}
-    if "parts_model" in models.own and options.parts_model is None:
-        changes["parts_model"] = str(models.path("parts_model"))
-    if "detector_bank" in models.own and options.detector_bank is None:
-        changes["detector_bank"] = str(models.path("detector_bank"))
+    changes = {name: str(models.path(name)) for name in MODEL_FILES
+               if name in models.own and getattr(options, name) is None}
     if "occlusion" in models.own:
         from wirescene.infer.occluded_score import load_occluded_score
 
@@ -51,14 +52,50 @@ def with_models(options: FitOptions, models: Models) -> FitOptions:
     return dataclasses.replace(options, **changes)
 
 
+def check_model_files(options: FitOptions, *, fine: bool = True) -> FitOptions:
+    """``options``, once the crop viewpoint classifier, score calibration and shape model
+    files they name (not the shipped ones) have been loaded (once per version of each file,
+    so the fits reuse them) and, for a ``fine`` variant to be fitted, the shape model has the
+    components the fine stage searches.
+
+    Raises
+    ------
+    InputError
+        Naming the file: missing, corrupt, of another kind or format version, of arrays of
+        other shapes, or (``fine``) a shape model of fewer components than
+        ``options.inference.n_shape``.
+    """
+    from wirescene.fitting.confidence import load_score_calibration
+    from wirescene.fitting.pipeline import load_shape_model, shape_model_for, viewpoint_classifier
+
+    if options.viewpoint_classifier is not None:
+        viewpoint_classifier(options.viewpoint_classifier)
+    if options.score_calibration is not None:
+        load_score_calibration(options.score_calibration)
+    if options.shape_model is not None and fine:
+        shape_model_for(options)
+    elif options.shape_model is not None:
+        load_shape_model(options.shape_model)
+    return options
+
+
+def reads_score_calibration(options: FitOptions) -> bool:
+    """Whether a fit with ``options`` reads the score calibration: for the confidences
+    (``calibrate_scores``) or for the verification of our own boxes
+    (``predetect.min_car_probability`` above 0)."""
+    return options.calibrate_scores or options.predetect.min_car_probability > 0
+
+
 def models_fingerprint(options: FitOptions) -> dict[str, str]:
     """``{artefact: SHA-256}`` of the files a fit with ``options`` reads: part model,
-    detector bank and (when scores are calibrated) score calibration. The occluded-part
-    score is a number in the options themselves."""
-    out = {
-        "parts_model": file_sha256(options.parts_model or shipped_path("parts_model")),
-        "detector_bank": file_sha256(options.detector_bank or shipped_path("detector_bank")),
-    }
-    if options.calibrate_scores:
-        out["score_calibration"] = file_sha256(shipped_path("score_calibration"))
-    return out
+    detector bank, crop viewpoint classifier, shape model and (when it is read,
+    :func:`reads_score_calibration`) score calibration. The occluded-part score is a number
+    in the options themselves.
+
+    Examples
+    --------
+    >>> sorted(models_fingerprint(FitOptions()))
+    ['detector_bank', 'parts_model', 'score_calibration', 'shape_model', 'viewpoint_classifier']
+    """
+    return {name: file_sha256(getattr(options, name) or shipped_path(name)) for name in MODEL_FILES
+            if name != "score_calibration" or reads_score_calibration(options)}

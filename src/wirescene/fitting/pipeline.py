@@ -16,13 +16,15 @@ import numpy as np
 
 from wirescene.core.boxes import clip_boxes
 from wirescene.core.camera import Camera
-from wirescene.core.errors import ArgumentError, check_shape
+from wirescene.core.errors import ArgumentError, InputError, check_shape
 from wirescene.core.groundplane import KITTI_MOUNT, Mount
 from wirescene.core.resources import cached_by_file
 from wirescene.core.settings import option, stage_field
-from wirescene.core.shape import load_default as load_shape_model
+from wirescene.core.shape import DEFAULT_MODEL_PATH as SHIPPED_SHAPE_MODEL
+from wirescene.core.shape import ShapeModel
+from wirescene.core.shape import load_default as load_default_shape_model
 from wirescene.core.types import Detections, SceneEstimate
-from wirescene.fitting.confidence import apply_confidence, keep_likely_cars
+from wirescene.fitting.confidence import apply_confidence, keep_likely_cars, load_score_calibration
 from wirescene.fitting.variants import Variant, get_variant
 from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
@@ -73,6 +75,12 @@ class FitOptions:
     detector_bank: str | None = None
     # Crop viewpoint classifier file for boxes given without a viewpoint (None: the shipped one).
     viewpoint_classifier: str | None = None
+    # Score calibration file of the confidences and of the verification of our own boxes
+    # (None: the shipped one), e.g. one of `wirescene train scores` on the user's own runs.
+    score_calibration: str | None = None
+    # Shape model file of the fine variants' wireframes (None: the shipped one), e.g. one of
+    # `wirescene train shape` on other CAD cars.
+    shape_model: str | None = None
 
     def with_settings(self, settings: Mapping[str, object] | None) -> "FitOptions":
         """These options with ``{"STAGE.FIELD": value}`` changed, ``STAGE`` one of
@@ -139,6 +147,24 @@ def viewpoint_classifier(path: str | None):
     from wirescene.predetect.viewpoint_classifier import ViewpointClassifier, load_default_classifier
 
     return load_default_classifier() if path is None else ViewpointClassifier.load(path)
+
+
+@cached_by_file(maxsize=4)
+def load_shape_model(path: str | None = None) -> ShapeModel:
+    """The shape model at ``path`` (None: the shipped one), loaded once per version of the file."""
+    return load_default_shape_model() if path is None else ShapeModel.load(path)
+
+
+def shape_model_for(options: "FitOptions") -> ShapeModel:
+    """The shape model of ``options`` (:attr:`FitOptions.shape_model`), checked to have the
+    components the fine stage searches (``inference.n_shape``): an
+    :class:`~wirescene.core.errors.InputError` naming the file otherwise."""
+    model = load_shape_model(options.shape_model)
+    if model.n_components < options.inference.n_shape:
+        raise InputError(f"shape model of {model.n_components} components, the fine stage searches "
+                         f"{options.inference.n_shape} (--set inference.n_shape=N, N <= {model.n_components})",
+                         path=options.shape_model or SHIPPED_SHAPE_MODEL)
+    return model
 
 
 @cached_by_file(maxsize=4)
@@ -240,26 +266,28 @@ def complete_viewpoints(camera: Camera, detections: Detections, image: np.ndarra
 
 
 def detections_above(camera: Camera | None, image: np.ndarray, found: Detections, threshold: float, *, bank,
-                     pyramid: list | None = None, responses: dict | None = None,
+                     classifier=None, pyramid: list | None = None, responses: dict | None = None,
                      mount: Mount = KITTI_MOUNT) -> Detections:
     """The bank's detections ``found`` of ``image`` (every score down to ``threshold`` at least)
     above ``threshold``, each box that the fit's own pre-detection also keeps (above
     ``PredetectOptions.threshold``, for a calibrated bank) with the viewpoint the fit gives it:
     cars of one row agree, so a box's viewpoint depends on the boxes the rule reads beside it
-    (:func:`detect_own`; ``pyramid``, ``responses`` and ``mount`` as there)."""
+    (:func:`detect_own`; ``classifier``, ``pyramid``, ``responses`` and ``mount`` as there)."""
     keep = found.subset(found.scores > threshold)
     if camera is None:
         return keep
     fit_threshold = PredetectOptions().threshold
     if bank.calibration is None:  # margins, not probabilities: no common scale with the fit's threshold
-        return detect_own(camera, image, bank=bank, detections=keep, pyramid=pyramid, responses=responses,
-                          mount=mount)
-    read = detect_own(camera, image, bank=bank, detections=found.subset(found.scores > min(threshold, fit_threshold)),
-                      pyramid=pyramid, responses=responses, mount=mount)
+        return detect_own(camera, image, bank=bank, classifier=classifier, detections=keep, pyramid=pyramid,
+                          responses=responses, mount=mount)
+    read = detect_own(camera, image, bank=bank, classifier=classifier,
+                      detections=found.subset(found.scores > min(threshold, fit_threshold)), pyramid=pyramid,
+                      responses=responses, mount=mount)
     out = read.subset(read.scores > threshold)
     if threshold < fit_threshold:  # the rule read more boxes than the fit's: the fit's set decides its own boxes
-        fit = detect_own(camera, image, bank=bank, detections=found.subset(found.scores > fit_threshold),
-                         pyramid=pyramid, responses=responses, mount=mount)
+        fit = detect_own(camera, image, bank=bank, classifier=classifier,
+                         detections=found.subset(found.scores > fit_threshold), pyramid=pyramid, responses=responses,
+                         mount=mount)
         alpha = out.alpha.copy()
         alpha[out.scores > fit_threshold] = fit.alpha
         out = Detections(out.boxes, out.scores, alpha, out.source)
@@ -485,7 +513,8 @@ def fit_frame(
                                  flip=options.inference.flip_evidence)
     if not np.all(np.isfinite(detections.alpha)):
         # no image to score (given evidence, e.g. the oracle's): the viewpoint from the part evidence
-        detections = viewpoint_from_evidence(camera, detections, evidence, load_shape_model(), lifting=options.lifting)
+        detections = viewpoint_from_evidence(camera, detections, evidence, load_shape_model(options.shape_model),
+                                             lifting=options.lifting)
     if lifted is None:
         lifted = lift_table(camera, detections, options=options.lifting)
     # the confidence's features ask whether a box touches the image's side
@@ -494,9 +523,9 @@ def fit_frame(
                  for v in variants}
     for v in variants:
         estimates[v.name].detections = detections
-        if own:
+        if own and options.predetect.min_car_probability > 0:  # the verification reads the calibration's car model
             keep_likely_cars(estimates[v.name], fine=v.fine, min_probability=options.predetect.min_car_probability,
-                             image_width=width)
+                             calibration=load_score_calibration(options.score_calibration), image_width=width)
     return FrameFit(detections, estimates, evidence)
 
 
@@ -514,9 +543,8 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
         # weighted by the detections' scores), not by the plain sum ``particles.cost``,
         # which lets badly fitting (false) detections pick the shared plane.
         estimate = SceneEstimate.from_particle(particles, 0, detections, variant=v.name)
-        return apply_confidence(estimate, fine=False, image_width=image_width) if options.calibrate_scores \
-            else estimate
-    shape_model = load_shape_model()
+        return _confidence(estimate, options, fine=False, image_width=image_width)
+    shape_model = shape_model_for(options)
     # Seeded per call from the run seed and the scene size alone, so a variant's fit does
     # not depend on which other variants are fitted with it.
     rng = np.random.default_rng([options.seed, len(detections)])
@@ -526,7 +554,16 @@ def _fit_variant(camera: Camera, detections: Detections, v: Variant, lifted: Lif
         alpha=detections.alpha,
     )
     estimate = estimate_from_refined(camera, refined, detections, shape_model, variant=v.name)
-    return apply_confidence(estimate, fine=True, image_width=image_width) if options.calibrate_scores else estimate
+    return _confidence(estimate, options, fine=True, image_width=image_width)
+
+
+def _confidence(estimate: SceneEstimate, options: FitOptions, *, fine: bool, image_width: float | None) -> SceneEstimate:
+    """``estimate`` with calibrated confidences (``options.score_calibration``'s) as its cars'
+    scores, unless ``options.calibrate_scores`` is off."""
+    if not options.calibrate_scores:
+        return estimate
+    return apply_confidence(estimate, fine=fine, calibration=load_score_calibration(options.score_calibration),
+                            image_width=image_width)
 
 
 def fit_scene(

@@ -46,6 +46,9 @@ C = 0.01
 #: Box jitter of the training copies, as a share of the box's width / height per side.
 JITTER = 0.05
 _SUB = 4  # pixels per colour cell side in the resampled crop
+#: Features of a crop (:func:`crop_viewpoint_features`): 31 HOG channels per cell, the mean
+#: and maximum redness and brightness per colour cell, the aspect ratio.
+N_FEATURES = HOG_GRID[0] * HOG_GRID[1] * 31 + 4 * COLOUR_GRID[0] * COLOUR_GRID[1] + 1
 
 
 def crop_viewpoint_features(image: np.ndarray, boxes) -> np.ndarray:
@@ -72,8 +75,7 @@ def crop_viewpoint_features(image: np.ndarray, boxes) -> np.ndarray:
         colour = np.concatenate([f for c in cells for f in (c.mean((1, 3)).ravel(), c.max((1, 3)).ravel())])
         aspect = np.log(max(x2 - x1, 1.0) / max(y2 - y1, 1.0))
         out.append(np.concatenate([hog, colour, [aspect]]))
-    n_feat = HOG_GRID[0] * HOG_GRID[1] * 31 + 4 * gh * gw + 1
-    return np.array(out, np.float32).reshape(len(b), n_feat)
+    return np.array(out, np.float32).reshape(len(b), N_FEATURES)
 
 
 @dataclass
@@ -127,6 +129,12 @@ class ViewpointClassifier:
         F = len(model.mean)
         if model.scale.shape != (F,) or model.weights.shape != (F, N_BINS) or model.bias.shape != (N_BINS,):
             raise InputError("viewpoint classifier arrays do not match", path=path)
+        if F != N_FEATURES:  # another crop description than this version computes
+            raise InputError(f"viewpoint classifier of {F} features, expected {N_FEATURES}", path=path)
+        if not all(np.all(np.isfinite(a)) for a in (model.mean, model.scale, model.weights, model.bias)) \
+                or np.any(model.scale <= 0):
+            raise InputError("viewpoint classifier holds values that are not finite (or a scale not above 0)",
+                             path=path)
         return model
 
 
@@ -204,13 +212,28 @@ def kitti_examples(dataset, frames, *, jitter: float = JITTER, seed: int = 0, co
     return np.concatenate(feats), np.concatenate(bins)
 
 
-def train_on_kitti(dataset, frames, *, C: float = C, seed: int = 0) -> ViewpointClassifier:
-    """:func:`fit_viewpoint_classifier` of :func:`kitti_examples` of ``frames``."""
+def check_trainable(dataset, frames) -> None:
+    """An :class:`InputError` naming the split if the labelled cars of ``frames`` and their
+    mirror images show a single viewpoint bin (read off the labels alone, so that ``train all``
+    refuses them before its first step); frames without any car are left to
+    :func:`kitti_examples` to refuse."""
     frames = list(frames)
-    x, y = kitti_examples(dataset, frames, seed=seed)
-    if len(np.unique(y)) < 2:  # mirror images turn every bin but the two pure side views into another
+    alpha = np.array([o.alpha for f in frames for o in dataset.labels(f).objects if o.type == "Car"], float)
+    if not len(alpha):
+        return
+    bins = viewpoint_bin(alpha)
+    if len(np.unique(np.concatenate([bins, mirror_bin(bins)]))) < 2:
+        # mirror images turn every bin but the two pure side views into another
         raise InputError(f"the labelled cars of the {len(frames)} frames show one viewpoint bin (with their mirror "
                          "images); a viewpoint classifier needs two or more", path=dataset.split_dir)
+
+
+def train_on_kitti(dataset, frames, *, C: float = C, seed: int = 0) -> ViewpointClassifier:
+    """:func:`fit_viewpoint_classifier` of :func:`kitti_examples` of ``frames`` (refused by
+    :func:`check_trainable` first)."""
+    frames = list(frames)
+    check_trainable(dataset, frames)
+    x, y = kitti_examples(dataset, frames, seed=seed)
     return fit_viewpoint_classifier(x, y, C=C, meta={"frames": [str(f) for f in frames], "seed": seed})
 
 

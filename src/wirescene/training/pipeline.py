@@ -8,11 +8,16 @@ Steps (:data:`STEPS`), each writing one file of :data:`wirescene.core.resources.
 2. ``detector``: the detector bank (:func:`wirescene.training.kitti_detector.train_detector_bank_kitti`),
    its Platt calibration fitted on leave-one-fold-out detections
    (:func:`heldout_bank_calibration`);
-3. ``score_calibration``: not trained. Fitting the confidence honestly needs evaluation
+3. ``viewpoints``: the crop viewpoint classifier
+   (:func:`wirescene.predetect.viewpoint_classifier.train_on_kitti`, the recipe of ``train
+   viewpoints``), which gives our own boxes and those of other detectors their viewpoints
+   with the bank; a directory of an older ``train all`` without it keeps the shipped one,
+   and ``--resume`` trains it;
+4. ``score_calibration``: not trained. Fitting the confidence honestly needs evaluation
    records of every frame fitted by models that never saw it (fold models of both steps
    above, then ``eval --raw-scores`` per fold and ``train scores``): several times the
    whole training. The directory keeps the shipped calibration, and the manifest says so;
-4. ``occlusion``: the occluded-part score ``c`` (:func:`wirescene.training.occlusion.calibrate_occluded_score`)
+5. ``occlusion``: the occluded-part score ``c`` (:func:`wirescene.training.occlusion.calibrate_occluded_score`)
    with the part detectors of step 1.
 
 Held-out folds (:func:`calibration_folds`): frames are grouped by recording drive where
@@ -62,6 +67,7 @@ from wirescene.core.validate import finite_real
 from wirescene.core.version import __version__, environment
 from wirescene.io.folds import drive_map
 from wirescene.parts import MAX_SMOOTH
+from wirescene.predetect.viewpoint_classifier import check_trainable
 from wirescene.training.kitti_detector import (
     calibration_folds,
     calibration_record,
@@ -75,11 +81,11 @@ __all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", 
            "heldout_bank_calibration", "train_all"]
 
 #: The steps in order; each makes one artefact (``_ARTEFACT``).
-STEPS: tuple[str, ...] = ("parts", "detector", "score_calibration", "occlusion")
+STEPS: tuple[str, ...] = ("parts", "detector", "viewpoints", "score_calibration", "occlusion")
 #: The steps that take options (``score_calibration`` is the shipped file).
-STEP_OPTIONS: tuple[str, ...] = ("parts", "detector", "occlusion")
-_ARTEFACT = {"parts": "parts_model", "detector": "detector_bank", "score_calibration": "score_calibration",
-             "occlusion": "occlusion"}
+STEP_OPTIONS: tuple[str, ...] = ("parts", "detector", "viewpoints", "occlusion")
+_ARTEFACT = {"parts": "parts_model", "detector": "detector_bank", "viewpoints": "viewpoint_classifier",
+             "score_calibration": "score_calibration", "occlusion": "occlusion"}
 
 
 def _parameters(fn, exclude: Iterable[str]) -> dict[str, object]:
@@ -91,6 +97,7 @@ def _parameters(fn, exclude: Iterable[str]) -> dict[str, object]:
 
 def step_options() -> dict[str, dict[str, object]]:
     """``{step: {option: default}}``: what each trained step accepts (``--set STEP.KEY=VALUE``)."""
+    from wirescene.predetect.viewpoint_classifier import train_on_kitti
     from wirescene.training.kitti_detector import train_bank_on_frames, train_detector_bank_kitti
     from wirescene.training.occlusion import calibrate_occluded_score
     from wirescene.training.parts import train_part_detector
@@ -103,6 +110,7 @@ def step_options() -> dict[str, dict[str, object]]:
     return {
         "parts": _parameters(train_part_detector, ("out_path", "kitti_root", "frames", "progress", "calibration_folds")),
         "detector": bank,
+        "viewpoints": _parameters(train_on_kitti, ("dataset", "frames")),
         "occlusion": _parameters(calibrate_occluded_score, ("detector", "progress")),
     }
 
@@ -160,6 +168,7 @@ OPTION_LIMITS: dict[str, dict[str, tuple]] = {
                  "min_height": (1, None), "max_scale": (0.01, None), "full_area": (1, None), "partial_area": (1, None),
                  "per_octave": (1, None), "cluster_radius": (0.01, None), "max_negatives": (1, None),
                  "max_truncated": (0, 1), "mining_images": (1, None), "threshold": (0, 1)},
+    "viewpoints": {"C": (1e-9, None)},
     "occlusion": {"n_scenes": (1, None)},
 }
 #: The options that take one of a few words.
@@ -288,6 +297,7 @@ def train_all(
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
     ids = _training_frames(dataset, frames, split_file)
     data_sha256, cars = _check_frames(dataset, ids)  # before anything is trained or written
+    check_trainable(dataset, ids)  # the viewpoint step's bins, before the steps ahead of it train
     drives, mapping_dir = drive_map(dataset.base_dir, mapping=drive_mapping)
     # held-out folds serve the part calibration and the bank's, unless both are off or given (one drive is then enough)
     held_out = bool(opts["parts"].get("calibrate_real")) or opts["detector"].get("calibration") is None
@@ -351,7 +361,7 @@ def _check_frames(dataset, ids: list[str]) -> tuple[str, int]:
 
 
 #: Steps whose artefacts another step trains from (part of the resume key).
-_INPUTS = {"parts": (), "detector": (), "occlusion": ("parts",)}
+_INPUTS = {"parts": (), "detector": (), "viewpoints": (), "occlusion": ("parts",)}
 
 
 def _training_frames(dataset, frames, split_file) -> list[str]:
@@ -477,6 +487,14 @@ class _Run:
                                             workers=self.workers, progress=self.say, **bank_opts)
         record["detectors"] = len(bank)
         CACHE.clear()  # the frames' images and pyramids are not needed by the steps after
+
+    def run_viewpoints(self, record: dict) -> None:
+        from wirescene.io.kitti import KittiDataset
+        from wirescene.predetect.viewpoint_classifier import train_on_kitti
+
+        classifier = train_on_kitti(KittiDataset(self.kitti_root), self.ids, **self.opts["viewpoints"])
+        classifier.save(self.path_of("viewpoints"))
+        record["crops"] = int(classifier.meta["n"])
 
     def run_occlusion(self, record: dict) -> None:
         from wirescene.infer.occluded_score import save_occluded_score

@@ -1,0 +1,206 @@
+"""The trained files a user retrains on their own data (crop viewpoint classifier, score
+calibration, shape model), each read by the fit from an explicit option, a field of
+``FitOptions`` or a models directory: every test changes one file on purpose and checks
+that the fit's output, or its resume fingerprint, follows it."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import wirescene
+from conftest import KITTI_ROOT
+from wirescene.cli.main import main
+from wirescene.core.errors import InputError
+from wirescene.core.resources import DATA_DIR, MANIFEST_FILE, shipped_path
+from wirescene.core.shape import ShapeModel, load_default
+from wirescene.core.viewpoints import viewpoint_bin
+from wirescene.fitting.models import models_fingerprint
+from wirescene.fitting.pipeline import FitOptions, PredetectOptions
+from wirescene.lift import LiftingOptions
+
+SPLIT = KITTI_ROOT / "training"
+IMAGE, CALIB = SPLIT / "image_2" / "000010.png", SPLIT / "calib" / "000010.txt"
+BOXES = [[354.43, 185.52, 549.52, 294.49], [600.0, 170.0, 700.0, 230.0]]  # no viewpoint: the box rule gives theirs
+FAST = LiftingOptions(n_particles=5)
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def forced_classifier(path, k: int):
+    """The shipped classifier made to put every crop in viewpoint bin ``k``."""
+    from wirescene.predetect.viewpoint_classifier import ViewpointClassifier, load_default_classifier
+
+    c = load_default_classifier()
+    bias = np.full(8, -50.0)
+    bias[k] = 50.0
+    ViewpointClassifier(c.mean, c.scale, np.zeros_like(c.weights), bias, dict(c.meta)).save(path)
+    return path
+
+
+def shifted_calibration(path, *, right: float = 0.0, car: float = 0.0):
+    """The shipped score calibration with ``right`` added to the coarse confidence's bias and
+    ``car`` to the coarse car model's (the verification of our own boxes)."""
+    record = json.loads(shipped_path("score_calibration").read_text())
+    record["coarse"]["bias"] += right
+    record["car"]["coarse"]["bias"] += car
+    path.write_text(json.dumps(record))
+    return path
+
+
+def renamed_shape_model(path, *, scale: float = 1.1, components: int | None = None):
+    """The shipped shape model ``scale`` times larger, its exemplars renamed ``mine-N`` (and
+    only its first ``components``)."""
+    m = load_default()
+    k = m.n_components if components is None else components
+    ShapeModel(m.mean * scale, m.components[:k], m.stds[:k], m.explained_variance_ratio[:k],
+               tuple(f"mine-{i}" for i in range(len(m.exemplars))), m.exemplars * scale).save(path)
+    return path
+
+
+def models_dir(path, **files):
+    """A models directory put together by hand: ``{artefact: file}`` copied under their names."""
+    path.mkdir()
+    for name, file in files.items():
+        shutil.copy(file, path / shipped_path(name).name)
+    return path
+
+
+def test_a_viewpoint_classifier_of_an_option_or_a_models_directory_gives_boxes_their_viewpoints(tmp_path):
+    forced = forced_classifier(tmp_path / "forced.npz", 5)
+    shipped = wirescene.fit(IMAGE, CALIB, BOXES, variant="coarse", particles=5)
+    assert set(viewpoint_bin(shipped.detections.alpha)) != {5}
+    own = wirescene.fit(IMAGE, CALIB, BOXES, variant="coarse", options=FitOptions(FAST, viewpoint_classifier=str(forced)))
+    assert viewpoint_bin(own.detections.alpha).tolist() == [5, 5]
+    models = models_dir(tmp_path / "models", viewpoint_classifier=forced)
+    assert viewpoint_bin(wirescene.fit(IMAGE, CALIB, BOXES, variant="coarse", particles=5, models=models)
+                         .detections.alpha).tolist() == [5, 5]
+    # an explicit file wins over the directory's
+    explicit = FitOptions(FAST, viewpoint_classifier=str(shipped_path("viewpoint_classifier")))
+    np.testing.assert_array_equal(wirescene.fit(IMAGE, CALIB, BOXES, variant="coarse", options=explicit,
+                                                models=models).detections.alpha, shipped.detections.alpha)
+    # the command line: --viewpoint-classifier and --models alike, the same labels
+    dets = tmp_path / "dets.json"
+    dets.write_text(json.dumps([{"box": b} for b in BOXES]))
+    common = ["fit", IMAGE, "--calib", CALIB, "--detections", dets, "--variant", "coarse", "--particles", 5]
+    fitted = {}
+    for name, extra in (("option", ["--viewpoint-classifier", forced]), ("models", ["--models", models])):
+        r = cli(*common, *extra, "--out", tmp_path / name)
+        assert r.exit_code == 0, r.output + r.stderr
+        fitted[name] = [o["alpha"] for o in json.loads((tmp_path / name / "000010.json").read_text())["objects"]]
+    assert fitted["option"] == fitted["models"] == [c.alpha for c in own.cars] != [c.alpha for c in shipped.cars]
+    # our own detections: `wirescene detect --out` and wirescene.detect write the classifier's viewpoints
+    r = cli("detect", KITTI_ROOT, "--frames", "000010", "--out", tmp_path / "found", "--viewpoint-classifier", forced)
+    assert r.exit_code == 0, r.output + r.stderr
+    written = json.loads((tmp_path / "found" / "000010.json").read_text())["detections"]
+    assert written and {d["viewpoint_bin"] for d in written} == {5}
+    assert set(viewpoint_bin(wirescene.detect(IMAGE, CALIB, models=models).alpha)) == {5}
+
+
+def test_a_score_calibration_of_an_option_or_a_models_directory_scores_and_verifies_the_cars(tmp_path):
+    higher = shifted_calibration(tmp_path / "higher.json", right=3.0)
+    shipped = wirescene.fit(IMAGE, CALIB, BOXES, variant="coarse", particles=5)
+    own = wirescene.fit(IMAGE, CALIB, BOXES, variant="coarse", options=FitOptions(FAST, score_calibration=str(higher)))
+    assert all(o.score > s.score for o, s in zip(own.cars, shipped.cars))
+    # once refused ("cannot be used yet"), a directory's own calibration now replaces the shipped one
+    models = models_dir(tmp_path / "models", score_calibration=higher)
+    via = wirescene.fit(IMAGE, CALIB, BOXES, variant="coarse", particles=5, models=models)
+    assert [c.score for c in via.cars] == [c.score for c in own.cars]
+    # the fit's verification of our own boxes reads its car model: one that calls nothing a car keeps no car
+    nothing = shifted_calibration(tmp_path / "nothing.json", car=-100.0)
+    assert wirescene.fit(IMAGE, CALIB, variant="coarse", particles=5).cars
+    assert not wirescene.fit(IMAGE, CALIB, variant="coarse", options=FitOptions(FAST, score_calibration=str(nothing))).cars
+    r = cli("fit", IMAGE, "--calib", CALIB, "--variant", "coarse", "--particles", 5, "--score-calibration", nothing,
+            "--out", tmp_path / "out")
+    assert r.exit_code == 0 and "no car found" in r.stderr, r.output + r.stderr
+
+
+def test_a_shape_model_of_an_option_or_a_models_directory_gives_the_wireframes(tmp_path):
+    mine = renamed_shape_model(tmp_path / "mine.npz")
+    settings = {"inference.iterations": 2}
+    shipped = wirescene.fit(IMAGE, CALIB, BOXES[:1], variant="fg", particles=3, settings=settings)
+    own = wirescene.fit(IMAGE, CALIB, BOXES[:1], variant="fg", settings=settings,
+                        options=FitOptions(LiftingOptions(n_particles=3), shape_model=str(mine)))
+    assert not shipped.cars[0].cad_model.startswith("mine-") and own.cars[0].cad_model.startswith("mine-")
+    assert not np.allclose(own.cars[0].vertices, shipped.cars[0].vertices)
+    models = models_dir(tmp_path / "models", shape_model=mine)
+    dets = tmp_path / "dets.json"
+    dets.write_text(json.dumps([{"box": BOXES[0]}]))
+    r = cli("fit", IMAGE, "--calib", CALIB, "--detections", dets, "--variant", "fg", "--particles", 3,
+            "--iterations", 2, "--models", models, "--out", tmp_path / "out")
+    assert r.exit_code == 0, r.output + r.stderr
+    assert all(o["exemplar"].startswith("mine-") for o in json.loads((tmp_path / "out" / "000010.json")
+                                                                   .read_text())["objects"])
+    # a model of fewer components than the fine stage searches: refused naming the file, coarse variants read none
+    few = renamed_shape_model(tmp_path / "few.npz", components=3)
+    with pytest.raises(InputError, match=r"few\.npz: shape model of 3 components, the fine stage searches 5"):
+        wirescene.fit(IMAGE, CALIB, BOXES[:1], variant="fg", options=FitOptions(shape_model=str(few)))
+    assert wirescene.fit(IMAGE, CALIB, BOXES[:1], variant="coarse", options=FitOptions(FAST, shape_model=str(few))).cars
+
+
+def test_the_resume_fingerprint_holds_every_file_the_fit_reads(tmp_path):
+    fingerprint = models_fingerprint(FitOptions())
+    assert set(fingerprint) == {"parts_model", "detector_bank", "viewpoint_classifier", "score_calibration",
+                                "shape_model"}
+    # raw scores read no calibration, unless the verification of our own boxes does
+    assert "score_calibration" not in models_fingerprint(FitOptions(calibrate_scores=False,
+                                                                    predetect=PredetectOptions(min_car_probability=0)))
+    assert "score_calibration" in models_fingerprint(FitOptions(calibrate_scores=False))
+    mine = renamed_shape_model(tmp_path / "mine.npz")
+    assert models_fingerprint(FitOptions(shape_model=str(mine)))["shape_model"] != fingerprint["shape_model"]
+    pred = tmp_path / "pred"
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", 1, "--particles", 5,
+              "--predictions", pred]
+    r = cli(*common, "--models", models_dir(tmp_path / "models", shape_model=mine))
+    assert r.exit_code == 0, r.output + r.stderr
+    record_path = pred / ".frames" / "000010.json"
+    assert json.loads(record_path.read_text())["config"]["models"]["shape_model"] != fingerprint["shape_model"]
+    # another shape model: the record is not reused
+    common += ["--shape-model", shipped_path("shape_model")]
+    r = cli(*common, "--resume")
+    assert r.exit_code == 0 and "written with a different configuration" in r.stderr, r.output + r.stderr
+    assert "models.shape_model" in r.stderr
+    r = cli(*common, "--resume")
+    assert r.exit_code == 0 and "1 of 1 frames already done" in r.stderr, r.output + r.stderr
+    # a record of an older wirescene, whose fingerprint lacked the files added since: refitted, not an error
+    record = json.loads(record_path.read_text())
+    for key in ("viewpoint_classifier", "shape_model"):
+        del record["config"]["models"][key]
+    del record["config"]["options"]["shape_model"], record["config"]["options"]["score_calibration"]
+    record_path.write_text(json.dumps(record))
+    r = cli(*common, "--resume")
+    assert r.exit_code == 0 and "refitting 1 frame(s)" in r.stderr and "models.viewpoint_classifier" in r.stderr
+    assert "already done" not in r.stderr
+
+
+def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(tmp_path):
+    models = models_dir(tmp_path / "models", viewpoint_classifier=shipped_path("viewpoint_classifier"))
+    manifest = {"format": "wirescene-models/1", "complete": True, "artefacts": ["viewpoint_classifier"],
+                "data": {"kitti_root": str(SPLIT.resolve()), "frame_ids": ["000010"]}, "steps": {}}
+    (models / MANIFEST_FILE).write_text(json.dumps(manifest))
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", 1, "--particles", 5,
+              "--models", models]
+    # our own boxes with the shipped bank: the directory's classifier gives them their viewpoints
+    r = cli(*common, "--detections", "bank", "--bank", DATA_DIR / "detector_bank.npz")
+    assert r.exit_code == 0, r.output + r.stderr
+    assert f"1 of the 1 frames evaluated are among those {models} was trained on" in r.stderr
+    # label boxes carry their viewpoints: no classifier is read
+    r = cli(*common, "--detections", "gt")
+    assert r.exit_code == 0 and "trained on" not in r.stderr, r.output + r.stderr
+
+
+def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):
+    broken = tmp_path / "parts.npz"
+    broken.write_text("x")
+    r = cli("train", "occlusion", "--out", tmp_path / "c.json", "--scenes", 1, "--parts-model", broken)
+    assert r.exit_code == 2 and "parts.npz: corrupt artefact file" in r.stderr, r.output + r.stderr
+    # the explicit file wins over the directory's
+    models = models_dir(tmp_path / "models", parts_model=broken)
+    r = cli("train", "occlusion", "--out", tmp_path / "c.json", "--scenes", 1, "--models", models,
+            "--parts-model", shipped_path("parts_model"))
+    assert r.exit_code == 0, r.output + r.stderr
+    assert json.loads((tmp_path / "c.json").read_text())["n_scenes"] == 1
