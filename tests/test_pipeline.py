@@ -218,6 +218,19 @@ def test_frame_result_leaves_out_the_cars_the_fit_dropped():
         frame_result("000002", labels, dets, SceneEstimate("coarse", objs + [objs[0]]))
 
 
+def test_the_json_lists_the_cars_in_the_label_files_order():
+    """The JSON file's cars, the label file's lines and the pictures' ``#n`` tags follow one
+    order (detection order), whatever order the estimate holds its objects in."""
+    from wirescene.core.types import ObjectEstimate, SceneEstimate
+
+    objs = [ObjectEstimate(j, np.array([10.0 * j, 0, 10.0 * j + 5, 5]), 0.5, np.array([0.0, 1.6, 10.0 + j]), np.eye(3),
+                           np.ones(3), 0.0) for j in (2, 0, 1)]
+    estimate = SceneEstimate("coarse", objs)
+    listed = [o["detection_index"] for o in estimate.to_dict()["objects"]]
+    lines = [float(line.split()[4]) for line in estimate.to_kitti().splitlines()]
+    assert listed == [0, 1, 2] and lines == [0.0, 10.0, 20.0]
+
+
 def test_own_boxes_weigh_by_the_predetect_stage():
     """Our own boxes are fitted with ``predetect.box_weight``, any other boxes with
     ``inference.box_weight``: the same boxes fitted as our own at weight 30 are the boxes

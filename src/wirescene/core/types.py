@@ -386,13 +386,14 @@ class SceneEstimate:
         return format_labels(self.to_labels())
 
     def to_dict(self) -> dict:
-        """The scene as plain JSON-ready values (the body of the JSON file ``wirescene fit`` writes)."""
+        """The scene as plain JSON-ready values (the body of the JSON file ``wirescene fit`` writes),
+        its cars in detection order (:attr:`cars`), the label file's order."""
         return {
             "variant": self.variant,
             "camera_height": float(self.camera_height),
             "shared_plane": bool(self.shared_plane),
             "n_particles": int(self.n_particles),
-            "objects": [o.to_dict() for o in self.objects],
+            "objects": [o.to_dict() for o in self.cars],
             **self.extras,
         }
 
