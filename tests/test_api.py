@@ -486,6 +486,34 @@ def test_draw_shows_the_fitted_wireframes_and_the_labels_where_they_stand(frame,
         wirescene.draw(image, camera.P, scene, gt=tmp_path / "missing.txt")
 
 
+def test_a_huge_image_is_drawn_reduced_with_everything_where_it_stands(frame):
+    """An image beyond MAX_OVERLAY_PIXELS is drawn on a canvas reduced by a whole factor (matplotlib
+    takes some 115 bytes a canvas pixel: a 9,000 x 9,000 image took 9.7 GB to draw, now under 1 GB),
+    the labels' boxes where they stand on it; a KITTI frame keeps its own size (above)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    image, camera, labels = frame
+    f = 6  # the frame 6x larger: 7452 x 2250 pixels, twice the most drawn
+    big = np.repeat(np.repeat(image, f, axis=0), f, axis=1)
+    P = camera.P.copy()
+    P[:2] *= f
+    cars = labels.of_type("Car")[:2]
+    fig = wirescene.draw(big, P, gt=cars)
+    size = [int(v) for v in fig.get_size_inches() * fig.dpi]
+    assert size == [big.shape[1] // 2, big.shape[0] // 2]
+    from wirescene.io.pictures import MAX_OVERLAY_PIXELS
+
+    assert size[0] * size[1] <= MAX_OVERLAY_PIXELS
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    rgb = np.asarray(canvas.buffer_rgba())[..., :3].astype(int)
+    green = (rgb[..., 1] > 160) & (rgb[..., 0] < 90) & (rgb[..., 2] < 100)
+    for c in cars:  # the box of each label, at half the big image's coordinates
+        b = (np.asarray(c.box) * f / 2).astype(int)
+        assert green[b[1]:b[3], b[0]:b[2]].sum() > 50
+    assert green.sum() < 0.2 * green.size
+
+
 def test_the_api_resolves_and_checks_the_device_before_any_work(frame, monkeypatch):
     from wirescene.infer import torch_backend
 

@@ -340,6 +340,30 @@ CASES = {
     "train detector --C 0": (lambda t: ["train", "detector", "--out", t / "b.npz", "--C", "0"], "--C: 0 is not above 0"),
     "train detector --per-octave 0": (lambda t: ["train", "detector", "--out", t / "b.npz", "--per-octave", "0"],
                                       "--per-octave"),
+    # sizes that grow time or memory without end: a typo's hours refused before any work
+    "train detector --per-octave 60": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--per-octave", "60"],
+        r"--per-octave: 60 is not in the range 1<=x<=48"),
+    "train parts --n-trees 3000": (lambda t: ["train", "parts", "--out", t / "p.npz", "--n-trees", "3000"],
+                                   r"--n-trees: 3000 is not in the range 1<=x<=1000"),
+    "synth --scenes 1000000": (lambda t: ["synth", t / "s", "--scenes", "1000000"],
+                               r"--scenes: 1000000 is not in the range 1<=x<=100000"),
+    "fit --particles 250000": (lambda t: _fit_case(t, extra=("--particles", "250000")),
+                               r"--particles: 250000 is not in the range 1<=x<=25000"),
+    "demo --particles 250000": (lambda t: ["demo", "--out", t / "demo", "--particles", "250000"],
+                                r"--particles: 250000 is not in the range 1<=x<=25000"),
+    "fit --particles x --samples beyond the memory's cap": (
+        lambda t: _fit_case(t, extra=("--particles", "5000", "--samples", "20", "--set", "lifting.pitch_step=0.02")),
+        r"^wirescene: error: lifting.n_particles x inference.samples = 3,913 \(one a plane of the grid\) x 20 = "
+        r"78,260 hypotheses a car and iteration, at most 50,000"),
+    "fit --set an azimuth step too fine": (
+        lambda t: _fit_case(t, extra=("--set", "lifting.unknown_viewpoint_step=0.05")),
+        r"^wirescene: error: --set: lifting.unknown_viewpoint_step gives 7,200 azimuths a detection, at most 3,600"),
+    "fit --set azimuths x planes too many": (
+        lambda t: _fit_case(t, extra=("--set", "lifting.pitch_step=0.01", "--set", "lifting.roll_step=0.01", "--set",
+                                      "lifting.azimuth_step=0.25")),
+        r"--set: lifting.pitch_step, lifting.roll_step, lifting.azimuth_halfwidth, lifting.azimuth_step give 180,901 "
+        r"ground planes x 181 azimuths = 32,743,081 cells a detection"),
     "train parts on frames without a car": (
         lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-root", _carless_root(t), "--synth-scenes", "0"],
         "frames: none of the 1 real training frame.s. has a labelled Car"),

@@ -1,6 +1,7 @@
 """End-to-end command-line behaviour: outputs, JSON keys, clean failures on bad input."""
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -501,6 +502,55 @@ def test_predict_writes_one_label_file_per_image_and_resumes(tmp_path):
     assert r.exit_code == 2 and "other settings" in r.stderr
 
 
+def test_predict_resumed_with_fewer_frames_is_refused_and_with_more_continues(tmp_path):
+    """A submission is the folder's label files: a resumed run whose --frames / --split-file leave
+    out frames of the earlier run is refused before any fit (they would be zipped with it), the
+    folder as it was; a larger selection continues the run."""
+    out = tmp_path / "pred"
+    common = ["predict", KITTI_ROOT, "--split", "training", "--out", out, "--variant", "coarse", "--detections", "gt",
+              "--particles", 8, "--workers", 1]
+    assert run(*common, "--frames", "000002,000010").exit_code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    split = tmp_path / "val.txt"
+    split.write_text("000010\n001545\n")
+    for selection in (["--frames", "000010"], ["--split-file", split]):
+        r = CliRunner().invoke(main, [str(a) for a in (*common, *selection, "--resume")])
+        assert r.exit_code == 2, r.output
+        assert r.stderr.strip() == (f"wirescene: error: {out}: holds the label files of 1 frame outside this run's "
+                                    "selection (e.g. 000002.txt), which a submission zipped from it would include: "
+                                    "resume with a selection that includes them, or choose another directory")
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    r = run(*common, "--frames", "000002,000010,001545", "--resume")
+    assert r.exit_code == 0 and "1 frames fitted, 2 kept" in r.output
+    assert sorted(p.name for p in out.glob("*.txt")) == ["000002.txt", "000010.txt", "001545.txt"]
+
+
+def test_an_image_larger_than_its_calibration_implies_is_fitted_with_a_warning(tmp_path):
+    """A calibration carries no image size: an image twice KITTI's with KITTI's calibration (its
+    principal point in the image's outer quarter) is fitted, with one line of warning on
+    standard error, by `fit` and by `eval` (once for all its frames); a KITTI frame gets none."""
+    from PIL import Image
+
+    from conftest import kitti_copy
+
+    root = kitti_copy(tmp_path / "kitti", ["000010"])
+    split = root / "training"
+    image = split / "image_2" / "000010.png"
+    fit = ["fit", image, "--calib", split / "calib" / "000010.txt", "--detections", split / "label_2" / "000010.txt",
+           "--variant", "coarse", "--particles", 8]
+    r = run(*fit, "--out", tmp_path / "kitti-size")
+    assert r.exit_code == 0 and "warning" not in r.stderr
+    Image.open(image).resize((2484, 750)).save(image)
+    r = run(*fit, "--out", tmp_path / "out")
+    assert r.exit_code == 0, r.output
+    problem = r"the principal point \(609\.\d+, 172\.\d+\) lies in the outer quarter of the 2484x750 image"
+    assert re.fullmatch(rf"wirescene: warning: {re.escape(str(image))}: {problem}: the calibration of a smaller or "
+                        r"cropped image\?\n", r.stderr), r.stderr
+    r = run("eval", root, "--variant", "coarse", "--particles", 8, "--workers", 1, "--draws", 0)
+    assert r.exit_code == 0, r.output
+    assert re.search(rf"wirescene: warning: 1 of 1 frames: {problem}: .* \(e\.g\. frame 000010\)", r.stderr), r.stderr
+
+
 def test_model_files_can_be_chosen_per_run(tmp_path):
     """Cross-validation evaluates each fold with its own models: --parts-model and --bank
     load those files (here the shipped ones, so the result must equal the default)."""
@@ -718,6 +768,110 @@ def test_ctrl_c_with_parallel_workers_exits_soon_and_leaves_no_worker(tmp_path):
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
+
+
+def _started(args, *, until, timeout=240):
+    """A ``wirescene ARGS`` process in a session of its own (its workers in its process group),
+    once ``until(process)`` holds; the test fails if it ended before."""
+    import subprocess
+    import sys
+    import time
+
+    cmd = [sys.executable, "-c", "from wirescene.cli.main import main; main()", *[str(a) for a in args]]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + timeout
+    while not until(proc) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    if proc.poll() is not None:
+        pytest.fail(f"the run ended before it was stopped: {proc.stderr.read().decode()[-500:]}")
+    return proc
+
+
+def _group_left(proc) -> list[str]:
+    """The processes of ``proc``'s group still there (its workers), half a second after it ended."""
+    import subprocess
+    import time
+
+    time.sleep(0.5)
+    return subprocess.run(["ps", "-o", "pid=", "-g", str(proc.pid)], capture_output=True, text=True).stdout.split()
+
+
+def _said(stderr: bytes) -> list[str]:
+    """The lines of a run's standard error, its progress bars left out."""
+    lines = stderr.decode().replace("\r", "\n").splitlines()
+    return [ln for ln in lines if ln.strip() and not re.match(r"(eval|predict|synth): ", ln)]
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "killpg"), reason="process groups are POSIX")
+def test_ctrl_c_held_down_ends_in_130_without_a_traceback(tmp_path):
+    """Ctrl-C pressed again and again (SIGINT to the process group every 2 ms until the run
+    ends) is one interruption: exit 130, one line, no worker left. The old code died of the
+    signal (exit -2) or printed tracebacks: a later Ctrl-C reached the interpreter's exit,
+    joining the pool's threads and processes, then past the point where Python puts back
+    SIGINT's default action."""
+    import os
+    import signal
+    import time
+
+    frames = ",".join(sorted(p.stem for p in (KITTI_ROOT / "training" / "label_2").glob("*.txt"))[:3])
+    pred = tmp_path / "pred"
+    proc = _started(["predict", KITTI_ROOT, "--split", "training", "--variant", "full", "--frames", frames,
+                     "--workers", "2", "--out", pred], until=lambda _: list(pred.glob("*.txt")))
+    try:
+        t0 = time.monotonic()
+        while proc.poll() is None and time.monotonic() - t0 < 30:
+            try:
+                os.killpg(proc.pid, signal.SIGINT)
+            except ProcessLookupError:
+                break
+            time.sleep(0.002)
+        assert proc.wait(timeout=30) == 130
+        assert time.monotonic() - t0 < 5
+        assert _said(proc.stderr.read()) == ["wirescene: interrupted"]
+        assert not _group_left(proc)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "killpg"), reason="process groups are POSIX")
+def test_sigterm_cleans_up_as_ctrl_c_does_and_ends_in_143(tmp_path):
+    """SIGTERM (``kill PID``: to the parent alone) during ``eval`` of two seeds with a report
+    and two workers: exit 143 (128 + SIGTERM), one line, the report's staging folder removed
+    and nothing else written, the workers stopped. It used to end the process where it stood
+    (exit -15), the staging folder left."""
+    import os
+    import signal
+    import subprocess
+
+    def fitting(proc):  # the report staged and the pool's two workers at work
+        workers = subprocess.run(["ps", "-o", "pid=", "--ppid", str(proc.pid)], capture_output=True, text=True)
+        return list(tmp_path.glob(".report.*.tmp")) and len(workers.stdout.split()) >= 2
+
+    proc = _started(["eval", KITTI_ROOT, "--variant", "full", "--frames", "000002,000010,001545", "--workers", "2",
+                     "--seed", 0, "--seed", 1, "--draws", 0, "--report", tmp_path / "report"], until=fitting)
+    try:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 143
+        assert _said(proc.stderr.read()) == ["wirescene: terminated"]
+        assert not _group_left(proc)
+        assert list(tmp_path.iterdir()) == []
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_sigterm_leaves_no_part_of_a_synthetic_set(tmp_path):
+    """SIGTERM while `synth` writes its scenes: exit 143, the staging folder removed and the
+    directory made for the set too (it used to stay, half a set, beside an exit of -15)."""
+    import signal
+
+    proc = _started(["synth", tmp_path / "synth", "--scenes", 50],
+                    until=lambda _: list(tmp_path.glob("synth/.training.*.tmp/image_2/*.png")))
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == 143
+    assert _said(proc.stderr.read()) == ["wirescene: terminated"]
+    assert list(tmp_path.iterdir()) == []
 
 
 def _slow_frame(seconds):

@@ -81,6 +81,44 @@ def test_the_coarse_grid_is_bounded_in_planes_whatever_step_is_refined():
         FitOptions(lifting=LiftingOptions(pitch_step=0.0)).checked()
 
 
+def test_particles_and_samples_are_bounded_together_and_the_azimuths_alone():
+    """The fine stage's memory grows with particles x samples (the particles the plane grid
+    holds): at most MAX_HYPOTHESES, wherever the options come from; the particles alone at
+    most MAX_PARTICLES, and the coarse grid's azimuths MAX_AZIMUTH_STEPS a detection and
+    MAX_GRID_CELLS (plane, azimuth) cells, what the plane cap allows at the default azimuths."""
+    import wirescene
+    from conftest import KITTI_ROOT
+    from wirescene.lift import MAX_AZIMUTH_STEPS, MAX_GRID_CELLS, MAX_HYPOTHESES, MAX_PARTICLES
+
+    options = FitOptions()
+    # the default grid's 325 planes: more particles cost nothing more
+    assert options.with_settings({"lifting.n_particles": MAX_PARTICLES, "inference.samples": 150}).lifting.n_particles \
+        == MAX_PARTICLES and 325 * 150 <= MAX_HYPOTHESES
+    with pytest.raises(ValueError, match="^lifting.n_particles must be at most 25000, got 25001$"):
+        options.with_settings({"lifting.n_particles": MAX_PARTICLES + 1})
+    with pytest.raises(ValueError, match=r"^lifting.n_particles x inference.samples = 1,573 \(one a plane of the "
+                                         r"grid\) x 40 = 62,920 hypotheses a car and iteration, at most 50,000"):
+        options.with_settings({"lifting.n_particles": 5000, "lifting.pitch_step": 0.05, "inference.samples": 40})
+    with pytest.raises(ArgumentError, match=r"^options: lifting.n_particles x inference.samples = 1,500 x 40"):
+        FitOptions(lifting=LiftingOptions(n_particles=1500, pitch_step=0.05), inference=InferenceOptions(samples=40)) \
+            .checked()
+    with pytest.raises(ArgumentError, match="^particles: must be at most 25,000, got 30000$"):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000002"], particles=30_000)
+    # azimuths: 0.1 deg round the circle at most, and no more cells than the finest plane grid at the default 72
+    assert LiftingOptions(unknown_viewpoint_step=0.1).combined_problem() is None
+    assert LiftingOptions(unknown_viewpoint_step=0.09).combined_problem() == (
+        ("unknown_viewpoint_step",), "gives 4,000 azimuths a detection, at most 3,600: take a coarser step")
+    names, problem = LiftingOptions(azimuth_halfwidth=90, azimuth_step=0.05).combined_problem()
+    assert names == ("azimuth_halfwidth", "azimuth_step") and problem.startswith(f"give 3,601 azimuths a detection, "
+                                                                                 f"at most {MAX_AZIMUTH_STEPS:,}")
+    finest = dict(pitch_step=0.01, roll_step=0.01)
+    assert LiftingOptions(**finest).combined_problem() is None and 180_901 * 72 <= MAX_GRID_CELLS
+    with pytest.raises(ValueError, match=r"^lifting.pitch_step, lifting.roll_step, lifting.azimuth_halfwidth, "
+                                         r"lifting.azimuth_step give 180,901 ground planes x 181 azimuths = 32,743,081 "
+                                         r"cells a detection, at most 18,000,000"):
+        options.with_settings({f"lifting.{k}": v for k, v in {**finest, "azimuth_step": 0.25}.items()})
+
+
 def test_with_settings_reaches_every_stage_and_refuses_unknown_ones():
     out = FitOptions().with_settings({"inference.polish_samples": "6", "lifting.iterations": 2})
     assert out.inference.polish_samples == 6 and out.lifting.iterations == 2

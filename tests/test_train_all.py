@@ -437,6 +437,8 @@ def test_train_all_needs_two_groups_and_known_options(tmp_path):
     ("parts.synth_seed=5", "parts.synth_seed must be at least 1000"),  # was a traceback in the parts step
     ("occlusion.grid=abc", "occlusion.grid must be a list of numbers"),  # was one after two steps
     ("parts.n_jobs=0", "parts.n_jobs must not be 0"),
+    ("parts.n_trees=3000", "parts.n_trees must be at most 1000, got 3000"),  # was hours of forests, then a slow model
+    ("detector.per_octave=60", "detector.per_octave must be at most 48, got 60"),  # was a bank 10x slower, to use too
 ])
 def test_train_all_checks_the_values_it_is_set_before_any_step(tmp_path, setting, problem):
     from wirescene.training.pipeline import check_options

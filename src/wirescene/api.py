@@ -25,7 +25,7 @@ from wirescene.core.validate import boxes_problem, finite_real, projection_probl
 from wirescene.fitting.pipeline import FitOptions, fit_frame
 from wirescene.fitting.variants import VARIANTS, casts_rays
 from wirescene.infer.inference import InferenceOptions
-from wirescene.lift import LiftingOptions
+from wirescene.lift import MAX_PARTICLES, LiftingOptions
 
 __all__ = ["fit", "detect", "draw", "evaluate", "as_image", "as_camera", "as_detections"]
 
@@ -180,6 +180,13 @@ def _positive_int(value, name: str) -> int:
     return int(value)
 
 
+def _particles(value) -> int:
+    particles = _positive_int(value, "particles")
+    if particles > MAX_PARTICLES:  # a typo's hours of fitting, refused here rather than as a field of options
+        raise ArgumentError("particles", f"must be at most {MAX_PARTICLES:,}, got {particles!r}")
+    return particles
+
+
 def _seed(value) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
         raise ArgumentError("seed", f"must be a non-negative integer, got {value!r}")
@@ -221,7 +228,7 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
         if not isinstance(options, FitOptions):
             raise ArgumentError("options", f"expected FitOptions, got {type(options).__name__}")
     else:
-        options = FitOptions(lifting=LiftingOptions(n_particles=_positive_int(particles, "particles")),
+        options = FitOptions(lifting=LiftingOptions(n_particles=_particles(particles)),
                              inference=InferenceOptions(), seed=_seed(seed))
     if settings is not None:
         if not isinstance(settings, Mapping):
@@ -455,8 +462,9 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
         wireframes, hidden vertices as open dots on dashed edges, in the ``overlay``;
         footprints and headings in the ``bev``).
     view : str
-        ``"overlay"`` (the image, full size) or ``"bev"`` (bird's-eye view, x right, z up
-        the page, the camera's field of view dotted).
+        ``"overlay"`` (the image, full size; one of more pixels than a 3840 x 2160 frame
+        reduced by a whole factor, :func:`wirescene.io.pictures.drawn_image`) or ``"bev"``
+        (bird's-eye view, x right, z up the page, the camera's field of view dotted).
     gt : path or sequence of Label, optional
         A KITTI label file (or its labels): its cars' 3D boxes are drawn cyan.
     boxes : (N, 4) array or Detections, optional

@@ -51,6 +51,26 @@ LIFT_BLOCK_CELLS = 1 << 17
 #: ranges make 180,901 planes, the defaults 325.
 MAX_GRID_PLANES = 250_000
 
+#: Most azimuths the coarse grid tries a detection (``2 * azimuth_halfwidth / azimuth_step + 1``
+#: for a known viewpoint, ``360 / unknown_viewpoint_step`` for none): 0.1 deg steps round the
+#: circle, 50x the default 72. Each costs time, not memory (some 17 us a (detection, plane,
+#: azimuth) cell: 5.5 ms a detection on the default 325 planes).
+MAX_AZIMUTH_STEPS = 3_600
+
+#: Most (plane, azimuth) cells of one detection: what :data:`MAX_GRID_PLANES` allows at the default
+#: 72 azimuths of an unknown viewpoint (the defaults: 6,175 and 23,400), about 5 minutes of
+#: lifting a detection.
+MAX_GRID_CELLS = MAX_GRID_PLANES * 72
+
+#: Most scene particles (``n_particles``): 100x the default. What a particle costs grows with the
+#: fine stage's samples, which :data:`MAX_HYPOTHESES` caps together with it.
+MAX_PARTICLES = 25_000
+
+#: Most particles x fine-stage samples (:meth:`wirescene.fitting.pipeline.FitOptions.combined_problem`):
+#: 250 x 200, the memory the ``samples`` cap was sized for (some 9 kB a (particle, car, sample): 9 GB
+#: for 20 cars).
+MAX_HYPOTHESES = 50_000
+
 
 @dataclass(frozen=True)
 class LiftingOptions:
@@ -76,7 +96,7 @@ class LiftingOptions:
     estimate_pitch: bool = option(False, help="Read the camera's pitch off each frame's boxes, within 15 deg of "
                                               "lifting.camera_pitch (a camera whose tilt is not known; our own "
                                               "pre-detection then takes 1.7x as long).")
-    n_particles: int = bounded(250, minimum=1)
+    n_particles: int = bounded(250, minimum=1, maximum=MAX_PARTICLES)
     # Weight of the prior that cars head along the road (:func:`road_alignment_cost`), which a box leaves open; 0: off.
     road_prior: float = option(0.03, help="Weight of the coarse stage's prior that cars head along the road "
                                           "(0: none).")
@@ -96,8 +116,9 @@ class LiftingOptions:
 
     def combined_problem(self) -> tuple[tuple[str, ...], str] | None:
         """The fields whose values together break a limit and the problem, or None: a plane
-        grid of more than :data:`MAX_GRID_PLANES` planes (read by
-        :func:`wirescene.core.settings.check_combined`).
+        grid of more than :data:`MAX_GRID_PLANES` planes, more than :data:`MAX_AZIMUTH_STEPS`
+        azimuths a detection or more than :data:`MAX_GRID_CELLS` (plane, azimuth) cells (read
+        by :func:`wirescene.core.settings.check_combined`).
 
         Examples
         --------
@@ -105,22 +126,55 @@ class LiftingOptions:
         True
         >>> LiftingOptions(pitch_range=10, pitch_step=0.01, roll_step=0.01).combined_problem()[1]
         'give 2,001 pitches x 301 rolls = 602,301 ground planes, at most 250,000: take coarser steps or narrower ranges'
+        >>> LiftingOptions(unknown_viewpoint_step=0.01).combined_problem()[1]
+        'gives 36,000 azimuths a detection, at most 3,600: take a coarser step'
         """
         sides = ((self.pitch_range, self.pitch_step), (self.roll_range, self.roll_step))
         if not all(finite_real(half) and finite_real(step) and half >= 0 and step > 0 for half, step in sides):
             return None  # the fields' own checks name what is wrong
         n_pitch, n_roll = (_symmetric_count(half, step) for half, step in sides)
-        if n_pitch * n_roll <= MAX_GRID_PLANES:
+        if n_pitch * n_roll > MAX_GRID_PLANES:
+            return (("pitch_range", "pitch_step", "roll_range", "roll_step"),
+                    f"give {_count(n_pitch)} pitches x {_count(n_roll)} rolls = {_count(n_pitch * n_roll)} ground "
+                    f"planes, at most {MAX_GRID_PLANES:,}: take coarser steps or narrower ranges")
+        azimuths = {("azimuth_halfwidth", "azimuth_step"): (self.azimuth_halfwidth, self.azimuth_step),
+                    ("unknown_viewpoint_step",): (180.0, self.unknown_viewpoint_step)}
+        if not all(finite_real(half) and finite_real(step) and half >= 0 and step > 0
+                   for half, step in azimuths.values()):
             return None
-        count = lambda n: f"{n:,}" if n < 1e12 else f"{n:.3g}"  # noqa: E731
-        return (("pitch_range", "pitch_step", "roll_range", "roll_step"),
-                f"give {count(n_pitch)} pitches x {count(n_roll)} rolls = {count(n_pitch * n_roll)} ground planes, "
-                f"at most {MAX_GRID_PLANES:,}: take coarser steps or narrower ranges")
+        counts = {names: _symmetric_count(half, step) if len(names) == 2 else len(_circle(step))
+                  for names, (half, step) in azimuths.items()}
+        for names, n in counts.items():
+            if n > MAX_AZIMUTH_STEPS:
+                return (names, f"give{'s' if len(names) == 1 else ''} {_count(n)} azimuths a detection, at most "
+                               f"{MAX_AZIMUTH_STEPS:,}: take a coarser step")
+        names, n_az = max(counts.items(), key=lambda item: item[1])  # the grid pads every detection to the longer
+        if n_pitch * n_roll * n_az > MAX_GRID_CELLS:
+            return (("pitch_step", "roll_step") + names,
+                    f"give {_count(n_pitch * n_roll)} ground planes x {_count(n_az)} azimuths = "
+                    f"{_count(n_pitch * n_roll * n_az)} cells a detection, at most {MAX_GRID_CELLS:,}: take coarser "
+                    "steps or narrower ranges")
+        return None
+
+    def grid_planes(self) -> int:
+        """The number of ground planes of :meth:`plane_grid`, counted without building it."""
+        pitches = _symmetric_count(self.pitch_range, self.pitch_step)
+        return int(pitches * _symmetric_count(self.roll_range, self.roll_step))
 
     def alpha_offsets(self, known: bool) -> np.ndarray:
         if known:
             return np.deg2rad(_symmetric_range(self.azimuth_halfwidth, self.azimuth_step))
-        return np.deg2rad(np.arange(-180.0, 180.0, self.unknown_viewpoint_step))
+        return np.deg2rad(_circle(self.unknown_viewpoint_step))
+
+
+def _circle(step: float) -> np.ndarray:
+    """Azimuths (degrees) round the circle from -180 by ``step``."""
+    return np.arange(-180.0, 180.0, step)
+
+
+def _count(n: float) -> str:
+    """A count for a message: with thousands separators, or in powers of ten where it has no digits to show."""
+    return f"{n:,}" if n < 1e12 else f"{n:.3g}"
 
 
 def _symmetric_range(half: float, step: float) -> np.ndarray:

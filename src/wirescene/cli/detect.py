@@ -33,7 +33,7 @@ from wirescene.core.settings import stage_field
 from wirescene.fitting.pipeline import PredetectOptions
 from wirescene.lift import LiftingOptions
 from wirescene.predetect.bank import SUPPORT_WEIGHT
-from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, single_thread
+from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, MAX_PER_OCTAVE, single_thread
 
 
 @click.command("detector")
@@ -62,8 +62,9 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, si
 @click.option("--scenes", "n_scenes", type=POSITIVE, default=200, show_default=True, help="Synthetic training scenes.")
 @click.option("--partial", "n_partial", type=NON_NEGATIVE, default=3, show_default=True,
               help="Partial configurations per viewpoint (plus one full-car configuration).")
-@click.option("--per-octave", type=POSITIVE, default=6, show_default=True,
-              help="With --kitti-root: HOG pyramid levels per octave (stored with the bank for detection).")
+@click.option("--per-octave", type=click.IntRange(min=1, max=MAX_PER_OCTAVE), default=6, show_default=True,
+              help="With --kitti-root: HOG pyramid levels per octave (stored with the bank for detection, whose "
+                   "time, like the training's, grows in proportion).")
 @click.option("--cut-paste", type=NON_NEGATIVE, default=0, show_default=True,
               help="With --kitti-root: cars of other frames pasted into a composite copy of every training frame.")
 @click.option("--mining-rounds", type=NON_NEGATIVE, default=None, help="Hard-negative mining rounds [synthetic 2, real 3].")

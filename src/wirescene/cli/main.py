@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import signal
 import sys
+import threading
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from importlib import resources
 from pathlib import Path
 
@@ -15,7 +17,6 @@ import numpy as np
 from wirescene.cli.options import (
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
-    POSITIVE,
     ap_draws_option,
     check_output_dir,
     check_output_file,
@@ -36,6 +37,7 @@ from wirescene.cli.options import (
 )
 from wirescene.core.errors import InputError, WiresceneError
 from wirescene.core.version import __version__
+from wirescene.lift import MAX_PARTICLES
 
 
 def _usage_message(exc: click.UsageError) -> str:
@@ -56,34 +58,103 @@ def _usage_message(exc: click.UsageError) -> str:
     return " ".join(exc.format_message().split())
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a scheduler's stop), raised in the main thread as Ctrl-C raises
+    ``KeyboardInterrupt``: a subclass of it, so that every cleanup Ctrl-C runs (staging
+    folders removed, worker processes stopped) runs for it too."""
+
+
+#: The signals that stop a run: Ctrl-C (SIGINT) and SIGTERM.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class _Stopping:
+    """Whether the command has reached its end (its result or an exception's exit code in
+    hand), after which a stop signal changes nothing; set by :meth:`_Group.invoke`."""
+
+    exiting = False
+
+
+def _on_stop_signal(signum, frame) -> None:
+    """The CLI's handler of :data:`STOP_SIGNALS`: the run stops once. Every later stop
+    signal is ignored, so that no second Ctrl-C cuts the cleanup short, lands outside the
+    handled region (click's "Aborted!" and exit 1) or in the interpreter's exit (where
+    Python has put back the default action and the process dies of it, exit -2); one that
+    comes once the command has its exit code in hand raises nothing."""
+    for s in STOP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    if not _Stopping.exiting:
+        raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+@contextmanager
+def _stop_signals(*, process: bool):
+    """Handle :data:`STOP_SIGNALS` by :func:`_on_stop_signal` while a command runs (those a
+    parent ignores, as a shell does for a job in the background, stay ignored). ``process``:
+    the command is this process's (the console script), whose interpreter then exits with
+    them ignored; otherwise (a call from Python, a test's) the handlers before are put back."""
+    if threading.current_thread() is not threading.main_thread():  # only the main thread may set handlers
+        yield
+        return
+    before = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    for s, handler in before.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(s, _on_stop_signal)
+    _Stopping.exiting = False
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, signal.SIG_IGN if process else signal.SIG_DFL if handler is None else handler)
+        if not process:
+            _Stopping.exiting = False
+
+
 class _Group(click.Group):
     """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
     on standard error and exit code 2, without a traceback (typed errors of the package,
     bad option values and usage errors alike); running out of memory (or a worker process
-    stopped by the system) one line too, exit code 1; Ctrl-C ends with exit code 130."""
+    stopped by the system) one line too, exit code 1; Ctrl-C ends with exit code 130 and
+    SIGTERM with 143 (128 + the signal), each after the same cleanup, once, whenever it comes
+    (:func:`_on_stop_signal`)."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        # args None: the command line of this process (the console script), not a call from Python
+        with _stop_signals(process=args is None):
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
 
     def invoke(self, ctx):
+        # Each branch's first statement, before any call (where Python runs signal handlers), marks
+        # the exit as decided: a stop signal from there on is ignored rather than raised in it.
         try:
-            return super().invoke(ctx)
+            result = super().invoke(ctx)
+            _Stopping.exiting = True
+            return result
         except WiresceneError as exc:
+            _Stopping.exiting = True
             click.echo(f"wirescene: error: {exc}", err=True)
             sys.exit(2)
         except click.UsageError as exc:
+            _Stopping.exiting = True
             click.echo(f"wirescene: error: {_usage_message(exc)}", err=True)
             sys.exit(2)
         except click.ClickException as exc:  # e.g. an unreachable --dask scheduler, a failed write of `synth`
+            _Stopping.exiting = True
             click.echo(f"wirescene: error: {' '.join(exc.format_message().split())}", err=True)
             sys.exit(2)
         except (MemoryError, BrokenProcessPool) as exc:  # a request the machine cannot hold: a line, no traceback
+            _Stopping.exiting = True
             what = ("a worker process was stopped (by the system, for memory?)" if isinstance(exc, BrokenProcessPool)
                     else f"out of memory ({' '.join(str(exc).split()) or 'MemoryError'})")
             click.echo(f"wirescene: error: {what}; ask for less (fewer --samples or --workers, a larger "
                        "--smallest-car) or use a larger machine; frames an --out or --predictions folder holds stay "
                        "(remove it to run with other settings)", err=True)
             sys.exit(1)
-        except KeyboardInterrupt:  # Ctrl-C: the shell's convention (128 + SIGINT), not click's "Aborted!" and 1
-            click.echo("wirescene: interrupted", err=True)
-            sys.exit(130)
+        except KeyboardInterrupt as exc:  # the shell's convention (128 + the signal), not click's "Aborted!" and 1
+            _Stopping.exiting = True
+            terminated = isinstance(exc, Terminated)
+            click.echo(f"wirescene: {'terminated' if terminated else 'interrupted'}", err=True)
+            sys.exit(128 + (signal.SIGTERM if terminated else signal.SIGINT))
 
 
 @click.group(cls=_Group)
@@ -147,9 +218,12 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_ray
     options = FitOptions(lifting=LiftingOptions(n_particles=particles), seed=seed, calibrate_scores=calibrate_scores,
                          **models)
     try:
-        options = options.with_settings(settings)
+        options = options.with_settings(settings, combined=False)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--set") from None
+    problem = options.combined_problem()  # of --particles and --samples as much as of --set
+    if problem is not None:
+        raise click.UsageError(problem)
     models = resolve_models(models_dir)
     # a missing or malformed model file is refused naming it (the error line alone), before any frame is read
     options = check_model_files(with_models(options, models), fine=casts_rays)
@@ -458,7 +532,9 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @workers_option()
 @click.option("--resume/--no-resume", default=False, show_default=True,
-              help="Continue an interrupted run in --out (same settings): fit only the images without a label file.")
+              help="Continue an interrupted run in --out (same settings): fit only the images without a label file. "
+                   "Its frames must be among those chosen now (--frames / --split-file: a larger selection "
+                   "continues it; a folder holding frames outside the selection is refused).")
 @click.option("--dask", "dask_address", metavar="ADDRESS", default=None,
               help="Fit frames on this running Dask scheduler instead of local processes.")
 @_inference_options
@@ -488,7 +564,8 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
                                                         bank=options.detector_bank,
                                                         classifier=options.viewpoint_classifier),
                                  workers=_frame_workers(workers, options.inference.device), dask_client=client,
-                                 progress=_progress("predict", total))
+                                 progress=_progress("predict", total),
+                                 notify=lambda message: click.echo(f"wirescene: {message}", err=True))
     finally:
         if client is not None:
             client.close()
@@ -630,6 +707,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     from wirescene.api import as_camera, fit
     from wirescene.core.types import Detections
+    from wirescene.core.validate import off_centre_problem
     from wirescene.fitting.variants import casts_rays
     from wirescene.io.detections import NO_CARS, read_detections
     from wirescene.io.kitti import read_image, read_labels
@@ -643,6 +721,9 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     options = _fit_options(particles, seed, casts_rays=casts_rays([variant]), **inference)
     img = read_image(image)
     camera = as_camera(calib, (img.shape[1], img.shape[0]))
+    problem = off_centre_problem(camera.P, camera.image_size)
+    if problem is not None:  # a calibration carries no image size: said, not refused
+        click.echo(f"wirescene: warning: {image}: {problem}", err=True)
     dets = None
     if detections is not None:
         try:
@@ -664,7 +745,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
 
 @main.command("demo")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("wirescene_demo"), show_default=True)
-@click.option("--particles", type=POSITIVE, default=50, show_default=True,
+@click.option("--particles", type=click.IntRange(min=1, max=MAX_PARTICLES), default=50, show_default=True,
               help="Scene particles (the paper used 250; fewer keep the demo short).")
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()),
               default=("coarse", "coarse+gp", "fg+gp", "full"), show_default=True)

@@ -218,13 +218,16 @@ def workers_option(what: str = "fitting frames"):
 
 def particles_option(f):
     """``--particles N``: scene particles the coarse stage hands the fine one (``LiftingOptions.n_particles``)."""
-    from wirescene.lift import LiftingOptions
+    from wirescene.core.settings import stage_field
+    from wirescene.lift import MAX_HYPOTHESES, LiftingOptions
 
     options = LiftingOptions()
     planes = len(options.plane_grid()[0])
-    return click.option("--particles", type=POSITIVE, default=options.n_particles, show_default=True,
+    return click.option("--particles", type=field_type(stage_field(LiftingOptions, "n_particles")),
+                        default=options.n_particles, show_default=True,
                         help=f"Scene particles kept by the coarse stage: at most one per plane of its grid "
-                             f"({planes} planes with the default steps).")(f)
+                             f"({planes} planes with the default steps), their number times --samples at most "
+                             f"{MAX_HYPOTHESES:,}.")(f)
 
 
 def workers_count(workers: int | None) -> int:

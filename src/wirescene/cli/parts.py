@@ -20,6 +20,7 @@ from wirescene.cli.options import (
 )
 from wirescene.parts import MAX_SMOOTH
 from wirescene.training.recipe import RECIPE
+from wirescene.training.scale import MAX_TREES
 
 #: The shipped model's options are this command's defaults (``train all`` trains the same).
 _RECIPE = RECIPE["parts"]
@@ -33,7 +34,8 @@ _RECIPE = RECIPE["parts"]
 @click.option("--n-views", type=NON_NEGATIVE, default=0, show_default=True,
               help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog and --no-position "
                    "only).")
-@click.option("--n-trees", type=POSITIVE, default=30, show_default=True, help="Trees of the random forest.")
+@click.option("--n-trees", type=click.IntRange(min=1, max=MAX_TREES), default=30, show_default=True,
+              help="Trees of the random forest (the part maps of every fit take time in proportion).")
 @click.option("--max-depth", type=POSITIVE, default=13, show_default=True, help="Depth limit of each tree.")
 @click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc", "ghog_ms", "ghog_msc"]), default=_RECIPE["kind"],
               show_default=True,

@@ -13,6 +13,9 @@ from wirescene.core.atomic import replaced_dir
 from wirescene.core.errors import WiresceneError
 
 MAX_CARS = 1000
+#: Most scenes of one set: some 0.8 s and 0.9 MB of disk a scene (memory does not grow), so the cap
+#: is about 22 hours and 90 GB; KITTI's six-digit frame ids would end at 1,000,000.
+MAX_SCENES = 100_000
 
 
 def _parse_range(value: str) -> tuple[int, int]:
@@ -28,8 +31,8 @@ def _parse_range(value: str) -> tuple[int, int]:
 
 @click.command("synth")
 @click.argument("out_dir", type=click.Path(file_okay=False))
-@click.option("--scenes", default=10, show_default=True, type=click.IntRange(min=1, max=10_000_000),
-              help="Number of scenes.")
+@click.option("--scenes", default=10, show_default=True, type=click.IntRange(min=1, max=MAX_SCENES),
+              help=f"Number of scenes (at most {MAX_SCENES:,}: about 0.8 s and 0.9 MB each).")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Random seed; scene i is drawn from (seed, i).")
 @click.option("--cars-per-scene", "cars", default="2-8", show_default=True,

@@ -64,6 +64,32 @@ def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | No
     return None
 
 
+def off_centre_problem(P, image_size: tuple[int, int]) -> str | None:
+    """Why a projection matrix (one :func:`projection_problem` accepts) looks made for
+    another image than one of ``image_size`` ``(width, height)``, or None: a warning, not an
+    error. A calibration carries no image size, but its principal point lies near the
+    image's centre (KITTI's within 4%; the benchmarks' off-centre camera at a third); one in
+    the outer quarter of the image on either axis (the image more than twice as large as
+    the principal point implies, or cut) is likely a smaller or cropped image's calibration,
+    which places every car wrongly.
+
+    Examples
+    --------
+    >>> P = [[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]]
+    >>> off_centre_problem(P, (1242, 375)) is None
+    True
+    >>> off_centre_problem(P, (2484, 750))
+    'the principal point (609.6, 172.9) lies in the outer quarter of the 2484x750 image: the calibration of a smaller or cropped image?'
+    """
+    K = np.asarray(P, dtype=float)[:, :3]
+    cx, cy = K[0, 2] / K[2, 2], K[1, 2] / K[2, 2]
+    w, h = image_size
+    if abs(cx - w / 2) <= w / 4 and abs(cy - h / 2) <= h / 4:
+        return None
+    return (f"the principal point ({cx:g}, {cy:g}) lies in the outer quarter of the {w}x{h} image: the calibration "
+            "of a smaller or cropped image?")
+
+
 def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | None:
     """What is wrong with 2D boxes ``(N, 4)`` ``x1 y1 x2 y2``, if anything: finite,
     ``x1 < x2`` and ``y1 < y2``, and (with the image size) overlapping the image and

@@ -17,7 +17,7 @@ from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_text
 from wirescene.core.errors import InputError
 from wirescene.core.version import __version__
-from wirescene.eval.runner import fit_frames
+from wirescene.eval.runner import fit_frames, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint
 from wirescene.fitting.pipeline import FitOptions, fit_frame
@@ -65,6 +65,7 @@ def predict_dataset(
     workers: int = 1,
     dask_client=None,
     progress: Callable[[Iterable], Iterable] = lambda it: it,
+    notify: Callable[[str], None] | None = None,
 ) -> list[str]:
     """Write ``out_dir/FRAME.txt`` (KITTI labels with scores) for every image.
 
@@ -84,13 +85,18 @@ def predict_dataset(
         The frames to fit (default: every image of the split).
     resume : bool
         Keep the label files of a previous run with the same settings and fit only the
-        missing frames. Without it, ``out_dir`` must not hold label files already.
+        missing frames; the previous run's frames must be among ``frames`` (a larger selection
+        continues it, a smaller one is refused: its folder would hold frames it did not ask
+        for). Without it, ``out_dir`` must not hold label files already.
     workers : int
         Local processes fitting frames in parallel (the files do not depend on it).
     dask_client : distributed.Client, optional
         Fit the frames on this Dask cluster instead of local processes.
     progress : callable
         Wraps the iterable of finished frames (e.g. ``tqdm``).
+    notify : callable, optional
+        Receives one-line warnings (frames whose calibration looks made for another image
+        size); default: standard error.
 
     Returns
     -------
@@ -102,7 +108,7 @@ def predict_dataset(
     InputError
         Before any fit: no frame to predict (no ``.png`` image in ``image_2/``), a frame
         without its detection file, calibration or image, or ``out_dir`` holding another
-        run's label files.
+        run's label files (or, resumed, label files of frames outside ``frames``).
     """
     source = DetectionSource("bank") if source is None else source
     options = FitOptions() if options is None else options
@@ -125,9 +131,17 @@ def predict_dataset(
         if stored != config:
             raise InputError(f"label files were written with other settings (or {CONFIG_FILE} is missing): "
                              "cannot resume into this directory", path=out)
+        # A submission is the folder's *.txt: frames outside this selection would go to the server too.
+        chosen = set(frame_ids)
+        outside = [p.name for p in existing if p.stem not in chosen]
+        if outside:
+            frames = f"{len(outside)} frame{'s' if len(outside) > 1 else ''}"
+            raise InputError(f"holds the label files of {frames} outside this run's selection (e.g. {outside[0]}), "
+                             "which a submission zipped from it would include: resume with a selection that includes "
+                             "them, or choose another directory", path=out)
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
-    dataset.check_frames(todo, labels=source.spec == "gt")
+    say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), notify or notify_stderr)
     job = _PredictJob(dataset, variant, source, options)
     with ExitStack() as stack:
         for k, (frame_id, text) in enumerate(progress(fit_frames(job, todo, workers=workers,

@@ -113,10 +113,12 @@ class _FrameJob:
 def _worker_init(parent: int, threads: int) -> None:
     """Worker initializer: end with the parent (:func:`_die_with_parent`), leave Ctrl-C to
     the parent (which stops the pool: a worker interrupted in its queue's read hung a
-    second Ctrl-C), and let a PyTorch the parent imported use the worker's share of the
-    cores (each worker taking them all made ``--device cpu`` 3-4x slower)."""
+    second Ctrl-C), end at once on SIGTERM, and let a PyTorch the parent imported use the
+    worker's share of the cores (each worker taking them all made ``--device cpu`` 3-4x
+    slower)."""
     _die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # it writes no file: stopped, it ends (not by the CLI's handler)
     os.environ[TORCH_THREADS_ENV] = str(threads)  # read where PyTorch is imported later (spawned workers)
     torch = sys.modules.get("torch")
     if torch is not None:  # imported before the fork
@@ -290,7 +292,7 @@ def evaluate_dataset(
     if not dataset.has_labels:
         raise InputError("evaluation needs label_2/ ground truth", path=dataset.split_dir)
     if notify is None:
-        notify = _notify_stderr
+        notify = notify_stderr
     variants = [get_variant(v).name for v in variants]
     frame_ids = list(frames) if frames is not None else dataset.require_frames()
     missing = source.missing_frames(frame_ids)
@@ -308,7 +310,7 @@ def evaluate_dataset(
             refuse_earlier_run(predictions_dir)
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
-    dataset.check_frames(todo, labels=True)
+    say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
     with ExitStack() as stack:
         fitted = fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
         by_frame = _collect_frames(fitted, reused, records, progress, on_estimate)
@@ -357,5 +359,14 @@ def _collect_frames(fitted, reused: dict, records: FrameRecords | None, progress
     return by_frame
 
 
-def _notify_stderr(message: str) -> None:
+def say_off_centre(odd: list[tuple[str, str]], total: int, notify: Callable[[str], None]) -> None:
+    """Tell ``notify`` in one line of the frames whose calibration looks made for another image
+    size (``odd``, of :meth:`~wirescene.io.kitti.KittiDataset.check_frames`; of ``total`` checked)."""
+    if odd:
+        frame, problem = odd[0]
+        notify(f"warning: {len(odd)} of {total} frames: {problem} (e.g. frame {frame})")
+
+
+def notify_stderr(message: str) -> None:
+    """``wirescene: MESSAGE`` on standard error, one line."""
     print(f"wirescene: {message}", file=sys.stderr)

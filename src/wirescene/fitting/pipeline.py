@@ -29,7 +29,14 @@ from wirescene.fitting.variants import Variant, get_variant
 from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
 from wirescene.infer.likelihood import PartEvidence
-from wirescene.lift import LiftingOptions, LiftingTable, lift_table, plane_vote_weights, select_particles
+from wirescene.lift import (
+    MAX_HYPOTHESES,
+    LiftingOptions,
+    LiftingTable,
+    lift_table,
+    plane_vote_weights,
+    select_particles,
+)
 from wirescene.predetect.bank import MIN_SMALLEST_CAR, smallest_car_search
 
 
@@ -82,12 +89,13 @@ class FitOptions:
     # `wirescene train shape` on other CAD cars.
     shape_model: str | None = None
 
-    def with_settings(self, settings: Mapping[str, object] | None) -> "FitOptions":
+    def with_settings(self, settings: Mapping[str, object] | None, *, combined: bool = True) -> "FitOptions":
         """These options with ``{"STAGE.FIELD": value}`` changed, ``STAGE`` one of
         :data:`STAGES` (``lifting``, ``inference``, ``predetect``): the mapping ``--set`` and the named
         options of ``eval`` / ``predict`` / ``fit`` and the API's ``settings`` share.
         String values are parsed as the field's type; an unknown stage or field is a
-        ``ValueError`` naming what exists.
+        ``ValueError`` naming what exists, and so are options that break a limit together
+        (:meth:`combined_problem`; ``combined=False``: left to the caller).
 
         Examples
         --------
@@ -103,7 +111,39 @@ class FitOptions:
                 raise ValueError(f"{name!r}: settings are STAGE.FIELD, STAGE one of {', '.join(STAGES)}")
             by_stage.setdefault(stage, {})[key] = value
         changed = {stage: replace_fields(getattr(self, stage), values, scope=stage) for stage, values in by_stage.items()}
-        return replace(self, **changed)
+        out = replace(self, **changed)
+        problem = out.combined_problem() if combined else None
+        if problem is not None:
+            raise ValueError(problem)
+        return out
+
+    def combined_problem(self) -> str | None:
+        """What the stages' options break together, or None: more scene particles (those the
+        plane grid holds) times fine-stage samples than :data:`~wirescene.lift.MAX_HYPOTHESES`,
+        whose memory grows with both (some 9 kB a particle, car and sample).
+
+        Examples
+        --------
+        >>> FitOptions().combined_problem() is None
+        True
+        >>> FitOptions(lifting=LiftingOptions(n_particles=1000, pitch_step=0.05),
+        ...            inference=InferenceOptions(samples=60)).combined_problem()
+        'lifting.n_particles x inference.samples = 1,000 x 60 = 60,000 hypotheses a car and iteration, at most 50,000 (memory grows with them): fewer particles or samples'
+        """
+        lifting, inference = self.lifting, self.inference
+        if not all(isinstance(v, numbers.Integral) for v in (lifting.n_particles, inference.samples)):
+            return None  # the fields' own checks name what is wrong
+        try:
+            particles = min(lifting.n_particles, lifting.grid_planes())  # the coarse stage keeps one a plane at most
+        except (TypeError, ValueError, ZeroDivisionError, OverflowError):
+            return None
+        n = particles * inference.samples
+        if n <= MAX_HYPOTHESES:
+            return None
+        planes = " (one a plane of the grid)" if particles < lifting.n_particles else ""
+        return (f"lifting.n_particles x inference.samples = {particles:,}{planes} x {inference.samples:,} = {n:,} "
+                f"hypotheses a car and iteration, at most {MAX_HYPOTHESES:,} (memory grows with them): fewer "
+                "particles or samples")
 
     def checked(self) -> "FitOptions":
         """These options, once every stage's numbers are checked against their fields'
@@ -125,6 +165,9 @@ class FitOptions:
                 check_fields(getattr(self, stage), scope=stage)
         except ValueError as exc:
             raise ArgumentError("options", str(exc)) from None
+        problem = self.combined_problem()
+        if problem is not None:
+            raise ArgumentError("options", problem)
         if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral) or self.seed < 0:
             raise ArgumentError("options", f"seed must be a non-negative integer, got {self.seed!r}")
         return self

@@ -36,7 +36,7 @@ from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label
     format_labels,
     select_cars,
 )
-from wirescene.core.validate import MAX_PIXEL, outside_image
+from wirescene.core.validate import MAX_PIXEL, off_centre_problem, outside_image
 
 # --------------------------------------------------------------------------- labels
 
@@ -340,15 +340,22 @@ class KittiDataset:
         size = self.image_size(frame_id) if image.is_file() else None  # no image: checked where it is read
         return read_labels(self.label_path(frame_id), image_size=size)
 
-    def check_frames(self, frame_ids, *, labels: bool = False) -> None:
+    def check_frames(self, frame_ids, *, labels: bool = False) -> list[tuple[str, str]]:
         """Read every frame's calibration, image header and (``labels``) label file: an
         :class:`InputError` naming the first missing or malformed one, before a run fits
         any frame (a hole found at frame N of thousands would cost N fits and leave their
-        outputs). Images are not decoded: a truncated image is found where it is read."""
+        outputs). Images are not decoded: a truncated image is found where it is read.
+        Returns ``[(frame, warning)]`` of the frames whose calibration looks made for another
+        image size (:func:`~wirescene.core.validate.off_centre_problem`), for the caller to say."""
+        odd = []
         for f in frame_ids:
-            self.camera(f)
+            camera = self.camera(f)
+            problem = off_centre_problem(camera.P, camera.image_size)
+            if problem is not None:
+                odd.append((f, problem))
             if labels:
                 self.labels(f)
+        return odd
 
     def car_counts(self, frame_ids) -> dict[str | int, int]:
         """``{frame: number of its Car labels}`` for ``frame_ids`` (keyed as given): what the

@@ -42,6 +42,35 @@ _BOX_EDGES = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0
 _FRONT_FACE = [(0, 3), (1, 2)]  # cross on the front face marks the heading
 
 
+#: Most pixels of an overlay's canvas (a 4K UHD frame's): matplotlib takes some 115 bytes a pixel
+#: to draw one (about 1 GB here; a 9,000 x 9,000 image took 9.3 GB), so a larger image is drawn
+#: reduced by the least whole factor that fits (:func:`drawn_image`).
+MAX_OVERLAY_PIXELS = 3840 * 2160
+
+
+def drawn_image(image: np.ndarray) -> np.ndarray:
+    """``image`` ``(H, W, 3)`` as an overlay draws it: itself when it has at most
+    :data:`MAX_OVERLAY_PIXELS` pixels, else reduced by the least whole factor that fits (each
+    pixel the mean of a square of them), so that drawing a huge image takes bounded memory.
+
+    Examples
+    --------
+    >>> drawn_image(np.zeros((375, 1242, 3), np.uint8)).shape
+    (375, 1242, 3)
+    >>> drawn_image(np.zeros((9000, 9000, 3), np.uint8)).shape
+    (2250, 2250, 3)
+    """
+    h, w = image.shape[:2]
+    k = 1
+    while -(-w // k) * -(-h // k) > MAX_OVERLAY_PIXELS:
+        k += 1
+    if k == 1:
+        return image
+    from PIL import Image
+
+    return np.asarray(Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8)).reduce(k))
+
+
 def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: float, ls="-") -> None:
     """The segments ``edges`` ``(E, 2)`` between 3D ``points`` ``(P, 3)``, each cut at the
     camera's near plane (a car next to or beside the camera keeps the part in front of it)."""
@@ -176,6 +205,8 @@ def overlay(
     Parameters
     ----------
     image : (H, W, 3) uint8 array
+        Drawn pixel for pixel up to :data:`MAX_OVERLAY_PIXELS` pixels, reduced beyond
+        (:func:`drawn_image`).
     camera : Camera
         The image's camera (``P2``).
     estimate : SceneEstimate, optional
@@ -197,9 +228,13 @@ def overlay(
         have none).
     """
     h, w = image.shape[:2]
-    fig = new_figure(figsize=(w / 100, h / 100), dpi=100)
+    drawn = drawn_image(image)  # the canvas: the image's pixels, or a reduced copy's for a huge image
+    fig = new_figure(figsize=(drawn.shape[1] / 100, drawn.shape[0] / 100), dpi=100)
     ax = fig.add_axes([0, 0, 1, 1])
-    ax.imshow(image)
+    if drawn is image:
+        ax.imshow(image)
+    else:  # spread over the image's own pixel coordinates, which everything drawn on it keeps
+        ax.imshow(drawn, extent=(-0.5, w - 0.5, h - 0.5, -0.5))
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     ax.axis("off")

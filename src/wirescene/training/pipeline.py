@@ -75,7 +75,7 @@ from wirescene.training.kitti_detector import (
     heldout_bank_calibration,
 )
 from wirescene.training.recipe import RECIPE
-from wirescene.training.scale import CACHE
+from wirescene.training.scale import CACHE, MAX_PER_OCTAVE, MAX_TREES
 
 __all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "check_options", "calibration_folds",
            "heldout_bank_calibration", "train_all"]
@@ -161,12 +161,12 @@ def option_default(step: str, key: str):
 #: ``{step: {option: (minimum, maximum)}}`` of the numeric options that a value of 0 (the
 #: least any number of a step takes) would break; ``maximum`` None: none.
 OPTION_LIMITS: dict[str, dict[str, tuple]] = {
-    "parts": {"n_trees": (1, None), "max_depth": (1, None), "min_samples_leaf": (1, None),
+    "parts": {"n_trees": (1, MAX_TREES), "max_depth": (1, None), "min_samples_leaf": (1, None),
               "max_real_patches": (1, None), "n_jobs": (-1, None), "synth_seed": (1000, None),
               "smooth": (0, MAX_SMOOTH)},
     "detector": {"C": (1e-9, None), "max_pos": (1, None), "min_pos": (1, None), "neg_per_image": (1, None),
                  "min_height": (1, None), "max_scale": (0.01, None), "full_area": (1, None), "partial_area": (1, None),
-                 "per_octave": (1, None), "cluster_radius": (0.01, None), "max_negatives": (1, None),
+                 "per_octave": (1, MAX_PER_OCTAVE), "cluster_radius": (0.01, None), "max_negatives": (1, None),
                  "max_truncated": (0, 1), "mining_images": (1, None), "threshold": (0, 1)},
     "viewpoints": {"C": (1e-9, None)},
     "occlusion": {"n_scenes": (1, None)},

@@ -34,6 +34,18 @@ DEFAULT_CACHE_MB = 3000
 #: gathers at most 144 x (40 + 3 x 15) = 12,240 per configuration, so it never reaches it.
 DEFAULT_MAX_NEGATIVES = 12800
 
+#: Most HOG pyramid levels an octave (``train detector --per-octave``, default 6), stored with the
+#: bank: each level costs every detection and training pass about a sixth of the default's time
+#: (some 86 ms of a KITTI frame's 2.2 s detection) and 0.6 MB of the frame's pyramid; 48 is 8x the
+#: default, scales 1.4% apart.
+MAX_PER_OCTAVE = 48
+
+#: Most trees of the part model's forest (``train parts --n-trees``, default 30, the paper's): each
+#: takes some 2 minutes to grow on the real patches at their cap and up to 6 MB while it is built
+#: (16,383 nodes of depth 13), and every fit's part maps take time in proportion: 1,000 trees are
+#: some 30 hours and 6 GB of training.
+MAX_TREES = 1000
+
 #: Default cap of the box refinement's regression rows (:class:`RowSample`): the 72 shared
 #: frames give 11,572 (jittered label boxes and the bank's own detections), below it.
 DEFAULT_MAX_REFINEMENT_ROWS = 16000
@@ -202,6 +214,8 @@ def _worker_init() -> None:
     CACHE.max_bytes = 0
     if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:  # a parent that ignores Ctrl-C waits on its workers
         signal.signal(signal.SIGINT, _end_quietly)
+    # the pool's own stop (terminate()) is SIGTERM: the worker ends, whatever handler the parent's command set
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _end_quietly(signum, frame) -> None:
