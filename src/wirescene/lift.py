@@ -75,7 +75,19 @@ MAX_HYPOTHESES = 50_000
 @dataclass(frozen=True)
 class LiftingOptions:
     """Options of the coarse lifting stage (all angles in degrees). How the defaults
-    were chosen (the study, its command and figures): ``benchmarks/RESULTS.md``."""
+    were chosen (the study, its command and figures): ``benchmarks/RESULTS.md``.
+
+    Examples
+    --------
+    >>> options = LiftingOptions(pitch_range=1.0, pitch_step=0.5, roll_range=0.0, camera_pitch=2.0)
+    >>> pitch, roll = options.plane_grid()  # radians, one entry a plane
+    >>> np.rad2deg(pitch).round(6).tolist(), np.rad2deg(roll).tolist()  # about the camera's own pitch
+    ([1.0, 1.5, 2.0, 2.5, 3.0], [0.0, 0.0, 0.0, 0.0, 0.0])
+    >>> options.mount
+    Mount(height=1.65, pitch=2.0)
+    >>> len(options.alpha_offsets(True)), len(options.alpha_offsets(False))  # +-22.5 deg by 2.5; a full turn by 5
+    (19, 72)
+    """
 
     # KITTI's camera is rigidly mounted: roads tilt by a few degrees in pitch, much less in roll.
     pitch_range: float = bounded(3.0, minimum=0)  # searched about camera_pitch
@@ -162,6 +174,9 @@ class LiftingOptions:
         return int(pitches * _symmetric_count(self.roll_range, self.roll_step))
 
     def alpha_offsets(self, known: bool) -> np.ndarray:
+        """Offsets (radians) of the observation angles searched about a detection's
+        viewpoint: ``+- azimuth_halfwidth`` by ``azimuth_step`` where it is ``known``, a
+        full turn by ``unknown_viewpoint_step`` where it is not."""
         if known:
             return np.deg2rad(_symmetric_range(self.azimuth_halfwidth, self.azimuth_step))
         return np.deg2rad(_circle(self.unknown_viewpoint_step))
@@ -192,7 +207,25 @@ def project_boxes(camera: Camera, lo, hi, location, R) -> tuple[np.ndarray, np.n
     """2D boxes ``(..., 4)`` of the object-frame boxes spanning ``lo`` to ``hi`` ``(..., 3)``
     (see :func:`wirescene.core.boxes.box_extent_object`) placed at ``location`` ``(..., 3)``
     with rotation ``R`` ``(..., 3, 3)``, clipped to the image when its size is known, and
-    the minimum corner depth ``(...)`` (<= 0 means the box reaches behind the camera)."""
+    the minimum corner depth ``(...)`` (<= 0 means the box reaches behind the camera).
+
+    The same boxes as :func:`wirescene.core.boxes.project_points_to_box` of the eight
+    corners, computed without them (the grid search's inner loop).
+
+    Examples
+    --------
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]], (1242, 375))
+    >>> from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners, box_extent_object, project_points_to_box
+    >>> from wirescene.core.groundplane import rotation_y
+    >>> lo, hi = box_extent_object(MEAN_CAR_DIMS)
+    >>> box, depth = project_boxes(camera, lo, hi, np.array([-3.0, 1.65, 15.0]), rotation_y(-1.5))
+    >>> np.round(box, 1).tolist(), round(float(depth), 2)  # x1 y1 x2 y2; the nearest corner 13 m away
+    ([395.7, 178.0, 524.5, 264.4], 13.01)
+    >>> corners = box_corners(MEAN_CAR_DIMS, [-3.0, 1.65, 15.0], rotation_y(-1.5))
+    >>> bool(np.allclose(box, project_points_to_box(camera, corners)))
+    True
+    """
     lo, hi, location, R = (np.asarray(a, dtype=float) for a in (lo, hi, location, R))
     nd = max(lo.ndim - 1, hi.ndim - 1, location.ndim - 1, R.ndim - 2)  # batch axes
     P3 = camera.P[:, :3]
@@ -229,8 +262,19 @@ def _projected_extent(camera: Camera, lo, hi, axes, offset) -> tuple[np.ndarray,
 
 
 def box_residual(projected: np.ndarray, detected: np.ndarray, min_depth: np.ndarray) -> np.ndarray:
-    """Side differences ``(..., 4)`` normalised by the detection diagonal; boxes that
-    reach behind the camera get a large constant residual."""
+    """Side differences ``(..., 4)`` of ``projected`` and ``detected`` boxes ``(..., 4)``,
+    normalised by the detection diagonal (at least 1 px); boxes whose ``min_depth``
+    ``(...)`` (:func:`project_boxes`) is 0.5 m or less, reaching behind or right up to the
+    camera, get a large constant residual of 10.
+
+    Examples
+    --------
+    >>> detected = np.array([0.0, 0.0, 30.0, 40.0])  # a diagonal of 50 px
+    >>> box_residual(detected + [5, 0, 5, 0], detected, np.array(10.0))  # 5 px to the right
+    array([0.1, 0. , 0.1, 0. ])
+    >>> box_residual(detected, detected, np.array(0.2))  # a corner 0.2 m from the camera: refused
+    array([10., 10., 10., 10.])
+    """
     diag = np.hypot(detected[..., 2] - detected[..., 0], detected[..., 3] - detected[..., 1])
     r = (projected - detected) / np.maximum(diag, 1.0)[..., None]
     return np.where((min_depth > 0.5)[..., None], r, 10.0)
@@ -276,6 +320,24 @@ def solve_positions(
     -------
     x, z, azimuth, cost : arrays of shape ``B``
         ``cost`` is the squared normalised box residual (0 = perfect fit).
+
+    Examples
+    --------
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]], (1242, 375))
+    >>> from wirescene.core.boxes import MEAN_CAR_DIMS, box_extent_object
+    >>> from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y
+    >>> # the box of a mean car 15 m ahead, 3 m to the left, heading away (rotation_y -1.5)
+    >>> box, _ = project_boxes(camera, *box_extent_object(MEAN_CAR_DIMS), np.array([-3.0, 1.65, 15.0]),
+    ...                        rotation_y(-1.5))
+    >>> alpha = alpha_from_rotation_y(-1.5, -3.0, 15.0)
+    >>> x, z, azimuth, cost = solve_positions(camera, box, alpha, 0.0, 0.0, MEAN_CAR_DIMS)  # a level plane
+    >>> round(float(x), 3), round(float(z), 3), round(float(azimuth), 3), bool(cost < 1e-12)  # found again
+    (-3.0, 15.0, -1.5, True)
+    >>> # a batch: one box tried on 5 planes x 19 observation angles
+    >>> pitch, angles = np.deg2rad(np.linspace(-1, 1, 5))[:, None], alpha + np.deg2rad(np.arange(-9, 10) * 2.5)
+    >>> [a.shape for a in solve_positions(camera, box, angles, pitch, 0.0, MEAN_CAR_DIMS)]
+    [(5, 19), (5, 19), (5, 19), (5, 19)]
     """
     shape = np.broadcast_shapes(boxes.shape[:-1], np.shape(alpha), np.shape(pitch), np.shape(roll), dims.shape[:-1])
     boxes = np.broadcast_to(boxes, shape + (4,))
@@ -362,6 +424,25 @@ def lift_table(
     ``detections.alpha`` restricts the azimuth search to the viewpoint bin
     (+- ``options.azimuth_halfwidth``); NaN searches the full circle. ``dims`` ``(N, 3)``
     defaults to the mean KITTI car.
+
+    Examples
+    --------
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]], (1242, 375))
+    >>> from wirescene.core.boxes import MEAN_CAR_DIMS, box_extent_object
+    >>> from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y
+    >>> from wirescene.core.types import Detections
+    >>> from wirescene.core.viewpoints import bin_center, viewpoint_bin
+    >>> # two mean cars on KITTI's level road, their boxes as a perfect detector would give them
+    >>> location, heading = np.array([[-3.0, 1.65, 15.0], [4.0, 1.65, 25.0]]), np.array([-1.5, 1.6])
+    >>> boxes, _ = project_boxes(camera, *box_extent_object(MEAN_CAR_DIMS), location, rotation_y(heading))
+    >>> alpha = alpha_from_rotation_y(heading, location[:, 0], location[:, 2])
+    >>> detections = Detections(boxes, scores=1.0, alpha=bin_center(viewpoint_bin(alpha)))  # 45 deg bins
+    >>> table = lift_table(camera, detections, options=LiftingOptions(pitch_range=0.5, roll_range=0.25))
+    >>> table.pitch.shape, table.cost.shape  # 5 pitches x 3 rolls: 15 planes, a row of them a detection
+    ((15,), (2, 15))
+    >>> table.dims.tolist()[0]  # the mean KITTI car (h, w, l)
+    [1.53, 1.63, 3.88]
     """
     n = len(detections)
     if n == 0:
@@ -420,7 +501,14 @@ def road_alignment_cost(azimuth, *, weight: float, width: float) -> np.ndarray:
     ``weight * (1 - exp(-sin(d)**2 / (2 sin(width)**2)))``, ``d`` the heading's angle to
     the road (rotation_y = +-90 deg) and ``width`` in degrees. 0 along the road, near
     ``weight`` across it (within 5% of it beyond 60 deg, so a car across the road is
-    left to its box); the same front and back. See :class:`LiftingOptions`."""
+    left to its box); the same front and back. See :class:`LiftingOptions`.
+
+    Examples
+    --------
+    >>> cost = road_alignment_cost(np.deg2rad([90.0, -90.0, 60.0, 0.0]), weight=0.03, width=20.0)
+    >>> np.round(cost, 4)  # along the road (either way), 30 deg off it, across it
+    array([0.    , 0.    , 0.0197, 0.0296])
+    """
     # cos(rotation_y) is the sine of the heading's angle to the road (the camera's z axis).
     s2 = np.cos(azimuth) ** 2 / (2 * np.sin(np.deg2rad(width)) ** 2)
     return weight * -np.expm1(-s2)
@@ -428,7 +516,13 @@ def road_alignment_cost(azimuth, *, weight: float, width: float) -> np.ndarray:
 
 def road_angle(azimuth) -> np.ndarray:
     """Angle (radians, in [0, pi/2]) between a heading of KITTI ``rotation_y``
-    ``azimuth`` and the camera's road (rotation_y = +-90 deg), front and back alike."""
+    ``azimuth`` and the camera's road (rotation_y = +-90 deg), front and back alike.
+
+    Examples
+    --------
+    >>> np.rad2deg(road_angle(np.deg2rad([-90.0, 90.0, 60.0, -120.0, 0.0]))).round(6)
+    array([ 0.,  0., 30., 30., 90.])
+    """
     return np.arcsin(np.minimum(np.abs(np.cos(azimuth)), 1.0))
 
 
@@ -436,7 +530,13 @@ def plane_vote_weights(scores: np.ndarray) -> np.ndarray:
     """Weights ``(N,)`` of the detections' votes for a shared ground plane: their scores
     when all lie in [0, 1] (probabilities that the box is a car, as our calibrated
     pre-detections and label boxes give), else equal weights (scores on another scale,
-    e.g. an external detector's margins, say nothing comparable)."""
+    e.g. an external detector's margins, say nothing comparable).
+
+    Examples
+    --------
+    >>> plane_vote_weights([0.9, 0.2]), plane_vote_weights([3.5, -1.0])
+    (array([0.9, 0.2]), array([1., 1.]))
+    """
     s = np.asarray(scores, dtype=float).reshape(-1)
     if len(s) and np.all((s >= 0) & (s <= 1)) and s.sum() > 0:
         return s
@@ -455,6 +555,28 @@ def select_particles(
     plane, and weighted so that likely false detections, which stand anywhere, do not
     outvote the cars; without (``coarse``) particle ``k`` gives every object its own
     ``k``-th best plane. ``robust_cost`` defaults to ``LiftingOptions().robust_cost``.
+
+    Returns ``min(n_particles, G)`` particles of the table's ``N`` objects.
+
+    Examples
+    --------
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]], (1242, 375))
+    >>> from wirescene.core.boxes import MEAN_CAR_DIMS, box_extent_object
+    >>> from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y
+    >>> from wirescene.core.types import Detections
+    >>> from wirescene.core.viewpoints import bin_center, viewpoint_bin
+    >>> # two mean cars on KITTI's level road, their boxes as a perfect detector would give them
+    >>> location, heading = np.array([[-3.0, 1.65, 15.0], [4.0, 1.65, 25.0]]), np.array([-1.5, 1.6])
+    >>> boxes, _ = project_boxes(camera, *box_extent_object(MEAN_CAR_DIMS), location, rotation_y(heading))
+    >>> alpha = alpha_from_rotation_y(heading, location[:, 0], location[:, 2])
+    >>> detections = Detections(boxes, scores=1.0, alpha=bin_center(viewpoint_bin(alpha)))  # 45 deg bins
+    >>> table = lift_table(camera, detections, options=LiftingOptions(pitch_range=0.5, roll_range=0.25))
+    >>> shared = select_particles(table, shared_plane=True, n_particles=4)
+    >>> shared.x.shape, bool((shared.pitch[:, 0] == shared.pitch[:, 1]).all())  # one plane for both cars
+    ((4, 2), True)
+    >>> select_particles(table, shared_plane=False, n_particles=100).n_particles  # no more than the 15 planes
+    15
     """
     robust_cost = LiftingOptions().robust_cost if robust_cost is None else robust_cost
     n, G = table.cost.shape
@@ -494,6 +616,27 @@ def lift_detections(
     ``shared_plane=True`` gives ``coarse+gp`` (one plane for all objects), ``False``
     gives ``coarse``. Returns ``min(options.n_particles, grid planes)`` particles
     sorted by cost.
+
+    Examples
+    --------
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]], (1242, 375))
+    >>> from wirescene.core.boxes import MEAN_CAR_DIMS, box_extent_object
+    >>> from wirescene.core.groundplane import alpha_from_rotation_y, rotation_y
+    >>> from wirescene.core.types import Detections
+    >>> from wirescene.core.viewpoints import bin_center, viewpoint_bin
+    >>> # two mean cars on KITTI's level road, their boxes as a perfect detector would give them
+    >>> location, heading = np.array([[-3.0, 1.65, 15.0], [4.0, 1.65, 25.0]]), np.array([-1.5, 1.6])
+    >>> boxes, _ = project_boxes(camera, *box_extent_object(MEAN_CAR_DIMS), location, rotation_y(heading))
+    >>> alpha = alpha_from_rotation_y(heading, location[:, 0], location[:, 2])
+    >>> detections = Detections(boxes, scores=1.0, alpha=bin_center(viewpoint_bin(alpha)))  # 45 deg bins
+    >>> options = LiftingOptions(pitch_range=0.5, roll_range=0.25, n_particles=10)  # a small grid: fast
+    >>> particles = lift_detections(camera, detections, shared_plane=True, options=options)
+    >>> particles.n_particles, particles.n_objects
+    (10, 2)
+    >>> found, R = particles.poses()  # the best particle first
+    >>> bool(np.abs(found[0] - location).max() < 0.1)  # both cars within 10 cm, from viewpoint bins alone
+    True
     """
     table = lift_table(camera, detections, options=options, dims=dims)
     return select_particles(

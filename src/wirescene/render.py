@@ -123,6 +123,21 @@ def render_scene(
     Returns
     -------
     SceneRendering
+
+    Examples
+    --------
+    >>> cube = np.array([[x, y, z] for z in (-1.0, 1.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)])  # a 2 m cube
+    >>> faces = np.array([[0, 1, 3], [0, 3, 2], [4, 7, 5], [4, 6, 7], [0, 4, 5], [0, 5, 1],
+    ...                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    >>> camera = Camera([[100.0, 0, 32, 0], [0, 100.0, 24, 0], [0, 0, 1, 0]], image_size=(64, 48))
+    >>> # one cube 9 to 11 m ahead, a second one behind it and to the right
+    >>> scene = render_scene([(cube + [0.0, 0.0, 10.0], faces), (cube + [1.5, 0.0, 15.0], faces)], camera)
+    >>> scene.object_id.shape, np.unique(scene.object_id).tolist()  # -1: background
+    ((48, 64), [-1, 0, 1])
+    >>> int(scene.object_id[24, 32]), float(scene.depth[24, 32])  # the near cube's front face hides the far one
+    (0, 9.0)
+    >>> int(scene.object_id[24, 45]), float(scene.depth[24, 45])  # the far cube shows beside it
+    (1, 14.0)
     """
     w, h = _image_size(camera, image_size)
     all_v, all_f, obj_of_face, local_face = [], [], [], []
@@ -255,6 +270,26 @@ def render(
     Returns
     -------
     Rendering
+
+    Examples
+    --------
+    >>> cube = np.array([[x, y, z] for z in (-1.0, 1.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)])  # a 2 m cube
+    >>> faces = np.array([[0, 1, 3], [0, 3, 2], [4, 7, 5], [4, 6, 7], [0, 4, 5], [0, 5, 1],
+    ...                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    >>> camera = Camera([[100.0, 0, 32, 0], [0, 100.0, 24, 0], [0, 0, 1, 0]], image_size=(64, 48))
+    >>> rendering = render(cube, faces, camera, [0.0, 0.0, 10.0], np.eye(3))
+    >>> rendering.depth.shape, float(rendering.depth[24, 32]), float(rendering.depth[0, 0])
+    ((48, 64), 9.0, inf)
+    >>> # the front face spans u = 32 +- 100 * 1 / 9 = 20.9 to 43.1: pixels 21 to 43 (rows alike)
+    >>> int(rendering.mask.sum()), int(rendering.edges.sum())  # 23 x 23 pixels, outlined by a 1-pixel line
+    (529, 88)
+    >>> # a line drawing of the mean car wireframe seen from 30 deg, for part-detector training
+    >>> from wirescene.core.shape import load_default
+    >>> from wirescene.core.wireframe import FACES
+    >>> view = view_camera(30.0, 10.0, image_size=(64, 48))
+    >>> car = render(load_default().mean, FACES, view.camera, view.location, view.R)
+    >>> car.edges.dtype.name, bool(car.mask[24, 32])  # the car's middle is at the image centre
+    ('bool', True)
     """
     vertices = np.asarray(vertices, dtype=float)
     check_shape("vertices", vertices, (None, 3))
@@ -311,6 +346,18 @@ def project_landmarks(
     visible : (K,) bool array
         In front of the camera and not hidden by the mesh. Truncation by the image
         border is not considered here.
+
+    Examples
+    --------
+    >>> cube = np.array([[x, y, z] for z in (-1.0, 1.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)])  # a 2 m cube
+    >>> faces = np.array([[0, 1, 3], [0, 3, 2], [4, 7, 5], [4, 6, 7], [0, 4, 5], [0, 5, 1],
+    ...                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    >>> camera = Camera([[100.0, 0, 32, 0], [0, 100.0, 24, 0], [0, 0, 1, 0]], image_size=(64, 48))
+    >>> uv, depth, visible = project_landmarks(cube, cube, faces, camera, [0.0, 0.0, 10.0], np.eye(3))
+    >>> np.round(uv[:2], 2).tolist(), depth.tolist()  # the cube's own corners as landmarks
+    ([[20.89, 12.89], [43.11, 12.89]], [9.0, 9.0, 9.0, 9.0, 11.0, 11.0, 11.0, 11.0])
+    >>> visible.tolist()  # the front face's corners are seen, the back face's hidden
+    [True, True, True, True, False, False, False, False]
     """
     points = np.asarray(points, dtype=float)
     check_shape("points", points, (None, 3))
@@ -380,6 +427,15 @@ def view_camera(
     Returns
     -------
     View
+
+    Examples
+    --------
+    >>> view = view_camera(90.0, 15.0, image_size=(64, 48))  # the car's front, seen from 15 deg above
+    >>> view.camera.image_size, round(view.camera.focal, 2)  # 6 m at 10 m span the 64 px
+    ((64, 48), 106.67)
+    >>> target = view.location + view.R @ np.array([0.0, -0.75, 0.0])  # the car's middle ...
+    >>> np.round(view.camera.project(target), 6).tolist(), round(float(np.linalg.norm(target)), 6)  # ... at the centre
+    ([31.5, 23.5], 10.0)
     """
     w, h = (int(s) for s in image_size)
     if distance <= 0:
@@ -395,7 +451,15 @@ def view_camera(
 def iter_views(n_azimuth: int = 72, elevations: Sequence[float] = (7.5, 15.0), **kwargs) -> Iterator[View]:
     """All views of the paper's training renderings: ``n_azimuth`` equally spaced
     azimuths (5 deg steps for 72) at each elevation. Keyword arguments go to
-    :func:`view_camera`."""
+    :func:`view_camera`.
+
+    Examples
+    --------
+    >>> len(list(iter_views()))  # 72 azimuths x 2 elevations
+    144
+    >>> [(v.azimuth_deg, v.elevation_deg) for v in iter_views(4, (10.0,), image_size=(32, 32))]
+    [(0.0, 10.0), (90.0, 10.0), (180.0, 10.0), (270.0, 10.0)]
+    """
     for elevation in elevations:
         for k in range(int(n_azimuth)):
             yield view_camera(360.0 * k / n_azimuth, float(elevation), **kwargs)
@@ -430,6 +494,20 @@ def shade(
     image : (H, W) or (H, W, 3) float array
         ``albedo * (ambient + (1 - ambient) * max(0, n . l))``, in [0, 1] for albedos
         in [0, 1].
+
+    Examples
+    --------
+    >>> cube = np.array([[x, y, z] for z in (-1.0, 1.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)])  # a 2 m cube
+    >>> faces = np.array([[0, 1, 3], [0, 3, 2], [4, 7, 5], [4, 6, 7], [0, 4, 5], [0, 5, 1],
+    ...                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    >>> camera = Camera([[100.0, 0, 32, 0], [0, 100.0, 24, 0], [0, 0, 1, 0]], image_size=(64, 48))
+    >>> rendering = render(cube, faces, camera, [0.0, 0.0, 10.0], np.eye(3))
+    >>> grey = shade(rendering, light_dir=(0, 0, -1))  # light from the camera: the front face fully lit
+    >>> grey.shape, float(grey[24, 32]), float(grey[0, 0])  # the albedo 0.8; the background 0
+    ((48, 64), 0.8, 0.0)
+    >>> rgb = shade(rendering, albedo=(1.0, 0.2, 0.2), background=(0.0, 0.0, 1.0))
+    >>> rgb.shape, rgb[0, 0].tolist()
+    ((48, 64, 3), [0.0, 0.0, 1.0])
     """
     normals = np.asarray(rendering.normals, dtype=float)
     obj = np.asarray(rendering.object_id)

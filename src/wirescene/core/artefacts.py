@@ -19,7 +19,13 @@ from wirescene.core.errors import InputError
 
 
 def format_tag(kind: str, version: int) -> str:
-    """``"wirescene-KIND/VERSION"``."""
+    """``"wirescene-KIND/VERSION"``.
+
+    Examples
+    --------
+    >>> format_tag("shape-model", 1)
+    'wirescene-shape-model/1'
+    """
     return f"wirescene-{kind}/{int(version)}"
 
 
@@ -30,7 +36,22 @@ def _check(found, kind: str, version: int, path: Path, older=()) -> None:
 
 
 def save_npz(path: str | Path, arrays: dict, *, kind: str, version: int) -> Path:
-    """Write ``arrays`` (no object arrays) with their format tag, atomically."""
+    """Write ``arrays`` (``{name: array}``, no object arrays) with their format tag, atomically,
+    compressed; returns ``path``. Read it back with :func:`load_npz`.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = save_npz(Path(d) / "weights.npz", {"w": np.arange(3.0)}, kind="demo", version=2)
+    ...     arrays = load_npz(path, kind="demo", version=2)
+    ...     load_npz(path, kind="demo", version=3)
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...weights.npz: format 'wirescene-demo/2', expected 'wirescene-demo/3' (...)
+    >>> arrays
+    {'w': array([0., 1., 2.])}
+    """
     buf = io.BytesIO()
     np.savez_compressed(buf, format=np.array(format_tag(kind, version)), **arrays)
     write_bytes(Path(path), buf.getvalue())
@@ -39,7 +60,14 @@ def save_npz(path: str | Path, arrays: dict, *, kind: str, version: int) -> Path
 
 def load_npz(path: str | Path, *, kind: str, version: int, older=()) -> dict[str, np.ndarray]:
     """Arrays of an artefact written by :func:`save_npz` (format checked: ``version``, or one
-    of the ``older`` versions its reader still understands; an error names ``version``)."""
+    of the ``older`` versions its reader still understands; an error names ``version``),
+    as ``{name: array}`` without the tag; see :func:`save_npz` for an example.
+
+    Raises
+    ------
+    InputError
+        Naming the file: missing, corrupt, or of another kind or version.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError("artefact file is missing (run the training command that makes it)", path=path)
@@ -54,7 +82,17 @@ def load_npz(path: str | Path, *, kind: str, version: int, older=()) -> dict[str
 
 
 def save_json(path: str | Path, record: dict, *, kind: str, version: int, indent: int | None = 1) -> Path:
-    """Write a JSON record with its format tag first, atomically."""
+    """Write a JSON record (a dict of JSON-ready values) with its format tag first,
+    atomically; returns ``path``.
+
+    Examples
+    --------
+    >>> import json, tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = save_json(Path(d) / "run.json", {"frames": 2}, kind="run", version=1)
+    ...     json.loads(path.read_text()), load_json(path, kind="run", version=1)
+    ({'format': 'wirescene-run/1', 'frames': 2}, {'frames': 2})
+    """
     write_text(Path(path), json.dumps({"format": format_tag(kind, version), **record}, indent=indent))
     return Path(path)
 

@@ -15,7 +15,24 @@ from wirescene.core.errors import InputError
 @contextmanager
 def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     """Yield a temporary path beside ``path``; it replaces ``path`` when the block
-    succeeds and is removed when it raises."""
+    succeeds and is removed when it raises.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = Path(d) / "labels.txt"
+    ...     with atomic_path(path) as tmp:
+    ...         _ = tmp.write_text("Car ...")
+    ...     try:
+    ...         with atomic_path(path) as tmp:
+    ...             _ = tmp.write_text("half a file")
+    ...             raise RuntimeError("disk full")
+    ...     except RuntimeError:
+    ...         pass
+    ...     path.read_text(), sorted(p.name for p in Path(d).iterdir())  # the first file, no leftovers
+    ('Car ...', ['labels.txt'])
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = _new_file(path.parent, prefix=f".{path.name}.", suffix=suffix)
@@ -56,18 +73,32 @@ def _new_dir(directory: Path, *, prefix: str, suffix: str) -> Path:
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_path`), making its directories."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
 
 
 def write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (:func:`atomic_path`), making its directories."""
     with atomic_path(path) as tmp:
         tmp.write_text(text)
 
 
 def missing_dirs(path: str | Path) -> list[Path]:
     """``path`` and the directories above it that do not exist yet, deepest first: those
-    a ``mkdir(parents=True)`` would make, for :func:`remove_empty` to take back."""
+    a ``mkdir(parents=True)`` would make, for :func:`remove_empty` to take back.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     made = missing_dirs(Path(d) / "run" / "plots")
+    ...     (Path(d) / "run" / "plots").mkdir(parents=True)
+    ...     names = [p.name for p in made]
+    ...     remove_empty(made)  # a failed run takes back what it made
+    ...     names, (Path(d) / "run").exists()
+    (['plots', 'run'], False)
+    """
     path = Path(path)
     return [p for p in (path, *path.parents) if not p.exists()]
 
@@ -178,10 +209,13 @@ def replaced_dir(path: str | Path):
     Examples
     --------
     >>> import tempfile
-    >>> root = Path(tempfile.mkdtemp())
-    >>> with replaced_dir(root / "set") as staging:
-    ...     _ = (staging / "a.txt").write_text("new")
-    >>> sorted(p.name for p in (root / "set").iterdir())
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     root = Path(d)
+    ...     (root / "set").mkdir()
+    ...     _ = (root / "set" / "old.txt").write_text("old")
+    ...     with replaced_dir(root / "set") as staging:
+    ...         _ = (staging / "a.txt").write_text("new")
+    ...     sorted(p.name for p in (root / "set").iterdir())  # the old set is gone whole
     ['a.txt']
     """
     path = Path(path)

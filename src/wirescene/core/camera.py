@@ -33,6 +33,22 @@ class Camera:
         Projection matrix, ``uvw = P @ [X, 1]``.
     image_size : (width, height) or None
         Image size in pixels, used for clipping boxes and truncation tests.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = np.array([[721.5, 0, 609.6], [0, 721.5, 172.9], [0, 0, 1]])
+    >>> camera = Camera(np.hstack([K, np.zeros((3, 1))]), image_size=(1242, 375))
+    >>> camera.project([[0.0, 0.0, 10.0]])  # a point on the optical axis: the principal point
+    array([[609.6, 172.9]])
+    >>> uv, depth = camera.project_with_depth([[1.0, 1.65, 10.0], [0.0, 0.0, -5.0]])
+    >>> uv[0].tolist(), depth.tolist()  # u = 609.6 + 721.5 * 1 / 10; depth <= 0: behind the camera
+    ([681.75, 291.9475], [10.0, -5.0])
+    >>> camera.backproject(uv[0], 10.0)  # the inverse, given the depth
+    array([ 1.  ,  1.65, 10.  ])
+    >>> np.round(camera.rays([[609.6, 172.9], [609.6 + 721.5, 172.9]]), 4)  # unit rays, 45 deg apart
+    array([[0.    , 0.    , 1.    ],
+           [0.7071, 0.    , 0.7071]])
     """
 
     P: np.ndarray
@@ -113,7 +129,20 @@ class Camera:
 
 @dataclass(frozen=True)
 class KittiCalib:
-    """The matrices of a KITTI object calibration file (all as float arrays)."""
+    """The matrices of a KITTI object calibration file (all as float arrays): ``P0`` to
+    ``P3`` ``(3, 4)``, ``R0_rect`` ``(3, 3)`` and ``Tr_velo_to_cam`` ``(3, 4)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> calib = read_kitti_calib(DATA_DIR / "sample" / "kitti" / "training" / "calib" / "000010.txt")
+    >>> camera = calib.camera((1242, 375))  # the left colour camera, P2
+    >>> camera.focal, camera.image_size
+    (721.5377, (1242, 375))
+    >>> np.round(camera.center, 3)  # P2's fourth column: the colour camera sits 6 cm left of the reference
+    array([-0.06 ,  0.   , -0.003])
+    """
 
     P0: np.ndarray
     P1: np.ndarray
@@ -160,10 +189,15 @@ def read_projection(path: str | Path) -> np.ndarray:
     Examples
     --------
     >>> import tempfile
-    >>> path = Path(tempfile.mkdtemp()) / "K.txt"
-    >>> _ = path.write_text("721.5 0 609.6  0 721.5 172.9  0 0 1")
-    >>> read_projection(path)[:, 3].tolist()
-    [0.0, 0.0, 0.0]
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = Path(d) / "K.txt"
+    ...     _ = path.write_text("721.5 0 609.6  0 721.5 172.9  0 0 1")
+    ...     P = read_projection(path)
+    >>> P.shape, P[:, 3].tolist()
+    ((3, 4), [0.0, 0.0, 0.0])
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> read_projection(DATA_DIR / "sample" / "kitti" / "training" / "calib" / "000010.txt")[0].tolist()  # P2
+    [721.5377, 0.0, 609.5593, 44.85728]
     """
     path = Path(path)
     text = _calibration_text(path)
@@ -189,10 +223,23 @@ def read_projection(path: str | Path) -> np.ndarray:
 def read_kitti_calib(path: str | Path) -> KittiCalib:
     """Parse a KITTI object calibration file.
 
+    Lines are ``KEY: numbers``; ``P2`` is required, ``P0``, ``P1`` and ``P3`` default to
+    it, ``R0_rect`` to the identity and ``Tr_velo_to_cam`` to ``[I | 0]``; other keys
+    (``Tr_imu_to_velo``) are read and dropped.
+
     Raises
     ------
     InputError
         If the file is missing, a line is malformed or ``P2`` is absent.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> calib = read_kitti_calib(DATA_DIR / "sample" / "kitti" / "training" / "calib" / "000010.txt")
+    >>> calib.P2.shape, calib.R0_rect.shape, calib.Tr_velo_to_cam.shape
+    ((3, 4), (3, 3), (3, 4))
+    >>> calib.P2[:, 3].tolist()  # the colour camera's offset from the reference camera (pixels x metres)
+    [44.85728, 0.2163791, 0.002745884]
     """
     path = Path(path)
     return _parse_kitti_calib(_calibration_text(path), path)
@@ -240,7 +287,21 @@ def write_kitti_calib(path: str | Path, P2: np.ndarray) -> None:
     """Write a minimal KITTI calibration file, the seven lines of KITTI's in their order:
     P0..P3 are ``P2``, R0 is identity, ``Tr_velo_to_cam`` that of a LiDAR at the camera
     with KITTI's axes (:data:`VELO_TO_CAM_AXES`; tools that take label boxes into the LiDAR
-    frame need them), ``Tr_imu_to_velo`` identity."""
+    frame need them), ``Tr_imu_to_velo`` identity.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> P2 = np.array([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     write_kitti_calib(Path(d) / "000000.txt", P2)
+    ...     keys = [line.split(":")[0] for line in (Path(d) / "000000.txt").read_text().splitlines()]
+    ...     calib = read_kitti_calib(Path(d) / "000000.txt")
+    >>> keys
+    ['P0', 'P1', 'P2', 'P3', 'R0_rect', 'Tr_velo_to_cam', 'Tr_imu_to_velo']
+    >>> bool(np.array_equal(calib.P2, P2))  # written with 13 significant digits: these numbers round-trip
+    True
+    """
     P2 = np.asarray(P2, dtype=float)
     check_shape("P2", P2, (3, 4))
     fmt = lambda a: " ".join(f"{v:.12e}" for v in np.asarray(a).ravel())  # noqa: E731

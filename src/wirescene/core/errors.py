@@ -7,7 +7,17 @@ from pathlib import Path
 
 
 class WiresceneError(Exception):
-    """Base class of all errors raised on purpose by wirescene."""
+    """Base class of all errors raised on purpose by wirescene; ``path`` (a
+    :class:`~pathlib.Path` or None) is the file it names, ``problem`` the message without it.
+
+    Examples
+    --------
+    >>> err = InputError("calibration has no P2 matrix", path="000010.txt")
+    >>> str(err), err.problem, isinstance(err, WiresceneError)
+    ('000010.txt: calibration has no P2 matrix', 'calibration has no P2 matrix', True)
+    >>> isinstance(ShapeError("..."), ValueError)  # shape and argument errors are ValueErrors too
+    True
+    """
 
     def __init__(self, message: str, *, path: str | Path | None = None):
         self.path = None if path is None else Path(path)
@@ -30,7 +40,14 @@ class ShapeError(WiresceneError, ValueError):
 
 class ArgumentError(WiresceneError, ValueError):
     """An argument of the Python API (or an option of the CLI) has a wrong type, shape
-    or value; the message starts with the argument's name."""
+    or value; the message starts with the argument's name.
+
+    Examples
+    --------
+    >>> err = ArgumentError("particles", "must be at least 1, got 0")
+    >>> err.name, str(err)
+    ('particles', 'particles: must be at least 1, got 0')
+    """
 
     def __init__(self, name: str, problem: str):
         self.name = name
@@ -41,6 +58,21 @@ def check_shape(name: str, array, shape: tuple) -> None:
     """Check ``array.shape`` against ``shape``; ``None`` entries match any size.
 
     A leading ``...`` in ``shape`` matches any number of leading dimensions.
+
+    Raises
+    ------
+    ShapeError
+        Naming ``name``, the expected and the actual shape.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> check_shape("points", np.zeros((250, 36, 3)), (..., 3))  # passes: returns None
+    >>> check_shape("P", np.zeros((3, 3)), (3, 4))
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ShapeError: P must have shape (3, 4), got (3, 3)
+    >>> check_shape("boxes", np.zeros((5, 4)), (None, 4))  # None: any size
     """
     actual = tuple(getattr(array, "shape", ()))
     want = tuple(shape)

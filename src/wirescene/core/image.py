@@ -40,7 +40,18 @@ def _channels(img: np.ndarray) -> np.ndarray:
 
 
 def to_grey(image) -> np.ndarray:
-    """Grey ``(H, W)`` float32 in [0, 1] (ITU-R 601 luma of RGB)."""
+    """Grey ``(H, W)`` float32 in [0, 1] (ITU-R 601 luma of RGB) of an image ``(H, W)``,
+    ``(H, W, 1)``, ``(H, W, 3)`` or ``(H, W, 4)`` (alpha dropped) of any numeric dtype.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> grey = to_grey(np.array([[[255, 0, 0], [0, 255, 0]]], np.uint8))  # pure red, pure green
+    >>> grey.shape, grey.dtype.name, np.round(grey.astype(float), 3).tolist()
+    ((1, 2), 'float32', [[0.299, 0.587]])
+    >>> float(to_grey(np.full((2, 2), 65535, np.uint16)).max())  # 16-bit: scaled by its own range
+    1.0
+    """
     values, top = _values_and_range(_channels(np.asarray(image)))
     grey = values[..., 0] if values.shape[-1] == 1 else values @ _LUMA
     # Luma first, then the scaling: the float32 rounding of every stage's features
@@ -49,7 +60,17 @@ def to_grey(image) -> np.ndarray:
 
 
 def to_rgb_uint8(image) -> np.ndarray:
-    """``(H, W, 3)`` uint8 RGB of any supported image array (grey is replicated)."""
+    """``(H, W, 3)`` uint8 RGB of any supported image array (grey is replicated; see
+    :func:`to_grey` for the shapes and the module docstring for the value ranges). An
+    ``(H, W, 3)`` uint8 array is returned as it is, not copied.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rgb = to_rgb_uint8(np.array([[0.0, 0.5, 1.0]]))  # float grey in [0, 1]
+    >>> rgb.shape, rgb.dtype.name, rgb[0, :, 0].tolist()
+    ((1, 3, 3), 'uint8', [0, 128, 255])
+    """
     img = np.asarray(image)
     if img.dtype == np.uint8 and img.ndim == 3 and img.shape[-1] == 3:
         return img

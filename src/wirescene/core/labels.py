@@ -53,6 +53,15 @@ class Label:
         Azimuth about the camera y axis, radians.
     score : float or None
         Detection confidence (16th column); ``None`` for ground truth.
+
+    Examples
+    --------
+    >>> car = Label("Car", truncated=0.0, occluded=0, alpha=1.95, box=[354.43, 185.52, 549.52, 294.49],
+    ...             dims=[1.43, 1.70, 3.95], location=[-2.39, 1.66, 11.80], rotation_y=1.76)
+    >>> car.box.shape, car.dims.tolist(), car.score is None  # arrays of floats; ground truth has no score
+    ((4,), [1.43, 1.7, 3.95], True)
+    >>> round(car.height_px, 2), np.round(car.centroid, 3).tolist()  # centroid: h / 2 above the bottom (y down)
+    (108.97, [-2.39, 0.945, 11.8])
     """
 
     type: str
@@ -87,12 +96,24 @@ class Label:
 
     @property
     def is_dontcare(self) -> bool:
+        """Whether the row is a ``DontCare`` region (kept apart in :class:`FrameLabels`)."""
         return self.type == DONTCARE
 
 
 @dataclass
 class FrameLabels:
-    """The labels of one frame: real objects, and DontCare regions kept apart."""
+    """The labels of one frame: real objects, and DontCare regions kept apart.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> from wirescene.io.kitti import read_labels
+    >>> labels = read_labels(DATA_DIR / "sample" / "kitti" / "training" / "label_2" / "000010.txt")
+    >>> len(labels), len(labels.dontcare)  # len counts the objects only
+    (9, 4)
+    >>> [o.type for o in labels.of_type("Pedestrian", "Cyclist")]
+    ['Pedestrian']
+    """
 
     objects: list[Label] = field(default_factory=list)
     dontcare: list[Label] = field(default_factory=list)
@@ -114,6 +135,21 @@ def format_label(label: Label, *, with_score: bool = True) -> str:
     1 m metrics of the paper); the score is written with 6 significant digits. KITTI's
     own readers parse any of these with ``%f``. ``with_score`` writes the 16th column
     (a label without a score gets 0).
+
+    Raises
+    ------
+    ValueError
+        If a number is not finite or the type is not one word.
+
+    Examples
+    --------
+    >>> car = Label("Car", 0.0, 0, 1.95, [354.43, 185.52, 549.52, 294.49], [1.43, 1.70, 3.95],
+    ...             [-2.39, 1.66, 11.80], 1.76)
+    >>> format_label(car, with_score=False)  # ground truth: 15 columns
+    'Car 0.00 0 1.950000 354.43 185.52 549.52 294.49 1.430000 1.700000 3.950000 -2.390000 1.660000 11.800000 1.760000'
+    >>> car.score = 0.87654321
+    >>> format_label(car).split()[-1]  # a detection: the score, 6 significant digits
+    '0.876543'
     """
     numbers = [label.alpha, *label.box, *label.dims, *label.location, label.rotation_y]
     if not np.all(np.isfinite([label.truncated, *numbers])):
@@ -136,7 +172,20 @@ def format_label(label: Label, *, with_score: bool = True) -> str:
 
 
 def format_labels(labels: FrameLabels | Iterable[Label], *, with_score: bool = True) -> str:
-    """The text of a KITTI label file (see :func:`write_labels`)."""
+    """The text of a KITTI label file (see :func:`wirescene.io.kitti.write_labels`): one line
+    a label (:func:`format_label`), each ended by a newline; a :class:`FrameLabels` gives
+    its objects, then its DontCare regions.
+
+    Examples
+    --------
+    >>> car = Label("Car", 0.0, 0, 1.95, [354.43, 185.52, 549.52, 294.49], [1.43, 1.70, 3.95],
+    ...             [-2.39, 1.66, 11.80], 1.76, score=0.9)
+    >>> text = format_labels([car, car])
+    >>> text.endswith("0.9\\n"), [len(line.split()) for line in text.splitlines()]  # two lines of 16 columns
+    (True, [16, 16])
+    >>> format_labels([])  # a frame without objects: an empty file
+    ''
+    """
     items = list(labels.objects) + list(labels.dontcare) if isinstance(labels, FrameLabels) else list(labels)
     return "".join(format_label(lab, with_score=with_score) + "\n" for lab in items)
 
@@ -155,6 +204,20 @@ def car_indices(
     ``min_height`` (pixels), ``max_truncated`` and ``max_occluded`` (KITTI flag) give
     KITTI-style difficulty filters, e.g. the paper's pre-detection protocol uses cars
     taller than 50 px.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> from wirescene.io.kitti import read_labels
+    >>> labels = read_labels(DATA_DIR / "sample" / "kitti" / "training" / "label_2" / "000010.txt")
+    >>> [o.type for o in labels.objects].index("Pedestrian")
+    2
+    >>> car_indices(labels)  # every Car, the pedestrian left out
+    [0, 1, 3, 4, 5, 6, 7, 8]
+    >>> car_indices(labels, min_height=50)  # cars at least 50 px tall
+    [0, 1, 3, 4, 5]
+    >>> car_indices(labels, min_height=50, max_truncated=0.15, max_occluded=0)  # and fully visible, not cut
+    [1, 3, 5]
     """
     objects = labels.objects if isinstance(labels, FrameLabels) else list(labels)
     return [
@@ -165,6 +228,15 @@ def car_indices(
 
 
 def select_cars(labels: FrameLabels | Sequence[Label], **filters) -> list[Label]:
-    """The evaluation cars themselves; see :func:`car_indices` for the filters."""
+    """The evaluation cars themselves; see :func:`car_indices` for the filters.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> from wirescene.io.kitti import read_labels
+    >>> labels = read_labels(DATA_DIR / "sample" / "kitti" / "training" / "label_2" / "000010.txt")
+    >>> [round(o.height_px, 1) for o in select_cars(labels, min_height=50, max_occluded=0)]
+    [191.5, 109.0, 73.4, 51.6]
+    """
     objects = labels.objects if isinstance(labels, FrameLabels) else list(labels)
     return [objects[i] for i in car_indices(objects, **filters)]

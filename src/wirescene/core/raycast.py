@@ -42,6 +42,7 @@ _CORNERS_AND_NEXT = np.array([0, 1, 2, 1, 2, 0])
 
 
 def check_eps(eps: float) -> None:
+    """A ``ValueError`` unless ``eps`` (:func:`segment_blocked`) lies in ``[0, 0.5)``."""
     if not 0 <= eps < 0.5:
         raise ValueError(f"eps must be in [0, 0.5), got {eps}")
 
@@ -121,6 +122,15 @@ def segment_blocked(
     triangles is irrelevant (two-sided test). The origin is assumed not to lie on a
     triangle. See :func:`mesh_vertices_blocked` for targets that are the vertices of
     the occluding mesh itself (cheaper: no triangle array is materialised).
+
+    Examples
+    --------
+    >>> wall = np.array([[[-1.0, -1.0, 5.0], [1.0, -1.0, 5.0], [0.0, 1.0, 5.0]]])  # one triangle, z = 5 m
+    >>> segment_blocked(np.zeros(3), [[0.0, 0.0, 10.0], [0.0, 0.0, 3.0], [5.0, 0.0, 10.0]], wall)
+    array([ True, False, False])
+    >>> # a batch: 250 origins, each with its own 36 targets, against one shared set of triangles
+    >>> segment_blocked(np.zeros((250, 3)), np.full((250, 36, 3), 10.0), wall).shape
+    (250, 36)
     """
     origins, targets, triangles, batch = segment_inputs(origins, targets, triangles, eps)
     F = triangles.shape[-3]
@@ -164,6 +174,17 @@ def mesh_vertices_blocked(
     -----
     Triangles are gathered one chunk at a time, so the ``(..., F, 3, 3)`` corner array
     (88 MB for 15k wireframes) is never built.
+
+    Examples
+    --------
+    >>> # a 2 m cube 9 to 11 m ahead: vertices 0-3 its front face (z = 9), 4-7 its back face (z = 11)
+    >>> vertices = np.array([[x, y, z] for z in (9.0, 11.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)])
+    >>> faces = np.array([[0, 1, 3], [0, 3, 2], [4, 7, 5], [4, 6, 7], [0, 4, 5], [0, 5, 1],
+    ...                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    >>> mesh_vertices_blocked(np.zeros(3), vertices, faces)  # seen from the origin: the back face is hidden
+    array([False, False, False, False,  True,  True,  True,  True])
+    >>> mesh_vertices_blocked(np.zeros(3), np.stack([vertices] * 5), faces).shape  # 5 meshes, one face list
+    (5, 8)
     """
     origins = np.asarray(origins, dtype=float)
     vertices = np.asarray(vertices, dtype=float)
@@ -305,6 +326,16 @@ def mesh_intersector(mesh_vertices, mesh_faces):
     trimesh's (much slower) pure-Python one, with a warning.
 
     Reuse it across calls of :func:`first_hit_distance` to avoid rebuilding the BVH.
+
+    Examples
+    --------
+    >>> vertices = np.array([[-1.0, -1.0, 5.0], [1.0, -1.0, 5.0], [0.0, 1.0, 5.0]])  # one triangle, 5 m ahead
+    >>> faces = np.array([[0, 1, 2]])
+    >>> intersector = mesh_intersector(vertices, faces)  # built once ...
+    >>> for z in (1.0, 2.0):  # ... for several batches of rays
+    ...     first_hit_distance(vertices, faces, np.zeros(3), [[0.0, 0.0, z]], intersector=intersector)[0].tolist()
+    [5.0]
+    [2.5]
     """
     import trimesh
 
@@ -351,6 +382,16 @@ def first_hit_distance(mesh_vertices, mesh_faces, origins, directions, *, inters
     Embree works in float32; it is only used to find *which* face is hit first. The
     distance is then recomputed in float64 against that face's plane, so depth values
     are as precise as the inputs.
+
+    Examples
+    --------
+    >>> # a 2 m cube 9 to 11 m ahead: vertices 0-3 its front face (z = 9), 4-7 its back face (z = 11)
+    >>> vertices = np.array([[x, y, z] for z in (9.0, 11.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)])
+    >>> faces = np.array([[0, 1, 3], [0, 3, 2], [4, 7, 5], [4, 6, 7], [0, 4, 5], [0, 5, 1],
+    ...                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    >>> distance, face = first_hit_distance(vertices, faces, np.zeros(3), [[0.05, 0.02, 1.0], [1.0, 0.0, 0.0]])
+    >>> distance.tolist(), face.tolist()  # the front face at 9 (units of |direction|: z = 1); the other misses
+    ([9.0, inf], [0, -1])
     """
     mesh_vertices = np.asarray(mesh_vertices, dtype=float)
     mesh_faces = np.asarray(mesh_faces, dtype=np.int64)
@@ -383,7 +424,17 @@ def first_hit_distance(mesh_vertices, mesh_faces, origins, directions, *, inters
 
 
 def check_faces(faces, n_vertices: int) -> np.ndarray:
-    """``faces`` as an ``(F, 3)`` integer array indexing ``n_vertices`` vertices (else ShapeError)."""
+    """``faces`` as an ``(F, 3)`` integer array indexing ``n_vertices`` vertices (else ShapeError).
+
+    Examples
+    --------
+    >>> check_faces([[0, 1, 2]], 3)
+    array([[0, 1, 2]])
+    >>> check_faces([[0, 1, 3]], 3)
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ShapeError: faces index vertices outside [0, 3)
+    """
     faces = np.asarray(faces)
     check_shape("faces", faces, (None, 3))
     if not np.issubdtype(faces.dtype, np.integer):
@@ -394,7 +445,16 @@ def check_faces(faces, n_vertices: int) -> np.ndarray:
 
 
 def incidence(faces, n_vertices: int) -> np.ndarray:
-    """``(V, F)`` bool: True where vertex ``v`` is a corner of face ``f``."""
+    """``(V, F)`` bool: True where vertex ``v`` is a corner of face ``f`` (the ``ignore``
+    mask of :func:`segment_blocked` that exempts a vertex from its own faces).
+
+    Examples
+    --------
+    >>> from wirescene.core.wireframe import FACES, N_VERTICES
+    >>> inc = incidence(FACES, N_VERTICES)
+    >>> inc.shape, bool((inc.sum(axis=0) == 3).all())  # the car's wireframe surface: three corners a face
+    ((36, 68), True)
+    """
     faces = check_faces(faces, n_vertices)
     inc = np.zeros((n_vertices, len(faces)), dtype=bool)
     inc[faces, np.arange(len(faces))[:, None]] = True
@@ -412,6 +472,17 @@ def interaction_candidates(rel) -> np.ndarray:
     depth between ``j``'s nearest point and the target's depth. The projection onto
     ``z = 1`` is used where every vertex of both objects lies in front of that plane;
     other pairs are always kept.
+
+    Examples
+    --------
+    >>> from wirescene.core.boxes import box_corners
+    >>> # one scene of three cars: A 10 m ahead, B right behind it (20 m), C 10 m to the right of A
+    >>> cars = np.stack([box_corners([1.5, 1.6, 4.0], location, np.eye(3))
+    ...                  for location in ([0.0, 1.65, 10.0], [0.0, 1.65, 20.0], [10.0, 1.65, 10.0])])
+    >>> interaction_candidates(cars[None])  # only A can hide B: [target B, occluder A]
+    array([[[False, False, False],
+            [ True, False, False],
+            [False, False, False]]])
     """
     rel = np.asarray(rel, dtype=float)
     check_shape("rel", rel, (None, None, None, 3))

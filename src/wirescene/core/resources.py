@@ -41,7 +41,14 @@ MANIFEST_VERSION = 1
 
 
 def shipped_path(name: str) -> Path:
-    """The package's own file of artefact ``name`` (a key of :data:`ARTEFACTS`)."""
+    """The package's own file of artefact ``name`` (a key of :data:`ARTEFACTS`).
+
+    Examples
+    --------
+    >>> path = shipped_path("shape_model")
+    >>> path.name, path.parent == DATA_DIR, path.is_file()
+    ('shape_model.npz', True, True)
+    """
     return DATA_DIR / ARTEFACTS[name]
 
 
@@ -55,6 +62,13 @@ class Models:
         The models directory (None: every artefact is the shipped one).
     own : tuple of str
         Names of the artefacts ``root`` holds (keys of :data:`ARTEFACTS`).
+
+    Examples
+    --------
+    >>> SHIPPED.describe()  # Models(): every artefact the package's own
+    'shipped models'
+    >>> SHIPPED.path("occlusion") == shipped_path("occlusion")
+    True
     """
 
     root: Path | None = None
@@ -81,6 +95,9 @@ SHIPPED = Models()
 def resolve_models(models_dir: str | Path | None) -> Models:
     """The :class:`Models` of a models directory (None: the shipped models).
 
+    A directory without a manifest (``models.json``) is taken as it is: the known
+    artefact files it holds replace the shipped ones.
+
     Raises
     ------
     InputError
@@ -88,6 +105,18 @@ def resolve_models(models_dir: str | Path | None) -> Models:
         another format, lists an unknown or missing artefact, disagrees with the files
         present (or with their hashes), or marks an unfinished training; no manifest and
         no known artefact.
+
+    Examples
+    --------
+    >>> import shutil, tempfile
+    >>> resolve_models(None) is SHIPPED
+    True
+    >>> with tempfile.TemporaryDirectory() as d:  # a directory put together by hand: one file of its own
+    ...     _ = shutil.copy(shipped_path("occlusion"), d)
+    ...     models = resolve_models(d)
+    ...     own_file, shipped_file = models.path("occlusion"), models.path("parts_model")
+    ...     models.own, own_file.parent == Path(d).resolve(), shipped_file.parent == DATA_DIR
+    (('occlusion',), True, True)
     """
     if models_dir is None:
         return SHIPPED
@@ -148,7 +177,18 @@ def trained_on(models: Models, split_dir: str | Path, frame_ids) -> list[str]:
 
 def file_version(path: str | Path) -> tuple[int, int, int] | None:
     """``(inode, size, mtime in ns)`` of the file at ``path`` (None where it cannot be read):
-    a file rewritten or replaced at the same path has another version."""
+    a file rewritten or replaced at the same path has another version.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     f = Path(d) / "model.npz"
+    ...     missing = file_version(f)
+    ...     _ = f.write_bytes(b"12345")
+    ...     missing, file_version(f)[1]  # the size is its second entry
+    (None, 5)
+    """
     try:
         stat = os.stat(path)
     except OSError:
@@ -195,7 +235,17 @@ def cached_by_file(maxsize: int):
 
 
 def file_sha256(path: str | Path) -> str:
-    """SHA-256 (hex) of a file's bytes, computed once per file version (:func:`file_version`)."""
+    """SHA-256 (hex) of a file's bytes, computed once per file version (:func:`file_version`).
+
+    Examples
+    --------
+    >>> import hashlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     f = Path(d) / "model.txt"
+    ...     _ = f.write_bytes(b"abc")
+    ...     file_sha256(f) == hashlib.sha256(b"abc").hexdigest()
+    True
+    """
     path = Path(path).resolve()
     version = file_version(path)
     if version is None:

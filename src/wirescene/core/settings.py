@@ -74,7 +74,19 @@ def bounded(default=dataclasses.MISSING, *, minimum: float, maximum: float | Non
 
 def exposed_fields(cls) -> list[tuple[dataclasses.Field, str, str]]:
     """``[(field, cli_name, help)]`` of the fields of dataclass ``cls`` declared with
-    :func:`option`, in declaration order."""
+    :func:`option`, in declaration order.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Stage:
+    ...     road_prior: float = option(0.03, help="Weight of the road prior (0: none).")
+    ...     step: float = bounded(0.25, minimum=0.01)  # no command-line option
+    ...     n_seeds: int = option(4, help="Seeds.", cli="seeds", minimum=1)
+    >>> [(f.name, cli, text) for f, cli, text in exposed_fields(Stage)]
+    [('road_prior', 'road-prior', 'Weight of the road prior (0: none).'), ('n_seeds', 'seeds', 'Seeds.')]
+    """
     return [(f, f.metadata.get("cli") or f.name.replace("_", "-"), f.metadata["help"])
             for f in dataclasses.fields(cls) if "help" in f.metadata]
 
@@ -93,7 +105,18 @@ def stage_field(cls, name: str) -> dataclasses.Field:
 
 
 def field_default(f: dataclasses.Field):
-    """The default value of dataclass field ``f``."""
+    """The default value of dataclass field ``f`` (its ``default_factory`` called where it has one).
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass, field
+    >>> @dataclass
+    ... class Stage:
+    ...     steps: int = 8
+    ...     sizes: list = field(default_factory=lambda: [1, 2])
+    >>> [field_default(f) for f in dataclasses.fields(Stage)]
+    [8, [1, 2]]
+    """
     return f.default_factory() if f.default is dataclasses.MISSING else f.default
 
 
@@ -123,7 +146,17 @@ def parse_value(text: str, default):
 
 
 def parse_assignment(item: str) -> tuple[str, str, str]:
-    """``(scope, key, text)`` of ``"SCOPE.KEY=VALUE"``; a ``ValueError`` otherwise."""
+    """``(scope, key, text)`` of ``"SCOPE.KEY=VALUE"``; a ``ValueError`` otherwise.
+
+    Examples
+    --------
+    >>> parse_assignment("lifting.road_prior=0.05")  # the value stays text: see parse_value
+    ('lifting', 'road_prior', '0.05')
+    >>> parse_assignment("road_prior=0.05")
+    Traceback (most recent call last):
+    ...
+    ValueError: 'road_prior=0.05' is not SCOPE.KEY=VALUE
+    """
     name, sep, text = item.partition("=")
     scope, dot, key = name.strip().partition(".")
     if not sep or not dot or not scope or not key:
@@ -164,7 +197,23 @@ def check_value(f: dataclasses.Field, value, *, scope: str = ""):
     """``value`` for dataclass field ``f`` if it is of the default's kind (a bool, an
     integer, a finite real number) and within the field's ``minimum`` / ``maximum``
     (:func:`option`, :func:`bounded`); a ``ValueError`` naming the field otherwise. Fields
-    whose default is not a number or a bool (None, text, a list) take any value."""
+    whose default is not a number or a bool (None, text, a list) take any value.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Stage:
+    ...     n_particles: int = bounded(250, minimum=1)
+    ...     weight: float = bounded(1.0, minimum=0)
+    >>> n_particles, weight = dataclasses.fields(Stage)
+    >>> check_value(n_particles, 100), check_value(weight, 2)  # an int given for a float: the float
+    (100, 2.0)
+    >>> check_value(n_particles, 2.5, scope="lifting")
+    Traceback (most recent call last):
+    ...
+    ValueError: lifting.n_particles must be an integer, got 2.5
+    """
     default = field_default(f)
     name = f"{scope}.{f.name}" if scope else f.name
 
@@ -195,7 +244,20 @@ def check_value(f: dataclasses.Field, value, *, scope: str = ""):
 
 def check_fields(obj, *, scope: str = "") -> None:
     """:func:`check_value` of every field of dataclass ``obj`` (options built directly,
-    not through :func:`replace_fields`)."""
+    not through :func:`replace_fields`), then :func:`check_combined`.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Stage:
+    ...     step: float = bounded(0.25, minimum=0.01)
+    >>> check_fields(Stage())  # passes: returns None
+    >>> check_fields(Stage(step=0.0), scope="lifting")
+    Traceback (most recent call last):
+    ...
+    ValueError: lifting.step must be at least 0.01, got 0.0
+    """
     for f in dataclasses.fields(obj):
         check_value(f, getattr(obj, f.name), scope=scope)
     check_combined(obj, scope=scope)

@@ -46,6 +46,20 @@ class ShapeModel:
         Their annotated wireframes, as measured (before any augmentation).
     version : int
         File format version.
+
+    Examples
+    --------
+    >>> model = load_default()
+    >>> model.mean.shape, model.components.shape[1:], model.stds.shape == (model.n_components,)
+    ((36, 3), (36, 3), True)
+    >>> X = model.instantiate([1.0, -0.5])  # +1 sd along the first component, -0.5 sd along the second
+    >>> X.shape, model.instantiate(np.zeros((250, 2))).shape  # one wireframe, a batch of 250
+    ((36, 3), (250, 36, 3))
+    >>> bool(np.allclose(model.project_coefficients(X, n_components=3), [1.0, -0.5, 0.0]))  # the inverse
+    True
+    >>> index, name, distance = model.nearest_exemplar(model.exemplars[2])
+    >>> name == model.exemplar_names[2], distance
+    (True, 0.0)
     """
 
     mean: np.ndarray
@@ -58,6 +72,7 @@ class ShapeModel:
 
     @property
     def n_components(self) -> int:
+        """``K``, the number of components."""
         return int(self.components.shape[0])
 
     def instantiate(self, s) -> np.ndarray:
@@ -87,7 +102,8 @@ class ShapeModel:
         return self.instantiate(self.project_coefficients(X, n_components))
 
     def nearest_exemplar(self, X):
-        """Nearest CAD exemplar by Euclidean distance of the 108-vectors (paper Sec. 5.4).
+        """Nearest CAD exemplar of wireframes ``X`` ``(..., 36, 3)`` by Euclidean distance of
+        the 108-vectors (paper Sec. 5.4); Python scalars for one wireframe.
 
         Returns
         -------
@@ -112,7 +128,19 @@ class ShapeModel:
         return self.instantiate(rng.standard_normal((int(n), k)))
 
     def save(self, path) -> None:
-        """Write a versioned ``.npz`` (no pickled objects; :mod:`wirescene.core.artefacts`)."""
+        """Write a versioned ``.npz`` (no pickled objects; :mod:`wirescene.core.artefacts`).
+
+        Examples
+        --------
+        >>> import tempfile
+        >>> from pathlib import Path
+        >>> model = load_default()
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     model.save(Path(d) / "shape_model.npz")
+        ...     again = ShapeModel.load(Path(d) / "shape_model.npz")
+        >>> bool(np.array_equal(again.components, model.components)), again.exemplar_names == model.exemplar_names
+        (True, True)
+        """
         save_npz(path, dict(
             mean=self.mean, components=self.components, stds=self.stds,
             explained_variance_ratio=self.explained_variance_ratio,
@@ -183,6 +211,20 @@ def augment_to_kitti_sizes(wireframes, *, n_per_exemplar: int, rng=None,
     Returns
     -------
     (M * n_per_exemplar, 36, 3) array
+        The copies of exemplar ``m`` are rows ``m * n_per_exemplar`` to
+        ``(m + 1) * n_per_exemplar - 1``.
+
+    Examples
+    --------
+    >>> exemplars = load_default().exemplars[:2]  # two CAD wireframes (M, 36, 3)
+    >>> copies = augment_to_kitti_sizes(exemplars, n_per_exemplar=5, rng=0)
+    >>> copies.shape
+    (10, 36, 3)
+    >>> lengths = copies[..., 0].max(axis=1) - copies[..., 0].min(axis=1)
+    >>> bool(np.all(np.abs(lengths - 3.88) <= 2.5 * 0.43 + 1e-9))  # KITTI's mean length +- 2.5 std
+    True
+    >>> bool(np.all(copies[..., 1].max(axis=1) == 0))  # still standing on the ground (y = 0)
+    True
     """
     W = np.asarray(wireframes, dtype=float)
     check_shape("wireframes", W, (None, N_VERTICES, 3))
@@ -214,6 +256,21 @@ def fit_shape_model(wireframes, names, *, n_components: int | None = None,
         that the mean and the size modes follow KITTI car dimensions. The stored
         ``exemplars`` are always the measured, un-augmented wireframes.
     rng : seed or Generator, for the augmentation.
+
+    Returns
+    -------
+    ShapeModel
+
+    Examples
+    --------
+    >>> exemplars = load_default().exemplars[:4]  # four CAD wireframes (M, 36, 3)
+    >>> model = fit_shape_model(exemplars, ["a", "b", "c", "d"])
+    >>> model.n_components  # M - 1: four shapes span a 3-dimensional space about their mean
+    3
+    >>> bool(np.allclose(model.reconstruct(exemplars), exemplars))  # all components: exact
+    True
+    >>> round(float(model.explained_variance_ratio.sum()), 6)
+    1.0
     """
     W = np.asarray(wireframes, dtype=float)
     check_shape("wireframes", W, (None, N_VERTICES, 3))
@@ -244,7 +301,14 @@ def fit_shape_model(wireframes, names, *, n_components: int | None = None,
 
 def load_default() -> ShapeModel:
     """The shape model shipped with wirescene (``wirescene/data/shape_model.npz``),
-    trained by ``wirescene train shape``."""
+    trained by ``wirescene train shape``.
+
+    Examples
+    --------
+    >>> model = load_default()
+    >>> model.mean.shape, len(model.exemplar_names) == len(model.exemplars)
+    ((36, 3), True)
+    """
     if not DEFAULT_MODEL_PATH.exists():
         raise InputError("default shape model missing; run `wirescene train shape`", path=DEFAULT_MODEL_PATH)
     return ShapeModel.load(DEFAULT_MODEL_PATH)

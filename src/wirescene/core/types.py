@@ -114,6 +114,23 @@ class SceneParticles:
     row when the plane is shared), position ``x``/``z`` on that plane, ``azimuth`` about
     the plane normal, and the per-object ``cost`` (lower is better) of the stage that
     made them. ``dims`` ``(P, N, 3)`` holds each object's box size (h, w, l).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.types import SceneParticles
+    >>> zeros = np.zeros((3, 2))  # 3 particles of 2 cars, on a level road
+    >>> particles = SceneParticles(pitch=zeros, roll=zeros, x=np.array([[-2.0, 3.0]] * 3), z=np.full((3, 2), 12.0),
+    ...                            azimuth=zeros, object_cost=np.array([[0.1, 0.2], [0.3, 0.0], [0.0, 0.05]]),
+    ...                            dims=np.full((3, 2, 3), [1.5, 1.6, 3.9]))
+    >>> particles.n_particles, particles.n_objects, np.round(particles.cost, 2).tolist()
+    (3, 2, [0.3, 0.3, 0.05])
+    >>> location, R = particles.poses()
+    >>> location.shape, R.shape, location[0, 0].tolist()  # bottom centres on the road, 1.65 m below the camera
+    ((3, 2, 3), (3, 2, 3, 3), [-2.0, 1.65, 12.0])
+    >>> best = particles.take(np.argsort(particles.cost)[:1])  # the best particle
+    >>> best.n_particles, best.object_cost.tolist()
+    (1, [[0.0, 0.05]])
     """
 
     pitch: np.ndarray
@@ -133,10 +150,12 @@ class SceneParticles:
 
     @property
     def n_particles(self) -> int:
+        """``P``, the number of scene hypotheses."""
         return self.x.shape[0]
 
     @property
     def n_objects(self) -> int:
+        """``N``, the number of objects (detections) of each hypothesis."""
         return self.x.shape[1]
 
     @property
@@ -401,6 +420,8 @@ class SceneEstimate:
     def from_particle(
         particles: SceneParticles, index: int, detections: Detections, *, variant: str
     ) -> "SceneEstimate":
+        """The scene of particle ``index`` of ``particles``: one car per detection, with its
+        box and score, its pose and size from the particle."""
         location, R = particles.poses()
         objects = [
             ObjectEstimate(

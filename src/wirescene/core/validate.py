@@ -40,6 +40,16 @@ def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | No
     is the rectified frame: no rotation), positive ``K[2, 2]``, focal lengths in
     :data:`FOCAL_RANGE` and, when the image size is known, a principal point within
     the image widened by half its size on each side.
+
+    Examples
+    --------
+    >>> P = [[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]]
+    >>> projection_problem(P, (1242, 375)) is None  # KITTI's P2: nothing wrong
+    True
+    >>> projection_problem(np.eye(3, 4))  # an identity matrix is no street camera
+    'implausible focal length (fx=1, fy=1 px; expected 10..100000)'
+    >>> projection_problem([[721.5, 0, 5000, 0], [0, 721.5, 172.9, 0], [0, 0, 1, 0]], (1242, 375))
+    'principal point (5000, 172.9) is far outside the 1242x375 image'
     """
     P = np.asarray(P)
     if P.shape != (3, 4):
@@ -93,7 +103,17 @@ def off_centre_problem(P, image_size: tuple[int, int]) -> str | None:
 def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | None:
     """What is wrong with 2D boxes ``(N, 4)`` ``x1 y1 x2 y2``, if anything: finite,
     ``x1 < x2`` and ``y1 < y2``, and (with the image size) overlapping the image and
-    within ten image sizes of it."""
+    within ten image sizes of it.
+
+    Examples
+    --------
+    >>> boxes_problem([[300, 180, 520, 300]], (1242, 375)) is None
+    True
+    >>> boxes_problem([[300, 180, 200, 300]])
+    'box 0 is empty or inverted (x1 y1 x2 y2 = 300 180 200 300)'
+    >>> boxes_problem([[1300, 180, 1400, 300]], (1242, 375))
+    'box 0 lies entirely outside the 1242x375 image'
+    """
     b = np.asarray(boxes)
     if b.ndim != 2 or b.shape[1] != 4:
         return f"boxes must have shape (N, 4), got {b.shape}"
@@ -121,7 +141,13 @@ def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | Non
 
 def outside_image(boxes, image_size: tuple[int, int]) -> np.ndarray:
     """``(N,)`` bool: which boxes ``(N, 4)`` ``x1 y1 x2 y2`` have no pixel in the
-    ``(width, height)`` image (a truncated box touching the border is inside)."""
+    ``(width, height)`` image (a truncated box touching the border is inside).
+
+    Examples
+    --------
+    >>> outside_image([[300, 180, 520, 300], [-50, 100, 0, 200], [-50, 100, 1, 200]], (1242, 375))
+    array([False,  True, False])
+    """
     b = np.asarray(boxes, dtype=float).reshape(-1, 4)
     w, h = image_size
     return (b[:, 2] <= 0) | (b[:, 0] >= w) | (b[:, 3] <= 0) | (b[:, 1] >= h)

@@ -19,7 +19,15 @@ _PACKAGES = ("numpy", "scipy", "scikit-learn", "scikit-image", "pillow", "trimes
 
 
 def package_versions(names) -> dict:
-    """``{name: installed version or None}`` of the distributions ``names``."""
+    """``{name: installed version or None}`` of the distributions ``names``.
+
+    Examples
+    --------
+    >>> import numpy
+    >>> package_versions(["numpy", "no-such-distribution"]) == {"numpy": numpy.__version__,
+    ...                                                         "no-such-distribution": None}
+    True
+    """
     out: dict = {}
     for name in names:
         try:

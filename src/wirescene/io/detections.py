@@ -72,7 +72,18 @@ def detections_from_labels(
     The viewpoint is the bin of the true observation angle after adding zero-mean
     Gaussian noise of ``viewpoint_noise_deg`` (so bins can be wrong, as a detector's
     would), unknown (NaN) where the label's ``alpha`` is KITTI's ``-10``; the score is
-    1, or the label's score if it has one.
+    1, or the label's score if it has one. ``rng`` defaults to a generator seeded 0.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> from wirescene.io.kitti import read_labels
+    >>> labels = read_labels(DATA_DIR / "sample" / "kitti" / "training" / "label_2" / "000010.txt")
+    >>> dets = detections_from_labels(labels)  # the 8 cars; the pedestrian and DontCare left out
+    >>> dets.boxes.shape, dets.scores.tolist()[:3], dets.source
+    ((8, 4), [1.0, 1.0, 1.0], 'gt')
+    >>> labels.objects[1].alpha, float(np.rad2deg(dets.alpha[1]))  # 1.95 rad (112 deg): the 90 deg bin
+    (1.95, 90.0)
     """
     objs = _of_types(labels, types)
     if not objs:
@@ -189,6 +200,24 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     InputError
         Missing or malformed file, a file without any detection, an ``alpha`` beyond one
         turn, or (with ``image_size``) a box outside the image.
+
+    Examples
+    --------
+    >>> import json, tempfile
+    >>> entries = [{"box": [300, 180, 520, 300], "score": 0.9, "alpha": 1.9},
+    ...            {"bbox": [600, 170, 80, 60], "score": 0.4, "category_id": 3},  # COCO: x, y, w, h; a car
+    ...            {"box": [10, 10, 50, 90], "score": 0.8, "label": "person"}]  # not a car: skipped
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "000010.json").write_text(json.dumps(entries))
+    ...     dets = read_detections(Path(d) / "000010.json", image_size=(1242, 375))
+    ...     confident = read_detections(Path(d) / "000010.json", min_score=0.5)
+    >>> dets.boxes
+    array([[300., 180., 520., 300.],
+           [600., 170., 680., 230.]])
+    >>> dets.scores.tolist(), np.rad2deg(dets.alpha).tolist()  # alpha binned; none given: NaN
+    ([0.9, 0.4], [90.0, nan])
+    >>> len(confident)
+    1
     """
     path = Path(path)
     if not path.is_file():

@@ -83,7 +83,13 @@ DRIVE_FOLDS: dict[str, int] = {
 
 @lru_cache(maxsize=1)
 def frame_drives() -> dict[str, str]:
-    """``{frame id: drive}`` of the labelled real frames the project knows."""
+    """``{frame id: drive}`` of the labelled real frames the project knows.
+
+    Examples
+    --------
+    >>> frame_drives()["000010"]  # drive names without KITTI's ``_sync``
+    '2011_09_26_drive_0036'
+    """
     record = load_json(DATA_DIR / "kitti_drives.json", kind="kitti-drives", version=1)
     return {f: d.removesuffix("_sync") for f, d in record["drives"].items()}
 
@@ -120,11 +126,11 @@ def read_devkit_mapping(directory) -> dict[str, str]:
     Examples
     --------
     >>> import tempfile
-    >>> d = Path(tempfile.mkdtemp())
-    >>> _ = (d / "train_rand.txt").write_text("2,1\n")
-    >>> _ = (d / "train_mapping.txt").write_text(
-    ...     "2011_09_26 2011_09_26_drive_0005_sync 0000000109\n2011_09_26 2011_09_26_drive_0009_sync 0000000003\n")
-    >>> read_devkit_mapping(d)
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "train_rand.txt").write_text("2,1\n")
+    ...     _ = (Path(d) / "train_mapping.txt").write_text(
+    ...         "2011_09_26 2011_09_26_drive_0005_sync 0000000109\n2011_09_26 2011_09_26_drive_0009_sync 0000000003\n")
+    ...     read_devkit_mapping(d)
     {'000000': '2011_09_26_drive_0009', '000001': '2011_09_26_drive_0005'}
     """
     directory = Path(directory)
@@ -151,7 +157,19 @@ def read_devkit_mapping(directory) -> dict[str, str]:
 
 def find_devkit_mapping(kitti_root) -> Path | None:
     """The devkit mapping directory at one of :data:`DEVKIT_PLACES` under ``kitti_root``
-    (both files present), or None."""
+    (both files present), or None.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as root:
+    ...     before = find_devkit_mapping(root)
+    ...     (Path(root) / "devkit" / "mapping").mkdir(parents=True)
+    ...     for name in (DEVKIT_RAND, DEVKIT_MAPPING):
+    ...         _ = (Path(root) / "devkit" / "mapping" / name).write_text("")
+    ...     before, find_devkit_mapping(root).relative_to(root).as_posix()
+    (None, 'devkit/mapping')
+    """
     for place in DEVKIT_PLACES:
         directory = Path(kitti_root) / place
         if (directory / DEVKIT_RAND).is_file() and (directory / DEVKIT_MAPPING).is_file():
@@ -172,7 +190,17 @@ def drive_map(kitti_root=None, *, mapping=None) -> tuple[dict[str, str], Path | 
 
 
 def fold_of(frame_id: str) -> int:
-    """Fold of a frame; ``KeyError`` for a frame of an unknown drive."""
+    """Fold (0 to :data:`N_FOLDS` - 1) of a frame id; ``KeyError`` for a frame of an unknown drive.
+
+    Examples
+    --------
+    >>> fold_of("000010")  # drive 2011_09_26_drive_0036
+    3
+    >>> fold_of("999999")
+    Traceback (most recent call last):
+    ...
+    KeyError: "frame '999999' has no known recording drive"
+    """
     drive = frame_drives().get(frame_id)
     if drive is None:
         raise KeyError(f"frame {frame_id!r} has no known recording drive")

@@ -124,6 +124,18 @@ def read_labels(path: str | Path, *, image_size: tuple[int, int] | None = None) 
         values (an empty or inverted box, a truncation outside [0, 1], ...) or a 2D box
         coordinate beyond :data:`~wirescene.core.validate.MAX_PIXEL` or (with
         ``image_size``) a box wholly outside the image; the message gives the line number.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> labels = read_labels(DATA_DIR / "sample" / "kitti" / "training" / "label_2" / "000010.txt")
+    >>> len(labels.objects), len(labels.dontcare)  # DontCare regions are kept apart
+    (9, 4)
+    >>> car = labels.objects[1]
+    >>> car.type, car.box.tolist(), car.dims.tolist(), car.location.tolist(), car.rotation_y
+    ('Car', [354.43, 185.52, 549.52, 294.49], [1.43, 1.7, 3.95], [-2.39, 1.66, 11.8], 1.76)
+    >>> car.score is None  # 15 columns: ground truth
+    True
     """
     path = Path(path)
     if not path.is_file():
@@ -151,6 +163,20 @@ def write_labels(
     :class:`Label`. The file is written to a temporary file in the same directory and
     moved into place with :func:`os.replace`, so an error never leaves a partial file.
     See :func:`format_label` for the number formats.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> labels = read_labels(DATA_DIR / "sample" / "kitti" / "training" / "label_2" / "000010.txt")
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     write_labels(Path(d) / "000010.txt", labels, with_score=False)  # ground truth: 15 columns
+    ...     first = (Path(d) / "000010.txt").read_text().splitlines()[0]
+    ...     again = read_labels(Path(d) / "000010.txt")
+    >>> first
+    'Car 0.80 0 -2.090000 1013.39 182.46 1241.00 374.00 1.570000 1.650000 3.350000 4.430000 1.650000 5.200000 -1.420000'
+    >>> len(again), len(again.dontcare), again.objects[1].location.tolist()  # the same labels back
+    (9, 4, [-2.39, 1.66, 11.8])
     """
     write_text(Path(path), format_labels(labels, with_score=with_score))  # formatting fails before touching disk
 
@@ -185,6 +211,13 @@ def read_image(path: str | Path) -> np.ndarray:
     ------
     InputError
         If the file is missing, not an image, too large, or corrupt / truncated.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> image = read_image(DATA_DIR / "sample" / "kitti" / "training" / "image_2" / "000010.png")
+    >>> image.shape, image.dtype.name  # rows, columns, RGB
+    ((375, 1242, 3), 'uint8')
     """
     path = Path(path)
     img = _open_image(path)
@@ -199,7 +232,15 @@ def read_image(path: str | Path) -> np.ndarray:
 def rgb_of_pil(img) -> np.ndarray:
     """A loaded PIL image as an ``(H, W, 3)`` uint8 RGB array: 16-bit and float images
     scaled by their range (:func:`wirescene.core.image.to_rgb_uint8`), palette, grey and
-    alpha images converted to RGB."""
+    alpha images converted to RGB.
+
+    Examples
+    --------
+    >>> white16 = Image.fromarray(np.full((2, 3), 65535, np.uint16))  # a 16-bit grey image
+    >>> rgb = rgb_of_pil(white16)
+    >>> rgb.shape, rgb[0, 0].tolist()  # white, not clipped to 255 of 65535
+    ((2, 3, 3), [255, 255, 255])
+    """
     if img.mode.startswith("I"):  # 16-bit (or 32-bit integer) grey
         return to_rgb_uint8(np.clip(np.asarray(img), 0, 65535).astype(np.uint16))
     if img.mode == "F":
@@ -208,7 +249,16 @@ def rgb_of_pil(img) -> np.ndarray:
 
 
 def image_size(path: str | Path) -> tuple[int, int]:
-    """``(width, height)`` of an image read from its header only (no decoding)."""
+    """``(width, height)`` of an image read from its header only (no decoding): note the
+    order, that of :class:`~wirescene.core.camera.Camera` ``image_size``, not of
+    ``array.shape``.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> image_size(DATA_DIR / "sample" / "kitti" / "training" / "image_2" / "000010.png")
+    (1242, 375)
+    """
     path = Path(path)
     with _open_image(path) as img:
         return int(img.size[0]), int(img.size[1])
@@ -231,6 +281,20 @@ class KittiDataset:
     ------
     InputError
         If ``root`` does not exist or the split lacks ``image_2/`` or ``calib/``.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> dataset = KittiDataset(DATA_DIR / "sample" / "kitti")  # the bundled sample: two frames
+    >>> dataset.split_dir.name, dataset.frame_ids(), dataset.has_labels
+    ('training', ['000010', '001545'], True)
+    >>> camera = dataset.camera(10)  # an int id is written %06d: frame 000010
+    >>> camera.image_size, camera.focal
+    ((1242, 375), 721.5377)
+    >>> dataset.image(10).shape, len(dataset.labels(10).of_type("Car"))
+    ((375, 1242, 3), 8)
+    >>> dataset.car_counts(["000010", "001545"])
+    {'000010': 8, '001545': 6}
     """
 
     def __init__(self, root: str | Path, *, split: str = "training"):
@@ -308,12 +372,15 @@ class KittiDataset:
         return f"{frame_id:06d}" if isinstance(frame_id, (int, np.integer)) else str(frame_id)
 
     def image_path(self, frame_id: str | int) -> Path:
+        """``image_2/FRAME.png`` of the split (an int id written ``%06d``)."""
         return self.split_dir / "image_2" / f"{self._id(frame_id)}.png"
 
     def calib_path(self, frame_id: str | int) -> Path:
+        """``calib/FRAME.txt`` of the split."""
         return self.split_dir / "calib" / f"{self._id(frame_id)}.txt"
 
     def label_path(self, frame_id: str | int) -> Path:
+        """``label_2/FRAME.txt`` of the split."""
         return self.split_dir / "label_2" / f"{self._id(frame_id)}.txt"
 
     def image(self, frame_id: str | int) -> np.ndarray:
@@ -325,6 +392,7 @@ class KittiDataset:
         return image_size(self.image_path(frame_id))
 
     def calib(self, frame_id: str | int) -> KittiCalib:
+        """The frame's calibration (:func:`~wirescene.core.camera.read_kitti_calib`)."""
         return read_kitti_calib(self.calib_path(frame_id))
 
     def camera(self, frame_id: str | int) -> Camera:

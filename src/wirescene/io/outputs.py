@@ -68,7 +68,13 @@ def dropped_detections(detections: Detections, estimate: SceneEstimate) -> Detec
 
 
 def fit_output_paths(out_dir: Path, stem: str) -> dict[str, Path]:
-    """``{"labels", "json", "overlay", "bev": path}``: the files :func:`write_fit_outputs` writes."""
+    """``{"labels", "json", "overlay", "bev": path}``: the files :func:`write_fit_outputs` writes.
+
+    Examples
+    --------
+    >>> {kind: path.name for kind, path in fit_output_paths(Path("out"), "000010").items()}
+    {'labels': '000010.txt', 'json': '000010.json', 'overlay': '000010_overlay.png', 'bev': '000010_bev.png'}
+    """
     out_dir = Path(out_dir)
     return {"labels": out_dir / f"{stem}.txt", "json": out_dir / f"{stem}.json",
             "overlay": out_dir / f"{stem}_overlay.png", "bev": out_dir / f"{stem}_bev.png"}

@@ -99,7 +99,22 @@ def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float =
 def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR):
     """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``: visible vertices as dots of
     ``color``, hidden ones as open dots and the edges between two hidden vertices dashed;
-    dots sized by the car's height in the image (a far car's dots would hide it)."""
+    dots sized by the car's height in the image (a far car's dots would hide it).
+    ``visible`` ``(V,)`` bool defaults to all visible; edges are cut at the camera's near plane.
+
+    Examples
+    --------
+    >>> from wirescene.core.camera import Camera
+    >>> from wirescene.core.groundplane import transform
+    >>> from wirescene.core.shape import load_default
+    >>> from wirescene.core.wireframe import EDGES
+    >>> camera = Camera([[721.5, 0, 609.6, 0], [0, 721.5, 172.9, 0], [0, 0, 1, 0]], (1242, 375))
+    >>> vertices = transform(load_default().mean, np.array([-2.0, 1.65, 12.0]), rotation_y(0.3))  # (36, 3)
+    >>> ax = new_figure().subplots()
+    >>> draw_wireframe(ax, camera, vertices, EDGES, visible=np.arange(36) >= 18)  # the left side hidden
+    >>> [type(c).__name__ for c in ax.collections]  # solid and dashed edges, filled and open dots
+    ['LineCollection', 'LineCollection', 'PathCollection', 'PathCollection']
+    """
     vertices = np.asarray(vertices, float)
     edges = np.asarray(edges, int).reshape(-1, 2)
     vis = np.ones(len(vertices), bool) if visible is None else np.asarray(visible, bool)
@@ -119,7 +134,18 @@ def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, 
 
 def car_numbers(estimate) -> dict[int, int]:
     """``{id(car): n}``: each car of ``estimate`` numbered as the KITTI label file and the
-    JSON file list it (:attr:`SceneEstimate.cars`, detection order), from 1."""
+    JSON file list it (:attr:`SceneEstimate.cars`, detection order), from 1.
+
+    Examples
+    --------
+    >>> from wirescene.core.types import ObjectEstimate, SceneEstimate
+    >>> cars = [ObjectEstimate(detection_index=i, box2d=np.array([0.0, 0.0, 10.0, 10.0]), score=1.0,
+    ...                        location=np.array([0.0, 1.65, 10.0]), R=np.eye(3), dims=np.ones(3), cost=0.0)
+    ...         for i in (2, 0)]
+    >>> numbers = car_numbers(SceneEstimate(variant="coarse", objects=cars))
+    >>> numbers[id(cars[0])], numbers[id(cars[1])]  # detection 2 is the second line of the label file
+    (2, 1)
+    """
     return {} if estimate is None else {id(o): n for n, o in enumerate(estimate.cars, 1)}
 
 
@@ -129,7 +155,14 @@ def _car_label(n: int, score: float | None) -> str:
 
 def text_size(text: str, fontsize: float, scale: float, pad: float) -> tuple[float, float]:
     """Width and height (data units, ``scale`` of them a point) of ``text`` in a box padded
-    by ``pad`` font sizes, measured from the font's outlines (no renderer needed)."""
+    by ``pad`` font sizes, measured from the font's outlines (no renderer needed).
+
+    Examples
+    --------
+    >>> (w1, h1), (w2, h2) = text_size("#1", 7, 1.0, 0.2), text_size("#1 0.80", 7, 1.0, 0.2)
+    >>> bool(w2 > w1), h1 == h2  # longer text, wider box; the height is the font's
+    (True, True)
+    """
     from matplotlib.textpath import TextPath
 
     width = TextPath((0, 0), text, size=fontsize).get_extents().width
@@ -408,7 +441,19 @@ def save_figure(fig, path: str | Path, **savefig_kw) -> Path:
     (``.pdf``, ``.svg``, ...), PNG where matplotlib knows no such format; a figure pyplot
     manages (the caller's) is closed too. PNG, SVG and PDF files are the same bytes run to
     run (no creation date). ``savefig_kw``: further options of
-    :meth:`~matplotlib.figure.Figure.savefig` (``dpi``, ``bbox_inches``, ``metadata``)."""
+    :meth:`~matplotlib.figure.Figure.savefig` (``dpi``, ``bbox_inches``, ``metadata``).
+    Returns ``path``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> fig = new_figure(figsize=(1, 1), dpi=20)
+    >>> _ = fig.subplots().plot([0, 1])
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = save_figure(fig, Path(d) / "plot.png")
+    ...     path.read_bytes()[:4], sorted(p.name for p in Path(d).iterdir())  # a PNG, no temporary file left
+    (b'\\x89PNG', ['plot.png'])
+    """
     path = Path(path)
     fmt = path.suffix[1:].lower()
     if fmt not in fig.canvas.get_supported_filetypes():

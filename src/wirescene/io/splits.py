@@ -39,6 +39,19 @@ def read_split_file(path: str | Path, *, known: Iterable[str] | None = None, wha
     InputError
         Naming the file (and the line): missing or unreadable file, a line that is not
         one frame id, an id listed twice, an id not in ``known``, or no id at all.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "val.txt").write_text("000010\\n\\n  001545  \\n")
+    ...     ids = read_split_file(Path(d) / "val.txt", known=["000010", "001545"])
+    ...     read_split_file(Path(d) / "val.txt", known=["000010"], where="the sample")
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...val.txt: line 3: no frame 001545 in the sample
+    >>> ids
+    ['000010', '001545']
     """
     path = Path(path)
     if not path.is_file():

@@ -25,7 +25,26 @@ class WireframeGT:
 
 
 def read_wireframe_gt(path: str | Path) -> WireframeGT:
-    """Read a ``wireframes/FRAME.json`` file; :class:`InputError` if malformed."""
+    """Read a ``wireframes/FRAME.json`` file; :class:`InputError` if missing or malformed.
+
+    Each car of its ``"cars"`` list needs ``vertices_2d`` ``(36, 2)``, ``visible`` ``(36,)``,
+    ``visibility`` (a reason a vertex: ``"visible"``, ``"self"``, ``"other-car"`` or
+    ``"occluder"``) and ``n_occluded_not_self``.
+
+    Examples
+    --------
+    >>> import json, tempfile
+    >>> reasons = ["visible"] * 30 + ["self"] * 4 + ["other-car"] * 2
+    >>> car = {"vertices_2d": np.zeros((36, 2)).tolist(), "visible": [r == "visible" for r in reasons],
+    ...        "visibility": reasons, "n_occluded_not_self": 2}
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = wireframe_gt_path(Path(d), "000003")
+    ...     path.parent.mkdir()
+    ...     _ = path.write_text(json.dumps({"cars": [car], "ground_plane": {"pitch": 0.0}}))
+    ...     gt = read_wireframe_gt(path)
+    >>> gt.vertices_2d[0].shape, int(gt.visible[0].sum()), int(gt.self_occluded[0].sum()), gt.occluded_parts
+    ((36, 2), 30, 4, [2])
+    """
     path = Path(path)
     try:
         data = json.loads(path.read_text())
@@ -44,9 +63,18 @@ def read_wireframe_gt(path: str | Path) -> WireframeGT:
 
 
 def wireframe_gt_dir(split_dir: Path) -> Path:
-    """Where a split keeps its per-vertex ground truth (synthetic scenes have one)."""
+    """Where a split keeps its per-vertex ground truth (synthetic scenes have one).
+
+    Examples
+    --------
+    >>> wireframe_gt_dir(Path("synth") / "training").as_posix()
+    'synth/training/wireframes'
+    >>> wireframe_gt_path(Path("synth") / "training", "000003").as_posix()
+    'synth/training/wireframes/000003.json'
+    """
     return Path(split_dir) / "wireframes"
 
 
 def wireframe_gt_path(split_dir: Path, frame_id: str) -> Path:
+    """``wireframes/FRAME.json`` of a split (see :func:`wireframe_gt_dir`)."""
     return wireframe_gt_dir(split_dir) / f"{frame_id}.json"
