@@ -268,3 +268,13 @@ def test_alpha_minus_ten_is_an_unknown_viewpoint(tmp_path):
     for path in (js, csv):
         alpha = read_detections(path).alpha
         assert np.isnan(alpha[0]) and alpha[1] == pytest.approx(bin_center(viewpoint_bin(-3.0))), path.name
+
+
+def test_wireframe_ground_truth_that_cannot_be_read_is_an_input_error(tmp_path):
+    from wirescene.io.wireframes import read_wireframe_gt
+
+    folder = tmp_path / "000003.json"
+    folder.mkdir()  # a directory where the file should be
+    with pytest.raises(InputError, match="cannot read the wireframe ground truth") as info:
+        read_wireframe_gt(folder)
+    assert str(folder) in str(info.value)

@@ -22,8 +22,15 @@ def viewpoint_bin(alpha) -> np.ndarray:
     --------
     >>> viewpoint_bin(np.deg2rad([0.0, 22.0, 23.0, 90.0, -90.0, 180.0])).tolist()
     [0, 0, 1, 2, 6, 4]
+    >>> viewpoint_bin(np.nan)
+    Traceback (most recent call last):
+    ...
+    ValueError: viewpoint_bin: an unknown (non-finite) viewpoint has no bin
     """
-    return (np.round(np.asarray(alpha, dtype=float) / BIN_WIDTH).astype(int)) % N_BINS
+    alpha = np.asarray(alpha, dtype=float)
+    if not np.isfinite(alpha).all():  # NaN would be cast to bin 0: an unknown viewpoint made a known one
+        raise ValueError("viewpoint_bin: an unknown (non-finite) viewpoint has no bin")
+    return (np.round(alpha / BIN_WIDTH).astype(int)) % N_BINS
 
 
 def bin_center(bin_index) -> np.ndarray:

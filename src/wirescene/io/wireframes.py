@@ -58,6 +58,8 @@ def read_wireframe_gt(path: str | Path) -> WireframeGT:
         )
     except FileNotFoundError:
         raise InputError("wireframe ground truth not found", path=path) from None
+    except OSError as exc:  # a directory, a file that may not be read
+        raise InputError(f"cannot read the wireframe ground truth ({exc.strerror or exc})", path=path) from None
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
         raise InputError(f"malformed wireframe ground truth ({exc.__class__.__name__}: {exc})", path=path) from None
 
