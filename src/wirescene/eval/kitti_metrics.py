@@ -113,6 +113,16 @@ def box_overlap_2d(a: np.ndarray, b: np.ndarray, *, criterion: str = "union") ->
     ``criterion="union"`` gives intersection over union, ``"a"`` intersection over the
     area of ``a`` (the DontCare test, ``a`` the detection). Boxes that do not intersect
     (zero or negative width or height of the intersection) give 0.
+
+    Examples
+    --------
+    >>> round(float(box_overlap_2d([0, 0, 10, 10], [5, 0, 15, 10])), 4)  # 50 / 150
+    0.3333
+    >>> float(box_overlap_2d([0, 0, 10, 10], [5, 0, 15, 10], criterion="a"))  # 50 / 100
+    0.5
+    >>> a, b = np.array([[0.0, 0, 10, 10]]), np.array([[5.0, 0, 15, 10], [20, 20, 30, 30]])
+    >>> box_overlap_2d(a[:, None], b[None]).round(3)  # (1, 2): every pair by broadcasting
+    array([[0.333, 0.   ]])
     """
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     check_shape("a", a, (..., 4))
@@ -132,9 +142,19 @@ def box_overlap_2d(a: np.ndarray, b: np.ndarray, *, criterion: str = "union") ->
 
 
 def bev_corners(location: np.ndarray, dims: np.ndarray, rotation_y: np.ndarray) -> np.ndarray:
-    """Footprints ``(N, 4, 2)`` (camera ``x``, ``z``) of KITTI boxes, counter-clockwise in
-    the x-z plane: the object's length ``l`` along ``(cos ry, -sin ry)``, its width ``w``
-    across, as in the devkit (and :func:`wirescene.core.boxes.box_corners`)."""
+    """Footprints ``(N, 4, 2)`` (camera ``x``, ``z``) of KITTI boxes, clockwise in ``(x, z)``
+    coordinates (a negative shoelace area; either order suits :func:`convex_intersection_area`):
+    the object's length ``l`` along ``(cos ry, -sin ry)``, its width ``w`` across, as in the
+    devkit (and :func:`wirescene.core.boxes.box_corners`).
+
+    Examples
+    --------
+    >>> bev_corners([0.0, 1.6, 10.0], [1.5, 1.6, 4.0], 0.0)  # 4 m long along x, 1.6 m wide along z
+    array([[[ 2. , 10.8],
+            [ 2. ,  9.2],
+            [-2. ,  9.2],
+            [-2. , 10.8]]])
+    """
     location = np.asarray(location, dtype=float).reshape(-1, 3)
     dims = np.asarray(dims, dtype=float).reshape(-1, 3)
     ry = np.asarray(rotation_y, dtype=float).reshape(-1)
@@ -164,6 +184,12 @@ def convex_intersection_area(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     the other and of the crossings of their edges; these points are ordered by angle
     about their mean and their area summed with the shoelace formula, all as array
     operations over the ``N`` pairs.
+
+    Examples
+    --------
+    >>> square = np.array([[[0.0, 0], [2, 0], [2, 2], [0, 2]]])
+    >>> convex_intersection_area(square, square + 1)  # two 2 x 2 squares sharing a 1 x 1 corner
+    array([1.])
     """
     p, q = np.asarray(p, dtype=float), np.asarray(q, dtype=float)
     check_shape("p", p, (None, 4, 2))
@@ -256,7 +282,16 @@ def _paired(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry):
 
 def iou_bev(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry) -> np.ndarray:
     """Bird's-eye-view IoU of paired KITTI boxes: ``location (N, 3)``, ``dims (N, 3)`` =
-    ``h w l``, ``rotation_y (N,)`` each; the rotated ``l x w`` footprints in the x-z plane."""
+    ``h w l``, ``rotation_y (N,)`` each; the rotated ``l x w`` footprints in the x-z plane.
+
+    Examples
+    --------
+    >>> loc, dims = np.array([[0.0, 1.6, 20.0]]), np.array([[1.5, 1.6, 4.0]])  # h w l
+    >>> iou_bev(loc, dims, [0.0], loc + [2.0, 0, 0], dims, [0.0]).round(4)  # half a length along x: 1 / 3
+    array([0.3333])
+    >>> iou_bev(loc, dims, [0.0], loc, dims, [np.pi / 2]).round(4)  # turned 90 deg: 1.6 x 1.6 of 10.24 m^2
+    array([0.25])
+    """
     a_loc, a_dims, a_ry, b_loc, b_dims, b_ry = _paired(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry)
     return _bev_from_intersection(_footprint_intersection(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry), a_dims, b_dims)
 
@@ -264,7 +299,16 @@ def iou_bev(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry) -> np.ndarray:
 def iou_3d(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry) -> np.ndarray:
     """3D IoU of paired KITTI boxes (arguments as :func:`iou_bev`): footprint intersection
     times the overlap of the vertical extents ``[y - h, y]`` (y down, the location is the
-    bottom centre), over the union of the volumes."""
+    bottom centre), over the union of the volumes.
+
+    Examples
+    --------
+    >>> loc, dims = np.array([[0.0, 1.6, 20.0]]), np.array([[1.5, 1.6, 4.0]])
+    >>> iou_3d(loc, dims, [0.0], loc, dims, [0.0])
+    array([1.])
+    >>> iou_3d(loc, dims, [0.0], loc + [0, 0.75, 0], dims, [0.0]).round(4)  # half its height lower: 1 / 3
+    array([0.3333])
+    """
     a_loc, a_dims, a_ry, b_loc, b_dims, b_ry = _paired(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry)
     inter = _footprint_intersection(a_loc, a_dims, a_ry, b_loc, b_dims, b_ry)
     return _3d_from_intersection(inter, a_loc, a_dims, b_loc, b_dims)
@@ -571,7 +615,18 @@ def _points(tp: np.ndarray, fp: np.ndarray, similarity: np.ndarray) -> tuple[np.
 def average_precision(curve: np.ndarray, *, recall_points: int = 40):
     """AP in percent from a 41-point precision (or orientation-similarity) curve: R40
     averages points 1..40, R11 points 0, 4, ..., 40. Curves ``(..., 41)`` give an array
-    ``(...)`` of APs."""
+    ``(...)`` of APs.
+
+    Examples
+    --------
+    >>> average_precision(np.ones(41))  # precision 1 at every recall
+    100.0
+    >>> half = np.r_[np.ones(21), np.zeros(20)]  # precision 1 up to recall 0.5, then nothing
+    >>> average_precision(half), round(average_precision(half, recall_points=11), 2)
+    (50.0, 54.55)
+    >>> average_precision(np.stack([np.ones(41), half]))  # (2, 41) curves: (2,) APs
+    array([100.,  50.])
+    """
     curve = np.asarray(curve, dtype=float)
     check_shape("curve", curve, (..., N_SAMPLE_PTS))
     if recall_points == 40:
@@ -618,6 +673,18 @@ def kitti_curves(
         ``3d``; a curve has ``precision`` and ``orientation`` (41 points; ``(B, 41)``
         with weights) and ``n_gt`` (``(B,)`` with weights); ``None`` where the devkit
         does not evaluate (see the module docstring).
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> found = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0, 0.9)
+    >>> curves = kitti_curves([[car]] * 41, [[found]] * 41)
+    >>> sorted(curves), sorted(curves[0.7])
+    ([0.7], ['2d', '3d', 'aos_valid', 'bev'])
+    >>> curve = curves[0.7]["3d"]["moderate"]
+    >>> curve.precision.shape, curve.n_gt, average_precision(curve.precision)
+    ((41,), 41, 100.0)
     """
     if len(gt_frames) != len(pred_frames):
         raise ValueError(f"{len(gt_frames)} ground-truth frames but {len(pred_frames)} prediction frames")
@@ -715,6 +782,19 @@ def kitti_metrics(
         (see the module docstring); the top level is R40 at the devkit's IoU 0.7, ``r11``
         the same at 11 recall points, ``iou_0.5`` R40 with every overlap threshold at 0.5.
         ``None`` where the devkit gives no figure.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> exact = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0, 0.9)
+    >>> far = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 25], 0.0, 0.9)
+    >>> result = kitti_metrics([[car]] * 41, [[exact]] * 41)  # 41 cars, each found exactly
+    >>> result["car"]["3d"], result["n_gt"]["car"]["moderate"]
+    ({'easy': 100.0, 'moderate': 100.0, 'hard': 100.0}, 41)
+    >>> result = kitti_metrics([[car]] * 41, [[far]] * 41)  # the right box, 5 m too far
+    >>> result["car"]["2d"]["moderate"], result["car"]["3d"]["moderate"]
+    (100.0, 0.0)
     """
     curves = kitti_curves(gt_frames, pred_frames, class_name="car", min_overlaps=(MIN_OVERLAP["car"], 0.5))
     strict, loose = curves[MIN_OVERLAP["car"]], curves[0.5]
@@ -809,7 +889,16 @@ def detection_ap_2d(detections, gt_frames: Sequence[FrameLabels | Sequence[Label
 
 def difficulty_of(label: Label) -> str | None:
     """The easiest KITTI difficulty whose limits a ground-truth object meets (``None``:
-    beyond *hard*, ignored in every evaluation)."""
+    beyond *hard*, ignored in every evaluation).
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> def car(height, occluded):
+    ...     return Label("Car", 0.0, occluded, 0.0, [100, 100, 200, 100 + height], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> difficulty_of(car(60, 0)), difficulty_of(car(30, 1)), difficulty_of(car(60, 3))
+    ('easy', 'moderate', None)
+    """
     for d, name in enumerate(DIFFICULTIES):
         if (label.occluded <= MAX_OCCLUSION[d] and label.truncated <= MAX_TRUNCATION[d]
                 and label.box[3] - label.box[1] >= MIN_HEIGHT[d]):
@@ -844,6 +933,21 @@ def read_label_dirs(
         If a directory is missing, a ground-truth file of a frame is missing, no frame has
         a prediction file, any file is unreadable or malformed (see
         :func:`wirescene.io.kitti.read_labels`), or a prediction row has no score.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> row = "Car 0.00 0 -1.58 587.0 173.3 614.1 200.1 1.65 1.67 3.64 -0.65 1.71 46.70 -1.59"
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     gt, pred = Path(tmp, "label_2"), Path(tmp, "pred")
+    ...     gt.mkdir(); pred.mkdir()
+    ...     _ = Path(gt, "000001.txt").write_text(row)
+    ...     _ = Path(gt, "000002.txt").write_text(row)
+    ...     _ = Path(pred, "000001.txt").write_text(row + " 0.9")
+    ...     ids, gts, preds = read_label_dirs(gt, pred)
+    >>> ids, [len(f) for f in gts], [len(f) for f in preds]  # 000002 has no prediction file: no detections
+    (['000001', '000002'], [1, 1], [1, 0])
     """
     gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
     if not gt_dir.is_dir():
@@ -874,7 +978,24 @@ def _fmt(v) -> str:
 
 def format_kitti_table(result: dict, *, title: str = "") -> str:
     """Plain-text table of :func:`kitti_metrics`: rows 2d / aos / bev / 3d at IoU 0.7,
-    then at 0.5, columns easy / moderate / hard (R40), and the R11 figures at 0.7."""
+    then at 0.5, columns easy / moderate / hard (R40), and the R11 figures at 0.7.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> found = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0, 0.9)
+    >>> print(format_kitti_table(kitti_metrics([[car]] * 41, [[found]] * 41)))  # doctest: +NORMALIZE_WHITESPACE
+    KITTI Car AP (%), 41 frames, cars easy/moderate/hard: 41/41/41
+    metric   IoU points     easy  moderate     hard
+    2d       0.7    R40   100.00    100.00   100.00
+    aos      0.7    R40   100.00    100.00   100.00
+    bev      0.7    R40   100.00    100.00   100.00
+    3d       0.7    R40   100.00    100.00   100.00
+    2d       0.5    R40   100.00    100.00   100.00
+    ...
+    3d       0.7    R11   100.00    100.00   100.00
+    """
     n = result["n_gt"]["car"]
     head = (f"KITTI Car AP (%), {result['n_frames']} frames, cars easy/moderate/hard: "
             f"{n['easy']}/{n['moderate']}/{n['hard']}")
@@ -902,7 +1023,17 @@ def _ceiling_note(n: dict) -> str:
 def kitti_figure(result: dict, block: str, metric: str):
     """One metric's figures in the layout of :func:`kitti_metrics` (and of the intervals of
     :func:`wirescene.eval.intervals.kitti_intervals`): ``block`` ``"car"`` (IoU 0.7) or
-    ``"iou_0.5"``."""
+    ``"iou_0.5"``.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> near = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [1, 1.6, 20], 0.0, 0.9)
+    >>> result = kitti_metrics([[car]] * 41, [[near]] * 41)  # 1 m along its length: BEV IoU 0.6
+    >>> kitti_figure(result, "car", "bev"), kitti_figure(result, "iou_0.5", "bev")
+    ({'easy': 0.0, 'moderate': 0.0, 'hard': 0.0}, {'easy': 100.0, 'moderate': 100.0, 'hard': 100.0})
+    """
     return (result[block] if block == "car" else result[block]["car"])[metric]
 
 
@@ -920,7 +1051,18 @@ def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict]
     AP at moderate difficulty, 2D / AOS / BEV / 3D at IoU 0.7 and BEV / 3D at 0.5; with
     ``intervals`` (``{variant: intervals}`` of :func:`wirescene.eval.intervals.kitti_intervals`)
     the table of :func:`format_kitti_intervals` below, and with ``margins`` (the same of the
-    margins over a reference) a table of those."""
+    margins over a reference) a table of those.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> near = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 160], [1.5, 1.6, 4.0], [1, 1.6, 20], 0.0, 0.9)
+    >>> print(format_kitti_summary({"near": kitti_metrics([[car]] * 41, [[near]] * 41)}))
+    KITTI Car AP R40 (%), moderate (41 cars in 41 frames; easy 41, hard 41 cars)
+    variant   2d@.7  aos@.7  bev@.7   3d@.7  bev@.5   3d@.5
+    near     100.00  100.00    0.00    0.00  100.00  100.00
+    """
     if not results:
         return ""
     first = next(iter(results.values()))
@@ -941,7 +1083,21 @@ def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict]
 
 def format_kitti_intervals(intervals: dict[str, dict]) -> str:
     """A table of :func:`wirescene.eval.intervals.kitti_intervals` figures ``{name:
-    intervals}``, a line per name, in the columns of :func:`format_kitti_summary`."""
+    intervals}``, a line per name, in the columns of :func:`format_kitti_summary`.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import Label
+    >>> from wirescene.eval.intervals import kitti_intervals
+    >>> car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 20.0], 0.0, 0.9)
+    >>> ids = [f"{i:06d}" for i in range(50)]
+    >>> spread = kitti_intervals([[car]] * 50, [[car]] * 50, ids, {f: "drive_1" if f < "000025" else "drive_2"
+    ...                                                             for f in ids}, n_boot=20)
+    >>> print(format_kitti_intervals({"exact": spread}))
+    90% bootstrap interval over 2 drives, moderate (20 draws; every draw ranks the estimates again):
+    variant          2d@.7         aos@.7         bev@.7          3d@.7         bev@.5          3d@.5
+    exact   [100.0, 100.0] [100.0, 100.0] [100.0, 100.0] [100.0, 100.0] [100.0, 100.0] [100.0, 100.0]
+    """
     if not intervals:
         return ""
     some = next(iter(intervals.values()))

@@ -65,14 +65,39 @@ def _config_difference(stored, current, prefix: str = "") -> list[str]:
 
 
 class StaleRecord(Exception):
-    """A frame record that cannot be reused (the message says why)."""
+    """A frame record that cannot be reused (the message says why).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> empty = FrameResult("000001", [], [], [], [], [], [], [], [])
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     FrameRecords(Path(tmp), {"variants": ["coarse"], "seed": 0}).save("000001", {"coarse": ("", empty)})
+    ...     FrameRecords(Path(tmp), {"variants": ["coarse"], "seed": 1}).load("000001")
+    Traceback (most recent call last):
+    ...
+    wirescene.eval.records.StaleRecord: written with a different configuration (seed)
+    """
 
 
 class FrameRecords:
     """The resume records of one predictions directory: ``DIR/.frames/FRAME.json`` holds
     the configuration and, per variant, the frame's :class:`FrameResult` and its KITTI
     label text. A record is written (atomically) only after the frame's label files, so
-    its presence means the frame is complete."""
+    its presence means the frame is complete.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> empty = FrameResult("000001", [], [], [], [], [], [], [], [])  # a frame without detections
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     records = FrameRecords(Path(tmp), {"variants": ["coarse"], "seed": 0})
+    ...     records.save("000001", {"coarse": ("", empty)})  # coarse/000001.txt, then .frames/000001.json
+    ...     labels, result = records.load("000001")["coarse"]
+    ...     missing = records.load("000002")
+    >>> labels, result.n_detections, missing
+    ('', 0, None)
+    """
 
     def __init__(self, predictions_dir: Path, config: dict):
         self.root = Path(predictions_dir)
@@ -140,13 +165,37 @@ class FrameRecords:
 
 
 def recorded_frames(predictions_dir) -> list[str]:
-    """The frames a predictions directory holds records of (whatever their settings)."""
+    """The frames a predictions directory holds records of (whatever their settings).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> empty = FrameResult("000001", [], [], [], [], [], [], [], [])
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     before = recorded_frames(tmp)
+    ...     FrameRecords(Path(tmp), {"variants": ["coarse"]}).save("000001", {"coarse": ("", empty)})
+    ...     before, recorded_frames(tmp)
+    ([], ['000001'])
+    """
     return sorted(p.stem for p in (Path(predictions_dir) / RECORDS_DIR).glob("*.json"))
 
 
 def refuse_earlier_run(predictions_dir) -> None:
     """An :class:`InputError` if ``predictions_dir`` holds an earlier run's records: a run
-    that does not resume it would leave its frames beside the other's, to pass for one run."""
+    that does not resume it would leave its frames beside the other's, to pass for one run.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> empty = FrameResult("000001", [], [], [], [], [], [], [], [])
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     refuse_earlier_run(tmp)  # an empty directory: nothing to refuse
+    ...     FrameRecords(Path(tmp), {"variants": ["coarse"]}).save("000001", {"coarse": ("", empty)})
+    ...     refuse_earlier_run(tmp)
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...holds the records of an earlier run (1 frames)...
+    """
     earlier = recorded_frames(predictions_dir)
     if earlier:
         raise InputError(f"holds the records of an earlier run ({len(earlier)} frames): resume it (--resume reuses "

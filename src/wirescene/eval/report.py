@@ -86,7 +86,13 @@ class Gallery:
 
 
 def depth_error_per_pixel(z, focal: float, camera_height: float = KITTI_CAMERA_HEIGHT):
-    """Depth change (m) of a ground contact point at depth ``z`` moved by one pixel."""
+    """Depth change (m) of a ground contact point at depth ``z`` moved by one pixel.
+
+    Examples
+    --------
+    >>> depth_error_per_pixel([10.0, 20.0, 40.0], focal=721.5).round(2)  # KITTI's focal length and camera height
+    array([0.08, 0.34, 1.34])
+    """
     z = np.asarray(z, float)
     return z**2 / (focal * camera_height)
 
@@ -187,6 +193,16 @@ def frame_scores(report: EvaluationReport, counts: dict[str, tuple[int, int]]) -
     exactly and nothing else is output; a missed car adds nothing and a false car costs what
     a perfect car earns, so a few cars found precisely do not outrank many found well. A
     frame without labelled cars divides by 1.
+
+    Examples
+    --------
+    >>> from wirescene.eval.metrics import TPRecord
+    >>> found = [TPRecord("a", 0, 0, 0.9, 0.0, 0.0, 0.0, True, None, 0),  # frame a: its car found exactly
+    ...          TPRecord("b", 0, 0, 0.9, 1.0, 0.0, 0.0, True, None, 0)]  # frame b: one of two, 1 m off
+    >>> report = EvaluationReport({}, found, "kitti_flag", "applied")
+    >>> counts = {"a": (1, 1), "b": (2, 3), "c": (1, 0)}  # (labelled cars, cars output); c: its car missed
+    >>> frame_scores(report, counts)  # b: (0.5 - 2 false cars) / 2 cars
+    {'a': 1.0, 'b': -0.75, 'c': 0.0}
     """
     credit: dict[str, float] = {}
     found: dict[str, int] = {}
@@ -224,6 +240,16 @@ def rank_frames(report: EvaluationReport, counts: dict[str, tuple[int, int]]) ->
     Returns
     -------
     list of str
+
+    Examples
+    --------
+    >>> from wirescene.eval.metrics import TPRecord
+    >>> found = [TPRecord("a", 0, 0, 0.9, 0.0, 0.0, 0.0, True, None, 0),  # frame a: its car found exactly
+    ...          TPRecord("b", 0, 0, 0.9, 1.0, 0.0, 0.0, True, None, 0)]  # frame b: one of two, 1 m off
+    >>> report = EvaluationReport({}, found, "kitti_flag", "applied")
+    >>> counts = {"a": (1, 1), "b": (2, 3), "c": (1, 0)}  # (labelled cars, cars output); c: its car missed
+    >>> rank_frames(report, counts)  # the gallery's best first, its worst read from the end
+    ['a', 'c', 'b']
     """
     scores = frame_scores(report, counts)
     mean = {f: float(np.mean(e)) for f, e in _errors_by_frame(report).items()}

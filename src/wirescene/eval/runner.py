@@ -48,7 +48,19 @@ def frame_result(
 ) -> FrameResult:
     """Evaluation record of one frame: the estimates with the detections they were fitted
     to (those the fit's verification dropped are left out, as from its output); with
-    ``vertex_gt`` (synthetic data) the occlusion subsets use true part counts."""
+    ``vertex_gt`` (synthetic data) the occlusion subsets use true part counts.
+
+    Examples
+    --------
+    >>> from wirescene.core.groundplane import rotation_y
+    >>> from wirescene.core.types import ObjectEstimate
+    >>> dets = Detections([[300, 180, 520, 300], [600, 170, 680, 230]], scores=[0.9, 0.4], alpha=0.0)
+    >>> car = ObjectEstimate(detection_index=0, box2d=dets.boxes[0], score=0.8, location=np.array([-2.0, 1.65, 12.0]),
+    ...                      R=rotation_y(0.3), dims=np.array([1.5, 1.6, 3.9]), cost=0.1)
+    >>> record = frame_result("000001", FrameLabels(), dets, SceneEstimate(variant="coarse", objects=[car]))
+    >>> record.n_detections, record.det_boxes.tolist(), record.est_score.tolist()  # detection 1 was dropped
+    (1, [[300.0, 180.0, 520.0, 300.0]], [0.8])
+    """
     objs = sorted(estimate.objects, key=lambda o: o.detection_index)
     kept = np.array([o.detection_index for o in objs], dtype=int)
     if len(np.unique(kept)) != len(kept) or (len(kept) and (kept.min() < 0 or kept.max() >= len(detections))):
@@ -153,7 +165,15 @@ def fit_frames(
 ) -> Iterator:
     """Outputs of ``job`` on ``frame_ids`` as the frames finish: serially, in ``workers``
     processes, or on a Dask cluster (``dask_client``: its address or a
-    ``distributed.Client``). Pools and futures are released when ``stack`` closes."""
+    ``distributed.Client``). Pools and futures are released when ``stack`` closes.
+
+    Examples
+    --------
+    >>> from contextlib import ExitStack
+    >>> with ExitStack() as stack:  # one worker: the frames in order, in this process
+    ...     list(fit_frames(str.upper, ["000001", "00000a"], workers=1, dask_client=None, stack=stack))
+    ['000001', '00000A']
+    """
     if not frame_ids:
         return iter(())
     if dask_client is not None:

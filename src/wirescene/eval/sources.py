@@ -27,6 +27,17 @@ class DetectionSource:
 
     A frame without a detection file in the directory is an error, unless
     ``allow_missing`` (then it has no detections, and :meth:`missing_frames` counts it).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> DetectionSource().folder is None, DetectionSource("bank").own  # label boxes; our own detector bank
+    (True, True)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     _ = Path(tmp, "000001.json").write_text("{}")
+    ...     source = DetectionSource(tmp, allow_missing=True)
+    ...     source.detection_file("000001").name, source.missing_frames(["000001", "000002"])
+    ('000001.json', ['000002'])
     """
 
     spec: str = "gt"
@@ -103,7 +114,15 @@ class DetectionSource:
 
 
 def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
-    """A generator that depends only on the run seed and the frame, so results do not
-    depend on the order (or the process) in which frames are processed."""
+    """A generator that depends only on the run seed and the frame (the digits of its id:
+    ``"000007"`` and ``"7"`` share a stream), so results do not depend on the order (or the
+    process) in which frames are processed.
+
+    Examples
+    --------
+    >>> a, b = frame_seed(0, "000007").random(), frame_seed(0, "000007").random()
+    >>> a == b, a == frame_seed(1, "000007").random(), a == frame_seed(0, "7").random()
+    (True, False, True)
+    """
     digits = int("".join(ch for ch in frame_id if ch.isdigit()) or 0)
     return np.random.default_rng([seed, digits])

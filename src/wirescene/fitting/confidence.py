@@ -52,7 +52,14 @@ MODEL_FEATURES = {"right": FEATURES, "car": FEATURES[:3]}
 
 def confidence_features(detection_scores, costs, boxes, *, image_width: float | None = None) -> np.ndarray:
     """``(N, 5)`` features of :data:`FEATURES` for ``N`` cars; ``image_width`` (pixels)
-    tells which boxes touch the image's right side (None: only its left side counts)."""
+    tells which boxes touch the image's right side (None: only its left side counts).
+
+    Examples
+    --------
+    >>> f = confidence_features([0.5, 0.9], [0.1, 2.0], [[0, 100, 50, 150], [600, 100, 1241, 300]], image_width=1242)
+    >>> f.shape, f[:, 0].round(3), f[:, 2].round(3), f[:, 4]  # logit of the score, log height, at a side
+    ((2, 5), array([0.   , 2.197]), array([3.912, 5.298]), array([1., 1.]))
+    """
     s = np.clip(np.asarray(detection_scores, float), 1e-3, 1 - 1e-3)
     boxes = np.asarray(boxes, float).reshape(-1, 4)
     log_height = np.log(np.maximum(boxes[:, 3] - boxes[:, 1], 1.0))
@@ -64,14 +71,36 @@ def confidence_features(detection_scores, costs, boxes, *, image_width: float | 
 
 
 def save_score_calibration(path: str | Path, record: dict) -> Path:
-    """Write a calibration (``{"coarse": {...}, "fine": {...}, ...}``) as loaded below."""
+    """Write a calibration (``{"coarse": {...}, "fine": {...}, ...}``) as loaded below.
+
+    Examples
+    --------
+    >>> def model(weights):  # standardisation by (0, 1), then a logistic model on the first three features
+    ...     return {"mean": [0.0] * 3, "scale": [1.0] * 3, "weights": weights, "bias": 0.0}
+    >>> calibration = {stage: model([1.0, -1.0, 0.0]) for stage in STAGES}  # sigmoid(logit(score) - cost)
+    >>> calibration["car"] = {stage: model([1.0, 0.0, 0.0]) for stage in STAGES}  # the detection score itself
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = save_score_calibration(Path(tmp) / "score_calibration.json", calibration)
+    ...     load_score_calibration(path)["fine"]["weights"]
+    [1.0, -1.0, 0.0]
+    """
     return save_json(path, record, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
 
 @cached_by_file(maxsize=8)
 def load_score_calibration(path: str | Path | None = None) -> dict:
     """The calibration: per stage ``mean`` and ``scale`` (feature standardisation),
-    ``weights`` and ``bias`` of the logistic model, for each of :data:`TARGETS`."""
+    ``weights`` and ``bias`` of the logistic model, for each of :data:`TARGETS`.
+
+    Examples
+    --------
+    >>> calibration = load_score_calibration()  # the shipped one
+    >>> [sorted(calibration[stage]) == sorted(calibration["car"][stage]) for stage in STAGES]  # each target, stage
+    [True, True]
+    >>> {"mean", "scale", "weights", "bias"} <= set(calibration["fine"])
+    True
+    """
     path = DEFAULT_PATH if path is None else Path(path)
     record = load_json(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
     try:
@@ -110,7 +139,20 @@ def calibrated_confidence(features: np.ndarray, *, fine: bool, calibration: dict
                           target: str = "right") -> np.ndarray:
     """``(N,)`` probabilities that the ``N`` estimates of ``features`` ``(N, 5)``
     (:func:`confidence_features`) are right (``target="right"``) or stand on a car
-    (``"car"``)."""
+    (``"car"``).
+
+    Examples
+    --------
+    >>> def model(weights):  # standardisation by (0, 1), then a logistic model on the first three features
+    ...     return {"mean": [0.0] * 3, "scale": [1.0] * 3, "weights": weights, "bias": 0.0}
+    >>> calibration = {stage: model([1.0, -1.0, 0.0]) for stage in STAGES}  # sigmoid(logit(score) - cost)
+    >>> calibration["car"] = {stage: model([1.0, 0.0, 0.0]) for stage in STAGES}  # the detection score itself
+    >>> features = confidence_features([0.8, 0.8], [0.0, 1.0], [[0, 0, 10, 10]] * 2)
+    >>> calibrated_confidence(features, fine=True, calibration=calibration).round(4)  # sigmoid(logit(0.8) - cost)
+    array([0.8   , 0.5954])
+    >>> calibrated_confidence(features, fine=True, calibration=calibration, target="car").round(4)
+    array([0.8, 0.8])
+    """
     cal = load_score_calibration() if calibration is None else calibration
     m = _model(cal, "fine" if fine else "coarse", target)
     x = np.asarray(features, float).reshape(-1, len(FEATURES))[:, _model_columns(m, cal)]
@@ -129,7 +171,25 @@ def _car_features(cars, image_width: float | None) -> np.ndarray:
 def apply_confidence(estimate: SceneEstimate, *, fine: bool, calibration: dict | None = None,
                      image_width: float | None = None) -> SceneEstimate:
     """Set every car's ``score`` to its calibrated confidence, keeping the pre-detection's
-    score as ``detection_score``; ``image_width`` as in :func:`confidence_features`."""
+    score as ``detection_score``; ``image_width`` as in :func:`confidence_features`.
+
+    Examples
+    --------
+    >>> def model(weights):  # standardisation by (0, 1), then a logistic model on the first three features
+    ...     return {"mean": [0.0] * 3, "scale": [1.0] * 3, "weights": weights, "bias": 0.0}
+    >>> calibration = {stage: model([1.0, -1.0, 0.0]) for stage in STAGES}  # sigmoid(logit(score) - cost)
+    >>> calibration["car"] = {stage: model([1.0, 0.0, 0.0]) for stage in STAGES}  # the detection score itself
+    >>> from wirescene.core.groundplane import rotation_y
+    >>> from wirescene.core.types import ObjectEstimate
+    >>> def car(i, score, cost, box):
+    ...     return ObjectEstimate(detection_index=i, box2d=np.array(box, float), score=score, cost=cost,
+    ...                           location=np.array([0.0, 1.65, 12.0]), R=rotation_y(0.0), dims=np.array([1.5, 1.6, 3.9]))
+    >>> scene = SceneEstimate(variant="coarse", objects=[car(0, 0.9, 0.0, [300, 180, 520, 300]),
+    ...                                                  car(1, 0.2, 0.5, [600, 170, 640, 200])])
+    >>> scene = apply_confidence(scene, fine=False, calibration=calibration)
+    >>> [(round(o.score, 4), o.detection_score) for o in scene.cars]  # calibrated; the detection's kept
+    [(0.9, 0.9), (0.1317, 0.2)]
+    """
     cars = estimate.objects
     if not cars:
         return estimate
@@ -146,7 +206,24 @@ def car_probabilities(estimate: SceneEstimate, *, fine: bool, calibration: dict 
                       image_width: float | None = None) -> np.ndarray:
     """``(N,)`` probabilities that the ``N`` fitted cars of ``estimate`` stand on a car,
     from their pre-detection's score (``detection_score`` once :func:`apply_confidence`
-    has run), their objective and their box height."""
+    has run), their objective and their box height.
+
+    Examples
+    --------
+    >>> def model(weights):  # standardisation by (0, 1), then a logistic model on the first three features
+    ...     return {"mean": [0.0] * 3, "scale": [1.0] * 3, "weights": weights, "bias": 0.0}
+    >>> calibration = {stage: model([1.0, -1.0, 0.0]) for stage in STAGES}  # sigmoid(logit(score) - cost)
+    >>> calibration["car"] = {stage: model([1.0, 0.0, 0.0]) for stage in STAGES}  # the detection score itself
+    >>> from wirescene.core.groundplane import rotation_y
+    >>> from wirescene.core.types import ObjectEstimate
+    >>> def car(i, score, cost, box):
+    ...     return ObjectEstimate(detection_index=i, box2d=np.array(box, float), score=score, cost=cost,
+    ...                           location=np.array([0.0, 1.65, 12.0]), R=rotation_y(0.0), dims=np.array([1.5, 1.6, 3.9]))
+    >>> scene = SceneEstimate(variant="coarse", objects=[car(0, 0.9, 0.0, [300, 180, 520, 300]),
+    ...                                                  car(1, 0.2, 0.5, [600, 170, 640, 200])])
+    >>> car_probabilities(scene, fine=False, calibration=calibration).round(4)
+    array([0.9, 0.2])
+    """
     if not estimate.objects:
         return np.zeros(0)
     return calibrated_confidence(_car_features(estimate.objects, image_width), fine=fine, calibration=calibration,
@@ -157,7 +234,25 @@ def keep_likely_cars(estimate: SceneEstimate, *, fine: bool, min_probability: fl
                      calibration: dict | None = None, image_width: float | None = None) -> SceneEstimate:
     """``estimate`` without the cars whose :func:`car_probabilities` fall below
     ``min_probability`` (0 keeps every car): the fit's verification of our own
-    pre-detections. The kept cars keep their ``detection_index``."""
+    pre-detections. The kept cars keep their ``detection_index``.
+
+    Examples
+    --------
+    >>> def model(weights):  # standardisation by (0, 1), then a logistic model on the first three features
+    ...     return {"mean": [0.0] * 3, "scale": [1.0] * 3, "weights": weights, "bias": 0.0}
+    >>> calibration = {stage: model([1.0, -1.0, 0.0]) for stage in STAGES}  # sigmoid(logit(score) - cost)
+    >>> calibration["car"] = {stage: model([1.0, 0.0, 0.0]) for stage in STAGES}  # the detection score itself
+    >>> from wirescene.core.groundplane import rotation_y
+    >>> from wirescene.core.types import ObjectEstimate
+    >>> def car(i, score, cost, box):
+    ...     return ObjectEstimate(detection_index=i, box2d=np.array(box, float), score=score, cost=cost,
+    ...                           location=np.array([0.0, 1.65, 12.0]), R=rotation_y(0.0), dims=np.array([1.5, 1.6, 3.9]))
+    >>> scene = SceneEstimate(variant="coarse", objects=[car(0, 0.9, 0.0, [300, 180, 520, 300]),
+    ...                                                  car(1, 0.2, 0.5, [600, 170, 640, 200])])
+    >>> kept = keep_likely_cars(scene, fine=False, min_probability=0.5, calibration=calibration)
+    >>> [o.detection_index for o in kept.cars]
+    [0]
+    """
     if min_probability <= 0 or not estimate.objects:
         return estimate
     p = car_probabilities(estimate, fine=fine, calibration=calibration, image_width=image_width)

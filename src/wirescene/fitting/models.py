@@ -64,6 +64,15 @@ def check_model_files(options: FitOptions, *, fine: bool = True) -> FitOptions:
         Naming the file: missing, corrupt, of another kind or format version, of arrays of
         other shapes, or (``fine``) a shape model of fewer components than
         ``options.inference.n_shape``.
+
+    Examples
+    --------
+    >>> check_model_files(FitOptions()) == FitOptions()  # the shipped files: nothing to load, the options back
+    True
+    >>> check_model_files(FitOptions(shape_model="no/such/shape.npz"))
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...
     """
     from wirescene.fitting.confidence import load_score_calibration
     from wirescene.fitting.pipeline import load_shape_model, shape_model_for, viewpoint_classifier
@@ -82,7 +91,16 @@ def check_model_files(options: FitOptions, *, fine: bool = True) -> FitOptions:
 def reads_score_calibration(options: FitOptions) -> bool:
     """Whether a fit with ``options`` reads the score calibration: for the confidences
     (``calibrate_scores``) or for the verification of our own boxes
-    (``predetect.min_car_probability`` above 0)."""
+    (``predetect.min_car_probability`` above 0).
+
+    Examples
+    --------
+    >>> from wirescene.fitting.pipeline import PredetectOptions
+    >>> reads_score_calibration(FitOptions())
+    True
+    >>> reads_score_calibration(FitOptions(calibrate_scores=False, predetect=PredetectOptions(min_car_probability=0)))
+    False
+    """
     return options.calibrate_scores or options.predetect.min_car_probability > 0
 
 

@@ -44,7 +44,15 @@ from wirescene.predetect.bank import MIN_SMALLEST_CAR, smallest_car_search
 class PredetectOptions:
     """Options of our own pre-detection as the fit uses it (stage 1), and of how the fit
     treats its boxes: their weight in the fine objective and their verification. How each
-    default was chosen: ``benchmarks/RESULTS.md``."""
+    default was chosen: ``benchmarks/RESULTS.md``.
+
+    Examples
+    --------
+    >>> PredetectOptions()
+    PredetectOptions(threshold=0.3, min_car_probability=0.5, box_weight=30.0, smallest_car=0.0)
+    >>> FitOptions().with_settings({"predetect.threshold": "0.5"}).predetect.threshold
+    0.5
+    """
 
     # Below the bank's own 2D operating point (0.5): the fit verifies every box it is given.
     threshold: float = option(0.3, cli="detection-threshold",
@@ -66,7 +74,17 @@ class PredetectOptions:
 
 @dataclass(frozen=True)
 class FitOptions:
-    """Options of every stage of :func:`fit_frame`, with the run's seed."""
+    """Options of every stage of :func:`fit_frame`, with the run's seed.
+
+    Examples
+    --------
+    >>> options = FitOptions()
+    >>> options.seed, options.calibrate_scores, options.inference.iterations, options.parts_model  # None: shipped
+    (0, True, 12, None)
+    >>> from dataclasses import replace
+    >>> replace(options, seed=3, lifting=replace(options.lifting, n_particles=20)).lifting.n_particles
+    20
+    """
 
     lifting: LiftingOptions = field(default_factory=LiftingOptions)
     inference: InferenceOptions = field(default_factory=InferenceOptions)
@@ -186,7 +204,14 @@ def _part_detector(path: str | None):
 
 @cached_by_file(maxsize=4)
 def viewpoint_classifier(path: str | None):
-    """The crop viewpoint classifier at ``path`` (None: the shipped one), loaded once per version of the file."""
+    """The crop viewpoint classifier at ``path`` (None: the shipped one), loaded once per version of the file.
+
+    Examples
+    --------
+    >>> classifier = viewpoint_classifier(None)  # the shipped one
+    >>> classifier is viewpoint_classifier(None), classifier.weights.shape  # (features, 8 bins)
+    (True, (1957, 8))
+    """
     from wirescene.predetect.viewpoint_classifier import ViewpointClassifier, load_default_classifier
 
     return load_default_classifier() if path is None else ViewpointClassifier.load(path)
@@ -194,14 +219,31 @@ def viewpoint_classifier(path: str | None):
 
 @cached_by_file(maxsize=4)
 def load_shape_model(path: str | None = None) -> ShapeModel:
-    """The shape model at ``path`` (None: the shipped one), loaded once per version of the file."""
+    """The shape model at ``path`` (None: the shipped one), loaded once per version of the file.
+
+    Examples
+    --------
+    >>> model = load_shape_model()  # the shipped one, loaded once
+    >>> model is load_shape_model(), model.instantiate(np.zeros(5)).shape  # the mean car's 36 vertices (m)
+    (True, (36, 3))
+    """
     return load_default_shape_model() if path is None else ShapeModel.load(path)
 
 
 def shape_model_for(options: "FitOptions") -> ShapeModel:
     """The shape model of ``options`` (:attr:`FitOptions.shape_model`), checked to have the
     components the fine stage searches (``inference.n_shape``): an
-    :class:`~wirescene.core.errors.InputError` naming the file otherwise."""
+    :class:`~wirescene.core.errors.InputError` naming the file otherwise.
+
+    Examples
+    --------
+    >>> shape_model_for(FitOptions()) is load_shape_model()
+    True
+    >>> shape_model_for(FitOptions(inference=InferenceOptions(n_shape=1000)))
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...components, the fine stage searches 1000 (--set inference.n_shape=N...
+    """
     model = load_shape_model(options.shape_model)
     if model.n_components < options.inference.n_shape:
         raise InputError(f"shape model of {model.n_components} components, the fine stage searches "
@@ -212,7 +254,14 @@ def shape_model_for(options: "FitOptions") -> ShapeModel:
 
 @cached_by_file(maxsize=4)
 def detector_bank(path: str | None):
-    """The detector bank at ``path`` (None: the shipped one), loaded once per version of the file."""
+    """The detector bank at ``path`` (None: the shipped one), loaded once per version of the file.
+
+    Examples
+    --------
+    >>> from wirescene.predetect import load_default_bank
+    >>> detector_bank(None) is load_default_bank()  # the shipped bank
+    True
+    """
     from wirescene.predetect import DetectorBank, load_default_bank
 
     return load_default_bank() if path is None else DetectorBank.load(path)
@@ -232,6 +281,16 @@ class FrameFit:
         One estimate per requested variant, in the requested order.
     evidence : PartEvidence or None
         The part evidence the fine variants used (None if no variant needed it).
+
+    Examples
+    --------
+    >>> P = np.array([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
+    >>> camera = Camera(P, (1242, 375))
+    >>> dets = Detections([[300, 180, 520, 300]], 0.9, 0.0)  # a box and its viewpoint (alpha 0)
+    >>> options = FitOptions(lifting=LiftingOptions(n_particles=20))
+    >>> fit = fit_frame(camera, dets, ["coarse", "coarse+gp"], options=options)
+    >>> list(fit.estimates), fit.evidence is None  # coarse variants need no part evidence
+    (['coarse', 'coarse+gp'], True)
     """
 
     detections: Detections
@@ -246,7 +305,16 @@ def _variant(v: str | Variant) -> Variant:
 def needs_evidence(detections: Detections, variants: Iterable[str | Variant]) -> bool:
     """Whether :func:`fit_frame` needs part evidence or the image for these detections:
     a fine variant, or a detection without a viewpoint (scored by the detector bank on the
-    image, or taken from the part evidence when only that is given)."""
+    image, or taken from the part evidence when only that is given).
+
+    Examples
+    --------
+    >>> dets = Detections([[300, 180, 520, 300]], 0.9, 0.0)
+    >>> needs_evidence(dets, ["coarse", "coarse+gp"]), needs_evidence(dets, ["fg"])
+    (False, True)
+    >>> needs_evidence(Detections([[300, 180, 520, 300]], 0.9, np.nan), ["coarse"])  # a viewpoint to find
+    True
+    """
     if len(detections) == 0:
         return False
     return any(_variant(v).fine for v in variants) or not np.all(np.isfinite(detections.alpha))
@@ -505,6 +573,19 @@ def fit_frame(
     FrameFit
         The estimates per variant; every variant starts from the same detections and
         the same coarse lifting, which does not depend on the variant.
+
+    Examples
+    --------
+    >>> P = np.array([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
+    >>> camera = Camera(P, (1242, 375))
+    >>> dets = Detections([[300, 180, 520, 300]], 0.9, 0.0)  # a box and its viewpoint (alpha 0)
+    >>> options = FitOptions(lifting=LiftingOptions(n_particles=20))
+    >>> fit = fit_frame(camera, dets, ["coarse", "coarse+gp"], options=options)
+    >>> car = fit.estimates["coarse"].cars[0]
+    >>> car.location.shape, car.dims.shape, bool(5 < car.location[2] < 30)  # metres ahead of the camera
+    ((3,), (3,), True)
+    >>> fit_frame(camera, Detections.empty(), ["full"]).estimates["full"].cars  # no box, no car, no fit
+    []
     """
     if options is None:
         options = FitOptions()
@@ -619,7 +700,18 @@ def fit_scene(
     evidence: PartEvidence | None = None,
     lifted: LiftingTable | None = None,
 ) -> SceneEstimate:
-    """One variant of :func:`fit_frame` (same arguments): the estimate alone."""
+    """One variant of :func:`fit_frame` (same arguments): the estimate alone.
+
+    Examples
+    --------
+    >>> P = np.array([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
+    >>> camera = Camera(P, (1242, 375))
+    >>> dets = Detections([[300, 180, 520, 300]], 0.9, 0.0)  # a box and its viewpoint (alpha 0)
+    >>> options = FitOptions(lifting=LiftingOptions(n_particles=20))
+    >>> scene = fit_scene(camera, dets, variant="coarse", options=options)
+    >>> scene.variant, len(scene.cars), scene.cars[0].detection_index
+    ('coarse', 1, 0)
+    """
     v = _variant(variant)
     return fit_frame(camera, detections, [v], image=image, evidence=evidence, options=options,
                      lifted=lifted).estimates[v.name]

@@ -25,6 +25,13 @@ class Variant:
         Search occluder masks from missing part evidence (``+so``).
     deterministic_occlusion : bool
         Derive inter-object occlusion by ray casting (``+do``).
+
+    Examples
+    --------
+    >>> VARIANTS["full"]
+    Variant(name='full', shared_plane=True, fine=True, searched_occluder=True, deterministic_occlusion=True)
+    >>> [v.name for v in VARIANTS.values() if not v.fine]
+    ['coarse', 'coarse+gp']
     """
 
     name: str
@@ -49,6 +56,18 @@ VARIANTS: dict[str, Variant] = {
 
 
 def get_variant(name: str) -> Variant:
+    """The :class:`Variant` of :data:`VARIANTS` named ``name``; a ``ValueError`` listing them
+    for any other name.
+
+    Examples
+    --------
+    >>> get_variant("fg+gp").shared_plane
+    True
+    >>> get_variant("fast")
+    Traceback (most recent call last):
+    ...
+    ValueError: unknown variant 'fast'; available: coarse, coarse+gp, fg, fg+so, fg+do, fg+gp, full
+    """
     try:
         return VARIANTS[name]
     except KeyError:

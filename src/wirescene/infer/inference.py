@@ -87,6 +87,19 @@ class InferenceOptions:
     fraction (log range), observation angle in degrees, shape in units of the PCA
     standard deviations, plane pitch and roll in degrees. How each default was chosen
     (the study, its command and figures): ``benchmarks/RESULTS.md``.
+
+    Examples
+    --------
+    >>> options = InferenceOptions()
+    >>> options.iterations, options.samples, options.n_shape, options.device
+    (12, 12, 5, 'numpy')
+    >>> from dataclasses import replace
+    >>> replace(options, iterations=4, polish_iterations=0).iterations
+    4
+    >>> InferenceOptions(known_occluded_score=float("nan"))
+    Traceback (most recent call last):
+    ...
+    ValueError: known_occluded_score must be a finite number or None, got nan
     """
 
     iterations: int = option(12, help="Inference iterations (Algorithm 1).")
@@ -157,7 +170,24 @@ class RefinedParticles:
     inter-object occlusion ``gamma`` ``(P, N, 36)``, with the coarse particles' planes.
     ``coupled`` says whether objects depend on each other (shared plane or
     deterministic occlusion), so that only whole particles can be compared, by the
-    scene objective: the object likelihoods summed with ``weights`` ``(N,)``."""
+    scene objective: the object likelihoods summed with ``weights`` ``(N,)``.
+
+    Examples
+    --------
+    >>> P, N = 2, 2
+    >>> zeros = np.zeros((P, N))
+    >>> particles = SceneParticles(zeros, zeros, zeros, zeros + 10, zeros, zeros, np.ones((P, N, 3)))
+    >>> refined = RefinedParticles(particles, np.zeros((P, N, 5)), score=np.array([[1.0, 0.2], [0.5, 0.9]]),
+    ...                            history=np.zeros(1), mask=np.zeros((P, N), int),
+    ...                            gamma=np.zeros((P, N, 36), bool), coupled=False)
+    >>> refined.scene_score(), refined.best_scene(), refined.best_per_object()
+    (array([1.2, 1.4]), 1, array([0, 1]))
+    >>> refined.best_rows()  # independent objects: each its own best particle
+    array([0, 1])
+    >>> from dataclasses import replace
+    >>> replace(refined, coupled=True).best_rows()  # coupled (a shared plane): the best scene's row
+    array([1, 1])
+    """
 
     particles: SceneParticles
     shape: np.ndarray
@@ -226,7 +256,17 @@ def box_cost(camera, extent, location, R, boxes) -> np.ndarray:
 def size_cost(lo, hi) -> np.ndarray:
     """Half the squared distance ``(...)`` of the box size of extents ``lo, hi``
     ``(..., 3)`` (object frame: x length, y height, z width) from KITTI's mean car, in
-    KITTI's standard deviations per dimension: the negative log density of car sizes."""
+    KITTI's standard deviations per dimension: the negative log density of car sizes.
+
+    Examples
+    --------
+    >>> from wirescene.core.boxes import KITTI_CAR_SIZE
+    >>> l, w, h = KITTI_CAR_SIZE["mean"]
+    >>> float(size_cost(np.zeros(3), np.array([l, h, w])))  # object frame: x length, y height, z width
+    0.0
+    >>> round(float(size_cost(np.zeros(3), np.array([l + 0.43, h, w]))), 6)  # one standard deviation longer
+    0.5
+    """
     ext = hi - lo
     size = np.stack([ext[..., 0], ext[..., 2], ext[..., 1]], axis=-1)  # l, w, h
     return 0.5 * np.sum(((size - _SIZE_MEAN) / _SIZE_STD) ** 2, axis=-1)
@@ -465,7 +505,15 @@ class FineObjective:
 def sampling_blocks(options: InferenceOptions) -> list:
     """Parameter blocks sampled in turn, so each step searches a 3- or K-dimensional
     space: indices into the viewing parameters (pose, then shape), and None for the
-    ground plane."""
+    ground plane.
+
+    Examples
+    --------
+    >>> sampling_blocks(InferenceOptions())  # pose, shape, ground plane
+    [array([0, 1, 2]), array([3, 4, 5, 6, 7]), None]
+    >>> sampling_blocks(InferenceOptions(n_shape=2, plane_refinement=False))
+    [array([0, 1, 2]), array([3, 4])]
+    """
     blocks = [np.arange(3), np.arange(3, 3 + options.n_shape)] if options.n_shape else [np.arange(3)]
     if options.plane_refinement:
         blocks.append(None)  # the ground plane
@@ -478,7 +526,17 @@ def smoothed_spread(values: np.ndarray, delta: np.ndarray, sigma0: np.ndarray) -
     objective ``values`` ``(..., M)`` relative to its spread, times :data:`GROWTH`,
     within :data:`MIN_SIGMA_RATIO` and :data:`MAX_SIGMA_RATIO` of the initial spread
     ``sigma0``. Even weights (a flat objective) widen the search, weights concentrated
-    on a peak narrow it."""
+    on a peak narrow it.
+
+    Examples
+    --------
+    >>> delta = np.array([[-1.0], [1.0]])  # (M, d): two samples one unit either side
+    >>> smoothed_spread(np.zeros(2), delta, np.array([1.0]))  # a flat objective: the spread grows by GROWTH
+    array([1.3])
+    >>> values, delta = np.array([10.0, 0.0, 0.0]), np.array([[0.0], [1.0], [-1.0]])  # a peak at offset 0
+    >>> smoothed_spread(values, delta, np.array([1.0])).round(3)  # the weights concentrate: it narrows
+    array([0.572])
+    """
     spread = values.std(axis=-1, keepdims=True) + 1e-9
     w = np.exp((values - values.max(axis=-1, keepdims=True)) / spread)
     w /= w.sum(axis=-1, keepdims=True)
@@ -714,6 +772,27 @@ def refine_particles(
     alpha : (N,) array, optional
         The detections' viewpoints (observation angles, NaN where unknown): each car's
         observation angle stays within ``options.viewpoint_window_deg`` of its own.
+
+    Examples
+    --------
+    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> from wirescene.infer.likelihood import GaussianVertexEvidence
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> model = load_shape_model()
+    >>> truth = instantiate_wireframes(camera, model, x=np.array([-2.0]), z=np.array([12.0]), azimuth=np.array([0.3]),
+    ...                                pitch=np.zeros(1), roll=np.zeros(1), shape=np.zeros((1, 5)), height=1.65)
+    >>> evidence = GaussianVertexEvidence(truth.uv, np.ones((1, 36), bool))  # peaks at a car's true vertices
+    >>> start = SceneParticles(pitch=np.zeros((2, 1)), roll=np.zeros((2, 1)), x=np.array([[-2.3], [-1.5]]),
+    ...                        z=np.array([[12.5], [11.0]]), azimuth=np.array([[0.2], [0.5]]),
+    ...                        object_cost=np.zeros((2, 1)), dims=np.tile([1.5, 1.6, 3.9], (2, 1, 1)))  # 2 particles
+    >>> options = InferenceOptions(iterations=6, samples=8, polish_iterations=0, box_weight=0.0)
+    >>> refined = refine_particles(camera, start, evidence, model, options=options)
+    >>> refined.score.shape, refined.shape.shape, refined.history.shape  # (P, N), (P, N, K), iterations + 1
+    ((1, 1), (1, 1, 5), (7,))
+    >>> refined.particles.n_particles  # after prune_after (4) iterations the best quarter went on: 1 of 2
+    1
+    >>> bool(np.all(np.diff(refined.history) >= 0))  # the current value is always a candidate
+    True
     """
     options = InferenceOptions() if options is None else options
     rng = np.random.default_rng(0) if rng is None else rng
@@ -746,6 +825,27 @@ def estimate_from_refined(
     Each object's box size and bottom centre are those of its fitted wireframe's
     axis-aligned extent in the object frame; visibility is the complement of
     self-occlusion; ``exemplar`` is the nearest CAD exemplar (paper Sec. 5.4).
+
+    Examples
+    --------
+    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> from wirescene.infer.likelihood import GaussianVertexEvidence
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> model = load_shape_model()
+    >>> truth = instantiate_wireframes(camera, model, x=np.array([-2.0]), z=np.array([12.0]), azimuth=np.array([0.3]),
+    ...                                pitch=np.zeros(1), roll=np.zeros(1), shape=np.zeros((1, 5)), height=1.65)
+    >>> evidence = GaussianVertexEvidence(truth.uv, np.ones((1, 36), bool))  # peaks at a car's true vertices
+    >>> start = SceneParticles(pitch=np.zeros((2, 1)), roll=np.zeros((2, 1)), x=np.array([[-2.3], [-1.5]]),
+    ...                        z=np.array([[12.5], [11.0]]), azimuth=np.array([[0.2], [0.5]]),
+    ...                        object_cost=np.zeros((2, 1)), dims=np.tile([1.5, 1.6, 3.9], (2, 1, 1)))  # 2 particles
+    >>> options = InferenceOptions(iterations=6, samples=8, polish_iterations=0, box_weight=0.0)
+    >>> from wirescene.core.types import Detections
+    >>> refined = refine_particles(camera, start, evidence, model, options=options)
+    >>> estimate = estimate_from_refined(camera, refined, Detections([[400, 150, 600, 230]], 0.9, 0.0), model,
+    ...                                  variant="fg")
+    >>> car = estimate.cars[0]
+    >>> len(estimate.cars), car.vertices.shape, car.visibility.shape, car.dims.shape
+    (1, (36, 3), (36,), (3,))
     """
 
     p = refined.particles

@@ -38,7 +38,18 @@ class PartEvidence(Protocol):
 
 def object_likelihood(evidence: np.ndarray, self_hidden: np.ndarray, mask_hidden: np.ndarray | None, *, c: float) -> np.ndarray:
     """Paper Eq. 2 for a batch: ``evidence``, ``self_hidden``, ``mask_hidden`` are
-    ``(..., V)``; returns ``(...)``."""
+    ``(..., V)``; returns ``(...)``.
+
+    Examples
+    --------
+    >>> evidence = np.array([2.0, 2.0, -1.0, -1.0])
+    >>> self_hidden = np.array([False, False, False, True])  # vertex 3 does not count
+    >>> mask_hidden = np.array([False, False, True, False])  # vertex 2 occluded: scores c
+    >>> float(object_likelihood(evidence, self_hidden, mask_hidden, c=0.5))  # (2 + 2 + 0.5) / 3
+    1.5
+    >>> float(object_likelihood(evidence, self_hidden, None, c=0.5))  # (2 + 2 - 1) / 3
+    1.0
+    """
     evidence = np.asarray(evidence, dtype=float)
     visible0 = ~np.asarray(self_hidden, dtype=bool)
     if mask_hidden is None:
@@ -73,7 +84,23 @@ def outside_image(camera: Camera, uv: np.ndarray) -> np.ndarray:
 
 @dataclass
 class WireframeBatch:
-    """Geometry of a batch of wireframe hypotheses, everything ``(..., 36, ...)``."""
+    """Geometry of a batch of wireframe hypotheses, everything ``(..., 36, ...)``.
+
+    Examples
+    --------
+    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> def place(x):  # two cars, at (x, 12 m) and (3 m, 20 m), the mean shape (5 coefficients 0)
+    ...     return instantiate_wireframes(camera, load_shape_model(), x=np.array([[x, 3.0]]), z=np.array([[12.0, 20.0]]),
+    ...                                   azimuth=np.array([[0.3, 1.5]]), pitch=np.zeros((1, 2)), roll=np.zeros((1, 2)),
+    ...                                   shape=np.zeros((1, 2, 5)), height=1.65)
+    >>> batch = place(-2.0)
+    >>> batch.vertices.shape, batch.uv.shape, batch.self_hidden.shape, batch.scale.shape
+    ((1, 2, 36, 3), (1, 2, 36, 2), (1, 2, 36), (1, 2))
+    >>> batch.location  # bottom centres on the road, 1.65 m below the camera
+    array([[[-2.  ,  1.65, 12.  ],
+            [ 3.  ,  1.65, 20.  ]]])
+    """
 
     vertices: np.ndarray  # (..., 36, 3) camera frame
     location: np.ndarray  # (..., 3) bottom centre of the shape model origin
@@ -95,7 +122,24 @@ def instantiate_wireframes(
     """Place shape-model wireframes with coefficients ``shape`` ``(..., K)`` at
     ``(x, z, azimuth)`` on planes ``(pitch, roll)`` (all ``(...)``), project them and
     compute self-occlusion by ray casting against the wireframe's own faces (on
-    ``device``, see :func:`wirescene.infer.occlusion.self_occlusion`)."""
+    ``device``, see :func:`wirescene.infer.occlusion.self_occlusion`).
+
+    Examples
+    --------
+    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> def place(x):  # two cars, at (x, 12 m) and (3 m, 20 m), the mean shape (5 coefficients 0)
+    ...     return instantiate_wireframes(camera, load_shape_model(), x=np.array([[x, 3.0]]), z=np.array([[12.0, 20.0]]),
+    ...                                   azimuth=np.array([[0.3, 1.5]]), pitch=np.zeros((1, 2)), roll=np.zeros((1, 2)),
+    ...                                   shape=np.zeros((1, 2, 5)), height=1.65)
+    >>> batch = place(-2.0)
+    >>> batch.uv.shape, batch.self_hidden.dtype.name  # (...) = (1, 2): one particle, two cars
+    ((1, 2, 36, 2), 'bool')
+    >>> lo, hi = batch.extent  # the object-frame box of each wireframe: x length, y height, z width
+    >>> size = hi - lo
+    >>> size.shape, bool(np.all(size[..., 0] > size[..., 2]))  # longer than wide
+    ((1, 2, 3), True)
+    """
     shape = np.asarray(shape, dtype=float)
     check_shape("shape", shape, (..., None))
     X_obj = shape_model.instantiate(shape)
@@ -119,7 +163,23 @@ def wireframe_likelihood(
     mask_hidden: np.ndarray | None = None,
 ) -> np.ndarray:
     """Object likelihood ``(...)`` of placed wireframes against image evidence.
-    Vertices behind the camera count as hidden."""
+    Vertices behind the camera count as hidden.
+
+    Examples
+    --------
+    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> def place(x):  # two cars, at (x, 12 m) and (3 m, 20 m), the mean shape (5 coefficients 0)
+    ...     return instantiate_wireframes(camera, load_shape_model(), x=np.array([[x, 3.0]]), z=np.array([[12.0, 20.0]]),
+    ...                                   azimuth=np.array([[0.3, 1.5]]), pitch=np.zeros((1, 2)), roll=np.zeros((1, 2)),
+    ...                                   shape=np.zeros((1, 2, 5)), height=1.65)
+    >>> batch = place(-2.0)
+    >>> evidence = GaussianVertexEvidence(batch.uv[0], np.ones((2, 36), bool))  # peaks at these wireframes
+    >>> wireframe_likelihood(batch, evidence, np.array([0, 1]), c=0.5)  # every counted vertex at its peak
+    array([[2., 2.]])
+    >>> wireframe_likelihood(place(-1.0), evidence, np.array([0, 1]), c=0.5).round(3)  # car 0 a metre aside
+    array([[-1.,  2.]])
+    """
     check_shape("uv", batch.uv, (..., N_VERTICES, 2))
     self_hidden = batch.self_hidden | (batch.depth <= NEAR_PLANE)
     e = evidence.log_ratio(batch.uv, np.broadcast_to(obj, batch.scale.shape), batch.scale)
@@ -143,6 +203,16 @@ class GaussianVertexEvidence:
     peak, floor : float, optional
         The log ratio at the true position and far from it (and at vertices without
         evidence).
+
+    Examples
+    --------
+    >>> uv_true = np.zeros((1, 36, 2))  # one detection, every true vertex at (0, 0)
+    >>> evidence = GaussianVertexEvidence(uv_true, [np.arange(36) < 18], sigma_frac=0.1)  # 18 vertices seen
+    >>> e = evidence.log_ratio(np.zeros((36, 2)), 0, 100.0)  # at the true positions, a car 100 px long
+    >>> float(e[0]), float(e[35])  # the peak where seen, the floor where not
+    (2.0, -1.0)
+    >>> round(float(evidence.log_ratio(np.full((36, 2), [10.0, 0.0]), 0, 100.0)[0]), 4)  # one sigma off
+    0.8196
     """
 
     def __init__(self, uv_true, visible, *, sigma_frac: float = 0.03, peak: float = 2.0, floor: float = -1.0):

@@ -22,7 +22,14 @@ from wirescene.core.errors import check_shape
 
 @lru_cache(maxsize=1)
 def occluder_masks() -> np.ndarray:
-    """The mask set, ``(A, 4)`` rectangles in normalised object coordinates."""
+    """The mask set, ``(A, 4)`` rectangles in normalised object coordinates.
+
+    Examples
+    --------
+    >>> masks = occluder_masks()
+    >>> masks.shape, masks[0].tolist(), masks[1].tolist()  # a0 hides nothing; a band of the left 10%
+    ((246, 4), [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.1, 1.0])
+    """
     rects = [(0.0, 0.0, 0.0, 0.0)]  # a0: nothing hidden
     fractions = np.round(np.arange(0.1, 0.95, 0.05), 2)
     for f in fractions:  # side bands: truncation or a large occluder at one side
@@ -44,7 +51,18 @@ def occluder_masks() -> np.ndarray:
 
 
 def normalised_coordinates(uv: np.ndarray) -> np.ndarray:
-    """Vertex projections ``(..., V, 2)`` in coordinates of their own 2D extent."""
+    """Vertex projections ``(..., V, 2)`` in coordinates of their own 2D extent.
+
+    Examples
+    --------
+    >>> uv = np.array([[10.0, 20.0], [30.0, 20.0], [10.0, 40.0], [30.0, 40.0], [20.0, 30.0]])  # corners, centre
+    >>> normalised_coordinates(uv)  # 0..1 over the points' own box
+    array([[0. , 0. ],
+           [1. , 0. ],
+           [0. , 1. ],
+           [1. , 1. ],
+           [0.5, 0.5]])
+    """
     uv = np.asarray(uv, dtype=float)
     check_shape("uv", uv, (..., None, 2))
     lo, hi = point_bounds(uv)
@@ -52,7 +70,17 @@ def normalised_coordinates(uv: np.ndarray) -> np.ndarray:
 
 
 def mask_hidden(uv: np.ndarray, mask_index, *, masks: np.ndarray | None = None) -> np.ndarray:
-    """Vertices ``(..., V)`` hidden by masks ``mask_index`` ``(...)`` (0 hides nothing)."""
+    """Vertices ``(..., V)`` hidden by masks ``mask_index`` ``(...)`` (0 hides nothing).
+
+    Examples
+    --------
+    >>> uv = np.array([[10.0, 20.0], [30.0, 20.0], [10.0, 40.0], [30.0, 40.0], [20.0, 30.0]])  # corners, centre
+    >>> left_half = int(np.flatnonzero((occluder_masks() == [0.0, 0.0, 0.5, 1.0]).all(1))[0])
+    >>> mask_hidden(uv, left_half)  # the left corners and the centre (on the band's edge)
+    array([ True, False,  True, False,  True])
+    >>> bool(mask_hidden(uv, 0).any())  # a0
+    False
+    """
     masks = occluder_masks() if masks is None else masks
     q = normalised_coordinates(uv)
     r = masks[np.asarray(mask_index)][..., None, :]
@@ -62,7 +90,15 @@ def mask_hidden(uv: np.ndarray, mask_index, *, masks: np.ndarray | None = None) 
 
 
 def all_mask_hidden(uv: np.ndarray, *, masks: np.ndarray | None = None) -> np.ndarray:
-    """Hidden flags ``(..., A, V)`` of every mask for vertices ``uv`` ``(..., V, 2)``."""
+    """Hidden flags ``(..., A, V)`` of every mask for vertices ``uv`` ``(..., V, 2)``.
+
+    Examples
+    --------
+    >>> uv = np.array([[10.0, 20.0], [30.0, 20.0], [10.0, 40.0], [30.0, 40.0], [20.0, 30.0]])  # corners, centre
+    >>> hidden = all_mask_hidden(uv)
+    >>> hidden.shape, bool(np.array_equal(hidden[7], mask_hidden(uv, 7)))  # (A, V): every mask at once
+    ((246, 5), True)
+    """
     masks = occluder_masks() if masks is None else masks
     q = normalised_coordinates(uv)[..., None, :, :]
     r = masks[:, None, :]
@@ -96,6 +132,14 @@ def mask_weight_sums(uv: np.ndarray, weights: np.ndarray) -> np.ndarray:
     the ``(..., A, V)`` flags: every mask is a product of one of I x-intervals and one
     of J y-intervals (I, J << A), so the sums for all masks are the entries of the
     ``(I, J)`` matrix ``X diag(w) Y^T`` -- one small batched matrix product.
+
+    Examples
+    --------
+    >>> uv = np.array([[10.0, 20.0], [30.0, 20.0], [10.0, 40.0], [30.0, 40.0], [20.0, 30.0]])  # corners, centre
+    >>> weights = np.ones(5)
+    >>> sums = mask_weight_sums(uv, weights)  # vertices each mask hides
+    >>> sums.shape, float(sums[0]), bool(np.allclose(sums, (all_mask_hidden(uv) * weights).sum(-1)))
+    ((246,), 0.0, True)
     """
     xs, ys, i, j, nonempty = _factorised_masks()
     q = normalised_coordinates(uv)
@@ -129,6 +173,14 @@ def best_mask(uv: np.ndarray, evidence: np.ndarray, self_hidden: np.ndarray, *, 
     ``sum_{visible0} e - sum_{visible0 & H_a} (e - c)`` and its denominator does not
     depend on ``a``, so the best mask minimises the sum of ``e - c`` over the visible0
     vertices it hides beyond ``hidden``: one :func:`mask_weight_sums` call.
+
+    Examples
+    --------
+    >>> uv = np.array([[10.0, 20.0], [30.0, 20.0], [10.0, 40.0], [30.0, 40.0], [20.0, 30.0]])  # corners, centre
+    >>> evidence = np.array([2.0, -1.0, 2.0, -1.0, 2.0])  # nothing seen at the right corners
+    >>> a = best_mask(uv, evidence, np.zeros(5, bool), c=0.5)
+    >>> occluder_masks()[a], mask_hidden(uv, a)  # hide the right 10%: those score c = 0.5 instead of -1
+    (array([0.9, 0. , 1. , 1. ]), array([False,  True, False,  True, False]))
     """
     loss = np.where(self_hidden, 0.0, np.asarray(evidence, dtype=float) - c)
     if hidden is not None:
@@ -156,6 +208,14 @@ def fit_mask(uv: np.ndarray, occluded: np.ndarray, candidates: np.ndarray, *, we
     -------
     (...) int array
         The index of the best mask of :func:`occluder_masks`.
+
+    Examples
+    --------
+    >>> uv = np.array([[10.0, 20.0], [30.0, 20.0], [10.0, 40.0], [30.0, 40.0], [20.0, 30.0]])  # corners, centre
+    >>> occluded = np.array([False, True, False, True, False])  # e.g. the right side hidden by another car
+    >>> a = fit_mask(uv, occluded, np.ones(5, bool))
+    >>> bool(np.array_equal(mask_hidden(uv, a), occluded))
+    True
     """
     occ = np.asarray(occluded, bool)
     cand = np.asarray(candidates, bool)

@@ -57,6 +57,13 @@ def self_occlusion(vertices, faces, camera_center, *, eps: float = DEFAULT_EPS, 
         True where the segment from the camera centre to the vertex crosses a face of
         the same object before reaching it. Faces incident to a vertex are never tested
         against it, so a vertex is never hidden by its own faces.
+
+    Examples
+    --------
+    >>> faces = np.array([[0, 1, 2]])  # one triangle 5 m ahead of the camera
+    >>> vertices = np.array([[-1.0, -1, 5], [1, -1, 5], [0, 1, 5], [0, 0, 10], [5, 0, 10]])
+    >>> self_occlusion(vertices, faces, np.zeros(3))  # the vertex right behind it is hidden
+    array([False, False, False,  True, False])
     """
     if device != "numpy":
         from wirescene.infer import torch_backend
@@ -93,6 +100,15 @@ def inter_object_occlusion(vertices, faces, camera_center, *, eps: float = DEFAU
         *not* included; combine with :func:`self_occlusion` as needed (the paper casts
         rays only to vertices that are not self-occluded, which gives the same flags
         on those vertices).
+
+    Examples
+    --------
+    >>> faces = np.array([[0, 1, 2]])
+    >>> near = np.array([[-1.0, -1, 5], [1, -1, 5], [0, 1, 5], [9, 9, 9]])  # a triangle at 5 m, a point aside
+    >>> far = np.array([[-1.0, -1, 20], [1, -1, 20], [0, 1, 20], [0, 0, 10]])  # the same at 20 m, a point at 10 m
+    >>> inter_object_occlusion(np.stack([near, far]), faces, np.zeros(3))  # (N, V): all of the far one hidden
+    array([[False, False, False, False],
+           [ True,  True,  True,  True]])
     """
     if device != "numpy":
         from wirescene.infer import torch_backend

@@ -75,7 +75,16 @@ TORCH_THREADS_ENV = "WIRESCENE_TORCH_THREADS"
 
 
 class DeviceError(WiresceneError, ValueError):
-    """A ``--device`` that cannot be used here (unknown name, PyTorch missing, no CUDA)."""
+    """A ``--device`` that cannot be used here (unknown name, PyTorch missing, no CUDA).
+
+    Examples
+    --------
+    >>> try:
+    ...     choose_device("tpu")
+    ... except DeviceError as exc:  # also a ValueError: one line, fit for a command line
+    ...     print(isinstance(exc, ValueError), exc)
+    True unknown device 'tpu': expected numpy, cpu, cuda, cuda:N or auto
+    """
 
 
 def available() -> bool:
@@ -154,6 +163,13 @@ def resolve_device(name="auto"):
     DeviceError (a ValueError)
         With a one-line message if the name is unknown, PyTorch is not installed, CUDA
         is asked for but not available, or the CUDA device index does not exist.
+
+    Examples
+    --------
+    >>> resolve_device("cuda:x")  # refused by its name alone, whether or not PyTorch is installed
+    Traceback (most recent call last):
+    ...
+    wirescene.infer.torch_backend.DeviceError: unknown device 'cuda:x': expected numpy, cpu, cuda, cuda:N or auto
     """
     if not isinstance(name, str):
         if type(name).__name__ == "device" and type(name).__module__.startswith("torch"):

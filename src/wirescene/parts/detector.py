@@ -83,6 +83,17 @@ class PartDetector:
         :func:`response_maps` is ``calib_scale[j] * log(S_j / S_b) + calib_offset[j]``
         (per-class calibration on real data, see
         :func:`wirescene.training.parts.calibrate`); None: identity
+
+    Examples
+    --------
+    >>> detector = load_default()
+    >>> n_context = feat.CONTEXT_DIM * detector.context  # a descriptor, the box's context, the point's position
+    >>> detector.n_features == feat.feature_dim(detector.kind) + n_context + 2 * detector.position
+    True
+    >>> X = np.zeros((3, detector.n_features))  # 3 descriptors
+    >>> probs = detector.predict_proba(X)
+    >>> probs.shape, bool(np.allclose(probs.sum(1), 1.0)), detector.predict(X).shape  # 36 parts, background
+    ((3, 37), True, (3,))
     """
 
     roots: np.ndarray
@@ -286,7 +297,16 @@ class PartDetector:
 
     def log_ratio_of(self, probs, *, eps: float = DEFAULT_EPS) -> np.ndarray:
         """Calibrated ``log(S_j / S_b)`` ``(..., 36)`` of class probabilities ``(..., 37)``
-        (clipped to ``[eps, 1]`` first; calibrated values clipped to ``+-|log eps|``)."""
+        (clipped to ``[eps, 1]`` first; calibrated values clipped to ``+-|log eps|``).
+
+        Examples
+        --------
+        >>> probs = np.zeros((2, N_CLASSES))
+        >>> probs[0, 0], probs[0, BACKGROUND], probs[1, BACKGROUND] = 0.9, 0.1, 1.0
+        >>> lr = load_default().log_ratio_of(probs)
+        >>> lr.shape, bool(np.abs(lr).max() <= -np.log(DEFAULT_EPS) + 1e-6)  # (..., 36), within +-|log eps|
+        ((2, 36), True)
+        """
         pc = np.clip(np.asarray(probs, dtype=np.float32), eps, 1.0)
         lr = np.log(pc[..., :N_PARTS]) - np.log(pc[..., N_PARTS:])
         if self.calib_scale is not None:
@@ -301,7 +321,14 @@ _DEFAULT = None
 
 def load_default() -> PartDetector:
     """The package's trained model (cached). Another model file is chosen per run with
-    ``FitOptions.parts_model`` (``--parts-model``), which the resume records include."""
+    ``FitOptions.parts_model`` (``--parts-model``), which the resume records include.
+
+    Examples
+    --------
+    >>> detector = load_default()
+    >>> detector is load_default(), 0 <= detector.smooth <= MAX_SMOOTH  # cached; its smoothing in box heights
+    (True, True)
+    """
     global _DEFAULT
     if _DEFAULT is None:
         _DEFAULT = PartDetector.load()
@@ -318,6 +345,19 @@ class BoxResponses:
 
     probs : (n_scales, Gh, Gw, 37) float16 -- ``S_j`` (columns 0..35) and ``S_b`` (36)
     log_ratio : (Gh, Gw, 36) float32 -- ``max_s log(clip(S_j) / clip(S_b))``
+
+    Examples
+    --------
+    >>> image = np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8)
+    >>> responses = response_maps(image, [[20, 20, 44, 34]])  # one box, 24 x 14 px
+    >>> maps = responses.boxes[0]
+    >>> maps.stride, maps.region  # the box grown by 10% of its size, a grid point a pixel
+    (1.0, array([17.6, 18.6, 46.4, 35.4]))
+    >>> maps.probs.shape, maps.log_ratio.shape  # (scales, Gh, Gw, 37), (Gh, Gw, 36)
+    ((3, 17, 29, 37), (17, 29, 36))
+    >>> grid = maps.grid_uv()
+    >>> grid.shape, grid[0, 0], grid[0, 1]
+    ((17, 29, 2), array([17.6, 18.6]), array([18.6, 18.6]))
     """
 
     box: np.ndarray
@@ -338,7 +378,21 @@ class BoxResponses:
 
 @dataclass
 class PartResponses:
-    """Response maps of all boxes of an image (see :func:`response_maps`)."""
+    """Response maps of all boxes of an image (see :func:`response_maps`).
+
+    Examples
+    --------
+    >>> image = np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8)
+    >>> responses = response_maps(image, [[20, 20, 44, 34]])  # one box, 24 x 14 px
+    >>> len(responses), round(responses.floor, 4)  # log(eps)
+    (1, -6.9078)
+    >>> maps = responses.boxes[0]
+    >>> uv = np.tile(maps.grid_uv()[3, 4], (36, 1))  # every vertex at grid point (3, 4)
+    >>> bool(np.allclose(responses.log_ratio(uv, 0), maps.log_ratio[3, 4]))
+    True
+    >>> responses.log_ratio(np.full((36, 2), -500.0), 0)[:2]  # far outside the grid: the floor
+    array([-6.9077554, -6.9077554], dtype=float32)
+    """
 
     boxes: list
     eps: float
@@ -429,7 +483,16 @@ class PartResponses:
 
 
 def log_ratio(responses: PartResponses, uv, box_index, **kwargs) -> np.ndarray:
-    """Function form of :meth:`PartResponses.log_ratio`."""
+    """Function form of :meth:`PartResponses.log_ratio`.
+
+    Examples
+    --------
+    >>> image = np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8)
+    >>> responses = response_maps(image, [[20, 20, 44, 34]])  # one box, 24 x 14 px
+    >>> uv = np.full((4, 36, 2), [32.0, 27.0])  # 4 hypotheses of box 0, every vertex at the box centre
+    >>> log_ratio(responses, uv, 0, bilinear=True).shape
+    (4, 36)
+    """
     return responses.log_ratio(uv, box_index, **kwargs)
 
 
@@ -441,7 +504,16 @@ def box_crop(box, image_size, scales=DEFAULT_SCALES, *, pad: float = 0.1, radius
     """The padded region ``(rx0, ry0, rx1, ry1)`` that :func:`response_maps` scores for
     ``box`` and the integer native crop ``(cx0, cy0, cx1, cy1)`` it describes (the region
     plus room for the largest patch of half-width ``radius`` canonical px, see
-    :func:`wirescene.parts.features.context_radius`). ``image_size = (W, H)``."""
+    :func:`wirescene.parts.features.context_radius`). ``image_size = (W, H)``.
+
+    Examples
+    --------
+    >>> region, crop, zs = box_crop([20, 20, 44, 34], (96, 64))
+    >>> region, crop  # the box grown by 10%; the native pixels its descriptors read
+    (array([17.6, 18.6, 46.4, 35.4]), (11, 12, 53, 42))
+    >>> np.round(zs, 2)  # canonical px per native px at scales 0.85, 1.0, 1.2 (64 px per car height)
+    array([5.38, 4.57, 3.81])
+    """
     W, H = image_size
     x1, y1, x2, y2 = np.asarray(box, dtype=float)
     bw, bh = max(x2 - x1, 1.0), max(y2 - y1, 1.0)
@@ -468,7 +540,15 @@ def _grid_within(start: float, n: int, step: float, size: int) -> tuple[float, i
 
 def box_position(uv, box) -> np.ndarray:
     """``(..., 2)`` float32 position of points ``uv (..., 2)`` relative to ``box``:
-    ``((u - x1) / w, (v - y1) / h)`` (0..1 inside the box)."""
+    ``((u - x1) / w, (v - y1) / h)`` (0..1 inside the box).
+
+    Examples
+    --------
+    >>> box_position([[20, 20], [44, 34], [32, 27]], [20, 20, 44, 34])
+    array([[0. , 0. ],
+           [1. , 1. ],
+           [0.5, 0.5]], dtype=float32)
+    """
     x1, y1, x2, y2 = np.asarray(box, dtype=float)
     uv = np.asarray(uv, dtype=float)
     return np.stack([(uv[..., 0] - x1) / max(x2 - x1, 1.0), (uv[..., 1] - y1) / max(y2 - y1, 1.0)],
@@ -481,7 +561,17 @@ def box_descriptors(image, box, uv, kind: str, *, scale: float = 1.0, pad: float
     :func:`response_maps` computes them for ``box`` at one ``scale`` (used by training).
     ``edges``: precomputed full-image :func:`wirescene.parts.features.image_edges`;
     ``context``, ``position``: append :func:`wirescene.parts.features.box_context`, then
-    :func:`box_position` (models with ``context`` / ``position``)."""
+    :func:`box_position` (models with ``context`` / ``position``).
+
+    Examples
+    --------
+    >>> image = np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8)
+    >>> detector = load_default()
+    >>> X = box_descriptors(image, [20, 20, 44, 34], [[32, 27], [25, 25]], detector.kind,
+    ...                     position=detector.position, context=detector.context)
+    >>> X.shape == (2, detector.n_features), detector.predict_proba(X).shape
+    (True, (2, 37))
+    """
     img = np.asarray(image)
     H, W = img.shape[:2]
     _, (cx0, cy0, cx1, cy1), (z,) = box_crop(box, (W, H), (scale,), pad=pad, radius=feat.context_radius(kind))
@@ -564,6 +654,13 @@ def response_maps(image, boxes, *, detector: PartDetector | None = None, scales=
     scale would exceed :data:`MAX_CANONICAL_PIXELS` (a sliver far flatter than a car) gets
     no evidence (log ratio 0 everywhere). Neither binds for any label box or detection of
     the 72 shared KITTI frames.
+
+    Examples
+    --------
+    >>> image = np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8)
+    >>> responses = response_maps(image, [[20, 20, 44, 34]])  # one box, 24 x 14 px
+    >>> len(responses), responses.boxes[0].log_ratio.shape  # per box: (Gh, Gw, 36) max over 3 scales
+    (1, (17, 29, 36))
     """
     detector = load_default() if detector is None else detector
     img = np.asarray(image)

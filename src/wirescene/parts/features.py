@@ -91,6 +91,12 @@ def sc_kernels() -> np.ndarray:
 
     Bin ``ring * SC_N_ANGLES + sector``; angle measured in image coordinates
     (``atan2(dy, dx)``, y down); the centre pixel belongs to ring 0, sector 0.
+
+    Examples
+    --------
+    >>> k = sc_kernels()
+    >>> k.shape, int(k.sum()), bool((k.sum(0) <= 1).all())  # 3 rings x 12 sectors; each pixel in one bin at most
+    ((36, 33, 33), 861, True)
     """
     global _KERNELS
     if _KERNELS is None:
@@ -110,13 +116,26 @@ def sc_kernels() -> np.ndarray:
 
 
 def context_radius(kind: str) -> int:
-    """Half-width (canonical px) of the window a descriptor of ``kind`` reads."""
+    """Half-width (canonical px) of the window a descriptor of ``kind`` reads.
+
+    Examples
+    --------
+    >>> context_radius("ghog"), context_radius("ghog_ms")  # the multi-scale kinds read the whole car height
+    (16, 32)
+    """
     if kind in ("ghog_ms", "ghog_msc"):
         return GHOG_COARSE_OFFSETS[-1] + GHOG_COARSE_CELL // 2
     return RADIUS
 
 
 def feature_dim(kind: str) -> int:
+    """Length of a descriptor of ``kind`` (one of :data:`KINDS`; a ``ValueError`` otherwise).
+
+    Examples
+    --------
+    >>> {kind: feature_dim(kind) for kind in KINDS}
+    {'sc': 37, 'hog': 324, 'ghog': 145, 'ghog_sc': 182, 'ghog_ms': 290, 'ghog_msc': 317}
+    """
     if kind == "sc":
         return sc_kernels().shape[0] + 1
     if kind == "hog":
@@ -156,6 +175,14 @@ def canonical_edges(edges, z: float, *, blur: float = 0.0) -> np.ndarray:
     Returns a float32 map of shape ``round(shape * z)`` whose mass is edge length in
     canonical pixels (see module docstring); ``blur`` (canonical px) is an optional
     Gaussian (mass-preserving).
+
+    Examples
+    --------
+    >>> line = np.zeros((20, 20), bool)
+    >>> line[10, :] = True  # 20 px of edge
+    >>> e = canonical_edges(line, 0.5)
+    >>> e.shape, e.dtype.name, round(float(e.sum()), 1)  # about 10 canonical px of edge (less at the map's ends)
+    ((10, 10), 'float32', 9.6)
     """
     e = np.asarray(edges, dtype=np.float32)
     # Edge mass is line length: dividing by z keeps it in canonical pixels.
@@ -171,6 +198,14 @@ def image_edges(image, *, sigma: float = 1.0, low: float = 0.05, high: float = 0
 
     ``low``/``high`` are hysteresis thresholds on the gradient magnitude of the grey
     image scaled to [0, 1].
+
+    Examples
+    --------
+    >>> grey = np.zeros((32, 32), np.float32)
+    >>> grey[:, 16:] = 1.0  # a vertical step edge
+    >>> edges = image_edges(grey)
+    >>> edges.dtype.name, bool(edges[16, 14:18].any()), bool(edges[16, :12].any())  # on the step, not beside it
+    ('bool', True, False)
     """
     from skimage.feature import canny
 
@@ -181,7 +216,14 @@ def image_edges(image, *, sigma: float = 1.0, low: float = 0.05, high: float = 0
 def to_canonical(uv, z: float) -> np.ndarray:
     """Native pixel coordinates ``(..., 2) = (u, v)`` to canonical ``(row, col)`` floats
     for a map made by :func:`canonical_edges` with factor ``z`` (pixel centres align as
-    in :func:`skimage.transform.resize`)."""
+    in :func:`skimage.transform.resize`).
+
+    Examples
+    --------
+    >>> to_canonical([[0.0, 0.0], [10.0, 4.0]], 2.0)  # (u, v) -> (row, col), pixel centres aligned
+    array([[ 0.5,  0.5],
+           [ 8.5, 20.5]])
+    """
     uv = np.asarray(uv, dtype=float)
     c = (uv + 0.5) * z - 0.5
     return c[..., ::-1]
@@ -189,7 +231,16 @@ def to_canonical(uv, z: float) -> np.ndarray:
 
 def extract_patches(edge_map, points) -> np.ndarray:
     """``(N, PATCH, PATCH)`` windows of a canonical map centred at integer
-    ``points (N, 2) = (row, col)``; zero outside the map."""
+    ``points (N, 2) = (row, col)``; zero outside the map.
+
+    Examples
+    --------
+    >>> edge_map = np.zeros((40, 40), np.float32)
+    >>> edge_map[20, :] = 1.0  # a horizontal line through row 20
+    >>> patches = extract_patches(edge_map, [[20, 20], [0, 0], [-100, 0]])
+    >>> patches.shape, [float(p.sum()) for p in patches]  # the line crosses the first; zero outside the map
+    ((3, 33, 33), [33.0, 0.0, 0.0])
+    """
     e = np.asarray(edge_map, dtype=np.float32)
     p = np.asarray(points).reshape(-1, 2).astype(int)
     padded = np.pad(e, RADIUS)
@@ -215,6 +266,14 @@ def dense_sc(edge_map) -> np.ndarray:
     """Shape context of every pixel of a canonical map: ``(H, W, 37)`` float32.
 
     Equals ``extract(extract_patches(edge_map, all pixels), "sc")`` up to FFT rounding.
+
+    Examples
+    --------
+    >>> edge_map = np.zeros((40, 40), np.float32)
+    >>> edge_map[20, :] = 1.0  # a horizontal line through row 20
+    >>> d = dense_sc(edge_map)
+    >>> d.shape, bool(np.allclose(d[20, 20], extract(edge_map, "sc", points=[[20, 20]])[0], atol=1e-5))
+    ((40, 40, 37), True)
     """
     e = np.asarray(edge_map, dtype=np.float64)
     if e.ndim != 2:
@@ -243,13 +302,26 @@ def _hog(patches: np.ndarray) -> np.ndarray:
 
 
 def image_grey(image) -> np.ndarray:
-    """Grey ``(H, W)`` float32 in [0, 1] (:func:`wirescene.core.image.to_grey`)."""
+    """Grey ``(H, W)`` float32 in [0, 1] (:func:`wirescene.core.image.to_grey`).
+
+    Examples
+    --------
+    >>> g = image_grey(np.full((2, 2, 3), 255, np.uint8))
+    >>> g.dtype.name, float(g.max())
+    ('float32', 1.0)
+    """
     return to_grey(image)
 
 
 def canonical_grey(grey, z: float) -> np.ndarray:
     """Resample a native grey image by ``z`` (same grid as :func:`canonical_edges`), with
-    a Gaussian pre-filter of sigma ``0.5 / z`` when downsampling."""
+    a Gaussian pre-filter of sigma ``0.5 / z`` when downsampling.
+
+    Examples
+    --------
+    >>> canonical_grey(np.ones((20, 30)), 0.5).shape  # round(shape * z)
+    (10, 15)
+    """
     g = np.asarray(grey, dtype=np.float32)
     out = _resample(g, z, name="grey", filter_mode="nearest", resize_mode="edge")
     return g.copy() if out is g else out
@@ -305,14 +377,34 @@ def _cells_two_sizes(votes) -> tuple[np.ndarray, np.ndarray]:
 def orientation_cells(grey_map, *, cell: int = GHOG_CELL) -> np.ndarray:
     """``(H, W, GHOG_BINS)`` float32: gradient-magnitude-weighted unsigned orientation
     votes summed over the ``cell``-pixel square window at every pixel (window
-    ``[i - cell/2, i + cell/2 - 1]``; zero gradient outside the map)."""
+    ``[i - cell/2, i + cell/2 - 1]``; zero gradient outside the map).
+
+    Examples
+    --------
+    >>> grey = np.zeros((32, 32), np.float32)
+    >>> grey[:, 16:] = 1.0  # a vertical step edge
+    >>> cells = orientation_cells(grey)
+    >>> cells.shape, cells.dtype.name
+    ((32, 32, 9), 'float32')
+    >>> cells[16, 16].round(2)  # a horizontal gradient: split between bins 0 and 8 (centred on 10 and 170 deg)
+    array([4., 0., 0., 0., 0., 0., 0., 0., 4.], dtype=float32)
+    """
     return _cells_of_votes(_orientation_votes(grey_map), cell)
 
 
 def ghog_at(cells, points, *, offsets=GHOG_OFFSETS) -> np.ndarray:
     """``"ghog"`` descriptors ``(N, 145)`` at integer canonical ``points (N, 2) = (row,
     col)`` of a map of :func:`orientation_cells` (cells outside the map are empty);
-    ``offsets``: cell centres relative to the point (a 4 x 4 grid by default)."""
+    ``offsets``: cell centres relative to the point (a 4 x 4 grid by default).
+
+    Examples
+    --------
+    >>> grey = np.zeros((32, 32), np.float32)
+    >>> grey[:, 16:] = 1.0  # a vertical step edge
+    >>> d = ghog_at(orientation_cells(grey), [[16, 16], [-100, -100]])
+    >>> d.shape, float(d[1].max())  # 4 x 4 cells x 9 bins + log1p(mass); nothing far outside the map
+    ((2, 145), 0.0)
+    """
     c = np.asarray(cells, dtype=np.float32)
     p = np.asarray(points).reshape(-1, 2).astype(np.int64)
     H, W, B = c.shape
@@ -350,7 +442,15 @@ def box_context(inputs: dict, box_rc) -> np.ndarray:
     r1, c1)``, summed 2 x 2 into 2 x 4 blocks of 9 bins, L2-Hys normalised. The same for
     every point of the box: it tells a part detector which way the car faces (where in
     the box its front wheel should be), which local patches cannot (front and rear
-    wheels look alike)."""
+    wheels look alike).
+
+    Examples
+    --------
+    >>> inputs = canonical_inputs(np.zeros((40, 60, 3), np.uint8), 0.5, "ghog_ms")
+    >>> context = box_context(inputs, (0, 0, 20, 30))  # 2 x 4 blocks x 9 bins
+    >>> context.shape, context.dtype.name, context.shape[0] == CONTEXT_DIM
+    ((72,), 'float32', True)
+    """
     c = np.asarray(inputs["coarse"], dtype=np.float32)
     H, W, B = c.shape
     r0, c0, r1, c1 = (float(v) for v in box_rc)
@@ -373,7 +473,13 @@ CONTEXT_DIM = 72
 def canonical_colour(image, z: float) -> np.ndarray:
     """``(H', W', 3)`` float32 canonical colour channels of a native RGB (or grey) image:
     grey in [0, 1] and the opponent channels ``(R - G) / sqrt 2``, ``(R + G - 2B) / sqrt 6``,
-    each resampled by ``z`` like :func:`canonical_grey`."""
+    each resampled by ``z`` like :func:`canonical_grey`.
+
+    Examples
+    --------
+    >>> canonical_colour(np.array([[[255, 0, 0]]], np.uint8), 1.0).round(3)  # red: grey, R - G, R + G - 2B
+    array([[[0.299, 0.707, 0.408]]], dtype=float32)
+    """
     img = np.asarray(image)
     if img.ndim == 2:
         img = np.repeat(img[..., None], 3, axis=2)
@@ -388,7 +494,17 @@ def canonical_colour(image, z: float) -> np.ndarray:
 def colour_at(cmeans, points) -> np.ndarray:
     """Colour descriptors ``(N, 27)``: the ``COLOUR_CELL``-window means of the canonical
     colour channels (``cmeans``, window-averaged :func:`canonical_colour`) at a 3 x 3
-    grid of :data:`COLOUR_OFFSETS` around integer canonical ``points``; 0 outside."""
+    grid of :data:`COLOUR_OFFSETS` around integer canonical ``points``; 0 outside.
+
+    Examples
+    --------
+    >>> means = np.ones((40, 40, 3), np.float32)
+    >>> d = colour_at(means, [[20, 20], [0, 0]])
+    >>> d.shape, d[1].reshape(3, 3, 3)[..., 0]  # (N, 3 x 3 cells x 3 channels); cells off the map are 0
+    ((2, 27), array([[0., 0., 0.],
+           [0., 1., 1.],
+           [0., 1., 1.]], dtype=float32))
+    """
     c = np.asarray(cmeans, dtype=np.float32)
     p = np.asarray(points).reshape(-1, 2).astype(np.int64)
     H, W, C = c.shape
@@ -404,7 +520,16 @@ def canonical_inputs(image, z: float, kind: str, *, edges=None) -> dict:
     """What :func:`describe` needs for ``kind`` from a native image (crop) resampled by
     ``z``: ``{"edges": canonical edge map}`` and/or ``{"cells": orientation cells}``
     (plus ``"coarse"`` cells and ``"colour"`` means for the multi-scale kinds).
-    ``edges``: precomputed :func:`image_edges` of the same crop."""
+    ``edges``: precomputed :func:`image_edges` of the same crop.
+
+    Examples
+    --------
+    >>> inputs = canonical_inputs(np.zeros((40, 60, 3), np.uint8), 0.5, "ghog_ms")
+    >>> {k: v.shape for k, v in inputs.items()}  # 8-px and 16-px orientation cells of the 20 x 30 canonical crop
+    {'cells': (20, 30, 9), 'coarse': (20, 30, 9)}
+    >>> sorted(canonical_inputs(np.zeros((40, 60, 3), np.uint8), 0.5, "ghog_msc"))
+    ['cells', 'coarse', 'colour']
+    """
     from scipy.ndimage import uniform_filter
 
     if kind not in KINDS:
@@ -427,7 +552,14 @@ def canonical_inputs(image, z: float, kind: str, *, edges=None) -> dict:
 
 def describe(inputs: dict, points, kind: str) -> np.ndarray:
     """Descriptors ``(N, feature_dim(kind))`` at integer canonical ``points (N, 2)`` of
-    :func:`canonical_inputs` (any points: outside the map the input is empty)."""
+    :func:`canonical_inputs` (any points: outside the map the input is empty).
+
+    Examples
+    --------
+    >>> inputs = canonical_inputs(np.zeros((40, 60, 3), np.uint8), 0.5, "ghog_ms")
+    >>> describe(inputs, [[10, 15], [0, 0]], "ghog_ms").shape == (2, feature_dim("ghog_ms"))
+    True
+    """
     p = np.asarray(points).reshape(-1, 2).astype(np.int64)
     if kind == "ghog":
         return ghog_at(inputs["cells"], p)
@@ -464,6 +596,16 @@ def extract(x, kind: str = "sc", *, points=None) -> np.ndarray:
     Returns
     -------
     (N, D) or (H, W, D) float32
+
+    Examples
+    --------
+    >>> edge_map = np.zeros((40, 40), np.float32)
+    >>> edge_map[20, :] = 1.0  # a horizontal line through row 20
+    >>> d = extract(extract_patches(edge_map, [[20, 20], [0, 0]]), "sc")
+    >>> d.shape, round(float(d[0, :36].sum()), 4), d[:, -1].round(3)  # L1-normalised bins, log1p(edge mass)
+    ((2, 37), 1.0, array([3.526, 0.   ], dtype=float32))
+    >>> extract(edge_map, "sc", points=[[20, 20]]).shape  # a map and points: the same descriptors
+    (1, 37)
     """
     if kind not in KINDS:
         raise ValueError(f"unknown feature kind {kind!r}, expected one of {KINDS}")

@@ -32,6 +32,25 @@ NEIGHBOUR_TYPES = ("Van",)
 
 @dataclass
 class FrameGT:
+    """A frame's ground truth as the pre-detection AP reads it (:func:`frame_gt`): the cars
+    that count ``boxes`` ``(K, 4)`` with their observation angles ``alpha`` ``(K,)``, the
+    objects whose matches are ignored ``ignore`` ``(M, 4)`` and the DontCare regions
+    ``dontcare`` ``(N, 4)``.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import FrameLabels, Label
+    >>> def label(kind, box):
+    ...     return Label(kind, 0.0, 0, 1.6, box, [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> labels = FrameLabels([label("Car", [100, 100, 200, 160]),  # counts: 60 px high
+    ...                       label("Car", [300, 100, 340, 130]),  # 30 px high: ignored
+    ...                       label("Van", [500, 100, 600, 170])],  # the neighbouring class: ignored
+    ...                      [label("DontCare", [700, 100, 800, 200])])
+    >>> gt = frame_gt(labels)
+    >>> gt.boxes, gt.alpha, gt.ignore.shape, gt.dontcare.shape
+    (array([[100., 100., 200., 160.]]), array([1.6]), (2, 4), (1, 4))
+    """
+
     boxes: np.ndarray  # (K, 4) cars that count
     alpha: np.ndarray  # (K,)
     ignore: np.ndarray  # (M, 4) objects whose matches are ignored
@@ -47,7 +66,21 @@ def frame_gt(labels, *, wireframes: dict | None = None, min_height: float = 50.0
     """Split a frame's labels into counted cars, ignored objects and DontCare regions.
 
     ``wireframes``: the synthetic scene's ``wireframes/FRAME.json`` content (cars aligned
-    with ``labels.objects``) for the exact visible fraction; else the KITTI rule."""
+    with ``labels.objects``) for the exact visible fraction; else the KITTI rule.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import FrameLabels, Label
+    >>> def label(kind, box):
+    ...     return Label(kind, 0.0, 0, 1.6, box, [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> labels = FrameLabels([label("Car", [100, 100, 200, 160]),  # counts: 60 px high
+    ...                       label("Car", [300, 100, 340, 130]),  # 30 px high: ignored
+    ...                       label("Van", [500, 100, 600, 170])],  # the neighbouring class: ignored
+    ...                      [label("DontCare", [700, 100, 800, 200])])
+    >>> gt = frame_gt(labels)
+    >>> len(gt.boxes), len(frame_gt(labels, min_height=25).boxes)  # the small car counts from 25 px up
+    (1, 2)
+    """
     keep, alpha, ignore = [], [], []
     cars = wireframes.get("cars") if wireframes else None
     for k, o in enumerate(labels.objects):
@@ -76,7 +109,25 @@ def _inside_fraction(det: np.ndarray, regions: np.ndarray) -> np.ndarray:
 
 def match_frame(boxes, scores, alpha, gt: FrameGT, *, iou: float = 0.5, min_height: float = 50.0):
     """Label one frame's detections: returns ``(status (D,), gt_index (D,))`` with status
-    1 = true positive, 0 = false positive, -1 = ignored; detections in descending score."""
+    1 = true positive, 0 = false positive, -1 = ignored; detections in descending score.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import FrameLabels, Label
+    >>> def label(kind, box):
+    ...     return Label(kind, 0.0, 0, 1.6, box, [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> labels = FrameLabels([label("Car", [100, 100, 200, 160]),  # counts: 60 px high
+    ...                       label("Car", [300, 100, 340, 130]),  # 30 px high: ignored
+    ...                       label("Van", [500, 100, 600, 170])],  # the neighbouring class: ignored
+    ...                      [label("DontCare", [700, 100, 800, 200])])
+    >>> boxes = [[100, 100, 200, 160], [300, 100, 340, 130], [500, 100, 600, 170], [710, 110, 790, 190],
+    ...          [900, 100, 1000, 170]]
+    >>> status, gt_index = match_frame(boxes, [0.9, 0.8, 0.7, 0.6, 0.5], None, frame_gt(labels))
+    >>> status  # the car; the small car, the van and the DontCare region ignored; a false positive
+    array([ 1, -1, -1, -1,  0])
+    >>> gt_index
+    array([ 0, -1, -1, -1, -1])
+    """
     boxes, scores = _arr(boxes), np.asarray(scores, float)
     order = np.argsort(-scores, kind="stable")
     status = np.full(len(boxes), -1, int)
@@ -103,7 +154,13 @@ def match_frame(boxes, scores, alpha, gt: FrameGT, *, iou: float = 0.5, min_heig
 
 
 def voc_average_precision(recall: np.ndarray, precision: np.ndarray) -> float:
-    """PASCAL VOC (2010+) all-point interpolated AP."""
+    """PASCAL VOC (2010+) all-point interpolated AP.
+
+    Examples
+    --------
+    >>> voc_average_precision(np.array([0.5, 1.0]), np.array([1.0, 0.5]))  # 0.5 x 1 + 0.5 x 0.5
+    0.75
+    """
     mrec = np.concatenate([[0.0], recall, [1.0]])
     mpre = np.concatenate([[0.0], precision, [0.0]])
     mpre = np.maximum.accumulate(mpre[::-1])[::-1]
@@ -115,7 +172,25 @@ def evaluate_detections(detections, gts, *, iou: float = 0.5, min_height: float 
     """AP, PR curve and viewpoint accuracy over frames.
 
     ``detections``: per frame a :class:`~wirescene.core.types.Detections` (or any
-    object with ``boxes``, ``scores``, ``alpha``); ``gts``: per frame a :class:`FrameGT`."""
+    object with ``boxes``, ``scores``, ``alpha``); ``gts``: per frame a :class:`FrameGT`.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import FrameLabels, Label
+    >>> def label(kind, box):
+    ...     return Label(kind, 0.0, 0, 1.6, box, [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> labels = FrameLabels([label("Car", [100, 100, 200, 160]),  # counts: 60 px high
+    ...                       label("Car", [300, 100, 340, 130]),  # 30 px high: ignored
+    ...                       label("Van", [500, 100, 600, 170])],  # the neighbouring class: ignored
+    ...                      [label("DontCare", [700, 100, 800, 200])])
+    >>> from wirescene.core.types import Detections
+    >>> boxes = [[100, 100, 200, 160], [900, 100, 1000, 170]]
+    >>> result = evaluate_detections([Detections(boxes, [0.9, 0.5], [1.57, np.nan])], [frame_gt(labels)])
+    >>> result["ap"], result["n_tp"], result["precision"], result["viewpoint_bin_acc"]  # the car first: AP 1
+    (1.0, 1, array([1. , 0.5]), 1.0)
+    >>> evaluate_detections([Detections(boxes, [0.5, 0.9], np.nan)], [frame_gt(labels)])["ap"]  # ranked behind
+    0.5
+    """
     all_s, all_t, vp_err = [], [], []
     n_gt = 0
     for det, gt in zip(detections, gts):
@@ -148,7 +223,22 @@ def evaluate_detections(detections, gts, *, iou: float = 0.5, min_height: float 
 
 
 def summary(res: dict) -> dict:
-    """JSON-friendly subset of :func:`evaluate_detections`'s result."""
+    """JSON-friendly subset of :func:`evaluate_detections`'s result.
+
+    Examples
+    --------
+    >>> from wirescene.core.labels import FrameLabels, Label
+    >>> def label(kind, box):
+    ...     return Label(kind, 0.0, 0, 1.6, box, [1.5, 1.6, 4.0], [0, 1.6, 20], 0.0)
+    >>> labels = FrameLabels([label("Car", [100, 100, 200, 160]),  # counts: 60 px high
+    ...                       label("Car", [300, 100, 340, 130]),  # 30 px high: ignored
+    ...                       label("Van", [500, 100, 600, 170])],  # the neighbouring class: ignored
+    ...                      [label("DontCare", [700, 100, 800, 200])])
+    >>> from wirescene.core.types import Detections
+    >>> result = evaluate_detections([Detections([[100, 100, 200, 160]], 0.9, 1.57)], [frame_gt(labels)])
+    >>> summary(result)  # without the curves
+    {'ap': 1.0, 'n_gt': 1, 'n_det': 1, 'n_tp': 1, 'max_recall': 1.0, 'viewpoint_bin_acc': 1.0, 'viewpoint_within_45': 1.0}
+    """
     return {k: v for k, v in res.items() if not isinstance(v, np.ndarray)}
 
 
@@ -175,7 +265,15 @@ def plot_pr(results: dict, path, *, title: str = "Car pre-detection") -> Path:
 
 
 def load_frame_gt(split_dir, frame_id: str, **kw) -> FrameGT:
-    """GT of one frame of a KITTI-layout split (uses ``wireframes/`` when present)."""
+    """GT of one frame of a KITTI-layout split (uses ``wireframes/`` when present).
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> gt = load_frame_gt(DATA_DIR / "sample" / "kitti" / "training", "000010")
+    >>> gt.boxes.shape, gt.ignore.shape, gt.dontcare.shape  # cars that count, ignored objects, DontCare
+    ((5, 4), (3, 4), (4, 4))
+    """
     from wirescene.io.kitti import read_labels
 
     split_dir = Path(split_dir)

@@ -66,6 +66,40 @@ SUPPORT_WEIGHT = 0.3
 
 @dataclass
 class DetectorBank:
+    """A bank of ``T`` linear HOG templates, one per part configuration (module docstring).
+
+    Attributes
+    ----------
+    configs : list of Configuration
+        The part configuration of each template (its viewpoint bin, vertices, template shape
+        and full-box offsets).
+    weights : list of (th, tw, 31) float32 arrays
+        The templates.
+    biases : (T,) array
+    threshold : float
+        Default detection threshold, in the units of the scores :func:`detect_cars` returns.
+    meta : dict
+        Training settings and the learned priors (``ground_prior``, ``viewpoint_prior``, ...).
+    calibration : (2,) array or None
+        Platt ``(a, b)``: confidence ``= sigmoid(a * margin + b)``.
+    refinement, verifier : dict or None
+        The box refinement (:mod:`wirescene.predetect.refine`) and the verifier
+        (:mod:`wirescene.predetect.verifier`, with its ``gain``).
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> len(bank) == len(bank.weights) == len(bank.biases) == len(bank.bins), bank.weights[0].shape[2]
+    (True, 31)
+    >>> bank.configs[0].name, bank.configs[0].template == bank.weights[0].shape[:2]  # (th, tw) cells
+    ('bin0:full', True)
+    >>> a, b = bank.calibration  # Platt: confidence = sigmoid(a * margin + b)
+    >>> bool(np.isclose(bank.confidence(0.0), 1 / (1 + np.exp(-b))))
+    True
+    >>> round(float(bank.confidence(bank.margin_of(0.7))), 6)  # margin_of inverts it
+    0.7
+    """
+
     configs: list  # [Configuration]
     weights: list  # [(th, tw, 31) float32]
     biases: np.ndarray  # (T,)
@@ -195,7 +229,14 @@ _DEFAULT: DetectorBank | None = None
 
 
 def load_default_bank() -> DetectorBank:
-    """The bank shipped in ``wirescene/data/detector_bank.npz`` (cached)."""
+    """The bank shipped in ``wirescene/data/detector_bank.npz`` (cached).
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> bank is load_default_bank(), 0 < bank.threshold < 1  # cached; its threshold is a probability
+    (True, True)
+    """
     global _DEFAULT
     if _DEFAULT is None:
         _DEFAULT = DetectorBank.load(DEFAULT_BANK_PATH)
@@ -207,7 +248,16 @@ def load_default_bank() -> DetectorBank:
 
 @dataclass
 class Activations:
-    """Raw sliding-window activations of every detector of the bank."""
+    """Raw sliding-window activations of every detector of the bank.
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> pyramid = bank_pyramid(bank, np.zeros((64, 96, 3), np.uint8))
+    >>> act = score_pyramid(bank, pyramid, threshold=-np.inf, top_k=5, detectors=[0])
+    >>> act.det.shape, act.boxes.shape, act.scores.shape, act.level.shape, act.cell.shape
+    ((5,), (5, 4), (5,), (5,), (5, 2))
+    """
 
     det: np.ndarray  # (A,) detector index
     boxes: np.ndarray  # (A, 4) configuration boxes in image pixels
@@ -226,7 +276,17 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
     every cell's product in the cell order, added one after the other in float32 (one
     reduction along the first axis of a copy of the shifted products, which numpy sums row
     after row -- pairwise summation is only along a contiguous axis -- so the same additions
-    in the same order as a loop of in-place adds, without a numpy call per cell)."""
+    in the same order as a loop of in-place adds, without a numpy call per cell).
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> pyramid = bank_pyramid(bank, np.zeros((64, 96, 3), np.uint8))
+    >>> t, level, scale, R = next(template_responses(bank, pyramid))  # the first map of all
+    >>> (th, tw), (Hc, Wc, _) = bank.configs[t].template, pyramid[level][1].shape
+    >>> R.shape == (Hc - th + 1, Wc - tw + 1), R.dtype.name  # a score per window position
+    (True, 'float32')
+    """
     dets = range(len(bank)) if detectors is None else detectors
     buf = np.empty(0, np.float32)  # the products' memory, reused: a fresh one per level cost page faults
     stack = np.empty(0, np.float32)  # a template's shifted products, reused likewise
@@ -298,7 +358,16 @@ def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k
     ``responses`` (a dict), where given, receives every response map ``R`` as ``{(t, level): R}``
     over the windows inside the unpadded level (entry ``(r, q)``: the window whose top-left
     cell is ``(r, q)``), for the box rule to read
-    (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`)."""
+    (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`).
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> pyramid = bank_pyramid(bank, np.zeros((64, 96, 3), np.uint8))
+    >>> act = score_pyramid(bank, pyramid, threshold=-np.inf, top_k=5, detectors=[0])  # template 0's best 5
+    >>> act.boxes.shape, bool(np.all(act.det == 0))
+    ((5, 4), True)
+    """
     out = {k: [] for k in ("det", "boxes", "scores", "level", "cell")}
     pyramid = pad_pyramid(pyramid, pad_cells)
     for t, li, s, R in template_responses(bank, pyramid, min_height=min_height, max_height=max_height,
@@ -329,7 +398,14 @@ def score_pyramid(bank: DetectorBank, pyramid, *, threshold: float = -1.0, top_k
 
 def pad_pyramid(pyramid, pad_cells: int) -> list:
     """``pyramid`` with ``pad_cells`` columns of empty cells left and right of every level
-    (windows past the image's sides; DPM's padding), unchanged for 0."""
+    (windows past the image's sides; DPM's padding), unchanged for 0.
+
+    Examples
+    --------
+    >>> levels = [(1.0, np.zeros((16, 24, 31), np.float32))]
+    >>> pad_pyramid(levels, 2)[0][1].shape  # two empty cell columns on each side
+    (16, 28, 31)
+    """
     if not pad_cells:
         return list(pyramid)
     return [(s, np.pad(F, ((0, 0), (pad_cells, pad_cells), (0, 0)))) for s, F in pyramid]
@@ -338,14 +414,29 @@ def pad_pyramid(pyramid, pad_cells: int) -> list:
 def half_inside(q, tw: int, wc: int, pad_cells: int) -> np.ndarray:
     """Whether windows ``tw`` cells wide whose first column is ``q`` in a level ``wc``
     cells wide padded by ``pad_cells`` keep at least half their columns in the image (a
-    window mostly in the padding scores its bias, whatever the image shows)."""
+    window mostly in the padding scores its bias, whatever the image shows).
+
+    Examples
+    --------
+    >>> half_inside([0, 10, 11], tw=4, wc=10, pad_cells=2)  # window columns -2..1, 8..11 and 9..12 of 0..9
+    array([ True,  True, False])
+    """
     q = np.asarray(q) - pad_cells
     inside = np.minimum(q + tw, wc) - np.maximum(q, 0)
     return 2 * inside >= tw
 
 
 def nms(boxes: np.ndarray, scores: np.ndarray, iou: float = 0.5, max_keep: int | None = None) -> np.ndarray:
-    """Greedy non-maximum suppression; indices kept, best first."""
+    """Greedy non-maximum suppression; indices kept, best first.
+
+    Examples
+    --------
+    >>> boxes = np.array([[0, 0, 10, 10], [1, 0, 11, 10], [20, 0, 30, 10]], float)
+    >>> nms(boxes, [0.5, 0.9, 0.7])  # box 0 overlaps the better box 1 at IoU 0.82
+    array([1, 2])
+    >>> nms(boxes, [0.5, 0.9, 0.7], max_keep=1)
+    array([1])
+    """
     order = np.argsort(-np.asarray(scores), kind="stable")
     keep = []
     x1, y1, x2, y2 = np.asarray(boxes, float).reshape(-1, 4).T
@@ -397,6 +488,16 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
     its score the highest member score. Different viewpoints are never merged.
 
     Returns ``(boxes (C, 4), scores (C,), bins (C,), support (C,))``.
+
+    Examples
+    --------
+    >>> boxes = [[0, 0, 100, 50], [4, 2, 104, 52], [0, 0, 100, 50]]
+    >>> out, scores, bins, support = cluster_activations(boxes, [1.0, 2.0, 0.5], [3, 3, 5])
+    >>> out  # the two votes of bin 3 merged into their mean box; bin 5's alone
+    array([[  2.,   1., 102.,  51.],
+           [  0.,   0., 100.,  50.]])
+    >>> scores, bins, support  # a cluster's best vote, its bin, its number of votes
+    (array([2. , 0.5]), array([3, 5]), array([2., 1.]))
     """
     boxes = np.asarray(boxes, float).reshape(-1, 4)
     scores = np.asarray(scores, float).reshape(-1)
@@ -497,7 +598,16 @@ def bank_scales(bank: DetectorBank, width: int, height: int, *, max_scale: float
                 per_octave: int | None = None) -> list[float]:
     """Pyramid scales of a ``width x height`` image at the levels the bank was trained with
     (``meta["max_scale"]``, ``meta["per_octave"]``; 2.0 and 4 for banks that do not say),
-    unless ``max_scale`` / ``per_octave`` are given."""
+    unless ``max_scale`` / ``per_octave`` are given.
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> np.round(bank_scales(bank, 1242, 375, max_scale=2.0, per_octave=4)[:3], 3)  # 2 ** (-k / 4) from 2x
+    array([2.   , 1.682, 1.414])
+    >>> bank_scales(bank, 1242, 375)[0] == bank.meta["max_scale"]  # the levels the bank was trained with
+    True
+    """
     max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
     per_octave = int(bank.meta.get("per_octave", 4)) if per_octave is None else per_octave
     return pyramid_scales(width, height, max_scale=max_scale, per_octave=per_octave)
@@ -534,7 +644,18 @@ def bank_pyramid(bank: DetectorBank, image: np.ndarray, *, max_scale: float | No
                  per_octave: int | None = None) -> list[tuple[float, np.ndarray]]:
     """The HOG :func:`~wirescene.predetect.hog.feature_pyramid` of ``image`` at the bank's
     levels (:func:`bank_scales`, with its ``max_scale`` / ``per_octave``): what :func:`detect_cars`
-    computes, to share with the box rule (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`)."""
+    computes, to share with the box rule (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`).
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> pyramid = bank_pyramid(bank, np.zeros((64, 96, 3), np.uint8))
+    >>> [s for s, _ in pyramid] == bank_scales(bank, 96, 64)
+    True
+    >>> scale, F = pyramid[0]
+    >>> F.shape == (round(64 * scale) // 8, round(96 * scale) // 8, 31)  # 8-px cells of the resized image
+    True
+    """
     H, W = np.asarray(image).shape[:2]
     return feature_pyramid(image, bank_scales(bank, W, H, max_scale=max_scale, per_octave=per_octave))
 
@@ -542,7 +663,16 @@ def bank_pyramid(bank: DetectorBank, image: np.ndarray, *, max_scale: float | No
 def cluster_options(bank: DetectorBank) -> dict:
     """Clustering options stored with the bank (``meta["box_weight"]``, old banks: plain
     means; ``meta["cluster_rx" | "cluster_ry" | "cluster_rs"]`` where set, else
-    :func:`cluster_activations`' radii)."""
+    :func:`cluster_activations`' radii).
+
+    Examples
+    --------
+    >>> bank = DetectorBank([], [], np.zeros(0), meta={"box_weight": 2.0, "cluster_rx": 0.2, "cluster_ry": 0.2})
+    >>> cluster_options(bank)
+    {'box_weight': 2.0, 'rx': 0.2, 'ry': 0.2}
+    >>> cluster_options(DetectorBank([], [], np.zeros(0)))  # an old bank: plain means, the default radii
+    {'box_weight': 0.0}
+    """
     kw = {"box_weight": float(bank.meta.get("box_weight", 0.0))}
     kw.update({k: float(bank.meta[f"cluster_{k}"]) for k in ("rx", "ry", "rs") if f"cluster_{k}" in bank.meta})
     return kw
@@ -576,7 +706,14 @@ def detect_pyramid(bank: DetectorBank, pyramid, image_size, *, threshold: float 
 
 def raw_threshold(bank: DetectorBank, threshold: float | None, *, calibrated: bool = True) -> float | None:
     """``threshold`` in margin units (None stays None): :meth:`DetectorBank.margin_of` of a
-    calibrated one."""
+    calibrated one.
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> round(float(bank.confidence(raw_threshold(bank, 0.7))), 6), raw_threshold(bank, 0.7, calibrated=False)
+    (0.7, 0.7)
+    """
     return None if threshold is None else (bank.margin_of(threshold) if calibrated else float(threshold))
 
 
@@ -649,7 +786,19 @@ def finish_clusters(clusters, bank: DetectorBank, image_size, *, threshold: floa
     :func:`vote_clusters` (or :func:`pyramid_clusters`): clip, box regression, refinement,
     verifier, ground term, suppression across viewpoints, ``threshold`` (margin units);
     ``calibrated``: the returned scores are the bank's calibrated confidences (where it
-    has a calibration)."""
+    has a calibration).
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> boxes = np.array([[100.0, 150, 220, 220], [105, 152, 225, 222], [400, 160, 460, 200]])
+    >>> clusters = boxes, np.array([1.5, 0.5, -3.0]), np.array([2, 6, 0])  # margins, viewpoint bins
+    >>> found = finish_clusters(clusters, bank, (1242, 375), threshold=bank.margin_of(0.5), calibrated=True)
+    >>> len(found), found.alpha.round(4)  # bin 6's box suppressed, the third too weak; bin 2's centre
+    (1, array([1.5708]))
+    >>> bool(np.isclose(found.scores[0], bank.confidence(1.5)))  # no image: no verifier nor ground term
+    True
+    """
     W, H = image_size
     boxes, scores, bins = clusters
     if threshold is not None and verify_within is not None:
@@ -693,7 +842,18 @@ def verification_logits(bank: DetectorBank, gray: np.ndarray, boxes, bins, *,
     ``boxes`` ``(D, 4)`` of viewpoint ``bins`` ``(D,)`` in the grey ``(H, W)`` float image
     show a car; zeros for a bank without one. A verifier that reads colour
     (:attr:`DetectorBank.needs_channels`) needs the image's ``channels``
-    (:func:`~wirescene.predetect.channels.integral_channels`)."""
+    (:func:`~wirescene.predetect.channels.integral_channels`).
+
+    Examples
+    --------
+    >>> from wirescene.predetect.channels import integral_channels
+    >>> image = np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8)
+    >>> bank = load_default_bank()
+    >>> logits = verification_logits(bank, to_gray(image), [[10, 10, 70, 40], [20, 5, 90, 60]], [0, 2],
+    ...                              channels=integral_channels(image))  # this bank's verifier reads colour
+    >>> logits.shape, bool(np.isfinite(logits).all())
+    ((2,), True)
+    """
     b = np.asarray(boxes, float).reshape(-1, 4)
     if bank.verifier is None or not len(b):
         return np.zeros(len(b))
@@ -711,7 +871,14 @@ def ground_margin(bank: DetectorBank, boxes, horizon: float | Horizon) -> np.nda
     ratio of :func:`wirescene.predetect.geometry.ground_log_ratio` divided by the Platt slope,
     so that the calibrated confidence is ``sigmoid(a * margin + b + log ratio)``. Zero for
     a bank without a ground prior, and for an uncalibrated one (its scores are SVM margins,
-    on no scale a log ratio could be added to)."""
+    on no scale a log ratio could be added to).
+
+    Examples
+    --------
+    >>> boxes = [[500, 180, 600, 230], [500, 100, 600, 150]]  # standing 1.2 box heights below the horizon; above it
+    >>> (ground_margin(load_default_bank(), boxes, 170.0) > 0).tolist()
+    [True, False]
+    """
     if bank.calibration is None:
         return np.zeros(len(boxes))
     return bank.ground_log_ratio(boxes, horizon) / float(bank.calibration[0])
@@ -724,7 +891,18 @@ def traffic_viewpoints(bank: DetectorBank, kept, kept_bins, clusters, horizon: f
     :func:`wirescene.predetect.viewpoint_prior.choose_viewpoints` with the bank's viewpoint
     prior at each box's lateral position. ``kept_bins`` (the winners' own bins) unchanged
     for a bank without that prior or without a calibration (margins of different
-    viewpoints' templates are only comparable as calibrated log-odds)."""
+    viewpoints' templates are only comparable as calibrated log-odds).
+
+    Examples
+    --------
+    >>> bank = load_default_bank()
+    >>> def facing(x1):  # a front view (bin 2) scoring a little above a back view (bin 6) of the same box
+    ...     boxes = np.array([[x1, 180, x1 + 100, 230], [x1 + 2, 181, x1 + 101, 231]])
+    ...     return traffic_viewpoints(bank, boxes[:1], [2], (boxes, np.array([0.2, 0.0]), np.array([2, 6])), 170.0,
+    ...                               600.0, iou=0.3)
+    >>> facing(700.0), facing(400.0)  # to the right of the camera traffic shows its back; to the left, fronts
+    (array([6]), array([2]))
+    """
     log_prior = traffic_log_prior(bank, kept, horizon, center_column) if len(kept) else None
     if log_prior is None:
         return np.asarray(kept_bins, int)
@@ -737,7 +915,14 @@ def traffic_log_prior(bank: DetectorBank, boxes, horizon: float | Horizon, cente
     """``(D, 8)`` log P(bin | lateral position) of ``boxes`` ``(D, 4)`` under the bank's
     viewpoint prior (:func:`wirescene.predetect.viewpoint_prior.viewpoint_log_prior`), or None
     for a bank without that prior or without a calibration (its margins are no log-odds the
-    prior could be added to)."""
+    prior could be added to).
+
+    Examples
+    --------
+    >>> prior = traffic_log_prior(load_default_bank(), [[700, 180, 800, 230]], 170.0, 600.0)
+    >>> prior.shape, bool(np.isclose(np.exp(prior).sum(), 1.0))  # log P(bin | lateral position)
+    ((1, 8), True)
+    """
     prior = bank.meta.get("viewpoint_prior")
     if not prior or bank.calibration is None:
         return None
@@ -755,7 +940,14 @@ def regression_features(boxes, bins, image_size) -> np.ndarray:
     """``(D, F)`` features of detection boxes ``(D, 4)`` (clipped to the image) for the
     box regression: a constant, the viewpoint bin (one-hot), log height (over 100 px),
     log aspect ratio, the bottom edge's height in the image, and whether the box touches
-    the left or right image border (a truncated car, whose label box is clipped)."""
+    the left or right image border (a truncated car, whose label box is clipped).
+
+    Examples
+    --------
+    >>> f = regression_features([[0, 100, 50, 200]], [2], (1242, 375))  # 100 px high, at the left side
+    >>> f.shape, dict(zip(REGRESSION_FEATURES[9:], f[0, 9:].round(3).tolist()))
+    ((1, 14), {'log_height': 0.0, 'log_aspect': -0.693, 'bottom': 0.033, 'at_left': 1.0, 'at_right': 0.0})
+    """
     W, H = image_size
     b = np.asarray(boxes, float).reshape(-1, 4)
     w, h = np.maximum(b[:, 2] - b[:, 0], 1.0), np.maximum(b[:, 3] - b[:, 1], 1.0)
@@ -768,7 +960,15 @@ def apply_box_regression(regression: dict, boxes, bins, image_size) -> np.ndarra
     """Boxes ``(D, 4)`` moved by the linear box regression ``regression`` (``weights``
     ``(F, 4)``: each side's offset in units of the box width or height, DPM's bounding-box
     prediction), which maps the bank's cluster boxes -- averaged votes of the placed
-    wireframe's box -- onto the labelled 2D boxes."""
+    wireframe's box -- onto the labelled 2D boxes.
+
+    Examples
+    --------
+    >>> weights = np.zeros((len(REGRESSION_FEATURES), 4))
+    >>> weights[0] = [0.1, 0.0, -0.1, 0.0]  # the constant: both sides 10% of the width inwards
+    >>> apply_box_regression({"weights": weights}, [[100, 100, 200, 150]], [0], (1242, 375))
+    array([[110., 100., 190., 150.]])
+    """
     b = np.asarray(boxes, float).reshape(-1, 4)
     if not len(b):
         return b

@@ -34,18 +34,40 @@ FULL = tuple(range(N_VERTICES))
 
 
 def mirror_bin(b):
-    """Viewpoint bin of the horizontally flipped image (alpha -> pi - alpha)."""
+    """Viewpoint bin of the horizontally flipped image (alpha -> pi - alpha).
+
+    Examples
+    --------
+    >>> mirror_bin(np.arange(8))  # bins 2 and 6 (alpha +-90 deg) are their own mirror images
+    array([4, 3, 2, 1, 0, 7, 6, 5])
+    """
     return (4 - np.asarray(b)) % N_BINS
 
 
 def mirror_alpha(alpha):
-    """Observation angles ``(...)`` in the horizontally flipped image: ``pi - alpha``, in ``[-pi, pi)``."""
+    """Observation angles ``(...)`` in the horizontally flipped image: ``pi - alpha``, in ``[-pi, pi)``.
+
+    Examples
+    --------
+    >>> mirror_alpha([0.0, np.pi / 2, 0.5]).round(4)  # pi - alpha, wrapped into [-pi, pi)
+    array([-3.1416,  1.5708,  2.6416])
+    """
     return wrap_angle(np.pi - np.asarray(alpha, dtype=float))
 
 
 @dataclass
 class Configuration:
-    """One part configuration seen from one viewpoint bin."""
+    """One part configuration seen from one viewpoint bin.
+
+    Examples
+    --------
+    >>> c = Configuration(bin=0, vertices=(0, 1, 2), template=(4, 6), offsets=np.array([-0.5, -0.2, 0.5, 0.3]),
+    ...                   frac=np.array([0.5, 0.6]), coverage=0.3)
+    >>> c.name, c.is_full
+    ('bin0:nose_bottom_left+nose_top_left+headlight_left', False)
+    >>> c.full_box([[100, 100, 160, 150]])  # cfg box + offsets * (60, 50, 60, 50)
+    array([[ 70.,  90., 190., 165.]])
+    """
 
     bin: int
     vertices: tuple  # vertex indices; all 36 for the full-car configuration
@@ -84,7 +106,14 @@ def _adjacency() -> list[set]:
 
 
 def connected_subsets(sizes=(3, 4)) -> list[tuple]:
-    """All vertex sets of the given sizes that are connected in the wireframe graph."""
+    """All vertex sets of the given sizes that are connected in the wireframe graph.
+
+    Examples
+    --------
+    >>> subsets = connected_subsets()
+    >>> len(subsets), subsets[:2], len(connected_subsets((3,)))
+    (374, [(0, 1, 2), (0, 1, 2, 3)], 116)
+    """
     adj = _adjacency()
     found: set = set()
     frontier = {frozenset([v]) for v in range(N_VERTICES)}
@@ -177,7 +206,17 @@ def apply_full_box(examples, corr: np.ndarray) -> None:
 
 
 def config_box(v2d: np.ndarray, vertices, full_box: np.ndarray) -> np.ndarray:
-    """Configuration box of vertex set ``vertices`` (see module docstring)."""
+    """Configuration box of vertex set ``vertices`` (see module docstring).
+
+    Examples
+    --------
+    >>> v2d = np.array([[x, y] for x in range(6) for y in range(6)], float) * 10  # 36 vertices on a grid
+    >>> full = np.array([0.0, 0, 50, 50])
+    >>> config_box(v2d, FULL, full)  # the full-car configuration: the full box itself
+    array([ 0.,  0., 50., 50.])
+    >>> config_box(v2d, (0, 1, 2), full)  # (0, 0)..(0, 20) grown by 4 px, then to 15 px (30%) wide
+    array([-7.5, -4. ,  7.5, 24. ])
+    """
     fb = np.asarray(full_box, float)
     if len(vertices) == N_VERTICES:
         return fb.copy()
@@ -196,6 +235,14 @@ def _normalised(box, full):
 
 
 def template_shape(aspect: float, area_cells: float) -> tuple:
+    """``(th, tw)`` HOG cells of a template of about ``area_cells`` cells whose width is
+    ``aspect`` times its height, at least 3 x 3.
+
+    Examples
+    --------
+    >>> template_shape(2.0, 60), template_shape(0.5, 42)  # th = round(sqrt(area / aspect)), tw = round(area / th)
+    ((5, 12), (9, 5))
+    """
     th = max(3, int(round(np.sqrt(area_cells / max(aspect, 1e-3)))))
     tw = max(3, int(round(area_cells / th)))
     return th, tw

@@ -37,7 +37,15 @@ from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, KITTI_MOUNT, Mount
 
 class Horizon(NamedTuple):
     """The horizon's image ``row`` and the camera's height above the road as the priors
-    read it: ``scale`` = KITTI's camera height over the camera's (1 for KITTI's rig)."""
+    read it: ``scale`` = KITTI's camera height over the camera's (1 for KITTI's rig).
+
+    Examples
+    --------
+    >>> Horizon(170.0)  # KITTI's rig
+    Horizon(row=170.0, scale=1.0)
+    >>> below_horizon([230.0], Horizon(170.0, scale=0.5))  # a camera 3.3 m up: 60 px read as KITTI's 30
+    array([30.])
+    """
 
     row: float
     scale: float = 1.0
@@ -49,7 +57,16 @@ MIN_SIGMA = 0.05
 
 
 def horizon_row(camera) -> float:
-    """Image row of the horizon of the KITTI camera frame's ground plane (``K[1, 2]``)."""
+    """Image row of the horizon of the KITTI camera frame's ground plane (``K[1, 2]``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> horizon_row(camera)  # K[1, 2]
+    170.0
+    """
     return float(np.asarray(camera.K, float)[1, 2])
 
 
@@ -79,7 +96,13 @@ def road_horizon(camera, mount: Mount = KITTI_MOUNT) -> Horizon:
 
 def below_horizon(rows, horizon) -> np.ndarray:
     """How far image ``rows`` lie below the ``horizon`` (a :class:`Horizon`, or a row for
-    KITTI's rig), in pixels of KITTI's camera height."""
+    KITTI's rig), in pixels of KITTI's camera height.
+
+    Examples
+    --------
+    >>> below_horizon([200.0, 230.0], 170.0)  # a row: KITTI's camera height
+    array([30., 60.])
+    """
     if isinstance(horizon, Horizon):
         return (np.asarray(rows, float) - horizon.row) * horizon.scale
     return np.asarray(rows, float) - float(horizon)
@@ -87,7 +110,13 @@ def below_horizon(rows, horizon) -> np.ndarray:
 
 def bottom_ratio(boxes, horizon) -> np.ndarray:
     """``(D,)`` ratio ``(bottom - horizon) / height`` of boxes ``(D, 4)`` (x1 y1 x2 y2);
-    ``horizon`` as in :func:`below_horizon`."""
+    ``horizon`` as in :func:`below_horizon`.
+
+    Examples
+    --------
+    >>> bottom_ratio([[500, 180, 600, 230], [500, 100, 600, 150]], 170.0)  # 60 / 50; a box above the horizon
+    array([ 1.2, -0.4])
+    """
     b = np.asarray(boxes, float).reshape(-1, 4)
     return below_horizon(b[:, 3], horizon) / np.maximum(b[:, 3] - b[:, 1], 1.0)
 
@@ -100,7 +129,14 @@ def _log_normal(x, mean: float, sigma: float) -> np.ndarray:
 def fit_ground_prior(car_ratios, background_ratios) -> dict:
     """The prior (a JSON-able dict) from the ratios of training cars and of background
     detections: a robust normal for cars (median, 1.4826 MAD) and a normal for the
-    background (mean, standard deviation)."""
+    background (mean, standard deviation).
+
+    Examples
+    --------
+    >>> prior = fit_ground_prior([1.0, 1.1, 1.2, 1.3, 1.4], [-1.0, 0.0, 0.5, 1.0, 2.5])
+    >>> prior["car"][0], round(prior["car"][1], 4), prior["background"][0]  # median, 1.4826 MAD; mean
+    (1.2, 0.1483, 0.6)
+    """
     rc = np.asarray(car_ratios, float)
     rb = np.asarray(background_ratios, float)
     rc, rb = rc[np.isfinite(rc)], rb[np.isfinite(rb)]
@@ -123,7 +159,15 @@ def _log_densities(prior: dict, r) -> tuple[np.ndarray, np.ndarray]:
 def ground_log_ratio(prior: dict, boxes, horizon: float | Horizon) -> np.ndarray:
     """``(D,)`` log p(r | car) - log p(r | background) of boxes ``(D, 4)``; the car density
     is mixed with ``outlier_share`` of the background density, so the ratio is bounded
-    below by ``log(outlier_share)``."""
+    below by ``log(outlier_share)``.
+
+    Examples
+    --------
+    >>> prior = fit_ground_prior([1.0, 1.1, 1.2, 1.3, 1.4], [-1.0, 0.0, 0.5, 1.0, 2.5])
+    >>> boxes = [[500, 180, 600, 230], [500, 100, 600, 150]]  # ratios 1.2 (a car's) and -0.4
+    >>> ground_log_ratio(prior, boxes, 170.0).round(2)  # bounded below by log(outlier_share) = log(0.02)
+    array([ 2.17, -3.91])
+    """
     car, bg = _log_densities(prior, bottom_ratio(boxes, horizon))
     return car - bg
 

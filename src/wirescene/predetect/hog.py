@@ -20,7 +20,14 @@ _N_ORIENT = 18
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
-    """(H, W) float32 luminance in [0, 1] (:func:`wirescene.core.image.to_grey`)."""
+    """(H, W) float32 luminance in [0, 1] (:func:`wirescene.core.image.to_grey`).
+
+    Examples
+    --------
+    >>> g = to_gray(np.full((2, 3, 3), 255, np.uint8))
+    >>> g.shape, g.dtype.name, float(g.max())
+    ((2, 3), 'float32', 1.0)
+    """
     return to_grey(image)
 
 
@@ -113,7 +120,22 @@ def hog_cells(gray: np.ndarray, cell: int = CELL, *, strip_pixels: int = 1 << 16
     (a stack of equal crops in one call: the same numbers as one call each, for far fewer
     numpy calls). The pixels are read in strips of whole cell rows, some ``strip_pixels`` at
     a time: the same sums in the same order, with the temporaries in the CPU's cache (1.4-1.8x
-    faster on a 750 x 2484 pyramid level; ``benchmarks/bench_hog.py``)."""
+    faster on a 750 x 2484 pyramid level; ``benchmarks/bench_hog.py``).
+
+    Examples
+    --------
+    >>> step = np.zeros((32, 48), np.float32)
+    >>> step[:, 24:] = 1.0  # dark left, bright right: a vertical edge between cell columns 2 and 3
+    >>> F = hog_cells(step)
+    >>> F.shape, F.dtype.name  # 4 x 6 cells of 8 px, 31 features each
+    ((4, 6, 31), 'float32')
+    >>> int(F[1, 2, :18].argmax()), int(F[1, 2, 18:27].argmax())  # gradient along +x: bin 9 of 18, bin 0 of 9
+    (9, 0)
+    >>> float(hog_cells(np.zeros((32, 48))).max())  # no gradient, no feature
+    0.0
+    >>> hog_cells(np.zeros((5, 32, 48))).shape  # a stack of equal crops at once
+    (5, 4, 6, 31)
+    """
     g = np.asarray(gray, dtype=np.float32)
     lead = g.shape[:-2]
     hc, wc = g.shape[-2] // cell, g.shape[-1] // cell
@@ -141,14 +163,28 @@ def hog_cells(gray: np.ndarray, cell: int = CELL, *, strip_pixels: int = 1 << 16
 
 
 def resize(gray: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Bilinear (antialiased when shrinking) resize of a float grey image."""
+    """Bilinear (antialiased when shrinking) resize of a float grey image.
+
+    Examples
+    --------
+    >>> resize(np.ones((4, 6)), 3, 2).shape  # width, height in; (height, width) out
+    (2, 3)
+    """
     return np.asarray(Image.fromarray(np.asarray(gray, np.float32), mode="F").resize(
         (int(width), int(height)), Image.BILINEAR), dtype=np.float32)
 
 
 def pyramid_scales(width: int, height: int, *, max_scale: float = 2.0, min_scale: float = 0.1,
                    per_octave: int = 4, min_cells: int = 4) -> list[float]:
-    """Image scales ``max_scale * 2**(-k / per_octave)`` down to ``min_scale`` (or too small)."""
+    """Image scales ``max_scale * 2**(-k / per_octave)`` down to ``min_scale`` (or too small).
+
+    Examples
+    --------
+    >>> np.round(pyramid_scales(64, 64, max_scale=1.0, min_scale=0.5), 3)  # 4 levels an octave
+    array([1.   , 0.841, 0.707, 0.595, 0.5  ])
+    >>> len(pyramid_scales(1242, 375))  # a KITTI frame from 2x down to 0.1x, 4 levels an octave
+    18
+    """
     scales, k = [], 0
     while True:
         s = max_scale * 2.0 ** (-k / per_octave)
@@ -160,19 +196,38 @@ def pyramid_scales(width: int, height: int, *, max_scale: float = 2.0, min_scale
 
 
 def level_size(W: int, H: int, scale: float) -> tuple[int, int]:
-    """``(w, h)`` in pixels of a ``W x H`` image at pyramid ``scale``."""
+    """``(w, h)`` in pixels of a ``W x H`` image at pyramid ``scale``.
+
+    Examples
+    --------
+    >>> level_size(1242, 375, 0.5)  # (w, h), rounded
+    (621, 188)
+    """
     return max(int(round(W * scale)), 1), max(int(round(H * scale)), 1)
 
 
 def level_image(gray: np.ndarray, scale: float) -> np.ndarray:
-    """The grey image resized to pyramid ``scale`` (itself at scale 1)."""
+    """The grey image resized to pyramid ``scale`` (itself at scale 1).
+
+    Examples
+    --------
+    >>> level_image(np.zeros((375, 1242), np.float32), 0.5).shape
+    (188, 621)
+    """
     H, W = gray.shape
     w, h = level_size(W, H, scale)
     return gray if (w == W and h == H) else resize(gray, w, h)
 
 
 def feature_pyramid(image: np.ndarray, scales) -> list[tuple[float, np.ndarray]]:
-    """``[(scale, (Hc, Wc, 31) features)]`` of the image resized by each scale."""
+    """``[(scale, (Hc, Wc, 31) features)]`` of the image resized by each scale.
+
+    Examples
+    --------
+    >>> image = np.zeros((64, 96, 3), np.uint8)
+    >>> [(s, F.shape) for s, F in feature_pyramid(image, [1.0, 0.5])]
+    [(1.0, (8, 12, 31)), (0.5, (4, 6, 31))]
+    """
     gray = to_gray(image)
     return [(float(s), hog_cells(level_image(gray, s))) for s in scales]
 
@@ -206,14 +261,30 @@ def crop_features(gray: np.ndarray, box, th: int, tw: int) -> np.ndarray:
 
     The crop includes one cell of context on every side (edge-replicated outside the
     image) so that gradients and block normalisation at the template border match those
-    of the sliding-window features."""
+    of the sliding-window features.
+
+    Examples
+    --------
+    >>> gray = to_gray(np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8))
+    >>> crop_features(gray, [10, 10, 70, 40], 4, 8).shape  # a 60 x 30 px box on a 4 x 8-cell template
+    (4, 8, 31)
+    """
     return hog_cells(_warped_crop(gray, box, th, tw))[1:-1, 1:-1]
 
 
 def crops_features(gray: np.ndarray, boxes, th: int, tw: int, *, chunk: int = 16) -> np.ndarray:
     """(D, th, tw, 31) :func:`crop_features` of ``boxes`` ``(D, 4)``, the same numbers, the
     features of ``chunk`` crops at a time (some 60 kB per crop and array: 16 keep the
-    temporaries in the CPU's cache, 1.9x faster than 256; ``benchmarks/bench_hog.py``)."""
+    temporaries in the CPU's cache, 1.9x faster than 256; ``benchmarks/bench_hog.py``).
+
+    Examples
+    --------
+    >>> gray = to_gray(np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8))
+    >>> boxes = [[10, 10, 70, 40], [-5, 0, 30, 30]]  # the second reaches past the image's left side
+    >>> F = crops_features(gray, boxes, 4, 8)
+    >>> F.shape, bool(np.array_equal(F[0], crop_features(gray, boxes[0], 4, 8)))
+    ((2, 4, 8, 31), True)
+    """
     b = np.asarray(boxes, float).reshape(-1, 4)
     out = np.zeros((len(b), th, tw, N_FEAT), np.float32)
     for start in range(0, len(b), chunk):

@@ -28,7 +28,13 @@ GRID = (8, 12)  # (rows, cols) of HOG cells of the grown window
 
 
 def window_boxes(boxes) -> np.ndarray:
-    """Boxes ``(D, 4)`` grown by ``CONTEXT`` of their width / height on every side."""
+    """Boxes ``(D, 4)`` grown by ``CONTEXT`` of their width / height on every side.
+
+    Examples
+    --------
+    >>> window_boxes([[0, 0, 100, 40]])  # a quarter of the width / height on every side
+    array([[-25., -10., 125.,  50.]])
+    """
     b = np.asarray(boxes, float).reshape(-1, 4)
     w, h = b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]
     return b + CONTEXT * np.column_stack([-w, -h, w, h])
@@ -37,7 +43,18 @@ def window_boxes(boxes) -> np.ndarray:
 def refinement_features(gray: np.ndarray, boxes, geometry: np.ndarray) -> np.ndarray:
     """``(D, F)`` features of detection ``boxes`` ``(D, 4)`` in a grey ``(H, W)`` float
     image: the HOG cells of each grown window, then ``geometry`` ``(D, G)`` (the box
-    regression's features of the same boxes)."""
+    regression's features of the same boxes).
+
+    Examples
+    --------
+    >>> from wirescene.predetect.bank import regression_features
+    >>> from wirescene.predetect.hog import to_gray
+    >>> gray = to_gray(np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8))
+    >>> boxes = np.array([[10.0, 10, 70, 40], [20, 5, 90, 60]])
+    >>> geometry = regression_features(boxes, [0, 2], (96, 64))  # (2, 14)
+    >>> refinement_features(gray, boxes, geometry).shape  # 8 x 12 cells x 31, then the 14 geometry features
+    (2, 2990)
+    """
     b = np.asarray(boxes, float).reshape(-1, 4)
     geometry = np.asarray(geometry, float)
     geometry = geometry.reshape(len(b), geometry.shape[-1])  # (the last axis named: no boxes, no rows to infer it)
@@ -48,7 +65,23 @@ def refinement_features(gray: np.ndarray, boxes, geometry: np.ndarray) -> np.nda
 
 def apply_box_refinement(refinement: dict, gray: np.ndarray, boxes, geometry) -> np.ndarray:
     """Boxes ``(D, 4)`` moved by a fitted refinement (``mean`` ``(F,)``, ``scale`` ``(F,)``,
-    ``weights`` ``(F + 1, 4)``, the last row the constant)."""
+    ``weights`` ``(F + 1, 4)``, the last row the constant).
+
+    Examples
+    --------
+    >>> from wirescene.predetect.bank import regression_features
+    >>> from wirescene.predetect.hog import to_gray
+    >>> gray = to_gray(np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8))
+    >>> boxes = np.array([[10.0, 10, 70, 40], [20, 5, 90, 60]])
+    >>> geometry = regression_features(boxes, [0, 2], (96, 64))  # (2, 14)
+    >>> F = 2990
+    >>> weights = np.zeros((F + 1, 4))
+    >>> weights[-1] = [0.1, 0.0, -0.1, 0.0]  # the constant alone: both sides 10% of the width inwards
+    >>> refinement = {"mean": np.zeros(F), "scale": np.ones(F), "weights": weights}
+    >>> apply_box_refinement(refinement, gray, boxes, geometry)
+    array([[16., 10., 64., 40.],
+           [27.,  5., 83., 60.]])
+    """
     b = np.asarray(boxes, float).reshape(-1, 4)
     if not len(b):
         return b
@@ -64,7 +97,20 @@ def fit_ridge(X, T, reg: float, *, chunk: int = 2048) -> dict:
     """The refinement ``dict`` of a ridge regression ``T (N, 4) ~ X (N, F)`` on
     standardised features (constant features keep scale 1), the constant unpenalised.
     The normal equations are accumulated ``chunk`` rows at a time in float64, so memory
-    is that of ``X`` itself plus ``F x F`` floats, whatever ``N``."""
+    is that of ``X`` itself plus ``F x F`` floats, whatever ``N``.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> X = rng.normal(size=(200, 3))
+    >>> T = np.column_stack([X @ [1.0, 2.0, 0.0], 0.5 * X[:, 0], np.zeros(200), np.full(200, 0.1)])
+    >>> fit = fit_ridge(X, T, reg=0.0)
+    >>> {k: v.shape for k, v in fit.items()}  # the last row of the weights: the constant
+    {'mean': (3,), 'scale': (3,), 'weights': (4, 4)}
+    >>> predicted = (X - fit["mean"]) / fit["scale"] @ fit["weights"][:-1] + fit["weights"][-1]
+    >>> bool(np.abs(predicted - T).max() < 1e-4)  # a linear target, found exactly (to float32)
+    True
+    """
     X, T = np.asarray(X), np.asarray(T, float)
     n, F = X.shape
 

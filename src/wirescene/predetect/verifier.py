@@ -44,7 +44,21 @@ def verifier_features(gray: np.ndarray, boxes, geometry, *, channels: np.ndarray
     the HOG cells of each box's window, then, given the image's ``channels``
     (:func:`wirescene.predetect.channels.integral_channels`), its colour and gradient-magnitude
     channel features (:func:`wirescene.predetect.channels.window_channel_features`), then the
-    geometry."""
+    geometry.
+
+    Examples
+    --------
+    >>> from wirescene.predetect.bank import regression_features
+    >>> from wirescene.predetect.channels import integral_channels
+    >>> from wirescene.predetect.hog import to_gray
+    >>> image = np.random.default_rng(0).integers(0, 255, (64, 96, 3), dtype=np.uint8)
+    >>> boxes = np.array([[10.0, 10, 70, 40], [20, 5, 90, 60]])
+    >>> geometry = regression_features(boxes, [0, 2], (96, 64))
+    >>> verifier_features(to_gray(image), boxes, geometry).shape  # HOG of the grown window, geometry
+    (2, 2990)
+    >>> verifier_features(to_gray(image), boxes, geometry, channels=integral_channels(image)).shape  # + channels
+    (2, 3382)
+    """
     if channels is None:
         return refinement_features(gray, boxes, geometry)
     b = np.asarray(boxes, float).reshape(-1, 4)
@@ -124,7 +138,14 @@ def _logistic(z: np.ndarray, y: np.ndarray, C: float) -> np.ndarray:
 
 def verifier_logits(verifier: dict, features, *, groups=None) -> np.ndarray:
     """``(D,)`` log-odds of the verifier for ``features`` ``(D, F)``; a verifier with one
-    regression per viewpoint group needs each row's ``groups`` ``(D,)``."""
+    regression per viewpoint group needs each row's ``groups`` ``(D,)``.
+
+    Examples
+    --------
+    >>> verifier = {"mean": np.zeros(2), "scale": np.ones(2), "weights": np.array([1.0, -1.0, 0.5])}
+    >>> verifier_logits(verifier, [[2.0, 1.0], [0.0, 3.0]])  # x . w + constant
+    array([ 1.5, -2.5])
+    """
     mean, scale, weights = (np.asarray(verifier[k], float) for k in ("mean", "scale", "weights"))
     x = np.asarray(features, float).reshape(-1, len(mean))
     z = (x - mean) / scale

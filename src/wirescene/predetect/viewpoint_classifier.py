@@ -55,7 +55,17 @@ def crop_viewpoint_features(image: np.ndarray, boxes) -> np.ndarray:
     """``(N, F)`` appearance features of boxes ``(N, 4)`` in an ``(H, W, 3)`` uint8 image:
     HOG of the box warped to :data:`HOG_GRID` cells, per cell of :data:`COLOUR_GRID` the mean
     and maximum redness (``R - max(G, B)``, clipped at 0) and brightness, and the log
-    aspect ratio."""
+    aspect ratio.
+
+    Examples
+    --------
+    >>> image = np.zeros((64, 96, 3), np.uint8)
+    >>> f = crop_viewpoint_features(image, [[10, 10, 70, 40], [0, 0, 30, 30]])
+    >>> f.shape == (2, N_FEATURES), N_FEATURES, f.dtype.name  # 6 x 10 cells x 31, 4 numbers x 24 colour cells, aspect
+    (True, 1957, 'float32')
+    >>> f[:, -1].round(3)  # log(60 / 30), log(30 / 30)
+    array([0.693, 0.   ], dtype=float32)
+    """
     b = np.asarray(boxes, float)
     check_shape("boxes", b, (None, 4))
     image = np.asarray(image)
@@ -80,7 +90,17 @@ def crop_viewpoint_features(image: np.ndarray, boxes) -> np.ndarray:
 
 @dataclass
 class ViewpointClassifier:
-    """Standardisation and multinomial logistic regression over the 8 viewpoint bins."""
+    """Standardisation and multinomial logistic regression over the 8 viewpoint bins.
+
+    Examples
+    --------
+    >>> model = load_default_classifier()
+    >>> model.mean.shape, model.weights.shape, model.bias.shape
+    ((1957,), (1957, 8), (8,))
+    >>> log_p = model.log_probs_of_features(np.zeros((3, 1957)))
+    >>> log_p.shape, bool(np.allclose(np.exp(log_p).sum(1), 1.0))
+    ((3, 8), True)
+    """
 
     mean: np.ndarray  # (F,)
     scale: np.ndarray  # (F,)
@@ -178,7 +198,16 @@ def kitti_examples(dataset, frames, *, jitter: float = JITTER, seed: int = 0, co
     :class:`~wirescene.io.kitti.KittiDataset`: each label box, its mirror image and ``copies``
     copies of each with the sides moved by N(0, ``jitter``) of the box's width / height (the
     recipe: one); with ``photometric`` (a study's option, ``benchmarks/bench_viewpoint_classifier.py``)
-    also each box of an image copy of other brightness and contrast."""
+    also each box of an image copy of other brightness and contrast.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> from wirescene.io.kitti import KittiDataset
+    >>> x, bins = kitti_examples(KittiDataset(DATA_DIR / "sample" / "kitti"), ["000010"])
+    >>> x.shape, bins.shape  # 8 cars, each with its mirror image, each with one jittered copy
+    ((32, 1957), (32,))
+    """
     rng = np.random.default_rng(seed)
     frames = list(frames)
     feats, bins = [], []
@@ -216,7 +245,15 @@ def check_trainable(dataset, frames) -> None:
     """An :class:`InputError` naming the split if the labelled cars of ``frames`` and their
     mirror images show a single viewpoint bin (read off the labels alone, so that ``train all``
     refuses them before its first step); frames without any car are left to
-    :func:`kitti_examples` to refuse."""
+    :func:`kitti_examples` to refuse.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> from wirescene.io.kitti import KittiDataset
+    >>> check_trainable(KittiDataset(DATA_DIR / "sample" / "kitti"), ["000010"]) is None  # cars of several bins
+    True
+    """
     frames = list(frames)
     alpha = np.array([o.alpha for f in frames for o in dataset.labels(f).objects if o.type == "Car"], float)
     if not len(alpha):

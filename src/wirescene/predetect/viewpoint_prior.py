@@ -40,7 +40,13 @@ def lateral_position(boxes, horizon, center_column: float) -> np.ndarray:
     :class:`~wirescene.predetect.geometry.Horizon` for another camera height), seen by a
     camera whose principal point lies in column ``center_column``. Boxes whose bottom is less
     than half their height below the horizon (no car on the road) are measured as if it
-    were half their height."""
+    were half their height.
+
+    Examples
+    --------
+    >>> lateral_position([[700, 180, 800, 230], [400, 180, 500, 230]], 170.0, 600.0)  # (750 - 600) / 60
+    array([ 2.5, -2.5])
+    """
     b = np.asarray(boxes, float).reshape(-1, 4)
     below = np.maximum(below_horizon(b[:, 3], horizon), 0.5 * np.maximum(b[:, 3] - b[:, 1], 1.0))
     return ((b[:, 0] + b[:, 2]) / 2 - float(center_column)) / below
@@ -48,7 +54,16 @@ def lateral_position(boxes, horizon, center_column: float) -> np.ndarray:
 
 def fit_viewpoint_prior(lateral, bins) -> dict:
     """The prior (a JSON-able dict) from the lateral positions ``(N,)`` and viewpoint bins
-    ``(N,)`` of training cars (never mirrored copies: mirroring swaps the sides of traffic)."""
+    ``(N,)`` of training cars (never mirrored copies: mirroring swaps the sides of traffic).
+
+    Examples
+    --------
+    >>> lateral = np.r_[np.linspace(1, 3, 10), np.linspace(-3, -1, 10)]  # 10 cars right of the camera, 10 left
+    >>> bins = np.r_[np.full(10, 6), np.full(10, 2)]  # seen in bin 6 on the right, bin 2 on the left
+    >>> prior = fit_viewpoint_prior(lateral, bins)
+    >>> sorted(prior), prior["n"], round(prior["bandwidth"], 3)
+    (['bandwidth', 'bins', 'lateral', 'n', 'pseudo_count'], 20, 1.038)
+    """
     s = np.asarray(lateral, float).reshape(-1)
     b = np.asarray(bins, int).reshape(-1)
     if s.shape != b.shape:
@@ -64,7 +79,17 @@ def fit_viewpoint_prior(lateral, bins) -> dict:
 
 
 def viewpoint_log_prior(prior: dict, lateral) -> np.ndarray:
-    """``(D, 8)`` log P(bin | s) of lateral positions ``(D,)``."""
+    """``(D, 8)`` log P(bin | s) of lateral positions ``(D,)``.
+
+    Examples
+    --------
+    >>> lateral = np.r_[np.linspace(1, 3, 10), np.linspace(-3, -1, 10)]  # 10 cars right of the camera, 10 left
+    >>> bins = np.r_[np.full(10, 6), np.full(10, 2)]  # seen in bin 6 on the right, bin 2 on the left
+    >>> prior = fit_viewpoint_prior(lateral, bins)
+    >>> log_prior = viewpoint_log_prior(prior, [2.0, -2.0])
+    >>> log_prior.shape, log_prior.argmax(1), bool(np.allclose(np.exp(log_prior).sum(1), 1.0))
+    ((2, 8), array([6, 2]), True)
+    """
     q = np.asarray(lateral, float).reshape(-1)
     s = np.asarray(prior["lateral"], float)
     b = np.asarray(prior["bins"], int)
@@ -77,7 +102,20 @@ def choose_viewpoints(kept, candidates, candidate_log_odds, candidate_bins, log_
     """``(D,)`` viewpoint bin of each kept detection ``kept`` ``(D, 4)``: among the
     ``candidates`` ``(C, 4)`` overlapping it by IoU >= ``iou`` (the clusters of every
     viewpoint it suppressed; it is one of them), the bin maximising the best candidate's
-    calibrated log-odds ``candidate_log_odds`` ``(C,)`` plus ``log_prior`` ``(D, 8)``."""
+    calibrated log-odds ``candidate_log_odds`` ``(C,)`` plus ``log_prior`` ``(D, 8)``.
+
+    Examples
+    --------
+    >>> lateral = np.r_[np.linspace(1, 3, 10), np.linspace(-3, -1, 10)]  # 10 cars right of the camera, 10 left
+    >>> bins = np.r_[np.full(10, 6), np.full(10, 2)]  # seen in bin 6 on the right, bin 2 on the left
+    >>> prior = fit_viewpoint_prior(lateral, bins)
+    >>> kept = np.array([[100.0, 100, 200, 150]])
+    >>> candidates = np.array([[100.0, 100, 200, 150], [102, 101, 201, 151]])  # bins 2 and 6, log-odds 1.0, 0.8
+    >>> choose_viewpoints(kept, candidates, [1.0, 0.8], [2, 6], np.zeros((1, 8)), iou=0.5)  # no prior: the best
+    array([2])
+    >>> choose_viewpoints(kept, candidates, [1.0, 0.8], [2, 6], viewpoint_log_prior(prior, [2.0]), iou=0.5)
+    array([6])
+    """
     kept = np.asarray(kept, float).reshape(-1, 4)
     candidates = np.asarray(candidates, float).reshape(-1, 4)
     bins = np.asarray(candidate_bins, int)
