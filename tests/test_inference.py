@@ -423,3 +423,12 @@ def test_pose_step_samples_only_its_block_and_never_loses_an_object(synthetic_sc
     assert np.any(state.theta[..., :3] != before.theta[..., :3])
     assert_close(state.theta[..., 3:], before.theta[..., 3:], atol=0)
     assert_close(state.sigma[..., 3:], before.sigma[..., 3:], atol=0)  # only the block's spread changes
+
+
+def test_oracle_evidence_checks_its_visibility_against_its_vertices():
+    from wirescene.infer.likelihood import GaussianVertexEvidence
+
+    uv = np.zeros((2, 36, 2))
+    GaussianVertexEvidence(uv, np.ones((2, 36), bool))  # one flag a vertex of each car
+    with pytest.raises(ShapeError, match="visible must have shape"):
+        GaussianVertexEvidence(uv, np.ones(36, bool))  # one car's flags would stand for every car's vertices

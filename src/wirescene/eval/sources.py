@@ -3,6 +3,7 @@ random stream that makes runs independent of scheduling."""
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -114,15 +115,19 @@ class DetectionSource:
 
 
 def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
-    """A generator that depends only on the run seed and the frame (the digits of its id:
-    ``"000007"`` and ``"7"`` share a stream), so results do not depend on the order (or the
-    process) in which frames are processed.
+    """A generator that depends only on the run seed and the frame, so results do not depend
+    on the order (or the process) in which frames are processed. A numeric id seeds by its
+    number (``"000007"`` and ``"7"`` share a stream), any other by its bytes' CRC-32 beside
+    a marker (``"a1"`` and ``"b1"`` differ).
 
     Examples
     --------
     >>> a, b = frame_seed(0, "000007").random(), frame_seed(0, "000007").random()
     >>> a == b, a == frame_seed(1, "000007").random(), a == frame_seed(0, "7").random()
     (True, False, True)
+    >>> frame_seed(0, "a1").random() == frame_seed(0, "b1").random()
+    False
     """
-    digits = int("".join(ch for ch in frame_id if ch.isdigit()) or 0)
-    return np.random.default_rng([seed, digits])
+    if frame_id.isascii() and frame_id.isdigit():  # KITTI's ids: the streams every earlier run used
+        return np.random.default_rng([seed, int(frame_id)])
+    return np.random.default_rng([seed, 1, zlib.crc32(frame_id.encode("utf-8"))])

@@ -219,6 +219,8 @@ class GaussianVertexEvidence:
         self.uv_true = np.asarray(uv_true, dtype=float)
         self.visible = np.asarray(visible, dtype=bool)
         check_shape("uv_true", self.uv_true, (None, N_VERTICES, 2))
+        # a (36,) mask would be read as one vertex's flag for every vertex of a car
+        check_shape("visible", self.visible, self.uv_true.shape[:2])
         self.sigma_frac, self.peak, self.floor = sigma_frac, peak, floor
 
     def log_ratio(self, uv, obj, scale):
