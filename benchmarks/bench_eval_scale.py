@@ -9,7 +9,8 @@ Protocol: ``WORK_DIR/kitti`` becomes a KITTI-layout root of N frames whose files
 the labelled frames of ``--root``, dealt out again and again under new ids (``000000``,
 ``000001``, ...), so that the memory of many frames can be measured with the frames at hand.
 For each N of ``--frames`` the command ``wirescene eval WORK_DIR/kitti --frames 000000,...``
-runs in a subprocess with ``--workers`` and the evaluation arguments given after ``--``
+runs in a subprocess with ``--workers`` (2 or more, and N too: ``eval`` fits a run of one worker
+or one frame in its own process, with no worker to measure) and the evaluation arguments given after ``--``
 (default ``--variant coarse --detections gt``: cheap fits, for the parent's growth). At its
 exit the subprocess writes its own peak resident set and the largest of its workers'
 (``getrusage``: self and reaped children), and a thread sums, every 0.2 s, the resident sets
@@ -190,10 +191,14 @@ def main():
     ap.add_argument("--workers", type=int, default=2, help="--workers of the evaluations")
     ap.add_argument("--json", type=Path, default=None, help="write the rows and the projection here")
     args = ap.parse_args(argv)
+    sizes = sorted(int(v) for v in args.frames.split(","))
+    # eval fits one worker's or one frame's run in its own process: no worker to measure, the fits in the parent's law
+    if args.workers < 2 or sizes[0] < 2:
+        ap.error("--workers and every number of --frames must be 2 or more: wirescene eval fits a run of one "
+                 "worker or one frame in its own process, so no worker's peak is measured and the parent's holds the fits")
     if not Path("/proc/self/status").is_file():
         raise SystemExit("this benchmark reads /proc (Linux)")
     args.work_dir.mkdir(parents=True, exist_ok=True)
-    sizes = sorted(int(v) for v in args.frames.split(","))
     root, ids = repeated_root(args.root, args.work_dir, max(sizes))
     rows = [run_eval(root, ids[:n], args.work_dir, workers=args.workers, eval_args=eval_args) for n in sizes]
     summary = project(rows)

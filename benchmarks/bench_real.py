@@ -1,9 +1,9 @@
 """Real-image benchmark (issue 18), part 1: part-detector localisation on real KITTI frames
 under 4-fold cross-validation by drive, and on held-out synthetic scenes.
 
-Protocol (:func:`parts_cv`): the real patches of all 33 labelled frames are described once
-(:func:`wirescene.training.parts_real.make_real_patch_data`: scaled mean wireframe at the labelled
-pose, visibility by ray casting, mirrored copies); for each fold ``k`` of
+Protocol (:func:`parts_cv`): the real patches of every labelled frame of ``--root`` (the 72 shared
+frames) are described once (:func:`wirescene.training.parts_real.make_real_patch_data`: scaled mean
+wireframe at the labelled pose, visibility by ray casting, mirrored copies); for each fold ``k`` of
 :mod:`wirescene.io.folds` a forest is trained on the patches of the frames of the
 other three folds (plus, optionally, the synthetic training patches,
 :func:`wirescene.training.parts.make_synth_patch_data`) and scored on the frames of fold

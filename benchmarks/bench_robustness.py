@@ -11,7 +11,7 @@ and the KITTI 3D AP R40 at IoU 0.5 (moderate) of the written predictions (raw sc
 all 1, so that AP is about precision x recall of one operating point).
 
 Nothing here is trained on real frames (the coarse variants use the CAD shape model
-only), so all 33 frames are scored. Fine variants (``--variant fg+gp`` ...) use part
+only), so every labelled frame of ``--root`` is scored. Fine variants (``--variant fg+gp`` ...) use part
 detectors and occluder statistics; check what they were trained on before reading their
 figures as held-out ones.
 

@@ -345,6 +345,21 @@ def test_eval_scale_repeats_the_labelled_frames_and_projects_parent_plus_workers
         child.wait()
 
 
+@pytest.mark.parametrize("args", [["--workers", "1", "--frames", "2,3"], ["--workers", "2", "--frames", "1,3"]],
+                         ids=["one worker", "one frame"])
+def test_eval_scale_refuses_runs_that_fit_in_the_parent(monkeypatch, tmp_path, capsys, args):
+    """wirescene eval fits a run of one worker or one frame in its own process: no worker's
+    peak (it read 0 MB and projected 12,000 workers in 24 GB) and the fits in the parent's law."""
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import bench_eval_scale
+
+    monkeypatch.setattr(sys, "argv", ["bench_eval_scale.py", str(tmp_path / "work"), "--root", str(KITTI_ROOT), *args])
+    with pytest.raises(SystemExit):
+        bench_eval_scale.main()
+    assert "must be 2 or more" in capsys.readouterr().err
+    assert not (tmp_path / "work").exists()  # refused before linking a root or running an evaluation
+
+
 def test_plane_height_bound_moves_cars_along_their_rays(monkeypatch):
     """A car moved by its own height factor stands at its label's height, on the same ray."""
     monkeypatch.syspath_prepend(str(BENCHMARKS))
