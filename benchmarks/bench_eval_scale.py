@@ -140,9 +140,9 @@ def _peaks():
         json.dump({"self": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
                    "children": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss}, f)
 atexit.register(_peaks)
-from wirescene.cli.main import main
+from wirescene.cli.main import console_main
 sys.argv[0] = "wirescene"
-main()
+console_main()
 """
 
 
@@ -159,6 +159,9 @@ def run_eval(root: Path, ids: list[str], work: Path, *, workers: int, eval_args:
     if proc.returncode != 0:
         raise RuntimeError(f"wirescene eval failed ({proc.returncode}):\n{log[-3000:]}")
     kib = json.loads(peaks.read_text())
+    if kib["children"] == 0:  # e.g. --device cuda or --dask after --: the fits ran in the parent, or elsewhere
+        raise RuntimeError("no worker process was reaped: the run was not parallel, so no worker's peak was measured "
+                           "and the parent's holds the fits")
     row = {"frames": len(ids), "workers": workers, "seconds": round(time.perf_counter() - t0, 1),
            "parent_mb": round(kib["self"] / 1024), "worker_max_mb": round(kib["children"] / 1024),
            "peak_sum_mb": round(memory.peak_sum)}

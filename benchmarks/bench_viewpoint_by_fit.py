@@ -34,10 +34,10 @@ from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import angle_difference  # noqa: E402
 from wirescene.fitting.pipeline import (  # noqa: E402
     FitOptions,
-    _part_detector,
     complete_viewpoints,
     detector_bank,
     fit_frame,
+    part_detector,
     viewpoint_classifier,
 )
 from wirescene.infer.evidence import part_evidence  # noqa: E402
@@ -61,7 +61,7 @@ def frame_costs(dataset, frame_id, models: Path, variant: str, seed: int) -> dic
                                bank=detector_bank(options.detector_bank),
                                classifier=viewpoint_classifier(options.viewpoint_classifier))
     turned = Detections(rule.boxes, rule.scores, wrap_angle(rule.alpha + np.pi), rule.source)
-    evidence = part_evidence(image, rule, detector=_part_detector(options.parts_model),
+    evidence = part_evidence(image, rule, detector=part_detector(options.parts_model),
                              flip=options.inference.flip_evidence)
     costs = []
     for dets in (rule, turned):

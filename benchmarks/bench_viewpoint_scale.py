@@ -65,6 +65,7 @@ def main(argv=None) -> None:
         out["runs"].append({"frames": n, "seconds": round(seconds, 1), "peak_mb": round(peak)})
         print(f"train viewpoints on {n} frames: {seconds:.1f} s, peak {peak:.0f} MB")
     dataset = KittiDataset(args.root)
+    n = max(run["frames"] for run in out["runs"])  # the per-car time of the largest run
     t0 = time.perf_counter()
     x, y = kitti_examples(dataset, ids[:n])
     describe = time.perf_counter() - t0

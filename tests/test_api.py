@@ -507,11 +507,11 @@ def test_a_huge_image_is_drawn_reduced_with_everything_where_it_stands(frame):
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
     rgb = np.asarray(canvas.buffer_rgba())[..., :3].astype(int)
-    green = (rgb[..., 1] > 160) & (rgb[..., 0] < 90) & (rgb[..., 2] < 100)
+    cyan = (rgb[..., 0] < 90) & (rgb[..., 1] > 150) & (rgb[..., 2] > 200)  # the ground truth's colour
     for c in cars:  # the box of each label, at half the big image's coordinates
         b = (np.asarray(c.box) * f / 2).astype(int)
-        assert green[b[1]:b[3], b[0]:b[2]].sum() > 50
-    assert green.sum() < 0.2 * green.size
+        assert cyan[b[1]:b[3], b[0]:b[2]].sum() > 50
+    assert cyan.sum() < 0.2 * cyan.size
 
 
 def test_the_api_resolves_and_checks_the_device_before_any_work(frame, monkeypatch):

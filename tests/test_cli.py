@@ -544,8 +544,8 @@ def test_an_image_larger_than_its_calibration_implies_is_fitted_with_a_warning(t
     r = run(*fit, "--out", tmp_path / "out")
     assert r.exit_code == 0, r.output
     problem = r"the principal point \(609\.\d+, 172\.\d+\) lies in the outer quarter of the 2484x750 image"
-    assert re.fullmatch(rf"wirescene: warning: {re.escape(str(image))}: {problem}: the calibration of a smaller or "
-                        r"cropped image\?\n", r.stderr), r.stderr
+    assert re.fullmatch(rf"wirescene: warning: {re.escape(str(image))}: {problem}: the calibration of a smaller image, "
+                        r"or of a crop\?\n", r.stderr), r.stderr
     r = run("eval", root, "--variant", "coarse", "--particles", 8, "--workers", 1, "--draws", 0)
     assert r.exit_code == 0, r.output
     assert re.search(rf"wirescene: warning: 1 of 1 frames: {problem}: .* \(e\.g\. frame 000010\)", r.stderr), r.stderr
@@ -745,7 +745,7 @@ def test_ctrl_c_with_parallel_workers_exits_soon_and_leaves_no_worker(tmp_path):
 
     frames = ",".join(sorted(p.stem for p in (KITTI_ROOT / "training" / "label_2").glob("*.txt"))[:3])
     pred = tmp_path / "pred"
-    cmd = [sys.executable, "-c", "from wirescene.cli.main import main; main()", "predict", str(KITTI_ROOT),
+    cmd = [sys.executable, "-c", "from wirescene.cli.main import console_main; console_main()", "predict", str(KITTI_ROOT),
            "--split", "training", "--variant", "full", "--frames", frames, "--workers", "2", "--out", str(pred)]
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
@@ -777,7 +777,7 @@ def _started(args, *, until, timeout=240):
     import sys
     import time
 
-    cmd = [sys.executable, "-c", "from wirescene.cli.main import main; main()", *[str(a) for a in args]]
+    cmd = [sys.executable, "-c", "from wirescene.cli.main import console_main; console_main()", *[str(a) for a in args]]
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + timeout
     while not until(proc) and time.monotonic() < deadline and proc.poll() is None:
@@ -800,6 +800,19 @@ def _said(stderr: bytes) -> list[str]:
     """The lines of a run's standard error, its progress bars left out."""
     lines = stderr.decode().replace("\r", "\n").splitlines()
     return [ln for ln in lines if ln.strip() and not re.match(r"(eval|predict|synth): ", ln)]
+
+
+def test_main_called_from_python_gives_back_the_callers_signal_handlers(monkeypatch):
+    """A notebook or a script calling ``main()`` on its own command line keeps its Ctrl-C and
+    SIGTERM afterwards; only the console script's process exits with them ignored."""
+    import signal
+    import sys
+
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    monkeypatch.setattr(sys, "argv", ["wirescene", "--version"])
+    with pytest.raises(SystemExit):
+        main()
+    assert {s: signal.getsignal(s) for s in before} == before
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "killpg"), reason="process groups are POSIX")

@@ -371,6 +371,12 @@ def test_report_says_how_the_run_was_made(tmp_path):
     assert run["seed"] == "3" and run["scene particles"] == "50" and run["pre-detections"] == "own pre-detection"
     assert run["parts model"] == f"shipped (SHA-256 {models_fingerprint(options)['parts_model'][:12]}…)"
     assert run["options changed from the defaults"] == "inference.box_weight=50.0"
+    from wirescene.core.resources import shipped_path
+
+    mine = str(shipped_path("shape_model"))  # a user's own file, named (the shipped bytes stand in for it)
+    told = run_settings(FitOptions(shape_model=mine, viewpoint_classifier=mine), detections="bank")
+    assert told["shape model"].startswith(f"{mine} (SHA-256") and told["viewpoint classifier"].startswith(mine)
+    assert told["options changed from the defaults"] == "none"
     reports, gallery = _made_up_run(("good",))
     page = write_report(tmp_path / "r", reports, gallery=gallery, image_of=_blank, run=run).read_text()
     assert "<h2>How this run was made</h2>" in page and "<tr><td>seed</td><td>3</td></tr>" in page

@@ -204,3 +204,44 @@ def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):
             "--parts-model", shipped_path("parts_model"))
     assert r.exit_code == 0, r.output + r.stderr
     assert json.loads((tmp_path / "c.json").read_text())["n_scenes"] == 1
+
+
+def test_settings_win_over_a_models_directory_and_its_line_names_the_files_given_instead(tmp_path, capsys):
+    """An explicit value beats the directory's, for a number (``--set inference.occluded_score``)
+    as for a file (``--shape-model``), and the run's line on standard error says which of the
+    directory's files were replaced."""
+    from wirescene.api import _options
+    from wirescene.cli.main import _fit_options
+    from wirescene.infer.occluded_score import save_occluded_score
+
+    models = tmp_path / "models"
+    models.mkdir()
+    save_occluded_score(models / "occlusion.json", {"c": 0.4})
+    shutil.copy(shipped_path("shape_model"), models / "shape_model.npz")
+    mine = tmp_path / "mine.npz"
+    shutil.copy(shipped_path("shape_model"), mine)
+    assert _options(None, 5, 0, models=models).inference.occluded_score == 0.4
+    assert _options(None, 5, 0, models=models, settings={"inference.occluded_score": 0.1}).inference.occluded_score \
+        == 0.1
+    options = _fit_options(5, 0, models=models, shape_model=mine, device="numpy",
+                           settings=("inference.occluded_score=0.1",))
+    assert options.inference.occluded_score == 0.1 and options.shape_model == str(mine.resolve())
+    line = capsys.readouterr().err
+    assert "given as files: shape_model" in line and f"models from {models.resolve()}: occlusion;" in line
+
+
+def test_a_broken_part_model_or_bank_is_refused_before_any_frame(tmp_path):
+    """A corrupt part model or bank of a models directory is refused in one line before any
+    frame is fitted, as the other files are; so is a fine stage searching more shape
+    components than the shipped model has."""
+    broken = tmp_path / "models"
+    broken.mkdir()
+    (broken / "parts_model.npz").write_bytes(b"not an npz")
+    with pytest.raises(InputError, match="parts_model.npz"):
+        wirescene.api._options(None, 5, 0, models=broken, casts_rays=True)
+    (broken / "parts_model.npz").unlink()
+    (broken / "detector_bank.npz").write_bytes(b"not an npz")
+    with pytest.raises(InputError, match="detector_bank.npz"):
+        wirescene.api._options(None, 5, 0, models=broken, casts_rays=False)
+    with pytest.raises(InputError, match="shape model of 41 components, the fine stage searches 50"):
+        wirescene.api._options(None, 5, 0, settings={"inference.n_shape": 50}, casts_rays=True)

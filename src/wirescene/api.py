@@ -230,6 +230,8 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
     else:
         options = FitOptions(lifting=LiftingOptions(n_particles=_particles(particles)),
                              inference=InferenceOptions(), seed=_seed(seed))
+    # the directory's models before the settings: settings={"inference.occluded_score": ...} wins over its c
+    options = with_models(options, _models(models))
     if settings is not None:
         if not isinstance(settings, Mapping):
             raise ArgumentError("settings", f"expected a mapping of 'STAGE.FIELD' to values, got {type(settings).__name__}")
@@ -238,7 +240,7 @@ def _options(options: FitOptions | None, particles, seed, models=None, settings=
         except (ValueError, TypeError) as exc:
             raise ArgumentError("settings", str(exc)) from None
     device = choose_device(options.inference.device, parallel=parallel, casts_rays=casts_rays)
-    options = with_models(replace(options, inference=replace(options.inference, device=device)), _models(models))
+    options = replace(options, inference=replace(options.inference, device=device))
     return check_model_files(options, fine=casts_rays)  # a bad model file: an InputError naming it, before any work
 
 

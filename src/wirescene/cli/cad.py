@@ -81,7 +81,9 @@ def draw_car(vertices, faces, X, *, title: str = "", out=None):
     # (title, horizontal axis, vertical axis, sign of vertical, depth axis, axis labels) in object coordinates; the
     # front view's +z (the car's left) on the right, as seen standing in front of the car
     forward, left, height = "x: forward (m)", "z: to the car's left (m)", "height above the ground (m)"
-    views = (("side (the left side)", 0, 1, -1.0, 2, forward, height), ("top (seen from above)", 0, 2, 1.0, 1, forward, left),
+    # forward to the right in the side view is the car seen from its right: the left side's landmarks seen through it
+    views = (("side (seen from the right, forward to the right; the left side's landmarks red)", 0, 1, -1.0, 2, forward,
+              height), ("top (seen from above)", 0, 2, 1.0, 1, forward, left),
              ("front (looking at the car's front; names on its left side)", 2, 1, -1.0, 0, left, height))
     for ax, (label, a, b, sb, depth_axis, xlabel, ylabel) in zip(axes, views):
         tri = np.stack([vertices[faces][..., a], sb * vertices[faces][..., b]], axis=-1)

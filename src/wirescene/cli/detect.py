@@ -222,13 +222,16 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
         raise click.UsageError("--viewpoint-classifier gives the boxes --out writes their viewpoints: it needs --out")
     ds = KittiDataset(kitti_root, split=split)
     found = resolve_models(models)
+    classifier_option = classifier_path
     bank = DetectorBank.load(bank_path if bank_path else found.path("detector_bank"))
     if classifier_path is None and "viewpoint_classifier" in found.own:
         classifier_path = found.path("viewpoint_classifier")
     # the viewpoints of the boxes --out writes (None: the shipped one), read before any frame: a bad file is refused
     classifier = None if out_dir is None else viewpoint_classifier(None if classifier_path is None
                                                                    else str(classifier_path))
-    say_models(found)  # once its files are read (a broken one: the error line alone)
+    # once its files are read (a broken one: the error line alone)
+    say_models(found, replaced=[name for name, given in (("detector_bank", bank_path),
+                                                         ("viewpoint_classifier", classifier_option)) if given])
     ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
     thr = bank.threshold if threshold is None else threshold
     min_height, max_scale = smallest_car_search(bank, smallest_car)

@@ -118,9 +118,11 @@ class _Group(click.Group):
     SIGTERM with 143 (128 + the signal), each after the same cleanup, once, whenever it comes
     (:func:`_on_stop_signal`)."""
 
-    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
-        # args None: the command line of this process (the console script), not a call from Python
-        with _stop_signals(process=args is None):
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, *, console: bool = False,
+             **extra):
+        # console: the process is this command's (:func:`console_main`); a call from Python (a notebook's, a
+        # test's) gets its handlers back afterwards
+        with _stop_signals(process=console):
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
 
     def invoke(self, ctx):
@@ -206,17 +208,20 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_ray
     models_dir = inference.pop("models", None)
     # False: the pre-detection scores (`eval --raw-scores`, the data of `train scores`).
     calibrate_scores = inference.pop("calibrate_scores", True)
-    models = {k: None if inference.get(k) is None else str(inference[k]) for k in MODEL_FILES}
+    # absolute: a resumed run from another folder, or a Dask worker, reads the same files
+    models_given = {k: None if inference.get(k) is None else str(Path(inference[k]).resolve()) for k in MODEL_FILES}
     settings = stage_settings(inference, inference.pop("settings", ()))
     device = inference.pop("device", None)
-    unknown = set(inference) - set(models)
+    unknown = set(inference) - set(models_given)
     if unknown:  # a command passed an option no stage owns: a bug, not a user error
         raise TypeError(f"options no stage owns: {', '.join(sorted(unknown))}")
     # --device, else --set inference.device=..., else auto: resolved and checked here, before any fit
     settings["inference.device"] = choose_device(device or settings.get("inference.device", "auto"), parallel=parallel,
                                                  casts_rays=casts_rays)
     options = FitOptions(lifting=LiftingOptions(n_particles=particles), seed=seed, calibrate_scores=calibrate_scores,
-                         **models)
+                         **models_given)
+    models = resolve_models(models_dir)
+    options = with_models(options, models)  # before --set, which wins over the directory's occluded-part score
     try:
         options = options.with_settings(settings, combined=False)
     except ValueError as exc:
@@ -224,10 +229,9 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_ray
     problem = options.combined_problem()  # of --particles and --samples as much as of --set
     if problem is not None:
         raise click.UsageError(problem)
-    models = resolve_models(models_dir)
     # a missing or malformed model file is refused naming it (the error line alone), before any frame is read
-    options = check_model_files(with_models(options, models), fine=casts_rays)
-    say_models(models)
+    options = check_model_files(options, fine=casts_rays)
+    say_models(models, replaced=[name for name, path in models_given.items() if path is not None])
     return options
 
 
@@ -697,7 +701,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 @click.option("--detections", type=click.Path(path_type=Path), default=None,
               help="2D car detections: .json, .csv or KITTI label .txt (see `wirescene.io.detections.read_detections`); "
                    "default: our own pre-detection from raw pixels.")
-@click.option("--gt", type=click.Path(path_type=Path), default=None, help="KITTI label file drawn in green for comparison.")
+@click.option("--gt", type=click.Path(path_type=Path), default=None, help="KITTI label file drawn in cyan for comparison.")
 @click.option("--variant", type=click.Choice(_variants()), default="coarse+gp", show_default=True)
 @particles_option
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
@@ -858,5 +862,13 @@ def _register_commands():
 
 _register_commands()
 
+def console_main() -> None:
+    """The ``wirescene`` console script (and ``python -m wirescene.cli.main``): :func:`main` on
+    this process's command line, the process being the command's, so that it exits with
+    the stop signals ignored (:func:`_stop_signals`). Calling ``main()`` from Python instead
+    leaves the caller's handlers as they were."""
+    main.main(console=True)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    console_main()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import NON_NEGATIVE, POSITIVE, check_output_file, load_models, models_option
+from wirescene.cli.options import NON_NEGATIVE, POSITIVE, check_output_file, models_option, say_models
 
 
 @click.command("occlusion")
@@ -33,8 +33,10 @@ def occlusion(seed, scenes, out, flip_evidence, models, parts_model):
     from wirescene.training.occlusion import calibrate_occluded_score
 
     check_output_file(out, "--out")
-    detector = PartDetector.load(parts_model if parts_model is not None else resolve_models(models).path("parts_model"))
-    load_models(models)  # says which models, once its part model is read (a broken one: the error line alone)
+    found = resolve_models(models)
+    detector = PartDetector.load(parts_model if parts_model is not None else found.path("parts_model"))
+    # once its part model is read (a broken one: the error line alone)
+    say_models(found, replaced=["parts_model"] if parts_model is not None else [])
     result = calibrate_occluded_score(seed=seed, n_scenes=scenes, detector=detector, flip=flip_evidence,
                                       progress=lambda it: tqdm(it, desc="scenes", leave=False, file=sys.stderr))
     save_occluded_score(out, result)

@@ -251,11 +251,11 @@ def load_models(models_dir: Path | None):
     return say_models(resolve_models(models_dir))
 
 
-def say_models(models):
+def say_models(models, *, replaced=()):
     """``models`` (a :class:`~wirescene.core.resources.Models`), said on standard error unless
-    they are the shipped ones."""
+    they are the shipped ones; ``replaced``: the artefacts a file option gave instead."""
     if models.root is not None:
-        click.echo(f"wirescene: {models.describe()}", err=True)
+        click.echo(f"wirescene: {models.describe(replaced=replaced)}", err=True)
     return models
 
 

@@ -80,12 +80,24 @@ class Models:
             raise KeyError(f"unknown artefact {name!r}; known: {', '.join(ARTEFACTS)}")
         return self.root / ARTEFACTS[name] if name in self.own else shipped_path(name)
 
-    def describe(self) -> str:
-        """One line: which artefacts come from the directory and which are shipped."""
+    def describe(self, *, replaced=()) -> str:
+        """One line: which artefacts come from the directory, which from a file given in
+        their place (``replaced``, names of :data:`ARTEFACTS`) and which are shipped.
+
+        Examples
+        --------
+        >>> Models(Path("m"), ("parts_model", "shape_model")).describe(replaced=["shape_model", "detector_bank"])
+        'models from m: parts_model; given as files: detector_bank, shape_model; shipped: viewpoint_classifier, \
+score_calibration, occlusion'
+        """
         if self.root is None:
             return "shipped models"
-        shipped = [n for n in ARTEFACTS if n not in self.own]
-        return (f"models from {self.root}: {', '.join(self.own)}"
+        replaced = set(replaced)
+        own = [n for n in self.own if n not in replaced]
+        given = [n for n in ARTEFACTS if n in replaced]
+        shipped = [n for n in ARTEFACTS if n not in self.own and n not in replaced]
+        return (f"models from {self.root}: {', '.join(own) or 'none used'}"
+                + (f"; given as files: {', '.join(given)}" if given else "")
                 + (f"; shipped: {', '.join(shipped)}" if shipped else ""))
 
 

@@ -80,8 +80,9 @@ def off_centre_problem(P, image_size: tuple[int, int]) -> str | None:
     error. A calibration carries no image size, but its principal point lies near the
     image's centre (KITTI's within 4%; the benchmarks' off-centre camera at a third); one in
     the outer quarter of the image on either axis (the image more than twice as large as
-    the principal point implies, or cut) is likely a smaller or cropped image's calibration,
-    which places every car wrongly.
+    the principal point implies, or cut) is likely another image's calibration (a smaller
+    image's where the point lies towards the top left, a larger one's towards the bottom
+    right), which places every car wrongly, unless it was adjusted to a crop.
 
     Examples
     --------
@@ -89,15 +90,19 @@ def off_centre_problem(P, image_size: tuple[int, int]) -> str | None:
     >>> off_centre_problem(P, (1242, 375)) is None
     True
     >>> off_centre_problem(P, (2484, 750))
-    'the principal point (609.6, 172.9) lies in the outer quarter of the 2484x750 image: the calibration of a smaller or cropped image?'
+    'the principal point (609.6, 172.9) lies in the outer quarter of the 2484x750 image: the calibration of a smaller image, or of a crop?'
+    >>> off_centre_problem(P, (621, 187))
+    'the principal point (609.6, 172.9) lies in the outer quarter of the 621x187 image: the calibration of a larger image, or of a crop?'
     """
     K = np.asarray(P, dtype=float)[:, :3]
     cx, cy = K[0, 2] / K[2, 2], K[1, 2] / K[2, 2]
     w, h = image_size
     if abs(cx - w / 2) <= w / 4 and abs(cy - h / 2) <= h / 4:
         return None
+    low, high = cx < w / 4 or cy < h / 4, cx > 3 * w / 4 or cy > 3 * h / 4
+    which = "a smaller image" if low and not high else "a larger image" if high and not low else "another size's image"
     return (f"the principal point ({cx:g}, {cy:g}) lies in the outer quarter of the {w}x{h} image: the calibration "
-            "of a smaller or cropped image?")
+            f"of {which}, or of a crop?")
 
 
 def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | None:

@@ -284,17 +284,16 @@ def run_settings(options, *, detections: str, evidence: str = "parts") -> dict[s
     from dataclasses import asdict
 
     from wirescene.core.version import __version__
-    from wirescene.fitting.models import models_fingerprint
+    from wirescene.fitting.models import MODEL_FILES, models_fingerprint
     from wirescene.fitting.pipeline import FitOptions
 
     named = {"gt": "label boxes", "bank": "own pre-detection"}
     out = {"wirescene": __version__, "pre-detections": named.get(detections, f"files in {detections}"),
            "evidence of the fine variants": evidence, "seed": str(options.seed),
            "scene particles": str(options.lifting.n_particles), "device": str(options.inference.device)}
-    files = {"parts_model": options.parts_model, "detector_bank": options.detector_bank}
     for name, digest in models_fingerprint(options).items():
-        out[name.replace("_", " ")] = f"{files.get(name) or 'shipped'} (SHA-256 {digest[:12]}…)"
-    shown = {"seed", "lifting.n_particles", "inference.device", "parts_model", "detector_bank"}
+        out[name.replace("_", " ")] = f"{getattr(options, name) or 'shipped'} (SHA-256 {digest[:12]}…)"
+    shown = {"seed", "lifting.n_particles", "inference.device", *MODEL_FILES}
     default = asdict(FitOptions())
     changed = []
     for key, value in asdict(options).items():
@@ -529,9 +528,10 @@ every labelled car (a missed car is never within d), so its value at 1 m is the 
 <div class="plots">{''.join(f'<img src="{_href(name)}" alt="{html.escape(name)}">' for name in plots)}</div>
 <h2>Gallery ({html.escape(lead)}): {shown}</h2>
 <p>Red: estimate ({"wireframe, hidden parts as open dots on dashed edges" if get_variant(lead).fine
-else "3D box, a cross on its front"}), each numbered #n as in the label file with its confidence (the same number
-in the bird's-eye view); cyan: ground truth; dashed yellow: the pre-detections of the cars output; dotted grey:
-those the fit dropped.
+else "3D box, a cross on its front"}), each numbered #n in detection order (the order of the label files
+<code>--predictions</code> writes) with its score (the same number in the bird's-eye view); cyan: ground truth;
+dashed yellow: the pre-detections of the cars output; dotted grey: those the fit's verification dropped (our own
+pre-detection only).
 Frames ranked by a score that counts missed and false cars: (sum over true positives of
 max(0, 1 &minus; error / {SCORE_ZERO_ERROR:g} m) &minus; false cars output) / labelled cars; equal scores by the
 mean localisation error; frames with neither a labelled car nor a car output are not ranked.</p>

@@ -117,8 +117,8 @@ class DetectionSource:
 def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
     """A generator that depends only on the run seed and the frame, so results do not depend
     on the order (or the process) in which frames are processed. A numeric id seeds by its
-    number (``"000007"`` and ``"7"`` share a stream), any other by its bytes' CRC-32 beside
-    a marker (``"a1"`` and ``"b1"`` differ).
+    number (``"000007"`` and ``"7"`` share a stream), any other by its bytes' CRC-32 in a
+    stream of its own (``"a1"`` and ``"b1"`` differ).
 
     Examples
     --------
@@ -130,4 +130,5 @@ def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
     """
     if frame_id.isascii() and frame_id.isdigit():  # KITTI's ids: the streams every earlier run used
         return np.random.default_rng([seed, int(frame_id)])
-    return np.random.default_rng([seed, 1, zlib.crc32(frame_id.encode("utf-8"))])
+    # a spawn key of its own: no id's words can make a numeric id's entropy (SeedSequence pads with zeros)
+    return np.random.default_rng(np.random.SeedSequence([seed, zlib.crc32(frame_id.encode("utf-8"))], spawn_key=(1,)))

@@ -53,10 +53,11 @@ def with_models(options: FitOptions, models: Models) -> FitOptions:
 
 
 def check_model_files(options: FitOptions, *, fine: bool = True) -> FitOptions:
-    """``options``, once the crop viewpoint classifier, score calibration and shape model
-    files they name (not the shipped ones) have been loaded (once per version of each file,
-    so the fits reuse them) and, for a ``fine`` variant to be fitted, the shape model has the
-    components the fine stage searches.
+    """``options``, once the model files they name have been loaded (once per version of
+    each file, so the fits reuse them; the shipped ones too, which are read anyway) and,
+    for a ``fine`` variant to be fitted, the part model read and the shape model found to
+    have the components the fine stage searches: a broken file is refused before any
+    frame is fitted, not in the first frame's fit.
 
     Raises
     ------
@@ -64,24 +65,22 @@ def check_model_files(options: FitOptions, *, fine: bool = True) -> FitOptions:
         Naming the file: missing, corrupt, of another kind or format version, of arrays of
         other shapes, or (``fine``) a shape model of fewer components than
         ``options.inference.n_shape``.
-
-    Examples
-    --------
-    >>> check_model_files(FitOptions()) == FitOptions()  # the shipped files: nothing to load, the options back
-    True
-    >>> check_model_files(FitOptions(shape_model="no/such/shape.npz"))
-    Traceback (most recent call last):
-    ...
-    wirescene.core.errors.InputError: ...
     """
     from wirescene.fitting.confidence import load_score_calibration
-    from wirescene.fitting.pipeline import load_shape_model, shape_model_for, viewpoint_classifier
+    from wirescene.fitting.pipeline import (
+        detector_bank,
+        load_shape_model,
+        part_detector,
+        shape_model_for,
+        viewpoint_classifier,
+    )
 
-    if options.viewpoint_classifier is not None:
-        viewpoint_classifier(options.viewpoint_classifier)
-    if options.score_calibration is not None:
+    detector_bank(options.detector_bank)
+    viewpoint_classifier(options.viewpoint_classifier)
+    if reads_score_calibration(options):
         load_score_calibration(options.score_calibration)
-    if options.shape_model is not None and fine:
+    if fine:
+        part_detector(options.parts_model)
         shape_model_for(options)
     elif options.shape_model is not None:
         load_shape_model(options.shape_model)

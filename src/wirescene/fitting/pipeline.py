@@ -196,7 +196,8 @@ STAGES: tuple[str, ...] = ("lifting", "inference", "predetect")
 
 
 @cached_by_file(maxsize=4)
-def _part_detector(path: str | None):
+def part_detector(path: str | None):
+    """The part detectors at ``path`` (None: the shipped model), loaded once per version of the file."""
     from wirescene.parts.detector import PartDetector, load_default
 
     return load_default() if path is None else PartDetector.load(path)
@@ -633,7 +634,7 @@ def fit_frame(
     if evidence is None and needs_evidence(detections, variants):
         if image is None:
             raise ValueError("image is needed for the part evidence of fine variants and unknown viewpoints")
-        evidence = part_evidence(image, detections, detector=_part_detector(options.parts_model),
+        evidence = part_evidence(image, detections, detector=part_detector(options.parts_model),
                                  flip=options.inference.flip_evidence)
     if not np.all(np.isfinite(detections.alpha)):
         # no image to score (given evidence, e.g. the oracle's): the viewpoint from the part evidence

@@ -396,9 +396,11 @@ def birds_eye(
     ax.plot([0], [0], marker="^", color="black", ls="none")
     key.append((Line2D([], [], marker="^", color="black", ls="none"), "camera"))
     room = extent[1] - 0.12 * (extent[1] - extent[0])  # right of it a number would leave the axes
-    for fp, n in labels:  # the number beside the footprint, on its right unless at the right edge
+    # the number beside the footprint (its four corners once: the outline closes on the first), on its right unless at
+    # the right edge
+    for fp, n in labels:
         on_right = fp[:, 0].max() < room
-        ax.text(fp[:, 0].max() + 0.3 if on_right else fp[:, 0].min() - 0.3, fp[:, 1].mean(), f"#{n}", color=EST_COLOR,
+        ax.text(fp[:, 0].max() + 0.3 if on_right else fp[:, 0].min() - 0.3, fp[:4, 1].mean(), f"#{n}", color=EST_COLOR,
                 fontsize=7, va="center", ha="left" if on_right else "right", clip_on=True)
     if estimate is not None and not estimate.objects:
         ax.text(0.5, 0.5, "no car estimated", transform=ax.transAxes, ha="center", va="center", color="0.3")
