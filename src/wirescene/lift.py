@@ -20,6 +20,7 @@ In both cases many scene particles are kept (default 250), ranked by cost.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -154,7 +155,7 @@ class LiftingOptions:
         if not all(finite_real(half) and finite_real(step) and half >= 0 and step > 0
                    for half, step in azimuths.values()):
             return None
-        counts = {names: _symmetric_count(half, step) if len(names) == 2 else len(_circle(step))
+        counts = {names: _symmetric_count(half, step) if len(names) == 2 else _circle_count(step)
                   for names, (half, step) in azimuths.items()}
         for names, n in counts.items():
             if n > MAX_AZIMUTH_STEPS:
@@ -195,6 +196,11 @@ def _count(n: float) -> str:
 def _symmetric_range(half: float, step: float) -> np.ndarray:
     n = int(round(half / step))
     return np.arange(-n, n + 1) * step
+
+
+def _circle_count(step: float) -> float:
+    """``len(_circle(step))`` without building it (a step too fine for any array to hold)."""
+    return math.ceil(360.0 / step) if 360.0 / step < 1e15 else 360.0 / step
 
 
 def _symmetric_count(half: float, step: float) -> float:
