@@ -266,8 +266,14 @@ class Activations:
     cell: np.ndarray  # (A, 2) (row, col) of the window's top-left cell
 
 
+#: Most template-cell products (floats) :func:`template_responses` holds at once: a level whose chunk of templates
+#: would need more is scored in bands of cell rows. 2^25 (128 MB of float32) is above every level of a KITTI frame
+#: (at most 772 x 28,830 at scale 2), which is scored whole as before; a 4K frame's scale-2 level needed 1.7 GB.
+MAX_PRODUCTS = 1 << 25
+
+
 def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0, max_height: float = 2000.0,
-                       chunk_cols: int = 800, detectors=None):
+                       chunk_cols: int = 800, detectors=None, max_products: int = MAX_PRODUCTS):
     """Yield ``(t, level, scale, R)``: the response map ``R`` ``(Hr, Wr)`` (float32, bias
     included; entry ``(r, q)`` scores the window whose top-left cell is ``(r, q)``) of every
     template ``t`` at every pyramid level where the full object it implies is
@@ -278,6 +284,11 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
     after row -- pairwise summation is only along a contiguous axis -- so the same additions
     in the same order as a loop of in-place adds, without a numpy call per cell).
 
+    A level whose products would exceed ``max_products`` floats (:data:`MAX_PRODUCTS`; a
+    large image's finest levels) is scored in bands of response rows, each from the cell
+    rows its windows cover: the same products and additions per window, the memory bounded
+    whatever the image's size.
+
     Examples
     --------
     >>> bank = load_default_bank()
@@ -286,6 +297,9 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
     >>> (th, tw), (Hc, Wc, _) = bank.configs[t].template, pyramid[level][1].shape
     >>> R.shape == (Hc - th + 1, Wc - tw + 1), R.dtype.name  # a score per window position
     (True, 'float32')
+    >>> banded = {(t, li): R for t, li, _, R in template_responses(bank, pyramid, max_products=1)}
+    >>> all(R.tobytes() == banded[(t, li)].tobytes() for t, li, _, R in template_responses(bank, pyramid))
+    True
     """
     dets = range(len(bank)) if detectors is None else detectors
     buf = np.empty(0, np.float32)  # the products' memory, reused: a fresh one per level cost page faults
@@ -301,7 +315,6 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
                 active.append(t)
         if not active:
             continue
-        Fm = F.reshape(-1, N_FEAT)
         i = 0
         while i < len(active):
             group, cols = [], 0
@@ -310,25 +323,42 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
                 cols += int(np.prod(bank.configs[active[i]].template))
                 i += 1
             W = np.concatenate([bank.weights[t].reshape(-1, N_FEAT) for t in group], 0)  # (M, 31)
-            dtype = np.result_type(W, Fm)
-            if buf.size < len(W) * len(Fm) or buf.dtype != dtype:
-                buf = np.empty(len(W) * len(Fm), dtype)
-            P = np.matmul(W, Fm.T, out=buf[:len(W) * len(Fm)].reshape(len(W), len(Fm))).reshape(-1, Hc, Wc)  # (M, Hc, Wc)
-            o = 0
+            dtype = np.result_type(W, F)
+            reach = max(bank.configs[t].template[0] for t in group) - 1  # cell rows a band reads below its last
+            # response rows a band: all of them when the level's products fit, else as many as max_products allows
+            rows = Hc if len(W) * Hc * Wc <= max_products else max(1, max_products // (len(W) * Wc) - reach)
+            maps = {t: (np.empty((Hc - bank.configs[t].template[0] + 1, Wc - bank.configs[t].template[1] + 1),
+                                 np.float32) if rows < Hc else None) for t in group}
+            for r0 in range(0, Hc - min(bank.configs[t].template[0] for t in group) + 1, rows):
+                hb = min(Hc, r0 + rows + reach) - r0  # the band's cell rows
+                Fm = F[r0:r0 + hb].reshape(-1, N_FEAT)
+                if buf.size < len(W) * len(Fm) or buf.dtype != dtype:
+                    buf = P = Pt = None  # (the old products and their views freed first: not both at once)
+                    buf = np.empty(len(W) * len(Fm), dtype)
+                P = np.matmul(W, Fm.T, out=buf[:len(W) * len(Fm)].reshape(len(W), len(Fm))).reshape(-1, hb, Wc)
+                o = 0
+                for t in group:
+                    th, tw = bank.configs[t].template
+                    Hr, Wr = min(Hc - th + 1 - r0, rows), Wc - tw + 1  # this band's response rows
+                    Pt, o = P[o:o + th * tw, :Hr + th - 1], o + th * tw
+                    if Hr <= 0:
+                        continue
+                    if P.dtype == np.float32:
+                        stack = _shifted_products(Pt, th, tw, stack)
+                        R = np.add.reduce(stack[:th * tw * Hr * Wr].reshape(th * tw, Hr, Wr), axis=0,
+                                          initial=np.float32(bank.biases[t]))
+                    else:  # (float64 products, e.g. weights not yet stored: rounded to float32 after every add)
+                        R = np.full((Hr, Wr), bank.biases[t], np.float32)
+                        for dy in range(th):
+                            for dx in range(tw):
+                                R += Pt[dy * tw + dx, dy:dy + Hr, dx:dx + Wr]
+                    if maps[t] is None:
+                        yield t, li, s, R
+                    else:
+                        maps[t][r0:r0 + Hr] = R
             for t in group:
-                th, tw = bank.configs[t].template
-                Hr, Wr = Hc - th + 1, Wc - tw + 1
-                if P.dtype == np.float32:
-                    stack = _shifted_products(P[o:o + th * tw], th, tw, stack)
-                    R = np.add.reduce(stack[:th * tw * Hr * Wr].reshape(th * tw, Hr, Wr), axis=0,
-                                      initial=np.float32(bank.biases[t]))
-                else:  # (float64 products, e.g. weights not yet stored: rounded to float32 after every add)
-                    R = np.full((Hr, Wr), bank.biases[t], np.float32)
-                    for dy in range(th):
-                        for dx in range(tw):
-                            R += P[o + dy * tw + dx, dy:dy + Hr, dx:dx + Wr]
-                o += th * tw
-                yield t, li, s, R
+                if maps[t] is not None:
+                    yield t, li, s, maps[t]
 
 
 def _shifted_products(P: np.ndarray, th: int, tw: int, stack: np.ndarray) -> np.ndarray:
