@@ -364,6 +364,61 @@ CASES = {
                                       "lifting.azimuth_step=0.25")),
         r"--set: lifting.pitch_step, lifting.roll_step, lifting.azimuth_halfwidth, lifting.azimuth_step give 180,901 "
         r"ground planes x 181 azimuths = 32,743,081 cells a detection"),
+    # iterations, scenes, rounds, workers: counts whose time (or memory) a typo would multiply, refused at parsing
+    "fit --iterations 100000": (lambda t: _fit_case(t, extra=("--variant", "full", "--iterations", "100000")),
+                                r"--iterations: 100000 is not in the range 0<=x<=1000"),
+    "fit --polish-iterations 100000": (lambda t: _fit_case(t, extra=("--variant", "full", "--polish-iterations",
+                                                                     "100000")),
+                                       r"--polish-iterations: 100000 is not in the range 0<=x<=1000"),
+    "fit --set lifting.iterations=1000": (lambda t: _fit_case(t, extra=("--set", "lifting.iterations=1000")),
+                                          r"--set: lifting.iterations must be at most 100, got 1000"),
+    "eval --set inference.iterations=5000": (lambda t: _eval_case(t, "--variant", "full", "--set",
+                                                                  "inference.iterations=5000"),
+                                             r"--set: inference.iterations must be at most 1000, got 5000"),
+    "eval --workers 10000": (lambda t: _eval_case(t, "--workers", "10000"), r"--workers: 10000 is not in the range 1<=x<="),
+    "eval --draws 10000000": (lambda t: _eval_case(t, "--draws", "10000000"),
+                              r"--draws: 10000000 is not in the range 0<=x<=100000"),
+    "kitti-eval --draws 10000000": (lambda t: ["kitti-eval", SPLIT / "label_2", _dets_dir(t, {f"{FRAME}.txt": CAR + " 0.9\n"}),
+                                               "--frames", FRAME, "--draws", "10000000"],
+                                    r"--draws: 10000000 is not in the range 0<=x<=100000"),
+    "predict --workers 10000": (lambda t: ["predict", KITTI_ROOT, "--split", "training", "--variant", "coarse",
+                                           "--detections", "gt", "--out", t / "pred", "--workers", "10000"],
+                                r"--workers: 10000 is not in the range 1<=x<="),
+    "train detector --scenes 100000": (lambda t: ["train", "detector", "--out", t / "b.npz", "--scenes", "100000"],
+                                       r"--scenes: 100000 is not in the range 1<=x<=2000"),
+    "train detector --val-scenes 100000": (lambda t: ["train", "detector", "--out", t / "b.npz", "--val-scenes", "100000"],
+                                           r"--val-scenes: 100000 is not in the range 0<=x<=2000"),
+    "train detector --mining-rounds 300": (lambda t: ["train", "detector", "--out", t / "b.npz", "--mining-rounds", "300"],
+                                           r"--mining-rounds: 300 is not in the range 0<=x<=20"),
+    "train detector --cut-paste 1000": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--cut-paste", "1000"],
+        r"--cut-paste: 1000 is not in the range 0<=x<=50"),
+    "train detector --max-negatives 10000000": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--max-negatives", "10000000"],
+        r"--max-negatives: 10000000 is not in the range 1<=x<=100000"),
+    "train detector --pyramid-cache-mb 1e6": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--pyramid-cache-mb", "1e6"],
+        r"--pyramid-cache-mb: 1e\+06 is above the maximum 16000"),
+    "train detector --workers 10000": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--workers", "10000"],
+        r"--workers: 10000 is not in the range 1<=x<="),
+    "train occlusion --scenes 100000": (lambda t: ["train", "occlusion", "--out", t / "o.json", "--scenes", "100000"],
+                                        r"--scenes: 100000 is not in the range 1<=x<=3000"),
+    "train parts --n-views 10000": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--n-views", "10000", "--kind", "sc", "--no-position"],
+        r"--n-views: 10000 is not in the range 0<=x<=360"),
+    "train parts --n-aug 1000": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--n-views", "2", "--n-aug", "1000", "--kind", "sc",
+                   "--no-position"], r"--n-aug: 1000 is not in the range 1<=x<=20"),
+    "train parts --synth-scenes 100000": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--synth-scenes", "100000"],
+        r"--synth-scenes: 100000 is not in the range 0<=x<=3000"),
+    "train parts --heldout every CAD car": (  # was a held-out accuracy of 0 on a forest trained on no car
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--n-views", "2", "--synth-scenes", "0", "--kind", "sc",
+                   "--no-position", "--n-trees", "1", "--heldout", "1000"],
+        r"heldout: holds out 1,000 of the \d+ CAD cars: at most \d+"),
+    "train all --workers 10000": (lambda t: ["train", "all", KITTI_ROOT, "--out", t / "models", "--workers", "10000"],
+                                  r"--workers: 10000 is not in the range 1<=x<="),
     "train parts on frames without a car": (
         lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-root", _carless_root(t), "--synth-scenes", "0"],
         "frames: none of the 1 real training frame.s. has a labelled Car"),

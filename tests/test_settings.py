@@ -119,6 +119,36 @@ def test_particles_and_samples_are_bounded_together_and_the_azimuths_alone():
         options.with_settings({f"lifting.{k}": v for k, v in {**finest, "azimuth_step": 0.25}.items()})
 
 
+def test_iterations_and_workers_are_bounded_alike_wherever_they_come_from():
+    """The fine stage's iterations (some 0.3 s each an 8-car frame) and polish iterations at most
+    MAX_ITERATIONS, the coarse stage's Levenberg-Marquardt steps at most MAX_LIFT_ITERATIONS (its
+    damping overflowed from some 150 on): --set, the API's settings and FitOptions.checked refuse
+    alike; the API's workers at most MAX_WORKERS (each a process of some 360 MB)."""
+    import wirescene
+    from conftest import KITTI_ROOT
+    from wirescene.core.validate import MAX_WORKERS
+    from wirescene.infer.inference import MAX_ITERATIONS
+    from wirescene.lift import MAX_LIFT_ITERATIONS
+
+    assert (MAX_ITERATIONS, MAX_LIFT_ITERATIONS) == (1000, 100) and MAX_WORKERS >= 64
+    options = FitOptions()
+    assert options.with_settings({"inference.iterations": 1000, "inference.polish_iterations": 1000,
+                                  "lifting.iterations": 100}).lifting.iterations == 100
+    for name, value, limit in (("inference.iterations", 1001, 1000), ("inference.polish_iterations", "5000", 1000),
+                               ("lifting.iterations", 101, 100)):
+        got = int(value)
+        with pytest.raises(ValueError, match=f"^{name} must be at most {limit}, got {got}$"):
+            options.with_settings({name: value})
+    with pytest.raises(ArgumentError, match="^options: lifting.iterations must be at most 100, got 500$"):
+        FitOptions(lifting=LiftingOptions(iterations=500)).checked()
+    with pytest.raises(ArgumentError, match="^options: inference.polish_iterations must be at most 1000, got 2000$"):
+        FitOptions(inference=InferenceOptions(polish_iterations=2000)).checked()
+    with pytest.raises(ArgumentError, match="^settings: inference.iterations must be at most 1000, got 5000$"):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000002"], settings={"inference.iterations": 5000})
+    with pytest.raises(ArgumentError, match=f"^workers: must be at most {MAX_WORKERS:,} .*, got {MAX_WORKERS + 1}$"):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000002", "000010"], workers=MAX_WORKERS + 1)
+
+
 def test_with_settings_reaches_every_stage_and_refuses_unknown_ones():
     out = FitOptions().with_settings({"inference.polish_samples": "6", "lifting.iterations": 2})
     assert out.inference.polish_samples == 6 and out.lifting.iterations == 2

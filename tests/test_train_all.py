@@ -439,6 +439,14 @@ def test_train_all_needs_two_groups_and_known_options(tmp_path):
     ("parts.n_jobs=0", "parts.n_jobs must not be 0"),
     ("parts.n_trees=3000", "parts.n_trees must be at most 1000, got 3000"),  # was hours of forests, then a slow model
     ("detector.per_octave=60", "detector.per_octave must be at most 48, got 60"),  # was a bank 10x slower, to use too
+    ("detector.mining_rounds=300", "detector.mining_rounds must be at most 20, got 300"),  # each some 2.5 h a split
+    ("detector.cut_paste=1000", "detector.cut_paste must be at most 50, got 1000"),
+    ("detector.max_negatives=10000000", "detector.max_negatives must be at most 100000, got 10000000"),  # 4.8 kB each
+    ("detector.pyramid_cache_mb=1000000", "detector.pyramid_cache_mb must be at most 16000, got 1000000"),
+    ("parts.synth_scenes=100000", "parts.synth_scenes must be at most 3000, got 100000"),  # 4 MB of patches each
+    ("parts.n_views=10000", "parts.n_views must be at most 360, got 10000"),
+    ("parts.n_aug=1000", "parts.n_aug must be at most 20, got 1000"),
+    ("occlusion.n_scenes=100000", "occlusion.n_scenes must be at most 3000, got 100000"),
 ])
 def test_train_all_checks_the_values_it_is_set_before_any_step(tmp_path, setting, problem):
     from wirescene.training.pipeline import check_options

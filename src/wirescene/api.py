@@ -21,7 +21,7 @@ from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate
-from wirescene.core.validate import boxes_problem, finite_real, projection_problem
+from wirescene.core.validate import MAX_WORKERS, boxes_problem, finite_real, projection_problem
 from wirescene.fitting.pipeline import FitOptions, fit_frame
 from wirescene.fitting.variants import VARIANTS, casts_rays
 from wirescene.infer.inference import InferenceOptions
@@ -178,6 +178,14 @@ def _positive_int(value, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
         raise ArgumentError(name, f"must be a positive integer, got {value!r}")
     return int(value)
+
+
+def _workers(value) -> int:
+    workers = _positive_int(value, "workers")
+    if workers > MAX_WORKERS:  # each a process of some 360 MB
+        raise ArgumentError("workers", f"must be at most {MAX_WORKERS:,} (the larger of 64 and the cores), "
+                                       f"got {workers!r}")
+    return workers
 
 
 def _particles(value) -> int:
@@ -562,7 +570,8 @@ def evaluate(
     particles, seed : int
         As in :func:`fit`.
     workers : int
-        Processes fitting frames in parallel.
+        Processes fitting frames in parallel (at most
+        :data:`~wirescene.core.validate.MAX_WORKERS`, the larger of 64 and the cores).
     predictions : path, optional
         Also write KITTI label files per variant there, and each finished frame's record
         (``.frames/``); a directory holding an earlier run's records needs ``resume``.
@@ -621,11 +630,11 @@ def evaluate(
     several = frame_ids is None or len(frame_ids) > 1
     if resume and predictions is None:
         raise ArgumentError("resume", "needs predictions, the directory where finished frames are recorded")
-    options = _options(None, particles, seed, models, settings, parallel=several and _positive_int(workers, "workers") > 1,
+    options = _options(None, particles, seed, models, settings, parallel=several and _workers(workers) > 1,
                        casts_rays=casts_rays(names))
     return evaluate_dataset(dataset, names, frames=frame_ids,
                             source=DetectionSource(str(detections), bank=options.detector_bank,
                                                    classifier=options.viewpoint_classifier),
-                            options=options, workers=_positive_int(workers, "workers"),
+                            options=options, workers=_workers(workers),
                             predictions_dir=None if predictions is None else Path(predictions),
                             resume=bool(resume))

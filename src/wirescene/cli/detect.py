@@ -33,7 +33,18 @@ from wirescene.core.settings import stage_field
 from wirescene.fitting.pipeline import PredetectOptions
 from wirescene.lift import LiftingOptions
 from wirescene.predetect.bank import SUPPORT_WEIGHT
-from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, MAX_PER_OCTAVE, single_thread
+from wirescene.training.scale import (
+    DEFAULT_CACHE_MB,
+    DEFAULT_MAX_NEGATIVES,
+    MAX_CACHE_MB,
+    MAX_CUT_PASTE,
+    MAX_DETECTOR_SCENES,
+    MAX_MINING_ROUNDS,
+    MAX_NEGATIVES,
+    MAX_PER_OCTAVE,
+    MAX_VAL_SCENES,
+    single_thread,
+)
 
 
 @click.command("detector")
@@ -59,24 +70,31 @@ from wirescene.training.scale import DEFAULT_CACHE_MB, DEFAULT_MAX_NEGATIVES, MA
               help="With --kitti-root: margin a cluster of detections gains per e-fold of its votes (0: its best vote "
                    "alone).")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Random stream (synthetic: scenes; validation: seed+1).")
-@click.option("--scenes", "n_scenes", type=POSITIVE, default=200, show_default=True, help="Synthetic training scenes.")
+@click.option("--scenes", "n_scenes", type=click.IntRange(min=1, max=MAX_DETECTOR_SCENES), default=200, show_default=True,
+              help=f"Synthetic training scenes (at most {MAX_DETECTOR_SCENES:,}: some 0.6 s and 4 MB each).")
 @click.option("--partial", "n_partial", type=NON_NEGATIVE, default=3, show_default=True,
               help="Partial configurations per viewpoint (plus one full-car configuration).")
 @click.option("--per-octave", type=click.IntRange(min=1, max=MAX_PER_OCTAVE), default=6, show_default=True,
               help="With --kitti-root: HOG pyramid levels per octave (stored with the bank for detection, whose "
                    "time, like the training's, grows in proportion).")
-@click.option("--cut-paste", type=NON_NEGATIVE, default=0, show_default=True,
+@click.option("--cut-paste", type=click.IntRange(min=0, max=MAX_CUT_PASTE), default=0, show_default=True,
               help="With --kitti-root: cars of other frames pasted into a composite copy of every training frame.")
-@click.option("--mining-rounds", type=NON_NEGATIVE, default=None, help="Hard-negative mining rounds [synthetic 2, real 3].")
+@click.option("--mining-rounds", type=click.IntRange(min=0, max=MAX_MINING_ROUNDS), default=None,
+              help="Hard-negative mining rounds [synthetic 2, real 3], each describing every mined image again.")
 @click.option("--mining-images", type=POSITIVE, default=None,
               help="The most training images a hard-negative mining round searches [synthetic 80, real: all].")
-@click.option("--val-scenes", "n_val", type=NON_NEGATIVE, default=20, show_default=True, help="Synthetic only.")
+@click.option("--val-scenes", "n_val", type=click.IntRange(min=0, max=MAX_VAL_SCENES), default=20, show_default=True,
+              help="Synthetic only: held-out scenes of the threshold.")
 @click.option("--C", "C", type=POSITIVE_FLOAT, default=0.01, show_default=True, help="Linear SVM regularisation.")
 @click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
-@click.option("--max-negatives", type=POSITIVE, default=DEFAULT_MAX_NEGATIVES, show_default=True,
-              help="With --kitti-root: cap of each configuration's negatives (reservoir, then the hardest).")
-@click.option("--pyramid-cache-mb", type=NON_NEGATIVE_FLOAT, default=DEFAULT_CACHE_MB, show_default=True,
-              help="With --kitti-root: memory for cached grey images and HOG pyramids (beyond it they are recomputed).")
+@click.option("--max-negatives", type=click.IntRange(min=1, max=MAX_NEGATIVES), default=DEFAULT_MAX_NEGATIVES,
+              show_default=True,
+              help=f"With --kitti-root: cap of each configuration's negatives (reservoir, then the hardest; at most "
+                   f"{MAX_NEGATIVES:,}: some 4.8 kB each).")
+@click.option("--pyramid-cache-mb", type=FiniteFloat(min=0, max=MAX_CACHE_MB), default=DEFAULT_CACHE_MB,
+              show_default=True,
+              help=f"With --kitti-root: memory for cached grey images and HOG pyramids (beyond it they are recomputed; "
+                   f"at most {MAX_CACHE_MB:,}, the step needing some 6 GB besides).")
 @workers_option("of the per-image passes (mining, detections; --kitti-root only)")
 def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, drive_mapping,
              support_weight, seed, n_scenes, n_partial, per_octave, cut_paste, mining_rounds, mining_images, n_val, C,

@@ -7,12 +7,14 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import NON_NEGATIVE, POSITIVE, check_output_file, models_option, say_models
+from wirescene.cli.options import NON_NEGATIVE, check_output_file, models_option, say_models
+from wirescene.training.scale import MAX_OCCLUSION_SCENES
 
 
 @click.command("occlusion")
 @click.option("--seed", type=NON_NEGATIVE, default=2000, show_default=True, help="Synthetic stream of the held-out scenes.")
-@click.option("--scenes", type=POSITIVE, default=30, show_default=True, help="Held-out synthetic scenes scored.")
+@click.option("--scenes", type=click.IntRange(min=1, max=MAX_OCCLUSION_SCENES), default=30, show_default=True,
+              help=f"Held-out synthetic scenes scored (at most {MAX_OCCLUSION_SCENES:,}: some 1.6 s each).")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Record to write (the shipped one is src/wirescene/data/occlusion.json).")
 @click.option("--flip-evidence/--no-flip-evidence", default=False, show_default=True,

@@ -157,11 +157,11 @@ def split_option(default: str = "training"):
 
 def ap_draws_option(f):
     """``--draws N``: bootstrap draws of the KITTI APs' intervals over drives (0: none)."""
-    from wirescene.eval.intervals import N_BOOT_AP
+    from wirescene.eval.intervals import MAX_BOOT_AP, N_BOOT_AP
 
-    return click.option("--draws", type=click.IntRange(min=0), default=N_BOOT_AP, show_default=True,
-                        help="Bootstrap draws of the moderate KITTI APs' 90% interval over drives (0: none; each "
-                             "draw evaluates the drawn frames again).")(f)
+    return click.option("--draws", type=click.IntRange(min=0, max=MAX_BOOT_AP), default=N_BOOT_AP, show_default=True,
+                        help=f"Bootstrap draws of the moderate KITTI APs' 90% interval over drives (0: none; each "
+                             f"draw evaluates the drawn frames again; at most {MAX_BOOT_AP:,}).")(f)
 
 
 def drive_map_option(purpose: str = "the held-out calibrations' folds group the frames by recording drive"):
@@ -212,8 +212,11 @@ def select_frames(frames: str | None, split_file: Path | None, known: list[str],
 
 def workers_option(what: str = "fitting frames"):
     """``--workers N``: processes doing ``what`` in parallel (None: all cores, :func:`workers_count`)."""
-    return click.option("--workers", type=POSITIVE, default=None,
-                        help=f"Processes {what} in parallel (default: all cores).")
+    from wirescene.core.validate import MAX_WORKERS
+
+    return click.option("--workers", type=click.IntRange(min=1, max=MAX_WORKERS), default=None,
+                        help=f"Processes {what} in parallel (default: all cores; at most {MAX_WORKERS}, the larger "
+                             "of 64 and the cores: each takes some 360 MB).")
 
 
 def particles_option(f):

@@ -20,7 +20,7 @@ from wirescene.cli.options import (
 )
 from wirescene.parts import MAX_SMOOTH
 from wirescene.training.recipe import RECIPE
-from wirescene.training.scale import MAX_TREES
+from wirescene.training.scale import MAX_AUG, MAX_PART_SCENES, MAX_TREES, MAX_VIEWS
 
 #: The shipped model's options are this command's defaults (``train all`` trains the same).
 _RECIPE = RECIPE["parts"]
@@ -31,7 +31,7 @@ _RECIPE = RECIPE["parts"]
               help="Model .npz to write (the shipped one is src/wirescene/data/parts_model.npz).")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True,
               help="Random stream of the patches' sampling and augmentation and of the forest.")
-@click.option("--n-views", type=NON_NEGATIVE, default=0, show_default=True,
+@click.option("--n-views", type=click.IntRange(min=0, max=MAX_VIEWS), default=0, show_default=True,
               help="CAD edge renderings: views per car (2 elevations; 0: none; edge kinds sc/hog and --no-position "
                    "only).")
 @click.option("--n-trees", type=click.IntRange(min=1, max=MAX_TREES), default=30, show_default=True,
@@ -57,8 +57,10 @@ _RECIPE = RECIPE["parts"]
 @click.option("--label-shapes", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="With --kitti-root: .npz of the labelled cars' own wireframes (frame id -> (N, 36, 3), object "
                    "frame) in place of the mean shape scaled into each label's box.")
-@click.option("--synth-scenes", type=NON_NEGATIVE, default=_RECIPE["synth_scenes"], show_default=True,
-              help="Synthetic shaded training scenes (wirescene synth stream --synth-seed).")
+@click.option("--synth-scenes", type=click.IntRange(min=0, max=MAX_PART_SCENES), default=_RECIPE["synth_scenes"],
+              show_default=True,
+              help=f"Synthetic shaded training scenes (wirescene synth stream --synth-seed; at most {MAX_PART_SCENES:,}: "
+                   "some 1.3 s and 4 MB of patches each).")
 @click.option("--synth-seed", type=click.IntRange(min=1000), default=1000, show_default=True,
               help="Synthetic scene stream (>= 1000; lower seeds are evaluation scenes).")
 @click.option("--synth-cache", type=click.Path(file_okay=False), default=None,
@@ -66,7 +68,7 @@ _RECIPE = RECIPE["parts"]
                    "synthetic options (e.g. one per fold).")
 @click.option("--class-weight", type=click.Choice(["balanced", "balanced_subsample", "none"]), default="balanced",
               show_default=True, help="Forest class weights.")
-@click.option("--n-aug", type=POSITIVE, default=2, show_default=True,
+@click.option("--n-aug", type=click.IntRange(min=1, max=MAX_AUG), default=2, show_default=True,
               help="With --n-views: renderings per view (first unaugmented).")
 @click.option("--heldout", type=NON_NEGATIVE, default=0, show_default=True,
               help="With --n-views: first evaluate with this many CAD models held out.")

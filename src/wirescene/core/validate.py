@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 
 import numpy as np
 
@@ -14,6 +15,11 @@ import numpy as np
 FOCAL_RANGE = (10.0, 1e5)
 # No image is this large (pixels): a box coordinate beyond it is a corrupted number.
 MAX_PIXEL = 1e5
+
+#: Most worker processes of one run (``--workers``, the API's ``workers``): each fitting worker holds
+#: some 360 MB (README, "Evaluating needs little memory"), so 64 of them take 23 GB; a machine with
+#: more cores than that may use them all (beyond the cores a worker adds no speed, only memory).
+MAX_WORKERS = max(64, os.cpu_count() or 1)
 
 
 def finite_real(value) -> bool:

@@ -28,6 +28,9 @@ N_BOOT = 10000
 #: Draws of a KITTI AP interval (each draw re-ranks every estimate: 1,000 draws of a 3,769-frame split take
 #: seconds per figure).
 N_BOOT_AP = 1000
+#: Most draws of a KITTI AP interval (``--draws``): 100x :data:`N_BOOT_AP`, some minutes a figure of a
+#: 3,769-frame split; memory does not grow with them (:data:`_CHUNK` at once).
+MAX_BOOT_AP = 100_000
 #: Draws generated at once (memory: ``_CHUNK x clusters`` floats).
 _CHUNK = 1000
 

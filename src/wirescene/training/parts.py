@@ -784,6 +784,13 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
                                             "are both 0 and no kitti_root (--kitti-root) is given")
     if calibrate_real and kitti_root is None:
         raise ArgumentError("calibrate_real", "needs kitti_root (--kitti-root), the real labelled frames")
+    if heldout and n_az:  # the held-out evaluation trains on the other cars: one at least
+        from wirescene.cad.training import load_cad_meshes
+
+        n_cars = len(load_cad_meshes()) if cars is None else len(list(cars))
+        if int(heldout) >= n_cars:
+            raise ArgumentError("heldout", f"holds out {int(heldout):,} of the {n_cars} CAD cars: at most "
+                                           f"{n_cars - 1}, so that the evaluation's forest has a car to learn from")
     real_only = kitti_root is not None and not n_az and not synth_scenes
     if real_only or calibrate_real:  # checked before any patch is made
         from wirescene.io.kitti import KittiDataset

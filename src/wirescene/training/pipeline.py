@@ -75,7 +75,19 @@ from wirescene.training.kitti_detector import (
     heldout_bank_calibration,
 )
 from wirescene.training.recipe import RECIPE
-from wirescene.training.scale import CACHE, MAX_PER_OCTAVE, MAX_TREES
+from wirescene.training.scale import (
+    CACHE,
+    MAX_AUG,
+    MAX_CACHE_MB,
+    MAX_CUT_PASTE,
+    MAX_MINING_ROUNDS,
+    MAX_NEGATIVES,
+    MAX_OCCLUSION_SCENES,
+    MAX_PART_SCENES,
+    MAX_PER_OCTAVE,
+    MAX_TREES,
+    MAX_VIEWS,
+)
 
 __all__ = ["STEPS", "STEP_OPTIONS", "RECIPE", "step_options", "option_default", "check_options", "calibration_folds",
            "heldout_bank_calibration", "train_all"]
@@ -163,13 +175,16 @@ def option_default(step: str, key: str):
 OPTION_LIMITS: dict[str, dict[str, tuple]] = {
     "parts": {"n_trees": (1, MAX_TREES), "max_depth": (1, None), "min_samples_leaf": (1, None),
               "max_real_patches": (1, None), "n_jobs": (-1, None), "synth_seed": (1000, None),
-              "smooth": (0, MAX_SMOOTH)},
+              "smooth": (0, MAX_SMOOTH), "n_views": (0, MAX_VIEWS), "n_aug": (1, MAX_AUG),
+              "synth_scenes": (0, MAX_PART_SCENES)},
     "detector": {"C": (1e-9, None), "max_pos": (1, None), "min_pos": (1, None), "neg_per_image": (1, None),
                  "min_height": (1, None), "max_scale": (0.01, None), "full_area": (1, None), "partial_area": (1, None),
-                 "per_octave": (1, MAX_PER_OCTAVE), "cluster_radius": (0.01, None), "max_negatives": (1, None),
-                 "max_truncated": (0, 1), "mining_images": (1, None), "threshold": (0, 1)},
+                 "per_octave": (1, MAX_PER_OCTAVE), "cluster_radius": (0.01, None), "max_negatives": (1, MAX_NEGATIVES),
+                 "max_truncated": (0, 1), "mining_images": (1, None), "threshold": (0, 1),
+                 "mining_rounds": (0, MAX_MINING_ROUNDS), "cut_paste": (0, MAX_CUT_PASTE),
+                 "pyramid_cache_mb": (0, MAX_CACHE_MB)},
     "viewpoints": {"C": (1e-9, None)},
-    "occlusion": {"n_scenes": (1, None)},
+    "occlusion": {"n_scenes": (1, MAX_OCCLUSION_SCENES)},
 }
 #: The options that take one of a few words.
 OPTION_CHOICES: dict[str, dict[str, tuple]] = {"parts": {"class_weight": ("balanced", "balanced_subsample", None)}}

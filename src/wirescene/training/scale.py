@@ -46,6 +46,48 @@ MAX_PER_OCTAVE = 48
 #: some 30 hours and 6 GB of training.
 MAX_TREES = 1000
 
+#: Most synthetic scenes of ``train detector`` without ``--kitti-root`` (``--scenes``, default 200):
+#: each costs some 0.6 s and 4 MB held to the end (its grey image and car examples), so 2,000 are some
+#: 20 minutes and 8 GB before the mining.
+MAX_DETECTOR_SCENES = 2000
+
+#: Most held-out synthetic scenes of the synthetic bank's threshold (``--val-scenes``, default 20):
+#: some 0.8 s each (a scene drawn and detected), no memory kept: 2,000 are some 27 minutes.
+MAX_VAL_SCENES = 2000
+
+#: Most hard-negative mining rounds (``--mining-rounds``, default 2 synthetic, 3 real): each round
+#: describes every mined image again (0.7 s a synthetic scene; on KITTI a sixth of the detector
+#: step, some 2.5 hours of a 3,712-frame split on one core).
+MAX_MINING_ROUNDS = 20
+
+#: Most cars pasted into each composite frame (``--cut-paste``, default 0): a KITTI frame has room for
+#: a few tens, and every car beyond the room still costs its placement tries against all those placed.
+MAX_CUT_PASTE = 50
+
+#: Most of a configuration's negatives (``--max-negatives``, default :data:`DEFAULT_MAX_NEGATIVES`):
+#: a descriptor is some 4.8 kB (the shipped bank's 32 templates average 1,198 floats), so 32
+#: configurations at 100,000 hold 15 GB, which with the rest of the step (some 4 GB) fits 24 GB.
+MAX_NEGATIVES = 100_000
+
+#: Most megabytes of :data:`CACHE` (``--pyramid-cache-mb``, default :data:`DEFAULT_CACHE_MB`): the
+#: cache fills up to it on a large split, and the step needs some 6 GB besides (README, "Scale"), so
+#: 16,000 keeps the step within 24 GB.
+MAX_CACHE_MB = 16_000
+
+#: Most synthetic shaded scenes of the part model's patches (``train parts --synth-scenes``, default
+#: 300): some 1.3 s and 4 MB of patches each, not capped as the real patches are, so 3,000 are some
+#: 12 GB and an hour before the forest.
+MAX_PART_SCENES = 3000
+
+#: Most CAD edge renderings a car of ``train parts --n-views`` (views; default 0, none) and of
+#: ``--n-aug`` (copies a view; default 2).
+MAX_VIEWS = 360
+MAX_AUG = 20
+
+#: Most held-out synthetic scenes of ``train occlusion --scenes`` (default 30): some 1.6 s each, the
+#: cars' small arrays kept: 3,000 are some 80 minutes.
+MAX_OCCLUSION_SCENES = 3000
+
 #: Default cap of the box refinement's regression rows (:class:`RowSample`): the 72 shared
 #: frames give 11,572 (jittered label boxes and the bank's own detections), below it.
 DEFAULT_MAX_REFINEMENT_ROWS = 16000
