@@ -53,3 +53,18 @@ def test_integral_channels_convert_a_large_image_in_strips():
     out, peak = _peak_bytes(lambda: integral_channels(image))
     assert out.shape == (1501, 4001, 4)
     assert peak < out.nbytes + 200 * STRIP_PIXELS, (peak - out.nbytes) / 2**20
+
+
+def test_bands_give_the_whole_maps_to_the_bit_on_levels_a_template_wide():
+    """A band of one window on a level exactly a template wide is summed in order, as the
+    whole map's rows are: banded maps equal whole ones at any band size."""
+    bank = load_default_bank()
+    rng = np.random.default_rng(3)
+    tw = bank.configs[0].template[1]
+    levels = [(1.0, np.abs(rng.normal(0, 0.1, (40, width, N_FEAT))).astype(np.float32)) for width in (tw, tw + 1)]
+    whole = {(t, li): R for t, li, _, R in template_responses(bank, levels, min_height=0, max_height=np.inf)}
+    assert any(R.shape[1] == 1 for R in whole.values())  # a level a template wide: a map one window wide
+    for max_products in (1, 5_000):
+        banded = list(template_responses(bank, levels, min_height=0, max_height=np.inf, max_products=max_products))
+        assert len(banded) == len(whole)
+        assert all(R.tobytes() == whole[(t, li)].tobytes() for t, li, _, R in banded)

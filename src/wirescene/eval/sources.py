@@ -116,7 +116,7 @@ class DetectionSource:
 
 def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
     """A generator that depends only on the run seed and the frame, so results do not depend
-    on the order (or the process) in which frames are processed. A numeric id seeds by its
+    on the order (or the process) in which frames are processed. A numeric id below 2^32 seeds by its
     number (``"000007"`` and ``"7"`` share a stream), any other by its bytes' CRC-32 in a
     stream of its own (``"a1"`` and ``"b1"`` differ).
 
@@ -128,7 +128,7 @@ def frame_seed(seed: int, frame_id: str) -> np.random.Generator:
     >>> frame_seed(0, "a1").random() == frame_seed(0, "b1").random()
     False
     """
-    if frame_id.isascii() and frame_id.isdigit():  # KITTI's ids: the streams every earlier run used
+    if frame_id.isascii() and frame_id.isdigit() and int(frame_id) < 2**32:  # KITTI's: every earlier run's streams
         return np.random.default_rng([seed, int(frame_id)])
-    # a spawn key of its own: no id's words can make a numeric id's entropy (SeedSequence pads with zeros)
+    # a spawn key of its own: one 32-bit word of id, so no id's entropy equals a numeric id's (zero-padded) one
     return np.random.default_rng(np.random.SeedSequence([seed, zlib.crc32(frame_id.encode("utf-8"))], spawn_key=(1,)))

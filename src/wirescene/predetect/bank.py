@@ -286,8 +286,9 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
 
     A level whose products would exceed ``max_products`` floats (:data:`MAX_PRODUCTS`; a
     large image's finest levels) is scored in bands of response rows, each from the cell
-    rows its windows cover: the same products and additions per window, the memory bounded
-    whatever the image's size.
+    rows its windows cover: the same products and additions per window, the products' memory
+    bounded whatever the image's size (the group's maps, at most a chunk of templates', are
+    kept until its last band).
 
     Examples
     --------
@@ -343,7 +344,14 @@ def template_responses(bank: DetectorBank, pyramid, *, min_height: float = 30.0,
                     Pt, o = P[o:o + th * tw, :Hr + th - 1], o + th * tw
                     if Hr <= 0:
                         continue
-                    if P.dtype == np.float32:
+                    if P.dtype == np.float32 and Hr * Wr == 1 and maps[t] is not None and Hc - th + 1 > 1:
+                        # a band of one window: numpy would sum its contiguous products pairwise, the whole map row
+                        # after row
+                        stack = _shifted_products(Pt, th, tw, stack)
+                        R = np.full((1, 1), bank.biases[t], np.float32)
+                        for k in range(th * tw):
+                            R += stack[k]
+                    elif P.dtype == np.float32:
                         stack = _shifted_products(Pt, th, tw, stack)
                         R = np.add.reduce(stack[:th * tw * Hr * Wr].reshape(th * tw, Hr, Wr), axis=0,
                                           initial=np.float32(bank.biases[t]))

@@ -45,6 +45,7 @@ from __future__ import annotations
 import hashlib
 import inspect
 import math
+import numbers
 import sys
 import time
 from dataclasses import dataclass
@@ -299,13 +300,16 @@ def train_all(
     InputError
         A bad root, frame selection, split file or models directory, before any training.
     ValueError
-        An unknown step option.
+        An unknown step option, or ``workers`` beyond :data:`~wirescene.core.validate.MAX_WORKERS`.
     """
+    from wirescene.core.validate import MAX_WORKERS
     from wirescene.io.kitti import KittiDataset
 
     out = Path(out_dir)
     if frames is not None and split_file is not None:
         raise ValueError("frames and split_file both choose the frames: give one")
+    if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or not 0 <= workers <= MAX_WORKERS:
+        raise ValueError(f"workers must be an integer from 0 to {MAX_WORKERS:,}, got {workers!r}")
     opts = check_options(options or {})
     dataset = KittiDataset(kitti_root)
     if not dataset.has_labels:
