@@ -862,6 +862,7 @@ def _register_commands():
 
 _register_commands()
 
+
 def console_main() -> None:
     """The ``wirescene`` console script (and ``python -m wirescene.cli.main``): :func:`main` on
     this process's command line, the process being the command's, so that it exits with
