@@ -227,3 +227,15 @@ def test_set_on_the_command_line_is_checked(tmp_path):
                                       "--set", item])
         assert r.exit_code == 2 and "--set" in r.output and says in r.output, (item, r.output)
         assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "sched_setaffinity"), reason="CPU affinity is Linux's")
+def test_the_default_workers_are_the_cores_this_process_may_use():
+    """A job scheduler's share of the machine (the CPU affinity), not the machine's every core."""
+    import subprocess
+    import sys
+
+    code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
+            "from wirescene.cli.options import workers_count; print(workers_count(None))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "1"

@@ -171,7 +171,7 @@ def sample_root() -> Path:
 
 
 def _frame_workers(workers: int | None, device: str) -> int:
-    """Processes fitting frames: ``workers`` (None: all cores), or one on a CUDA device,
+    """Processes fitting frames: ``workers`` (None: the usable cores), or one on a CUDA device,
     said on stderr when that reduces them (forked processes cannot share the CUDA state)."""
     n = workers_count(workers)
     if device.startswith("cuda") and n > 1:

@@ -211,12 +211,13 @@ def select_frames(frames: str | None, split_file: Path | None, known: list[str],
 
 
 def workers_option(what: str = "fitting frames"):
-    """``--workers N``: processes doing ``what`` in parallel (None: all cores, :func:`workers_count`)."""
+    """``--workers N``: processes doing ``what`` in parallel (None: every core this process may
+    use, :func:`workers_count`)."""
     from wirescene.core.validate import MAX_WORKERS
 
     return click.option("--workers", type=click.IntRange(min=1, max=MAX_WORKERS), default=None,
-                        help=f"Processes {what} in parallel (default: all cores; at most {MAX_WORKERS}, the larger "
-                             "of 64 and the cores: each takes some 360 MB).")
+                        help=f"Processes {what} in parallel (default: the cores this process may use; at most "
+                             f"{MAX_WORKERS}, the larger of 64 and those cores: each takes some 360 MB).")
 
 
 def particles_option(f):
@@ -234,8 +235,11 @@ def particles_option(f):
 
 
 def workers_count(workers: int | None) -> int:
-    """The processes of ``--workers`` (None: all cores)."""
-    return workers or os.cpu_count() or 1
+    """The processes of ``--workers`` (None: every core this process may use,
+    :func:`~wirescene.core.validate.usable_cores`)."""
+    from wirescene.core.validate import usable_cores
+
+    return workers or usable_cores()
 
 
 def models_option(f):

@@ -22,6 +22,7 @@ import numpy as np
 from wirescene.core.camera import Camera
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections, SceneEstimate
+from wirescene.core.validate import usable_cores
 from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
 from wirescene.eval.records import FrameRecords, StaleRecord, refuse_earlier_run, run_config
 from wirescene.eval.sources import DetectionSource, frame_seed
@@ -183,7 +184,7 @@ def fit_frames(
 
         n = min(workers, len(frame_ids))
         pool = ProcessPoolExecutor(max_workers=n, initializer=_worker_init,
-                                   initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // n)))
+                                   initargs=(os.getpid(), max(1, usable_cores() // n)))
         stack.push(_pool_closer(pool))
         # As completed rather than in order: a finished frame is recorded at once, so an
         # interrupted run loses only the frames still being fitted.
