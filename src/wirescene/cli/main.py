@@ -386,6 +386,13 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
 
             # the seeds' pages and the page over them replace an earlier report together, after the last seed
             pages = stack.enter_context(staged_report(report_dir))
+        said: set[str] = set()
+
+        def notify(message: str) -> None:  # several seeds: a frame's warning once, not once a seed
+            if message not in said:
+                said.add(message)
+                click.echo(f"wirescene: {message}", err=True)
+
         for k, seed in enumerate(seeds):
             if several:
                 click.echo(("\n" if k else "") + f"=== seed {seed}")
@@ -394,7 +401,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
                 particles=particles, predictions=_seed_dir(predictions, seed, several), evidence=evidence, draws=draws,
                 report_dir=_seed_dir(pages, seed, several), workers=workers,
                 allow_missing=allow_missing_detections, resume=resume, client=client, dask_address=dask_address,
-                inference=dict(inference), as_json=json_out is not None)
+                inference=dict(inference), as_json=json_out is not None, notify=notify)
             figures[seed] = seed_figures({v: r.metrics["all"] for v, r in reports.items()}, kitti)
         summary = over_seeds(figures) if several else None
         if several and report_dir is not None:
@@ -446,8 +453,9 @@ def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
 
 def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, viewpoint_noise, particles, predictions,
                    evidence, draws, report_dir, workers, allow_missing, resume, client, dask_address,
-                   inference, as_json) -> tuple[dict, dict, dict | None]:
-    """One seed of ``wirescene eval``: fits, prints its tables and writes its report;
+                   inference, as_json, notify) -> tuple[dict, dict, dict | None]:
+    """One seed of ``wirescene eval``: fits, prints its tables and writes its report (its notices
+    to ``notify``);
     returns ``(reports, kitti figures, JSON data)`` by variant, the JSON data (every record
     serialised) only ``as_json`` (else None)."""
     from wirescene.eval.intervals import format_intervals, localisation_intervals, margin_intervals
@@ -489,7 +497,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
         workers=_frame_workers(workers, options.inference.device),
         dask_client=client,
         progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
-        notify=lambda message: click.echo(f"wirescene: {message}", err=True),
+        notify=notify,
         on_estimate=on_estimate,
     )
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
