@@ -889,6 +889,20 @@ def test_sigterm_leaves_no_part_of_a_synthetic_set(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.skipif(not hasattr(__import__("signal"), "SIGHUP"), reason="SIGHUP is POSIX's")
+def test_a_hang_up_cleans_up_as_sigterm_does_and_ends_in_129(tmp_path):
+    """SIGHUP (the terminal closed, an SSH session dropped) while `synth` writes: exit 129, one
+    line, nothing left (it used to end the process where it stood, the staging folder left)."""
+    import signal
+
+    proc = _started(["synth", tmp_path / "synth", "--scenes", 50],
+                    until=lambda _: list(tmp_path.glob("synth/.training.*.tmp/image_2/*.png")))
+    proc.send_signal(signal.SIGHUP)
+    assert proc.wait(timeout=30) == 129
+    assert _said(proc.stderr.read()) == ["wirescene: hung up"]
+    assert list(tmp_path.iterdir()) == []
+
+
 def _slow_frame(seconds):
     import signal
     import time

@@ -59,13 +59,19 @@ def _usage_message(exc: click.UsageError) -> str:
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM (``kill``, a scheduler's stop), raised in the main thread as Ctrl-C raises
-    ``KeyboardInterrupt``: a subclass of it, so that every cleanup Ctrl-C runs (staging
-    folders removed, worker processes stopped) runs for it too."""
+    """SIGTERM (``kill``, a scheduler's stop) or SIGHUP (the terminal of the session closed, a
+    dropped SSH connection), raised in the main thread as Ctrl-C raises ``KeyboardInterrupt``:
+    a subclass of it, so that every cleanup Ctrl-C runs (staging folders removed, worker
+    processes stopped) runs for it too. ``signum``: the signal."""
+
+    def __init__(self, signum: int = signal.SIGTERM):
+        super().__init__()
+        self.signum = int(signum)
 
 
-#: The signals that stop a run: Ctrl-C (SIGINT) and SIGTERM.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: The signals that stop a run: Ctrl-C (SIGINT), SIGTERM and, where the system has it, SIGHUP
+#: (ignored under ``nohup``, and then left ignored).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM) + ((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ())
 
 
 class _Stopping:
@@ -84,7 +90,7 @@ def _on_stop_signal(signum, frame) -> None:
     for s in STOP_SIGNALS:
         signal.signal(s, signal.SIG_IGN)
     if not _Stopping.exiting:
-        raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+        raise KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
 
 
 @contextmanager
@@ -114,8 +120,9 @@ class _Group(click.Group):
     """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
     on standard error and exit code 2, without a traceback (typed errors of the package,
     bad option values and usage errors alike); running out of memory (or a worker process
-    stopped by the system) one line too, exit code 1; Ctrl-C ends with exit code 130 and
-    SIGTERM with 143 (128 + the signal), each after the same cleanup, once, whenever it comes
+    stopped by the system) one line too, exit code 1; Ctrl-C ends with exit code 130,
+    SIGTERM with 143 and SIGHUP with 129 (128 + the signal), each after the same cleanup, once,
+    whenever it comes
     (:func:`_on_stop_signal`)."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, *, console: bool = False,
@@ -154,9 +161,10 @@ class _Group(click.Group):
             sys.exit(1)
         except KeyboardInterrupt as exc:  # the shell's convention (128 + the signal), not click's "Aborted!" and 1
             _Stopping.exiting = True
-            terminated = isinstance(exc, Terminated)
-            click.echo(f"wirescene: {'terminated' if terminated else 'interrupted'}", err=True)
-            sys.exit(128 + (signal.SIGTERM if terminated else signal.SIGINT))
+            signum = exc.signum if isinstance(exc, Terminated) else signal.SIGINT
+            said = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated"}.get(signum, "hung up")
+            click.echo(f"wirescene: {said}", err=True)
+            sys.exit(128 + signum)
 
 
 @click.group(cls=_Group)

@@ -132,6 +132,8 @@ def _worker_init(parent: int, threads: int) -> None:
     _die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # it writes no file: stopped, it ends (not by the CLI's handler)
+    if hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # (nohup: kept)
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)  # a closed terminal ends the worker, not the CLI's handler in it
     os.environ[TORCH_THREADS_ENV] = str(threads)  # read where PyTorch is imported later (spawned workers)
     torch = sys.modules.get("torch")
     if torch is not None:  # imported before the fork

@@ -258,6 +258,8 @@ def _worker_init() -> None:
         signal.signal(signal.SIGINT, _end_quietly)
     # the pool's own stop (terminate()) is SIGTERM: the worker ends, whatever handler the parent's command set
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # (nohup: kept)
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
 
 def _end_quietly(signum, frame) -> None:
