@@ -122,8 +122,7 @@ class _Group(click.Group):
     bad option values and usage errors alike); running out of memory (or a worker process
     stopped by the system) one line too, exit code 1; Ctrl-C ends with exit code 130,
     SIGTERM with 143 and SIGHUP with 129 (128 + the signal), each after the same cleanup, once,
-    whenever it comes
-    (:func:`_on_stop_signal`)."""
+    whenever it comes (:func:`_on_stop_signal`)."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, *, console: bool = False,
              **extra):
