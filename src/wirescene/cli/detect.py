@@ -20,6 +20,7 @@ from wirescene.cli.options import (
     field_type,
     models_option,
     read_drive_map,
+    refuse_given,
     say_models,
     select_frames,
     split_file_option,
@@ -115,11 +116,10 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
               "--per-octave": per_octave != 6, "--cut-paste": cut_paste, "--max-negatives":
               max_negatives != DEFAULT_MAX_NEGATIVES, "--pyramid-cache-mb": pyramid_cache_mb != DEFAULT_CACHE_MB,
               "--workers": workers is not None})
-    given = [name for name, value in other.items() if value]
-    if given:
-        raise click.UsageError(" / ".join(given) + (": synthetic training only, not with --kitti-root"
-                                                     if kitti_root is not None else
-                                                     " need" + ("s" if len(given) == 1 else "") + " --kitti-root"))
+    if kitti_root is not None:
+        refuse_given(other, why="synthetic training only, not with --kitti-root")
+    else:
+        refuse_given(other, needs="--kitti-root")
     if kitti_root is not None:
         from wirescene.io.kitti import KittiDataset
         from wirescene.training.kitti_detector import check_calibration, train_detector_bank_kitti

@@ -8,6 +8,7 @@ import math
 import os
 import tempfile
 from pathlib import Path
+from typing import Mapping
 
 import click
 
@@ -210,6 +211,26 @@ def select_frames(frames: str | None, split_file: Path | None, known: list[str],
     return parse_frames(frames, known, option)
 
 
+def refuse_given(options: Mapping[str, object], *, needs: str | None = None, why: str | None = None) -> None:
+    """A ``click.UsageError`` naming every option of ``{"--name": given}`` given (a true value)
+    where it would be ignored: ``--a / --b need NEEDS`` (``needs``), or ``--a / --b: WHY``;
+    nothing when none is given.
+
+    Examples
+    --------
+    >>> refuse_given({"--n-aug": False, "--heldout": 0}, needs="--n-views")  # none given: nothing
+    >>> refuse_given({"--n-aug": True}, needs="--n-views")
+    Traceback (most recent call last):
+    ...
+    click.exceptions.UsageError: --n-aug needs --n-views
+    """
+    given = [name for name, value in options.items() if value]
+    if given:
+        listed = " / ".join(given)
+        raise click.UsageError(f"{listed} need{'s' if len(given) == 1 else ''} {needs}" if needs is not None
+                               else f"{listed}: {why}")
+
+
 def workers_option(what: str = "fitting frames"):
     """``--workers N``: processes doing ``what`` in parallel (None: every core this process may
     use, :func:`workers_count`)."""
@@ -236,8 +257,8 @@ def particles_option(f):
 
 def workers_count(workers: int | None) -> int:
     """The processes of ``--workers`` (None: every core this process may use,
-    :func:`~wirescene.core.validate.usable_cores`)."""
-    from wirescene.core.validate import usable_cores
+    :func:`~wirescene.core.workers.usable_cores`)."""
+    from wirescene.core.workers import usable_cores
 
     return workers or usable_cores()
 

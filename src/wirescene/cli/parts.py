@@ -15,6 +15,7 @@ from wirescene.cli.options import (
     check_output_file,
     drive_map_option,
     read_drive_map,
+    refuse_given,
     select_frames,
     split_file_option,
 )
@@ -95,11 +96,8 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
     if kitti_root is None and (frames is not None or split_file is not None):
         raise click.UsageError("--frames / --split-file need --kitti-root")
     if not n_views:  # options of the CAD renderings, else ignored
-        given = [name for name, value in (("--n-aug", n_aug != 2), ("--heldout", heldout), ("--compare-hog", compare_hog),
-                                          ("--kitti-background", kitti_background is not None)) if value]
-        if given:
-            raise click.UsageError(f"{' / '.join(given)} need{'s' if len(given) == 1 else ''} --n-views (CAD edge "
-                                   "renderings)")
+        refuse_given({"--n-aug": n_aug != 2, "--heldout": heldout, "--compare-hog": compare_hog,
+                      "--kitti-background": kitti_background is not None}, needs="--n-views (CAD edge renderings)")
     if kitti_background is not None:  # read after the renderings: checked before them
         from wirescene.core.errors import InputError
         from wirescene.io.kitti import KittiDataset

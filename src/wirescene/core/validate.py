@@ -7,30 +7,15 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 
 import numpy as np
+
+from wirescene.core.workers import usable_cores
 
 # Focal lengths outside this range (pixels) are not a street camera: KITTI's is ~720.
 FOCAL_RANGE = (10.0, 1e5)
 # No image is this large (pixels): a box coordinate beyond it is a corrupted number.
 MAX_PIXEL = 1e5
-
-def usable_cores() -> int:
-    """The cores this process may run on: its CPU affinity where the system tells it (a job
-    scheduler's or a container's share of the machine, e.g. ``taskset`` or a SLURM
-    allocation), else every core of the machine.
-
-    Examples
-    --------
-    >>> 1 <= usable_cores() <= (os.cpu_count() or 1)
-    True
-    """
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # macOS and Windows have no affinity call
-        return os.cpu_count() or 1
-
 
 #: Most worker processes of one run (``--workers``, the API's ``workers``): each fitting worker holds
 #: some 360 MB (README, "Evaluating needs little memory"), so 64 of them take 23 GB; a machine with

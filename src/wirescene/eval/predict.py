@@ -135,8 +135,8 @@ def predict_dataset(
         chosen = set(frame_ids)
         outside = [p.name for p in existing if p.stem not in chosen]
         if outside:
-            frames = f"{len(outside)} frame{'s' if len(outside) > 1 else ''}"
-            raise InputError(f"holds the label files of {frames} outside this run's selection (e.g. {outside[0]}), "
+            count = f"{len(outside)} frame{'s' if len(outside) > 1 else ''}"
+            raise InputError(f"holds the label files of {count} outside this run's selection (e.g. {outside[0]}), "
                              "which a submission zipped from it would include: resume with a selection that includes "
                              "them, or choose another directory", path=out)
     done = {p.stem for p in existing}

@@ -22,7 +22,7 @@ import numpy as np
 from wirescene.core.camera import Camera
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections, SceneEstimate
-from wirescene.core.validate import usable_cores
+from wirescene.core.workers import end_on_stop_signals, usable_cores
 from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
 from wirescene.eval.records import FrameRecords, StaleRecord, refuse_earlier_run, run_config
 from wirescene.eval.sources import DetectionSource, frame_seed
@@ -131,9 +131,7 @@ def _worker_init(parent: int, threads: int) -> None:
     slower)."""
     _die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # it writes no file: stopped, it ends (not by the CLI's handler)
-    if hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # (nohup: kept)
-        signal.signal(signal.SIGHUP, signal.SIG_DFL)  # a closed terminal ends the worker, not the CLI's handler in it
+    end_on_stop_signals()
     os.environ[TORCH_THREADS_ENV] = str(threads)  # read where PyTorch is imported later (spawned workers)
     torch = sys.modules.get("torch")
     if torch is not None:  # imported before the fork

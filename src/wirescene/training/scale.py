@@ -25,6 +25,8 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from wirescene.core.workers import end_on_stop_signals
+
 #: Default budget of :data:`CACHE`: the grey images and HOG pyramids (6 levels per
 #: octave, up to scale 2) of the 72 shared KITTI frames and their mirror images (144 x
 #: 17.3 MB = 2.5 GB): at that scale nothing is computed twice.
@@ -256,10 +258,7 @@ def _worker_init() -> None:
     CACHE.max_bytes = 0
     if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:  # a parent that ignores Ctrl-C waits on its workers
         signal.signal(signal.SIGINT, _end_quietly)
-    # the pool's own stop (terminate()) is SIGTERM: the worker ends, whatever handler the parent's command set
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    if hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # (nohup: kept)
-        signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    end_on_stop_signals()  # the pool's own stop (terminate()) is SIGTERM
 
 
 def _end_quietly(signum, frame) -> None:
