@@ -876,30 +876,20 @@ def test_sigterm_cleans_up_as_ctrl_c_does_and_ends_in_143(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
 
 
-def test_sigterm_leaves_no_part_of_a_synthetic_set(tmp_path):
-    """SIGTERM while `synth` writes its scenes: exit 143, the staging folder removed and the
-    directory made for the set too (it used to stay, half a set, beside an exit of -15)."""
+@pytest.mark.parametrize("name, code, said", [("SIGTERM", 143, "terminated"), ("SIGHUP", 129, "hung up")])
+def test_a_stop_signal_leaves_no_part_of_a_synthetic_set(tmp_path, name, code, said):
+    """SIGTERM, or SIGHUP (the terminal closed, an SSH session dropped), while `synth` writes
+    its scenes: exit 128 + the signal, one line, the staging folder removed and the directory
+    made for the set too (it used to stay, half a set, beside an exit of -15 or -1)."""
     import signal
 
+    if not hasattr(signal, name):
+        pytest.skip(f"{name} is POSIX's")
     proc = _started(["synth", tmp_path / "synth", "--scenes", 50],
                     until=lambda _: list(tmp_path.glob("synth/.training.*.tmp/image_2/*.png")))
-    proc.send_signal(signal.SIGTERM)
-    assert proc.wait(timeout=30) == 143
-    assert _said(proc.stderr.read()) == ["wirescene: terminated"]
-    assert list(tmp_path.iterdir()) == []
-
-
-@pytest.mark.skipif(not hasattr(__import__("signal"), "SIGHUP"), reason="SIGHUP is POSIX's")
-def test_a_hang_up_cleans_up_as_sigterm_does_and_ends_in_129(tmp_path):
-    """SIGHUP (the terminal closed, an SSH session dropped) while `synth` writes: exit 129, one
-    line, nothing left (it used to end the process where it stood, the staging folder left)."""
-    import signal
-
-    proc = _started(["synth", tmp_path / "synth", "--scenes", 50],
-                    until=lambda _: list(tmp_path.glob("synth/.training.*.tmp/image_2/*.png")))
-    proc.send_signal(signal.SIGHUP)
-    assert proc.wait(timeout=30) == 129
-    assert _said(proc.stderr.read()) == ["wirescene: hung up"]
+    proc.send_signal(getattr(signal, name))
+    assert proc.wait(timeout=30) == code
+    assert _said(proc.stderr.read()) == [f"wirescene: {said}"]
     assert list(tmp_path.iterdir()) == []
 
 
