@@ -19,7 +19,7 @@ from wirescene.core.errors import InputError, check_shape
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.wireframe import N_VERTICES
 
-__all__ = ["ShapeModel", "fit_shape_model", "augment_to_kitti_sizes", "load_default",
+__all__ = ["ShapeModel", "fit_shape_model", "component_signs", "augment_to_kitti_sizes", "load_default",
            "FORMAT_VERSION", "DEFAULT_MODEL_PATH", "KITTI_CAR_SIZE"]
 
 FORMAT_VERSION = 1
@@ -238,6 +238,28 @@ def augment_to_kitti_sizes(wireframes, *, n_per_exemplar: int, rng=None,
     return (W[:, None] * scale_xyz[:, :, None, :]).reshape(-1, N_VERTICES, 3)
 
 
+def component_signs(vt: np.ndarray, *, rtol: float = 1e-6) -> np.ndarray:
+    """Signs ``(K,)`` that make each row of ``vt`` ``(K, D)`` start positive where it is largest.
+
+    A component's sign is arbitrary; the convention makes it reproducible: the first entry whose
+    magnitude lies within ``rtol`` of the row's largest is made positive. The first, not the
+    largest: a left/right symmetric wireframe's components have exact ties between mirrored
+    vertices, which rounding (another BLAS kernel) would break either way.
+
+    Examples
+    --------
+    >>> vt = np.array([[0.6, -0.6, 0.1], [-0.9, 0.2, 0.0]])
+    >>> component_signs(vt)  # a tie: the first of the two decides
+    array([ 1., -1.])
+    >>> component_signs(vt - np.array([[0.0, 1e-12, 0.0], [0.0, 0.0, 0.0]]))  # rounding: the same
+    array([ 1., -1.])
+    """
+    vt = np.asarray(vt, dtype=float)
+    mag = np.abs(vt)
+    first = np.argmax(mag >= mag.max(axis=1, keepdims=True) * (1.0 - rtol), axis=1)
+    return np.where(vt[np.arange(len(vt)), first] < 0, -1.0, 1.0)
+
+
 def fit_shape_model(wireframes, names, *, n_components: int | None = None,
                     augment: int = 0, rng=None) -> ShapeModel:
     """PCA of annotated wireframes.
@@ -286,9 +308,7 @@ def fit_shape_model(wireframes, names, *, n_components: int | None = None,
     var = sv**2 / max(len(data) - 1, 1)
     keep = var > 1e-12 * max(var.max(), 1e-300)
     k = int(keep.sum()) if n_components is None else min(int(n_components), int(keep.sum()))
-    # Deterministic component signs: largest-magnitude entry positive.
-    signs = np.sign(vt[np.arange(len(vt)), np.argmax(np.abs(vt), axis=1)])
-    vt = vt * signs[:, None]
+    vt = vt * component_signs(vt)[:, None]
     return ShapeModel(
         mean=mean.reshape(N_VERTICES, 3),
         components=vt[:k].reshape(k, N_VERTICES, 3),
