@@ -148,6 +148,38 @@ def test_boxes_past_the_image_are_fitted_and_written_clipped(frame):
     assert_close(first.cars[0].box, [0.0, 200.0, 1.0, 330.0])  # and one in the first, inside the image
 
 
+def test_fit_and_detect_warn_of_a_calibration_made_for_another_image_size(frame, tmp_path):
+    """A calibration carries no image size: the left half of a KITTI frame with the frame's own
+    P2 (its principal point in the outer quarter of the cropped image) is fitted and searched
+    with one CalibrationWarning a call, attributed to the caller and naming an image given as a
+    path; the whole frame is fitted and searched without one."""
+    import warnings
+
+    from PIL import Image
+
+    image, _, labels = frame
+    half = image[:, :621]
+    boxes = np.array([o.box for o in labels.of_type("Car")])
+    box = boxes[boxes[:, 2] < 600][:1]  # a car of the left half
+    problem = (r"the principal point \(609\.\d+, 172\.\d+\) lies in the outer quarter of the 621x375 image: "
+               r"the calibration of a larger image, or of a crop\?")
+    with pytest.warns(UserWarning) as said:
+        assert wirescene.fit(half, P2, box, variant="coarse", particles=8).cars
+    assert [w.category for w in said] == [wirescene.CalibrationWarning]
+    assert re.fullmatch(problem, str(said[0].message)) and said[0].filename == __file__
+    path = tmp_path / "left.png"
+    Image.fromarray(half).save(path)
+    with pytest.warns(UserWarning) as said:
+        wirescene.detect(path, P2)
+    assert [w.category for w in said] == [wirescene.CalibrationWarning]
+    assert re.fullmatch(re.escape(str(path)) + ": " + problem, str(said[0].message)) and said[0].filename == __file__
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", wirescene.CalibrationWarning)
+        wirescene.detect(half)  # no calibration: nothing to say
+        assert wirescene.fit(image, P2, box, variant="coarse", particles=8).cars
+        wirescene.detect(image, P2)
+
+
 def test_pil_images_are_read_as_their_files_are(frame, tmp_path):
     from PIL import Image
 

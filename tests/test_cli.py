@@ -553,6 +553,92 @@ def test_an_image_larger_than_its_calibration_implies_is_fitted_with_a_warning(t
     assert len(said) == 1, r.stderr  # once for the run, not once a seed
 
 
+#: What `fit` and the commands of KITTI frames say of a frame twice KITTI's size with KITTI's P2.
+TWICE_KITTI_SIZE = (r"the principal point \(609\.\d+, 172\.\d+\) lies in the outer quarter of the 2484x750 image: "
+                    r"the calibration of a smaller image, or of a crop\?")
+#: The line of a command of KITTI frames that reads one such frame (of ``{problem}``).
+ONE_FRAME = r"1 of 1 frames: {problem} \(e\.g\. frame 000010\)"
+
+
+@pytest.mark.parametrize("command, frames, said", [
+    (lambda root, out: ["detect", root], ["000002", "000010"], r"2 of 2 frames: {problem} \(e\.g\. frame 000002\)"),
+    (lambda root, out: ["gt", root, "000010", "--out", out / "gt.png"], ["000010"], "{image}: {problem}"),
+    # the training commands say it before they train (these refuse a single drive, after it)
+    (lambda root, out: ["train", "all", root, "--out", out / "models"], ["000010"], ONE_FRAME),
+    (lambda root, out: ["train", "detector", "--kitti-root", root, "--out", out / "b.npz"], ["000010"], ONE_FRAME),
+    (lambda root, out: ["train", "parts", "--kitti-root", root, "--synth-scenes", 0, "--out", out / "p.npz"],
+     ["000010"], ONE_FRAME),
+], ids=["detect", "gt", "train all", "train detector", "train parts"])
+def test_the_commands_of_kitti_frames_warn_of_a_calibration_made_for_another_image_size(tmp_path, command, frames,
+                                                                                        said):
+    """Every command that reads KITTI frames with their calibrations says as `fit`, `eval` and
+    `predict` do, in one line on standard error (once for the run), that a frame twice KITTI's
+    size with KITTI's calibration looks made for another image size; a KITTI frame gets none."""
+    from PIL import Image
+
+    from conftest import kitti_copy
+
+    root = kitti_copy(tmp_path / "kitti", frames)
+    first = CliRunner().invoke(main, [str(a) for a in command(root, tmp_path / "first")])
+    assert first.exit_code in (0, 2) and "warning" not in first.stderr, first.output + first.stderr
+    for f in frames:
+        image = root / "training" / "image_2" / f"{f}.png"
+        Image.open(image).resize((2484, 750)).save(image)
+    r = CliRunner().invoke(main, [str(a) for a in command(root, tmp_path / "second")])
+    assert r.exit_code == first.exit_code, r.output
+    warned = [line for line in r.stderr.splitlines() if "warning" in line]
+    line = "wirescene: warning: " + said.format(image=re.escape(str(image)), problem=TWICE_KITTI_SIZE)
+    assert len(warned) == 1 and re.fullmatch(line, warned[0]), r.stderr
+    assert r.stderr.replace(warned[0] + "\n", "", 1) == first.stderr.replace(str(tmp_path / "first"),
+                                                                              str(tmp_path / "second"))
+
+
+def test_eval_resumed_with_fewer_frames_is_refused_before_any_fit_and_with_more_continues(tmp_path):
+    """As `predict --resume`: an `eval --predictions DIR --resume` whose --frames / --split-file
+    leave out frames of the run it continues is refused before any fit (their label files would
+    stay in DIR, to be scored with this run's), every seed's folder before the first seed's fits,
+    the folders as they were; the API refuses it too; a larger selection continues the run."""
+    import wirescene
+    from wirescene.eval.records import RECORDS_DIR
+
+    pred = tmp_path / "pred"
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--particles", 8, "--workers", 1, "--draws", 0,
+              "--predictions", pred]
+
+    def files():
+        return {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+
+    assert run(*common, "--frames", "000002,000010").exit_code == 0
+    split = tmp_path / "val.txt"
+    split.write_text("000010\n001545\n")
+    before = files()
+    for selection in (["--frames", "000010"], ["--split-file", split]):
+        r = CliRunner().invoke(main, [str(a) for a in (*common, *selection, "--resume")])
+        assert r.exit_code == 2, r.output
+        assert r.stderr.strip() == (f"wirescene: error: {pred}: holds the label files of 1 frame outside this run's "
+                                    "selection (e.g. coarse/000002.txt), which `kitti-eval` of its folders would "
+                                    "score with this run's: resume with a selection that includes them, or choose "
+                                    "another directory")
+        assert files() == before  # 001545 was not fitted
+    with pytest.raises(InputError, match=r"holds the label files of 1 frame outside this run's selection"):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000010"], particles=8, predictions=pred,
+                           resume=True)
+    assert files() == before
+    r = run(*common, "--frames", "000002,000010,001545", "--resume")
+    assert r.exit_code == 0 and "resuming: 2 of 3 frames already done" in r.stderr, r.output
+    assert sorted(p.name for p in (pred / "coarse").glob("*.txt")) == ["000002.txt", "000010.txt", "001545.txt"]
+    # several seeds: the second seed's folder, holding a record of a frame left out, is refused before any fit
+    common[-1] = seeds = tmp_path / "seeds"
+    assert run(*common, "--frames", "000002", "--seed", 1, "--seed", 2).exit_code == 0
+    (seeds / "seed-2" / RECORDS_DIR / "000010.json").write_text("{}")
+    before = files()
+    r = CliRunner().invoke(main, [str(a) for a in (*common, "--frames", "000002,001545", "--seed", 1, "--seed", 2,
+                                                   "--resume")])
+    assert r.exit_code == 2 and f"{seeds / 'seed-2'}: holds the label files of 1 frame" in r.stderr, r.output
+    assert f"(e.g. {RECORDS_DIR}/000010.json)" in r.stderr
+    assert files() == before
+
+
 def test_model_files_can_be_chosen_per_run(tmp_path):
     """Cross-validation evaluates each fold with its own models: --parts-model and --bank
     load those files (here the shipped ones, so the result must equal the default)."""

@@ -10,18 +10,19 @@ from __future__ import annotations
 
 import numbers
 import sys
+import warnings
 from pathlib import Path
 from typing import Iterable, Mapping
 
 import numpy as np
 
 from wirescene.core.camera import Camera, KittiCalib, read_projection
-from wirescene.core.errors import ArgumentError, InputError, ShapeError
+from wirescene.core.errors import ArgumentError, CalibrationWarning, InputError, ShapeError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate
-from wirescene.core.validate import MAX_WORKERS, boxes_problem, finite_real, projection_problem
+from wirescene.core.validate import MAX_WORKERS, boxes_problem, finite_real, off_centre_problem, projection_problem
 from wirescene.fitting.pipeline import FitOptions, fit_frame
 from wirescene.fitting.variants import VARIANTS, casts_rays
 from wirescene.infer.inference import InferenceOptions
@@ -135,6 +136,17 @@ def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Cam
     if problem:
         raise ArgumentError(name, problem)
     return Camera(P.astype(float), image_size)
+
+
+def _warn_off_centre(camera: Camera, image) -> None:
+    """A :class:`~wirescene.core.errors.CalibrationWarning` where ``camera`` looks made for
+    another size than its image's (:func:`wirescene.core.validate.off_centre_problem`),
+    naming ``image`` if it is a path; attributed to the caller of the API function that calls
+    this."""
+    problem = off_centre_problem(camera.P, camera.image_size)
+    if problem is not None:
+        where = f"{image}: " if isinstance(image, (str, Path)) else ""
+        warnings.warn(f"{where}{problem}", CalibrationWarning, stacklevel=3)
 
 
 def as_detections(boxes, image_size: tuple[int, int], *, name: str = "boxes") -> Detections:
@@ -327,6 +339,13 @@ def fit(
     DeviceError
         ``settings["inference.device"]`` names a device this machine lacks.
 
+    Warns
+    -----
+    CalibrationWarning
+        The calibration's principal point lies in the outer quarter of the image: it looks
+        made for another image size (a larger or smaller image's, or a crop's), which places
+        every car wrongly (:func:`wirescene.core.validate.off_centre_problem`).
+
     Examples
     --------
     >>> import numpy as np, wirescene
@@ -349,8 +368,9 @@ def fit(
     if len(names) != 1:
         raise ArgumentError("variant", f"fit takes one variant, got {len(names)}; fit_frame or evaluate fit several")
     (name,) = names
-    fitted = fit_frame(camera, dets, [name], image=rgb,
-                       options=_options(options, particles, seed, models, settings, casts_rays=casts_rays(names)))
+    options = _options(options, particles, seed, models, settings, casts_rays=casts_rays(names))
+    _warn_off_centre(camera, image)  # once every argument is accepted, before the fit
+    fitted = fit_frame(camera, dets, [name], image=rgb, options=options)
     return fitted.estimates[name]
 
 
@@ -403,6 +423,11 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     Detections
         Boxes ``(D, 4)``, calibrated scores ``(D,)`` and viewpoints ``alpha`` ``(D,)``.
 
+    Warns
+    -----
+    CalibrationWarning
+        As :func:`fit`: ``calib``'s principal point lies in the outer quarter of the image.
+
     Examples
     --------
     >>> import wirescene
@@ -441,6 +466,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
     classifier = viewpoint_classifier(str(found.path("viewpoint_classifier"))
                                       if "viewpoint_classifier" in found.own else None)
+    if camera is not None:  # once every argument is accepted, before the detection
+        _warn_off_centre(camera, image)
     keep = bank.threshold if threshold is None else float(threshold)
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
     min_height, max_scale = smallest_car_search(bank, smallest_car)
@@ -577,7 +604,8 @@ def evaluate(
         (``.frames/``); a directory holding an earlier run's records needs ``resume``.
     resume : bool
         Reuse the records in ``predictions`` written with the same settings and fit only
-        the other frames (``eval --resume``).
+        the other frames (``eval --resume``); the earlier run's frames must be among those
+        chosen now (a smaller selection is refused: their label files would stay).
     models : path, optional
         A models directory replacing the shipped artefacts, as in :func:`fit`.
     settings : mapping, optional

@@ -22,6 +22,7 @@ from wirescene.cli.options import (
     read_drive_map,
     refuse_given,
     say_models,
+    say_off_centre_frames,
     select_frames,
     split_file_option,
     split_option,
@@ -131,6 +132,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir)
         fl = _fold_list(folds)
+        say_off_centre_frames(ds, ds.frame_ids() if ids is None else ids)
         drives = read_drive_map(ds, drive_mapping)[0] if not no_calibration and given is None else None
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
                                            n_partial=n_partial, calibration_folds=not no_calibration,
@@ -251,6 +253,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     say_models(found, replaced=[name for name, given in (("detector_bank", bank_path),
                                                          ("viewpoint_classifier", classifier_option)) if given])
     ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
+    say_off_centre_frames(ds, ids)  # before the first frame: a missing calibration is refused here
     thr = bank.threshold if threshold is None else threshold
     min_height, max_scale = smallest_car_search(bank, smallest_car)
     told = Mount(camera_height, camera_pitch)

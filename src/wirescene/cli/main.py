@@ -26,6 +26,7 @@ from wirescene.cli.options import (
     models_option,
     particles_option,
     say_models,
+    say_off_centre_image,
     select_frames,
     settings_option,
     split_file_option,
@@ -340,8 +341,10 @@ def _dask_client(address: str):
                    "(their number is reported) instead of an error.")
 @click.option("--resume/--no-resume", default=False, show_default=True,
               help="Reuse the frames already finished in --predictions DIR (recorded in DIR/.frames/) and fit only the "
-                   "rest; a record written with other settings is fitted again. Without it, a DIR holding an earlier "
-                   "run's records is refused (its frames would mix with this run's).")
+                   "rest; a record written with other settings is fitted again. Its frames must be among those chosen "
+                   "now (--frames / --split-file: a larger selection continues it; a DIR holding frames outside the "
+                   "selection is refused). Without it, a DIR holding an earlier run's records is refused (its frames "
+                   "would mix with this run's).")
 @click.option("--dask", "dask_address", metavar="ADDRESS", default=None,
               help="Fit frames on this running Dask scheduler (e.g. tcp://host:8786) instead of local processes "
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
@@ -377,11 +380,15 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     if len(set(seeds)) < len(seeds):
         raise click.UsageError(f"--seed: each seed once (given {', '.join(map(str, seeds))})")
     several = len(seeds) > 1
-    if predictions is not None and not resume:  # every seed's folder, before the first seed's fits
-        from wirescene.eval.records import refuse_earlier_run
+    if predictions is not None:  # every seed's folder, before the first seed's fits
+        from wirescene.eval.records import refuse_earlier_run, refuse_records_outside
 
         for seed in seeds:
-            refuse_earlier_run(_seed_dir(predictions, seed, several))
+            if resume:  # as `predict --resume`: a narrower selection would leave the other frames' files
+                refuse_records_outside(_seed_dir(predictions, seed, several), variants,
+                                       dataset.require_frames() if frame_ids is None else frame_ids)
+            else:
+                refuse_earlier_run(_seed_dir(predictions, seed, several))
     client = _dask_client(dask_address) if dask_address is not None else None
     figures, data = {}, {}
     with ExitStack() as stack:
@@ -724,9 +731,11 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 @_inference_options
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **inference):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
+    import warnings
+
     from wirescene.api import as_camera, fit
+    from wirescene.core.errors import CalibrationWarning
     from wirescene.core.types import Detections
-    from wirescene.core.validate import off_centre_problem
     from wirescene.fitting.variants import casts_rays
     from wirescene.io.detections import NO_CARS, read_detections
     from wirescene.io.kitti import read_image, read_labels
@@ -740,9 +749,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     options = _fit_options(particles, seed, casts_rays=casts_rays([variant]), **inference)
     img = read_image(image)
     camera = as_camera(calib, (img.shape[1], img.shape[0]))
-    problem = off_centre_problem(camera.P, camera.image_size)
-    if problem is not None:  # a calibration carries no image size: said, not refused
-        click.echo(f"wirescene: warning: {image}: {problem}", err=True)
+    say_off_centre_image(image, camera)  # a calibration carries no image size: said, not refused
     dets = None
     if detections is not None:
         try:
@@ -752,7 +759,9 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
                 raise
             dets = Detections.empty(str(detections))
     gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
-    estimate = fit(img, camera, dets, variant=variant, options=options)
+    with warnings.catch_warnings():  # said above, in the command's one line, not again by the API
+        warnings.simplefilter("ignore", CalibrationWarning)
+        estimate = fit(img, camera, dets, variant=variant, options=options)
     if not estimate.cars:
         click.echo(f"wirescene: {detections if dets is not None else image}: "
                    f"{'no car detections' if dets is not None else 'no car found'}; writing an empty scene", err=True)
@@ -838,6 +847,7 @@ def gt_cmd(kitti_root, frame, out, split):
         held = f"its image_2 holds {len(ids)} frames, e.g. {ids[0]}" if ids else "its image_2 holds no .png image"
         raise click.BadParameter(f"no frame {frame} in {dataset.split_dir} ({held})", param_hint="FRAME")
     camera = dataset.camera(frame)
+    say_off_centre_image(dataset.image_path(frame), camera)
     cars = dataset.labels(frame).of_type("Car")
     mean = load_default().mean
     objects = []

@@ -287,6 +287,34 @@ def say_models(models, *, replaced=()):
     return models
 
 
+def say(message: str) -> None:
+    """``wirescene: MESSAGE`` on standard error, one line: the ``notify`` of the commands."""
+    click.echo(f"wirescene: {message}", err=True)
+
+
+def say_off_centre_image(image, camera) -> None:
+    """``wirescene: warning: IMAGE: problem`` on standard error where ``camera`` looks made for
+    another size than its image's (:func:`wirescene.core.validate.off_centre_problem`): the
+    commands of one image (``fit``, ``gt``) say it, not refuse it (a calibration carries no
+    image size)."""
+    from wirescene.core.validate import off_centre_problem
+
+    problem = off_centre_problem(camera.P, camera.image_size)
+    if problem is not None:
+        say(f"warning: {image}: {problem}")
+
+
+def say_off_centre_frames(dataset, frame_ids) -> None:
+    """Check the calibrations and image headers of ``frame_ids`` of ``dataset``
+    (:meth:`~wirescene.io.kitti.KittiDataset.check_frames`: an ``InputError`` naming the first
+    missing or malformed one, before any work) and say in one line on standard error, once for
+    the run, those whose calibration looks made for another image size, as ``eval`` and
+    ``predict`` do (:func:`wirescene.eval.runner.say_off_centre`)."""
+    from wirescene.eval.runner import say_off_centre
+
+    say_off_centre(dataset.check_frames(frame_ids), len(frame_ids), say)
+
+
 def field_type(field) -> click.ParamType:
     """The click type of a number field of stage options (:func:`wirescene.core.settings.option`,
     :func:`~wirescene.core.settings.bounded`): its kind and bounds, as ``--set`` checks them."""

@@ -16,6 +16,7 @@ from wirescene.cli.options import (
     drive_map_option,
     read_drive_map,
     refuse_given,
+    say_off_centre_frames,
     select_frames,
     split_file_option,
 )
@@ -122,6 +123,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
         ds = KittiDataset(kitti_root)
         if frames is not None or split_file is not None:
             frames = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
+        say_off_centre_frames(ds, ds.frame_ids() if frames is None else frames)  # the real frames' calibrations
         if calibrate:
             from wirescene.training.kitti_detector import calibration_folds
 

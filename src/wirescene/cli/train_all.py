@@ -81,7 +81,9 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
         return bar
 
     manifest = train_all(out, kitti_root, frames=ids, split_file=split_file, options=options, n_folds=n_folds,
-                         drive_mapping=drive_mapping, resume=resume, workers=workers_count(workers), iterate=iterate, progress=lambda line: tqdm.write(line, file=sys.stderr))
+                         drive_mapping=drive_mapping, resume=resume, workers=workers_count(workers), iterate=iterate,
+                         progress=lambda line: tqdm.write(line, file=sys.stderr),
+                         notify=lambda message: tqdm.write(f"wirescene: {message}", file=sys.stderr))
     for step, record in manifest["steps"].items():
         if record.get("source") == "shipped":
             click.echo(f"{step:18s} shipped ({record['why']})")

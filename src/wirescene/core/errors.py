@@ -54,6 +54,14 @@ class ArgumentError(WiresceneError, ValueError):
         super().__init__(f"{name}: {problem}")
 
 
+class CalibrationWarning(UserWarning):
+    """A calibration accepted for an image that it looks made for another image size (its
+    principal point in the image's outer quarter: a larger or smaller image's, or a crop's;
+    :func:`~wirescene.core.validate.off_centre_problem`): said, not refused, by
+    :func:`wirescene.fit` and :func:`wirescene.detect`. Filter it as any warning, e.g.
+    ``warnings.simplefilter("error", CalibrationWarning)`` to refuse such a calibration."""
+
+
 def check_shape(name: str, array, shape: tuple) -> None:
     """Check ``array.shape`` against ``shape``; ``None`` entries match any size.
 

@@ -17,6 +17,7 @@ from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_text
 from wirescene.core.errors import InputError
 from wirescene.core.version import __version__
+from wirescene.eval.records import refuse_frames_outside
 from wirescene.eval.runner import fit_frames, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint
@@ -132,13 +133,7 @@ def predict_dataset(
             raise InputError(f"label files were written with other settings (or {CONFIG_FILE} is missing): "
                              "cannot resume into this directory", path=out)
         # A submission is the folder's *.txt: frames outside this selection would go to the server too.
-        chosen = set(frame_ids)
-        outside = [p.name for p in existing if p.stem not in chosen]
-        if outside:
-            count = f"{len(outside)} frame{'s' if len(outside) > 1 else ''}"
-            raise InputError(f"holds the label files of {count} outside this run's selection (e.g. {outside[0]}), "
-                             "which a submission zipped from it would include: resume with a selection that includes "
-                             "them, or choose another directory", path=out)
+        refuse_frames_outside(out, existing, frame_ids, would="which a submission zipped from it would include")
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
     say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), notify or notify_stderr)

@@ -201,3 +201,42 @@ def refuse_earlier_run(predictions_dir) -> None:
         raise InputError(f"holds the records of an earlier run ({len(earlier)} frames): resume it (--resume reuses "
                          "the frames of the same settings and fits the rest) or choose another directory",
                          path=predictions_dir)
+
+
+def refuse_frames_outside(folder, files, frame_ids, *, would: str) -> None:
+    """An :class:`InputError` if ``files`` (paths under ``folder``, each named after its frame,
+    ``FRAME.txt``) hold frames outside ``frame_ids``: a run resumed with a narrower selection
+    (``--frames``, ``--split-file``) than the one it continues would leave them in ``folder``
+    beside its own; the message names the first, and says what they ``would`` then do. Nothing
+    when every file is of a chosen frame.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     files = [Path(tmp) / "000002.txt", Path(tmp) / "000010.txt"]
+    ...     refuse_frames_outside(tmp, files, ["000002", "000010", "001545"], would="...")  # a larger selection
+    ...     refuse_frames_outside(tmp, files, ["000010"], would="which would pass for this run's")
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...holds the label files of 1 frame outside this run's selection (e.g. 000002.txt), which would pass for this run's: resume with a selection that includes them, or choose another directory
+    """
+    chosen = set(frame_ids)
+    outside = [Path(f) for f in files if Path(f).stem not in chosen]
+    if outside:
+        n = len({f.stem for f in outside})
+        example = outside[0].relative_to(folder).as_posix()
+        raise InputError(f"holds the label files of {n} frame{'s' if n > 1 else ''} outside this run's selection "
+                         f"(e.g. {example}), {would}: resume with a selection that includes them, or choose another "
+                         "directory", path=folder)
+
+
+def refuse_records_outside(predictions_dir, variants: Iterable[str], frame_ids) -> None:
+    """:func:`refuse_frames_outside` of a resumed evaluation's ``predictions_dir``: its label
+    files of ``variants`` (``VARIANT/FRAME.txt``) and its records (``.frames/FRAME.json``) must
+    all be of ``frame_ids``, else the label files of frames this run does not evaluate would
+    stay beside its own, to be scored with them by ``kitti-eval`` of its folders."""
+    root = Path(predictions_dir)
+    files = [p for v in variants for p in sorted((root / v).glob("*.txt"))]
+    files += sorted((root / RECORDS_DIR).glob("*.json"))
+    refuse_frames_outside(root, files, frame_ids, would="which `kitti-eval` of its folders would score with this run's")

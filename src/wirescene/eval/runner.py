@@ -24,7 +24,13 @@ from wirescene.core.errors import InputError
 from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.workers import end_on_stop_signals, usable_cores
 from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
-from wirescene.eval.records import FrameRecords, StaleRecord, refuse_earlier_run, run_config
+from wirescene.eval.records import (
+    FrameRecords,
+    StaleRecord,
+    refuse_earlier_run,
+    refuse_records_outside,
+    run_config,
+)
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint
 from wirescene.fitting.pipeline import FitOptions, fit_frame, needs_evidence
@@ -276,7 +282,9 @@ def evaluate_dataset(
         Reuse the records in ``predictions_dir`` instead of fitting those frames again;
         needs ``predictions_dir``. A record written with a different configuration, or
         unreadable, is not reused: its frame is fitted again (and ``notify`` told).
-        Reused frames give exactly the results of fitting them again.
+        Reused frames give exactly the results of fitting them again. The earlier run's
+        frames must be among ``frames`` (a larger selection continues it; a smaller one is
+        refused, :func:`~wirescene.eval.records.refuse_records_outside`).
     evidence : {"parts", "oracle"}
         What the fine-grained variants fit to: the part detectors (the real system) or
         true vertex positions of synthetic scenes (needs ``wireframes/`` ground truth).
@@ -303,6 +311,13 @@ def evaluate_dataset(
         ``{variant: EvaluationReport}``. Every frame draws its random numbers from (seed,
         frame id) alone and the reports list frames in the order of ``frames``, so
         serial, process, Dask and resumed runs give identical reports.
+
+    Raises
+    ------
+    InputError
+        Before any fit: a frame's missing or malformed file, or ``predictions_dir`` holding
+        an earlier run's records (without ``resume``) or, resumed, files of frames outside
+        ``frames``.
     """
     source = DetectionSource() if source is None else source
     options = FitOptions() if options is None else options
@@ -329,6 +344,8 @@ def evaluate_dataset(
         records = FrameRecords(Path(predictions_dir), config)
         if not resume:
             refuse_earlier_run(predictions_dir)
+        else:  # a narrower selection would leave the other frames' label files beside this run's
+            refuse_records_outside(predictions_dir, variants, frame_ids)
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
     say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)

@@ -259,6 +259,7 @@ def train_all(
     workers: int = 1,
     progress: Callable[[str], None] | None = None,
     iterate: Callable[[Iterable, str], Iterable] | None = None,
+    notify: Callable[[str], None] | None = None,
 ) -> dict:
     """Train every artefact of a models directory (see the module docstring).
 
@@ -289,6 +290,9 @@ def train_all(
         Receives one line per event.
     iterate : callable, optional
         ``iterate(items, name)`` wraps the steps and a step's inner loops (progress bars).
+    notify : callable, optional
+        Receives one-line warnings (frames whose calibration looks made for another image
+        size, said once before any step); default: standard error.
 
     Returns
     -------
@@ -315,7 +319,7 @@ def train_all(
     if not dataset.has_labels:
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
     ids = _training_frames(dataset, frames, split_file)
-    data_sha256, cars = _check_frames(dataset, ids)  # before anything is trained or written
+    data_sha256, cars = _check_frames(dataset, ids, notify=notify)  # before anything is trained or written
     check_trainable(dataset, ids)  # the viewpoint step's bins, before the steps ahead of it train
     drives, mapping_dir = drive_map(dataset.base_dir, mapping=drive_mapping)
     # held-out folds serve the part calibration and the bank's, unless both are off or given (one drive is then enough)
@@ -359,14 +363,18 @@ def train_all(
     return manifest
 
 
-def _check_frames(dataset, ids: list[str]) -> tuple[str, int]:
+def _check_frames(dataset, ids: list[str], *, notify: Callable[[str], None] | None = None) -> tuple[str, int]:
     """Check the training frames' calibrations and image headers
     (:meth:`~wirescene.io.kitti.KittiDataset.check_frames`) and labels (read to count the cars):
     an :class:`InputError` naming the first missing or malformed file, or saying that they hold
-    no labelled car, before any step trains; return a SHA-256 of their label, calibration and
-    image files (a resumed step whose frames changed is trained again; an image replaced by
+    no labelled car, before any step trains; tell ``notify`` (default: standard error) in one
+    line of those whose calibration looks made for another image size
+    (:func:`wirescene.eval.runner.say_off_centre`); return a SHA-256 of their label, calibration
+    and image files (a resumed step whose frames changed is trained again; an image replaced by
     another of the same size too), and their number of cars."""
-    dataset.check_frames(ids)
+    from wirescene.eval.runner import notify_stderr, say_off_centre
+
+    say_off_centre(dataset.check_frames(ids), len(ids), notify or notify_stderr)
     counts = dataset.car_counts(ids)
     if not any(counts.values()):
         raise InputError(f"none of the {len(ids)} training frames has a labelled Car", path=dataset.split_dir)
