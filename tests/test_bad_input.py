@@ -419,6 +419,17 @@ CASES = {
         r"heldout: holds out 1,000 of the \d+ CAD cars: at most \d+"),
     "train all --workers 10000": (lambda t: ["train", "all", KITTI_ROOT, "--out", t / "models", "--workers", "10000"],
                                   r"--workers: 10000 is not in the range 1<=x<="),
+    "train parts --max-depth 1000": (lambda t: ["train", "parts", "--out", t / "p.npz", "--max-depth", "1000"],
+                                     r"--max-depth: 1000 is not in the range 1<=x<=100"),
+    "train detector --mining-images 10^6": (
+        lambda t: ["train", "detector", "--out", t / "b.npz", "--mining-images", "1000000"],
+        r"--mining-images: 1000000 is not in the range 1<=x<=100000"),
+    "train detector --partial 50": (lambda t: ["train", "detector", "--out", t / "b.npz", "--partial", "50"],
+                                    r"--partial: 50 is not in the range 0<=x<=20"),
+    "train all --folds 100": (lambda t: ["train", "all", KITTI_ROOT, "--out", t / "models", "--folds", "100"],
+                              r"--folds: 100 is not in the range 2<=x<=25"),
+    "eval --seed given 101 times": (lambda t: _eval_case(t, *[a for s in range(101) for a in ("--seed", str(s))]),
+                                    r"--seed: 101 seeds given, at most 100 \(each evaluates every frame again\)$"),
     "train parts on frames without a car": (
         lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-root", _carless_root(t), "--synth-scenes", "0"],
         "frames: none of the 1 real training frame.s. has a labelled Car"),

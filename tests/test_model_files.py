@@ -99,6 +99,29 @@ def test_a_viewpoint_classifier_of_an_option_or_a_models_directory_gives_boxes_t
     written = json.loads((tmp_path / "found" / "000010.json").read_text())["detections"]
     assert written and {d["viewpoint_bin"] for d in written} == {5}
     assert set(viewpoint_bin(wirescene.detect(IMAGE, CALIB, models=models).alpha)) == {5}
+    # the directory's classifier for `detect --models` too, and the option's over it (one lookup: Models.file)
+    bins = {}
+    for name, extra in (("shipped", []), ("models", ["--models", models]),
+                        ("option", ["--models", models, "--viewpoint-classifier", shipped_path("viewpoint_classifier")])):
+        r = cli("detect", KITTI_ROOT, "--frames", "000010", "--out", tmp_path / f"detect-{name}", *extra)
+        assert r.exit_code == 0, r.output + r.stderr
+        written = json.loads((tmp_path / f"detect-{name}" / "000010.json").read_text())["detections"]
+        bins[name] = [d["viewpoint_bin"] for d in written]
+    assert set(bins["models"]) == {5} != set(bins["shipped"]) and bins["option"] == bins["shipped"]
+
+
+def test_models_file_is_the_given_file_else_the_directory_s_else_none_for_the_shipped_one(tmp_path):
+    """The one lookup of the files a loader reads (the fit's options, ``detect`` of the API and the
+    command line): a file given wins, else the directory's own, else None (the loaders' shipped file)."""
+    from wirescene.core.resources import SHIPPED, resolve_models
+
+    models = resolve_models(models_dir(tmp_path / "models", viewpoint_classifier=shipped_path("viewpoint_classifier")))
+    assert models.file("viewpoint_classifier") == str(models.root / "viewpoint_classifier.npz")
+    assert models.file("viewpoint_classifier", given="mine.npz") == "mine.npz"
+    assert models.file("detector_bank") is None and SHIPPED.file("viewpoint_classifier") is None
+    assert SHIPPED.file("detector_bank", given="bank.npz") == "bank.npz"
+    with pytest.raises(KeyError, match="unknown artefact 'bank'"):
+        models.file("bank", given="bank.npz")
 
 
 def test_a_score_calibration_of_an_option_or_a_models_directory_scores_and_verifies_the_cars(tmp_path):

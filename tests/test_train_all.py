@@ -447,6 +447,9 @@ def test_train_all_needs_two_groups_and_known_options(tmp_path):
     ("parts.n_views=10000", "parts.n_views must be at most 360, got 10000"),
     ("parts.n_aug=1000", "parts.n_aug must be at most 20, got 1000"),
     ("occlusion.n_scenes=100000", "occlusion.n_scenes must be at most 3000, got 100000"),
+    ("parts.max_depth=1000", "parts.max_depth must be at most 100, got 1000"),  # every fit's part maps: a step a level
+    ("detector.mining_images=1000000", "detector.mining_images must be at most 100000, got 1000000"),
+    ("detector.n_partial=50", "detector.n_partial must be at most 20, got 50"),  # some 7 a viewpoint can be found
 ])
 def test_train_all_checks_the_values_it_is_set_before_any_step(tmp_path, setting, problem):
     from wirescene.training.pipeline import check_options
@@ -457,6 +460,19 @@ def test_train_all_checks_the_values_it_is_set_before_any_step(tmp_path, setting
     documented = {"parts": {"class_weight": "balanced_subsample", "max_real_patches": None, "n_jobs": -1},
                   "detector": {"mining_images": None}, "occlusion": {"grid": [0.5, 0.75]}}
     assert check_options(documented)["parts"]["n_jobs"] == -1  # what the steps document is taken
+
+
+@pytest.mark.parametrize("n_folds", [1, 0, 26, 10**6, 2.5, True])
+def test_train_all_takes_2_to_25_folds_checked_before_any_step(tmp_path, n_folds):
+    """The API's ``n_folds`` as ``--folds``, before any work: a fold held out leaves the others' frames to train
+    on (1 was refused by the parts step, 2.5 a TypeError), and each fold trains a bank and a part forest again, so
+    at most MAX_FOLDS (26 began the training)."""
+    from wirescene.training.pipeline import train_all
+    from wirescene.training.scale import MAX_FOLDS
+
+    with pytest.raises(ValueError, match=rf"^n_folds must be an integer from 2 to {MAX_FOLDS}, got {n_folds!r}$"):
+        train_all(tmp_path / "m", KITTI_ROOT, n_folds=n_folds)
+    assert not (tmp_path / "m").exists()
 
 
 def test_train_parts_defaults_are_the_shipped_recipe(tmp_path):

@@ -463,9 +463,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     rgb = as_image(image)
     camera = None if calib is None else as_camera(calib, (rgb.shape[1], rgb.shape[0]))
     found = _models(models)
-    bank = detector_bank(str(found.path("detector_bank")) if "detector_bank" in found.own else None)
-    classifier = viewpoint_classifier(str(found.path("viewpoint_classifier"))
-                                      if "viewpoint_classifier" in found.own else None)
+    bank = detector_bank(found.file("detector_bank"))  # the directory's, else the shipped one (as `detect --models`)
+    classifier = viewpoint_classifier(found.file("viewpoint_classifier"))
     if camera is not None:  # once every argument is accepted, before the detection
         _warn_off_centre(camera, image)
     keep = bank.threshold if threshold is None else float(threshold)

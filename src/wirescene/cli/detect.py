@@ -11,7 +11,6 @@ import click
 from wirescene.cli.options import (
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
-    POSITIVE,
     POSITIVE_FLOAT,
     FiniteFloat,
     check_output_dir,
@@ -41,8 +40,10 @@ from wirescene.training.scale import (
     MAX_CACHE_MB,
     MAX_CUT_PASTE,
     MAX_DETECTOR_SCENES,
+    MAX_MINING_IMAGES,
     MAX_MINING_ROUNDS,
     MAX_NEGATIVES,
+    MAX_PARTIAL,
     MAX_PER_OCTAVE,
     MAX_VAL_SCENES,
     single_thread,
@@ -74,8 +75,9 @@ from wirescene.training.scale import (
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Random stream (synthetic: scenes; validation: seed+1).")
 @click.option("--scenes", "n_scenes", type=click.IntRange(min=1, max=MAX_DETECTOR_SCENES), default=200, show_default=True,
               help=f"Synthetic training scenes (at most {MAX_DETECTOR_SCENES:,}: some 0.6 s and 4 MB each).")
-@click.option("--partial", "n_partial", type=NON_NEGATIVE, default=3, show_default=True,
-              help="Partial configurations per viewpoint (plus one full-car configuration).")
+@click.option("--partial", "n_partial", type=click.IntRange(min=0, max=MAX_PARTIAL), default=3, show_default=True,
+              help=f"Partial configurations per viewpoint (plus one full-car configuration; at most {MAX_PARTIAL}, "
+                   "as many as the cars' visible vertex sets allow: some 7).")
 @click.option("--per-octave", type=click.IntRange(min=1, max=MAX_PER_OCTAVE), default=6, show_default=True,
               help="With --kitti-root: HOG pyramid levels per octave (stored with the bank for detection, whose "
                    "time, like the training's, grows in proportion).")
@@ -83,8 +85,9 @@ from wirescene.training.scale import (
               help="With --kitti-root: cars of other frames pasted into a composite copy of every training frame.")
 @click.option("--mining-rounds", type=click.IntRange(min=0, max=MAX_MINING_ROUNDS), default=None,
               help="Hard-negative mining rounds [synthetic 2, real 3], each describing every mined image again.")
-@click.option("--mining-images", type=POSITIVE, default=None,
-              help="The most training images a hard-negative mining round searches [synthetic 80, real: all].")
+@click.option("--mining-images", type=click.IntRange(min=1, max=MAX_MINING_IMAGES), default=None,
+              help=f"The most training images a hard-negative mining round searches [synthetic 80, real: all; at most "
+                   f"{MAX_MINING_IMAGES:,}].")
 @click.option("--val-scenes", "n_val", type=click.IntRange(min=0, max=MAX_VAL_SCENES), default=20, show_default=True,
               help="Synthetic only: held-out scenes of the threshold.")
 @click.option("--C", "C", type=POSITIVE_FLOAT, default=0.01, show_default=True, help="Linear SVM regularisation.")
@@ -230,10 +233,10 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.core.resources import resolve_models
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import detections_above, image_mount, viewpoint_classifier
+    from wirescene.fitting.pipeline import detections_above, detector_bank, image_mount, viewpoint_classifier
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
-    from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars, smallest_car_search
+    from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
 
     check_output_dir(out_dir, "--out")
     check_output_file(pr_curve, "--pr-curve")
@@ -242,16 +245,13 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
         raise click.UsageError("--viewpoint-classifier gives the boxes --out writes their viewpoints: it needs --out")
     ds = KittiDataset(kitti_root, split=split)
     found = resolve_models(models)
-    classifier_option = classifier_path
-    bank = DetectorBank.load(bank_path if bank_path else found.path("detector_bank"))
-    if classifier_path is None and "viewpoint_classifier" in found.own:
-        classifier_path = found.path("viewpoint_classifier")
-    # the viewpoints of the boxes --out writes (None: the shipped one), read before any frame: a bad file is refused
-    classifier = None if out_dir is None else viewpoint_classifier(None if classifier_path is None
-                                                                   else str(classifier_path))
+    bank = detector_bank(found.file("detector_bank", given=bank_path))
+    # the viewpoints of the boxes --out writes, read before any frame: a bad file is refused
+    classifier = None if out_dir is None else viewpoint_classifier(found.file("viewpoint_classifier",
+                                                                              given=classifier_path))
     # once its files are read (a broken one: the error line alone)
     say_models(found, replaced=[name for name, given in (("detector_bank", bank_path),
-                                                         ("viewpoint_classifier", classifier_option)) if given])
+                                                         ("viewpoint_classifier", classifier_path)) if given])
     ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
     say_off_centre_frames(ds, ids)  # before the first frame: a missing calibration is refused here
     thr = bank.threshold if threshold is None else threshold

@@ -38,6 +38,7 @@ from wirescene.cli.options import (
 )
 from wirescene.core.errors import InputError, WiresceneError
 from wirescene.core.version import __version__
+from wirescene.eval.seeds import MAX_SEEDS
 from wirescene.lift import MAX_PARTICLES
 
 
@@ -318,10 +319,10 @@ def _dask_client(address: str):
 @split_file_option
 @particles_option
 @click.option("--seed", "seeds", type=NON_NEGATIVE, multiple=True, default=(0,), show_default=True,
-              help="Seed of the fit. Repeat it (--seed 1 --seed 2 --seed 3) to fit every frame once per seed: each "
-                   "seed's figures, then their mean and range over the seeds (the fit samples, so the seed alone "
-                   "moves the figures by a few cars); --predictions and --report then get a seed-S folder per seed, "
-                   "and --report a page of the mean and range over the seeds that links them.")
+              help=f"Seed of the fit. Repeat it (--seed 1 --seed 2 --seed 3; at most {MAX_SEEDS} seeds) to fit every frame "
+                   "once per seed: each seed's figures, then their mean and range over the seeds (the fit samples, so the "
+                   "seed alone moves the figures by a few cars); --predictions and --report then get a seed-S folder "
+                   "per seed, and --report a page of the mean and range over the seeds that links them.")
 @split_option()
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None,
               help="Write the metrics as JSON: one variant's at the top level, several keyed by variant (and by seed "
@@ -356,6 +357,9 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     from wirescene.eval.seeds import format_over_seeds, over_seeds, seed_figures
     from wirescene.io.kitti import KittiDataset
 
+    if len(seeds) > MAX_SEEDS:  # each seed evaluates every frame again
+        raise click.BadParameter(f"{len(seeds):,} seeds given, at most {MAX_SEEDS} (each evaluates every frame again)",
+                                 param_hint="--seed")
     if resume and predictions is None:
         raise click.UsageError("--resume needs --predictions DIR, where finished frames are recorded")
     if dask_address is not None:

@@ -9,7 +9,6 @@ import click
 
 from wirescene.cli.options import (
     NON_NEGATIVE,
-    POSITIVE,
     FiniteFloat,
     check_output_dir,
     check_output_file,
@@ -22,7 +21,7 @@ from wirescene.cli.options import (
 )
 from wirescene.parts import MAX_SMOOTH
 from wirescene.training.recipe import RECIPE
-from wirescene.training.scale import MAX_AUG, MAX_PART_SCENES, MAX_TREES, MAX_VIEWS
+from wirescene.training.scale import MAX_AUG, MAX_DEPTH, MAX_PART_SCENES, MAX_TREES, MAX_VIEWS
 
 #: The shipped model's options are this command's defaults (``train all`` trains the same).
 _RECIPE = RECIPE["parts"]
@@ -38,7 +37,9 @@ _RECIPE = RECIPE["parts"]
                    "only).")
 @click.option("--n-trees", type=click.IntRange(min=1, max=MAX_TREES), default=30, show_default=True,
               help="Trees of the random forest (the part maps of every fit take time in proportion).")
-@click.option("--max-depth", type=POSITIVE, default=13, show_default=True, help="Depth limit of each tree.")
+@click.option("--max-depth", type=click.IntRange(min=1, max=MAX_DEPTH), default=13, show_default=True,
+              help=f"Depth limit of each tree (at most {MAX_DEPTH}; a tree stops where its patches run out, and the "
+                   "part maps of every fit take time in proportion to the deepest).")
 @click.option("--kind", type=click.Choice(["sc", "hog", "ghog", "ghog_sc", "ghog_ms", "ghog_msc"]), default=_RECIPE["kind"],
               show_default=True,
               help="Descriptor (ghog: gradient-orientation histograms of the grey image; ghog_ms: two cell sizes; "

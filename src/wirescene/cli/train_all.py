@@ -15,6 +15,7 @@ from wirescene.cli.options import (
     workers_count,
     workers_option,
 )
+from wirescene.training.scale import MAX_FOLDS
 
 
 def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
@@ -44,8 +45,9 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
                    "occlusion.json, models.json); use it with --models of fit, eval, predict and detect.")
 @click.option("--frames", default=None, help="Comma-separated training frame ids (default: every labelled frame).")
 @split_file_option
-@click.option("--folds", "n_folds", type=click.IntRange(min=2), default=4, show_default=True,
-              help="Folds of the held-out calibrations (by drive where it is known, else by frame).")
+@click.option("--folds", "n_folds", type=click.IntRange(min=2, max=MAX_FOLDS), default=4, show_default=True,
+              help=f"Folds of the held-out calibrations (by drive where it is known, else by frame; at most {MAX_FOLDS}: "
+                   "each trains a bank and a part forest again).")
 @drive_map_option()
 @click.option("--set", "settings", multiple=True, metavar="STEP.KEY=VALUE",
               help="Change one option of a step's recipe (steps parts, detector, viewpoints, occlusion), e.g. "

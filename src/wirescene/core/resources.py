@@ -80,6 +80,25 @@ class Models:
             raise KeyError(f"unknown artefact {name!r}; known: {', '.join(ARTEFACTS)}")
         return self.root / ARTEFACTS[name] if name in self.own else shipped_path(name)
 
+    def file(self, name: str, *, given=None):
+        """What the loader of artefact ``name`` reads (the fit's file options, ``detect``'s
+        ``--bank`` and ``--viewpoint-classifier``): ``given``, a file named in its place, which
+        wins; else the directory's own file (a string); else None, which the loaders read as
+        the shipped file.
+
+        Examples
+        --------
+        >>> mine = Models(Path("m"), ("viewpoint_classifier",))
+        >>> Path(mine.file("viewpoint_classifier")) == Path("m") / "viewpoint_classifier.npz"
+        True
+        >>> mine.file("viewpoint_classifier", given="v.npz"), mine.file("detector_bank"), SHIPPED.file("detector_bank")
+        ('v.npz', None, None)
+        """
+        path = self.path(name)  # an unknown name: the KeyError that lists the known ones
+        if given is not None:
+            return given
+        return str(path) if name in self.own else None
+
     def describe(self, *, replaced=()) -> str:
         """One line: which artefacts come from the directory, which from a file given in
         their place (``replaced``, names of :data:`ARTEFACTS`) and which are shipped.

@@ -14,6 +14,12 @@ from collections.abc import Mapping
 
 from wirescene.eval.kitti_metrics import kitti_figure
 
+#: Most seeds of one evaluation (``eval --seed``, repeated): each evaluates every frame again (some
+#: 0.4 s a frame of ``coarse``, 6 s of ``full``: 6 hours of ``full`` a seed on the 3,769 val frames on
+#: one core) and keeps its figures, and with ``--json`` its records (some 2.6 kB a frame of ``coarse``),
+#: to the end; 100 is 14x the seven seeds above.
+MAX_SEEDS = 100
+
 #: ``(column, source, key)``: figures of the paper's protocol (``metrics``: a variant's
 #: :class:`~wirescene.eval.metrics.EvaluationReport` figures over all cars) and KITTI's moderate
 #: R40 APs (``kitti``: ``(block, metric)`` of :func:`~wirescene.eval.kitti_metrics.kitti_figure`).

@@ -42,8 +42,7 @@ def with_models(options: FitOptions, models: Models) -> FitOptions:
     """
     if models.root is None:
         return options
-    changes = {name: str(models.path(name)) for name in MODEL_FILES
-               if name in models.own and getattr(options, name) is None}
+    changes = {name: models.file(name, given=getattr(options, name)) for name in MODEL_FILES}
     if "occlusion" in models.own:
         from wirescene.infer.occluded_score import load_occluded_score
 

@@ -81,10 +81,14 @@ from wirescene.training.scale import (
     MAX_AUG,
     MAX_CACHE_MB,
     MAX_CUT_PASTE,
+    MAX_DEPTH,
+    MAX_FOLDS,
+    MAX_MINING_IMAGES,
     MAX_MINING_ROUNDS,
     MAX_NEGATIVES,
     MAX_OCCLUSION_SCENES,
     MAX_PART_SCENES,
+    MAX_PARTIAL,
     MAX_PER_OCTAVE,
     MAX_TREES,
     MAX_VIEWS,
@@ -174,16 +178,16 @@ def option_default(step: str, key: str):
 #: ``{step: {option: (minimum, maximum)}}`` of the numeric options that a value of 0 (the
 #: least any number of a step takes) would break; ``maximum`` None: none.
 OPTION_LIMITS: dict[str, dict[str, tuple]] = {
-    "parts": {"n_trees": (1, MAX_TREES), "max_depth": (1, None), "min_samples_leaf": (1, None),
+    "parts": {"n_trees": (1, MAX_TREES), "max_depth": (1, MAX_DEPTH), "min_samples_leaf": (1, None),
               "max_real_patches": (1, None), "n_jobs": (-1, None), "synth_seed": (1000, None),
               "smooth": (0, MAX_SMOOTH), "n_views": (0, MAX_VIEWS), "n_aug": (1, MAX_AUG),
               "synth_scenes": (0, MAX_PART_SCENES)},
     "detector": {"C": (1e-9, None), "max_pos": (1, None), "min_pos": (1, None), "neg_per_image": (1, None),
                  "min_height": (1, None), "max_scale": (0.01, None), "full_area": (1, None), "partial_area": (1, None),
                  "per_octave": (1, MAX_PER_OCTAVE), "cluster_radius": (0.01, None), "max_negatives": (1, MAX_NEGATIVES),
-                 "max_truncated": (0, 1), "mining_images": (1, None), "threshold": (0, 1),
+                 "max_truncated": (0, 1), "mining_images": (1, MAX_MINING_IMAGES), "threshold": (0, 1),
                  "mining_rounds": (0, MAX_MINING_ROUNDS), "cut_paste": (0, MAX_CUT_PASTE),
-                 "pyramid_cache_mb": (0, MAX_CACHE_MB)},
+                 "pyramid_cache_mb": (0, MAX_CACHE_MB), "n_partial": (0, MAX_PARTIAL)},
     "viewpoints": {"C": (1e-9, None)},
     "occlusion": {"n_scenes": (1, MAX_OCCLUSION_SCENES)},
 }
@@ -276,7 +280,8 @@ def train_all(
     options : dict, optional
         ``{step: {option: value}}`` over :data:`RECIPE` (names of :func:`step_options`).
     n_folds : int
-        Folds of the held-out calibrations (fewer if there are fewer groups).
+        Folds of the held-out calibrations, 2 to :data:`~wirescene.training.scale.MAX_FOLDS`
+        (fewer if there are fewer groups).
     drive_mapping : path, optional
         A KITTI devkit mapping directory (``train_rand.txt``, ``train_mapping.txt``) that
         groups the frames by drive; default: one found under ``kitti_root``
@@ -304,7 +309,8 @@ def train_all(
     InputError
         A bad root, frame selection, split file or models directory, before any training.
     ValueError
-        An unknown step option, or ``workers`` beyond :data:`~wirescene.core.validate.MAX_WORKERS`.
+        An unknown step option, ``workers`` beyond :data:`~wirescene.core.validate.MAX_WORKERS`,
+        or ``n_folds`` outside 2 to :data:`~wirescene.training.scale.MAX_FOLDS`.
     """
     from wirescene.core.validate import MAX_WORKERS
     from wirescene.io.kitti import KittiDataset
@@ -314,6 +320,8 @@ def train_all(
         raise ValueError("frames and split_file both choose the frames: give one")
     if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or not 0 <= workers <= MAX_WORKERS:
         raise ValueError(f"workers must be an integer from 0 to {MAX_WORKERS:,}, got {workers!r}")
+    if isinstance(n_folds, bool) or not isinstance(n_folds, numbers.Integral) or not 2 <= n_folds <= MAX_FOLDS:
+        raise ValueError(f"n_folds must be an integer from 2 to {MAX_FOLDS}, got {n_folds!r}")
     opts = check_options(options or {})
     dataset = KittiDataset(kitti_root)
     if not dataset.has_labels:

@@ -48,6 +48,15 @@ MAX_PER_OCTAVE = 48
 #: some 30 hours and 6 GB of training.
 MAX_TREES = 1000
 
+#: Most levels of each tree of the part model's forest (``train parts --max-depth``, default 13, the
+#: paper's): a tree stops where its patches run out (leaves of 2), so its nodes and memory are bounded by
+#: the patches whatever the limit (unbounded, trees reached 40-42 levels and some 31,000 nodes on the
+#: 160,506 real patches of the 72 shared frames, 31 levels on 24 frames' 33,184; 13 and 7,200 at the
+#: default), but every fit's part maps step once a level of the deepest tree (some 24 ms a level of
+#: 80,000 descriptors, a 5-car frame's: 0.37 s at 13 levels, 1.25 s at 52); 100 leaves any forest free to
+#: grow whole, and far beyond it scikit-learn's C integer overflows (2**63) once the patches are made.
+MAX_DEPTH = 100
+
 #: Most synthetic scenes of ``train detector`` without ``--kitti-root`` (``--scenes``, default 200):
 #: each costs some 0.6 s and 4 MB held to the end (its grey image and car examples), so 2,000 are some
 #: 20 minutes and 8 GB before the mining.
@@ -61,6 +70,25 @@ MAX_VAL_SCENES = 2000
 #: describes every mined image again (0.7 s a synthetic scene; on KITTI a sixth of the detector
 #: step, some 2.5 hours of a 3,712-frame split on one core).
 MAX_MINING_ROUNDS = 20
+
+#: Most images a hard-negative mining round searches (``--mining-images``; default: synthetic 80, real
+#: all): beyond the training images a round searches them all, so it never costs more than the real
+#: default (some 0.7 s a synthetic scene and 1.2 s a KITTI image a round, no memory kept); 100,000 is 6.7x
+#: KITTI's training split with its mirror images (14,962).
+MAX_MINING_IMAGES = 100_000
+
+#: Most partial configurations a viewpoint (``--partial``, default 3; plus the full car): the greedy
+#: choice finds no more than some 7 a viewpoint (a connected 3-4 vertex set seen in 90% of the viewpoint's
+#: cars, overlapping those chosen by IoU 0.3 at most: 49 configurations from ``--partial 10`` on the 72
+#: shared frames, 32 by default); were 20 found, each of the 168 configurations would cost its share of
+#: every detection (some 70 ms of a KITTI frame's 2.2 s) and up to 61 MB of negatives (10 GB).
+MAX_PARTIAL = 20
+
+#: Most held-out calibration folds of ``train all --folds`` (default 4; fewer where there are fewer
+#: drives): each fold trains a bank on the other folds' frames, about the detector step again (some
+#: 13 minutes on the 72 shared frames, 11 hours on a 3,712-frame split on one core), and a part forest;
+#: 25 is the 25 drives of the shared frames one a fold, 6x the default's time.
+MAX_FOLDS = 25
 
 #: Most cars pasted into each composite frame (``--cut-paste``, default 0): a KITTI frame has room for
 #: a few tens, and every car beyond the room still costs its placement tries against all those placed.
