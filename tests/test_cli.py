@@ -858,6 +858,39 @@ def test_ctrl_c_with_parallel_workers_exits_soon_and_leaves_no_worker(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
 
 
+def test_ctrl_c_while_the_command_is_imported_ends_as_one_later_does():
+    """A Ctrl-C in the first half second of ``wirescene ...``, while the package is imported,
+    before the command handles stop signals: the line ``wirescene: interrupted`` and exit code
+    130, no traceback, as at any later time. The console script's entry imports nothing of the
+    package itself; here the process sends itself SIGINT as the import reaches the API, to
+    the bit the same every run."""
+    import subprocess
+    import sys
+
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11+
+    scripts = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["wirescene"] == "_wirescene_console:console_main"
+    code = (
+        "import os, signal, sys\n"
+        "class CtrlC:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'wirescene.api':\n"
+        "            sys.meta_path.remove(self)\n"
+        "            os.kill(os.getpid(), signal.SIGINT)\n"
+        "        return None\n"
+        "from _wirescene_console import console_main\n"
+        "assert not {'wirescene', 'numpy', 'click'} & set(sys.modules), 'the entry imports the command at once'\n"
+        "sys.meta_path.insert(0, CtrlC())\n"
+        "console_main()\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code, "info"], capture_output=True, text=True, timeout=120)
+    assert (proc.returncode, proc.stderr) == (130, "wirescene: interrupted\n")
+    # and the command runs through it
+    proc = subprocess.run([sys.executable, "-c", "from _wirescene_console import console_main; console_main()",
+                           "--version"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and proc.stdout.startswith("wirescene, version "), proc.stdout + proc.stderr
+
+
 def _started(args, *, until, timeout=240):
     """A ``wirescene ARGS`` process in a session of its own (its workers in its process group),
     once ``until(process)`` holds; the test fails if it ended before."""

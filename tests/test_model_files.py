@@ -165,7 +165,7 @@ def test_a_shape_model_of_an_option_or_a_models_directory_gives_the_wireframes(t
     assert wirescene.fit(IMAGE, CALIB, BOXES[:1], variant="coarse", options=FitOptions(FAST, shape_model=str(few))).cars
 
 
-def test_the_resume_fingerprint_holds_every_file_the_fit_reads(tmp_path):
+def test_the_resume_fingerprint_holds_the_files_the_fit_reads_and_no_other(tmp_path):
     fingerprint = models_fingerprint(FitOptions())
     assert set(fingerprint) == {"parts_model", "detector_bank", "viewpoint_classifier", "score_calibration",
                                 "shape_model"}
@@ -173,31 +173,52 @@ def test_the_resume_fingerprint_holds_every_file_the_fit_reads(tmp_path):
     assert "score_calibration" not in models_fingerprint(FitOptions(calibrate_scores=False,
                                                                     predetect=PredetectOptions(min_car_probability=0)))
     assert "score_calibration" in models_fingerprint(FitOptions(calibrate_scores=False))
+    assert "score_calibration" not in models_fingerprint(FitOptions(calibrate_scores=False), own=False)
+    # coarse variants read neither the part model nor the shape model; true vertices read no part model
+    assert set(models_fingerprint(FitOptions(), fine=False, own=False)) == {"detector_bank", "viewpoint_classifier",
+                                                                            "score_calibration"}
+    assert "parts_model" not in models_fingerprint(FitOptions(), evidence="oracle")
     mine = renamed_shape_model(tmp_path / "mine.npz")
     assert models_fingerprint(FitOptions(shape_model=str(mine)))["shape_model"] != fingerprint["shape_model"]
+    calibration = tmp_path / "calibration.json"
+    shutil.copy(shipped_path("score_calibration"), calibration)
     pred = tmp_path / "pred"
     common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", 1, "--particles", 5,
-              "--predictions", pred]
+              "--predictions", pred, "--score-calibration", calibration]
     r = cli(*common, "--models", models_dir(tmp_path / "models", shape_model=mine))
     assert r.exit_code == 0, r.output + r.stderr
     record_path = pred / ".frames" / "000010.json"
-    assert json.loads(record_path.read_text())["config"]["models"]["shape_model"] != fingerprint["shape_model"]
-    # another shape model: the record is not reused
-    common += ["--shape-model", shipped_path("shape_model")]
+    config = json.loads(record_path.read_text())["config"]
+    assert set(config["models"]) == {"detector_bank", "viewpoint_classifier", "score_calibration"}
+    assert "shape_model" not in config["options"] and config["options"]["score_calibration"] == str(calibration)
+    # files the coarse run does not read, swapped (named anew, or rewritten in place): the record is reused
+    renamed_shape_model(mine, scale=1.2)
+    for swapped in (["--shape-model", shipped_path("shape_model"), "--parts-model", shipped_path("parts_model")],
+                    ["--shape-model", mine]):
+        r = cli(*common, *swapped, "--resume")
+        assert r.exit_code == 0 and "1 of 1 frames already done" in r.stderr, r.output + r.stderr
+        assert "refitting" not in r.stderr
+    # a file it reads, rewritten in place: refitted
+    shifted_calibration(calibration, right=3.0)
     r = cli(*common, "--resume")
     assert r.exit_code == 0 and "written with a different configuration" in r.stderr, r.output + r.stderr
-    assert "models.shape_model" in r.stderr
+    assert "models.score_calibration" in r.stderr
     r = cli(*common, "--resume")
     assert r.exit_code == 0 and "1 of 1 frames already done" in r.stderr, r.output + r.stderr
-    # a record of an older wirescene, whose fingerprint lacked the files added since: refitted, not an error
-    record = json.loads(record_path.read_text())
-    for key in ("viewpoint_classifier", "shape_model"):
-        del record["config"]["models"][key]
-    del record["config"]["options"]["shape_model"], record["config"]["options"]["score_calibration"]
-    record_path.write_text(json.dumps(record))
-    r = cli(*common, "--resume")
-    assert r.exit_code == 0 and "refitting 1 frame(s)" in r.stderr and "models.viewpoint_classifier" in r.stderr
-    assert "already done" not in r.stderr
+    # records of an older wirescene, whose fingerprint held other files (every model file, or fewer than are read
+    # now): refitted, not an error
+    for older in ({"shape_model": fingerprint["shape_model"]}, {"viewpoint_classifier": None}):
+        record = json.loads(record_path.read_text())
+        for key, digest in older.items():
+            if digest is None:
+                del record["config"]["models"][key], record["config"]["options"][key]
+            else:
+                record["config"]["models"][key] = digest
+                record["config"]["options"][key] = None
+        record_path.write_text(json.dumps(record))
+        r = cli(*common, "--resume")
+        assert r.exit_code == 0 and "refitting 1 frame(s)" in r.stderr, r.output + r.stderr
+        assert f"models.{next(iter(older))}" in r.stderr and "already done" not in r.stderr
 
 
 def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(tmp_path):

@@ -195,6 +195,85 @@ def test_overlay_draws_the_pre_detections_the_fit_dropped_apart(camera):
                                                                        "pre-detection the fit dropped"]
 
 
+def _rectangles(ax) -> dict:
+    """``{(x, y): (line style, edge colour)}`` of the boxes drawn on ``ax``."""
+    from matplotlib.patches import Rectangle
+
+    return {(r.get_x(), r.get_y()): (r.get_linestyle(), tuple(r.get_edgecolor())) for r in ax.patches
+            if isinstance(r, Rectangle)}
+
+
+def test_draw_tells_the_boxes_the_fit_dropped_apart_as_fit_does(camera):
+    """``wirescene.draw(..., boxes=...)`` draws a box the fit of its scene dropped (one of
+    ``scene.detections`` with no car) dotted grey, as ``wirescene fit``'s overlay does; a box
+    of our own pre-detection is found among them once clipped to the image, as the fit clips
+    it; a box the fit never saw stays dashed yellow."""
+    from matplotlib.colors import to_rgba
+
+    import wirescene
+    from wirescene.io.outputs import dropped_detections, fitted_detections
+    from wirescene.io.pictures import DET_COLOR, DROPPED_COLOR, overlay
+
+    cars = _scene(camera, [(-3.0, 10.0), (4.0, 30.0)]).cars
+    boxes = [cars[0].box, [600.0, 150.0, 640.0, 180.0], cars[1].box, [0.0, 200.0, 40.0, 240.0]]
+    fitted = Detections(boxes, 0.6, 0.0, "bank")
+    scene = SceneEstimate("coarse", [ObjectEstimate(j, np.asarray(boxes[j]), c.score, c.location, c.R, c.dims, 0.0)
+                                     for j, c in zip((0, 2), cars)], detections=fitted)
+    image = np.zeros((375, 1242, 3), np.uint8)
+    # the scene's own boxes: the picture of `wirescene fit`
+    ax = wirescene.draw(image, camera, scene, boxes=scene.detections).axes[0]
+    told = overlay(image, camera, scene, detections=fitted_detections(fitted, scene),
+                   dropped=dropped_detections(fitted, scene)).axes[0]
+    assert _rectangles(ax) == _rectangles(told)
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [t.get_text() for t in told.get_legend().get_texts()]
+    dotted, dashed = (":", to_rgba(DROPPED_COLOR)), ("--", to_rgba(DET_COLOR))
+    assert [_rectangles(ax)[tuple(b[:2])] for b in boxes] == [dashed, dotted, dashed, dotted]
+    assert [t.get_text() for t in ax.get_legend().get_texts()][-2:] == ["pre-detection", "pre-detection the fit dropped"]
+    # the detector's boxes before the fit clipped them, and one the fit never saw
+    found = Detections([[-30.0, 200.0, 40.0, 240.0], boxes[1], [900.0, 150.0, 960.0, 190.0], boxes[2]], 0.6, 0.0)
+    drawn = _rectangles(wirescene.draw(image, camera, scene, boxes=found).axes[0])
+    assert [drawn[tuple(b[:2])] for b in found.boxes.tolist()] == [dotted, dotted, dashed, dashed]
+    # a scene that does not say which boxes it was fitted to: every box dashed, as before
+    bare = SceneEstimate("coarse", scene.objects)
+    assert set(_rectangles(wirescene.draw(image, camera, bare, boxes=found).axes[0]).values()) == {dashed}
+
+
+def test_the_key_says_what_the_number_after_a_car_is(camera, tmp_path, monkeypatch):
+    """A calibrated confidence, or (``eval --raw-scores``) the pre-detection's score: the key
+    of the overlay says which, in the report's gallery too."""
+    import functools
+
+    from click.testing import CliRunner
+
+    import wirescene.eval.report as report
+    from wirescene.cli.main import main
+    from wirescene.io.pictures import overlay
+
+    scene = _scene(camera, [(2.0, 12.0)])
+    image = np.zeros((375, 1242, 3), np.uint8)
+    key = [t.get_text() for t in overlay(image, camera, scene, score_name="pre-detection score").axes[0]
+           .get_legend().get_texts()]
+    assert key[1] == "#n c: car n (line n of the label file), pre-detection score c"
+    keys = []
+
+    @functools.wraps(report.overlay)
+    def keeping_the_key(*args, **kwargs):
+        fig = overlay(*args, **kwargs)
+        keys.append([t.get_text() for t in fig.axes[0].get_legend().get_texts()])
+        return fig
+
+    monkeypatch.setattr(report, "overlay", keeping_the_key)
+    for raw, said in ((["--raw-scores"], "pre-detection score c"), ([], "confidence c")):
+        keys.clear()
+        r = CliRunner().invoke(main, [str(a) for a in ("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010",
+                                                       "--particles", 5, "--workers", 1, *raw, "--report",
+                                                       tmp_path / f"report{len(raw)}")])
+        assert r.exit_code == 0, r.output + r.stderr
+        tags = [k for frame in keys for k in frame if k.startswith("#n c:")]
+        assert tags and all(k.endswith(f"), {said}") for k in tags), keys
+        assert f"with its {said[:-2]}" in (tmp_path / f"report{len(raw)}" / "index.html").read_text()
+
+
 def test_pr_curve_counts_the_cars_of_its_ap(tmp_path, monkeypatch):
     """An AP over 11 cars is not one over thousands: the key counts them."""
     import wirescene.io.pictures as pictures

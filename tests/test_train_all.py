@@ -534,10 +534,12 @@ def test_models_replace_the_bank_and_the_resume_fingerprint(trained, tmp_path):
     np.testing.assert_allclose(FrameResult.from_dict(record["variants"]["coarse"]["result"]).det_boxes, own.boxes)
     assert record["config"]["models"]["detector_bank"] == hashlib.sha256(
         (out / "detector_bank.npz").read_bytes()).hexdigest()
-    # the same bank file, the shipped part model: the record is not reused
+    # the same bank file, the shipped crop classifier (and part model, which coarse variants do not read): the
+    # record is not reused
     r = cli(*common, "--bank", out / "detector_bank.npz", "--resume")
     assert r.exit_code == 0 and "written with a different configuration" in r.stderr
-    assert "models.parts_model" in r.stderr and "models.detector_bank" not in r.stderr
+    assert "models.viewpoint_classifier" in r.stderr and "models.detector_bank" not in r.stderr
+    assert "parts_model" not in r.stderr
     r = cli(*common, "--bank", out / "detector_bank.npz", "--resume")
     assert r.exit_code == 0 and "1 of 1 frames already done" in r.stderr
 

@@ -504,8 +504,12 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
     gt : path or sequence of Label, optional
         A KITTI label file (or its labels): its cars' 3D boxes are drawn cyan.
     boxes : (N, 4) array or Detections, optional
-        2D boxes drawn dashed yellow in the ``overlay`` (e.g. :func:`detect`'s); checked
-        but not drawn in the ``bev``.
+        2D boxes drawn dashed yellow in the ``overlay`` (e.g. :func:`detect`'s, or
+        ``scene.detections``, the boxes the fit started from); checked but not drawn in the
+        ``bev``. A box that is one of ``scene.detections`` (compared once clipped to the
+        image, as the fit clips them) to which no car was fitted, a box of our own
+        pre-detection that the fit's verification dropped, is drawn dotted grey instead, as
+        ``wirescene fit``'s overlay draws it.
     title : str, optional
 
     Returns
@@ -520,7 +524,7 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
     >>> P = np.array([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
     >>> image = np.full((375, 1242, 3), 128, np.uint8)
     >>> scene = wirescene.fit(image, P, [[300, 180, 520, 300]], variant="coarse", particles=20)
-    >>> fig = wirescene.draw(image, P, scene, boxes=[[300, 180, 520, 300]])
+    >>> fig = wirescene.draw(image, P, scene, boxes=scene.detections)
     >>> [int(v) for v in fig.get_size_inches() * fig.dpi]  # the image's own size
     [1242, 375]
     >>> type(wirescene.draw(image, P, scene, view="bev")).__name__
@@ -540,7 +544,39 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
     dets = None if boxes is None else as_detections(boxes, size)  # checked in either view
     if view == "bev":
         return birds_eye(scene, gt=cars, camera=camera, title=title)
-    return overlay(rgb, camera, scene, gt=cars, detections=dets, title=title, edges=EDGES)
+    dropped = None if dets is None else _dropped_boxes(dets, scene, size)
+    if dropped is not None:
+        dets, dropped = dets.subset(~dropped), dets.subset(dropped)
+    return overlay(rgb, camera, scene, gt=cars, detections=dets, dropped=dropped, title=title, edges=EDGES)
+
+
+def _dropped_boxes(dets: Detections, scene: SceneEstimate | None, image_size: tuple[int, int]) -> np.ndarray | None:
+    """Which of ``dets`` are boxes the fit of ``scene`` dropped: one of its pre-detections
+    (``scene.detections``, compared once clipped to the image as the fit clips them) with no
+    car fitted to it, and no car fitted to an equal one (as :func:`wirescene.io.outputs.dropped_detections`
+    tells them apart); None when ``scene`` does not say which boxes it was fitted to.
+
+    Examples
+    --------
+    >>> from wirescene.core.types import ObjectEstimate
+    >>> fitted = Detections([[0, 0, 10, 10], [20, 0, 30, 10]], 1.0, 0.0)
+    >>> car = ObjectEstimate(detection_index=1, box2d=fitted.boxes[1], score=1.0, location=np.array([0.0, 1.65, 9.0]),
+    ...                      R=np.eye(3), dims=np.array([1.5, 1.6, 3.9]), cost=0.0)
+    >>> scene = SceneEstimate(variant="coarse", objects=[car], detections=fitted)
+    >>> drawn = Detections([[20, 0, 30, 10], [-5, 0, 10, 10], [40, 0, 50, 10]], 1.0, 0.0)  # the second one clipped
+    >>> _dropped_boxes(drawn, scene, (100, 50)).tolist()
+    [False, True, False]
+    """
+    from wirescene.fitting.pipeline import inside_image
+
+    fitted = None if scene is None else scene.detections
+    if fitted is None:
+        return None
+    has_car = np.zeros(len(fitted), bool)
+    has_car[[o.detection_index for o in scene.objects if 0 <= o.detection_index < len(fitted)]] = True
+    drawn = inside_image(dets, image_size).boxes
+    same = np.all(np.abs(drawn[:, None, :] - fitted.boxes[None, :, :]) <= 1e-6, axis=2)  # (drawn, fitted)
+    return same.any(axis=1) & ~(same & has_car).any(axis=1)
 
 
 def _gt_cars(gt) -> list:

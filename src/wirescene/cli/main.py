@@ -541,7 +541,8 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 
         write_report(report_dir, reports, gallery=gallery, image_of=dataset.image, intervals=intervals,
                      kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})",
-                     run=run_settings(options, detections=detections, evidence=evidence))
+                     run=run_settings(options, detections=detections, evidence=evidence, fine=casts_rays(variants)),
+                     raw_scores=not options.calibrate_scores)
     return reports, kitti, data
 
 

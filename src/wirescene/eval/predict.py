@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -20,7 +20,7 @@ from wirescene.core.version import __version__
 from wirescene.eval.records import refuse_frames_outside
 from wirescene.eval.runner import fit_frames, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
-from wirescene.fitting.models import models_fingerprint
+from wirescene.fitting.models import models_fingerprint, options_read
 from wirescene.fitting.pipeline import FitOptions, fit_frame
 from wirescene.fitting.variants import get_variant
 from wirescene.io.kitti import KittiDataset
@@ -47,10 +47,12 @@ class _PredictJob:
 
 def _config(dataset: KittiDataset, variant: str, source: DetectionSource, options: FitOptions) -> dict:
     spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
+    # the trained files the fit reads, by path and content: another file it does not read changes nothing
+    read = {"fine": get_variant(variant).fine, "own": source.own, "evidence": "parts"}
     config = {"format": format_tag("predict-config", 1), "wirescene": __version__,
               "dataset": str(Path(dataset.split_dir).resolve()), "variant": variant,
-              "detections": {"spec": spec, "allow_missing": source.allow_missing}, "options": asdict(options),
-              "models": models_fingerprint(options)}
+              "detections": {"spec": spec, "allow_missing": source.allow_missing},
+              "options": options_read(options, **read), "models": models_fingerprint(options, **read)}
     return json.loads(json.dumps(config, default=str))
 
 

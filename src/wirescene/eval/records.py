@@ -4,7 +4,6 @@ predictions directory, holding the run's configuration and each variant's result
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
 
@@ -34,8 +33,17 @@ def run_config(
     Two runs with equal configurations give equal per-frame results (every frame draws
     its random numbers from the seed and its id alone), so a record is reused only when
     its configuration equals the current one. The package version stands in for the
-    code; the content of a detections directory is not included.
+    code; the content of a detections directory is not included. Of the trained files
+    (:data:`~wirescene.fitting.models.MODEL_FILES`) it holds those the fit reads
+    (:func:`~wirescene.fitting.models.model_files_read`): their paths among the options and
+    their content hashes under ``models`` (:func:`~wirescene.fitting.models.models_fingerprint`),
+    so that a model retrained in place refits and a file the run does not read (the part and
+    shape models of coarse variants, say) changes nothing.
     """
+    from wirescene.fitting.models import models_fingerprint, options_read
+    from wirescene.fitting.variants import casts_rays
+
+    read = {"fine": casts_rays(variants), "own": source.own, "evidence": evidence}
     spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
     config = {
         "wirescene": __version__,
@@ -45,9 +53,12 @@ def run_config(
         "variants": sorted(variants),
         "detections": {"spec": spec, "viewpoint_noise_deg": float(source.viewpoint_noise_deg),
                        "allow_missing": bool(source.allow_missing),
-                       "bank": None if source.bank is None else str(Path(source.bank).resolve())},
+                       # the bank that finds our own boxes (another source's are found without it)
+                       "bank": None if source.bank is None or not source.own else str(Path(source.bank).resolve())},
         "evidence": evidence,
-        "options": asdict(options),
+        "options": options_read(options, **read),
+        # the artefacts' content, not only their paths: a model retrained in place refits
+        "models": models_fingerprint(options, **read),
     }
     # Normalised through JSON (tuples become lists; anything else JSON cannot hold, as
     # its str) so that it compares equal to a stored one.

@@ -262,10 +262,11 @@ def _href(name: str) -> str:
     return html.escape(urllib.parse.quote(name))
 
 
-def run_settings(options, *, detections: str, evidence: str = "parts") -> dict[str, str]:
+def run_settings(options, *, detections: str, evidence: str = "parts", fine: bool = True) -> dict[str, str]:
     """What made an evaluation run, for its report page: the package, the pre-detections, the
     seed, the scene particles, the device, the trained models the fit reads (file, or
-    ``shipped``, and the start of its SHA-256) and every option changed from its default.
+    ``shipped``, and the start of its SHA-256; :func:`~wirescene.fitting.models.model_files_read`)
+    and every option changed from its default.
 
     Parameters
     ----------
@@ -275,6 +276,8 @@ def run_settings(options, *, detections: str, evidence: str = "parts") -> dict[s
         The pre-detections: ``gt``, ``bank`` or a directory of detection files.
     evidence : str
         The fine variants' evidence (``parts`` or ``oracle``).
+    fine : bool
+        A fine variant was fitted (the part and shape models are read).
 
     Returns
     -------
@@ -291,7 +294,7 @@ def run_settings(options, *, detections: str, evidence: str = "parts") -> dict[s
     out = {"wirescene": __version__, "pre-detections": named.get(detections, f"files in {detections}"),
            "evidence of the fine variants": evidence, "seed": str(options.seed),
            "scene particles": str(options.lifting.n_particles), "device": str(options.inference.device)}
-    for name, digest in models_fingerprint(options).items():
+    for name, digest in models_fingerprint(options, fine=fine, own=detections == "bank", evidence=evidence).items():
         out[name.replace("_", " ")] = f"{getattr(options, name) or 'shipped'} (SHA-256 {digest[:12]}…)"
     shown = {"seed", "lifting.n_particles", "inference.device", *MODEL_FILES}
     default = asdict(FitOptions())
@@ -354,7 +357,7 @@ def _kitti_table(kitti: dict, kitti_intervals: dict | None) -> str:
 
 def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gallery, image_of, title: str = "",
                  n_gallery: int = 3, intervals: dict | None = None, kitti: dict | None = None,
-                 kitti_intervals: dict | None = None, run: dict | None = None) -> Path:
+                 kitti_intervals: dict | None = None, run: dict | None = None, raw_scores: bool = False) -> Path:
     """Write ``out_dir/index.html`` and its PNGs; returns the page's path.
 
     Parameters
@@ -382,10 +385,14 @@ def write_report(out_dir, reports: dict[str, EvaluationReport], *, gallery: Gall
         moderate APs (with their intervals).
     run : dict, optional
         ``{what: value}`` of :func:`run_settings`: the page says how the run was made.
+    raw_scores : bool, optional
+        The cars' scores are their pre-detections' (``wirescene eval --raw-scores``), not
+        calibrated confidences: the gallery's key and the page call them so.
     """
     with staged_report(out_dir) as staging:
         _write_report(staging, reports, gallery=gallery, image_of=image_of, title=title, n_gallery=n_gallery,
-                      intervals=intervals, kitti=kitti, kitti_intervals=kitti_intervals, run=run)
+                      intervals=intervals, kitti=kitti, kitti_intervals=kitti_intervals, run=run,
+                      raw_scores=raw_scores)
     return Path(out_dir) / "index.html"
 
 
@@ -462,8 +469,9 @@ APs (R40) at IoU 0.7 and 0.5.</p>
 
 
 def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, intervals, kitti,
-                  kitti_intervals, run=None) -> None:
+                  kitti_intervals, run=None, raw_scores=False) -> None:
     """:func:`write_report`'s files, written into the directory ``out``."""
+    score_name = "pre-detection score" if raw_scores else "confidence"
     focal = next((c.focal for c, *_ in gallery.frames.values()), 721.5)
     plots = {
         "error_vs_depth.png": _plot_error_vs_depth(reports, focal),
@@ -492,7 +500,8 @@ def _write_report(out: Path, reports, *, gallery, image_of, title, n_gallery, in
         estimate = estimates[lead]
         stem = f"{kind}_{frame_id}"
         save_figure(overlay(image_of(frame_id), camera, estimate, gt=cars, detections=fitted_detections(dets, estimate),
-                            dropped=dropped_detections(dets, estimate), edges=EDGES, title=f"{frame_id}  {lead}"),
+                            dropped=dropped_detections(dets, estimate), edges=EDGES, title=f"{frame_id}  {lead}",
+                            score_name=score_name),
                     out / f"{stem}_overlay.png")
         save_figure(birds_eye(estimate, gt=cars, camera=camera, title=f"{frame_id}  {lead}"), out / f"{stem}_bev.png")
         found = errors.get(frame_id, [])
@@ -529,7 +538,8 @@ every labelled car (a missed car is never within d), so its value at 1 m is the 
 <h2>Gallery ({html.escape(lead)}): {shown}</h2>
 <p>Red: estimate ({"wireframe, hidden parts as open dots on dashed edges" if get_variant(lead).fine
 else "3D box, a cross on its front"}), each numbered #n in detection order (the order of the label files
-<code>--predictions</code> writes) with its score (the same number in the bird's-eye view); cyan: ground truth;
+<code>--predictions</code> writes) with its {score_name}{" (--raw-scores)" if raw_scores else ""} (the same number
+in the bird's-eye view); cyan: ground truth;
 dashed yellow: the pre-detections of the cars output; dotted grey: those the fit's verification dropped (our own
 pre-detection only).
 Frames ranked by a score that counts missed and false cars: (sum over true positives of

@@ -32,7 +32,6 @@ from wirescene.eval.records import (
     run_config,
 )
 from wirescene.eval.sources import DetectionSource, frame_seed
-from wirescene.fitting.models import models_fingerprint
 from wirescene.fitting.pipeline import FitOptions, fit_frame, needs_evidence
 from wirescene.fitting.variants import get_variant
 from wirescene.infer.evidence import oracle_evidence
@@ -276,8 +275,8 @@ def evaluate_dataset(
         Write KITTI label files of each variant to ``predictions_dir/VARIANT/FRAME.txt``
         and, once a frame is complete, its resume record to
         ``predictions_dir/.frames/FRAME.json`` (configuration, per-variant
-        :class:`FrameResult` and label text; see :func:`run_config`, completed with the
-        content hashes of the trained artefacts, :func:`models_fingerprint`).
+        :class:`FrameResult` and label text; see :func:`run_config`, with the content hashes
+        of the trained artefacts the fit reads, :func:`~wirescene.fitting.models.models_fingerprint`).
     resume : bool
         Reuse the records in ``predictions_dir`` instead of fitting those frames again;
         needs ``predictions_dir``. A record written with a different configuration, or
@@ -338,10 +337,7 @@ def evaluate_dataset(
     job = _FrameJob(dataset, tuple(variants), source, options, evidence)
     records = None
     if predictions_dir is not None:
-        config = run_config(dataset, variants, source, options, evidence)
-        # The artefacts' content, not only their paths: a model retrained in place refits.
-        config["models"] = models_fingerprint(options)
-        records = FrameRecords(Path(predictions_dir), config)
+        records = FrameRecords(Path(predictions_dir), run_config(dataset, variants, source, options, evidence))
         if not resume:
             refuse_earlier_run(predictions_dir)
         else:  # a narrower selection would leave the other frames' label files beside this run's

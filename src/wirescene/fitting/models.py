@@ -1,8 +1,9 @@
 """The trained artefacts a fit uses, as :class:`~wirescene.fitting.pipeline.FitOptions`
 carry them: a models directory (:func:`wirescene.core.resources.resolve_models`) applied
-to the options, the files checked before any fit, and the content fingerprint of what the
-options load (part of every resume record, so that a retrained model is never mistaken
-for the one a record was fitted with)."""
+to the options, which of the files a run reads (:func:`model_files_read`), the files checked
+before any fit, and the content fingerprint of those it reads (part of every resume record,
+so that a retrained model is never mistaken for the one a record was fitted with, and a file
+the run does not read changes nothing)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ import dataclasses
 from wirescene.core.resources import Models, file_sha256, shipped_path
 from wirescene.fitting.pipeline import FitOptions
 
-__all__ = ["MODEL_FILES", "with_models", "check_model_files", "reads_score_calibration", "models_fingerprint"]
+__all__ = ["MODEL_FILES", "with_models", "model_files_read", "check_model_files", "reads_score_calibration",
+           "models_fingerprint", "options_read"]
 
 #: The artefacts a fit reads from a file that :class:`FitOptions` names (the field of the
 #: same name; None: the shipped file): each an explicit option (``--parts-model``, ``--bank``,
@@ -51,12 +53,68 @@ def with_models(options: FitOptions, models: Models) -> FitOptions:
     return dataclasses.replace(options, **changes)
 
 
-def check_model_files(options: FitOptions, *, fine: bool = True) -> FitOptions:
-    """``options``, once the model files they name have been loaded (once per version of
-    each file, so the fits reuse them; the shipped ones too, which are read anyway) and,
-    for a ``fine`` variant to be fitted, the part model read and the shape model found to
-    have the components the fine stage searches: a broken file is refused before any
-    frame is fitted, not in the first frame's fit.
+def model_files_read(options: FitOptions, *, fine: bool = True, own: bool = True,
+                     evidence: str = "parts") -> tuple[str, ...]:
+    """The artefacts of :data:`MODEL_FILES` that fitting with ``options`` reads, in that
+    order: the files :func:`check_model_files` loads and :func:`models_fingerprint` hashes.
+
+    Parameters
+    ----------
+    options : FitOptions
+        ``calibrate_scores``, ``predetect.min_car_probability`` and ``lifting.estimate_pitch``
+        decide on the score calibration and the detector bank.
+    fine : bool
+        A fine variant is fitted: it reads the shape model and, on the part detectors'
+        evidence, the part model. The coarse variants read neither.
+    own : bool
+        The boxes are our own pre-detection: the detector bank finds them and, with the crop
+        viewpoint classifier, gives them their viewpoints; the verification reads the score
+        calibration (``predetect.min_car_probability`` above 0). Other boxes (label files,
+        detection files, the API's) may come without a viewpoint (no ``alpha``, or KITTI's
+        ``-10``), which the fit then finds with the bank and the classifier on the image
+        (``evidence="parts"``) or from the given evidence with the shape model (``"oracle"``):
+        those files count as read, as the boxes are not read before a run.
+    evidence : {"parts", "oracle"}
+        What the fine variants fit to (``wirescene eval --evidence``): the part detectors on
+        the image, or given per-vertex evidence (synthetic scenes), which reads no part model.
+
+    Returns
+    -------
+    tuple of str
+        Names of :data:`MODEL_FILES`.
+
+    Examples
+    --------
+    >>> model_files_read(FitOptions())  # a fine variant on our own pre-detection
+    ('parts_model', 'detector_bank', 'viewpoint_classifier', 'score_calibration', 'shape_model')
+    >>> model_files_read(FitOptions(), fine=False, own=False)  # coarse variants on label boxes
+    ('detector_bank', 'viewpoint_classifier', 'score_calibration')
+    >>> model_files_read(FitOptions(calibrate_scores=False), fine=False, own=False, evidence="oracle")
+    ('shape_model',)
+    """
+    if evidence not in ("parts", "oracle"):
+        raise ValueError(f"evidence must be 'parts' or 'oracle', got {evidence!r}")
+    # boxes without a viewpoint: scored on the image by the bank and the classifier, or read off the given evidence
+    on_image = own or evidence == "parts"
+    read = {
+        "parts_model": fine and evidence == "parts",
+        # the pitch read off each frame's boxes (lifting.estimate_pitch) takes the bank's ground prior
+        "detector_bank": on_image or options.lifting.estimate_pitch,
+        "viewpoint_classifier": on_image,
+        "score_calibration": reads_score_calibration(options, own=own),
+        "shape_model": fine or not on_image,
+    }
+    return tuple(name for name in MODEL_FILES if read[name])
+
+
+def check_model_files(options: FitOptions, *, fine: bool = True, own: bool = True,
+                      evidence: str = "parts") -> FitOptions:
+    """``options``, once the model files a fit with them reads (:func:`model_files_read`, of
+    ``fine``, ``own`` and ``evidence``) have been loaded (once per version of each file, so
+    the fits reuse them; the shipped ones too, which are read anyway) and, for a ``fine``
+    variant to be fitted, the shape model found to have the components the fine stage
+    searches: a broken file is refused before any frame is fitted, not in the first frame's
+    fit. A shape model named in ``options`` is checked even where it is not read.
 
     Raises
     ------
@@ -74,44 +132,68 @@ def check_model_files(options: FitOptions, *, fine: bool = True) -> FitOptions:
         viewpoint_classifier,
     )
 
-    detector_bank(options.detector_bank)
-    viewpoint_classifier(options.viewpoint_classifier)
-    if reads_score_calibration(options):
-        load_score_calibration(options.score_calibration)
-    if fine:
-        part_detector(options.parts_model)
-        shape_model_for(options)
-    elif options.shape_model is not None:
+    load = {
+        "detector_bank": lambda: detector_bank(options.detector_bank),
+        "viewpoint_classifier": lambda: viewpoint_classifier(options.viewpoint_classifier),
+        "score_calibration": lambda: load_score_calibration(options.score_calibration),
+        "parts_model": lambda: part_detector(options.parts_model),
+        "shape_model": lambda: shape_model_for(options) if fine else load_shape_model(options.shape_model),
+    }
+    read = model_files_read(options, fine=fine, own=own, evidence=evidence)
+    for name in load:  # the bank first, the shape model last, as a fit reads them
+        if name in read:
+            load[name]()
+    if "shape_model" not in read and options.shape_model is not None:
         load_shape_model(options.shape_model)
     return options
 
 
-def reads_score_calibration(options: FitOptions) -> bool:
+def reads_score_calibration(options: FitOptions, *, own: bool = True) -> bool:
     """Whether a fit with ``options`` reads the score calibration: for the confidences
-    (``calibrate_scores``) or for the verification of our own boxes
-    (``predetect.min_car_probability`` above 0).
+    (``calibrate_scores``) or for the verification of our own boxes (``own``, with
+    ``predetect.min_car_probability`` above 0).
 
     Examples
     --------
     >>> from wirescene.fitting.pipeline import PredetectOptions
     >>> reads_score_calibration(FitOptions())
     True
+    >>> reads_score_calibration(FitOptions(calibrate_scores=False)), reads_score_calibration(
+    ...     FitOptions(calibrate_scores=False), own=False)  # only our own boxes are verified
+    (True, False)
     >>> reads_score_calibration(FitOptions(calibrate_scores=False, predetect=PredetectOptions(min_car_probability=0)))
     False
     """
-    return options.calibrate_scores or options.predetect.min_car_probability > 0
+    return options.calibrate_scores or (own and options.predetect.min_car_probability > 0)
 
 
-def models_fingerprint(options: FitOptions) -> dict[str, str]:
-    """``{artefact: SHA-256}`` of the files a fit with ``options`` reads: part model,
-    detector bank, crop viewpoint classifier, shape model and (when it is read,
-    :func:`reads_score_calibration`) score calibration. The occluded-part score is a number
+def models_fingerprint(options: FitOptions, *, fine: bool = True, own: bool = True,
+                       evidence: str = "parts") -> dict[str, str]:
+    """``{artefact: SHA-256}`` of the files a fit with ``options`` reads
+    (:func:`model_files_read`, of ``fine``, ``own`` and ``evidence``): a file it does not read
+    is left out, so that replacing it changes nothing. The occluded-part score is a number
     in the options themselves.
 
     Examples
     --------
     >>> sorted(models_fingerprint(FitOptions()))
     ['detector_bank', 'parts_model', 'score_calibration', 'shape_model', 'viewpoint_classifier']
+    >>> sorted(models_fingerprint(FitOptions(), fine=False, own=False))  # coarse variants on label boxes
+    ['detector_bank', 'score_calibration', 'viewpoint_classifier']
     """
-    return {name: file_sha256(getattr(options, name) or shipped_path(name)) for name in MODEL_FILES
-            if name != "score_calibration" or reads_score_calibration(options)}
+    return {name: file_sha256(getattr(options, name) or shipped_path(name))
+            for name in model_files_read(options, fine=fine, own=own, evidence=evidence)}
+
+
+def options_read(options: FitOptions, *, fine: bool = True, own: bool = True, evidence: str = "parts") -> dict:
+    """``dataclasses.asdict(options)`` without the fields of the model files a fit with them
+    does not read (:func:`model_files_read`): the options as a resume record holds them, so
+    that naming another such file changes nothing.
+
+    Examples
+    --------
+    >>> sorted(set(MODEL_FILES) & set(options_read(FitOptions(shape_model="mine.npz"), fine=False, own=False)))
+    ['detector_bank', 'score_calibration', 'viewpoint_classifier']
+    """
+    read = model_files_read(options, fine=fine, own=own, evidence=evidence)
+    return {k: v for k, v in dataclasses.asdict(options).items() if k not in MODEL_FILES or k in read}

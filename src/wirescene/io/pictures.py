@@ -231,6 +231,7 @@ def overlay(
     edges: np.ndarray | None = None,
     estimate_name: str = "estimate",
     scores: bool = True,
+    score_name: str = "confidence",
 ):
     """Image with detections (dashed yellow), estimated 3D boxes or wireframes (red, each
     numbered as in the label file, with its confidence) and ground-truth 3D boxes (cyan).
@@ -259,6 +260,9 @@ def overlay(
     scores : bool, optional
         Whether each car's number is followed by its confidence (``wirescene gt``'s cars
         have none).
+    score_name : str, optional
+        What the key calls that number: ``"confidence"`` (calibrated), or what else the
+        cars' scores are (``wirescene eval --raw-scores``: ``"pre-detection score"``).
     """
     h, w = image.shape[:2]
     drawn = drawn_image(image)  # the canvas: the image's pixels, or a reduced copy's for a huge image
@@ -301,7 +305,7 @@ def overlay(
         key.append(("-", EST_COLOR, estimate_name + (" (a cross marks the front)" if not wireframes else "")))
         if wireframes and any(o.visibility is not None and not np.all(o.visibility) for o in objects):
             key.append(("hidden", EST_COLOR, "hidden part"))
-        key.append(("tag", EST_COLOR, "#n c: car n (line n of the label file), confidence c" if scores
+        key.append(("tag", EST_COLOR, f"#n c: car n (line n of the label file), {score_name} c" if scores
                     else "#n: the label file's n-th car"))
     if len(gt):
         key.append(("-", GT_COLOR, "ground truth"))
