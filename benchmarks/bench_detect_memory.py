@@ -3,8 +3,8 @@ it reads ``/proc`` and runs ``/usr/bin/time``'s resource usage through ``os.wait
 
 A user's camera need not have KITTI's 1242 x 375 pixels: dashcams give 1920 x 1080, 4K ones 3840 x 2160. This
 writes a one-frame KITTI root per ``--size WxH`` from a labelled frame of ``--root``: the image upsampled to the
-width (PIL, Lanczos; ``P2`` rescaled as :func:`bench_resolution.scaled_projection` does) and, where ``H`` is taller
-than the result, centred on a grey canvas of ``H`` rows (the principal point moved down with it). It then runs
+width (PIL, Lanczos; ``P2`` rescaled by :func:`wirescene.predetect.enlarge.scaled_projection`) and, where ``H`` is
+taller than the result, centred on a grey canvas of ``H`` rows (the principal point moved down with it). It then runs
 ``wirescene detect`` (or ``wirescene fit --variant coarse``, ``--command fit``, both from raw pixels) on it in a
 fresh process, polling its resident set and ending it above ``--limit-gb``, and prints the peak resident set (the
 kernel's ``ru_maxrss``, what ``/usr/bin/time -v`` reports as "Maximum resident set size") and the wall time.
@@ -29,9 +29,9 @@ from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_resolution import scaled_projection  # noqa: E402
 from wirescene.core.camera import write_kitti_calib  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
+from wirescene.predetect.enlarge import scaled_projection  # noqa: E402
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 

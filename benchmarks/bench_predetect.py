@@ -60,6 +60,7 @@ from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of, frame_drives  # no
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_cars, load_default_bank  # noqa: E402
+from wirescene.predetect.enlarge import boxes_back, enlarge_frame  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
     add_verifier,
     detect_training_image,
@@ -226,6 +227,9 @@ def main():
                     "suppression, stored likewise (default: each bank's, 30)")
     ap.add_argument("--smallest-car", type=float, default=None,
                     help="also time the pipeline's pre-detection with predetect.smallest_car at this height (px)")
+    ap.add_argument("--upsample", type=float, default=1.0,
+                    help="fold-models / bank modes: detect on each image enlarged by this factor, the boxes brought "
+                         "back (predetect.upsample); also timed as the pipeline's pre-detection")
     ap.add_argument("--time-frames", type=int, default=12,
                     help="frames timed, spread evenly over the scored frames (0: no timing)")
     ap.add_argument("--pr-curve", default=None)
@@ -269,6 +273,8 @@ def main():
         ap.error("--fold needs --cv and --models-dir")
     if not 0 < args.train_fraction <= 1:
         ap.error("--train-fraction must be in (0, 1]")
+    if args.upsample != 1.0 and (args.cv or args.from_raw):
+        ap.error("--upsample: the --fold-models and --bank modes only")
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
@@ -385,8 +391,10 @@ def main():
                 b.meta["max_scale"] = args.max_scale
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
-            dets[f] = detect_cars(ds.image(f), bank=banks[fold_of(f)], return_all=True,
-                                  camera=ds.camera(f) if ground else None, cross_view_nms=args.cross_view_nms)
+            camera, image, factors = enlarge_frame(ds.camera(f), ds.image(f), args.upsample)
+            dets[f] = boxes_back(detect_cars(image, bank=banks[fold_of(f)], return_all=True,
+                                             camera=camera if ground else None, cross_view_nms=args.cross_view_nms),
+                                 factors)
         time_bank = banks[0]
         name = f"fold banks {args.fold_models}"
         if not ground:
@@ -397,8 +405,9 @@ def main():
     else:
         bank = with_detection_options(DetectorBank.load(args.bank) if args.bank else load_default_bank(), args)
         for f in ids:
-            dets[f] = detect_cars(ds.image(f), bank=bank, return_all=True,
-                                  camera=None if args.no_ground else ds.camera(f))
+            camera, image, factors = enlarge_frame(ds.camera(f), ds.image(f), args.upsample)
+            dets[f] = boxes_back(detect_cars(image, bank=bank, return_all=True,
+                                             camera=None if args.no_ground else camera), factors)
         time_bank = bank
         name = f"fixed bank {args.bank or 'shipped'}"
     if args.save_dets:
@@ -428,7 +437,7 @@ def main():
             print("   ", fmt_operating_point(o))
     from wirescene.fitting.pipeline import PredetectOptions, detect_own
 
-    cpu, plain, own, small = [], [], [], []
+    cpu, plain, own, small, enlarged = [], [], [], [], []
     unverified = replace(time_bank, verifier=None)
     fit_threshold = PredetectOptions().threshold
     timed = list(dict.fromkeys(ids[i] for i in np.linspace(0, len(ids) - 1, args.time_frames).round().astype(int)))
@@ -450,6 +459,10 @@ def main():
             c = time.process_time()
             detect_own(camera, img, bank=time_bank, threshold=fit_threshold, smallest_car=args.smallest_car)
             small.append(time.process_time() - c)
+        if args.upsample != 1.0:
+            c = time.process_time()
+            detect_own(camera, img, bank=time_bank, threshold=fit_threshold, upsample=args.upsample)
+            enlarged.append(time.process_time() - c)
     # CPU time of this single-threaded process = seconds on one free core (wall time grows
     # with whatever else shares the machine)
     if times:  # (--time-frames 0: no timing)
@@ -461,6 +474,9 @@ def main():
         if small:
             print(f"  the same searching cars down to {args.smallest_car:g} px (predetect.smallest_car): "
                   f"{np.mean(small):.2f} s (max {np.max(small):.2f}), {np.mean(small) / np.mean(own):.2f}x")
+        if enlarged:
+            print(f"  the same on the image enlarged {args.upsample:g}x (predetect.upsample): "
+                  f"{np.mean(enlarged):.2f} s (max {np.max(enlarged):.2f}), {np.mean(enlarged) / np.mean(own):.2f}x")
         out.update(seconds_per_frame=float(np.mean(times)), cpu_seconds_per_frame=float(np.mean(cpu)))
     out.update(pooled=public(pooled), per_fold=per_fold, per_group=per_group)
     if args.pr_curve:

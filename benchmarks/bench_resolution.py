@@ -41,15 +41,7 @@ from bench_train_scale import labelled_frames  # noqa: E402
 from wirescene.core.boxes import iou_2d  # noqa: E402
 from wirescene.core.camera import read_kitti_calib, write_kitti_calib  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
-
-
-def scaled_projection(P: np.ndarray, scale: float) -> np.ndarray:
-    """``P`` ``(3, 4)`` of the same camera whose image is resized by ``scale``: a pixel centre
-    ``u`` moves to ``scale * (u + 0.5) - 0.5``."""
-    out = np.array(P, dtype=float)
-    shift = 0.5 * (scale - 1.0)
-    out[:2] = scale * out[:2] + shift * out[2]
-    return out
+from wirescene.predetect.enlarge import scaled_projection  # noqa: E402
 
 
 def scaled_label_line(line: str, scale: float) -> str:

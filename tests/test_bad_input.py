@@ -281,6 +281,10 @@ CASES = {
                              r"--samples: 100000 is not in the range 2<=x<=200"),
     "fit --smallest-car 2": (lambda t: [*_fit_case(t), "--smallest-car", "2", "--out", t / "o"],
                              r"--smallest-car: 2 is below the minimum 10 \(0: the bank's own\)"),
+    "fit --upsample 0.5": (lambda t: [*_fit_case(t), "--upsample", "0.5", "--out", t / "o"],
+                           r"--upsample: 0.5 is below the minimum 1$"),
+    "detect --upsample 5": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--upsample", "5"],
+                            r"--upsample: 5 is above the maximum 3$"),
     "fit --set a plane grid too fine": (
         lambda t: [*_fit_case(t), "--set", "lifting.pitch_step=0.01", "--set", "lifting.roll_step=0.01", "--set",
                    "lifting.roll_range=3", "--out", t / "o"],

@@ -475,8 +475,9 @@ def test_worker_memory_fits_the_same_frames_pass_after_pass_and_reads_the_reside
 
 def test_resolution_root_resizes_images_calibrations_and_boxes_alike(monkeypatch, tmp_path):
     monkeypatch.syspath_prepend(str(BENCHMARKS))
-    from bench_resolution import resized_root, scaled_projection
+    from bench_resolution import resized_root
     from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.enlarge import scaled_projection
 
     frames = resized_root(KITTI_ROOT, tmp_path / "kitti", 1.5)
     source, resized = KittiDataset(KITTI_ROOT), KittiDataset(tmp_path / "kitti")

@@ -266,14 +266,13 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
     from wirescene.core.camera import Camera
     from wirescene.eval.sources import DetectionSource
     from wirescene.fitting.pipeline import PredetectOptions, detect_own
+    from wirescene.predetect.enlarge import scaled_projection
 
     ds = KittiDataset(KITTI_ROOT)
     image, camera = ds.image("000010"), ds.camera("000010")
     h, w = image.shape[:2]
     small = np.asarray(Image.fromarray(image).resize((w // 2, h // 2), Image.LANCZOS))
-    P = camera.P.copy()
-    P[:2] = 0.5 * P[:2] - 0.25 * P[2]  # pixel centres: u -> (u + 0.5) / 2 - 0.5
-    half = Camera(P, (w // 2, h // 2))
+    half = Camera(scaled_projection(camera.P, 0.5), (w // 2, h // 2))  # 1242 x 375: 621 x 187.5, as near as can be
     heights = {}
     for smallest in (None, 12.0):
         found = detect_own(half, small, threshold=0.3, smallest_car=smallest)
@@ -295,6 +294,52 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
                                                    predetect=PredetectOptions(threshold=0.3, smallest_car=12.0))
     direct = detect_own(camera, image, threshold=0.3, smallest_car=12.0)
     assert np.array_equal(via_source.boxes, direct.boxes)
+
+
+def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_path):
+    """``predetect.upsample``: at half the resolution the frame's cars fall below the bank's
+    25 px; detected on the half image enlarged 2x they are found again, their boxes in the
+    half image's pixels (those of the full frame halved), by the fit, the API, the detect
+    command and the evaluation's source alike."""
+    from PIL import Image
+
+    import wirescene
+    from wirescene.core.boxes import iou_2d
+    from wirescene.core.camera import Camera
+    from wirescene.fitting.pipeline import PredetectOptions, detect_own
+    from wirescene.predetect.enlarge import scaled_projection
+
+    ds = KittiDataset(KITTI_ROOT)
+    image, camera = ds.image("000010"), ds.camera("000010")
+    h, w = image.shape[:2]
+    small = np.asarray(Image.fromarray(image).resize((w // 2, h // 2), Image.LANCZOS))
+    half = Camera(scaled_projection(camera.P, (w // 2) / w, (h // 2) / h), (w // 2, h // 2))
+    full = detect_own(camera, image, threshold=0.3)
+    plain = detect_own(half, small, threshold=0.3)
+    found = detect_own(half, small, threshold=0.3, upsample=2.0)
+    assert len(found) > len(plain)
+    halved = (full.boxes + 0.5) * np.array([(w // 2) / w, (h // 2) / h] * 2) - 0.5
+    matched = [max(iou_2d(b, c) for c in halved) for b in found.boxes]
+    assert sum(m > 0.7 for m in matched) >= 4, matched  # the full frame's cars, where they lie in the half image
+    assert np.array_equal(detect_own(half, small, threshold=0.3, upsample=1.0).boxes, plain.boxes)
+    assert_close(wirescene.detect(small, half, threshold=0.3, upsample=2.0).boxes, found.boxes, atol=0)
+    with pytest.raises(ValueError, match=r"predetect.upsample must be"):
+        FitOptions().with_settings({"predetect.upsample": 0.5})
+    with pytest.raises(ValueError, match=r"predetect.upsample must be"):
+        FitOptions().with_settings({"predetect.upsample": 4})
+    # the evaluation's detections take the option from the fit's options; the detect command as the API
+    via_source = DetectionSource("bank").for_frame(ds, "000010", np.random.default_rng(0),
+                                                   predetect=PredetectOptions(threshold=0.3, upsample=1.5))
+    direct = detect_own(camera, image, threshold=0.3, upsample=1.5)
+    assert np.array_equal(via_source.boxes, direct.boxes) and not np.array_equal(direct.boxes, full.boxes)
+    api = wirescene.detect(image, camera, threshold=0.3, upsample=1.5)
+    assert_close(api.boxes, direct.boxes, atol=0)
+    out = tmp_path / "dets"
+    r = CliRunner().invoke(main, ["detect", str(KITTI_ROOT), "--frames", "000010", "--upsample", "1.5",
+                                  "--threshold", "0.3", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    written = json.loads((out / "000010.json").read_text())["detections"]
+    assert_close(np.array([d["box"] for d in written]), direct.boxes, atol=0.006)  # rounded to 0.01 px
 
 
 def test_a_fit_told_to_estimate_the_pitch_reads_it_off_its_boxes():

@@ -222,8 +222,11 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--smallest-car", type=field_type(stage_field(PredetectOptions, "smallest_car")), default=0.0,
               show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
                                       "upsampled to reach it (the fit's --smallest-car).")
+@click.option("--upsample", type=field_type(stage_field(PredetectOptions, "upsample")), default=1.0,
+              show_default=True, help="Detect on the image enlarged by this factor (Lanczos), the boxes brought back "
+                                      "(the fit's --upsample).")
 def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_path, threshold, out_dir, pr_curve,
-           json_out, camera_height, camera_pitch, estimate_pitch, smallest_car):
+           json_out, camera_height, camera_pitch, estimate_pitch, smallest_car, upsample):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
 
     The files of --out hold the detections above the threshold with the viewpoints the
@@ -237,6 +240,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
+    from wirescene.predetect.enlarge import boxes_back, enlarge_frame
 
     check_output_dir(out_dir, "--out")
     check_output_file(pr_curve, "--pr-curve")
@@ -263,17 +267,20 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
         for fid in ids:
             img = ds.image(fid)
             t = time.perf_counter()
+            camera, img, factors = enlarge_frame(ds.camera(fid), img, upsample)
             # the features and templates' responses, kept for the viewpoints of the boxes written
             pyramid, responses = bank_pyramid(bank, img, max_scale=max_scale), ({} if out_dir is not None else None)
-            mount = told if not estimate_pitch else image_mount(ds.camera(fid), img, bank=bank, told=told,
+            mount = told if not estimate_pitch else image_mount(camera, img, bank=bank, told=told,
                                                                 pyramid=pyramid, min_height=min_height)
-            d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=ds.camera(fid), pyramid=pyramid,
+            d = detect_cars(img, bank=bank, return_all=True, source=fid, camera=camera, pyramid=pyramid,
                             responses=responses, min_height=min_height, mount=mount)
             times.append(time.perf_counter() - t)
             kept = d.subset(d.scores > thr)
             if out_dir is not None:  # with the viewpoints the fit gives the boxes it keeps
-                kept = detections_above(ds.camera(fid), img, d, thr, bank=bank, classifier=classifier, pyramid=pyramid,
+                kept = detections_above(camera, img, d, thr, bank=bank, classifier=classifier, pyramid=pyramid,
                                         responses=responses, mount=mount)
+            d, kept = boxes_back(d, factors), boxes_back(kept, factors)  # in the image's own pixels
+            if out_dir is not None:
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
                 files[f"{fid}.json"] = json.dumps({"detections": entries}, indent=1)

@@ -86,8 +86,9 @@ class DetectionSource:
 
     def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator, *,
                   predetect: PredetectOptions | None = None, lifting: LiftingOptions | None = None) -> Detections:
-        """The detections of one frame; ``predetect``: the threshold and smallest car of our own
-        pre-detection (:func:`~wirescene.fitting.pipeline.detect_own`; None: the bank's own);
+        """The detections of one frame; ``predetect``: the threshold, smallest car and
+        enlargement of our own pre-detection (:func:`~wirescene.fitting.pipeline.detect_own`;
+        None: the bank's own);
         ``lifting``: the camera's mount (``LiftingOptions.mount``), for its priors (None: KITTI's)."""
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
@@ -100,6 +101,7 @@ class DetectionSource:
                               classifier=viewpoint_classifier(self.classifier),
                               threshold=None if predetect is None else predetect.threshold,
                               smallest_car=None if predetect is None else predetect.smallest_car,
+                              upsample=1.0 if predetect is None else predetect.upsample,
                               mount=rig.mount, estimate_pitch=rig.estimate_pitch)
         path = self.detection_file(frame_id)
         if path is None:
