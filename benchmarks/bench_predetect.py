@@ -394,7 +394,7 @@ def main():
             camera, image, factors = enlarge_frame(ds.camera(f), ds.image(f), args.upsample)
             dets[f] = boxes_back(detect_cars(image, bank=banks[fold_of(f)], return_all=True,
                                              camera=camera if ground else None, cross_view_nms=args.cross_view_nms),
-                                 factors)
+                                 factors, ds.image_size(f))
         time_bank = banks[0]
         name = f"fold banks {args.fold_models}"
         if not ground:
@@ -407,7 +407,7 @@ def main():
         for f in ids:
             camera, image, factors = enlarge_frame(ds.camera(f), ds.image(f), args.upsample)
             dets[f] = boxes_back(detect_cars(image, bank=bank, return_all=True,
-                                             camera=None if args.no_ground else camera), factors)
+                                             camera=None if args.no_ground else camera), factors, ds.image_size(f))
         time_bank = bank
         name = f"fixed bank {args.bank or 'shipped'}"
     if args.save_dets:

@@ -14,26 +14,23 @@ from __future__ import annotations
 import signal
 import sys
 
-#: What the line on standard error says of each stop signal, as the command says it.
-_SAID = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated"}
-
 
 def console_main() -> None:
     """Run ``wirescene`` on this process's command line
     (:func:`wirescene.cli.main.console_main`), a Ctrl-C while the command is imported
     included: it ends with ``wirescene: interrupted`` on standard error and exit code 130
-    (128 + SIGINT), without a traceback, and a second Ctrl-C cuts nothing short."""
+    (128 + SIGINT), without a traceback, and a second Ctrl-C cuts nothing short. (SIGTERM and
+    SIGHUP during the imports end the process by their default action: nothing is written
+    yet.)"""
     try:
         from wirescene.cli.main import console_main as run
 
         run()
-    except KeyboardInterrupt as exc:  # raised by Python's own SIGINT handler, before the command's is set
-        for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", signal.SIGTERM)):
-            signal.signal(s, signal.SIG_IGN)
-        signum = getattr(exc, "signum", signal.SIGINT)  # the command's SIGTERM and SIGHUP say which
-        sys.stderr.write(f"wirescene: {_SAID.get(signum, 'hung up')}\n")
+    except KeyboardInterrupt:  # Python's own SIGINT handler, before the command sets its handling
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        sys.stderr.write("wirescene: interrupted\n")
         sys.stderr.flush()
-        sys.exit(128 + signum)
+        sys.exit(128 + signal.SIGINT)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -163,16 +163,16 @@ def test_fit_and_detect_warn_of_a_calibration_made_for_another_image_size(frame,
     box = boxes[boxes[:, 2] < 600][:1]  # a car of the left half
     problem = (r"the principal point \(609\.\d+, 172\.\d+\) lies in the outer quarter of the 621x375 image: "
                r"the calibration of a larger image, or of a crop\?")
-    with pytest.warns(UserWarning) as said:
+    with pytest.warns(wirescene.CalibrationWarning) as said:
         assert wirescene.fit(half, P2, box, variant="coarse", particles=8).cars
-    assert [w.category for w in said] == [wirescene.CalibrationWarning]
-    assert re.fullmatch(problem, str(said[0].message)) and said[0].filename == __file__
+    said = [w for w in said if w.category is wirescene.CalibrationWarning]  # once, whatever else a library says
+    assert len(said) == 1 and re.fullmatch(problem, str(said[0].message)) and said[0].filename == __file__
     path = tmp_path / "left.png"
     Image.fromarray(half).save(path)
-    with pytest.warns(UserWarning) as said:
+    with pytest.warns(wirescene.CalibrationWarning) as said:
         wirescene.detect(path, P2)
-    assert [w.category for w in said] == [wirescene.CalibrationWarning]
-    assert re.fullmatch(re.escape(str(path)) + ": " + problem, str(said[0].message)) and said[0].filename == __file__
+    said = [w for w in said if w.category is wirescene.CalibrationWarning]
+    assert len(said) == 1 and re.fullmatch(re.escape(str(path)) + ": " + problem, str(said[0].message)) and said[0].filename == __file__
     with warnings.catch_warnings():
         warnings.simplefilter("error", wirescene.CalibrationWarning)
         wirescene.detect(half)  # no calibration: nothing to say

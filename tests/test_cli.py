@@ -499,7 +499,7 @@ def test_predict_writes_one_label_file_per_image_and_resumes(tmp_path):
     assert r.exit_code == 0 and "1 frames fitted, 1 kept" in r.output
     assert (out / "000010.txt").read_text() == first and (out / "000002.txt").is_file()
     r = CliRunner().invoke(main, [str(a) for a in args] + ["--particles", "21", "--resume"])
-    assert r.exit_code == 2 and "other settings" in r.stderr
+    assert r.exit_code == 2 and "other settings (options.lifting.n_particles)" in r.stderr, r.stderr
 
 
 def test_predict_resumed_with_fewer_frames_is_refused_and_with_more_continues(tmp_path):
@@ -615,12 +615,12 @@ def test_eval_resumed_with_fewer_frames_is_refused_before_any_fit_and_with_more_
     for selection in (["--frames", "000010"], ["--split-file", split]):
         r = CliRunner().invoke(main, [str(a) for a in (*common, *selection, "--resume")])
         assert r.exit_code == 2, r.output
-        assert r.stderr.strip() == (f"wirescene: error: {pred}: holds the label files of 1 frame outside this run's "
-                                    "selection (e.g. coarse/000002.txt), which `kitti-eval` of its folders would "
+        assert r.stderr.strip() == (f"wirescene: error: {pred}: holds the label files or records of 1 frame outside "
+                                    "this run's selection (e.g. coarse/000002.txt), which `kitti-eval` of its folders would "
                                     "score with this run's: resume with a selection that includes them, or choose "
                                     "another directory")
         assert files() == before  # 001545 was not fitted
-    with pytest.raises(InputError, match=r"holds the label files of 1 frame outside this run's selection"):
+    with pytest.raises(InputError, match=r"holds the label files or records of 1 frame outside this run's selection"):
         wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000010"], particles=8, predictions=pred,
                            resume=True)
     assert files() == before
@@ -634,7 +634,7 @@ def test_eval_resumed_with_fewer_frames_is_refused_before_any_fit_and_with_more_
     before = files()
     r = CliRunner().invoke(main, [str(a) for a in (*common, "--frames", "000002,001545", "--seed", 1, "--seed", 2,
                                                    "--resume")])
-    assert r.exit_code == 2 and f"{seeds / 'seed-2'}: holds the label files of 1 frame" in r.stderr, r.output
+    assert r.exit_code == 2 and f"{seeds / 'seed-2'}: holds the label files or records of 1 frame" in r.stderr, r.output
     assert f"(e.g. {RECORDS_DIR}/000010.json)" in r.stderr
     assert files() == before
 

@@ -299,14 +299,14 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
 def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_path):
     """``predetect.upsample``: at half the resolution the frame's cars fall below the bank's
     25 px; detected on the half image enlarged 2x they are found again, their boxes in the
-    half image's pixels (those of the full frame halved), by the fit, the API, the detect
-    command and the evaluation's source alike."""
+    half image's pixels (those of the full frame halved) and inside it, with the same boxes and
+    viewpoints from the fit, the API, the detect command and the evaluation's source."""
     from PIL import Image
 
     import wirescene
     from wirescene.core.boxes import iou_2d
-    from wirescene.core.camera import Camera
-    from wirescene.fitting.pipeline import PredetectOptions, detect_own
+    from wirescene.core.camera import Camera, write_kitti_calib
+    from wirescene.fitting.pipeline import PredetectOptions, detect_own, fit_frame
     from wirescene.predetect.enlarge import scaled_projection
 
     ds = KittiDataset(KITTI_ROOT)
@@ -321,25 +321,33 @@ def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_pa
     halved = (full.boxes + 0.5) * np.array([(w // 2) / w, (h // 2) / h] * 2) - 0.5
     matched = [max(iou_2d(b, c) for c in halved) for b in found.boxes]
     assert sum(m > 0.7 for m in matched) >= 4, matched  # the full frame's cars, where they lie in the half image
-    assert np.array_equal(detect_own(half, small, threshold=0.3, upsample=1.0).boxes, plain.boxes)
-    assert_close(wirescene.detect(small, half, threshold=0.3, upsample=2.0).boxes, found.boxes, atol=0)
-    with pytest.raises(ValueError, match=r"predetect.upsample must be"):
-        FitOptions().with_settings({"predetect.upsample": 0.5})
-    with pytest.raises(ValueError, match=r"predetect.upsample must be"):
-        FitOptions().with_settings({"predetect.upsample": 4})
-    # the evaluation's detections take the option from the fit's options; the detect command as the API
-    via_source = DetectionSource("bank").for_frame(ds, "000010", np.random.default_rng(0),
-                                                   predetect=PredetectOptions(threshold=0.3, upsample=1.5))
-    direct = detect_own(camera, image, threshold=0.3, upsample=1.5)
-    assert np.array_equal(via_source.boxes, direct.boxes) and not np.array_equal(direct.boxes, full.boxes)
-    api = wirescene.detect(image, camera, threshold=0.3, upsample=1.5)
-    assert_close(api.boxes, direct.boxes, atol=0)
-    out = tmp_path / "dets"
-    r = CliRunner().invoke(main, ["detect", str(KITTI_ROOT), "--frames", "000010", "--upsample", "1.5",
-                                  "--threshold", "0.3", "--out", str(out)])
+    assert (found.boxes >= 0).all() and (found.boxes[:, [0, 2]] <= w // 2 - 1).all()
+    assert (found.boxes[:, [1, 3]] <= h // 2 - 1).all()
+
+    def same(dets):
+        assert_close(dets.boxes, found.boxes, atol=0)
+        assert_close(dets.alpha, found.alpha, atol=0)
+
+    same(wirescene.detect(small, half, threshold=0.3, upsample=2.0))
+    fitted = fit_frame(half, None, ["coarse"], image=small,
+                       options=FitOptions().with_settings({"predetect.upsample": 2}))
+    same(fitted.detections)
+    # the evaluation's source and the detect command read a KITTI root: the half-size frame's
+    root = tmp_path / "kitti" / "training"
+    (root / "image_2").mkdir(parents=True)
+    (root / "calib").mkdir()
+    Image.fromarray(small).save(root / "image_2" / "000010.png")
+    write_kitti_calib(root / "calib" / "000010.txt", half.P)
+    same(DetectionSource("bank").for_frame(KittiDataset(tmp_path / "kitti"), "000010", np.random.default_rng(0),
+                                           predetect=PredetectOptions(threshold=0.3, upsample=2.0)))
+    r = CliRunner().invoke(main, ["detect", str(tmp_path / "kitti"), "--upsample", "2", "--threshold", "0.3",
+                                  "--out", str(tmp_path / "dets")])
     assert r.exit_code == 0, r.output
-    written = json.loads((out / "000010.json").read_text())["detections"]
-    assert_close(np.array([d["box"] for d in written]), direct.boxes, atol=0.006)  # rounded to 0.01 px
+    written = json.loads((tmp_path / "dets" / "000010.json").read_text())["detections"]
+    assert_close(np.array([d["box"] for d in written]), found.boxes, atol=0.006)  # rounded to 0.01 px
+    for value in (0.5, 4):
+        with pytest.raises(ValueError, match=r"predetect.upsample must be"):
+            FitOptions().with_settings({"predetect.upsample": value})
 
 
 def test_a_fit_told_to_estimate_the_pitch_reads_it_off_its_boxes():

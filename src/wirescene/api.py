@@ -452,7 +452,7 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         viewpoint_classifier,
     )
     from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
-    from wirescene.predetect.enlarge import boxes_back, enlarge_frame
+    from wirescene.predetect.enlarge import boxes_back, enlarge_frame, smallest_car_enlarged
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
@@ -476,15 +476,15 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         _warn_off_centre(camera, image)
     keep = bank.threshold if threshold is None else float(threshold)
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
-    min_height, max_scale = smallest_car_search(bank, smallest_car)
-    camera, rgb, factors = enlarge_frame(camera, rgb, upsample)
-    pyramid, responses = bank_pyramid(bank, rgb, max_scale=max_scale), {}
+    camera, big, factors = enlarge_frame(camera, rgb, upsample)
+    min_height, max_scale = smallest_car_search(bank, smallest_car_enlarged(smallest_car, factors))
+    pyramid, responses = bank_pyramid(bank, big, max_scale=max_scale), {}
     if estimate_pitch and camera is not None:
-        mount = image_mount(camera, rgb, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
-    dets = detect_cars(rgb, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
+        mount = image_mount(camera, big, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
+    dets = detect_cars(big, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
                        min_height=min_height, mount=mount)
-    return boxes_back(detections_above(camera, rgb, dets, keep, bank=bank, classifier=classifier, pyramid=pyramid,
-                                       responses=responses, mount=mount), factors)
+    return boxes_back(detections_above(camera, big, dets, keep, bank=bank, classifier=classifier, pyramid=pyramid,
+                                       responses=responses, mount=mount), factors, (rgb.shape[1], rgb.shape[0]))
 
 
 DRAW_VIEWS = ("overlay", "bev")

@@ -287,21 +287,17 @@ def say_models(models, *, replaced=()):
     return models
 
 
-def say(message: str) -> None:
-    """``wirescene: MESSAGE`` on standard error, one line: the ``notify`` of the commands."""
-    click.echo(f"wirescene: {message}", err=True)
-
-
 def say_off_centre_image(image, camera) -> None:
     """``wirescene: warning: IMAGE: problem`` on standard error where ``camera`` looks made for
     another size than its image's (:func:`wirescene.core.validate.off_centre_problem`): the
     commands of one image (``fit``, ``gt``) say it, not refuse it (a calibration carries no
     image size)."""
     from wirescene.core.validate import off_centre_problem
+    from wirescene.eval.runner import notify_stderr
 
     problem = off_centre_problem(camera.P, camera.image_size)
     if problem is not None:
-        say(f"warning: {image}: {problem}")
+        notify_stderr(f"warning: {image}: {problem}")
 
 
 def say_off_centre_frames(dataset, frame_ids) -> None:
@@ -310,9 +306,9 @@ def say_off_centre_frames(dataset, frame_ids) -> None:
     missing or malformed one, before any work) and say in one line on standard error, once for
     the run, those whose calibration looks made for another image size, as ``eval`` and
     ``predict`` do (:func:`wirescene.eval.runner.say_off_centre`)."""
-    from wirescene.eval.runner import say_off_centre
+    from wirescene.eval.runner import notify_stderr, say_off_centre
 
-    say_off_centre(dataset.check_frames(frame_ids), len(frame_ids), say)
+    say_off_centre(dataset.check_frames(frame_ids), len(frame_ids), notify_stderr)
 
 
 def field_type(field) -> click.ParamType:

@@ -17,7 +17,7 @@ from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_text
 from wirescene.core.errors import InputError
 from wirescene.core.version import __version__
-from wirescene.eval.records import refuse_frames_outside
+from wirescene.eval.records import config_difference, refuse_frames_outside
 from wirescene.eval.runner import fit_frames, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint, options_read
@@ -132,7 +132,8 @@ def predict_dataset(
         except (OSError, ValueError):
             stored = None
         if stored != config:
-            raise InputError(f"label files were written with other settings (or {CONFIG_FILE} is missing): "
+            changed = ", ".join(config_difference(stored, config)) if isinstance(stored, dict) else ""
+            raise InputError(f"label files were written with other settings ({changed or f'{CONFIG_FILE} missing'}): "
                              "cannot resume into this directory", path=out)
         # A submission is the folder's *.txt: frames outside this selection would go to the server too.
         refuse_frames_outside(out, existing, frame_ids, would="which a submission zipped from it would include")

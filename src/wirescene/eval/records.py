@@ -65,12 +65,18 @@ def run_config(
     return json.loads(json.dumps(config, default=str))
 
 
-def _config_difference(stored, current, prefix: str = "") -> list[str]:
-    """Dotted names of the settings in which two configurations differ."""
+def config_difference(stored, current, prefix: str = "") -> list[str]:
+    """Dotted names of the settings in which two configurations differ.
+
+    Examples
+    --------
+    >>> config_difference({"seed": 1, "options": {"a": 1, "b": 2}}, {"seed": 1, "options": {"a": 1, "b": 3}})
+    ['options.b']
+    """
     if isinstance(stored, dict) and isinstance(current, dict):
         out = []
         for key in sorted(set(stored) | set(current), key=str):
-            out += _config_difference(stored.get(key), current.get(key), f"{prefix}{key}.")
+            out += config_difference(stored.get(key), current.get(key), f"{prefix}{key}.")
         return out
     return [] if stored == current else [prefix.rstrip(".")]
 
@@ -151,7 +157,7 @@ class FrameRecords:
         if not isinstance(record, dict) or record.get("format") != RECORD_FORMAT or record.get("frame") != frame_id:
             raise StaleRecord("not a record of this frame")
         if record.get("config") != self.config:
-            changed = _config_difference(record.get("config"), self.config)
+            changed = config_difference(record.get("config"), self.config)
             raise StaleRecord(f"written with a different configuration ({', '.join(changed) or 'config'})")
         try:
             variants = record["variants"]
@@ -214,12 +220,12 @@ def refuse_earlier_run(predictions_dir) -> None:
                          path=predictions_dir)
 
 
-def refuse_frames_outside(folder, files, frame_ids, *, would: str) -> None:
+def refuse_frames_outside(folder, files, frame_ids, *, would: str, what: str = "label files") -> None:
     """An :class:`InputError` if ``files`` (paths under ``folder``, each named after its frame,
     ``FRAME.txt``) hold frames outside ``frame_ids``: a run resumed with a narrower selection
     (``--frames``, ``--split-file``) than the one it continues would leave them in ``folder``
-    beside its own; the message names the first, and says what they ``would`` then do. Nothing
-    when every file is of a chosen frame.
+    beside its own; the message names the first, calls them ``what``, and says what they
+    ``would`` then do. Nothing when every file is of a chosen frame.
 
     Examples
     --------
@@ -237,7 +243,7 @@ def refuse_frames_outside(folder, files, frame_ids, *, would: str) -> None:
     if outside:
         n = len({f.stem for f in outside})
         example = outside[0].relative_to(folder).as_posix()
-        raise InputError(f"holds the label files of {n} frame{'s' if n > 1 else ''} outside this run's selection "
+        raise InputError(f"holds the {what} of {n} frame{'s' if n > 1 else ''} outside this run's selection "
                          f"(e.g. {example}), {would}: resume with a selection that includes them, or choose another "
                          "directory", path=folder)
 
@@ -250,4 +256,5 @@ def refuse_records_outside(predictions_dir, variants: Iterable[str], frame_ids) 
     root = Path(predictions_dir)
     files = [p for v in variants for p in sorted((root / v).glob("*.txt"))]
     files += sorted((root / RECORDS_DIR).glob("*.json"))
-    refuse_frames_outside(root, files, frame_ids, would="which `kitti-eval` of its folders would score with this run's")
+    refuse_frames_outside(root, files, frame_ids, what="label files or records",
+                          would="which `kitti-eval` of its folders would score with this run's")

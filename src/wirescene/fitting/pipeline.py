@@ -38,7 +38,7 @@ from wirescene.lift import (
     select_particles,
 )
 from wirescene.predetect.bank import MIN_SMALLEST_CAR, smallest_car_search
-from wirescene.predetect.enlarge import boxes_back, enlarge_frame
+from wirescene.predetect.enlarge import boxes_back, enlarge_frame, smallest_car_enlarged
 
 #: Largest enlargement of ``PredetectOptions.upsample``: 3 makes a KITTI frame 9 times the pixels.
 MAX_UPSAMPLE = 3.0
@@ -76,9 +76,9 @@ class PredetectOptions:
                                       "far cars at 1.7x the pre-detection's time; at least 10).")
     # Off: held out, 1.5 gave `full` 13 more cars within 1 m but `coarse+gp` 8 fewer, at 1.8x the time (RESULTS).
     upsample: float = option(1.0, minimum=1.0, maximum=MAX_UPSAMPLE,
-                             help="Detect our own cars on the image enlarged by this factor (Lanczos; up to a 4K "
-                                  "frame's pixels), their boxes brought back: 1.5 finds more small, far cars at "
-                                  "1.8x the pre-detection's time (1: as it is).")
+                             help="Detect our own cars on the image enlarged by this factor, 1 to 3 (Lanczos; up "
+                                  "to a 4K frame's pixels), their boxes brought back: 1.5 finds more small, far cars "
+                                  "at 1.8x the pre-detection's time (1: as it is).")
 
 
 @dataclass(frozen=True)
@@ -506,8 +506,8 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
         big_camera, big, factors = enlarge_frame(camera, image, upsample)
         if factors != (1.0, 1.0):
             return boxes_back(detect_own(big_camera, big, bank=bank, classifier=classifier, threshold=threshold,
-                                         smallest_car=smallest_car, mount=mount, estimate_pitch=estimate_pitch),
-                              factors)
+                                         smallest_car=smallest_car_enlarged(smallest_car, factors), mount=mount,
+                                         estimate_pitch=estimate_pitch), factors, image.shape[1::-1])
     if detections is None:
         min_height, max_scale = smallest_car_search(bank, smallest_car)
         # the templates' features and responses, read again by the box rule

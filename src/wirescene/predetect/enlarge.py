@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
+from wirescene.core.boxes import clip_boxes
 from wirescene.core.camera import Camera
 from wirescene.core.types import Detections
 
@@ -37,7 +38,7 @@ def enlarged_size(width: int, height: int, factor: float) -> tuple[int, int]:
     factor = min(float(factor), float(np.sqrt(MAX_ENLARGED_PIXELS / (width * height))))
     if factor <= 1.0:
         return int(width), int(height)
-    return round(width * factor), round(height * factor)
+    return int(width * factor + 1e-9), int(height * factor + 1e-9)  # whole pixels, down: within the limit
 
 
 def scaled_projection(P, sx: float, sy: float | None = None) -> np.ndarray:
@@ -81,19 +82,37 @@ def enlarge_frame(camera: Camera | None, image: np.ndarray, factor: float):
     return camera, big, (sx, sy)
 
 
-def boxes_back(detections: Detections, factors: tuple[float, float]) -> Detections:
+def boxes_back(detections: Detections, factors: tuple[float, float], image_size: tuple[int, int]) -> Detections:
     """``detections`` of an image enlarged by ``factors`` ``(sx, sy)``
-    (:func:`enlarge_frame`), their boxes in the original image's pixels; the scores and
-    viewpoints as they are (a viewpoint does not change with the image's size).
+    (:func:`enlarge_frame`), their boxes in the pixels of the original ``image_size``
+    ``(W, H)``, clipped to them as the bank clips its boxes to its image (the enlarged image's
+    border lies half an enlarged pixel beyond the original's); the scores and viewpoints as
+    they are (a viewpoint does not change with the image's size).
 
     Examples
     --------
-    >>> dets = Detections(np.array([[29.5, 14.5, 89.5, 44.5]]), np.ones(1), np.zeros(1))
-    >>> boxes_back(dets, (1.5, 1.5)).boxes
-    array([[19.5,  9.5, 59.5, 29.5]])
+    >>> dets = Detections(np.array([[29.5, 14.5, 89.5, 44.5], [0.0, 0.0, 30.0, 95.0]]), np.ones(2), np.zeros(2))
+    >>> boxes_back(dets, (1.5, 1.5), (96, 64)).boxes  # the second from the enlarged image's corner
+    array([[19.5       ,  9.5       , 59.5       , 29.5       ],
+           [ 0.        ,  0.        , 19.83333333, 63.        ]])
     """
-    sx, sy = factors
-    if (sx, sy) == (1.0, 1.0):
+    if tuple(factors) == (1.0, 1.0):
         return detections
-    scale = np.array([sx, sy, sx, sy])
-    return Detections((detections.boxes + 0.5) / scale - 0.5, detections.scores, detections.alpha, detections.source)
+    sx, sy = factors
+    boxes = (detections.boxes + 0.5) / np.array([sx, sy, sx, sy]) - 0.5
+    return Detections(clip_boxes(boxes, *image_size), detections.scores, detections.alpha, detections.source)
+
+
+def smallest_car_enlarged(smallest_car: float | None, factors: tuple[float, float]) -> float | None:
+    """The smallest car height to search in the image enlarged by ``factors``
+    (:func:`enlarge_frame`) for ``smallest_car`` pixels of the original (``PredetectOptions.
+    smallest_car``, which counts the caller's pixels); None or 0 (the bank's own) as it is.
+
+    Examples
+    --------
+    >>> round(smallest_car_enlarged(16.7, (1.5, 1.4986)), 2)  # the lesser factor: no car smaller than asked
+    25.03
+    >>> smallest_car_enlarged(0.0, (1.5, 1.5)), smallest_car_enlarged(None, (1.5, 1.5))
+    (0.0, None)
+    """
+    return smallest_car if not smallest_car else float(smallest_car) * min(factors)
