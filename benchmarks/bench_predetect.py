@@ -60,7 +60,7 @@ from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of, frame_drives  # no
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_cars, load_default_bank  # noqa: E402
-from wirescene.predetect.enlarge import boxes_back, enlarge_frame  # noqa: E402
+from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, joined  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
     add_verifier,
     detect_training_image,
@@ -73,6 +73,24 @@ from wirescene.training.kitti_detector import (  # noqa: E402
     set_calibration,
     train_bank_on_frames,
 )
+
+
+def with_enlarged(ds, frame: str, upsample: float, detect) -> Detections:
+    """``detect(camera, image)``'s every detection of ``frame`` and, with ``upsample`` > 1, those of
+    the image enlarged above the fit's threshold that none of the image's above it covers, as
+    the pipeline adds them (``predetect.upsample``: :func:`wirescene.predetect.enlarge.add_enlarged`)."""
+    from wirescene.fitting.pipeline import PredetectOptions
+
+    camera, image = ds.camera(frame), ds.image(frame)
+    found = detect(camera, image)
+    big_camera, big, factors = enlarge_frame(camera, image, upsample)
+    if factors == (1.0, 1.0):
+        return found
+    thr = PredetectOptions().threshold
+    enlarged = boxes_back(detect(big_camera, big), factors, ds.image_size(frame))
+    kept = found.subset(found.scores > thr)
+    merged = add_enlarged(kept, enlarged.subset(enlarged.scores > thr))
+    return joined(found, merged.subset(np.arange(len(merged)) >= len(kept)))
 
 
 def metrics(dets, labels) -> dict:
@@ -228,8 +246,9 @@ def main():
     ap.add_argument("--smallest-car", type=float, default=None,
                     help="also time the pipeline's pre-detection with predetect.smallest_car at this height (px)")
     ap.add_argument("--upsample", type=float, default=1.0,
-                    help="fold-models / bank modes: detect on each image enlarged by this factor, the boxes brought "
-                         "back (predetect.upsample); also timed as the pipeline's pre-detection")
+                    help="fold-models / bank modes: also detect on each image enlarged by this factor, adding the "
+                         "cars above the fit's threshold the image misses (predetect.upsample); also timed as the "
+                         "pipeline's pre-detection")
     ap.add_argument("--time-frames", type=int, default=12,
                     help="frames timed, spread evenly over the scored frames (0: no timing)")
     ap.add_argument("--pr-curve", default=None)
@@ -391,10 +410,9 @@ def main():
                 b.meta["max_scale"] = args.max_scale
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
-            camera, image, factors = enlarge_frame(ds.camera(f), ds.image(f), args.upsample)
-            dets[f] = boxes_back(detect_cars(image, bank=banks[fold_of(f)], return_all=True,
-                                             camera=camera if ground else None, cross_view_nms=args.cross_view_nms),
-                                 factors, ds.image_size(f))
+            dets[f] = with_enlarged(ds, f, args.upsample, lambda camera, image, f=f: detect_cars(
+                image, bank=banks[fold_of(f)], return_all=True, camera=camera if ground else None,
+                cross_view_nms=args.cross_view_nms))
         time_bank = banks[0]
         name = f"fold banks {args.fold_models}"
         if not ground:
@@ -405,9 +423,8 @@ def main():
     else:
         bank = with_detection_options(DetectorBank.load(args.bank) if args.bank else load_default_bank(), args)
         for f in ids:
-            camera, image, factors = enlarge_frame(ds.camera(f), ds.image(f), args.upsample)
-            dets[f] = boxes_back(detect_cars(image, bank=bank, return_all=True,
-                                             camera=None if args.no_ground else camera), factors, ds.image_size(f))
+            dets[f] = with_enlarged(ds, f, args.upsample, lambda camera, image: detect_cars(
+                image, bank=bank, return_all=True, camera=None if args.no_ground else camera))
         time_bank = bank
         name = f"fixed bank {args.bank or 'shipped'}"
     if args.save_dets:
@@ -475,7 +492,7 @@ def main():
             print(f"  the same searching cars down to {args.smallest_car:g} px (predetect.smallest_car): "
                   f"{np.mean(small):.2f} s (max {np.max(small):.2f}), {np.mean(small) / np.mean(own):.2f}x")
         if enlarged:
-            print(f"  the same on the image enlarged {args.upsample:g}x (predetect.upsample): "
+            print(f"  the same with the image enlarged {args.upsample:g}x too (predetect.upsample): "
                   f"{np.mean(enlarged):.2f} s (max {np.max(enlarged):.2f}), {np.mean(enlarged) / np.mean(own):.2f}x")
         out.update(seconds_per_frame=float(np.mean(times)), cpu_seconds_per_frame=float(np.mean(cpu)))
     out.update(pooled=public(pooled), per_fold=per_fold, per_group=per_group)

@@ -298,9 +298,10 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
 
 def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_path):
     """``predetect.upsample``: at half the resolution the frame's cars fall below the bank's
-    25 px; detected on the half image enlarged 2x they are found again, their boxes in the
-    half image's pixels (those of the full frame halved) and inside it, with the same boxes and
-    viewpoints from the fit, the API, the detect command and the evaluation's source."""
+    25 px; detected on the half image enlarged 2x too they are found again and added to the
+    half image's own, their boxes in the half image's pixels (those of the full frame halved)
+    and inside it, with the same boxes and viewpoints from the fit, the API, the detect command
+    and the evaluation's source."""
     from PIL import Image
 
     import wirescene
@@ -318,6 +319,7 @@ def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_pa
     plain = detect_own(half, small, threshold=0.3)
     found = detect_own(half, small, threshold=0.3, upsample=2.0)
     assert len(found) > len(plain)
+    assert_close(found.boxes[:len(plain)], plain.boxes, atol=0)  # the image's own boxes stay, the others added
     halved = (full.boxes + 0.5) * np.array([(w // 2) / w, (h // 2) / h] * 2) - 0.5
     matched = [max(iou_2d(b, c) for c in halved) for b in found.boxes]
     assert sum(m > 0.7 for m in matched) >= 4, matched  # the full frame's cars, where they lie in the half image

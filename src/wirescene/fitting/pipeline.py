@@ -38,7 +38,7 @@ from wirescene.lift import (
     select_particles,
 )
 from wirescene.predetect.bank import MIN_SMALLEST_CAR, smallest_car_search
-from wirescene.predetect.enlarge import boxes_back, enlarge_frame, smallest_car_enlarged
+from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, smallest_car_enlarged
 
 #: Largest enlargement of ``PredetectOptions.upsample``: 3 makes a KITTI frame 9 times the pixels.
 MAX_UPSAMPLE = 3.0
@@ -74,11 +74,11 @@ class PredetectOptions:
                                  help="Smallest car height (px) our own pre-detection searches, its pyramid "
                                       "upsampled to reach it (0: the bank's own, 25 px; 16.7 finds more small, "
                                       "far cars at 1.7x the pre-detection's time; at least 10).")
-    # Off: held out, 1.5 gave `full` 13 more cars within 1 m but `coarse+gp` 8 fewer, at 1.8x the time (RESULTS).
+    # Off: held out, 1.5 gave `full` 15 more cars within 1 m but 11 more false cars, at 2.9x the time (RESULTS).
     upsample: float = option(1.0, minimum=1.0, maximum=MAX_UPSAMPLE,
-                             help="Detect our own cars on the image enlarged by this factor, 1 to 3 (Lanczos; up "
-                                  "to a 4K frame's pixels), their boxes brought back: 1.5 finds more small, far cars "
-                                  "at 1.8x the pre-detection's time (1: as it is).")
+                             help="Also detect our own cars on the image enlarged by this factor, 1 to 3 (Lanczos; "
+                                  "up to a 4K frame's pixels), adding those the image as it is misses: 1.5 finds more "
+                                  "small, far cars at 2.9x the pre-detection's time (1: none).")
 
 
 @dataclass(frozen=True)
@@ -485,10 +485,11 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     traffic priors learned at KITTI's level rig; ``estimate_pitch``: the priors read the
     camera's pitch off the boxes the templates find without them (:func:`frame_pitch` about
     ``mount``'s; ``LiftingOptions.estimate_pitch``); ``upsample``: the detection and the rule
-    run on the image enlarged by this factor (:func:`~wirescene.predetect.enlarge.enlarge_frame`;
-    ``PredetectOptions.upsample``), the boxes brought back to ``image``'s pixels (with
-    ``detections`` given, nothing is detected and it is not read). Returns the bank's boxes and
-    calibrated scores with the rule's viewpoints.
+    also run on the image enlarged by this factor (:func:`~wirescene.predetect.enlarge.enlarge_frame`;
+    ``PredetectOptions.upsample``), whose cars that no box of ``image`` covers are added, their
+    boxes brought back to ``image``'s pixels (:func:`~wirescene.predetect.enlarge.add_enlarged`;
+    with ``detections`` given, nothing is detected and it is not read). Returns the bank's boxes
+    and calibrated scores with the rule's viewpoints.
 
     Examples
     --------
@@ -501,13 +502,16 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
 
     bank = detector_bank(None) if bank is None else bank
     if detections is None and upsample != 1.0:
-        if pyramid is not None:
-            raise ValueError("pyramid: the features of the image as it is; give none with upsample")
         big_camera, big, factors = enlarge_frame(camera, image, upsample)
-        if factors != (1.0, 1.0):
-            return boxes_back(detect_own(big_camera, big, bank=bank, classifier=classifier, threshold=threshold,
-                                         smallest_car=smallest_car_enlarged(smallest_car, factors), mount=mount,
-                                         estimate_pitch=estimate_pitch), factors, image.shape[1::-1])
+        found = detect_own(camera, image, bank=bank, classifier=classifier, threshold=threshold, pyramid=pyramid,
+                           smallest_car=smallest_car, mount=mount, estimate_pitch=estimate_pitch)
+        if factors == (1.0, 1.0):
+            return found
+        return add_enlarged(found, boxes_back(detect_own(big_camera, big, bank=bank, classifier=classifier,
+                                                         threshold=threshold,
+                                                         smallest_car=smallest_car_enlarged(smallest_car, factors),
+                                                         mount=mount, estimate_pitch=estimate_pitch),
+                                              factors, image.shape[1::-1]))
     if detections is None:
         min_height, max_scale = smallest_car_search(bank, smallest_car)
         # the templates' features and responses, read again by the box rule
