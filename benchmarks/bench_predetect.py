@@ -60,7 +60,7 @@ from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of, frame_drives  # no
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_cars, load_default_bank  # noqa: E402
-from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, joined  # noqa: E402
+from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
     add_verifier,
     detect_training_image,
@@ -77,8 +77,9 @@ from wirescene.training.kitti_detector import (  # noqa: E402
 
 def with_enlarged(ds, frame: str, upsample: float, detect) -> Detections:
     """``detect(camera, image)``'s every detection of ``frame`` and, with ``upsample`` > 1, those of
-    the image enlarged above the fit's threshold that none of the image's above it covers, as
-    the pipeline adds them (``predetect.upsample``: :func:`wirescene.predetect.enlarge.add_enlarged`)."""
+    the image enlarged above the fit's threshold that none of the image's above it covers (the
+    image's below it that overlap one going), as the pipeline adds them (``predetect.upsample``:
+    :func:`wirescene.predetect.enlarge.add_enlarged`)."""
     from wirescene.fitting.pipeline import PredetectOptions
 
     camera, image = ds.camera(frame), ds.image(frame)
@@ -86,11 +87,8 @@ def with_enlarged(ds, frame: str, upsample: float, detect) -> Detections:
     big_camera, big, factors = enlarge_frame(camera, image, upsample)
     if factors == (1.0, 1.0):
         return found
-    thr = PredetectOptions().threshold
     enlarged = boxes_back(detect(big_camera, big), factors, ds.image_size(frame))
-    kept = found.subset(found.scores > thr)
-    merged = add_enlarged(kept, enlarged.subset(enlarged.scores > thr))
-    return joined(found, merged.subset(np.arange(len(merged)) >= len(kept)))
+    return add_enlarged(found, enlarged, threshold=PredetectOptions().threshold)
 
 
 def metrics(dets, labels) -> dict:
@@ -292,8 +290,9 @@ def main():
         ap.error("--fold needs --cv and --models-dir")
     if not 0 < args.train_fraction <= 1:
         ap.error("--train-fraction must be in (0, 1]")
-    if args.upsample != 1.0 and (args.cv or args.from_raw):
-        ap.error("--upsample: the --fold-models and --bank modes only")
+    if args.upsample != 1.0 and (args.cv or args.from_raw or args.no_ground):
+        ap.error("--upsample: the --fold-models and --bank modes only, with the ground term (calibrated scores, "
+                 "added above the fit's threshold)")
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)

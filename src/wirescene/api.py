@@ -486,15 +486,16 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
             rig = image_mount(camera, image, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
         dets = detect_cars(image, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
                            min_height=min_height, mount=rig)
-        return detections_above(camera, image, dets, keep, bank=bank, classifier=classifier, pyramid=pyramid,
+        return detections_above(camera, image, dets, read, bank=bank, classifier=classifier, pyramid=pyramid,
                                 responses=responses, mount=rig)
 
     found = detected(camera, rgb, smallest_car)
     big_camera, big, factors = enlarge_frame(camera, rgb, upsample)
-    if factors == (1.0, 1.0):
-        return found
-    enlarged = detected(big_camera, big, smallest_car_enlarged(smallest_car, factors))
-    return add_enlarged(found, boxes_back(enlarged, factors, (rgb.shape[1], rgb.shape[0])))
+    if factors != (1.0, 1.0):  # the cars the enlarged image adds, as the fit's own pre-detection adds them
+        enlarged = detected(big_camera, big, smallest_car_enlarged(bank, smallest_car, factors))
+        found = add_enlarged(found, boxes_back(enlarged, factors, (rgb.shape[1], rgb.shape[0])),
+                             threshold=PredetectOptions().threshold if bank.calibration is not None else keep)
+    return found.subset(found.scores > keep)
 
 
 DRAW_VIEWS = ("overlay", "bev")

@@ -231,7 +231,8 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
 
     The files of --out hold the detections above the threshold with the viewpoints the
-    pipeline gives them (the box rule of `fit`); AP and AOS score the bank's own."""
+    pipeline gives them (the box rule of `fit`); AP and AOS score the bank's own (with
+    --upsample, the image's and those the enlarged image adds, each with its bank viewpoint)."""
     import numpy as np
 
     from wirescene.core.resources import resolve_models
@@ -241,7 +242,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
-    from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, joined, smallest_car_enlarged
+    from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, smallest_car_enlarged
 
     check_output_dir(out_dir, "--out")
     check_output_file(pr_curve, "--pr-curve")
@@ -261,6 +262,8 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     say_off_centre_frames(ds, ids)  # before the first frame: a missing calibration is refused here
     thr = bank.threshold if threshold is None else threshold
     told = Mount(camera_height, camera_pitch)
+    # the score at which the enlarged image's cars are added (--upsample): the fit's threshold, for a calibrated bank
+    merge_at = PredetectOptions().threshold if bank.calibration is not None else thr
     dets_all, gts, times = [], [], []
     files: dict[str, str] = {}  # FRAME.json of --out, written once every frame is done (no partial output)
     with single_thread():
@@ -270,7 +273,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
             passes = [(ds.camera(fid), image, smallest_car, (1.0, 1.0))]  # the image, and with --upsample enlarged
             big_camera, big, factors = enlarge_frame(ds.camera(fid), image, upsample)
             if factors != (1.0, 1.0):
-                passes.append((big_camera, big, smallest_car_enlarged(smallest_car, factors), factors))
+                passes.append((big_camera, big, smallest_car_enlarged(bank, smallest_car, factors), factors))
             found = []
             for camera, img, smallest, _ in passes:
                 min_height, max_scale = smallest_car_search(bank, smallest)
@@ -282,17 +285,18 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
                                           responses=responses, min_height=min_height, mount=mount),
                               pyramid, responses, mount))
             times.append(time.perf_counter() - t)
-            every = []
+            every = []  # per pass: all its detections, and those --out writes with the fit's viewpoints
             for (camera, img, _, back), (d, pyramid, responses, mount) in zip(passes, found):
-                kept = d.subset(d.scores > thr)
-                if out_dir is not None:  # with the viewpoints the fit gives the boxes it keeps
-                    kept = detections_above(camera, img, d, thr, bank=bank, classifier=classifier, pyramid=pyramid,
-                                            responses=responses, mount=mount)
-                every.append((boxes_back(d, back, size), boxes_back(kept, back, size)))  # in the image's pixels
-            d, kept = every[0]
-            if len(every) > 1:  # the cars only the enlarged image finds, kept and among all
-                merged = add_enlarged(kept, every[1][1])
-                d, kept = joined(d, merged.subset(np.arange(len(merged)) >= len(kept))), merged
+                viewed = None if out_dir is None else detections_above(
+                    camera, img, d, min(thr, merge_at), bank=bank, classifier=classifier, pyramid=pyramid,
+                    responses=responses, mount=mount)
+                every.append([None if x is None else boxes_back(x, back, size) for x in (d, viewed)])  # its pixels
+            (d, viewed), *enlarged = every
+            for more, more_viewed in enlarged:  # the cars the enlarged image adds, as the fit adds them
+                d = add_enlarged(d, more, threshold=merge_at)
+                viewed = None if viewed is None else add_enlarged(viewed, more_viewed, threshold=merge_at)
+            shown = d if viewed is None else viewed
+            kept = shown.subset(shown.scores > thr)
             if out_dir is not None:
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]

@@ -133,7 +133,7 @@ def predict_dataset(
             stored = None
         if stored != config:
             changed = ", ".join(config_difference(stored, config)) if isinstance(stored, dict) else ""
-            raise InputError(f"label files were written with other settings ({changed or f'{CONFIG_FILE} missing'}): "
+            raise InputError(f"label files were written with other settings ({changed or f'{CONFIG_FILE} missing or unreadable'}): "
                              "cannot resume into this directory", path=out)
         # A submission is the folder's *.txt: frames outside this selection would go to the server too.
         refuse_frames_outside(out, existing, frame_ids, would="which a submission zipped from it would include")

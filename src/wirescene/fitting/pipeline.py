@@ -509,7 +509,7 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
             return found
         return add_enlarged(found, boxes_back(detect_own(big_camera, big, bank=bank, classifier=classifier,
                                                          threshold=threshold,
-                                                         smallest_car=smallest_car_enlarged(smallest_car, factors),
+                                                         smallest_car=smallest_car_enlarged(bank, smallest_car, factors),
                                                          mount=mount, estimate_pitch=estimate_pitch),
                                               factors, image.shape[1::-1]))
     if detections is None:

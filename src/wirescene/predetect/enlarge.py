@@ -105,19 +105,25 @@ def boxes_back(detections: Detections, factors: tuple[float, float], image_size:
     return Detections(clip_boxes(boxes, *image_size), detections.scores, detections.alpha, detections.source)
 
 
-def smallest_car_enlarged(smallest_car: float | None, factors: tuple[float, float]) -> float | None:
-    """The smallest car height to search in the image enlarged by ``factors``
-    (:func:`enlarge_frame`) for ``smallest_car`` pixels of the original (``PredetectOptions.
-    smallest_car``, which counts the caller's pixels); None or 0 (the bank's own) as it is.
+def smallest_car_enlarged(bank, smallest_car: float | None, factors: tuple[float, float]) -> float | None:
+    """The smallest car height the detector ``bank`` searches in the image enlarged by
+    ``factors`` (:func:`enlarge_frame`): ``smallest_car`` pixels of the image as it is
+    (``PredetectOptions.smallest_car``, in the caller's pixels) where that reaches below the
+    bank's own smallest height in the enlarged image, else the bank's own (0), so that the
+    enlarged image is searched at least as far down as by default.
 
     Examples
     --------
-    >>> round(smallest_car_enlarged(16.7, (1.5, 1.4986)), 2)  # the lesser factor: no car smaller than asked
-    25.03
-    >>> smallest_car_enlarged(0.0, (1.5, 1.5)), smallest_car_enlarged(None, (1.5, 1.5))
+    >>> bank = type("Bank", (), {"meta": {"min_height": 25.0}})()
+    >>> round(smallest_car_enlarged(bank, 12.0, (1.5, 1.4986)), 2)  # 18 px of the enlarged image
+    17.98
+    >>> smallest_car_enlarged(bank, 25.0, (1.5, 1.5)), smallest_car_enlarged(bank, None, (1.5, 1.5))
     (0.0, None)
     """
-    return smallest_car if not smallest_car else float(smallest_car) * min(factors)
+    if not smallest_car:
+        return smallest_car
+    enlarged = float(smallest_car) * min(factors)
+    return enlarged if enlarged < float(bank.meta.get("min_height", 30.0)) else 0.0
 
 
 #: IoU with a detection of the image as it is above which an enlarged image's detection is the
@@ -125,34 +131,44 @@ def smallest_car_enlarged(smallest_car: float | None, factors: tuple[float, floa
 SAME_CAR_IOU = 0.5
 
 
-def add_enlarged(detections: Detections, enlarged: Detections) -> Detections:
-    """``detections`` of an image, then those of ``enlarged`` (the same image's, enlarged and
-    brought back: :func:`boxes_back`) that overlap none of them at IoU :data:`SAME_CAR_IOU`
-    or more: the cars the enlarged image adds.
+def add_enlarged(detections: Detections, enlarged: Detections, *, threshold: float | None = None) -> Detections:
+    """``detections`` of an image with the cars ``enlarged`` adds (the same image's, enlarged
+    and brought back: :func:`boxes_back`): its boxes scoring above ``threshold`` that overlap
+    none of ``detections`` above it at IoU :data:`SAME_CAR_IOU` or more; a box of
+    ``detections`` at or below ``threshold`` that overlaps an added one is the same car and
+    goes. ``threshold`` None: every box counts (both lists already cut at one threshold). The
+    cars found both ways keep the image's box and score.
 
     Examples
     --------
-    >>> mine = Detections(np.array([[0.0, 0, 40, 20]]), np.array([0.9]), np.zeros(1))
+    >>> mine = Detections(np.array([[0.0, 0, 40, 20], [59, 0, 70, 6]]), np.array([0.9, 0.1]), np.zeros(2))
     >>> more = Detections(np.array([[1.0, 0, 40, 20], [60, 0, 70, 6]]), np.array([0.8, 0.6]), np.ones(2))
-    >>> add_enlarged(mine, more).boxes  # the first is the same car: the image's box stays
+    >>> add_enlarged(mine, more, threshold=0.3).boxes  # the first car found both ways; the second's low box goes
     array([[ 0.,  0., 40., 20.],
            [60.,  0., 70.,  6.]])
+    >>> add_enlarged(mine, more).scores  # every box counts: the second car found both ways too
+    array([0.9, 0.1])
     """
+    floor = -np.inf if threshold is None else float(threshold)
+    enlarged = enlarged.subset(enlarged.scores > floor)
+    above = detections.boxes[detections.scores > floor]
+    if len(enlarged) and len(above):
+        enlarged = enlarged.subset(iou_2d(enlarged.boxes[:, None, :], above[None, :, :]).max(axis=1) < SAME_CAR_IOU)
     if not len(enlarged):
         return detections
-    if len(detections):
-        overlap = iou_2d(enlarged.boxes[:, None, :], detections.boxes[None, :, :]).max(axis=1)
-        enlarged = enlarged.subset(overlap < SAME_CAR_IOU)
-    return joined(detections, enlarged)
+    if threshold is not None and len(detections):
+        twin = iou_2d(detections.boxes[:, None, :], enlarged.boxes[None, :, :]).max(axis=1) >= SAME_CAR_IOU
+        detections = detections.subset((detections.scores > floor) | ~twin)
+    return _joined(detections, enlarged)
 
 
-def joined(first: Detections, second: Detections) -> Detections:
+def _joined(first: Detections, second: Detections) -> Detections:
     """The detections of ``first``, then those of ``second``, with ``first``'s source.
 
     Examples
     --------
     >>> one = Detections(np.array([[0.0, 0, 40, 20]]), np.array([0.9]), np.zeros(1))
-    >>> len(joined(one, one)), len(joined(one, Detections.empty()))
+    >>> len(_joined(one, one)), len(_joined(one, Detections.empty()))
     (2, 1)
     """
     return Detections(np.concatenate([first.boxes, second.boxes]).reshape(-1, 4),
