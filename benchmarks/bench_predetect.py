@@ -290,9 +290,8 @@ def main():
         ap.error("--fold needs --cv and --models-dir")
     if not 0 < args.train_fraction <= 1:
         ap.error("--train-fraction must be in (0, 1]")
-    if args.upsample != 1.0 and (args.cv or args.from_raw or args.no_ground):
-        ap.error("--upsample: the --fold-models and --bank modes only, with the ground term (calibrated scores, "
-                 "added above the fit's threshold)")
+    if args.upsample != 1.0 and (args.cv or args.from_raw):
+        ap.error("--upsample: the --fold-models and --bank modes only")
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
@@ -397,6 +396,8 @@ def main():
         pattern = args.fold_models if "{k}" in args.fold_models else str(Path(args.fold_models) / "fold{k}.npz")
         banks = {k: DetectorBank.load(pattern.format(k=k)) for k in range(N_FOLDS)}
         ground = not args.no_ground and all(b.meta.get("ground_prior") for b in banks.values())
+        if args.upsample != 1.0 and not ground:  # raw margins: no common scale with the fit's threshold
+            ap.error("--upsample: the fold banks' calibrated scores are needed (a ground prior, no --no-ground)")
         for b in banks.values():
             if not ground:
                 b.calibration = None  # pool raw margins (monotone per fold)
@@ -421,6 +422,8 @@ def main():
             print("Platt calibration of the pooled held-out detections (a, b):", allc.tolist())
     else:
         bank = with_detection_options(DetectorBank.load(args.bank) if args.bank else load_default_bank(), args)
+        if args.upsample != 1.0 and bank.calibration is None:  # raw margins: no common scale with the fit's threshold
+            ap.error("--upsample: the bank's calibrated scores are needed")
         for f in ids:
             dets[f] = with_enlarged(ds, f, args.upsample, lambda camera, image: detect_cars(
                 image, bank=bank, return_all=True, camera=None if args.no_ground else camera))

@@ -419,9 +419,10 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         reads it from ``settings={"predetect.smallest_car": S}``.
     upsample : float, optional
         Also detect on the image enlarged by this factor, 1 to 3 (Lanczos, up to a 4K frame's
-        pixels; :mod:`wirescene.predetect.enlarge`), adding the cars that no box of the image
-        as it is covers, their boxes brought back to the image's pixels: 1.5 finds more of
-        KITTI's small, far cars at 2.9x the time; the fit reads it from
+        pixels; :mod:`wirescene.predetect.enlarge`), adding the cars it finds above the fit's
+        threshold 0.3 that no box of the image above it covers (an image box below it over
+        one of them is replaced), their boxes in the image's pixels, as the fit adds them:
+        1.5 finds more of KITTI's small, far cars at 2.9x the time; the fit reads it from
         ``settings={"predetect.upsample": F}``.
 
     Returns

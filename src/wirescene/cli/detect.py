@@ -224,8 +224,8 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
                                       "upsampled to reach it (the fit's --smallest-car).")
 @click.option("--upsample", type=field_type(stage_field(PredetectOptions, "upsample")), default=1.0,
               show_default=True, help="Also detect on the image enlarged by this factor, 1 to 3 (Lanczos), adding "
-                                      "the cars the image misses: more small, far cars at 2.9x the time (the fit's "
-                                      "--upsample).")
+                                      "the cars it finds above the fit's threshold 0.3 that the image's boxes above "
+                                      "it miss: more small, far cars at 2.9x the time (the fit's --upsample).")
 def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_path, threshold, out_dir, pr_curve,
            json_out, camera_height, camera_pitch, estimate_pitch, smallest_car, upsample):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.

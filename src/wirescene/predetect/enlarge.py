@@ -4,8 +4,8 @@ and added to those of the image as it is.
 The detector bank's smallest templates fit cars some 25 px high; a camera of KITTI's
 resolution sees many cars smaller than that. Detecting on the image enlarged (Lanczos) too,
 and adding the cars found there that no detection of the image covers, finds many of them
-(``PredetectOptions.upsample``); the cars found either way keep the boxes of the image as it
-is, which sit better (held-out figures in ``benchmarks/RESULTS.md``). A pixel centre ``u`` of
+(``PredetectOptions.upsample``); the cars both find keep the boxes of the image as it is,
+which sit better (held-out figures in ``benchmarks/RESULTS.md``). A pixel centre ``u`` of
 the image lies at ``s (u + 0.5) - 0.5`` in the image enlarged by ``s``, on each axis with its
 own factor (the enlarged size is rounded down to whole pixels).
 """
@@ -107,23 +107,26 @@ def boxes_back(detections: Detections, factors: tuple[float, float], image_size:
 
 def smallest_car_enlarged(bank, smallest_car: float | None, factors: tuple[float, float]) -> float | None:
     """The smallest car height the detector ``bank`` searches in the image enlarged by
-    ``factors`` (:func:`enlarge_frame`): ``smallest_car`` pixels of the image as it is
-    (``PredetectOptions.smallest_car``, in the caller's pixels) where that reaches below the
-    bank's own smallest height in the enlarged image, else the bank's own (0), so that the
-    enlarged image is searched at least as far down as by default.
+    ``factors`` (:func:`enlarge_frame`) for ``smallest_car`` pixels of the image as it is
+    (``PredetectOptions.smallest_car``, in the caller's pixels): the same cars, except that a
+    smallest car asked below the bank's own (to search farther than it) is searched at least
+    as far down as the enlarged image's default, the bank's own (0) there.
 
     Examples
     --------
     >>> bank = type("Bank", (), {"meta": {"min_height": 25.0}})()
     >>> round(smallest_car_enlarged(bank, 12.0, (1.5, 1.4986)), 2)  # 18 px of the enlarged image
     17.98
-    >>> smallest_car_enlarged(bank, 25.0, (1.5, 1.5)), smallest_car_enlarged(bank, None, (1.5, 1.5))
-    (0.0, None)
+    >>> smallest_car_enlarged(bank, 20.0, (1.5, 1.5))  # 16.7 px of the image by default: farther than asked
+    0.0
+    >>> smallest_car_enlarged(bank, 50.0, (1.5, 1.5)), smallest_car_enlarged(bank, None, (1.5, 1.5))  # no car < 50
+    (75.0, None)
     """
     if not smallest_car:
         return smallest_car
+    own = float(bank.meta.get("min_height", 30.0))
     enlarged = float(smallest_car) * min(factors)
-    return enlarged if enlarged < float(bank.meta.get("min_height", 30.0)) else 0.0
+    return enlarged if smallest_car >= own or enlarged < own else 0.0
 
 
 #: IoU with a detection of the image as it is above which an enlarged image's detection is the
@@ -137,7 +140,8 @@ def add_enlarged(detections: Detections, enlarged: Detections, *, threshold: flo
     none of ``detections`` above it at IoU :data:`SAME_CAR_IOU` or more; a box of
     ``detections`` at or below ``threshold`` that overlaps an added one is the same car and
     goes. ``threshold`` None: every box counts (both lists already cut at one threshold). The
-    cars found both ways keep the image's box and score.
+    cars both find above ``threshold`` keep the image's box and score; a car the image finds
+    only at or below it takes the enlarged image's.
 
     Examples
     --------
