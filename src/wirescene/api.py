@@ -448,12 +448,11 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     """
     from wirescene.fitting.pipeline import (
         PredetectOptions,
+        bank_pass,
         detections_above,
         detector_bank,
-        image_mount,
         viewpoint_classifier,
     )
-    from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
     from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, smallest_car_enlarged
 
     if threshold is not None and not finite_real(threshold):
@@ -480,13 +479,8 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
 
     def detected(camera, image, smallest):  # the image as it is, or enlarged
-        min_height, max_scale = smallest_car_search(bank, smallest)
-        pyramid, responses = bank_pyramid(bank, image, max_scale=max_scale), {}
-        rig = mount
-        if estimate_pitch and camera is not None:
-            rig = image_mount(camera, image, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
-        dets = detect_cars(image, bank=bank, camera=camera, threshold=read, pyramid=pyramid, responses=responses,
-                           min_height=min_height, mount=rig)
+        dets, pyramid, responses, rig = bank_pass(camera, image, bank=bank, threshold=read, smallest_car=smallest,
+                                                  mount=mount, estimate_pitch=estimate_pitch)
         return detections_above(camera, image, dets, read, bank=bank, classifier=classifier, pyramid=pyramid,
                                 responses=responses, mount=rig)
 

@@ -238,10 +238,9 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.core.resources import resolve_models
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import detections_above, detector_bank, image_mount, viewpoint_classifier
+    from wirescene.fitting.pipeline import bank_pass, detections_above, detector_bank, viewpoint_classifier
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
-    from wirescene.predetect.bank import bank_pyramid, detect_cars, smallest_car_search
     from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, smallest_car_enlarged
 
     check_output_dir(out_dir, "--out")
@@ -274,16 +273,10 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
             big_camera, big, factors = enlarge_frame(ds.camera(fid), image, upsample)
             if factors != (1.0, 1.0):
                 passes.append((big_camera, big, smallest_car_enlarged(bank, smallest_car, factors), factors))
-            found = []
-            for camera, img, smallest, _ in passes:
-                min_height, max_scale = smallest_car_search(bank, smallest)
-                # the features and templates' responses, kept for the viewpoints of the boxes written
-                pyramid, responses = bank_pyramid(bank, img, max_scale=max_scale), ({} if out_dir is not None else None)
-                mount = told if not estimate_pitch else image_mount(camera, img, bank=bank, told=told,
-                                                                    pyramid=pyramid, min_height=min_height)
-                found.append((detect_cars(img, bank=bank, return_all=True, source=fid, camera=camera, pyramid=pyramid,
-                                          responses=responses, min_height=min_height, mount=mount),
-                              pyramid, responses, mount))
+            # each pass's features and templates' responses, kept for the viewpoints of the boxes written
+            found = [bank_pass(camera, img, bank=bank, return_all=True, smallest_car=smallest, mount=told,
+                               estimate_pitch=estimate_pitch, keep_responses=out_dir is not None, source=fid)
+                     for camera, img, smallest, _ in passes]
             times.append(time.perf_counter() - t)
             every = []  # per pass: all its detections, and those --out writes with the fit's viewpoints
             for (camera, img, _, back), (d, pyramid, responses, mount) in zip(passes, found):

@@ -497,9 +497,6 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     >>> detect_own(None, np.zeros((64, 96, 3), np.uint8)).boxes.shape
     (0, 4)
     """
-    from wirescene.predetect import detect_cars
-    from wirescene.predetect.bank import bank_pyramid
-
     bank = detector_bank(None) if bank is None else bank
     if detections is None and upsample != 1.0:
         big_camera, big, factors = enlarge_frame(camera, image, upsample)
@@ -512,14 +509,10 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
                                                          smallest_car=smallest_car_enlarged(bank, smallest_car, factors),
                                                          mount=mount, estimate_pitch=estimate_pitch),
                                               factors, image.shape[1::-1]))
-    if detections is None:
-        min_height, max_scale = smallest_car_search(bank, smallest_car)
-        # the templates' features and responses, read again by the box rule
-        pyramid, responses = (bank_pyramid(bank, image, max_scale=max_scale) if pyramid is None else pyramid), {}
-        if estimate_pitch and camera is not None:
-            mount = image_mount(camera, image, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
-        found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, pyramid=pyramid, responses=responses,
-                            min_height=min_height, mount=mount)
+    if detections is None:  # the templates' features and responses, read again by the box rule
+        found, pyramid, responses, mount = bank_pass(camera, image, bank=bank, threshold=threshold, pyramid=pyramid,
+                                                     smallest_car=smallest_car, mount=mount,
+                                                     estimate_pitch=estimate_pitch)
     else:
         found = detections
     if camera is None or not len(found):
@@ -527,6 +520,38 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     unknown = Detections(found.boxes, found.scores, np.full(len(found), np.nan), found.source)
     return complete_viewpoints(camera, unknown, image, bank=bank, classifier=classifier, pyramid=pyramid,
                                responses=responses, mount=mount)
+
+
+def bank_pass(camera: Camera | None, image: np.ndarray, *, bank, threshold: float | None = None,
+              return_all: bool = False, pyramid: list | None = None, smallest_car: float | None = None,
+              mount: Mount = KITTI_MOUNT, estimate_pitch: bool = False, keep_responses: bool = True,
+              source: str = "bank"):
+    """One pass of the detector ``bank`` over ``image``: the feature pyramid its smallest car
+    needs (``smallest_car``, :func:`~wirescene.predetect.bank.smallest_car_search`; or
+    ``pyramid``, given), the camera's pitch read off the boxes (``estimate_pitch``, with a
+    camera: :func:`image_mount` about ``mount``), then
+    :func:`~wirescene.predetect.detect_cars` at ``threshold`` (None: the bank's own), or every
+    score with ``return_all``. Returns ``(detections, pyramid, responses, mount)``: what the box
+    rule reads after it (``responses`` None unless ``keep_responses``); the one pass of
+    :func:`detect_own`, :func:`wirescene.detect` and the ``detect`` command.
+
+    Examples
+    --------
+    >>> found, pyramid, responses, mount = bank_pass(None, np.zeros((64, 96, 3), np.uint8), bank=detector_bank(None))
+    >>> found.boxes.shape, mount == KITTI_MOUNT
+    ((0, 4), True)
+    """
+    from wirescene.predetect import detect_cars
+    from wirescene.predetect.bank import bank_pyramid
+
+    min_height, max_scale = smallest_car_search(bank, smallest_car)
+    pyramid = bank_pyramid(bank, image, max_scale=max_scale) if pyramid is None else pyramid
+    responses = {} if keep_responses else None
+    if estimate_pitch and camera is not None:
+        mount = image_mount(camera, image, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
+    found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, return_all=return_all, pyramid=pyramid,
+                        responses=responses, min_height=min_height, mount=mount, source=source)
+    return found, pyramid, responses, mount
 
 
 def inside_image(detections: Detections, image_size: tuple[int, int]) -> Detections:
