@@ -274,12 +274,12 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
             if factors != (1.0, 1.0):
                 passes.append((big_camera, big, smallest_car_enlarged(bank, smallest_car, factors), factors))
             # each pass's features and templates' responses, kept for the viewpoints of the boxes written
-            found = [bank_pass(camera, img, bank=bank, return_all=True, smallest_car=smallest, mount=told,
-                               estimate_pitch=estimate_pitch, keep_responses=out_dir is not None, source=fid)
-                     for camera, img, smallest, _ in passes]
+            ran = [bank_pass(camera, img, bank=bank, return_all=True, smallest_car=smallest, mount=told,
+                             estimate_pitch=estimate_pitch, keep_responses=out_dir is not None, source=fid)
+                   for camera, img, smallest, _ in passes]
             times.append(time.perf_counter() - t)
             every = []  # per pass: all its detections, and those --out writes with the fit's viewpoints
-            for (camera, img, _, back), (d, pyramid, responses, mount) in zip(passes, found):
+            for (camera, img, _, back), (d, pyramid, responses, mount) in zip(passes, ran):
                 viewed = None if out_dir is None else detections_above(
                     camera, img, d, min(thr, merge_at), bank=bank, classifier=classifier, pyramid=pyramid,
                     responses=responses, mount=mount)
