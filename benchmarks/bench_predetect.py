@@ -60,7 +60,7 @@ from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of, frame_drives  # no
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_cars, load_default_bank  # noqa: E402
-from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame  # noqa: E402
+from wirescene.predetect.enlarge import detect_enlarged  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
     add_verifier,
     detect_training_image,
@@ -82,13 +82,8 @@ def with_enlarged(ds, frame: str, upsample: float, detect) -> Detections:
     :func:`wirescene.predetect.enlarge.add_enlarged`)."""
     from wirescene.fitting.pipeline import PredetectOptions
 
-    camera, image = ds.camera(frame), ds.image(frame)
-    found = detect(camera, image)
-    big_camera, big, factors = enlarge_frame(camera, image, upsample)
-    if factors == (1.0, 1.0):
-        return found
-    enlarged = boxes_back(detect(big_camera, big), factors, ds.image_size(frame))
-    return add_enlarged(found, enlarged, threshold=PredetectOptions().threshold)
+    return detect_enlarged(lambda camera, image, _: detect(camera, image), None, ds.camera(frame), ds.image(frame),
+                           upsample, threshold=PredetectOptions().threshold)
 
 
 def metrics(dets, labels) -> dict:

@@ -453,7 +453,7 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         detector_bank,
         viewpoint_classifier,
     )
-    from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, smallest_car_enlarged
+    from wirescene.predetect.enlarge import detect_enlarged
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
@@ -484,12 +484,9 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         return detections_above(camera, image, dets, read, bank=bank, classifier=classifier, pyramid=pyramid,
                                 responses=responses, mount=rig)
 
-    found = detected(camera, rgb, smallest_car)
-    big_camera, big, factors = enlarge_frame(camera, rgb, upsample)
-    if factors != (1.0, 1.0):  # the cars the enlarged image adds, as the fit's own pre-detection adds them
-        enlarged = detected(big_camera, big, smallest_car_enlarged(bank, smallest_car, factors))
-        found = add_enlarged(found, boxes_back(enlarged, factors, (rgb.shape[1], rgb.shape[0])),
-                             threshold=PredetectOptions().threshold if bank.calibration is not None else keep)
+    # with upsample, the cars the enlarged image adds, as the fit's own pre-detection adds them
+    found = detect_enlarged(detected, bank, camera, rgb, upsample, smallest_car=smallest_car,
+                            threshold=PredetectOptions().threshold if bank.calibration is not None else keep)
     return found.subset(found.scores > keep)
 
 

@@ -241,7 +241,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.fitting.pipeline import bank_pass, detections_above, detector_bank, viewpoint_classifier
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
-    from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, smallest_car_enlarged
+    from wirescene.predetect.enlarge import add_enlarged, boxes_back, frame_passes
 
     check_output_dir(out_dir, "--out")
     check_output_file(pr_curve, "--pr-curve")
@@ -269,10 +269,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
         for fid in ids:
             image, size = ds.image(fid), ds.image_size(fid)
             t = time.perf_counter()
-            passes = [(ds.camera(fid), image, smallest_car, (1.0, 1.0))]  # the image, and with --upsample enlarged
-            big_camera, big, factors = enlarge_frame(ds.camera(fid), image, upsample)
-            if factors != (1.0, 1.0):
-                passes.append((big_camera, big, smallest_car_enlarged(bank, smallest_car, factors), factors))
+            passes = list(frame_passes(bank, ds.camera(fid), image, upsample, smallest_car))  # with --upsample two
             # each pass's features and templates' responses, kept for the viewpoints of the boxes written
             ran = [bank_pass(camera, img, bank=bank, return_all=True, smallest_car=smallest, mount=told,
                              estimate_pitch=estimate_pitch, keep_responses=out_dir is not None, source=fid)

@@ -38,7 +38,7 @@ from wirescene.lift import (
     select_particles,
 )
 from wirescene.predetect.bank import MIN_SMALLEST_CAR, smallest_car_search
-from wirescene.predetect.enlarge import add_enlarged, boxes_back, enlarge_frame, smallest_car_enlarged
+from wirescene.predetect.enlarge import detect_enlarged
 
 #: Largest enlargement of ``PredetectOptions.upsample``: 3 makes a KITTI frame 9 times the pixels.
 MAX_UPSAMPLE = 3.0
@@ -499,16 +499,11 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     """
     bank = detector_bank(None) if bank is None else bank
     if detections is None and upsample != 1.0:
-        big_camera, big, factors = enlarge_frame(camera, image, upsample)
-        found = detect_own(camera, image, bank=bank, classifier=classifier, threshold=threshold, pyramid=pyramid,
-                           smallest_car=smallest_car, mount=mount, estimate_pitch=estimate_pitch)
-        if factors == (1.0, 1.0):
-            return found
-        return add_enlarged(found, boxes_back(detect_own(big_camera, big, bank=bank, classifier=classifier,
-                                                         threshold=threshold,
-                                                         smallest_car=smallest_car_enlarged(bank, smallest_car, factors),
-                                                         mount=mount, estimate_pitch=estimate_pitch),
-                                              factors, image.shape[1::-1]))
+        def one_pass(cam, img, smallest):  # a given pyramid is the image's own, not the enlarged image's
+            return detect_own(cam, img, bank=bank, classifier=classifier, threshold=threshold, smallest_car=smallest,
+                              pyramid=pyramid if img is image else None, mount=mount, estimate_pitch=estimate_pitch)
+
+        return detect_enlarged(one_pass, bank, camera, image, upsample, smallest_car=smallest_car)
     if detections is None:  # the templates' features and responses, read again by the box rule
         found, pyramid, responses, mount = bank_pass(camera, image, bank=bank, threshold=threshold, pyramid=pyramid,
                                                      smallest_car=smallest_car, mount=mount,

@@ -129,6 +129,49 @@ def smallest_car_enlarged(bank, smallest_car: float | None, factors: tuple[float
     return enlarged if smallest_car >= own or enlarged < own else 0.0
 
 
+def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, smallest_car: float | None = None):
+    """The passes of the pre-detection over ``image`` with the enlargement ``factor``
+    (``PredetectOptions.upsample``): ``(camera, image, smallest car, factors)`` of the image as
+    it is, then, where :func:`enlarge_frame` enlarges it, of the enlarged image, whose smallest
+    car is :func:`smallest_car_enlarged` (``bank`` read for it only with a ``smallest_car``)
+    and whose boxes ``factors`` bring back (:func:`boxes_back`).
+
+    Examples
+    --------
+    >>> image = np.zeros((64, 96, 3), np.uint8)
+    >>> [(img.shape, factors) for _, img, _, factors in frame_passes(None, None, image, 1.5)]
+    [((64, 96, 3), (1.0, 1.0)), ((96, 144, 3), (1.5, 1.5))]
+    >>> len(list(frame_passes(None, None, image, 1.0)))  # as it is only
+    1
+    """
+    yield camera, image, smallest_car, (1.0, 1.0)
+    big_camera, big, factors = enlarge_frame(camera, image, factor)
+    if factors != (1.0, 1.0):
+        yield big_camera, big, smallest_car_enlarged(bank, smallest_car, factors), factors
+
+
+def detect_enlarged(detect, bank, camera: Camera | None, image: np.ndarray, factor: float, *,
+                    smallest_car: float | None = None, threshold: float | None = None) -> Detections:
+    """``detect(camera, image, smallest_car)``'s detections over the passes of
+    :func:`frame_passes`: those of the image as it is, with the cars the enlarged image adds
+    (:func:`add_enlarged` at ``threshold``), in the image's pixels.
+
+    Examples
+    --------
+    >>> image = np.zeros((64, 96, 3), np.uint8)
+    >>> def detect(camera, image, smallest):  # one box in the middle of whatever image it is given
+    ...     h, w = image.shape[:2]
+    ...     return Detections(np.array([[w / 4, h / 4, w / 2, h / 2]]), np.ones(1), np.zeros(1))
+    >>> detect_enlarged(detect, None, None, image, 2.0).boxes  # the enlarged image's box is the same car
+    array([[24., 16., 48., 32.]])
+    """
+    found = None
+    for cam, img, smallest, factors in frame_passes(bank, camera, image, factor, smallest_car):
+        dets = boxes_back(detect(cam, img, smallest), factors, image.shape[1::-1])
+        found = dets if found is None else add_enlarged(found, dets, threshold=threshold)
+    return found
+
+
 #: IoU with a detection of the image as it is above which an enlarged image's detection is the
 #: same car (:func:`add_enlarged`): the IoU at which a detection counts as a car's.
 SAME_CAR_IOU = 0.5
