@@ -593,6 +593,30 @@ def test_the_commands_of_kitti_frames_warn_of_a_calibration_made_for_another_ima
                                                                               str(tmp_path / "second"))
 
 
+def test_train_detector_warns_of_the_calibrations_of_the_frames_its_folds_keep(tmp_path):
+    """`train detector --folds` says the warning of a calibration made for another image size
+    of the frames the folds keep, the ones it reads, not of those they leave out."""
+    from PIL import Image
+
+    from conftest import kitti_copy
+    from wirescene.io.folds import fold_of
+
+    root = kitti_copy(tmp_path / "kitti", ["000002", "000010"])
+    image = root / "training" / "image_2" / "000002.png"
+    Image.open(image).resize((2484, 750)).save(image)
+
+    def warned(frame):  # each fold holds one frame, one drive: refused after the warning, before training
+        r = CliRunner().invoke(main, [str(a) for a in ["train", "detector", "--kitti-root", root, "--out",
+                                                       tmp_path / "b.npz", "--folds", fold_of(frame)]])
+        assert r.exit_code == 2 and "form a single group" in r.stderr, r.output + r.stderr
+        return [line for line in r.stderr.splitlines() if "warning" in line]
+
+    assert warned("000010") == []
+    said = warned("000002")
+    line = rf"wirescene: warning: 1 of 1 frames: {TWICE_KITTI_SIZE} \(e\.g\. frame 000002\)"
+    assert len(said) == 1 and re.fullmatch(line, said[0]), said
+
+
 def test_eval_resumed_with_fewer_frames_is_refused_before_any_fit_and_with_more_continues(tmp_path):
     """As `predict --resume`: an `eval --predictions DIR --resume` whose --frames / --split-file
     leave out frames of the run it continues is refused before any fit (their label files would

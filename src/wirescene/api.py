@@ -138,15 +138,43 @@ def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Cam
     return Camera(P.astype(float), image_size)
 
 
-def _warn_off_centre(camera: Camera, image) -> None:
-    """A :class:`~wirescene.core.errors.CalibrationWarning` where ``camera`` looks made for
-    another size than its image's (:func:`wirescene.core.validate.off_centre_problem`),
-    naming ``image`` if it is a path; attributed to the caller of the API function that calls
-    this."""
+def off_centre_message(camera: Camera, image) -> str | None:
+    """What is said where ``camera`` looks made for another size than its image's
+    (:func:`wirescene.core.validate.off_centre_problem`), or None: the problem, after
+    ``IMAGE: `` if ``image`` is a path; the API warns it (:func:`fit`, :func:`detect`), the
+    commands of one image (``fit``, ``gt``) print it.
+
+    Parameters
+    ----------
+    camera : Camera
+        The calibration and the size of the image it is used with.
+    image : path or image
+        The image, named in the message if it is a path.
+
+    Returns
+    -------
+    str or None
+
+    Examples
+    --------
+    >>> P = np.array([[721.5, 0, 609.6, 44.9], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
+    >>> off_centre_message(Camera(P, (1242, 375)), "000010.png") is None
+    True
+    >>> off_centre_message(Camera(P, (621, 187)), "small.png")
+    'small.png: the principal point (609.6, 172.9) lies in the outer quarter of the 621x187 image: the calibration of a larger image, or of a crop?'
+    """
     problem = off_centre_problem(camera.P, camera.image_size)
-    if problem is not None:
-        where = f"{image}: " if isinstance(image, (str, Path)) else ""
-        warnings.warn(f"{where}{problem}", CalibrationWarning, stacklevel=3)
+    if problem is None:
+        return None
+    return f"{image}: {problem}" if isinstance(image, (str, Path)) else problem
+
+
+def _warn_off_centre(camera: Camera, image) -> None:
+    """A :class:`~wirescene.core.errors.CalibrationWarning` of :func:`off_centre_message`, if
+    any, attributed to the caller of the API function that calls this."""
+    message = off_centre_message(camera, image)
+    if message is not None:
+        warnings.warn(message, CalibrationWarning, stacklevel=3)
 
 
 def as_detections(boxes, image_size: tuple[int, int], *, name: str = "boxes") -> Detections:

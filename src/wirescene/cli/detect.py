@@ -126,7 +126,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         refuse_given(other, needs="--kitti-root")
     if kitti_root is not None:
         from wirescene.io.kitti import KittiDataset
-        from wirescene.training.kitti_detector import check_calibration, train_detector_bank_kitti
+        from wirescene.training.kitti_detector import check_calibration, frames_in_folds, train_detector_bank_kitti
 
         try:
             given = None if calibration is None else check_calibration(calibration.split(","), size=3)
@@ -135,9 +135,12 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         ds = KittiDataset(kitti_root)
         ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir)
         fl = _fold_list(folds)
-        say_off_centre_frames(ds, ds.frame_ids() if ids is None else ids)
+        ids = ds.frame_ids() if ids is None else ids
+        if fl is not None:  # narrowed here, so that the warning below is of the frames trained on
+            ids = frames_in_folds(ids, fl)
+        say_off_centre_frames(ds, ids)
         drives = read_drive_map(ds, drive_mapping)[0] if not no_calibration and given is None else None
-        _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, folds=fl, seed=seed, C=C,
+        _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, seed=seed, C=C,
                                            n_partial=n_partial, calibration_folds=not no_calibration,
                                            calibration=given, threshold=threshold, support_weight=support_weight,
                                            mining_rounds=3 if mining_rounds is None else mining_rounds,

@@ -385,14 +385,11 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         raise click.UsageError(f"--seed: each seed once (given {', '.join(map(str, seeds))})")
     several = len(seeds) > 1
     if predictions is not None:  # every seed's folder, before the first seed's fits
-        from wirescene.eval.records import refuse_earlier_run, refuse_records_outside
+        from wirescene.eval.records import refuse_predictions_dir
 
         for seed in seeds:
-            if resume:  # as `predict --resume`: a narrower selection would leave the other frames' files
-                refuse_records_outside(_seed_dir(predictions, seed, several), variants,
-                                       dataset.require_frames() if frame_ids is None else frame_ids)
-            else:
-                refuse_earlier_run(_seed_dir(predictions, seed, several))
+            refuse_predictions_dir(_seed_dir(predictions, seed, several), variants,
+                                   dataset.require_frames() if frame_ids is None else frame_ids, resume=resume)
     client = _dask_client(dask_address) if dask_address is not None else None
     figures, data = {}, {}
     with ExitStack() as stack:

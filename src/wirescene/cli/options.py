@@ -289,15 +289,15 @@ def say_models(models, *, replaced=()):
 
 def say_off_centre_image(image, camera) -> None:
     """``wirescene: warning: IMAGE: problem`` on standard error where ``camera`` looks made for
-    another size than its image's (:func:`wirescene.core.validate.off_centre_problem`): the
-    commands of one image (``fit``, ``gt``) say it, not refuse it (a calibration carries no
-    image size)."""
-    from wirescene.core.validate import off_centre_problem
+    another size than its image's (:func:`wirescene.api.off_centre_message`, what the API
+    warns): the commands of one image (``fit``, ``gt``) say it, not refuse it (a calibration
+    carries no image size); ``image``: the image file."""
+    from wirescene.api import off_centre_message
     from wirescene.eval.runner import notify_stderr
 
-    problem = off_centre_problem(camera.P, camera.image_size)
-    if problem is not None:
-        notify_stderr(f"warning: {image}: {problem}")
+    message = off_centre_message(camera, image)
+    if message is not None:
+        notify_stderr(f"warning: {message}")
 
 
 def say_off_centre_frames(dataset, frame_ids) -> None:

@@ -258,3 +258,30 @@ def refuse_records_outside(predictions_dir, variants: Iterable[str], frame_ids) 
     files += sorted((root / RECORDS_DIR).glob("*.json"))
     refuse_frames_outside(root, files, frame_ids, what="label files or records",
                           would="which `kitti-eval` of its folders would score with this run's")
+
+
+def refuse_predictions_dir(predictions_dir, variants: Iterable[str], frame_ids, *, resume: bool) -> None:
+    """The refusals of an evaluation's ``predictions_dir``, before any fit: without ``resume``,
+    one holding an earlier run's records (:func:`refuse_earlier_run`); resumed, one holding
+    files of frames outside ``frame_ids`` (:func:`refuse_records_outside`).
+
+    Parameters
+    ----------
+    predictions_dir : path
+        The folder of one run's label files and records.
+    variants : iterable of str
+        The run's model variants (their folders).
+    frame_ids : iterable of str
+        The run's frames.
+    resume : bool
+        Whether the run continues the one recorded in ``predictions_dir``.
+
+    Raises
+    ------
+    InputError
+        Naming ``predictions_dir``.
+    """
+    if resume:  # a narrower selection would leave the other frames' label files beside this run's
+        refuse_records_outside(predictions_dir, variants, frame_ids)
+    else:
+        refuse_earlier_run(predictions_dir)

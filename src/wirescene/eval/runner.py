@@ -27,8 +27,7 @@ from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
 from wirescene.eval.records import (
     FrameRecords,
     StaleRecord,
-    refuse_earlier_run,
-    refuse_records_outside,
+    refuse_predictions_dir,
     run_config,
 )
 from wirescene.eval.sources import DetectionSource, frame_seed
@@ -338,10 +337,7 @@ def evaluate_dataset(
     records = None
     if predictions_dir is not None:
         records = FrameRecords(Path(predictions_dir), run_config(dataset, variants, source, options, evidence))
-        if not resume:
-            refuse_earlier_run(predictions_dir)
-        else:  # a narrower selection would leave the other frames' label files beside this run's
-            refuse_records_outside(predictions_dir, variants, frame_ids)
+        refuse_predictions_dir(predictions_dir, variants, frame_ids, resume=resume)
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
     say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)

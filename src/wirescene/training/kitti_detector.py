@@ -1031,6 +1031,45 @@ def mirrored_boxes(boxes, width: int) -> np.ndarray:
     return b
 
 
+def frames_in_folds(frame_ids, folds) -> list[str]:
+    """The frames of ``frame_ids`` that lie in the :mod:`wirescene.io.folds` folds ``folds``,
+    in their order (``train detector --folds``).
+
+    Parameters
+    ----------
+    frame_ids : iterable of str
+        Frame ids, each one of the shared frames (:func:`wirescene.io.folds.frame_drives`),
+        whose drives the folds are made of.
+    folds : iterable of int
+        Fold numbers.
+
+    Returns
+    -------
+    list of str
+
+    Raises
+    ------
+    ArgumentError
+        Naming ``folds``: a frame is not one of the shared frames, or none lies in ``folds``.
+
+    Examples
+    --------
+    >>> frames_in_folds(["000002", "000010"], [3])  # 000002 is of fold 0
+    ['000010']
+    """
+    from wirescene.io.folds import fold_of, frame_drives
+
+    ids, wanted = list(frame_ids), set(folds)
+    unknown = [f for f in ids if f not in frame_drives()]
+    if unknown:  # the study's folds are those of the shared frames' drives
+        raise ArgumentError("folds", f"frame {unknown[0]} is not one of the shared frames, whose drives the folds "
+                                     "are made of (--folds is for their studies)")
+    kept = [f for f in ids if fold_of(f) in wanted]
+    if not kept:
+        raise ArgumentError("folds", f"none of the {len(ids)} frame(s) given lies in folds {sorted(wanted)} (--folds)")
+    return kept
+
+
 @single_threaded
 def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str = "training",
                               seed: int = 0, calibration_folds: bool | Mapping[str, int] = True, calibration=None,
@@ -1060,7 +1099,6 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     user's devkit mapping).
     Returns ``(bank, report)``.
     """
-    from wirescene.io.folds import fold_of, frame_drives
     from wirescene.io.kitti import KittiDataset
 
     say = progress or (lambda msg: None)
@@ -1068,14 +1106,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     ds = KittiDataset(kitti_root, split=split)
     ids = list(frames) if frames else ds.frame_ids()
     if folds is not None:
-        wanted = set(folds)
-        unknown = [f for f in ids if f not in frame_drives()]
-        if unknown:  # the study's folds are those of the shared frames' drives
-            raise ArgumentError("folds", f"frame {unknown[0]} is not one of the shared frames, whose drives the folds "
-                                         "are made of (--folds is for their studies)")
-        given, ids = len(ids), [f for f in ids if fold_of(f) in wanted]
-        if not ids:
-            raise ArgumentError("folds", f"none of the {given} frame(s) given lies in folds {sorted(wanted)} (--folds)")
+        ids = frames_in_folds(ids, folds)
     if not ids:
         raise ArgumentError("frames", "no training frames selected")
     if not any(ds.car_counts(ids).values()):  # else an empty bank, written without a word
