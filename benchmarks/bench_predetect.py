@@ -75,14 +75,15 @@ from wirescene.training.kitti_detector import (  # noqa: E402
 )
 
 
-def with_enlarged(ds, frame: str, upsample: float, detect) -> Detections:
-    """``detect(camera, image)``'s every detection of ``frame`` and, with ``upsample`` > 1, those of
-    the image enlarged above the fit's threshold that none of the image's above it covers (the
-    image's below it that overlap one going), as the pipeline adds them (``predetect.upsample``:
-    :func:`wirescene.predetect.enlarge.add_enlarged`)."""
+def with_enlarged(ds, frame: str, upsample: float, bank, detect) -> Detections:
+    """``detect(camera, image, min_scale)``'s every detection of ``frame`` and, with ``upsample``
+    > 1, those of the image enlarged (searched by ``bank`` at its levels finer than the image's,
+    down to ``min_scale``) above the fit's threshold that none of the image's above it covers
+    (the image's below it that overlap one going), as the pipeline adds them
+    (``predetect.upsample``: :func:`wirescene.predetect.enlarge.detect_enlarged`)."""
     from wirescene.fitting.pipeline import PredetectOptions
 
-    return detect_enlarged(lambda camera, image, _: detect(camera, image), None, ds.camera(frame), ds.image(frame),
+    return detect_enlarged(lambda p: detect(p.camera, p.image, p.min_scale), bank, ds.camera(frame), ds.image(frame),
                            upsample, threshold=PredetectOptions().threshold)
 
 
@@ -405,9 +406,9 @@ def main():
                 b.meta["max_scale"] = args.max_scale
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
-            dets[f] = with_enlarged(ds, f, args.upsample, lambda camera, image, f=f: detect_cars(
+            dets[f] = with_enlarged(ds, f, args.upsample, banks[fold_of(f)], lambda camera, image, lowest, f=f: detect_cars(
                 image, bank=banks[fold_of(f)], return_all=True, camera=camera if ground else None,
-                cross_view_nms=args.cross_view_nms))
+                cross_view_nms=args.cross_view_nms, min_scale=lowest))
         time_bank = banks[0]
         name = f"fold banks {args.fold_models}"
         if not ground:
@@ -420,8 +421,8 @@ def main():
         if args.upsample != 1.0 and bank.calibration is None:  # raw margins: no common scale with the fit's threshold
             ap.error("--upsample: the bank's calibrated scores are needed")
         for f in ids:
-            dets[f] = with_enlarged(ds, f, args.upsample, lambda camera, image: detect_cars(
-                image, bank=bank, return_all=True, camera=None if args.no_ground else camera))
+            dets[f] = with_enlarged(ds, f, args.upsample, bank, lambda camera, image, lowest: detect_cars(
+                image, bank=bank, return_all=True, camera=None if args.no_ground else camera, min_scale=lowest))
         time_bank = bank
         name = f"fixed bank {args.bank or 'shipped'}"
     if args.save_dets:

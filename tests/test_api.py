@@ -115,7 +115,8 @@ def test_detect_returns_the_fits_own_boxes_and_viewpoints_above_its_threshold(fr
     from wirescene.fitting.pipeline import PredetectOptions, detect_own
 
     image, camera, _ = frame
-    own = detect_own(camera, image, threshold=PredetectOptions().threshold)  # what the fit starts from
+    fit = PredetectOptions()
+    own = detect_own(camera, image, threshold=fit.threshold, upsample=fit.upsample)  # what the fit starts from
     both = wirescene.detect(image, camera, threshold=PredetectOptions().threshold)
     assert_close(both.boxes, own.boxes, atol=0, rtol=0)
     assert_close(both.alpha, own.alpha, atol=0, rtol=0)

@@ -228,7 +228,8 @@ def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
     from wirescene.fitting.pipeline import FitOptions, PredetectOptions
 
     options = FitOptions()
-    at_fit = detect_own(camera, image, bank=bank, threshold=options.predetect.threshold)
+    at_fit = detect_own(camera, image, bank=bank, threshold=options.predetect.threshold,
+                        upsample=options.predetect.upsample)
     assert len(at_fit) >= len(own)
     fit = fit_frame(camera, None, ["coarse"], image=image)
     assert np.array_equal(fit.detections.boxes, at_fit.boxes) and np.allclose(fit.detections.alpha, at_fit.alpha)

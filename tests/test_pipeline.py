@@ -357,6 +357,40 @@ def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_pa
             FitOptions().with_settings({"predetect.upsample": value})
 
 
+def test_the_enlarged_image_is_searched_at_the_levels_finer_than_the_images_only(monkeypatch):
+    """``predetect.upsample``: the enlarged image's pyramid holds the levels finer than the
+    image's finest alone (the small, far cars; the image's own levels hold the others), and
+    where ``smallest_car`` already takes the image's levels as fine there is no second pass."""
+    import functools
+
+    import wirescene.predetect.bank as bank_module
+    from wirescene.fitting.pipeline import detect_own, detector_bank
+
+    ds = KittiDataset(KITTI_ROOT)
+    image, camera = ds.image("000010"), ds.camera("000010")
+    top = float(detector_bank(None).meta["max_scale"])
+    searched = []  # (image height, scales) of every pyramid computed
+
+    @functools.wraps(bank_module.feature_pyramid)
+    def seen(img, scales):
+        searched.append((np.asarray(img).shape[0], list(scales)))
+        return seen.__wrapped__(img, scales)
+
+    monkeypatch.setattr(bank_module, "feature_pyramid", seen)
+    plain = detect_own(camera, image, threshold=0.3)
+    found = detect_own(camera, image, threshold=0.3, upsample=1.5)
+    (h0, own), (h1, same), (h2, finer) = searched
+    assert h0 == h1 == image.shape[0] and own == same and max(own) == top
+    factor = h2 / image.shape[0]
+    assert 1.49 < factor <= 1.5 and len(finer) >= 2
+    assert min(finer) * factor > top and max(finer) == top  # finer than the image's finest, down from the bank's top
+    assert len(found) > len(plain)
+    assert_close(found.boxes[:len(plain)], plain.boxes, atol=0)  # the image's own boxes stay
+    searched.clear()
+    detect_own(camera, image, threshold=0.3, upsample=1.5, smallest_car=12.5)  # its levels reach 4x: as fine
+    assert [h for h, _ in searched] == [image.shape[0]]
+
+
 def test_a_fit_told_to_estimate_the_pitch_reads_it_off_its_boxes():
     """A calibration whose principal point lies 50 px below the road's horizon (a camera
     pitched down 4 deg, not told): the shared plane, searched within 3 deg of level, stands

@@ -36,7 +36,7 @@ def test_train_scores_from_eval_runs_and_use_them(tmp_path):
     assert r.exit_code == 0, r.output
     config = json.loads(next((own / ".frames").glob("*.json")).read_text())["config"]
     assert config["options"]["predetect"] == {"threshold": 0.2, "min_car_probability": 0.0, "box_weight": 30.0,
-                                              "smallest_car": 0.0, "upsample": 1.0}
+                                              "smallest_car": 0.0, "upsample": 1.5}
     r = CliRunner().invoke(main, ["train", "scores", str(pred), str(own), "--out", str(cal)])
     assert r.exit_code == 0, r.output
     record = json.loads(cal.read_text())

@@ -404,7 +404,7 @@ def fit(
 
 def detect(image, calib=None, *, models=None, threshold: float | None = None,
            camera_height: float = KITTI_CAMERA_HEIGHT, camera_pitch: float = 0.0, estimate_pitch: bool = False,
-           smallest_car: float | None = None, upsample: float = 1.0) -> Detections:
+           smallest_car: float | None = None, upsample: float | None = None) -> Detections:
     """wirescene's own 2D pre-detection of cars (paper Sec. 3.4).
 
     Parameters
@@ -447,11 +447,11 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         reads it from ``settings={"predetect.smallest_car": S}``.
     upsample : float, optional
         Also detect on the image enlarged by this factor, 1 to 3 (Lanczos, up to a 4K frame's
-        pixels; :mod:`wirescene.predetect.enlarge`), adding the cars it finds above the fit's
-        threshold 0.3 that no box of the image above it covers (an image box below it over
-        one of them is replaced), their boxes in the image's pixels, as the fit adds them:
-        1.5 finds more of KITTI's small, far cars at 2.9x the time; the fit reads it from
-        ``settings={"predetect.upsample": F}``.
+        pixels), at its pyramid levels finer than the image's (:mod:`wirescene.predetect.enlarge`),
+        adding the cars it finds above the fit's threshold 0.3 that no box of the image above
+        it covers (an image box below it over one of them is replaced), their boxes in the
+        image's pixels, as the fit adds them: KITTI's small, far cars. None: the fit's, 1.5
+        (``settings={"predetect.upsample": F}``), at 2.3x the time of 1 (the image alone).
 
     Returns
     -------
@@ -479,12 +479,14 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         bank_pass,
         detections_above,
         detector_bank,
+        frame_mount,
         viewpoint_classifier,
     )
     from wirescene.predetect.enlarge import detect_enlarged
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
+    upsample = PredetectOptions().upsample if upsample is None else upsample
     # the bounds `--set lifting.NAME` / `--set predetect.NAME` and the detect command check
     for stage, name, value in ((LiftingOptions, "camera_height", camera_height),
                                (LiftingOptions, "camera_pitch", camera_pitch),
@@ -506,10 +508,15 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     keep = bank.threshold if threshold is None else float(threshold)
     read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
 
-    def detected(camera, image, smallest):  # the image as it is, or enlarged
-        dets, pyramid, responses, rig = bank_pass(camera, image, bank=bank, threshold=read, smallest_car=smallest,
-                                                  mount=mount, estimate_pitch=estimate_pitch)
-        return detections_above(camera, image, dets, read, bank=bank, classifier=classifier, pyramid=pyramid,
+    # one mount for both passes, the pitch (estimate_pitch) read off the image's own boxes
+    pyramid, rig = frame_mount(camera, rgb, bank=bank, told=mount, estimate_pitch=estimate_pitch,
+                               smallest_car=smallest_car)
+
+    def detected(p):  # the image as it is, or enlarged
+        dets, levels, responses = bank_pass(p.camera, p.image, bank=bank, threshold=read, smallest_car=p.smallest_car,
+                                            min_scale=p.min_scale, pyramid=pyramid if p.image is rgb else None,
+                                            mount=rig)
+        return detections_above(p.camera, p.image, dets, read, bank=bank, classifier=classifier, pyramid=levels,
                                 responses=responses, mount=rig)
 
     # with upsample, the cars the enlarged image adds, as the fit's own pre-detection adds them

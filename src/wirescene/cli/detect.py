@@ -225,10 +225,11 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--smallest-car", type=field_type(stage_field(PredetectOptions, "smallest_car")), default=0.0,
               show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
                                       "upsampled to reach it (the fit's --smallest-car).")
-@click.option("--upsample", type=field_type(stage_field(PredetectOptions, "upsample")), default=1.0,
-              show_default=True, help="Also detect on the image enlarged by this factor, 1 to 3 (Lanczos), adding "
-                                      "the cars it finds above the fit's threshold 0.3 that the image's boxes above "
-                                      "it miss: more small, far cars at 2.9x the time (the fit's --upsample).")
+@click.option("--upsample", type=field_type(stage_field(PredetectOptions, "upsample")),
+              default=PredetectOptions().upsample, show_default=True,
+              help="Also detect on the image enlarged by this factor, 1 to 3 (Lanczos), at its pyramid levels finer "
+                   "than the image's, adding the cars it finds above the fit's threshold 0.3 that the image's boxes "
+                   "above it miss: small, far cars (1: the image alone, 2.3x faster; the fit's --upsample).")
 def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_path, threshold, out_dir, pr_curve,
            json_out, camera_height, camera_pitch, estimate_pitch, smallest_car, upsample):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
@@ -241,7 +242,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.core.resources import resolve_models
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import bank_pass, detections_above, detector_bank, viewpoint_classifier
+    from wirescene.fitting.pipeline import bank_pass, detections_above, detector_bank, frame_mount, viewpoint_classifier
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
     from wirescene.predetect.enlarge import add_enlarged, boxes_back, frame_passes
@@ -273,17 +274,21 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
             image, size = ds.image(fid), ds.image_size(fid)
             t = time.perf_counter()
             passes = list(frame_passes(bank, ds.camera(fid), image, upsample, smallest_car))  # with --upsample two
+            # one mount for every pass, the pitch (--estimate-pitch) read off the image's own boxes
+            pyramid, mount = frame_mount(passes[0].camera, image, bank=bank, told=told, estimate_pitch=estimate_pitch,
+                                         smallest_car=smallest_car)
             # each pass's features and templates' responses, kept for the viewpoints of the boxes written
-            ran = [bank_pass(camera, img, bank=bank, return_all=True, smallest_car=smallest, mount=told,
-                             estimate_pitch=estimate_pitch, keep_responses=out_dir is not None, source=fid)
-                   for camera, img, smallest, _ in passes]
+            ran = [bank_pass(p.camera, p.image, bank=bank, return_all=True, smallest_car=p.smallest_car,
+                             min_scale=p.min_scale, pyramid=pyramid if p.image is image else None, mount=mount,
+                             keep_responses=out_dir is not None, source=fid)
+                   for p in passes]
             times.append(time.perf_counter() - t)
             every = []  # per pass: all its detections, and those --out writes with the fit's viewpoints
-            for (camera, img, _, back), (d, pyramid, responses, mount) in zip(passes, ran):
+            for p, (d, levels, responses) in zip(passes, ran):
                 viewed = None if out_dir is None else detections_above(
-                    camera, img, d, min(thr, merge_at), bank=bank, classifier=classifier, pyramid=pyramid,
+                    p.camera, p.image, d, min(thr, merge_at), bank=bank, classifier=classifier, pyramid=levels,
                     responses=responses, mount=mount)
-                every.append([None if x is None else boxes_back(x, back, size) for x in (d, viewed)])  # its pixels
+                every.append([None if x is None else boxes_back(x, p.factors, size) for x in (d, viewed)])  # its pixels
             (d, viewed), *enlarged = every
             for more, more_viewed in enlarged:  # the cars the enlarged image adds, as the fit adds them
                 d = add_enlarged(d, more, threshold=merge_at)

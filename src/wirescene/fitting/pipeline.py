@@ -53,7 +53,7 @@ class PredetectOptions:
     Examples
     --------
     >>> PredetectOptions()
-    PredetectOptions(threshold=0.3, min_car_probability=0.5, box_weight=30.0, smallest_car=0.0, upsample=1.0)
+    PredetectOptions(threshold=0.3, min_car_probability=0.5, box_weight=30.0, smallest_car=0.0, upsample=1.5)
     >>> FitOptions().with_settings({"predetect.threshold": "0.5"}).predetect.threshold
     0.5
     """
@@ -74,11 +74,12 @@ class PredetectOptions:
                                  help="Smallest car height (px) our own pre-detection searches, its pyramid "
                                       "upsampled to reach it (0: the bank's own, 25 px; 16.7 finds more small, "
                                       "far cars at 1.7x the pre-detection's time; at least 10).")
-    # Off: held out, 1.5 gave `full` 15 more cars within 1 m but 11 more false cars, at 2.9x the time (RESULTS).
-    upsample: float = option(1.0, minimum=1.0, maximum=MAX_UPSAMPLE,
+    # Held out on {0, 1}, where it was chosen: `full` 7 more true positives, 8 more within 1 m, 2 more false (RESULTS).
+    upsample: float = option(1.5, minimum=1.0, maximum=MAX_UPSAMPLE,
                              help="Also detect our own cars on the image enlarged by this factor, 1 to 3 (Lanczos; "
-                                  "up to a 4K frame's pixels), adding those the image as it is misses: 1.5 finds more "
-                                  "small, far cars at 2.9x the pre-detection's time (1: none).")
+                                  "up to a 4K frame's pixels), at its pyramid levels finer than the image's, adding "
+                                  "the small, far cars the image as it is misses (2.3x the pre-detection's time at "
+                                  "1.5; 1: none).")
 
 
 @dataclass(frozen=True)
@@ -461,9 +462,32 @@ def image_mount(camera: Camera, image: np.ndarray, *, bank, told: Mount = KITTI_
     return Mount(told.height, frame_pitch(camera, raw, bank=bank, told=told, weighted=True))
 
 
+def frame_mount(camera: Camera | None, image: np.ndarray, *, bank, told: Mount = KITTI_MOUNT,
+                estimate_pitch: bool = False, smallest_car: float | None = None,
+                pyramid: list | None = None) -> tuple[list | None, Mount]:
+    """``(pyramid, mount)`` of a frame before its detection passes: with ``estimate_pitch`` and
+    a camera, the image's feature pyramid for its ``smallest_car`` (or ``pyramid``, given) and
+    ``told`` with the pitch read off its boxes (:func:`image_mount`); else ``(pyramid, told)``
+    as given. Every pass of the frame then takes that mount (the enlarged image's too, whose
+    pyramid holds its finest levels only: :func:`~wirescene.predetect.enlarge.frame_passes`).
+
+    Examples
+    --------
+    >>> frame_mount(None, np.zeros((64, 96, 3), np.uint8), bank=detector_bank(None), estimate_pitch=True)
+    (None, Mount(height=1.65, pitch=0.0))
+    """
+    if not estimate_pitch or camera is None:
+        return pyramid, told
+    from wirescene.predetect.bank import bank_pyramid
+
+    min_height, max_scale = smallest_car_search(bank, smallest_car)
+    pyramid = bank_pyramid(bank, image, max_scale=max_scale) if pyramid is None else pyramid
+    return pyramid, image_mount(camera, image, bank=bank, told=told, pyramid=pyramid, min_height=min_height)
+
+
 def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
                detections: Detections | None = None, threshold: float | None = None, pyramid: list | None = None,
-               responses: dict | None = None, smallest_car: float | None = None,
+               responses: dict | None = None, smallest_car: float | None = None, min_scale: float | None = None,
                mount: Mount = KITTI_MOUNT, estimate_pitch: bool = False, upsample: float = 1.0) -> Detections:
     """Our own pre-detection (stage 1): the detector bank's cars at its threshold
     (:func:`wirescene.predetect.detect_cars`, with the camera), each box's viewpoint then
@@ -480,12 +504,13 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     and the rule); ``threshold``: the bank's score threshold (None: its own, the 2D
     operating point); ``smallest_car``: the smallest car height searched (px; None or 0: the
     bank's own), the pyramid's largest scale moved so that the bank's smallest templates reach
-    it; ``mount``: the camera's height above the road and pitch down from it
+    it; ``min_scale``: the pyramid's coarsest level (None: the bank's own); ``mount``: the camera's height above the road and pitch down from it
     (:class:`~wirescene.core.groundplane.Mount`; ``LiftingOptions.mount``), for the ground and
     traffic priors learned at KITTI's level rig; ``estimate_pitch``: the priors read the
     camera's pitch off the boxes the templates find without them (:func:`frame_pitch` about
-    ``mount``'s; ``LiftingOptions.estimate_pitch``); ``upsample``: the detection and the rule
-    also run on the image enlarged by this factor (:func:`~wirescene.predetect.enlarge.enlarge_frame`;
+    ``mount``'s; ``LiftingOptions.estimate_pitch``; :func:`frame_mount`); ``upsample``: the
+    detection and the rule also run on the image enlarged by this factor, at its pyramid's
+    levels finer than the image's (:func:`~wirescene.predetect.enlarge.frame_passes`;
     ``PredetectOptions.upsample``), whose cars that no box of ``image`` covers are added, their
     boxes brought back to ``image``'s pixels (:func:`~wirescene.predetect.enlarge.add_enlarged`;
     with ``detections`` given, nothing is detected and it is not read). Returns the bank's boxes
@@ -498,16 +523,19 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     (0, 4)
     """
     bank = detector_bank(None) if bank is None else bank
+    if detections is None:  # one mount for every pass
+        pyramid, mount = frame_mount(camera, image, bank=bank, told=mount, estimate_pitch=estimate_pitch,
+                                     smallest_car=smallest_car, pyramid=pyramid)
     if detections is None and upsample != 1.0:
-        def one_pass(cam, img, smallest):  # a given pyramid is the image's own, not the enlarged image's
-            return detect_own(cam, img, bank=bank, classifier=classifier, threshold=threshold, smallest_car=smallest,
-                              pyramid=pyramid if img is image else None, mount=mount, estimate_pitch=estimate_pitch)
+        def one_pass(p):  # the pyramid is the image's own, not the enlarged image's
+            return detect_own(p.camera, p.image, bank=bank, classifier=classifier, threshold=threshold,
+                              smallest_car=p.smallest_car, min_scale=p.min_scale,
+                              pyramid=pyramid if p.image is image else None, mount=mount)
 
         return detect_enlarged(one_pass, bank, camera, image, upsample, smallest_car=smallest_car)
     if detections is None:  # the templates' features and responses, read again by the box rule
-        found, pyramid, responses, mount = bank_pass(camera, image, bank=bank, threshold=threshold, pyramid=pyramid,
-                                                     smallest_car=smallest_car, mount=mount,
-                                                     estimate_pitch=estimate_pitch)
+        found, pyramid, responses = bank_pass(camera, image, bank=bank, threshold=threshold, pyramid=pyramid,
+                                              smallest_car=smallest_car, min_scale=min_scale, mount=mount)
     else:
         found = detections
     if camera is None or not len(found):
@@ -519,34 +547,32 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
 
 def bank_pass(camera: Camera | None, image: np.ndarray, *, bank, threshold: float | None = None,
               return_all: bool = False, pyramid: list | None = None, smallest_car: float | None = None,
-              mount: Mount = KITTI_MOUNT, estimate_pitch: bool = False, keep_responses: bool = True,
+              min_scale: float | None = None, mount: Mount = KITTI_MOUNT, keep_responses: bool = True,
               source: str = "bank"):
     """One pass of the detector ``bank`` over ``image``: the feature pyramid its smallest car
-    needs (``smallest_car``, :func:`~wirescene.predetect.bank.smallest_car_search`; or
-    ``pyramid``, given), the camera's pitch read off the boxes (``estimate_pitch``, with a
-    camera: :func:`image_mount` about ``mount``), then
+    needs (``smallest_car``, :func:`~wirescene.predetect.bank.smallest_car_search`), down to
+    ``min_scale`` (None: the bank's own; or ``pyramid``, given), then
     :func:`~wirescene.predetect.detect_cars` at ``threshold`` (None: the bank's own), or every
-    score with ``return_all``. Returns ``(detections, pyramid, responses, mount)``: what the box
-    rule reads after it (``responses`` None unless ``keep_responses``); the one pass of
-    :func:`detect_own`, :func:`wirescene.detect` and the ``detect`` command.
+    score with ``return_all``, with the camera's ``mount`` (:func:`frame_mount`). Returns
+    ``(detections, pyramid, responses)``: what the box rule reads after it (``responses`` None
+    unless ``keep_responses``); the one pass of :func:`detect_own`, :func:`wirescene.detect` and
+    the ``detect`` command.
 
     Examples
     --------
-    >>> found, pyramid, responses, mount = bank_pass(None, np.zeros((64, 96, 3), np.uint8), bank=detector_bank(None))
-    >>> found.boxes.shape, mount == KITTI_MOUNT
+    >>> found, pyramid, responses = bank_pass(None, np.zeros((64, 96, 3), np.uint8), bank=detector_bank(None))
+    >>> found.boxes.shape, len(responses) > 0
     ((0, 4), True)
     """
     from wirescene.predetect import detect_cars
     from wirescene.predetect.bank import bank_pyramid
 
     min_height, max_scale = smallest_car_search(bank, smallest_car)
-    pyramid = bank_pyramid(bank, image, max_scale=max_scale) if pyramid is None else pyramid
+    pyramid = bank_pyramid(bank, image, max_scale=max_scale, min_scale=min_scale) if pyramid is None else pyramid
     responses = {} if keep_responses else None
-    if estimate_pitch and camera is not None:
-        mount = image_mount(camera, image, bank=bank, told=mount, pyramid=pyramid, min_height=min_height)
     found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, return_all=return_all, pyramid=pyramid,
                         responses=responses, min_height=min_height, mount=mount, source=source)
-    return found, pyramid, responses, mount
+    return found, pyramid, responses
 
 
 def inside_image(detections: Detections, image_size: tuple[int, int]) -> Detections:

@@ -580,7 +580,8 @@ def cluster_activations(boxes, scores, bins, *, rx: float = 0.4, ry: float = 0.4
 
 def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshold: float | None = None,
                 max_scale: float | None = None, per_octave: int | None = None, min_height: float | None = None,
-                per_detector: int | None = None, cross_view_nms: float | None = 0.3, source: str = "bank",
+                min_scale: float | None = None, per_detector: int | None = None, cross_view_nms: float | None = 0.3,
+                source: str = "bank",
                 return_all: bool = False, camera=None, pyramid: list | None = None,
                 verify_within: float | None = None, responses: dict | None = None,
                 mount: Mount = KITTI_MOUNT) -> Detections:
@@ -596,7 +597,8 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     :meth:`DetectorBank.confidence`) when it carries a calibration, else SVM margins;
     ``threshold`` is in the same units. ``max_scale``, ``per_octave`` (pyramid levels per
     octave) and ``min_height`` (smallest full-car height searched, px) default to the values
-    the bank was trained with (2.0, 4, 30 for banks that do not say); ``per_detector`` (the
+    the bank was trained with (2.0, 4, 30 for banks that do not say); ``min_scale``: the
+    pyramid's coarsest level (:func:`bank_scales`); ``per_detector`` (the
     windows each template keeps after its own suppression) to ``meta["per_detector"]`` (30).
 
     ``camera`` (a :class:`~wirescene.core.camera.Camera`): when given and the bank carries a
@@ -621,7 +623,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
         raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
     H, W = image.shape[:2]
     if pyramid is None:
-        pyramid = bank_pyramid(bank, image, max_scale=max_scale, per_octave=per_octave)
+        pyramid = bank_pyramid(bank, image, max_scale=max_scale, per_octave=per_octave, min_scale=min_scale)
     gray = None if bank.refinement is None and bank.verifier is None else to_gray(image)
     channels = integral_channels(image) if bank.needs_channels else None
     horizon = None if camera is None else road_horizon(camera, mount)
@@ -633,10 +635,11 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
 
 
 def bank_scales(bank: DetectorBank, width: int, height: int, *, max_scale: float | None = None,
-                per_octave: int | None = None) -> list[float]:
+                per_octave: int | None = None, min_scale: float | None = None) -> list[float]:
     """Pyramid scales of a ``width x height`` image at the levels the bank was trained with
     (``meta["max_scale"]``, ``meta["per_octave"]``; 2.0 and 4 for banks that do not say),
-    unless ``max_scale`` / ``per_octave`` are given.
+    unless ``max_scale`` / ``per_octave`` are given, down to ``min_scale`` (None: to
+    :func:`~wirescene.predetect.hog.pyramid_scales`' smallest).
 
     Examples
     --------
@@ -645,10 +648,13 @@ def bank_scales(bank: DetectorBank, width: int, height: int, *, max_scale: float
     array([2.   , 1.682, 1.414])
     >>> bank_scales(bank, 1242, 375)[0] == bank.meta["max_scale"]  # the levels the bank was trained with
     True
+    >>> np.round(bank_scales(bank, 1242, 375, min_scale=1.5), 3)  # the finest levels only
+    array([2.   , 1.782, 1.587])
     """
     max_scale = float(bank.meta.get("max_scale", 2.0)) if max_scale is None else max_scale
     per_octave = int(bank.meta.get("per_octave", 4)) if per_octave is None else per_octave
-    return pyramid_scales(width, height, max_scale=max_scale, per_octave=per_octave)
+    lowest = {} if min_scale is None else {"min_scale": float(min_scale)}
+    return pyramid_scales(width, height, max_scale=max_scale, per_octave=per_octave, **lowest)
 
 
 #: The smallest car (px) a search may be asked to reach: 10 px upsamples a KITTI frame 5x (6.6 s, 0.9 GB), 2 px
@@ -679,10 +685,11 @@ def smallest_car_search(bank: DetectorBank, smallest_car: float | None) -> tuple
 
 
 def bank_pyramid(bank: DetectorBank, image: np.ndarray, *, max_scale: float | None = None,
-                 per_octave: int | None = None) -> list[tuple[float, np.ndarray]]:
+                 per_octave: int | None = None, min_scale: float | None = None) -> list[tuple[float, np.ndarray]]:
     """The HOG :func:`~wirescene.predetect.hog.feature_pyramid` of ``image`` at the bank's
-    levels (:func:`bank_scales`, with its ``max_scale`` / ``per_octave``): what :func:`detect_cars`
-    computes, to share with the box rule (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`).
+    levels (:func:`bank_scales`, with its ``max_scale`` / ``per_octave`` / ``min_scale``):
+    what :func:`detect_cars` computes, to share with the box rule
+    (:func:`wirescene.predetect.box_viewpoints.box_bin_log_odds`).
 
     Examples
     --------
@@ -695,7 +702,8 @@ def bank_pyramid(bank: DetectorBank, image: np.ndarray, *, max_scale: float | No
     True
     """
     H, W = np.asarray(image).shape[:2]
-    return feature_pyramid(image, bank_scales(bank, W, H, max_scale=max_scale, per_octave=per_octave))
+    return feature_pyramid(image, bank_scales(bank, W, H, max_scale=max_scale, per_octave=per_octave,
+                                              min_scale=min_scale))
 
 
 def cluster_options(bank: DetectorBank) -> dict:

@@ -3,14 +3,17 @@ and added to those of the image as it is.
 
 The detector bank's smallest templates fit cars some 25 px high; a camera of KITTI's
 resolution sees many cars smaller than that. Detecting on the image enlarged (Lanczos) too,
-and adding the cars found there that no detection of the image covers, finds many of them
-(``PredetectOptions.upsample``); the cars both find keep the boxes of the image as it is,
-which sit better (held-out figures in ``benchmarks/RESULTS.md``). A pixel centre ``u`` of
-the image lies at ``s (u + 0.5) - 0.5`` in the image enlarged by ``s``, on each axis with its
-own factor (the enlarged size is rounded down to whole pixels).
+at the pyramid levels finer than the image's finest, and adding the cars found there that no
+detection of the image covers, finds many of them (``PredetectOptions.upsample``); the cars
+both find keep the boxes of the image as it is, which sit better (held-out figures in
+``benchmarks/RESULTS.md``). A pixel centre ``u`` of the image lies at ``s (u + 0.5) - 0.5``
+in the image enlarged by ``s``, on each axis with its own factor (the enlarged size is
+rounded down to whole pixels).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from PIL import Image
@@ -18,6 +21,7 @@ from PIL import Image
 from wirescene.core.boxes import clip_boxes, iou_2d
 from wirescene.core.camera import Camera
 from wirescene.core.types import Detections
+from wirescene.predetect.bank import smallest_car_search
 
 #: Most pixels of an enlarged image (a 4K frame's): a larger image is enlarged less, one of as
 #: many pixels not at all (its cars are large enough; the pre-detection's time and memory grow
@@ -129,45 +133,74 @@ def smallest_car_enlarged(bank, smallest_car: float | None, factors: tuple[float
     return enlarged if smallest_car >= own or enlarged < own else 0.0
 
 
+class Pass(NamedTuple):
+    """One pass of the pre-detection over a frame (:func:`frame_passes`): its ``camera`` (or
+    None) and ``image``, the ``smallest_car`` it searches (``PredetectOptions.smallest_car``,
+    in its pixels), the coarsest level of its pyramid ``min_scale`` (None: the bank's own) and
+    the ``factors`` by which ``image`` enlarges the frame's (:func:`boxes_back`)."""
+
+    camera: Camera | None
+    image: np.ndarray
+    smallest_car: float | None
+    min_scale: float | None
+    factors: tuple[float, float]
+
+
+def _finest_scale(bank, smallest_car: float | None) -> float:
+    """The finest pyramid level (scale) the ``bank`` searches for ``smallest_car`` px
+    (:func:`~wirescene.predetect.bank.smallest_car_search`; None or 0: its own)."""
+    return smallest_car_search(bank, smallest_car)[1] or float(bank.meta.get("max_scale", 2.0))
+
+
 def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, smallest_car: float | None = None):
-    """The passes of the pre-detection over ``image`` with the enlargement ``factor``
-    (``PredetectOptions.upsample``): ``(camera, image, smallest car, factors)`` of the image as
-    it is, then, where :func:`enlarge_frame` enlarges it, of the enlarged image, whose smallest
-    car is :func:`smallest_car_enlarged` (``bank`` read for it only with a ``smallest_car``)
-    and whose boxes ``factors`` bring back (:func:`boxes_back`).
+    """The passes (:class:`Pass`) of the pre-detection over ``image`` with the enlargement
+    ``factor`` (``PredetectOptions.upsample``): the image as it is, then, where
+    :func:`enlarge_frame` enlarges it, the enlarged image at the levels of its pyramid finer
+    than the image's finest: the small, far cars the image's own levels cannot hold (the
+    cars they hold keep the image's boxes). Its smallest car is :func:`smallest_car_enlarged`;
+    where the image's own levels reach as fine (a ``smallest_car`` far below the bank's),
+    there is no second pass.
 
     Examples
     --------
+    >>> bank = type("Bank", (), {"meta": {"min_height": 25.0, "max_scale": 2.0}})()
     >>> image = np.zeros((64, 96, 3), np.uint8)
-    >>> [(img.shape, factors) for _, img, _, factors in frame_passes(None, None, image, 1.5)]
-    [((64, 96, 3), (1.0, 1.0)), ((96, 144, 3), (1.5, 1.5))]
-    >>> len(list(frame_passes(None, None, image, 1.0)))  # as it is only
+    >>> [(p.image.shape, round(p.min_scale or 0, 3), p.factors) for p in frame_passes(bank, None, image, 1.5)]
+    [((64, 96, 3), 0, (1.0, 1.0)), ((96, 144, 3), 1.333, (1.5, 1.5))]
+    >>> len(list(frame_passes(bank, None, image, 1.0)))  # as it is only
+    1
+    >>> len(list(frame_passes(bank, None, image, 1.5, smallest_car=12.5)))  # its levels reach 4x: as fine
     1
     """
-    yield camera, image, smallest_car, (1.0, 1.0)
+    yield Pass(camera, image, smallest_car, None, (1.0, 1.0))
     big_camera, big, factors = enlarge_frame(camera, image, factor)
-    if factors != (1.0, 1.0):
-        yield big_camera, big, smallest_car_enlarged(bank, smallest_car, factors), factors
+    if factors == (1.0, 1.0):
+        return
+    smallest = smallest_car_enlarged(bank, smallest_car, factors)
+    min_scale = _finest_scale(bank, smallest_car) / min(factors) * (1.0 + 1e-9)  # strictly finer than the image's
+    if _finest_scale(bank, smallest) >= min_scale:
+        yield Pass(big_camera, big, smallest, min_scale, factors)
 
 
 def detect_enlarged(detect, bank, camera: Camera | None, image: np.ndarray, factor: float, *,
                     smallest_car: float | None = None, threshold: float | None = None) -> Detections:
-    """``detect(camera, image, smallest_car)``'s detections over the passes of
-    :func:`frame_passes`: those of the image as it is, with the cars the enlarged image adds
-    (:func:`add_enlarged` at ``threshold``), in the image's pixels.
+    """``detect(pass_)``'s detections over the passes (:class:`Pass`) of :func:`frame_passes`:
+    those of the image as it is, with the cars the enlarged image adds (:func:`add_enlarged`
+    at ``threshold``), in the image's pixels.
 
     Examples
     --------
+    >>> bank = type("Bank", (), {"meta": {"min_height": 25.0, "max_scale": 2.0}})()
     >>> image = np.zeros((64, 96, 3), np.uint8)
-    >>> def detect(camera, image, smallest):  # one box in the middle of whatever image it is given
-    ...     h, w = image.shape[:2]
+    >>> def detect(p):  # one box in the middle of whatever image it is given
+    ...     h, w = p.image.shape[:2]
     ...     return Detections(np.array([[w / 4, h / 4, w / 2, h / 2]]), np.ones(1), np.zeros(1))
-    >>> detect_enlarged(detect, None, None, image, 2.0).boxes  # the enlarged image's box is the same car
+    >>> detect_enlarged(detect, bank, None, image, 2.0).boxes  # the enlarged image's box is the same car
     array([[24., 16., 48., 32.]])
     """
     found = None
-    for cam, img, smallest, factors in frame_passes(bank, camera, image, factor, smallest_car):
-        dets = boxes_back(detect(cam, img, smallest), factors, image.shape[1::-1])
+    for p in frame_passes(bank, camera, image, factor, smallest_car):
+        dets = boxes_back(detect(p), p.factors, image.shape[1::-1])
         found = dets if found is None else add_enlarged(found, dets, threshold=threshold)
     return found
 
