@@ -1,7 +1,7 @@
 """The pipeline's own pre-detection of this checkout against another checkout's, side by side.
 
-:func:`wirescene.fitting.pipeline.detect_own` (the shipped bank at the fit's threshold, then the
-box rule's viewpoints) runs in two worker processes, one importing this checkout's ``src``, the
+:func:`wirescene.fitting.pipeline.detect_own` (the shipped bank at the fit's threshold, with the
+enlarged image's cars where the checkout's default adds them, then the box rule's viewpoints) runs in two worker processes, one importing this checkout's ``src``, the
 other ``--other``'s (e.g. ``git worktree add BASE REV``, then ``--other BASE/src``),
 each on one core (BLAS threads 1). They take the frames in turn, frame by frame, so that a
 change in the machine's speed falls on both alike; each reports the CPU seconds of its call
@@ -38,6 +38,8 @@ from wirescene.predetect.bank import DetectorBank
 from wirescene.predetect.viewpoint_classifier import ViewpointClassifier
 ds = KittiDataset(sys.argv[1])
 threshold = PredetectOptions().threshold if sys.argv[2] == "fit" else float(sys.argv[2])
+# each checkout's own default enlargement (predetect.upsample), where it has one
+enlarged = {"upsample": PredetectOptions().upsample} if hasattr(PredetectOptions(), "upsample") else {}
 banks = [DetectorBank.load(sys.argv[3].format(k=k)) for k in range(N_FOLDS)] if sys.argv[3] else None
 classifiers = [ViewpointClassifier.load(sys.argv[4].format(k=k)) for k in range(N_FOLDS)] if sys.argv[4] else None
 for line in sys.stdin:
@@ -46,7 +48,7 @@ for line in sys.stdin:
     bank = detector_bank(None) if banks is None else banks[fold_of(f)]
     classifier = viewpoint_classifier(None) if classifiers is None else classifiers[fold_of(f)]
     c = time.process_time()
-    d = detect_own(camera, image, bank=bank, classifier=classifier, threshold=threshold)
+    d = detect_own(camera, image, bank=bank, classifier=classifier, threshold=threshold, **enlarged)
     cpu = time.process_time() - c
     rows = [[float(v) for v in (*b, s, a)] for b, s, a in zip(d.boxes, d.scores, d.alpha)]
     print(json.dumps({"frame": f, "cpu": cpu, "detections": rows}), flush=True)

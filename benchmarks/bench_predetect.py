@@ -18,8 +18,10 @@ Metrics (all on the pooled held-out detections):
 * seconds per frame on one core of :func:`wirescene.predetect.detect_cars` (whole image:
   pyramid + templates + clustering), and side by side without the verifier and of the
   pipeline's own pre-detection (:func:`wirescene.fitting.pipeline.detect_own` at the fit's
-  threshold: the bank, then the box rule's viewpoints), on ``--time-frames`` frames spread
-  evenly over the scored ones (the first frames of a set may hold few cars).
+  threshold: the bank, then the box rule's viewpoints) on the image alone and with the image
+  enlarged (``--upsample``, else the pipeline's default ``predetect.upsample``), on
+  ``--time-frames`` frames spread evenly over the scored ones (the first frames of a set may
+  hold few cars). The detections scored are the image's alone unless ``--upsample`` is given.
 
 Detection passes each frame's camera, so banks with a ground prior score with it
 (:mod:`wirescene.predetect.geometry`; pooled scores are then each fold bank's calibrated
@@ -241,8 +243,8 @@ def main():
                     help="also time the pipeline's pre-detection with predetect.smallest_car at this height (px)")
     ap.add_argument("--upsample", type=float, default=1.0,
                     help="fold-models / bank modes: also detect on each image enlarged by this factor, adding the "
-                         "cars above the fit's threshold the image misses (predetect.upsample); also timed as the "
-                         "pipeline's pre-detection")
+                         "cars above the fit's threshold the image misses (predetect.upsample; default 1: the image "
+                         "alone, the bank's own); also timed (default: the pipeline's predetect.upsample)")
     ap.add_argument("--time-frames", type=int, default=12,
                     help="frames timed, spread evenly over the scored frames (0: no timing)")
     ap.add_argument("--pr-curve", default=None)
@@ -406,8 +408,9 @@ def main():
                 b.meta["max_scale"] = args.max_scale
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
-            dets[f] = with_enlarged(ds, f, args.upsample, banks[fold_of(f)], lambda camera, image, lowest, f=f: detect_cars(
-                image, bank=banks[fold_of(f)], return_all=True, camera=camera if ground else None,
+            held = banks[fold_of(f)]
+            dets[f] = with_enlarged(ds, f, args.upsample, held, lambda camera, image, lowest, held=held: detect_cars(
+                image, bank=held, return_all=True, camera=camera if ground else None,
                 cross_view_nms=args.cross_view_nms, min_scale=lowest))
         time_bank = banks[0]
         name = f"fold banks {args.fold_models}"
@@ -455,6 +458,8 @@ def main():
     cpu, plain, own, small, enlarged = [], [], [], [], []
     unverified = replace(time_bank, verifier=None)
     fit_threshold = PredetectOptions().threshold
+    # the enlargement timed beside the image alone: --upsample's, else the pipeline's default
+    timed_upsample = args.upsample if args.upsample != 1.0 else PredetectOptions().upsample
     timed = list(dict.fromkeys(ids[i] for i in np.linspace(0, len(ids) - 1, args.time_frames).round().astype(int)))
     for f in timed:  # side by side, frame by frame: load falls on all three alike
         img = ds.image(f)
@@ -468,29 +473,30 @@ def main():
         detect_cars(img, bank=unverified, return_all=True, camera=camera)
         plain.append(time.process_time() - c)
         c = time.process_time()
-        detect_own(camera, img, bank=time_bank, threshold=fit_threshold)  # the pipeline's: the box rule's viewpoints
+        detect_own(camera, img, bank=time_bank, threshold=fit_threshold)  # the image alone, the box rule's viewpoints
         own.append(time.process_time() - c)
         if args.smallest_car:
             c = time.process_time()
             detect_own(camera, img, bank=time_bank, threshold=fit_threshold, smallest_car=args.smallest_car)
             small.append(time.process_time() - c)
-        if args.upsample != 1.0:
+        if timed_upsample != 1.0:
             c = time.process_time()
-            detect_own(camera, img, bank=time_bank, threshold=fit_threshold, upsample=args.upsample)
+            detect_own(camera, img, bank=time_bank, threshold=fit_threshold, upsample=timed_upsample)
             enlarged.append(time.process_time() - c)
     # CPU time of this single-threaded process = seconds on one free core (wall time grows
     # with whatever else shares the machine)
     if times:  # (--time-frames 0: no timing)
         print(f"time per frame (detect_cars, 1 thread, {len(times)} frames): CPU {np.mean(cpu):.2f} s (max "
               f"{np.max(cpu):.2f}), wall {np.mean(times):.2f} s (load average {os.getloadavg()[0]:.1f}); side by side: "
-              f"without the verifier {np.mean(plain):.2f} s, the pipeline's own pre-detection "
-              f"(fitting.pipeline.detect_own at the fit's threshold {fit_threshold}, shipped viewpoint classifier) "
-              f"{np.mean(own):.2f} s (max {np.max(own):.2f})")
+              f"without the verifier {np.mean(plain):.2f} s, the pipeline's own pre-detection on the image alone "
+              f"(fitting.pipeline.detect_own at the fit's threshold {fit_threshold}, shipped viewpoint classifier, "
+              f"upsample 1) {np.mean(own):.2f} s (max {np.max(own):.2f})")
         if small:
             print(f"  the same searching cars down to {args.smallest_car:g} px (predetect.smallest_car): "
                   f"{np.mean(small):.2f} s (max {np.max(small):.2f}), {np.mean(small) / np.mean(own):.2f}x")
         if enlarged:
-            print(f"  the same with the image enlarged {args.upsample:g}x too (predetect.upsample): "
+            which = "the pipeline's default" if timed_upsample == PredetectOptions().upsample else "not the default"
+            print(f"  the same with the image enlarged {timed_upsample:g}x too (predetect.upsample, {which}): "
                   f"{np.mean(enlarged):.2f} s (max {np.max(enlarged):.2f}), {np.mean(enlarged) / np.mean(own):.2f}x")
         out.update(seconds_per_frame=float(np.mean(times)), cpu_seconds_per_frame=float(np.mean(cpu)))
     out.update(pooled=public(pooled), per_fold=per_fold, per_group=per_group)

@@ -283,6 +283,7 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
     import wirescene
     from wirescene.core.errors import ArgumentError
 
+    # (at the API's default enlargement too: no finer level left for the enlarged image at 12 px)
     assert_close(wirescene.detect(small, half, threshold=0.3, smallest_car=12.0).boxes, found.boxes, atol=0)
     with pytest.raises(ArgumentError, match="smallest_car"):  # 2 px would upsample 25x: some 40 GB
         wirescene.detect(small, half, smallest_car=2.0)
@@ -359,8 +360,9 @@ def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_pa
 
 def test_the_enlarged_image_is_searched_at_the_levels_finer_than_the_images_only(monkeypatch):
     """``predetect.upsample``: the enlarged image's pyramid holds the levels finer than the
-    image's finest alone (the small, far cars; the image's own levels hold the others), and
-    where ``smallest_car`` already takes the image's levels as fine there is no second pass."""
+    image's finest alone (the small, far cars; the image's own levels hold the others); where
+    ``smallest_car`` already takes the image's levels as fine, or bars cars under the bank's
+    own, there is no second pass; a pitch read off the boxes is read once, for both passes."""
     import functools
 
     import wirescene.predetect.bank as bank_module
@@ -386,9 +388,24 @@ def test_the_enlarged_image_is_searched_at_the_levels_finer_than_the_images_only
     assert min(finer) * factor > top and max(finer) == top  # finer than the image's finest, down from the bank's top
     assert len(found) > len(plain)
     assert_close(found.boxes[:len(plain)], plain.boxes, atol=0)  # the image's own boxes stay
+    for smallest in (12.5, 25.0):  # its levels reach 4x: as fine; no car under 25 px searched, in either image
+        searched.clear()
+        detect_own(camera, image, threshold=0.3, upsample=1.5, smallest_car=smallest)
+        assert [h for h, _ in searched] == [image.shape[0]], smallest
+    # a camera's pitch is read once, off the image's own boxes, for both passes
+    import wirescene.fitting.pipeline as pipeline
+
+    mounts = []
+
+    @functools.wraps(pipeline.image_mount)
+    def read(*args, **kwargs):
+        mounts.append(read.__wrapped__(*args, **kwargs))
+        return mounts[-1]
+
+    monkeypatch.setattr(pipeline, "image_mount", read)
     searched.clear()
-    detect_own(camera, image, threshold=0.3, upsample=1.5, smallest_car=12.5)  # its levels reach 4x: as fine
-    assert [h for h, _ in searched] == [image.shape[0]]
+    detect_own(camera, image, threshold=0.3, upsample=1.5, estimate_pitch=True)
+    assert len(mounts) == 1 and [h for h, _ in searched] == [h0, h2]  # the image's pyramid read by both
 
 
 def test_a_fit_told_to_estimate_the_pitch_reads_it_off_its_boxes():

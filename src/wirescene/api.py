@@ -438,13 +438,14 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     estimate_pitch : bool, optional
         Read the camera's pitch off the boxes the bank finds without those priors, about
         ``camera_pitch`` (:func:`wirescene.fitting.pipeline.image_mount`; a camera whose tilt is
-        not known; the pre-detection then takes 1.7x as long); the fit reads it from
-        ``settings={"lifting.estimate_pitch": True}``.
+        not known; one more pass of the bank over the image, 1.25x the pre-detection's time);
+        the fit reads it from ``settings={"lifting.estimate_pitch": True}``.
     smallest_car : float, optional
         The smallest car height searched in pixels, at least 10 (None or 0: the bank's own,
         25 px), the image upsampled to reach it: e.g. scaled by the focal length for a camera
-        of longer focal length than KITTI's 721 px, or 16.7 for KITTI's farther cars; the fit
-        reads it from ``settings={"predetect.smallest_car": S}``.
+        of longer focal length than KITTI's 721 px; ``upsample``'s enlarged image adds the
+        levels finer than those it reaches, none for 25 px or more (no smaller car is searched);
+        the fit reads it from ``settings={"predetect.smallest_car": S}``.
     upsample : float, optional
         Also detect on the image enlarged by this factor, 1 to 3 (Lanczos, up to a 4K frame's
         pixels), at its pyramid levels finer than the image's (:mod:`wirescene.predetect.enlarge`),

@@ -69,11 +69,11 @@ class PredetectOptions:
     box_weight: float = option(30.0, cli="own-box-weight",
                                help="Weight of our own pre-detection's boxes in the fine objective (boxes from files "
                                     "or the API take the inference stage's --box-weight).")
-    # Off: held out, 16.7 px gave 7 more true positives and 8 fewer cars within 1 m at 1.7x the time (RESULTS).
+    # Off: held out (upsample 1), 16.7 px gave 7 more true positives, 8 fewer cars within 1 m, 1.7x the time (RESULTS).
     smallest_car: float = option(0.0, minimum=MIN_SMALLEST_CAR, zero="the bank's own",
                                  help="Smallest car height (px) our own pre-detection searches, its pyramid "
-                                      "upsampled to reach it (0: the bank's own, 25 px; 16.7 finds more small, "
-                                      "far cars at 1.7x the pre-detection's time; at least 10).")
+                                      "upsampled to reach it, the enlarged image's too (--upsample; 0: the bank's "
+                                      "own, 25 px, and the enlarged image's below it; at least 10).")
     # Held out on {0, 1}, where it was chosen: `full` 7 more true positives, 8 more within 1 m, 2 more false (RESULTS).
     upsample: float = option(1.5, minimum=1.0, maximum=MAX_UPSAMPLE,
                              help="Also detect our own cars on the image enlarged by this factor, 1 to 3 (Lanczos; "
@@ -504,8 +504,10 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     and the rule); ``threshold``: the bank's score threshold (None: its own, the 2D
     operating point); ``smallest_car``: the smallest car height searched (px; None or 0: the
     bank's own), the pyramid's largest scale moved so that the bank's smallest templates reach
-    it; ``min_scale``: the pyramid's coarsest level (None: the bank's own); ``mount``: the camera's height above the road and pitch down from it
-    (:class:`~wirescene.core.groundplane.Mount`; ``LiftingOptions.mount``), for the ground and
+    it; ``min_scale``: the pyramid's coarsest level of a single pass (None: the bank's own;
+    not read with ``upsample``, whose passes take their own, or ``estimate_pitch``, which
+    reads the image's whole pyramid); ``mount``: the camera's height above the road and pitch
+    down from it (:class:`~wirescene.core.groundplane.Mount`; ``LiftingOptions.mount``), for the ground and
     traffic priors learned at KITTI's level rig; ``estimate_pitch``: the priors read the
     camera's pitch off the boxes the templates find without them (:func:`frame_pitch` about
     ``mount``'s; ``LiftingOptions.estimate_pitch``; :func:`frame_mount`); ``upsample``: the

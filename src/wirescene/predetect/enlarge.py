@@ -156,28 +156,31 @@ def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, 
     """The passes (:class:`Pass`) of the pre-detection over ``image`` with the enlargement
     ``factor`` (``PredetectOptions.upsample``): the image as it is, then, where
     :func:`enlarge_frame` enlarges it, the enlarged image at the levels of its pyramid finer
-    than the image's finest: the small, far cars the image's own levels cannot hold (the
-    cars they hold keep the image's boxes). Its smallest car is :func:`smallest_car_enlarged`;
-    where the image's own levels reach as fine (a ``smallest_car`` far below the bank's),
-    there is no second pass.
+    than the image's finest by a quarter of a level at least: the small, far cars the image's
+    own levels cannot hold (the cars they hold keep the image's boxes). Its smallest car is
+    :func:`smallest_car_enlarged`. There is no second pass where none of its levels is that
+    much finer: with a ``smallest_car`` the image's own levels reach (16.7 px or less at 1.5,
+    the bank's own smallest car over ``factor``), or one at or above the bank's own (no car
+    smaller is searched, in either image).
 
     Examples
     --------
-    >>> bank = type("Bank", (), {"meta": {"min_height": 25.0, "max_scale": 2.0}})()
+    >>> bank = type("Bank", (), {"meta": {"min_height": 25.0, "max_scale": 2.0, "per_octave": 6}})()
     >>> image = np.zeros((64, 96, 3), np.uint8)
     >>> [(p.image.shape, round(p.min_scale or 0, 3), p.factors) for p in frame_passes(bank, None, image, 1.5)]
-    [((64, 96, 3), 0, (1.0, 1.0)), ((96, 144, 3), 1.333, (1.5, 1.5))]
+    [((64, 96, 3), 0, (1.0, 1.0)), ((96, 144, 3), 1.372, (1.5, 1.5))]
     >>> len(list(frame_passes(bank, None, image, 1.0)))  # as it is only
     1
-    >>> len(list(frame_passes(bank, None, image, 1.5, smallest_car=12.5)))  # its levels reach 4x: as fine
-    1
+    >>> [len(list(frame_passes(bank, None, image, 1.5, smallest_car=c))) for c in (12.5, 16.7, 18, 24, 25)]
+    [1, 1, 2, 2, 1]
     """
     yield Pass(camera, image, smallest_car, None, (1.0, 1.0))
     big_camera, big, factors = enlarge_frame(camera, image, factor)
     if factors == (1.0, 1.0):
         return
     smallest = smallest_car_enlarged(bank, smallest_car, factors)
-    min_scale = _finest_scale(bank, smallest_car) / min(factors) * (1.0 + 1e-9)  # strictly finer than the image's
+    quarter = 2.0 ** (1.0 / (4 * int(bank.meta.get("per_octave", 4))))  # a level nearer is the image's own again
+    min_scale = _finest_scale(bank, smallest_car) / min(factors) * quarter
     if _finest_scale(bank, smallest) >= min_scale:
         yield Pass(big_camera, big, smallest, min_scale, factors)
 
@@ -190,7 +193,7 @@ def detect_enlarged(detect, bank, camera: Camera | None, image: np.ndarray, fact
 
     Examples
     --------
-    >>> bank = type("Bank", (), {"meta": {"min_height": 25.0, "max_scale": 2.0}})()
+    >>> bank = type("Bank", (), {"meta": {"min_height": 25.0, "max_scale": 2.0, "per_octave": 6}})()
     >>> image = np.zeros((64, 96, 3), np.uint8)
     >>> def detect(p):  # one box in the middle of whatever image it is given
     ...     h, w = p.image.shape[:2]
