@@ -438,7 +438,7 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     estimate_pitch : bool, optional
         Read the camera's pitch off the boxes the bank finds without those priors, about
         ``camera_pitch`` (:func:`wirescene.fitting.pipeline.image_mount`; a camera whose tilt is
-        not known; one more pass of the bank over the image, 1.25x the pre-detection's time);
+        not known; one more pass of the bank over the image, 1.3x the pre-detection's time);
         the fit reads it from ``settings={"lifting.estimate_pitch": True}``.
     smallest_car : float, optional
         The smallest car height searched in pixels, at least 10 (None or 0: the bank's own,

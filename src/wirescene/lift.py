@@ -115,7 +115,7 @@ class LiftingOptions:
     # "A camera's pitch read off its boxes").
     estimate_pitch: bool = option(False, help="Read the camera's pitch off each frame's boxes, within 15 deg of "
                                               "lifting.camera_pitch (a camera whose tilt is not known; our own "
-                                              "pre-detection then takes 1.25x as long).")
+                                              "pre-detection then takes 1.3x as long).")
     n_particles: int = bounded(250, minimum=1, maximum=MAX_PARTICLES)
     # Weight of the prior that cars head along the road (:func:`road_alignment_cost`), which a box leaves open; 0: off.
     road_prior: float = option(0.03, help="Weight of the coarse stage's prior that cars head along the road "

@@ -221,7 +221,7 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
                    "(the fit's --set lifting.camera_pitch).")
 @click.option("--estimate-pitch", is_flag=True, default=False,
               help="Read each frame's camera pitch off the boxes found without those priors, about --camera-pitch "
-                   "(a camera whose tilt is not known; 1.25x the detection's time; the fit's --estimate-pitch).")
+                   "(a camera whose tilt is not known; 1.3x the detection's time; the fit's --estimate-pitch).")
 @click.option("--smallest-car", type=field_type(stage_field(PredetectOptions, "smallest_car")), default=0.0,
               show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
                                       "upsampled to reach it (the fit's --smallest-car).")
