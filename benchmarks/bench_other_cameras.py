@@ -117,8 +117,10 @@ def main() -> None:
                 errors[mode, v] += list(np.linalg.norm((fit - truth)[:, [0, 2]], axis=1))
             if args.detect:
                 easy = np.array([o.box for o in cars if o.occluded <= 1 and o.truncated < 0.3], float).reshape(-1, 4)
+                # the fit's enlargement (--set predetect.upsample=1: the image alone, as the README's figures)
                 dets = wirescene.detect(scene.image, scene.camera, threshold=0.3, camera_height=assumed,
-                                        camera_pitch=assumed_pitch, estimate_pitch=mode == "read")
+                                        camera_pitch=assumed_pitch, estimate_pitch=mode == "read",
+                                        upsample=options.predetect.upsample)
                 hit = (iou_2d(easy[:, None], dets.boxes[None]).max(axis=1) >= 0.5) if len(dets) else np.zeros(len(easy))
                 found[mode][0] += int(np.sum(hit))
                 found[mode][1] += len(easy)

@@ -191,10 +191,12 @@ def test_the_resume_fingerprint_holds_the_files_the_fit_reads_and_no_other(tmp_p
     config = json.loads(record_path.read_text())["config"]
     assert set(config["models"]) == {"detector_bank", "viewpoint_classifier", "score_calibration"}
     assert "shape_model" not in config["options"] and config["options"]["score_calibration"] == str(calibration)
-    # files the coarse run does not read, swapped (named anew, or rewritten in place): the record is reused
+    assert "predetect" not in config["options"]  # label boxes: our own pre-detection's options are not read
+    # files the coarse run does not read, swapped (named anew, or rewritten in place), or options of a pre-detection
+    # it does not run: the record is reused
     renamed_shape_model(mine, scale=1.2)
     for swapped in (["--shape-model", shipped_path("shape_model"), "--parts-model", shipped_path("parts_model")],
-                    ["--shape-model", mine]):
+                    ["--shape-model", mine], ["--upsample", "1", "--own-box-weight", "10"]):
         r = cli(*common, *swapped, "--resume")
         assert r.exit_code == 0 and "1 of 1 frames already done" in r.stderr, r.output + r.stderr
         assert "refitting" not in r.stderr

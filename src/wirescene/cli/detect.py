@@ -223,8 +223,9 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
               help="Read each frame's camera pitch off the boxes found without those priors, about --camera-pitch "
                    "(a camera whose tilt is not known; 1.3x the detection's time; the fit's --estimate-pitch).")
 @click.option("--smallest-car", type=field_type(stage_field(PredetectOptions, "smallest_car")), default=0.0,
-              show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px), the image "
-                                      "upsampled to reach it (the fit's --smallest-car).")
+              show_default=True, help="Smallest car height searched (px; 0: the bank's own, 25 px, and --upsample's "
+                                      "enlarged image below it), the image upsampled to reach it; at 25 or more no "
+                                      "smaller car is searched in either image (the fit's --smallest-car).")
 @click.option("--upsample", type=field_type(stage_field(PredetectOptions, "upsample")),
               default=PredetectOptions().upsample, show_default=True,
               help="Also detect on the image enlarged by this factor, 1 to 3 (Lanczos), at its pyramid levels finer "

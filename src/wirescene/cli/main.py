@@ -156,8 +156,8 @@ class _Group(click.Group):
             _Stopping.exiting = True
             what = ("a worker process was stopped (by the system, for memory?)" if isinstance(exc, BrokenProcessPool)
                     else f"out of memory ({' '.join(str(exc).split()) or 'MemoryError'})")
-            click.echo(f"wirescene: error: {what}; ask for less (fewer --samples or --workers, a larger "
-                       "--smallest-car) or use a larger machine; frames an --out or --predictions folder holds stay "
+            click.echo(f"wirescene: error: {what}; ask for less (fewer --samples or --workers, --upsample 1, a "
+                       "larger --smallest-car) or use a larger machine; frames an --out or --predictions folder holds stay "
                        "(remove it to run with other settings)", err=True)
             sys.exit(1)
         except KeyboardInterrupt as exc:  # the shell's convention (128 + the signal), not click's "Aborted!" and 1

@@ -187,13 +187,17 @@ def models_fingerprint(options: FitOptions, *, fine: bool = True, own: bool = Tr
 
 def options_read(options: FitOptions, *, fine: bool = True, own: bool = True, evidence: str = "parts") -> dict:
     """``dataclasses.asdict(options)`` without the fields of the model files a fit with them
-    does not read (:func:`model_files_read`): the options as a resume record holds them, so
-    that naming another such file changes nothing.
+    does not read (:func:`model_files_read`), nor, unless it fits our own pre-detections
+    (``own``), the options of that pre-detection (``predetect``): the options as a resume
+    record holds them, so that naming another such file or option changes nothing.
 
     Examples
     --------
     >>> sorted(set(MODEL_FILES) & set(options_read(FitOptions(shape_model="mine.npz"), fine=False, own=False)))
     ['detector_bank', 'score_calibration', 'viewpoint_classifier']
+    >>> "predetect" in options_read(FitOptions(), own=False), "predetect" in options_read(FitOptions())
+    (False, True)
     """
     read = model_files_read(options, fine=fine, own=own, evidence=evidence)
-    return {k: v for k, v in dataclasses.asdict(options).items() if k not in MODEL_FILES or k in read}
+    return {k: v for k, v in dataclasses.asdict(options).items()
+            if (k not in MODEL_FILES or k in read) and (own or k != "predetect")}

@@ -557,7 +557,7 @@ def bank_pass(camera: Camera | None, image: np.ndarray, *, bank, threshold: floa
     :func:`~wirescene.predetect.detect_cars` at ``threshold`` (None: the bank's own), or every
     score with ``return_all``, with the camera's ``mount`` (:func:`frame_mount`). Returns
     ``(detections, pyramid, responses)``: what the box rule reads after it (``responses`` None
-    unless ``keep_responses``); the one pass of :func:`detect_own`, :func:`wirescene.detect` and
+    unless ``keep_responses``); each pass of :func:`detect_own`, :func:`wirescene.detect` and
     the ``detect`` command.
 
     Examples

@@ -175,13 +175,16 @@ def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, 
     [1, 1, 2, 2, 1]
     """
     yield Pass(camera, image, smallest_car, None, (1.0, 1.0))
-    big_camera, big, factors = enlarge_frame(camera, image, factor)
-    if factors == (1.0, 1.0):
+    H, W = image.shape[:2]
+    w, h = enlarged_size(W, H, factor)
+    if (w, h) == (W, H):
         return
+    factors = (w / W, h / H)  # as enlarge_frame's, known before the image is enlarged
     smallest = smallest_car_enlarged(bank, smallest_car, factors)
     quarter = 2.0 ** (1.0 / (4 * int(bank.meta.get("per_octave", 4))))  # a level nearer is the image's own again
     min_scale = _finest_scale(bank, smallest_car) / min(factors) * quarter
     if _finest_scale(bank, smallest) >= min_scale:
+        big_camera, big, factors = enlarge_frame(camera, image, factor)
         yield Pass(big_camera, big, smallest, min_scale, factors)
 
 
