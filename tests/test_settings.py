@@ -123,7 +123,7 @@ def test_iterations_and_workers_are_bounded_alike_wherever_they_come_from():
     """The fine stage's iterations (some 0.3 s each an 8-car frame) and polish iterations at most
     MAX_ITERATIONS, the coarse stage's Levenberg-Marquardt steps at most MAX_LIFT_ITERATIONS (its
     damping overflowed from some 150 on): --set, the API's settings and FitOptions.checked refuse
-    alike; the API's workers at most MAX_WORKERS (each a process of some 360 MB)."""
+    alike; the API's workers at most MAX_WORKERS (each a process of some 440 MB)."""
     import wirescene
     from conftest import KITTI_ROOT
     from wirescene.core.validate import MAX_WORKERS

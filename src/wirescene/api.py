@@ -222,7 +222,7 @@ def _positive_int(value, name: str) -> int:
 
 def _workers(value) -> int:
     workers = _positive_int(value, "workers")
-    if workers > MAX_WORKERS:  # each a process of some 360 MB
+    if workers > MAX_WORKERS:  # each a process of some 440 MB
         raise ArgumentError("workers", f"must be at most {MAX_WORKERS:,} (the larger of 64 and the cores), "
                                        f"got {workers!r}")
     return workers

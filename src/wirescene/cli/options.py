@@ -238,7 +238,7 @@ def workers_option(what: str = "fitting frames"):
 
     return click.option("--workers", type=click.IntRange(min=1, max=MAX_WORKERS), default=None,
                         help=f"Processes {what} in parallel (default: the cores this process may use; at most "
-                             f"{MAX_WORKERS}, the larger of 64 and those cores: each takes some 360 MB).")
+                             f"{MAX_WORKERS}, the larger of 64 and those cores: each takes some 440 MB).")
 
 
 def particles_option(f):

@@ -18,8 +18,8 @@ FOCAL_RANGE = (10.0, 1e5)
 MAX_PIXEL = 1e5
 
 #: Most worker processes of one run (``--workers``, the API's ``workers``): each fitting worker holds
-#: some 360 MB (README, "Evaluating needs little memory"), so 64 of them take 23 GB; a machine with
-#: more cores than that may use them all (beyond the cores a worker adds no speed, only memory).
+#: some 440 MB (README, "Evaluating needs little memory"), so 64 of them take 28 GB (55 fit 24 GB); a
+#: machine with more cores than that may use them all (beyond the cores a worker adds no speed, only memory).
 MAX_WORKERS = max(64, usable_cores())
 
 
