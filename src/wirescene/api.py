@@ -515,14 +515,14 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
 
     def detected(p):  # the image as it is, or enlarged
         dets, levels, responses = bank_pass(p.camera, p.image, bank=bank, threshold=read, smallest_car=p.smallest_car,
-                                            min_scale=p.min_scale, pyramid=pyramid if p.image is rgb else None,
-                                            mount=rig)
+                                            min_scale=p.min_scale, pyramid=p.pyramid, mount=rig)
         return detections_above(p.camera, p.image, dets, read, bank=bank, classifier=classifier, pyramid=levels,
                                 responses=responses, mount=rig)
 
     # with upsample, the cars the enlarged image adds, as the fit's own pre-detection adds them
     found = detect_enlarged(detected, bank, camera, rgb, upsample, smallest_car=smallest_car,
-                            threshold=PredetectOptions().threshold if bank.calibration is not None else keep)
+                            threshold=PredetectOptions().threshold if bank.calibration is not None else keep,
+                            pyramid=pyramid)
     return found.subset(found.scores > keep)
 
 

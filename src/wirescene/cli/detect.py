@@ -274,13 +274,14 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
         for fid in ids:
             image, size = ds.image(fid), ds.image_size(fid)
             t = time.perf_counter()
-            passes = list(frame_passes(bank, ds.camera(fid), image, upsample, smallest_car))  # with --upsample two
+            camera = ds.camera(fid)
             # one mount for every pass, the pitch (--estimate-pitch) read off the image's own boxes
-            pyramid, mount = frame_mount(passes[0].camera, image, bank=bank, told=told, estimate_pitch=estimate_pitch,
+            pyramid, mount = frame_mount(camera, image, bank=bank, told=told, estimate_pitch=estimate_pitch,
                                          smallest_car=smallest_car)
+            passes = list(frame_passes(bank, camera, image, upsample, smallest_car, pyramid=pyramid))  # up to two
             # each pass's features and templates' responses, kept for the viewpoints of the boxes written
             ran = [bank_pass(p.camera, p.image, bank=bank, return_all=True, smallest_car=p.smallest_car,
-                             min_scale=p.min_scale, pyramid=pyramid if p.image is image else None, mount=mount,
+                             min_scale=p.min_scale, pyramid=p.pyramid, mount=mount,
                              keep_responses=out_dir is not None, source=fid)
                    for p in passes]
             times.append(time.perf_counter() - t)

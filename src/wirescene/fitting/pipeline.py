@@ -529,12 +529,11 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
         pyramid, mount = frame_mount(camera, image, bank=bank, told=mount, estimate_pitch=estimate_pitch,
                                      smallest_car=smallest_car, pyramid=pyramid)
     if detections is None and upsample != 1.0:
-        def one_pass(p):  # the pyramid is the image's own, not the enlarged image's
+        def one_pass(p):
             return detect_own(p.camera, p.image, bank=bank, classifier=classifier, threshold=threshold,
-                              smallest_car=p.smallest_car, min_scale=p.min_scale,
-                              pyramid=pyramid if p.image is image else None, mount=mount)
+                              smallest_car=p.smallest_car, min_scale=p.min_scale, pyramid=p.pyramid, mount=mount)
 
-        return detect_enlarged(one_pass, bank, camera, image, upsample, smallest_car=smallest_car)
+        return detect_enlarged(one_pass, bank, camera, image, upsample, smallest_car=smallest_car, pyramid=pyramid)
     if detections is None:  # the templates' features and responses, read again by the box rule
         found, pyramid, responses = bank_pass(camera, image, bank=bank, threshold=threshold, pyramid=pyramid,
                                               smallest_car=smallest_car, min_scale=min_scale, mount=mount)

@@ -136,14 +136,16 @@ def smallest_car_enlarged(bank, smallest_car: float | None, factors: tuple[float
 class Pass(NamedTuple):
     """One pass of the pre-detection over a frame (:func:`frame_passes`): its ``camera`` (or
     None) and ``image``, the ``smallest_car`` it searches (``PredetectOptions.smallest_car``,
-    in its pixels), the coarsest level of its pyramid ``min_scale`` (None: the bank's own) and
-    the ``factors`` by which ``image`` enlarges the frame's (:func:`boxes_back`)."""
+    in its pixels), the coarsest level of its pyramid ``min_scale`` (None: the bank's own),
+    the ``factors`` by which ``image`` enlarges the frame's (:func:`boxes_back`) and its
+    feature ``pyramid`` if already computed (None: to compute)."""
 
     camera: Camera | None
     image: np.ndarray
     smallest_car: float | None
     min_scale: float | None
     factors: tuple[float, float]
+    pyramid: list | None = None
 
 
 def _finest_scale(bank, smallest_car: float | None) -> float:
@@ -152,9 +154,11 @@ def _finest_scale(bank, smallest_car: float | None) -> float:
     return smallest_car_search(bank, smallest_car)[1] or float(bank.meta.get("max_scale", 2.0))
 
 
-def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, smallest_car: float | None = None):
+def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, smallest_car: float | None = None,
+                 *, pyramid: list | None = None):
     """The passes (:class:`Pass`) of the pre-detection over ``image`` with the enlargement
-    ``factor`` (``PredetectOptions.upsample``): the image as it is, then, where
+    ``factor`` (``PredetectOptions.upsample``): the image as it is (with its feature
+    ``pyramid`` if already computed, e.g. to read the camera's pitch), then, where
     :func:`enlarge_frame` enlarges it, the enlarged image at the levels of its pyramid finer
     than the image's finest by a quarter of a level at least: the small, far cars the image's
     own levels cannot hold (the cars they hold keep the image's boxes). Its smallest car is
@@ -174,7 +178,7 @@ def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, 
     >>> [len(list(frame_passes(bank, None, image, 1.5, smallest_car=c))) for c in (12.5, 16.7, 18, 24, 25)]
     [1, 1, 2, 2, 1]
     """
-    yield Pass(camera, image, smallest_car, None, (1.0, 1.0))
+    yield Pass(camera, image, smallest_car, None, (1.0, 1.0), pyramid)
     H, W = image.shape[:2]
     w, h = enlarged_size(W, H, factor)
     if (w, h) == (W, H):
@@ -189,10 +193,11 @@ def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, 
 
 
 def detect_enlarged(detect, bank, camera: Camera | None, image: np.ndarray, factor: float, *,
-                    smallest_car: float | None = None, threshold: float | None = None) -> Detections:
-    """``detect(pass_)``'s detections over the passes (:class:`Pass`) of :func:`frame_passes`:
-    those of the image as it is, with the cars the enlarged image adds (:func:`add_enlarged`
-    at ``threshold``), in the image's pixels.
+                    smallest_car: float | None = None, threshold: float | None = None,
+                    pyramid: list | None = None) -> Detections:
+    """``detect(pass_)``'s detections over the passes (:class:`Pass`) of :func:`frame_passes`
+    (``pyramid``: the image's, if already computed): those of the image as it is, with the
+    cars the enlarged image adds (:func:`add_enlarged` at ``threshold``), in the image's pixels.
 
     Examples
     --------
@@ -205,7 +210,7 @@ def detect_enlarged(detect, bank, camera: Camera | None, image: np.ndarray, fact
     array([[24., 16., 48., 32.]])
     """
     found = None
-    for p in frame_passes(bank, camera, image, factor, smallest_car):
+    for p in frame_passes(bank, camera, image, factor, smallest_car, pyramid=pyramid):
         dets = boxes_back(detect(p), p.factors, image.shape[1::-1])
         found = dets if found is None else add_enlarged(found, dets, threshold=threshold)
     return found
