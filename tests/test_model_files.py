@@ -17,7 +17,7 @@ from wirescene.core.errors import InputError
 from wirescene.core.resources import DATA_DIR, MANIFEST_FILE, shipped_path
 from wirescene.core.shape import ShapeModel, load_default
 from wirescene.core.viewpoints import viewpoint_bin
-from wirescene.fitting.models import models_fingerprint
+from wirescene.fitting.models import model_files_read, models_fingerprint, options_read
 from wirescene.fitting.pipeline import FitOptions, PredetectOptions
 from wirescene.lift import LiftingOptions
 
@@ -193,10 +193,11 @@ def test_the_resume_fingerprint_holds_the_files_the_fit_reads_and_no_other(tmp_p
     assert "shape_model" not in config["options"] and config["options"]["score_calibration"] == str(calibration)
     assert "predetect" not in config["options"]  # label boxes: our own pre-detection's options are not read
     # files the coarse run does not read, swapped (named anew, or rewritten in place), or options of a pre-detection
-    # it does not run: the record is reused
+    # it does not run or of the fine stage it does not fit: the record is reused
     renamed_shape_model(mine, scale=1.2)
     for swapped in (["--shape-model", shipped_path("shape_model"), "--parts-model", shipped_path("parts_model")],
-                    ["--shape-model", mine], ["--upsample", "1", "--own-box-weight", "10"]):
+                    ["--shape-model", mine], ["--upsample", "1", "--own-box-weight", "10"],
+                    ["--set", "inference.flip_evidence=false", "--iterations", 3]):
         r = cli(*common, *swapped, "--resume")
         assert r.exit_code == 0 and "1 of 1 frames already done" in r.stderr, r.output + r.stderr
         assert "refitting" not in r.stderr
@@ -221,6 +222,28 @@ def test_the_resume_fingerprint_holds_the_files_the_fit_reads_and_no_other(tmp_p
         r = cli(*common, "--resume")
         assert r.exit_code == 0 and "refitting 1 frame(s)" in r.stderr, r.output + r.stderr
         assert f"models.{next(iter(older))}" in r.stderr and "already done" not in r.stderr
+
+
+def test_a_coarse_run_s_resume_record_holds_no_option_of_the_fine_stage():
+    """The options only the fine variants read (the inference stage's, the weight of our own
+    boxes in its objective) are not in a coarse run's record, so that changing one refits no
+    frame; those the coarse fit reads are, on our own pre-detections as on other boxes."""
+    base = FitOptions(FAST)
+    for fine_only in ({"inference.flip_evidence": False}, {"inference.iterations": 3, "inference.occluded_score": 0.1},
+                      {"inference.device": "cpu"}, {"predetect.box_weight": 10}):
+        changed = base.with_settings(fine_only)
+        for own in (True, False):
+            assert options_read(changed, fine=False, own=own) == options_read(base, fine=False, own=own), fine_only
+        assert options_read(changed) != options_read(base), fine_only  # a fine variant reads it
+    # the coarse stage's own options, our own pre-detection's (its threshold, its boxes' verification), the seed and
+    # the confidences: still recorded
+    for read in ({"lifting.road_prior": 0}, {"lifting.camera_height": 1.5}, {"predetect.threshold": 0.5},
+                 {"predetect.min_car_probability": 0}, {"predetect.upsample": 1}):
+        assert options_read(base.with_settings(read), fine=False) != options_read(base, fine=False), read
+    for changed in (FitOptions(FAST, seed=1), FitOptions(FAST, calibrate_scores=False)):
+        assert options_read(changed, fine=False, own=False) != options_read(base, fine=False, own=False)
+    assert set(options_read(base, fine=False)) == {"lifting", "predetect", "seed", "calibrate_scores",
+                                                   *model_files_read(base, fine=False)}
 
 
 def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(tmp_path):

@@ -38,7 +38,10 @@ def run_config(
     (:func:`~wirescene.fitting.models.model_files_read`): their paths among the options and
     their content hashes under ``models`` (:func:`~wirescene.fitting.models.models_fingerprint`),
     so that a model retrained in place refits and a file the run does not read (the part and
-    shape models of coarse variants, say) changes nothing.
+    shape models of coarse variants, say) changes nothing. Of the options it holds those the
+    fit reads too (:func:`~wirescene.fitting.models.options_read`: not the fine stage's for
+    coarse variants, nor our own pre-detection's for other boxes); a record written before an
+    option was left out differs in it, and its frame is fitted again.
     """
     from wirescene.fitting.models import models_fingerprint, options_read
     from wirescene.fitting.variants import casts_rays

@@ -12,8 +12,8 @@ import dataclasses
 from wirescene.core.resources import Models, file_sha256, shipped_path
 from wirescene.fitting.pipeline import FitOptions
 
-__all__ = ["MODEL_FILES", "with_models", "model_files_read", "check_model_files", "reads_score_calibration",
-           "models_fingerprint", "options_read"]
+__all__ = ["MODEL_FILES", "FINE_OPTIONS", "with_models", "model_files_read", "check_model_files",
+           "reads_score_calibration", "models_fingerprint", "options_read"]
 
 #: The artefacts a fit reads from a file that :class:`FitOptions` names (the field of the
 #: same name; None: the shipped file): each an explicit option (``--parts-model``, ``--bank``,
@@ -21,6 +21,12 @@ __all__ = ["MODEL_FILES", "with_models", "model_files_read", "check_model_files"
 #: a models directory's file. The occluded-part score is a number in the options instead.
 MODEL_FILES: tuple[str, ...] = ("parts_model", "detector_bank", "viewpoint_classifier", "score_calibration",
                                 "shape_model")
+
+#: The options only the fine variants read, as ``--set`` names them (``STAGE`` for all of a
+#: stage's, ``STAGE.FIELD``): the inference stage's (Algorithm 1 and the part evidence it
+#: scores, ``inference.flip_evidence``; the coarse variants compute none) and the weight of
+#: our own pre-detection's boxes in its objective, which replaces ``inference.box_weight``.
+FINE_OPTIONS: tuple[str, ...] = ("inference", "predetect.box_weight")
 
 
 def with_models(options: FitOptions, models: Models) -> FitOptions:
@@ -188,8 +194,9 @@ def models_fingerprint(options: FitOptions, *, fine: bool = True, own: bool = Tr
 def options_read(options: FitOptions, *, fine: bool = True, own: bool = True, evidence: str = "parts") -> dict:
     """``dataclasses.asdict(options)`` without the fields of the model files a fit with them
     does not read (:func:`model_files_read`), nor, unless it fits our own pre-detections
-    (``own``), the options of that pre-detection (``predetect``): the options as a resume
-    record holds them, so that naming another such file or option changes nothing.
+    (``own``), the options of that pre-detection (``predetect``), nor, unless it fits a fine
+    variant (``fine``), the options only those read (:data:`FINE_OPTIONS`): the options as a
+    resume record holds them, so that naming another such file or option changes nothing.
 
     Examples
     --------
@@ -197,7 +204,14 @@ def options_read(options: FitOptions, *, fine: bool = True, own: bool = True, ev
     ['detector_bank', 'score_calibration', 'viewpoint_classifier']
     >>> "predetect" in options_read(FitOptions(), own=False), "predetect" in options_read(FitOptions())
     (False, True)
+    >>> coarse = options_read(FitOptions(), fine=False)  # coarse variants on our own pre-detection
+    >>> "inference" in coarse, sorted(coarse["predetect"])
+    (False, ['min_car_probability', 'smallest_car', 'threshold', 'upsample'])
     """
     read = model_files_read(options, fine=fine, own=own, evidence=evidence)
-    return {k: v for k, v in dataclasses.asdict(options).items()
-            if (k not in MODEL_FILES or k in read) and (own or k != "predetect")}
+    unread = {name for name in MODEL_FILES if name not in read}
+    unread |= set() if own else {"predetect"}
+    unread |= set() if fine else set(FINE_OPTIONS)
+    # a stage's fields are one level down (predetect.box_weight); the others sit at the top (seed)
+    return {k: {f: x for f, x in v.items() if f"{k}.{f}" not in unread} if isinstance(v, dict) else v
+            for k, v in dataclasses.asdict(options).items() if k not in unread}
