@@ -12,20 +12,29 @@ cars it scores below ``tau`` are dropped, and the paper-protocol figures (true-p
 initialisations, cars within 1 m) and the false cars are reported for each ``tau``, with
 the ROC AUC of each feature alone.
 
+With ``--calibration FILE`` (e.g. the shipped ``score_calibration.json``), also the share of
+each variant's fitted cars on which that file's car model decides as the run's own held-out
+verification does (p(car) >= 0.5 both, or below it both; each fold's cars by a car model
+fitted on the other folds' records of all the run's variants, as ``bench_real_folds.py``
+verifies them): how near a calibration fitted on other runs is to the held-out figures.
+
     python benchmarks/bench_car_filter.py NAME=RUN [NAME=RUN ...] [--variant full] [--tau 0.3 0.5 0.7]
+        [--calibration FILE ...]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
+from _common import VERIFICATION_FILE, read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from bench_operating_point import false_cars, figures, on_car
-from wirescene.fitting.confidence import FEATURES, MODEL_FEATURES
+from wirescene.fitting.confidence import FEATURES, MODEL_FEATURES, calibrated_confidence, load_score_calibration
+from wirescene.fitting.variants import get_variant
 from wirescene.io.folds import FOLD_GROUPS, fold_of
 from wirescene.training.scores import cross_validated_confidences, record_features
 
@@ -46,15 +55,39 @@ def cross_group_probabilities(variant: str, results) -> list[np.ndarray]:
     return [p[r.frame_id] for r in results]
 
 
+def agreement(records: dict, calibration: dict, *, min_probability: float = 0.5) -> dict:
+    """``{variant: (agreeing, fitted)}``: the fitted cars on which the car model of
+    ``calibration`` and the run's held-out car models (each fold's fitted on the other folds'
+    records of every variant) fall on the same side of ``min_probability``."""
+    folds = {r.frame_id: fold_of(r.frame_id) for rs in records.values() for r in rs}
+    out = {}
+    for variant, results in records.items():
+        held = cross_validated_confidences(records, folds, variant, target="car")
+        fine = get_variant(variant).fine
+        same = [(held[r.frame_id] >= min_probability)
+                == (calibrated_confidence(record_features(r), fine=fine, calibration=calibration, target="car")
+                    >= min_probability) for r in results if len(r.det_boxes)]
+        out[variant] = (int(sum(s.sum() for s in same)), sum(len(s) for s in same))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", help="NAME=RUN_DIR (bench_real_folds.py --out, --detections bank)")
     ap.add_argument("--variant", action="append", default=None, help="variants to report (default: all in the run)")
     ap.add_argument("--tau", type=float, nargs="+", default=[0.3, 0.5, 0.7])
+    ap.add_argument("--calibration", type=Path, nargs="+", default=[],
+                    help="score calibrations whose car model to compare with the run's held-out verification")
     args = ap.parse_args()
     for item in args.runs:
         name, _, run = item.partition("=")
         records, _ = read_run(Path(run), verified=False)
+        verification = Path(run) / VERIFICATION_FILE
+        verified_at = json.loads(verification.read_text())["min_car_probability"] if verification.is_file() else 0.5
+        for path in args.calibration:
+            agree = agreement(records, load_score_calibration(path), min_probability=verified_at)
+            print(f"{name}: {path} decides as the held-out car models on " + ", ".join(
+                f"{v} {a}/{n} ({100 * a / max(n, 1):.1f}%)" for v, (a, n) in agree.items()))
         for variant, results in records.items():
             if args.variant and variant not in args.variant:
                 continue
