@@ -324,6 +324,27 @@ def test_fit_frame_checks_its_arguments(frame):
     assert list(one.estimates) == ["coarse"]  # a variant's name alone, not its letters
 
 
+def test_arguments_that_reached_a_library_are_named_before_it(tmp_path):
+    """Each was an untyped error from deep inside (str.partition, matplotlib, pathlib) or, for
+    the labels, passed unchecked: now the argument's ArgumentError, or the file's InputError."""
+    image = np.full((375, 1242, 3), 128, np.uint8)
+    with pytest.raises(wirescene.ArgumentError, match=r"^settings: 1: settings are STAGE\.FIELD"):
+        wirescene.fit(image, P2, [[300, 180, 520, 300]], variant="coarse", particles=10, settings={1: 2})
+    with pytest.raises(wirescene.ArgumentError, match=r"^settings: predetect\.min_car_probability must be at most 1"):
+        wirescene.fit(image, P2, variant="coarse", particles=10, settings={"predetect.min_car_probability": 2})
+    with pytest.raises(wirescene.ArgumentError, match="^title: expected a string, got int"):
+        wirescene.draw(image, P2, title=5)
+    gt = tmp_path / "gt.txt"  # a label file of another image: the same check as a frame's labels
+    gt.write_text("Car 0.00 0 1.95 3000 185.52 3100 294.49 1.43 1.70 3.95 -2.39 1.66 11.80 1.76\n")
+    with pytest.raises(wirescene.InputError, match=r"gt\.txt: line 1: 2D box .* entirely outside the 1242x375 image"):
+        wirescene.draw(image, P2, gt=gt)
+    a_file = tmp_path / "f"
+    a_file.write_text("x")
+    for predictions, says in ((a_file, "is a file, expected a directory"), (a_file / "pred", "is a file, not a directory")):
+        with pytest.raises(wirescene.ArgumentError, match=f"^predictions: .*{says}$"):
+            wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=[FRAME], particles=10, predictions=predictions)
+
+
 def test_evaluate_takes_one_frame_id_and_refuses_none_and_what_is_no_path(tmp_path):
     from wirescene.core.resources import DATA_DIR
 

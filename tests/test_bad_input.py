@@ -508,6 +508,35 @@ CASES = {
     "synth of 10^20 scenes": (lambda t: ["synth", t / "s", "--scenes", "99999999999999999999"], "--scenes"),
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],
                                          "already holds scenes"),
+    # a record that is JSON but no object: was an AttributeError's traceback
+    "train scores of a frame record not a JSON object": (
+        lambda t: ["train", "scores", _file(t, f"run/.frames/{FRAME}.json", "[]").parents[1], "--out", t / "s.json"],
+        rf"{FRAME}\.json: unreadable frame record \(a JSON list, not an object\)$"),
+    # a PR curve named .txt was a PNG under that name, as gt's and cad show's --out refuse
+    "detect --pr-curve of no picture format": (
+        lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--pr-curve", t / "pr.txt"],
+        r"^wirescene: error: --pr-curve: .*pr\.txt: \.txt is not a picture format \(\.png, "),
+    # fit's --gt was read without the image's size, which eval's labels are checked against
+    "fit --gt of a box outside the image": (
+        lambda t: [*_fit_case(t), "--gt", _file(t, "gt.txt", CAR.replace("354.43 185.52 549.52", "3000 185.52 3100"))],
+        r"gt\.txt: line 1: 2D box \(x1 y1 x2 y2 = 3000 185\.52 3100 294\.49\) lies entirely outside the 1242x375 image"),
+    # a probability above 1 dropped every car of our own pre-detection
+    "fit --min-car-probability 2": (lambda t: _fit_case(t, extra=("--min-car-probability", "2")),
+                                    r"--min-car-probability: 2 is above the maximum 1$"),
+    # was int()'s "invalid literal for int() with base 10"
+    "fit --set of an integer given 2.5": (lambda t: _fit_case(t, extra=("--set", "inference.iterations=2.5")),
+                                          r"--set: inference\.iterations: expected an integer, got '2\.5'$"),
+    "fit --set of a number given a word": (lambda t: _fit_case(t, extra=("--set", "lifting.camera_height=high")),
+                                           r"--set: lifting\.camera_height: expected a number, got 'high'$"),
+    # a directory where a file is expected (and the other way round) was "not found"
+    "fit --calib a directory": (lambda t: (lambda a: [*a[:3], _file(t, "cdir/x").parent, *a[4:]])(_fit_case(t)),
+                                r"cdir: calibration path is not a file$"),
+    "fit --detections a directory": (lambda t: (lambda a: [*a[:5], _file(t, "ddir/x").parent, *a[6:]])(_fit_case(t)),
+                                     r"ddir: detections path is not a file$"),
+    "fit --models a file": (lambda t: _fit_case(t, extra=("--models", _file(t, "models.npz"))),
+                            r"models\.npz: models path is not a directory$"),
+    "detect of a KITTI root that is a file": (lambda t: ["detect", _file(t, "kitti.zip")],
+                                               r"kitti\.zip: KITTI root is not a directory$"),
     "synth where OUT_DIR/training is a file": (
         lambda t: ["synth", _file(t, "s/training", "mine").parent, "--scenes", "1", "--overwrite"],
         r"^wirescene: error: OUT_DIR: \S+/s/training is a file, not a folder of scenes"),
@@ -569,6 +598,12 @@ def _predict_without_p2_case(tmp):
             _dets_dir(tmp, {f"{FRAME}.txt": CAR + "\n"}), "--workers", "1", "--out", tmp / "submission"]
 
 
+def _later_frame_bad_dets(tmp):
+    """A detections directory whose first frame's (000002) file is fine and the test frame's is not."""
+    return _dets_dir(tmp, {"000002.json": json.dumps([{"box": [600, 170, 680, 230]}]),
+                           f"{FRAME}.json": json.dumps([{"box": [5000, 170, 5100, 230]}])})
+
+
 # Runs that fail after their fits began: the report's pictures already drawn, the settings' record of
 # `predict`, appear only with the whole (or with a finished frame), so nothing is left behind.
 FAILING_RUNS = {
@@ -577,6 +612,16 @@ FAILING_RUNS = {
         lambda t: ["eval", _truncated_copy(t, [FRAME], FRAME), "--variant", "coarse", "--frames", FRAME, "--workers",
                    "1", "--draws", "0", "--report", t / "report"], rf"image_2/{FRAME}\.png: corrupt or truncated"),
     "predict, calibration without P2": (_predict_without_p2_case, "calibration has no P2"),
+    # the detection files are read before the first fit, as the calibrations and labels: the first frame's
+    # outputs (label files, its record, the settings' record) were left behind
+    "eval --predictions, a later frame's detection file malformed": (
+        lambda t: ["eval", kitti_copy(t / "kitti", ["000002", FRAME]), "--variant", "coarse", "--workers", "1",
+                   "--draws", "0", "--detections", _later_frame_bad_dets(t), "--predictions", t / "pred",
+                   "--json", t / "m.json"], rf"dets/{FRAME}\.json: box 0 lies entirely outside the 1242x375 image"),
+    "predict, a later frame's detection file malformed": (
+        lambda t: ["predict", kitti_copy(t / "kitti", ["000002", FRAME]), "--split", "training", "--variant", "coarse",
+                   "--workers", "1", "--detections", _later_frame_bad_dets(t), "--out", t / "submission"],
+        rf"dets/{FRAME}\.json: box 0 lies entirely outside the 1242x375 image"),
 }
 
 

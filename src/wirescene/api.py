@@ -22,7 +22,14 @@ from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate
-from wirescene.core.validate import MAX_WORKERS, boxes_problem, finite_real, off_centre_problem, projection_problem
+from wirescene.core.validate import (
+    MAX_WORKERS,
+    boxes_problem,
+    finite_real,
+    off_centre_problem,
+    output_dir_problem,
+    projection_problem,
+)
 from wirescene.fitting.pipeline import FitOptions, fit_frame
 from wirescene.fitting.variants import VARIANTS, casts_rays
 from wirescene.infer.inference import InferenceOptions
@@ -584,10 +591,12 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
         raise ArgumentError("view", f"expected one of {', '.join(DRAW_VIEWS)}, got {view!r}")
     if scene is not None and not isinstance(scene, SceneEstimate):
         raise ArgumentError("scene", f"expected what wirescene.fit returns (SceneEstimate), got {type(scene).__name__}")
+    if title is not None and not isinstance(title, str):
+        raise ArgumentError("title", f"expected a string, got {type(title).__name__}")
     rgb = as_image(image)
     size = (rgb.shape[1], rgb.shape[0])
     camera = as_camera(calib, size)
-    cars = _gt_cars(gt)
+    cars = _gt_cars(gt, size)
     dets = None if boxes is None else as_detections(boxes, size)  # checked in either view
     if view == "bev":
         return birds_eye(scene, gt=cars, camera=camera, title=title)
@@ -626,8 +635,10 @@ def _dropped_boxes(dets: Detections, scene: SceneEstimate | None, image_size: tu
     return same.any(axis=1) & ~(same & has_car).any(axis=1)
 
 
-def _gt_cars(gt) -> list:
-    """The ``Car`` labels of a KITTI label file, or of a sequence of labels (None: none)."""
+def _gt_cars(gt, image_size: tuple[int, int]) -> list:
+    """The ``Car`` labels of a KITTI label file (every row's box checked against the
+    ``image_size`` ``(width, height)`` image, as a frame's labels are), or of a sequence of
+    labels (None: none)."""
     from wirescene.core.labels import FrameLabels, Label
 
     if gt is None:
@@ -635,7 +646,7 @@ def _gt_cars(gt) -> list:
     if isinstance(gt, (str, Path)):
         from wirescene.io.kitti import read_labels
 
-        return read_labels(gt).of_type("Car")  # InputError naming the file
+        return read_labels(gt, image_size=image_size).of_type("Car")  # InputError naming the file
     if isinstance(gt, FrameLabels):
         return gt.of_type("Car")
     labels = list(gt) if isinstance(gt, Iterable) else [gt]
@@ -740,6 +751,9 @@ def evaluate(
     several = frame_ids is None or len(frame_ids) > 1
     if resume and predictions is None:
         raise ArgumentError("resume", "needs predictions, the directory where finished frames are recorded")
+    problem = None if predictions is None else output_dir_problem(predictions)
+    if problem:  # before any fit, as the CLI's --predictions
+        raise ArgumentError("predictions", problem)
     options = _options(None, particles, seed, models, settings, parallel=several and _workers(workers) > 1,
                        casts_rays=casts_rays(names))
     return evaluate_dataset(dataset, names, frames=frame_ids,

@@ -15,6 +15,7 @@ from wirescene.cli.options import (
     FiniteFloat,
     check_output_dir,
     check_output_file,
+    check_picture_file,
     drive_map_option,
     field_type,
     models_option,
@@ -210,7 +211,8 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
                    "the boxes above 0.3, and --out writes the fit's viewpoints at any threshold).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Write FRAME.json detection files here (readable by --detections of `eval`).")
-@click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PR curve PNG.")
+@click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="PR curve picture, in the format its suffix names (.png, .pdf, .svg; PNG without a suffix).")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write AP and timing as JSON.")
 @click.option("--camera-height", type=field_type(stage_field(LiftingOptions, "camera_height")), default=KITTI_CAMERA_HEIGHT, show_default=True,
@@ -249,7 +251,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.predetect.enlarge import add_enlarged, boxes_back, frame_passes
 
     check_output_dir(out_dir, "--out")
-    check_output_file(pr_curve, "--pr-curve")
+    check_picture_file(pr_curve, "--pr-curve")
     check_output_file(json_out, "--json")
     if classifier_path is not None and out_dir is None:  # refused, not ignored
         raise click.UsageError("--viewpoint-classifier gives the boxes --out writes their viewpoints: it needs --out")

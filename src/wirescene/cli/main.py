@@ -760,7 +760,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
             if exc.problem != NO_CARS:
                 raise
             dets = Detections.empty(str(detections))
-    gt_objs = read_labels(gt).of_type("Car") if gt is not None else []
+    gt_objs = read_labels(gt, image_size=(img.shape[1], img.shape[0])).of_type("Car") if gt is not None else []
     with warnings.catch_warnings():  # said above, in the command's one line, not again by the API
         warnings.simplefilter("ignore", CalibrationWarning)
         estimate = fit(img, camera, dets, variant=variant, options=options)

@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Mapping
 
 import click
+
+from wirescene.core.validate import creatable_problem, output_dir_problem
 
 #: Counts that must be at least 1 (particles, samples, workers, scenes).
 POSITIVE = click.IntRange(min=1)
@@ -52,34 +53,11 @@ NON_NEGATIVE_FLOAT = FiniteFloat(min=0.0)
 POSITIVE_FLOAT = FiniteFloat(min=0.0, strict=True)
 
 
-def _first_existing(path: Path) -> Path:
-    for candidate in (path, *path.parents):
-        if candidate.exists():
-            return candidate
-    return Path(".")
-
-
-def _writable_problem(directory: Path) -> str | None:
-    """Why nothing can be created in ``directory``, or None: permission bits first, then a
-    real try (a directory made and removed again), since ``os.access`` says yes to root and
-    knows nothing of pseudo file systems (``/proc``, ``/sys``)."""
-    if not os.access(directory, os.W_OK | os.X_OK):
-        return "is not writable"
-    try:
-        os.rmdir(tempfile.mkdtemp(prefix=".wirescene-check.", dir=directory))
-    except OSError as exc:
-        return f"is not writable ({exc.strerror or exc.__class__.__name__})"
-    return None
-
-
 def _check_creatable(path: Path, option: str) -> None:
     """The directories above ``path`` exist or can be created and written."""
-    base = _first_existing(path.parent)
-    if not base.is_dir():
-        raise click.BadParameter(f"{path}: {base} is a file, not a directory", param_hint=option)
-    problem = _writable_problem(base)
+    problem = creatable_problem(path)
     if problem:
-        raise click.BadParameter(f"{path}: {base} {problem}", param_hint=option)
+        raise click.BadParameter(problem, param_hint=option)
 
 
 def check_output_file(path: Path | None, option: str) -> None:
@@ -112,15 +90,9 @@ def check_output_dir(path: Path | None, option: str) -> None:
     """``path`` is (or can be created as) a writable directory."""
     if path is None:
         return
-    path = Path(path)
-    if path.exists():
-        if not path.is_dir():
-            raise click.BadParameter(f"{path} is a file, expected a directory", param_hint=option)
-        problem = _writable_problem(path)
-        if problem:
-            raise click.BadParameter(f"{path} {problem}", param_hint=option)
-        return
-    _check_creatable(path, option)
+    problem = output_dir_problem(path)
+    if problem:
+        raise click.BadParameter(problem, param_hint=option)
 
 
 def parse_frames(value: str | None, known: list[str], option: str = "--frames") -> list[str] | None:

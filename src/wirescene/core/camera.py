@@ -164,7 +164,8 @@ class KittiCalib:
 def _calibration_text(path: Path) -> str:
     """The text of a calibration file; an :class:`InputError` naming it if it cannot be read."""
     if not path.is_file():
-        raise InputError("calibration file not found", path=path)
+        raise InputError("calibration file not found" if not path.exists() else "calibration path is not a file",
+                         path=path)
     try:
         return path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:

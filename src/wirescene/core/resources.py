@@ -153,7 +153,8 @@ def resolve_models(models_dir: str | Path | None) -> Models:
         return SHIPPED
     root = Path(models_dir)
     if not root.is_dir():
-        raise InputError("models directory not found", path=root)
+        raise InputError("models directory not found" if not root.exists() else "models path is not a directory",
+                         path=root)
     present = tuple(n for n, f in ARTEFACTS.items() if (root / f).is_file())
     manifest = root / MANIFEST_FILE
     if not manifest.is_file():

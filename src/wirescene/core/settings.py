@@ -135,10 +135,12 @@ def parse_value(text: str, default):
         if key not in ("0", "1", "true", "false"):
             raise ValueError(f"expected 0, 1, true or false, got {text!r}")
         return key in ("1", "true")
-    if isinstance(default, int):
-        return int(text)
-    if isinstance(default, float):
-        return float(text)
+    if isinstance(default, (int, float)):
+        kind, what = (int, "an integer") if isinstance(default, int) else (float, "a number")
+        try:
+            return kind(text)
+        except ValueError:  # not int()'s "invalid literal for int() with base 10"
+            raise ValueError(f"expected {what}, got {text!r}") from None
     try:
         return json.loads(text)
     except ValueError:

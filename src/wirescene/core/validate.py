@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
@@ -163,3 +166,66 @@ def outside_image(boxes, image_size: tuple[int, int]) -> np.ndarray:
     b = np.asarray(boxes, dtype=float).reshape(-1, 4)
     w, h = image_size
     return (b[:, 2] <= 0) | (b[:, 0] >= w) | (b[:, 3] <= 0) | (b[:, 1] >= h)
+
+
+def _first_existing(path: Path) -> Path:
+    for candidate in (path, *path.parents):
+        if candidate.exists():
+            return candidate
+    return Path(".")
+
+
+def _writable_problem(directory: Path) -> str | None:
+    """Why nothing can be created in ``directory``, or None: permission bits first, then a
+    real try (a directory made and removed again), since ``os.access`` says yes to root and
+    knows nothing of pseudo file systems (``/proc``, ``/sys``)."""
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return "is not writable"
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".wirescene-check.", dir=directory))
+    except OSError as exc:
+        return f"is not writable ({exc.strerror or exc.__class__.__name__})"
+    return None
+
+
+def creatable_problem(path) -> str | None:
+    """Why the directories above ``path`` cannot be created and written (the first of them
+    that exists is a file, or not writable), as a phrase naming ``path``, or None.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.NamedTemporaryFile() as f:
+    ...     creatable_problem(Path(f.name) / "out" / "a.json").endswith(f"{f.name} is a file, not a directory")
+    True
+    """
+    path = Path(path)
+    base = _first_existing(path.parent)
+    if not base.is_dir():
+        return f"{path}: {base} is a file, not a directory"
+    problem = _writable_problem(base)
+    return f"{path}: {base} {problem}" if problem else None
+
+
+def output_dir_problem(path) -> str | None:
+    """Why ``path`` is not (and cannot be created as) a writable directory, as a phrase
+    naming it, or None: what every output folder of a command (``--out``, ``--predictions``)
+    and of the API (``predictions``) is checked for before any work.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     output_dir_problem(Path(d) / "new" / "out") is None  # made when written
+    True
+    >>> with tempfile.NamedTemporaryFile() as f:
+    ...     output_dir_problem(f.name) == f"{f.name} is a file, expected a directory"
+    True
+    """
+    path = Path(path)
+    if path.exists():
+        if not path.is_dir():
+            return f"{path} is a file, expected a directory"
+        problem = _writable_problem(path)
+        return f"{path} {problem}" if problem else None
+    return creatable_problem(path)

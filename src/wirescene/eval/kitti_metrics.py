@@ -951,9 +951,11 @@ def read_label_dirs(
     """
     gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
     if not gt_dir.is_dir():
-        raise InputError("ground-truth label directory not found", path=gt_dir)
+        raise InputError("ground-truth label directory not found" if not gt_dir.exists()
+                         else "ground-truth label path is not a directory", path=gt_dir)
     if not pred_dir.is_dir():
-        raise InputError("prediction directory not found", path=pred_dir)
+        raise InputError("prediction directory not found" if not pred_dir.exists()
+                         else "prediction path is not a directory", path=pred_dir)
     ids = sorted(p.stem for p in gt_dir.glob("*.txt")) if frames is None else [str(f) for f in frames]
     if not ids:
         raise InputError("no ground-truth label files (*.txt)", path=gt_dir)

@@ -140,6 +140,7 @@ def predict_dataset(
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
     say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), notify or notify_stderr)
+    source.check_files(dataset, todo)
     job = _PredictJob(dataset, variant, source, options)
     with ExitStack() as stack:
         for k, (frame_id, text) in enumerate(progress(fit_frames(job, todo, workers=workers,

@@ -341,6 +341,7 @@ def evaluate_dataset(
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
     say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
+    source.check_files(dataset, todo)
     with ExitStack() as stack:
         fitted = fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
         by_frame = _collect_frames(fitted, reused, records, progress, on_estimate)

@@ -79,6 +79,16 @@ class DetectionSource:
                              "--allow-missing-detections treats such frames as having none", path=self.folder)
         return missing
 
+    def check_files(self, dataset: KittiDataset, frame_ids: list[str]) -> None:
+        """Read every frame's file of the detections directory (nothing for ``gt`` / ``bank``):
+        an :class:`InputError` naming the first malformed one before a run fits any frame, as
+        :meth:`~wirescene.io.kitti.KittiDataset.check_frames` for the calibrations and labels (a
+        bad file found at frame N would leave the N - 1 frames fitted before it)."""
+        if self.folder is None:
+            return
+        for frame_id in frame_ids:
+            self.for_frame(dataset, frame_id, None)
+
     @property
     def own(self) -> bool:
         """Whether these are our own pre-detections (the fit verifies them)."""

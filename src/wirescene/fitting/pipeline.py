@@ -63,8 +63,9 @@ class PredetectOptions:
                               help="Score threshold of our own pre-detection for the fit (the bank's calibrated "
                                    "probability of a car).")
     # The score calibration's car model on the detection score, the fit's objective and the box height.
-    min_car_probability: float = option(0.5, help="Drop the fitted cars of our own pre-detection whose probability "
-                                                  "of standing on a car is below this (0: keep all).")
+    min_car_probability: float = option(0.5, maximum=1.0,
+                                        help="Drop the fitted cars of our own pre-detection whose probability "
+                                             "of standing on a car is below this (0: keep all).")
     # The bank's boxes miss the car's outline by more than labelled ones: the fine stage leans on them less.
     box_weight: float = option(30.0, cli="own-box-weight",
                                help="Weight of our own pre-detection's boxes in the fine objective (boxes from files "
@@ -134,7 +135,7 @@ class FitOptions:
 
         by_stage: dict[str, dict[str, object]] = {}
         for name, value in (settings or {}).items():
-            stage, dot, key = name.partition(".")
+            stage, dot, key = name.partition(".") if isinstance(name, str) else ("", "", "")
             if not dot or stage not in STAGES:
                 raise ValueError(f"{name!r}: settings are STAGE.FIELD, STAGE one of {', '.join(STAGES)}")
             by_stage.setdefault(stage, {})[key] = value

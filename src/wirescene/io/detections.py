@@ -221,7 +221,8 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError("detections file not found", path=path)
+        raise InputError("detections file not found" if not path.exists() else "detections path is not a file",
+                         path=path)
     suffix = path.suffix.lower()
     if suffix == ".txt":
         labels = read_labels(path, image_size=image_size)

@@ -300,7 +300,8 @@ class KittiDataset:
     def __init__(self, root: str | Path, *, split: str = "training"):
         root = Path(root)
         if not root.is_dir():
-            raise InputError("KITTI root directory not found", path=root)
+            raise InputError("KITTI root directory not found" if not root.exists() else "KITTI root is not a directory",
+                             path=root)
         if (root / split / "image_2").is_dir() or (root / split / "calib").is_dir():
             split_dir = root / split
         elif (root / "image_2").is_dir() or (root / "calib").is_dir():

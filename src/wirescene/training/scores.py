@@ -93,11 +93,13 @@ def read_run_sources(predictions_dir, frames: Iterable[str] | None = None) -> di
     for path in paths:
         try:
             record = json.loads(path.read_text())
+            if not isinstance(record, dict):
+                raise TypeError(f"a JSON {type(record).__name__}, not an object")
             gt = record.get("config", {}).get("detections", {}).get("spec") == "gt"
             for variant, entry in record["variants"].items():
                 out["labels" if gt else "detections"].setdefault(variant, []).append(
                     FrameResult.from_dict(entry["result"]))
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:  # AttributeError: a part not an object
             raise InputError(f"unreadable frame record ({' '.join(str(exc).split())[:100]})", path=path) from None
     return out
 
