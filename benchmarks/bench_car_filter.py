@@ -15,7 +15,7 @@ the ROC AUC of each feature alone.
 With ``--calibration FILE`` (e.g. the shipped ``score_calibration.json``), also the share of
 each variant's fitted cars on which that file's car model decides as the run's own held-out
 verification does (p(car) >= 0.5 both, or below it both; each fold's cars by a car model
-fitted on the other folds' records of all the run's variants, as ``bench_real_folds.py``
+fitted on the other folds' records of the run's variants of its stage, as ``bench_real_folds.py``
 verifies them): how near a calibration fitted on other runs is to the held-out figures.
 
     python benchmarks/bench_car_filter.py NAME=RUN [NAME=RUN ...] [--variant full] [--tau 0.3 0.5 0.7]
@@ -58,7 +58,7 @@ def cross_group_probabilities(variant: str, results) -> list[np.ndarray]:
 def agreement(records: dict, calibration: dict, *, min_probability: float = 0.5) -> dict:
     """``{variant: (agreeing, fitted)}``: the fitted cars on which the car model of
     ``calibration`` and the run's held-out car models (each fold's fitted on the other folds'
-    records of every variant) fall on the same side of ``min_probability``."""
+    records of the run's variants of its stage, coarse or fine) fall on the same side of ``min_probability``."""
     folds = {r.frame_id: fold_of(r.frame_id) for rs in records.values() for r in rs}
     out = {}
     for variant, results in records.items():

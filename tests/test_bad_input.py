@@ -536,7 +536,7 @@ CASES = {
     "fit --models a file": (lambda t: _fit_case(t, extra=("--models", _file(t, "models.npz"))),
                             r"models\.npz: models path is not a directory$"),
     "detect of a KITTI root that is a file": (lambda t: ["detect", _file(t, "kitti.zip")],
-                                               r"kitti\.zip: KITTI root is not a directory$"),
+                                               r"kitti\.zip: KITTI root path is not a directory$"),
     "synth where OUT_DIR/training is a file": (
         lambda t: ["synth", _file(t, "s/training", "mine").parent, "--scenes", "1", "--overwrite"],
         r"^wirescene: error: OUT_DIR: \S+/s/training is a file, not a folder of scenes"),

@@ -16,6 +16,10 @@ import numpy as np
 
 from wirescene.core.atomic import write_bytes, write_text
 from wirescene.core.errors import InputError
+from wirescene.core.validate import path_problem
+
+#: What a missing trained file's error says (the fix, not only the fact).
+MISSING_ARTEFACT = "artefact file is missing (run the training command that makes it)"
 
 
 def format_tag(kind: str, version: int) -> str:
@@ -69,8 +73,9 @@ def load_npz(path: str | Path, *, kind: str, version: int, older=()) -> dict[str
         Naming the file: missing, corrupt, or of another kind or version.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("artefact file is missing (run the training command that makes it)", path=path)
+    problem = path_problem(path, "artefact", missing=MISSING_ARTEFACT)
+    if problem:
+        raise InputError(problem, path=path)
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
@@ -100,8 +105,9 @@ def save_json(path: str | Path, record: dict, *, kind: str, version: int, indent
 def load_json(path: str | Path, *, kind: str, version: int) -> dict:
     """A JSON record written by :func:`save_json` (format checked), without the tag."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError("artefact file is missing (run the training command that makes it)", path=path)
+    problem = path_problem(path, "artefact", missing=MISSING_ARTEFACT)
+    if problem:
+        raise InputError(problem, path=path)
     try:
         record = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.errors import ArgumentError, InputError, ShapeError, check_shape
-from wirescene.core.validate import projection_problem
+from wirescene.core.validate import path_problem, projection_problem
 
 KITTI_CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam")
 #: Points closer than this (metres, along the optical axis) are treated as behind the
@@ -163,9 +163,9 @@ class KittiCalib:
 
 def _calibration_text(path: Path) -> str:
     """The text of a calibration file; an :class:`InputError` naming it if it cannot be read."""
-    if not path.is_file():
-        raise InputError("calibration file not found" if not path.exists() else "calibration path is not a file",
-                         path=path)
+    problem = path_problem(path, "calibration")
+    if problem:
+        raise InputError(problem, path=path)
     try:
         return path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:

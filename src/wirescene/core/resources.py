@@ -21,6 +21,7 @@ from pathlib import Path
 
 from wirescene.core.artefacts import load_json
 from wirescene.core.errors import InputError
+from wirescene.core.validate import path_problem
 
 #: ``src/wirescene/data``: trained models (npz / JSON) and the bundled sample frames.
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
@@ -152,9 +153,9 @@ def resolve_models(models_dir: str | Path | None) -> Models:
     if models_dir is None:
         return SHIPPED
     root = Path(models_dir)
-    if not root.is_dir():
-        raise InputError("models directory not found" if not root.exists() else "models path is not a directory",
-                         path=root)
+    problem = path_problem(root, "models", directory=True)
+    if problem:
+        raise InputError(problem, path=root)
     present = tuple(n for n, f in ARTEFACTS.items() if (root / f).is_file())
     manifest = root / MANIFEST_FILE
     if not manifest.is_file():

@@ -168,6 +168,28 @@ def outside_image(boxes, image_size: tuple[int, int]) -> np.ndarray:
     return (b[:, 2] <= 0) | (b[:, 0] >= w) | (b[:, 3] <= 0) | (b[:, 1] >= h)
 
 
+def path_problem(path, what: str, *, directory: bool = False, missing: str | None = None) -> str | None:
+    """Why ``path`` is not the existing file (``directory``: directory) of ``what`` a reader
+    needs, or None: ``missing`` (default "WHAT file not found" / "WHAT directory not found")
+    where nothing is there, "WHAT path is not a file" (a directory) where something else is.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path_problem(d, "calibration"), path_problem(Path(d) / "x", "calibration"), path_problem(d, "models",
+    ...                                                                                            directory=True)
+    ('calibration path is not a file', 'calibration file not found', None)
+    """
+    path = Path(path)
+    kind = "directory" if directory else "file"
+    if path.is_dir() if directory else path.is_file():
+        return None
+    if not path.exists():
+        return missing or f"{what} {kind} not found"
+    return f"{what} path is not a {kind}"
+
+
 def _first_existing(path: Path) -> Path:
     for candidate in (path, *path.parents):
         if candidate.exists():

@@ -82,6 +82,7 @@ import numpy as np
 
 from wirescene.core.errors import InputError, check_shape
 from wirescene.core.labels import ALPHA_NOT_ESTIMATED, FrameLabels, Label
+from wirescene.core.validate import path_problem
 from wirescene.io.kitti import read_labels
 
 DIFFICULTIES = ("easy", "moderate", "hard")
@@ -950,12 +951,10 @@ def read_label_dirs(
     (['000001', '000002'], [1, 1], [1, 0])
     """
     gt_dir, pred_dir = Path(gt_dir), Path(pred_dir)
-    if not gt_dir.is_dir():
-        raise InputError("ground-truth label directory not found" if not gt_dir.exists()
-                         else "ground-truth label path is not a directory", path=gt_dir)
-    if not pred_dir.is_dir():
-        raise InputError("prediction directory not found" if not pred_dir.exists()
-                         else "prediction path is not a directory", path=pred_dir)
+    for path, what in ((gt_dir, "ground-truth label"), (pred_dir, "prediction")):
+        problem = path_problem(path, what, directory=True)
+        if problem:
+            raise InputError(problem, path=path)
     ids = sorted(p.stem for p in gt_dir.glob("*.txt")) if frames is None else [str(f) for f in frames]
     if not ids:
         raise InputError("no ground-truth label files (*.txt)", path=gt_dir)

@@ -110,8 +110,9 @@ def predict_dataset(
     ------
     InputError
         Before any fit: no frame to predict (no ``.png`` image in ``image_2/``), a frame
-        without its detection file, calibration or image, or ``out_dir`` holding another
-        run's label files (or, resumed, label files of frames outside ``frames``).
+        without its detection file, calibration or image, a malformed detection file, or
+        ``out_dir`` holding another run's label files (or, resumed, label files of frames
+        outside ``frames``).
     """
     source = DetectionSource("bank") if source is None else source
     options = FitOptions() if options is None else options

@@ -17,7 +17,7 @@ import numpy as np
 
 from wirescene.core.errors import InputError
 from wirescene.core.types import MAX_ALPHA, Detections
-from wirescene.core.validate import boxes_problem
+from wirescene.core.validate import boxes_problem, path_problem
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
 from wirescene.io.kitti import ALPHA_NOT_ESTIMATED, CAR_TYPES, FrameLabels, read_labels
 
@@ -220,9 +220,9 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     1
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("detections file not found" if not path.exists() else "detections path is not a file",
-                         path=path)
+    problem = path_problem(path, "detections")
+    if problem:
+        raise InputError(problem, path=path)
     suffix = path.suffix.lower()
     if suffix == ".txt":
         labels = read_labels(path, image_size=image_size)

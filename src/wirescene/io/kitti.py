@@ -36,7 +36,7 @@ from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label
     format_labels,
     select_cars,
 )
-from wirescene.core.validate import MAX_PIXEL, off_centre_problem, outside_image
+from wirescene.core.validate import MAX_PIXEL, off_centre_problem, outside_image, path_problem
 
 # --------------------------------------------------------------------------- labels
 
@@ -138,8 +138,9 @@ def read_labels(path: str | Path, *, image_size: tuple[int, int] | None = None) 
     True
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("label file not found" if not path.exists() else "label path is not a file", path=path)
+    problem = path_problem(path, "label")
+    if problem:
+        raise InputError(problem, path=path)
     try:
         text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (editors write one) is no part of a type
     except (OSError, UnicodeDecodeError) as exc:
@@ -185,8 +186,9 @@ def write_labels(
 
 
 def _open_image(path: Path) -> Image.Image:
-    if not path.is_file():
-        raise InputError("image file not found" if not path.exists() else "image path is not a file", path=path)
+    problem = path_problem(path, "image")
+    if problem:
+        raise InputError(problem, path=path)
     try:
         with warnings.catch_warnings():
             # Pillow only warns between 1x and 2x its pixel limit: refuse those too.
@@ -299,9 +301,9 @@ class KittiDataset:
 
     def __init__(self, root: str | Path, *, split: str = "training"):
         root = Path(root)
-        if not root.is_dir():
-            raise InputError("KITTI root directory not found" if not root.exists() else "KITTI root is not a directory",
-                             path=root)
+        problem = path_problem(root, "KITTI root", directory=True)
+        if problem:
+            raise InputError(problem, path=root)
         if (root / split / "image_2").is_dir() or (root / split / "calib").is_dir():
             split_dir = root / split
         elif (root / "image_2").is_dir() or (root / "calib").is_dir():

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Iterable
 
 from wirescene.core.errors import InputError
+from wirescene.core.validate import path_problem
 
 __all__ = ["read_split_file"]
 
@@ -54,8 +55,9 @@ def read_split_file(path: str | Path, *, known: Iterable[str] | None = None, wha
     ['000010', '001545']
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("split file not found", path=path)
+    problem = path_problem(path, "split")
+    if problem:
+        raise InputError(problem, path=path)
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
