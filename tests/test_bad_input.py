@@ -175,6 +175,11 @@ def _dets_dir(tmp, files):
     return d
 
 
+PLY_FACE_PAST_VERTICES = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                          "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n4 0 0\n0 1 1\n"
+                          "3 0 1 7\n")
+
+
 CASES = {
     # calibration
     "calib NaN P2": (lambda t: _fit_case(t, calib=_with_p2(" ".join(["nan"] * 12))), "not a number|non-finite"),
@@ -540,13 +545,53 @@ CASES = {
     "synth where OUT_DIR/training is a file": (
         lambda t: ["synth", _file(t, "s/training", "mine").parent, "--scenes", "1", "--overwrite"],
         r"^wirescene: error: OUT_DIR: \S+/s/training is a file, not a folder of scenes"),
+    # an empty path (an unset variable's --out "$OUT") was the current directory: written into, exit 0 (the test
+    # runs these in tmp_path, so that what they write there shows)
+    "fit --out empty": (lambda t: [*_fit_case(t), "--out", ""],
+                        r"^wirescene: error: --out: empty path \(give a directory, e\.g\. '\.'\)$"),
+    "predict --out empty": (lambda t: ["predict", KITTI_ROOT, "--split", "training", "--variant", "coarse",
+                                       "--detections", "gt", "--frames", FRAME, "--workers", "1", "--out", ""],
+                            r"^wirescene: error: --out: empty path \(give a directory"),
+    "detect --out empty": (lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--out", ""],
+                           r"^wirescene: error: --out: empty path \(give a directory"),
+    "eval --predictions empty": (lambda t: _eval_case(t, "--draws", "0", "--predictions", ""),
+                                 r"^wirescene: error: --predictions: empty path \(give a directory"),
+    "eval --report empty": (lambda t: _eval_case(t, "--draws", "0", "--report", ""),
+                            r"^wirescene: error: --report: empty path \(give a directory"),
+    "eval --json empty": (lambda t: _eval_case(t, "--draws", "0", "--json", " "),
+                          r"^wirescene: error: --json: empty path \(give a file name\)$"),
+    "demo --out empty": (lambda t: ["demo", "--out", "", "--variant", "coarse", "--particles", "5"],
+                         r"^wirescene: error: --out: empty path \(give a directory"),
+    "cad show --out empty": (lambda t: ["cad", "show", "acura-nsx-sz", "--cad-dir", Path(__file__).parent / "data" / "cad",
+                                        "--out", ""], r"^wirescene: error: --out: empty path \(give a file name\)$"),
+    "train all --set parts.synth_cache empty": (
+        lambda t: ["train", "all", KITTI_ROOT, "--out", t / "m", "--set", "parts.synth_cache=", "--frames", "424242"],
+        r"^wirescene: error: --set parts\.synth_cache: empty path \(give a directory"),
+    "eval of an empty KITTI_ROOT": (lambda t: ["eval", "", "--variant", "coarse"],
+                                    r"^wirescene: error: KITTI_ROOT: empty path \(give a directory"),
+    # a corrupt file of --models: its "models from DIR" line came before the error's
+    "info --models with a corrupt file": (lambda t: ["info", "--models", _file(t, "models/shape_model.npz").parent],
+                                          r"^wirescene: error: \S+/models/shape_model\.npz: corrupt"),
+    # numpy's words: "cannot read mesh (IndexError: index 2 is out of bounds for axis 0 with size 2)"
+    "cad list of an OBJ face past its vertices": (
+        lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\n").parent],
+        r"^wirescene: error: \S+/cad/car\.obj: OBJ line 3: vertex reference 3 out of range \(the file has 2 "
+        r"vertices\)$"),
+    "cad list of an OBJ face of words": (
+        lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n").parent],
+        r"car\.obj: OBJ line 4: non-integer vertex reference 'x'$"),
+    "cad list of a PLY face past its vertices": (  # loaded as it is by trimesh, refused later or not at all
+        lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.ply", PLY_FACE_PAST_VERTICES).parent],
+        r"car\.ply: a face refers to vertex 7, the file has 3 vertices \(0 to 2\)$"),
 }
 
 
 @pytest.mark.parametrize("case", [c for c, v in CASES.items() if v is not None])
-def test_bad_input_ends_in_one_line_and_exit_code_2(tmp_path, case):
+def test_bad_input_ends_in_one_line_and_exit_code_2(tmp_path, monkeypatch, case):
     make, pattern = CASES[case]
     args = [str(a) for a in make(tmp_path)]
+    if "" in [a.strip() for a in args]:  # an empty path is the current directory: what it writes there shows
+        monkeypatch.chdir(tmp_path)
     before = {p for p in tmp_path.rglob("*")}
     r = CliRunner().invoke(main, args)
     assert r.exit_code == 2, (case, r.output, r.exception)
@@ -557,6 +602,38 @@ def test_bad_input_ends_in_one_line_and_exit_code_2(tmp_path, case):
     assert re.search(pattern, lines[0]), lines[0]
     after = {p for p in tmp_path.rglob("*")}
     assert after <= before, f"{case} left {sorted(after - before)}"
+
+
+def test_every_path_parameter_refuses_an_empty_path():
+    """Every path option and argument of every command is a NonEmptyPath: "" (an unset shell variable) is
+    refused naming it, not read as the current directory (click's own Path takes it for ".")."""
+    import click
+
+    from wirescene.cli.options import NonEmptyPath
+
+    def commands(command, name):
+        yield name, command
+        for sub, child in getattr(command, "commands", {}).items():
+            yield from commands(child, f"{name} {sub}")
+
+    paths = [(name, p) for name, command in commands(main, "wirescene") for p in command.params
+             if isinstance(p.type, click.Path)]
+    assert len(paths) > 40
+    assert [f"{name} {p.name}" for name, p in paths if not isinstance(p.type, NonEmptyPath)] == []
+
+
+def test_api_refuses_an_empty_path(tmp_path, monkeypatch):
+    """evaluate's kitti_root, predictions and models of "" (an unset variable): an ArgumentError naming the
+    argument, not the current directory read or written."""
+    import wirescene
+    from wirescene.core.errors import ArgumentError
+
+    monkeypatch.chdir(tmp_path)
+    for name, kwargs in (("kitti_root", dict(kitti_root="")), ("predictions", dict(kitti_root=KITTI_ROOT, predictions="")),
+                         ("models", dict(kitti_root=KITTI_ROOT, models=" "))):
+        with pytest.raises(ArgumentError, match=rf"^{name}: empty path \(give a directory, e\.g\. '\.'\)$"):
+            wirescene.evaluate(**kwargs, variants="coarse", frames=[FRAME], particles=5)
+    assert list(tmp_path.iterdir()) == []
 
 
 # Label rows that cannot be (row appended to the test frame's label file -> the problem named).

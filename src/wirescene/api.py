@@ -25,6 +25,7 @@ from wirescene.core.types import Detections, SceneEstimate
 from wirescene.core.validate import (
     MAX_WORKERS,
     boxes_problem,
+    empty_path_problem,
     finite_real,
     off_centre_problem,
     output_dir_problem,
@@ -266,6 +267,9 @@ def _models(models):
 
     if models is not None and not isinstance(models, (str, Path)):
         raise ArgumentError("models", f"expected a models directory path, got {type(models).__name__}")
+    problem = empty_path_problem(models)  # "" (an unset variable) is no name for the current directory
+    if problem:
+        raise ArgumentError("models", problem)
     return resolve_models(models)  # InputError naming the directory or file
 
 
@@ -728,6 +732,9 @@ def evaluate(
     for name, value in (("kitti_root", kitti_root), ("predictions", predictions)):
         if not (isinstance(value, (str, Path)) or (value is None and name == "predictions")):
             raise ArgumentError(name, f"expected a directory path, got {type(value).__name__}")
+        problem = empty_path_problem(value)  # "" (an unset variable) is no name for the current directory
+        if problem:
+            raise ArgumentError(name, problem)
     dataset = KittiDataset(kitti_root)
     if not isinstance(detections, (str, Path)):
         raise ArgumentError("detections", f"expected 'gt', 'bank' or a directory, got {type(detections).__name__}")

@@ -179,10 +179,57 @@ def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as e:  # trimesh raises many types for malformed files
-        raise InputError(f"cannot read mesh ({type(e).__name__}: {e})".splitlines()[0], path=path) from None
+        # said in plain words where they can be (numpy's "index 8 is out of bounds for axis 0" says nothing of the file)
+        problem = _obj_problem(path) if suffix == ".obj" else None
+        if problem is None and isinstance(e, IndexError):
+            problem = "a face refers to a vertex the file does not have"
+        raise InputError(problem or f"cannot read mesh ({type(e).__name__}: {e})".splitlines()[0], path=path) from None
     if len(loaded.faces) == 0:
         raise InputError("mesh has no faces", path=path)
-    return np.asarray(loaded.vertices, dtype=float), np.asarray(loaded.faces, dtype=np.int64)
+    vertices, faces = np.asarray(loaded.vertices, dtype=float), np.asarray(loaded.faces, dtype=np.int64)
+    if faces.min() < 0 or faces.max() >= len(vertices):  # trimesh loads a PLY's faces past its vertices as they are
+        bad = faces.max() if faces.max() >= len(vertices) else faces.min()
+        raise InputError(f"a face refers to vertex {bad}, the file has {len(vertices)} vertices (0 to "
+                         f"{len(vertices) - 1})", path=path)
+    return vertices, faces
+
+
+def _obj_problem(path: Path) -> str | None:
+    """Why trimesh could not read the OBJ file ``path``, in plain words with its line (as
+    :mod:`wirescene.cad.ac3d` says its errors), or None where no such line is found: a vertex
+    coordinate that is no number, or a face's vertex reference that is no integer or names
+    a vertex the file does not have (1 to N, or -1 to -N counting back from the last).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "car.obj").write_text("v 0 0 0\\nv 1 0 0\\nf 1 2 3 # a triangle\\n")
+    ...     _obj_problem(Path(d) / "car.obj")
+    'OBJ line 3: vertex reference 3 out of range (the file has 2 vertices)'
+    """
+    try:
+        lines = [line.partition("#")[0].split() for line in path.read_text(encoding="latin-1").splitlines()]
+    except OSError:
+        return None
+    n = sum(tokens[:1] == ["v"] for tokens in lines)
+    for i, tokens in enumerate(lines, 1):
+        if tokens[:1] == ["v"]:
+            for t in tokens[1:4]:
+                try:
+                    float(t)
+                except ValueError:
+                    return f"OBJ line {i}: non-numeric vertex coordinate {t!r}"
+        elif tokens[:1] == ["f"]:
+            for t in tokens[1:]:
+                ref = t.split("/")[0]
+                try:
+                    k = int(ref)
+                except ValueError:
+                    return f"OBJ line {i}: non-integer vertex reference {ref!r}"
+                if not (1 <= k <= n or -n <= k <= -1):
+                    return f"OBJ line {i}: vertex reference {k} out of range (the file has {n} vertices)"
+    return None
 
 
 def _mirror_error(points: np.ndarray, axis: int) -> float:

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from wirescene.cli.options import NON_NEGATIVE, check_output_file, check_picture_file
+from wirescene.cli.options import NON_NEGATIVE, NonEmptyPath, check_output_file, check_picture_file
 from wirescene.core.errors import InputError
 
 __all__ = ["cad", "shape", "draw_car"]
@@ -127,7 +127,7 @@ def cad():
 
 
 @cad.command("list")
-@click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
+@click.option("--cad-dir", type=NonEmptyPath(file_okay=False), default=None,
               help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
 def list_cmd(cad_dir):
     """Names, dimensions (l, w, h) and road / non-road decision with its reason."""
@@ -141,9 +141,9 @@ def list_cmd(cad_dir):
 
 @cad.command("show")
 @click.argument("name")
-@click.option("--out", type=click.Path(dir_okay=False), default=None,
+@click.option("--out", type=NonEmptyPath(dir_okay=False), default=None,
               help="Picture to write, in the format its suffix names (.png, .pdf, .svg; default: NAME.png).")
-@click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
+@click.option("--cad-dir", type=NonEmptyPath(file_okay=False), default=None,
               help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
 def show_cmd(name, out, cad_dir):
     """Picture of one car: three orthographic views with the 36 annotated vertices."""
@@ -162,9 +162,9 @@ def show_cmd(name, out, cad_dir):
 
 
 @click.command("shape")
-@click.option("--cad-dir", type=click.Path(file_okay=False), default=None,
+@click.option("--cad-dir", type=NonEmptyPath(file_okay=False), default=None,
               help="Mesh directory (default: $WIRESCENE_CAD_DIR or ../shared/data/cad/torcs).")
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+@click.option("--out", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
               help="Shape model .npz to write (the shipped one is src/wirescene/data/shape_model.npz); "
                    "cad_landmarks.json and cad_meshes.npz are written next to it.")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Seed of the size augmentation.")

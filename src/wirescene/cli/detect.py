@@ -13,6 +13,7 @@ from wirescene.cli.options import (
     NON_NEGATIVE_FLOAT,
     POSITIVE_FLOAT,
     FiniteFloat,
+    NonEmptyPath,
     check_output_dir,
     check_output_file,
     check_picture_file,
@@ -52,9 +53,9 @@ from wirescene.training.scale import (
 
 
 @click.command("detector")
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+@click.option("--out", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
               help="Detector bank .npz to write (the shipped one is src/wirescene/data/detector_bank.npz).")
-@click.option("--kitti-root", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("--kitti-root", type=NonEmptyPath(file_okay=False, path_type=Path), default=None,
               help="Train on the labelled real frames of this KITTI root (the shipped bank: all 72 frames of "
                    "shared/data/kitti). Without it: synthetic scenes.")
 @click.option("--frames", default=None, help="With --kitti-root: comma-separated training frame ids (default all).")
@@ -92,7 +93,7 @@ from wirescene.training.scale import (
 @click.option("--val-scenes", "n_val", type=click.IntRange(min=0, max=MAX_VAL_SCENES), default=20, show_default=True,
               help="Synthetic only: held-out scenes of the threshold.")
 @click.option("--C", "C", type=POSITIVE_FLOAT, default=0.01, show_default=True, help="Linear SVM regularisation.")
-@click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
+@click.option("--report", type=NonEmptyPath(dir_okay=False), default=None, help="Write a JSON report here.")
 @click.option("--max-negatives", type=click.IntRange(min=1, max=MAX_NEGATIVES), default=DEFAULT_MAX_NEGATIVES,
               show_default=True,
               help=f"With --kitti-root: cap of each configuration's negatives (reservoir, then the hardest; at most "
@@ -176,8 +177,8 @@ def _fold_list(text: str | None) -> list[int] | None:
 
 
 @click.command("viewpoints")
-@click.argument("kitti_root", type=click.Path(file_okay=False, exists=True, path_type=Path))
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+@click.argument("kitti_root", type=NonEmptyPath(file_okay=False, exists=True, path_type=Path))
+@click.option("--out", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
               help="Classifier to write (the shipped one is src/wirescene/data/viewpoint_classifier.npz).")
 @click.option("--frames", default=None, help="Comma-separated training frame ids (default: all).")
 @split_file_option
@@ -196,24 +197,24 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 
 
 @click.command("detect")
-@click.argument("kitti_root", type=click.Path(path_type=Path))
+@click.argument("kitti_root", type=NonEmptyPath(directory=True, path_type=Path))
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all).")
 @split_file_option
 @split_option()
 @models_option
-@click.option("--bank", "bank_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--bank", "bank_path", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
               help="Detector bank .npz (default: --models' or the shipped one).")
-@click.option("--viewpoint-classifier", "classifier_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--viewpoint-classifier", "classifier_path", type=NonEmptyPath(dir_okay=False, path_type=Path),
               default=None, help="Crop viewpoint classifier .npz of the viewpoints --out writes (default: --models' "
                                  "or the shipped one).")
 @click.option("--threshold", type=FiniteFloat(), default=None,
               help="Score threshold (default: the bank's, 0.5 for the shipped one; the fit's own pre-detection keeps "
                    "the boxes above 0.3, and --out writes the fit's viewpoints at any threshold).")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("--out", "out_dir", type=NonEmptyPath(file_okay=False, path_type=Path), default=None,
               help="Write FRAME.json detection files here (readable by --detections of `eval`).")
-@click.option("--pr-curve", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--pr-curve", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
               help="PR curve picture, in the format its suffix names (.png, .pdf, .svg; PNG without a suffix).")
-@click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--json", "json_out", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
               help="Write AP and timing as JSON.")
 @click.option("--camera-height", type=field_type(stage_field(LiftingOptions, "camera_height")), default=KITTI_CAMERA_HEIGHT, show_default=True,
               help="The camera's height above the road (m), for the ground and traffic priors learned at KITTI's "

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_file, load_models, models_option
+from wirescene.cli.options import NonEmptyPath, check_output_file, models_option, say_models
 
 
 def info_record(models) -> dict:
@@ -51,7 +51,7 @@ def _lines(record: dict) -> list[str]:
 
 @click.command("info")
 @models_option
-@click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--json", "json_out", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
               help="Also write the record as JSON (full hashes and paths).")
 def info(models, json_out):
     """Print the versions, BLAS kernels and model files a run here uses.
@@ -59,8 +59,12 @@ def info(models, json_out):
     The trained files and the figures of the README depend on them (another CPU's BLAS
     kernels train other models in their last digits): attach this to a bug report, or
     compare it with the environment a run or a training recorded."""
+    from wirescene.core.resources import resolve_models
+
     check_output_file(json_out, "--json")
-    record = info_record(load_models(models))
+    models = resolve_models(models)
+    record = info_record(models)  # reads every file: a corrupt one is the only line, said before any other
+    say_models(models)
     click.echo("\n".join(_lines(record)))
     if json_out is not None:
         from wirescene.core.atomic import write_text

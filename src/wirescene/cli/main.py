@@ -17,6 +17,7 @@ import numpy as np
 from wirescene.cli.options import (
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
+    NonEmptyPath,
     ap_draws_option,
     check_output_dir,
     check_output_file,
@@ -257,21 +258,21 @@ def _inference_options(f):
     f = stage_options(InferenceOptions, "inference")(f)
     f = stage_options(LiftingOptions, "lifting")(f)
     f = models_option(f)
-    f = click.option("--parts-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+    f = click.option("--parts-model", type=NonEmptyPath(exists=True, dir_okay=False, path_type=Path), default=None,
                      help="Part detector file (default: --models' or the shipped model), e.g. a cross-validation "
                           "fold's.")(f)
-    f = click.option("--bank", "detector_bank", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    f = click.option("--bank", "detector_bank", type=NonEmptyPath(exists=True, dir_okay=False, path_type=Path),
                      default=None, help="Detector bank file for our own pre-detection (default: --models' or the "
                                         "shipped bank).")(f)
-    f = click.option("--viewpoint-classifier", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    f = click.option("--viewpoint-classifier", type=NonEmptyPath(exists=True, dir_okay=False, path_type=Path),
                      default=None, help="Crop viewpoint classifier file (`wirescene train viewpoints`) that gives our "
                                         "own boxes and boxes without a viewpoint theirs (default: --models' or the "
                                         "shipped one).")(f)
-    f = click.option("--score-calibration", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    f = click.option("--score-calibration", type=NonEmptyPath(exists=True, dir_okay=False, path_type=Path),
                      default=None, help="Score calibration file (`wirescene train scores`) of the cars' confidences "
                                         "and of the verification of our own boxes (default: --models' or the "
                                         "shipped one).")(f)
-    f = click.option("--shape-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+    f = click.option("--shape-model", type=NonEmptyPath(exists=True, dir_okay=False, path_type=Path), default=None,
                      help="Shape model file (`wirescene train shape`) of the fine variants' wireframes (default: "
                           "--models' or the shipped one).")(f)
     f = click.option("--device", default=None,
@@ -309,7 +310,7 @@ def _dask_client(address: str):
 
 
 @main.command("eval")
-@click.argument("kitti_root", type=click.Path(path_type=Path))
+@click.argument("kitti_root", type=NonEmptyPath(directory=True, path_type=Path))
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()), help="Model variant(s); default: all available.")
 @click.option("--detections", default="gt", show_default=True,
               help="'gt' (label boxes), 'bank' (our pre-detection from raw pixels) or a directory of per-frame detection files.")
@@ -324,17 +325,18 @@ def _dask_client(address: str):
                    "seed alone moves the figures by a few cars); --predictions and --report then get a seed-S folder "
                    "per seed, and --report a page of the mean and range over the seeds that links them.")
 @split_option()
-@click.option("--json", "json_out", type=click.Path(path_type=Path), default=None,
+@click.option("--json", "json_out", type=NonEmptyPath(path_type=Path), default=None,
               help="Write the metrics as JSON: one variant's at the top level, several keyed by variant (and by seed "
                    "under 'seeds' with several --seed).")
-@click.option("--predictions", type=click.Path(path_type=Path), default=None, help="Write KITTI label files per variant here.")
+@click.option("--predictions", type=NonEmptyPath(directory=True, path_type=Path), default=None,
+              help="Write KITTI label files per variant here.")
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
               help="Evidence of the fine-grained variants: part detectors, or true vertices of synthetic scenes (upper bound).")
 @click.option("--raw-scores", is_flag=True, default=False,
               help="Write the pre-detection scores instead of calibrated confidences, and keep every box of our own "
                    "pre-detection (the data of `train scores`).")
 @ap_draws_option
-@click.option("--report", "report_dir", type=click.Path(path_type=Path), default=None,
+@click.option("--report", "report_dir", type=NonEmptyPath(directory=True, path_type=Path), default=None,
               help="Write an HTML report with plots and a gallery of the best and worst frames to this directory.")
 @workers_option()
 @click.option("--allow-missing-detections", is_flag=True, default=False,
@@ -544,9 +546,9 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 
 
 @main.command("predict")
-@click.argument("kitti_root", type=click.Path(path_type=Path))
+@click.argument("kitti_root", type=NonEmptyPath(directory=True, path_type=Path))
 @split_option("testing")
-@click.option("--out", type=click.Path(path_type=Path), required=True,
+@click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), required=True,
               help="Directory of KITTI label files, one FRAME.txt per image (the benchmark's submission layout).")
 @click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True)
 @click.option("--detections", default="bank", show_default=True,
@@ -651,9 +653,10 @@ def _prediction_dir_warnings(pred_dir: Path, gt_dir: Path, ids: list[str], *, ch
 
 
 @main.command("kitti-eval")
-@click.argument("gt_dir", type=click.Path(path_type=Path))
-@click.argument("pred_dirs", metavar="PRED_DIR...", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--json", "json_out", type=click.Path(path_type=Path), default=None, help="Write the figures as JSON.")
+@click.argument("gt_dir", type=NonEmptyPath(directory=True, path_type=Path))
+@click.argument("pred_dirs", metavar="PRED_DIR...", nargs=-1, required=True,
+                type=NonEmptyPath(directory=True, path_type=Path))
+@click.option("--json", "json_out", type=NonEmptyPath(path_type=Path), default=None, help="Write the figures as JSON.")
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every GT_DIR/*.txt).")
 @split_file_option
 @ap_draws_option
@@ -718,18 +721,19 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 
 
 @main.command("fit")
-@click.argument("image", type=click.Path(path_type=Path))
-@click.option("--calib", type=click.Path(path_type=Path), required=True,
+@click.argument("image", type=NonEmptyPath(path_type=Path))
+@click.option("--calib", type=NonEmptyPath(path_type=Path), required=True,
               help="Camera calibration: a KITTI calibration file (P2 is used), or a text file of the 9 numbers of the "
                    "intrinsics K or the 12 of the projection P.")
-@click.option("--detections", type=click.Path(path_type=Path), default=None,
+@click.option("--detections", type=NonEmptyPath(path_type=Path), default=None,
               help="2D car detections: .json, .csv or KITTI label .txt (see `wirescene.io.detections.read_detections`); "
                    "default: our own pre-detection from raw pixels.")
-@click.option("--gt", type=click.Path(path_type=Path), default=None, help="KITTI label file drawn in cyan for comparison.")
+@click.option("--gt", type=NonEmptyPath(path_type=Path), default=None,
+              help="KITTI label file drawn in cyan for comparison.")
 @click.option("--variant", type=click.Choice(_variants()), default="coarse+gp", show_default=True)
 @particles_option
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
-@click.option("--out", type=click.Path(path_type=Path), required=True, help="Output directory.")
+@click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), required=True, help="Output directory.")
 @_inference_options
 def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **inference):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
@@ -774,7 +778,8 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
 
 
 @main.command("demo")
-@click.option("--out", type=click.Path(path_type=Path), default=Path("wirescene_demo"), show_default=True)
+@click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), default=Path("wirescene_demo"),
+              show_default=True)
 @click.option("--particles", type=click.IntRange(min=1, max=MAX_PARTICLES), default=50, show_default=True,
               help="Scene particles (the paper used 250; fewer keep the demo short).")
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()),
@@ -826,9 +831,9 @@ def demo_cmd(out, particles, variants, models):
 
 
 @main.command("gt")
-@click.argument("kitti_root", type=click.Path(path_type=Path))
+@click.argument("kitti_root", type=NonEmptyPath(directory=True, path_type=Path))
 @click.argument("frame")
-@click.option("--out", type=click.Path(path_type=Path), required=True,
+@click.option("--out", type=NonEmptyPath(path_type=Path), required=True,
               help="Picture to write, in the format its suffix names (.png, .pdf, .svg; PNG without a suffix).")
 @split_option()
 def gt_cmd(kitti_root, frame, out, split):

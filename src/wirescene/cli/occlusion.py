@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import NON_NEGATIVE, check_output_file, models_option, say_models
+from wirescene.cli.options import NON_NEGATIVE, NonEmptyPath, check_output_file, models_option, say_models
 from wirescene.training.scale import MAX_OCCLUSION_SCENES
 
 
@@ -15,13 +15,13 @@ from wirescene.training.scale import MAX_OCCLUSION_SCENES
 @click.option("--seed", type=NON_NEGATIVE, default=2000, show_default=True, help="Synthetic stream of the held-out scenes.")
 @click.option("--scenes", type=click.IntRange(min=1, max=MAX_OCCLUSION_SCENES), default=30, show_default=True,
               help=f"Held-out synthetic scenes scored (at most {MAX_OCCLUSION_SCENES:,}: some 1.6 s each).")
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+@click.option("--out", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
               help="Record to write (the shipped one is src/wirescene/data/occlusion.json).")
 @click.option("--flip-evidence/--no-flip-evidence", default=False, show_default=True,
               help="Also read each box's part evidence off its mirror image, as the fit does by default "
                    "(the shipped c was chosen without; benchmarks/RESULTS.md, 'c = 0.5 with the mirrored evidence').")
 @models_option
-@click.option("--parts-model", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+@click.option("--parts-model", type=NonEmptyPath(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Part detector file whose evidence is scored (default: --models' or the shipped model), e.g. one "
                    "of `wirescene train parts`.")
 def occlusion(seed, scenes, out, flip_evidence, models, parts_model):

@@ -11,7 +11,7 @@ from typing import Mapping
 
 import click
 
-from wirescene.core.validate import creatable_problem, output_dir_problem
+from wirescene.core.validate import creatable_problem, empty_path_problem, output_dir_problem
 
 #: Counts that must be at least 1 (particles, samples, workers, scenes).
 POSITIVE = click.IntRange(min=1)
@@ -53,6 +53,34 @@ NON_NEGATIVE_FLOAT = FiniteFloat(min=0.0)
 POSITIVE_FLOAT = FiniteFloat(min=0.0, strict=True)
 
 
+class NonEmptyPath(click.Path):
+    """``click.Path`` that refuses an empty (or blank) value, the type of every path option
+    and argument of the CLI: click reads ``""`` as ``Path(".")``, so that an unset shell
+    variable (``--out "$OUT"``) would write into the current directory (or read it), exit 0
+    (:func:`wirescene.core.validate.empty_path_problem`). ``directory``: the path names a
+    directory (the hint of the message; default: where ``file_okay`` is false).
+
+    Examples
+    --------
+    >>> NonEmptyPath(file_okay=False).convert("", None, None)
+    Traceback (most recent call last):
+    ...
+    click.exceptions.BadParameter: empty path (give a directory, e.g. '.')
+    >>> NonEmptyPath(path_type=Path).convert("out.json", None, None) == Path("out.json")
+    True
+    """
+
+    def __init__(self, *, directory: bool | None = None, **kwargs):
+        super().__init__(**kwargs)
+        self.directory = not self.file_okay if directory is None else directory
+
+    def convert(self, value, param, ctx):
+        problem = empty_path_problem(value, directory=self.directory)
+        if problem:
+            self.fail(problem, param, ctx)
+        return super().convert(value, param, ctx)
+
+
 def _check_creatable(path: Path, option: str) -> None:
     """The directories above ``path`` exist or can be created and written."""
     problem = creatable_problem(path)
@@ -86,7 +114,7 @@ def check_picture_file(path: Path | None, option: str) -> None:
     check_output_file(path, option)
 
 
-def check_output_dir(path: Path | None, option: str) -> None:
+def check_output_dir(path: Path | str | None, option: str) -> None:
     """``path`` is (or can be created as) a writable directory."""
     if path is None:
         return
@@ -116,7 +144,7 @@ def parse_frames(value: str | None, known: list[str], option: str = "--frames") 
 
 def split_file_option(f):
     """``--split-file FILE``: the frames of a run from a KITTI ``ImageSets`` file."""
-    return click.option("--split-file", type=click.Path(dir_okay=False, path_type=Path), default=None,
+    return click.option("--split-file", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
                         help="Frames listed in this file, one id a line (KITTI's ImageSets format, e.g. "
                              "ImageSets/val.txt); instead of --frames.")(f)
 
@@ -139,7 +167,8 @@ def ap_draws_option(f):
 
 def drive_map_option(purpose: str = "the held-out calibrations' folds group the frames by recording drive"):
     """``--drive-map DIR``: the KITTI devkit's mapping files, grouping frames by drive for ``purpose``."""
-    return click.option("--drive-map", "drive_mapping", type=click.Path(file_okay=False, path_type=Path), default=None,
+    return click.option("--drive-map", "drive_mapping", type=NonEmptyPath(file_okay=False, path_type=Path),
+                        default=None,
                         help=f"KITTI devkit mapping directory (train_rand.txt, train_mapping.txt): {purpose} "
                              "(default: mapping/, devkit/mapping/ or devkit_object/mapping/ under the KITTI root when "
                              "there, else the drives of the shared frames only; other frames are each their own "
@@ -237,7 +266,7 @@ def workers_count(workers: int | None) -> int:
 
 def models_option(f):
     """``--models MODELS_DIR``: trained artefacts that replace the shipped ones."""
-    return click.option("--models", "models", type=click.Path(path_type=Path), default=None,
+    return click.option("--models", "models", type=NonEmptyPath(directory=True, path_type=Path), default=None,
                         help="Models directory (`wirescene train all --out`): its parts_model.npz, detector_bank.npz, "
                              "viewpoint_classifier.npz, score_calibration.json, shape_model.npz and occlusion.json "
                              "replace the shipped ones; what it lacks stays shipped.")(f)

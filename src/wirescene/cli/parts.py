@@ -10,6 +10,7 @@ import click
 from wirescene.cli.options import (
     NON_NEGATIVE,
     FiniteFloat,
+    NonEmptyPath,
     check_output_dir,
     check_output_file,
     drive_map_option,
@@ -28,7 +29,7 @@ _RECIPE = RECIPE["parts"]
 
 
 @click.command("parts")
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+@click.option("--out", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
               help="Model .npz to write (the shipped one is src/wirescene/data/parts_model.npz).")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True,
               help="Random stream of the patches' sampling and augmentation and of the forest.")
@@ -44,7 +45,7 @@ _RECIPE = RECIPE["parts"]
               show_default=True,
               help="Descriptor (ghog: gradient-orientation histograms of the grey image; ghog_ms: two cell sizes; "
                    "ghog_msc: ghog_ms plus colour).")
-@click.option("--kitti-root", type=click.Path(file_okay=False, exists=True), default=None,
+@click.option("--kitti-root", type=NonEmptyPath(file_okay=False, exists=True), default=None,
               help="Labelled KITTI root whose frames add real part and background patches "
                    "(the shipped model: ../shared/data/kitti, all 72 frames).")
 @click.option("--frames", default=None, help="Real training frames: comma-separated ids (default: all).")
@@ -57,7 +58,7 @@ _RECIPE = RECIPE["parts"]
               help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root; default: on with "
                    "--kitti-root, as the shipped model).")
 @drive_map_option()
-@click.option("--label-shapes", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--label-shapes", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
               help="With --kitti-root: .npz of the labelled cars' own wireframes (frame id -> (N, 36, 3), object "
                    "frame) in place of the mean shape scaled into each label's box.")
 @click.option("--synth-scenes", type=click.IntRange(min=0, max=MAX_PART_SCENES), default=_RECIPE["synth_scenes"],
@@ -66,7 +67,7 @@ _RECIPE = RECIPE["parts"]
                    "some 1.3 s and 4 MB of patches each).")
 @click.option("--synth-seed", type=click.IntRange(min=1000), default=1000, show_default=True,
               help="Synthetic scene stream (>= 1000; lower seeds are evaluation scenes).")
-@click.option("--synth-cache", type=click.Path(file_okay=False), default=None,
+@click.option("--synth-cache", type=NonEmptyPath(file_okay=False), default=None,
               help="Directory keeping the synthetic scenes' patches, read back by later trainings with the same "
                    "synthetic options (e.g. one per fold).")
 @click.option("--class-weight", type=click.Choice(["balanced", "balanced_subsample", "none"]), default="balanced",
@@ -76,10 +77,10 @@ _RECIPE = RECIPE["parts"]
 @click.option("--heldout", type=NON_NEGATIVE, default=0, show_default=True,
               help="With --n-views: first evaluate with this many CAD models held out.")
 @click.option("--compare-hog/--no-compare-hog", default=False, help="With --n-views: also evaluate HOG held-out.")
-@click.option("--kitti-background", type=click.Path(file_okay=False, exists=True), default=None,
+@click.option("--kitti-background", type=NonEmptyPath(file_okay=False, exists=True), default=None,
               help="With --n-views: labelled KITTI root whose car-free regions add background patches (off by "
                    "default).")
-@click.option("--report", type=click.Path(dir_okay=False), default=None, help="Write a JSON report here.")
+@click.option("--report", type=NonEmptyPath(dir_okay=False), default=None, help="Write a JSON report here.")
 def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, split_file, position, smooth, calibrate,
           drive_mapping, label_shapes, synth_scenes, synth_seed, synth_cache, class_weight, n_aug, heldout, compare_hog,
           kitti_background, report):

@@ -6,14 +6,14 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_file, select_frames, split_file_option
+from wirescene.cli.options import NonEmptyPath, check_output_file, select_frames, split_file_option
 
 
 @click.command("scores")
-@click.argument("predictions_dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("predictions_dirs", nargs=-1, required=True, type=NonEmptyPath(directory=True, path_type=Path))
 @click.option("--frames", default=None, help="Comma-separated frame ids to train on (default: every record).")
 @split_file_option
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+@click.option("--out", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
               help="Calibration to write (the shipped one is src/wirescene/data/score_calibration.json).")
 @click.option("--right", type=click.Choice(["iou", "1m"]), default="iou", show_default=True,
               help="When the confidence calls a car right: its 3D box overlaps the labelled car's at IoU > 0.7 "

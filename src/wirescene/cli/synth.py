@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from wirescene.cli.options import check_output_dir
+from wirescene.cli.options import NonEmptyPath, check_output_dir
 from wirescene.core.atomic import replaced_dir
 from wirescene.core.errors import WiresceneError
 
@@ -30,7 +30,7 @@ def _parse_range(value: str) -> tuple[int, int]:
 
 
 @click.command("synth")
-@click.argument("out_dir", type=click.Path(file_okay=False))
+@click.argument("out_dir", type=NonEmptyPath(file_okay=False))
 @click.option("--scenes", default=10, show_default=True, type=click.IntRange(min=1, max=MAX_SCENES),
               help=f"Number of scenes (at most {MAX_SCENES:,}: about 0.8 s and 0.9 MB each).")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
@@ -52,8 +52,6 @@ def synth(out_dir, scenes, seed, cars, occluders, overwrite):
     from wirescene.synth.generate import generate_dataset
 
     rng_cars = _parse_range(cars)
-    if not str(out_dir).strip():
-        raise click.BadParameter("empty path (give a directory, e.g. '.')", param_hint="OUT_DIR")
     check_output_dir(Path(out_dir), "OUT_DIR")
     split = Path(out_dir) / "training"
     if split.exists() and not split.is_dir():  # not scenes: --overwrite would remove it

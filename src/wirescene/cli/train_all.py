@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from wirescene.cli.options import (
+    NonEmptyPath,
     check_output_dir,
     drive_map_option,
     split_file_option,
@@ -39,8 +40,8 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
 
 
 @click.command("all")
-@click.argument("kitti_root", type=click.Path(path_type=Path))
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
+@click.argument("kitti_root", type=NonEmptyPath(directory=True, path_type=Path))
+@click.option("--out", type=NonEmptyPath(file_okay=False, path_type=Path), required=True,
               help="Models directory to write (parts_model.npz, detector_bank.npz, viewpoint_classifier.npz, "
                    "occlusion.json, models.json); use it with --models of fit, eval, predict and detect.")
 @click.option("--frames", default=None, help="Comma-separated training frame ids (default: every labelled frame).")
@@ -68,7 +69,7 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
     check_output_dir(out, "--out")
     options = parse_settings(settings)
     if options.get("parts", {}).get("synth_cache") is not None:
-        check_output_dir(Path(options["parts"]["synth_cache"]), "--set parts.synth_cache")
+        check_output_dir(options["parts"]["synth_cache"], "--set parts.synth_cache")  # "" refused, not "."
     if frames is not None and split_file is not None:
         raise click.UsageError("--frames and --split-file both choose the frames: give one")
     ids = None

@@ -210,6 +210,26 @@ def _writable_problem(directory: Path) -> str | None:
     return None
 
 
+def empty_path_problem(path, *, directory: bool = True) -> str | None:
+    """``empty path (...)`` where ``path`` is an empty (or blank) string, None otherwise:
+    pathlib reads ``""`` as the current directory, so that an unset shell variable
+    (``--out "$OUT"``) would write there. Only a string can be empty (``Path("")`` is
+    ``Path(".")``, said as such); ``directory``: the path names a directory, else a file.
+    Every path option of the CLI (:class:`wirescene.cli.options.NonEmptyPath`) and the API's
+    directory arguments are refused by it.
+
+    Examples
+    --------
+    >>> empty_path_problem("")
+    "empty path (give a directory, e.g. '.')"
+    >>> empty_path_problem(" ", directory=False), empty_path_problem("."), empty_path_problem(Path(""))
+    ('empty path (give a file name)', None, None)
+    """
+    if isinstance(path, str) and not path.strip():
+        return "empty path (give a directory, e.g. '.')" if directory else "empty path (give a file name)"
+    return None
+
+
 def creatable_problem(path) -> str | None:
     """Why the directories above ``path`` cannot be created and written (the first of them
     that exists is a file, or not writable), as a phrase naming ``path``, or None.
@@ -243,7 +263,12 @@ def output_dir_problem(path) -> str | None:
     >>> with tempfile.NamedTemporaryFile() as f:
     ...     output_dir_problem(f.name) == f"{f.name} is a file, expected a directory"
     True
+    >>> output_dir_problem("")  # an unset shell variable, not the current directory
+    "empty path (give a directory, e.g. '.')"
     """
+    empty = empty_path_problem(path)
+    if empty:  # "" is no name for the current directory
+        return empty
     path = Path(path)
     if path.exists():
         if not path.is_dir():
