@@ -569,6 +569,13 @@ CASES = {
         r"^wirescene: error: --set parts\.synth_cache: empty path \(give a directory"),
     "eval of an empty KITTI_ROOT": (lambda t: ["eval", "", "--variant", "coarse"],
                                     r"^wirescene: error: KITTI_ROOT: empty path \(give a directory"),
+    # --detections "$DETS" unset: a directory name, not a path type, and read as the current directory
+    "eval --detections empty": (lambda t: _eval_case(t, "--draws", "0", "--detections", "", "--allow-missing-detections"),
+                                r"^wirescene: error: --detections: empty path \(give a directory"),
+    "predict --detections empty": (lambda t: ["predict", KITTI_ROOT, "--split", "training", "--variant", "coarse",
+                                              "--detections", " ", "--frames", FRAME, "--workers", "1", "--out",
+                                              t / "submission"],
+                                   r"^wirescene: error: --detections: empty path \(give a directory"),
     # a corrupt file of --models: its "models from DIR" line came before the error's
     "info --models with a corrupt file": (lambda t: ["info", "--models", _file(t, "models/shape_model.npz").parent],
                                           r"^wirescene: error: \S+/models/shape_model\.npz: corrupt"),
@@ -577,6 +584,11 @@ CASES = {
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\n").parent],
         r"^wirescene: error: \S+/cad/car\.obj: OBJ line 3: vertex reference 3 out of range \(the file has 2 "
         r"vertices\)$"),
+    # a latin-1 0x85 (a UTF-8 byte of "Å") is no line end: the face's line is the fourth
+    "cad list of an OBJ face past its vertices after a UTF-8 comment": (
+        lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.obj", "# Ångström car by Åsa\nv 0 0 0\nv 1 0 0\n"
+                                                                       "f 1 2 3\n").parent],
+        r"car\.obj: OBJ line 4: vertex reference 3 out of range"),
     "cad list of an OBJ face of words": (
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n").parent],
         r"car\.obj: OBJ line 4: non-integer vertex reference 'x'$"),
@@ -623,14 +635,15 @@ def test_every_path_parameter_refuses_an_empty_path():
 
 
 def test_api_refuses_an_empty_path(tmp_path, monkeypatch):
-    """evaluate's kitti_root, predictions and models of "" (an unset variable): an ArgumentError naming the
+    """evaluate's kitti_root, predictions, models and detections of "" (an unset variable): an ArgumentError naming the
     argument, not the current directory read or written."""
     import wirescene
     from wirescene.core.errors import ArgumentError
 
     monkeypatch.chdir(tmp_path)
     for name, kwargs in (("kitti_root", dict(kitti_root="")), ("predictions", dict(kitti_root=KITTI_ROOT, predictions="")),
-                         ("models", dict(kitti_root=KITTI_ROOT, models=" "))):
+                         ("models", dict(kitti_root=KITTI_ROOT, models=" ")),
+                         ("detections", dict(kitti_root=KITTI_ROOT, detections=""))):
         with pytest.raises(ArgumentError, match=rf"^{name}: empty path \(give a directory, e\.g\. '\.'\)$"):
             wirescene.evaluate(**kwargs, variants="coarse", frames=[FRAME], particles=5)
     assert list(tmp_path.iterdir()) == []

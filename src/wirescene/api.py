@@ -738,6 +738,9 @@ def evaluate(
     dataset = KittiDataset(kitti_root)
     if not isinstance(detections, (str, Path)):
         raise ArgumentError("detections", f"expected 'gt', 'bank' or a directory, got {type(detections).__name__}")
+    problem = empty_path_problem(detections)  # "" (an unset variable) is no name for the current directory
+    if problem:
+        raise ArgumentError("detections", problem)
     if frames is not None and split_file is not None:
         raise ArgumentError("split_file", "frames and split_file both choose the frames: give one")
     frame_ids = None

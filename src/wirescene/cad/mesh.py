@@ -178,10 +178,12 @@ def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]
 
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
+    except MemoryError:
+        raise
     except Exception as e:  # trimesh raises many types for malformed files
         # said in plain words where they can be (numpy's "index 8 is out of bounds for axis 0" says nothing of the file)
         problem = _obj_problem(path) if suffix == ".obj" else None
-        if problem is None and isinstance(e, IndexError):
+        if problem is None and suffix == ".obj" and isinstance(e, IndexError):
             problem = "a face refers to a vertex the file does not have"
         raise InputError(problem or f"cannot read mesh ({type(e).__name__}: {e})".splitlines()[0], path=path) from None
     if len(loaded.faces) == 0:
@@ -209,7 +211,8 @@ def _obj_problem(path: Path) -> str | None:
     'OBJ line 3: vertex reference 3 out of range (the file has 2 vertices)'
     """
     try:
-        lines = [line.partition("#")[0].split() for line in path.read_text(encoding="latin-1").splitlines()]
+        # lines end at "\n" only: str.splitlines would also break at the latin-1 reading of UTF-8 bytes such as 0x85
+        lines = [line.partition("#")[0].split() for line in path.read_text(encoding="latin-1").split("\n")]
     except OSError:
         return None
     n = sum(tokens[:1] == ["v"] for tokens in lines)

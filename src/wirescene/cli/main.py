@@ -22,6 +22,7 @@ from wirescene.cli.options import (
     check_output_dir,
     check_output_file,
     check_picture_file,
+    detections_spec,
     drive_map_option,
     interval_drives,
     models_option,
@@ -312,7 +313,7 @@ def _dask_client(address: str):
 @main.command("eval")
 @click.argument("kitti_root", type=NonEmptyPath(directory=True, path_type=Path))
 @click.option("--variant", "variants", multiple=True, type=click.Choice(_variants()), help="Model variant(s); default: all available.")
-@click.option("--detections", default="gt", show_default=True,
+@click.option("--detections", default="gt", show_default=True, callback=detections_spec,
               help="'gt' (label boxes), 'bank' (our pre-detection from raw pixels) or a directory of per-frame detection files.")
 @click.option("--viewpoint-noise", type=NON_NEGATIVE_FLOAT, default=0.0, show_default=True,
               help="Std. dev. (deg) of noise on the GT viewpoint before binning.")
@@ -551,7 +552,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 @click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), required=True,
               help="Directory of KITTI label files, one FRAME.txt per image (the benchmark's submission layout).")
 @click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True)
-@click.option("--detections", default="bank", show_default=True,
+@click.option("--detections", default="bank", show_default=True, callback=detections_spec,
               help="'bank' (our pre-detection), 'gt' (label boxes; labelled splits only) or a directory of "
                    "per-frame detection files.")
 @click.option("--allow-missing-detections", is_flag=True, default=False,

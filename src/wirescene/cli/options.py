@@ -81,6 +81,25 @@ class NonEmptyPath(click.Path):
         return super().convert(value, param, ctx)
 
 
+def detections_spec(ctx, param, value: str) -> str:
+    """``--detections``' callback: ``gt``, ``bank`` or a directory, never an empty value (an
+    unset variable, ``--detections "$DETS"``, would read the current directory).
+
+    Examples
+    --------
+    >>> detections_spec(None, None, "bank")
+    'bank'
+    >>> detections_spec(None, None, "")
+    Traceback (most recent call last):
+    ...
+    click.exceptions.BadParameter: empty path (give a directory, e.g. '.')
+    """
+    problem = empty_path_problem(value)
+    if problem:
+        raise click.BadParameter(problem, ctx=ctx, param=param)
+    return value
+
+
 def _check_creatable(path: Path, option: str) -> None:
     """The directories above ``path`` exist or can be created and written."""
     problem = creatable_problem(path)
@@ -270,14 +289,6 @@ def models_option(f):
                         help="Models directory (`wirescene train all --out`): its parts_model.npz, detector_bank.npz, "
                              "viewpoint_classifier.npz, score_calibration.json, shape_model.npz and occlusion.json "
                              "replace the shipped ones; what it lacks stays shipped.")(f)
-
-
-def load_models(models_dir: Path | None):
-    """The :class:`~wirescene.core.resources.Models` of ``--models`` (shipped without
-    it), said on standard error so that a run's log tells which models it used."""
-    from wirescene.core.resources import resolve_models
-
-    return say_models(resolve_models(models_dir))
 
 
 def say_models(models, *, replaced=()):
