@@ -566,7 +566,14 @@ CASES = {
                                         "--out", ""], r"^wirescene: error: --out: empty path \(give a file name\)$"),
     "train all --set parts.synth_cache empty": (
         lambda t: ["train", "all", KITTI_ROOT, "--out", t / "m", "--set", "parts.synth_cache=", "--frames", "424242"],
-        r"^wirescene: error: --set parts\.synth_cache: empty path \(give a directory"),
+        r"^wirescene: error: --set: parts\.synth_cache must be a path, got ''$"),
+    # a number where a path goes was Path(5)'s TypeError, a traceback
+    "train all --set parts.synth_cache a number": (
+        lambda t: ["train", "all", KITTI_ROOT, "--out", t / "m", "--set", "parts.synth_cache=5", "--frames", "424242"],
+        r"^wirescene: error: --set: parts\.synth_cache must be a path, got 5$"),
+    "train all --set parts.label_shapes empty": (
+        lambda t: ["train", "all", KITTI_ROOT, "--out", t / "m", "--set", "parts.label_shapes=", "--frames", "424242"],
+        r"^wirescene: error: --set: parts\.label_shapes must be a path, got ''$"),
     "eval of an empty KITTI_ROOT": (lambda t: ["eval", "", "--variant", "coarse"],
                                     r"^wirescene: error: KITTI_ROOT: empty path \(give a directory"),
     # --detections "$DETS" unset: a directory name, not a path type, and read as the current directory

@@ -69,7 +69,7 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
     check_output_dir(out, "--out")
     options = parse_settings(settings)
     if options.get("parts", {}).get("synth_cache") is not None:
-        check_output_dir(options["parts"]["synth_cache"], "--set parts.synth_cache")  # "" refused, not "."
+        check_output_dir(options["parts"]["synth_cache"], "--set parts.synth_cache")
     if frames is not None and split_file is not None:
         raise click.UsageError("--frames and --split-file both choose the frames: give one")
     ids = None

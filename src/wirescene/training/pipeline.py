@@ -195,6 +195,8 @@ OPTION_LIMITS: dict[str, dict[str, tuple]] = {
 OPTION_CHOICES: dict[str, dict[str, tuple]] = {"parts": {"class_weight": ("balanced", "balanced_subsample", None)}}
 #: The numeric options that None also sets (all: no cap).
 OPTION_NONE: dict[str, tuple] = {"parts": ("max_real_patches",), "detector": ("mining_images",)}
+#: ``{step: options}`` that name a file or directory (None: none): a path's text, never a number or "".
+OPTION_PATHS: dict[str, tuple] = {"parts": ("synth_cache", "label_shapes", "kitti_background")}
 
 
 def _checked_value(step: str, key: str, value):
@@ -217,6 +219,10 @@ def _checked_value(step: str, key: str, value):
         return value
     if value is None and key in OPTION_NONE.get(step, ()):
         return None
+    if key in OPTION_PATHS.get(step, ()):
+        if value is not None and (not isinstance(value, str) or not value.strip()):
+            raise ValueError(f"{step}.{key} must be a path, got {value!r}")
+        return value
     if (step, key) == ("occlusion", "grid") and value is not None:  # the c values the calibration tries
         if not isinstance(value, (list, tuple)) or not value or not all(finite_real(v) for v in value):
             raise ValueError(f"occlusion.grid must be a list of numbers, got {value!r}")
