@@ -360,6 +360,26 @@ def test_evaluate_takes_one_frame_id_and_refuses_none_and_what_is_no_path(tmp_pa
     assert one["coarse"].metrics["all"]["n_gt"] == listed["coarse"].metrics["all"]["n_gt"] > 0
 
 
+def test_evaluate_min_score_floors_the_boxes_of_detection_files(tmp_path):
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    (dets / f"{FRAME}.json").write_text(json.dumps([{"box": [354.43, 185.52, 549.52, 294.49], "score": 0.9},
+                                                    {"box": [600.0, 170.0, 680.0, 230.0], "score": 0.1}]))
+    for bad, says in ((float("nan"), "must be finite"), (np.inf, "must be finite"), ("0.5", "expected a number"),
+                      (True, "expected a number")):
+        with pytest.raises(wirescene.ArgumentError, match=f"^min_score: {says}"):
+            wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=[FRAME], detections=dets, min_score=bad)
+    with pytest.raises(wirescene.ArgumentError, match="^min_score: needs detections from a directory"):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=[FRAME], min_score=0.5)  # label boxes
+    fitted = {}
+    for m in (None, 0.5):
+        pred = tmp_path / f"pred-{m}"
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=[FRAME], particles=5, detections=dets, min_score=m,
+                           predictions=pred)
+        fitted[m] = len((pred / "coarse" / f"{FRAME}.txt").read_text().splitlines())
+    assert fitted == {None: 2, 0.5: 1}
+
+
 def test_cli_fit_and_api_fit_give_identical_results(tmp_path, frame):
     image, camera, _ = frame
     dets = read_detections(SPLIT / "label_2" / f"{FRAME}.txt")

@@ -333,6 +333,15 @@ CASES = {
     # detection directories
     "eval detections match no frame": (lambda t: _eval_case(t, "--detections", _dets_dir(t, {"10.csv": "x1,y1,x2,y2\n1,2,3,4\n"})),
                                        "none of the frames"),
+    "fit --min-score nan": (lambda t: _fit_case(t, extra=("--min-score", "nan")), "--min-score: 'nan' is not finite"),
+    "fit --min-score without --detections": (
+        lambda t: _fit_case(t)[:4] + ["--min-score", "0.5", "--out", t / "out"],
+        "--min-score needs --detections FILE: our own boxes' floor is --detection-threshold"),
+    "eval --min-score with label boxes": (lambda t: _eval_case(t, "--detections", "gt", "--min-score", "0.5"),
+                                          r"--min-score needs --detections DIR: label boxes \('gt'\) are all fitted"),
+    "predict --min-score with our own boxes": (
+        lambda t: ["predict", KITTI_ROOT, "--split", "training", "--frames", FRAME, "--out", t / "pred", "--min-score",
+                   "0.5"], "--min-score needs --detections DIR: our own boxes' floor is --detection-threshold"),
     "eval detections: two files for one frame": (
         lambda t: _eval_case(t, "--detections", _dets_dir(t, {f"{FRAME}.json": '{"detections": []}',
                                                               f"{FRAME}.txt": ""})),

@@ -350,6 +350,52 @@ def test_eval_with_external_boxes_without_viewpoint(tmp_path):
     assert 3 <= data["n_tp"] <= 8
 
 
+def _scored_boxes(path, low=0.1):
+    """The test frame's car boxes as another detector's JSON file: every other box at 0.9, the rest at ``low``."""
+    from wirescene.io.kitti import read_labels
+
+    labels = read_labels(SPLIT / "label_2" / "000010.txt").of_type("Car")
+    path.write_text(json.dumps([{"box": list(map(float, o.box)), "score": 0.9 if i % 2 == 0 else low}
+                                for i, o in enumerate(labels)]))
+    return path
+
+
+def test_fit_min_score_fits_only_the_boxes_at_or_above_the_floor(tmp_path):
+    dets = tmp_path / "dets.json"
+    dets.write_text(json.dumps([{"box": [354.43, 185.52, 549.52, 294.49], "score": 0.9},
+                                {"box": [600.0, 170.0, 680.0, 230.0], "score": 0.1}]))
+    common = ["fit", SPLIT / "image_2" / "000010.png", "--calib", SPLIT / "calib" / "000010.txt", "--detections", dets,
+              "--variant", "coarse", "--particles", 5]
+    cars = {}
+    for floor in (None, "0.5", "0.9", "0.95"):  # 0.9: a box scoring the floor itself is kept
+        out = tmp_path / f"out-{floor}"
+        r = run(*common, *(() if floor is None else ("--min-score", floor)), "--out", out)
+        assert r.exit_code == 0, r.output
+        cars[floor] = len(json.loads((out / "000010.json").read_text())["objects"])
+    assert cars == {None: 2, "0.5": 1, "0.9": 1, "0.95": 0}
+    assert f"wirescene: {dets}: no car detections scoring at least 0.95; writing an empty scene" in r.output
+
+
+def test_eval_min_score_over_a_detections_dir_and_a_changed_floor_refits(tmp_path):
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    _scored_boxes(dets / "000010.json")
+    pred = tmp_path / "pred"
+    common = ["eval", KITTI_ROOT, "--frames", "000010", "--variant", "coarse", "--particles", 5, "--workers", 1,
+              "--draws", 0, "--detections", dets, "--predictions", pred]
+    r = run(*common, "--min-score", 0.5)
+    assert r.exit_code == 0, r.output
+    assert len((pred / "coarse" / "000010.txt").read_text().splitlines()) == 4  # 4 of the 8 boxes at 0.9
+    assert json.loads((pred / ".frames" / "000010.json").read_text())["config"]["detections"]["min_score"] == 0.5
+    r = run(*common, "--min-score", 0.05, "--resume")  # another floor: the frame is fitted again, every box
+    assert r.exit_code == 0, r.output
+    assert "written with a different configuration (detections.min_score)" in r.stderr
+    assert len((pred / "coarse" / "000010.txt").read_text().splitlines()) == 8
+    # a floor above every box: the frame has no detections, as with an empty file
+    r = run(*common[:-2], "--min-score", 0.95)
+    assert r.exit_code == 0, r.output
+
+
 def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gpu(tmp_path):
     from wirescene.infer import torch_backend
     from wirescene.infer.torch_backend import choose_device as _resolve_device
@@ -686,7 +732,7 @@ def _parsed_fit_options(*flags):
     ctx = cli_main.fit_cmd.make_context("fit", ["image.png", "--calib", "c.txt", "--out", "o", "--particles", "7",
                                                 "--seed", "3", "--device", "numpy", *flags])
     params = dict(ctx.params)
-    own = ("image", "calib", "detections", "gt", "variant", "particles", "seed", "out")
+    own = ("image", "calib", "detections", "min_score", "gt", "variant", "particles", "seed", "out")
     return cli_main._fit_options(params["particles"], params["seed"], **{k: v for k, v in params.items() if k not in own})
 
 

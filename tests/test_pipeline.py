@@ -160,6 +160,34 @@ def test_record_of_another_configuration_is_refit(reference, tmp_path):
     assert fitted == {"000002"} and len(notes) == 1 and "unreadable" in notes[0]
 
 
+def test_the_score_floor_of_boxes_from_files_is_in_the_resume_records(tmp_path):
+    import pickle
+
+    from wirescene.eval.predict import _config
+    from wirescene.eval.records import config_difference, run_config
+
+    dataset = KittiDataset(KITTI_ROOT)
+    every, floor, other = (DetectionSource(str(tmp_path), min_score=m) for m in (None, 0.5, 0.6))
+    for config in (lambda source: run_config(dataset, VARIANTS, source, OPTS, "parts"),
+                   lambda source: _config(dataset, "coarse", source, OPTS)):
+        # no floor: no key, so that the records written before the option stay valid
+        assert "min_score" not in config(every)["detections"]
+        assert config(floor)["detections"]["min_score"] == 0.5
+        assert config_difference(config(every), config(floor)) == ["detections.min_score"]
+        assert config_difference(config(floor), config(other)) == ["detections.min_score"]
+    # sent to worker processes (and Dask's) whole
+    assert pickle.loads(pickle.dumps(floor)) == floor
+
+
+def test_a_file_whose_boxes_all_fall_below_the_floor_is_a_frame_without_detections(tmp_path):
+    (tmp_path / "000010.json").write_text(json.dumps([{"box": [354.4, 185.5, 549.5, 294.5], "score": 0.3},
+                                                      {"box": [600, 170, 680, 230], "score": 0.7}]))
+    dataset, rng = KittiDataset(KITTI_ROOT), np.random.default_rng(0)
+    scores = {m: DetectionSource(str(tmp_path), min_score=m).for_frame(dataset, "000010", rng).scores.tolist()
+              for m in (None, 0.3, 0.5, 0.8)}
+    assert scores == {None: [0.3, 0.7], 0.3: [0.3, 0.7], 0.5: [0.7], 0.8: []}
+
+
 def test_dask_cluster_equals_serial(reference, tmp_path):
     distributed = pytest.importorskip("distributed")
     ref_reports, ref_dir = reference

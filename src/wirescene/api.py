@@ -673,6 +673,7 @@ def evaluate(
     resume: bool = False,
     models=None,
     settings=None,
+    min_score: float | None = None,
 ):
     """Fit and evaluate variants on a KITTI directory with the paper's protocol.
 
@@ -686,6 +687,10 @@ def evaluate(
     detections : str
         ``"gt"`` (label boxes), ``"bank"`` (our pre-detection) or a directory with one
         detection file per frame.
+    min_score : float, optional
+        With a ``detections`` directory: fit only the boxes scoring at or above it (a file
+        with none left is a frame without detections); None (default) keeps every box. Not
+        with ``"gt"`` or ``"bank"`` (whose floor is ``settings={"predetect.threshold": ...}``).
     frames : iterable of str, optional
         Frame ids (default: every labelled frame).
     split_file : path, optional
@@ -741,6 +746,14 @@ def evaluate(
     problem = empty_path_problem(detections)  # "" (an unset variable) is no name for the current directory
     if problem:
         raise ArgumentError("detections", problem)
+    if min_score is not None:
+        if isinstance(min_score, (bool, np.bool_)) or not isinstance(min_score, numbers.Real):
+            raise ArgumentError("min_score", f"expected a number, got {type(min_score).__name__}")
+        if not np.isfinite(min_score):
+            raise ArgumentError("min_score", f"must be finite, got {min_score!r}")
+        if str(detections) in ("gt", "bank"):
+            raise ArgumentError("min_score", "needs detections from a directory of files, not 'gt' or 'bank'")
+        min_score = float(min_score)
     if frames is not None and split_file is not None:
         raise ArgumentError("split_file", "frames and split_file both choose the frames: give one")
     frame_ids = None
@@ -767,7 +780,7 @@ def evaluate(
     options = _options(None, particles, seed, models, settings, parallel=several and _workers(workers) > 1,
                        casts_rays=casts_rays(names))
     return evaluate_dataset(dataset, names, frames=frame_ids,
-                            source=DetectionSource(str(detections), bank=options.detector_bank,
+                            source=DetectionSource(str(detections), min_score=min_score, bank=options.detector_bank,
                                                    classifier=options.viewpoint_classifier),
                             options=options, workers=_workers(workers),
                             predictions_dir=None if predictions is None else Path(predictions),

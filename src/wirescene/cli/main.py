@@ -25,8 +25,10 @@ from wirescene.cli.options import (
     detections_spec,
     drive_map_option,
     interval_drives,
+    min_score_option,
     models_option,
     particles_option,
+    refuse_min_score,
     say_models,
     say_off_centre_image,
     select_frames,
@@ -343,6 +345,7 @@ def _dask_client(address: str):
 @click.option("--allow-missing-detections", is_flag=True, default=False,
               help="With --detections DIR: frames without a detection file count as frames without detections "
                    "(their number is reported) instead of an error.")
+@min_score_option
 @click.option("--resume/--no-resume", default=False, show_default=True,
               help="Reuse the frames already finished in --predictions DIR (recorded in DIR/.frames/) and fit only the "
                    "rest; a record written with other settings is fitted again. Its frames must be among those chosen "
@@ -354,12 +357,13 @@ def _dask_client(address: str):
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
 def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_file, particles, seeds, split, json_out,
-             predictions, evidence, raw_scores, draws, report_dir, workers, allow_missing_detections, resume,
-             dask_address, **inference):
+             predictions, evidence, raw_scores, draws, report_dir, workers, allow_missing_detections, min_score,
+             resume, dask_address, **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.eval.seeds import format_over_seeds, over_seeds, seed_figures
     from wirescene.io.kitti import KittiDataset
 
+    refuse_min_score(min_score, detections)
     if len(seeds) > MAX_SEEDS:  # each seed evaluates every frame again
         raise click.BadParameter(f"{len(seeds):,} seeds given, at most {MAX_SEEDS} (each evaluates every frame again)",
                                  param_hint="--seed")
@@ -418,7 +422,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
                 dataset, variants, frame_ids, drives, seed=seed, detections=detections, viewpoint_noise=viewpoint_noise,
                 particles=particles, predictions=_seed_dir(predictions, seed, several), evidence=evidence, draws=draws,
                 report_dir=_seed_dir(pages, seed, several), workers=workers,
-                allow_missing=allow_missing_detections, resume=resume, client=client, dask_address=dask_address,
+                allow_missing=allow_missing_detections, min_score=min_score, resume=resume, client=client,
+                dask_address=dask_address,
                 inference=dict(inference), as_json=json_out is not None, notify=notify)
             figures[seed] = seed_figures({v: r.metrics["all"] for v, r in reports.items()}, kitti)
         summary = over_seeds(figures) if several else None
@@ -470,7 +475,7 @@ def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
 
 
 def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, viewpoint_noise, particles, predictions,
-                   evidence, draws, report_dir, workers, allow_missing, resume, client, dask_address,
+                   evidence, draws, report_dir, workers, allow_missing, min_score, resume, client, dask_address,
                    inference, as_json, notify) -> tuple[dict, dict, dict | None]:
     """One seed of ``wirescene eval``: fits, prints its tables and writes its report (its notices
     to ``notify``);
@@ -485,7 +490,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 
     options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address),
                            casts_rays=casts_rays(variants), **inference)
-    source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing,
+    source = DetectionSource(detections, viewpoint_noise, allow_missing=allow_missing, min_score=min_score,
                              bank=options.detector_bank, classifier=options.viewpoint_classifier)
     on_gpu = options.inference.device.startswith("cuda")
     if on_gpu and workers is not None and _parallel(workers, frame_ids, None):  # --workers asked for, and usable
@@ -541,7 +546,8 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 
         write_report(report_dir, reports, gallery=gallery, image_of=dataset.image, intervals=intervals,
                      kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})",
-                     run=run_settings(options, detections=detections, evidence=evidence, fine=casts_rays(variants)),
+                     run=run_settings(options, detections=detections, evidence=evidence, fine=casts_rays(variants),
+                                      min_score=min_score),
                      raw_scores=not options.calibrate_scores)
     return reports, kitti, data
 
@@ -557,6 +563,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
                    "per-frame detection files.")
 @click.option("--allow-missing-detections", is_flag=True, default=False,
               help="With --detections DIR: images without a detection file get an empty label file.")
+@min_score_option
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every image).")
 @split_file_option
 @particles_option
@@ -569,14 +576,15 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 @click.option("--dask", "dask_address", metavar="ADDRESS", default=None,
               help="Fit frames on this running Dask scheduler instead of local processes.")
 @_inference_options
-def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, frames, split_file, particles,
-                seed, workers, resume, dask_address, **inference):
+def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, min_score, frames, split_file,
+                particles, seed, workers, resume, dask_address, **inference):
     """Write KITTI label files (with scores) for every image of a split, labelled or not."""
     from wirescene.eval.predict import predict_dataset
     from wirescene.eval.sources import DetectionSource
     from wirescene.fitting.variants import casts_rays
     from wirescene.io.kitti import KittiDataset
 
+    refuse_min_score(min_score, detections)
     check_output_dir(out, "--out")
     if dask_address is not None:
         kitti_root = kitti_root.resolve()
@@ -592,7 +600,7 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
     try:
         fitted = predict_dataset(dataset, out, variant=variant, options=options, frames=frame_ids, resume=resume,
                                  source=DetectionSource(detections, allow_missing=allow_missing_detections,
-                                                        bank=options.detector_bank,
+                                                        min_score=min_score, bank=options.detector_bank,
                                                         classifier=options.viewpoint_classifier),
                                  workers=_frame_workers(workers, options.inference.device), dask_client=client,
                                  progress=_progress("predict", total),
@@ -729,6 +737,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 @click.option("--detections", type=NonEmptyPath(path_type=Path), default=None,
               help="2D car detections: .json, .csv or KITTI label .txt (see `wirescene.io.detections.read_detections`); "
                    "default: our own pre-detection from raw pixels.")
+@min_score_option
 @click.option("--gt", type=NonEmptyPath(path_type=Path), default=None,
               help="KITTI label file drawn in cyan for comparison.")
 @click.option("--variant", type=click.Choice(_variants()), default="coarse+gp", show_default=True)
@@ -736,7 +745,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), required=True, help="Output directory.")
 @_inference_options
-def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **inference):
+def fit_cmd(image, calib, detections, min_score, gt, variant, particles, seed, out, **inference):
     """Fit the scene model to one image; write KITTI labels, JSON, overlay and bird's-eye view."""
     import warnings
 
@@ -748,6 +757,7 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     from wirescene.io.kitti import read_image, read_labels
     from wirescene.io.outputs import fit_output_paths, fit_outputs_problem, write_fit_outputs
 
+    refuse_min_score(min_score, detections, needs="--detections FILE")
     check_output_dir(out, "--out")
     problem = fit_outputs_problem(fit_output_paths(out, Path(image).stem))
     if problem:  # before the fit, not at its end
@@ -760,8 +770,9 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
     dets = None
     if detections is not None:
         try:
-            dets = read_detections(detections, image_size=(img.shape[1], img.shape[0]))
-        except InputError as exc:  # a frame without cars is a frame, as in eval and predict
+            dets = read_detections(detections, image_size=(img.shape[1], img.shape[0]),
+                                   min_score=-np.inf if min_score is None else min_score)
+        except InputError as exc:  # a frame without cars (or none at --min-score) is a frame, as in eval and predict
             if exc.problem != NO_CARS:
                 raise
             dets = Detections.empty(str(detections))
@@ -770,8 +781,11 @@ def fit_cmd(image, calib, detections, gt, variant, particles, seed, out, **infer
         warnings.simplefilter("ignore", CalibrationWarning)
         estimate = fit(img, camera, dets, variant=variant, options=options)
     if not estimate.cars:
+        # the floor said where it left the file no box
+        floor = f" scoring at least {min_score:g}" if min_score is not None and dets is not None and not len(dets) else ""
         click.echo(f"wirescene: {detections if dets is not None else image}: "
-                   f"{'no car detections' if dets is not None else 'no car found'}; writing an empty scene", err=True)
+                   f"{f'no car detections{floor}' if dets is not None else 'no car found'}; writing an empty scene",
+                   err=True)
     paths = write_fit_outputs(out, Path(image).stem, image=img, camera=camera, estimate=estimate,
                               detections=estimate.detections, gt=gt_objs)
     for kind, p in paths.items():

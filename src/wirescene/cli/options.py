@@ -100,6 +100,44 @@ def detections_spec(ctx, param, value: str) -> str:
     return value
 
 
+def min_score_option(f):
+    """``--min-score FLOAT``: the score floor of boxes read from files (``--detections FILE``
+    of ``fit``, ``--detections DIR`` of ``eval`` and ``predict``; :func:`refuse_min_score`
+    refuses it with other boxes)."""
+    return click.option("--min-score", type=FiniteFloat(), default=None,
+                        help="With --detections FILE/DIR: fit only the boxes scoring at or above this (score >= "
+                             "FLOAT; default: every box); a file with none left is an image without cars. A "
+                             "detector's raw output (COCO-style result files keep ~100 boxes an image, most at low "
+                             "scores) costs about 0.07 s a box with coarse and 0.5-0.8 s with full, and each "
+                             "low-score box fitted is a false 3D car.")(f)
+
+
+def refuse_min_score(min_score: float | None, detections, *, needs: str = "--detections DIR") -> None:
+    """A ``click.UsageError`` where ``--min-score`` is given without boxes from files: with
+    ``detections`` ``"gt"`` (label boxes), ``"bank"`` or None (our own pre-detection, whose
+    floor is ``--detection-threshold``); ``needs``: the option that reads files.
+
+    Examples
+    --------
+    >>> refuse_min_score(None, "gt"), refuse_min_score(0.5, "dets")  # no floor, or boxes from files: nothing
+    (None, None)
+    >>> refuse_min_score(0.5, "gt")
+    Traceback (most recent call last):
+    ...
+    click.exceptions.UsageError: --min-score needs --detections DIR: label boxes ('gt') are all fitted
+    >>> refuse_min_score(0.0, None, needs="--detections FILE")
+    Traceback (most recent call last):
+    ...
+    click.exceptions.UsageError: --min-score needs --detections FILE: our own boxes' floor is --detection-threshold
+    """
+    if min_score is None:
+        return
+    if detections is None or (isinstance(detections, str) and detections == "bank"):
+        raise click.UsageError(f"--min-score needs {needs}: our own boxes' floor is --detection-threshold")
+    if isinstance(detections, str) and detections == "gt":
+        raise click.UsageError(f"--min-score needs {needs}: label boxes ('gt') are all fitted")
+
+
 def _check_creatable(path: Path, option: str) -> None:
     """The directories above ``path`` exist or can be created and written."""
     problem = creatable_problem(path)

@@ -262,7 +262,8 @@ def _href(name: str) -> str:
     return html.escape(urllib.parse.quote(name))
 
 
-def run_settings(options, *, detections: str, evidence: str = "parts", fine: bool = True) -> dict[str, str]:
+def run_settings(options, *, detections: str, evidence: str = "parts", fine: bool = True,
+                 min_score: float | None = None) -> dict[str, str]:
     """What made an evaluation run, for its report page: the package, the pre-detections, the
     seed, the scene particles, the device, the trained models the fit reads (file, or
     ``shipped``, and the start of its SHA-256; :func:`~wirescene.fitting.models.model_files_read`)
@@ -278,6 +279,8 @@ def run_settings(options, *, detections: str, evidence: str = "parts", fine: boo
         The fine variants' evidence (``parts`` or ``oracle``).
     fine : bool
         A fine variant was fitted (the part and shape models are read).
+    min_score : float, optional
+        The score floor of the boxes of detection files (``--min-score``; None: every box).
 
     Returns
     -------
@@ -291,7 +294,8 @@ def run_settings(options, *, detections: str, evidence: str = "parts", fine: boo
     from wirescene.fitting.pipeline import FitOptions
 
     named = {"gt": "label boxes", "bank": "own pre-detection"}
-    out = {"wirescene": __version__, "pre-detections": named.get(detections, f"files in {detections}"),
+    files = f"files in {detections}" + ("" if min_score is None else f", boxes scoring at least {min_score:g}")
+    out = {"wirescene": __version__, "pre-detections": named.get(detections, files),
            "evidence of the fine variants": evidence, "seed": str(options.seed),
            "scene particles": str(options.lifting.n_particles), "device": str(options.inference.device)}
     for name, digest in models_fingerprint(options, fine=fine, own=detections == "bank", evidence=evidence).items():

@@ -28,6 +28,9 @@ class DetectionSource:
 
     A frame without a detection file in the directory is an error, unless
     ``allow_missing`` (then it has no detections, and :meth:`missing_frames` counts it).
+    ``min_score``: of a directory's files, only the boxes scoring at or above it are kept
+    (``read_detections(min_score=...)``; a file with none left is a frame without
+    detections); None keeps every box. It does not apply to ``gt`` or ``bank``.
 
     Examples
     --------
@@ -39,6 +42,9 @@ class DetectionSource:
     ...     source = DetectionSource(tmp, allow_missing=True)
     ...     source.detection_file("000001").name, source.missing_frames(["000001", "000002"])
     ('000001.json', ['000002'])
+    >>> import pickle  # sent to worker processes and Dask workers as it is
+    >>> pickle.loads(pickle.dumps(DetectionSource("dets", min_score=0.5))).min_score
+    0.5
     """
 
     spec: str = "gt"
@@ -46,6 +52,7 @@ class DetectionSource:
     allow_missing: bool = False
     bank: str | None = None  # detector bank file for "bank" (None: the shipped one)
     classifier: str | None = None  # crop viewpoint classifier file for "bank" (None: the shipped one)
+    min_score: float | None = None  # score floor of the boxes of a directory's files (None: every box)
 
     @property
     def folder(self) -> Path | None:
@@ -119,9 +126,10 @@ class DetectionSource:
                 raise InputError(f"no detection file for frame {frame_id}", path=self.folder)
             return Detections.empty(str(self.folder))
         try:
-            return read_detections(path, image_size=dataset.image_size(frame_id))
+            return read_detections(path, image_size=dataset.image_size(frame_id),
+                                   min_score=-np.inf if self.min_score is None else self.min_score)
         except InputError as exc:
-            if exc.problem == NO_CARS:
+            if exc.problem == NO_CARS:  # no car in the file, or none scoring at least min_score
                 return Detections.empty(str(path))
             raise
 
