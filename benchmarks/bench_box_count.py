@@ -4,7 +4,8 @@ Boxes read from another detector's files are all fitted (``--min-score`` cuts th
 detector's raw output costs the fit per box. This times ``wirescene.fit`` on one frame with
 N boxes drawn at random (heights 25-120 px, widths 1-2.5 heights, bottoms in the lower half
 of the image, seeded), for each N of ``--boxes`` and each ``--variant``, one thread, after
-a warm-up fit, and prints the seconds per box above the fit of no box.
+a warm-up fit, and prints the seconds a box on average at each N and between the two
+largest N (a box added to many can cost more than one added to few).
 
 Usage: python benchmarks/bench_box_count.py [--root src/wirescene/data/sample/kitti] [--frame 000010]
        [--boxes 0 10 50] [--variant coarse --variant full] [--particles 250]
@@ -59,11 +60,12 @@ def main() -> None:
             t0 = time.perf_counter()
             wirescene.fit(image, camera.P, boxes, variant=variant, particles=args.particles)
             seconds[n] = time.perf_counter() - t0
-        base = seconds.get(0)
         cells = ", ".join(f"{n} boxes {s:.2f} s" for n, s in seconds.items())
-        per = "" if base is None else "; per box above none: " + ", ".join(
-            f"{(s - base) / n:.3f} s ({n})" for n, s in seconds.items() if n)
-        print(f"{variant}: {cells}{per}")
+        ns = sorted(n for n in seconds if n)
+        per = ", ".join(f"{seconds[n] / n:.3f} s ({n})" for n in ns)
+        last = "" if len(ns) < 2 else (f"; each box from {ns[-2]} to {ns[-1]}: "
+                                       f"{(seconds[ns[-1]] - seconds[ns[-2]]) / (ns[-1] - ns[-2]):.3f} s")
+        print(f"{variant}: {cells}; a box on average {per}{last}")
 
 
 if __name__ == "__main__":

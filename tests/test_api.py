@@ -365,11 +365,12 @@ def test_evaluate_min_score_floors_the_boxes_of_detection_files(tmp_path):
     dets.mkdir()
     (dets / f"{FRAME}.json").write_text(json.dumps([{"box": [354.43, 185.52, 549.52, 294.49], "score": 0.9},
                                                     {"box": [600.0, 170.0, 680.0, 230.0], "score": 0.1}]))
-    for bad, says in ((float("nan"), "must be finite"), (np.inf, "must be finite"), ("0.5", "expected a number"),
-                      (True, "expected a number")):
+    for bad, says in ((float("nan"), "must be a finite number"), (np.inf, "must be a finite number"),
+                      ("0.5", "must be a finite number"), (True, "must be a finite number"),
+                      (10**400, "must be a finite number")):
         with pytest.raises(wirescene.ArgumentError, match=f"^min_score: {says}"):
             wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=[FRAME], detections=dets, min_score=bad)
-    with pytest.raises(wirescene.ArgumentError, match="^min_score: needs detections from a directory"):
+    with pytest.raises(wirescene.ArgumentError, match=r"^min_score: needs detection files: label boxes \('gt'\)"):
         wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=[FRAME], min_score=0.5)  # label boxes
     fitted = {}
     for m in (None, 0.5):

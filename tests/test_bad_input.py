@@ -336,12 +336,13 @@ CASES = {
     "fit --min-score nan": (lambda t: _fit_case(t, extra=("--min-score", "nan")), "--min-score: 'nan' is not finite"),
     "fit --min-score without --detections": (
         lambda t: _fit_case(t)[:4] + ["--min-score", "0.5", "--out", t / "out"],
-        "--min-score needs --detections FILE: our own boxes' floor is --detection-threshold"),
+        "--min-score needs --detections FILE: our own pre-detection's floor is its detection threshold "
+        r"\(--detection-threshold\)$"),
     "eval --min-score with label boxes": (lambda t: _eval_case(t, "--detections", "gt", "--min-score", "0.5"),
                                           r"--min-score needs --detections DIR: label boxes \('gt'\) are all fitted"),
     "predict --min-score with our own boxes": (
         lambda t: ["predict", KITTI_ROOT, "--split", "training", "--frames", FRAME, "--out", t / "pred", "--min-score",
-                   "0.5"], "--min-score needs --detections DIR: our own boxes' floor is --detection-threshold"),
+                   "0.5"], r"--min-score needs --detections DIR: our own pre-detection's floor is its detection threshold"),
     "eval detections: two files for one frame": (
         lambda t: _eval_case(t, "--detections", _dets_dir(t, {f"{FRAME}.json": '{"detections": []}',
                                                               f"{FRAME}.txt": ""})),
@@ -579,10 +580,11 @@ CASES = {
     # a number where a path goes was Path(5)'s TypeError, a traceback
     "train all --set parts.synth_cache a number": (
         lambda t: ["train", "all", KITTI_ROOT, "--out", t / "m", "--set", "parts.synth_cache=5", "--frames", "424242"],
-        r"^wirescene: error: --set: parts\.synth_cache must be a path, got 5$"),
+        r"^wirescene: error: --set: parts\.synth_cache must be a path, got 5 \(a name of digits or a JSON word: \./5\)$"),
     "train all --set parts.label_shapes empty": (
         lambda t: ["train", "all", KITTI_ROOT, "--out", t / "m", "--set", "parts.label_shapes=", "--frames", "424242"],
-        r"^wirescene: error: --set: parts\.label_shapes must be a path, got ''$"),
+        r"^wirescene: error: --set: parts\.label_shapes is not an option of train all \(it is `wirescene train parts "
+        r"--label-shapes FILE`'s\)$"),
     "eval of an empty KITTI_ROOT": (lambda t: ["eval", "", "--variant", "coarse"],
                                     r"^wirescene: error: KITTI_ROOT: empty path \(give a directory"),
     # --detections "$DETS" unset: a directory name, not a path type, and read as the current directory

@@ -392,8 +392,9 @@ def test_eval_min_score_over_a_detections_dir_and_a_changed_floor_refits(tmp_pat
     assert "written with a different configuration (detections.min_score)" in r.stderr
     assert len((pred / "coarse" / "000010.txt").read_text().splitlines()) == 8
     # a floor above every box: the frame has no detections, as with an empty file
-    r = run(*common[:-2], "--min-score", 0.95)
+    r = run(*common[:-1], tmp_path / "pred-none", "--min-score", 0.95)
     assert r.exit_code == 0, r.output
+    assert (tmp_path / "pred-none" / "coarse" / "000010.txt").read_text() == ""
 
 
 def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gpu(tmp_path):

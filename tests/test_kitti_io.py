@@ -278,3 +278,22 @@ def test_wireframe_ground_truth_that_cannot_be_read_is_an_input_error(tmp_path):
     with pytest.raises(InputError, match="cannot read the wireframe ground truth") as info:
         read_wireframe_gt(folder)
     assert str(folder) in str(info.value)
+
+
+def test_a_score_floor_keeps_the_boxes_at_or_above_it_and_checks_every_box_first(tmp_path):
+    """read_detections(min_score=): boxes scoring the floor or more stay, a box without a score scores 1, none
+    left is NO_CARS; a box outside the image is refused even where the floor would drop it (a file of another
+    image), and named by its place in the file."""
+    import json
+
+    from wirescene.io.detections import NO_CARS, read_detections
+
+    path = tmp_path / "dets.json"
+    path.write_text(json.dumps([{"box": [10, 10, 50, 40], "score": 0.2}, {"box": [60, 10, 90, 40], "score": 0.5},
+                                {"box": [100, 10, 140, 40]}]))
+    assert read_detections(path, min_score=0.5).scores.tolist() == [0.5, 1.0]
+    with pytest.raises(InputError, match=NO_CARS):
+        read_detections(path, min_score=1.5)
+    path.write_text(json.dumps([{"box": [10, 10, 50, 40], "score": 0.9}, {"box": [5000, 10, 5100, 40], "score": 0.1}]))
+    with pytest.raises(InputError, match="box 1 lies entirely outside the 1242x375 image"):
+        read_detections(path, min_score=0.5, image_size=(1242, 375))

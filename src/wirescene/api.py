@@ -730,7 +730,7 @@ def evaluate(
     True
     """
     from wirescene.eval.runner import evaluate_dataset
-    from wirescene.eval.sources import DetectionSource
+    from wirescene.eval.sources import DetectionSource, min_score_problem
     from wirescene.io.kitti import KittiDataset
 
     names = _variant_names(variants, "variants")
@@ -746,14 +746,10 @@ def evaluate(
     problem = empty_path_problem(detections)  # "" (an unset variable) is no name for the current directory
     if problem:
         raise ArgumentError("detections", problem)
-    if min_score is not None:
-        if isinstance(min_score, (bool, np.bool_)) or not isinstance(min_score, numbers.Real):
-            raise ArgumentError("min_score", f"expected a number, got {type(min_score).__name__}")
-        if not np.isfinite(min_score):
-            raise ArgumentError("min_score", f"must be finite, got {min_score!r}")
-        if str(detections) in ("gt", "bank"):
-            raise ArgumentError("min_score", "needs detections from a directory of files, not 'gt' or 'bank'")
-        min_score = float(min_score)
+    problem = min_score_problem(min_score, str(detections))
+    if problem:
+        raise ArgumentError("min_score", problem if problem.startswith("must") else f"needs detection files: {problem}")
+    min_score = None if min_score is None else float(min_score)
     if frames is not None and split_file is not None:
         raise ArgumentError("split_file", "frames and split_file both choose the frames: give one")
     frame_ids = None

@@ -39,6 +39,7 @@ higher; measured 0.20 m on the baja-bug and at most 0.055 m on the road cars). M
 from __future__ import annotations
 
 import os
+import re
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -211,8 +212,8 @@ def _obj_problem(path: Path) -> str | None:
     'OBJ line 3: vertex reference 3 out of range (the file has 2 vertices)'
     """
     try:
-        # lines end at "\n" only: str.splitlines would also break at the latin-1 reading of UTF-8 bytes such as 0x85
-        lines = [line.partition("#")[0].split() for line in path.read_text(encoding="latin-1").split("\n")]
+        # lines end at \n, \r\n or \r: str.splitlines would also break at the latin-1 reading of UTF-8 bytes (0x85)
+        lines = [line.partition("#")[0].split() for line in re.split(r"\r\n?|\n", path.read_text(encoding="latin-1"))]
     except OSError:
         return None
     n = sum(tokens[:1] == ["v"] for tokens in lines)

@@ -108,14 +108,14 @@ def min_score_option(f):
                         help="With --detections FILE/DIR: fit only the boxes scoring at or above this (score >= "
                              "FLOAT; default: every box); a file with none left is an image without cars. A "
                              "detector's raw output (COCO-style result files keep ~100 boxes an image, most at low "
-                             "scores) costs about 0.07 s a box with coarse and 0.5-0.8 s with full, and each "
+                             "scores) costs the fit some 3.5 s a frame of 50 boxes with coarse and 38 s with full, and each "
                              "low-score box fitted is a false 3D car.")(f)
 
 
 def refuse_min_score(min_score: float | None, detections, *, needs: str = "--detections DIR") -> None:
-    """A ``click.UsageError`` where ``--min-score`` is given without boxes from files: with
-    ``detections`` ``"gt"`` (label boxes), ``"bank"`` or None (our own pre-detection, whose
-    floor is ``--detection-threshold``); ``needs``: the option that reads files.
+    """A ``click.UsageError`` where ``--min-score`` is given without boxes from files
+    (:func:`wirescene.eval.sources.min_score_problem`: with ``detections`` ``"gt"``, or
+    ``"bank"`` / None, our own pre-detection); ``needs``: the option that reads files.
 
     Examples
     --------
@@ -128,14 +128,15 @@ def refuse_min_score(min_score: float | None, detections, *, needs: str = "--det
     >>> refuse_min_score(0.0, None, needs="--detections FILE")
     Traceback (most recent call last):
     ...
-    click.exceptions.UsageError: --min-score needs --detections FILE: our own boxes' floor is --detection-threshold
+    click.exceptions.UsageError: --min-score needs --detections FILE: our own pre-detection's floor is its detection \
+threshold (--detection-threshold)
     """
-    if min_score is None:
-        return
-    if detections is None or (isinstance(detections, str) and detections == "bank"):
-        raise click.UsageError(f"--min-score needs {needs}: our own boxes' floor is --detection-threshold")
-    if isinstance(detections, str) and detections == "gt":
-        raise click.UsageError(f"--min-score needs {needs}: label boxes ('gt') are all fitted")
+    from wirescene.eval.sources import min_score_problem
+
+    problem = min_score_problem(min_score, detections if detections is None else str(detections))
+    if problem:
+        hint = " (--detection-threshold)" if problem.startswith("our own") else ""
+        raise click.UsageError(f"--min-score needs {needs}: {problem}{hint}")
 
 
 def _check_creatable(path: Path, option: str) -> None:

@@ -12,6 +12,7 @@ import numpy as np
 
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
+from wirescene.core.validate import finite_real
 from wirescene.io.detections import NO_CARS, detections_from_labels, read_detections
 from wirescene.io.kitti import KittiDataset
 
@@ -132,6 +133,30 @@ class DetectionSource:
             if exc.problem == NO_CARS:  # no car in the file, or none scoring at least min_score
                 return Detections.empty(str(path))
             raise
+
+
+def min_score_problem(min_score, spec) -> str | None:
+    """Why ``min_score`` cannot floor the boxes of the detections ``spec`` (``DetectionSource.spec``;
+    None: our own pre-detection), or None: it must be a finite number, and only boxes read
+    from files have such a floor (label boxes are all fitted, our own pre-detection has its
+    detection threshold). The command line and the API each name their own option.
+
+    Examples
+    --------
+    >>> min_score_problem(None, "gt"), min_score_problem(0.5, "dets")
+    (None, None)
+    >>> min_score_problem(float("nan"), "dets"), min_score_problem(0.5, "gt")
+    ('must be a finite number, got nan', "label boxes ('gt') are all fitted")
+    """
+    if min_score is None:
+        return None
+    if not finite_real(min_score):
+        return f"must be a finite number, got {min_score!r}"
+    if spec is None or str(spec) == "bank":
+        return "our own pre-detection's floor is its detection threshold"
+    if str(spec) == "gt":
+        return "label boxes ('gt') are all fitted"
+    return None
 
 
 def frame_seed(seed: int, frame_id: str) -> np.random.Generator:

@@ -192,8 +192,10 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     unknown viewpoint in every format, and so is NaN in JSON and CSV; any other beyond one
     turn (2 pi) is refused as an angle in degrees.
 
-    With ``image_size`` (width, height), every box must overlap the image
-    (:func:`wirescene.core.validate.boxes_problem`).
+    A box given without a score (JSON, CSV, a KITTI file of 15 columns) scores 1. Only the
+    boxes scoring ``min_score`` or more are kept (a file left without one is an
+    :class:`InputError` of :data:`NO_CARS`). With ``image_size`` (width, height), every box,
+    kept or not, must overlap the image (:func:`wirescene.core.validate.boxes_problem`).
 
     Raises
     ------
@@ -256,11 +258,10 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
         dets = _from_entries(rows, path)
     else:
         raise InputError(f"unknown detections format {suffix!r} (use .json, .csv or a KITTI .txt)", path=path)
-    keep = dets.scores >= min_score
-    dets = dets.subset(keep)
-    if len(dets) == 0:
-        raise InputError(NO_CARS, path=path)
-    problem = boxes_problem(dets.boxes, image_size)
+    problem = boxes_problem(dets.boxes, image_size)  # every box, before the floor: a file of another image is one
     if problem:
         raise InputError(problem, path=path)
+    dets = dets.subset(dets.scores >= min_score)
+    if len(dets) == 0:
+        raise InputError(NO_CARS, path=path)
     return dets

@@ -196,7 +196,9 @@ OPTION_CHOICES: dict[str, dict[str, tuple]] = {"parts": {"class_weight": ("balan
 #: The numeric options that None also sets (all: no cap).
 OPTION_NONE: dict[str, tuple] = {"parts": ("max_real_patches",), "detector": ("mining_images",)}
 #: ``{step: options}`` that name a file or directory (None: none): a path's text, never a number or "".
-OPTION_PATHS: dict[str, tuple] = {"parts": ("synth_cache", "label_shapes", "kitti_background")}
+OPTION_PATHS: dict[str, tuple] = {"parts": ("synth_cache", "kitti_background")}
+#: ``{step: options}`` that a ``--set`` text cannot give (an array a command reads from a file), with that command.
+OPTION_UNSET: dict[str, dict] = {"parts": {"label_shapes": "wirescene train parts --label-shapes FILE"}}
 
 
 def _checked_value(step: str, key: str, value):
@@ -221,8 +223,11 @@ def _checked_value(step: str, key: str, value):
         return None
     if key in OPTION_PATHS.get(step, ()):
         if value is not None and (not isinstance(value, str) or not value.strip()):
-            raise ValueError(f"{step}.{key} must be a path, got {value!r}")
+            hint = f" (a name of digits or a JSON word: ./{value})" if isinstance(value, (int, float)) else ""
+            raise ValueError(f"{step}.{key} must be a path, got {value!r}{hint}")
         return value
+    if key in OPTION_UNSET.get(step, {}) and value is not None:
+        raise ValueError(f"{step}.{key} is not an option of train all (it is `{OPTION_UNSET[step][key]}`'s)")
     if (step, key) == ("occlusion", "grid") and value is not None:  # the c values the calibration tries
         if not isinstance(value, (list, tuple)) or not value or not all(finite_real(v) for v in value):
             raise ValueError(f"occlusion.grid must be a list of numbers, got {value!r}")
