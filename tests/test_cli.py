@@ -397,6 +397,22 @@ def test_eval_min_score_over_a_detections_dir_and_a_changed_floor_refits(tmp_pat
     assert (tmp_path / "pred-none" / "coarse" / "000010.txt").read_text() == ""
 
 
+def test_predict_min_score_floors_the_boxes_and_a_changed_floor_is_refused_on_resume(tmp_path):
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    _scored_boxes(dets / "000010.json")
+    out = tmp_path / "submission"
+    common = ["predict", KITTI_ROOT, "--split", "training", "--frames", "000010", "--variant", "coarse", "--particles", 5,
+              "--workers", 1, "--detections", dets, "--out", out]
+    r = run(*common, "--min-score", 0.5)
+    assert r.exit_code == 0, r.output
+    assert len((out / "000010.txt").read_text().splitlines()) == 4  # 4 of the 8 boxes at 0.9
+    assert run(*common, "--min-score", 0.5, "--resume").exit_code == 0  # the same floor: kept
+    r = run(*common, "--min-score", 0.05, "--resume")  # another floor: the folder's labels were written otherwise
+    assert r.exit_code == 2 and "detections.min_score" in r.stderr, r.output
+    assert len((out / "000010.txt").read_text().splitlines()) == 4
+
+
 def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gpu(tmp_path):
     from wirescene.infer import torch_backend
     from wirescene.infer.torch_backend import choose_device as _resolve_device

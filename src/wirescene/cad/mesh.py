@@ -48,6 +48,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from wirescene.core.errors import InputError
+from wirescene.core.validate import path_problem
 
 __all__ = [
     "CarMesh",
@@ -110,12 +111,17 @@ def default_cad_dir() -> Path:
     return Path(env) if env else Path("..") / "shared" / "data" / "cad" / "torcs"
 
 
+#: What a missing CAD directory's error says (where one is named).
+CAD_DIR_MISSING = "CAD directory not found (pass --cad-dir or set WIRESCENE_CAD_DIR)"
+
+
 def list_cad_files(cad_dir) -> list[Path]:
     """Sorted mesh files (by suffix) in ``cad_dir`` and in its subfolders one level down
     (Speed Dreams keeps one folder per car); :class:`InputError` if there are none."""
     cad_dir = Path(cad_dir)
-    if not cad_dir.is_dir():
-        raise InputError("CAD directory not found (set --cad-dir or WIRESCENE_CAD_DIR)", path=cad_dir)
+    problem = path_problem(cad_dir, "CAD", directory=True, missing=CAD_DIR_MISSING)
+    if problem:
+        raise InputError(problem, path=cad_dir)
     found = [*cad_dir.glob("*"), *cad_dir.glob("*/*")]
     files = sorted((p for p in found if p.suffix.lower() in MESH_SUFFIXES and p.is_file()),
                    key=lambda p: (p.name, p.as_posix()))
@@ -173,8 +179,9 @@ def read_mesh(path) -> tuple[np.ndarray, np.ndarray]:
 def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]:
     if suffix not in MESH_SUFFIXES:
         raise InputError(f"unsupported mesh format {suffix!r} (use one of {', '.join(MESH_SUFFIXES)})", path=path)
-    if not path.is_file():
-        raise InputError("mesh file not found", path=path)
+    problem = path_problem(path, "mesh")
+    if problem:
+        raise InputError(problem, path=path)
     import trimesh
 
     try:

@@ -20,11 +20,13 @@ MAX_AUGMENT = 10_000
 
 
 def _cad_dir(value) -> Path:
-    from wirescene.cad.mesh import default_cad_dir
+    from wirescene.cad.mesh import CAD_DIR_MISSING, default_cad_dir
+    from wirescene.core.validate import path_problem
 
     d = Path(value) if value else default_cad_dir()
-    if not d.is_dir():
-        raise InputError("CAD directory not found (pass --cad-dir or set WIRESCENE_CAD_DIR)", path=d)
+    problem = path_problem(d, "CAD", directory=True, missing=CAD_DIR_MISSING)
+    if problem:
+        raise InputError(problem, path=d)
     return d
 
 
