@@ -1,15 +1,16 @@
 """The pipeline's own pre-detection of this checkout against another checkout's, side by side.
 
 :func:`wirescene.fitting.pipeline.detect_own` (the shipped bank at the fit's threshold, with the
-enlarged image's cars where the checkout's default adds them, then the box rule's viewpoints) runs in two worker processes, one importing this checkout's ``src``, the
-other ``--other``'s (e.g. ``git worktree add BASE REV``, then ``--other BASE/src``),
-each on one core (BLAS threads 1). They take the frames in turn, frame by frame, so that a
-change in the machine's speed falls on both alike; each reports the CPU seconds of its call
-(= seconds on one free core). Prints the mean seconds a frame of each, their ratio, and whether
-the two give the same detections (boxes, scores and viewpoints to the bit, or how far apart).
-``--fold-banks`` / ``--fold-classifiers`` (path patterns with ``{k}``) detect each frame with the
-bank and crop classifier of its fold (:func:`wirescene.io.folds.fold_of`), trained without its
-drives: the models the README's held-out figures from our own boxes come from.
+enlarged image's cars where the checkout's default adds them, then the box rule's viewpoints)
+runs in two worker processes, one importing this checkout's ``src``, the other ``--other``'s
+(e.g. ``git worktree add BASE REV``, then ``--other BASE/src``), each on one core (BLAS threads
+1). They take the frames in turn, frame by frame, so that a change in the machine's speed falls
+on both alike; each reports the CPU seconds of its call (= seconds on one free core). Prints the
+mean seconds a frame of each, their ratio, and whether the two give the same detections (boxes,
+scores and viewpoints to the bit, or how far apart). ``--fold-banks`` / ``--fold-classifiers``
+(path patterns with ``{k}``) detect each frame with the bank and crop classifier of its fold
+(:func:`wirescene.io.folds.fold_of`), trained without its drives: the models the README's
+held-out figures from our own boxes come from.
 
     python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other BASE/src [--frames 24]
     python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other BASE/src --frames 72 \

@@ -737,9 +737,12 @@ def evaluate(
     for name, value in (("kitti_root", kitti_root), ("predictions", predictions)):
         if not (isinstance(value, (str, Path)) or (value is None and name == "predictions")):
             raise ArgumentError(name, f"expected a directory path, got {type(value).__name__}")
-        problem = empty_path_problem(value)  # "" (an unset variable) is no name for the current directory
-        if problem:
-            raise ArgumentError(name, problem)
+    problem = empty_path_problem(kitti_root)  # "" (an unset variable) is no name for the current directory
+    if problem:
+        raise ArgumentError("kitti_root", problem)
+    problem = None if predictions is None else output_dir_problem(predictions)  # "" too, as for kitti_root
+    if problem:  # before any fit, as the CLI's --predictions
+        raise ArgumentError("predictions", problem)
     dataset = KittiDataset(kitti_root)
     if not isinstance(detections, (str, Path)):
         raise ArgumentError("detections", f"expected 'gt', 'bank' or a directory, got {type(detections).__name__}")
@@ -770,9 +773,6 @@ def evaluate(
     several = frame_ids is None or len(frame_ids) > 1
     if resume and predictions is None:
         raise ArgumentError("resume", "needs predictions, the directory where finished frames are recorded")
-    problem = None if predictions is None else output_dir_problem(predictions)
-    if problem:  # before any fit, as the CLI's --predictions
-        raise ArgumentError("predictions", problem)
     options = _options(None, particles, seed, models, settings, parallel=several and _workers(workers) > 1,
                        casts_rays=casts_rays(names))
     return evaluate_dataset(dataset, names, frames=frame_ids,

@@ -111,15 +111,12 @@ def default_cad_dir() -> Path:
     return Path(env) if env else Path("..") / "shared" / "data" / "cad" / "torcs"
 
 
-#: What a missing CAD directory's error says (where one is named).
-CAD_DIR_MISSING = "CAD directory not found (pass --cad-dir or set WIRESCENE_CAD_DIR)"
-
-
 def list_cad_files(cad_dir) -> list[Path]:
     """Sorted mesh files (by suffix) in ``cad_dir`` and in its subfolders one level down
     (Speed Dreams keeps one folder per car); :class:`InputError` if there are none."""
     cad_dir = Path(cad_dir)
-    problem = path_problem(cad_dir, "CAD", directory=True, missing=CAD_DIR_MISSING)
+    problem = path_problem(cad_dir, "CAD", directory=True,
+                           missing="CAD directory not found (pass --cad-dir or set WIRESCENE_CAD_DIR)")
     if problem:
         raise InputError(problem, path=cad_dir)
     found = [*cad_dir.glob("*"), *cad_dir.glob("*/*")]

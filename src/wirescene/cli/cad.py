@@ -20,14 +20,10 @@ MAX_AUGMENT = 10_000
 
 
 def _cad_dir(value) -> Path:
-    from wirescene.cad.mesh import CAD_DIR_MISSING, default_cad_dir
-    from wirescene.core.validate import path_problem
+    """``--cad-dir``, or the default one (checked where its files are listed, ``list_cad_files``)."""
+    from wirescene.cad.mesh import default_cad_dir
 
-    d = Path(value) if value else default_cad_dir()
-    problem = path_problem(d, "CAD", directory=True, missing=CAD_DIR_MISSING)
-    if problem:
-        raise InputError(problem, path=d)
-    return d
+    return Path(value) if value else default_cad_dir()
 
 
 def _find(cad_dir: Path, name: str) -> Path:

@@ -161,8 +161,8 @@ class _Group(click.Group):
             what = ("a worker process was stopped (by the system, for memory?)" if isinstance(exc, BrokenProcessPool)
                     else f"out of memory ({' '.join(str(exc).split()) or 'MemoryError'})")
             click.echo(f"wirescene: error: {what}; ask for less (fewer --samples or --workers, --upsample 1, a "
-                       "larger --smallest-car) or use a larger machine; frames an --out or --predictions folder holds stay "
-                       "(remove it to run with other settings)", err=True)
+                       "larger --smallest-car) or use a larger machine; frames an --out or --predictions folder holds "
+                       "stay (remove it to run with other settings)", err=True)
             sys.exit(1)
         except KeyboardInterrupt as exc:  # the shell's convention (128 + the signal), not click's "Aborted!" and 1
             _Stopping.exiting = True
@@ -770,8 +770,7 @@ def fit_cmd(image, calib, detections, min_score, gt, variant, particles, seed, o
     dets = None
     if detections is not None:
         try:
-            dets = read_detections(detections, image_size=(img.shape[1], img.shape[0]),
-                                   min_score=-np.inf if min_score is None else min_score)
+            dets = read_detections(detections, image_size=(img.shape[1], img.shape[0]), min_score=min_score)
         except InputError as exc:  # a frame without cars (or none at --min-score) is a frame, as in eval and predict
             if exc.problem != NO_CARS:
                 raise

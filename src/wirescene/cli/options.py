@@ -108,8 +108,8 @@ def min_score_option(f):
                         help="With --detections FILE/DIR: fit only the boxes scoring at or above this (score >= "
                              "FLOAT; default: every box); a file with none left is an image without cars. A "
                              "detector's raw output (COCO-style result files keep ~100 boxes an image, most at low "
-                             "scores) costs the fit some 3.5 s a frame of 50 boxes with coarse and 38 s with full, and each "
-                             "low-score box fitted is a false 3D car.")(f)
+                             "scores) costs the fit some 3.5 s a frame of 50 boxes with coarse and 38 s with full, "
+                             "and each low-score box fitted is a false 3D car.")(f)
 
 
 def refuse_min_score(min_score: float | None, detections, *, needs: str = "--detections DIR") -> None:

@@ -51,9 +51,7 @@ def _config(dataset: KittiDataset, variant: str, source: DetectionSource, option
     read = {"fine": get_variant(variant).fine, "own": source.own, "evidence": "parts"}
     config = {"format": format_tag("predict-config", 1), "wirescene": __version__,
               "dataset": str(Path(dataset.split_dir).resolve()), "variant": variant,
-              "detections": {"spec": spec, "allow_missing": source.allow_missing,
-                             # absent without a floor, as in a .predict.json written before it
-                             **({} if source.min_score is None else {"min_score": float(source.min_score)})},
+              "detections": {"spec": spec, "allow_missing": source.allow_missing, **source.floor_record()},
               "options": options_read(options, **read), "models": models_fingerprint(options, **read)}
     return json.loads(json.dumps(config, default=str))
 

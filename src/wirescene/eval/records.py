@@ -58,8 +58,7 @@ def run_config(
                        "allow_missing": bool(source.allow_missing),
                        # the bank that finds our own boxes (another source's are found without it)
                        "bank": None if source.bank is None or not source.own else str(Path(source.bank).resolve()),
-                       # the score floor of boxes from files; absent without one, as in records written before it
-                       **({} if source.min_score is None else {"min_score": float(source.min_score)})},
+                       **source.floor_record()},
         "evidence": evidence,
         "options": options_read(options, **read),
         # the artefacts' content, not only their paths: a model retrained in place refits

@@ -87,6 +87,17 @@ class DetectionSource:
                              "--allow-missing-detections treats such frames as having none", path=self.folder)
         return missing
 
+    def floor_record(self) -> dict:
+        """The score floor as a run's settings record holds it: ``{"min_score": S}``, or ``{}``
+        without one (as in records written before the floor existed, which so still match).
+
+        Examples
+        --------
+        >>> DetectionSource("dets", min_score=0.5).floor_record(), DetectionSource("dets").floor_record()
+        ({'min_score': 0.5}, {})
+        """
+        return {} if self.min_score is None else {"min_score": float(self.min_score)}
+
     def check_files(self, dataset: KittiDataset, frame_ids: list[str]) -> None:
         """Read every frame's file of the detections directory (nothing for ``gt`` / ``bank``):
         an :class:`InputError` naming the first malformed one before a run fits any frame, as
@@ -127,8 +138,7 @@ class DetectionSource:
                 raise InputError(f"no detection file for frame {frame_id}", path=self.folder)
             return Detections.empty(str(self.folder))
         try:
-            return read_detections(path, image_size=dataset.image_size(frame_id),
-                                   min_score=-np.inf if self.min_score is None else self.min_score)
+            return read_detections(path, image_size=dataset.image_size(frame_id), min_score=self.min_score)
         except InputError as exc:
             if exc.problem == NO_CARS:  # no car in the file, or none scoring at least min_score
                 return Detections.empty(str(path))

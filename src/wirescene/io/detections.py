@@ -169,7 +169,7 @@ def _from_entries(entries: list, path: Path) -> Detections:
     return Detections(np.array(boxes).reshape(-1, 4), np.array(scores), np.array(alpha), str(path))
 
 
-def read_detections(path: str | Path, *, min_score: float = -np.inf,
+def read_detections(path: str | Path, *, min_score: float | None = None,
                     image_size: tuple[int, int] | None = None) -> Detections:
     """Read 2D car detections of one image.
 
@@ -193,7 +193,7 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     turn (2 pi) is refused as an angle in degrees.
 
     A box given without a score (JSON, CSV, a KITTI file of 15 columns) scores 1. Only the
-    boxes scoring ``min_score`` or more are kept (a file left without one is an
+    boxes scoring ``min_score`` (None: no floor) or more are kept (a file left without one is an
     :class:`InputError` of :data:`NO_CARS`). With ``image_size`` (width, height), every box,
     kept or not, must overlap the image (:func:`wirescene.core.validate.boxes_problem`).
 
@@ -261,7 +261,7 @@ def read_detections(path: str | Path, *, min_score: float = -np.inf,
     problem = boxes_problem(dets.boxes, image_size)  # every box, before the floor: a file of another image is one
     if problem:
         raise InputError(problem, path=path)
-    dets = dets.subset(dets.scores >= min_score)
+    dets = dets if min_score is None else dets.subset(dets.scores >= min_score)
     if len(dets) == 0:
         raise InputError(NO_CARS, path=path)
     return dets
