@@ -519,3 +519,13 @@ def test_a_report_never_writes_or_removes_through_a_link_and_refuses_a_file_wher
                 (staging / "index.html").write_text("new")
         after = {p.relative_to(rep).as_posix(): p.read_bytes() for p in rep.rglob("*") if p.is_file()}
         assert after == before and sorted(p.name for p in tmp_path.iterdir()) == ["rep", "site"]
+
+
+def test_the_evaluation_imports_no_matplotlib():
+    """The parent of ``wirescene eval`` and each of its workers import the runner and draw nothing unless asked:
+    matplotlib (some 26 MB a process) is imported where a picture is drawn (benchmarks/RESULTS.md)."""
+    import subprocess
+    import sys
+
+    code = "import wirescene.eval.runner, wirescene.eval.predict, sys; assert 'matplotlib' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True)

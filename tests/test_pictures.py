@@ -177,7 +177,7 @@ def test_birds_eye_view_names_kitti_axes_numbers_the_overlays_cars_and_keeps_its
 def test_overlay_draws_the_pre_detections_the_fit_dropped_apart(camera):
     from matplotlib.patches import Rectangle
 
-    from wirescene.io.outputs import dropped_detections, fitted_detections
+    from wirescene.core.types import dropped_detections, fitted_detections
     from wirescene.io.pictures import DET_COLOR, DROPPED_COLOR, overlay
 
     scene = _scene(camera, [(-3.0, 10.0), (4.0, 30.0)])
@@ -211,7 +211,7 @@ def test_draw_tells_the_boxes_the_fit_dropped_apart_as_fit_does(camera):
     from matplotlib.colors import to_rgba
 
     import wirescene
-    from wirescene.io.outputs import dropped_detections, fitted_detections
+    from wirescene.core.types import dropped_detections, fitted_detections
     from wirescene.io.pictures import DET_COLOR, DROPPED_COLOR, overlay
 
     cars = _scene(camera, [(-3.0, 10.0), (4.0, 30.0)]).cars

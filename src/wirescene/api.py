@@ -613,7 +613,7 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
 def _dropped_boxes(dets: Detections, scene: SceneEstimate | None, image_size: tuple[int, int]) -> np.ndarray | None:
     """Which of ``dets`` are boxes the fit of ``scene`` dropped: one of its pre-detections
     (``scene.detections``, compared once clipped to the image as the fit clips them) with no
-    car fitted to it, and no car fitted to an equal one (as :func:`wirescene.io.outputs.dropped_detections`
+    car fitted to it, and no car fitted to an equal one (as :func:`wirescene.core.types.dropped_detections`
     tells them apart); None when ``scene`` does not say which boxes it was fitted to.
 
     Examples

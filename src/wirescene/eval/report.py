@@ -33,13 +33,12 @@ from wirescene.core.atomic import atomic_dir, write_text
 from wirescene.core.camera import Camera
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.labels import Label
-from wirescene.core.types import Detections, SceneEstimate
+from wirescene.core.types import Detections, SceneEstimate, dropped_detections, fitted_detections
 from wirescene.core.wireframe import EDGES
 from wirescene.eval.kitti_metrics import kitti_figure
 from wirescene.eval.metrics import EvaluationReport
 from wirescene.eval.seeds import mean_and_range, seed_folder
 from wirescene.fitting.variants import get_variant
-from wirescene.io.outputs import dropped_detections, fitted_detections
 from wirescene.io.pictures import birds_eye, new_figure, overlay, save_figure
 
 #: Localisation error (m) at the top of the error-vs-distance plot; larger errors are drawn on its top edge.

@@ -21,7 +21,7 @@ import numpy as np
 
 from wirescene.core.camera import Camera
 from wirescene.core.errors import InputError
-from wirescene.core.types import Detections, SceneEstimate
+from wirescene.core.types import Detections, SceneEstimate, fitted_detections  # not io.outputs: it imports matplotlib
 from wirescene.core.workers import end_on_stop_signals, usable_cores
 from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
 from wirescene.eval.records import (
@@ -36,7 +36,6 @@ from wirescene.fitting.variants import get_variant
 from wirescene.infer.evidence import oracle_evidence
 from wirescene.infer.torch_backend import TORCH_THREADS_ENV
 from wirescene.io.kitti import FrameLabels, KittiDataset
-from wirescene.io.outputs import fitted_detections
 from wirescene.io.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
 
 if TYPE_CHECKING:  # an optional dependency, imported where dask mode runs

@@ -12,7 +12,7 @@ from wirescene.core.atomic import atomic_path, missing_dirs, remove_empty, write
 from wirescene.core.camera import Camera
 from wirescene.core.errors import InputError
 from wirescene.core.labels import Label
-from wirescene.core.types import Detections, SceneEstimate
+from wirescene.core.types import Detections, SceneEstimate, dropped_detections, fitted_detections
 from wirescene.core.wireframe import EDGES
 from wirescene.io.kitti import write_labels
 from wirescene.io.pictures import birds_eye, overlay, save_figure
@@ -28,43 +28,6 @@ def boxes_in_words(source: str) -> str:
     """
     named = {"gt": "label boxes", "bank": "own pre-detection", "api": "given boxes", "": "given boxes"}
     return named.get(source, f"boxes of {Path(source).name}")
-
-
-def fitted_detections(detections: Detections, estimate: SceneEstimate) -> Detections:
-    """The pre-detections of the cars of ``estimate``, in detection order: those the fit's
-    verification dropped (our own pre-detection's) are left out, as from the fit's output.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from wirescene.core.types import ObjectEstimate
-    >>> dets = Detections([[0, 0, 10, 10], [20, 0, 30, 10], [40, 0, 50, 10]], 1.0, np.nan)
-    >>> car = ObjectEstimate(detection_index=2, box2d=dets.boxes[2], score=1.0, location=np.array([0.0, 1.65, 9.0]),
-    ...                      R=np.eye(3), dims=np.array([1.5, 1.6, 3.9]), cost=0.0)
-    >>> fitted_detections(dets, SceneEstimate(variant="coarse", objects=[car])).boxes
-    array([[40.,  0., 50., 10.]])
-    """
-    return detections.subset(np.array(sorted(o.detection_index for o in estimate.objects), dtype=int))
-
-
-def dropped_detections(detections: Detections, estimate: SceneEstimate) -> Detections:
-    """The pre-detections of ``detections`` that no car of ``estimate`` was fitted to: those
-    the fit's verification dropped (our own pre-detection's), in detection order.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from wirescene.core.types import ObjectEstimate
-    >>> dets = Detections([[0, 0, 10, 10], [20, 0, 30, 10], [40, 0, 50, 10]], 1.0, np.nan)
-    >>> car = ObjectEstimate(detection_index=2, box2d=dets.boxes[2], score=1.0, location=np.array([0.0, 1.65, 9.0]),
-    ...                      R=np.eye(3), dims=np.array([1.5, 1.6, 3.9]), cost=0.0)
-    >>> dropped_detections(dets, SceneEstimate(variant="coarse", objects=[car])).boxes
-    array([[ 0.,  0., 10., 10.],
-           [20.,  0., 30., 10.]])
-    """
-    kept = np.zeros(len(detections), bool)
-    kept[[o.detection_index for o in estimate.objects]] = True
-    return detections.subset(~kept)
 
 
 def fit_output_paths(out_dir: Path, stem: str) -> dict[str, Path]:
