@@ -297,6 +297,31 @@ def test_camera_checks_its_arguments():
     assert_close(camera.project(camera.backproject(uv, 12.0)), uv, atol=1e-9)  # one depth for all
 
 
+def test_complex_numbers_are_refused_not_cast_to_their_real_part():
+    """A complex calibration (given as a matrix or in a Camera) or complex boxes lost their imaginary part with
+    numpy's ComplexWarning only: refused naming the argument, as a complex image is."""
+    import warnings
+
+    from wirescene.core.camera import Camera
+
+    image, box = np.zeros((375, 1242, 3), np.uint8), np.array([[300, 180, 520, 300]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's ComplexWarning was all that was said
+        for kwargs, says in ((dict(calib=P2.astype(complex)), r"^calib: complex numbers \(dtype complex128\), expected "
+                                                              r"real numbers$"),
+                             (dict(calib=(P2 + 1e-3j)[:, :3]), r"^calib: complex numbers \(dtype complex128\)"),
+                             (dict(calib=P2 > 0), r"^calib: booleans \(dtype bool\), expected real numbers$"),
+                             (dict(boxes=box + 0j), r"^boxes: boxes must be real numbers, got dtype complex128$"),
+                             (dict(image=image + 0j), r"^image: image must have a numeric dtype, got complex128$")):
+            args = {"image": image, "calib": P2, "boxes": box, **kwargs}
+            with pytest.raises(wirescene.ArgumentError, match=says):
+                wirescene.fit(args["image"], args["calib"], args["boxes"], variant="coarse")
+        with pytest.raises(wirescene.ArgumentError, match=r"^P: complex numbers \(dtype complex128\)"):
+            Camera(P2 + 1e-3j, (1242, 375))
+        # a matrix of objects holding real numbers is read as before
+        assert_close(wirescene.api.as_camera(P2.astype(object), (1242, 375)).P, P2)
+
+
 def test_fit_takes_what_read_kitti_calib_returns(frame):
     image, camera, _ = frame
     calib = wirescene.read_kitti_calib(SPLIT / "calib" / f"{FRAME}.txt")

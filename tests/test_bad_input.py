@@ -175,6 +175,27 @@ def _dets_dir(tmp, files):
     return d
 
 
+def _predict_resume_case(tmp, record, *, resume=True):
+    """``predict`` of the test frame (label boxes, coarse) into ``tmp/pred``, which holds a settings' record
+    ``record`` (text, or None: a folder of its name) and no label file."""
+    pred = tmp / "pred"
+    if record is None:
+        (pred / ".predict.json").mkdir(parents=True)
+    else:
+        _file(tmp, "pred/.predict.json", record)
+    return ["predict", KITTI_ROOT, "--split", "training", "--variant", "coarse", "--detections", "gt", "--frames",
+            FRAME, "--workers", "1", "--particles", "20", "--out", pred, *(["--resume"] if resume else [])]
+
+
+def _cars_in_one_fold(tmp):
+    """A KITTI root of the test frame and of a copy of another frame (of another fold) whose label holds no Car."""
+    root = kitti_copy(tmp / "kitti", [FRAME, "001545"])
+    (root / "training" / "label_2" / "001545.txt").write_text(
+        "DontCare -1 -1 -10 1000 160 1040 190 -1 -1 -1 -1000 -1000 -1000 -10\n")
+    assert fold_of(FRAME) != fold_of("001545")
+    return root
+
+
 PLY_FACE_PAST_VERTICES = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                           "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n4 0 0\n0 1 1\n"
                           "3 0 1 7\n")
@@ -452,6 +473,13 @@ CASES = {
     "train parts on frames without a car": (
         lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-root", _carless_root(t), "--synth-scenes", "0"],
         "frames: none of the 1 real training frame.s. has a labelled Car"),
+    # the held-out forest of the fold of every car learnt from background only: a calibration of no part, and a
+    # held-out log loss of NaN (of the fold without cars) in --report
+    "train parts --calibrate with the cars of one fold": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-root", _cars_in_one_fold(t), "--synth-scenes", "0",
+                   "--n-trees", "1", "--max-depth", "4", "--calibrate"],
+        r"calibrate_real: the held-out calibration needs labelled cars in 2 or more folds \(drives\); those of the 2 "
+        r"frame\(s\) given lie in one"),
     "train detector on frames without a car": (
         lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", _carless_root(t), "--no-calibration"],
         "none of the 1 training frame.s. has a labelled Car"),
@@ -523,6 +551,18 @@ CASES = {
     "synth of 10^20 scenes": (lambda t: ["synth", t / "s", "--scenes", "99999999999999999999"], "--scenes"),
     "synth into a non-empty directory": (lambda t: ["synth", _file(t, "training/x").parents[1], "--scenes", "1"],
                                          "already holds scenes"),
+    # a settings' record that cannot be read was taken for none and written over (a resumed run with no label file)
+    "predict --resume of an unreadable settings record": (
+        lambda t: _predict_resume_case(t, "{not json"),
+        r"^wirescene: error: \S+/pred/\.predict\.json: unreadable settings record \(JSONDecodeError\): cannot resume "
+        r"from it \(remove it to start afresh, or choose another directory\)$"),
+    "predict --resume of a settings record not a JSON object": (
+        lambda t: _predict_resume_case(t, "[]"),
+        r"pred/\.predict\.json: unreadable settings record \(a JSON list, not an object\): cannot resume from it"),
+    # was IsADirectoryError's traceback, after the first frame's fit
+    "predict where .predict.json is a folder": (
+        lambda t: _predict_resume_case(t, None, resume=False),
+        r"^wirescene: error: \S+/pred/\.predict\.json: a folder where predict writes its settings' record$"),
     # a record that is JSON but no object: was an AttributeError's traceback
     "train scores of a frame record not a JSON object": (
         lambda t: ["train", "scores", _file(t, f"run/.frames/{FRAME}.json", "[]").parents[1], "--out", t / "s.json"],
@@ -610,6 +650,12 @@ CASES = {
     "cad list of an OBJ face of words": (
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n").parent],
         r"car\.obj: OBJ line 4: non-integer vertex reference 'x'$"),
+    # trimesh read vertex 0 (OBJ counts from 1) as the last vertex: another mesh, without a word
+    "cad list of an OBJ face of vertex 0": (
+        lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+                                                                       "f 0 1 2\n").parent],
+        r"^wirescene: error: \S+/cad/car\.obj: OBJ line 5: vertex reference 0 \(OBJ counts vertices from 1, or back "
+        r"from -1\)$"),
     "cad list of a PLY face past its vertices": (  # loaded as it is by trimesh, refused later or not at all
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.ply", PLY_FACE_PAST_VERTICES).parent],
         r"car\.ply: a face refers to vertex 7, the file has 3 vertices \(0 to 2\)$"),
@@ -743,6 +789,24 @@ def test_runs_failing_at_a_frame_leave_no_output(tmp_path, case):
     lines = [ln for ln in r.stderr.splitlines() if ln.strip() and not re.match(r"(eval|predict): ", ln)]
     assert len(lines) == 1 and re.match(rf"wirescene: error: .*{problem}", lines[0]), r.stderr
     assert set(tmp_path.rglob("*")) <= before, f"{case} left {sorted(set(tmp_path.rglob('*')) - before)}"
+
+
+def test_file_sha256_names_the_file_and_what_it_is(tmp_path):
+    """The hash of a file a run records (a model file of the options, an image or split file of train all's) of a
+    folder was IsADirectoryError's traceback; missing, it was an "artefact" whatever it was."""
+    from wirescene.core.artefacts import MISSING_ARTEFACT
+    from wirescene.core.resources import file_sha256
+    from wirescene.fitting.models import models_fingerprint
+    from wirescene.fitting.pipeline import FitOptions
+
+    with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path.resolve()))}: artefact path is not a file$"):
+        models_fingerprint(FitOptions(parts_model=str(tmp_path)))
+    with pytest.raises(InputError, match=rf"/parts\.npz: {re.escape(MISSING_ARTEFACT)}$"):
+        models_fingerprint(FitOptions(parts_model=str(tmp_path / "parts.npz")))
+    with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path.resolve()))}: image path is not a file$"):
+        file_sha256(tmp_path, what="image")
+    with pytest.raises(InputError, match=r"/nope\.png: image file not found$"):
+        file_sha256(tmp_path / "nope.png", what="image")
 
 
 def test_label_boxes_of_real_frames_are_accepted(tmp_path):

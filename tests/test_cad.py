@@ -260,3 +260,18 @@ def test_cli_list_and_show(tmp_path):
     (per_car / "nsx" / "acura-nsx-sz.acc").rename(per_car / "nsx" / "body.joe")
     r = CliRunner().invoke(cad, ["list", "--cad-dir", str(per_car)])
     assert isinstance(r.exception, InputError) and ".joe (VDrift's format) not read" in str(r.exception)
+
+
+def test_obj_faces_of_vertex_0_are_refused_and_relative_references_read(tmp_path):
+    """OBJ counts vertices from 1 (or back from -1): trimesh read a face's 0 as the last vertex, another mesh
+    without a word; a reference counted back from the last vertex is OBJ's and read as the one it names."""
+    from wirescene.cad.mesh import read_mesh
+
+    vertices = "v 0 0 0\nv 4 0 0\nv 0 1.5 0\nv 0 0 1.7\n"
+    (tmp_path / "zero.obj").write_text(vertices + "f 1 2 3\nf 0 1 2\n")
+    with pytest.raises(InputError, match=r"zero\.obj: OBJ line 6: vertex reference 0 \(OBJ counts vertices from 1"):
+        read_mesh(tmp_path / "zero.obj")
+    (tmp_path / "absolute.obj").write_text(vertices + "f 1 2 3\nf 2 3 4\n")
+    (tmp_path / "relative.obj").write_text(vertices + "f -4 -3 -2\nf 2 -2 -1\n")
+    for a, b in zip(read_mesh(tmp_path / "absolute.obj"), read_mesh(tmp_path / "relative.obj")):
+        assert_close(b, a)

@@ -529,6 +529,29 @@ def test_tiny_real_retraining_reproduces_the_pipeline(tiny_real, kitti_frame):
         assert_close(R.log_ratio(np.broadcast_to(guv[i, j], (N_PARTS, 2)), 0), det.log_ratio_of(p[k]), atol=2e-2)
 
 
+def test_held_out_calibration_of_a_fold_without_cars_measures_the_others(tmp_path):
+    """A fold without cars has no part to score: its held-out log loss was NaN (numpy's "Mean of empty slice"), and
+    so the report's (``train parts --report``'s JSON, train all's manifest); it is measured on the folds with parts."""
+    import json
+
+    from conftest import kitti_copy
+    from wirescene.training.parts import train_part_detector
+
+    root = kitti_copy(tmp_path / "kitti", ["000002", "000010", "001545"])
+    (root / "training" / "label_2" / "001545.txt").write_text(
+        "DontCare -1 -1 -10 1000 160 1040 190 -1 -1 -1 -1000 -1000 -1000 -10\n")
+    folds = {"000002": 0, "000010": 1, "001545": 2}
+    said = []
+    det, rep = train_part_detector(tmp_path / "p.npz", seed=1, n_trees=3, max_depth=8, kind="ghog_ms", synth_scenes=0,
+                                   kitti_root=root, frames=list(folds), position=True, calibrate_real=True,
+                                   calibration_folds=folds, progress=said.append)
+    cal = rep["calibration"]
+    json.dumps(cal, allow_nan=False)  # was "Out of range float values are not JSON compliant"
+    assert np.isfinite([cal["logloss_raw"], cal["logloss_calibrated"]]).all() and cal["logloss_raw"] > 0
+    assert any("calibrated over 2 of 3 folds" in line for line in said), said
+    assert (det.calib_scale > 0).all() and np.isfinite(det.calib_offset).all()
+
+
 def test_kitti_eval_frames_reads_the_frames_asked_for():
     from wirescene.training.parts import kitti_eval_frames
 

@@ -30,6 +30,7 @@ from wirescene.core.validate import (
     off_centre_problem,
     output_dir_problem,
     projection_problem,
+    real_dtype_problem,
 )
 from wirescene.fitting.pipeline import FitOptions, fit_frame
 from wirescene.fitting.variants import VARIANTS, casts_rays
@@ -132,7 +133,8 @@ def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Cam
         P = calib.P2
     elif isinstance(calib, (np.ndarray, list, tuple)):
         try:
-            P = np.asarray(calib, dtype=float)
+            P = np.asarray(calib)
+            P = P if real_dtype_problem(P) else P.astype(float)  # complex, bool, text: refused below, not cast
         except (TypeError, ValueError):
             raise ArgumentError(name, "expected a matrix of numbers (rows of equal length)") from None
         if P.shape == (3, 3):
@@ -140,7 +142,7 @@ def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Cam
     else:
         raise ArgumentError(name, f"expected a calibration path, a (3, 4) matrix P, a (3, 3) matrix K or a Camera, "
                                   f"got {type(calib).__name__}")
-    problem = projection_problem(P, image_size)
+    problem = real_dtype_problem(P) or projection_problem(P, image_size)
     if problem:
         raise ArgumentError(name, problem)
     return Camera(P.astype(float), image_size)

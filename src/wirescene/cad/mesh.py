@@ -176,7 +176,9 @@ def read_mesh(path) -> tuple[np.ndarray, np.ndarray]:
 def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]:
     if suffix not in MESH_SUFFIXES:
         raise InputError(f"unsupported mesh format {suffix!r} (use one of {', '.join(MESH_SUFFIXES)})", path=path)
-    problem = path_problem(path, "mesh")
+    # an OBJ's lines checked first: said in plain words (numpy's "index 8 is out of bounds for axis 0" says
+    # nothing of the file), and a face of vertex 0, which trimesh reads as the last vertex, refused
+    problem = path_problem(path, "mesh") or (_obj_problem(path) if suffix == ".obj" else None)
     if problem:
         raise InputError(problem, path=path)
     import trimesh
@@ -186,11 +188,9 @@ def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]
     except MemoryError:
         raise
     except Exception as e:  # trimesh raises many types for malformed files
-        # said in plain words where they can be (numpy's "index 8 is out of bounds for axis 0" says nothing of the file)
-        problem = _obj_problem(path) if suffix == ".obj" else None
-        if problem is None and suffix == ".obj" and isinstance(e, IndexError):
-            problem = "a face refers to a vertex the file does not have"
-        raise InputError(problem or f"cannot read mesh ({type(e).__name__}: {e})".splitlines()[0], path=path) from None
+        if suffix == ".obj" and isinstance(e, IndexError):
+            raise InputError("a face refers to a vertex the file does not have", path=path) from None
+        raise InputError(f"cannot read mesh ({type(e).__name__}: {e})".splitlines()[0], path=path) from None
     if len(loaded.faces) == 0:
         raise InputError("mesh has no faces", path=path)
     vertices, faces = np.asarray(loaded.vertices, dtype=float), np.asarray(loaded.faces, dtype=np.int64)
@@ -202,10 +202,11 @@ def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]
 
 
 def _obj_problem(path: Path) -> str | None:
-    """Why trimesh could not read the OBJ file ``path``, in plain words with its line (as
-    :mod:`wirescene.cad.ac3d` says its errors), or None where no such line is found: a vertex
-    coordinate that is no number, or a face's vertex reference that is no integer or names
-    a vertex the file does not have (1 to N, or -1 to -N counting back from the last).
+    """What trimesh would refuse, or read as another mesh, in the OBJ file ``path``, in plain
+    words with its line (as :mod:`wirescene.cad.ac3d` says its errors), or None where no such
+    line is found: a vertex coordinate that is no number, or a face's vertex reference that is
+    no integer or names a vertex the file does not have (1 to N, or -1 to -N counting back from
+    the last; 0, which OBJ's counting from 1 does not have, trimesh reads as the last vertex).
 
     Examples
     --------
@@ -214,6 +215,10 @@ def _obj_problem(path: Path) -> str | None:
     ...     _ = (Path(d) / "car.obj").write_text("v 0 0 0\\nv 1 0 0\\nf 1 2 3 # a triangle\\n")
     ...     _obj_problem(Path(d) / "car.obj")
     'OBJ line 3: vertex reference 3 out of range (the file has 2 vertices)'
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "car.obj").write_text("v 0 0 0\\nv 1 0 0\\nv 0 1 0\\nf 0 1 2\\nf -1 -2 -3\\n")
+    ...     _obj_problem(Path(d) / "car.obj")
+    'OBJ line 4: vertex reference 0 (OBJ counts vertices from 1, or back from -1)'
     """
     try:
         # lines end at \n, \r\n or \r: str.splitlines would also break at the latin-1 reading of UTF-8 bytes (0x85)
@@ -235,6 +240,8 @@ def _obj_problem(path: Path) -> str | None:
                     k = int(ref)
                 except ValueError:
                     return f"OBJ line {i}: non-integer vertex reference {ref!r}"
+                if k == 0:
+                    return f"OBJ line {i}: vertex reference 0 (OBJ counts vertices from 1, or back from -1)"
                 if not (1 <= k <= n or -n <= k <= -1):
                     return f"OBJ line {i}: vertex reference {k} out of range (the file has {n} vertices)"
     return None

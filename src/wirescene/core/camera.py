@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.errors import ArgumentError, InputError, ShapeError, check_shape
-from wirescene.core.validate import path_problem, projection_problem
+from wirescene.core.validate import path_problem, projection_problem, real_dtype_problem
 
 KITTI_CALIB_KEYS = ("P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam")
 #: Points closer than this (metres, along the optical axis) are treated as behind the
@@ -55,6 +55,9 @@ class Camera:
     image_size: tuple[int, int] | None = None
 
     def __post_init__(self):
+        problem = real_dtype_problem(self.P)
+        if problem:  # complex numbers: their cast to float would drop the imaginary part
+            raise ArgumentError("P", problem)
         P = np.asarray(self.P, dtype=float)
         check_shape("P", P, (3, 4))
         if not np.all(np.isfinite(P)):

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-from wirescene.core.artefacts import load_json
+from wirescene.core.artefacts import MISSING_ARTEFACT, load_json
 from wirescene.core.errors import InputError
 from wirescene.core.validate import path_problem
 
@@ -267,8 +267,21 @@ def cached_by_file(maxsize: int):
     return decorate
 
 
-def file_sha256(path: str | Path) -> str:
+def file_sha256(path: str | Path, *, what: str = "artefact") -> str:
     """SHA-256 (hex) of a file's bytes, computed once per file version (:func:`file_version`).
+
+    Parameters
+    ----------
+    path : path
+        The file.
+    what : str
+        What the file is, for the error (``"artefact"``, ``"image"``, ``"split"``).
+
+    Raises
+    ------
+    InputError
+        Naming ``path``: missing (an artefact's error says how one is made,
+        :data:`~wirescene.core.artefacts.MISSING_ARTEFACT`), not a file, or unreadable.
 
     Examples
     --------
@@ -278,12 +291,21 @@ def file_sha256(path: str | Path) -> str:
     ...     _ = f.write_bytes(b"abc")
     ...     file_sha256(f) == hashlib.sha256(b"abc").hexdigest()
     True
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     file_sha256(d, what="image")
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...: image path is not a file
     """
     path = Path(path).resolve()
-    version = file_version(path)
-    if version is None:
-        raise InputError("artefact file is missing", path=path)
-    return _sha256(path, version)
+    problem = path_problem(path, what, missing=MISSING_ARTEFACT if what == "artefact" else None)
+    version = None if problem else file_version(path)
+    if version is None:  # problem None: gone since it was checked
+        raise InputError(problem or f"{what} file is unreadable", path=path)
+    try:
+        return _sha256(path, version)
+    except OSError as exc:
+        raise InputError(f"cannot read {what} file ({exc.strerror or exc.__class__.__name__})", path=path) from None
 
 
 @lru_cache(maxsize=64)

@@ -43,6 +43,28 @@ def finite_real(value) -> bool:
         return False
 
 
+def real_dtype_problem(values) -> str | None:
+    """What keeps the array ``values`` from holding real numbers, as a phrase, or None: a dtype
+    of complex numbers (whose cast to float drops the imaginary part, numpy only warning), of
+    booleans or of text. Integers, floats and objects (which the cast converts one by one,
+    refusing a complex number) are fine.
+
+    Examples
+    --------
+    >>> [real_dtype_problem(np.eye(3, dtype=t)) for t in (int, float, object)]
+    [None, None, None]
+    >>> real_dtype_problem(np.eye(3) * 1j)
+    'complex numbers (dtype complex128), expected real numbers'
+    >>> real_dtype_problem([["721.5", "0"]])
+    'text (dtype <U5), expected real numbers'
+    """
+    dtype = np.asarray(values).dtype
+    if dtype.kind in "iufO":
+        return None
+    held = {"c": "complex numbers", "b": "booleans", "U": "text", "S": "text"}.get(dtype.kind, "no numbers")
+    return f"{held} (dtype {dtype}), expected real numbers"
+
+
 def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | None:
     """What is wrong with a 3x4 projection matrix as a street camera, if anything.
 
@@ -132,8 +154,8 @@ def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | Non
     b = np.asarray(boxes)
     if b.ndim != 2 or b.shape[1] != 4:
         return f"boxes must have shape (N, 4), got {b.shape}"
-    if not np.issubdtype(b.dtype, np.number):
-        return f"boxes must be numbers, got dtype {b.dtype}"
+    if b.dtype.kind not in "iuf":  # complex numbers too: their cast to float drops the imaginary part
+        return f"boxes must be real numbers, got dtype {b.dtype}"
     b = b.astype(float)
     bad = ~np.all(np.isfinite(b), axis=1)
     if bad.any():

@@ -56,6 +56,25 @@ def _config(dataset: KittiDataset, variant: str, source: DetectionSource, option
     return json.loads(json.dumps(config, default=str))
 
 
+def _stored_config(path: Path) -> dict | None:
+    """The settings' record of an earlier run at ``path`` (None where there is none), for a
+    resumed run to compare with its own; an :class:`InputError` naming it where it cannot be
+    read as one, not taken for no record and written over: a resumed run refuses it, with or
+    without the label files it describes (as ``eval --resume`` names a frame's unreadable
+    record)."""
+    if not path.exists():
+        return None
+    try:
+        stored = json.loads(path.read_text())
+        if not isinstance(stored, dict):
+            raise TypeError(f"a JSON {type(stored).__name__}, not an object")
+    except (OSError, ValueError, TypeError) as exc:  # ValueError: UnicodeDecodeError and JSONDecodeError too
+        why = exc if isinstance(exc, TypeError) else exc.__class__.__name__
+        raise InputError(f"unreadable settings record ({why}): cannot resume from it (remove it to start afresh, "
+                         "or choose another directory)", path=path) from None
+    return stored
+
+
 def predict_dataset(
     dataset: KittiDataset,
     out_dir,
@@ -112,7 +131,8 @@ def predict_dataset(
         Before any fit: no frame to predict (no ``.png`` image in ``image_2/``), a frame
         without its detection file, calibration or image, a malformed detection file, or
         ``out_dir`` holding another run's label files (or, resumed, label files of frames
-        outside ``frames``).
+        outside ``frames``, or a settings' record that cannot be read), or a folder in place of
+        that record.
     """
     source = DetectionSource("bank") if source is None else source
     options = FitOptions() if options is None else options
@@ -123,18 +143,17 @@ def predict_dataset(
     source.missing_frames(frame_ids)
     config = _config(dataset, variant, source, options)
     config_path = out / CONFIG_FILE
+    if config_path.is_dir():  # else found where the first frame's labels are written, after its fit
+        raise InputError("a folder where predict writes its settings' record", path=config_path)
     existing = sorted(out.glob("*.txt")) if out.is_dir() else []
+    if existing and not resume:
+        raise InputError(f"already holds {len(existing)} label files; use --resume to continue that run "
+                         "or choose an empty directory", path=out)
+    stored = _stored_config(config_path) if resume else None
     if existing:
-        if not resume:
-            raise InputError(f"already holds {len(existing)} label files; use --resume to continue that run "
-                             "or choose an empty directory", path=out)
-        try:
-            stored = json.loads(config_path.read_text())
-        except (OSError, ValueError):
-            stored = None
         if stored != config:
-            changed = ", ".join(config_difference(stored, config)) if isinstance(stored, dict) else ""
-            raise InputError(f"label files were written with other settings ({changed or f'{CONFIG_FILE} missing or unreadable'}): "
+            changed = ", ".join(config_difference(stored, config)) if stored is not None else f"{CONFIG_FILE} missing"
+            raise InputError(f"label files were written with other settings ({changed}): "
                              "cannot resume into this directory", path=out)
         # A submission is the folder's *.txt: frames outside this selection would go to the server too.
         refuse_frames_outside(out, existing, frame_ids, would="which a submission zipped from it would include")

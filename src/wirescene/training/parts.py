@@ -660,7 +660,8 @@ def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, 
 
     Returns ``(scale, offset, report)``; the report holds the held-out balanced log loss
     of "is vertex j" before (raw ``log(S_j / S_b)`` as logit) and after calibration
-    (each fold calibrated on the other folds' scores)."""
+    (each fold calibrated on the other folds' scores), over the folds holding a part's 5
+    patches at least (a fold without cars has none to score): None where no fold does."""
     say = progress or (lambda m: None)
     folds = real_folds(real.names, folds)[real.group]
     lr = np.zeros((len(real.y), N_PARTS))
@@ -677,6 +678,7 @@ def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, 
         say(f"calibration fold {k}: {int(te.sum())} held-out patches scored [{time.time() - t:.0f} s]")
 
     def loss(r, y, sc, of):
+        """Mean balanced log loss of the parts of 5 patches at least; None where none has 5."""
         z = r * sc + of
         out = []
         for j in range(N_PARTS):
@@ -684,19 +686,23 @@ def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, 
             if t.sum() < 5:
                 continue
             out.append(0.5 * np.mean(np.logaddexp(0, -z[t, j])) + 0.5 * np.mean(np.logaddexp(0, z[~t, j])))
-        return float(np.mean(out))
+        return float(np.mean(out)) if out else None
 
     cv = []
     for k in np.unique(folds):
         sc, of = calibrate(lr[folds != k], real.y[folds != k])
-        cv.append((loss(lr[folds == k], real.y[folds == k], 1.0, 0.0),
-                   loss(lr[folds == k], real.y[folds == k], sc, of), int((folds == k).sum())))
+        raw = loss(lr[folds == k], real.y[folds == k], 1.0, 0.0)
+        if raw is not None:  # a fold without parts to score (no car, or too few) says nothing of either loss
+            cv.append((raw, loss(lr[folds == k], real.y[folds == k], sc, of), int((folds == k).sum())))
     n = sum(c[2] for c in cv)
     scale, offset = calibrate(lr, real.y)
-    report = {"logloss_raw": sum(c[0] * c[2] for c in cv) / n, "logloss_calibrated": sum(c[1] * c[2] for c in cv) / n,
+    report = {"logloss_raw": sum(c[0] * c[2] for c in cv) / n if cv else None,
+              "logloss_calibrated": sum(c[1] * c[2] for c in cv) / n if cv else None,
               "scale_mean": float(scale.mean()), "offset_mean": float(offset.mean())}
-    say(f"calibration: held-out balanced log loss {report['logloss_raw']:.3f} raw -> "
-        f"{report['logloss_calibrated']:.3f} calibrated; mean scale {scale.mean():.2f}, offset {offset.mean():.2f}")
+    losses = (f"{report['logloss_raw']:.3f} raw -> {report['logloss_calibrated']:.3f} calibrated" if cv else
+              "not measured (no fold holds 5 patches of a part)")
+    say(f"calibration: held-out balanced log loss {losses} over {len(cv)} of {len(np.unique(folds))} folds; "
+        f"mean scale {scale.mean():.2f}, offset {offset.mean():.2f}")
     return scale, offset, report
 
 
@@ -797,14 +803,24 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
 
         ds = KittiDataset(kitti_root)
         frames = ds.frame_ids() if frames is None else list(frames)
-        if real_only and not any(ds.car_counts(frames).values()):
+        car_counts = ds.car_counts(frames) if real_only else {}
+        if real_only and not any(car_counts.values()):
             raise ArgumentError("frames", f"none of the {len(frames)} real training frame(s) has a labelled Car, and no "
                                           "synthetic scenes (--synth-scenes) or CAD views (--n-views) add car parts")
-        # the calibration holds out folds of the real frames
-        if calibrate_real and len(np.unique(real_folds(frames, calibration_folds))) < 2:
-            raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
-                                f"(drives); the {len(frames)} frame(s) given fall in one: train without it "
-                                "(calibrate_real=False, --no-calibrate) or on frames of more drives")
+        if calibrate_real:  # the calibration holds out folds of the real frames
+            fold = real_folds(frames, calibration_folds)
+            if len(np.unique(fold)) < 2:
+                raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
+                                    f"(drives); the {len(frames)} frame(s) given fall in one: train without it "
+                                    "(calibrate_real=False, --no-calibrate) or on frames of more drives")
+            # a fold's held-out forest learns from the other folds' cars: of real frames only, the cars of one fold
+            # leave its forest none (of background only, whose scores the calibration can but take for the identity)
+            if real_only and len({k for f, k in zip(frames, fold) if car_counts[f]}) < 2:
+                raise ArgumentError("calibrate_real", f"the held-out calibration needs labelled cars in 2 or more "
+                                    f"folds (drives); those of the {len(frames)} frame(s) given lie in one, so the "
+                                    "forest held out from it would learn no part: train without it "
+                                    "(calibrate_real=False, --no-calibrate), on frames of more drives or with "
+                                    "synthetic scenes (--synth-scenes)")
     t0 = time.time()
     data = None
     report = {"cars": []}

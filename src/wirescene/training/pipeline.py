@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import hashlib
 import inspect
-import math
 import numbers
 import sys
 import time
@@ -402,7 +401,7 @@ def _check_frames(dataset, ids: list[str], *, notify: Callable[[str], None] | No
         digest.update(f"{f}\n".encode())
         digest.update(dataset.label_path(f).read_bytes())
         digest.update(dataset.calib_path(f).read_bytes())
-        digest.update(file_sha256(dataset.image_path(f)).encode())  # some 6 s for KITTI's 7,481 images
+        digest.update(file_sha256(dataset.image_path(f), what="image").encode())  # some 6 s for KITTI's 7,481 images
     return digest.hexdigest(), sum(counts.values())
 
 
@@ -455,7 +454,7 @@ def _new_manifest(dataset, ids: list[str], cars: int, folds: dict[str, int], spl
             "frames_sha256": _frames_sha256(ids), "frame_ids": ids}
     if split_file is not None:
         data["split_file"] = str(Path(split_file).resolve())
-        data["split_file_sha256"] = file_sha256(split_file)
+        data["split_file_sha256"] = file_sha256(split_file, what="split")
     fold_ids = sorted(set(folds.values()))
     fold_record = {"n_folds": len(fold_ids), "frames_with_known_drive": sum(f in drives for f in ids),
                    "devkit_mapping": None if mapping_dir is None else str(Path(mapping_dir).resolve()),
@@ -511,9 +510,8 @@ class _Run:
         _, report = train_part_detector(self.path_of("parts"), kitti_root=self.kitti_root, frames=self.ids,
                                         calibration_folds=self.folds, progress=self.say, **self.opts["parts"])
         record["train_accuracy"] = float(report["train_acc"])
-        if "calibration" in report:  # JSON has no NaN (a fold without cars gives one)
-            record["calibration"] = {k: float(v) if math.isfinite(float(v)) else None
-                                     for k, v in report["calibration"].items()}
+        if "calibration" in report:  # a held-out loss is None where no fold holds parts to score
+            record["calibration"] = {k: None if v is None else float(v) for k, v in report["calibration"].items()}
 
     def run_detector(self, record: dict) -> None:
         from wirescene.training.kitti_detector import train_detector_bank_kitti
