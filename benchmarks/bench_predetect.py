@@ -62,7 +62,6 @@ from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of, frame_drives  # no
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.ap import plot_pr  # noqa: E402
 from wirescene.predetect.bank import SUPPORT_WEIGHT, DetectorBank, detect_cars, load_default_bank  # noqa: E402
-from wirescene.predetect.enlarge import detect_enlarged  # noqa: E402
 from wirescene.training.kitti_detector import (  # noqa: E402
     add_verifier,
     detect_training_image,
@@ -77,16 +76,17 @@ from wirescene.training.kitti_detector import (  # noqa: E402
 )
 
 
-def with_enlarged(ds, frame: str, upsample: float, bank, detect) -> Detections:
-    """``detect(camera, image, min_scale)``'s every detection of ``frame`` and, with ``upsample``
-    > 1, those of the image enlarged (searched by ``bank`` at its levels finer than the image's,
-    down to ``min_scale``) above the fit's threshold that none of the image's above it covers
-    (the image's below it that overlap one going), as the pipeline adds them
-    (``predetect.upsample``: :func:`wirescene.predetect.enlarge.detect_enlarged`)."""
-    from wirescene.fitting.pipeline import PredetectOptions
+def with_enlarged(ds, frame: str, upsample: float, bank, *, ground: bool = True,
+                  cross_view_nms: float | None = 0.3) -> Detections:
+    """``bank``'s every detection of ``frame`` (with its camera's priors where ``ground``) and, with
+    ``upsample`` > 1, those of the image enlarged (at its levels finer than the image's) above the fit's
+    threshold that none of the image's above it covers (the image's below it that overlap one going), as
+    the pipeline adds them (``predetect.upsample``: :func:`wirescene.fitting.pipeline.own_detections`)."""
+    from wirescene.fitting.pipeline import own_detections
 
-    return detect_enlarged(lambda p: detect(p.camera, p.image, p.min_scale), bank, ds.camera(frame), ds.image(frame),
-                           upsample, threshold=PredetectOptions().threshold)
+    every, _ = own_detections(ds.camera(frame) if ground else None, ds.image(frame), bank=bank, fit_viewpoints=True,
+                              return_all=True, viewpoints=False, upsample=upsample, cross_view_nms=cross_view_nms)
+    return every
 
 
 def metrics(dets, labels) -> dict:
@@ -409,9 +409,7 @@ def main():
         for f in ids:
             # with the ground term the scores are each fold bank's calibrated confidences
             held = banks[fold_of(f)]
-            dets[f] = with_enlarged(ds, f, args.upsample, held, lambda camera, image, lowest, held=held: detect_cars(
-                image, bank=held, return_all=True, camera=camera if ground else None,
-                cross_view_nms=args.cross_view_nms, min_scale=lowest))
+            dets[f] = with_enlarged(ds, f, args.upsample, held, ground=ground, cross_view_nms=args.cross_view_nms)
         time_bank = banks[0]
         name = f"fold banks {args.fold_models}"
         if not ground:
@@ -424,8 +422,7 @@ def main():
         if args.upsample != 1.0 and bank.calibration is None:  # raw margins: no common scale with the fit's threshold
             ap.error("--upsample: the bank's calibrated scores are needed")
         for f in ids:
-            dets[f] = with_enlarged(ds, f, args.upsample, bank, lambda camera, image, lowest: detect_cars(
-                image, bank=bank, return_all=True, camera=None if args.no_ground else camera, min_scale=lowest))
+            dets[f] = with_enlarged(ds, f, args.upsample, bank, ground=not args.no_ground)
         time_bank = bank
         name = f"fixed bank {args.bank or 'shipped'}"
     if args.save_dets:

@@ -286,21 +286,31 @@ def test_own_boxes_weigh_by_the_predetect_stage():
     assert not np.allclose(as_own, locations(unverified, False))  # inference.box_weight: 100
 
 
-def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it():
-    """``predetect.smallest_car``: at half the resolution the frame's cars fall below the bank's
-    25 px; searched down to 12 px they are found again, boxes under 25 px among them."""
+@pytest.fixture(scope="module")
+def half_frame():
+    """``(camera, image, half, small)``: frame 000010 and the frame at half its size (Lanczos) with
+    the camera that sees it, each axis by its own factor (375 rows: 187)."""
     from PIL import Image
 
     from wirescene.core.camera import Camera
-    from wirescene.eval.sources import DetectionSource
-    from wirescene.fitting.pipeline import PredetectOptions, detect_own
     from wirescene.predetect.enlarge import scaled_projection
 
     ds = KittiDataset(KITTI_ROOT)
     image, camera = ds.image("000010"), ds.camera("000010")
     h, w = image.shape[:2]
     small = np.asarray(Image.fromarray(image).resize((w // 2, h // 2), Image.LANCZOS))
-    half = Camera(scaled_projection(camera.P, 0.5), (w // 2, h // 2))  # 1242 x 375: 621 x 187.5, as near as can be
+    half = Camera(scaled_projection(camera.P, (w // 2) / w, (h // 2) / h), (w // 2, h // 2))
+    return camera, image, half, small
+
+
+def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(half_frame):
+    """``predetect.smallest_car``: at half the resolution the frame's cars fall below the bank's
+    25 px; searched down to 12 px they are found again, boxes under 25 px among them."""
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.fitting.pipeline import PredetectOptions, detect_own
+
+    ds = KittiDataset(KITTI_ROOT)
+    camera, image, half, small = half_frame
     heights = {}
     for smallest in (None, 12.0):
         found = detect_own(half, small, threshold=0.3, smallest_car=smallest)
@@ -325,7 +335,7 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
     assert np.array_equal(via_source.boxes, direct.boxes)
 
 
-def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_path):
+def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_path, half_frame):
     """``predetect.upsample``: at half the resolution the frame's cars fall below the bank's
     25 px; detected on the half image enlarged 2x too they are found again and added to the
     half image's own, their boxes in the half image's pixels (those of the full frame halved)
@@ -335,15 +345,11 @@ def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_pa
 
     import wirescene
     from wirescene.core.boxes import iou_2d
-    from wirescene.core.camera import Camera, write_kitti_calib
+    from wirescene.core.camera import write_kitti_calib
     from wirescene.fitting.pipeline import PredetectOptions, detect_own, fit_frame
-    from wirescene.predetect.enlarge import scaled_projection
 
-    ds = KittiDataset(KITTI_ROOT)
-    image, camera = ds.image("000010"), ds.camera("000010")
+    camera, image, half, small = half_frame
     h, w = image.shape[:2]
-    small = np.asarray(Image.fromarray(image).resize((w // 2, h // 2), Image.LANCZOS))
-    half = Camera(scaled_projection(camera.P, (w // 2) / w, (h // 2) / h), (w // 2, h // 2))
     full = detect_own(camera, image, threshold=0.3)
     plain = detect_own(half, small, threshold=0.3)
     found = detect_own(half, small, threshold=0.3, upsample=2.0)

@@ -21,7 +21,7 @@ from wirescene.core.errors import ArgumentError, CalibrationWarning, InputError,
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
-from wirescene.core.types import Detections, SceneEstimate
+from wirescene.core.types import Detections, SceneEstimate, car_fitted
 from wirescene.core.validate import (
     MAX_WORKERS,
     boxes_problem,
@@ -488,15 +488,7 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     >>> bool((dets.scores > 0.5).all())  # above the shipped bank's threshold
     True
     """
-    from wirescene.fitting.pipeline import (
-        PredetectOptions,
-        bank_pass,
-        detections_above,
-        detector_bank,
-        frame_mount,
-        viewpoint_classifier,
-    )
-    from wirescene.predetect.enlarge import detect_enlarged
+    from wirescene.fitting.pipeline import PredetectOptions, detector_bank, own_detections, viewpoint_classifier
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")
@@ -519,24 +511,9 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     classifier = viewpoint_classifier(given.file("viewpoint_classifier"))
     if camera is not None:  # once every argument is accepted, before the detection
         _warn_off_centre(camera, image)
-    keep = bank.threshold if threshold is None else float(threshold)
-    read = min(keep, PredetectOptions().threshold) if bank.calibration is not None else keep
-
-    # one mount for both passes, the pitch (estimate_pitch) read off the image's own boxes
-    pyramid, rig = frame_mount(camera, rgb, bank=bank, told=mount, estimate_pitch=estimate_pitch,
-                               smallest_car=smallest_car)
-
-    def detected(p):  # the image as it is, or enlarged
-        dets, levels, responses = bank_pass(p.camera, p.image, bank=bank, threshold=read, smallest_car=p.smallest_car,
-                                            min_scale=p.min_scale, pyramid=p.pyramid, mount=rig)
-        return detections_above(p.camera, p.image, dets, read, bank=bank, classifier=classifier, pyramid=levels,
-                                responses=responses, mount=rig)
-
-    # with upsample, the cars the enlarged image adds, as the fit's own pre-detection adds them
-    found = detect_enlarged(detected, bank, camera, rgb, upsample, smallest_car=smallest_car,
-                            threshold=PredetectOptions().threshold if bank.calibration is not None else keep,
-                            pyramid=pyramid)
-    return found.subset(found.scores > keep)
+    # the fit's boxes and viewpoints above the threshold, the enlarged image's cars added as the fit adds them
+    return own_detections(camera, rgb, bank=bank, classifier=classifier, threshold=threshold, fit_viewpoints=True,
+                          upsample=upsample, smallest_car=smallest_car, mount=mount, estimate_pitch=estimate_pitch)
 
 
 DRAW_VIEWS = ("overlay", "bev")
@@ -615,8 +592,8 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
 def _dropped_boxes(dets: Detections, scene: SceneEstimate | None, image_size: tuple[int, int]) -> np.ndarray | None:
     """Which of ``dets`` are boxes the fit of ``scene`` dropped: one of its pre-detections
     (``scene.detections``, compared once clipped to the image as the fit clips them) with no
-    car fitted to it, and no car fitted to an equal one (as :func:`wirescene.core.types.dropped_detections`
-    tells them apart); None when ``scene`` does not say which boxes it was fitted to.
+    car fitted to it (:func:`wirescene.core.types.car_fitted`), and no car fitted to an equal one; None when
+    ``scene`` does not say which boxes it was fitted to.
 
     Examples
     --------
@@ -634,11 +611,9 @@ def _dropped_boxes(dets: Detections, scene: SceneEstimate | None, image_size: tu
     fitted = None if scene is None else scene.detections
     if fitted is None:
         return None
-    has_car = np.zeros(len(fitted), bool)
-    has_car[[o.detection_index for o in scene.objects if 0 <= o.detection_index < len(fitted)]] = True
     drawn = inside_image(dets, image_size).boxes
     same = np.all(np.abs(drawn[:, None, :] - fitted.boxes[None, :, :]) <= 1e-6, axis=2)  # (drawn, fitted)
-    return same.any(axis=1) & ~(same & has_car).any(axis=1)
+    return same.any(axis=1) & ~(same & car_fitted(fitted, scene)).any(axis=1)
 
 
 def _gt_cars(gt, image_size: tuple[int, int]) -> list:

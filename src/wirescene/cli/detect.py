@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import click
@@ -246,10 +245,9 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.core.resources import resolve_models
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import bank_pass, detections_above, detector_bank, frame_mount, viewpoint_classifier
+    from wirescene.fitting.pipeline import detector_bank, own_detections, viewpoint_classifier
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
-    from wirescene.predetect.enlarge import add_enlarged, boxes_back, frame_passes
 
     check_output_dir(out_dir, "--out")
     check_picture_file(pr_curve, "--pr-curve")
@@ -269,37 +267,15 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     say_off_centre_frames(ds, ids)  # before the first frame: a missing calibration is refused here
     thr = bank.threshold if threshold is None else threshold
     told = Mount(camera_height, camera_pitch)
-    # the score at which the enlarged image's cars are added (--upsample): the fit's threshold, for a calibrated bank
-    merge_at = PredetectOptions().threshold if bank.calibration is not None else thr
     dets_all, gts, times = [], [], []
     files: dict[str, str] = {}  # FRAME.json of --out, written once every frame is done (no partial output)
     with single_thread():
         for fid in ids:
-            image, size = ds.image(fid), ds.image_size(fid)
-            t = time.perf_counter()
-            camera = ds.camera(fid)
-            # one mount for every pass, the pitch (--estimate-pitch) read off the image's own boxes
-            pyramid, mount = frame_mount(camera, image, bank=bank, told=told, estimate_pitch=estimate_pitch,
-                                         smallest_car=smallest_car)
-            passes = list(frame_passes(bank, camera, image, upsample, smallest_car, pyramid=pyramid))  # up to two
-            # each pass's features and templates' responses, kept for the viewpoints of the boxes written
-            ran = [bank_pass(p.camera, p.image, bank=bank, return_all=True, smallest_car=p.smallest_car,
-                             min_scale=p.min_scale, pyramid=p.pyramid, mount=mount,
-                             keep_responses=out_dir is not None, source=fid)
-                   for p in passes]
-            times.append(time.perf_counter() - t)
-            every = []  # per pass: all its detections, and those --out writes with the fit's viewpoints
-            for p, (d, levels, responses) in zip(passes, ran):
-                viewed = None if out_dir is None else detections_above(
-                    p.camera, p.image, d, min(thr, merge_at), bank=bank, classifier=classifier, pyramid=levels,
-                    responses=responses, mount=mount)
-                every.append([None if x is None else boxes_back(x, p.factors, size) for x in (d, viewed)])  # its pixels
-            (d, viewed), *enlarged = every
-            for more, more_viewed in enlarged:  # the cars the enlarged image adds, as the fit adds them
-                d = add_enlarged(d, more, threshold=merge_at)
-                viewed = None if viewed is None else add_enlarged(viewed, more_viewed, threshold=merge_at)
-            shown = d if viewed is None else viewed
-            kept = shown.subset(shown.scores > thr)
+            # every score of the image's own and added detections for AP; --out's boxes with the fit's viewpoints
+            d, kept = own_detections(ds.camera(fid), ds.image(fid), bank=bank, classifier=classifier,
+                                     threshold=threshold, fit_viewpoints=True, return_all=True,
+                                     viewpoints=out_dir is not None, upsample=upsample, smallest_car=smallest_car,
+                                     mount=told, estimate_pitch=estimate_pitch, source=fid, seconds=times)
             if out_dir is not None:
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]

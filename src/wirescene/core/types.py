@@ -463,9 +463,28 @@ def fitted_detections(detections: Detections, estimate: SceneEstimate) -> Detect
     return detections.subset(np.array(sorted(o.detection_index for o in estimate.objects), dtype=int))
 
 
+def car_fitted(detections: Detections, estimate: SceneEstimate) -> np.ndarray:
+    """Which of ``detections`` (those ``estimate`` was fitted to, in order) a car of
+    ``estimate`` was fitted to; a car whose index lies past them (a scene put together by
+    hand) is none of theirs.
+
+    Examples
+    --------
+    >>> dets = Detections([[0, 0, 10, 10], [20, 0, 30, 10]], 1.0, np.nan)
+    >>> cars = [ObjectEstimate(detection_index=i, box2d=dets.boxes[0], score=1.0, location=np.array([0.0, 1.65, 9.0]),
+    ...                        R=np.eye(3), dims=np.array([1.5, 1.6, 3.9]), cost=0.0) for i in (1, 5)]
+    >>> car_fitted(dets, SceneEstimate(variant="coarse", objects=cars)).tolist()
+    [False, True]
+    """
+    fitted = np.zeros(len(detections), bool)
+    fitted[[o.detection_index for o in estimate.objects if 0 <= o.detection_index < len(detections)]] = True
+    return fitted
+
+
 def dropped_detections(detections: Detections, estimate: SceneEstimate) -> Detections:
     """The pre-detections of ``detections`` that no car of ``estimate`` was fitted to: those
-    the fit's verification dropped (our own pre-detection's), in detection order.
+    the fit's verification dropped (our own pre-detection's), in detection order
+    (:func:`car_fitted`).
 
     Examples
     --------
@@ -478,6 +497,4 @@ def dropped_detections(detections: Detections, estimate: SceneEstimate) -> Detec
     array([[ 0.,  0., 10., 10.],
            [20.,  0., 30., 10.]])
     """
-    kept = np.zeros(len(detections), bool)
-    kept[[o.detection_index for o in estimate.objects]] = True
-    return detections.subset(~kept)
+    return detections.subset(~car_fitted(detections, estimate))

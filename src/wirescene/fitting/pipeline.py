@@ -9,6 +9,7 @@ I/O: inputs are arrays and typed objects, outputs a :class:`FrameFit`.
 from __future__ import annotations
 
 import numbers
+import time
 from dataclasses import dataclass, field, replace
 from typing import Iterable, Mapping
 
@@ -38,7 +39,7 @@ from wirescene.lift import (
     select_particles,
 )
 from wirescene.predetect.bank import MIN_SMALLEST_CAR, smallest_car_search
-from wirescene.predetect.enlarge import detect_enlarged
+from wirescene.predetect.enlarge import add_enlarged, boxes_back, frame_passes
 
 #: Largest enlargement of ``PredetectOptions.upsample``: 3 makes a KITTI frame 9 times the pixels.
 MAX_UPSAMPLE = 3.0
@@ -488,8 +489,8 @@ def frame_mount(camera: Camera | None, image: np.ndarray, *, bank, told: Mount =
 
 def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
                detections: Detections | None = None, threshold: float | None = None, pyramid: list | None = None,
-               responses: dict | None = None, smallest_car: float | None = None, min_scale: float | None = None,
-               mount: Mount = KITTI_MOUNT, estimate_pitch: bool = False, upsample: float = 1.0) -> Detections:
+               responses: dict | None = None, smallest_car: float | None = None, mount: Mount = KITTI_MOUNT,
+               estimate_pitch: bool = False, upsample: float = 1.0) -> Detections:
     """Our own pre-detection (stage 1): the detector bank's cars at its threshold
     (:func:`wirescene.predetect.detect_cars`, with the camera), each box's viewpoint then
     chosen as for the boxes of any other detector (:func:`complete_viewpoints`: the bank's
@@ -505,10 +506,8 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     and the rule); ``threshold``: the bank's score threshold (None: its own, the 2D
     operating point); ``smallest_car``: the smallest car height searched (px; None or 0: the
     bank's own), the pyramid's largest scale moved so that the bank's smallest templates reach
-    it; ``min_scale``: the pyramid's coarsest level of a single pass (None: the bank's own;
-    not read with ``upsample``, whose passes take their own, or ``estimate_pitch``, which
-    reads the image's whole pyramid); ``mount``: the camera's height above the road and pitch
-    down from it (:class:`~wirescene.core.groundplane.Mount`; ``LiftingOptions.mount``), for the ground and
+    it; ``mount``: the camera's height above the road and pitch down from it
+    (:class:`~wirescene.core.groundplane.Mount`; ``LiftingOptions.mount``), for the ground and
     traffic priors learned at KITTI's level rig; ``estimate_pitch``: the priors read the
     camera's pitch off the boxes the templates find without them (:func:`frame_pitch` about
     ``mount``'s; ``LiftingOptions.estimate_pitch``; :func:`frame_mount`); ``upsample``: the
@@ -516,8 +515,9 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     levels finer than the image's (:func:`~wirescene.predetect.enlarge.frame_passes`;
     ``PredetectOptions.upsample``), whose cars that no box of ``image`` covers are added, their
     boxes brought back to ``image``'s pixels (:func:`~wirescene.predetect.enlarge.add_enlarged`;
-    with ``detections`` given, nothing is detected and it is not read). Returns the bank's boxes
-    and calibrated scores with the rule's viewpoints.
+    with ``detections`` given, nothing is detected and it is not read; the passes:
+    :func:`own_detections`). Returns the bank's boxes and calibrated scores with the rule's
+    viewpoints.
 
     Examples
     --------
@@ -526,39 +526,127 @@ def detect_own(camera: Camera | None, image: np.ndarray, *, bank=None, classifie
     (0, 4)
     """
     bank = detector_bank(None) if bank is None else bank
-    if detections is None:  # one mount for every pass
-        pyramid, mount = frame_mount(camera, image, bank=bank, told=mount, estimate_pitch=estimate_pitch,
-                                     smallest_car=smallest_car, pyramid=pyramid)
-    if detections is None and upsample != 1.0:
-        def one_pass(p):
-            return detect_own(p.camera, p.image, bank=bank, classifier=classifier, threshold=threshold,
-                              smallest_car=p.smallest_car, min_scale=p.min_scale, pyramid=p.pyramid, mount=mount)
-
-        return detect_enlarged(one_pass, bank, camera, image, upsample, smallest_car=smallest_car, pyramid=pyramid)
-    if detections is None:  # the templates' features and responses, read again by the box rule
-        found, pyramid, responses = bank_pass(camera, image, bank=bank, threshold=threshold, pyramid=pyramid,
-                                              smallest_car=smallest_car, min_scale=min_scale, mount=mount)
-    else:
-        found = detections
-    if camera is None or not len(found):
-        return found
-    unknown = Detections(found.boxes, found.scores, np.full(len(found), np.nan), found.source)
+    if detections is None:
+        return own_detections(camera, image, bank=bank, classifier=classifier, threshold=threshold, upsample=upsample,
+                              smallest_car=smallest_car, pyramid=pyramid, mount=mount, estimate_pitch=estimate_pitch)
+    if camera is None or not len(detections):
+        return detections
+    unknown = Detections(detections.boxes, detections.scores, np.full(len(detections), np.nan), detections.source)
     return complete_viewpoints(camera, unknown, image, bank=bank, classifier=classifier, pyramid=pyramid,
                                responses=responses, mount=mount)
+
+
+def own_detections(camera: Camera | None, image: np.ndarray, *, bank=None, classifier=None,
+                   threshold: float | None = None, fit_viewpoints: bool = False, return_all: bool = False,
+                   viewpoints: bool = True, upsample: float = 1.0, smallest_car: float | None = None,
+                   pyramid: list | None = None, mount: Mount = KITTI_MOUNT, estimate_pitch: bool = False,
+                   cross_view_nms: float | None = 0.3, source: str = "bank", seconds: list | None = None):
+    """Our own pre-detection's passes over a frame, chained once for :func:`detect_own` (the
+    fit's and the evaluation's), :func:`wirescene.detect` and the ``detect`` command: one
+    camera mount for every pass (:func:`frame_mount`), the passes of
+    :func:`~wirescene.predetect.enlarge.frame_passes` (the image as it is and, with
+    ``upsample``, enlarged), on each the detector bank (:func:`bank_pass`) and the box rule's
+    viewpoints, the enlarged image's boxes brought back to the image's pixels
+    (:func:`~wirescene.predetect.enlarge.boxes_back`) and the cars it adds
+    (:func:`~wirescene.predetect.enlarge.add_enlarged`).
+
+    Parameters
+    ----------
+    camera : Camera or None
+        For the bank's priors and the box rule (None: neither, the detector's own viewpoints).
+    image : (H, W, 3) uint8 array
+    bank, classifier : DetectorBank, ViewpointClassifier, optional
+        As in :func:`complete_viewpoints`.
+    threshold : float, optional
+        Keep the boxes scoring above it (None: the bank's own, its 2D operating point).
+    fit_viewpoints : bool
+        Keep the boxes above ``threshold`` of the fit's own pre-detection, whatever the
+        threshold, for a calibrated bank: the passes read down to the lower of ``threshold``
+        and the fit's (``PredetectOptions.threshold``), each box the fit keeps takes the fit's
+        viewpoint (:func:`detections_above`) and the enlarged image's cars are added at the
+        fit's threshold. False: the passes read at ``threshold`` and the rule reads every box
+        found (:func:`detect_own`'s: the fit's own at its threshold).
+    return_all : bool
+        The passes keep every score (:func:`bank_pass`), returned too with the detector's own
+        viewpoints (e.g. for AP).
+    viewpoints : bool
+        The boxes kept take the box rule's viewpoints (False: the detector's own; no response
+        maps kept).
+    upsample, smallest_car, pyramid, mount, estimate_pitch
+        As in :func:`detect_own`.
+    cross_view_nms : float or None
+        As in :func:`~wirescene.predetect.detect_cars`.
+    source : str
+        The detections' ``source``.
+    seconds : list, optional
+        Receives the seconds the detection took: the mount, the passes' images and the bank's
+        passes, not the box rule's viewpoints.
+
+    Returns
+    -------
+    Detections or tuple of Detections
+        The boxes kept, in the image's pixels; with ``return_all``, ``(every, kept)``.
+
+    Examples
+    --------
+    >>> image = np.zeros((64, 96, 3), np.uint8)
+    >>> own_detections(None, image, upsample=1.5).boxes.shape
+    (0, 4)
+    >>> every, kept = own_detections(None, image, fit_viewpoints=True, return_all=True, viewpoints=False)
+    >>> len(every) >= len(kept), bool((kept.scores > detector_bank(None).threshold).all())
+    (True, True)
+    """
+    bank = detector_bank(None) if bank is None else bank
+    keep = read = threshold
+    add_at = None  # every pass cut at one threshold: every box counts
+    if fit_viewpoints:
+        keep = bank.threshold if threshold is None else float(threshold)
+        fit = PredetectOptions().threshold if bank.calibration is not None else keep  # margins: no common scale
+        read, add_at = min(keep, fit), fit
+    clock = time.perf_counter()
+    pyramid, mount = frame_mount(camera, image, bank=bank, told=mount, estimate_pitch=estimate_pitch,
+                                 smallest_car=smallest_car, pyramid=pyramid)  # one mount for every pass
+    passes = list(frame_passes(bank, camera, image, upsample, smallest_car, pyramid=pyramid))
+    spent = time.perf_counter() - clock
+    merged = None  # (every, viewed) in the image's pixels
+    for p in passes:
+        clock = time.perf_counter()
+        found, levels, responses = bank_pass(p.camera, p.image, bank=bank, threshold=read, return_all=return_all,
+                                             smallest_car=p.smallest_car, min_scale=p.min_scale, pyramid=p.pyramid,
+                                             mount=mount, keep_responses=viewpoints, cross_view_nms=cross_view_nms,
+                                             source=source)
+        spent += time.perf_counter() - clock
+        viewed = None
+        if viewpoints and fit_viewpoints:
+            viewed = detections_above(p.camera, p.image, found, read, bank=bank, classifier=classifier,
+                                      pyramid=levels, responses=responses, mount=mount)
+        elif viewpoints:
+            viewed = detect_own(p.camera, p.image, bank=bank, classifier=classifier, detections=found,
+                                pyramid=levels, responses=responses, mount=mount)
+        del levels, responses  # this pass's features and maps, freed before the next pass's
+        here = [None if d is None else boxes_back(d, p.factors, image.shape[1::-1]) for d in (found, viewed)]
+        merged = here if merged is None else [None if d is None else add_enlarged(d, more, threshold=add_at)
+                                              for d, more in zip(merged, here)]
+    if seconds is not None:
+        seconds.append(spent)
+    every, viewed = merged
+    shown = every if viewed is None else viewed
+    kept = shown.subset(shown.scores > keep) if fit_viewpoints else shown
+    return (every, kept) if return_all else kept
 
 
 def bank_pass(camera: Camera | None, image: np.ndarray, *, bank, threshold: float | None = None,
               return_all: bool = False, pyramid: list | None = None, smallest_car: float | None = None,
               min_scale: float | None = None, mount: Mount = KITTI_MOUNT, keep_responses: bool = True,
-              source: str = "bank"):
+              cross_view_nms: float | None = 0.3, source: str = "bank"):
     """One pass of the detector ``bank`` over ``image``: the feature pyramid its smallest car
     needs (``smallest_car``, :func:`~wirescene.predetect.bank.smallest_car_search`), down to
     ``min_scale`` (None: the bank's own; or ``pyramid``, given), then
     :func:`~wirescene.predetect.detect_cars` at ``threshold`` (None: the bank's own), or every
-    score with ``return_all``, with the camera's ``mount`` (:func:`frame_mount`). Returns
-    ``(detections, pyramid, responses)``: what the box rule reads after it (``responses`` None
-    unless ``keep_responses``); each pass of :func:`detect_own`, :func:`wirescene.detect` and
-    the ``detect`` command.
+    score with ``return_all``, with the camera's ``mount`` (:func:`frame_mount`) and its
+    ``cross_view_nms``. Returns ``(detections, pyramid, responses)``: what the box rule reads
+    after it (``responses`` None unless ``keep_responses``); each pass of
+    :func:`own_detections`.
 
     Examples
     --------
@@ -573,7 +661,8 @@ def bank_pass(camera: Camera | None, image: np.ndarray, *, bank, threshold: floa
     pyramid = bank_pyramid(bank, image, max_scale=max_scale, min_scale=min_scale) if pyramid is None else pyramid
     responses = {} if keep_responses else None
     found = detect_cars(image, bank=bank, camera=camera, threshold=threshold, return_all=return_all, pyramid=pyramid,
-                        responses=responses, min_height=min_height, mount=mount, source=source)
+                        responses=responses, min_height=min_height, mount=mount, cross_view_nms=cross_view_nms,
+                        source=source)
     return found, pyramid, responses
 
 

@@ -192,30 +192,6 @@ def frame_passes(bank, camera: Camera | None, image: np.ndarray, factor: float, 
         yield Pass(big_camera, big, smallest, min_scale, factors)
 
 
-def detect_enlarged(detect, bank, camera: Camera | None, image: np.ndarray, factor: float, *,
-                    smallest_car: float | None = None, threshold: float | None = None,
-                    pyramid: list | None = None) -> Detections:
-    """``detect(pass_)``'s detections over the passes (:class:`Pass`) of :func:`frame_passes`
-    (``pyramid``: the image's, if already computed): those of the image as it is, with the
-    cars the enlarged image adds (:func:`add_enlarged` at ``threshold``), in the image's pixels.
-
-    Examples
-    --------
-    >>> bank = type("Bank", (), {"meta": {"min_height": 25.0, "max_scale": 2.0, "per_octave": 6}})()
-    >>> image = np.zeros((64, 96, 3), np.uint8)
-    >>> def detect(p):  # one box in the middle of whatever image it is given
-    ...     h, w = p.image.shape[:2]
-    ...     return Detections(np.array([[w / 4, h / 4, w / 2, h / 2]]), np.ones(1), np.zeros(1))
-    >>> detect_enlarged(detect, bank, None, image, 2.0).boxes  # the enlarged image's box is the same car
-    array([[24., 16., 48., 32.]])
-    """
-    found = None
-    for p in frame_passes(bank, camera, image, factor, smallest_car, pyramid=pyramid):
-        dets = boxes_back(detect(p), p.factors, image.shape[1::-1])
-        found = dets if found is None else add_enlarged(found, dets, threshold=threshold)
-    return found
-
-
 #: IoU with a detection of the image as it is above which an enlarged image's detection is the
 #: same car (:func:`add_enlarged`): the IoU at which a detection counts as a car's.
 SAME_CAR_IOU = 0.5
