@@ -1136,3 +1136,31 @@ def test_a_pool_stopped_by_an_error_does_not_wait_for_its_frames():
         time.sleep(0.1)
     assert all(gone(p.pid) for p in processes)
     assert futures[-1].cancelled() or futures[-1].done()
+
+
+def test_pitch_reads_a_rig_off_its_frames_pooled(tmp_path):
+    """``wirescene pitch``: the three frames' calibrations with the principal point 50 px lower
+    (the road's horizon 50 px above it, as for a camera pitched down by 4 deg) read about 4 deg,
+    the frames as they are level; ``--max-frames`` reads that many, spread over the frames."""
+    from wirescene.core.camera import read_projection
+
+    moved = tmp_path / "moved"
+    shutil.copytree(KITTI_ROOT, moved)
+    for calib in sorted((moved / "training" / "calib").glob("*.txt")):
+        P = read_projection(calib)
+        rows = calib.read_text().splitlines()
+        P[1, 2] += 50.0
+        calib.write_text("\n".join(f"P2: {' '.join(f'{v:.12e}' for v in P.ravel())}" if r.startswith("P2:") else r
+                                   for r in rows) + "\n")
+    expected = float(np.rad2deg(np.arctan(50.0 / P[1, 1])))
+    for root, pitch in ((KITTI_ROOT, 0.0), (moved, expected)):
+        out = tmp_path / f"{root.name}.json"
+        r = run("pitch", root, "--json", out)
+        assert r.exit_code == 0, r.output
+        record = json.loads(out.read_text())
+        assert sorted(record["frames"]) == ["000002", "000010", "001545"] and record["boxes"] > 3, record
+        assert abs(record["pitch"] - pitch) < 1.0, (record["pitch"], pitch)
+        assert f"fit with --set lifting.camera_pitch={record['pitch']:.1f}" in r.output
+    r = run("pitch", moved, "--max-frames", "2", "--json", out)
+    assert r.exit_code == 0, r.output
+    assert sorted(json.loads(out.read_text())["frames"]) == ["000002", "001545"]

@@ -892,6 +892,7 @@ def _register_commands():
     from wirescene.cli.info import info
     from wirescene.cli.occlusion import occlusion
     from wirescene.cli.parts import parts
+    from wirescene.cli.pitch import pitch
     from wirescene.cli.scores import scores
     from wirescene.cli.synth import synth
     from wirescene.cli.train_all import train_all_cmd
@@ -899,6 +900,7 @@ def _register_commands():
     main.add_command(synth)
     main.add_command(cad)
     main.add_command(detect)
+    main.add_command(pitch)
     main.add_command(info)
     train = click.Group("train", help="Train the model's artefacts from documented data.")
     for command in (shape, parts, detector, viewpoints, occlusion, scores, train_all_cmd):

@@ -424,6 +424,19 @@ def detections_above(camera: Camera | None, image: np.ndarray, found: Detections
 PITCH_THRESHOLD = 0.1
 
 
+def bounded_pitch(pitch: float) -> float:
+    """``pitch`` (degrees) within ``LiftingOptions.camera_pitch``'s bounds, which a pitch read
+    off boxes may pass (the grid reaches 15 deg past the one told).
+
+    Examples
+    --------
+    >>> bounded_pitch(50.0), bounded_pitch(-0.1)
+    (45.0, -0.1)
+    """
+    bounds = stage_field(LiftingOptions, "camera_pitch").metadata
+    return min(max(float(pitch), bounds["minimum"]), bounds["maximum"])
+
+
 def frame_pitch(camera: Camera, detections: Detections, *, bank, told: Mount = KITTI_MOUNT,
                 weighted: bool = False) -> float:
     """The camera's pitch read off a frame's boxes
@@ -445,23 +458,48 @@ def frame_pitch(camera: Camera, detections: Detections, *, bank, told: Mount = K
     if not prior:
         return float(told.pitch)
     weights = np.clip(detections.scores, 0.0, 1.0) if weighted else None
-    pitch = pitch_from_boxes(prior, camera, detections.boxes, weights=weights, told=told)
-    bounds = stage_field(LiftingOptions, "camera_pitch").metadata
-    return min(max(pitch, bounds["minimum"]), bounds["maximum"])
+    return bounded_pitch(pitch_from_boxes(prior, camera, detections.boxes, weights=weights, told=told))
+
+
+def image_pitch_likelihood(camera: Camera, image: np.ndarray, *, bank, told: Mount = KITTI_MOUNT,
+                           pyramid: list | None = None, min_height: float | None = None) -> tuple[np.ndarray, int]:
+    """``((301,) log-likelihood, boxes)`` of the camera's pitch
+    (:func:`~wirescene.predetect.geometry.pitch_log_likelihood` on the grid about ``told``) by
+    the boxes ``bank``'s templates find in ``image`` without the priors, which need the pitch,
+    down to :data:`PITCH_THRESHOLD`, each weighed by its score, and how many boxes it read;
+    zeros and 0 for a bank without a ground prior. Frames of one rig add their
+    log-likelihoods (``wirescene pitch``); ``pyramid`` and ``min_height`` as in
+    :func:`~wirescene.predetect.bank.detect_cars`.
+
+    Examples
+    --------
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera(np.array([[720.0, 0, 48, 0], [0, 720.0, 32, 0], [0, 0, 1, 0]]), (96, 64))
+    >>> likelihood, boxes = image_pitch_likelihood(camera, np.zeros((64, 96, 3), np.uint8), bank=detector_bank(None))
+    >>> likelihood.shape, boxes  # a blank image: no box, no evidence
+    ((301,), 0)
+    """
+    from wirescene.predetect import detect_cars
+    from wirescene.predetect.geometry import pitch_grid, pitch_log_likelihood
+
+    prior = bank.meta.get("ground_prior")
+    if not prior:  # no prior to read the pitch with: no detection pass spent on it
+        return np.zeros(len(pitch_grid(told))), 0
+    raw = detect_cars(image, bank=bank, threshold=PITCH_THRESHOLD, pyramid=pyramid, min_height=min_height)
+    weights = np.clip(raw.scores, 0.0, 1.0)
+    return pitch_log_likelihood(prior, camera, raw.boxes, weights=weights, told=told), len(raw)
 
 
 def image_mount(camera: Camera, image: np.ndarray, *, bank, told: Mount = KITTI_MOUNT, pyramid: list | None = None,
                 min_height: float | None = None) -> Mount:
     """``told`` with the pitch read off the boxes ``bank``'s templates find in ``image``
-    without the priors, which need the pitch (:func:`frame_pitch`, down to
-    :data:`PITCH_THRESHOLD`, each box weighed by its score); ``pyramid`` and ``min_height`` as
-    in :func:`~wirescene.predetect.bank.detect_cars`."""
-    from wirescene.predetect import detect_cars
+    without the priors, which need the pitch (:func:`image_pitch_likelihood`, within
+    ``LiftingOptions.camera_pitch``'s bounds; ``told`` for a bank without a ground prior);
+    ``pyramid`` and ``min_height`` as in :func:`~wirescene.predetect.bank.detect_cars`."""
+    from wirescene.predetect.geometry import pitch_of
 
-    if not bank.meta.get("ground_prior"):  # no prior to read the pitch with: no detection pass spent on it
-        return told
-    raw = detect_cars(image, bank=bank, threshold=PITCH_THRESHOLD, pyramid=pyramid, min_height=min_height)
-    return Mount(told.height, frame_pitch(camera, raw, bank=bank, told=told, weighted=True))
+    likelihood, _ = image_pitch_likelihood(camera, image, bank=bank, told=told, pyramid=pyramid, min_height=min_height)
+    return Mount(told.height, bounded_pitch(pitch_of(likelihood, told=told)))
 
 
 def frame_mount(camera: Camera | None, image: np.ndarray, *, bank, told: Mount = KITTI_MOUNT,

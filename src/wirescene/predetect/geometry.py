@@ -177,20 +177,85 @@ def ground_log_ratio(prior: dict, boxes, horizon: float | Horizon) -> np.ndarray
 PITCH_SPREAD = 5.0
 
 
+def pitch_grid(told: Mount = KITTI_MOUNT) -> np.ndarray:
+    """``(301,)`` pitches (degrees down from the road) the boxes are read at: 0.1 deg apart,
+    within 15 deg of ``told.pitch``.
+
+    Examples
+    --------
+    >>> grid = pitch_grid(Mount(1.65, 2.0))
+    >>> grid.shape, float(grid[0]), float(grid[-1])
+    ((301,), -13.0, 17.0)
+    """
+    return float(told.pitch) + np.arange(-150, 151) / 10.0
+
+
+def pitch_log_likelihood(prior: dict, camera, boxes, *, weights=None, told: Mount = KITTI_MOUNT) -> np.ndarray:
+    """``(301,)`` log-likelihood of ``boxes`` standing on the road as cars do, at each pitch
+    of :func:`pitch_grid`, the camera's height told: the ground ``prior``'s car density
+    (mixed with the background's, for boxes that are no car's) of every box's ratio of its
+    distance below the horizon to its height (:func:`bottom_ratio`), ``weights`` per box
+    (e.g. their probability of a car, default 1). Boxes cut by the image's bottom edge say
+    nothing of where their car stands and are left out; without a box, zeros. Frames of
+    one rig add their log-likelihoods (:func:`pitch_of`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wirescene.core.camera import Camera
+    >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
+    >>> prior = {"car": [1.1, 0.08], "background": [0.5, 1.0]}
+    >>> bool(pitch_log_likelihood(prior, camera, np.zeros((0, 4))).any())  # no box: no evidence
+    False
+    >>> z = np.array([8.0, 20.0])  # two frames of one car each, the horizon 50 px up: 4 deg down
+    >>> frames = [[[500.0, 120 + 720 * 0.15 / d, 600.0, 120 + 720 * 1.65 / d]] for d in z]
+    >>> pitch_of(sum(pitch_log_likelihood(prior, camera, b) for b in frames))
+    4.0
+    """
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    w = np.ones(len(b)) if weights is None else np.asarray(weights, float).reshape(-1)
+    if len(w) != len(b):
+        raise ValueError(f"weights must have one value per box ({len(b)}), got {len(w)}")
+    size = getattr(camera, "image_size", None)
+    keep = np.isfinite(b).all(1) & np.isfinite(w) & (w > 0) & (b[:, 3] - b[:, 1] >= 1)
+    if size is not None:
+        keep &= b[:, 3] < size[1] - 2  # cut by the bottom edge: its bottom is not the car's
+    grid = pitch_grid(told)
+    if not keep.any():
+        return np.zeros(len(grid))
+    ratios = np.stack([bottom_ratio(b[keep], road_horizon(camera, Mount(told.height, p))) for p in grid])  # (G, D)
+    density, _ = _log_densities(prior, ratios)
+    return density @ w[keep]
+
+
+def pitch_of(log_likelihood, *, told: Mount = KITTI_MOUNT) -> float:
+    """The pitch (degrees) of :func:`pitch_grid` that a log-likelihood ``(301,)`` of
+    :func:`pitch_log_likelihood` (one frame's, or the sum of a rig's frames') and a normal
+    prior about ``told.pitch`` (:data:`PITCH_SPREAD`) make most likely; ``told.pitch`` for
+    no evidence.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> pitch_of(np.zeros(301), told=Mount(1.65, 2.5))
+    2.5
+    """
+    grid = pitch_grid(told)
+    score = np.asarray(log_likelihood, float) - 0.5 * ((grid - told.pitch) / PITCH_SPREAD) ** 2
+    return float(grid[np.argmax(score)])
+
+
 def pitch_from_boxes(prior: dict, camera, boxes, *, weights=None, told: Mount = KITTI_MOUNT) -> float:
     """The camera's pitch (degrees down from the road) under which ``boxes`` stand on the
     road as cars do, its height above the road told.
 
     A car's box lies ``f Hcam / Z`` below the horizon and is ``f Hc / Z`` high: the ratio of
     the two is the same for every car (:func:`bottom_ratio`), and the horizon that gives the
-    frame's boxes the ratios the ground ``prior`` expects of cars (its car density, mixed
-    with the background's for boxes that are no car's; ``weights`` per box, e.g. their
-    probability of a car, default 1) is the camera's pitch, searched on a grid of 0.1 deg
-    within 15 deg of ``told.pitch`` under a normal prior about it (:data:`PITCH_SPREAD`).
-    Boxes cut by the image's bottom edge say nothing of where their car stands and are left
-    out; without a box the told pitch is returned. The height is not estimated: the boxes
-    fix the ratio of the camera's height to the cars' only, and a car's height varies by
-    10%.
+    frame's boxes the ratios the ground ``prior`` expects of cars
+    (:func:`pitch_log_likelihood`) is the camera's pitch, searched on a grid of 0.1 deg
+    within 15 deg of ``told.pitch`` under a normal prior about it (:func:`pitch_of`).
+    Without a box the told pitch is returned. The height is not estimated: the boxes fix
+    the ratio of the camera's height to the cars' only, and a car's height varies by 10%.
 
     Parameters
     ----------
@@ -219,18 +284,4 @@ def pitch_from_boxes(prior: dict, camera, boxes, *, weights=None, told: Mount = 
     >>> round(pitch_from_boxes(prior, camera, boxes), 1)
     4.0
     """
-    b = np.asarray(boxes, float).reshape(-1, 4)
-    w = np.ones(len(b)) if weights is None else np.asarray(weights, float).reshape(-1)
-    if len(w) != len(b):
-        raise ValueError(f"weights must have one value per box ({len(b)}), got {len(w)}")
-    size = getattr(camera, "image_size", None)
-    keep = np.isfinite(b).all(1) & np.isfinite(w) & (w > 0) & (b[:, 3] - b[:, 1] >= 1)
-    if size is not None:
-        keep &= b[:, 3] < size[1] - 2  # cut by the bottom edge: its bottom is not the car's
-    if not keep.any():
-        return float(told.pitch)
-    pitch = told.pitch + np.arange(-150, 151) / 10.0  # (G,) degrees
-    ratios = np.stack([bottom_ratio(b[keep], road_horizon(camera, Mount(told.height, p))) for p in pitch])  # (G, D)
-    density, _ = _log_densities(prior, ratios)
-    score = density @ w[keep] - 0.5 * ((pitch - told.pitch) / PITCH_SPREAD) ** 2
-    return float(pitch[np.argmax(score)])
+    return pitch_of(pitch_log_likelihood(prior, camera, boxes, weights=weights, told=told), told=told)
