@@ -196,6 +196,16 @@ def _cars_in_one_fold(tmp):
     return root
 
 
+def _bank_without_ground_prior(tmp):
+    """The shipped detector bank saved as ``tmp/bank.npz`` without its ground prior."""
+    from dataclasses import replace
+
+    from wirescene.predetect.bank import load_default_bank
+
+    bank = load_default_bank()
+    return replace(bank, meta={k: v for k, v in bank.meta.items() if k != "ground_prior"}).save(tmp / "bank.npz")
+
+
 PLY_FACE_PAST_VERTICES = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                           "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n4 0 0\n0 1 1\n"
                           "3 0 1 7\n")
@@ -656,6 +666,10 @@ CASES = {
                                                                        "f 0 1 2\n").parent],
         r"^wirescene: error: \S+/cad/car\.obj: OBJ line 5: vertex reference 0 \(OBJ counts vertices from 1, or back "
         r"from -1\)$"),
+    "pitch with a bank without a ground prior": (
+        lambda t: ["pitch", KITTI_ROOT, "--frames", FRAME, "--bank", _bank_without_ground_prior(t), "--json",
+                   t / "pitch.json"],
+        r"^wirescene: error: \S+/bank\.npz: detector bank without a ground prior to read a pitch with"),
     "cad list of a PLY face past its vertices": (  # loaded as it is by trimesh, refused later or not at all
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.ply", PLY_FACE_PAST_VERTICES).parent],
         r"car\.ply: a face refers to vertex 7, the file has 3 vertices \(0 to 2\)$"),

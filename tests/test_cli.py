@@ -1141,8 +1141,12 @@ def test_a_pool_stopped_by_an_error_does_not_wait_for_its_frames():
 def test_pitch_reads_a_rig_off_its_frames_pooled(tmp_path):
     """``wirescene pitch``: the three frames' calibrations with the principal point 50 px lower
     (the road's horizon 50 px above it, as for a camera pitched down by 4 deg) read about 4 deg,
-    the frames as they are level; ``--max-frames`` reads that many, spread over the frames."""
+    the frames as they are level; the rig's pitch is the frames' log-likelihoods summed, read at
+    the camera height told; ``--max-frames`` reads that many, spread over the frames."""
     from wirescene.core.camera import read_projection
+    from wirescene.core.groundplane import Mount
+    from wirescene.fitting.pipeline import detector_bank, image_pitch_likelihood, rig_pitch
+    from wirescene.io.kitti import KittiDataset
 
     moved = tmp_path / "moved"
     shutil.copytree(KITTI_ROOT, moved)
@@ -1153,14 +1157,32 @@ def test_pitch_reads_a_rig_off_its_frames_pooled(tmp_path):
         calib.write_text("\n".join(f"P2: {' '.join(f'{v:.12e}' for v in P.ravel())}" if r.startswith("P2:") else r
                                    for r in rows) + "\n")
     expected = float(np.rad2deg(np.arctan(50.0 / P[1, 1])))
-    for root, pitch in ((KITTI_ROOT, 0.0), (moved, expected)):
-        out = tmp_path / f"{root.name}.json"
-        r = run("pitch", root, "--json", out)
+    out = tmp_path / "pitch.json"
+    read = {}
+    for root, height, pitch in ((KITTI_ROOT, 1.65, 0.0), (moved, 1.65, expected), (moved, 2.2, None)):
+        r = run("pitch", root, "--camera-height", height, "--json", out)
         assert r.exit_code == 0, r.output
-        record = json.loads(out.read_text())
+        record = read[root.name, height] = json.loads(out.read_text())
         assert sorted(record["frames"]) == ["000002", "000010", "001545"] and record["boxes"] > 3, record
-        assert abs(record["pitch"] - pitch) < 1.0, (record["pitch"], pitch)
-        assert f"fit with --set lifting.camera_pitch={record['pitch']:.1f}" in r.output
+        if pitch is not None:
+            assert abs(record["pitch"] - pitch) < 1.0, (record["pitch"], pitch)
+        assert (f"fit with --set lifting.camera_height={height:g} --set lifting.camera_pitch={record['pitch']:.1f}"
+                in r.output)
+    assert read["moved", 2.2]["pitch"] > read["moved", 1.65]["pitch"] + 0.5  # read at the height told
+    # two frames pooled: their log-likelihoods summed (not one frame's pitch, nor the mean of their pitches)
+    dataset, told = KittiDataset(moved), Mount(1.65, 0.0)
+    pair = ("000002", "001545")
+    each = [image_pitch_likelihood(dataset.camera(f), dataset.image(f), bank=detector_bank(None), told=told)[0]
+            for f in pair]
+    r = run("pitch", moved, "--frames", ",".join(pair), "--json", out)
+    assert r.exit_code == 0, r.output
+    record = json.loads(out.read_text())
+    alone = [round(rig_pitch([e], told=told), 2) for e in each]
+    assert [record["frames"][f]["pitch"] for f in pair] == alone
+    assert record["pitch"] == round(rig_pitch(each, told=told), 2)
+    assert record["pitch"] not in alone and abs(record["pitch"] - np.mean(alone)) > 0.05, (record, alone)
     r = run("pitch", moved, "--max-frames", "2", "--json", out)
     assert r.exit_code == 0, r.output
     assert sorted(json.loads(out.read_text())["frames"]) == ["000002", "001545"]
+    r = run("pitch", moved, "--max-frames", "1", "--frames", "000010", "--camera-pitch", "40")
+    assert r.exit_code == 0 and "lies at the edge of the search" in r.output, r.output

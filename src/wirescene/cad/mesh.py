@@ -176,8 +176,7 @@ def read_mesh(path) -> tuple[np.ndarray, np.ndarray]:
 def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]:
     if suffix not in MESH_SUFFIXES:
         raise InputError(f"unsupported mesh format {suffix!r} (use one of {', '.join(MESH_SUFFIXES)})", path=path)
-    # an OBJ's lines checked first: said in plain words (numpy's "index 8 is out of bounds for axis 0" says
-    # nothing of the file), and a face of vertex 0, which trimesh reads as the last vertex, refused
+    # an OBJ checked before trimesh, which reads a face of vertex 0 as the last vertex without a word
     problem = path_problem(path, "mesh") or (_obj_problem(path) if suffix == ".obj" else None)
     if problem:
         raise InputError(problem, path=path)

@@ -468,7 +468,7 @@ def image_pitch_likelihood(camera: Camera, image: np.ndarray, *, bank, told: Mou
     the boxes ``bank``'s templates find in ``image`` without the priors, which need the pitch,
     down to :data:`PITCH_THRESHOLD`, each weighed by its score, and how many boxes it read;
     zeros and 0 for a bank without a ground prior. Frames of one rig add their
-    log-likelihoods (``wirescene pitch``); ``pyramid`` and ``min_height`` as in
+    log-likelihoods (:func:`rig_pitch`, ``wirescene pitch``); ``pyramid`` and ``min_height`` as in
     :func:`~wirescene.predetect.bank.detect_cars`.
 
     Examples
@@ -484,10 +484,26 @@ def image_pitch_likelihood(camera: Camera, image: np.ndarray, *, bank, told: Mou
 
     prior = bank.meta.get("ground_prior")
     if not prior:  # no prior to read the pitch with: no detection pass spent on it
-        return np.zeros(len(pitch_grid(told))), 0
+        return np.zeros(len(pitch_grid(told=told))), 0
     raw = detect_cars(image, bank=bank, threshold=PITCH_THRESHOLD, pyramid=pyramid, min_height=min_height)
     weights = np.clip(raw.scores, 0.0, 1.0)
     return pitch_log_likelihood(prior, camera, raw.boxes, weights=weights, told=told), len(raw)
+
+
+def rig_pitch(likelihoods, *, told: Mount = KITTI_MOUNT) -> float:
+    """The pitch (degrees) that the frames of one rig tell together: the sum of their
+    :func:`image_pitch_likelihood` (read about ``told``, at its height) under the prior about
+    ``told.pitch`` (:func:`~wirescene.predetect.geometry.pitch_of`), within
+    ``LiftingOptions.camera_pitch``'s bounds; ``told.pitch`` without evidence.
+
+    Examples
+    --------
+    >>> rig_pitch([np.zeros(301), np.zeros(301)], told=Mount(1.65, 2.5))
+    2.5
+    """
+    from wirescene.predetect.geometry import pitch_of
+
+    return bounded_pitch(pitch_of(np.sum(np.asarray(likelihoods, float), axis=0), told=told))
 
 
 def image_mount(camera: Camera, image: np.ndarray, *, bank, told: Mount = KITTI_MOUNT, pyramid: list | None = None,
@@ -496,10 +512,8 @@ def image_mount(camera: Camera, image: np.ndarray, *, bank, told: Mount = KITTI_
     without the priors, which need the pitch (:func:`image_pitch_likelihood`, within
     ``LiftingOptions.camera_pitch``'s bounds; ``told`` for a bank without a ground prior);
     ``pyramid`` and ``min_height`` as in :func:`~wirescene.predetect.bank.detect_cars`."""
-    from wirescene.predetect.geometry import pitch_of
-
     likelihood, _ = image_pitch_likelihood(camera, image, bank=bank, told=told, pyramid=pyramid, min_height=min_height)
-    return Mount(told.height, bounded_pitch(pitch_of(likelihood, told=told)))
+    return Mount(told.height, rig_pitch([likelihood], told=told))
 
 
 def frame_mount(camera: Camera | None, image: np.ndarray, *, bank, told: Mount = KITTI_MOUNT,

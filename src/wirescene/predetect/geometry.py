@@ -177,17 +177,22 @@ def ground_log_ratio(prior: dict, boxes, horizon: float | Horizon) -> np.ndarray
 PITCH_SPREAD = 5.0
 
 
-def pitch_grid(told: Mount = KITTI_MOUNT) -> np.ndarray:
+#: Half-width (degrees) of the pitch searched about the one told, on a grid of 0.1 deg.
+PITCH_SEARCH = 15.0
+
+
+def pitch_grid(*, told: Mount = KITTI_MOUNT) -> np.ndarray:
     """``(301,)`` pitches (degrees down from the road) the boxes are read at: 0.1 deg apart,
-    within 15 deg of ``told.pitch``.
+    within :data:`PITCH_SEARCH` (15 deg) of ``told.pitch``.
 
     Examples
     --------
-    >>> grid = pitch_grid(Mount(1.65, 2.0))
+    >>> grid = pitch_grid(told=Mount(1.65, 2.0))
     >>> grid.shape, float(grid[0]), float(grid[-1])
     ((301,), -13.0, 17.0)
     """
-    return float(told.pitch) + np.arange(-150, 151) / 10.0
+    steps = round(PITCH_SEARCH * 10)
+    return float(told.pitch) + np.arange(-steps, steps + 1) / 10.0
 
 
 def pitch_log_likelihood(prior: dict, camera, boxes, *, weights=None, told: Mount = KITTI_MOUNT) -> np.ndarray:
@@ -220,7 +225,7 @@ def pitch_log_likelihood(prior: dict, camera, boxes, *, weights=None, told: Moun
     keep = np.isfinite(b).all(1) & np.isfinite(w) & (w > 0) & (b[:, 3] - b[:, 1] >= 1)
     if size is not None:
         keep &= b[:, 3] < size[1] - 2  # cut by the bottom edge: its bottom is not the car's
-    grid = pitch_grid(told)
+    grid = pitch_grid(told=told)
     if not keep.any():
         return np.zeros(len(grid))
     ratios = np.stack([bottom_ratio(b[keep], road_horizon(camera, Mount(told.height, p))) for p in grid])  # (G, D)
@@ -240,7 +245,7 @@ def pitch_of(log_likelihood, *, told: Mount = KITTI_MOUNT) -> float:
     >>> pitch_of(np.zeros(301), told=Mount(1.65, 2.5))
     2.5
     """
-    grid = pitch_grid(told)
+    grid = pitch_grid(told=told)
     score = np.asarray(log_likelihood, float) - 0.5 * ((grid - told.pitch) / PITCH_SPREAD) ** 2
     return float(grid[np.argmax(score)])
 

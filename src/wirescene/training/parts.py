@@ -813,8 +813,7 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
                 raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
                                     f"(drives); the {len(frames)} frame(s) given fall in one: train without it "
                                     "(calibrate_real=False, --no-calibrate) or on frames of more drives")
-            # a fold's held-out forest learns from the other folds' cars: of real frames only, the cars of one fold
-            # leave its forest none (of background only, whose scores the calibration can but take for the identity)
+            # real frames only, the cars in one fold: that fold's held-out forest would learn no part
             if real_only and len({k for f, k in zip(frames, fold) if car_counts[f]}) < 2:
                 raise ArgumentError("calibrate_real", f"the held-out calibration needs labelled cars in 2 or more "
                                     f"folds (drives); those of the {len(frames)} frame(s) given lie in one, so the "
