@@ -187,11 +187,18 @@ def _predict_resume_case(tmp, record, *, resume=True):
             FRAME, "--workers", "1", "--particles", "20", "--out", pred, *(["--resume"] if resume else [])]
 
 
-def _cars_in_one_fold(tmp):
-    """A KITTI root of the test frame and of a copy of another frame (of another fold) whose label holds no Car."""
+def _cars_in_one_fold(tmp, *, occluded=False):
+    """A KITTI root of the test frame and of a copy of another frame (of another fold) whose label holds no Car
+    (``occluded``: its Cars, all of occlusion level 2, which the part training leaves out)."""
     root = kitti_copy(tmp / "kitti", [FRAME, "001545"])
-    (root / "training" / "label_2" / "001545.txt").write_text(
-        "DontCare -1 -1 -10 1000 160 1040 190 -1 -1 -1 -1000 -1000 -1000 -10\n")
+    label = root / "training" / "label_2" / "001545.txt"
+    if occluded:
+        rows = [r.split() for r in label.read_text().splitlines()]
+        label.write_text("".join(" ".join(r[:2] + ["2"] + r[3:]) + "\n" if r[0] == "Car" else " ".join(r) + "\n"
+                                 for r in rows))
+        assert "Car" in label.read_text()
+    else:
+        label.write_text("DontCare -1 -1 -10 1000 160 1040 190 -1 -1 -1 -1000 -1000 -1000 -10\n")
     assert fold_of(FRAME) != fold_of("001545")
     return root
 
@@ -488,8 +495,13 @@ CASES = {
     "train parts --calibrate with the cars of one fold": (
         lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-root", _cars_in_one_fold(t), "--synth-scenes", "0",
                    "--n-trees", "1", "--max-depth", "4", "--calibrate"],
-        r"calibrate_real: the held-out calibration needs labelled cars in 2 or more folds \(drives\); those of the 2 "
-        r"frame\(s\) given lie in one"),
+        r"calibrate_real: the held-out calibration needs labelled cars \(25 px high or more, occlusion 1 or less\) in 2 "
+        r"or more folds \(drives\); those of the 2 frame\(s\) given lie in one"),
+    # the other fold's Cars all too occluded to learn parts from: the same forest of background only
+    "train parts --calibrate with the other fold's cars all occluded": (
+        lambda t: ["train", "parts", "--out", t / "p.npz", "--kitti-root", _cars_in_one_fold(t, occluded=True),
+                   "--synth-scenes", "0", "--n-trees", "1", "--max-depth", "4", "--calibrate"],
+        r"needs labelled cars \(25 px high or more, occlusion 1 or less\) in 2 or more folds"),
     "train detector on frames without a car": (
         lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", _carless_root(t), "--no-calibration"],
         "none of the 1 training frame.s. has a labelled Car"),

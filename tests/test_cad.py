@@ -275,3 +275,18 @@ def test_obj_faces_of_vertex_0_are_refused_and_relative_references_read(tmp_path
     (tmp_path / "relative.obj").write_text(vertices + "f -4 -3 -2\nf 2 -2 -1\n")
     for a, b in zip(read_mesh(tmp_path / "absolute.obj"), read_mesh(tmp_path / "relative.obj")):
         assert_close(b, a)
+
+
+def test_obj_lines_continued_by_a_backslash_are_read_and_checked_whole(tmp_path):
+    """A line ending in a backslash goes on at the next (as trimesh reads it): legal OBJ, read as the one-line
+    file; a bad reference on a continued line is said at the line where it starts."""
+    from wirescene.cad.mesh import read_mesh
+
+    vertices = "v 0 0 0\nv 4 0 0\nv 0 1.5 0\nv 0 0 1.7\n"
+    (tmp_path / "plain.obj").write_text(vertices + "f 1 2 3\nf 2 4 3\n")
+    (tmp_path / "continued.obj").write_text("v 0 0 \\\n0\nv 4 0 0\nv 0 1.5 0\nv 0 0 1.7\nf 1 2 \\\n3\nf 2 4 3\n")
+    for a, b in zip(read_mesh(tmp_path / "plain.obj"), read_mesh(tmp_path / "continued.obj")):
+        assert_close(b, a)
+    (tmp_path / "bad.obj").write_text(vertices + "f 1 2 \\\n9\n")
+    with pytest.raises(InputError, match=r"bad\.obj: OBJ line 5: vertex reference 9 out of range"):
+        read_mesh(tmp_path / "bad.obj")

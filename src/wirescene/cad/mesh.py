@@ -221,11 +221,17 @@ def _obj_problem(path: Path) -> str | None:
     """
     try:
         # lines end at \n, \r\n or \r: str.splitlines would also break at the latin-1 reading of UTF-8 bytes (0x85)
-        lines = [line.partition("#")[0].split() for line in re.split(r"\r\n?|\n", path.read_text(encoding="latin-1"))]
+        physical = re.split(r"\r\n?|\n", path.read_text(encoding="latin-1"))
     except OSError:
         return None
-    n = sum(tokens[:1] == ["v"] for tokens in lines)
-    for i, tokens in enumerate(lines, 1):
+    lines, start, parts = [], 1, []  # (number of its first line, tokens): a line ending in \ goes on (as trimesh reads)
+    for i, line in enumerate(physical, 1):
+        parts.append(line[:-1] if line.endswith("\\") else line)
+        if not line.endswith("\\") or i == len(physical):
+            lines.append((start, "".join(parts).partition("#")[0].split()))
+            start, parts = i + 1, []
+    n = sum(tokens[:1] == ["v"] for _, tokens in lines)
+    for i, tokens in lines:
         if tokens[:1] == ["v"]:
             for t in tokens[1:4]:
                 try:

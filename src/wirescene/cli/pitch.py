@@ -109,12 +109,15 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
         click.echo(f"{fid}: {each[fid]['pitch']:.1f} deg ({_count(n, 'box')} found)")
     rig = round(rig_pitch(likelihoods, told=told), 2)
     boxes = sum(e["boxes"] for e in each.values())
-    alone = [abs(e["pitch"] - rig) for e in each.values() if e["boxes"]]
-    spread = f"; each frame alone: within {np.percentile(alone, 90):.1f} deg of it for 90%" if len(alone) > 1 else ""
+    read = [bool(likelihood.any()) for likelihood in likelihoods]  # boxes cut by the bottom edge are not read
+    alone = [abs(e["pitch"] - rig) for e, r in zip(each.values(), read) if r]
+    spread = (f"; each frame alone: within {np.percentile(alone, 90, method='higher'):.1f} deg of it for 90%"
+              if len(alone) > 1 else "")
     click.echo(f"the rig's pitch over {_count(len(ids), 'frame')} ({_count(boxes, 'box')} found): {rig:.1f} deg "
                f"down from the road, its height told {camera_height:g} m{spread}")
-    if not boxes:
-        click.echo("wirescene: no box was found to read the pitch off: the pitch told stands", err=True)
+    if not any(read):
+        click.echo("wirescene: no box was found to read the pitch off (or each was cut by the image's bottom edge): "
+                   "the pitch told stands", err=True)
     elif abs(rig - camera_pitch) > PITCH_SEARCH - 0.05 or abs(rig) >= 45.0:  # at the grid's end or the bound
         click.echo(f"wirescene: the pitch read lies at the edge of the search ({PITCH_SEARCH:g} deg about "
                    f"--camera-pitch {camera_pitch:g}, at most 45): read it again about it (--camera-pitch {rig:.1f})",

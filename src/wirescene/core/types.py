@@ -460,7 +460,7 @@ def fitted_detections(detections: Detections, estimate: SceneEstimate) -> Detect
     >>> fitted_detections(dets, SceneEstimate(variant="coarse", objects=[car])).boxes
     array([[40.,  0., 50., 10.]])
     """
-    return detections.subset(np.array(sorted(o.detection_index for o in estimate.objects), dtype=int))
+    return detections.subset(car_fitted(detections, estimate))
 
 
 def car_fitted(detections: Detections, estimate: SceneEstimate) -> np.ndarray:

@@ -512,6 +512,8 @@ def image_mount(camera: Camera, image: np.ndarray, *, bank, told: Mount = KITTI_
     without the priors, which need the pitch (:func:`image_pitch_likelihood`, within
     ``LiftingOptions.camera_pitch``'s bounds; ``told`` for a bank without a ground prior);
     ``pyramid`` and ``min_height`` as in :func:`~wirescene.predetect.bank.detect_cars`."""
+    if not bank.meta.get("ground_prior"):  # no prior to read the pitch with: the mount told, as it is
+        return told
     likelihood, _ = image_pitch_likelihood(camera, image, bank=bank, told=told, pyramid=pyramid, min_height=min_height)
     return Mount(told.height, rig_pitch([likelihood], told=told))
 
@@ -620,7 +622,7 @@ def own_detections(camera: Camera | None, image: np.ndarray, *, bank=None, class
         found (:func:`detect_own`'s: the fit's own at its threshold).
     return_all : bool
         The passes keep every score (:func:`bank_pass`), returned too with the detector's own
-        viewpoints (e.g. for AP).
+        viewpoints (e.g. for AP); with ``fit_viewpoints`` only.
     viewpoints : bool
         The boxes kept take the box rule's viewpoints (False: the detector's own; no response
         maps kept).
@@ -648,6 +650,8 @@ def own_detections(camera: Camera | None, image: np.ndarray, *, bank=None, class
     >>> len(every) >= len(kept), bool((kept.scores > detector_bank(None).threshold).all())
     (True, True)
     """
+    if return_all and not fit_viewpoints:  # every box would take the box rule's viewpoint: seconds for nothing
+        raise ValueError("return_all needs fit_viewpoints (the boxes kept above the threshold)")
     bank = detector_bank(None) if bank is None else bank
     keep = read = threshold
     add_at = None  # every pass cut at one threshold: every box counts

@@ -800,6 +800,7 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     real_only = kitti_root is not None and not n_az and not synth_scenes
     if real_only or calibrate_real:  # checked before any patch is made
         from wirescene.io.kitti import KittiDataset
+        from wirescene.training.parts_real import REAL_MAX_OCCLUDED, REAL_MIN_BOX_H, trainable_car_counts
 
         ds = KittiDataset(kitti_root)
         frames = ds.frame_ids() if frames is None else list(frames)
@@ -814,9 +815,12 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
                                     f"(drives); the {len(frames)} frame(s) given fall in one: train without it "
                                     "(calibrate_real=False, --no-calibrate) or on frames of more drives")
             # real frames only, the cars in one fold: that fold's held-out forest would learn no part
-            if real_only and len({k for f, k in zip(frames, fold) if car_counts[f]}) < 2:
-                raise ArgumentError("calibrate_real", f"the held-out calibration needs labelled cars in 2 or more "
-                                    f"folds (drives); those of the {len(frames)} frame(s) given lie in one, so the "
+            trainable = trainable_car_counts(ds, frames) if real_only else {}
+            if real_only and len({k for f, k in zip(frames, fold) if trainable[f]}) < 2:
+                raise ArgumentError("calibrate_real", f"the held-out calibration needs labelled cars "
+                                    f"({REAL_MIN_BOX_H:g} px high or more, occlusion {REAL_MAX_OCCLUDED} or less) "
+                                    f"in 2 or more folds (drives); those of the "
+                                    f"{len(frames)} frame(s) given lie in one, so the "
                                     "forest held out from it would learn no part: train without it "
                                     "(calibrate_real=False, --no-calibrate), on frames of more drives or with "
                                     "synthetic scenes (--synth-scenes)")

@@ -176,9 +176,26 @@ def mirror_cars(image, boxes, uv, visible):
     return img, b, u[..., MIRROR, :], np.asarray(visible, bool)[..., MIRROR]
 
 
+#: The real cars :func:`make_real_patch_data` learns parts from by default: boxes this high (px) at least, ...
+REAL_MIN_BOX_H = 25.0
+#: ... and occlusion levels up to this.
+REAL_MAX_OCCLUDED = 1
+
+
+def trainable_car_counts(dataset, frame_ids, *, min_box_h: float = REAL_MIN_BOX_H,
+                         max_occluded: int = REAL_MAX_OCCLUDED) -> dict:
+    """``{frame: number of its Car labels :func:`make_real_patch_data` learns parts from}``
+    (box at least ``min_box_h`` px high, occlusion level at most ``max_occluded``) of
+    ``dataset`` (a :class:`~wirescene.io.kitti.KittiDataset`), for the checks made before any
+    patch is."""
+    return {f: sum(o.box[3] - o.box[1] >= min_box_h and o.occluded <= max_occluded
+                   for o in dataset.labels(f).of_type("Car")) for f in frame_ids}
+
+
 def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mirror: bool = True,
                          scale_samples: int = 3, n_jitter: int = 2, jitter: float = 2.0, bg_per_car: int = 60,
-                         bg_boxes: int = 12, bg_per_box: int = 15, min_box_h: float = 25.0, max_occluded: int = 1,
+                         bg_boxes: int = 12, bg_per_box: int = 15, min_box_h: float = REAL_MIN_BOX_H,
+                         max_occluded: int = REAL_MAX_OCCLUDED,
                          min_dist: float = 8.0, box_jitter: float = 0.04, max_patches: int | None = None,
                          label_shapes=None, progress=None):
     """Descriptors of real part and background patches of labelled KITTI frames.
