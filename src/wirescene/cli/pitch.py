@@ -101,6 +101,7 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
     ids = spread_sample(ids, max_frames)
     say_off_centre_frames(ds, ids)  # before the first frame: a missing calibration is refused here
     told = Mount(camera_height, camera_pitch)
+    bound = stage_field(LiftingOptions, "camera_pitch").metadata["maximum"]
     likelihoods, each = [], {}
     for fid in ids:
         likelihood, n = image_pitch_likelihood(ds.camera(fid), ds.image(fid), bank=bank, told=told)
@@ -118,10 +119,10 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
     if not any(read):
         click.echo("wirescene: no box was found to read the pitch off (or each was cut by the image's bottom edge): "
                    "the pitch told stands", err=True)
-    elif abs(rig - camera_pitch) > PITCH_SEARCH - 0.05 or abs(rig) >= 45.0:  # at the grid's end or the bound
+    elif abs(rig - camera_pitch) > PITCH_SEARCH - 0.05 or abs(rig) >= bound:  # at the grid's end or the bound
         click.echo(f"wirescene: the pitch read lies at the edge of the search ({PITCH_SEARCH:g} deg about "
-                   f"--camera-pitch {camera_pitch:g}, at most 45): read it again about it (--camera-pitch {rig:.1f})",
-                   err=True)
+                   f"--camera-pitch {camera_pitch:g}, at most {bound:g}): read it again about it (--camera-pitch "
+                   f"{rig:.1f})", err=True)
     click.echo(f"fit with --set lifting.camera_height={camera_height:g} --set lifting.camera_pitch={rig:.1f} "
                f"(wirescene detect --camera-height {camera_height:g} --camera-pitch {rig:.1f})")
     if json_out is not None:
