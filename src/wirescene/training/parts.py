@@ -706,6 +706,10 @@ def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, 
     return scale, offset, report
 
 
+#: How a training goes without the held-out calibration, said where one cannot be made.
+WITHOUT_CALIBRATION = "calibrate_real=False; train parts --no-calibrate, train all --set parts.calibrate_real=false"
+
+
 def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: int = 30,
                         max_depth: int = 13, kind: str = "ghog", n_aug: int = 2, cars=None, heldout: int = 0,
                         compare_kinds=(), kitti_background=None, synth_scenes: int = 300,
@@ -813,17 +817,16 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
             if len(np.unique(fold)) < 2:
                 raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
                                     f"(drives); the {len(frames)} frame(s) given fall in one: train without it "
-                                    "(calibrate_real=False, --no-calibrate) or on frames of more drives")
+                                    f"({WITHOUT_CALIBRATION}) or on frames of more drives")
             # real frames only, the cars in one fold: that fold's held-out forest would learn no part
             trainable = trainable_car_counts(ds, frames) if real_only else {}
             if real_only and len({k for f, k in zip(frames, fold) if trainable[f]}) < 2:
                 raise ArgumentError("calibrate_real", f"the held-out calibration needs labelled cars "
                                     f"({REAL_MIN_BOX_H:g} px high or more, occlusion {REAL_MAX_OCCLUDED} or less) "
-                                    f"in 2 or more folds (drives); those of the "
-                                    f"{len(frames)} frame(s) given lie in one, so the "
-                                    "forest held out from it would learn no part: train without it "
-                                    "(calibrate_real=False, --no-calibrate), on frames of more drives or with "
-                                    "synthetic scenes (--synth-scenes)")
+                                    f"in 2 or more folds (drives); those of the {len(frames)} frame(s) given lie in "
+                                    f"one, so the forest held out from it would learn no part: train without it "
+                                    f"({WITHOUT_CALIBRATION}), on frames of more drives or with synthetic scenes "
+                                    "(--synth-scenes)")
     t0 = time.time()
     data = None
     report = {"cars": []}
