@@ -680,6 +680,8 @@ def own_detections(camera: Camera | None, image: np.ndarray, *, bank=None, class
             viewed = detect_own(p.camera, p.image, bank=bank, classifier=classifier, detections=found,
                                 pyramid=levels, responses=responses, mount=mount)
         del levels, responses  # this pass's features and maps, freed before the next pass's
+        if viewed is not None and not return_all:  # every box found is neither returned nor shown
+            found = None
         here = [None if d is None else boxes_back(d, p.factors, image.shape[1::-1]) for d in (found, viewed)]
         merged = here if merged is None else [None if d is None else add_enlarged(d, more, threshold=add_at)
                                               for d, more in zip(merged, here)]

@@ -124,7 +124,7 @@ def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True
                         truncated=float(o.truncated), X=X[i]) for i, o in enumerate(cars)]
 
 
-def _usable(c: LabelledCar, *, min_box_h: float, max_occluded: int, clean: bool) -> bool:
+def _usable(c, *, min_box_h: float, max_occluded: int, clean: bool) -> bool:  # a LabelledCar or a Label
     if c.box[3] - c.box[1] < min_box_h or c.occluded > max_occluded:
         return False
     return not clean or (c.occluded == 0 and c.truncated <= 1e-9)
@@ -188,7 +188,7 @@ def trainable_car_counts(dataset, frame_ids, *, min_box_h: float = REAL_MIN_BOX_
     (box at least ``min_box_h`` px high, occlusion level at most ``max_occluded``) of
     ``dataset`` (a :class:`~wirescene.io.kitti.KittiDataset`), for the checks made before any
     patch is."""
-    return {f: sum(o.box[3] - o.box[1] >= min_box_h and o.occluded <= max_occluded
+    return {f: sum(_usable(o, min_box_h=min_box_h, max_occluded=max_occluded, clean=False)
                    for o in dataset.labels(f).of_type("Car")) for f in frame_ids}
 
 
