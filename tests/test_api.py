@@ -265,6 +265,10 @@ def test_detections_check_their_shapes():
         Detections(np.zeros((2, 4)), 1.0, [0.1, 0.2, 0.3])
     with pytest.raises(wirescene.ArgumentError, match="^boxes: expected numbers"):
         Detections([[1, 2, 3, 4], [1, 2]], 1.0, np.nan)
+    for name, values in (("boxes", np.ones((1, 4)) * 1j), ("scores", [0.9 + 0.1j]), ("alpha", [True])):
+        args = {"boxes": np.ones((1, 4)), "scores": [0.9], "alpha": [0.1], name: values}
+        with pytest.raises(wirescene.ArgumentError, match=f"^{name}: (complex numbers|booleans) .dtype"):
+            Detections(**args)  # a complex number lost its imaginary part with a mere warning
 
 
 def test_detections_refuse_angles_that_are_no_radians():

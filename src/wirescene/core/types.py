@@ -22,6 +22,7 @@ from wirescene.core.groundplane import (
     rotation_y_of,
 )
 from wirescene.core.labels import Label, format_labels
+from wirescene.core.validate import real_dtype_problem
 
 # Largest |alpha| a detection may carry: one turn. A detector's angles lie in [-pi, pi] (KITTI's range; wrapped
 # values are taken), so anything beyond is an angle in degrees.
@@ -30,7 +31,15 @@ MAX_ALPHA = 2 * np.pi
 
 def _numbers(name: str, values) -> np.ndarray:
     """``values`` as a float array; an :class:`ArgumentError` naming ``name`` where they are no
-    numbers or ragged rows."""
+    real numbers (:func:`~wirescene.core.validate.real_dtype_problem`: complex numbers, booleans,
+    text) or ragged rows."""
+    try:
+        held = np.asarray(values)
+    except ValueError:  # ragged rows: the cast below says so
+        held = None
+    problem = None if held is None else real_dtype_problem(held)
+    if problem is not None:  # complex numbers would lose their imaginary part with a mere warning
+        raise ArgumentError(name, problem)
     try:
         return np.asarray(values, dtype=float)
     except (TypeError, ValueError) as exc:
