@@ -203,6 +203,17 @@ def _cars_in_one_fold(tmp, *, occluded=False):
     return root
 
 
+def _grey_root(tmp):
+    """A KITTI root (``tmp/kitti``) of one unlabelled frame: a uniform grey image (no car to find) and the test
+    frame's calibration."""
+    from PIL import Image
+
+    root = kitti_copy(tmp / "kitti", [FRAME], subdirs=("calib",))
+    (root / "training" / "image_2").mkdir()
+    Image.new("RGB", (1242, 375), (128, 128, 128)).save(root / "training" / "image_2" / f"{FRAME}.png")
+    return root
+
+
 def _bank_without_ground_prior(tmp):
     """The shipped detector bank saved as ``tmp/bank.npz`` without its ground prior."""
     from dataclasses import replace
@@ -216,6 +227,10 @@ def _bank_without_ground_prior(tmp):
 PLY_FACE_PAST_VERTICES = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                           "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n4 0 0\n0 1 1\n"
                           "3 0 1 7\n")
+
+# A COCO result file (a detector's output over a data set): boxes of every image, told by image_id.
+COCO_TWO_IMAGES = [{"image_id": 7, "category_id": 3, "bbox": [300, 180, 220, 90], "score": 0.9},
+                   {"image_id": 8, "category_id": 3, "bbox": [600, 170, 80, 60], "score": 0.8}]
 
 
 CASES = {
@@ -261,7 +276,12 @@ CASES = {
                            "too large"),
     "10 x 10 image, boxes to x = 1241": (
         lambda t: _fit_case(t, image=lambda p: __import__("PIL.Image").Image.new("RGB", (10, 10)).save(p)),
-        "principal point|entirely outside|absurdly far"),
+        "principal point|entirely outside|absurdly far|too small"),
+    # was "image: image of 8x8 px is too small": the API's argument named, not the file
+    "8 x 8 image with its own calibration": (
+        lambda t: _fit_case(t, calib="20 0 4 0 20 4 0 0 1\n", dets=(".json", '[{"box": [1, 1, 6, 6]}]'),
+                            image=lambda p: __import__("PIL.Image").Image.new("RGB", (8, 8)).save(p)),
+        rf"^wirescene: error: \S+/{FRAME}\.png: image of 8x8 px is too small \(at least 16 px a side\)$"),
     # options
     "--particles 0": (lambda t: _fit_case(t, extra=("--particles", "0")), "--particles"),
     "--particles -5": (lambda t: _fit_case(t, extra=("--particles", "-5")), "--particles"),
@@ -682,6 +702,38 @@ CASES = {
         lambda t: ["pitch", KITTI_ROOT, "--frames", FRAME, "--bank", _bank_without_ground_prior(t), "--json",
                    t / "pitch.json"],
         r"^wirescene: error: \S+/bank\.npz: detector bank without a ground prior to read a pitch with"),
+    # the pitch told was printed, and written to --json, as the pitch read (exit 0, a warning aside)
+    "pitch of frames without a box": (
+        lambda t: ["pitch", _grey_root(t), "--json", t / "pitch.json"],
+        r"^wirescene: error: \S+/training/image_2: no box to read the pitch off in the 1 frame read: give frames of "
+        r"cars \(--frames, --max-frames\)$"),
+    # a COCO result file holds every image's boxes: all of them were fitted to this image
+    "fit --detections of a COCO result file of two images": (
+        lambda t: _fit_case(t, dets=(".json", json.dumps(COCO_TWO_IMAGES))),
+        r"dets\.json: detection 1 is of image_id 8, detection 0 of 7: a detections file holds one image's boxes "
+        r"\(split a COCO result file by image_id\)$"),
+    # its first box was taken for the header and no box was read: an empty scene, exit 0
+    "fit --detections of a CSV without its header": (
+        lambda t: _fit_case(t, dets=(".csv", "300,180,520,300\n")),
+        r"dets\.csv: CSV header must name x1,y1,x2,y2 \(optional score, viewpoint_bin, alpha\), got "
+        r"'300,180,520,300'$"),
+    # a car fitted to a box of a fifth of a pixel: 957 m to the left, 178 m ahead
+    "fit --detections in normalised coordinates": (
+        lambda t: _fit_case(t, dets=(".csv", "x1,y1,x2,y2\n0.24,0.48,0.42,0.8\n")),
+        r"dets\.csv: every box is under a pixel \(box 0: x1 y1 x2 y2 = 0\.24 0\.48 0\.42 0\.8\): normalised "
+        r"coordinates\? boxes are in pixels$"),
+    # millimetres: each car fitted 1650 m below the camera
+    "fit --set lifting.camera_height in millimetres": (
+        lambda t: _fit_case(t, extra=("--set", "lifting.camera_height=1650")),
+        r"--set: lifting\.camera_height must be at most 10, got 1650\.0$"),
+    "detect --camera-height in centimetres": (
+        lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--camera-height", "165"],
+        r"--camera-height: 165 is above the maximum 10$"),
+    # predictions' angles in degrees scored 0% 3D AP without a word
+    "kitti-eval of predictions with rotation_y in degrees": (
+        lambda t: ["kitti-eval", SPLIT / "label_2", _dets_dir(t, {f"{FRAME}.txt": CAR.replace(" 1.76", " 100.8 0.9")}),
+                   "--frames", FRAME, "--draws", "0"],
+        rf"dets/{FRAME}\.txt: line 1: rotation_y must be radians within one turn, got 100\.8 \(degrees\?\)$"),
     "cad list of a PLY face past its vertices": (  # loaded as it is by trimesh, refused later or not at all
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.ply", PLY_FACE_PAST_VERTICES).parent],
         r"car\.ply: a face refers to vertex 7, the file has 3 vertices \(0 to 2\)$"),
@@ -753,6 +805,9 @@ BAD_LABEL_ROWS = {
     "y1 -inf": (CAR.replace("185.52", "-inf"), r"column 6 \(y1\) is not finite"),
     "x2 < x1": (CAR.replace("354.43 185.52 549.52", "549.52 185.52 354.43"), "2D box is empty or inverted"),
     "y2 = y1": (CAR.replace("294.49", "185.52"), "2D box is empty or inverted"),
+    # ground truth in degrees: every car's orientation (AOS) wrong without a word
+    "alpha in degrees": (CAR.replace("Car 0.00 0 1.95", "Car 0.00 0 111.7"),
+                         r"alpha must be radians within one turn, got 111\.7 \(degrees\?\)$"),
 }
 
 

@@ -27,6 +27,7 @@ from wirescene.core.validate import (
     boxes_problem,
     empty_path_problem,
     finite_real,
+    image_size_problem,
     off_centre_problem,
     output_dir_problem,
     projection_problem,
@@ -68,7 +69,7 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     ArgumentError
         Not an image array (shape, dtype, non-finite values, under 16 px a side).
     InputError
-        An image file that is missing or unreadable.
+        An image file that is missing, unreadable or under 16 px a side.
 
     Examples
     --------
@@ -95,8 +96,9 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
         raise ArgumentError(name, exc.problem) from None
     except (OSError, ValueError) as exc:  # a PIL image that cannot be converted
         raise ArgumentError(name, f"unreadable PIL image ({' '.join(str(exc).split())})") from None
-    if min(rgb.shape[:2]) < 16:
-        raise ArgumentError(name, f"image of {rgb.shape[1]}x{rgb.shape[0]} px is too small")
+    problem = image_size_problem((rgb.shape[1], rgb.shape[0]))
+    if problem:
+        raise ArgumentError(name, problem)
     return rgb
 
 

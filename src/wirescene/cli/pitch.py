@@ -108,18 +108,19 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
         likelihoods.append(likelihood)
         each[fid] = {"pitch": round(rig_pitch([likelihood], told=told), 2), "boxes": n}
         click.echo(f"{fid}: {each[fid]['pitch']:.1f} deg ({_count(n, 'box')} found)")
-    rig = round(rig_pitch(likelihoods, told=told), 2)
     boxes = sum(e["boxes"] for e in each.values())
     read = [bool(likelihood.any()) for likelihood in likelihoods]  # boxes cut by the bottom edge are not read
+    if not any(read):  # the pitch told is no pitch read: no line (nor --json) may pass it off as one
+        cut = f" ({_count(boxes, 'box')} found, each cut by the image's bottom edge)" if boxes else ""
+        raise InputError(f"no box to read the pitch off in the {_count(len(ids), 'frame')} read{cut}: give frames "
+                         "of cars (--frames, --max-frames)", path=ds.split_dir / "image_2")
+    rig = round(rig_pitch(likelihoods, told=told), 2)
     alone = [abs(e["pitch"] - rig) for e, r in zip(each.values(), read) if r]
     spread = (f"; each frame alone: within {np.percentile(alone, 90, method='higher'):.1f} deg of it for 90%"
               if len(alone) > 1 else "")
     click.echo(f"the rig's pitch over {_count(len(ids), 'frame')} ({_count(boxes, 'box')} found): {rig:.1f} deg "
                f"down from the road, its height told {camera_height:g} m{spread}")
-    if not any(read):
-        click.echo("wirescene: no box was found to read the pitch off (or each was cut by the image's bottom edge): "
-                   "the pitch told stands", err=True)
-    elif abs(rig - camera_pitch) > PITCH_SEARCH - 0.05 or abs(rig) >= bound:  # at the grid's end or the bound
+    if abs(rig - camera_pitch) > PITCH_SEARCH - 0.05 or abs(rig) >= bound:  # at the grid's end or the bound
         click.echo(f"wirescene: the pitch read lies at the edge of the search ({PITCH_SEARCH:g} deg about "
                    f"--camera-pitch {camera_pitch:g}, at most {bound:g}): read it again about it (--camera-pitch "
                    f"{rig:.1f})", err=True)

@@ -19,6 +19,8 @@ from wirescene.core.workers import usable_cores
 FOCAL_RANGE = (10.0, 1e5)
 # No image is this large (pixels): a box coordinate beyond it is a corrupted number.
 MAX_PIXEL = 1e5
+# No image is smaller (pixels a side): the detector's and the crop classifier's least window.
+MIN_IMAGE_SIDE = 16
 
 #: Most worker processes of one run (``--workers``, the API's ``workers``): each fitting worker holds
 #: some 440 MB (README, "Evaluating needs little memory"), so 64 of them take 28 GB (55 fit 24 GB); a
@@ -63,6 +65,23 @@ def real_dtype_problem(values) -> str | None:
         return None
     held = {"c": "complex numbers", "b": "booleans", "U": "text", "S": "text"}.get(dtype.kind, "no numbers")
     return f"{held} (dtype {dtype}), expected real numbers"
+
+
+def image_size_problem(image_size: tuple[int, int]) -> str | None:
+    """Why an image of ``image_size`` ``(width, height)`` is too small to fit, or None: under
+    :data:`MIN_IMAGE_SIDE` pixels a side (a thumbnail, a 1x1 placeholder).
+
+    Examples
+    --------
+    >>> image_size_problem((1242, 375)) is None
+    True
+    >>> image_size_problem((8, 8))
+    'image of 8x8 px is too small (at least 16 px a side)'
+    """
+    w, h = image_size
+    if min(w, h) < MIN_IMAGE_SIDE:
+        return f"image of {w}x{h} px is too small (at least {MIN_IMAGE_SIDE} px a side)"
+    return None
 
 
 def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | None:
@@ -139,8 +158,9 @@ def off_centre_problem(P, image_size: tuple[int, int]) -> str | None:
 
 def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | None:
     """What is wrong with 2D boxes ``(N, 4)`` ``x1 y1 x2 y2``, if anything: finite,
-    ``x1 < x2`` and ``y1 < y2``, and (with the image size) overlapping the image and
-    within ten image sizes of it.
+    ``x1 < x2`` and ``y1 < y2``, not all under a pixel wide and high (boxes in coordinates
+    normalised to the image, which no car fits), and (with the image size) overlapping
+    the image and within ten image sizes of it.
 
     Examples
     --------
@@ -148,6 +168,8 @@ def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | Non
     True
     >>> boxes_problem([[300, 180, 200, 300]])
     'box 0 is empty or inverted (x1 y1 x2 y2 = 300 180 200 300)'
+    >>> boxes_problem([[0.24, 0.48, 0.42, 0.8]])
+    'every box is under a pixel (box 0: x1 y1 x2 y2 = 0.24 0.48 0.42 0.8): normalised coordinates? boxes are in pixels'
     >>> boxes_problem([[1300, 180, 1400, 300]], (1242, 375))
     'box 0 lies entirely outside the 1242x375 image'
     """
@@ -164,6 +186,10 @@ def boxes_problem(boxes, image_size: tuple[int, int] | None = None) -> str | Non
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         return f"box {i} is empty or inverted (x1 y1 x2 y2 = {' '.join(f'{v:g}' for v in b[i])})"
+    # every box: a sliver clipped at the border among a detector's boxes is no mistake of units
+    if len(b) and np.all((b[:, 2] - b[:, 0] < 1) & (b[:, 3] - b[:, 1] < 1)):
+        return (f"every box is under a pixel (box 0: x1 y1 x2 y2 = {' '.join(f'{v:g}' for v in b[0])}): normalised "
+                "coordinates? boxes are in pixels")
     if image_size is not None and len(b):
         w, h = image_size
         outside = outside_image(b, image_size)

@@ -148,7 +148,24 @@ def _box_of(entry: dict, path: Path, where: str) -> list[float]:
     return box
 
 
+def _one_image(entries: list, path: Path) -> None:
+    """Refuse ``entries`` naming more than one ``image_id`` (a COCO result file holds every image's
+    boxes): the boxes of other images would be fitted to this one's."""
+    first = None
+    for i, entry in enumerate(entries):
+        image = entry.get("image_id") if isinstance(entry, dict) else None
+        if image in (None, ""):
+            continue
+        if first is None:
+            first = (i, image)
+        elif str(image) != str(first[1]):
+            raise InputError(f"detection {i} is of image_id {str(image)[:20]}, detection {first[0]} of "
+                             f"{str(first[1])[:20]}: a detections file holds one image's boxes (split a COCO result "
+                             "file by image_id)", path=path)
+
+
 def _from_entries(entries: list, path: Path) -> Detections:
+    _one_image(entries, path)
     boxes, scores, alpha = [], [], []
     for i, entry in enumerate(entries):
         where = f"detection {i}"
@@ -181,9 +198,11 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
       ``alpha`` (radians) and an optional class: ``category``, ``category_name``,
       ``label``, ``class``, ``type`` or COCO's ``category_id``, ``car`` in any case or the
       number 3 (COCO's id of a car; a detector numbering its classes otherwise must name
-      them); entries of another class are skipped.
+      them); entries of another class are skipped. Entries naming an ``image_id`` (COCO)
+      must all name the same one: a COCO result file of several images is refused.
     * ``.csv``: a header with ``x1,y1,x2,y2`` and optional ``score``, ``viewpoint_bin``,
-      ``alpha`` and class columns as in JSON.
+      ``alpha``, ``image_id`` and class columns as in JSON (a file without the header is refused;
+      an empty one holds no box).
     * ``.txt``: a KITTI label file (15 or 16 columns); Car rows (``car`` in any case, as
       KITTI's devkit reads them) are used, with their ``alpha`` binned and their score (16th
       column) if present.
@@ -200,8 +219,9 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
     Raises
     ------
     InputError
-        Missing or malformed file, a file without any detection, an ``alpha`` beyond one
-        turn, or (with ``image_size``) a box outside the image.
+        Missing or malformed file, a file without any detection, boxes of several images, an
+        ``alpha`` beyond one turn, boxes all under a pixel (normalised coordinates) or (with
+        ``image_size``) a box outside the image.
 
     Examples
     --------
@@ -227,11 +247,7 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
         raise InputError(problem, path=path)
     suffix = path.suffix.lower()
     if suffix == ".txt":
-        labels = read_labels(path, image_size=image_size)
-        for o in _of_types(labels, CAR_TYPES):
-            if o.alpha != ALPHA_NOT_ESTIMATED and abs(o.alpha) > MAX_ALPHA:
-                raise InputError(f"a Car row's alpha must be radians within one turn, got {o.alpha:g} (degrees?)",
-                                 path=path)
+        labels = read_labels(path, image_size=image_size)  # an angle in degrees refused there, naming its line
         dets = detections_from_labels(labels, source=str(path))
     elif suffix == ".json":
         try:
@@ -250,11 +266,15 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
         try:
             # utf-8-sig: spreadsheets write a byte-order mark before the header.
             with path.open(newline="", encoding="utf-8-sig") as fh:
-                rows = list(csv.DictReader(fh))
+                reader = csv.DictReader(fh)
+                rows = list(reader)
         except (csv.Error, UnicodeDecodeError, OSError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", path=path) from None
-        if rows and not {"x1", "y1", "x2", "y2"} <= set(rows[0]):
-            raise InputError("CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha)", path=path)
+        # the header itself, rows or not: a file without one takes its first box for it (and reads no box)
+        if reader.fieldnames is not None and not {"x1", "y1", "x2", "y2"} <= set(reader.fieldnames):
+            header = ",".join(reader.fieldnames)
+            raise InputError(f"CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha), got "
+                             f"{header if len(header) <= 40 else header[:37] + '...'!r}", path=path)
         dets = _from_entries(rows, path)
     else:
         raise InputError(f"unknown detections format {suffix!r} (use .json, .csv or a KITTI .txt)", path=path)

@@ -36,7 +36,14 @@ from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label
     format_labels,
     select_cars,
 )
-from wirescene.core.validate import MAX_PIXEL, off_centre_problem, outside_image, path_problem
+from wirescene.core.types import MAX_ALPHA
+from wirescene.core.validate import (
+    MAX_PIXEL,
+    image_size_problem,
+    off_centre_problem,
+    outside_image,
+    path_problem,
+)
 
 # --------------------------------------------------------------------------- labels
 
@@ -44,7 +51,9 @@ from wirescene.core.validate import MAX_PIXEL, off_centre_problem, outside_image
 def _object_problem(values: list[float]) -> str | None:
     """What is impossible in the numbers of a (non-DontCare) label row, if anything.
     ``-1`` marks a quantity that is not estimated (truncation and occlusion of
-    predictions, all three dimensions of a 2D-only detector), as in KITTI files."""
+    predictions, all three dimensions of a 2D-only detector), as in KITTI files, and
+    ``-10`` an angle that is not (``alpha``, ``rotation_y``); any other angle beyond one
+    turn is one in degrees."""
     truncated, occluded, _alpha = values[0:3]
     x1, y1, x2, y2 = values[3:7]
     dims = values[7:10]
@@ -56,6 +65,9 @@ def _object_problem(values: list[float]) -> str | None:
         return f"2D box is empty or inverted (x1 y1 x2 y2 = {x1:g} {y1:g} {x2:g} {y2:g})"
     if dims != [-1.0, -1.0, -1.0] and min(dims) <= 0:
         return f"dimensions must be positive (h w l = {' '.join(f'{d:g}' for d in dims)})"
+    for name, angle in (("alpha", values[2]), ("rotation_y", values[13])):
+        if angle != ALPHA_NOT_ESTIMATED and abs(angle) > MAX_ALPHA:
+            return f"{name} must be radians within one turn, got {angle:g} (degrees?)"
     return None
 
 
@@ -121,9 +133,10 @@ def read_labels(path: str | Path, *, image_size: tuple[int, int] | None = None) 
     InputError
         If the file is missing or unreadable, or a line has the wrong number of columns,
         a non-numeric or non-finite number, a non-integer occlusion state, impossible
-        values (an empty or inverted box, a truncation outside [0, 1], ...) or a 2D box
-        coordinate beyond :data:`~wirescene.core.validate.MAX_PIXEL` or (with
-        ``image_size``) a box wholly outside the image; the message gives the line number.
+        values (an empty or inverted box, a truncation outside [0, 1], an angle in
+        degrees, ...) or a 2D box coordinate beyond :data:`~wirescene.core.validate.MAX_PIXEL`
+        or (with ``image_size``) a box wholly outside the image; the message gives the line
+        number.
 
     Examples
     --------
@@ -193,7 +206,7 @@ def _open_image(path: Path) -> Image.Image:
         with warnings.catch_warnings():
             # Pillow only warns between 1x and 2x its pixel limit: refuse those too.
             warnings.simplefilter("error", Image.DecompressionBombWarning)
-            return Image.open(path)
+            img = Image.open(path)
     except (Image.DecompressionBombError, Image.DecompressionBombWarning):
         raise InputError(f"image is too large (more than {Image.MAX_IMAGE_PIXELS} pixels: a decompression bomb?)",
                          path=path) from None
@@ -201,6 +214,11 @@ def _open_image(path: Path) -> Image.Image:
         raise InputError("not an image file (unrecognised format)", path=path) from None
     except OSError as exc:
         raise InputError(f"cannot open image ({exc})", path=path) from None
+    problem = image_size_problem(img.size)  # from the header: every frame's is read before a run's first fit
+    if problem:
+        img.close()
+        raise InputError(problem, path=path)
+    return img
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -212,7 +230,8 @@ def read_image(path: str | Path) -> np.ndarray:
     Raises
     ------
     InputError
-        If the file is missing, not an image, too large, or corrupt / truncated.
+        If the file is missing, not an image, too large or too small (under
+        :data:`~wirescene.core.validate.MIN_IMAGE_SIDE` px a side), or corrupt / truncated.
 
     Examples
     --------
