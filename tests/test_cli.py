@@ -1186,3 +1186,12 @@ def test_pitch_reads_a_rig_off_its_frames_pooled(tmp_path):
     assert sorted(json.loads(out.read_text())["frames"]) == ["000002", "001545"]
     r = run("pitch", moved, "--max-frames", "1", "--frames", "000010", "--camera-pitch", "40")
     assert r.exit_code == 0 and "lies at the edge of the search" in r.output, r.output
+    # a frame with no box read: no pitch of its own (the pitch told was printed as its reading), none in the pool
+    from PIL import Image
+
+    Image.new("RGB", (1242, 375), (128, 128, 128)).save(moved / "training" / "image_2" / "001545.png")
+    r = run("pitch", moved, "--frames", ",".join(pair), "--json", out)
+    assert r.exit_code == 0 and "001545: no pitch read (0 boxes found)" in r.output, r.output
+    record = json.loads(out.read_text())
+    assert record["frames"]["001545"] == {"pitch": None, "boxes": 0}
+    assert record["pitch"] == alone[0] == record["frames"]["000002"]["pitch"]

@@ -67,7 +67,7 @@ def spread_sample(ids: list[str], n: int) -> list[str]:
               show_default=True, help="The pitch (degrees down from the road) the search is centred on, within 15 "
                                       "deg of it.")
 @click.option("--json", "json_out", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
-              help="Write the rig's pitch and each frame's as JSON.")
+              help="Write the rig's pitch and each frame's (null where it read no box) as JSON.")
 def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, camera_height, camera_pitch,
           json_out):
     """Read the camera's pitch off the cars of many frames of one rig (a camera mounted once).
@@ -106,16 +106,20 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
     for fid in ids:
         likelihood, n = image_pitch_likelihood(ds.camera(fid), ds.image(fid), bank=bank, told=told)
         likelihoods.append(likelihood)
-        each[fid] = {"pitch": round(rig_pitch([likelihood], told=told), 2), "boxes": n}
-        click.echo(f"{fid}: {each[fid]['pitch']:.1f} deg ({_count(n, 'box')} found)")
+        if likelihood.any():
+            each[fid] = {"pitch": round(rig_pitch([likelihood], told=told), 2), "boxes": n}
+            click.echo(f"{fid}: {each[fid]['pitch']:.1f} deg ({_count(n, 'box')} found)")
+        else:  # boxes cut by the bottom edge are not read: the pitch told would pass for one read
+            each[fid] = {"pitch": None, "boxes": n}
+            click.echo(f"{fid}: no pitch read ({_count(n, 'box')} found{', cut by the bottom edge' if n else ''})")
     boxes = sum(e["boxes"] for e in each.values())
-    read = [bool(likelihood.any()) for likelihood in likelihoods]  # boxes cut by the bottom edge are not read
+    read = [e["pitch"] is not None for e in each.values()]
     if not any(read):  # the pitch told is no pitch read: no line (nor --json) may pass it off as one
         cut = f" ({_count(boxes, 'box')} found, each cut by the image's bottom edge)" if boxes else ""
         raise InputError(f"no box to read the pitch off in the {_count(len(ids), 'frame')} read{cut}: give frames "
                          "of cars (--frames, --max-frames)", path=ds.split_dir / "image_2")
     rig = round(rig_pitch(likelihoods, told=told), 2)
-    alone = [abs(e["pitch"] - rig) for e, r in zip(each.values(), read) if r]
+    alone = [abs(e["pitch"] - rig) for e in each.values() if e["pitch"] is not None]
     spread = (f"; each frame alone: within {np.percentile(alone, 90, method='higher'):.1f} deg of it for 90%"
               if len(alone) > 1 else "")
     click.echo(f"the rig's pitch over {_count(len(ids), 'frame')} ({_count(boxes, 'box')} found): {rig:.1f} deg "
