@@ -583,6 +583,18 @@ def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
     assert "kitti_interval" not in one
     n = one["n_gt"]["car"]["moderate"]
     assert one["n_frames"] == 1 and one["car"]["3d"]["moderate"] == pytest.approx((n - 1) / 40 * 100)
+    # a 2D detector's rows (dimensions -1 -1 -1): scored as boxes of no size, which the output says
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    labels = read_labels(pred / "000010.txt")
+    for o in labels.objects[:2]:  # two Car rows
+        o.dims = np.array([-1.0, -1.0, -1.0])
+    write_labels(flat / "000010.txt", labels.objects)
+    r = _cli("kitti-eval", gt_dir, flat, "--frames", "000010", "--draws", "0")
+    cars = sum(o.type == "Car" for o in labels.objects)
+    assert r.exit_code == 0 and (f"{flat}: 2 of {cars} Car rows have no 3D box (dimensions -1 -1 -1): BEV and 3D AP "
+                                 "count them as misses") in r.output, r.output
+    assert "no 3D box" not in _cli("kitti-eval", gt_dir, pred, "--frames", "000010", "--draws", "0").output
 
 
 @pytest.mark.parametrize("case, problem", [("no_gt_dir", "not found"), ("bad_gt", "line 1"),

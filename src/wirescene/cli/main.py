@@ -701,11 +701,16 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
         raise InputError("prediction directory given twice", path=twice[0])
     runs = [read_label_dirs(gt_dir, d, frames=frame_ids) for d in pred_dirs]
     ids, gts = runs[0][0], runs[0][1]
-    for d in pred_dirs:
+    for d, (_, _, preds) in zip(pred_dirs, runs):
         missing = sum(not (d / f"{f}.txt").exists() for f in ids)
         if missing:
             click.echo(f"wirescene: {d}: {missing} of {len(ids)} frames have no prediction file (no detections)",
                        err=True)
+        cars = [o for frame in preds for o in frame.objects if o.type.lower() == "car"]
+        flat = sum(bool(np.all(o.dims == -1)) for o in cars)  # a 2D detector's rows: scored as 3D boxes of size -1
+        if flat:
+            click.echo(f"wirescene: {d}: {flat} of {len(cars)} Car rows have no 3D box (dimensions -1 -1 -1): "
+                       "BEV and 3D AP count them as misses", err=True)
         for warning in _prediction_dir_warnings(d, gt_dir, ids, chosen=frame_ids is not None):
             click.echo(f"wirescene: {d}: {warning}", err=True)
     preds = [r[2] for r in runs]
