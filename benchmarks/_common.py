@@ -107,7 +107,8 @@ def run_configs(root, variants, configs, *, evidence="parts", frames=None, seed=
 
     from wirescene.eval.runner import frame_result
     from wirescene.eval.sources import DetectionSource, frame_seed
-    from wirescene.fitting.pipeline import FitOptions, fit_scene
+    from wirescene.fitting.options import FitOptions
+    from wirescene.fitting.pipeline import fit_scene
     from wirescene.infer.evidence import oracle_evidence, part_evidence
     from wirescene.infer.inference import InferenceOptions
     from wirescene.io.folds import fold_of

@@ -24,7 +24,7 @@ the models of the frame's fold (:mod:`wirescene.io.folds`), trained without its 
   at its threshold or ``--own-threshold``, with the camera) matched to the cars at IoU >= 0.5, for reference: the
   viewpoint of the matched detection, over the cars found only; and ``own/pipeline``, the
   pipeline's rule applied to every detection of the frame (as
-  :func:`wirescene.fitting.pipeline.detect_own` does), read on the matched ones
+  :func:`wirescene.fitting.own_boxes.own_detections` does), read on the matched ones
   (``own/pipeline-rowless``: each box alone).
 
 Reported per method and box set: the share of cars whose ``|alpha_est - alpha_true|``
@@ -255,7 +255,7 @@ def main():
             match = [int(np.argmax(ov[i])) if ov.shape[1] and ov[i].max() >= 0.5 else -1 for i in range(n)]
             own_alpha += [d.alpha[j] if j >= 0 else np.nan for j in match]
             # the pipeline's rule for boxes without a viewpoint, given every detection of the frame (as
-            # detect_own), read on the matched ones; with and without the rows
+            # own_detections), read on the matched ones; with and without the rows
             found = [i for i, j in enumerate(match) if j >= 0]
             for weight, out_list in ((args.row_weight[0], own_rule), (0.0, own_rowless)):
                 rule = np.full(n, np.nan)

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 
 from _common import operating_point, read_saved_detections  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.eval.kitti_metrics import detection_ap_2d  # noqa: E402
-from wirescene.fitting.pipeline import PredetectOptions  # noqa: E402
+from wirescene.fitting.options import PredetectOptions  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 

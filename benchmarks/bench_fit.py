@@ -40,7 +40,8 @@ import numpy as np  # noqa: E402
 from wirescene.core.boxes import MEAN_CAR_DIMS, box_corners, box_extent_object, project_points_to_box  # noqa: E402
 from wirescene.core.groundplane import object_pose  # noqa: E402
 from wirescene.core.shape import load_default  # noqa: E402
-from wirescene.fitting.pipeline import FitOptions, fit_scene  # noqa: E402
+from wirescene.fitting.options import FitOptions  # noqa: E402
+from wirescene.fitting.pipeline import fit_scene  # noqa: E402
 from wirescene.infer.evidence import part_evidence  # noqa: E402
 from wirescene.infer.inference import InferenceOptions  # noqa: E402
 from wirescene.infer.likelihood import instantiate_wireframes, wireframe_likelihood  # noqa: E402
@@ -159,6 +160,20 @@ def _frame_side_by_side(args, revisions: dict, ds, fid: str, seconds: dict, diff
         timed(row, {name: stages[name][row] for name in revisions})
 
 
+def _fit_name(rev, name: str):
+    """``name`` of revision ``rev``'s fitting package, from the module that holds it: the options,
+    loaders and own pre-detection left ``fitting.pipeline`` for modules of their own, where an older
+    ``--against`` checkout does not have them."""
+    for module in ("wirescene.fitting.options", "wirescene.fitting.models", "wirescene.fitting.own_boxes"):
+        try:
+            found = getattr(rev.module(module), name, None)
+        except ImportError:  # a checkout before the split
+            continue
+        if found is not None:
+            return found
+    return getattr(rev.module("wirescene.fitting.pipeline"), name)
+
+
 def _stage_calls(rev, image, P2, boxes, particles: int) -> dict:
     """``{row: (call, record)}`` of the stages of a fit in revision ``rev``, each with the
     inputs the stages before it made (in that revision)."""
@@ -167,14 +182,15 @@ def _stage_calls(rev, image, P2, boxes, particles: int) -> dict:
         lift, evidence_of = rev.module("wirescene.lift"), rev.module("wirescene.infer.evidence").part_evidence
         camera = api.as_camera(P2, (image.shape[1], image.shape[0]))
         dets = pipe.inside_image(api.as_detections(boxes, camera.image_size), camera.image_size)
-        bank, classifier = pipe.detector_bank(None), pipe.viewpoint_classifier(None)
-        known = pipe.complete_viewpoints(camera, dets, image, bank=bank, classifier=classifier)
-        options = pipe.FitOptions(lifting=lift.LiftingOptions(n_particles=particles))
+        bank, classifier = _fit_name(rev, "detector_bank")(None), _fit_name(rev, "viewpoint_classifier")(None)
+        complete_viewpoints = _fit_name(rev, "complete_viewpoints")
+        known = complete_viewpoints(camera, dets, image, bank=bank, classifier=classifier)
+        options = _fit_name(rev, "FitOptions")(lifting=lift.LiftingOptions(n_particles=particles))
         lifted = lift.lift_table(camera, known, options=options.lifting)
         flip = rev.module("wirescene.infer.inference").InferenceOptions().flip_evidence
         evidence = evidence_of(image, known, flip=flip)
     calls = {
-        "viewpoints": (lambda: pipe.complete_viewpoints(camera, dets, image, bank=bank, classifier=classifier),
+        "viewpoints": (lambda: complete_viewpoints(camera, dets, image, bank=bank, classifier=classifier),
                        _detection_record),
         "lifting": (lambda: lift.lift_table(camera, known, options=options.lifting),
                     lambda t: b"".join(np.ascontiguousarray(getattr(t, f)).tobytes() for f in ("x", "z", "azimuth", "cost"))),

@@ -43,13 +43,10 @@ from wirescene.core.boxes import box_corners, clip_boxes, iou_2d, project_points
 from wirescene.core.camera import Camera  # noqa: E402
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
-from wirescene.fitting.pipeline import (  # noqa: E402
-    FitOptions,
-    detector_bank,
-    fit_frame,
-    image_pitch_likelihood,
-    rig_pitch,
-)
+from wirescene.fitting.models import detector_bank  # noqa: E402
+from wirescene.fitting.mount import image_pitch_likelihood, rig_pitch  # noqa: E402
+from wirescene.fitting.options import FitOptions  # noqa: E402
+from wirescene.fitting.pipeline import fit_frame  # noqa: E402
 from wirescene.synth.generate import default_camera, generate_scene  # noqa: E402
 
 

@@ -1,6 +1,6 @@
 """The pipeline's own pre-detection of this checkout against another checkout's, side by side.
 
-:func:`wirescene.fitting.pipeline.detect_own` (the shipped bank at the fit's threshold, with the
+:func:`wirescene.fitting.own_boxes.own_detections` (the shipped bank at the fit's threshold, with the
 enlarged image's cars where the checkout's default adds them, then the box rule's viewpoints)
 runs in two worker processes, one importing this checkout's ``src``, the other ``--other``'s
 (e.g. ``git worktree add BASE REV``, then ``--other BASE/src``), each on one core (BLAS threads
@@ -32,7 +32,13 @@ _WORKER = r"""
 import json, sys, time
 from threadpoolctl import threadpool_limits
 threadpool_limits(1)
-from wirescene.fitting.pipeline import PredetectOptions, detect_own, detector_bank, viewpoint_classifier
+try:
+    from wirescene.fitting.models import detector_bank, viewpoint_classifier
+    from wirescene.fitting.options import PredetectOptions
+    from wirescene.fitting.own_boxes import own_detections
+except ImportError:  # a checkout before fitting.pipeline was split, whose detect_own ran the passes
+    from wirescene.fitting.pipeline import PredetectOptions, detector_bank, viewpoint_classifier
+    from wirescene.fitting.pipeline import detect_own as own_detections
 from wirescene.io.folds import N_FOLDS, fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.predetect.bank import DetectorBank
@@ -49,7 +55,7 @@ for line in sys.stdin:
     bank = detector_bank(None) if banks is None else banks[fold_of(f)]
     classifier = viewpoint_classifier(None) if classifiers is None else classifiers[fold_of(f)]
     c = time.process_time()
-    d = detect_own(camera, image, bank=bank, classifier=classifier, threshold=threshold, **enlarged)
+    d = own_detections(camera, image, bank=bank, classifier=classifier, threshold=threshold, **enlarged)
     cpu = time.process_time() - c
     rows = [[float(v) for v in (*b, s, a)] for b, s, a in zip(d.boxes, d.scores, d.alpha)]
     print(json.dumps({"frame": f, "cpu": cpu, "detections": rows}), flush=True)
@@ -114,7 +120,7 @@ def main() -> None:
             p.stdin.close()
             p.wait()
     t, o = np.mean(cpu["this"]), np.mean(cpu["other"])
-    print(f"detect_own on {len(frames)} frames ({n_det} detections here), CPU s a frame on one core: this {t:.2f} "
+    print(f"own_detections on {len(frames)} frames ({n_det} detections here), CPU s a frame on one core: this {t:.2f} "
           f"(max {np.max(cpu['this']):.2f}), other {o:.2f} (max {np.max(cpu['other']):.2f}), other / this {o / t:.2f}x; "
           f"detections identical on {same} of {len(frames)} frames"
           + ("" if same == len(frames) else f" (largest difference {gap:.3g})"))

@@ -17,7 +17,7 @@ Metrics (all on the pooled held-out detections):
   > 135 deg: front and back swapped);
 * seconds per frame on one core of :func:`wirescene.predetect.detect_cars` (whole image:
   pyramid + templates + clustering), and side by side without the verifier and of the
-  pipeline's own pre-detection (:func:`wirescene.fitting.pipeline.detect_own` at the fit's
+  pipeline's own pre-detection (:func:`wirescene.fitting.own_boxes.own_detections` at the fit's
   threshold: the bank, then the box rule's viewpoints) on the image alone and with the image
   enlarged (``--upsample``, else the pipeline's default ``predetect.upsample``), on
   ``--time-frames`` frames spread evenly over the scored ones (the first frames of a set may
@@ -81,8 +81,8 @@ def with_enlarged(ds, frame: str, upsample: float, bank, *, ground: bool = True,
     """``bank``'s every detection of ``frame`` (with its camera's priors where ``ground``) and, with
     ``upsample`` > 1, those of the image enlarged (at its levels finer than the image's) above the fit's
     threshold that none of the image's above it covers (the image's below it that overlap one going), as
-    the pipeline adds them (``predetect.upsample``: :func:`wirescene.fitting.pipeline.own_detections`)."""
-    from wirescene.fitting.pipeline import own_detections
+    the pipeline adds them (``predetect.upsample``: :func:`wirescene.fitting.own_boxes.own_detections`)."""
+    from wirescene.fitting.own_boxes import own_detections
 
     every, _ = own_detections(ds.camera(frame) if ground else None, ds.image(frame), bank=bank, fit_viewpoints=True,
                               return_all=True, viewpoints=False, upsample=upsample, cross_view_nms=cross_view_nms)
@@ -450,7 +450,8 @@ def main():
                                                       iou=args.min_iou) for t in thresholds]
         for o in pooled["operating_points"]:
             print("   ", fmt_operating_point(o))
-    from wirescene.fitting.pipeline import PredetectOptions, detect_own
+    from wirescene.fitting.options import PredetectOptions
+    from wirescene.fitting.own_boxes import own_detections
 
     cpu, plain, own, small, enlarged = [], [], [], [], []
     unverified = replace(time_bank, verifier=None)
@@ -470,15 +471,16 @@ def main():
         detect_cars(img, bank=unverified, return_all=True, camera=camera)
         plain.append(time.process_time() - c)
         c = time.process_time()
-        detect_own(camera, img, bank=time_bank, threshold=fit_threshold)  # the image alone, the box rule's viewpoints
+        # the image alone, the box rule's viewpoints
+        own_detections(camera, img, bank=time_bank, threshold=fit_threshold)
         own.append(time.process_time() - c)
         if args.smallest_car:
             c = time.process_time()
-            detect_own(camera, img, bank=time_bank, threshold=fit_threshold, smallest_car=args.smallest_car)
+            own_detections(camera, img, bank=time_bank, threshold=fit_threshold, smallest_car=args.smallest_car)
             small.append(time.process_time() - c)
         if timed_upsample != 1.0:
             c = time.process_time()
-            detect_own(camera, img, bank=time_bank, threshold=fit_threshold, upsample=timed_upsample)
+            own_detections(camera, img, bank=time_bank, threshold=fit_threshold, upsample=timed_upsample)
             enlarged.append(time.process_time() - c)
     # CPU time of this single-threaded process = seconds on one free core (wall time grows
     # with whatever else shares the machine)
@@ -486,8 +488,8 @@ def main():
         print(f"time per frame (detect_cars, 1 thread, {len(times)} frames): CPU {np.mean(cpu):.2f} s (max "
               f"{np.max(cpu):.2f}), wall {np.mean(times):.2f} s (load average {os.getloadavg()[0]:.1f}); side by side: "
               f"without the verifier {np.mean(plain):.2f} s, the pipeline's own pre-detection on the image alone "
-              f"(fitting.pipeline.detect_own at the fit's threshold {fit_threshold}, shipped viewpoint classifier, "
-              f"upsample 1) {np.mean(own):.2f} s (max {np.max(own):.2f})")
+              f"(fitting.own_boxes.own_detections at the fit's threshold {fit_threshold}, shipped viewpoint "
+              f"classifier, upsample 1) {np.mean(own):.2f} s (max {np.max(own):.2f})")
         if small:
             print(f"  the same searching cars down to {args.smallest_car:g} px (predetect.smallest_car): "
                   f"{np.mean(small):.2f} s (max {np.max(small):.2f}), {np.mean(small) / np.mean(own):.2f}x")

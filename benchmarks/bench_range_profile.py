@@ -41,7 +41,9 @@ import numpy as np
 from wirescene.core.camera import NEAR_PLANE
 from wirescene.core.wireframe import FACES
 from wirescene.eval.sources import frame_seed
-from wirescene.fitting.pipeline import FitOptions, fit_frame, load_shape_model
+from wirescene.fitting.models import load_shape_model
+from wirescene.fitting.options import FitOptions
+from wirescene.fitting.pipeline import fit_frame
 from wirescene.fitting.variants import VARIANTS
 from wirescene.infer.inference import BOX_ROBUST
 from wirescene.infer.likelihood import object_likelihood, outside_image

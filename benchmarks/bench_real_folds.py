@@ -39,7 +39,7 @@ from wirescene.eval.kitti_metrics import format_kitti_intervals, kitti_figure, k
 from wirescene.eval.metrics import evaluate, format_table
 from wirescene.eval.runner import evaluate_dataset
 from wirescene.eval.sources import DetectionSource
-from wirescene.fitting.pipeline import FitOptions
+from wirescene.fitting.options import FitOptions
 from wirescene.fitting.variants import VARIANTS, get_variant
 from wirescene.io.folds import N_FOLDS, drive_map, fold_of
 from wirescene.io.kitti import KittiDataset

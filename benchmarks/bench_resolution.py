@@ -83,14 +83,14 @@ def box_agreement(source: Path, resized: Path, scale: float, frames: list[str], 
     "matched": [(height ratio, IoU)] of each source box and the resized box it overlaps most
     (IoU > 0.5), "labelled": [[(height / label's, IoU)] for each root] of the boxes on a
     labelled car (IoU > 0.5)}``."""
-    from wirescene.fitting.pipeline import detect_own
+    from wirescene.fitting.own_boxes import own_detections
 
     roots = (KittiDataset(source), KittiDataset(resized))
     out = {"detections": [0, 0], "matched": [], "labelled": [[], []]}
     for f in frames:
         boxes = []
         for k, root in enumerate(roots):
-            b = detect_own(root.camera(f), root.image(f), bank=bank, threshold=threshold).boxes
+            b = own_detections(root.camera(f), root.image(f), bank=bank, threshold=threshold).boxes
             boxes.append(b if k == 0 else (b + 0.5) / scale - 0.5)
             out["detections"][k] += len(b)
         labels = np.array([o.box for o in roots[0].labels(f).of_type("Car")], float).reshape(-1, 4)

@@ -1,7 +1,7 @@
 """A rig's camera pitch read off the boxes of many frames (``wirescene pitch``), plain script.
 
 Each frame's boxes, found by a detector bank without its priors, give a log-likelihood of
-the camera's pitch (:func:`wirescene.fitting.pipeline.image_pitch_likelihood`); the frames
+the camera's pitch (:func:`wirescene.fitting.mount.image_pitch_likelihood`); the frames
 of one rig add theirs (:func:`wirescene.predetect.geometry.pitch_of`). KITTI's frames come
 from one car, its camera mounted level (to about a degree, as the road and the car's own
 pitch allow): the pitch read off every frame pooled is the reference. With ``--fold-models``
@@ -32,7 +32,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from wirescene.core.groundplane import KITTI_MOUNT  # noqa: E402
-from wirescene.fitting.pipeline import detector_bank, image_pitch_likelihood, rig_pitch  # noqa: E402
+from wirescene.fitting.models import detector_bank  # noqa: E402
+from wirescene.fitting.mount import image_pitch_likelihood, rig_pitch  # noqa: E402
 from wirescene.io.folds import drive_map, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 

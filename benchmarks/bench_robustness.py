@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 from wirescene.eval.kitti_metrics import kitti_metrics  # noqa: E402
 from wirescene.eval.runner import evaluate_dataset  # noqa: E402
 from wirescene.eval.sources import DetectionSource, frame_seed  # noqa: E402
-from wirescene.fitting.pipeline import FitOptions  # noqa: E402
+from wirescene.fitting.options import FitOptions  # noqa: E402
 from wirescene.io.kitti import KittiDataset, Label, read_labels, write_labels  # noqa: E402
 
 

@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 
 import wirescene.predetect.bank as bank_module  # noqa: E402
 from wirescene.core.boxes import iou_2d  # noqa: E402
-from wirescene.fitting.pipeline import PredetectOptions  # noqa: E402
+from wirescene.fitting.options import PredetectOptions  # noqa: E402
 from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
 from wirescene.predetect.bank import DetectorBank, bank_pyramid, detect_cars  # noqa: E402

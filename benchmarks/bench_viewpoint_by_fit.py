@@ -1,7 +1,7 @@
 """Front or back by the fit: does the fine objective tell a box's viewpoint from its opposite?
 
 Boxes given without a viewpoint (issue 27, item 2) take the box rule's
-(:func:`wirescene.fitting.pipeline.complete_viewpoints`); its errors are mostly front/back
+(:func:`wirescene.fitting.own_boxes.complete_viewpoints`); its errors are mostly front/back
 swaps. Here every labelled Car of every frame is given as its label box without a viewpoint,
 completed by the rule with the models of the frame's fold (``--models DIR`` with
 ``bank_fold{k}.npz``, ``viewpoint_classifier_fold{k}.npz``, ``parts_fold{k}.npz``, trained
@@ -32,14 +32,10 @@ import numpy as np  # noqa: E402
 from wirescene.core.groundplane import wrap_angle  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import angle_difference  # noqa: E402
-from wirescene.fitting.pipeline import (  # noqa: E402
-    FitOptions,
-    complete_viewpoints,
-    detector_bank,
-    fit_frame,
-    part_detector,
-    viewpoint_classifier,
-)
+from wirescene.fitting.models import detector_bank, part_detector, viewpoint_classifier  # noqa: E402
+from wirescene.fitting.options import FitOptions  # noqa: E402
+from wirescene.fitting.own_boxes import complete_viewpoints  # noqa: E402
+from wirescene.fitting.pipeline import fit_frame  # noqa: E402
 from wirescene.infer.evidence import part_evidence  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402

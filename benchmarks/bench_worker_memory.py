@@ -47,7 +47,7 @@ def passes(root: str, *, frames: int, n_passes: int, variants: list[str], detect
     """Yield ``(pass, seconds, rss_mb, rss_trimmed_mb, peak_mb)`` after each pass."""
     from wirescene.eval.runner import _FrameJob
     from wirescene.eval.sources import DetectionSource
-    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.fitting.options import FitOptions
     from wirescene.io.kitti import KittiDataset
 
     dataset = KittiDataset(root)

@@ -18,7 +18,7 @@ import wirescene
 import wirescene.api
 from conftest import KITTI_ROOT, assert_close
 from wirescene.cli.main import main
-from wirescene.fitting.pipeline import FitOptions
+from wirescene.fitting.options import FitOptions
 from wirescene.io.detections import read_detections
 from wirescene.io.kitti import KittiDataset
 from wirescene.lift import LiftingOptions
@@ -112,11 +112,12 @@ def test_integer_images_holding_8_bit_values_are_read_as_8_bit(frame):
 
 
 def test_detect_returns_the_fits_own_boxes_and_viewpoints_above_its_threshold(frame):
-    from wirescene.fitting.pipeline import PredetectOptions, detect_own
+    from wirescene.fitting.options import PredetectOptions
+    from wirescene.fitting.own_boxes import own_detections
 
     image, camera, _ = frame
     fit = PredetectOptions()
-    own = detect_own(camera, image, threshold=fit.threshold, upsample=fit.upsample)  # what the fit starts from
+    own = own_detections(camera, image, threshold=fit.threshold, upsample=fit.upsample)  # what the fit starts from
     both = wirescene.detect(image, camera, threshold=PredetectOptions().threshold)
     assert_close(both.boxes, own.boxes, atol=0, rtol=0)
     assert_close(both.alpha, own.alpha, atol=0, rtol=0)
@@ -672,7 +673,7 @@ def test_a_model_retrained_in_place_is_loaded_anew(tmp_path):
     from wirescene.core.errors import InputError
     from wirescene.core.resources import shipped_path
     from wirescene.fitting.confidence import load_score_calibration, save_score_calibration
-    from wirescene.fitting.pipeline import detector_bank
+    from wirescene.fitting.models import detector_bank
     from wirescene.infer.occluded_score import load_occluded_score, save_occluded_score
 
     occlusion = tmp_path / "occlusion.json"

@@ -878,7 +878,7 @@ def test_file_sha256_names_the_file_and_what_it_is(tmp_path):
     from wirescene.core.artefacts import MISSING_ARTEFACT
     from wirescene.core.resources import file_sha256
     from wirescene.fitting.models import models_fingerprint
-    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.fitting.options import FitOptions
 
     with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path.resolve()))}: artefact path is not a file$"):
         models_fingerprint(FitOptions(parts_model=str(tmp_path)))

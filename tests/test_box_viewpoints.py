@@ -195,12 +195,12 @@ def test_fit_frame_completes_unknown_viewpoints_with_the_bank(scene):
 
 
 def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
-    from wirescene.fitting.pipeline import detect_own
+    from wirescene.fitting.own_boxes import own_detections, with_rule_viewpoints
     from wirescene.predetect import detect_cars
 
     image, camera, bank = scene["image"], scene["camera"], scene["bank"]
     raw = detect_cars(image, bank=bank, camera=camera)
-    own = detect_own(camera, image, bank=bank)
+    own = own_detections(camera, image, bank=bank)
     assert len(raw) >= 3
     assert np.array_equal(own.boxes, raw.boxes) and np.array_equal(own.scores, raw.scores)
     expected = box_viewpoints(bank, image, raw.boxes, camera=camera, classifier=load_default_classifier())
@@ -208,7 +208,7 @@ def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
     # detections made elsewhere, with the pyramid and response maps they came from (`wirescene detect --out`)
     pyramid, maps = bank_pyramid(bank, image), {}
     kept = detect_cars(image, bank=bank, camera=camera, pyramid=pyramid, responses=maps)
-    given = detect_own(camera, image, bank=bank, detections=kept, pyramid=pyramid, responses=maps)
+    given = with_rule_viewpoints(camera, image, kept, bank=bank, pyramid=pyramid, responses=maps)
     assert np.array_equal(given.boxes, own.boxes) and np.array_equal(given.alpha, own.alpha)
     # a pyramid alone is read by the detection too, not computed again
     import wirescene.predetect.bank as bank_module
@@ -219,17 +219,17 @@ def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(bank_module, "bank_pyramid", no_pyramid)
         mp.setattr(bank_module, "feature_pyramid", no_pyramid)
-        alone = detect_own(camera, image, bank=bank, pyramid=pyramid)
+        alone = own_detections(camera, image, bank=bank, pyramid=pyramid)
     assert np.array_equal(alone.boxes, own.boxes) and np.array_equal(alone.alpha, own.alpha)
     # fit_frame's own pre-detection is this one at the fit's lower threshold, its cars verified by the fit
     from dataclasses import replace
 
     from wirescene.fitting.confidence import car_probabilities
-    from wirescene.fitting.pipeline import FitOptions, PredetectOptions
+    from wirescene.fitting.options import FitOptions, PredetectOptions
 
     options = FitOptions()
-    at_fit = detect_own(camera, image, bank=bank, threshold=options.predetect.threshold,
-                        upsample=options.predetect.upsample)
+    at_fit = own_detections(camera, image, bank=bank, threshold=options.predetect.threshold,
+                            upsample=options.predetect.upsample)
     assert len(at_fit) >= len(own)
     fit = fit_frame(camera, None, ["coarse"], image=image)
     assert np.array_equal(fit.detections.boxes, at_fit.boxes) and np.allclose(fit.detections.alpha, at_fit.alpha)
@@ -240,7 +240,7 @@ def test_our_own_detections_take_the_viewpoint_of_the_box_rule(scene):
     likely = [o.detection_index for o, p in zip(est.objects, car_probabilities(est, fine=False)) if p >= 0.5]
     assert [o.detection_index for o in fit.estimates["coarse"].objects] == likely
     # no camera, no road prior: the detector's own viewpoints stay
-    assert np.array_equal(detect_own(None, image, bank=bank).alpha, detect_cars(image, bank=bank).alpha)
+    assert np.array_equal(own_detections(None, image, bank=bank).alpha, detect_cars(image, bank=bank).alpha)
 
 
 def test_crop_classifier_contract_storage_and_mirror_training(scene, tmp_path):

@@ -1145,7 +1145,8 @@ def test_pitch_reads_a_rig_off_its_frames_pooled(tmp_path):
     the camera height told; ``--max-frames`` reads that many, spread over the frames."""
     from wirescene.core.camera import read_projection
     from wirescene.core.groundplane import Mount
-    from wirescene.fitting.pipeline import detector_bank, image_pitch_likelihood, rig_pitch
+    from wirescene.fitting.models import detector_bank
+    from wirescene.fitting.mount import image_pitch_likelihood, rig_pitch
     from wirescene.io.kitti import KittiDataset
 
     moved = tmp_path / "moved"

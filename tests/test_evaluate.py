@@ -363,7 +363,7 @@ def test_report_says_how_the_run_was_made(tmp_path):
     which options differ from the defaults: the page says so."""
     from wirescene.eval.report import run_settings
     from wirescene.fitting.models import models_fingerprint
-    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.fitting.options import FitOptions
     from wirescene.lift import LiftingOptions
 
     options = FitOptions(lifting=LiftingOptions(n_particles=50), seed=3).with_settings({"inference.box_weight": 50})

@@ -9,7 +9,8 @@ from wirescene.core.groundplane import alpha_from_rotation_y
 from wirescene.core.shape import load_default
 from wirescene.core.types import Detections
 from wirescene.core.viewpoints import angle_difference, bin_center, viewpoint_bin
-from wirescene.fitting.pipeline import FitOptions, fit_scene
+from wirescene.fitting.options import FitOptions
+from wirescene.fitting.pipeline import fit_scene
 from wirescene.infer.inference import InferenceOptions, estimate_from_refined, refine_particles
 from wirescene.infer.likelihood import GaussianVertexEvidence, instantiate_wireframes, object_likelihood
 from wirescene.io.kitti import KittiDataset

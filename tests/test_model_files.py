@@ -18,7 +18,7 @@ from wirescene.core.resources import DATA_DIR, MANIFEST_FILE, shipped_path
 from wirescene.core.shape import ShapeModel, load_default
 from wirescene.core.viewpoints import viewpoint_bin
 from wirescene.fitting.models import model_files_read, models_fingerprint, options_read
-from wirescene.fitting.pipeline import FitOptions, PredetectOptions
+from wirescene.fitting.options import FitOptions, PredetectOptions
 from wirescene.lift import LiftingOptions
 
 SPLIT = KITTI_ROOT / "training"

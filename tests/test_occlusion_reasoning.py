@@ -162,7 +162,8 @@ def test_occlusion_reasoning_changes_the_estimate_where_a_car_hides_another():
     from wirescene.core.groundplane import alpha_from_rotation_y, object_pose, transform
     from wirescene.core.types import Detections
     from wirescene.core.wireframe import FACES
-    from wirescene.fitting.pipeline import FitOptions, fit_frame
+    from wirescene.fitting.options import FitOptions
+    from wirescene.fitting.pipeline import fit_frame
     from wirescene.infer.inference import InferenceOptions
     from wirescene.infer.likelihood import GaussianVertexEvidence
     from wirescene.infer.occlusion import inter_object_occlusion, self_occlusion

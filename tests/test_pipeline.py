@@ -13,7 +13,7 @@ from wirescene.eval.metrics import FrameResult
 from wirescene.eval.records import RECORDS_DIR
 from wirescene.eval.runner import _FrameJob, evaluate_dataset
 from wirescene.eval.sources import DetectionSource
-from wirescene.fitting.pipeline import FitOptions
+from wirescene.fitting.options import FitOptions
 from wirescene.infer.inference import InferenceOptions
 from wirescene.io.kitti import KittiDataset, Label
 from wirescene.lift import LiftingOptions
@@ -267,7 +267,8 @@ def test_own_boxes_weigh_by_the_predetect_stage():
     fitted as given at weight 30, and differ from those at weight 100."""
     from dataclasses import replace
 
-    from wirescene.fitting.pipeline import PredetectOptions, fit_frame
+    from wirescene.fitting.options import PredetectOptions
+    from wirescene.fitting.pipeline import fit_frame
     from wirescene.io.detections import detections_from_labels
 
     ds = KittiDataset(KITTI_ROOT)
@@ -307,13 +308,14 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
     """``predetect.smallest_car``: at half the resolution the frame's cars fall below the bank's
     25 px; searched down to 12 px they are found again, boxes under 25 px among them."""
     from wirescene.eval.sources import DetectionSource
-    from wirescene.fitting.pipeline import PredetectOptions, detect_own
+    from wirescene.fitting.options import PredetectOptions
+    from wirescene.fitting.own_boxes import own_detections
 
     ds = KittiDataset(KITTI_ROOT)
     camera, image, half, small = half_frame
     heights = {}
     for smallest in (None, 12.0):
-        found = detect_own(half, small, threshold=0.3, smallest_car=smallest)
+        found = own_detections(half, small, threshold=0.3, smallest_car=smallest)
         heights[smallest] = found.boxes[:, 3] - found.boxes[:, 1]
     assert (heights[None] >= 24).all()  # the bank's own range (a box may shrink a little in its refinement)
     assert (heights[12.0] < 24).sum() >= 2 and len(heights[12.0]) > len(heights[None])
@@ -331,7 +333,7 @@ def test_smallest_car_searched_moves_the_pyramid_so_that_the_templates_reach_it(
     # the evaluation's detections take the option from the fit's options
     via_source = DetectionSource("bank").for_frame(ds, "000010", np.random.default_rng(0),
                                                    predetect=PredetectOptions(threshold=0.3, smallest_car=12.0))
-    direct = detect_own(camera, image, threshold=0.3, smallest_car=12.0)
+    direct = own_detections(camera, image, threshold=0.3, smallest_car=12.0)
     assert np.array_equal(via_source.boxes, direct.boxes)
 
 
@@ -346,13 +348,15 @@ def test_upsample_detects_on_the_enlarged_image_and_brings_the_boxes_back(tmp_pa
     import wirescene
     from wirescene.core.boxes import iou_2d
     from wirescene.core.camera import write_kitti_calib
-    from wirescene.fitting.pipeline import PredetectOptions, detect_own, fit_frame
+    from wirescene.fitting.options import PredetectOptions
+    from wirescene.fitting.own_boxes import own_detections
+    from wirescene.fitting.pipeline import fit_frame
 
     camera, image, half, small = half_frame
     h, w = image.shape[:2]
-    full = detect_own(camera, image, threshold=0.3)
-    plain = detect_own(half, small, threshold=0.3)
-    found = detect_own(half, small, threshold=0.3, upsample=2.0)
+    full = own_detections(camera, image, threshold=0.3)
+    plain = own_detections(half, small, threshold=0.3)
+    found = own_detections(half, small, threshold=0.3, upsample=2.0)
     assert len(found) > len(plain)
     assert_close(found.boxes[:len(plain)], plain.boxes, atol=0)  # the image's own boxes stay, the others added
     overlaps = iou_2d(found.boxes[:, None], found.boxes[None])
@@ -400,7 +404,8 @@ def test_the_enlarged_image_is_searched_at_the_levels_finer_than_the_images_only
     import functools
 
     import wirescene.predetect.bank as bank_module
-    from wirescene.fitting.pipeline import detect_own, detector_bank
+    from wirescene.fitting.models import detector_bank
+    from wirescene.fitting.own_boxes import own_detections
 
     ds = KittiDataset(KITTI_ROOT)
     image, camera = ds.image("000010"), ds.camera("000010")
@@ -413,8 +418,8 @@ def test_the_enlarged_image_is_searched_at_the_levels_finer_than_the_images_only
         return seen.__wrapped__(img, scales)
 
     monkeypatch.setattr(bank_module, "feature_pyramid", seen)
-    plain = detect_own(camera, image, threshold=0.3)
-    found = detect_own(camera, image, threshold=0.3, upsample=1.5)
+    plain = own_detections(camera, image, threshold=0.3)
+    found = own_detections(camera, image, threshold=0.3, upsample=1.5)
     (h0, own), (h1, same), (h2, finer) = searched
     assert h0 == h1 == image.shape[0] and own == same and max(own) == top
     factor = h2 / image.shape[0]
@@ -424,21 +429,21 @@ def test_the_enlarged_image_is_searched_at_the_levels_finer_than_the_images_only
     assert_close(found.boxes[:len(plain)], plain.boxes, atol=0)  # the image's own boxes stay
     for smallest in (12.5, 25.0):  # its levels reach 4x: as fine; no car under 25 px searched, in either image
         searched.clear()
-        detect_own(camera, image, threshold=0.3, upsample=1.5, smallest_car=smallest)
+        own_detections(camera, image, threshold=0.3, upsample=1.5, smallest_car=smallest)
         assert [h for h, _ in searched] == [image.shape[0]], smallest
     # a camera's pitch is read once, off the image's own boxes, for both passes
-    import wirescene.fitting.pipeline as pipeline
+    import wirescene.fitting.mount as mount
 
     mounts = []
 
-    @functools.wraps(pipeline.image_mount)
+    @functools.wraps(mount.image_mount)
     def read(*args, **kwargs):
         mounts.append(read.__wrapped__(*args, **kwargs))
         return mounts[-1]
 
-    monkeypatch.setattr(pipeline, "image_mount", read)
+    monkeypatch.setattr(mount, "image_mount", read)
     searched.clear()
-    detect_own(camera, image, threshold=0.3, upsample=1.5, estimate_pitch=True)
+    own_detections(camera, image, threshold=0.3, upsample=1.5, estimate_pitch=True)
     assert len(mounts) == 1 and [h for h, _ in searched] == [h0, h2]  # the image's pyramid read by both
 
 
@@ -449,7 +454,8 @@ def test_a_fit_told_to_estimate_the_pitch_reads_it_off_its_boxes():
     the fit places them as with the true calibration (compared by lateral offset and distance
     from the camera, which the frames' rotation about the x axis keeps)."""
     from wirescene.core.camera import Camera
-    from wirescene.fitting.pipeline import FitOptions, fit_frame
+    from wirescene.fitting.options import FitOptions
+    from wirescene.fitting.pipeline import fit_frame
     from wirescene.io.detections import detections_from_labels
 
     ds = KittiDataset(KITTI_ROOT)
@@ -482,7 +488,7 @@ def test_a_bank_without_ground_prior_spends_no_detection_on_the_pitch(monkeypatc
 
     import wirescene.predetect
     from wirescene.core.groundplane import Mount
-    from wirescene.fitting.pipeline import image_mount
+    from wirescene.fitting.mount import image_mount
 
     ds = KittiDataset(KITTI_ROOT)
     calls = []

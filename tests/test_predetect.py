@@ -883,7 +883,7 @@ def test_detect_reads_the_pitch_of_a_camera_that_was_not_told_it(monkeypatch):
     ground prior scores the frame's cars as boxes standing off the road; reading the pitch
     off the boxes, it finds the level rig's cars again."""
     import wirescene
-    import wirescene.fitting.pipeline as pipeline
+    import wirescene.fitting.mount as mount
     from wirescene.core.camera import read_projection
     from wirescene.core.errors import ArgumentError
     from wirescene.core.resources import DATA_DIR
@@ -894,9 +894,9 @@ def test_detect_reads_the_pitch_of_a_camera_that_was_not_told_it(monkeypatch):
     moved = P.copy()
     moved[1, 2] += 50.0
     level = wirescene.detect(image, P)
-    mounts, image_mount = [], pipeline.image_mount
+    mounts, image_mount = [], mount.image_mount
     # the mount the detection reads, seen as it is read (not read again: the test's time)
-    monkeypatch.setattr(pipeline, "image_mount", lambda *a, **kw: mounts.append(image_mount(*a, **kw)) or mounts[-1])
+    monkeypatch.setattr(mount, "image_mount", lambda *a, **kw: mounts.append(image_mount(*a, **kw)) or mounts[-1])
     read = wirescene.detect(image, moved, estimate_pitch=True)
     assert len(mounts) == 1 and abs(mounts[0].pitch - np.rad2deg(np.arctan(50.0 / P[1, 1]))) < 1.0, mounts
     not_told = wirescene.detect(image, moved)

@@ -7,7 +7,7 @@ import pytest
 
 from wirescene.core.errors import ArgumentError
 from wirescene.core.settings import exposed_fields, parse_assignment, parse_value, replace_fields
-from wirescene.fitting.pipeline import STAGES, FitOptions
+from wirescene.fitting.options import STAGES, FitOptions
 from wirescene.infer.inference import InferenceOptions
 from wirescene.lift import LiftingOptions
 
@@ -162,7 +162,7 @@ def test_with_settings_reaches_every_stage_and_refuses_unknown_ones():
 
 def test_every_exposed_field_is_a_command_line_option_of_eval_fit_and_predict():
     from wirescene.cli.main import eval_cmd, fit_cmd, predict_cmd
-    from wirescene.fitting.pipeline import PredetectOptions
+    from wirescene.fitting.options import PredetectOptions
 
     stages = {"lifting": LiftingOptions, "inference": InferenceOptions, "predetect": PredetectOptions}
     assert set(stages) == set(STAGES)

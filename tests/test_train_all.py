@@ -163,7 +163,7 @@ def test_models_directory_rules(tmp_path):
 
 def test_models_directory_replaces_c_and_an_explicit_file_wins(tmp_path):
     from wirescene.fitting.models import with_models
-    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.fitting.options import FitOptions
     from wirescene.infer.occluded_score import save_occluded_score
 
     save_occluded_score(tmp_path / "occlusion.json", {"c": -2.75})

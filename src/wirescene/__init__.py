@@ -19,7 +19,7 @@ from wirescene.core.errors import ArgumentError, CalibrationWarning, InputError,
 from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate
 from wirescene.core.version import __version__
 from wirescene.eval.metrics import EvaluationReport
-from wirescene.fitting.pipeline import FitOptions
+from wirescene.fitting.options import FitOptions
 from wirescene.fitting.variants import VARIANTS
 from wirescene.infer.inference import InferenceOptions
 from wirescene.lift import LiftingOptions

@@ -33,7 +33,8 @@ from wirescene.core.validate import (
     projection_problem,
     real_dtype_problem,
 )
-from wirescene.fitting.pipeline import FitOptions, fit_frame
+from wirescene.fitting.options import FitOptions
+from wirescene.fitting.pipeline import fit_frame
 from wirescene.fitting.variants import VARIANTS, casts_rays
 from wirescene.infer.inference import InferenceOptions
 from wirescene.lift import MAX_PARTICLES, LiftingOptions
@@ -334,7 +335,7 @@ def fit(
         camera.
     boxes : None, (N, 4) array or Detections
         2D car boxes ``x1 y1 x2 y2`` in pixels from any detector (viewpoints are then
-        taken from the box rule, :func:`wirescene.fitting.pipeline.complete_viewpoints`),
+        taken from the box rule, :func:`wirescene.fitting.own_boxes.complete_viewpoints`),
         or :class:`Detections` with viewpoints; ``None`` runs wirescene's own
         pre-detection, whose boxes the fit verifies (cars it finds unlikely are dropped:
         ``settings={"predetect.min_car_probability": 0}`` keeps them all) and weighs less than
@@ -432,7 +433,7 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         :mod:`wirescene.predetect.geometry`), which the shipped bank was calibrated with,
         and each box's viewpoint is chosen by the bank's templates inside it, the crop
         viewpoint classifier and where the car stands on the road
-        (:func:`wirescene.fitting.pipeline.detect_own`); without it the detector's own
+        (:func:`wirescene.fitting.own_boxes.own_detections`); without it the detector's own
         viewpoints stay.
     models : path, optional
         A models directory whose detector bank and crop viewpoint classifier replace the
@@ -452,7 +453,7 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
         ``settings={"lifting.camera_pitch": D}``.
     estimate_pitch : bool, optional
         Read the camera's pitch off the boxes the bank finds without those priors, about
-        ``camera_pitch`` (:func:`wirescene.fitting.pipeline.image_mount`; a camera whose tilt is
+        ``camera_pitch`` (:func:`wirescene.fitting.mount.image_mount`; a camera whose tilt is
         not known; one more pass of the bank over the image, 1.3x the pre-detection's time);
         the fit reads it from ``settings={"lifting.estimate_pitch": True}``.
     smallest_car : float, optional
@@ -490,7 +491,9 @@ def detect(image, calib=None, *, models=None, threshold: float | None = None,
     >>> bool((dets.scores > 0.5).all())  # above the shipped bank's threshold
     True
     """
-    from wirescene.fitting.pipeline import PredetectOptions, detector_bank, own_detections, viewpoint_classifier
+    from wirescene.fitting.models import detector_bank, viewpoint_classifier
+    from wirescene.fitting.options import PredetectOptions
+    from wirescene.fitting.own_boxes import own_detections
 
     if threshold is not None and not finite_real(threshold):
         raise ArgumentError("threshold", f"expected a finite number or None, got {threshold!r}")

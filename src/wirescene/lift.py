@@ -67,7 +67,7 @@ MAX_GRID_CELLS = MAX_GRID_PLANES * 72
 #: fine stage's samples, which :data:`MAX_HYPOTHESES` caps together with it.
 MAX_PARTICLES = 25_000
 
-#: Most particles x fine-stage samples (:meth:`wirescene.fitting.pipeline.FitOptions.combined_problem`):
+#: Most particles x fine-stage samples (:meth:`wirescene.fitting.options.FitOptions.combined_problem`):
 #: 250 x 200, the memory the ``samples`` cap was sized for (some 9 kB a (particle, car, sample): 9 GB
 #: for 20 cars).
 MAX_HYPOTHESES = 50_000

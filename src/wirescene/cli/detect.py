@@ -32,7 +32,7 @@ from wirescene.cli.options import (
 from wirescene.core.atomic import write_text
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.settings import stage_field
-from wirescene.fitting.pipeline import PredetectOptions
+from wirescene.fitting.options import PredetectOptions
 from wirescene.lift import LiftingOptions
 from wirescene.predetect.bank import SUPPORT_WEIGHT
 from wirescene.training.scale import (
@@ -245,7 +245,8 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     from wirescene.core.resources import resolve_models
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.fitting.pipeline import detector_bank, own_detections, viewpoint_classifier
+    from wirescene.fitting.models import detector_bank, viewpoint_classifier
+    from wirescene.fitting.own_boxes import own_detections
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
 

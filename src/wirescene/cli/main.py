@@ -214,7 +214,7 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_ray
     :func:`wirescene.infer.torch_backend.choose_device`)."""
     from wirescene.core.resources import resolve_models
     from wirescene.fitting.models import MODEL_FILES, check_model_files, with_models
-    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.fitting.options import FitOptions
     from wirescene.infer.torch_backend import choose_device
     from wirescene.lift import LiftingOptions
 
@@ -252,7 +252,7 @@ def _inference_options(f):
     """Options of the coarse and fine-grained inference stages (generated from the
     stages' own option fields, :func:`stage_options`) and the trained models they use,
     shared by `eval`, `fit` and `predict`."""
-    from wirescene.fitting.pipeline import PredetectOptions
+    from wirescene.fitting.options import PredetectOptions
     from wirescene.infer.inference import InferenceOptions
     from wirescene.lift import LiftingOptions
 

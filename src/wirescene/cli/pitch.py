@@ -84,7 +84,8 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
 
     from wirescene.core.errors import InputError
     from wirescene.core.resources import resolve_models
-    from wirescene.fitting.pipeline import detector_bank, image_pitch_likelihood, rig_pitch
+    from wirescene.fitting.models import detector_bank
+    from wirescene.fitting.mount import image_pitch_likelihood, rig_pitch
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.geometry import PITCH_SEARCH
 

@@ -5,7 +5,7 @@ meant for users carries its help text (:func:`option`). From those fields alone 
 named command-line options (:func:`wirescene.cli.options.stage_options`), the
 ``--set STAGE.FIELD=VALUE`` settings of ``eval``, ``predict`` and ``fit`` and the
 ``settings`` of :func:`wirescene.fit` / :func:`wirescene.evaluate`
-(:meth:`wirescene.fitting.pipeline.FitOptions.with_settings`), so that the three cannot
+(:meth:`wirescene.fitting.options.FitOptions.with_settings`), so that the three cannot
 disagree on a name, a type or a default. ``train all --set`` parses its values with the
 same :func:`parse_value`.
 """

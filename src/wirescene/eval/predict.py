@@ -21,7 +21,8 @@ from wirescene.eval.records import config_difference, refuse_frames_outside
 from wirescene.eval.runner import fit_frames, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint, options_read
-from wirescene.fitting.pipeline import FitOptions, fit_frame
+from wirescene.fitting.options import FitOptions
+from wirescene.fitting.pipeline import fit_frame
 from wirescene.fitting.variants import get_variant
 from wirescene.io.kitti import KittiDataset
 

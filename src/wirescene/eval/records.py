@@ -16,7 +16,7 @@ from wirescene.io.kitti import KittiDataset
 
 if TYPE_CHECKING:
     from wirescene.eval.sources import DetectionSource
-    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.fitting.options import FitOptions
 
 
 #: Where :func:`evaluate_dataset` keeps the record of each finished frame, under the

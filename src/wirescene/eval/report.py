@@ -290,7 +290,7 @@ def run_settings(options, *, detections: str, evidence: str = "parts", fine: boo
 
     from wirescene.core.version import __version__
     from wirescene.fitting.models import MODEL_FILES, models_fingerprint
-    from wirescene.fitting.pipeline import FitOptions
+    from wirescene.fitting.options import FitOptions
 
     named = {"gt": "label boxes", "bank": "own pre-detection"}
     files = f"files in {detections}" + ("" if min_score is None else f", boxes scoring at least {min_score:g}")

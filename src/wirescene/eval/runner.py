@@ -31,7 +31,8 @@ from wirescene.eval.records import (
     run_config,
 )
 from wirescene.eval.sources import DetectionSource, frame_seed
-from wirescene.fitting.pipeline import FitOptions, fit_frame, needs_evidence
+from wirescene.fitting.options import FitOptions
+from wirescene.fitting.pipeline import fit_frame, needs_evidence
 from wirescene.fitting.variants import get_variant
 from wirescene.infer.evidence import oracle_evidence
 from wirescene.infer.torch_backend import TORCH_THREADS_ENV

@@ -17,7 +17,7 @@ from wirescene.io.detections import NO_CARS, detections_from_labels, read_detect
 from wirescene.io.kitti import KittiDataset
 
 if TYPE_CHECKING:  # imported where the bank runs
-    from wirescene.fitting.pipeline import PredetectOptions
+    from wirescene.fitting.options import PredetectOptions
     from wirescene.lift import LiftingOptions
 
 
@@ -116,22 +116,23 @@ class DetectionSource:
     def for_frame(self, dataset: KittiDataset, frame_id: str, rng: np.random.Generator, *,
                   predetect: PredetectOptions | None = None, lifting: LiftingOptions | None = None) -> Detections:
         """The detections of one frame; ``predetect``: the threshold, smallest car and
-        enlargement of our own pre-detection (:func:`~wirescene.fitting.pipeline.detect_own`;
+        enlargement of our own pre-detection (:func:`~wirescene.fitting.own_boxes.own_detections`;
         None: the bank's own);
         ``lifting``: the camera's mount (``LiftingOptions.mount``), for its priors (None: KITTI's)."""
         if self.spec == "gt":
             return detections_from_labels(dataset.labels(frame_id), viewpoint_noise_deg=self.viewpoint_noise_deg, rng=rng)
         if self.spec == "bank":
-            from wirescene.fitting.pipeline import detect_own, detector_bank, viewpoint_classifier
+            from wirescene.fitting.models import detector_bank, viewpoint_classifier
+            from wirescene.fitting.own_boxes import own_detections
             from wirescene.lift import LiftingOptions
 
             rig = LiftingOptions() if lifting is None else lifting
-            return detect_own(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
-                              classifier=viewpoint_classifier(self.classifier),
-                              threshold=None if predetect is None else predetect.threshold,
-                              smallest_car=None if predetect is None else predetect.smallest_car,
-                              upsample=1.0 if predetect is None else predetect.upsample,
-                              mount=rig.mount, estimate_pitch=rig.estimate_pitch)
+            return own_detections(dataset.camera(frame_id), dataset.image(frame_id), bank=detector_bank(self.bank),
+                                  classifier=viewpoint_classifier(self.classifier),
+                                  threshold=None if predetect is None else predetect.threshold,
+                                  smallest_car=None if predetect is None else predetect.smallest_car,
+                                  upsample=1.0 if predetect is None else predetect.upsample,
+                                  mount=rig.mount, estimate_pitch=rig.estimate_pitch)
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:

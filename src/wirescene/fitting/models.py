@@ -1,18 +1,25 @@
-"""The trained artefacts a fit uses, as :class:`~wirescene.fitting.pipeline.FitOptions`
-carry them: a models directory (:func:`wirescene.core.resources.resolve_models`) applied
-to the options, which of the files a run reads (:func:`model_files_read`), the files checked
-before any fit, and the content fingerprint of those it reads (part of every resume record,
-so that a retrained model is never mistaken for the one a record was fitted with, and a file
-the run does not read changes nothing)."""
+"""The trained artefacts a fit uses, as :class:`~wirescene.fitting.options.FitOptions`
+carry them: their loaders (:func:`part_detector`, :func:`detector_bank`,
+:func:`viewpoint_classifier`, :func:`load_shape_model`, :func:`shape_model_for`; each file
+loaded once per version), a models directory (:func:`wirescene.core.resources.resolve_models`)
+applied to the options, which of the files a run reads (:func:`model_files_read`), the files
+checked before any fit, and the content fingerprint of those it reads (part of every resume
+record, so that a retrained model is never mistaken for the one a record was fitted with, and
+a file the run does not read changes nothing)."""
 
 from __future__ import annotations
 
 import dataclasses
 
-from wirescene.core.resources import Models, file_sha256, shipped_path
-from wirescene.fitting.pipeline import FitOptions
+from wirescene.core.errors import InputError
+from wirescene.core.resources import Models, cached_by_file, file_sha256, shipped_path
+from wirescene.core.shape import DEFAULT_MODEL_PATH as SHIPPED_SHAPE_MODEL
+from wirescene.core.shape import ShapeModel
+from wirescene.core.shape import load_default as load_default_shape_model
+from wirescene.fitting.options import FitOptions
 
-__all__ = ["MODEL_FILES", "FINE_OPTIONS", "with_models", "model_files_read", "check_model_files",
+__all__ = ["MODEL_FILES", "FINE_OPTIONS", "part_detector", "viewpoint_classifier", "load_shape_model",
+           "shape_model_for", "detector_bank", "with_models", "model_files_read", "check_model_files",
            "reads_score_calibration", "models_fingerprint", "options_read"]
 
 #: The artefacts a fit reads from a file that :class:`FitOptions` names (the field of the
@@ -27,6 +34,81 @@ MODEL_FILES: tuple[str, ...] = ("parts_model", "detector_bank", "viewpoint_class
 #: scores, ``inference.flip_evidence``; the coarse variants compute none) and the weight of
 #: our own pre-detection's boxes in its objective, which replaces ``inference.box_weight``.
 FINE_OPTIONS: tuple[str, ...] = ("inference", "predetect.box_weight")
+
+
+@cached_by_file(maxsize=4)
+def part_detector(path: str | None):
+    """The part detectors at ``path`` (None: the shipped model), loaded once per version of the file."""
+    from wirescene.parts.detector import PartDetector, load_default
+
+    return load_default() if path is None else PartDetector.load(path)
+
+
+@cached_by_file(maxsize=4)
+def viewpoint_classifier(path: str | None):
+    """The crop viewpoint classifier at ``path`` (None: the shipped one), loaded once per version of the file.
+
+    Examples
+    --------
+    >>> classifier = viewpoint_classifier(None)  # the shipped one
+    >>> classifier is viewpoint_classifier(None), classifier.weights.shape  # (features, 8 bins)
+    (True, (1957, 8))
+    """
+    from wirescene.predetect.viewpoint_classifier import ViewpointClassifier, load_default_classifier
+
+    return load_default_classifier() if path is None else ViewpointClassifier.load(path)
+
+
+@cached_by_file(maxsize=4)
+def load_shape_model(path: str | None = None) -> ShapeModel:
+    """The shape model at ``path`` (None: the shipped one), loaded once per version of the file.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> model = load_shape_model()  # the shipped one, loaded once
+    >>> model is load_shape_model(), model.instantiate(np.zeros(5)).shape  # the mean car's 36 vertices (m)
+    (True, (36, 3))
+    """
+    return load_default_shape_model() if path is None else ShapeModel.load(path)
+
+
+def shape_model_for(options: "FitOptions") -> ShapeModel:
+    """The shape model of ``options`` (:attr:`FitOptions.shape_model`), checked to have the
+    components the fine stage searches (``inference.n_shape``): an
+    :class:`~wirescene.core.errors.InputError` naming the file otherwise.
+
+    Examples
+    --------
+    >>> shape_model_for(FitOptions()) is load_shape_model()
+    True
+    >>> from wirescene.infer.inference import InferenceOptions
+    >>> shape_model_for(FitOptions(inference=InferenceOptions(n_shape=1000)))
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...components, the fine stage searches 1000 (--set inference.n_shape=N...
+    """
+    model = load_shape_model(options.shape_model)
+    if model.n_components < options.inference.n_shape:
+        raise InputError(f"shape model of {model.n_components} components, the fine stage searches "
+                         f"{options.inference.n_shape} (--set inference.n_shape=N, N <= {model.n_components})",
+                         path=options.shape_model or SHIPPED_SHAPE_MODEL)
+    return model
+
+
+@cached_by_file(maxsize=4)
+def detector_bank(path: str | None):
+    """The detector bank at ``path`` (None: the shipped one), loaded once per version of the file.
+
+    Examples
+    --------
+    >>> from wirescene.predetect import load_default_bank
+    >>> detector_bank(None) is load_default_bank()  # the shipped bank
+    True
+    """
+    from wirescene.predetect import DetectorBank, load_default_bank
+
+    return load_default_bank() if path is None else DetectorBank.load(path)
 
 
 def with_models(options: FitOptions, models: Models) -> FitOptions:
@@ -130,13 +212,6 @@ def check_model_files(options: FitOptions, *, fine: bool = True, own: bool = Tru
         ``options.inference.n_shape``.
     """
     from wirescene.fitting.confidence import load_score_calibration
-    from wirescene.fitting.pipeline import (
-        detector_bank,
-        load_shape_model,
-        part_detector,
-        shape_model_for,
-        viewpoint_classifier,
-    )
 
     load = {
         "detector_bank": lambda: detector_bank(options.detector_bank),
@@ -161,7 +236,7 @@ def reads_score_calibration(options: FitOptions, *, own: bool = True) -> bool:
 
     Examples
     --------
-    >>> from wirescene.fitting.pipeline import PredetectOptions
+    >>> from wirescene.fitting.options import PredetectOptions
     >>> reads_score_calibration(FitOptions())
     True
     >>> reads_score_calibration(FitOptions(calibrate_scores=False)), reads_score_calibration(

@@ -117,7 +117,7 @@ def viewpoint_from_evidence(camera, detections: Detections, evidence, shape_mode
     --------
     >>> from wirescene.core.camera import Camera
     >>> from wirescene.core.viewpoints import bin_center
-    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> from wirescene.fitting.models import load_shape_model
     >>> from wirescene.infer.likelihood import instantiate_wireframes
     >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
     >>> x, z, alpha = -2.0, 15.0, bin_center(3)  # a car seen at 135 deg

@@ -783,7 +783,7 @@ def refine_particles(
 
     Examples
     --------
-    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> from wirescene.fitting.models import load_shape_model
     >>> from wirescene.infer.likelihood import GaussianVertexEvidence
     >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
     >>> model = load_shape_model()
@@ -836,7 +836,7 @@ def estimate_from_refined(
 
     Examples
     --------
-    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> from wirescene.fitting.models import load_shape_model
     >>> from wirescene.infer.likelihood import GaussianVertexEvidence
     >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
     >>> model = load_shape_model()

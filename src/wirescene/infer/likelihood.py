@@ -88,7 +88,7 @@ class WireframeBatch:
 
     Examples
     --------
-    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> from wirescene.fitting.models import load_shape_model
     >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
     >>> def place(x):  # two cars, at (x, 12 m) and (3 m, 20 m), the mean shape (5 coefficients 0)
     ...     return instantiate_wireframes(camera, load_shape_model(), x=np.array([[x, 3.0]]), z=np.array([[12.0, 20.0]]),
@@ -126,7 +126,7 @@ def instantiate_wireframes(
 
     Examples
     --------
-    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> from wirescene.fitting.models import load_shape_model
     >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
     >>> def place(x):  # two cars, at (x, 12 m) and (3 m, 20 m), the mean shape (5 coefficients 0)
     ...     return instantiate_wireframes(camera, load_shape_model(), x=np.array([[x, 3.0]]), z=np.array([[12.0, 20.0]]),
@@ -167,7 +167,7 @@ def wireframe_likelihood(
 
     Examples
     --------
-    >>> from wirescene.fitting.pipeline import load_shape_model
+    >>> from wirescene.fitting.models import load_shape_model
     >>> camera = Camera(np.array([[720.0, 0, 600, 0], [0, 720.0, 170, 0], [0, 0, 1, 0]]), (1200, 370))
     >>> def place(x):  # two cars, at (x, 12 m) and (3 m, 20 m), the mean shape (5 coefficients 0)
     ...     return instantiate_wireframes(camera, load_shape_model(), x=np.array([[x, 3.0]]), z=np.array([[12.0, 20.0]]),
