@@ -150,6 +150,22 @@ def test_boxes_past_the_image_are_fitted_and_written_clipped(frame):
     assert_close(first.cars[0].box, [0.0, 200.0, 1.0, 330.0])  # and one in the first, inside the image
 
 
+def test_a_sliver_without_a_viewpoint_beside_a_box_with_one_is_fitted(frame, tmp_path):
+    """Boxes in normalised coordinates (every box under a pixel) are refused where they enter; a
+    sliver among real boxes is fitted, its viewpoint from the box rule, which read it as a file's
+    every box (it stopped the fit)."""
+    from wirescene.core.types import Detections
+
+    image, camera, _ = frame
+    dets = Detections([[300.0, 180.0, 520.0, 300.0], [700.2, 200.1, 700.8, 200.6]], 1.0, [0.5, np.nan])
+    assert len(wirescene.fit(image, camera, dets, variant="coarse", particles=10).cars) == 2
+    path = tmp_path / "dets.json"
+    path.write_text('[{"box": [300, 180, 520, 300], "alpha": 0.5}, {"box": [700.2, 200.1, 700.8, 200.6]}]')
+    assert len(wirescene.fit(image, camera, read_detections(path), variant="coarse", particles=10).cars) == 2
+    with pytest.raises(wirescene.ArgumentError, match="^boxes: every box is under a pixel"):
+        wirescene.fit(image, camera, [[0.24, 0.48, 0.42, 0.8]], variant="coarse", particles=10)
+
+
 def test_fit_and_detect_warn_of_a_calibration_made_for_another_image_size(frame, tmp_path):
     """A calibration carries no image size: the left half of a KITTI frame with the frame's own
     P2 (its principal point in the outer quarter of the cropped image) is fitted and searched
@@ -266,9 +282,10 @@ def test_detections_check_their_shapes():
         Detections(np.zeros((2, 4)), 1.0, [0.1, 0.2, 0.3])
     with pytest.raises(wirescene.ArgumentError, match="^boxes: expected numbers"):
         Detections([[1, 2, 3, 4], [1, 2]], 1.0, np.nan)
-    for name, values in (("boxes", np.ones((1, 4)) * 1j), ("scores", [0.9 + 0.1j]), ("alpha", [True])):
+    for name, values in (("boxes", np.ones((1, 4)) * 1j), ("scores", [0.9 + 0.1j]), ("alpha", [True]),
+                         ("boxes", [["300", "180", "520", "300"]])):
         args = {"boxes": np.ones((1, 4)), "scores": [0.9], "alpha": [0.1], name: values}
-        with pytest.raises(wirescene.ArgumentError, match=f"^{name}: (complex numbers|booleans) .dtype"):
+        with pytest.raises(wirescene.ArgumentError, match=f"^{name}: (complex numbers|booleans|text) .dtype"):
             Detections(**args)  # a complex number lost its imaginary part with a mere warning
 
 

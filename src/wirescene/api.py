@@ -28,6 +28,7 @@ from wirescene.core.validate import (
     empty_path_problem,
     finite_real,
     image_size_problem,
+    normalised_boxes_problem,
     off_centre_problem,
     output_dir_problem,
     projection_problem,
@@ -217,7 +218,7 @@ def as_detections(boxes, image_size: tuple[int, int], *, name: str = "boxes") ->
         if problem:
             raise ArgumentError(name, problem)
         dets = Detections(b.astype(float), np.ones(len(b)), np.full(len(b), np.nan), source="api")
-    problem = boxes_problem(dets.boxes, image_size)
+    problem = boxes_problem(dets.boxes, image_size) or normalised_boxes_problem(dets.boxes)
     if problem:
         raise ArgumentError(name, problem)
     if not np.all(np.isfinite(dets.scores)):

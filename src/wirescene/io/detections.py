@@ -17,7 +17,7 @@ import numpy as np
 
 from wirescene.core.errors import InputError
 from wirescene.core.types import MAX_ALPHA, Detections
-from wirescene.core.validate import boxes_problem, path_problem
+from wirescene.core.validate import boxes_problem, normalised_boxes_problem, path_problem
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
 from wirescene.io.kitti import ALPHA_NOT_ESTIMATED, CAR_TYPES, FrameLabels, read_labels
 
@@ -278,7 +278,8 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
         dets = _from_entries(rows, path)
     else:
         raise InputError(f"unknown detections format {suffix!r} (use .json, .csv or a KITTI .txt)", path=path)
-    problem = boxes_problem(dets.boxes, image_size)  # every box, before the floor: a file of another image is one
+    # every box, before the floor: a file of another image is one
+    problem = boxes_problem(dets.boxes, image_size) or normalised_boxes_problem(dets.boxes)
     if problem:
         raise InputError(problem, path=path)
     dets = dets if min_score is None else dets.subset(dets.scores >= min_score)
