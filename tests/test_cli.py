@@ -1193,6 +1193,7 @@ def test_pitch_reads_a_rig_off_its_frames_pooled(tmp_path):
     Image.new("RGB", (1242, 375), (128, 128, 128)).save(moved / "training" / "image_2" / "001545.png")
     r = run("pitch", moved, "--frames", ",".join(pair), "--json", out)
     assert r.exit_code == 0 and "001545: no pitch read (0 boxes found)" in r.output, r.output
+    assert "the rig's pitch over 1 of 2 frames read (" in r.output, r.output
     record = json.loads(out.read_text())
     assert record["frames"]["001545"] == {"pitch": None, "boxes": 0}
     assert record["pitch"] == alone[0] == record["frames"]["000002"]["pitch"]

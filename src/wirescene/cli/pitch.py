@@ -123,7 +123,8 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
     alone = [abs(e["pitch"] - rig) for e in each.values() if e["pitch"] is not None]
     spread = (f"; each frame alone: within {np.percentile(alone, 90, method='higher'):.1f} deg of it for 90%"
               if len(alone) > 1 else "")
-    click.echo(f"the rig's pitch over {_count(len(ids), 'frame')} ({_count(boxes, 'box')} found): {rig:.1f} deg "
+    over = _count(len(ids), "frame") if all(read) else f"{sum(read)} of {_count(len(ids), 'frame')} read"
+    click.echo(f"the rig's pitch over {over} ({_count(boxes, 'box')} found): {rig:.1f} deg "
                f"down from the road, its height told {camera_height:g} m{spread}")
     if abs(rig - camera_pitch) > PITCH_SEARCH - 0.05 or abs(rig) >= bound:  # at the grid's end or the bound
         click.echo(f"wirescene: the pitch read lies at the edge of the search ({PITCH_SEARCH:g} deg about "
