@@ -725,10 +725,10 @@ CASES = {
     # millimetres: each car fitted 1650 m below the camera
     "fit --set lifting.camera_height in millimetres": (
         lambda t: _fit_case(t, extra=("--set", "lifting.camera_height=1650")),
-        r"--set: lifting\.camera_height must be at most 10, got 1650\.0$"),
+        r"--set: lifting\.camera_height must be at most 50, got 1650\.0$"),
     "detect --camera-height in centimetres": (
         lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--camera-height", "165"],
-        r"--camera-height: 165 is above the maximum 10$"),
+        r"--camera-height: 165 is above the maximum 50$"),
     # predictions' angles in degrees scored 0% 3D AP without a word
     "kitti-eval of predictions with rotation_y in degrees": (
         lambda t: ["kitti-eval", SPLIT / "label_2", _dets_dir(t, {f"{FRAME}.txt": CAR.replace(" 1.76", " 100.8 0.9")}),

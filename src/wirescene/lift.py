@@ -108,8 +108,8 @@ class LiftingOptions:
     iterations: int = bounded(8, minimum=0, maximum=MAX_LIFT_ITERATIONS)  # Levenberg-Marquardt steps a cell
     # Cap of each object's shared-plane vote, near a fitting car's cost: a box no car explains is an outlier.
     robust_cost: float = bounded(0.01, minimum=0)
-    # Metres above the road: a car's or a truck's camera, a pole's at most 10 m (1650 would be millimetres).
-    camera_height: float = bounded(KITTI_CAMERA_HEIGHT, minimum=0.1, maximum=10.0)
+    # Metres above the road: a car's, a truck's, a pole's at some 10-15 m; 165 or 1650 would be cm or mm.
+    camera_height: float = bounded(KITTI_CAMERA_HEIGHT, minimum=0.1, maximum=50.0)
     # Degrees the camera looks down from the road (a dashcam's tilt; KITTI's rig is level to +-1 deg).
     camera_pitch: float = bounded(0.0, minimum=-45.0, maximum=45.0)
     # Off: on KITTI's level rig reading it costs `coarse` 9 of 148 cars within 1 m (benchmarks/RESULTS.md,

@@ -679,6 +679,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
     scored (said). Several PRED_DIRs are runs of one method (other
     seeds, say): each run's moderate APs, their mean, and an interval whose every draw
     resamples the drives and takes one of the runs."""
+    from wirescene.core.labels import CAR_TYPES, no_3d_box, of_types
     from wirescene.eval.intervals import kitti_intervals, kitti_run_intervals
     from wirescene.eval.kitti_metrics import (
         format_kitti_intervals,
@@ -706,8 +707,8 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
         if missing:
             click.echo(f"wirescene: {d}: {missing} of {len(ids)} frames have no prediction file (no detections)",
                        err=True)
-        cars = [o for frame in preds for o in frame.objects if o.type.lower() == "car"]
-        flat = sum(bool(np.all(o.dims == -1)) for o in cars)  # a 2D detector's rows: scored as 3D boxes of size -1
+        cars = [o for frame in preds for o in of_types(frame, CAR_TYPES)]
+        flat = sum(no_3d_box(o.dims) for o in cars)  # a 2D detector's rows: scored as 3D boxes of size -1
         if flat:
             click.echo(f"wirescene: {d}: {flat} of {len(cars)} Car rows have no 3D box (dimensions -1 -1 -1): "
                        "BEV and 3D AP count them as misses", err=True)

@@ -22,6 +22,9 @@ CAR_TYPES = ("Car",)
 DONTCARE = "DontCare"
 #: KITTI's ``alpha`` of a row whose viewpoint is not estimated (DontCare, 2D-only detectors).
 ALPHA_NOT_ESTIMATED = -10.0
+# Largest |alpha| a detection may carry: one turn. A detector's angles lie in [-pi, pi] (KITTI's range; wrapped
+# values are taken), so anything beyond is an angle in degrees.
+MAX_ALPHA = 2 * np.pi
 
 COLUMNS = (
     "type", "truncated", "occluded", "alpha", "x1", "y1", "x2", "y2",
@@ -225,6 +228,50 @@ def car_indices(
         for i, o in enumerate(objects)
         if o.type in types and o.height_px >= min_height and o.truncated <= max_truncated and o.occluded <= max_occluded
     ]
+
+
+def angle_problem(name: str, angle: float) -> str | None:
+    """Why ``angle`` (``alpha`` or ``rotation_y`` of a label row or a detection, radians) is no
+    angle in radians, as a phrase, or None: beyond one turn (:data:`MAX_ALPHA`), unless KITTI's
+    :data:`ALPHA_NOT_ESTIMATED`.
+
+    Examples
+    --------
+    >>> angle_problem("alpha", -1.58) is None, angle_problem("alpha", ALPHA_NOT_ESTIMATED) is None
+    (True, True)
+    >>> angle_problem("rotation_y", 90.0)
+    'rotation_y must be radians within one turn, got 90 (degrees?)'
+    """
+    if angle != ALPHA_NOT_ESTIMATED and abs(angle) > MAX_ALPHA:
+        return f"{name} must be radians within one turn, got {angle:g} (degrees?)"
+    return None
+
+
+def no_3d_box(dims) -> bool:
+    """Whether a label row's dimensions ``h w l`` are a 2D detector's ``-1 -1 -1`` (KITTI's "not
+    estimated"): the row has no 3D box.
+
+    Examples
+    --------
+    >>> no_3d_box([-1, -1, -1]), no_3d_box([1.5, 1.6, 3.9])
+    (True, False)
+    """
+    return bool(np.all(np.asarray(dims, dtype=float) == -1.0))
+
+
+def of_types(labels: FrameLabels, types: Iterable[str]) -> list[Label]:
+    """The objects of ``labels`` of one of ``types``, whatever their case (as KITTI's devkit
+    reads types: other detectors write ``car``).
+
+    Examples
+    --------
+    >>> frame = FrameLabels([Label("car", 0, 0, 0.1, np.array([1, 1, 9, 9]), np.ones(3), np.ones(3), 0.1),
+    ...                      Label("Van", 0, 0, 0.1, np.array([1, 1, 9, 9]), np.ones(3), np.ones(3), 0.1)])
+    >>> [o.type for o in of_types(frame, CAR_TYPES)]
+    ['car']
+    """
+    wanted = {t.lower() for t in types}
+    return [o for o in labels.objects if o.type.lower() in wanted]
 
 
 def select_cars(labels: FrameLabels | Sequence[Label], **filters) -> list[Label]:

@@ -21,12 +21,8 @@ from wirescene.core.groundplane import (
     object_pose,
     rotation_y_of,
 )
-from wirescene.core.labels import Label, format_labels
+from wirescene.core.labels import MAX_ALPHA, Label, format_labels
 from wirescene.core.validate import real_dtype_problem
-
-# Largest |alpha| a detection may carry: one turn. A detector's angles lie in [-pi, pi] (KITTI's range; wrapped
-# values are taken), so anything beyond is an angle in degrees.
-MAX_ALPHA = 2 * np.pi
 
 
 def _numbers(name: str, values) -> np.ndarray:

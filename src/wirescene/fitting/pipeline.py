@@ -36,6 +36,9 @@ from wirescene.infer.inference import estimate_from_refined, refine_particles
 from wirescene.infer.likelihood import PartEvidence
 from wirescene.lift import LiftingTable, lift_table, plane_vote_weights, select_particles
 
+# The fit's own names: the options, loaders and pre-detection it imports live in their modules.
+__all__ = ["FrameFit", "needs_evidence", "inside_image", "fit_frame", "fit_scene"]
+
 
 @dataclass
 class FrameFit:

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.errors import InputError
-from wirescene.core.types import MAX_ALPHA, Detections
+from wirescene.core.labels import angle_problem, of_types
+from wirescene.core.types import Detections
 from wirescene.core.validate import boxes_problem, normalised_boxes_problem, path_problem
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
 from wirescene.io.kitti import ALPHA_NOT_ESTIMATED, CAR_TYPES, FrameLabels, read_labels
@@ -28,13 +29,6 @@ def _binned_viewpoint(alpha) -> np.ndarray:
     alpha = np.asarray(alpha, dtype=float)
     known = alpha != ALPHA_NOT_ESTIMATED
     return np.where(known, bin_center(viewpoint_bin(np.where(known, alpha, 0.0))), np.nan)
-
-
-def _of_types(labels: FrameLabels, types) -> list:
-    """The objects of ``labels`` of one of ``types``, whatever their case (as KITTI's devkit
-    reads types: other detectors write ``car``)."""
-    wanted = {t.lower() for t in types}
-    return [o for o in labels.objects if o.type.lower() in wanted]
 
 
 #: The problem of a detection file without a car (a frame without cars to ``eval`` and ``fit``).
@@ -85,7 +79,7 @@ def detections_from_labels(
     >>> labels.objects[1].alpha, float(np.rad2deg(dets.alpha[1]))  # 1.95 rad (112 deg): the 90 deg bin
     (1.95, 90.0)
     """
-    objs = _of_types(labels, types)
+    objs = of_types(labels, types)
     if not objs:
         return Detections.empty(source)
     alpha = np.array([o.alpha for o in objs])
@@ -115,8 +109,9 @@ def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
             return float("nan")
         if not np.isfinite(alpha):
             raise InputError(f"{where}: alpha must be finite (radians), got {alpha}", path=path)
-        if alpha != ALPHA_NOT_ESTIMATED and abs(alpha) > MAX_ALPHA:
-            raise InputError(f"{where}: alpha must be radians within one turn, got {alpha:g} (degrees?)", path=path)
+        problem = angle_problem("alpha", alpha)
+        if problem:
+            raise InputError(f"{where}: {problem}", path=path)
         return float(_binned_viewpoint(alpha))
     return float("nan")
 

@@ -31,12 +31,13 @@ from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label
     DONTCARE,
     FrameLabels,
     Label,
+    angle_problem,
     car_indices,
     format_label,
     format_labels,
+    no_3d_box,
     select_cars,
 )
-from wirescene.core.types import MAX_ALPHA
 from wirescene.core.validate import (
     MAX_PIXEL,
     image_size_problem,
@@ -63,12 +64,9 @@ def _object_problem(values: list[float]) -> str | None:
         return f"occlusion state {occluded:g} is not one of 0, 1, 2, 3 (or -1 for unknown)"
     if not (x1 < x2 and y1 < y2):
         return f"2D box is empty or inverted (x1 y1 x2 y2 = {x1:g} {y1:g} {x2:g} {y2:g})"
-    if dims != [-1.0, -1.0, -1.0] and min(dims) <= 0:
+    if not no_3d_box(dims) and min(dims) <= 0:
         return f"dimensions must be positive (h w l = {' '.join(f'{d:g}' for d in dims)})"
-    for name, angle in (("alpha", values[2]), ("rotation_y", values[13])):
-        if angle != ALPHA_NOT_ESTIMATED and abs(angle) > MAX_ALPHA:
-            return f"{name} must be radians within one turn, got {angle:g} (degrees?)"
-    return None
+    return angle_problem("alpha", values[2]) or angle_problem("rotation_y", values[13])
 
 
 def _box_problem(box: list[float], image_size: tuple[int, int] | None) -> str | None:

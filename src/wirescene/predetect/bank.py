@@ -39,6 +39,7 @@ from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.groundplane import KITTI_MOUNT, Mount
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
+from wirescene.core.validate import MIN_IMAGE_SIDE
 from wirescene.core.viewpoints import bin_center
 from wirescene.core.wireframe import N_VERTICES
 from wirescene.predetect.channels import integral_channels
@@ -619,7 +620,7 @@ def detect_cars(image: np.ndarray, *, bank: DetectorBank | None = None, threshol
     min_height = float(bank.meta.get("min_height", 30.0)) if min_height is None else min_height
     thr = bank.threshold if threshold is None else float(threshold)
     image = np.asarray(image)
-    if image.ndim not in (2, 3) or image.shape[0] < 16 or image.shape[1] < 16:
+    if image.ndim not in (2, 3) or min(image.shape[:2]) < MIN_IMAGE_SIDE:
         raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
     H, W = image.shape[:2]
     if pyramid is None:

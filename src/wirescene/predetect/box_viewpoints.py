@@ -39,7 +39,7 @@ import numpy as np
 from wirescene.core.boxes import clip_boxes, iou_2d
 from wirescene.core.errors import ArgumentError, InputError, check_shape
 from wirescene.core.groundplane import KITTI_MOUNT, Mount, rotation_y_from_alpha
-from wirescene.core.validate import boxes_problem
+from wirescene.core.validate import MIN_IMAGE_SIDE, boxes_problem
 from wirescene.core.viewpoints import N_BINS, bin_center
 from wirescene.predetect.bank import (
     DetectorBank,
@@ -84,7 +84,7 @@ _REGRESSION_SLACK = 1.5
 
 def _check_image(image) -> np.ndarray:
     image = np.asarray(image)
-    if image.ndim not in (2, 3) or image.shape[0] < 16 or image.shape[1] < 16:
+    if image.ndim not in (2, 3) or min(image.shape[:2]) < MIN_IMAGE_SIDE:
         raise InputError(f"expected an (H, W, 3) image, got shape {image.shape}")
     return image
 
