@@ -137,6 +137,16 @@ def _jpeg_split(tmp):
     return root
 
 
+def _frames_folder(tmp, *names):
+    """A plain folder (``tmp/frames``) of copies of the test frame's image named ``names`` (``FRAME.png``
+    without), as a dashcam's frames: read with one calibration (``--calib``)."""
+    folder = tmp / "frames"
+    folder.mkdir()
+    for name in names or (f"{FRAME}.png",):
+        shutil.copy(SPLIT / "image_2" / f"{FRAME}.png", folder / name)
+    return folder
+
+
 def _unlabelled_split(tmp):
     """A KITTI root (``tmp/kitti``) whose training split has images and calibrations but an empty ``label_2/``."""
     root = kitti_copy(tmp / "kitti", [FRAME], subdirs=("image_2", "calib"))
@@ -302,6 +312,33 @@ CASES = {
     "detect on a split without .png images": (
         lambda t: ["detect", _jpeg_split(t), "--split", "testing", "--out", t / "dets"],
         r"testing/image_2: no \.png file \(it holds \.jpg files; KITTI's images are \.png\)$"),
+    # one calibration for every frame (--calib): refused before any frame, naming the file
+    "predict --calib not found": (
+        lambda t: ["predict", _frames_folder(t), "--calib", t / "K.txt", "--out", t / "out", "--workers", "1"],
+        r"^wirescene: error: \S+/K\.txt: calibration file not found$"),
+    "detect --calib of 8 numbers": (
+        lambda t: ["detect", _frames_folder(t), "--calib", _file(t, "K.txt", "721 0 609 0 721 172 0 0\n"), "--out",
+                   t / "dets"], r"\S+/K\.txt: expected a KITTI calibration .* found 8 numbers$"),
+    "pitch --calib of a folder": (
+        lambda t: ["pitch", _frames_folder(t), "--calib", t, "--json", t / "pitch.json"],
+        r"^wirescene: error: \S+: calibration path is not a file$"),
+    "eval --calib without P2": (
+        lambda t: ["eval", kitti_copy(t / "kitti", [FRAME], subdirs=("image_2", "label_2")), "--calib",
+                   _file(t, "calib.txt", CALIB_TEXT.replace(P2_LINE + "\n", "")), "--variant", "coarse", "--json",
+                   t / "m.json", "--predictions", t / "pred"], r"calib\.txt: calibration has no P2 matrix$"),
+    "predict --calib of a folder without images": (
+        lambda t: ["predict", _file(t, "frames/notes.txt").parent, "--calib", SPLIT / "calib" / f"{FRAME}.txt",
+                   "--out", t / "out"], r"frames: no \.png, \.jpg or \.jpeg file \(it holds \.txt files\)$"),
+    "predict --calib of a KITTI root without the split": (
+        lambda t: ["predict", KITTI_ROOT, "--calib", SPLIT / "calib" / f"{FRAME}.txt", "--out", t / "out"],
+        r"kitti: no \.png, \.jpg or \.jpeg file \(it holds only the folders ImageSets, training, no testing/image_2\)$"),
+    "predict --calib of a frame of two images": (
+        lambda t: ["predict", _frames_folder(t, f"{FRAME}.png", f"{FRAME}.jpg"), "--calib",
+                   SPLIT / "calib" / f"{FRAME}.txt", "--out", t / "out"],
+        rf"frames: frame {FRAME} has two images \({FRAME}\.jpg, {FRAME}\.png\): keep one$"),
+    "predict of a folder of frames without --calib": (
+        lambda t: ["predict", _frames_folder(t), "--out", t / "out"],
+        r"frames: not a KITTI object directory: expected testing/image_2 and testing/calib \(or image_2 and calib\)$"),
     "eval of a split without label files": (
         lambda t: ["eval", _unlabelled_split(t), "--variant", "coarse"], r"training/label_2: no \.txt file \(it is empty\)$"),
     # outputs, refused before any fitting

@@ -13,6 +13,7 @@ from wirescene.cli.options import (
     POSITIVE_FLOAT,
     FiniteFloat,
     NonEmptyPath,
+    calib_option,
     check_output_dir,
     check_output_file,
     check_picture_file,
@@ -200,6 +201,7 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: all).")
 @split_file_option
 @split_option()
+@calib_option
 @models_option
 @click.option("--bank", "bank_path", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
               help="Detector bank .npz (default: --models' or the shipped one).")
@@ -233,8 +235,8 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
               help="Also detect on the image enlarged by this factor, 1 to 3 (Lanczos), at its pyramid levels finer "
                    "than the image's, adding the cars it finds above the fit's threshold 0.3 that the image's boxes "
                    "above it miss: small, far cars (1: the image alone, 2.3x faster; the fit's --upsample).")
-def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_path, threshold, out_dir, pr_curve,
-           json_out, camera_height, camera_pitch, estimate_pitch, smallest_car, upsample):
+def detect(kitti_root, frames, split_file, split, calib, models, bank_path, classifier_path, threshold, out_dir,
+           pr_curve, json_out, camera_height, camera_pitch, estimate_pitch, smallest_car, upsample):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
 
     The files of --out hold the detections above the threshold with the viewpoints the
@@ -255,7 +257,7 @@ def detect(kitti_root, frames, split_file, split, models, bank_path, classifier_
     check_output_file(json_out, "--json")
     if classifier_path is not None and out_dir is None:  # refused, not ignored
         raise click.UsageError("--viewpoint-classifier gives the boxes --out writes their viewpoints: it needs --out")
-    ds = KittiDataset(kitti_root, split=split)
+    ds = KittiDataset(kitti_root, split=split, calib=calib)
     found = resolve_models(models)
     bank = detector_bank(found.file("detector_bank", given=bank_path))
     # the viewpoints of the boxes --out writes, read before any frame: a bad file is refused

@@ -15,10 +15,12 @@ import click
 import numpy as np
 
 from wirescene.cli.options import (
+    CALIB_FORMS,
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
     NonEmptyPath,
     ap_draws_option,
+    calib_option,
     check_output_dir,
     check_output_file,
     check_picture_file,
@@ -328,6 +330,7 @@ def _dask_client(address: str):
                    "seed alone moves the figures by a few cars); --predictions and --report then get a seed-S folder "
                    "per seed, and --report a page of the mean and range over the seeds that links them.")
 @split_option()
+@calib_option
 @click.option("--json", "json_out", type=NonEmptyPath(path_type=Path), default=None,
               help="Write the metrics as JSON: one variant's at the top level, several keyed by variant (and by seed "
                    "under 'seeds' with several --seed).")
@@ -356,9 +359,9 @@ def _dask_client(address: str):
               help="Fit frames on this running Dask scheduler (e.g. tcp://host:8786) instead of local processes "
                    "(--workers is then ignored); needs wirescene[dask] and the data at the same path on the workers.")
 @_inference_options
-def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_file, particles, seeds, split, json_out,
-             predictions, evidence, raw_scores, draws, report_dir, workers, allow_missing_detections, min_score,
-             resume, dask_address, **inference):
+def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_file, particles, seeds, split, calib,
+             json_out, predictions, evidence, raw_scores, draws, report_dir, workers, allow_missing_detections,
+             min_score, resume, dask_address, **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.eval.seeds import format_over_seeds, over_seeds, seed_figures
     from wirescene.io.kitti import KittiDataset
@@ -377,7 +380,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     check_output_file(json_out, "--json")
     check_output_dir(predictions, "--predictions")
     check_output_dir(report_dir, "--report")
-    dataset = KittiDataset(kitti_root, split=split)
+    dataset = KittiDataset(kitti_root, split=split, calib=calib)
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
     drives = interval_drives(dataset.split_dir)  # read before any fit: a bad devkit mapping is an error now
@@ -555,6 +558,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 @main.command("predict")
 @click.argument("kitti_root", type=NonEmptyPath(directory=True, path_type=Path))
 @split_option("testing")
+@calib_option
 @click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), required=True,
               help="Directory of KITTI label files, one FRAME.txt per image (the benchmark's submission layout).")
 @click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True)
@@ -576,9 +580,10 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 @click.option("--dask", "dask_address", metavar="ADDRESS", default=None,
               help="Fit frames on this running Dask scheduler instead of local processes.")
 @_inference_options
-def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detections, min_score, frames, split_file,
-                particles, seed, workers, resume, dask_address, **inference):
-    """Write KITTI label files (with scores) for every image of a split, labelled or not."""
+def predict_cmd(kitti_root, split, calib, out, variant, detections, allow_missing_detections, min_score, frames,
+                split_file, particles, seed, workers, resume, dask_address, **inference):
+    """Write KITTI label files (with scores) for every image of a split, labelled or not (or of a folder of
+    frames of one camera, with --calib)."""
     from wirescene.eval.predict import predict_dataset
     from wirescene.eval.sources import DetectionSource
     from wirescene.fitting.variants import casts_rays
@@ -590,7 +595,7 @@ def predict_cmd(kitti_root, split, out, variant, detections, allow_missing_detec
         kitti_root = kitti_root.resolve()
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())
-    dataset = KittiDataset(kitti_root, split=split)
+    dataset = KittiDataset(kitti_root, split=split, calib=calib)
     images = dataset.require_frames(images=True)
     frame_ids = select_frames(frames, split_file, images, where=dataset.split_dir, what="image")
     options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address),
@@ -737,9 +742,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 
 @main.command("fit")
 @click.argument("image", type=NonEmptyPath(path_type=Path))
-@click.option("--calib", type=NonEmptyPath(path_type=Path), required=True,
-              help="Camera calibration: a KITTI calibration file (P2 is used), or a text file of the 9 numbers of the "
-                   "intrinsics K or the 12 of the projection P.")
+@click.option("--calib", type=NonEmptyPath(path_type=Path), required=True, help=f"Camera calibration: {CALIB_FORMS}.")
 @click.option("--detections", type=NonEmptyPath(path_type=Path), default=None,
               help="2D car detections: .json, .csv or KITTI label .txt (see `wirescene.io.detections.read_detections`); "
                    "default: our own pre-detection from raw pixels.")

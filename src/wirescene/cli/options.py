@@ -214,6 +214,20 @@ def split_option(default: str = "training"):
                              "is).")
 
 
+#: The forms of a calibration file the commands read (:func:`wirescene.core.camera.read_calibration`).
+CALIB_FORMS = ("a KITTI calibration file (P2 is used), or a text file of the 9 numbers of the intrinsics K or the 12 "
+               "of the projection P")
+
+
+def calib_option(f):
+    """``--calib FILE``: one calibration for every frame of ``KITTI_ROOT``
+    (:class:`~wirescene.io.kitti.KittiDataset` ``calib``), which may then be a plain folder of images."""
+    return click.option("--calib", type=NonEmptyPath(path_type=Path), default=None,
+                        help="One calibration for every image (a camera other than KITTI's whose frames share it): "
+                             f"{CALIB_FORMS}. No calib/ folder is then read, and KITTI_ROOT may be a plain folder of "
+                             "the images (.png, .jpg or .jpeg; frame ids are their names without the suffix).")(f)
+
+
 def ap_draws_option(f):
     """``--draws N``: bootstrap draws of the KITTI APs' intervals over drives (0: none)."""
     from wirescene.eval.intervals import MAX_BOOT_AP, N_BOOT_AP

@@ -10,6 +10,7 @@ import click
 from wirescene.cli.options import (
     NON_NEGATIVE,
     NonEmptyPath,
+    calib_option,
     check_output_file,
     field_type,
     models_option,
@@ -52,6 +53,7 @@ def spread_sample(ids: list[str], n: int) -> list[str]:
 @click.option("--frames", default=None, help="Comma-separated frame ids (default: every frame of the split).")
 @split_file_option
 @split_option()
+@calib_option
 @click.option("--max-frames", type=NON_NEGATIVE, default=DEFAULT_FRAMES, show_default=True,
               help="Read this many of the frames chosen, spread evenly over them (0: all of them); the pitch pooled "
                    "over 20 KITTI frames is within 0.3 deg of the other 52 frames' in 90% of draws.")
@@ -68,7 +70,7 @@ def spread_sample(ids: list[str], n: int) -> list[str]:
                                       "deg of it.")
 @click.option("--json", "json_out", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
               help="Write the rig's pitch and each frame's (null where it read no box) as JSON.")
-def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, camera_height, camera_pitch,
+def pitch(kitti_root, frames, split_file, split, calib, max_frames, models, bank_path, camera_height, camera_pitch,
           json_out):
     """Read the camera's pitch off the cars of many frames of one rig (a camera mounted once).
 
@@ -90,7 +92,7 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
     from wirescene.predetect.geometry import PITCH_SEARCH
 
     check_output_file(json_out, "--json")
-    ds = KittiDataset(kitti_root, split=split)
+    ds = KittiDataset(kitti_root, split=split, calib=calib)
     found = resolve_models(models)
     bank_file = found.file("detector_bank", given=bank_path)
     bank = detector_bank(bank_file)
@@ -118,7 +120,7 @@ def pitch(kitti_root, frames, split_file, split, max_frames, models, bank_path, 
     if not any(read):  # the pitch told is no pitch read: no line (nor --json) may pass it off as one
         cut = f" ({_count(boxes, 'box')} found, each cut by the image's bottom edge)" if boxes else ""
         raise InputError(f"no box to read the pitch off in the {_count(len(ids), 'frame')} read{cut}: give frames "
-                         "of cars (--frames, --max-frames)", path=ds.split_dir / "image_2")
+                         "of cars (--frames, --max-frames)", path=ds.image_dir)
     rig = round(rig_pitch(likelihoods, told=told), 2)
     alone = [abs(e["pitch"] - rig) for e in each.values() if e["pitch"] is not None]
     spread = (f"; each frame alone: within {np.percentile(alone, 90, method='higher'):.1f} deg of it for 90%"

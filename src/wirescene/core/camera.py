@@ -203,10 +203,36 @@ def read_projection(path: str | Path) -> np.ndarray:
     >>> read_projection(DATA_DIR / "sample" / "kitti" / "training" / "calib" / "000010.txt")[0].tolist()  # P2
     [721.5377, 0.0, 609.5593, 44.85728]
     """
+    return read_calibration(path).P2
+
+
+def read_calibration(path: str | Path) -> KittiCalib:
+    """A calibration file in any form :func:`read_projection` reads, as a :class:`KittiCalib`:
+    a KITTI calibration file's matrices (:func:`read_kitti_calib`), or the ``P`` of the
+    numbers of ``K`` or ``P`` as ``P0`` to ``P3`` (``R0_rect`` and ``Tr_velo_to_cam`` their
+    defaults); ``source`` names the file in later errors.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_projection`, naming the file.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = Path(d) / "P.txt"
+    ...     _ = path.write_text("721.5, 0, 609.6, 44.9,  0, 721.5, 172.9, 0.2,  0, 0, 1, 0.003")
+    ...     calib = read_calibration(path)
+    >>> calib.P2[:, 3].tolist(), calib.source.endswith("P.txt")
+    ([44.9, 0.2, 0.003], True)
+    >>> calib.camera((1242, 375)).focal  # the camera every frame of a folder takes (KittiDataset calib=)
+    721.5
+    """
     path = Path(path)
     text = _calibration_text(path)
     if ":" in text:
-        return _parse_kitti_calib(text, path).P2
+        return _parse_kitti_calib(text, path)
     expected = "expected a KITTI calibration ('KEY: numbers' lines) or the 9 numbers of K or 12 of P"
     try:
         numbers = np.array([float(v) for v in text.replace(",", " ").split()])
@@ -221,7 +247,7 @@ def read_projection(path: str | Path) -> np.ndarray:
     problem = projection_problem(P)
     if problem:
         raise InputError(problem, path=path)
-    return P
+    return KittiCalib(P, P, P, P, source=str(path))
 
 
 def read_kitti_calib(path: str | Path) -> KittiCalib:

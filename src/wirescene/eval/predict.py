@@ -51,7 +51,7 @@ def _config(dataset: KittiDataset, variant: str, source: DetectionSource, option
     # the trained files the fit reads, by path and content: another file it does not read changes nothing
     read = {"fine": get_variant(variant).fine, "own": source.own, "evidence": "parts"}
     config = {"format": format_tag("predict-config", 1), "wirescene": __version__,
-              "dataset": str(Path(dataset.split_dir).resolve()), "variant": variant,
+              **dataset.record(), "variant": variant,
               "detections": {"spec": spec, "allow_missing": source.allow_missing, **source.floor_record()},
               "options": options_read(options, **read), "models": models_fingerprint(options, **read)}
     return json.loads(json.dumps(config, default=str))
@@ -129,7 +129,7 @@ def predict_dataset(
     Raises
     ------
     InputError
-        Before any fit: no frame to predict (no ``.png`` image in ``image_2/``), a frame
+        Before any fit: no frame to predict (no image in ``image_2/``, or the folder of frames), a frame
         without its detection file, calibration or image, a malformed detection file, or
         ``out_dir`` holding another run's label files (or, resumed, label files of frames
         outside ``frames``, or a settings' record that cannot be read), or a folder in place of

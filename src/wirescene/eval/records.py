@@ -33,7 +33,8 @@ def run_config(
     Two runs with equal configurations give equal per-frame results (every frame draws
     its random numbers from the seed and its id alone), so a record is reused only when
     its configuration equals the current one. The package version stands in for the
-    code; the content of a detections directory is not included. Of the trained files
+    code; the content of a detections directory is not included, the one calibration of
+    every frame is (:meth:`~wirescene.io.kitti.KittiDataset.record`). Of the trained files
     (:data:`~wirescene.fitting.models.MODEL_FILES`) it holds those the fit reads
     (:func:`~wirescene.fitting.models.model_files_read`): their paths among the options and
     their content hashes under ``models`` (:func:`~wirescene.fitting.models.models_fingerprint`),
@@ -50,7 +51,8 @@ def run_config(
     spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
     config = {
         "wirescene": __version__,
-        "dataset": str(Path(dataset.split_dir).resolve()),
+        # the split folder, and the one calibration of its frames where it has one (KittiDataset.record)
+        **dataset.record(),
         # Per-variant fits do not depend on the order of the variants (fit_scene seeds
         # itself per call), but the set decides whether part evidence is computed.
         "variants": sorted(variants),

@@ -21,7 +21,7 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from wirescene.core.atomic import write_text
-from wirescene.core.camera import Camera, KittiCalib, read_kitti_calib
+from wirescene.core.camera import Camera, KittiCalib, read_calibration, read_kitti_calib
 from wirescene.core.errors import InputError, ShapeError
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label types live in core)
@@ -286,20 +286,35 @@ def image_size(path: str | Path) -> tuple[int, int]:
 # --------------------------------------------------------------------------- dataset
 
 
+#: The image files of a folder read with one calibration (``KittiDataset(calib=)``): a dashcam's
+#: or a nuScenes camera's frames are JPEG; KITTI's own layout without it reads ``.png`` only.
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
 class KittiDataset:
-    """Frames of a KITTI object split on disk (``image_2``, ``calib``, optional ``label_2``).
+    """Frames of a KITTI object split on disk (``image_2``, ``calib``, optional ``label_2``),
+    or of a folder of frames of one camera with one calibration (``calib``).
 
     Parameters
     ----------
     root : path
-        Either the KITTI root (containing ``<split>/``) or the split directory itself.
+        Either the KITTI root (containing ``<split>/``) or the split directory itself; with
+        ``calib``, also a plain folder holding the images themselves.
     split : str
         Split directory name under ``root``, ``"training"`` or ``"testing"``.
+    calib : path, optional
+        One calibration for every frame (a camera other than KITTI's whose frames share it),
+        in any form :func:`~wirescene.core.camera.read_calibration` reads: a KITTI calibration
+        file (its ``P2``) or a text file of the 9 numbers of ``K`` or the 12 of ``P``. No
+        ``calib/`` directory is then read (nor needed), the images may be ``.png``, ``.jpg`` or
+        ``.jpeg`` (:data:`IMAGE_SUFFIXES`), and a folder without ``image_2/`` is read as the
+        folder of the images; frame ids are the images' stems.
 
     Raises
     ------
     InputError
-        If ``root`` does not exist or the split lacks ``image_2/`` or ``calib/``.
+        If ``root`` does not exist or the split lacks ``image_2/`` or ``calib/`` (without
+        ``calib``), or ``calib`` is missing or malformed (naming it).
 
     Examples
     --------
@@ -314,28 +329,50 @@ class KittiDataset:
     ((375, 1242, 3), 8)
     >>> dataset.car_counts(["000010", "001545"])
     {'000010': 8, '001545': 6}
+
+    A folder of frames of one camera, read with one calibration:
+
+    >>> import shutil, tempfile
+    >>> split = DATA_DIR / "sample" / "kitti" / "training"
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = shutil.copy(split / "image_2" / "000010.png", Path(d) / "frame_a.png")
+    ...     _ = Path(d, "K.txt").write_text("721.5 0 609.6  0 721.5 172.9  0 0 1")
+    ...     frames = KittiDataset(d, calib=Path(d) / "K.txt")
+    ...     frames.image_dir == Path(d), frames.frame_ids(), frames.camera("frame_a").image_size
+    (True, ['frame_a'], (1242, 375))
     """
 
-    def __init__(self, root: str | Path, *, split: str = "training"):
+    def __init__(self, root: str | Path, *, split: str = "training", calib: str | Path | None = None):
         root = Path(root)
         problem = path_problem(root, "KITTI root", directory=True)
         if problem:
             raise InputError(problem, path=root)
-        if (root / split / "image_2").is_dir() or (root / split / "calib").is_dir():
-            split_dir = root / split
+        # one calibration is read now: a bad file is refused before any frame, naming it
+        self._calib = None if calib is None else read_calibration(calib)
+        if self._calib is not None:  # no calib/ is read: image_2/ where there is one, else the folder's own images
+            split_dir = next((d for d in (root / split, root) if (d / "image_2").is_dir()), root)
+            image_dir = split_dir / "image_2" if (split_dir / "image_2").is_dir() else split_dir
+        elif (root / split / "image_2").is_dir() or (root / split / "calib").is_dir():
+            split_dir = image_dir = root / split
         elif (root / "image_2").is_dir() or (root / "calib").is_dir():
-            split_dir = root
+            split_dir = image_dir = root
         else:
             raise InputError(
                 f"not a KITTI object directory: expected {split}/image_2 and {split}/calib (or image_2 and calib)",
                 path=root,
             )
-        for sub in ("image_2", "calib"):
-            if not (split_dir / sub).is_dir():
-                raise InputError(f"KITTI split has no {sub}/ directory", path=split_dir)
+        if self._calib is None:
+            for sub in ("image_2", "calib"):
+                if not (split_dir / sub).is_dir():
+                    raise InputError(f"KITTI split has no {sub}/ directory", path=split_dir)
+            image_dir = split_dir / "image_2"
         self.root = root
+        self._split = split
         self.split_dir = split_dir
+        #: Where the images lie: ``image_2/`` of the split, or (with one calibration) a plain folder of them.
+        self.image_dir = image_dir
         self._ids: list[str] | None = None
+        self._images: dict[str, Path] | None = None
 
     @property
     def base_dir(self) -> Path:
@@ -349,18 +386,36 @@ class KittiDataset:
         return (self.split_dir / "label_2").is_dir()
 
     def frame_ids(self) -> list[str]:
-        """Sorted frame ids (file stems), from ``label_2`` if present, else ``image_2``."""
+        """Sorted frame ids (file stems), from ``label_2`` if present, else the images'."""
         if self._ids is None:
             if self.has_labels:
                 ids = [p.stem for p in (self.split_dir / "label_2").glob("*.txt")]
             else:
-                ids = [p.stem for p in (self.split_dir / "image_2").glob("*.png")]
+                ids = self.image_ids()
             self._ids = sorted(ids)
         return list(self._ids)
 
     def image_ids(self) -> list[str]:
-        """Sorted ids of every image in ``image_2`` (labelled or not)."""
-        return sorted(p.stem for p in (self.split_dir / "image_2").glob("*.png"))
+        """Sorted ids of every image in :attr:`image_dir` (labelled or not)."""
+        if self._calib is None:
+            return sorted(p.stem for p in self.image_dir.glob("*.png"))
+        return sorted(self._image_files())
+
+    def _image_files(self) -> dict[str, Path]:
+        """``{frame: image}`` of a folder read with one calibration, listed once (a folder of
+        thousands is not listed again for each frame); an :class:`InputError` where two images
+        share a stem (which is the frame is unknown)."""
+        if self._images is None:
+            found: dict[str, Path] = {}
+            for path in sorted(self.image_dir.iterdir()):
+                if path.suffix.lower() not in IMAGE_SUFFIXES or not path.is_file():
+                    continue
+                if path.stem in found:
+                    raise InputError(f"frame {path.stem} has two images ({found[path.stem].name}, {path.name}): "
+                                     "keep one", path=self.image_dir)
+                found[path.stem] = path
+            self._images = found
+        return self._images
 
     def require_frames(self, *, images: bool = False) -> list[str]:
         """:meth:`frame_ids` (``images``: :meth:`image_ids`), refusing a split without any.
@@ -368,16 +423,20 @@ class KittiDataset:
         Raises
         ------
         InputError
-            Naming the folder read (``label_2/`` or ``image_2/``) and what it holds instead,
+            Naming the folder read (``label_2/`` or the images') and what it holds instead,
             so that a run over no frame stops here rather than reporting nothing.
         """
         ids = self.image_ids() if images else self.frame_ids()
         if not ids:
             labels = self.has_labels and not images
-            folder, kind = (self.split_dir / "label_2", ".txt") if labels else (self.split_dir / "image_2", ".png")
+            folder = self.split_dir / "label_2" if labels else self.image_dir
+            kind = ".txt" if labels else ".png" if self._calib is None else ".png, .jpg or .jpeg"
             others = sorted({p.suffix or p.name for p in folder.iterdir() if p.is_file()})
             held = f"it holds {', '.join(others)} files" if others else "it is empty"
-            hint = "; KITTI's images are .png" if others and not labels else ""
+            folders = sorted(p.name for p in folder.iterdir() if p.is_dir()) if not others and not labels else []
+            if self._calib is not None and folders:  # a KITTI root given for a split that has no image_2/
+                held = f"it holds only the folders {', '.join(folders[:3])}, no {self._split}/image_2"
+            hint = "; KITTI's images are .png" if others and not labels and self._calib is None else ""
             raise InputError(f"no {kind} file ({held}{hint})", path=folder)
         return ids
 
@@ -392,11 +451,17 @@ class KittiDataset:
         return f"{frame_id:06d}" if isinstance(frame_id, (int, np.integer)) else str(frame_id)
 
     def image_path(self, frame_id: str | int) -> Path:
-        """``image_2/FRAME.png`` of the split (an int id written ``%06d``)."""
-        return self.split_dir / "image_2" / f"{self._id(frame_id)}.png"
+        """``image_2/FRAME.png`` of the split (an int id written ``%06d``); with one calibration,
+        the frame's image in :attr:`image_dir` of any of :data:`IMAGE_SUFFIXES` (``FRAME.png``
+        where it has none, the path its error names)."""
+        frame = self._id(frame_id)
+        found = self._image_files().get(frame) if self._calib is not None else None
+        return found if found is not None else self.image_dir / f"{frame}.png"
 
     def calib_path(self, frame_id: str | int) -> Path:
-        """``calib/FRAME.txt`` of the split."""
+        """``calib/FRAME.txt`` of the split; the one calibration's file where the dataset has one."""
+        if self._calib is not None:
+            return Path(self._calib.source)
         return self.split_dir / "calib" / f"{self._id(frame_id)}.txt"
 
     def label_path(self, frame_id: str | int) -> Path:
@@ -408,12 +473,34 @@ class KittiDataset:
         return read_image(self.image_path(frame_id))
 
     def image_size(self, frame_id: str | int) -> tuple[int, int]:
-        """``(width, height)`` of the image, from the PNG header."""
+        """``(width, height)`` of the image, from its header."""
         return image_size(self.image_path(frame_id))
 
     def calib(self, frame_id: str | int) -> KittiCalib:
-        """The frame's calibration (:func:`~wirescene.core.camera.read_kitti_calib`)."""
+        """The frame's calibration (:func:`~wirescene.core.camera.read_kitti_calib`): the one
+        calibration of every frame where the dataset has one."""
+        if self._calib is not None:
+            return self._calib
         return read_kitti_calib(self.calib_path(frame_id))
+
+    def record(self) -> dict:
+        """What a run's settings record holds of the dataset, for a resumed run to compare:
+        the split folder and, with one calibration, the projection every frame takes (a run
+        resumed with another camera would mix two cameras' fits).
+
+        Examples
+        --------
+        >>> from wirescene.core.resources import DATA_DIR
+        >>> root = DATA_DIR / "sample" / "kitti"
+        >>> sorted(KittiDataset(root).record())
+        ['dataset']
+        >>> KittiDataset(root, calib=root / "training" / "calib" / "000010.txt").record()["calib"][0]
+        [721.5377, 0.0, 609.5593, 44.85728]
+        """
+        out: dict = {"dataset": str(Path(self.split_dir).resolve())}
+        if self._calib is not None:
+            out["calib"] = self._calib.P2.tolist()
+        return out
 
     def camera(self, frame_id: str | int) -> Camera:
         """The ``P2`` camera with the frame's image size."""

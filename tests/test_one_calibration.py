@@ -1,0 +1,173 @@
+"""One calibration for every frame (``KittiDataset(calib=)``, ``--calib`` of ``predict``, ``detect``,
+``pitch`` and ``eval``): a folder of frames of one camera reads as KITTI's layout of one calibration
+file per frame. The three test frames' calibrations are identical, so every output must be too."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from PIL import Image
+
+from conftest import KITTI_ROOT, assert_close, kitti_copy
+from wirescene.cli.main import main
+from wirescene.core.errors import InputError
+from wirescene.io.kitti import KittiDataset
+
+SPLIT = KITTI_ROOT / "training"
+FRAMES = ["000002", "000010", "001545"]
+CALIB = SPLIT / "calib" / "000010.txt"
+CAR = "Car 0.00 0 1.95 354.43 185.52 549.52 294.49 1.43 1.70 3.95 -2.39 1.66 11.80 1.76"
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture
+def frames_dir(tmp_path):
+    """A plain folder of the test frames' images (no image_2/, no calib/)."""
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for frame in FRAMES:
+        shutil.copy(SPLIT / "image_2" / f"{frame}.png", folder)
+    return folder
+
+
+def _projection_file(path, P):
+    """``path`` holding the 12 numbers of ``P`` (another form of a calibration than KITTI's file)."""
+    path.write_text("\n".join(" ".join(repr(float(v)) for v in row) for row in P) + "\n")
+    return path
+
+
+def test_the_test_frames_share_one_calibration():
+    """What the byte-for-byte comparisons below rest on."""
+    assert len({(SPLIT / "calib" / f"{f}.txt").read_text() for f in FRAMES}) == 1
+
+
+def test_a_folder_of_frames_with_one_calibration_reads_as_the_kitti_layout(frames_dir, tmp_path):
+    kitti = KittiDataset(KITTI_ROOT)
+    ds = KittiDataset(frames_dir, calib=CALIB)
+    assert ds.image_dir == ds.split_dir == frames_dir and not ds.has_labels
+    assert ds.frame_ids() == ds.require_frames(images=True) == FRAMES
+    for f in FRAMES:
+        assert np.array_equal(ds.camera(f).P, kitti.camera(f).P)
+        assert ds.camera(f).image_size == kitti.camera(f).image_size
+        assert np.array_equal(ds.image(f), kitti.image(f))
+    assert ds.calib_path(10) == CALIB and ds.check_frames(FRAMES) == []
+    # KITTI's layout without calib/: refused alone, read with one calibration (labels and all)
+    root = kitti_copy(tmp_path / "kitti", FRAMES, subdirs=("image_2", "label_2"))
+    with pytest.raises(InputError, match=r"training: KITTI split has no calib/ directory$"):
+        KittiDataset(root)
+    labelled = KittiDataset(root, calib=CALIB)
+    assert labelled.split_dir == labelled.image_dir.parent == root / "training"
+    assert labelled.frame_ids() == FRAMES and len(labelled.labels("000010").of_type("Car")) == 8
+    # without a calibration a folder of frames is no KITTI directory, as before
+    with pytest.raises(InputError, match=r"frames: not a KITTI object directory: expected training/image_2"):
+        KittiDataset(frames_dir)
+    # the 9 numbers of K: a camera at the origin, P = K [I | 0]; the run's record names the camera
+    K = tmp_path / "K.txt"
+    K.write_text(" ".join(repr(float(v)) for v in kitti.camera(10).K.ravel()))
+    intrinsics = KittiDataset(frames_dir, calib=K)
+    assert_close(intrinsics.camera(10).P, np.hstack([kitti.camera(10).K, np.zeros((3, 1))]))
+    assert "calib" not in kitti.record() and ds.record()["calib"] == kitti.camera(10).P.tolist()
+    assert intrinsics.record() != ds.record()
+
+
+def test_jpeg_frames_are_read_and_two_images_of_one_frame_refused(tmp_path):
+    """A dashcam's or nuScenes' frames are JPEG, named as they come: the id is the name without its suffix."""
+    folder = tmp_path / "cam"
+    folder.mkdir()
+    rgb = Image.open(SPLIT / "image_2" / "000010.png").convert("RGB")
+    rgb.save(folder / "CAM_FRONT_0001.jpg", quality=95)
+    rgb.save(folder / "CAM_FRONT_0002.JPEG", quality=95)
+    (folder / "notes.txt").write_text("the rig: 1.4 m up\n")
+    ds = KittiDataset(folder, calib=CALIB)
+    assert ds.frame_ids() == ["CAM_FRONT_0001", "CAM_FRONT_0002"]
+    assert ds.image_path("CAM_FRONT_0002").name == "CAM_FRONT_0002.JPEG"
+    assert ds.image("CAM_FRONT_0001").shape == (375, 1242, 3) and ds.camera("CAM_FRONT_0001").image_size == (1242, 375)
+    shutil.copy(SPLIT / "image_2" / "000010.png", folder / "CAM_FRONT_0001.png")
+    with pytest.raises(InputError, match=r"cam: frame CAM_FRONT_0001 has two images \(CAM_FRONT_0001\.jpg, "
+                                         r"CAM_FRONT_0001\.png\): keep one$"):
+        KittiDataset(folder, calib=CALIB).frame_ids()
+    # KITTI's layout without --calib reads .png alone, as before
+    jpeg_split = kitti_copy(tmp_path / "kitti", ["000010"], subdirs=("calib",))
+    (jpeg_split / "training" / "image_2").mkdir()
+    rgb.save(jpeg_split / "training" / "image_2" / "000010.jpg")
+    assert KittiDataset(jpeg_split).image_ids() == []
+    assert KittiDataset(jpeg_split, calib=CALIB).image_ids() == ["000010"]
+
+
+def test_predict_of_a_folder_of_frames_writes_the_kitti_layouts_label_files(frames_dir, tmp_path):
+    """Our own pre-detection reads each image: the label files match those of the KITTI layout byte for byte."""
+    common = ["--variant", "coarse", "--frames", "000010", "--particles", 20, "--workers", 1,
+              "--set", "predetect.upsample=1"]  # the image alone: half the time
+    r = run("predict", frames_dir, "--calib", CALIB, "--out", tmp_path / "folder", *common)
+    assert r.exit_code == 0, r.output
+    r = run("predict", KITTI_ROOT, "--split", "training", "--out", tmp_path / "kitti", *common)
+    assert r.exit_code == 0, r.output
+    written = (tmp_path / "folder" / "000010.txt").read_bytes()
+    assert written and written == (tmp_path / "kitti" / "000010.txt").read_bytes()
+
+
+def test_predict_resumed_with_another_calibration_is_refused(frames_dir, tmp_path):
+    """The settings' record holds the camera: another one is refused on --resume; the same matrix in another
+    file (its 12 numbers) continues the run."""
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    (dets / "000010.txt").write_text(CAR + "\n")
+    out = tmp_path / "pred"
+    common = ["predict", frames_dir, "--frames", "000010", "--variant", "coarse", "--detections", dets,
+              "--particles", 5, "--workers", 1, "--out", out]
+    r = run(*common, "--calib", CALIB)
+    assert r.exit_code == 0, r.output
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    P = KittiDataset(KITTI_ROOT).camera(10).P
+    longer = P.copy()
+    longer[:2, :3] *= 1.05  # a longer lens
+    r = run(*common, "--calib", _projection_file(tmp_path / "longer.txt", longer), "--resume")
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip() == (f"wirescene: error: {out}: label files were written with other settings (calib): "
+                                "cannot resume into this directory")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    r = run(*common, "--calib", _projection_file(tmp_path / "P.txt", P), "--resume")
+    assert r.exit_code == 0 and "0 frames fitted, 1 kept" in r.output, r.output
+
+
+def test_eval_with_one_calibration_and_its_records(tmp_path):
+    """``eval --calib`` of KITTI's layout without calib/ gives the figures of the per-frame calibrations;
+    a frame's record written with another camera is fitted again."""
+    root = kitti_copy(tmp_path / "kitti", ["000010"], subdirs=("image_2", "label_2"))
+    common = ["--variant", "coarse", "--frames", "000010", "--particles", 20, "--workers", 1, "--draws", 0]
+    r = run("eval", root, "--calib", CALIB, *common, "--json", tmp_path / "one.json", "--predictions", tmp_path / "p")
+    assert r.exit_code == 0, r.output
+    r = run("eval", KITTI_ROOT, *common, "--json", tmp_path / "each.json", "--predictions", tmp_path / "q")
+    assert r.exit_code == 0, r.output
+    assert json.loads((tmp_path / "one.json").read_text()) == json.loads((tmp_path / "each.json").read_text())
+    written = [(tmp_path / run / "coarse" / "000010.txt").read_bytes() for run in ("p", "q")]
+    assert written[0] == written[1]
+    K = tmp_path / "K.txt"
+    K.write_text(" ".join(repr(float(v)) for v in KittiDataset(KITTI_ROOT).camera(10).K.ravel()))
+    r = run("eval", root, "--calib", K, *common, "--predictions", tmp_path / "p", "--resume")
+    assert r.exit_code == 0, r.output
+    assert "refitting 1 frame(s) whose record cannot be reused" in r.stderr
+    assert "written with a different configuration (calib)" in r.stderr, r.stderr
+
+
+def test_detect_of_a_folder_of_frames_writes_the_kitti_layouts_files(frames_dir, tmp_path):
+    r = run("detect", frames_dir, "--calib", CALIB, "--frames", "000010", "--upsample", 1, "--out", tmp_path / "folder")
+    assert r.exit_code == 0, r.output
+    r = run("detect", KITTI_ROOT, "--frames", "000010", "--upsample", 1, "--out", tmp_path / "kitti")
+    assert r.exit_code == 0, r.output
+    written = (tmp_path / "folder" / "000010.json").read_bytes()
+    assert json.loads(written)["detections"] and written == (tmp_path / "kitti" / "000010.json").read_bytes()
+
+
+def test_pitch_of_a_folder_of_frames_reads_the_kitti_layouts_pitch(frames_dir, tmp_path):
+    r = run("pitch", frames_dir, "--calib", CALIB, "--frames", "000010", "--json", tmp_path / "folder.json")
+    assert r.exit_code == 0, r.output
+    r = run("pitch", KITTI_ROOT, "--frames", "000010", "--json", tmp_path / "kitti.json")
+    assert r.exit_code == 0, r.output
+    record = json.loads((tmp_path / "folder.json").read_text())
+    assert record["frames"]["000010"]["boxes"] > 0 and record == json.loads((tmp_path / "kitti.json").read_text())
