@@ -338,7 +338,9 @@ CASES = {
         rf"frames: frame {FRAME} has two images \({FRAME}\.jpg, {FRAME}\.png\): keep one$"),
     "predict of a folder of frames without --calib": (
         lambda t: ["predict", _frames_folder(t), "--out", t / "out"],
-        r"frames: not a KITTI object directory: expected testing/image_2 and testing/calib \(or image_2 and calib\)$"),
+        r"frames: not a KITTI object directory: expected testing/image_2 and testing/calib \(or image_2 and calib\); "
+        r"predict, detect, pitch and eval take one calibration for every frame \(--calib FILE\) for a folder of one "
+        r"camera's frames$"),
     "eval of a split without label files": (
         lambda t: ["eval", _unlabelled_split(t), "--variant", "coarse"], r"training/label_2: no \.txt file \(it is empty\)$"),
     # outputs, refused before any fitting

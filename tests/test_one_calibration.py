@@ -58,7 +58,8 @@ def test_a_folder_of_frames_with_one_calibration_reads_as_the_kitti_layout(frame
     assert ds.calib_path(10) == CALIB and ds.check_frames(FRAMES) == []
     # KITTI's layout without calib/: refused alone, read with one calibration (labels and all)
     root = kitti_copy(tmp_path / "kitti", FRAMES, subdirs=("image_2", "label_2"))
-    with pytest.raises(InputError, match=r"training: KITTI split has no calib/ directory$"):
+    with pytest.raises(InputError, match=r"training: KITTI split has no calib/ directory; predict, detect, pitch and "
+                                         r"eval take one calibration for every frame \(--calib FILE\)$"):
         KittiDataset(root)
     labelled = KittiDataset(root, calib=CALIB)
     assert labelled.split_dir == labelled.image_dir.parent == root / "training"

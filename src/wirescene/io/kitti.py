@@ -289,6 +289,8 @@ def image_size(path: str | Path) -> tuple[int, int]:
 #: The image files of a folder read with one calibration (``KittiDataset(calib=)``): a dashcam's
 #: or a nuScenes camera's frames are JPEG; KITTI's own layout without it reads ``.png`` only.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+# Where a folder lacks KITTI's calib/: the commands that read one calibration for every frame.
+ONE_CALIB_HINT = "; predict, detect, pitch and eval take one calibration for every frame (--calib FILE)"
 
 
 class KittiDataset:
@@ -357,14 +359,17 @@ class KittiDataset:
         elif (root / "image_2").is_dir() or (root / "calib").is_dir():
             split_dir = image_dir = root
         else:
+            images = any(p.suffix.lower() in IMAGE_SUFFIXES for p in root.iterdir())
             raise InputError(
-                f"not a KITTI object directory: expected {split}/image_2 and {split}/calib (or image_2 and calib)",
+                f"not a KITTI object directory: expected {split}/image_2 and {split}/calib (or image_2 and calib)"
+                + (f"{ONE_CALIB_HINT} for a folder of one camera's frames" if images else ""),
                 path=root,
             )
         if self._calib is None:
             for sub in ("image_2", "calib"):
                 if not (split_dir / sub).is_dir():
-                    raise InputError(f"KITTI split has no {sub}/ directory", path=split_dir)
+                    hint = ONE_CALIB_HINT if sub == "calib" else ""
+                    raise InputError(f"KITTI split has no {sub}/ directory{hint}", path=split_dir)
             image_dir = split_dir / "image_2"
         self.root = root
         self._split = split
