@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
@@ -32,6 +31,7 @@ from wirescene.cli.options import (
 )
 from wirescene.core.atomic import write_text
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
+from wirescene.core.jsonio import dumps, write_json
 from wirescene.core.settings import stage_field
 from wirescene.fitting.options import PredetectOptions
 from wirescene.lift import LiftingOptions
@@ -158,7 +158,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
                                      mining_images=80 if mining_images is None else mining_images, n_val=n_val,
                                      progress=click.echo)
     if report:
-        write_text(report, json.dumps(rep, indent=1, default=float))
+        write_json(report, rep)
 
 
 def _fold_list(text: str | None) -> list[int] | None:
@@ -282,7 +282,7 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
             if out_dir is not None:
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
                             "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
-                files[f"{fid}.json"] = json.dumps({"detections": entries}, indent=1)
+                files[f"{fid}.json"] = dumps({"detections": entries})
             dets_all.append(d)
             if ds.has_labels:
                 gts.append((load_frame_gt(ds.split_dir, fid), ds.labels(fid)))
@@ -307,4 +307,4 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
                     title="Car pre-detection: IoU 0.5, cars over 50 px,\nat least 20% visible (not KITTI's AP)")
     click.echo(f"{result['seconds_per_frame']:.2f} s per frame")
     if json_out is not None:
-        write_text(json_out, json.dumps(result, indent=1))
+        write_json(json_out, result)

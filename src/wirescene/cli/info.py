@@ -4,7 +4,6 @@ comparing a machine with the one whose figures the README gives."""
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -67,7 +66,7 @@ def info(models, json_out):
     say_models(models)
     click.echo("\n".join(_lines(record)))
     if json_out is not None:
-        from wirescene.core.atomic import write_text
+        from wirescene.core.jsonio import write_json
 
-        write_text(json_out, json.dumps(record, indent=1))
+        write_json(json_out, record)
         click.echo(f"written: {json_out}")

@@ -295,9 +295,9 @@ def _variants():
 
 
 def _write_json_atomic(path: Path, data: dict) -> None:
-    from wirescene.core.atomic import write_text
+    from wirescene.core.jsonio import write_json
 
-    write_text(path, json.dumps(data, indent=1))
+    write_json(path, data)  # strict JSON: a figure of an empty subset is null, not NaN
 
 
 def _dask_client(address: str):

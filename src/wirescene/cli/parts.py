@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
@@ -146,7 +145,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
                 return {k: conv(v) for k, v in o.items() if not str(k).startswith("_")}
             return o.tolist() if hasattr(o, "tolist") else o
 
-        from wirescene.core.atomic import write_text
+        from wirescene.core.jsonio import write_json
 
-        write_text(report, json.dumps(conv(rep), indent=1))
+        write_json(report, conv(rep))
     click.echo(f"train accuracy {rep['train_acc']:.3f}")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
@@ -20,8 +19,8 @@ from wirescene.cli.options import (
     split_file_option,
     split_option,
 )
-from wirescene.core.atomic import write_text
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
+from wirescene.core.jsonio import write_json
 from wirescene.core.settings import stage_field
 from wirescene.lift import LiftingOptions
 
@@ -137,7 +136,7 @@ def pitch(kitti_root, frames, split_file, split, calib, max_frames, models, bank
     if json_out is not None:
         record = {"pitch": rig, "camera_height": camera_height, "told_pitch": camera_pitch, "boxes": boxes,
                   "frames": each}
-        write_text(json_out, json.dumps(record, indent=1))
+        write_json(json_out, record)
 
 
 def _count(n: int, noun: str) -> str:

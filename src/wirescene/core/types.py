@@ -411,7 +411,8 @@ class SceneEstimate:
 
     def to_dict(self) -> dict:
         """The scene as plain JSON-ready values (the body of the JSON file ``wirescene fit`` writes),
-        its cars in detection order (:attr:`cars`), the label file's order."""
+        its cars in detection order (:attr:`cars`), the label file's order. A non-finite float stays
+        a float here: :func:`wirescene.core.jsonio.dumps` writes it as ``null``, as ``fit`` does."""
         return {
             "variant": self.variant,
             "camera_height": float(self.camera_height),

@@ -43,7 +43,6 @@ Protocol
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Iterable, Sequence
 
@@ -51,6 +50,7 @@ import numpy as np
 
 from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import ShapeError, check_shape
+from wirescene.core.jsonio import strict_values
 from wirescene.core.viewpoints import angle_difference
 from wirescene.io.kitti import CAR_TYPES, Label
 
@@ -350,24 +350,14 @@ class EvaluationReport:
         """JSON-ready dict: the full-set metrics at top level, the occluded subsets under
         ``subsets``, plus ``occlusion_source``, ``viewpoint_check``, ``counts`` and
         (optionally) ``records``. NaN becomes ``None``."""
-        out: dict = {k: _json_value(v) for k, v in self.metrics["all"].items()}
-        out["subsets"] = {s: {k: _json_value(v) for k, v in self.metrics[s].items()} for s in SUBSETS[1:]}
+        out: dict = {k: strict_values(v) for k, v in self.metrics["all"].items()}
+        out["subsets"] = {s: {k: strict_values(v) for k, v in self.metrics[s].items()} for s in SUBSETS[1:]}
         out["occlusion_source"] = self.occlusion_source
         out["viewpoint_check"] = self.viewpoint_check
         out["counts"] = dict(self.counts)
         if include_records:
-            out["records"] = [{k: _json_value(v) for k, v in asdict(r).items()} for r in self.records]
+            out["records"] = [{k: strict_values(v) for k, v in asdict(r).items()} for r in self.records]
         return out
-
-
-def _json_value(v):
-    if isinstance(v, (bool, np.bool_)):
-        return bool(v)
-    if isinstance(v, (int, np.integer)):
-        return int(v)
-    if isinstance(v, (float, np.floating)):
-        return None if not math.isfinite(float(v)) else float(v)
-    return v
 
 
 def match_detections(

@@ -203,8 +203,8 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
       column) if present.
 
     An ``alpha`` of ``-10`` (KITTI's "not estimated", as 2D-only detectors write) is an
-    unknown viewpoint in every format, and so is NaN in JSON and CSV; any other beyond one
-    turn (2 pi) is refused as an angle in degrees.
+    unknown viewpoint in every format, and so is NaN in JSON and CSV and ``null`` in JSON (as
+    strict JSON writes NaN); any other beyond one turn (2 pi) is refused as an angle in degrees.
 
     A box given without a score (JSON, CSV, a KITTI file of 15 columns) scores 1. Only the
     boxes scoring ``min_score`` (None: no floor) or more are kept (a file left without one is an

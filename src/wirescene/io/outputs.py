@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from contextlib import ExitStack
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import numpy as np
 from wirescene.core.atomic import atomic_path, missing_dirs, remove_empty, write_text
 from wirescene.core.camera import Camera
 from wirescene.core.errors import InputError
+from wirescene.core.jsonio import dumps
 from wirescene.core.labels import Label
 from wirescene.core.types import Detections, SceneEstimate, dropped_detections, fitted_detections
 from wirescene.core.wireframe import EDGES
@@ -75,7 +75,7 @@ def write_fit_outputs(
     if problem:
         raise InputError(problem[1], path=problem[0])
     made = missing_dirs(out_dir)
-    payload = json.dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()}, indent=1)
+    payload = dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()})
     fitted = fitted_detections(detections, estimate)
     title = f"{stem}  {estimate.variant}, {boxes_in_words(detections.source)}"
     fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted,
