@@ -148,6 +148,11 @@ def test_eval_with_one_calibration_and_its_records(tmp_path):
     assert json.loads((tmp_path / "one.json").read_text()) == json.loads((tmp_path / "each.json").read_text())
     written = [(tmp_path / run / "coarse" / "000010.txt").read_bytes() for run in ("p", "q")]
     assert written[0] == written[1]
+    import wirescene
+
+    api = wirescene.evaluate(root, calib=CALIB, variants="coarse", frames=["000010"], particles=20)  # the same in Python
+    records = api["coarse"].to_json_dict()["records"]
+    assert records and records == json.loads((tmp_path / "one.json").read_text())["records"]
     K = tmp_path / "K.txt"
     K.write_text(" ".join(repr(float(v)) for v in KittiDataset(KITTI_ROOT).camera(10).K.ravel()))
     r = run("eval", root, "--calib", K, *common, "--predictions", tmp_path / "p", "--resume")

@@ -657,6 +657,7 @@ def evaluate(
     models=None,
     settings=None,
     min_score: float | None = None,
+    calib=None,
 ):
     """Fit and evaluate variants on a KITTI directory with the paper's protocol.
 
@@ -664,7 +665,7 @@ def evaluate(
     ----------
     kitti_root : path
         A KITTI object root (with ``training/``) or a split directory with
-        ``image_2/``, ``calib/`` and ``label_2/``.
+        ``image_2/``, ``calib/`` and ``label_2/`` (no ``calib/`` with ``calib``).
     variants : str or iterable of str
         Model variants to fit.
     detections : str
@@ -695,6 +696,9 @@ def evaluate(
         A models directory replacing the shipped artefacts, as in :func:`fit`.
     settings : mapping, optional
         Changes to the stages' options, as in :func:`fit`.
+    calib : path, optional
+        One calibration for every frame (a camera other than KITTI's whose frames share it;
+        ``eval --calib``): :class:`~wirescene.io.kitti.KittiDataset`'s ``calib``.
 
     Returns
     -------
@@ -726,7 +730,7 @@ def evaluate(
     problem = None if predictions is None else output_dir_problem(predictions)  # "" too, as for kitti_root
     if problem:  # before any fit, as the CLI's --predictions
         raise ArgumentError("predictions", problem)
-    dataset = KittiDataset(kitti_root)
+    dataset = KittiDataset(kitti_root, calib=calib)
     if not isinstance(detections, (str, Path)):
         raise ArgumentError("detections", f"expected 'gt', 'bank' or a directory, got {type(detections).__name__}")
     problem = empty_path_problem(detections)  # "" (an unset variable) is no name for the current directory
