@@ -14,12 +14,13 @@
    ``wirescene.detect``, then each stage alone (viewpoints, lifting, part maps, each
    variant's inference), on every ``--frame``; the ratio is the other revision's seconds
    over this one's (> 1: this one is faster), and every fit and detection is compared to
-   the bit (``--no-stages``: the whole frame and detect only).
+   the bit (``--no-stages``: the whole frame and detect only; ``--cpu``: CPU seconds of this
+   process instead of wall seconds, for a machine that runs other work).
 
 Usage: python benchmarks/bench_fit.py [--root tests/data/kitti] [--frame 000010] [--cars 5] [--particles 250]
        [--variants fg fg+gp full]
        python benchmarks/bench_fit.py --against OTHER/src --root ../shared/data/kitti --frame 000010 000095 000098
-       [--variants coarse+gp fg+gp full] [--repeats 3] [--no-stages]
+       [--variants coarse+gp fg+gp full] [--repeats 3] [--no-stages] [--cpu]
 """
 
 from __future__ import annotations
@@ -122,12 +123,13 @@ def _frame_side_by_side(args, revisions: dict, ds, fid: str, seconds: dict, diff
         """Best of ``args.repeats`` for both revisions, alternating; ``calls`` maps each
         revision to ``(call, record of its result)``."""
         best, out = dict.fromkeys(revisions, np.inf), {}
+        clock = time.process_time if args.cpu else time.perf_counter
         for _ in range(args.repeats):
             for name, rev in revisions.items():
                 with rev.active():
-                    t = time.perf_counter()
+                    t = clock()
                     out[name] = calls[name][0]()
-                    best[name] = min(best[name], time.perf_counter() - t)
+                    best[name] = min(best[name], clock() - t)
         same = calls["this"][1](out["this"]) == calls["other"][1](out["other"])
         if not same:
             differ.append(f"{row} {fid}")
@@ -215,6 +217,7 @@ def main():
     ap.add_argument("--against", default=None, help="another checkout's src directory, timed side by side")
     ap.add_argument("--repeats", type=int, default=3, help="best of this many calls (--against)")
     ap.add_argument("--no-stages", dest="stages", action="store_false", help="--against: the whole frame only")
+    ap.add_argument("--cpu", action="store_true", help="--against: CPU seconds of this process, not wall seconds")
     args = ap.parse_args()
     if args.against is not None:
         args.variants = args.variants or ["coarse+gp", "fg+gp", "full"]

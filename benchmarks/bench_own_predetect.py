@@ -10,9 +10,12 @@ mean seconds a frame of each, their ratio, and whether the two give the same det
 scores and viewpoints to the bit, or how far apart). ``--fold-banks`` / ``--fold-classifiers``
 (path patterns with ``{k}``) detect each frame with the bank and crop classifier of its fold
 (:func:`wirescene.io.folds.fold_of`), trained without its drives: the models the README's
-held-out figures from our own boxes come from.
+held-out figures from our own boxes come from. ``--stages`` also prints the CPU seconds a frame
+of the stages each worker times inside the call (the colour channels' integral images, the
+HOG pyramids, the windows' warps and HOG for the box refinement and the verifier, the
+templates' responses), the two checkouts side by side.
 
-    python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other BASE/src [--frames 24]
+    python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other BASE/src [--frames 24] [--stages]
     python benchmarks/bench_own_predetect.py --root ../shared/data/kitti --other BASE/src --frames 72 \
         --fold-banks 'M/bank_fold{k}.npz' --fold-classifiers 'M/viewpoint_classifier_fold{k}.npz'
 """
@@ -44,6 +47,31 @@ from wirescene.io.kitti import KittiDataset
 from wirescene.predetect.bank import DetectorBank
 from wirescene.predetect.viewpoint_classifier import ViewpointClassifier
 ds = KittiDataset(sys.argv[1])
+seconds = {}
+
+
+def timed(module, name, stage):  # CPU seconds of a stage inside detect_own, where this checkout has the function
+    fn = getattr(module, name, None)
+    if fn is None:
+        return
+
+    def wrapper(*args, **kwargs):
+        c = time.process_time()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            seconds[stage] = seconds.get(stage, 0.0) + time.process_time() - c
+    setattr(module, name, wrapper)
+
+
+if sys.argv[5] == "stages":
+    import wirescene.predetect.bank as bank_module
+    import wirescene.predetect.refine as refine_module
+    for module, name, stage in ((bank_module, "integral_channels", "colour channels"),
+                                (bank_module, "feature_pyramid", "HOG pyramids"),
+                                (refine_module, "crops_features", "windows' warps and HOG"),
+                                (bank_module, "score_pyramid", "templates' responses")):
+        timed(module, name, stage)
 threshold = PredetectOptions().threshold if sys.argv[2] == "fit" else float(sys.argv[2])
 # each checkout's own default enlargement (predetect.upsample), where it has one
 enlarged = {"upsample": PredetectOptions().upsample} if hasattr(PredetectOptions(), "upsample") else {}
@@ -54,19 +82,20 @@ for line in sys.stdin:
     camera, image = ds.camera(f), ds.image(f)
     bank = detector_bank(None) if banks is None else banks[fold_of(f)]
     classifier = viewpoint_classifier(None) if classifiers is None else classifiers[fold_of(f)]
+    seconds.clear()
     c = time.process_time()
     d = own_detections(camera, image, bank=bank, classifier=classifier, threshold=threshold, **enlarged)
     cpu = time.process_time() - c
     rows = [[float(v) for v in (*b, s, a)] for b, s, a in zip(d.boxes, d.scores, d.alpha)]
-    print(json.dumps({"frame": f, "cpu": cpu, "detections": rows}), flush=True)
+    print(json.dumps({"frame": f, "cpu": cpu, "detections": rows, "stages": seconds}), flush=True)
 """
 
 
 def worker(src: str, args) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=str(Path(src).resolve()), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     return subprocess.Popen([sys.executable, "-c", _WORKER, args.root, args.threshold, args.fold_banks or "",
-                             args.fold_classifiers or ""], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                            env=env)
+                             args.fold_classifiers or "", "stages" if args.stages else ""],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
 
 
 def ask(proc: subprocess.Popen, frame: str) -> dict:
@@ -86,6 +115,7 @@ def main() -> None:
     ap.add_argument("--threshold", default="fit", help="the bank's threshold (default: the fit's)")
     ap.add_argument("--fold-banks", help="fold banks, a path pattern with {k} (default: the shipped bank)")
     ap.add_argument("--fold-classifiers", help="fold crop classifiers, a path pattern with {k} (default: the shipped one)")
+    ap.add_argument("--stages", action="store_true", help="also time the stages inside the call")
     args = ap.parse_args()
     for name in ("fold_banks", "fold_classifiers"):
         pattern = getattr(args, name)
@@ -101,12 +131,15 @@ def main() -> None:
     try:
         ask(procs["this"], frames[0]), ask(procs["other"], frames[0])  # imports and caches, untimed
         cpu = {k: [] for k in procs}
+        stages = {k: {} for k in procs}  # {checkout: {stage: summed CPU seconds}}
         same, gap, n_det = 0, 0.0, 0
         for i, f in enumerate(frames):
             order = ("this", "other") if i % 2 == 0 else ("other", "this")
             got = {k: ask(procs[k], f) for k in order}
             for k in procs:
                 cpu[k].append(got[k]["cpu"])
+                for stage, sec in got[k].get("stages", {}).items():
+                    stages[k][stage] = stages[k].get(stage, 0.0) + sec
             a, b = (np.array(got[k]["detections"], float).reshape(-1, 6) for k in ("this", "other"))
             n_det += len(a)
             if a.shape == b.shape and np.array_equal(a, b):
@@ -124,6 +157,9 @@ def main() -> None:
           f"(max {np.max(cpu['this']):.2f}), other {o:.2f} (max {np.max(cpu['other']):.2f}), other / this {o / t:.2f}x; "
           f"detections identical on {same} of {len(frames)} frames"
           + ("" if same == len(frames) else f" (largest difference {gap:.3g})"))
+    for stage in dict.fromkeys([*stages["this"], *stages["other"]]):
+        a, b = (stages[k].get(stage, np.nan) / len(frames) for k in ("this", "other"))
+        print(f"  {stage}: this {a:.3f} s a frame, other {b:.3f}, other / this {b / a:.2f}x")
 
 
 if __name__ == "__main__":

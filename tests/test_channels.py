@@ -32,6 +32,25 @@ def test_cell_means_are_the_channels_means_over_each_cell():
     assert_close(f[0, th * tw * 4:], np.concatenate([mean, np.log(spread)]), rtol=1e-5, atol=1e-5)
 
 
+def test_integral_channels_are_skimage_s_colours_summed_in_order_to_the_bit():
+    """The L*u*v* channels are ``skimage.color.rgb2luv``'s to the bit (its gamma read from a
+    table of the 256 levels), the gradient magnitude ``np.hypot`` of ``np.gradient``'s, and the
+    integral image two ``cumsum``'s, down the columns, then along the rows, whole or in strips
+    (the former code, written out; every 8-bit level in every channel)."""
+    from skimage.color import rgb2luv
+
+    rng = np.random.default_rng(7)
+    img = np.stack([rng.permutation(np.tile(np.arange(256, dtype=np.uint8), 24)).reshape(48, 128)
+                    for _ in range(3)], axis=-1)
+    img[:4, :4] = [[0, 0, 0], [255, 255, 255], [10, 10, 10], [11, 0, 0]]  # black, white, the gamma's linear part
+    luv = rgb2luv(img).astype(np.float64)
+    ch = np.concatenate([luv, np.hypot(*np.gradient(luv[..., 0])[::-1])[..., None]], axis=-1)
+    expected = np.zeros((49, 129, 4))
+    expected[1:, 1:] = ch.cumsum(0).cumsum(1)
+    for strip_pixels in (1 << 20, 128 * 7, 1):  # one strip, strips of 7 rows, of one row
+        assert integral_channels(img, strip_pixels=strip_pixels).tobytes() == expected.tobytes()
+
+
 def test_windows_past_the_image_and_empty_inputs():
     ii = integral_channels(np.full((40, 60, 3), 128, np.uint8))
     f = window_channel_features(ii, np.array([[-30.0, -20.0, 10.0, 5.0], [50.0, 30.0, 90.0, 70.0]]))

@@ -227,6 +227,32 @@ def test_hog_cells_match_the_definition():
     assert_close(flat, np.zeros((2, 3, N_FEAT)))
 
 
+def test_hog_cells_normalise_block_by_block_like_the_four_blocks_stacked():
+    """The four blocks' normalisations, taken one at a time, give the numbers of the four
+    stacked at once to the bit: clipped, summed in the blocks' order, the texture sums per
+    block (the formula :func:`hog_cells` used before; a stack of crops and a single image)."""
+    from wirescene.predetect.hog import _cell_histograms, _edge_pad
+
+    def stacked(g):
+        lead, (hc, wc) = g.shape[:-2], (g.shape[-2] // 8, g.shape[-1] // 8)
+        h18 = _cell_histograms(_edge_pad(g[..., :hc * 8, :wc * 8]), hc, wc, 8).astype(np.float32)
+        h9 = h18[..., :9] + h18[..., 9:]
+        energy = _edge_pad((h9 * h9).sum(-1))
+        blk = energy[..., :-1, :-1] + energy[..., 1:, :-1] + energy[..., :-1, 1:] + energy[..., 1:, 1:]
+        inv = 1.0 / np.sqrt(blk + 1e-4)
+        norms = np.stack([inv[..., dy:dy + hc, dx:dx + wc] for dy in (0, 1) for dx in (0, 1)])[..., None]
+        a, a9 = np.minimum(h18 * norms, 0.2), np.minimum(h9 * norms, 0.2)
+        out = np.empty(lead + (hc, wc, N_FEAT), np.float32)
+        out[..., :18] = 0.5 * (((a[0] + a[1]) + a[2]) + a[3])
+        out[..., 18:27] = 0.5 * (((a9[0] + a9[1]) + a9[2]) + a9[3])
+        out[..., 27:] = 0.2357 * np.moveaxis(a.sum(-1), 0, -1)
+        return out
+
+    rng = np.random.default_rng(5)
+    for g in (rng.random((5, 80, 112)).astype(np.float32), rng.random((43, 61)).astype(np.float32) ** 3):
+        assert hog_cells(g).tobytes() == stacked(g).tobytes()
+
+
 # ------------------------------------------------------------------ storage
 
 def _random_bank(seed=0):

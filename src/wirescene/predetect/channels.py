@@ -15,6 +15,8 @@ frame's few hundred candidate boxes cost a few array lookups each.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from wirescene.core.errors import check_shape
@@ -29,9 +31,49 @@ _SPREAD_FLOOR = 1e-3  # of a channel over a window: a flat window's cells stay f
 
 
 #: Pixels of the image :func:`integral_channels` converts at once: a larger image is read in strips of rows (the
-#: colour conversion's float64 temporaries cost some 130 bytes a pixel, 4 GB on an 8K frame); a KITTI frame (466,000)
-#: is one strip, as before.
+#: colour conversion's float64 temporaries cost some 80 bytes a pixel, 130 before they were written into one buffer:
+#: 4 GB on an 8K frame at once); a KITTI frame (466,000) is one strip, as before.
 STRIP_PIXELS = 1 << 20
+
+# sRGB's primaries in CIE XYZ (D65), scikit-image's ``xyz_from_rgb``, transposed as ``rgb2xyz`` multiplies by it.
+_RGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
+                        [0.212671, 0.715160, 0.072169],
+                        [0.019334, 0.119193, 0.950227]]).T.astype(np.float64)
+
+
+@lru_cache(maxsize=1)
+def _luv_constants() -> tuple[np.ndarray, np.ndarray, float, float]:
+    """``(linear levels (256,), white (3,), u0, v0)`` of :func:`_luv`: each 8-bit level's linear
+    light (sRGB's gamma undone) and the D65 white point's terms, computed with scikit-image's
+    operations (``rgb2xyz``, ``xyz2luv``)."""
+    from skimage.color import xyz_tristimulus_values
+    from skimage.util import img_as_float64
+
+    levels = img_as_float64(np.arange(256, dtype=np.uint8))
+    curved = levels > 0.04045
+    levels[curved] = np.power((levels[curved] + 0.055) / 1.055, 2.4)
+    levels[~curved] /= 12.92
+    white = xyz_tristimulus_values(illuminant="D65", observer="2", dtype=np.float64)
+    uv_weights = np.array([1, 15, 3], dtype=np.float64)
+    return levels, white, 4 * white[0] / (uv_weights @ white), 9 * white[1] / (uv_weights @ white)
+
+
+def _luv(rgb: np.ndarray, out: np.ndarray) -> None:
+    """``skimage.color.rgb2luv(rgb)`` of uint8 ``rgb`` ``(..., 3)`` written into the float64
+    ``out`` ``(..., 3)``: the same operations, to the bit (``tests/test_channels.py``), with each
+    level's linear light read from a table of the 256 levels (a power of every pixel's three
+    values was most of ``rgb2xyz``'s time) and no stacked copies."""
+    levels, white, u0, v0 = _luv_constants()
+    xyz = levels[rgb] @ _RGB_TO_XYZ
+    x, y, z = xyz[..., 0], xyz[..., 1], xyz[..., 2]
+    L = np.divide(y, white[1], out=out[..., 0])
+    bright = L > 0.008856
+    L[bright] = 116.0 * np.cbrt(L[bright]) - 16.0
+    L[~bright] = 903.3 * L[~bright]
+    den = x + 15.0 * y + 3.0 * z + np.finfo(np.float64).eps
+    L13 = 13.0 * L
+    np.multiply(L13, (4.0 * x) / den - u0, out=out[..., 1])
+    np.multiply(L13, (9.0 * y) / den - v0, out=out[..., 2])
 
 
 def integral_channels(image, *, strip_pixels: int = STRIP_PIXELS) -> np.ndarray:
@@ -40,7 +82,9 @@ def integral_channels(image, *, strip_pixels: int = STRIP_PIXELS) -> np.ndarray:
     :func:`wirescene.core.image.to_rgb_uint8` reads. An image of more than ``strip_pixels``
     pixels is converted in strips of rows (one row of context each side for the vertical
     gradient, the column sums carried from strip to strip): the same numbers, the
-    temporaries bounded.
+    temporaries bounded. The colours are ``skimage.color.rgb2luv``'s to the bit (:func:`_luv`),
+    and each strip's channels are summed in place, in the order of a ``cumsum`` down the
+    columns, then along the rows.
 
     Examples
     --------
@@ -51,8 +95,6 @@ def integral_channels(image, *, strip_pixels: int = STRIP_PIXELS) -> np.ndarray:
     >>> integral_channels(img).tobytes() == integral_channels(img, strip_pixels=1).tobytes()  # strips of one row
     True
     """
-    from skimage.color import rgb2luv
-
     rgb = to_rgb_uint8(image)
     H, W = rgb.shape[:2]
     out = np.zeros((H + 1, W + 1, N_CHANNELS))
@@ -61,13 +103,16 @@ def integral_channels(image, *, strip_pixels: int = STRIP_PIXELS) -> np.ndarray:
     for r0 in range(0, H, rows):
         r1 = min(H, r0 + rows)
         a0, a1 = max(0, r0 - 1), min(H, r1 + 1)  # a row of context each side: the gradient's central differences
-        luv = rgb2luv(rgb[a0:a1]).astype(np.float64)
-        gy, gx = np.gradient(luv[..., 0])
-        ch = np.concatenate([luv, np.hypot(gx, gy)[..., None]], axis=-1)[r0 - a0:r1 - a0]
-        # (the first strip without a carried row: a zero added would turn its -0.0 sums into 0.0)
-        cols = ch.cumsum(0) if carry is None else np.concatenate([carry, ch]).cumsum(0)[1:]
-        carry = cols[-1:]
-        out[r0 + 1:r1 + 1, 1:] = cols.cumsum(1)
+        ch = np.empty((a1 - a0, W, N_CHANNELS))
+        _luv(rgb[a0:a1], ch[..., :3])
+        gy, gx = np.gradient(ch[..., 0])
+        np.hypot(gx, gy, out=ch[..., 3])
+        ch = ch[r0 - a0:r1 - a0]
+        if carry is not None:  # (not on the first strip: a zero added would turn its -0.0 sums into 0.0)
+            ch[0] += carry
+        np.cumsum(ch, axis=0, out=ch)
+        carry = ch[-1].copy()
+        np.cumsum(ch, axis=1, out=out[r0 + 1:r1 + 1, 1:])
     return out
 
 

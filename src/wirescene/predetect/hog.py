@@ -152,13 +152,23 @@ def hog_cells(gray: np.ndarray, cell: int = CELL, *, strip_pixels: int = 1 << 16
     # block energies: block (i, j) covers cells (i..i+1, j..j+1) of the padded grid
     blk = energy[..., :-1, :-1] + energy[..., 1:, :-1] + energy[..., :-1, 1:] + energy[..., 1:, 1:]  # (hc+1, wc+1)
     inv = 1.0 / np.sqrt(blk + 1e-4)
-    norms = np.stack([inv[..., dy:dy + hc, dx:dx + wc] for dy in (0, 1) for dx in (0, 1)])[..., None]  # (4, ..., hc, wc, 1)
-    a = np.minimum(h18 * norms, 0.2)
-    a9 = np.minimum(h9 * norms, 0.2)
     out = np.empty(lead + (hc, wc, N_FEAT), np.float32)
-    out[..., :18] = 0.5 * (((a[0] + a[1]) + a[2]) + a[3])  # summed in the order of the four blocks
-    out[..., 18:27] = 0.5 * (((a9[0] + a9[1]) + a9[2]) + a9[3])
-    out[..., 27:] = 0.2357 * np.moveaxis(a.sum(-1), 0, -1)
+    # one block's normalisation at a time, added to the first in the order of the four blocks (no stack of four)
+    s18 = s9 = None
+    for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+        norm = inv[..., dy:dy + hc, dx:dx + wc, None]
+        a = np.multiply(h18, norm)
+        np.minimum(a, 0.2, out=a)
+        a9 = np.multiply(h9, norm)
+        np.minimum(a9, 0.2, out=a9)
+        np.multiply(a.sum(-1), 0.2357, out=out[..., 27 + k])
+        if s18 is None:
+            s18, s9 = a, a9
+        else:
+            s18 += a
+            s9 += a9
+    np.multiply(s18, 0.5, out=out[..., :18])
+    np.multiply(s9, 0.5, out=out[..., 18:27])
     return out
 
 
