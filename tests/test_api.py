@@ -402,6 +402,10 @@ def test_evaluate_takes_one_frame_id_and_refuses_none_and_what_is_no_path(tmp_pa
         wirescene.evaluate(root, variants="coarse", predictions=5)
     with pytest.raises(wirescene.ArgumentError, match="^frames: no frame given"):
         wirescene.evaluate(root, variants="coarse", frames=[], particles=10)
+    with pytest.raises(wirescene.ArgumentError, match="^calib: expected a calibration file's path, got ndarray"):
+        wirescene.evaluate(root, variants="coarse", calib=P2)  # a raw TypeError before
+    with pytest.raises(wirescene.ArgumentError, match="^calib: "):
+        wirescene.evaluate(root, variants="coarse", calib="")
     one = wirescene.evaluate(root, variants="coarse", frames="000010", particles=10)
     listed = wirescene.evaluate(root, variants="coarse", frames=["000010"], particles=10)
     assert one["coarse"].metrics["all"]["n_gt"] == listed["coarse"].metrics["all"]["n_gt"] > 0

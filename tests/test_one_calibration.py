@@ -3,6 +3,7 @@
 file per frame. The three test frames' calibrations are identical, so every output must be too."""
 
 import json
+import pickle
 import shutil
 
 import numpy as np
@@ -84,9 +85,14 @@ def test_jpeg_frames_are_read_and_two_images_of_one_frame_refused(tmp_path):
     rgb.save(folder / "CAM_FRONT_0001.jpg", quality=95)
     rgb.save(folder / "CAM_FRONT_0002.JPEG", quality=95)
     (folder / "notes.txt").write_text("the rig: 1.4 m up\n")
+    (folder / "._CAM_FRONT_0001.jpg").write_bytes(b"\x00\x05\x16\x07")  # macOS's AppleDouble file on an exFAT card
     ds = KittiDataset(folder, calib=CALIB)
     assert ds.frame_ids() == ["CAM_FRONT_0001", "CAM_FRONT_0002"]
     assert ds.image_path("CAM_FRONT_0002").name == "CAM_FRONT_0002.JPEG"
+    # a worker's copy (pickled with each frame's task) carries no listing of the folder, and finds the same images
+    copy = pickle.loads(pickle.dumps(ds))
+    assert copy._images is None and ds._images is not None
+    assert [copy.image_path(f) for f in ds.frame_ids()] == [ds.image_path(f) for f in ds.frame_ids()]
     assert ds.image("CAM_FRONT_0001").shape == (375, 1242, 3) and ds.camera("CAM_FRONT_0001").image_size == (1242, 375)
     shutil.copy(SPLIT / "image_2" / "000010.png", folder / "CAM_FRONT_0001.png")
     with pytest.raises(InputError, match=r"cam: frame CAM_FRONT_0001 has two images \(CAM_FRONT_0001\.jpg, "
@@ -110,6 +116,9 @@ def test_predict_of_a_folder_of_frames_writes_the_kitti_layouts_label_files(fram
     assert r.exit_code == 0, r.output
     written = (tmp_path / "folder" / "000010.txt").read_bytes()
     assert written and written == (tmp_path / "kitti" / "000010.txt").read_bytes()
+    # scored against labels kept elsewhere: no word of a KITTI split mixed up (the folder's name is no split's)
+    r = run("kitti-eval", SPLIT / "label_2", tmp_path / "folder", "--frames", "000010", "--draws", 0)
+    assert r.exit_code == 0 and "predicted from the images of" not in r.output, r.output
 
 
 def test_predict_resumed_with_another_calibration_is_refused(frames_dir, tmp_path):

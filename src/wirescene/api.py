@@ -697,7 +697,7 @@ def evaluate(
     settings : mapping, optional
         Changes to the stages' options, as in :func:`fit`.
     calib : path, optional
-        One calibration for every frame (a camera other than KITTI's whose frames share it;
+        A calibration file for every frame (a camera other than KITTI's whose frames share it;
         ``eval --calib``): :class:`~wirescene.io.kitti.KittiDataset`'s ``calib``.
 
     Returns
@@ -730,6 +730,11 @@ def evaluate(
     problem = None if predictions is None else output_dir_problem(predictions)  # "" too, as for kitti_root
     if problem:  # before any fit, as the CLI's --predictions
         raise ArgumentError("predictions", problem)
+    if calib is not None:  # a file, as eval --calib's: a frame's camera comes with its image size
+        problem = (f"expected a calibration file's path, got {type(calib).__name__}"
+                   if not isinstance(calib, (str, Path)) else empty_path_problem(calib))
+        if problem:
+            raise ArgumentError("calib", problem)
     dataset = KittiDataset(kitti_root, calib=calib)
     if not isinstance(detections, (str, Path)):
         raise ArgumentError("detections", f"expected 'gt', 'bank' or a directory, got {type(detections).__name__}")

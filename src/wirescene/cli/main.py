@@ -383,7 +383,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     dataset = KittiDataset(kitti_root, split=split, calib=calib)
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
-    drives = interval_drives(dataset.split_dir)  # read before any fit: a bad devkit mapping is an error now
+    # read before any fit (a bad devkit mapping is an error now); a plain folder's frames are no KITTI drive's
+    drives = {} if dataset.image_dir == dataset.split_dir else interval_drives(dataset.split_dir)
     _say_if_trained_on(inference.get("models"), dataset, frame_ids, variants=variants, detections=detections,
                        replaced=[k for k in ("parts_model", "detector_bank", "viewpoint_classifier")
                                  if inference.get(k) is not None])
@@ -657,8 +658,11 @@ def _prediction_dir_warnings(pred_dir: Path, gt_dir: Path, ids: list[str], *, ch
         warnings.append(f"{len(extra)} prediction files have no label file in {gt_dir} and are not scored "
                         f"(e.g. {extra[0]}.txt)")
     try:
-        made_of = json.loads((pred_dir / CONFIG_FILE).read_text(encoding="utf-8"))["dataset"]
+        record = json.loads((pred_dir / CONFIG_FILE).read_text(encoding="utf-8"))
+        made_of = record["dataset"]
     except (OSError, ValueError, TypeError, KeyError):  # not a predict folder, or a record this check cannot read
+        return warnings
+    if "calib" in record:  # a folder of one camera's frames: no KITTI split whose name to compare
         return warnings
     # by the split's folder name: a KITTI folder moved since the prediction is no mistake
     if isinstance(made_of, str) and Path(made_of).name != gt_dir.resolve().parent.name:

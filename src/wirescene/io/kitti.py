@@ -289,6 +289,13 @@ def image_size(path: str | Path) -> tuple[int, int]:
 #: The image files of a folder read with one calibration (``KittiDataset(calib=)``): a dashcam's
 #: or a nuScenes camera's frames are JPEG; KITTI's own layout without it reads ``.png`` only.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+def _frame_image(path: Path) -> bool:
+    """Whether ``path`` is a frame's image in a folder read with one calibration: a file of
+    :data:`IMAGE_SUFFIXES`, not hidden (macOS writes ``._NAME.jpg`` beside each file it copies to
+    an exFAT card, where a dashcam's frames lie)."""
+    return path.suffix.lower() in IMAGE_SUFFIXES and not path.name.startswith(".") and path.is_file()
+
+
 # Where a folder lacks KITTI's calib/: the commands that read one calibration for every frame.
 ONE_CALIB_HINT = "; predict, detect, pitch and eval take one calibration for every frame (--calib FILE)"
 
@@ -359,7 +366,7 @@ class KittiDataset:
         elif (root / "image_2").is_dir() or (root / "calib").is_dir():
             split_dir = image_dir = root
         else:
-            images = any(p.suffix.lower() in IMAGE_SUFFIXES for p in root.iterdir())
+            images = any(_frame_image(p) for p in root.iterdir())
             raise InputError(
                 f"not a KITTI object directory: expected {split}/image_2 and {split}/calib (or image_2 and calib)"
                 + (f"{ONE_CALIB_HINT} for a folder of one camera's frames" if images else ""),
@@ -406,6 +413,10 @@ class KittiDataset:
             return sorted(p.stem for p in self.image_dir.glob("*.png"))
         return sorted(self._image_files())
 
+    def __getstate__(self) -> dict:
+        # a worker's copy is sent with every frame's task: not the folder's listing, which it makes once if needed
+        return {**self.__dict__, "_images": None}
+
     def _image_files(self) -> dict[str, Path]:
         """``{frame: image}`` of a folder read with one calibration, listed once (a folder of
         thousands is not listed again for each frame); an :class:`InputError` where two images
@@ -413,7 +424,7 @@ class KittiDataset:
         if self._images is None:
             found: dict[str, Path] = {}
             for path in sorted(self.image_dir.iterdir()):
-                if path.suffix.lower() not in IMAGE_SUFFIXES or not path.is_file():
+                if not _frame_image(path):
                     continue
                 if path.stem in found:
                     raise InputError(f"frame {path.stem} has two images ({found[path.stem].name}, {path.name}): "
@@ -460,7 +471,13 @@ class KittiDataset:
         the frame's image in :attr:`image_dir` of any of :data:`IMAGE_SUFFIXES` (``FRAME.png``
         where it has none, the path its error names)."""
         frame = self._id(frame_id)
-        found = self._image_files().get(frame) if self._calib is not None else None
+        if self._calib is None:
+            return self.image_dir / f"{frame}.png"
+        if self._images is None:  # a worker's copy: the usual spellings before a listing of the folder
+            for suffix in IMAGE_SUFFIXES + tuple(s.upper() for s in IMAGE_SUFFIXES):
+                if (self.image_dir / f"{frame}{suffix}").is_file():
+                    return self.image_dir / f"{frame}{suffix}"
+        found = self._image_files().get(frame)
         return found if found is not None else self.image_dir / f"{frame}.png"
 
     def calib_path(self, frame_id: str | int) -> Path:

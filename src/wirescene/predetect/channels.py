@@ -35,18 +35,14 @@ _SPREAD_FLOOR = 1e-3  # of a channel over a window: a flat window's cells stay f
 #: 4 GB on an 8K frame at once); a KITTI frame (466,000) is one strip, as before.
 STRIP_PIXELS = 1 << 20
 
-# sRGB's primaries in CIE XYZ (D65), scikit-image's ``xyz_from_rgb``, transposed as ``rgb2xyz`` multiplies by it.
-_RGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
-                        [0.212671, 0.715160, 0.072169],
-                        [0.019334, 0.119193, 0.950227]]).T.astype(np.float64)
-
-
 @lru_cache(maxsize=1)
-def _luv_constants() -> tuple[np.ndarray, np.ndarray, float, float]:
-    """``(linear levels (256,), white (3,), u0, v0)`` of :func:`_luv`: each 8-bit level's linear
-    light (sRGB's gamma undone) and the D65 white point's terms, computed with scikit-image's
-    operations (``rgb2xyz``, ``xyz2luv``)."""
+def _luv_constants() -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """``(linear levels (256,), rgb to xyz (3, 3), white (3,), u0, v0)`` of :func:`_luv`: each
+    8-bit level's linear light (sRGB's gamma undone), sRGB's primaries in CIE XYZ (transposed,
+    as ``rgb2xyz`` multiplies by them) and the D65 white point's terms, computed with
+    scikit-image's operations and matrices (``rgb2xyz``, ``xyz2luv``)."""
     from skimage.color import xyz_tristimulus_values
+    from skimage.color.colorconv import xyz_from_rgb
     from skimage.util import img_as_float64
 
     levels = img_as_float64(np.arange(256, dtype=np.uint8))
@@ -55,7 +51,8 @@ def _luv_constants() -> tuple[np.ndarray, np.ndarray, float, float]:
     levels[~curved] /= 12.92
     white = xyz_tristimulus_values(illuminant="D65", observer="2", dtype=np.float64)
     uv_weights = np.array([1, 15, 3], dtype=np.float64)
-    return levels, white, 4 * white[0] / (uv_weights @ white), 9 * white[1] / (uv_weights @ white)
+    rgb_to_xyz = xyz_from_rgb.T.astype(np.float64)
+    return levels, rgb_to_xyz, white, 4 * white[0] / (uv_weights @ white), 9 * white[1] / (uv_weights @ white)
 
 
 def _luv(rgb: np.ndarray, out: np.ndarray) -> None:
@@ -63,8 +60,8 @@ def _luv(rgb: np.ndarray, out: np.ndarray) -> None:
     ``out`` ``(..., 3)``: the same operations, to the bit (``tests/test_channels.py``), with each
     level's linear light read from a table of the 256 levels (a power of every pixel's three
     values was most of ``rgb2xyz``'s time) and no stacked copies."""
-    levels, white, u0, v0 = _luv_constants()
-    xyz = levels[rgb] @ _RGB_TO_XYZ
+    levels, rgb_to_xyz, white, u0, v0 = _luv_constants()
+    xyz = levels[rgb] @ rgb_to_xyz
     x, y, z = xyz[..., 0], xyz[..., 1], xyz[..., 2]
     L = np.divide(y, white[1], out=out[..., 0])
     bright = L > 0.008856
