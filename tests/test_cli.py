@@ -174,7 +174,8 @@ def test_fit_of_a_frame_without_cars_writes_an_empty_scene_and_says_so(tmp_path)
     black = tmp_path / "black.png"  # raw pixels without a car
     Image.new("RGB", (1242, 375)).save(black)
     calib = SPLIT / "calib" / "000010.txt"
-    for name, args, says in (("file", [SPLIT / "image_2" / "000010.png", "--detections", dets], "no car detections"),
+    for name, args, says in (("file", [SPLIT / "image_2" / "000010.png", "--detections", dets],
+                              "no car detections (its 1 box is of other classes: 'Pedestrian')"),
                              ("pixels", [black], "no car found")):
         r = run("fit", *args, "--calib", calib, "--variant", "full", "--out", tmp_path / name)
         assert r.exit_code == 0, r.output
@@ -213,6 +214,15 @@ def test_detection_formats(tmp_path):
         read_detections(bad)
     with pytest.raises(InputError, match="no car detections"):
         read_detections(c, min_score=0.9)
+    # a detector naming its cars otherwise: the classes it holds are said (an empty street before)
+    j.write_text(json.dumps([{"box": [0, 0, 10, 10], "label": "vehicle"}, {"box": [0, 0, 9, 9], "label": "vehicle"},
+                             {"box": [0, 0, 10, 10], "class": "truck"}]))
+    with pytest.raises(InputError, match=r"d\.json: no car detections in file \(its 3 boxes are of other classes: "
+                                         r"'truck', 'vehicle'\)$"):
+        read_detections(j)
+    c.write_text("x1,y1,x2,y2,type\n10,20,110,80,Automobile\n")
+    with pytest.raises(InputError, match=r"\(its 1 box is of other classes: 'Automobile'\)$"):
+        read_detections(c)
 
 
 def test_detection_files_of_other_tools_keep_only_their_cars(tmp_path):

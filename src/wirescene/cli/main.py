@@ -780,14 +780,15 @@ def fit_cmd(image, calib, detections, min_score, gt, variant, particles, seed, o
     img = read_image(image)
     camera = as_camera(calib, (img.shape[1], img.shape[0]))
     say_off_centre_image(image, camera)  # a calibration carries no image size: said, not refused
-    dets = None
+    dets, others = None, ""
     if detections is not None:
         try:
             dets = read_detections(detections, image_size=(img.shape[1], img.shape[0]), min_score=min_score)
         except InputError as exc:  # a frame without cars (or none at --min-score) is a frame, as in eval and predict
-            if exc.problem != NO_CARS:
+            if not exc.problem.startswith(NO_CARS):
                 raise
             dets = Detections.empty(str(detections))
+            others = exc.problem[len(NO_CARS):]  # the classes of the file's boxes, where it has some
     gt_objs = read_labels(gt, image_size=(img.shape[1], img.shape[0])).of_type("Car") if gt is not None else []
     with warnings.catch_warnings():  # said above, in the command's one line, not again by the API
         warnings.simplefilter("ignore", CalibrationWarning)
@@ -795,9 +796,8 @@ def fit_cmd(image, calib, detections, min_score, gt, variant, particles, seed, o
     if not estimate.cars:
         # the floor said where it left the file no box
         floor = f" scoring at least {min_score:g}" if min_score is not None and dets is not None and not len(dets) else ""
-        click.echo(f"wirescene: {detections if dets is not None else image}: "
-                   f"{f'no car detections{floor}' if dets is not None else 'no car found'}; writing an empty scene",
-                   err=True)
+        said = f"no car detections{floor}{others}" if dets is not None else "no car found"
+        click.echo(f"wirescene: {detections if dets is not None else image}: {said}; writing an empty scene", err=True)
     paths = write_fit_outputs(out, Path(image).stem, image=img, camera=camera, estimate=estimate,
                               detections=estimate.detections, gt=gt_objs)
     for kind, p in paths.items():

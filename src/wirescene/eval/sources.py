@@ -141,7 +141,7 @@ class DetectionSource:
         try:
             return read_detections(path, image_size=dataset.image_size(frame_id), min_score=self.min_score)
         except InputError as exc:
-            if exc.problem == NO_CARS:  # no car in the file, or none scoring at least min_score
+            if exc.problem.startswith(NO_CARS):  # no car in the file, or none scoring at least min_score
                 return Detections.empty(str(path))
             raise
 

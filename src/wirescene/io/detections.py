@@ -31,26 +31,44 @@ def _binned_viewpoint(alpha) -> np.ndarray:
     return np.where(known, bin_center(viewpoint_bin(np.where(known, alpha, 0.0))), np.nan)
 
 
-#: The problem of a detection file without a car (a frame without cars to ``eval`` and ``fit``).
+#: The problem of a detection file without a car (a frame without cars to ``eval`` and ``fit``): the
+#: start of the message, which names the classes of the file's other boxes where it has some.
 NO_CARS = "no car detections in file"
 
 #: COCO's category id of a car (``category_id`` in COCO result files).
 COCO_CAR_ID = 3
 
 
-def _is_car(entry: dict) -> bool:
-    """Whether a JSON / CSV entry is a car: its class under ``category``, ``category_name``,
-    ``label``, ``class``, ``type`` or COCO's ``category_id``: ``car`` in any case, or the
-    number 3 (COCO's id of a car); an entry naming no class is one."""
+def _class_of(entry: dict):
+    """The class a JSON / CSV entry names under ``category``, ``category_name``, ``label``,
+    ``class``, ``type`` or COCO's ``category_id`` (the first given), or None."""
     for key in ("category", "category_name", "label", "class", "type", "category_id"):
         value = entry.get(key)
-        if value in (None, ""):
-            continue
-        try:
-            return float(value) == COCO_CAR_ID
-        except (TypeError, ValueError):
-            return str(value).strip().lower() == "car"
-    return True
+        if value not in (None, ""):
+            return value
+    return None
+
+
+def _is_car(entry: dict) -> bool:
+    """Whether a JSON / CSV entry is a car: its class (:func:`_class_of`) ``car`` in any case,
+    or the number 3 (COCO's id of a car); an entry naming no class is one."""
+    value = _class_of(entry)
+    if value is None:
+        return True
+    try:
+        return float(value) == COCO_CAR_ID
+    except (TypeError, ValueError):
+        return str(value).strip().lower() == "car"
+
+
+def _no_cars(others: list) -> str:
+    """:data:`NO_CARS`, naming the classes of a file's ``others`` boxes where it holds some (a
+    detector whose cars are "vehicle" or "Automobile" would otherwise read as an empty street)."""
+    if not others:
+        return NO_CARS
+    named = sorted({str(c) for c in others})
+    shown = ", ".join(repr(c) for c in named[:3]) + (", ..." if len(named) > 3 else "")
+    return f"{NO_CARS} (its {len(others)} {'box is' if len(others) == 1 else 'boxes are'} of other classes: {shown})"
 
 
 def detections_from_labels(
@@ -244,6 +262,8 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
     if suffix == ".txt":
         labels = read_labels(path, image_size=image_size)  # an angle in degrees refused there, naming its line
         dets = detections_from_labels(labels, source=str(path))
+        cars = {id(o) for o in of_types(labels, CAR_TYPES)}
+        others = [o.type for o in labels.objects if id(o) not in cars]
     elif suffix == ".json":
         try:
             data = json.loads(path.read_text(encoding="utf-8-sig"))
@@ -257,6 +277,7 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
         if not isinstance(entries, list):
             raise InputError("expected a list of detections or {'detections': [...]}", path=path)
         dets = _from_entries(entries, path)
+        others = [_class_of(e) for e in entries if isinstance(e, dict) and not _is_car(e)]
     elif suffix == ".csv":
         try:
             # utf-8-sig: spreadsheets write a byte-order mark before the header.
@@ -271,12 +292,15 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
             raise InputError(f"CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha), got "
                              f"{header if len(header) <= 40 else header[:37] + '...'!r}", path=path)
         dets = _from_entries(rows, path)
+        others = [_class_of(e) for e in rows if not _is_car(e)]
     else:
         raise InputError(f"unknown detections format {suffix!r} (use .json, .csv or a KITTI .txt)", path=path)
     # every box, before the floor: a file of another image is one
     problem = boxes_problem(dets.boxes, image_size) or normalised_boxes_problem(dets.boxes)
     if problem:
         raise InputError(problem, path=path)
+    if len(dets) == 0:
+        raise InputError(_no_cars(others), path=path)
     dets = dets if min_score is None else dets.subset(dets.scores >= min_score)
     if len(dets) == 0:
         raise InputError(NO_CARS, path=path)
