@@ -186,3 +186,17 @@ def test_pitch_of_a_folder_of_frames_reads_the_kitti_layouts_pitch(frames_dir, t
     assert r.exit_code == 0, r.output
     record = json.loads((tmp_path / "folder.json").read_text())
     assert record["frames"]["000010"]["boxes"] > 0 and record == json.loads((tmp_path / "kitti.json").read_text())
+
+
+def test_eval_of_a_plain_folder_draws_its_frames_alone(tmp_path):
+    """A plain folder's frames are no KITTI drive's, whatever their names: the intervals draw each alone (the
+    shipped drive map grouped 000002 and 000010, frames of KITTI's, by their drives)."""
+    folder = tmp_path / "cam"
+    (folder / "label_2").mkdir(parents=True)
+    for f in ("000002", "000010"):
+        shutil.copy(SPLIT / "image_2" / f"{f}.png", folder / f"{f}.png")
+        shutil.copy(SPLIT / "label_2" / f"{f}.txt", folder / "label_2" / f"{f}.txt")
+    r = run("eval", folder, "--calib", CALIB, "--variant", "coarse", "--particles", 10, "--workers", 1,
+            "--draws", 20)
+    assert r.exit_code == 0, r.output
+    assert "0 drives and 2 frames of no known drive" in r.output, r.output
