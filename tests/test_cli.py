@@ -429,6 +429,8 @@ def test_device_option_errors_are_one_line_and_numpy_is_the_default_without_a_gp
 
     r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "fg", "--frames", "000002", "--device", "tpu"])
     assert r.exit_code == 2 and "unknown device 'tpu'" in r.output and len(r.output.strip().splitlines()) == 1
+    r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "fg", "--frames", "000002", "--device", ""])
+    assert r.exit_code == 2 and "unknown device ''" in r.output, r.output  # an unset variable: it was taken as auto
     # --set inference.device is the device too (it was overridden by --device's default), checked as early
     r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "coarse", "--frames", "000002", "--set",
                                   "inference.device=tpu"])

@@ -230,8 +230,9 @@ def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_ray
     unknown = set(inference) - set(models_given)
     if unknown:  # a command passed an option no stage owns: a bug, not a user error
         raise TypeError(f"options no stage owns: {', '.join(sorted(unknown))}")
-    # --device, else --set inference.device=..., else auto: resolved and checked here, before any fit
-    settings["inference.device"] = choose_device(device or settings.get("inference.device", "auto"), parallel=parallel,
+    # --device, else --set inference.device=..., else auto: resolved and checked here, before any fit ("" is no device)
+    chosen = settings.get("inference.device", "auto") if device is None else device
+    settings["inference.device"] = choose_device(chosen, parallel=parallel,
                                                  casts_rays=casts_rays)
     options = FitOptions(lifting=LiftingOptions(n_particles=particles), seed=seed, calibrate_scores=calibrate_scores,
                          **models_given)
