@@ -362,9 +362,9 @@ class KittiDataset:
             split_dir = next((d for d in (root / split, root) if (d / "image_2").is_dir()), root)
             image_dir = split_dir / "image_2" if (split_dir / "image_2").is_dir() else split_dir
         elif (root / split / "image_2").is_dir() or (root / split / "calib").is_dir():
-            split_dir = image_dir = root / split
+            split_dir = root / split
         elif (root / "image_2").is_dir() or (root / "calib").is_dir():
-            split_dir = image_dir = root
+            split_dir = root
         else:
             images = any(_frame_image(p) for p in root.iterdir())
             raise InputError(
