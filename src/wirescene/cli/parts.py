@@ -140,12 +140,10 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
                                  position=position, calibrate_real=calibrate, smooth=smooth, synth_cache=synth_cache,
                                  calibration_folds=folds, label_shapes=label_shapes, progress=click.echo)
     if report:
-        def conv(o):
-            if isinstance(o, dict):
-                return {k: conv(v) for k, v in o.items() if not str(k).startswith("_")}
-            return o.tolist() if hasattr(o, "tolist") else o
+        def public(o):  # the report's keys without the private ones; arrays are write_json's (strict_values)
+            return {k: public(v) for k, v in o.items() if not str(k).startswith("_")} if isinstance(o, dict) else o
 
         from wirescene.core.jsonio import write_json
 
-        write_json(report, conv(rep))
+        write_json(report, public(rep))
     click.echo(f"train accuracy {rep['train_acc']:.3f}")
