@@ -1,0 +1,179 @@
+"""The README's command lines name commands, options and benchmark scripts that exist: users
+copy them, so an option renamed in the code fails here rather than in their shell."""
+from __future__ import annotations
+
+import dataclasses
+import re
+import shlex
+from pathlib import Path
+
+import click
+import pytest
+
+from wirescene.cli.main import main as cli
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+
+
+def _command_lines(text: str, program: str) -> list[str]:
+    """Each ``program ...`` command of the README: the lines of its fenced shell blocks (a
+    comment cut off, lines continued by a backslash joined) and its inline code spans."""
+    commands, prose, fence = [], [], None
+    for line in text.replace("\\\n", " ").splitlines():
+        if line.lstrip().startswith("```"):  # a fence, also one indented under a list item
+            fence = None if fence is not None else (line.lstrip()[3:].strip() or "text")
+            continue
+        if fence is None:
+            prose.append(line)
+        elif fence in ("bash", "sh", "console"):
+            for part in re.split(r"&&|;|\|", line.split(" #")[0]):  # chained commands each checked
+                if part.strip().startswith(program + " "):
+                    commands.append(part.strip())
+    for span in re.findall(r"`([^`]+)`", " ".join(prose)):
+        if span.startswith(program + " "):
+            commands.append(span)
+    return commands
+
+
+def _options(command: click.Command) -> set[str]:
+    names = {"--help"}
+    for param in command.params:
+        names.update(getattr(param, "opts", []))
+        names.update(getattr(param, "secondary_opts", []))
+    return names
+
+
+def _resolve(tokens: list[str]) -> tuple[click.Command, list[str]]:
+    """The click command ``tokens`` name (``wirescene train detector ...``) and the path to it."""
+    command, path = cli, ["wirescene"]
+    for token in tokens[1:]:
+        if not isinstance(command, click.Group) or token.startswith("-"):
+            break
+        sub = command.commands.get(token)
+        if sub is None:
+            break
+        command, path = sub, [*path, token]
+    return command, path
+
+
+def _long_options(tokens: list[str]) -> list[str]:
+    tokens = tokens[:tokens.index("--")] if "--" in tokens else tokens  # what follows goes to another command
+    return [t.split("=")[0] for t in tokens if re.fullmatch(r"--[a-z][a-z0-9-]*(=.*)?", t)]
+
+
+def _benchmark_sources(script: Path, seen: set[Path] | None = None) -> str:
+    """The text of ``script`` and of the benchmark modules it imports (their parsers lend it options)."""
+    seen = set() if seen is None else seen
+    seen.add(script)
+    text = script.read_text()
+    for name in re.findall(r"^\s*(?:from|import) (\w+)", text, flags=re.M):
+        module = script.parent / f"{name}.py"
+        if module.is_file() and module not in seen:
+            text += _benchmark_sources(module, seen)
+    return text
+
+
+def _setting_problem(path: list[str], name: str) -> str | None:
+    """Why ``--set NAME=...`` of command ``path`` names nothing (None: a setting it takes)."""
+    from wirescene.fitting.options import STAGES, FitOptions
+    from wirescene.training.pipeline import option_default
+
+    stage, _, key = name.partition(".")
+    if path[1:] == ["train", "all"]:
+        try:
+            option_default(stage, key)
+        except ValueError as exc:
+            return str(exc)
+        return None
+    if stage not in STAGES or key not in {f.name for f in dataclasses.fields(getattr(FitOptions(), stage))}:
+        return f"no setting {name!r} (stages {', '.join(STAGES)})"
+    return None
+
+
+def _settings(tokens: list[str]) -> list[str]:
+    """The names ``--set NAME=VALUE`` assigns in ``tokens``; placeholders (``STAGE.KEY``) left out."""
+    values = [b for a, b in zip(tokens, tokens[1:]) if a == "--set"]
+    values += [t.removeprefix("--set=") for t in tokens if t.startswith("--set=")]
+    names = [v.partition("=")[0] for v in values]
+    return [n for n in names if n != n.upper()]
+
+
+def _split(command: str) -> list[str]:
+    try:
+        return shlex.split(command)
+    except ValueError:  # an unbalanced quote in prose: whitespace is enough to find the options
+        return command.split()
+
+
+def test_readme_names_command_lines():
+    # the extraction itself must find the README's commands, or the checks below pass on nothing
+    text = README.read_text()
+    assert len(_command_lines(text, "wirescene")) >= 40
+    assert sum(".py" in line for line in _command_lines(text, "python")) >= 30
+
+
+def test_readme_wirescene_commands_exist_with_their_options():
+    problems = []
+    for line in _command_lines(README.read_text(), "wirescene"):
+        tokens = _split(line)
+        command, path = _resolve(tokens)
+        if isinstance(command, click.Group) and len(tokens) > len(path) and not tokens[len(path)].startswith("-"):
+            problems.append(f"{line!r}: {' '.join(path)} has no command {tokens[len(path)]!r}")
+            continue
+        unknown = [o for o in _long_options(tokens) if o not in _options(command)]
+        if unknown:
+            problems.append(f"{line!r}: {' '.join(path)} has no option {', '.join(unknown)}")
+        wrong = [p for p in (_setting_problem(path, n) for n in _settings(tokens)) if p]
+        problems += [f"{line!r}: --set {p}" for p in wrong]
+    assert not problems, "\n".join(problems)
+
+
+def test_readme_benchmark_commands_name_scripts_and_options_that_exist():
+    problems = []
+    lines = _command_lines(README.read_text(), "python")
+    for line in lines:
+        tokens = _split(line)
+        scripts = [t for t in tokens[1:3] if t.endswith(".py")]
+        if not scripts:
+            continue
+        script = ROOT / scripts[0]
+        if not script.is_file():
+            problems.append(f"{line!r}: no script {scripts[0]}")
+            continue
+        known = _benchmark_sources(script)
+        unknown = [o for o in _long_options(tokens) if f'"{o}"' not in known and f"'{o}'" not in known]
+        if unknown:
+            problems.append(f"{line!r}: {scripts[0]} has no option {', '.join(unknown)}")
+    assert not problems, "\n".join(problems)
+
+
+def test_readme_settings_told_alone_exist():
+    # `--set NAME=VALUE` in prose, of the fit's stages or of `train all`'s steps
+    names = [n for span in _command_lines(README.read_text(), "--set") for n in _settings(_split(span))]
+    assert len(names) >= 8
+    wrong = [n for n in names if _setting_problem(["wirescene"], n) and _setting_problem(["wirescene", "train", "all"], n)]
+    assert not wrong, f"README's --set names nothing: {wrong}"
+
+
+@pytest.mark.parametrize("line, problem", [
+    ("wirescene eval ROOT --no-such-option 3", "wirescene eval has no option --no-such-option"),
+    ("wirescene train nonsense --out M", "wirescene train has no command 'nonsense'"),
+    ("wirescene evaluate ROOT", "wirescene has no command 'evaluate'"),
+    ("python benchmarks/bench_real_folds.py --root R --no-such-option", "bench_real_folds.py has no option --no-such"),
+    ("python benchmarks/bench_nothing.py --root R", "no script benchmarks/bench_nothing.py"),
+    ("wirescene predict R --out O --set lifting.camera_hight=1.3", "--set no setting 'lifting.camera_hight'"),
+    ("wirescene train all R --out M --set parts.n_tree=3", "--set step parts has no option 'n_tree'"),
+])
+@pytest.mark.parametrize("where", ["span", "fence", "indented fence"])
+def test_readme_check_finds_a_wrong_command(line, problem, where, monkeypatch, tmp_path):
+    fine = "wirescene demo --out D  # a comment --not-an-option\npython benchmarks/bench_fit.py --frame 000010"
+    text = {"span": f"Run `{line}` now.\n\n```bash\n{fine}\n```\n",
+            "fence": f"Run:\n\n```bash\n{fine}\n{line}\n```\n",
+            "indented fence": f"- Run:\n\n  ```bash\n  {line}\n  ```\n\n`wirescene demo --out D`\n"}[where]
+    readme = tmp_path / "README.md"
+    readme.write_text(text)
+    monkeypatch.setattr(f"{__name__}.README", readme)
+    with pytest.raises(AssertionError, match=re.escape(problem)):
+        test_readme_wirescene_commands_exist_with_their_options()
+        test_readme_benchmark_commands_name_scripts_and_options_that_exist()
