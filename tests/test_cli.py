@@ -577,6 +577,46 @@ def test_predict_writes_one_label_file_per_image_and_resumes(tmp_path):
     assert r.exit_code == 2 and "other settings (options.lifting.n_particles)" in r.stderr, r.stderr
 
 
+def test_predict_writes_each_frames_json_and_pictures_in_folders_of_their_own(tmp_path):
+    """`--json-dir` and `--pictures`: each frame's scene as `fit` writes it (its cars those of the
+    label file, with wireframes) and its two pictures, the label folder left a submission; a
+    frame resumed gets its files again, and another folder is another run."""
+    from wirescene.io.kitti import read_labels
+
+    out, scenes, pictures = tmp_path / "pred", tmp_path / "json", tmp_path / "pictures"
+    args = ["predict", KITTI_ROOT, "--split", "training", "--out", out, "--variant", "fg+gp", "--detections", "gt",
+            "--frames", "000002,000010", "--particles", 8, "--iterations", 1, "--workers", 2,
+            "--json-dir", scenes, "--pictures", pictures]
+    r = run(*args)
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in out.iterdir()) == [".predict.json", "000002.txt", "000010.txt"]
+    assert sorted(p.name for p in scenes.iterdir()) == ["000002.json", "000010.json"]
+    assert sorted(p.name for p in pictures.iterdir()) == ["000002_bev.png", "000002_overlay.png",
+                                                          "000010_bev.png", "000010_overlay.png"]
+    for frame in ("000002", "000010"):
+        scene = json.loads((scenes / f"{frame}.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+        labels = read_labels(out / f"{frame}.txt").objects
+        assert scene["frame"] == frame and scene["variant"] == "fg+gp" and len(scene["objects"]) == len(labels) > 0
+        for car, label in zip(scene["objects"], labels):
+            assert_close(car["location"], label.location, atol=0.006)  # the label file's two decimals
+            assert np.array(car["vertices"]).shape == (36, 3) and len(car["visibility"]) == 36
+        for kind in ("overlay", "bev"):
+            assert (pictures / f"{frame}_{kind}.png").read_bytes()[:4] == b"\x89PNG"
+    kept = (pictures / "000010_overlay.png").stat().st_mtime_ns
+    for path in (out / "000002.txt", scenes / "000002.json", pictures / "000002_bev.png"):
+        path.unlink()  # as if interrupted while writing this frame's files
+    r = run(*args, "--resume")
+    assert r.exit_code == 0 and "1 frames fitted, 1 kept" in r.output
+    assert (scenes / "000002.json").is_file() and (pictures / "000002_bev.png").is_file()
+    assert (pictures / "000010_overlay.png").stat().st_mtime_ns == kept
+    r = CliRunner().invoke(main, [str(a) for a in args[:-1]] + [str(tmp_path / "elsewhere"), "--resume"])
+    assert r.exit_code == 2 and "other settings (folders.pictures_dir)" in r.stderr, r.stderr
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    r = CliRunner().invoke(main, [str(a) for a in args[:-1]] + [str(a_file), "--out", str(tmp_path / "new")])
+    assert r.exit_code == 2 and "--pictures" in r.stderr and not (tmp_path / "new").exists(), r.stderr
+
+
 def test_predict_resumed_with_fewer_frames_is_refused_and_with_more_continues(tmp_path):
     """A submission is the folder's label files: a resumed run whose --frames / --split-file leave
     out frames of the earlier run is refused before any fit (they would be zipped with it), the

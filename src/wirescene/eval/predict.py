@@ -2,8 +2,10 @@
 the file set the KITTI benchmark server expects, one ``FRAME.txt`` per image with a
 score per car. Frames are fitted serially, in processes or on Dask, like ``eval``, and
 an interrupted run resumes: ``OUT/.predict.json`` records the settings, and a frame
-whose label file exists (written atomically) is not fitted again under the same
-settings."""
+whose label file exists (written atomically, after the frame's other files) is not fitted
+again under the same settings. Besides the label files, each frame's JSON (the cars'
+wireframes, visible vertices and the ground plane, as ``fit`` writes it) and its two
+pictures may be written to folders of their own, the label folder staying a submission."""
 
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from wirescene.core.artefacts import format_tag
-from wirescene.core.atomic import write_text
+from wirescene.core.atomic import write_bytes, write_text
 from wirescene.core.errors import InputError
 from wirescene.core.version import __version__
 from wirescene.eval.records import config_difference, refuse_frames_outside
@@ -25,6 +27,7 @@ from wirescene.fitting.options import FitOptions
 from wirescene.fitting.pipeline import fit_frame
 from wirescene.fitting.variants import get_variant
 from wirescene.io.kitti import KittiDataset
+from wirescene.io.outputs import scene_figures, scene_json
 
 CONFIG_FILE = ".predict.json"
 
@@ -35,25 +38,44 @@ class _PredictJob:
     variant: str
     source: DetectionSource
     options: FitOptions
+    json_dir: Path | None = None
+    pictures_dir: Path | None = None
 
-    def __call__(self, frame_id: str) -> tuple[str, str]:
+    def __call__(self, frame_id: str) -> tuple[str, str, dict[Path, bytes]]:
+        """``(frame, label file's text, {path: bytes} of its other files)``: the files are written
+        by the process that gathers the frames (a worker writes none)."""
         camera = self.dataset.camera(frame_id)
         detections = self.source.for_frame(self.dataset, frame_id, frame_seed(self.options.seed, frame_id),
                                            predetect=self.options.predetect, lifting=self.options.lifting)
         image = self.dataset.image(frame_id)
         fitted = fit_frame(camera, detections, [self.variant], image=image, options=self.options,
                            own=self.source.own)
-        return frame_id, fitted.estimates[self.variant].to_kitti()
+        estimate = fitted.estimates[self.variant]
+        files = {}
+        if self.json_dir is not None:
+            files[self.json_dir / f"{frame_id}.json"] = scene_json(frame_id, estimate, fitted.detections).encode()
+        if self.pictures_dir is not None:
+            from wirescene.io.pictures import figure_bytes
+
+            label_file = self.dataset.label_path(frame_id)  # a labelled split's cars drawn beside the estimate
+            gt = self.dataset.labels(frame_id).of_type("Car") if label_file.is_file() else []
+            figures = scene_figures(frame_id, image=image, camera=camera, estimate=estimate,
+                                    detections=fitted.detections, gt=gt)
+            for suffix, fig in zip(("overlay", "bev"), figures):
+                files[self.pictures_dir / f"{frame_id}_{suffix}.png"] = figure_bytes(fig)
+        return frame_id, estimate.to_kitti(), files
 
 
-def _config(dataset: KittiDataset, variant: str, source: DetectionSource, options: FitOptions) -> dict:
+def _config(dataset: KittiDataset, variant: str, source: DetectionSource, options: FitOptions,
+            folders: dict[str, str | None]) -> dict:
     spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
     # the trained files the fit reads, by path and content: another file it does not read changes nothing
     read = {"fine": get_variant(variant).fine, "own": source.own, "evidence": "parts"}
     config = {"format": format_tag("predict-config", 1), "wirescene": __version__,
               **dataset.record(), "variant": variant,
               "detections": {"spec": spec, "allow_missing": source.allow_missing, **source.floor_record()},
-              "options": options_read(options, **read), "models": models_fingerprint(options, **read)}
+              "options": options_read(options, **read), "models": models_fingerprint(options, **read),
+              "folders": folders}
     return json.loads(json.dumps(config, default=str))
 
 
@@ -89,6 +111,8 @@ def predict_dataset(
     dask_client=None,
     progress: Callable[[Iterable], Iterable] = lambda it: it,
     notify: Callable[[str], None] | None = None,
+    json_dir=None,
+    pictures_dir=None,
 ) -> list[str]:
     """Write ``out_dir/FRAME.txt`` (KITTI labels with scores) for every image.
 
@@ -120,6 +144,14 @@ def predict_dataset(
     notify : callable, optional
         Receives one-line warnings (frames whose calibration looks made for another image
         size); default: standard error.
+    json_dir : path, optional
+        Also write each frame's ``FRAME.json`` here
+        (:func:`wirescene.io.outputs.scene_json`: the cars' 3D boxes, wireframes and visible
+        vertices, the ground plane).
+    pictures_dir : path, optional
+        Also write each frame's ``FRAME_overlay.png`` and ``FRAME_bev.png`` here
+        (:func:`wirescene.io.outputs.scene_figures`; a labelled split's cars drawn beside the
+        estimates).
 
     Returns
     -------
@@ -142,7 +174,11 @@ def predict_dataset(
     # a submission of no file is refused here, not by the server
     frame_ids = list(frames) if frames is not None else dataset.require_frames(images=True)
     source.missing_frames(frame_ids)
-    config = _config(dataset, variant, source, options)
+    extra = {"json_dir": json_dir, "pictures_dir": pictures_dir}
+    extra = {name: None if folder is None else Path(folder) for name, folder in extra.items()}
+    # a resumed run's frames keep their files where the first run wrote them: another folder is another run
+    config = _config(dataset, variant, source, options,
+                     {name: None if f is None else str(f.resolve()) for name, f in extra.items()})
     config_path = out / CONFIG_FILE
     if config_path.is_dir():  # else found where the first frame's labels are written, after its fit
         raise InputError("a folder where predict writes its settings' record", path=config_path)
@@ -162,13 +198,15 @@ def predict_dataset(
     todo = [f for f in frame_ids if f not in done]
     say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), notify or notify_stderr)
     source.check_files(dataset, todo)
-    job = _PredictJob(dataset, variant, source, options)
+    job = _PredictJob(dataset, variant, source, options, **extra)
     with ExitStack() as stack:
-        for k, (frame_id, text) in enumerate(progress(fit_frames(job, todo, workers=workers,
-                                                                 dask_client=dask_client, stack=stack))):
+        for k, (frame_id, text, files) in enumerate(progress(fit_frames(job, todo, workers=workers,
+                                                                        dask_client=dask_client, stack=stack))):
             if k == 0:  # the settings' record with the first label file: a run failing before leaves nothing
                 write_text(config_path, json.dumps(config, indent=1))
-            write_text(out / f"{frame_id}.txt", text)
+            for path, data in files.items():
+                write_bytes(path, data)
+            write_text(out / f"{frame_id}.txt", text)  # last: a frame with its label file has its other files
     if not todo:
         write_text(config_path, json.dumps(config, indent=1))
     return todo

@@ -1,4 +1,5 @@
-"""The files of one fitted image: KITTI labels, JSON, wireframe overlay and bird's-eye view."""
+"""The files of one fitted image: KITTI labels, JSON, wireframe overlay and bird's-eye view
+(matplotlib imported only to draw the pictures: ``predict`` writes the JSON without it)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ from wirescene.core.labels import Label
 from wirescene.core.types import Detections, SceneEstimate, dropped_detections, fitted_detections
 from wirescene.core.wireframe import EDGES
 from wirescene.io.kitti import write_labels
-from wirescene.io.pictures import birds_eye, overlay, save_figure
 
 
 def boxes_in_words(source: str) -> str:
@@ -62,25 +62,23 @@ def write_fit_outputs(
     detections: Detections,
     gt: list[Label] = (),
 ) -> dict[str, Path]:
-    """Write ``STEM.txt`` (KITTI labels), ``STEM.json``, ``STEM_overlay.png`` and
-    ``STEM_bev.png``. The overlay draws the pre-detections of the fitted cars dashed and
-    those the fit's verification dropped dotted grey. The four files are written to
+    """Write ``STEM.txt`` (KITTI labels), ``STEM.json`` (:func:`scene_json`), ``STEM_overlay.png``
+    and ``STEM_bev.png`` (:func:`scene_figures`). The four files are written to
     temporary files in ``out_dir`` first and renamed into place only when all are
     complete: if any fails (a picture too large to draw, a full disk) ``out_dir`` is left
     as it was, an earlier run's files of ``STEM`` included, and the directories made for
     it are removed."""
+    from wirescene.io.pictures import save_figure
+
     out_dir = Path(out_dir)
     paths = fit_output_paths(out_dir, stem)
     problem = fit_outputs_problem(paths)
     if problem:
         raise InputError(problem[1], path=problem[0])
     made = missing_dirs(out_dir)
-    payload = dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()})
-    fitted = fitted_detections(detections, estimate)
-    title = f"{stem}  {estimate.variant}, {boxes_in_words(detections.source)}"
-    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted,
-                          dropped=dropped_detections(detections, estimate), title=title, edges=EDGES)
-    fig_bev = birds_eye(estimate, gt=gt, camera=camera, title=title)
+    payload = scene_json(stem, estimate, detections)
+    fig_overlay, fig_bev = scene_figures(stem, image=image, camera=camera, estimate=estimate, detections=detections,
+                                         gt=gt)
     try:
         with ExitStack() as stack:  # each temporary file replaces its path as the block ends without error
             tmp = {kind: stack.enter_context(atomic_path(path, suffix=path.suffix)) for kind, path in paths.items()}
@@ -92,3 +90,33 @@ def write_fit_outputs(
         remove_empty(made)
         raise
     return paths
+
+
+def scene_json(stem: str, estimate: SceneEstimate, detections: Detections) -> str:
+    """The JSON file of a fitted image (``fit``'s ``STEM.json``, ``predict --json-dir``'s
+    ``FRAME.json``): the frame, where its boxes came from and the scene
+    (:meth:`~wirescene.core.types.SceneEstimate.to_dict`: each car's 3D box, wireframe and
+    visible vertices, the ground plane); strict JSON (``null`` for a non-finite number).
+
+    Examples
+    --------
+    >>> import json
+    >>> scene = json.loads(scene_json("000010", SceneEstimate("coarse", []), Detections(np.zeros((0, 4)), 1.0, np.nan)))
+    >>> scene["frame"], scene["variant"], scene["objects"]
+    ('000010', 'coarse', [])
+    """
+    return dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()})
+
+
+def scene_figures(stem: str, *, image: np.ndarray, camera: Camera, estimate: SceneEstimate, detections: Detections,
+                  gt: list[Label] = ()):
+    """``(overlay, bird's-eye view)``: the two pictures of a fitted image, as matplotlib figures
+    (:func:`wirescene.io.pictures.overlay`, :func:`~wirescene.io.pictures.birds_eye`). The overlay
+    draws the pre-detections of the fitted cars dashed and those the fit's verification dropped
+    dotted grey; ``gt``: label cars drawn beside the estimate."""
+    from wirescene.io.pictures import birds_eye, overlay
+
+    title = f"{stem}  {estimate.variant}, {boxes_in_words(detections.source)}"
+    fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted_detections(detections, estimate),
+                          dropped=dropped_detections(detections, estimate), title=title, edges=EDGES)
+    return fig_overlay, birds_eye(estimate, gt=gt, camera=camera, title=title)

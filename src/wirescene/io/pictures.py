@@ -13,6 +13,7 @@ say) is left as it was.
 
 from __future__ import annotations
 
+import io
 import sys
 from pathlib import Path
 from typing import Sequence
@@ -464,13 +465,32 @@ def save_figure(fig, path: str | Path, **savefig_kw) -> Path:
     fmt = path.suffix[1:].lower()
     if fmt not in fig.canvas.get_supported_filetypes():
         fmt = "png"
+    data = figure_bytes(fig, fmt, **savefig_kw)
+    with atomic_path(path, suffix=f".{fmt}") as tmp:
+        tmp.write_bytes(data)
+    return path
+
+
+def figure_bytes(fig, fmt: str = "png", **savefig_kw) -> bytes:
+    """The file :func:`save_figure` writes, as bytes (a worker process sends them to the process
+    that writes its files); ``fmt`` one of ``fig.canvas.get_supported_filetypes()``. A figure
+    pyplot manages is closed.
+
+    Examples
+    --------
+    >>> fig = new_figure(figsize=(1, 1), dpi=20)
+    >>> _ = fig.subplots().plot([0, 1])
+    >>> figure_bytes(fig)[:4]
+    b'\\x89PNG'
+    """
     if fmt in _UNDATED:
         savefig_kw.setdefault("metadata", _UNDATED[fmt])
+    buffer = io.BytesIO()
     try:
-        with atomic_path(path, suffix=f".{fmt}") as tmp, rc_context({"svg.hashsalt": "wirescene"}):
-            fig.savefig(tmp, format=fmt, **savefig_kw)
+        with rc_context({"svg.hashsalt": "wirescene"}):
+            fig.savefig(buffer, format=fmt, **savefig_kw)
     finally:
         pyplot = sys.modules.get("matplotlib.pyplot")
         if pyplot is not None:
             pyplot.close(fig)
-    return path
+    return buffer.getvalue()
