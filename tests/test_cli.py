@@ -1249,3 +1249,25 @@ def test_pitch_reads_a_rig_off_its_frames_pooled(tmp_path):
     record = json.loads(out.read_text())
     assert record["frames"]["001545"] == {"pitch": None, "boxes": 0}
     assert record["pitch"] == alone[0] == record["frames"]["000002"]["pitch"]
+
+
+def test_pitch_of_frames_whose_boxes_are_all_cut_by_the_bottom_edge_is_refused(tmp_path):
+    """A box cut by the image's bottom edge says nothing of where its car stands: a frame whose cars all are reads
+    no pitch, and a run of such frames is refused (the pitch told would pass for one read), saying why."""
+    from PIL import Image
+
+    from conftest import kitti_copy
+
+    root = kitti_copy(tmp_path / "kitti", ["000002"], subdirs=("image_2", "calib"))
+    image = root / "training" / "image_2" / "000002.png"
+    rgb = np.asarray(Image.open(image).convert("RGB"))
+    moved = np.full_like(rgb, 128)
+    moved[153:] = rgb[:-153]  # the frame's one car (bottom at row 223 of 375) moved down past the bottom edge
+    Image.fromarray(moved).save(image)
+    r = run("pitch", root, "--json", tmp_path / "pitch.json")
+    assert r.exit_code == 2, r.output
+    assert "000002: no pitch read (1 box found, cut by the bottom edge)" in r.stdout, r.stdout
+    assert r.stderr == (f"wirescene: error: {root / 'training' / 'image_2'}: no box to read the pitch off in the 1 "
+                        "frame read (1 box found, cut by the image's bottom edge): give frames of cars "
+                        "(--frames, --max-frames)\n")
+    assert not (tmp_path / "pitch.json").exists()

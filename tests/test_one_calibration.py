@@ -200,3 +200,37 @@ def test_eval_of_a_plain_folder_draws_its_frames_alone(tmp_path):
             "--draws", 20)
     assert r.exit_code == 0, r.output
     assert "0 drives and 2 frames of no known drive" in r.output, r.output
+
+
+def test_split_given_for_a_plain_folder_is_refused(frames_dir, tmp_path):
+    """A plain folder of frames has no split folder: --split given there is refused (it was ignored, the folder's
+    own images read whatever it named), at its default it is no error; KITTI's layout read with --calib honours it."""
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    (dets / "000010.txt").write_text(CAR + "\n")
+    fit = ["--detections", dets, "--variant", "coarse", "--particles", 5, "--workers", 1]
+    commands = {"predict": ["--out", tmp_path / "pred", *fit], "detect": ["--out", tmp_path / "boxes"],
+                "pitch": ["--json", tmp_path / "pitch.json"],
+                "eval": [*fit, "--json", tmp_path / "m.json", "--predictions", tmp_path / "p"]}
+    for command, extra in commands.items():
+        for split in ("testing", "training"):  # either given: predict's default is testing, the others' training
+            r = run(command, frames_dir, "--calib", CALIB, "--split", split, "--frames", "000010", *extra)
+            assert r.exit_code == 2, (command, r.output)
+            assert r.stderr.strip() == (f"wirescene: error: {frames_dir}: --split {split} has no meaning for a plain "
+                                        f"folder of frames (its own images are read with --calib; no {split}/image_2 "
+                                        "here): drop --split"), (command, r.stderr)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dets", "frames"]  # nothing written
+
+    def predict(root, *more):
+        return run("predict", root, "--calib", CALIB, "--frames", "000010", *fit, *more)
+
+    r = predict(frames_dir, "--out", tmp_path / "folder")  # the default: as before
+    assert r.exit_code == 0, r.output
+    r = predict(KITTI_ROOT, "--split", "training", "--out", tmp_path / "kitti")
+    assert r.exit_code == 0, r.output
+    written = (tmp_path / "folder" / "000010.txt").read_bytes()
+    assert written and written == (tmp_path / "kitti" / "000010.txt").read_bytes()
+    r = predict(KITTI_ROOT, "--split", "testing", "--out", tmp_path / "none")  # the message of before
+    assert r.exit_code == 2 and not (tmp_path / "none").exists(), r.output
+    assert r.stderr.strip() == (f"wirescene: error: {KITTI_ROOT}: no .png, .jpg or .jpeg file (it holds only the "
+                                "folders ImageSets, training, no testing/image_2)")

@@ -641,6 +641,10 @@ def test_hidden_by_other_labels_leaves_self_occlusion_out(tmp_path):
 
 
 def test_train_parts_cli_trains_on_the_label_shapes_given(tmp_path):
+    """`train parts --label-shapes` learns from the wireframes given; its --report is strict JSON without the report's
+    private keys (its training data)."""
+    import json
+
     from click.testing import CliRunner
 
     from wirescene.cli.main import main
@@ -651,9 +655,18 @@ def test_train_parts_cli_trains_on_the_label_shapes_given(tmp_path):
     save_label_shapes(tmp_path / "s.npz", {"000010": np.stack([scaled_mean_shape(o.dims) for o in cars]) * 1.02})
     args = ["train", "parts", "--kitti-root", str(KITTI_ROOT), "--frames", "000010", "--n-trees", "2",
             "--max-depth", "4", "--synth-scenes", "0", "--no-calibrate", "--out", str(tmp_path / "p.npz")]
-    r = CliRunner().invoke(main, [*args, "--label-shapes", str(tmp_path / "s.npz")])
+    r = CliRunner().invoke(main, [*args, "--label-shapes", str(tmp_path / "s.npz"), "--report",
+                                  str(tmp_path / "r.json")])
     assert r.exit_code == 0, r.output
     assert PartDetector.load(tmp_path / "p.npz").meta["label_shapes"] == "True"
+
+    def refuse(token):  # a strict parser's reading: no NaN / Infinity token
+        raise ValueError(f"not strict JSON: {token}")
+
+    report = json.loads((tmp_path / "r.json").read_text(), parse_constant=refuse)
+    assert {"frames", "n_patches", "n_part", "n_background", "n_real", "train_acc", "model_bytes"} <= set(report)
+    assert not [k for k in report if k.startswith("_")] and report["frames"] == ["000010"]
+    assert report["n_patches"] == report["n_part"] + report["n_background"] > 0 and 0 <= report["train_acc"] <= 1
     r = CliRunner().invoke(main, ["train", "parts", "--out", str(tmp_path / "q.npz"), "--label-shapes",
                                   str(tmp_path / "s.npz")])
     assert r.exit_code == 2 and "--label-shapes needs --kitti-root" in r.output

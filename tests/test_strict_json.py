@@ -122,3 +122,26 @@ def test_detection_file_with_a_null_alpha_reads_as_no_viewpoint(tmp_path):
     assert back.alpha[0] == pytest.approx(np.pi / 2) and np.isnan(back.alpha[1])
     (tmp_path / "bins.json").write_text('[{"box": [300, 180, 520, 300], "viewpoint_bin": null}]')
     assert np.isnan(read_detections(tmp_path / "bins.json").alpha).all()  # a null bin: no viewpoint either
+
+
+@pytest.mark.parametrize("source", [
+    # real frames, the shipped recipe's kind: one frame and a given calibration (no held-out fold banks to train)
+    ["--kitti-root", KITTI_ROOT, "--frames", "000010", "--calibration", "4,-2,0.6", "--per-octave", 2, "--workers", 1,
+     "--mining-rounds", 0],
+    # synthetic scenes: the bank's meta (numpy arrays) and the validation's figures
+    ["--scenes", 2, "--val-scenes", 1, "--mining-rounds", 0],
+], ids=["kitti", "synthetic"])
+def test_train_detector_report_is_strict_json(tmp_path, source):
+    report = tmp_path / "report.json"
+    r = CliRunner().invoke(main, [str(a) for a in ["train", "detector", *source, "--partial", 0, "--out",
+                                                   tmp_path / "bank.npz", "--report", report]])
+    assert r.exit_code == 0, r.output + r.stderr
+    data = strict_loads(report.read_text())
+    assert {"n_detectors", "names", "total_seconds"} <= set(data) and data["n_detectors"] == len(data["names"]) > 0
+    if "--kitti-root" in source:
+        assert set(data) == {"frames", "calibration", "n_detectors", "names", "total_seconds"}
+        assert data["frames"] == ["000010"] and data["calibration"] == {"a": 4.0, "b": -2.0, "c": 0.6,
+                                                                        "source": "given"}
+    else:
+        assert data["n_scenes"] == 2 and data["validation"]["n_scenes"] == 1 and 0 <= data["validation"]["ap"] <= 1
+        assert len(data["full_box_correction"]) == len(data["bins"])  # an array of the bank's meta, as a list

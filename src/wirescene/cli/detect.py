@@ -18,6 +18,7 @@ from wirescene.cli.options import (
     check_picture_file,
     drive_map_option,
     field_type,
+    kitti_dataset,
     models_option,
     read_drive_map,
     refuse_given,
@@ -249,7 +250,6 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
     from wirescene.eval.kitti_metrics import detection_ap_2d
     from wirescene.fitting.models import detector_bank, viewpoint_classifier
     from wirescene.fitting.own_boxes import own_detections
-    from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
 
     check_output_dir(out_dir, "--out")
@@ -257,7 +257,7 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
     check_output_file(json_out, "--json")
     if classifier_path is not None and out_dir is None:  # refused, not ignored
         raise click.UsageError("--viewpoint-classifier gives the boxes --out writes their viewpoints: it needs --out")
-    ds = KittiDataset(kitti_root, split=split, calib=calib)
+    ds = kitti_dataset(kitti_root, split, calib)
     found = resolve_models(models)
     bank = detector_bank(found.file("detector_bank", given=bank_path))
     # the viewpoints of the boxes --out writes, read before any frame: a bad file is refused

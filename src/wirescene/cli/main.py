@@ -27,6 +27,7 @@ from wirescene.cli.options import (
     detections_spec,
     drive_map_option,
     interval_drives,
+    kitti_dataset,
     min_score_option,
     models_option,
     particles_option,
@@ -365,7 +366,6 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
              min_score, resume, dask_address, **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
     from wirescene.eval.seeds import format_over_seeds, over_seeds, seed_figures
-    from wirescene.io.kitti import KittiDataset
 
     refuse_min_score(min_score, detections)
     if len(seeds) > MAX_SEEDS:  # each seed evaluates every frame again
@@ -381,7 +381,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     check_output_file(json_out, "--json")
     check_output_dir(predictions, "--predictions")
     check_output_dir(report_dir, "--report")
-    dataset = KittiDataset(kitti_root, split=split, calib=calib)
+    dataset = kitti_dataset(kitti_root, split, calib)
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
     # read before any fit (a bad devkit mapping is an error now); a plain folder's frames are no KITTI drive's
@@ -596,7 +596,6 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
     from wirescene.eval.predict import predict_dataset
     from wirescene.eval.sources import DetectionSource
     from wirescene.fitting.variants import casts_rays
-    from wirescene.io.kitti import KittiDataset
 
     refuse_min_score(min_score, detections)
     check_output_dir(out, "--out")
@@ -606,7 +605,7 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
         kitti_root = kitti_root.resolve()
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())
-    dataset = KittiDataset(kitti_root, split=split, calib=calib)
+    dataset = kitti_dataset(kitti_root, split, calib)
     images = dataset.require_frames(images=True)
     frame_ids = select_frames(frames, split_file, images, where=dataset.split_dir, what="image")
     options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address),

@@ -228,6 +228,25 @@ def calib_option(f):
                              "the images (.png, .jpg or .jpeg; frame ids are their names without the suffix).")(f)
 
 
+def kitti_dataset(kitti_root: Path, split: str, calib: Path | None):
+    """``KittiDataset(kitti_root, split=split, calib=calib)`` of a command of :func:`split_option` and
+    :func:`calib_option`: an ``InputError`` naming a plain folder of frames (read with ``--calib``, no
+    ``image_2/``) where ``--split`` was given on the command line, which would be ignored there."""
+    from click.core import ParameterSource
+
+    from wirescene.core.errors import InputError
+    from wirescene.io.kitti import KittiDataset
+
+    dataset = KittiDataset(kitti_root, split=split, calib=calib)
+    source = click.get_current_context().get_parameter_source("split")
+    given = source in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT)
+    # a folder of no images is a KITTI root lacking the split: require_frames says so, naming what it holds
+    if given and dataset.image_dir == dataset.split_dir and dataset.image_ids():
+        raise InputError(f"--split {split} has no meaning for a plain folder of frames (its own images are read "
+                         f"with --calib; no {split}/image_2 here): drop --split", path=kitti_root)
+    return dataset
+
+
 def ap_draws_option(f):
     """``--draws N``: bootstrap draws of the KITTI APs' intervals over drives (0: none)."""
     from wirescene.eval.intervals import MAX_BOOT_AP, N_BOOT_AP

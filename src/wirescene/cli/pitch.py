@@ -12,6 +12,7 @@ from wirescene.cli.options import (
     calib_option,
     check_output_file,
     field_type,
+    kitti_dataset,
     models_option,
     say_models,
     say_off_centre_frames,
@@ -87,11 +88,10 @@ def pitch(kitti_root, frames, split_file, split, calib, max_frames, models, bank
     from wirescene.core.resources import resolve_models
     from wirescene.fitting.models import detector_bank
     from wirescene.fitting.mount import image_pitch_likelihood, rig_pitch
-    from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.geometry import PITCH_SEARCH
 
     check_output_file(json_out, "--json")
-    ds = KittiDataset(kitti_root, split=split, calib=calib)
+    ds = kitti_dataset(kitti_root, split, calib)
     found = resolve_models(models)
     bank_file = found.file("detector_bank", given=bank_path)
     bank = detector_bank(bank_file)
@@ -117,7 +117,8 @@ def pitch(kitti_root, frames, split_file, split, calib, max_frames, models, bank
     boxes = sum(e["boxes"] for e in each.values())
     read = [e["pitch"] is not None for e in each.values()]
     if not any(read):  # the pitch told is no pitch read: no line (nor --json) may pass it off as one
-        cut = f" ({_count(boxes, 'box')} found, each cut by the image's bottom edge)" if boxes else ""
+        each_cut = "cut" if boxes == 1 else "each cut"
+        cut = f" ({_count(boxes, 'box')} found, {each_cut} by the image's bottom edge)" if boxes else ""
         raise InputError(f"no box to read the pitch off in the {_count(len(ids), 'frame')} read{cut}: give frames "
                          "of cars (--frames, --max-frames)", path=ds.image_dir)
     rig = round(rig_pitch(likelihoods, told=told), 2)
