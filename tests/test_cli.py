@@ -589,6 +589,7 @@ def test_predict_writes_each_frames_json_and_pictures_in_folders_of_their_own(tm
             "--json-dir", scenes, "--pictures", pictures]
     r = run(*args)
     assert r.exit_code == 0, r.output
+    assert f"labels in {out}, scenes in {scenes}, pictures in {pictures}" in r.output
     assert sorted(p.name for p in out.iterdir()) == [".predict.json", "000002.txt", "000010.txt"]
     assert sorted(p.name for p in scenes.iterdir()) == ["000002.json", "000010.json"]
     assert sorted(p.name for p in pictures.iterdir()) == ["000002_bev.png", "000002_overlay.png",
