@@ -566,6 +566,8 @@ def test_predict_writes_one_label_file_per_image_and_resumes(tmp_path):
     assert sorted(p.name for p in out.glob("*.txt")) == ["000002.txt", "000010.txt"]
     rows = (out / "000010.txt").read_text().splitlines()
     assert len(rows) == 8 and all(len(row.split()) == 16 for row in rows)
+    # no --json-dir nor --pictures: the record is that of a run begun before them, which such a run resumes
+    assert "folders" not in json.loads((out / ".predict.json").read_text())
     first = (out / "000010.txt").read_text()
     (out / "000002.txt").unlink()  # as if interrupted before this frame
     r = CliRunner().invoke(main, [str(a) for a in args])

@@ -641,7 +641,7 @@ def test_hidden_by_other_labels_leaves_self_occlusion_out(tmp_path):
 
 
 def test_train_parts_cli_trains_on_the_label_shapes_given(tmp_path):
-    """`train parts --label-shapes` learns from the wireframes given; its --report is strict JSON without the report's
+    """`train parts --label-shapes` learns from the wireframes given; its --report is JSON without the report's
     private keys (its training data)."""
     import json
 

@@ -2,7 +2,9 @@
 copy them, so an option renamed in the code fails here rather than in their shell."""
 from __future__ import annotations
 
+import ast
 import dataclasses
+import functools
 import re
 import shlex
 from pathlib import Path
@@ -27,13 +29,17 @@ def _command_lines(text: str, program: str) -> list[str]:
         if fence is None:
             prose.append(line)
         elif fence in ("bash", "sh", "console"):
-            for part in re.split(r"&&|;|\|", line.split(" #")[0]):  # chained commands each checked
-                if part.strip().startswith(program + " "):
-                    commands.append(part.strip())
+            commands += _commands(line.split(" #")[0], program)
     for span in re.findall(r"`([^`]+)`", " ".join(prose)):
-        if span.startswith(program + " "):
-            commands.append(span)
+        commands += _commands(span, program)
     return commands
+
+
+def _commands(text: str, program: str) -> list[str]:
+    """The ``program ...`` commands of a shell line: chained ones each, without a console's ``$`` prompt or
+    the environment variables set before them."""
+    parts = [re.sub(r"^(\$\s+)?([A-Za-z_]\w*=\S*\s+)*", "", p.strip()) for p in re.split(r"&&|;|\|", text)]
+    return [p for p in parts if p.startswith(program + " ")]
 
 
 def _options(command: click.Command) -> set[str]:
@@ -58,20 +64,28 @@ def _resolve(tokens: list[str]) -> tuple[click.Command, list[str]]:
 
 
 def _long_options(tokens: list[str]) -> list[str]:
+    """The ``--name`` of every token that is one (``[--name VALUE]`` and ``--name=VALUE`` too): a token that
+    starts with ``--`` and names no option, however it is spelled (``--min_score``), is one the check reports."""
     tokens = tokens[:tokens.index("--")] if "--" in tokens else tokens  # what follows goes to another command
-    return [t.split("=")[0] for t in tokens if re.fullmatch(r"--[a-z][a-z0-9-]*(=.*)?", t)]
+    tokens = [t.strip("[]") for t in tokens]  # an optional part of a command line is still an option of it
+    return [t.split("=")[0] for t in tokens if t.startswith("--") and len(t) > 2]
 
 
-def _benchmark_sources(script: Path, seen: set[Path] | None = None) -> str:
-    """The text of ``script`` and of the benchmark modules it imports (their parsers lend it options)."""
-    seen = set() if seen is None else seen
-    seen.add(script)
-    text = script.read_text()
-    for name in re.findall(r"^\s*(?:from|import) (\w+)", text, flags=re.M):
-        module = script.parent / f"{name}.py"
-        if module.is_file() and module not in seen:
-            text += _benchmark_sources(module, seen)
-    return text
+@functools.lru_cache(maxsize=None)
+def _benchmark_options(script: Path) -> frozenset[str]:
+    """The options the ``add_argument`` calls of ``script`` and of the benchmark modules it imports name (their
+    parsers lend it options); a name merely quoted in the script (a command it runs) is none of its own."""
+    names, todo, seen = {"--help"}, [script], set()
+    while todo:
+        path = todo.pop()
+        seen.add(path)
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "add_argument":
+                names.update(a.value for a in node.args if isinstance(a, ast.Constant) and isinstance(a.value, str))
+            modules = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                       else [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+            todo += [m for m in (script.parent / f"{n}.py" for n in modules) if m.is_file() and m not in seen]
+    return frozenset(names)
 
 
 def _setting_problem(path: list[str], name: str) -> str | None:
@@ -113,20 +127,28 @@ def test_readme_names_command_lines():
     assert sum(".py" in line for line in _command_lines(text, "python")) >= 30
 
 
+def _wirescene_problems(line: str, tokens: list[str]) -> list[str]:
+    """What ``tokens`` (``wirescene ...``, of README line ``line``) name that does not exist."""
+    command, path = _resolve(tokens)
+    if isinstance(command, click.Group) and len(tokens) > len(path) and not tokens[len(path)].startswith("-"):
+        return [f"{line!r}: {' '.join(path)} has no command {tokens[len(path)]!r}"]
+    problems = []
+    unknown = [o for o in _long_options(tokens) if o not in _options(command)]
+    if unknown:
+        problems.append(f"{line!r}: {' '.join(path)} has no option {', '.join(unknown)}")
+    wrong = [p for p in (_setting_problem(path, n) for n in _settings(tokens)) if p]
+    return problems + [f"{line!r}: --set {p}" for p in wrong]
+
+
 def test_readme_wirescene_commands_exist_with_their_options():
     problems = []
     for line in _command_lines(README.read_text(), "wirescene"):
-        tokens = _split(line)
-        command, path = _resolve(tokens)
-        if isinstance(command, click.Group) and len(tokens) > len(path) and not tokens[len(path)].startswith("-"):
-            problems.append(f"{line!r}: {' '.join(path)} has no command {tokens[len(path)]!r}")
-            continue
-        unknown = [o for o in _long_options(tokens) if o not in _options(command)]
-        if unknown:
-            problems.append(f"{line!r}: {' '.join(path)} has no option {', '.join(unknown)}")
-        wrong = [p for p in (_setting_problem(path, n) for n in _settings(tokens)) if p]
-        problems += [f"{line!r}: --set {p}" for p in wrong]
+        problems += _wirescene_problems(line, _split(line))
     assert not problems, "\n".join(problems)
+
+
+# the benchmarks that pass what follows `--` on to a command of ours, which must take it
+PASSED_ON = {"bench_eval_scale.py": ["wirescene", "eval", "ROOT"]}
 
 
 def test_readme_benchmark_commands_name_scripts_and_options_that_exist():
@@ -141,10 +163,14 @@ def test_readme_benchmark_commands_name_scripts_and_options_that_exist():
         if not script.is_file():
             problems.append(f"{line!r}: no script {scripts[0]}")
             continue
-        known = _benchmark_sources(script)
-        unknown = [o for o in _long_options(tokens) if f'"{o}"' not in known and f"'{o}'" not in known]
+        unknown = [o for o in _long_options(tokens) if o not in _benchmark_options(script)]
         if unknown:
             problems.append(f"{line!r}: {scripts[0]} has no option {', '.join(unknown)}")
+        # a benchmark's --set is the fit's (bench_real_folds.py, bench_other_cameras.py)
+        wrong = [p for p in (_setting_problem(["wirescene"], n) for n in _settings(tokens)) if p]
+        problems += [f"{line!r}: --set {p}" for p in wrong]
+        if "--" in tokens and script.name in PASSED_ON:
+            problems += _wirescene_problems(line, PASSED_ON[script.name] + tokens[tokens.index("--") + 1:])
     assert not problems, "\n".join(problems)
 
 
@@ -152,7 +178,8 @@ def test_readme_settings_told_alone_exist():
     # `--set NAME=VALUE` in prose, of the fit's stages or of `train all`'s steps
     names = [n for span in _command_lines(README.read_text(), "--set") for n in _settings(_split(span))]
     assert len(names) >= 8
-    wrong = [n for n in names if _setting_problem(["wirescene"], n) and _setting_problem(["wirescene", "train", "all"], n)]
+    wrong = [n for n in names
+             if _setting_problem(["wirescene"], n) and _setting_problem(["wirescene", "train", "all"], n)]
     assert not wrong, f"README's --set names nothing: {wrong}"
 
 
@@ -164,13 +191,26 @@ def test_readme_settings_told_alone_exist():
     ("python benchmarks/bench_nothing.py --root R", "no script benchmarks/bench_nothing.py"),
     ("wirescene predict R --out O --set lifting.camera_hight=1.3", "--set no setting 'lifting.camera_hight'"),
     ("wirescene train all R --out M --set parts.n_tree=3", "--set step parts has no option 'n_tree'"),
+    ("wirescene predict R --out O [--resum]", "wirescene predict has no option --resum"),
+    ("wirescene fit I --calib C [--detection D.json] --out O", "wirescene fit has no option --detection"),
+    ("wirescene pitch R --camera_height 1.3", "wirescene pitch has no option --camera_height"),
+    ("wirescene eval R --jsn=m.json", "wirescene eval has no option --jsn"),
+    ("OMP_NUM_THREADS=1 wirescene eval R --jsn m.json", "wirescene eval has no option --jsn"),
+    ("wirescene demo --out D && wirescene eval R --jsn m.json", "wirescene eval has no option --jsn"),
+    ("python benchmarks/bench_fit.py --frame 000010 --no-such-option", "bench_fit.py has no option --no-such-option"),
+    ("python benchmarks/bench_eval_scale.py W --root R --detections bank", "bench_eval_scale.py has no option --det"),
+    ("python benchmarks/bench_real_folds.py --root R --set lifting.camera_hight=1", "--set no setting 'lifting.came"),
+    ("python benchmarks/bench_eval_scale.py W --root R -- --variant full --detection bank",
+     "wirescene eval has no option --detection"),
 ])
-@pytest.mark.parametrize("where", ["span", "fence", "indented fence"])
+@pytest.mark.parametrize("where", ["span", "fence", "indented fence", "continued"])
 def test_readme_check_finds_a_wrong_command(line, problem, where, monkeypatch, tmp_path):
     fine = "wirescene demo --out D  # a comment --not-an-option\npython benchmarks/bench_fit.py --frame 000010"
+    head, _, tail = line.rpartition(" ")
     text = {"span": f"Run `{line}` now.\n\n```bash\n{fine}\n```\n",
             "fence": f"Run:\n\n```bash\n{fine}\n{line}\n```\n",
-            "indented fence": f"- Run:\n\n  ```bash\n  {line}\n  ```\n\n`wirescene demo --out D`\n"}[where]
+            "indented fence": f"- Run:\n\n  ```bash\n  {line}\n  ```\n\n`wirescene demo --out D`\n",
+            "continued": f"```bash\n{fine}\n{head} \\\n    {tail}\n```\n"}[where]
     readme = tmp_path / "README.md"
     readme.write_text(text)
     monkeypatch.setattr(f"{__name__}.README", readme)

@@ -131,7 +131,7 @@ def test_detection_file_with_a_null_alpha_reads_as_no_viewpoint(tmp_path):
     # synthetic scenes: the bank's meta (numpy arrays) and the validation's figures
     ["--scenes", 2, "--val-scenes", 1, "--mining-rounds", 0],
 ], ids=["kitti", "synthetic"])
-def test_train_detector_report_is_strict_json(tmp_path, source):
+def test_train_detector_report_is_json_with_its_keys(tmp_path, source):
     report = tmp_path / "report.json"
     r = CliRunner().invoke(main, [str(a) for a in ["train", "detector", *source, "--partial", 0, "--out",
                                                    tmp_path / "bank.npz", "--report", report]])

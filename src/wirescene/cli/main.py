@@ -623,7 +623,8 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
     finally:
         if client is not None:
             client.close()
-    also = "".join(f", {what} in {folder}" for what, folder in (("scenes", json_dir), ("pictures", pictures_dir)) if folder)
+    also = "".join(f", {what} in {folder}" for what, folder in (("scenes", json_dir), ("pictures", pictures_dir))
+                   if folder)
     click.echo(f"{len(fitted)} frames fitted, {total - len(fitted)} kept from an earlier run; labels in {out}{also}")
 
 

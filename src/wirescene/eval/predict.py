@@ -67,7 +67,7 @@ class _PredictJob:
 
 
 def _config(dataset: KittiDataset, variant: str, source: DetectionSource, options: FitOptions,
-            folders: dict[str, str | None]) -> dict:
+            folders: dict[str, str]) -> dict:
     spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
     # the trained files the fit reads, by path and content: another file it does not read changes nothing
     read = {"fine": get_variant(variant).fine, "own": source.own, "evidence": "parts"}
@@ -75,7 +75,7 @@ def _config(dataset: KittiDataset, variant: str, source: DetectionSource, option
               **dataset.record(), "variant": variant,
               "detections": {"spec": spec, "allow_missing": source.allow_missing, **source.floor_record()},
               "options": options_read(options, **read), "models": models_fingerprint(options, **read),
-              "folders": folders}
+              **({"folders": folders} if folders else {})}  # none given: the record of a run begun before them
     return json.loads(json.dumps(config, default=str))
 
 
@@ -178,7 +178,7 @@ def predict_dataset(
     extra = {name: None if folder is None else Path(folder) for name, folder in extra.items()}
     # a resumed run's frames keep their files where the first run wrote them: another folder is another run
     config = _config(dataset, variant, source, options,
-                     {name: None if f is None else str(f.resolve()) for name, f in extra.items()})
+                     {name: str(f.resolve()) for name, f in extra.items() if f is not None})
     config_path = out / CONFIG_FILE
     if config_path.is_dir():  # else found where the first frame's labels are written, after its fit
         raise InputError("a folder where predict writes its settings' record", path=config_path)
