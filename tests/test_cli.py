@@ -1,6 +1,7 @@
 """End-to-end command-line behaviour: outputs, JSON keys, clean failures on bad input."""
 
 import json
+import pickle
 import re
 import shutil
 from pathlib import Path
@@ -66,21 +67,21 @@ def test_fit_writes_all_outputs(tmp_path):
 def test_fit_outputs_are_replaced_as_a_set_or_not_at_all(tmp_path, monkeypatch):
     """A picture that cannot be drawn (out of memory on a huge image, a full disk) leaves an earlier
     run's four files as they were, none of this run's and no folder made for it."""
-    import wirescene.io.outputs
+    import wirescene.io.pictures  # write_fit_outputs imports save_figure from it as it writes
 
     args = ["fit", SPLIT / "image_2" / "000010.png", "--calib", SPLIT / "calib" / "000010.txt",
             "--detections", SPLIT / "label_2" / "000010.txt", "--variant", "coarse", "--particles", 5]
     out = tmp_path / "out"
     assert run(*args, "--out", out).exit_code == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    save = wirescene.io.outputs.save_figure
+    save = wirescene.io.pictures.save_figure
 
     def fails_on_the_bev(fig, path, **kw):
         if "_bev.png" in Path(path).name:
             raise InputError("cannot draw", path=path)
         return save(fig, path, **kw)
 
-    monkeypatch.setattr(wirescene.io.outputs, "save_figure", fails_on_the_bev)
+    monkeypatch.setattr(wirescene.io.pictures, "save_figure", fails_on_the_bev)
     for where in (out, tmp_path / "new" / "out"):
         r = CliRunner().invoke(main, [str(a) for a in (*args, "--seed", 1, "--out", where)])
         assert r.exit_code == 2, r.output
@@ -618,6 +619,91 @@ def test_predict_writes_each_frames_json_and_pictures_in_folders_of_their_own(tm
     a_file.write_text("")
     r = CliRunner().invoke(main, [str(a) for a in args[:-1]] + [str(a_file), "--out", str(tmp_path / "new")])
     assert r.exit_code == 2 and "--pictures" in r.stderr and not (tmp_path / "new").exists(), r.stderr
+
+
+def test_predict_refuses_scene_and_picture_folders_that_spoil_another(tmp_path):
+    """--json-dir / --pictures where their files would spoil another folder are refused before any fit, nothing
+    written: the label folder (a submission), the detections' folder (a FRAME.json there replaced the frame's
+    detection file), the images' folder (a picture there was a frame of the next run), and a folder holding files
+    of another run's frames (written over, not resumed); the same folder for both is fine."""
+    from conftest import kitti_copy
+
+    root = kitti_copy(tmp_path / "kitti", ["000010"])
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    boxes = '[{"box": [296, 180, 420, 270], "score": 0.9}]'
+    (dets / "000010.json").write_text(boxes)
+    common = ["predict", root, "--split", "training", "--frames", "000010", "--variant", "coarse", "--particles", 5,
+              "--workers", 1]
+    out = tmp_path / "pred"
+    cases = {("--json-dir", out): (out, "--json-dir is --out, the label folder"),
+             ("--pictures", tmp_path / "pred" / "."): (out, "--pictures is --out, the label folder"),
+             ("--pictures", root / "training" / "image_2"): (root / "training" / "image_2",
+                                                             "--pictures is the folder of the images"),
+             ("--json-dir", dets): (dets, "--json-dir is the detections' folder")}
+    for (option, folder), (named, problem) in cases.items():
+        r = run(*common, "--detections", dets, "--out", out, option, folder)
+        assert r.exit_code == 2, r.output
+        assert r.stderr.startswith(f"wirescene: error: {named if named == dets else folder}: {problem}"), r.stderr
+    assert not out.exists() and sorted(p.name for p in (root / "training" / "image_2").iterdir()) == ["000010.png"]
+    assert [p.name for p in dets.iterdir()] == ["000010.json"] and (dets / "000010.json").read_text() == boxes
+    both = tmp_path / "both"
+    r = run(*common, "--detections", dets, "--out", out, "--json-dir", both, "--pictures", both)
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in both.iterdir()) == ["000010.json", "000010_bev.png", "000010_overlay.png"]
+    # another run (another --out) into the same folders: refused, the first run's files kept
+    kept = (both / "000010.json").read_bytes()
+    r = run(*common, "--detections", "gt", "--out", tmp_path / "other", "--json-dir", both)
+    assert r.exit_code == 2 and not (tmp_path / "other").exists(), r.output
+    assert r.stderr == (f"wirescene: error: {both}: already holds 1 of the files this run writes (e.g. 000010.json), "
+                        "another run's: use --resume to continue that run or choose an empty directory\n")
+    r = run(*common, "--detections", "gt", "--out", tmp_path / "other", "--pictures", both, "--resume")
+    assert r.exit_code == 2 and "already holds 2 of the files" in r.stderr, r.stderr
+    assert (both / "000010.json").read_bytes() == kept
+
+
+def test_predict_pictures_read_a_labelled_splits_label_files_before_any_fit(tmp_path):
+    """With --pictures a labelled split's label files are drawn: a malformed one is refused before any frame is
+    fitted (it was found at its frame, the frames before it written), a missing one said in one line."""
+    from conftest import kitti_copy
+
+    root = kitti_copy(tmp_path / "kitti", ["000002", "000010"], subdirs=("image_2", "calib"))
+    (root / "training" / "label_2").mkdir()
+    label = root / "training" / "label_2" / "000010.txt"
+    label.write_text("Car 0 0 bad\n")
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    for frame in ("000002", "000010"):
+        shutil.copy(SPLIT / "label_2" / f"{frame}.txt", dets)
+    args = ["predict", root, "--split", "training", "--variant", "coarse", "--particles", 5, "--workers", 1,
+            "--detections", dets, "--out", tmp_path / "pred", "--pictures", tmp_path / "pictures"]
+    r = run(*args)
+    assert r.exit_code == 2 and r.stderr.startswith(f"wirescene: error: {label}: line 1:"), r.stderr
+    assert not (tmp_path / "pred").exists() and not (tmp_path / "pictures").exists()
+    label.unlink()
+    r = run(*args)
+    assert r.exit_code == 0, r.output
+    assert (f"wirescene: warning: 2 of 2 frames have no label file in {root / 'training' / 'label_2'} (e.g. "
+            "000002.txt): their pictures draw the estimates alone") in r.stderr, r.stderr
+    assert len(list((tmp_path / "pictures").iterdir())) == 4
+
+
+def test_predict_job_writes_no_file(tmp_path):
+    """A worker writes no file: the job returns each frame's files as bytes, for the gathering process to write."""
+    from wirescene.eval.predict import _PredictJob
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.fitting.options import FitOptions
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.lift import LiftingOptions
+
+    job = _PredictJob(KittiDataset(KITTI_ROOT), "coarse", DetectionSource("gt"),
+                      FitOptions(lifting=LiftingOptions(n_particles=5)), json_dir=tmp_path / "json",
+                      pictures_dir=tmp_path / "pictures")
+    frame, text, files = pickle.loads(pickle.dumps(job))("000010")  # as a worker gets it
+    assert frame == "000010" and text and list(tmp_path.iterdir()) == []
+    assert sorted(files) == [tmp_path / "json" / "000010.json", tmp_path / "pictures" / "000010_bev.png",
+                             tmp_path / "pictures" / "000010_overlay.png"]
+    assert json.loads(files[tmp_path / "json" / "000010.json"])["frame"] == "000010"
 
 
 def test_predict_resumed_with_fewer_frames_is_refused_and_with_more_continues(tmp_path):

@@ -234,3 +234,18 @@ def test_split_given_for_a_plain_folder_is_refused(frames_dir, tmp_path):
     assert r.exit_code == 2 and not (tmp_path / "none").exists(), r.output
     assert r.stderr.strip() == (f"wirescene: error: {KITTI_ROOT}: no .png, .jpg or .jpeg file (it holds only the "
                                 "folders ImageSets, training, no testing/image_2)")
+
+
+def test_split_given_for_a_split_folder_of_another_name_is_refused(tmp_path):
+    """KITTI_ROOT/training given as the root reads its own image_2/: a --split naming another split there is refused
+    (it was ignored: `--split testing` wrote a submission of the training frames); its own name, or none, is fine."""
+    common = ["--variant", "coarse", "--particles", 5, "--workers", 1, "--detections", "gt", "--frames", "000010"]
+    r = run("predict", SPLIT, "--split", "testing", "--out", tmp_path / "pred", *common)
+    assert r.exit_code == 2 and not (tmp_path / "pred").exists(), r.output
+    assert r.stderr.strip() == (f"wirescene: error: {SPLIT}: --split testing names no folder here: this is itself a "
+                                "split folder (its image_2/ is read, no testing/image_2): give the KITTI root above "
+                                "it, or drop --split")
+    r = run("eval", SPLIT, "--split", "testing", "--json", tmp_path / "m.json", *common)
+    assert r.exit_code == 2 and "--split testing names no folder here" in r.stderr, r.stderr
+    r = run("predict", SPLIT, "--split", "training", "--out", tmp_path / "pred", *common)
+    assert r.exit_code == 0, r.output

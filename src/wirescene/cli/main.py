@@ -564,9 +564,9 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 @click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), required=True,
               help="Directory of KITTI label files, one FRAME.txt per image (the benchmark's submission layout).")
 @click.option("--json-dir", type=NonEmptyPath(directory=True, path_type=Path), default=None,
-              help="Also write each frame's FRAME.json here, as `wirescene fit` writes it: every car's 3D box, "
-                   "36-vertex wireframe and visible vertices, and the ground plane (the label files keep the box "
-                   "alone).")
+              help="Also write each frame's FRAME.json here, as `wirescene fit` writes it: every car's 3D box and "
+                   "ground plane and, of the fine variants (fg...), its 36-vertex wireframe and visible vertices "
+                   "(the label files keep the box alone).")
 @click.option("--pictures", "pictures_dir", type=NonEmptyPath(directory=True, path_type=Path), default=None,
               help="Also draw each frame's FRAME_overlay.png and FRAME_bev.png here (the cars of a labelled "
                    "split's label files drawn beside the estimates; some 0.4 s a frame more).")

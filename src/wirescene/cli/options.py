@@ -231,7 +231,8 @@ def calib_option(f):
 def kitti_dataset(kitti_root: Path, split: str, calib: Path | None):
     """``KittiDataset(kitti_root, split=split, calib=calib)`` of a command of :func:`split_option` and
     :func:`calib_option`: an ``InputError`` naming a plain folder of frames (read with ``--calib``, no
-    ``image_2/``) where ``--split`` was given on the command line, which would be ignored there."""
+    ``image_2/``), or a split folder itself (``ROOT/training``, its ``image_2/`` read) of another name,
+    where ``--split`` was given on the command line, which would be ignored there."""
     from click.core import ParameterSource
 
     from wirescene.core.errors import InputError
@@ -244,6 +245,11 @@ def kitti_dataset(kitti_root: Path, split: str, calib: Path | None):
     if given and dataset.image_dir == dataset.split_dir and dataset.image_ids():
         raise InputError(f"--split {split} has no meaning for a plain folder of frames (its own images are read "
                          f"with --calib; no {split}/image_2 here): drop --split", path=kitti_root)
+    # KITTI_ROOT/training given as the root: its own image_2/ is read, whatever split was named
+    if (given and dataset.split_dir == kitti_root != dataset.image_dir
+            and Path(kitti_root).resolve().name != split):
+        raise InputError(f"--split {split} names no folder here: this is itself a split folder (its image_2/ is "
+                         f"read, no {split}/image_2): give the KITTI root above it, or drop --split", path=kitti_root)
     return dataset
 
 

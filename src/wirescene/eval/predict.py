@@ -3,9 +3,10 @@ the file set the KITTI benchmark server expects, one ``FRAME.txt`` per image wit
 score per car. Frames are fitted serially, in processes or on Dask, like ``eval``, and
 an interrupted run resumes: ``OUT/.predict.json`` records the settings, and a frame
 whose label file exists (written atomically, after the frame's other files) is not fitted
-again under the same settings. Besides the label files, each frame's JSON (the cars'
-wireframes, visible vertices and the ground plane, as ``fit`` writes it) and its two
-pictures may be written to folders of their own, the label folder staying a submission."""
+again under the same settings. Besides the label files, each frame's JSON (the cars' boxes
+and ground plane, and of a fine variant their wireframes and visible vertices, as ``fit``
+writes it) and its two pictures may be written to folders of their own, the label folder
+staying a submission."""
 
 from __future__ import annotations
 
@@ -98,6 +99,40 @@ def _stored_config(path: Path) -> dict | None:
     return stored
 
 
+def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDataset,
+                    source: DetectionSource) -> None:
+    """An :class:`InputError` naming ``json_dir`` or ``pictures_dir`` (``folders``) where its files
+    would spoil another folder's: the label folder (a submission holds the label files alone), the
+    detections' folder (a frame's ``FRAME.json`` there takes the place of its detection file, or
+    sits beside it as a second one) or the images' folder (a picture there is a frame of the
+    next run)."""
+    taken = [("json_dir", out, "--out, the label folder: a submission holds the label files alone"),
+             ("pictures_dir", out, "--out, the label folder: a submission holds the label files alone"),
+             ("pictures_dir", dataset.image_dir, "the folder of the images: each picture written there would be "
+                                                 "a frame of the next run"),
+             ("json_dir", source.folder, "the detections' folder: each frame's FRAME.json written there would "
+                                         "replace its detection file or be a second one")]
+    option = {"json_dir": "--json-dir", "pictures_dir": "--pictures"}
+    for name, other, what in taken:
+        folder = folders[name]
+        if folder is not None and other is not None and folder.resolve() == Path(other).resolve():
+            raise InputError(f"{option[name]} is {what}; give it a folder of its own", path=folder)
+
+
+def _others_files(frame_ids: list[str], folders: dict[str, Path | None]) -> None:
+    """An :class:`InputError` naming ``json_dir`` or ``pictures_dir`` (``folders``) where it
+    already holds a file this run would write (another run's, not resumed: it would be written
+    over, the folder a mix of two runs' frames)."""
+    names = {"json_dir": lambda f: [f"{f}.json"], "pictures_dir": lambda f: [f"{f}_overlay.png", f"{f}_bev.png"]}
+    for name, folder in folders.items():
+        if folder is None or not folder.is_dir():
+            continue
+        held = [n for f in frame_ids for n in names[name](f) if (folder / n).exists()]
+        if held:
+            raise InputError(f"already holds {len(held)} of the files this run writes (e.g. {held[0]}), another "
+                             "run's: use --resume to continue that run or choose an empty directory", path=folder)
+
+
 def predict_dataset(
     dataset: KittiDataset,
     out_dir,
@@ -146,8 +181,8 @@ def predict_dataset(
         size); default: standard error.
     json_dir : path, optional
         Also write each frame's ``FRAME.json`` here
-        (:func:`wirescene.io.outputs.scene_json`: the cars' 3D boxes, wireframes and visible
-        vertices, the ground plane).
+        (:func:`wirescene.io.outputs.scene_json`: the cars' 3D boxes and the ground plane, and of a
+        fine variant their wireframes and visible vertices).
     pictures_dir : path, optional
         Also write each frame's ``FRAME_overlay.png`` and ``FRAME_bev.png`` here
         (:func:`wirescene.io.outputs.scene_figures`; a labelled split's cars drawn beside the
@@ -165,7 +200,10 @@ def predict_dataset(
         without its detection file, calibration or image, a malformed detection file, or
         ``out_dir`` holding another run's label files (or, resumed, label files of frames
         outside ``frames``, or a settings' record that cannot be read), or a folder in place of
-        that record.
+        that record; ``json_dir`` or ``pictures_dir`` where its files would spoil another folder
+        (the label folder, the detections' folder, the images' folder) or holding files of these
+        frames not written by a run resumed; with ``pictures_dir``, a malformed label file of a
+        labelled split (a missing one is said, its frame's pictures drawn without labels).
     """
     source = DetectionSource("bank") if source is None else source
     options = FitOptions() if options is None else options
@@ -176,6 +214,7 @@ def predict_dataset(
     source.missing_frames(frame_ids)
     extra = {"json_dir": json_dir, "pictures_dir": pictures_dir}
     extra = {name: None if folder is None else Path(folder) for name, folder in extra.items()}
+    _folder_problem(out, extra, dataset, source)
     # a resumed run's frames keep their files where the first run wrote them: another folder is another run
     config = _config(dataset, variant, source, options,
                      {name: str(f.resolve()) for name, f in extra.items() if f is not None})
@@ -194,9 +233,23 @@ def predict_dataset(
                              "cannot resume into this directory", path=out)
         # A submission is the folder's *.txt: frames outside this selection would go to the server too.
         refuse_frames_outside(out, existing, frame_ids, would="which a submission zipped from it would include")
+    if stored != config:  # not a run of these settings resumed (that one's files are its own)
+        _others_files(frame_ids, extra)
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
-    say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), notify or notify_stderr)
+    say = notify or notify_stderr
+    say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), say)
+    if pictures_dir is not None and source.spec != "gt" and dataset.has_labels:
+        # the pictures draw a labelled split's cars: a bad label file refused now, not at its frame
+        unlabelled = []
+        for f in todo:
+            if dataset.label_path(f).is_file():
+                dataset.labels(f)
+            else:
+                unlabelled.append(f)
+        if unlabelled:
+            say(f"warning: {len(unlabelled)} of {len(todo)} frames have no label file in "
+                f"{dataset.split_dir / 'label_2'} (e.g. {unlabelled[0]}.txt): their pictures draw the estimates alone")
     source.check_files(dataset, todo)
     job = _PredictJob(dataset, variant, source, options, **extra)
     with ExitStack() as stack:

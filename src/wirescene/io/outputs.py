@@ -95,8 +95,9 @@ def write_fit_outputs(
 def scene_json(stem: str, estimate: SceneEstimate, detections: Detections) -> str:
     """The JSON file of a fitted image (``fit``'s ``STEM.json``, ``predict --json-dir``'s
     ``FRAME.json``): the frame, where its boxes came from and the scene
-    (:meth:`~wirescene.core.types.SceneEstimate.to_dict`: each car's 3D box, wireframe and
-    visible vertices, the ground plane); strict JSON (``null`` for a non-finite number).
+    (:meth:`~wirescene.core.types.SceneEstimate.to_dict`: each car's 3D box and ground plane, and
+    of a fine variant its wireframe and visible vertices); strict JSON (``null`` for a non-finite
+    number).
 
     Examples
     --------
