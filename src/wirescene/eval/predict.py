@@ -68,7 +68,7 @@ class _PredictJob:
 
 
 def _config(dataset: KittiDataset, variant: str, source: DetectionSource, options: FitOptions,
-            folders: dict[str, str]) -> dict:
+            folders: dict[str, str] | None = None) -> dict:
     spec = source.spec if source.spec in ("gt", "bank") else str(Path(source.spec).resolve())
     # the trained files the fit reads, by path and content: another file it does not read changes nothing
     read = {"fine": get_variant(variant).fine, "own": source.own, "evidence": "parts"}
