@@ -637,7 +637,7 @@ def test_predict_refuses_scene_and_picture_folders_that_spoil_another(tmp_path):
               "--workers", 1]
     out = tmp_path / "pred"
     cases = {("--json-dir", out): (out, "--json-dir is --out, the label folder"),
-             ("--pictures", tmp_path / "pred" / "."): (out, "--pictures is --out, the label folder"),
+             ("--pictures", dets / ".." / "pred"): (out, "--pictures is --out, the label folder"),  # another spelling
              ("--pictures", root / "training" / "image_2"): (root / "training" / "image_2",
                                                              "--pictures is the folder of the images"),
              ("--json-dir", dets): (dets, "--json-dir is the detections' folder")}
@@ -658,8 +658,28 @@ def test_predict_refuses_scene_and_picture_folders_that_spoil_another(tmp_path):
     assert r.stderr == (f"wirescene: error: {both}: already holds 1 of the files this run writes (e.g. 000010.json), "
                         "another run's: use --resume to continue that run or choose an empty directory\n")
     r = run(*common, "--detections", "gt", "--out", tmp_path / "other", "--pictures", both, "--resume")
-    assert r.exit_code == 2 and "already holds 2 of the files" in r.stderr, r.stderr
+    assert r.exit_code == 2, r.output  # --resume given, into a folder of no run: not told to give it
+    assert r.stderr == (f"wirescene: error: {both}: already holds 2 of the files this run writes (e.g. "
+                        "000010_overlay.png), another run's: .predict.json in --out records no run: resume that run "
+                        "or choose an empty directory\n")
     assert (both / "000010.json").read_bytes() == kept
+
+
+def test_predict_says_whose_files_a_scene_folder_holds(tmp_path):
+    """A folder holding another run's files of these frames: a run not resumed is told of --resume, a run resumed
+    whether --out's record is of no run or of other settings (--resume was given)."""
+    from wirescene.eval.predict import _others_files
+
+    (tmp_path / "000010.json").write_text("{}")
+    folders = {"json_dir": tmp_path, "pictures_dir": None}
+    _others_files(["000002"], folders)  # another frame's file: nothing
+    for resumed, advice in ((None, "use --resume to continue that run"),
+                            ({}, ".predict.json in --out records no run: resume that run"),
+                            ({"variant": "full"}, ".predict.json in --out records other settings: resume that run")):
+        with pytest.raises(InputError) as caught:
+            _others_files(["000002", "000010"], folders, resumed=resumed)
+        assert str(caught.value) == (f"{tmp_path}: already holds 1 of the files this run writes (e.g. 000010.json), "
+                                     f"another run's: {advice} or choose an empty directory")
 
 
 def test_predict_pictures_read_a_labelled_splits_label_files_before_any_fit(tmp_path):

@@ -249,3 +249,31 @@ def test_split_given_for_a_split_folder_of_another_name_is_refused(tmp_path):
     assert r.exit_code == 2 and "--split testing names no folder here" in r.stderr, r.stderr
     r = run("predict", SPLIT, "--split", "training", "--out", tmp_path / "pred", *common)
     assert r.exit_code == 0, r.output
+
+
+def test_split_named_by_its_link_is_no_other_split(tmp_path, monkeypatch):
+    """ROOT/training a link to a folder of another name (the data kept elsewhere): `--split training` with
+    ROOT/training given names it (the link's name), with --dask too (whose dataset reads the link's target), and `.`
+    entered through the link (the shell's $PWD); another split is refused there, naming the path given."""
+    target = tmp_path / "kitti_object_train"
+    target.mkdir()
+    for sub in ("image_2", "calib", "label_2"):
+        (target / sub).symlink_to(SPLIT / sub)
+    (tmp_path / "kitti").mkdir()
+    split = tmp_path / "kitti" / "training"
+    split.symlink_to(target)
+    dask = ["--dask", "127.0.0.1:9"]  # refused at --frames, before any scheduler is reached
+    for command, extra in {"predict": ["--out", tmp_path / "pred"], "eval": [], "detect": [], "pitch": []}.items():
+        for more in ([], dask) if command in ("predict", "eval") else ([],):
+            r = run(command, split, "--split", "training", "--frames", "nothing", *extra, *more)
+            assert r.exit_code == 2 and "--frames: no frame nothing" in r.stderr, (command, more, r.stderr)
+            r = run(command, split, "--split", "testing", "--frames", "nothing", *extra, *more)
+            assert r.exit_code == 2, (command, more, r.output)
+            assert r.stderr.startswith(f"wirescene: error: {split}: --split testing names no folder here"), r.stderr
+    r = run("gt", split, "000010", "--split", "testing", "--out", tmp_path / "gt.png")
+    assert r.exit_code == 2 and "--split testing names no folder here" in r.stderr and not list(tmp_path.glob("*.png"))
+    monkeypatch.chdir(split)
+    monkeypatch.setenv("PWD", str(split))
+    r = run("predict", ".", "--split", "training", "--frames", "nothing", "--out", tmp_path / "pred")
+    assert r.exit_code == 2 and "--frames: no frame nothing" in r.stderr, r.stderr
+    assert not (tmp_path / "pred").exists()

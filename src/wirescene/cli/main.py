@@ -373,15 +373,13 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
                                  param_hint="--seed")
     if resume and predictions is None:
         raise click.UsageError("--resume needs --predictions DIR, where finished frames are recorded")
-    if dask_address is not None:
-        # Dask workers may run elsewhere (another working directory): give them absolute paths.
-        kitti_root = kitti_root.resolve()
+    if dask_address is not None:  # Dask workers may run elsewhere (another working directory): absolute paths
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())
     check_output_file(json_out, "--json")
     check_output_dir(predictions, "--predictions")
     check_output_dir(report_dir, "--report")
-    dataset = kitti_dataset(kitti_root, split, calib)
+    dataset = kitti_dataset(kitti_root, split, calib, absolute=dask_address is not None)
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
     # read before any fit (a bad devkit mapping is an error now); a plain folder's frames are no KITTI drive's
@@ -601,11 +599,10 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
     check_output_dir(out, "--out")
     check_output_dir(json_dir, "--json-dir")
     check_output_dir(pictures_dir, "--pictures")
-    if dask_address is not None:
-        kitti_root = kitti_root.resolve()
+    if dask_address is not None:  # Dask workers may run elsewhere (another working directory): absolute paths
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())
-    dataset = kitti_dataset(kitti_root, split, calib)
+    dataset = kitti_dataset(kitti_root, split, calib, absolute=dask_address is not None)
     images = dataset.require_frames(images=True)
     frame_ids = select_frames(frames, split_file, images, where=dataset.split_dir, what="image")
     options = _fit_options(particles, seed, parallel=_parallel(workers, frame_ids, dask_address),
@@ -873,7 +870,7 @@ def demo_cmd(out, particles, variants, models):
 @click.argument("frame")
 @click.option("--out", type=NonEmptyPath(path_type=Path), required=True,
               help="Picture to write, in the format its suffix names (.png, .pdf, .svg; PNG without a suffix).")
-@split_option()
+@split_option(calib=False)
 def gt_cmd(kitti_root, frame, out, split):
     """Draw a frame's ground truth with the mean wireframe at every GT car pose
     (self-occluded vertices as open dots): a check of geometry, shape model and labels."""
@@ -882,11 +879,10 @@ def gt_cmd(kitti_root, frame, out, split):
     from wirescene.core.types import ObjectEstimate, SceneEstimate
     from wirescene.core.wireframe import EDGES, FACES
     from wirescene.infer.occlusion import self_occlusion
-    from wirescene.io.kitti import KittiDataset
     from wirescene.io.pictures import overlay, save_figure
 
     check_picture_file(out, "--out")
-    dataset = KittiDataset(kitti_root, split=split)
+    dataset = kitti_dataset(kitti_root, split, None)  # a split folder given: --split naming another refused
     ids = dataset.image_ids()
     if frame not in ids:  # said as such, not as its missing calibration file
         held = f"its image_2 holds {len(ids)} frames, e.g. {ids[0]}" if ids else "its image_2 holds no .png image"

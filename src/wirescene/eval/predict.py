@@ -119,18 +119,23 @@ def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDa
             raise InputError(f"{option[name]} is {what}; give it a folder of its own", path=folder)
 
 
-def _others_files(frame_ids: list[str], folders: dict[str, Path | None]) -> None:
+def _others_files(frame_ids: list[str], folders: dict[str, Path | None], resumed: dict | None = None) -> None:
     """An :class:`InputError` naming ``json_dir`` or ``pictures_dir`` (``folders``) where it
     already holds a file this run would write (another run's, not resumed: it would be written
-    over, the folder a mix of two runs' frames)."""
+    over, the folder a mix of two runs' frames); ``resumed``: the settings' record a run asked to
+    resume found (``{}``: none), which is not this run's."""
     names = {"json_dir": lambda f: [f"{f}.json"], "pictures_dir": lambda f: [f"{f}_overlay.png", f"{f}_bev.png"]}
+    if resumed is None:
+        advice = "use --resume to continue that run"
+    else:  # --resume given: the label folder's record is none, or another run's
+        advice = f"{CONFIG_FILE} in --out records {'other settings' if resumed else 'no run'}: resume that run"
     for name, folder in folders.items():
         if folder is None or not folder.is_dir():
             continue
         held = [n for f in frame_ids for n in names[name](f) if (folder / n).exists()]
         if held:
             raise InputError(f"already holds {len(held)} of the files this run writes (e.g. {held[0]}), another "
-                             "run's: use --resume to continue that run or choose an empty directory", path=folder)
+                             f"run's: {advice} or choose an empty directory", path=folder)
 
 
 def predict_dataset(
@@ -234,7 +239,7 @@ def predict_dataset(
         # A submission is the folder's *.txt: frames outside this selection would go to the server too.
         refuse_frames_outside(out, existing, frame_ids, would="which a submission zipped from it would include")
     if stored != config:  # not a run of these settings resumed (that one's files are its own)
-        _others_files(frame_ids, extra)
+        _others_files(frame_ids, extra, resumed=(stored or {}) if resume else None)
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
     say = notify or notify_stderr
