@@ -332,6 +332,10 @@ CASES = {
     "predict --calib of a KITTI root without the split": (
         lambda t: ["predict", KITTI_ROOT, "--calib", SPLIT / "calib" / f"{FRAME}.txt", "--out", t / "out"],
         r"kitti: no \.png, \.jpg or \.jpeg file \(it holds only the folders ImageSets, training, no testing/image_2\)$"),
+    "predict --calib of a KITTI root with a file, without the split": (
+        lambda t: ["predict", _file(kitti_copy(t / "kitti", [FRAME]), "SOURCES.md", "# drives\n").parent, "--calib",
+                   SPLIT / "calib" / f"{FRAME}.txt", "--out", t / "out"],
+        r"kitti: no \.png, \.jpg or \.jpeg file \(it holds \.md files and the folders training, no testing/image_2\)$"),
     "predict --calib of a frame of two images": (
         lambda t: ["predict", _frames_folder(t, f"{FRAME}.png", f"{FRAME}.jpg"), "--calib",
                    SPLIT / "calib" / f"{FRAME}.txt", "--out", t / "out"],

@@ -449,9 +449,10 @@ class KittiDataset:
             kind = ".txt" if labels else ".png" if self._calib is None else ".png, .jpg or .jpeg"
             others = sorted({p.suffix or p.name for p in folder.iterdir() if p.is_file()})
             held = f"it holds {', '.join(others)} files" if others else "it is empty"
-            folders = sorted(p.name for p in folder.iterdir() if p.is_dir()) if not others and not labels else []
+            folders = sorted(p.name for p in folder.iterdir() if p.is_dir()) if not labels else []
             if self._calib is not None and folders:  # a KITTI root given for a split that has no image_2/
-                held = f"it holds only the folders {', '.join(folders[:3])}, no {self._split}/image_2"
+                files = f"{', '.join(others)} files and " if others else "only "
+                held = f"it holds {files}the folders {', '.join(folders[:3])}, no {self._split}/image_2"
             hint = "; KITTI's images are .png" if others and not labels and self._calib is None else ""
             raise InputError(f"no {kind} file ({held}{hint})", path=folder)
         return ids
