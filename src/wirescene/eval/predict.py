@@ -151,8 +151,8 @@ def predict_dataset(
     dask_client=None,
     progress: Callable[[Iterable], Iterable] = lambda it: it,
     notify: Callable[[str], None] | None = None,
-    json_dir=None,
-    pictures_dir=None,
+    json_dir: str | Path | None = None,
+    pictures_dir: str | Path | None = None,
 ) -> list[str]:
     """Write ``out_dir/FRAME.txt`` (KITTI labels with scores) for every image.
 
