@@ -217,3 +217,25 @@ def test_readme_check_finds_a_wrong_command(line, problem, where, monkeypatch, t
     with pytest.raises(AssertionError, match=re.escape(problem)):
         test_readme_wirescene_commands_exist_with_their_options()
         test_readme_benchmark_commands_name_scripts_and_options_that_exist()
+
+
+@pytest.mark.parametrize("variant", ["coarse", "full"])
+def test_readme_names_every_key_of_a_fitted_images_json(variant):
+    # the README's account of `fit`'s and `predict --json-dir`'s JSON names every key a fit writes
+    import json
+
+    import wirescene
+    from conftest import KITTI_ROOT
+    from wirescene.io.outputs import scene_json
+
+    text = README.read_text()
+    start = text.index("The JSON of a fitted image")
+    named = set(re.findall(r"`([a-z_0-9]+)`", " ".join(text[start:text.index("\n\n", start)].split())))
+    split = KITTI_ROOT / "training"
+    scene = wirescene.fit(split / "image_2" / "000010.png", split / "calib" / "000010.txt",
+                          boxes=[[354, 185, 549, 294]], variant=variant, particles=8,
+                          settings={"inference.iterations": 1, "inference.polish_iterations": 0})
+    written = json.loads(scene_json("000010", scene, scene.detections))
+    keys = set(written) | set(written["objects"][0]) | set(written["objects"][0]["ground_plane"])
+    assert ("vertices" in keys) == (variant == "full")
+    assert keys <= named, f"README's JSON paragraph names none of {sorted(keys - named)}"
