@@ -567,7 +567,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
                    "(the label files keep the box alone).")
 @click.option("--pictures", "pictures_dir", type=NonEmptyPath(directory=True, path_type=Path), default=None,
               help="Also draw each frame's FRAME_overlay.png and FRAME_bev.png here (the cars of a labelled "
-                   "split's label files drawn beside the estimates; some 0.4 s a frame more).")
+                   "split's label files drawn beside the estimates; some 0.3 s a frame more).")
 @click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True)
 @click.option("--detections", default="bank", show_default=True, callback=detections_spec,
               help="'bank' (our pre-detection), 'gt' (label boxes; labelled splits only) or a directory of "
