@@ -614,7 +614,9 @@ def test_predict_writes_each_frames_json_and_pictures_in_folders_of_their_own(tm
     assert (scenes / "000002.json").is_file() and (pictures / "000002_bev.png").is_file()
     assert (pictures / "000010_overlay.png").stat().st_mtime_ns == kept
     r = CliRunner().invoke(main, [str(a) for a in args[:-1]] + [str(tmp_path / "elsewhere"), "--resume"])
-    assert r.exit_code == 2 and "other settings (folders.pictures_dir)" in r.stderr, r.stderr
+    assert r.exit_code == 2 and "other settings (--pictures)" in r.stderr, r.stderr
+    r = CliRunner().invoke(main, [str(a) for a in args[:-4]] + ["--resume"])  # the first run's folders left out
+    assert r.exit_code == 2 and "other settings (--json-dir / --pictures)" in r.stderr, r.stderr
     a_file = tmp_path / "a_file"
     a_file.write_text("")
     r = CliRunner().invoke(main, [str(a) for a in args[:-1]] + [str(a_file), "--out", str(tmp_path / "new")])

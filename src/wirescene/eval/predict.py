@@ -233,7 +233,9 @@ def predict_dataset(
     stored = _stored_config(config_path) if resume else None
     if existing:
         if stored != config:
-            changed = ", ".join(config_difference(stored, config)) if stored is not None else f"{CONFIG_FILE} missing"
+            said = {"folders": "--json-dir / --pictures", "folders.json_dir": "--json-dir", "folders.pictures_dir": "--pictures"}
+            changed = (", ".join(said.get(name, name) for name in config_difference(stored, config))
+                       if stored is not None else f"{CONFIG_FILE} missing")
             raise InputError(f"label files were written with other settings ({changed}): "
                              "cannot resume into this directory", path=out)
         # A submission is the folder's *.txt: frames outside this selection would go to the server too.
