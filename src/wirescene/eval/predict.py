@@ -233,7 +233,8 @@ def predict_dataset(
     stored = _stored_config(config_path) if resume else None
     if existing:
         if stored != config:
-            said = {"folders": "--json-dir / --pictures", "folders.json_dir": "--json-dir", "folders.pictures_dir": "--pictures"}
+            said = {"folders": "--json-dir / --pictures", "folders.json_dir": "--json-dir",
+                    "folders.pictures_dir": "--pictures"}
             changed = (", ".join(said.get(name, name) for name in config_difference(stored, config))
                        if stored is not None else f"{CONFIG_FILE} missing")
             raise InputError(f"label files were written with other settings ({changed}): "
