@@ -29,6 +29,7 @@ def test_eval_prints_table_and_writes_json(tmp_path):
     assert r.exit_code == 0, r.output
     assert "coarse+gp" in r.output and "<1m" in r.output
     data = json.loads(out.read_text())
+    assert data["variant"] == "coarse+gp"  # one variant's figures at the top level, named
     for key in ("loc_1m", "loc_1_5m", "az_5", "az_10", "median_az3d", "median_az2d", "n_tp"):
         assert key in data
     assert data["n_tp"] == 9  # 1 + 8 cars, GT boxes with their true viewpoint bins

@@ -334,8 +334,8 @@ def _dask_client(address: str):
 @split_option()
 @calib_option
 @click.option("--json", "json_out", type=NonEmptyPath(path_type=Path), default=None,
-              help="Write the metrics as JSON: one variant's at the top level, several keyed by variant (and by seed "
-                   "under 'seeds' with several --seed).")
+              help="Write the metrics as JSON: one variant's at the top level (its name under 'variant'), several keyed "
+                   "by variant (and by seed under 'seeds' with several --seed).")
 @click.option("--predictions", type=NonEmptyPath(directory=True, path_type=Path), default=None,
               help="Write KITTI label files per variant here.")
 @click.option("--evidence", type=click.Choice(["parts", "oracle"]), default="parts", show_default=True,
@@ -441,8 +441,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         click.echo(f"report written to {Path(report_dir) / 'index.html'}{each}")
     if json_out is not None:
         out = data[seeds[0]] if not several else {"seeds": {str(s): d for s, d in data.items()}, "over_seeds": summary}
-        if len(variants) == 1 and not several:
-            out = out[variants[0]]
+        if len(variants) == 1 and not several:  # flat, but saying whose figures they are
+            out = {"variant": variants[0], **out[variants[0]]}
         _write_json_atomic(json_out, out)
         click.echo(f"metrics written to {json_out}")
 
