@@ -1293,7 +1293,10 @@ def test_a_pool_stopped_by_an_error_does_not_wait_for_its_frames():
         except ProcessLookupError:
             return True
         stat = Path(f"/proc/{pid}/stat")
-        return stat.is_file() and stat.read_text().rsplit(")", 1)[1].split()[0] == "Z"
+        try:
+            return stat.is_file() and stat.read_text().rsplit(")", 1)[1].split()[0] == "Z"
+        except OSError:  # reaped between the two looks (ESRCH): the next round's kill says so
+            return False
 
     deadline = time.monotonic() + 10
     while not all(gone(p.pid) for p in processes) and time.monotonic() < deadline:
