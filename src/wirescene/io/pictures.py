@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from wirescene.core.atomic import atomic_path
+from wirescene.core.atomic import write_bytes
 from wirescene.core.boxes import box_corners
 from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.groundplane import rotation_y
@@ -468,9 +468,7 @@ def save_figure(fig, path: str | Path, **savefig_kw) -> Path:
     fmt = path.suffix[1:].lower()
     if fmt not in fig.canvas.get_supported_filetypes():
         fmt = "png"
-    data = figure_bytes(fig, fmt, **savefig_kw)
-    with atomic_path(path, suffix=f".{fmt}") as tmp:
-        tmp.write_bytes(data)
+    write_bytes(path, figure_bytes(fig, fmt, **savefig_kw))
     return path
 
 
