@@ -28,7 +28,7 @@ from wirescene.fitting.options import FitOptions
 from wirescene.fitting.pipeline import fit_frame
 from wirescene.fitting.variants import get_variant
 from wirescene.io.kitti import KittiDataset
-from wirescene.io.outputs import scene_figures, scene_json
+from wirescene.io.outputs import fit_output_paths, scene_figures, scene_json
 
 CONFIG_FILE = ".predict.json"
 
@@ -54,7 +54,8 @@ class _PredictJob:
         estimate = fitted.estimates[self.variant]
         files = {}
         if self.json_dir is not None:
-            files[self.json_dir / f"{frame_id}.json"] = scene_json(frame_id, estimate, fitted.detections).encode()
+            path = fit_output_paths(self.json_dir, frame_id)["json"]
+            files[path] = scene_json(frame_id, estimate, fitted.detections).encode()
         if self.pictures_dir is not None:
             from wirescene.io.pictures import figure_bytes
 
@@ -62,8 +63,9 @@ class _PredictJob:
             gt = self.dataset.labels(frame_id).of_type("Car") if label_file.is_file() else []
             figures = scene_figures(frame_id, image=image, camera=camera, estimate=estimate,
                                     detections=fitted.detections, gt=gt)
-            for suffix, fig in zip(("overlay", "bev"), figures):
-                files[self.pictures_dir / f"{frame_id}_{suffix}.png"] = figure_bytes(fig)
+            paths = fit_output_paths(self.pictures_dir, frame_id)
+            for kind, fig in zip(("overlay", "bev"), figures):
+                files[paths[kind]] = figure_bytes(fig)
         return frame_id, estimate.to_kitti(), files
 
 
@@ -124,7 +126,7 @@ def _others_files(frame_ids: list[str], folders: dict[str, Path | None], resumed
     already holds a file this run would write (another run's, not resumed: it would be written
     over, the folder a mix of two runs' frames); ``resumed``: the settings' record a run asked to
     resume found (``{}``: none), which is not this run's."""
-    names = {"json_dir": lambda f: [f"{f}.json"], "pictures_dir": lambda f: [f"{f}_overlay.png", f"{f}_bev.png"]}
+    kinds = {"json_dir": ("json",), "pictures_dir": ("overlay", "bev")}  # of fit_output_paths
     if resumed is None:
         advice = "use --resume to continue that run"
     else:  # --resume given: the label folder's record is none, or another run's
@@ -132,7 +134,8 @@ def _others_files(frame_ids: list[str], folders: dict[str, Path | None], resumed
     for name, folder in folders.items():
         if folder is None or not folder.is_dir():
             continue
-        held = [n for f in frame_ids for n in names[name](f) if (folder / n).exists()]
+        held = [p.name for f in frame_ids for kind, p in fit_output_paths(folder, f).items()
+                if kind in kinds[name] and p.exists()]
         if held:
             raise InputError(f"already holds {len(held)} of the files this run writes (e.g. {held[0]}), another "
                              f"run's: {advice} or choose an empty directory", path=folder)

@@ -31,7 +31,8 @@ def boxes_in_words(source: str) -> str:
 
 
 def fit_output_paths(out_dir: Path, stem: str) -> dict[str, Path]:
-    """``{"labels", "json", "overlay", "bev": path}``: the files :func:`write_fit_outputs` writes.
+    """``{"labels", "json", "overlay", "bev": path}``: the files :func:`write_fit_outputs` writes
+    (and ``predict --json-dir`` / ``--pictures`` by the same names).
 
     Examples
     --------
