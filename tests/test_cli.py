@@ -1,6 +1,7 @@
 """End-to-end command-line behaviour: outputs, JSON keys, clean failures on bad input."""
 
 import json
+import os
 import pickle
 import re
 import shutil
@@ -66,29 +67,67 @@ def test_fit_writes_all_outputs(tmp_path):
 
 
 def test_fit_outputs_are_replaced_as_a_set_or_not_at_all(tmp_path, monkeypatch):
-    """A picture that cannot be drawn (out of memory on a huge image, a full disk) leaves an earlier
-    run's four files as they were, none of this run's and no folder made for it."""
-    import wirescene.io.pictures  # write_fit_outputs imports save_figure from it as it writes
+    """A picture that cannot be drawn (out of memory on a huge image) or a disk that fills as the
+    last file is written leaves an earlier run's four files as they were, none of this run's and no
+    folder made for it."""
+    import errno
+
+    import wirescene.io.pictures  # write_fit_outputs imports figure_bytes from it as it draws
 
     args = ["fit", SPLIT / "image_2" / "000010.png", "--calib", SPLIT / "calib" / "000010.txt",
             "--detections", SPLIT / "label_2" / "000010.txt", "--variant", "coarse", "--particles", 5]
     out = tmp_path / "out"
     assert run(*args, "--out", out).exit_code == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    save = wirescene.io.pictures.save_figure
+    draw, write = wirescene.io.pictures.figure_bytes, Path.write_bytes
+    drawn = []
 
-    def fails_on_the_bev(fig, path, **kw):
-        if "_bev.png" in Path(path).name:
-            raise InputError("cannot draw", path=path)
-        return save(fig, path, **kw)
+    def fails_on_the_second_picture(fig, *a, **kw):
+        drawn.append(fig)
+        if len(drawn) % 2 == 0:
+            raise InputError("cannot draw", path="000010_bev.png")
+        return draw(fig, *a, **kw)
 
-    monkeypatch.setattr(wirescene.io.pictures, "save_figure", fails_on_the_bev)
-    for where in (out, tmp_path / "new" / "out"):
-        r = CliRunner().invoke(main, [str(a) for a in (*args, "--seed", 1, "--out", where)])
-        assert r.exit_code == 2, r.output
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    def disk_full_on_the_bev(path, data):
+        if "_bev.png" in path.name:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return write(path, data)
 
+    for owner, name, failing, code, said in (
+            (wirescene.io.pictures, "figure_bytes", fails_on_the_second_picture, 2, "000010_bev.png: cannot draw"),
+            (Path, "write_bytes", disk_full_on_the_bev, 1, "000010_bev.png: No space left on device;")):
+        with monkeypatch.context() as patched:
+            patched.setattr(owner, name, failing)
+            for where in (out, tmp_path / "new" / "out"):
+                r = CliRunner().invoke(main, [str(a) for a in (*args, "--seed", 1, "--out", where)])
+                lines = r.stderr.strip().splitlines()
+                assert r.exit_code == code and len(lines) == 1 and said in lines[0], r.stderr
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_an_oserror_of_no_disk_or_place_is_a_line_and_any_other_keeps_its_traceback(tmp_path, monkeypatch):
+    """Only what the machine refused (a full disk, a read-only place) is told in one line: an
+    ``OSError`` of a bug (a file the code itself should have made) is not hidden."""
+    import errno
+
+    import wirescene.api
+
+    args = ["fit", SPLIT / "image_2" / "000010.png", "--calib", SPLIT / "calib" / "000010.txt",
+            "--variant", "coarse", "--out", tmp_path / "out"]
+    for number in (errno.EROFS, errno.ENOENT):
+        def refused(*a, number=number, **kw):
+            raise OSError(number, os.strerror(number), str(tmp_path / "out" / "000010.txt"))
+
+        monkeypatch.setattr(wirescene.api, "fit", refused)
+        if number == errno.ENOENT:
+            with pytest.raises(FileNotFoundError):
+                run(*args)
+            continue
+        r = run(*args)
+        assert r.exit_code == 1 and r.stderr.strip().splitlines() == [
+            f"wirescene: error: {tmp_path / 'out' / '000010.txt'}: {os.strerror(number)}; the frames a run's "
+            "--out or --predictions folder holds stay (--resume goes on from them)"], r.stderr
 
 
 def test_a_request_the_machine_cannot_hold_ends_in_one_line(tmp_path, monkeypatch):

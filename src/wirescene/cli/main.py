@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import signal
 import sys
@@ -125,13 +126,19 @@ def _stop_signals(*, process: bool):
             _Stopping.exiting = False
 
 
+# What the machine refused a write or a read (a full disk or quota, a read-only or unreadable place, a failing
+# device, too many open files): one line, exit code 1, as out of memory.
+_MACHINE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO,
+                             errno.EMFILE, errno.ENFILE})
+
+
 class _Group(click.Group):
     """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
     on standard error and exit code 2, without a traceback (typed errors of the package,
     bad option values and usage errors alike); running out of memory (or a worker process
-    stopped by the system) one line too, exit code 1; Ctrl-C ends with exit code 130,
-    SIGTERM with 143 and SIGHUP with 129 (128 + the signal), each after the same cleanup, once,
-    whenever it comes (:func:`_on_stop_signal`)."""
+    stopped by the system), a full disk or a place that refuses a write one line too, exit
+    code 1; Ctrl-C ends with exit code 130, SIGTERM with 143 and SIGHUP with 129 (128 + the
+    signal), each after the same cleanup, once, whenever it comes (:func:`_on_stop_signal`)."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, *, console: bool = False,
              **extra):
@@ -166,6 +173,14 @@ class _Group(click.Group):
             click.echo(f"wirescene: error: {what}; ask for less (fewer --samples or --workers, --upsample 1, a "
                        "larger --smallest-car) or use a larger machine; frames an --out or --predictions folder holds "
                        "stay (remove it to run with other settings)", err=True)
+            sys.exit(1)
+        except OSError as exc:
+            if exc.errno not in _MACHINE_ERRNOS:  # a bug's OSError keeps its traceback
+                raise
+            _Stopping.exiting = True
+            where = f"{exc.filename}: " if exc.filename else ""
+            click.echo(f"wirescene: error: {where}{exc.strerror or exc}; the frames a run's --out or --predictions "
+                       "folder holds stay (--resume goes on from them)", err=True)
             sys.exit(1)
         except KeyboardInterrupt as exc:  # the shell's convention (128 + the signal), not click's "Aborted!" and 1
             _Stopping.exiting = True

@@ -39,6 +39,11 @@ def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     try:
         yield tmp
         os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if exc.filename in (None, str(tmp)):  # a full disk is told of the file the user asked for, not its temporary
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
+        raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -28,7 +28,7 @@ from wirescene.fitting.options import FitOptions
 from wirescene.fitting.pipeline import fit_frame
 from wirescene.fitting.variants import get_variant
 from wirescene.io.kitti import KittiDataset
-from wirescene.io.outputs import fit_output_paths, scene_figures, scene_json
+from wirescene.io.outputs import fit_output_paths, scene_json, scene_pictures
 
 CONFIG_FILE = ".predict.json"
 
@@ -57,15 +57,12 @@ class _PredictJob:
             path = fit_output_paths(self.json_dir, frame_id)["json"]
             files[path] = scene_json(frame_id, estimate, fitted.detections).encode()
         if self.pictures_dir is not None:
-            from wirescene.io.pictures import figure_bytes
-
             label_file = self.dataset.label_path(frame_id)  # a labelled split's cars drawn beside the estimate
             gt = self.dataset.labels(frame_id).of_type("Car") if label_file.is_file() else []
-            figures = scene_figures(frame_id, image=image, camera=camera, estimate=estimate,
-                                    detections=fitted.detections, gt=gt)
+            pictures = scene_pictures(frame_id, image=image, camera=camera, estimate=estimate,
+                                      detections=fitted.detections, gt=gt)
             paths = fit_output_paths(self.pictures_dir, frame_id)
-            for kind, fig in zip(("overlay", "bev"), figures):
-                files[paths[kind]] = figure_bytes(fig)
+            files.update({paths[kind]: data for kind, data in pictures.items()})
         return frame_id, estimate.to_kitti(), files
 
 
@@ -193,7 +190,7 @@ def predict_dataset(
         fine variant their wireframes and visible vertices).
     pictures_dir : path, optional
         Also write each frame's ``FRAME_overlay.png`` and ``FRAME_bev.png`` here
-        (:func:`wirescene.io.outputs.scene_figures`; a labelled split's cars drawn beside the
+        (:func:`wirescene.io.outputs.scene_pictures`; a labelled split's cars drawn beside the
         estimates).
 
     Returns

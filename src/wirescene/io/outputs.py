@@ -8,14 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.core.atomic import atomic_path, missing_dirs, remove_empty, write_text
+from wirescene.core.atomic import atomic_path, missing_dirs, remove_empty
 from wirescene.core.camera import Camera
 from wirescene.core.errors import InputError
 from wirescene.core.jsonio import dumps
 from wirescene.core.labels import Label
 from wirescene.core.types import Detections, SceneEstimate, dropped_detections, fitted_detections
 from wirescene.core.wireframe import EDGES
-from wirescene.io.kitti import write_labels
 
 
 def boxes_in_words(source: str) -> str:
@@ -64,29 +63,23 @@ def write_fit_outputs(
     gt: list[Label] = (),
 ) -> dict[str, Path]:
     """Write ``STEM.txt`` (KITTI labels), ``STEM.json`` (:func:`scene_json`), ``STEM_overlay.png``
-    and ``STEM_bev.png`` (:func:`scene_figures`). The four files are written to
-    temporary files in ``out_dir`` first and renamed into place only when all are
-    complete: if any fails (a picture too large to draw, a full disk) ``out_dir`` is left
-    as it was, an earlier run's files of ``STEM`` included, and the directories made for
-    it are removed."""
-    from wirescene.io.pictures import save_figure
-
+    and ``STEM_bev.png`` (:func:`scene_pictures`). The four files are made in memory, written to
+    temporary files in ``out_dir`` and renamed into place only when all are complete: if any
+    fails (a picture too large to draw, a full disk) ``out_dir`` is left as it was, an earlier
+    run's files of ``STEM`` included, and the directories made for it are removed."""
     out_dir = Path(out_dir)
     paths = fit_output_paths(out_dir, stem)
     problem = fit_outputs_problem(paths)
     if problem:
         raise InputError(problem[1], path=problem[0])
     made = missing_dirs(out_dir)
-    payload = scene_json(stem, estimate, detections)
-    fig_overlay, fig_bev = scene_figures(stem, image=image, camera=camera, estimate=estimate, detections=detections,
-                                         gt=gt)
     try:
+        files = {"labels": estimate.to_kitti().encode(),
+                 "json": scene_json(stem, estimate, detections).encode(),
+                 **scene_pictures(stem, image=image, camera=camera, estimate=estimate, detections=detections, gt=gt)}
         with ExitStack() as stack:  # each temporary file replaces its path as the block ends without error
-            tmp = {kind: stack.enter_context(atomic_path(path, suffix=path.suffix)) for kind, path in paths.items()}
-            write_labels(tmp["labels"], estimate.to_labels())
-            write_text(tmp["json"], payload)
-            save_figure(fig_overlay, tmp["overlay"])
-            save_figure(fig_bev, tmp["bev"])
+            for kind, path in paths.items():
+                stack.enter_context(atomic_path(path, suffix=path.suffix)).write_bytes(files[kind])
     except BaseException:
         remove_empty(made)
         raise
@@ -122,3 +115,14 @@ def scene_figures(stem: str, *, image: np.ndarray, camera: Camera, estimate: Sce
     fig_overlay = overlay(image, camera, estimate, gt=gt, detections=fitted_detections(detections, estimate),
                           dropped=dropped_detections(detections, estimate), title=title, edges=EDGES)
     return fig_overlay, birds_eye(estimate, gt=gt, camera=camera, title=title)
+
+
+def scene_pictures(stem: str, *, image: np.ndarray, camera: Camera, estimate: SceneEstimate, detections: Detections,
+                   gt: list[Label] = ()) -> dict[str, bytes]:
+    """``{"overlay", "bev": PNG bytes}``: :func:`scene_figures` as the files ``fit`` and ``predict
+    --pictures`` write (:func:`wirescene.io.pictures.figure_bytes`; keys those of
+    :func:`fit_output_paths`)."""
+    from wirescene.io.pictures import figure_bytes
+
+    figures = scene_figures(stem, image=image, camera=camera, estimate=estimate, detections=detections, gt=gt)
+    return {kind: figure_bytes(fig) for kind, fig in zip(("overlay", "bev"), figures)}
