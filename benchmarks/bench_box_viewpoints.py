@@ -46,7 +46,6 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -54,6 +53,7 @@ import numpy as np  # noqa: E402
 
 from _common import HEIGHT_BANDS, jitter_rng, jittered  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.core.boxes import MEAN_CAR_DIMS, iou_2d  # noqa: E402
+from wirescene.core.jsonio import write_json  # noqa: E402
 from wirescene.core.shape import load_default as load_shape_model  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import N_BINS, angle_difference, bin_center  # noqa: E402
@@ -351,7 +351,7 @@ def main():
         out["methods"]["own/pipeline-rowless"] = summary(angle_difference(np.asarray(own_rowless), rec["alpha"]), rec)
         print(fmt("each own box alone", out["methods"]["own/pipeline-rowless"]))
     if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=1))
+        write_json(args.json, out)
 
 
 if __name__ == "__main__":

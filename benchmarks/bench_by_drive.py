@@ -28,7 +28,6 @@ A RUN given without a name is named by its directory.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -36,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, run_tables  # noqa: E402  (benchmarks/ is on the path)
+from wirescene.core.jsonio import write_json
 from wirescene.eval.intervals import clustered_margin, clustered_share
 from wirescene.io.folds import DRIVE_FOLDS, FOLD_GROUPS, frame_drives
 from wirescene.io.kitti import CAR_TYPES, KittiDataset
@@ -185,9 +185,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(f"| {drives[i]} | {drive_fold[i]} | "
               + " | ".join(f"{counts[c][1][i]}/{counts[c][0][i]}" for c in cells) + " |")
     if args.json:
-        args.json.write_text(json.dumps({"metric": args.metric, "drives": drives, "margins": report, "shares": shares,
-                                         "counts": {f"{a}:{b}": {"n": n.tolist(), "k": k.tolist()}
-                                                    for (a, b), (n, k) in counts.items()}}, indent=1))
+        write_json(args.json, {"metric": args.metric, "drives": drives, "margins": report, "shares": shares,
+                               "counts": {f"{a}:{b}": {"n": n.tolist(), "k": k.tolist()}
+                                          for (a, b), (n, k) in counts.items()}})
         print(f"json: {args.json}", file=sys.stderr)
 
 

@@ -20,12 +20,12 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from _common import operating_point, read_saved_detections  # noqa: E402  (benchmarks/ is on the path of a script run from it)
+from wirescene.core.jsonio import write_json  # noqa: E402
 from wirescene.eval.kitti_metrics import detection_ap_2d  # noqa: E402
 from wirescene.fitting.options import PredetectOptions  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, fold_of  # noqa: E402
@@ -88,7 +88,7 @@ def main() -> None:
     print(f"{'range':<{width}} | " + " | ".join(f"{summary[k]['min']:.{d}f}-{summary[k]['max']:.{d}f}"
                                                 for k in keys for d in [1 if isinstance(first[k], float) else 0]))
     if args.json:
-        Path(args.json).write_text(json.dumps({"runs": figures, "summary": summary, "threshold": args.threshold}, indent=1))
+        write_json(args.json, {"runs": figures, "summary": summary, "threshold": args.threshold})
 
 
 if __name__ == "__main__":

@@ -14,10 +14,10 @@ each variant over a reference (default ``coarse+gp``).
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
+from wirescene.core.jsonio import write_json
 from wirescene.eval.metrics import evaluate
 from wirescene.io.splits import read_split_file
 
@@ -64,7 +64,7 @@ def main() -> None:
             frames = next(iter(rows.values()))["frames"] if rows else 0
             print(f"  {name} ({frames} frames): " + "; ".join(cells))
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        write_json(args.json, out)
 
 
 if __name__ == "__main__":

@@ -109,8 +109,9 @@ def main(argv=None):
               f"{metrics['n_gt']:6d}{within:6d}{moved:11d}{max(moves, default=0.0):12.3f}")
         summary.append({"config": config, "seconds": seconds, "cars": metrics["n_gt"], "within_1m": within,
                         "moved_over_1cm": moved, "max_move_m": max(moves, default=0.0), "compared": len(common)})
-    (out / "summary.json").write_text(json.dumps({"frames": frames, "variant": args.variant, "seed": args.seed,
-                                                  "runs": summary}, indent=1))
+    from wirescene.core.jsonio import write_json
+
+    write_json(out / "summary.json", {"frames": frames, "variant": args.variant, "seed": args.seed, "runs": summary})
     print(f"runs in {out}")
 
 

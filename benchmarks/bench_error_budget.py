@@ -36,7 +36,6 @@ run side by side); its fold directories are pooled.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -46,6 +45,7 @@ import numpy as np
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.core.errors import InputError
+from wirescene.core.jsonio import write_json
 from wirescene.core.viewpoints import wrap_angle
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.eval.metrics import FrameResult, evaluate
@@ -554,22 +554,6 @@ def plot(path: Path, runs: dict[str, dict[str, dict]], *, camera_height: float) 
     plt.close(fig)
 
 
-def _json_ready(value):
-    if isinstance(value, dict):
-        return {k: _json_ready(v) for k, v in value.items()}
-    if isinstance(value, np.ndarray):
-        return [_json_ready(v) for v in value.tolist()]
-    if isinstance(value, (list, tuple)):
-        return [_json_ready(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(float(value)) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
-
-
 def main(argv: Sequence[str] | None = None) -> None:
     """The command line (module docstring); ``argv`` as for :meth:`argparse.ArgumentParser.parse_args`."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -608,7 +592,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                 "loc_threshold": LOC_THRESHOLD, "bands": [b[0] for b in BANDS],
                 "occlusion_groups": [g[0] for g in OCCLUSION_GROUPS],
                 "truncation_groups": [g[0] for g in TRUNCATION_GROUPS], "components": list(COMPONENTS)}
-        args.json.write_text(json.dumps(_json_ready({"_meta": meta, "runs": report}), indent=1))
+        write_json(args.json, {"_meta": meta, "runs": report})
         print(f"json: {args.json}", file=sys.stderr)
     if args.plot:
         plot(args.plot, plotted, camera_height=args.camera_height)

@@ -148,6 +148,8 @@ console_main()
 
 def run_eval(root: Path, ids: list[str], work: Path, *, workers: int, eval_args: list[str]) -> dict:
     """One ``wirescene eval`` of the frames ``ids`` of ``root``, with its time and memory."""
+    from wirescene.core.jsonio import dumps
+
     out, peaks = work / f"eval_{len(ids)}.json", work / f"peaks_{len(ids)}.json"
     cmd = [sys.executable, "-c", _CHILD, str(peaks), "eval", str(root), "--frames", ",".join(ids),
            "--workers", str(workers), "--draws", "0", "--json", str(out), *eval_args]
@@ -165,7 +167,7 @@ def run_eval(root: Path, ids: list[str], work: Path, *, workers: int, eval_args:
     row = {"frames": len(ids), "workers": workers, "seconds": round(time.perf_counter() - t0, 1),
            "parent_mb": round(kib["self"] / 1024), "worker_max_mb": round(kib["children"] / 1024),
            "peak_sum_mb": round(memory.peak_sum)}
-    print(json.dumps(row), flush=True)
+    print(dumps(row, indent=None), flush=True)
     return row
 
 
@@ -182,6 +184,8 @@ def project(rows: list[dict], *, frames: int = KITTI_VAL_FRAMES, machine_gb: flo
 
 
 def main():
+    from wirescene.core.jsonio import dumps, write_json
+
     argv = sys.argv[1:]
     eval_args = ["--variant", "coarse", "--detections", "gt"]
     if "--" in argv:
@@ -205,9 +209,9 @@ def main():
     root, ids = repeated_root(args.root, args.work_dir, max(sizes))
     rows = [run_eval(root, ids[:n], args.work_dir, workers=args.workers, eval_args=eval_args) for n in sizes]
     summary = project(rows)
-    print(json.dumps(summary, indent=1))
+    print(dumps(summary))
     if args.json:
-        args.json.write_text(json.dumps({"eval_args": eval_args, "rows": rows, "projection": summary}, indent=1))
+        write_json(args.json, {"eval_args": eval_args, "rows": rows, "projection": summary})
 
 
 if __name__ == "__main__":

@@ -87,7 +87,7 @@ def _record(scene) -> str:
     """A fit to the bit: its JSON and the raw bytes of every car's arrays."""
     cars = [{k: v.tobytes().hex() if isinstance(v, np.ndarray) else v for k, v in vars(o).items()}
             for o in scene.objects]
-    return json.dumps([scene.to_dict(), cars], sort_keys=True, default=str)
+    return json.dumps([scene.to_dict(), cars], sort_keys=True, default=str)  # plain json: compared, NaN kept
 
 
 def _detection_record(d) -> bytes:

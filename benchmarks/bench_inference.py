@@ -46,6 +46,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _common import approximated_wireframes, frame_result_2d, parse_config, run_configs  # noqa: E402
+from wirescene.core.jsonio import write_json  # noqa: E402
 from wirescene.core.shape import load_default  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import angle_difference  # noqa: E402
@@ -99,8 +100,7 @@ def study(args):
         print(f"{r['config']:12s} {r['variant']:7s} {r['cars']:4d} {r['loc_1m']:6.1f} {r['median_az3d']:6.2f} "
               f"{r['median_loc']:6.2f} {r['parts_70']:9.1f} {r['s_per_frame']:8.2f}")
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"evidence": args.evidence, "frames": n_frames, "configs": configs, "rows": rows}, fh, indent=1)
+        write_json(args.json, {"evidence": args.evidence, "frames": n_frames, "configs": configs, "rows": rows})
     if args.plot:
         import matplotlib
 

@@ -15,13 +15,13 @@ mean (mean and largest vertex move, as a share of the car's length).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from wirescene.core.jsonio import write_json
 from wirescene.io.folds import fold_of
 from wirescene.io.kitti import KittiDataset
 from wirescene.parts.detector import PartDetector
@@ -74,7 +74,7 @@ def main(argv=None) -> None:
           f"max {s['max']:.2f}; cars kept at the mean {s['kept_mean_pct']:.0f}%; largest vertex move median "
           f"{s['largest_median']:.2f}", file=sys.stderr)
     if args.json:
-        args.json.write_text(json.dumps(s, indent=1))
+        write_json(args.json, s)
 
 
 if __name__ == "__main__":

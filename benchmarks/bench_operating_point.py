@@ -28,12 +28,12 @@ still move the errors of all of them.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
+from wirescene.core.jsonio import write_json
 from wirescene.eval.metrics import evaluate
 from wirescene.io.folds import FOLD_GROUPS, fold_of
 
@@ -150,7 +150,7 @@ def main() -> None:
                     f"{r['within_1.5m'][0]} -> {r['within_1.5m'][1]}, {r['nearer']} / {r['farther']}"
                     for g, r in rows.items()))
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        write_json(args.json, out)
 
 
 if __name__ == "__main__":

@@ -32,7 +32,6 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -42,6 +41,7 @@ import wirescene  # noqa: E402
 from wirescene.core.boxes import box_corners, clip_boxes, iou_2d, project_points_to_box  # noqa: E402
 from wirescene.core.camera import Camera  # noqa: E402
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount  # noqa: E402
+from wirescene.core.jsonio import dumps  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.fitting.models import detector_bank  # noqa: E402
 from wirescene.fitting.mount import image_pitch_likelihood, rig_pitch  # noqa: E402
@@ -149,7 +149,7 @@ def main() -> None:
             out[f"{mode} recall"] = [hits, n]
             print(f"  {mode:8s} pre-detection recall at 0.3: {hits} / {n} ({hits / max(n, 1) * 100:.0f}%)")
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1) + "\n")
+        args.json.write_text(dumps(out) + "\n")
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wirescene.core.jsonio import write_json
 from wirescene.io.folds import FOLD_GROUPS, fold_of
 
 
@@ -91,7 +92,7 @@ def main() -> None:
         for band, b in p["bands"].items():
             print(f"  {band}: {b['cars']} cars, width {b['width_ratio']:.3f}, height {b['height_ratio']:.3f}")
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        write_json(args.json, out)
 
 
 if __name__ == "__main__":

@@ -29,7 +29,6 @@ DIR holds ``parts_fold{k}.npz`` (the README's fold part models).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -39,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.camera import NEAR_PLANE
+from wirescene.core.jsonio import write_json
 from wirescene.core.wireframe import FACES
 from wirescene.eval.sources import frame_seed
 from wirescene.fitting.models import load_shape_model
@@ -240,7 +240,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         out[name] = summarise([r for r in rows if r["fold"] in folds])
         print(format_summary(name, out[name]))
     if args.json:
-        args.json.write_text(json.dumps({"variant": args.variant, "seed": args.seed, "groups": out}, indent=1))
+        write_json(args.json, {"variant": args.variant, "seed": args.seed, "groups": out})
         print(f"json: {args.json}", file=sys.stderr)
 
 

@@ -25,7 +25,6 @@ Interrupted runs resume (``RUN_DIR/fold{k}`` are ordinary ``eval --predictions``
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
+from wirescene.core.jsonio import dumps, write_json
 from wirescene.core.version import environment
 from wirescene.eval.intervals import format_intervals, kitti_variant_intervals, localisation_intervals, margin_intervals
 from wirescene.eval.kitti_metrics import format_kitti_intervals, kitti_figure, kitti_metrics
@@ -133,7 +133,7 @@ def main():
     if args.detections == "bank":
         fitted = sum(r.n_detections for r in records[variants[0]])
         records = verified_records(records, tau)
-        (args.out / VERIFICATION_FILE).write_text(json.dumps({"min_car_probability": tau}))
+        write_json(args.out / VERIFICATION_FILE, {"min_car_probability": tau}, indent=None)
         print(f"verified held out at p(car) >= {tau:g}: {variants[0]} keeps "
               f"{sum(r.n_detections for r in records[variants[0]])} of {fitted} fitted cars", file=sys.stderr)
         pooled = [v for v in variants if get_variant(v).fine]
@@ -175,7 +175,7 @@ def main():
     summary["_run"] = {"frames": len(frames), "cars": n_cars, "detections": args.detections, "seed": args.seed,
                        "models": "shipped" if args.shipped else str(args.models), "seconds": elapsed,
                        "settings": args.settings, "environment": environment()}
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1, default=lambda o: None))
+    (args.out / "summary.json").write_text(dumps(summary, default=lambda o: None))
     print(f"\nsummary: {args.out / 'summary.json'}")
 
 

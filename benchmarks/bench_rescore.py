@@ -32,7 +32,6 @@ appearance logits cross-fitted between the group's two folds, and scored on the 
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ import numpy as np
 from _common import read_saved_detections  # (benchmarks/ is on the path of a script run from it)
 from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import check_shape
+from wirescene.core.jsonio import write_json
 from wirescene.core.types import Detections
 from wirescene.eval.kitti_metrics import detection_ap_2d
 from wirescene.io.folds import FOLD_GROUPS, fold_of
@@ -252,7 +252,7 @@ def main() -> None:
     print(fmt(f"POOLED before ({len(frames)} frames)", p["before"], p["op_before"]))
     print(fmt(f"POOLED after  ({len(frames)} frames)", p["after"], p["op_after"]))
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        write_json(args.json, out)
 
 
 def appearance_features(image: np.ndarray, boxes: np.ndarray, alpha: np.ndarray, kind: str) -> np.ndarray:

@@ -22,7 +22,6 @@ frames and cars must agree.
 from __future__ import annotations
 
 import itertools
-import json
 import sys
 from collections.abc import Mapping, Sequence
 
@@ -30,6 +29,7 @@ import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, Boxes, passes, run_tables  # noqa: E402  (benchmarks/ is on the path)
 from bench_seeds import GROUPS, chosen_variants, seed_run_parser, seed_runs
+from wirescene.core.jsonio import write_json
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.io.folds import DRIVE_FOLDS, frame_drives
 from wirescene.io.kitti import KittiDataset
@@ -176,7 +176,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         out[v] = report(cars, groups, len(runs))
         print(format_report(v, out[v]))
     if args.json:
-        args.json.write_text(json.dumps({"runs": [str(r) for r in runs], "seeds": seeds, "variants": out}, indent=1))
+        write_json(args.json, {"runs": [str(r) for r in runs], "seeds": seeds, "variants": out})
         print(f"json: {args.json}", file=sys.stderr)
 
 

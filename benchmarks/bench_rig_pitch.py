@@ -25,13 +25,13 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from wirescene.core.groundplane import KITTI_MOUNT  # noqa: E402
+from wirescene.core.jsonio import write_json  # noqa: E402
 from wirescene.fitting.models import detector_bank  # noqa: E402
 from wirescene.fitting.mount import image_pitch_likelihood, rig_pitch  # noqa: E402
 from wirescene.io.folds import drive_map, fold_of  # noqa: E402
@@ -94,9 +94,8 @@ def main() -> None:
     for n, e in errors.items():
         print(f"| {n} | {e['median']:.2f} | {e['p90']:.2f} | {e['max']:.2f} |")
     if args.json:
-        args.json.write_text(json.dumps({"reference": reference, "alone": dict(zip(ids, alone.tolist())),
-                                         "boxes": boxes, "drives": drive_pitch, "errors": errors,
-                                         "held_out": bool(args.fold_models)}, indent=1))
+        write_json(args.json, {"reference": reference, "alone": dict(zip(ids, alone.tolist())), "boxes": boxes,
+                               "drives": drive_pitch, "errors": errors, "held_out": bool(args.fold_models)})
 
 
 if __name__ == "__main__":

@@ -28,13 +28,13 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from wirescene.core.jsonio import write_json  # noqa: E402
 from wirescene.eval.kitti_metrics import kitti_metrics  # noqa: E402
 from wirescene.eval.runner import evaluate_dataset  # noqa: E402
 from wirescene.eval.sources import DetectionSource, frame_seed  # noqa: E402
@@ -105,7 +105,7 @@ def main():
                     print(f"{level:>6.2f} {vp:>8.0f} {v:<10} {m['n_tp']:>4}/{m['n_gt']:<3} {m['loc_1m']:>4.0f}% "
                           f"{m['loc_1_5m']:>5.0f}% {ap3d if ap3d is not None else float('nan'):>13.2f}", flush=True)
     if args.json:
-        Path(args.json).write_text(json.dumps({"frames": len(frames), "seed": args.seed, "rows": rows}, indent=1))
+        write_json(args.json, {"frames": len(frames), "seed": args.seed, "rows": rows})
 
 
 if __name__ == "__main__":

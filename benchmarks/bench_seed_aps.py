@@ -16,13 +16,13 @@ label files; this reads the runs' records, whose confidences it cross-validates 
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Sequence
 
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path)
 from bench_real_folds import cv_predictions
 from bench_seeds import chosen_variants, same_frames, seed_run_parser, seed_runs
+from wirescene.core.jsonio import write_json
 from wirescene.eval.intervals import N_BOOT_AP, kitti_run_intervals
 from wirescene.eval.kitti_metrics import kitti_figure, kitti_metrics, mean_kitti_metrics
 from wirescene.io.folds import drive_map, fold_of
@@ -79,8 +79,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     report = seed_aps(preds, gts, frames, drive_map(dataset.base_dir)[0], variants=variants, n_boot=args.draws)
     print(format_report(report, [s if s is not None else "?" for s in seeds]))
     if args.json:
-        args.json.write_text(json.dumps({"runs": [str(r) for r in runs], "seeds": seeds, "variants": report},
-                                        indent=1))
+        write_json(args.json, {"runs": [str(r) for r in runs], "seeds": seeds, "variants": report})
         print(f"json: {args.json}", file=sys.stderr)
 
 

@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from bench_error_budget import KITTI_CAMERA_HEIGHT, group_masks, run_tables  # noqa: E402  (benchmarks/ is on the path)
+from wirescene.core.jsonio import write_json
 from wirescene.io.folds import DRIVE_FOLDS, FOLD_GROUPS, frame_drives
 from wirescene.io.kitti import KittiDataset
 
@@ -279,8 +280,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         out[v] = compare([t[v] for t in tables[name_a]], [t[v] for t in tables[name_b]], fold_of, classes=classes)
         print(format_report(v, out[v], (name_a, name_b)))
     if args.json:
-        args.json.write_text(json.dumps({"settings": {n: [str(r) for r in rs] for n, rs in settings.items()},
-                                         "variants": out}, indent=1))
+        write_json(args.json, {"settings": {n: [str(r) for r in rs] for n, rs in settings.items()}, "variants": out})
         print(f"json: {args.json}", file=sys.stderr)
 
 

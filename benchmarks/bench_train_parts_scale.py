@@ -50,6 +50,8 @@ def fill_synth_cache(cache: Path) -> float:
 def train(root: Path, work: Path, n: int) -> dict:
     """One ``train parts`` run (the shipped recipe: the command's defaults) on the first ``n``
     labelled frames of ``root``."""
+    from wirescene.core.jsonio import dumps
+
     ids = labelled_frames(root)
     if n > len(ids):
         raise SystemExit(f"{root}: {len(ids)} labelled frames, fewer than the {n} asked for")
@@ -61,7 +63,7 @@ def train(root: Path, work: Path, n: int) -> dict:
     row = {"frames": n, "seconds": round(seconds, 1), "peak_mb": round(peak), "real_patches": r["n_real"],
            "patches": r["n_patches"], "patches_s": round(r["t_data_s"], 1), "final_forest_s": round(r["t_fit_s"], 1)}
     row["calibration_s"] = round(seconds - row["patches_s"] - row["final_forest_s"], 1)
-    print(json.dumps(row), flush=True)
+    print(dumps(row, indent=None), flush=True)
     return row
 
 
@@ -84,6 +86,8 @@ def project(rows: list[dict]) -> dict:
 
 
 def main():
+    from wirescene.core.jsonio import dumps
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("work_dir", type=Path, help="directory for the synthetic cache, the models and their reports")
     ap.add_argument("--root", type=Path, default=None,
@@ -99,9 +103,9 @@ def main():
     print(f"synthetic patches cached in {fill_synth_cache(args.work_dir / 'synth_cache'):.0f} s", flush=True)
     rows = [train(root, args.work_dir, n) for n in counts]
     result = {"root": str(root), "rows": rows, "projection": project(rows)}
-    print(json.dumps(result["projection"], indent=1))
+    print(dumps(result["projection"]))
     if args.json:
-        args.json.write_text(json.dumps(result, indent=1) + "\n")
+        args.json.write_text(dumps(result) + "\n")
 
 
 if __name__ == "__main__":

@@ -36,7 +36,6 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -86,6 +85,8 @@ def labelled_frames(root: Path) -> list[str]:
 def train(root: Path, work: Path, n: int, *, workers: int, cache_mb: float, max_negatives: int,
           recipe: str = "light") -> dict:
     """One detector-step run on the first ``n`` labelled frames of ``root``."""
+    from wirescene.core.jsonio import dumps
+
     ids = labelled_frames(root)
     if n > len(ids):
         raise SystemExit(f"{root}: {len(ids)} labelled frames, fewer than the {n} asked for")
@@ -97,7 +98,7 @@ def train(root: Path, work: Path, n: int, *, workers: int, cache_mb: float, max_
                                     "--workers", str(workers), "--out", str(out_path)])
     row = {"frames": n, "workers": workers, "seconds": round(seconds, 1), "peak_mb": round(peak),
            **pool_sizes(out_path)}
-    print(json.dumps(row), flush=True)
+    print(dumps(row, indent=None), flush=True)
     return row
 
 
@@ -146,6 +147,8 @@ def summarise(rows: list[dict], check: list[dict], large: list[dict] = ()) -> di
 
 
 def main():
+    from wirescene.core.jsonio import dumps
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("work_dir", type=Path, help="directory for the synthetic frames and the banks")
     ap.add_argument("--frames", default="10,20,40,80", help="numbers of training frames, comma-separated")
@@ -179,9 +182,9 @@ def main():
     two = [train(root, args.work_dir, n, workers=2, **caps) for n in large]
     result = {"recipe": RECIPES[args.recipe], "root": str(root), **caps, "rows": rows, "workers_check": check, "two_workers": two,
               "fit": summarise(rows, check, two)}
-    print(json.dumps(result["fit"], indent=1))
+    print(dumps(result["fit"]))
     if args.json:
-        args.json.write_text(json.dumps(result, indent=1) + "\n")
+        args.json.write_text(dumps(result) + "\n")
 
 
 if __name__ == "__main__":

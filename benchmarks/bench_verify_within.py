@@ -23,7 +23,6 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -31,6 +30,7 @@ import numpy as np  # noqa: E402
 
 import wirescene.predetect.bank as bank_module  # noqa: E402
 from wirescene.core.boxes import iou_2d  # noqa: E402
+from wirescene.core.jsonio import write_json  # noqa: E402
 from wirescene.fitting.options import PredetectOptions  # noqa: E402
 from wirescene.io.folds import N_FOLDS, fold_of  # noqa: E402
 from wirescene.io.kitti import KittiDataset  # noqa: E402
@@ -107,7 +107,7 @@ def main():
                 f"{g} {e['detections']} detections, {e['on_car']} on a car, {e['frames_differing']} frames differ"
                 for g, e in entry.items()))
     if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=1))
+        write_json(args.json, report)
 
 
 if __name__ == "__main__":

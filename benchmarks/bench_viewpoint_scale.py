@@ -19,7 +19,6 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import resource
 import sys
 import time
@@ -51,6 +50,7 @@ def main(argv=None) -> None:
     ap.add_argument("--frames", default="24,72", help="numbers of frames the command is run on")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
+    from wirescene.core.jsonio import write_json
     from wirescene.io.kitti import KittiDataset
     from wirescene.predetect.viewpoint_classifier import fit_viewpoint_classifier, kitti_examples
 
@@ -83,7 +83,7 @@ def main(argv=None) -> None:
           f"crops {per_car * 1e3:.1f} ms a car -> {per_car * rows / 4:.0f} s; the logistic fit on a replica "
           f"{fit:.0f} s, this process's peak {peak:.0f} MB")
     if args.json is not None:
-        args.json.write_text(json.dumps(out, indent=1))
+        write_json(args.json, out)
 
 
 if __name__ == "__main__":

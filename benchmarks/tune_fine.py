@@ -27,12 +27,12 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from _common import parse_config, run_configs  # noqa: E402
+from wirescene.core.jsonio import write_json  # noqa: E402
 from wirescene.eval.metrics import evaluate  # noqa: E402
 from wirescene.io.folds import fold_of  # noqa: E402
 
@@ -107,9 +107,8 @@ def main():
             print(f"  chosen on {choose}: {best:14s} -> on {report}: {v:7s} {f['n_tp']} cars  <1m {f['loc_1m']:.1f}%  "
                   f"<1.5m {f['loc_1_5m']:.1f}%  az {f['median_az3d']:.1f}  loc {f['median_loc']:.2f} m")
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"configs": configs, "seconds": seconds, "chosen": chosen,
-                       "table": {"|".join(k): v for k, v in table.items()}}, fh, indent=1)
+        write_json(args.json, {"configs": configs, "seconds": seconds, "chosen": chosen,
+                               "table": {"|".join(k): v for k, v in table.items()}})
 
 
 if __name__ == "__main__":

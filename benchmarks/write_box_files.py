@@ -10,12 +10,12 @@ jittered boxes), as a good detector's boxes would.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 from _common import jitter_rng, jittered  # noqa: E402  (benchmarks/ is on the path of a script run from it)
+from wirescene.core.jsonio import write_json
 from wirescene.io.kitti import KittiDataset
 
 
@@ -39,7 +39,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     frames = dataset.frame_ids()
     for f in frames:
-        (args.out / f"{f}.json").write_text(json.dumps(frame_boxes(dataset, f, jitter=args.jitter, seed=args.seed)))
+        write_json(args.out / f"{f}.json", frame_boxes(dataset, f, jitter=args.jitter, seed=args.seed), indent=None)
     print(f"{len(frames)} frames -> {args.out}")
 
 

@@ -38,6 +38,29 @@ def test_benchmark_imports(script, monkeypatch):
     assert callable(getattr(module, "main", None)), f"{script.name} has no main()"
 
 
+def test_benchmarks_write_json_through_the_strict_writer():
+    """Benchmark JSON goes through :mod:`wirescene.core.jsonio` (NaN as null), not bare ``json.dump`` /
+    ``json.dumps``: the calls in each script's code (not the code strings its child processes run) are
+    found, and one that writes no file for people says why on its line (``# plain json: ...``)."""
+    import ast
+
+    bare = []
+    for script in sorted(BENCHMARKS.glob("*.py")):
+        source = script.read_text()
+        lines = source.splitlines()
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, ast.ImportFrom) and node.module == "json":
+                called = [a.name for a in node.names if a.name in ("dump", "dumps")]
+            elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                  and isinstance(node.func.value, ast.Name) and node.func.value.id == "json"):
+                called = [node.func.attr] if node.func.attr in ("dump", "dumps") else []
+            else:
+                continue
+            if called and not any("# plain json:" in line for line in lines[node.lineno - 1:node.end_lineno]):
+                bare.append(f"{script.name}:{node.lineno}")
+    assert not bare, f"bare json.dump(s) (use wirescene.core.jsonio's write_json / dumps): {bare}"
+
+
 def test_choose_by_fold_never_uses_the_scored_fold(monkeypatch):
     """Each fold's configuration is the best on the other folds, whatever it scores on its own."""
     monkeypatch.syspath_prepend(str(BENCHMARKS))

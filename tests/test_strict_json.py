@@ -145,3 +145,33 @@ def test_train_detector_report_is_json_with_its_keys(tmp_path, source):
     else:
         assert data["n_scenes"] == 2 and data["validation"]["n_scenes"] == 1 and 0 <= data["validation"]["ap"] <= 1
         assert len(data["full_box_correction"]) == len(data["bins"])  # an array of the bank's meta, as a list
+
+
+@pytest.mark.parametrize("kind", ["bank", "classifier"])
+def test_trained_file_meta_is_strict_json_and_reads_back(tmp_path, kind):
+    """A bank's or viewpoint classifier's ``meta_json`` (a synthetic bank's validation summary can hold NaN):
+    strict JSON, NaN as null; an older file's NaN token still reads; a shipped file's meta keeps its bytes."""
+    from dataclasses import replace
+
+    from wirescene.core.artefacts import load_npz, save_npz
+    from wirescene.predetect import bank as module_bank
+    from wirescene.predetect import viewpoint_classifier as module_clf
+
+    module = module_bank if kind == "bank" else module_clf
+    shipped = module.load_default_bank() if kind == "bank" else module.load_default_classifier()
+    stored = str(np.load(module.DATA_DIR / ("detector_bank.npz" if kind == "bank" else "viewpoint_classifier.npz"))
+                 ["meta_json"])
+    model = replace(shipped, meta={**shipped.meta, "validation": {"ap": float("nan"), "n": 2},
+                                   "ratio": -np.inf})
+    path = model.save(tmp_path / "model.npz")
+    arrays = load_npz(path, kind=module.ARTEFACT_KIND, version=module.FORMAT_VERSION)
+    assert strict_loads(str(arrays["meta_json"]))["validation"] == {"ap": None, "n": 2}
+    back = type(model).load(path)
+    assert back.meta == {**shipped.meta, "validation": {"ap": None, "n": 2}, "ratio": None}
+    # a file written before, with json.dumps' NaN token, reads as it did
+    old = save_npz(tmp_path / "old.npz", {**arrays, "meta_json": np.array('{"validation": {"ap": NaN}}')},
+                   kind=module.ARTEFACT_KIND, version=module.FORMAT_VERSION)
+    assert np.isnan(type(model).load(old).meta["validation"]["ap"])
+    # a meta of finite values: the bytes json.dumps wrote (the shipped file re-saves identical)
+    assert str(np.load(shipped.save(tmp_path / "again.npz"))["meta_json"]) == stored == json.dumps(shipped.meta,
+                                                                                                      sort_keys=True)

@@ -37,6 +37,7 @@ from wirescene.core.artefacts import load_npz, save_npz
 from wirescene.core.boxes import clip_boxes
 from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.groundplane import KITTI_MOUNT, Mount
+from wirescene.core.jsonio import dumps
 from wirescene.core.resources import DATA_DIR
 from wirescene.core.types import Detections
 from wirescene.core.validate import MIN_IMAGE_SIDE
@@ -170,7 +171,8 @@ class DetectorBank:
             weights=np.concatenate([w.astype(np.float32).ravel() for w in self.weights]) if T else np.zeros(0, np.float32),
             names=np.array([c.name for c in self.configs], dtype=str),
             threshold=np.array(float(self.threshold)),
-            meta_json=np.array(json.dumps(self.meta, sort_keys=True)),
+            # strict JSON (a NaN of the validation summary as null), the bytes of json.dumps' otherwise
+            meta_json=np.array(dumps(self.meta, indent=None, sort_keys=True)),
             calibration=np.zeros(0, np.float64) if self.calibration is None else np.asarray(self.calibration, float),
             **{f"refine_{k}": (np.zeros(0, np.float32) if self.refinement is None
                                else np.asarray(self.refinement[k], np.float32)) for k in ("mean", "scale", "weights")},
@@ -221,7 +223,7 @@ class DetectorBank:
             else:
                 verifier["channels"] = bool(z.get("verify_channels", np.array(0)))
             return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
-                       json.loads(str(z["meta_json"])), calib, refinement, verifier)
+                       json.loads(str(z["meta_json"])), calib, refinement, verifier)  # older banks: NaN too
         except (KeyError, ValueError) as exc:
             raise InputError(f"malformed detector bank ({exc.__class__.__name__}: {exc})", path=path) from None
 

@@ -130,10 +130,10 @@ class ViewpointClassifier:
         return self.log_probs_of_features(crop_viewpoint_features(image, boxes))
 
     def save(self, path) -> Path:
-        import json
+        from wirescene.core.jsonio import dumps
 
         arrays = {k: np.asarray(getattr(self, k), np.float32) for k in ("mean", "scale", "weights", "bias")}
-        return save_npz(path, {**arrays, "meta_json": np.array(json.dumps(self.meta, sort_keys=True))},
+        return save_npz(path, {**arrays, "meta_json": np.array(dumps(self.meta, indent=None, sort_keys=True))},
                         kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
     @classmethod
@@ -143,7 +143,7 @@ class ViewpointClassifier:
         z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)  # missing / corrupt / foreign: InputError
         try:
             model = cls(*(z[k].astype(float) for k in ("mean", "scale", "weights", "bias")),
-                        json.loads(str(z["meta_json"])))
+                        json.loads(str(z["meta_json"])))  # strict JSON, or an older file's NaN
         except KeyError as exc:
             raise InputError(f"malformed viewpoint classifier (missing {exc})", path=path) from None
         F = len(model.mean)
