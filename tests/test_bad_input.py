@@ -238,6 +238,12 @@ PLY_FACE_PAST_VERTICES = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty flo
                           "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n4 0 0\n0 1 1\n"
                           "3 0 1 7\n")
 
+def _broken_link(tmp):
+    """``tmp/ln``: a symbolic link to nothing (``tmp/gone``), given where an output folder goes."""
+    (tmp / "ln").symlink_to(tmp / "gone")
+    return tmp / "ln"
+
+
 # A COCO result file (a detector's output over a data set): boxes of every image, told by image_id.
 COCO_TWO_IMAGES = [{"image_id": 7, "category_id": 3, "bbox": [300, 180, 220, 90], "score": 0.9},
                    {"image_id": 8, "category_id": 3, "bbox": [600, 170, 80, 60], "score": 0.8}]
@@ -652,6 +658,10 @@ CASES = {
     "train scores of a frame record not a JSON object": (
         lambda t: ["train", "scores", _file(t, f"run/.frames/{FRAME}.json", "[]").parents[1], "--out", t / "s.json"],
         rf"{FRAME}\.json: unreadable frame record \(a JSON list, not an object\)$"),
+    # was "unreadable frame record ('variants')": a KeyError's bare key
+    "train scores of a frame record without its variants": (
+        lambda t: ["train", "scores", _file(t, f"run/.frames/{FRAME}.json", "{}").parents[1], "--out", t / "s.json"],
+        rf"{FRAME}\.json: unreadable frame record \(no 'variants' entry\)$"),
     # a PR curve named .txt was a PNG under that name, as gt's and cad show's --out refuse
     "detect --pr-curve of no picture format": (
         lambda t: ["detect", KITTI_ROOT, "--frames", FRAME, "--pr-curve", t / "pr.txt"],
@@ -777,6 +787,38 @@ CASES = {
         lambda t: ["kitti-eval", SPLIT / "label_2", _dets_dir(t, {f"{FRAME}.txt": CAR.replace(" 1.76", " 100.8 0.9")}),
                    "--frames", FRAME, "--draws", "0"],
         rf"dets/{FRAME}\.txt: line 1: rotation_y must be radians within one turn, got 100\.8 \(degrees\?\)$"),
+    # a corrupt translation column was taken as it was: the car's x was -1.4e297 m in the label file, exit 0
+    "calib P2 translation 1e300": (
+        lambda t: _fit_case(t, calib=_with_p2("721.5 0 609 1e300 0 721.5 172.9 0.2 0 0 1 0.003")),
+        r"calib\.txt: P2: camera centre 1\.386e\+297 m from the frame's origin on an axis \(at most 100 m\): a corrupt "
+        r"translation column \(P's 4th\)\?$"),
+    # each row kept the last x1: box 0 was x1 y1 x2 y2 = 1 180 520 300, fitted without a word
+    "CSV header naming a column twice": (lambda t: _fit_case(t, dets=(".csv", "x1,y1,x2,y2,x1\n300,180,520,300,1\n")),
+                                         r"dets\.csv: CSV header names the column 'x1' twice$"),
+    # int() dropped the fraction (bin 2) and took true for bin 1
+    "JSON viewpoint_bin 2.7": (lambda t: _fit_case(t, dets=(".json", '[{"box": [300, 180, 520, 300], "viewpoint_bin": 2.7}]')),
+                               r"detection 0: viewpoint_bin must be an integer 0\.\.7, got '2\.7'$"),
+    "JSON viewpoint_bin true": (
+        lambda t: _fit_case(t, dets=(".json", '[{"box": [300, 180, 520, 300], "viewpoint_bin": true}]')),
+        r"detection 0: viewpoint_bin must be an integer 0\.\.7, got 'True'$"),
+    # float(True): a score of 1, as a bool box coordinate is refused
+    "JSON score true": (lambda t: _fit_case(t, dets=(".json", '[{"box": [300, 180, 520, 300], "score": true}]')),
+                        r"dets\.json: detection 0: score must be a number$"),
+    # an output folder that is a symbolic link to nothing passed the checks: FileExistsError's traceback at its
+    # mkdir (eval's --report after every fit, predict's --json-dir after its settings' record was written)
+    "fit --out a broken symbolic link": (
+        lambda t: [*_fit_case(t), "--out", _broken_link(t)],
+        r"^wirescene: error: --out: \S+/ln is a broken symbolic link \(to \S+/gone\)$"),
+    "fit --out under a broken symbolic link": (
+        lambda t: [*_fit_case(t), "--out", _broken_link(t) / "run"],
+        r"^wirescene: error: --out: \S+/ln is a broken symbolic link \(to \S+/gone\)$"),
+    "eval --report a broken symbolic link": (
+        lambda t: _eval_case(t, "--draws", "0", "--report", _broken_link(t)),
+        r"^wirescene: error: --report: \S+/ln is a broken symbolic link"),
+    "predict --json-dir a broken symbolic link": (
+        lambda t: ["predict", KITTI_ROOT, "--split", "training", "--variant", "coarse", "--detections", "gt",
+                   "--frames", FRAME, "--workers", "1", "--out", t / "submission", "--json-dir", _broken_link(t)],
+        r"^wirescene: error: --json-dir: \S+/ln is a broken symbolic link"),
     "cad list of a PLY face past its vertices": (  # loaded as it is by trimesh, refused later or not at all
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.ply", PLY_FACE_PAST_VERTICES).parent],
         r"car\.ply: a face refers to vertex 7, the file has 3 vertices \(0 to 2\)$"),
@@ -963,6 +1005,16 @@ def test_csv_with_a_byte_order_mark_is_read(tmp_path):
     path.write_bytes("x1,y1,x2,y2,score\n300,180,520,300,0.9\n".encode("utf-8-sig"))
     dets = read_detections(path)
     assert len(dets) == 1 and dets.scores[0] == pytest.approx(0.9)
+
+
+def test_an_empty_csv_holds_no_box(tmp_path):
+    """An empty CSV file (no header either) was "I/O operation on closed file"'s traceback: its header was
+    looked for once the file was closed."""
+    from wirescene.io.detections import NO_CARS
+
+    (tmp_path / "d.csv").write_text("")
+    with pytest.raises(InputError, match=rf"d\.csv: {NO_CARS}$"):
+        read_detections(tmp_path / "d.csv")
 
 
 def test_label_calib_and_split_files_with_a_byte_order_mark_are_read_whole(tmp_path):

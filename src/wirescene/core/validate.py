@@ -21,6 +21,9 @@ FOCAL_RANGE = (10.0, 1e5)
 MAX_PIXEL = 1e5
 # No image is smaller (pixels a side): the detector's and the crop classifier's least window.
 MIN_IMAGE_SIDE = 16
+# A camera centre farther than this (m) from the rectified frame's origin is a corrupt translation
+# column: KITTI's cameras lie within 0.6 m of it, and a fit would place every car that far off.
+MAX_CAMERA_OFFSET = 100.0
 
 #: Most worker processes of one run (``--workers``, the API's ``workers``): each fitting worker holds
 #: some 440 MB (README, "Evaluating needs little memory"), so 64 of them take 28 GB (55 fit 24 GB); a
@@ -89,8 +92,9 @@ def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | No
 
     It must be finite, with an upper-triangular intrinsic part ``K`` (the camera frame
     is the rectified frame: no rotation), positive ``K[2, 2]``, focal lengths in
-    :data:`FOCAL_RANGE` and, when the image size is known, a principal point within
-    the image widened by half its size on each side.
+    :data:`FOCAL_RANGE`, a camera centre within :data:`MAX_CAMERA_OFFSET` of the origin
+    and, when the image size is known, a principal point within the image widened by
+    half its size on each side.
 
     Examples
     --------
@@ -101,6 +105,8 @@ def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | No
     'implausible focal length (fx=1, fy=1 px; expected 10..100000)'
     >>> projection_problem([[721.5, 0, 5000, 0], [0, 721.5, 172.9, 0], [0, 0, 1, 0]], (1242, 375))
     'principal point (5000, 172.9) is far outside the 1242x375 image'
+    >>> projection_problem([[721.5, 0, 609.6, 1e300], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
+    "camera centre 1.386e+297 m from the frame's origin on an axis (at most 100 m): a corrupt translation column (P's 4th)?"
     """
     P = np.asarray(P)
     if P.shape != (3, 4):
@@ -117,6 +123,11 @@ def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | No
     lo, hi = FOCAL_RANGE
     if not (lo <= fx <= hi and lo <= fy <= hi):
         return f"implausible focal length (fx={fx:g}, fy={fy:g} px; expected {lo:g}..{hi:g})"
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is an offset beyond any bound, refused below
+        offset = float(np.abs(np.linalg.solve(P[:, :3], P[:, 3])).max())  # the camera centre's farthest coordinate
+    if not offset <= MAX_CAMERA_OFFSET:  # NaN too: an overflow (inf - inf) in the solve
+        return (f"camera centre {offset:.4g} m from the frame's origin on an axis (at most {MAX_CAMERA_OFFSET:g} m): a "
+                "corrupt translation column (P's 4th)?")
     if image_size is not None:
         w, h = image_size
         cx, cy = K[0, 2], K[1, 2]
@@ -251,6 +262,26 @@ def path_problem(path, what: str, *, directory: bool = False, missing: str | Non
     return f"{what} path is not a {kind}"
 
 
+def broken_link_problem(path) -> str | None:
+    """Why ``path`` cannot be made a directory because it, or a folder above it, is a symbolic
+    link to nothing (``mkdir`` fails on the link itself: FileExistsError), or None.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     (Path(d) / "out").symlink_to(Path(d) / "gone")
+    ...     broken_link_problem(Path(d) / "out" / "run").endswith("/out is a broken symbolic link (to " + d + "/gone)")
+    True
+    """
+    for candidate in (Path(path), *Path(path).parents):
+        if candidate.is_symlink() and not candidate.exists():
+            return f"{candidate} is a broken symbolic link (to {os.readlink(candidate)})"
+        if candidate.exists():
+            return None
+    return None
+
+
 def _first_existing(path: Path) -> Path:
     for candidate in (path, *path.parents):
         if candidate.exists():
@@ -303,6 +334,9 @@ def creatable_problem(path) -> str | None:
     True
     """
     path = Path(path)
+    link = broken_link_problem(path.parent)
+    if link:
+        return f"{path}: {link}"
     base = _first_existing(path.parent)
     if not base.is_dir():
         return f"{path}: {base} is a file, not a directory"
@@ -336,4 +370,4 @@ def output_dir_problem(path) -> str | None:
             return f"{path} is a file, expected a directory"
         problem = _writable_problem(path)
         return f"{path} {problem}" if problem else None
-    return creatable_problem(path)
+    return broken_link_problem(path) or creatable_problem(path)

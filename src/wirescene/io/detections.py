@@ -111,10 +111,13 @@ def detections_from_labels(
 
 def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
     if entry.get("viewpoint_bin") not in (None, ""):
+        value = entry["viewpoint_bin"]
         try:
-            b = int(entry["viewpoint_bin"])
+            b = int(value)
+            if isinstance(value, bool) or (isinstance(value, float) and b != value):  # int() drops a fraction
+                raise ValueError
         except (TypeError, ValueError, OverflowError):
-            raise InputError(f"{where}: viewpoint_bin must be an integer 0..7", path=path) from None
+            raise InputError(f"{where}: viewpoint_bin must be an integer 0..7, got {str(value)[:20]!r}", path=path) from None
         if not 0 <= b < 8:
             raise InputError(f"{where}: viewpoint_bin must be in 0..7, got {b}", path=path)
         return float(bin_center(b))
@@ -189,6 +192,8 @@ def _from_entries(entries: list, path: Path) -> Detections:
         boxes.append(_box_of(entry, path, where))
         try:
             score = entry.get("score", 1.0)
+            if isinstance(score, bool):  # float(True) is 1.0: a flag, not a score
+                raise TypeError
             score = 1.0 if score in (None, "") else float(score)
         except (TypeError, ValueError, OverflowError):
             raise InputError(f"{where}: score must be a number", path=path) from None
@@ -284,13 +289,17 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
             with path.open(newline="", encoding="utf-8-sig") as fh:
                 reader = csv.DictReader(fh)
                 rows = list(reader)
+                fieldnames = reader.fieldnames  # read here: an empty file's are looked for in the closed file later
         except (csv.Error, UnicodeDecodeError, OSError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", path=path) from None
         # the header itself, rows or not: a file without one takes its first box for it (and reads no box)
-        if reader.fieldnames is not None and not {"x1", "y1", "x2", "y2"} <= set(reader.fieldnames):
-            header = ",".join(reader.fieldnames)
+        if fieldnames is not None and not {"x1", "y1", "x2", "y2"} <= set(fieldnames):
+            header = ",".join(fieldnames)
             raise InputError(f"CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha), got "
                              f"{header if len(header) <= 40 else header[:37] + '...'!r}", path=path)
+        twice = sorted({name for name in fieldnames or () if fieldnames.count(name) > 1})
+        if twice:  # each row keeps the last column of a name: a box of another column's numbers
+            raise InputError(f"CSV header names the column {twice[0]!r} twice", path=path)
         dets = _from_entries(rows, path)
         others = [_class_of(e) for e in rows if not _is_car(e)]
     else:

@@ -99,7 +99,9 @@ def read_run_sources(predictions_dir, frames: Iterable[str] | None = None) -> di
             for variant, entry in record["variants"].items():
                 out["labels" if gt else "detections"].setdefault(variant, []).append(
                     FrameResult.from_dict(entry["result"]))
-        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:  # AttributeError: a part not an object
+        except KeyError as exc:  # its str() is the bare key: "unreadable frame record ('variants')"
+            raise InputError(f"unreadable frame record (no {str(exc.args[0])[:40]!r} entry)", path=path) from None
+        except (OSError, ValueError, TypeError, AttributeError) as exc:  # AttributeError: a part not an object
             raise InputError(f"unreadable frame record ({' '.join(str(exc).split())[:100]})", path=path) from None
     return out
 
