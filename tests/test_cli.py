@@ -667,7 +667,8 @@ def test_predict_refuses_scene_and_picture_folders_that_spoil_another(tmp_path):
     """--json-dir / --pictures where their files would spoil another folder are refused before any fit, nothing
     written: the label folder (a submission), the detections' folder (a FRAME.json there replaced the frame's
     detection file), the images' folder (a picture there was a frame of the next run), and a folder holding files
-    of another run's frames (written over, not resumed); the same folder for both is fine."""
+    of another run's frames (written over, not resumed); the same folder for both is fine. --out is refused as the
+    images', the detections', the split's label or calibration folder."""
     from conftest import kitti_copy
 
     root = kitti_copy(tmp_path / "kitti", ["000010"])
@@ -687,6 +688,16 @@ def test_predict_refuses_scene_and_picture_folders_that_spoil_another(tmp_path):
         r = run(*common, "--detections", dets, "--out", out, option, folder)
         assert r.exit_code == 2, r.output
         assert r.stderr.startswith(f"wirescene: error: {named if named == dets else folder}: {problem}"), r.stderr
+    split = root / "training"
+    for folder, problem in ((split / "image_2", "the folder of the images"), (dets, "the detections' folder"),
+                            (split / "label_2", "the split's label folder"),
+                            (split / "calib", "the split's calibration folder")):
+        r = run(*common, "--detections", dets, "--out", folder)
+        assert r.exit_code == 2 and r.stderr.startswith(f"wirescene: error: {folder}: --out is {problem}"), r.stderr
+    def files(top):
+        return {p.relative_to(top): p.read_bytes() for p in top.rglob("*") if p.is_file()}
+
+    assert files(root) == files(kitti_copy(tmp_path / "again", ["000010"]))  # nothing written into the split
     assert not out.exists() and sorted(p.name for p in (root / "training" / "image_2").iterdir()) == ["000010.png"]
     assert [p.name for p in dets.iterdir()] == ["000010.json"] and (dets / "000010.json").read_text() == boxes
     both = tmp_path / "both"

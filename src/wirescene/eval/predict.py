@@ -100,18 +100,26 @@ def _stored_config(path: Path) -> dict | None:
 
 def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDataset,
                     source: DetectionSource) -> None:
-    """An :class:`InputError` naming ``json_dir`` or ``pictures_dir`` (``folders``) where its files
-    would spoil another folder's: the label folder (a submission holds the label files alone), the
-    detections' folder (a frame's ``FRAME.json`` there takes the place of its detection file, or
-    sits beside it as a second one) or the images' folder (a picture there is a frame of the
-    next run)."""
-    taken = [("json_dir", out, "--out, the label folder: a submission holds the label files alone"),
-             ("pictures_dir", out, "--out, the label folder: a submission holds the label files alone"),
-             ("pictures_dir", dataset.image_dir, "the folder of the images: each picture written there would be "
-                                                 "a frame of the next run"),
-             ("json_dir", source.folder, "the detections' folder: each frame's FRAME.json written there would "
-                                         "replace its detection file or be a second one")]
-    option = {"json_dir": "--json-dir", "pictures_dir": "--pictures"}
+    """An :class:`InputError` naming ``out``, ``json_dir`` or ``pictures_dir`` (``folders``) where
+    its files would spoil another folder's: the label folder (a submission holds the label files
+    alone), the detections' folder (a frame's ``FRAME.json`` or ``FRAME.txt`` there takes the place
+    of its detection file, or sits beside it as a second one), the images' folder (a picture there
+    is a frame of the next run) or the split's own ``label_2`` / ``calib`` (its files written
+    over)."""
+    submission = "--out, the label folder: a submission holds the label files alone"
+    detections = ("the detections' folder: each frame's {} written there would replace its detection file or be "
+                  "a second one")
+    taken = [("json_dir", out, submission), ("pictures_dir", out, submission),
+             ("pictures_dir", dataset.image_dir, "the folder of the images: each picture written there would be a "
+                                                 "frame of the next run"),
+             ("json_dir", source.folder, detections.format("FRAME.json")),
+             ("out", source.folder, detections.format("label file")),
+             ("out", dataset.image_dir, "the folder of the images: a submission holds the label files alone"),
+             ("out", dataset.split_dir / "label_2", "the split's label folder: its labels would be written over"),
+             ("out", dataset.split_dir / "calib", "the split's calibration folder: FRAME.txt there is the frame's "
+                                                  "calibration")]
+    option = {"out": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures"}
+    folders = {"out": out, **folders}
     for name, other, what in taken:
         folder = folders[name]
         if folder is not None and other is not None and folder.resolve() == Path(other).resolve():
