@@ -560,7 +560,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("runs", nargs="+", type=Path, metavar="RUN",
                     help="bench_real_folds.py --out directory (fold*/), or an eval --predictions directory")
     ap.add_argument("--root", required=True, help="the KITTI root the runs were fitted on (calibrations)")
-    ap.add_argument("--split", default="training")
+    ap.add_argument("--split", default=None, help="the split folder under --root (default: training)")
     ap.add_argument("--camera-height", type=float, default=KITTI_CAMERA_HEIGHT,
                     help="camera height above the road for the one-pixel limit (m; the records hold no plane)")
     ap.add_argument("--reference", default="coarse+gp", help="variant the others are compared with")

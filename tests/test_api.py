@@ -111,6 +111,21 @@ def test_integer_images_holding_8_bit_values_are_read_as_8_bit(frame):
     assert (to_rgb_uint8(image.astype(np.uint16) * 257) == image).all()  # a 16-bit PNG's range
 
 
+def test_integer_images_beyond_8_bit_values_but_uint16_are_refused_not_read_black(frame):
+    """An int32 array of a 16-bit image's values was scaled by int32's range (a black image, no car found), a
+    negative value cut to 0: refused, naming the argument; uint16 and 8-bit values in any integer type are read."""
+    image = frame[0]
+    for values, says in ((image.astype(np.int32) * 257, r"dtype int32, 0\.\.65535"),
+                         (image.astype(np.int16) - 1, r"dtype int16, -1\.\.254"),
+                         (image.astype(np.uint32) + 1000, r"dtype uint32, 1000\.\.1255")):
+        with pytest.raises(wirescene.ArgumentError, match=f"^image: integer values outside 0..255 .{says}.*uint16"):
+            wirescene.api.as_image(values)
+        with pytest.raises(wirescene.ArgumentError, match="^image: integer values"):
+            wirescene.fit(values, P2, [[300, 180, 520, 300]], variant="coarse", particles=5)
+    for values in (image.astype(np.int64), image.astype(np.uint16) * 257):
+        assert (wirescene.api.as_image(values) == image).all()
+
+
 def test_detect_returns_the_fits_own_boxes_and_viewpoints_above_its_threshold(frame):
     from wirescene.fitting.options import PredetectOptions
     from wirescene.fitting.own_boxes import own_detections
@@ -287,6 +302,39 @@ def test_detections_check_their_shapes():
         args = {"boxes": np.ones((1, 4)), "scores": [0.9], "alpha": [0.1], name: values}
         with pytest.raises(wirescene.ArgumentError, match=f"^{name}: (complex numbers|booleans|text) .dtype"):
             Detections(**args)  # a complex number lost its imaginary part with a mere warning
+
+
+def test_estimates_check_their_shapes_where_they_are_made():
+    """An ObjectEstimate of a wrong shape (a location of 2 numbers, a wireframe of 10 vertices) was accepted, to fail
+    as an IndexError in its label line or its picture: refused with the argument and the shape expected."""
+    from wirescene.core.types import ObjectEstimate
+
+    car = dict(detection_index=0, box2d=[300.0, 180.0, 520.0, 300.0], score=0.8, location=[-2.0, 1.65, 12.0],
+               R=np.eye(3), dims=[1.5, 1.6, 3.9], cost=0.0)
+    ObjectEstimate(**car, shape=np.zeros(5), vertices=np.zeros((36, 3)), visibility=np.ones(36, bool))
+    for name, value, says in (("location", [-2.0, 12.0], r"location must have shape \(3,\), got \(2,\)"),
+                              ("box2d", [[300.0, 180.0, 520.0, 300.0]], r"box2d must have shape \(4,\), got \(1, 4\)"),
+                              ("R", np.eye(4), r"R must have shape \(3, 3\)"),
+                              ("dims", [1.5, 1.6], r"dims must have shape \(3,\)"),
+                              ("shape", np.zeros((1, 5)), r"shape must have shape \(\*,\)"),
+                              ("vertices", np.zeros((10, 3)), r"vertices must have shape \(36, 3\), got \(10, 3\)"),
+                              ("visibility", np.ones(10, bool), r"visibility must have shape \(36,\)")):
+        with pytest.raises(wirescene.ShapeError, match=f"^{says}"):
+            ObjectEstimate(**{**car, name: value})
+
+
+def test_scene_json_names_an_argument_of_the_wrong_type():
+    """scene_json (the README's way to the JSON `fit` writes) took anything: None for the detections failed as an
+    AttributeError, an int frame was written as a number."""
+    from wirescene.core.types import Detections, SceneEstimate
+    from wirescene.io.outputs import scene_json
+
+    scene, dets = SceneEstimate("coarse", []), Detections.empty()
+    assert json.loads(scene_json("000010", scene, dets))["frame"] == "000010"
+    for args, name in (((10, scene, dets), "stem"), (("000010", scene.to_dict(), dets), "estimate"),
+                       (("000010", scene, None), "detections")):
+        with pytest.raises(wirescene.ArgumentError, match=f"^{name}: expected "):
+            scene_json(*args)
 
 
 def test_detections_refuse_angles_that_are_no_radians():

@@ -779,6 +779,36 @@ def test_predict_job_writes_no_file(tmp_path):
     assert json.loads(files[tmp_path / "json" / "000010.json"])["frame"] == "000010"
 
 
+def test_predict_dataset_refuses_output_folders_it_cannot_write_before_any_fit(tmp_path, monkeypatch):
+    """predict_dataset called from Python checks out_dir, json_dir and pictures_dir as the command checks --out,
+    --json-dir and --pictures: a file, an empty path, or a folder under a file is refused before any frame is fitted,
+    naming the argument (it fitted the first frame, then failed writing it)."""
+    import wirescene.eval.predict as predict
+    from wirescene.core.errors import ArgumentError
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("a frame was fitted")
+
+    monkeypatch.setattr(predict, "fit_frames", no_fit)
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    dataset, good = KittiDataset(KITTI_ROOT), tmp_path / "out"
+    for name, folder, problem in (("out_dir", a_file, f"{a_file} is a file, expected a directory"),
+                                  ("out_dir", "", "empty path (give a directory, e.g. '.')"),
+                                  ("json_dir", a_file / "json", f"{a_file / 'json'}: {a_file} is a file, not a "
+                                                                "directory"),
+                                  ("pictures_dir", a_file, f"{a_file} is a file, expected a directory")):
+        given = {"out_dir": good, "json_dir": None, "pictures_dir": None, name: folder}
+        out_dir = given.pop("out_dir")
+        with pytest.raises(ArgumentError) as exc:
+            predict.predict_dataset(dataset, out_dir, variant="coarse", source=DetectionSource("gt"),
+                                    frames=["000010"], **given)
+        assert str(exc.value) == f"{name}: {problem}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
+
+
 def test_predict_resumed_with_fewer_frames_is_refused_and_with_more_continues(tmp_path):
     """A submission is the folder's label files: a resumed run whose --frames / --split-file leave
     out frames of the earlier run is refused before any fit (they would be zipped with it), the

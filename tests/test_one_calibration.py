@@ -236,6 +236,27 @@ def test_split_given_for_a_plain_folder_is_refused(frames_dir, tmp_path):
                                 "folders ImageSets, training, no testing/image_2)")
 
 
+def test_split_given_in_python_where_it_has_no_meaning_is_refused(frames_dir, tmp_path):
+    """KittiDataset(split=) as --split: refused for a plain folder of frames and for a split folder of another name
+    (it was ignored, the folder's own images read whatever it named), naming the root; not given, or honoured, no
+    error; the split folder's own name (as given, or as its link's target) is no other split."""
+    for split in ("testing", "training"):
+        with pytest.raises(InputError) as exc:
+            KittiDataset(frames_dir, calib=CALIB, split=split)
+        assert str(exc.value) == (f"{frames_dir}: split={split!r} has no meaning for a plain folder of frames (its own "
+                                  f"images are read with calib; no {split}/image_2 here): drop split")
+    with pytest.raises(InputError) as exc:
+        KittiDataset(SPLIT, split="testing")
+    assert str(exc.value) == (f"{SPLIT}: split='testing' names no folder here: this is itself a split folder (its "
+                              "image_2/ is read, no testing/image_2): give the KITTI root above it, or drop split")
+    assert KittiDataset(frames_dir, calib=CALIB).frame_ids() == FRAMES  # not given: as before
+    assert KittiDataset(SPLIT, split="training").split_dir == KittiDataset(SPLIT).split_dir == SPLIT
+    assert KittiDataset(KITTI_ROOT, split="training", calib=CALIB).image_dir == SPLIT / "image_2"
+    link = tmp_path / "val"
+    link.symlink_to(SPLIT)
+    assert KittiDataset(link, split="val").split_dir == KittiDataset(link, split="training").split_dir == link
+
+
 def test_split_given_for_a_split_folder_of_another_name_is_refused(tmp_path):
     """KITTI_ROOT/training given as the root reads its own image_2/: a --split naming another split there is refused
     (it was ignored: `--split testing` wrote a submission of the training frames); its own name, or none, is fine."""

@@ -19,7 +19,7 @@ import numpy as np
 from wirescene.core.camera import Camera, KittiCalib, read_projection
 from wirescene.core.errors import ArgumentError, CalibrationWarning, InputError, ShapeError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
-from wirescene.core.image import to_rgb_uint8
+from wirescene.core.image import integer_range_problem, to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate, car_fitted
 from wirescene.core.validate import (
@@ -57,8 +57,8 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     image : path, ndarray or PIL image
         An image file, a PIL image (read as its file would be), or an ``(H, W)`` /
         ``(H, W, 1|3|4)`` array: uint8, uint16 (a 16-bit PNG's range), other integers
-        holding 8-bit values, bool, or float in [0, 1] (or [0, 255] when larger); an alpha
-        channel is dropped.
+        holding 8-bit values (others refused: :func:`wirescene.core.image.integer_range_problem`),
+        bool, or float in [0, 1] (or [0, 255] when larger); an alpha channel is dropped.
     name : str
         The argument's name in error messages.
 
@@ -69,7 +69,8 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     Raises
     ------
     ArgumentError
-        Not an image array (shape, dtype, non-finite values, under 16 px a side).
+        Not an image array (shape, dtype, non-finite values, integers beyond 8-bit values but
+        uint16's, under 16 px a side).
     InputError
         An image file that is missing, unreadable or under 16 px a side.
 
@@ -87,6 +88,9 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     pil = _is_pil_image(image)
     if not pil and not isinstance(image, np.ndarray):
         raise ArgumentError(name, f"expected a path, a numpy array or a PIL image, got {type(image).__name__}")
+    problem = None if pil else integer_range_problem(image)  # an int32 array of 16-bit values would read black
+    if problem:
+        raise ArgumentError(name, problem)
     try:
         if pil:
             from wirescene.io.kitti import rgb_of_pil
@@ -105,13 +109,33 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
 
 
 def as_camera(calib, image_size: tuple[int, int], *, name: str = "calib") -> Camera:
-    """The camera of a calibration path (:func:`wirescene.core.camera.read_projection`: a
-    KITTI file's ``P2``, or the numbers of ``K`` or ``P``), a ``(3, 4)`` projection matrix, a
-    ``(3, 3)`` intrinsic matrix ``K`` (``P = K [I | 0]``), a :class:`KittiCalib` (its
-    ``P2``) or a :class:`Camera`, with ``image_size`` ``(width, height)`` set; checked for
-    sanity (:func:`wirescene.core.validate.projection_problem`): an
-    :class:`ArgumentError` naming ``name`` otherwise (an :class:`InputError` naming the
-    file for a path).
+    """The camera every entry point reads, checked for sanity
+    (:func:`wirescene.core.validate.projection_problem`).
+
+    Parameters
+    ----------
+    calib : path, (3, 4) or (3, 3) array, KittiCalib or Camera
+        A calibration path (:func:`wirescene.core.camera.read_projection`: a KITTI file's
+        ``P2``, or the numbers of ``K`` or ``P``), a projection matrix ``P``, an intrinsic
+        matrix ``K`` (``P = K [I | 0]``), a :class:`KittiCalib` (its ``P2``) or a
+        :class:`Camera`.
+    image_size : (int, int)
+        ``(width, height)`` of the image it is used with.
+    name : str
+        The argument's name in error messages.
+
+    Returns
+    -------
+    Camera
+        With ``image_size`` set.
+
+    Raises
+    ------
+    ArgumentError
+        Naming ``name``: not a matrix of real numbers, of another shape, non-finite, or no
+        plausible street camera.
+    InputError
+        A calibration file that is missing, malformed or no plausible camera, naming it.
 
     Examples
     --------
@@ -192,10 +216,27 @@ def _warn_off_centre(camera: Camera, image) -> None:
 
 
 def as_detections(boxes, image_size: tuple[int, int], *, name: str = "boxes") -> Detections:
-    """:class:`Detections` from an ``(N, 4)`` array of ``x1 y1 x2 y2`` (score 1, unknown
-    viewpoint) or from :class:`Detections`; boxes must be finite, non-empty and overlap
-    the ``image_size`` ``(width, height)`` image: an :class:`ArgumentError` naming ``name``
-    otherwise.
+    """The boxes every entry point reads.
+
+    Parameters
+    ----------
+    boxes : (N, 4) array or Detections
+        ``x1 y1 x2 y2`` in pixels (score 1, unknown viewpoint), or :class:`Detections`.
+    image_size : (int, int)
+        ``(width, height)`` of the image the boxes lie in.
+    name : str
+        The argument's name in error messages.
+
+    Returns
+    -------
+    Detections
+
+    Raises
+    ------
+    ArgumentError
+        Naming ``name``: not ``(N, 4)`` real numbers, a box non-finite, empty or inverted,
+        entirely outside the image or absurdly far beyond it, every box under a pixel
+        (normalised coordinates), non-finite scores or infinite viewpoints.
 
     Examples
     --------

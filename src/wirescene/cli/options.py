@@ -235,52 +235,22 @@ def kitti_dataset(kitti_root: Path, split: str, calib: Path | None, *, absolute:
     :func:`calib_option`: an ``InputError`` naming a plain folder of frames (read with ``--calib``, no
     ``image_2/``), or a split folder itself (``ROOT/training``, its ``image_2/`` read) of another name
     (as given, or as its link's target), where ``--split`` was given on the command line, which would be
-    ignored there. ``absolute``: the dataset reads the root's absolute path (for workers elsewhere),
-    the checks and messages the path given."""
+    ignored there (:func:`wirescene.io.kitti.given_split_problem`, the check of ``KittiDataset``'s own
+    ``split``); at its default it is no error. ``absolute``: the dataset reads the root's absolute path
+    (for workers elsewhere), the checks and messages the path given."""
     from click.core import ParameterSource
 
     from wirescene.core.errors import InputError
-    from wirescene.io.kitti import KittiDataset
+    from wirescene.io.kitti import KittiDataset, given_split_problem
 
     root = Path(kitti_root)
-    dataset = KittiDataset(root.resolve() if absolute else root, split=split, calib=calib)
+    dataset = KittiDataset.of_default_split(root.resolve() if absolute else root, split, calib=calib)
     source = click.get_current_context().get_parameter_source("split")
-    given = source in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT)
-    # a folder of no images is a KITTI root lacking the split: require_frames says so, naming what it holds
-    if given and dataset.image_dir == dataset.split_dir and dataset.image_ids():
-        raise InputError(f"--split {split} has no meaning for a plain folder of frames (its own images are read "
-                         f"with --calib; no {split}/image_2 here): drop --split", path=kitti_root)
-    # KITTI_ROOT/training given as the root: its own image_2/ is read, whatever split was named
-    if given and dataset.split_dir == dataset.root != dataset.image_dir and split not in folder_names(root):
-        raise InputError(f"--split {split} names no folder here: this is itself a split folder (its image_2/ is "
-                         f"read, no {split}/image_2): give the KITTI root above it, or drop --split", path=kitti_root)
+    if source in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT):
+        problem = given_split_problem(dataset, split, root=root, names=("--split", "--calib"))
+        if problem:
+            raise InputError(problem, path=kitti_root)
     return dataset
-
-
-def folder_names(path: Path) -> set[str]:
-    """The names the folder ``path`` goes by: its own as given (a relative path read from the shell's
-    working directory, ``$PWD``, as the links it was entered by left it) and its target's, where a
-    link leads elsewhere (``KITTI/training -> /data/kitti_train``).
-
-    Examples
-    --------
-    >>> import tempfile
-    >>> with tempfile.TemporaryDirectory() as d:
-    ...     (Path(d) / "kitti_train").mkdir()
-    ...     (Path(d) / "training").symlink_to(Path(d) / "kitti_train")
-    ...     sorted(folder_names(Path(d) / "training"))
-    ['kitti_train', 'training']
-    """
-    path = Path(path)
-    names = {path.resolve().name, Path(os.path.abspath(path)).name}
-    pwd = os.environ.get("PWD")
-    if pwd and not path.is_absolute():
-        try:
-            if os.path.samefile(pwd, os.curdir):  # the shell's logical directory, links kept
-                names.add(Path(os.path.normpath(os.path.join(pwd, path))).name)
-        except OSError:
-            pass
-    return names
 
 
 def ap_draws_option(f):

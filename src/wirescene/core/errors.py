@@ -81,6 +81,10 @@ def check_shape(name: str, array, shape: tuple) -> None:
     ...
     wirescene.core.errors.ShapeError: P must have shape (3, 4), got (3, 3)
     >>> check_shape("boxes", np.zeros((5, 4)), (None, 4))  # None: any size
+    >>> check_shape("location", np.zeros(2), (3,))
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ShapeError: location must have shape (3,), got (2,)
     """
     actual = tuple(getattr(array, "shape", ()))
     want = tuple(shape)
@@ -92,5 +96,6 @@ def check_shape(name: str, array, shape: tuple) -> None:
     else:
         ok = len(actual) == len(want) and all(w is None or w == a for w, a in zip(want, actual))
     if not ok:
-        pretty = "(" + ", ".join("..." if w is Ellipsis else ("*" if w is None else str(w)) for w in want) + ")"
+        pretty = ", ".join("..." if w is Ellipsis else ("*" if w is None else str(w)) for w in want)
+        pretty = f"({pretty},)" if len(want) == 1 else f"({pretty})"  # (3,) as Python writes the shape it got
         raise ShapeError(f"{name} must have shape {pretty}, got {actual}")

@@ -31,6 +31,32 @@ def _values_and_range(img: np.ndarray) -> tuple[np.ndarray, float]:
     return img, (255.0 if img.size and img.max() > 1.0 + 1e-6 else 1.0)
 
 
+def integer_range_problem(image) -> str | None:
+    """Why an integer image array would be read as another image than it holds, as a phrase, or
+    None: one of a type other than uint8 and uint16 (signed, or wider) holding a value outside
+    0..255 is scaled by its type's range (:func:`_values_and_range`), so that an int32 array of a
+    16-bit image's values reads black and negative values are cut to 0. Read where images enter
+    (:func:`wirescene.api.as_image`), not on the arrays a stage passes on.
+
+    Examples
+    --------
+    >>> integer_range_problem(np.array([[0, 255]], np.int32)) is None  # 8-bit values, e.g. after arithmetic
+    True
+    >>> integer_range_problem(np.array([[0, 65535]], np.uint16)) is None  # a 16-bit PNG's range
+    True
+    >>> integer_range_problem(np.array([[0, 4095]], np.int32))
+    'integer values outside 0..255 (dtype int32, 0..4095) would be read by the range of int32: cast a 16-bit image to uint16, scale others to 0..255'
+    """
+    img = np.asarray(image)
+    if img.dtype.kind not in "iu" or img.dtype in (np.uint8, np.uint16) or img.size == 0:
+        return None
+    lo, hi = img.min(), img.max()
+    if lo >= 0 and hi <= 255:
+        return None
+    return (f"integer values outside 0..255 (dtype {img.dtype}, {lo}..{hi}) would be read by the range of "
+            f"{img.dtype}: cast a 16-bit image to uint16, scale others to 0..255")
+
+
 def _channels(img: np.ndarray) -> np.ndarray:
     if img.ndim == 2:
         return img[..., None]

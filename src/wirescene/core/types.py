@@ -23,6 +23,7 @@ from wirescene.core.groundplane import (
 )
 from wirescene.core.labels import MAX_ALPHA, Label, format_labels
 from wirescene.core.validate import real_dtype_problem
+from wirescene.core.wireframe import N_VERTICES
 
 
 def _numbers(name: str, values) -> np.ndarray:
@@ -230,6 +231,11 @@ class ObjectEstimate:
     array([-2. ,  0.9, 12. ])
     >>> car.to_label().type, car.to_label().score
     ('Car', 0.8)
+    >>> ObjectEstimate(detection_index=0, box2d=car.box2d, score=0.8, location=[-2.0, 12.0], R=car.R, dims=car.dims,
+    ...                cost=0.0)
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ShapeError: location must have shape (3,), got (2,)
     """
 
     detection_index: int
@@ -252,10 +258,13 @@ class ObjectEstimate:
 
     def __post_init__(self):
         # own copies: a view into the search's (particles, cars, ...) arrays would keep them all alive
-        for name in ("box2d", "location", "R", "dims", "shape", "vertices", "visibility"):
+        for name, shape in (("box2d", (4,)), ("location", (3,)), ("R", (3, 3)), ("dims", (3,)), ("shape", (None,)),
+                            ("vertices", (N_VERTICES, 3)), ("visibility", (N_VERTICES,))):
             value = getattr(self, name)
             if value is not None:
-                setattr(self, name, np.array(value))
+                value = np.array(value)
+                check_shape(name, value, shape)  # a wrong one fails where it is made, not in a label line or a picture
+                setattr(self, name, value)
 
     def __repr__(self) -> str:
         extra = "" if self.exemplar is None else f", exemplar={self.exemplar!r}"

@@ -18,7 +18,8 @@ from typing import Callable, Iterable
 
 from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_bytes, write_text
-from wirescene.core.errors import InputError
+from wirescene.core.errors import ArgumentError, InputError
+from wirescene.core.validate import output_dir_problem
 from wirescene.core.version import __version__
 from wirescene.eval.records import config_difference, refuse_frames_outside
 from wirescene.eval.runner import fit_frames, notify_stderr, say_off_centre
@@ -208,6 +209,10 @@ def predict_dataset(
 
     Raises
     ------
+    ArgumentError
+        Before any fit: ``out_dir``, ``json_dir`` or ``pictures_dir`` is a file, an empty path,
+        or a directory that cannot be written or created
+        (:func:`wirescene.core.validate.output_dir_problem`).
     InputError
         Before any fit: no frame to predict (no image in ``image_2/``, or the folder of frames), a frame
         without its detection file, calibration or image, a malformed detection file, or
@@ -218,6 +223,10 @@ def predict_dataset(
         frames not written by a run resumed; with ``pictures_dir``, a malformed label file of a
         labelled split (a missing one is said, its frame's pictures drawn without labels).
     """
+    for name, folder in (("out_dir", out_dir), ("json_dir", json_dir), ("pictures_dir", pictures_dir)):
+        problem = None if folder is None and name != "out_dir" else output_dir_problem(folder)
+        if problem:  # before any fit, as the command's --out, --json-dir and --pictures
+            raise ArgumentError(name, problem)
     source = DetectionSource("bank") if source is None else source
     options = FitOptions() if options is None else options
     variant = get_variant(variant).name

@@ -13,6 +13,7 @@ kept apart from the objects, since every evaluation ignores them.
 
 from __future__ import annotations
 
+import os
 import warnings
 from pathlib import Path
 from typing import Iterable
@@ -299,6 +300,67 @@ def _frame_image(path: Path) -> bool:
 # Where a folder lacks KITTI's calib/: the commands that read one calibration for every frame.
 ONE_CALIB_HINT = "; predict, detect, pitch and eval take one calibration for every frame (--calib FILE)"
 
+#: The split :class:`KittiDataset` reads where none is given (``ROOT/training``).
+DEFAULT_SPLIT = "training"
+
+
+def folder_names(path: Path) -> set[str]:
+    """The names the folder ``path`` goes by: its own as given (a relative path read from the shell's
+    working directory, ``$PWD``, as the links it was entered by left it) and its target's, where a
+    link leads elsewhere (``KITTI/training -> /data/kitti_train``).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     (Path(d) / "kitti_train").mkdir()
+    ...     (Path(d) / "training").symlink_to(Path(d) / "kitti_train")
+    ...     sorted(folder_names(Path(d) / "training"))
+    ['kitti_train', 'training']
+    """
+    path = Path(path)
+    names = {path.resolve().name, Path(os.path.abspath(path)).name}
+    pwd = os.environ.get("PWD")
+    if pwd and not path.is_absolute():
+        try:
+            if os.path.samefile(pwd, os.curdir):  # the shell's logical directory, links kept
+                names.add(Path(os.path.normpath(os.path.join(pwd, path))).name)
+        except OSError:
+            pass
+    return names
+
+
+def given_split_problem(dataset: KittiDataset, split: str, *, root: str | Path | None = None,
+                        names: tuple[str, str] = ("split", "calib")) -> str | None:
+    """Why ``split``, given by the caller for ``dataset`` (read from ``root`` as given, default
+    ``dataset.root``), would be ignored there, or None: a plain folder of frames (read with one
+    calibration, no ``image_2/``) has no split folder, and a split folder given as the root
+    (``ROOT/training``, its own ``image_2/`` read) is no split of another name (as given, or as
+    its link's target, :func:`folder_names`). ``names``: how the split and the calibration are
+    named, the keywords of :class:`KittiDataset` or the options of the commands
+    (``("--split", "--calib")``, :func:`wirescene.cli.options.kitti_dataset`).
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> split = KittiDataset(DATA_DIR / "sample" / "kitti" / "training")
+    >>> given_split_problem(split, "training") is None  # its own name
+    True
+    >>> given_split_problem(split, "testing", names=("--split", "--calib"))[:58]
+    '--split testing names no folder here: this is itself a spl'
+    """
+    option, calib = names
+    said = f"{option} {split}" if option.startswith("-") else f"{option}={split!r}"
+    if dataset.image_dir == dataset.split_dir and dataset.image_ids():
+        # a folder of no images is a KITTI root lacking the split: require_frames says so, naming what it holds
+        return (f"{said} has no meaning for a plain folder of frames (its own images are read with {calib}; "
+                f"no {split}/image_2 here): drop {option}")
+    if dataset.split_dir == dataset.root != dataset.image_dir and split not in folder_names(
+            dataset.root if root is None else root):
+        return (f"{said} names no folder here: this is itself a split folder (its image_2/ is read, no "
+                f"{split}/image_2): give the KITTI root above it, or drop {option}")
+    return None
+
 
 class KittiDataset:
     """Frames of a KITTI object split on disk (``image_2``, ``calib``, optional ``label_2``),
@@ -309,8 +371,11 @@ class KittiDataset:
     root : path
         Either the KITTI root (containing ``<split>/``) or the split directory itself; with
         ``calib``, also a plain folder holding the images themselves.
-    split : str
-        Split directory name under ``root``, ``"training"`` or ``"testing"``.
+    split : str, optional
+        Split directory name under ``root``, ``"training"`` or ``"testing"`` (None:
+        :data:`DEFAULT_SPLIT`, ``"training"``). A split given where it would be ignored is
+        refused (:func:`given_split_problem`): a plain folder of frames read with ``calib``,
+        or a split folder given as ``root`` (``ROOT/training``) that goes by no such name.
     calib : path, optional
         One calibration for every frame (a camera other than KITTI's whose frames share it),
         in any form :func:`~wirescene.core.camera.read_calibration` reads: a KITTI calibration
@@ -323,7 +388,8 @@ class KittiDataset:
     ------
     InputError
         If ``root`` does not exist or the split lacks ``image_2/`` or ``calib/`` (without
-        ``calib``), or ``calib`` is missing or malformed (naming it).
+        ``calib``), or ``calib`` is missing or malformed (naming it), or ``split`` is given
+        where it has no meaning (naming ``root``).
 
     Examples
     --------
@@ -349,9 +415,37 @@ class KittiDataset:
     ...     frames = KittiDataset(d, calib=Path(d) / "K.txt")
     ...     frames.image_dir == Path(d), frames.frame_ids(), frames.camera("frame_a").image_size
     (True, ['frame_a'], (1242, 375))
+    >>> KittiDataset(split, split="testing")  # a split folder: no other split below it
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.InputError: ...: split='testing' names no folder here: ...
     """
 
-    def __init__(self, root: str | Path, *, split: str = "training", calib: str | Path | None = None):
+    def __init__(self, root: str | Path, *, split: str | None = None, calib: str | Path | None = None):
+        self._read(root, DEFAULT_SPLIT if split is None else split, calib)
+        if split is not None:
+            problem = given_split_problem(self, split, root=root)
+            if problem:
+                raise InputError(problem, path=root)
+
+    @classmethod
+    def of_default_split(cls, root: str | Path, split: str, *, calib: str | Path | None = None) -> KittiDataset:
+        """``KittiDataset(root, split=split, calib=calib)`` of a ``split`` named by a default (a
+        command's ``--split`` not given), not by its caller: never refused where it has no
+        meaning (:func:`given_split_problem`), as no split given is.
+
+        Examples
+        --------
+        >>> from wirescene.core.resources import DATA_DIR
+        >>> KittiDataset.of_default_split(DATA_DIR / "sample" / "kitti" / "training", "testing").split_dir.name
+        'training'
+        """
+        dataset = cls.__new__(cls)
+        dataset._read(root, split, calib)
+        return dataset
+
+    def _read(self, root: str | Path, split: str, calib: str | Path | None) -> None:
+        """Find the split's folders under ``root`` (the constructor's work, but the check of a split given)."""
         root = Path(root)
         problem = path_problem(root, "KITTI root", directory=True)
         if problem:

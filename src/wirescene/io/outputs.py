@@ -10,7 +10,7 @@ import numpy as np
 
 from wirescene.core.atomic import atomic_path, missing_dirs, remove_empty
 from wirescene.core.camera import Camera
-from wirescene.core.errors import InputError
+from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.jsonio import dumps
 from wirescene.core.labels import Label
 from wirescene.core.types import Detections, SceneEstimate, dropped_detections, fitted_detections
@@ -93,13 +93,42 @@ def scene_json(stem: str, estimate: SceneEstimate, detections: Detections) -> st
     of a fine variant its wireframe and visible vertices); strict JSON (``null`` for a non-finite
     number).
 
+    Parameters
+    ----------
+    stem : str
+        The frame's name, written as ``"frame"``.
+    estimate : SceneEstimate
+        What :func:`wirescene.fit` returned.
+    detections : Detections
+        The boxes the scene was fitted to (``estimate.detections``); their ``source`` is
+        written as ``"detections_source"``.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ArgumentError
+        An argument of another type, naming it.
+
     Examples
     --------
     >>> import json
     >>> scene = json.loads(scene_json("000010", SceneEstimate("coarse", []), Detections(np.zeros((0, 4)), 1.0, np.nan)))
     >>> scene["frame"], scene["variant"], scene["objects"]
     ('000010', 'coarse', [])
+    >>> scene_json("000010", SceneEstimate("coarse", []), None)
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ArgumentError: detections: expected Detections (the scene's own: scene.detections), got NoneType
     """
+    for name, value, kind, said in (("stem", stem, str, "the frame's name (str)"),
+                                    ("estimate", estimate, SceneEstimate, "what wirescene.fit returns (SceneEstimate)"),
+                                    ("detections", detections, Detections,
+                                     "Detections (the scene's own: scene.detections)")):
+        if not isinstance(value, kind):
+            raise ArgumentError(name, f"expected {said}, got {type(value).__name__}")
     return dumps({"frame": stem, "detections_source": detections.source, **estimate.to_dict()})
 
 

@@ -1071,7 +1071,7 @@ def frames_in_folds(frame_ids, folds) -> list[str]:
 
 
 @single_threaded
-def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str = "training",
+def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, split: str | None = None,
                               seed: int = 0, calibration_folds: bool | Mapping[str, int] = True, calibration=None,
                               threshold: float = 0.5, support_weight: float = SUPPORT_WEIGHT, workers: int = 1,
                               drives: Mapping[str, str] | None = None, progress=None, **train_kw):
@@ -1170,7 +1170,7 @@ def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4,
 
 
 @single_threaded
-def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str = "training", seed: int = 0,
+def heldout_bank_calibration(kitti_root, folds: Mapping[str, int], *, split: str | None = None, seed: int = 0,
                              workers: int = 1, progress=None, **bank_options) -> dict:
     """Platt calibration of a detector bank from held-out detections: for each fold, a
     bank trained on the other folds' frames detects on that fold's (unmirrored) frames;
