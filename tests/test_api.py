@@ -202,15 +202,15 @@ def test_fit_and_detect_warn_of_a_calibration_made_for_another_image_size(frame,
     assert len(said) == 1 and re.fullmatch(problem, str(said[0].message)) and said[0].filename == __file__
     path = tmp_path / "left.png"
     Image.fromarray(half).save(path)
-    with pytest.warns(wirescene.CalibrationWarning) as said:
-        wirescene.detect(path, P2)
+    with pytest.warns(wirescene.CalibrationWarning) as said:  # (said before the search: the image alone searched)
+        wirescene.detect(path, P2, upsample=1.0)
     said = [w for w in said if w.category is wirescene.CalibrationWarning]
     assert len(said) == 1 and re.fullmatch(re.escape(str(path)) + ": " + problem, str(said[0].message)) and said[0].filename == __file__
     with warnings.catch_warnings():
         warnings.simplefilter("error", wirescene.CalibrationWarning)
-        wirescene.detect(half)  # no calibration: nothing to say
+        wirescene.detect(half, upsample=1.0)  # no calibration: nothing to say
         assert wirescene.fit(image, P2, box, variant="coarse", particles=8).cars
-        wirescene.detect(image, P2)
+        wirescene.detect(image, P2, upsample=1.0)
 
 
 def test_pil_images_are_read_as_their_files_are(frame, tmp_path):

@@ -868,7 +868,9 @@ ONE_FRAME = r"1 of 1 frames: {problem} \(e\.g\. frame 000010\)"
 
 
 @pytest.mark.parametrize("command, frames, said", [
-    (lambda root, out: ["detect", root], ["000002", "000010"], r"2 of 2 frames: {problem} \(e\.g\. frame 000002\)"),
+    # (cars of 100 px or more in the image alone: the warning is said before any frame is searched)
+    (lambda root, out: ["detect", root, "--upsample", 1, "--smallest-car", 100], ["000002", "000010"],
+     r"2 of 2 frames: {problem} \(e\.g\. frame 000002\)"),
     (lambda root, out: ["gt", root, "000010", "--out", out / "gt.png"], ["000010"], "{image}: {problem}"),
     # the training commands say it before they train (these refuse a single drive, after it)
     (lambda root, out: ["train", "all", root, "--out", out / "models"], ["000010"], ONE_FRAME),

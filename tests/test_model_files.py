@@ -98,12 +98,14 @@ def test_a_viewpoint_classifier_of_an_option_or_a_models_directory_gives_boxes_t
     assert r.exit_code == 0, r.output + r.stderr
     written = json.loads((tmp_path / "found" / "000010.json").read_text())["detections"]
     assert written and {d["viewpoint_bin"] for d in written} == {5}
-    assert set(viewpoint_bin(wirescene.detect(IMAGE, CALIB, models=models).alpha)) == {5}
-    # the directory's classifier for `detect --models` too, and the option's over it (one lookup: Models.file)
+    assert set(viewpoint_bin(wirescene.detect(IMAGE, CALIB, models=models, upsample=1.0).alpha)) == {5}
+    # the directory's classifier for `detect --models` too, and the option's over it (one lookup: Models.file);
+    # which file is read shows in the image's own boxes (--upsample 1: the classifier of both passes is above)
     bins = {}
     for name, extra in (("shipped", []), ("models", ["--models", models]),
                         ("option", ["--models", models, "--viewpoint-classifier", shipped_path("viewpoint_classifier")])):
-        r = cli("detect", KITTI_ROOT, "--frames", "000010", "--out", tmp_path / f"detect-{name}", *extra)
+        r = cli("detect", KITTI_ROOT, "--frames", "000010", "--upsample", 1, "--out", tmp_path / f"detect-{name}",
+                *extra)
         assert r.exit_code == 0, r.output + r.stderr
         written = json.loads((tmp_path / f"detect-{name}" / "000010.json").read_text())["detections"]
         bins[name] = [d["viewpoint_bin"] for d in written]
@@ -134,11 +136,14 @@ def test_a_score_calibration_of_an_option_or_a_models_directory_scores_and_verif
     via = wirescene.fit(IMAGE, CALIB, BOXES, variant="coarse", particles=5, models=models)
     assert [c.score for c in via.cars] == [c.score for c in own.cars]
     # the fit's verification of our own boxes reads its car model: one that calls nothing a car keeps no car
+    # (our own boxes of the image alone, not enlarged too: the verification reads them all alike)
     nothing = shifted_calibration(tmp_path / "nothing.json", car=-100.0)
-    assert wirescene.fit(IMAGE, CALIB, variant="coarse", particles=5).cars
-    assert not wirescene.fit(IMAGE, CALIB, variant="coarse", options=FitOptions(FAST, score_calibration=str(nothing))).cars
-    r = cli("fit", IMAGE, "--calib", CALIB, "--variant", "coarse", "--particles", 5, "--score-calibration", nothing,
-            "--out", tmp_path / "out")
+    alone = PredetectOptions(upsample=1.0)
+    assert wirescene.fit(IMAGE, CALIB, variant="coarse", options=FitOptions(FAST, predetect=alone)).cars
+    assert not wirescene.fit(IMAGE, CALIB, variant="coarse",
+                             options=FitOptions(FAST, score_calibration=str(nothing), predetect=alone)).cars
+    r = cli("fit", IMAGE, "--calib", CALIB, "--variant", "coarse", "--particles", 5, "--upsample", 1,
+            "--score-calibration", nothing, "--out", tmp_path / "out")
     assert r.exit_code == 0 and "no car found" in r.stderr, r.output + r.stderr
 
 

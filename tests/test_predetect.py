@@ -856,16 +856,18 @@ def test_detect_takes_the_camera_height_and_pitch_and_checks_them():
             wirescene.detect(image, calib, camera_height=height)
     with pytest.raises(ArgumentError, match="camera_height: must be a finite number"):
         wirescene.detect(image, calib, camera_height=10**400)  # too large for a float: refused, not an OverflowError
-    kitti = wirescene.detect(image, calib)
-    assert_close(wirescene.detect(image, calib, camera_height=1.65).scores, kitti.scores, atol=0)
+    # (the image's own boxes, upsample=1: not enlarged too, whose pass reads the same mount)
+    kitti = wirescene.detect(image, calib, upsample=1.0)
+    assert_close(wirescene.detect(image, calib, camera_height=1.65, upsample=1.0).scores, kitti.scores, atol=0)
     # told the camera stands at 2.2 m, the same boxes stand nearer the horizon than such a camera sees cars
-    assert not np.array_equal(wirescene.detect(image, calib, camera_height=2.2, threshold=0.05).scores,
-                              wirescene.detect(image, calib, threshold=0.05).scores)
+    level = wirescene.detect(image, calib, threshold=0.05, upsample=1.0).scores
+    assert not np.array_equal(wirescene.detect(image, calib, camera_height=2.2, threshold=0.05, upsample=1.0).scores,
+                              level)
     with pytest.raises(ArgumentError, match="camera_pitch"):
         wirescene.detect(image, calib, camera_pitch=60.0)
-    assert_close(wirescene.detect(image, calib, camera_pitch=0.0).scores, kitti.scores, atol=0)
-    assert not np.array_equal(wirescene.detect(image, calib, camera_pitch=3.0, threshold=0.05).scores,
-                              wirescene.detect(image, calib, threshold=0.05).scores)
+    assert_close(wirescene.detect(image, calib, camera_pitch=0.0, upsample=1.0).scores, kitti.scores, atol=0)
+    assert not np.array_equal(wirescene.detect(image, calib, camera_pitch=3.0, threshold=0.05, upsample=1.0).scores,
+                              level)
 
 
 def test_the_pitch_is_read_off_the_boxes_of_cars_on_the_road():
@@ -919,20 +921,22 @@ def test_detect_reads_the_pitch_of_a_camera_that_was_not_told_it(monkeypatch):
     P = read_projection(frame / "calib" / "000010.txt")
     moved = P.copy()
     moved[1, 2] += 50.0
-    level = wirescene.detect(image, P)
+    # the image's own boxes (upsample=1: not enlarged too; a pitch read once for both passes is
+    # test_pipeline.py's test_the_enlarged_image_is_searched_at_the_levels_finer_than_the_images_only)
+    level = wirescene.detect(image, P, upsample=1.0)
     mounts, image_mount = [], mount.image_mount
     # the mount the detection reads, seen as it is read (not read again: the test's time)
     monkeypatch.setattr(mount, "image_mount", lambda *a, **kw: mounts.append(image_mount(*a, **kw)) or mounts[-1])
-    read = wirescene.detect(image, moved, estimate_pitch=True)
+    read = wirescene.detect(image, moved, estimate_pitch=True, upsample=1.0)
     assert len(mounts) == 1 and abs(mounts[0].pitch - np.rad2deg(np.arctan(50.0 / P[1, 1]))) < 1.0, mounts
-    not_told = wirescene.detect(image, moved)
+    not_told = wirescene.detect(image, moved, upsample=1.0)
 
     def found(dets):  # the level rig's cars found again
         return int((iou_2d(level.boxes[:, None], dets.boxes[None]).max(1) >= 0.5).sum()) if len(dets) else 0
 
     assert found(read) >= len(level) - 1 and found(read) > found(not_told) + 3, (len(level), found(read),
                                                                                 found(not_told))
-    told = wirescene.detect(image, moved, camera_pitch=float(np.rad2deg(np.arctan(50.0 / P[1, 1]))))
+    told = wirescene.detect(image, moved, camera_pitch=float(np.rad2deg(np.arctan(50.0 / P[1, 1]))), upsample=1.0)
     assert_close(told.boxes, level.boxes, atol=1e-6)  # told, the pitch is the principal point's row
     for bad in ("yes", 1):  # checked as --set lifting.estimate_pitch is (numpy's bools taken)
         with pytest.raises(ArgumentError, match=f"^estimate_pitch: must be true or false, got {bad!r}$"):
