@@ -49,7 +49,7 @@ from wirescene.core.jsonio import write_json
 from wirescene.core.viewpoints import wrap_angle
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.eval.metrics import FrameResult, evaluate
-from wirescene.io.kitti import CAR_TYPES, KittiDataset
+from wirescene.io.kitti import CAR_TYPES, DEFAULT_SPLIT, KittiDataset, given_split_problem
 
 #: KITTI's camera height above the road (the recording car's mounting, metres).
 KITTI_CAMERA_HEIGHT = 1.65
@@ -569,7 +569,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = ap.parse_args(argv)
     if args.camera_height <= 0:
         ap.error("--camera-height must be positive")
-    dataset = KittiDataset(args.root, split=args.split)
+    dataset = KittiDataset.of_default_split(args.root, args.split or DEFAULT_SPLIT)
+    problem = args.split and given_split_problem(dataset, args.split, root=args.root, names=("--split", "--calib"))
+    if problem:
+        ap.error(problem)
     report, plotted = {}, {}
     names = [str(r) for r in args.runs]
     if len(set(names)) != len(names):

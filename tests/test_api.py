@@ -115,9 +115,10 @@ def test_integer_images_beyond_8_bit_values_but_uint16_are_refused_not_read_blac
     """An int32 array of a 16-bit image's values was scaled by int32's range (a black image, no car found), a
     negative value cut to 0: refused, naming the argument; uint16 and 8-bit values in any integer type are read."""
     image = frame[0]
-    for values, says in ((image.astype(np.int32) * 257, r"dtype int32, 0\.\.65535"),
-                         (image.astype(np.int16) - 1, r"dtype int16, -1\.\.254"),
-                         (image.astype(np.uint32) + 1000, r"dtype uint32, 1000\.\.1255")):
+    for values, says in ((image.astype(np.int32) * 257, r"dtype int32, 0\.\.65535. would be read by the range of int32"),
+                         # 8-bit values but the negative ones: read as 8-bit, -1 as 0 (not by int16's range)
+                         (image.astype(np.int16) - 1, r"dtype int16, -1\.\.254.: the negative ones would be read as 0"),
+                         (image.astype(np.uint32) + 1000, r"dtype uint32, 1000\.\.1255. would be read by the range")):
         with pytest.raises(wirescene.ArgumentError, match=f"^image: integer values outside 0..255 .{says}.*uint16"):
             wirescene.api.as_image(values)
         with pytest.raises(wirescene.ArgumentError, match="^image: integer values"):

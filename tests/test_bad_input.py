@@ -1017,6 +1017,12 @@ def test_an_empty_csv_holds_no_box(tmp_path):
         read_detections(tmp_path / "d.csv")
 
 
+def test_a_csv_with_unnamed_trailing_columns_is_read(tmp_path):
+    """A spreadsheet's trailing commas name two empty columns: no column named twice (it was refused so)."""
+    (tmp_path / "d.csv").write_text("x1,y1,x2,y2,score,,\n300,180,520,300,0.9,,\n")
+    assert len(read_detections(tmp_path / "d.csv").boxes) == 1
+
+
 def test_label_calib_and_split_files_with_a_byte_order_mark_are_read_whole(tmp_path):
     from wirescene.io.splits import read_split_file
 

@@ -95,7 +95,7 @@ def test_fit_outputs_are_replaced_as_a_set_or_not_at_all(tmp_path, monkeypatch):
 
     for owner, name, failing, code, said in (
             (wirescene.io.pictures, "figure_bytes", fails_on_the_second_picture, 2, "000010_bev.png: cannot draw"),
-            (Path, "write_bytes", disk_full_on_the_bev, 1, "000010_bev.png: No space left on device;")):
+            (Path, "write_bytes", disk_full_on_the_bev, 1, "000010_bev.png: No space left on device")):
         with monkeypatch.context() as patched:
             patched.setattr(owner, name, failing)
             for where in (out, tmp_path / "new" / "out"):
@@ -126,8 +126,40 @@ def test_an_oserror_of_no_disk_or_place_is_a_line_and_any_other_keeps_its_traceb
             continue
         r = run(*args)
         assert r.exit_code == 1 and r.stderr.strip().splitlines() == [
-            f"wirescene: error: {tmp_path / 'out' / '000010.txt'}: {os.strerror(number)}; the frames a run's "
-            "--out or --predictions folder holds stay (--resume goes on from them)"], r.stderr
+            f"wirescene: error: {tmp_path / 'out' / '000010.txt'}: {os.strerror(number)}"], r.stderr
+    import wirescene.eval.predict
+
+    def disk_full(path, text):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(wirescene.eval.predict, "write_text", disk_full)  # predict says what --resume goes on from
+    r = run("predict", KITTI_ROOT, "--split", "training", "--frames", "000010", "--detections", "gt", "--variant",
+            "coarse", "--particles", 5, "--workers", 1, "--out", tmp_path / "pred")
+    assert r.exit_code == 1 and r.stderr.strip().splitlines()[-1] == (
+        f"wirescene: error: {tmp_path / 'pred' / '.predict.json'}: {os.strerror(errno.ENOSPC)}; the frames --out "
+        "holds stay (--resume goes on from them)"), r.stderr
+
+
+def test_synth_on_a_full_disk_says_so_as_every_command_and_a_bug_keeps_its_traceback(tmp_path, monkeypatch):
+    """synth caught every OSError itself: a full disk was exit code 2, a bug's OSError one line without a
+    traceback; now the command group's rule (exit 1, the scene's file in the set named)."""
+    import errno
+
+    import wirescene.synth.generate
+
+    def fails(out_dir, n_scenes, seed=0, *, split="training", number=errno.ENOSPC, **kw):
+        raise OSError(number, os.strerror(number), str(Path(out_dir) / split / "image_2" / "000000.png"))
+
+    monkeypatch.setattr(wirescene.synth.generate, "generate_dataset", fails)
+    r = run("synth", tmp_path / "synth", "--scenes", 1)
+    assert r.exit_code == 1 and r.stderr.strip().splitlines() == [
+        f"wirescene: error: {tmp_path / 'synth' / 'training' / 'image_2' / '000000.png'}: "
+        f"{os.strerror(errno.ENOSPC)}"], r.stderr
+    assert not (tmp_path / "synth").exists()
+    monkeypatch.setattr(wirescene.synth.generate, "generate_dataset",
+                        lambda *a, **kw: fails(*a, **kw, number=errno.ENOENT))
+    with pytest.raises(FileNotFoundError):
+        run("synth", tmp_path / "synth", "--scenes", 1)
 
 
 def test_a_request_the_machine_cannot_hold_ends_in_one_line(tmp_path, monkeypatch):
@@ -797,6 +829,8 @@ def test_predict_dataset_refuses_output_folders_it_cannot_write_before_any_fit(t
     dataset, good = KittiDataset(KITTI_ROOT), tmp_path / "out"
     for name, folder, problem in (("out_dir", a_file, f"{a_file} is a file, expected a directory"),
                                   ("out_dir", "", "empty path (give a directory, e.g. '.')"),
+                                  ("out_dir", None, "expected a directory path, got NoneType"),  # was a TypeError
+                                  ("json_dir", 1, "expected a directory path, got int"),
                                   ("json_dir", a_file / "json", f"{a_file / 'json'}: {a_file} is a file, not a "
                                                                 "directory"),
                                   ("pictures_dir", a_file, f"{a_file} is a file, expected a directory")):

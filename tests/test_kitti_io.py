@@ -108,6 +108,43 @@ def test_write_is_atomic(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["det.txt"]  # no temp file left
 
 
+def test_an_oserror_in_an_atomic_write_names_the_file_asked_for_and_keeps_an_errnoless_one(tmp_path):
+    """A full disk (no file named, or the temporary one) is told of the file asked for; an OSError without
+    an errno (an encoder's message, io.UnsupportedOperation) was "[Errno None] None: 'PATH'", a plain OSError."""
+    import errno
+    import io
+
+    from wirescene.core.atomic import atomic_path
+
+    out = tmp_path / "a.png"
+    with pytest.raises(OSError) as exc:
+        with atomic_path(out):
+            raise OSError(errno.ENOSPC, "No space left on device")
+    assert (exc.value.errno, exc.value.filename) == (errno.ENOSPC, str(out))
+    for raised in (OSError("cannot write mode RGBA as JPEG"), io.UnsupportedOperation("not writable")):
+        with pytest.raises(type(raised)) as exc:
+            with atomic_path(out):
+                raise raised
+        assert exc.value is raised and str(exc.value) == str(raised)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_oserror_in_a_set_of_files_names_the_file_of_the_set_not_of_its_staging_folder(tmp_path):
+    """A report's page or a synthetic scene written into the staging folder of a set when the disk fills was told of
+    `.SET.<hex>.tmp/...`, a folder gone by the time the message is read: the file's place in the set is named."""
+    import errno
+
+    from wirescene.core.atomic import atomic_dir, replaced_dir
+
+    for staged in (atomic_dir, replaced_dir):
+        with pytest.raises(OSError) as exc:
+            with staged(tmp_path / "set") as staging:
+                (staging / "seed-1").mkdir()
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(staging / "seed-1" / "index.html"))
+        assert (exc.value.errno, exc.value.filename) == (errno.ENOSPC, str(tmp_path / "set" / "seed-1" / "index.html"))
+        assert list(tmp_path.iterdir()) == []
+
+
 def test_a_set_that_cannot_take_its_place_leaves_the_old_one_whole(tmp_path, monkeypatch):
     from pathlib import Path
 

@@ -5,6 +5,7 @@ file per frame. The three test frames' calibrations are identical, so every outp
 import json
 import pickle
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from PIL import Image
 
 from conftest import KITTI_ROOT, assert_close, kitti_copy
 from wirescene.cli.main import main
-from wirescene.core.errors import InputError
+from wirescene.core.errors import ArgumentError, InputError
 from wirescene.io.kitti import KittiDataset
 
 SPLIT = KITTI_ROOT / "training"
@@ -250,6 +251,9 @@ def test_split_given_in_python_where_it_has_no_meaning_is_refused(frames_dir, tm
     assert str(exc.value) == (f"{SPLIT}: split='testing' names no folder here: this is itself a split folder (its "
                               "image_2/ is read, no testing/image_2): give the KITTI root above it, or drop split")
     assert KittiDataset(frames_dir, calib=CALIB).frame_ids() == FRAMES  # not given: as before
+    for split in (Path("training"), "training/", "training/image_2", 5):  # a split's name, nothing else
+        with pytest.raises(ArgumentError, match=r"^split: expected the name of a split folder \(e\.g\. 'training'\)"):
+            KittiDataset(KITTI_ROOT, split=split)
     assert KittiDataset(SPLIT, split="training").split_dir == KittiDataset(SPLIT).split_dir == SPLIT
     assert KittiDataset(KITTI_ROOT, split="training", calib=CALIB).image_dir == SPLIT / "image_2"
     link = tmp_path / "val"

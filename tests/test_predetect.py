@@ -858,6 +858,7 @@ def test_detect_takes_the_camera_height_and_pitch_and_checks_them():
         wirescene.detect(image, calib, camera_height=10**400)  # too large for a float: refused, not an OverflowError
     # (the image's own boxes, upsample=1: not enlarged too, whose pass reads the same mount)
     kitti = wirescene.detect(image, calib, upsample=1.0)
+    assert len(kitti) > 3  # the comparisons below are of cars found
     assert_close(wirescene.detect(image, calib, camera_height=1.65, upsample=1.0).scores, kitti.scores, atol=0)
     # told the camera stands at 2.2 m, the same boxes stand nearer the horizon than such a camera sees cars
     level = wirescene.detect(image, calib, threshold=0.05, upsample=1.0).scores

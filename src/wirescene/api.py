@@ -88,9 +88,6 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     pil = _is_pil_image(image)
     if not pil and not isinstance(image, np.ndarray):
         raise ArgumentError(name, f"expected a path, a numpy array or a PIL image, got {type(image).__name__}")
-    problem = None if pil else integer_range_problem(image)  # an int32 array of 16-bit values would read black
-    if problem:
-        raise ArgumentError(name, problem)
     try:
         if pil:
             from wirescene.io.kitti import rgb_of_pil
@@ -102,7 +99,8 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
         raise ArgumentError(name, exc.problem) from None
     except (OSError, ValueError) as exc:  # a PIL image that cannot be converted
         raise ArgumentError(name, f"unreadable PIL image ({' '.join(str(exc).split())})") from None
-    problem = image_size_problem((rgb.shape[1], rgb.shape[0]))
+    # after the shape's check: an int32 array of 16-bit values read black
+    problem = (None if pil else integer_range_problem(image)) or image_size_problem((rgb.shape[1], rgb.shape[0]))
     if problem:
         raise ArgumentError(name, problem)
     return rgb

@@ -132,6 +132,11 @@ _MACHINE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACC
                              errno.EMFILE, errno.ENFILE})
 
 
+# What a command that stops there keeps for its --resume, said after the machine's refusal.
+_KEPT_ON_RESUME = {"predict": "; the frames --out holds stay (--resume goes on from them)",
+                   "eval": "; the frames --predictions holds stay (--resume goes on from them)"}
+
+
 class _Group(click.Group):
     """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
     on standard error and exit code 2, without a traceback (typed errors of the package,
@@ -179,8 +184,8 @@ class _Group(click.Group):
                 raise
             _Stopping.exiting = True
             where = f"{exc.filename}: " if exc.filename else ""
-            click.echo(f"wirescene: error: {where}{exc.strerror or exc}; the frames a run's --out or --predictions "
-                       "folder holds stay (--resume goes on from them)", err=True)
+            kept = _KEPT_ON_RESUME.get(ctx.invoked_subcommand, "")
+            click.echo(f"wirescene: error: {where}{exc.strerror or exc}{kept}", err=True)
             sys.exit(1)
         except KeyboardInterrupt as exc:  # the shell's convention (128 + the signal), not click's "Aborted!" and 1
             _Stopping.exiting = True

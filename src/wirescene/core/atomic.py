@@ -41,7 +41,8 @@ def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        if exc.filename in (None, str(tmp)):  # a full disk is told of the file the user asked for, not its temporary
+        # a full disk told of the file asked for, not its temporary; an errno-less OSError keeps message and type
+        if exc.errno is not None and exc.filename in (None, str(tmp)):
             raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
     except BaseException:
@@ -126,9 +127,13 @@ def _staged(path: Path):
     staging = _new_dir(path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         yield staging
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
         remove_empty(made)
+        named = getattr(exc, "filename", None)
+        if isinstance(exc, OSError) and exc.errno is not None and named and Path(named).is_relative_to(staging):
+            # a full disk told of the file in the set asked for, not in its staging folder (gone by now)
+            raise OSError(exc.errno, exc.strerror, str(path / Path(named).relative_to(staging))) from exc
         raise
 
 
@@ -235,9 +240,10 @@ def replaced_dir(path: str | Path):
             if (old / path.name).exists():  # the swap failed half-way: the old set goes back
                 try:
                     os.replace(old / path.name, path)
-                except OSError:  # nor could it: the old set stays where it is, and the error says so
-                    raise OSError(f"{path}: the new set could not take its place, and the old one is left in "
-                                  f"{old / path.name}") from None
+                except OSError as restore:  # nor could it: the old set stays where it is, and the error says so
+                    said = f"the new set could not take its place, and the old one is left in {old / path.name}"
+                    raise (OSError(f"{path}: {said}") if restore.errno is None
+                           else OSError(restore.errno, said, str(path))) from None
             old.rmdir()
             raise
         shutil.rmtree(old, ignore_errors=True)

@@ -46,6 +46,8 @@ def integer_range_problem(image) -> str | None:
     True
     >>> integer_range_problem(np.array([[0, 4095]], np.int32))
     'integer values outside 0..255 (dtype int32, 0..4095) would be read by the range of int32: cast a 16-bit image to uint16, scale others to 0..255'
+    >>> integer_range_problem(np.array([[-1, 254]], np.int16))  # 8-bit values but one: not the range of int16
+    'integer values outside 0..255 (dtype int16, -1..254): the negative ones would be read as 0: clip or scale the image to 0..255 (cast a 16-bit image to uint16)'
     """
     img = np.asarray(image)
     if img.dtype.kind not in "iu" or img.dtype in (np.uint8, np.uint16) or img.size == 0:
@@ -53,6 +55,9 @@ def integer_range_problem(image) -> str | None:
     lo, hi = img.min(), img.max()
     if lo >= 0 and hi <= 255:
         return None
+    if hi <= 255:  # read as 8-bit values (_values_and_range), the negative ones as 0
+        return (f"integer values outside 0..255 (dtype {img.dtype}, {lo}..{hi}): the negative ones would be read "
+                f"as 0: clip or scale the image to 0..255 (cast a 16-bit image to uint16)")
     return (f"integer values outside 0..255 (dtype {img.dtype}, {lo}..{hi}) would be read by the range of "
             f"{img.dtype}: cast a 16-bit image to uint16, scale others to 0..255")
 

@@ -179,7 +179,7 @@ def _arrays_problem(data: dict) -> str | None:
         want = tuple(d for d in shape if d != "")
         found = np.shape(data[key])
         if len(found) != len(want) or any(isinstance(w, int) and f != w for f, w in zip(found, want)):
-            return f"{key} of shape {found}, expected ({', '.join(map(str, want))})"
+            return f"{key} of shape {found}, expected ({', '.join(map(str, want))}{',' * (len(want) == 1)})"
     k, m = len(data["components"]), len(data["exemplars"])
     if k < 1 or m < 1:
         return f"{k} components and {m} exemplars, at least one of each needed"

@@ -11,6 +11,7 @@ staying a submission."""
 from __future__ import annotations
 
 import json
+import os
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -105,8 +106,8 @@ def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDa
     its files would spoil another folder's: the label folder (a submission holds the label files
     alone), the detections' folder (a frame's ``FRAME.json`` or ``FRAME.txt`` there takes the place
     of its detection file, or sits beside it as a second one), the images' folder (a picture there
-    is a frame of the next run) or the split's own ``label_2`` / ``calib`` (its files written
-    over)."""
+    is a frame of the next run) or the split's own ``label_2`` / ``calib`` (the next run's ground
+    truth, or calibrations)."""
     submission = "--out, the label folder: a submission holds the label files alone"
     detections = ("the detections' folder: each frame's {} written there would replace its detection file or be "
                   "a second one")
@@ -116,8 +117,9 @@ def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDa
              ("json_dir", source.folder, detections.format("FRAME.json")),
              ("out", source.folder, detections.format("label file")),
              ("out", dataset.image_dir, "the folder of the images: a submission holds the label files alone"),
-             ("out", dataset.split_dir / "label_2", "the split's label folder: its labels would be written over"),
-             ("out", dataset.split_dir / "calib", "the split's calibration folder: FRAME.txt there is the frame's "
+             ("out", dataset.split_dir / "label_2", "the split's label folder: the next run would read the label "
+                                                    "files as the frames' ground truth"),
+             ("out", dataset.split_dir / "calib", "the split's calibration folder: each FRAME.txt there is a frame's "
                                                   "calibration")]
     option = {"out": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures"}
     folders = {"out": out, **folders}
@@ -210,8 +212,8 @@ def predict_dataset(
     Raises
     ------
     ArgumentError
-        Before any fit: ``out_dir``, ``json_dir`` or ``pictures_dir`` is a file, an empty path,
-        or a directory that cannot be written or created
+        Before any fit: ``out_dir``, ``json_dir`` or ``pictures_dir`` is no path, a file, an
+        empty path, or a directory that cannot be written or created
         (:func:`wirescene.core.validate.output_dir_problem`).
     InputError
         Before any fit: no frame to predict (no image in ``image_2/``, or the folder of frames), a frame
@@ -224,7 +226,10 @@ def predict_dataset(
         labelled split (a missing one is said, its frame's pictures drawn without labels).
     """
     for name, folder in (("out_dir", out_dir), ("json_dir", json_dir), ("pictures_dir", pictures_dir)):
-        problem = None if folder is None and name != "out_dir" else output_dir_problem(folder)
+        if folder is None and name != "out_dir":
+            continue
+        problem = (output_dir_problem(folder) if isinstance(folder, (str, os.PathLike))
+                   else f"expected a directory path, got {type(folder).__name__}")
         if problem:  # before any fit, as the command's --out, --json-dir and --pictures
             raise ArgumentError(name, problem)
     source = DetectionSource("bank") if source is None else source

@@ -297,8 +297,8 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
             header = ",".join(fieldnames)
             raise InputError(f"CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha), got "
                              f"{header if len(header) <= 40 else header[:37] + '...'!r}", path=path)
-        twice = sorted({name for name in fieldnames or () if fieldnames.count(name) > 1})
-        if twice:  # each row keeps the last column of a name: a box of another column's numbers
+        twice = sorted({name for name in fieldnames or () if name and fieldnames.count(name) > 1})
+        if twice:  # a row keeps a name's last column: another column's numbers (an unnamed one is never read)
             raise InputError(f"CSV header names the column {twice[0]!r} twice", path=path)
         dets = _from_entries(rows, path)
         others = [_class_of(e) for e in rows if not _is_car(e)]

@@ -23,7 +23,7 @@ from PIL import Image, UnidentifiedImageError
 
 from wirescene.core.atomic import write_text
 from wirescene.core.camera import Camera, KittiCalib, read_calibration, read_kitti_calib
-from wirescene.core.errors import InputError, ShapeError
+from wirescene.core.errors import ArgumentError, InputError, ShapeError
 from wirescene.core.image import to_rgb_uint8
 from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label types live in core)
     ALPHA_NOT_ESTIMATED,
@@ -422,6 +422,8 @@ class KittiDataset:
     """
 
     def __init__(self, root: str | Path, *, split: str | None = None, calib: str | Path | None = None):
+        if split is not None and (not isinstance(split, str) or split != Path(split).name):
+            raise ArgumentError("split", f"expected the name of a split folder (e.g. 'training'), got {split!r}")
         self._read(root, DEFAULT_SPLIT if split is None else split, calib)
         if split is not None:
             problem = given_split_problem(self, split, root=root)
