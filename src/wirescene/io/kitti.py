@@ -432,9 +432,11 @@ class KittiDataset:
 
     @classmethod
     def of_default_split(cls, root: str | Path, split: str, *, calib: str | Path | None = None) -> KittiDataset:
-        """``KittiDataset(root, split=split, calib=calib)`` of a ``split`` named by a default (a
-        command's ``--split`` not given), not by its caller: never refused where it has no
-        meaning (:func:`given_split_problem`), as no split given is.
+        """``KittiDataset(root, split=split, calib=calib)`` without the check of a split given
+        (:func:`given_split_problem`): for a split named by a default (a command's ``--split`` not
+        given), never refused where it has no meaning, as no split given is; a command checks the
+        one given itself, against the root as typed and with its options' names
+        (:func:`wirescene.cli.options.kitti_dataset`).
 
         Examples
         --------
