@@ -552,6 +552,31 @@ def test_held_out_calibration_of_a_fold_without_cars_measures_the_others(tmp_pat
     assert (det.calib_scale > 0).all() and np.isfinite(det.calib_offset).all()
 
 
+def test_train_parts_deals_its_calibration_folds_as_train_all_does(monkeypatch):
+    """train parts held out its calibration by the shared frames' fixed folds, other frames dealt round the folds in
+    turn, where train all deals the frames by drive, balanced by their cars: a subset's calibration differed. Now
+    both deal them one way (the 72 shared frames' folds either way)."""
+    import wirescene.training.parts as parts
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.training.kitti_detector import calibration_folds
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def held_out(*a, folds, **kw):
+        seen.append(dict(folds))
+        raise Stop
+
+    monkeypatch.setattr(parts, "heldout_calibration", held_out)
+    frames = ["000002", "000010", "001545"]
+    with pytest.raises(Stop):
+        parts.train_part_detector(None, seed=1, n_trees=2, max_depth=4, kind="ghog_ms", synth_scenes=0,
+                                  kitti_root=KITTI_ROOT, frames=frames, position=True, calibrate_real=True)
+    assert seen == [calibration_folds(KittiDataset(KITTI_ROOT), frames)]
+
+
 def test_kitti_eval_frames_reads_the_frames_asked_for():
     from wirescene.training.parts import kitti_eval_frames
 

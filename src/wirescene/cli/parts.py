@@ -129,7 +129,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
             from wirescene.training.kitti_detector import calibration_folds
 
             drives, mapping_dir = read_drive_map(ds, drive_mapping)
-            if mapping_dir is not None:  # else the folds of the shared frames' drives, as the shipped recipe
+            if mapping_dir is not None:  # else train_part_detector deals the frames by their known drives alike
                 folds = calibration_folds(ds, frames or ds.frame_ids(), drives=drives)
 
     _, rep = train_part_detector(out, seed=seed, n_views=n_views, n_trees=n_trees, max_depth=max_depth, kind=kind,

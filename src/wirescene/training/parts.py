@@ -48,7 +48,7 @@ from typing import Mapping
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from wirescene.core.errors import ArgumentError
+from wirescene.core.errors import ArgumentError, InputError
 from wirescene.io.wireframes import wireframe_gt_path
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, N_PARTS, PartDetector
@@ -634,25 +634,14 @@ def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True, fram
 GREY_KINDS = feat.GREY_KINDS
 
 
-def real_folds(frame_ids, folds: Mapping[str, int] | None = None) -> np.ndarray:
-    """Cross-validation fold of each frame: ``folds[frame]`` if given, else
-    :func:`wirescene.io.folds.fold_of` where the drive is known, else the frame's
-    position modulo the number of folds."""
-    from wirescene.io.folds import N_FOLDS, fold_of
-
-    if folds is not None:
-        return np.asarray([folds[f] for f in frame_ids], dtype=np.int64)
-    out = []
-    for i, f in enumerate(frame_ids):
-        try:
-            out.append(fold_of(f))
-        except KeyError:
-            out.append(i % N_FOLDS)
-    return np.asarray(out, dtype=np.int64)
+def real_folds(frame_ids, folds: Mapping[str, int]) -> np.ndarray:
+    """Cross-validation fold of each frame, ``folds[frame]``
+    (:func:`wirescene.training.kitti_detector.calibration_folds`)."""
+    return np.asarray([folds[f] for f in frame_ids], dtype=np.int64)
 
 
-def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, position: bool = False,
-                        context: bool = False, folds: Mapping[str, int] | None = None, progress=None, **fit_kwargs):
+def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, folds: Mapping[str, int],
+                        position: bool = False, context: bool = False, progress=None, **fit_kwargs):
     """Per-class calibration (:func:`calibrate`) of a forest trained on ``real`` (+
     ``other``) from held-out scores: for each fold of the real frames
     (:func:`real_folds` of ``folds``), a forest trained without that fold's real patches
@@ -754,8 +743,9 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
         heights, see :func:`wirescene.parts.detector.response_maps`)
     calibrate_real : bool -- calibrate the log ratio per class on held-out real patches
         (:func:`heldout_calibration`; needs ``kitti_root``)
-    calibration_folds : dict, optional -- ``{frame: fold}`` of that calibration (default:
-        :func:`real_folds`)
+    calibration_folds : dict, optional -- ``{frame: fold}`` of that calibration (default: the
+        frames dealt by drive as ``train all`` deals them,
+        :func:`wirescene.training.kitti_detector.calibration_folds`)
     max_real_patches : int or None -- keep at most that many real patches, a uniform
         sample of all (None: all), so that memory does not grow with the frames beyond
         it (about 0.4 kB a patch: 250 MB); the shipped model's 247,569 patches (real and
@@ -813,6 +803,13 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
             raise ArgumentError("frames", f"none of the {len(frames)} real training frame(s) has a labelled Car, and no "
                                           "synthetic scenes (--synth-scenes) or CAD views (--n-views) add car parts")
         if calibrate_real:  # the calibration holds out folds of the real frames
+            if calibration_folds is None:  # dealt as train all deals them: by drive, balanced by their cars
+                from wirescene.training.kitti_detector import calibration_folds as dealt_folds
+
+                try:
+                    calibration_folds = dealt_folds(ds, frames)
+                except InputError:  # frames of one drive: refused below, with what to do instead
+                    calibration_folds = dict.fromkeys(frames, 0)
             fold = real_folds(frames, calibration_folds)
             if len(np.unique(fold)) < 2:
                 raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
