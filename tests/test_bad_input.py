@@ -791,7 +791,7 @@ CASES = {
     "calib P2 translation 1e300": (
         lambda t: _fit_case(t, calib=_with_p2("721.5 0 609 1e300 0 721.5 172.9 0.2 0 0 1 0.003")),
         r"calib\.txt: P2: camera centre 1\.386e\+297 m from the frame's origin on an axis \(at most 100 m\): a corrupt "
-        r"translation column \(P's 4th\)\?$"),
+        r"translation column \(P's 4th\), or one in millimetres\?$"),
     # each row kept the last x1: box 0 was x1 y1 x2 y2 = 1 180 520 300, fitted without a word
     "CSV header naming a column twice": (lambda t: _fit_case(t, dets=(".csv", "x1,y1,x2,y2,x1\n300,180,520,300,1\n")),
                                          r"dets\.csv: CSV header names the column 'x1' twice$"),

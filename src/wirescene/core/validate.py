@@ -106,7 +106,7 @@ def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | No
     >>> projection_problem([[721.5, 0, 5000, 0], [0, 721.5, 172.9, 0], [0, 0, 1, 0]], (1242, 375))
     'principal point (5000, 172.9) is far outside the 1242x375 image'
     >>> projection_problem([[721.5, 0, 609.6, 1e300], [0, 721.5, 172.9, 0.2], [0, 0, 1, 0.003]])
-    "camera centre 1.386e+297 m from the frame's origin on an axis (at most 100 m): a corrupt translation column (P's 4th)?"
+    "camera centre 1.386e+297 m from the frame's origin on an axis (at most 100 m): a corrupt translation column (P's 4th), or one in millimetres?"
     """
     P = np.asarray(P)
     if P.shape != (3, 4):
@@ -127,7 +127,7 @@ def projection_problem(P, image_size: tuple[int, int] | None = None) -> str | No
         offset = float(np.abs(np.linalg.solve(P[:, :3], P[:, 3])).max())  # the camera centre's farthest coordinate
     if not offset <= MAX_CAMERA_OFFSET:  # NaN too: an overflow (inf - inf) in the solve
         return (f"camera centre {offset:.4g} m from the frame's origin on an axis (at most {MAX_CAMERA_OFFSET:g} m): a "
-                "corrupt translation column (P's 4th)?")
+                "corrupt translation column (P's 4th), or one in millimetres?")
     if image_size is not None:
         w, h = image_size
         cx, cy = K[0, 2], K[1, 2]
