@@ -140,6 +140,32 @@ def test_an_oserror_of_no_disk_or_place_is_a_line_and_any_other_keeps_its_traceb
         "holds stay (--resume goes on from them)"), r.stderr
 
 
+def test_the_resume_hint_of_a_full_disk_is_the_running_commands(tmp_path, monkeypatch):
+    """The hint was keyed by the top command's name: `train all` (a --resume of its own, under the group `train`) had
+    none, and `eval` without --predictions (nothing kept) was told its frames stay."""
+    import errno
+
+    import wirescene.cli.main
+    import wirescene.training.pipeline
+
+    def disk_full(*a, **kw):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp_path / "m" / "parts_model.npz"))
+
+    monkeypatch.setattr(wirescene.training.pipeline, "train_all", disk_full)
+    r = run("train", "all", KITTI_ROOT, "--out", tmp_path / "m")
+    assert r.exit_code == 1 and r.stderr.strip().splitlines() == [
+        f"wirescene: error: {tmp_path / 'm' / 'parts_model.npz'}: {os.strerror(errno.ENOSPC)}; the steps --out holds "
+        "stay (--resume goes on from them)"], r.stderr
+    monkeypatch.setattr(wirescene.cli.main, "_say_if_trained_on", disk_full)  # after the output folders' checks
+    r = run("eval", KITTI_ROOT, "--variant", "coarse", "--detections", "gt", "--frames", "000010")
+    assert r.exit_code == 1 and r.stderr.strip().splitlines() == [
+        f"wirescene: error: {tmp_path / 'm' / 'parts_model.npz'}: {os.strerror(errno.ENOSPC)}"], r.stderr
+    r = run("eval", KITTI_ROOT, "--variant", "coarse", "--detections", "gt", "--frames", "000010", "--predictions",
+            tmp_path / "p")
+    assert r.exit_code == 1 and r.stderr.strip().splitlines()[-1].endswith(
+        "; the frames --predictions holds stay (--resume goes on from them)"), r.stderr
+
+
 def test_synth_on_a_full_disk_says_so_as_every_command_and_a_bug_keeps_its_traceback(tmp_path, monkeypatch):
     """synth caught every OSError itself: a full disk was exit code 2, a bug's OSError one line without a
     traceback; now the command group's rule (exit 1, the scene's file in the set named)."""

@@ -145,6 +145,45 @@ def test_an_oserror_in_a_set_of_files_names_the_file_of_the_set_not_of_its_stagi
         assert list(tmp_path.iterdir()) == []
 
 
+def test_an_oserror_making_a_temporary_names_the_file_asked_for_and_any_name_is_kept(tmp_path, monkeypatch):
+    """A full disk or a refused place when the temporary file (or a set's staging folder) is made was told of
+    `.NAME.<hex>.tmp` (in a set: `SET/DIR/.NAME.<hex>.tmp`, a name no set holds); an OSError naming bytes or a file
+    descriptor in a set was a TypeError; os.replace's second name (filename2) in the staging folder was dropped."""
+    import errno
+
+    import wirescene.core.atomic as atomic
+
+    def refused(directory, *, prefix, suffix):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(directory / f"{prefix}0123456789ab{suffix}"))
+
+    with monkeypatch.context() as patched:
+        patched.setattr(atomic, "_new_file", refused)
+        with pytest.raises(OSError) as exc:
+            atomic.write_text(tmp_path / "a.txt", "x")
+        assert (exc.value.errno, exc.value.filename) == (errno.ENOSPC, str(tmp_path / "a.txt"))
+        for staged in (atomic.atomic_dir, atomic.replaced_dir):
+            with pytest.raises(OSError) as exc:
+                with staged(tmp_path / "set") as staging:
+                    atomic.write_text(staging / "seed-1" / "index.html", "x")
+            assert exc.value.filename == str(tmp_path / "set" / "seed-1" / "index.html")
+    with monkeypatch.context() as patched:
+        patched.setattr(atomic, "_new_dir", refused)
+        with pytest.raises(OSError) as exc:
+            with atomic.atomic_dir(tmp_path / "new" / "set"):
+                pass
+        assert exc.value.filename == str(tmp_path / "new" / "set")
+    for name in (b"/somewhere", 5):
+        with pytest.raises(OSError) as exc:
+            with atomic.atomic_dir(tmp_path / "set"):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), name)
+        assert exc.value.filename == name
+    with pytest.raises(OSError) as exc:
+        with atomic.atomic_dir(tmp_path / "set") as staging:
+            raise OSError(errno.EXDEV, os.strerror(errno.EXDEV), "/elsewhere/a", None, str(staging / "a"))
+    assert (exc.value.filename, exc.value.filename2) == ("/elsewhere/a", str(tmp_path / "set" / "a"))
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_set_that_cannot_take_its_place_leaves_the_old_one_whole(tmp_path, monkeypatch):
     from pathlib import Path
 

@@ -251,7 +251,7 @@ def test_split_given_in_python_where_it_has_no_meaning_is_refused(frames_dir, tm
     assert str(exc.value) == (f"{SPLIT}: split='testing' names no folder here: this is itself a split folder (its "
                               "image_2/ is read, no testing/image_2): give the KITTI root above it, or drop split")
     assert KittiDataset(frames_dir, calib=CALIB).frame_ids() == FRAMES  # not given: as before
-    for split in (Path("training"), "training/", "training/image_2", 5):  # a split's name, nothing else
+    for split in (Path("training"), "training/", "training/image_2", 5, "", ".."):  # a split's name, nothing else
         with pytest.raises(ArgumentError, match=r"^split: expected the name of a split folder \(e\.g\. 'training'\)"):
             KittiDataset(KITTI_ROOT, split=split)
     assert KittiDataset(SPLIT, split="training").split_dir == KittiDataset(SPLIT).split_dir == SPLIT

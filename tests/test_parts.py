@@ -577,6 +577,26 @@ def test_train_parts_deals_its_calibration_folds_as_train_all_does(monkeypatch):
     assert seen == [calibration_folds(KittiDataset(KITTI_ROOT), frames)]
 
 
+def test_train_parts_of_two_drives_with_a_bad_label_file_says_so_not_one_drive(tmp_path):
+    """The folds' dealing caught every InputError as "frames of one drive": a malformed label file of a frame (read
+    first by the dealing where synthetic scenes are added) was refused as frames falling in one fold."""
+    import shutil
+
+    import wirescene.training.parts as parts
+    from wirescene.core.errors import InputError
+
+    root = tmp_path / "kitti"
+    for folder in ("image_2", "label_2", "calib"):
+        (root / "training" / folder).mkdir(parents=True)
+        for f in ("000002", "000010"):  # two drives
+            name = f"{f}.png" if folder == "image_2" else f"{f}.txt"
+            shutil.copy(KITTI_ROOT / "training" / folder / name, root / "training" / folder / name)
+    (root / "training" / "label_2" / "000002.txt").write_text("Car 0 0 garbage\n")
+    with pytest.raises(InputError, match="000002.txt: line 1: expected 15 columns"):
+        parts.train_part_detector(None, seed=1, n_trees=2, max_depth=4, kind="ghog_ms", synth_scenes=1,
+                                  kitti_root=root, frames=["000002", "000010"], calibrate_real=True)
+
+
 def test_kitti_eval_frames_reads_the_frames_asked_for():
     from wirescene.training.parts import kitti_eval_frames
 

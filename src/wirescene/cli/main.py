@@ -17,6 +17,7 @@ import numpy as np
 
 from wirescene.cli.options import (
     CALIB_FORMS,
+    KEPT_ON_RESUME,
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
     NonEmptyPath,
@@ -28,6 +29,7 @@ from wirescene.cli.options import (
     detections_spec,
     drive_map_option,
     interval_drives,
+    keeps_on_resume,
     kitti_dataset,
     min_score_option,
     models_option,
@@ -132,11 +134,6 @@ _MACHINE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACC
                              errno.EMFILE, errno.ENFILE})
 
 
-# What a command that stops there keeps for its --resume, said after the machine's refusal.
-_KEPT_ON_RESUME = {"predict": "; the frames --out holds stay (--resume goes on from them)",
-                   "eval": "; the frames --predictions holds stay (--resume goes on from them)"}
-
-
 class _Group(click.Group):
     """Every refused input ends the same way: one line ``wirescene: error: WHAT: problem``
     on standard error and exit code 2, without a traceback (typed errors of the package,
@@ -184,7 +181,7 @@ class _Group(click.Group):
                 raise
             _Stopping.exiting = True
             where = f"{exc.filename}: " if exc.filename else ""
-            kept = _KEPT_ON_RESUME.get(ctx.invoked_subcommand, "")
+            kept = ctx.meta.get(KEPT_ON_RESUME, "")  # set by the command that runs (a nested group's too)
             click.echo(f"wirescene: error: {where}{exc.strerror or exc}{kept}", err=True)
             sys.exit(1)
         except KeyboardInterrupt as exc:  # the shell's convention (128 + the signal), not click's "Aborted!" and 1
@@ -399,6 +396,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     check_output_file(json_out, "--json")
     check_output_dir(predictions, "--predictions")
     check_output_dir(report_dir, "--report")
+    if predictions is not None:
+        keeps_on_resume("the frames --predictions holds")
     dataset = kitti_dataset(kitti_root, split, calib, absolute=dask_address is not None)
     variants = list(variants) or _variants()
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
@@ -619,6 +618,7 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
     check_output_dir(out, "--out")
     check_output_dir(json_dir, "--json-dir")
     check_output_dir(pictures_dir, "--pictures")
+    keeps_on_resume("the frames --out holds")
     if dask_address is not None:  # Dask workers may run elsewhere (another working directory): absolute paths
         if detections not in ("gt", "bank"):
             detections = str(Path(detections).resolve())

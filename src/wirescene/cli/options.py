@@ -172,6 +172,16 @@ def check_picture_file(path: Path | None, option: str) -> None:
     check_output_file(path, option)
 
 
+#: ``click.Context.meta`` key (shared by nested contexts): what the running command keeps for its --resume.
+KEPT_ON_RESUME = "wirescene.kept_on_resume"
+
+
+def keeps_on_resume(what: str) -> None:
+    """Say, after a refusal of the machine that stops the running command, that ``what`` stays
+    for its ``--resume`` (the command group's one line)."""
+    click.get_current_context().meta[KEPT_ON_RESUME] = f"; {what} stay (--resume goes on from them)"
+
+
 def check_output_dir(path: Path | str | None, option: str) -> None:
     """``path`` is (or can be created as) a writable directory."""
     if path is None:

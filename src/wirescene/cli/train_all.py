@@ -12,6 +12,7 @@ from wirescene.cli.options import (
     NonEmptyPath,
     check_output_dir,
     drive_map_option,
+    keeps_on_resume,
     split_file_option,
     workers_count,
     workers_option,
@@ -67,6 +68,7 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
     from wirescene.training.pipeline import step_cost, train_all
 
     check_output_dir(out, "--out")
+    keeps_on_resume("the steps --out holds")
     options = parse_settings(settings)
     if options.get("parts", {}).get("synth_cache") is not None:
         check_output_dir(options["parts"]["synth_cache"], "--set parts.synth_cache")

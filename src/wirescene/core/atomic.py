@@ -35,7 +35,8 @@ def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _new_file(path.parent, prefix=f".{path.name}.", suffix=suffix)
+    with _named_as(path):  # a full disk or a refused place told of the file asked for, not its temporary
+        tmp = _new_file(path.parent, prefix=f".{path.name}.", suffix=suffix)
     try:
         yield tmp
         os.replace(tmp, path)
@@ -48,6 +49,18 @@ def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+@contextmanager
+def _named_as(path: Path):
+    """An OSError of the block with an errno is told of ``path`` (the file or set asked for),
+    not of the temporary name the block was making beside it."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno is None:
+            raise
+        raise OSError(exc.errno, exc.strerror, str(path)) from exc
 
 
 def _new_entry(directory: Path, create, *, prefix: str, suffix: str) -> Path:
@@ -124,16 +137,27 @@ def _staged(path: Path):
     block raises it goes, and so do the directories made for it."""
     made = missing_dirs(path.parent)
     path.parent.mkdir(parents=True, exist_ok=True)
-    staging = _new_dir(path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with _named_as(path):
+            staging = _new_dir(path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except BaseException:
+        remove_empty(made)
+        raise
     try:
         yield staging
     except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
         remove_empty(made)
-        named = getattr(exc, "filename", None)
-        if isinstance(exc, OSError) and exc.errno is not None and named and Path(named).is_relative_to(staging):
-            # a full disk told of the file in the set asked for, not in its staging folder (gone by now)
-            raise OSError(exc.errno, exc.strerror, str(path / Path(named).relative_to(staging))) from exc
+
+        def in_set(name):  # a name in the staging folder (gone by now) as the file's in the set asked for
+            if isinstance(name, (str, os.PathLike)) and Path(name).is_relative_to(staging):
+                return str(path / Path(name).relative_to(staging))
+            return name  # another place's, or no path (bytes, a file descriptor, None)
+
+        if isinstance(exc, OSError) and exc.errno is not None and (in_set(exc.filename), in_set(exc.filename2)) != (
+                exc.filename, exc.filename2):
+            # a full disk told of the file in the set asked for, not in its staging folder
+            raise OSError(exc.errno, exc.strerror, in_set(exc.filename), None, in_set(exc.filename2)) from exc
         raise
 
 
@@ -231,7 +255,8 @@ def replaced_dir(path: str | Path):
     path = Path(path)
     with _staged(path) as staging:
         yield staging
-        old = _new_dir(path.parent, prefix=f".{path.name}.", suffix=".old")
+        with _named_as(path):
+            old = _new_dir(path.parent, prefix=f".{path.name}.", suffix=".old")
         try:
             if path.exists():
                 os.replace(path, old / path.name)

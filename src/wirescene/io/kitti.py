@@ -422,7 +422,7 @@ class KittiDataset:
     """
 
     def __init__(self, root: str | Path, *, split: str | None = None, calib: str | Path | None = None):
-        if split is not None and (not isinstance(split, str) or split != Path(split).name):
+        if split is not None and (not isinstance(split, str) or split != Path(split).name or split in ("", "..")):
             raise ArgumentError("split", f"expected the name of a split folder (e.g. 'training'), got {split!r}")
         self._read(root, DEFAULT_SPLIT if split is None else split, calib)
         if split is not None:

@@ -48,7 +48,7 @@ from typing import Mapping
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from wirescene.core.errors import ArgumentError, InputError
+from wirescene.core.errors import ArgumentError
 from wirescene.io.wireframes import wireframe_gt_path
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, N_PARTS, PartDetector
@@ -744,8 +744,9 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     calibrate_real : bool -- calibrate the log ratio per class on held-out real patches
         (:func:`heldout_calibration`; needs ``kitti_root``)
     calibration_folds : dict, optional -- ``{frame: fold}`` of that calibration (default: the
-        frames dealt by drive as ``train all`` deals them,
-        :func:`wirescene.training.kitti_detector.calibration_folds`)
+        frames dealt by the shared frames' drives as ``train all`` deals them,
+        :func:`wirescene.training.kitti_detector.calibration_folds`; ``train all`` and ``train
+        parts`` give the folds of a devkit mapping they find or are given)
     max_real_patches : int or None -- keep at most that many real patches, a uniform
         sample of all (None: all), so that memory does not grow with the frames beyond
         it (about 0.4 kB a patch: 250 MB); the shipped model's 247,569 patches (real and
@@ -804,12 +805,13 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
                                           "synthetic scenes (--synth-scenes) or CAD views (--n-views) add car parts")
         if calibrate_real:  # the calibration holds out folds of the real frames
             if calibration_folds is None:  # dealt as train all deals them: by drive, balanced by their cars
+                from wirescene.io.folds import frame_drives
                 from wirescene.training.kitti_detector import calibration_folds as dealt_folds
 
-                try:
-                    calibration_folds = dealt_folds(ds, frames)
-                except InputError:  # frames of one drive: refused below, with what to do instead
-                    calibration_folds = dict.fromkeys(frames, 0)
+                drives = frame_drives()
+                # frames of one drive: refused below, with what to do instead (a bad label file is its own error)
+                one = len({drives.get(f, f) for f in frames}) < 2
+                calibration_folds = dict.fromkeys(frames, 0) if one else dealt_folds(ds, frames)
             fold = real_folds(frames, calibration_folds)
             if len(np.unique(fold)) < 2:
                 raise ArgumentError("calibrate_real", f"the held-out calibration needs real frames of 2 or more folds "
