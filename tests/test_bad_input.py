@@ -819,6 +819,13 @@ CASES = {
         lambda t: ["predict", KITTI_ROOT, "--split", "training", "--variant", "coarse", "--detections", "gt",
                    "--frames", FRAME, "--workers", "1", "--out", t / "submission", "--json-dir", _broken_link(t)],
         r"^wirescene: error: --json-dir: \S+/ln is a broken symbolic link"),
+    # a folder name longer than the file system allows: Path.exists() raised ENAMETOOLONG, a traceback
+    "predict --out of a name too long": (
+        lambda t: ["predict", KITTI_ROOT, "--split", "training", "--variant", "coarse", "--detections", "gt",
+                   "--frames", FRAME, "--workers", "1", "--out", t / ("a" * 300) / "out"],
+        r"^wirescene: error: --out: \S+/a{300}/out: File name too long$"),
+    "synth into a name too long": (
+        lambda t: ["synth", t / ("a" * 300), "--scenes", "1"], r"^wirescene: error: OUT_DIR: \S+/a{300}: File name too long$"),
     "cad list of a PLY face past its vertices": (  # loaded as it is by trimesh, refused later or not at all
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.ply", PLY_FACE_PAST_VERTICES).parent],
         r"car\.ply: a face refers to vertex 7, the file has 3 vertices \(0 to 2\)$"),

@@ -129,9 +129,9 @@ def _stop_signals(*, process: bool):
 
 
 # What the machine refused a write or a read (a full disk or quota, a read-only or unreadable place, a failing
-# device, too many open files): one line, exit code 1, as out of memory.
+# device, too many open files, a path longer than the file system takes): one line, exit code 1, as out of memory.
 _MACHINE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO,
-                             errno.EMFILE, errno.ENFILE})
+                             errno.EMFILE, errno.ENFILE, errno.ENAMETOOLONG})
 
 
 class _Group(click.Group):

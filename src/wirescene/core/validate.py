@@ -334,12 +334,15 @@ def creatable_problem(path) -> str | None:
     True
     """
     path = Path(path)
-    link = broken_link_problem(path.parent)
-    if link:
-        return f"{path}: {link}"
-    base = _first_existing(path.parent)
-    if not base.is_dir():
-        return f"{path}: {base} is a file, not a directory"
+    try:
+        link = broken_link_problem(path.parent)
+        if link:
+            return f"{path}: {link}"
+        base = _first_existing(path.parent)
+        if not base.is_dir():
+            return f"{path}: {base} is a file, not a directory"
+    except OSError as exc:  # a name too long for the file system: refused before any work, not a traceback
+        return f"{path}: {exc.strerror or exc}"
     problem = _writable_problem(base)
     return f"{path}: {base} {problem}" if problem else None
 
@@ -365,7 +368,11 @@ def output_dir_problem(path) -> str | None:
     if empty:  # "" is no name for the current directory
         return empty
     path = Path(path)
-    if path.exists():
+    try:
+        exists = path.exists()
+    except OSError as exc:  # a name too long for the file system: refused before any work, not a traceback
+        return f"{path}: {exc.strerror or exc}"
+    if exists:
         if not path.is_dir():
             return f"{path} is a file, expected a directory"
         problem = _writable_problem(path)
