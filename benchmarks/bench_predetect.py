@@ -55,7 +55,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _common import operating_point, write_saved_detections  # noqa: E402  (benchmarks/ is on the path of a script run from it)
-from wirescene.core.jsonio import dumps  # noqa: E402
+from wirescene.core.jsonio import write_json  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.eval.kitti_metrics import N_SAMPLE_PTS, detection_ap_2d  # noqa: E402
 from wirescene.io.folds import FOLD_GROUPS, N_FOLDS, fold_of, frame_drives  # noqa: E402
@@ -504,7 +504,7 @@ def main():
         print("PR curve:", plot_pr({"moderate, IoU 0.7": c["2d"], "moderate, IoU 0.5": c["2d_iou_0.5"]},
                                    args.pr_curve, title=f"{name} ({len(ids)} frames)"))
     if args.json:
-        Path(args.json).write_text(dumps(out, default=float))
+        write_json(args.json, out)
 
 
 if __name__ == "__main__":

@@ -108,6 +108,30 @@ def test_write_is_atomic(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["det.txt"]  # no temp file left
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX's")
+def test_an_atomic_write_keeps_a_link_and_writes_into_a_pipe(tmp_path):
+    """A link was replaced by a new file (its target left as it was), and a device or a pipe (`--json /dev/stdout`,
+    as root: the container's /dev/stdout replaced by a file) by a file beside it: the link's target is written, the
+    pipe written into."""
+    from wirescene.core.jsonio import write_json
+
+    target = tmp_path / "runs" / "metrics.json"
+    target.parent.mkdir()
+    target.write_text("old")
+    (tmp_path / "latest.json").symlink_to(target)
+    write_json(tmp_path / "latest.json", {"ap": float("nan")})
+    assert (tmp_path / "latest.json").is_symlink() and target.read_text() == '{\n "ap": null\n}'
+    assert sorted(p.name for p in target.parent.iterdir()) == ["metrics.json"]
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # a reader waiting, as a shell's pipe has
+    try:
+        write_json(fifo, [1, 2])
+        assert os.read(reader, 100) == b"[\n 1,\n 2\n]" and fifo.is_fifo()
+    finally:
+        os.close(reader)
+
+
 def test_an_oserror_in_an_atomic_write_names_the_file_asked_for_and_keeps_an_errnoless_one(tmp_path):
     """A full disk (no file named, or the temporary one) is told of the file asked for; an OSError without
     an errno (an encoder's message, io.UnsupportedOperation) was "[Errno None] None: 'PATH'", a plain OSError."""

@@ -15,7 +15,8 @@ from wirescene.core.errors import InputError
 @contextmanager
 def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     """Yield a temporary path beside ``path``; it replaces ``path`` when the block
-    succeeds and is removed when it raises.
+    succeeds and is removed when it raises. A symbolic link stays: its target is replaced; a
+    device or a pipe (``--json /dev/stdout``) is yielded itself and written to.
 
     Examples
     --------
@@ -34,6 +35,11 @@ def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     ('Car ...', ['labels.txt'])
     """
     path = Path(path)
+    if path.exists() and not path.is_file():  # a device or a pipe (/dev/stdout, a FIFO): written to, never replaced
+        yield path
+        return
+    if path.is_symlink():  # the link kept: its target is the file written, beside which the temporary one is made
+        path = path.resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
     with _named_as(path):  # a full disk or a refused place told of the file asked for, not its temporary
         tmp = _new_file(path.parent, prefix=f".{path.name}.", suffix=suffix)
