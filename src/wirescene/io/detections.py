@@ -117,7 +117,8 @@ def _viewpoint_of(entry: dict, path: Path, where: str) -> float:
             if isinstance(value, bool) or (isinstance(value, float) and b != value):  # int() drops a fraction
                 raise ValueError
         except (TypeError, ValueError, OverflowError):
-            raise InputError(f"{where}: viewpoint_bin must be an integer 0..7, got {str(value)[:20]!r}", path=path) from None
+            raise InputError(f"{where}: viewpoint_bin must be an integer 0..7, got {str(value)[:20]!r}",
+                             path=path) from None
         if not 0 <= b < 8:
             raise InputError(f"{where}: viewpoint_bin must be in 0..7, got {b}", path=path)
         return float(bin_center(b))
