@@ -122,6 +122,10 @@ def test_an_atomic_write_keeps_a_link_and_writes_into_a_pipe(tmp_path):
     write_json(tmp_path / "latest.json", {"ap": float("nan")})
     assert (tmp_path / "latest.json").is_symlink() and target.read_text() == '{\n "ap": null\n}'
     assert sorted(p.name for p in target.parent.iterdir()) == ["metrics.json"]
+    (tmp_path / "runs.json").symlink_to(target.parent)  # a link to a folder: refused, not replaced by a file
+    with pytest.raises(InputError, match="runs.json: a folder where a file is written$"):
+        write_json(tmp_path / "runs.json", [])
+    assert (tmp_path / "runs.json").is_symlink()
     fifo = tmp_path / "pipe"
     os.mkfifo(fifo)
     reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # a reader waiting, as a shell's pipe has

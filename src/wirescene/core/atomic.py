@@ -35,6 +35,8 @@ def atomic_path(path: str | Path, *, suffix: str = ".tmp"):
     ('Car ...', ['labels.txt'])
     """
     path = Path(path)
+    if path.is_dir():  # a folder, or a link to one: no file takes its place
+        raise InputError("a folder where a file is written", path=path)
     if path.exists() and not path.is_file():  # a device or a pipe (/dev/stdout, a FIFO): written to, never replaced
         yield path
         return
