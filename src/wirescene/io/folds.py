@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
-from typing import Mapping
+from typing import Iterable, Mapping
 
 from wirescene.core.artefacts import load_json
 from wirescene.core.errors import InputError
@@ -92,6 +92,19 @@ def frame_drives() -> dict[str, str]:
     """
     record = load_json(DATA_DIR / "kitti_drives.json", kind="kitti-drives", version=1)
     return {f: d.removesuffix("_sync") for f, d in record["drives"].items()}
+
+
+def drive_groups(frames: Iterable[str], drives: Mapping[str, str] | None = None) -> dict[str, str]:
+    """``{frame: group}``: each frame's recording drive (``drives``, default :func:`frame_drives`),
+    a frame of unknown drive a group of its own; no held-out fold splits a group.
+
+    Examples
+    --------
+    >>> drive_groups(["000010", "900001"])
+    {'000010': '2011_09_26_drive_0036', '900001': '900001'}
+    """
+    drives = frame_drives() if drives is None else drives
+    return {f: drives.get(f, f) for f in frames}
 
 
 #: The devkit's files: a random permutation of the object frames' 1-based indices into the

@@ -1155,10 +1155,9 @@ def calibration_folds(dataset, frames: list[str], *, n_folds: int = 4,
     default :func:`wirescene.io.folds.frame_drives`; a frame of unknown drive alone), dealt
     to ``min(n_folds, groups)`` folds balanced by their cars. An :class:`InputError` if
     there are fewer than two groups."""
-    from wirescene.io.folds import assign_folds, frame_drives
+    from wirescene.io.folds import assign_folds, drive_groups
 
-    drives = frame_drives() if drives is None else drives
-    group = {f: drives.get(f, f) for f in frames}
+    group = drive_groups(frames, drives)
     cars: dict[str, int] = {}
     for f, n in dataset.car_counts(frames).items():
         cars[group[f]] = cars.get(group[f], 0) + n

@@ -805,12 +805,11 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
                                           "synthetic scenes (--synth-scenes) or CAD views (--n-views) add car parts")
         if calibrate_real:  # the calibration holds out folds of the real frames
             if calibration_folds is None:  # dealt as train all deals them: by drive, balanced by their cars
-                from wirescene.io.folds import frame_drives
+                from wirescene.io.folds import drive_groups
                 from wirescene.training.kitti_detector import calibration_folds as dealt_folds
 
-                drives = frame_drives()
                 # frames of one drive: refused below, with what to do instead (a bad label file is its own error)
-                one = len({drives.get(f, f) for f in frames}) < 2
+                one = len(set(drive_groups(frames).values())) < 2
                 calibration_folds = dict.fromkeys(frames, 0) if one else dealt_folds(ds, frames)
             fold = real_folds(frames, calibration_folds)
             if len(np.unique(fold)) < 2:
