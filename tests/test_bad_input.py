@@ -498,6 +498,9 @@ CASES = {
                                        r"--polish-iterations: 100000 is not in the range 0<=x<=1000"),
     "fit --set lifting.iterations=1000": (lambda t: _fit_case(t, extra=("--set", "lifting.iterations=1000")),
                                           r"--set: lifting.iterations must be at most 100, got 1000"),
+    # a window past 180 deg would read as a limit where it is none: an angle is never further off
+    "fit --viewpoint-window 270": (lambda t: _fit_case(t, extra=("--variant", "full", "--viewpoint-window", "270")),
+                                   r"--viewpoint-window: 270 is above the maximum 180$"),
     "eval --set inference.iterations=5000": (lambda t: _eval_case(t, "--variant", "full", "--set",
                                                                   "inference.iterations=5000"),
                                              r"--set: inference.iterations must be at most 1000, got 5000"),

@@ -258,6 +258,20 @@ def test_a_set_that_cannot_take_its_place_leaves_the_old_one_whole(tmp_path, mon
     assert sorted(p.name for p in tmp_path.iterdir()) == ["set"]
 
 
+def test_a_set_replaced_through_a_link_stays_where_the_link_points(tmp_path):
+    from wirescene.core.atomic import replaced_dir
+
+    (tmp_path / "big_disk" / "set").mkdir(parents=True)
+    (tmp_path / "big_disk" / "set" / "old.txt").write_text("old")
+    (tmp_path / "set").symlink_to(tmp_path / "big_disk" / "set", target_is_directory=True)
+    with replaced_dir(tmp_path / "set") as staging:
+        (staging / "new.txt").write_text("new")
+    assert (tmp_path / "set").is_symlink()
+    assert [p.name for p in (tmp_path / "big_disk" / "set").iterdir()] == ["new.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big_disk", "set"]
+    assert [p.name for p in (tmp_path / "big_disk").iterdir()] == ["set"]
+
+
 @pytest.mark.skipif(os.name != "posix", reason="file modes and the umask are POSIX's")
 def test_written_files_get_the_permissions_of_any_new_file(tmp_path):
     from wirescene.core.atomic import atomic_dir, write_text

@@ -246,7 +246,8 @@ def replaced_dir(path: str | Path):
     """Yield an empty staging directory beside ``path`` that takes ``path``'s place whole
     when the block succeeds (a directory there before is removed only then); when the
     block raises the staging directory goes, ``path`` is left as it was, and so are the
-    directories above it (those made for it are removed).
+    directories above it (those made for it are removed). A symbolic link to a directory
+    stays: the directory it points to is the one replaced.
 
     Examples
     --------
@@ -261,6 +262,8 @@ def replaced_dir(path: str | Path):
     ['a.txt']
     """
     path = Path(path)
+    if path.is_symlink() and path.is_dir():  # a set kept on another disk through a link stays there
+        path = path.resolve()
     with _staged(path) as staging:
         yield staging
         with _named_as(path):

@@ -154,9 +154,9 @@ class InferenceOptions:
     flip_evidence: bool = option(True, help="Also read the part evidence off each box's mirror image and average "
                                             "the two (the part detection takes twice as long).")
     # The paper's tolerance for a correct coarse viewpoint, around each pre-detection's (0: no window).
-    viewpoint_window_deg: float = option(45.0, cli="viewpoint-window",
+    viewpoint_window_deg: float = option(45.0, cli="viewpoint-window", maximum=180.0,
                                          help="Degrees the fine stage may turn a car's observation angle away from "
-                                              "its pre-detection's viewpoint (0: unlimited).")
+                                              "its pre-detection's viewpoint (0 or 180: unlimited).")
     # Starting spreads of the plane block: 0.1 deg of pitch moves a car at 30 m by about 1 m (0.1-0.4 read alike).
     sigma_pitch_deg: float = bounded(0.2, minimum=0)
     sigma_roll_deg: float = bounded(0.2, minimum=0)
