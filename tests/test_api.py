@@ -460,6 +460,22 @@ def test_evaluate_takes_one_frame_id_and_refuses_none_and_what_is_no_path(tmp_pa
     assert one["coarse"].metrics["all"]["n_gt"] == listed["coarse"].metrics["all"]["n_gt"] > 0
 
 
+def test_evaluate_reads_an_int_frame_id_as_kitti_dataset_does():
+    """An int frame id is written %06d, as KittiDataset reads it (10 is 000010; it was refused as no frame of the
+    split); a bool, a negative int and a float are refused naming frames, before any fit."""
+    from wirescene.core.resources import DATA_DIR
+
+    root = DATA_DIR / "sample" / "kitti"
+    named = wirescene.evaluate(root, variants="coarse", frames=["000010"], particles=10)
+    for frames in ([10], 10, [np.int64(10)], [10, "000010"]):  # the last: one frame, listed twice
+        reports = wirescene.evaluate(root, variants="coarse", frames=frames, particles=10)
+        assert reports["coarse"].to_json_dict() == named["coarse"].to_json_dict(), frames
+    for bad, says in ((True, "got bool True"), ([False], "got bool False"), ([-10], "must be non-negative, got -10"),
+                      ([10.5], "got float 10.5"), (10.0, "got float 10.0")):
+        with pytest.raises(wirescene.ArgumentError, match=f"^frames: .*{says}"):
+            wirescene.evaluate(root, variants="coarse", frames=bad, particles=10)
+
+
 def test_evaluate_min_score_floors_the_boxes_of_detection_files(tmp_path):
     dets = tmp_path / "dets"
     dets.mkdir()

@@ -869,6 +869,63 @@ def test_predict_dataset_refuses_output_folders_it_cannot_write_before_any_fit(t
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
 
 
+def test_predict_dataset_writes_an_int_frame_id_as_kitti_dataset_reads_it(tmp_path, monkeypatch):
+    """An int frame id is written %06d, as KittiDataset reads it: its label file is 000010.txt (it was 10.txt, no
+    frame of a submission), a lone id is one frame (a str was read as its characters); a bool, a negative int or a
+    float is refused naming frames, before any fit."""
+    import wirescene.eval.predict as predict
+    from wirescene.core.errors import ArgumentError
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
+
+    fitted = []
+    monkeypatch.setattr(predict, "fit_frames", lambda job, frame_ids, **kw: fitted.extend(frame_ids) or
+                        [(f, "", {}) for f in frame_ids])
+    dataset = KittiDataset(KITTI_ROOT)
+    for frames in ([10], 10, "000010", [np.int64(10), "000010"]):
+        out = tmp_path / f"out-{len(fitted)}"
+        assert predict.predict_dataset(dataset, out, variant="coarse", source=DetectionSource("gt"),
+                                       frames=frames) == ["000010"], frames
+        assert sorted(p.name for p in out.iterdir()) == [".predict.json", "000010.txt"], frames
+    for bad, says in (([True], "got bool True"), ([-10], "must be non-negative, got -10"), (10.5, "got float 10.5")):
+        with pytest.raises(ArgumentError, match=f"^frames: .*{says}"):
+            predict.predict_dataset(dataset, tmp_path / "refused", variant="coarse", source=DetectionSource("gt"),
+                                    frames=bad)
+    assert fitted == ["000010"] * 4 and not (tmp_path / "refused").exists()
+
+
+def test_predict_dataset_names_its_arguments_where_a_folder_would_spoil_another(tmp_path, monkeypatch):
+    """Called from Python, the refusals of one folder for another name predict_dataset's arguments (out_dir,
+    json_dir, pictures_dir; they named the command's --out, --json-dir and --pictures), the command its options."""
+    import wirescene.eval.predict as predict
+    from conftest import kitti_copy
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("a frame was fitted")
+
+    monkeypatch.setattr(predict, "fit_frames", no_fit)
+    root = kitti_copy(tmp_path / "kitti", ["000010"])
+    split, dets, out = root / "training", tmp_path / "dets", tmp_path / "pred"
+    dets.mkdir()
+    (dets / "000010.json").write_text('[{"box": [296, 180, 420, 270], "score": 0.9}]')
+    cases = [({"out_dir": split / "image_2"}, "out_dir is the folder of the images"),
+             ({"out_dir": split / "label_2"}, "out_dir is the split's label folder"),
+             ({"out_dir": dets}, "out_dir is the detections' folder"),
+             ({"json_dir": out}, "json_dir is out_dir, the label folder"),
+             ({"pictures_dir": out}, "pictures_dir is out_dir, the label folder"),
+             ({"pictures_dir": split / "image_2"}, "pictures_dir is the folder of the images"),
+             ({"json_dir": dets}, "json_dir is the detections' folder")]
+    for folders, problem in cases:
+        folders = {"out_dir": out, **folders}
+        with pytest.raises(InputError) as exc:
+            predict.predict_dataset(KittiDataset(root), variant="coarse", source=DetectionSource(str(dets)),
+                                    frames=["000010"], **folders)
+        assert exc.value.problem.startswith(f"{problem}"), (folders, str(exc.value))
+    assert not out.exists()
+
+
 def test_predict_resumed_with_fewer_frames_is_refused_and_with_more_continues(tmp_path):
     """A submission is the folder's label files: a resumed run whose --frames / --split-file leave
     out frames of the earlier run is refused before any fit (they would be zipped with it), the

@@ -350,6 +350,19 @@ def test_dataset_from_root_and_split_dir(kitti_root):
     assert ds.car_counts([10]) == {10: 8}  # keyed as given
 
 
+def test_an_int_frame_id_is_written_06d_and_a_bool_or_a_negative_one_refused(kitti_root):
+    """KittiDataset writes an int id %06d (10 is 000010); a bool (True was frame 000001), a negative int (-10 was
+    frame -00010) or a float is no frame id: an ArgumentError naming frame_id."""
+    from wirescene.core.errors import ArgumentError
+
+    ds = KittiDataset(kitti_root)
+    assert ds.image_path(10) == ds.image_path(np.int64(10)) == ds.image_path("000010")
+    for bad, says in ((True, "got bool True"), (-10, "must be non-negative, got -10"), (10.0, "got float 10.0")):
+        for read in (ds.image_path, ds.label_path, ds.calib_path):
+            with pytest.raises(ArgumentError, match=f"^frame_id: .*{says}"):
+                read(bad)
+
+
 def test_dataset_without_labels_and_bad_roots(kitti_root, tmp_path):
     split = kitti_copy(tmp_path, ["000002", "000010", "001545"], subdirs=("image_2", "calib"), split="testing") / "testing"
     ds = KittiDataset(tmp_path, split="testing")

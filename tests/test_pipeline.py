@@ -136,6 +136,45 @@ def test_resume_reuses_finished_frames_and_equals_uninterrupted_run(reference, t
         assert (pred / rel).read_text() == (ref_dir / rel).read_text(), rel
 
 
+def test_evaluate_dataset_writes_an_int_frame_id_as_kitti_dataset_reads_it(tmp_path):
+    """An int frame id is written %06d, as KittiDataset reads it: its label files and record are 000002's (they were
+    2.txt and 2.json, a frame of no split); a bool, a negative int or a float is refused naming frames."""
+    from wirescene.core.errors import ArgumentError
+
+    pred = tmp_path / "pred"
+    reports = evaluate_dataset(KittiDataset(KITTI_ROOT), ["coarse"], frames=[2], options=OPTS, predictions_dir=pred)
+    assert [r.frame_id for r in reports["coarse"].records] == ["000002"]
+    written = sorted(str(p.relative_to(pred)) for p in pred.rglob("*") if p.is_file())
+    assert written == [f"{RECORDS_DIR}/000002.json", "coarse/000002.txt"]
+    for bad in ([True], [-2], [2.0]):
+        with pytest.raises(ArgumentError, match="^frames: "):
+            evaluate_dataset(KittiDataset(KITTI_ROOT), ["coarse"], frames=bad, options=OPTS)
+
+
+def test_evaluate_dataset_refuses_a_predictions_dir_it_cannot_write_before_any_fit(tmp_path, monkeypatch):
+    """evaluate_dataset called directly checks predictions_dir as wirescene.evaluate checks predictions and the
+    command --predictions: a file, an empty path (it wrote into the working directory), a folder under a file or
+    no path at all is refused naming it, before any frame is fitted."""
+    import wirescene.eval.runner as runner
+    from wirescene.core.errors import ArgumentError
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("a frame was fitted")
+
+    monkeypatch.setattr(runner, "fit_frames", no_fit)
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    for folder, problem in ((a_file, f"{a_file} is a file, expected a directory"),
+                            ("", "empty path (give a directory, e.g. '.')"),
+                            (a_file / "pred", f"{a_file / 'pred'}: {a_file} is a file, not a directory"),
+                            (5, "expected a directory path, got int")):
+        with pytest.raises(ArgumentError) as exc:
+            evaluate_dataset(KittiDataset(KITTI_ROOT), ["coarse"], frames=["000002"], options=OPTS,
+                             predictions_dir=folder)
+        assert str(exc.value) == f"predictions_dir: {problem}"
+    assert [p.name for p in tmp_path.iterdir()] == ["a_file"]
+
+
 def test_record_of_another_configuration_is_refit(reference, tmp_path):
     _, ref_dir = reference
     pred = tmp_path / "pred"

@@ -686,7 +686,7 @@ def evaluate(
     *,
     variants: str | Iterable[str] = ("coarse+gp", "full"),
     detections: str = "gt",
-    frames: Iterable[str] | None = None,
+    frames: Iterable[str | int] | str | int | None = None,
     split_file=None,
     particles: int = 250,
     seed: int = 0,
@@ -714,8 +714,10 @@ def evaluate(
         With a ``detections`` directory: fit only the boxes scoring at or above it (a file
         with none left is a frame without detections); None (default) keeps every box. Not
         with ``"gt"`` or ``"bank"`` (whose floor is ``settings={"predetect.threshold": ...}``).
-    frames : iterable of str, optional
-        Frame ids (default: every labelled frame).
+    frames : str, int or iterable of them, optional
+        Frame ids, an int written ``%06d`` as :class:`~wirescene.io.kitti.KittiDataset` reads it
+        (``10`` is ``"000010"``; :func:`~wirescene.io.kitti.as_frame_ids`, each frame once; a bool,
+        a negative int or a float refused); default: every labelled frame.
     split_file : path, optional
         Instead of ``frames``: a file listing them, one id a line (KITTI's
         ``ImageSets/val.txt`` format; see :func:`wirescene.io.splits.read_split_file`).
@@ -757,17 +759,17 @@ def evaluate(
     """
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource, min_score_problem
-    from wirescene.io.kitti import KittiDataset
+    from wirescene.io.kitti import KittiDataset, as_frame_ids
 
     names = _variant_names(variants, "variants")
-    for name, value in (("kitti_root", kitti_root), ("predictions", predictions)):
-        if not (isinstance(value, (str, Path)) or (value is None and name == "predictions")):
-            raise ArgumentError(name, f"expected a directory path, got {type(value).__name__}")
+    if not isinstance(kitti_root, (str, Path)):
+        raise ArgumentError("kitti_root", f"expected a directory path, got {type(kitti_root).__name__}")
     problem = empty_path_problem(kitti_root)  # "" (an unset variable) is no name for the current directory
     if problem:
         raise ArgumentError("kitti_root", problem)
-    problem = None if predictions is None else output_dir_problem(predictions)  # "" too, as for kitti_root
-    if problem:  # before any fit, as the CLI's --predictions
+    # evaluate_dataset's own check (as predictions_dir), here before the models and the device are read
+    problem = None if predictions is None else output_dir_problem(predictions)
+    if problem:
         raise ArgumentError("predictions", problem)
     if calib is not None:  # a file, as eval --calib's: a frame's camera comes with its image size
         problem = (f"expected a calibration file's path, got {type(calib).__name__}"
@@ -788,7 +790,7 @@ def evaluate(
         raise ArgumentError("split_file", "frames and split_file both choose the frames: give one")
     frame_ids = None
     if frames is not None:
-        frame_ids = list(dict.fromkeys(str(f) for f in ([frames] if isinstance(frames, (str, int)) else frames)))
+        frame_ids = as_frame_ids(frames, name="frames")
         if not frame_ids:
             raise ArgumentError("frames", "no frame given")
         missing = sorted(set(frame_ids) - set(dataset.frame_ids()))

@@ -615,9 +615,11 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
     from wirescene.fitting.variants import casts_rays
 
     refuse_min_score(min_score, detections)
-    check_output_dir(out, "--out")
-    check_output_dir(json_dir, "--json-dir")
-    check_output_dir(pictures_dir, "--pictures")
+    # predict_dataset's refusals of a folder name its option, as these checks do
+    folders = {"out_dir": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures"}
+    check_output_dir(out, folders["out_dir"])
+    check_output_dir(json_dir, folders["json_dir"])
+    check_output_dir(pictures_dir, folders["pictures_dir"])
     keeps_on_resume("the frames --out holds")
     if dask_address is not None:  # Dask workers may run elsewhere (another working directory): absolute paths
         if detections not in ("gt", "bank"):
@@ -636,7 +638,7 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
                                                         classifier=options.viewpoint_classifier),
                                  workers=_frame_workers(workers, options.inference.device), dask_client=client,
                                  progress=_progress("predict", total), json_dir=json_dir, pictures_dir=pictures_dir,
-                                 notify=lambda message: click.echo(f"wirescene: {message}", err=True))
+                                 names=folders, notify=lambda message: click.echo(f"wirescene: {message}", err=True))
     finally:
         if client is not None:
             client.close()

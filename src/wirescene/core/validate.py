@@ -350,7 +350,10 @@ def creatable_problem(path) -> str | None:
 def output_dir_problem(path) -> str | None:
     """Why ``path`` is not (and cannot be created as) a writable directory, as a phrase
     naming it, or None: what every output folder of a command (``--out``, ``--predictions``)
-    and of the API (``predictions``) is checked for before any work.
+    and of the API is checked for before any work (:func:`wirescene.evaluate`'s ``predictions``,
+    :func:`~wirescene.eval.runner.evaluate_dataset`'s ``predictions_dir``,
+    :func:`~wirescene.eval.predict.predict_dataset`'s ``out_dir``, ``json_dir`` and
+    ``pictures_dir``), no path at all (an int, None) included.
 
     Examples
     --------
@@ -363,7 +366,11 @@ def output_dir_problem(path) -> str | None:
     True
     >>> output_dir_problem("")  # an unset shell variable, not the current directory
     "empty path (give a directory, e.g. '.')"
+    >>> output_dir_problem(5)
+    'expected a directory path, got int'
     """
+    if not isinstance(path, (str, os.PathLike)):  # an API's argument: Path(5) would be a TypeError
+        return f"expected a directory path, got {type(path).__name__}"
     empty = empty_path_problem(path)
     if empty:  # "" is no name for the current directory
         return empty

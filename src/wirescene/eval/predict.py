@@ -11,11 +11,10 @@ staying a submission."""
 from __future__ import annotations
 
 import json
-import os
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Mapping
 
 from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_bytes, write_text
@@ -29,10 +28,12 @@ from wirescene.fitting.models import models_fingerprint, options_read
 from wirescene.fitting.options import FitOptions
 from wirescene.fitting.pipeline import fit_frame
 from wirescene.fitting.variants import get_variant
-from wirescene.io.kitti import KittiDataset
+from wirescene.io.kitti import KittiDataset, as_frame_ids
 from wirescene.io.outputs import fit_output_paths, scene_json, scene_pictures
 
 CONFIG_FILE = ".predict.json"
+#: The folders :func:`predict_dataset` writes, by its arguments' names: how its refusals name them by default.
+FOLDERS = ("out_dir", "json_dir", "pictures_dir")
 
 
 @dataclass(frozen=True)
@@ -101,14 +102,15 @@ def _stored_config(path: Path) -> dict | None:
 
 
 def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDataset,
-                    source: DetectionSource) -> None:
+                    source: DetectionSource, names: Mapping[str, str]) -> None:
     """An :class:`InputError` naming ``out``, ``json_dir`` or ``pictures_dir`` (``folders``) where
     its files would spoil another folder's: the label folder (a submission holds the label files
     alone), the detections' folder (a frame's ``FRAME.json`` or ``FRAME.txt`` there takes the place
     of its detection file, or sits beside it as a second one), the images' folder (a picture there
     is a frame of the next run) or the split's own ``label_2`` / ``calib`` (the next run's ground
-    truth, or calibrations)."""
-    submission = "--out, the label folder: a submission holds the label files alone"
+    truth, or calibrations). ``names``: how the message names each folder of :data:`FOLDERS` (the
+    arguments' names, or the command's options)."""
+    submission = f"{names['out_dir']}, the label folder: a submission holds the label files alone"
     detections = ("the detections' folder: each frame's {} written there would replace its detection file or be "
                   "a second one")
     taken = [("json_dir", out, submission), ("pictures_dir", out, submission),
@@ -121,12 +123,12 @@ def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDa
                                                     "files as the frames' ground truth"),
              ("out", dataset.split_dir / "calib", "the split's calibration folder: each FRAME.txt there is a frame's "
                                                   "calibration")]
-    option = {"out": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures"}
     folders = {"out": out, **folders}
     for name, other, what in taken:
         folder = folders[name]
         if folder is not None and other is not None and folder.resolve() == Path(other).resolve():
-            raise InputError(f"{option[name]} is {what}; give it a folder of its own", path=folder)
+            said = names["out_dir" if name == "out" else name]
+            raise InputError(f"{said} is {what}; give it a folder of its own", path=folder)
 
 
 def _others_files(frame_ids: list[str], folders: dict[str, Path | None], resumed: dict | None = None) -> None:
@@ -156,7 +158,7 @@ def predict_dataset(
     variant: str = "full",
     source: DetectionSource | None = None,
     options: FitOptions | None = None,
-    frames: Iterable[str] | None = None,
+    frames: Iterable[str | int] | str | int | None = None,
     resume: bool = False,
     workers: int = 1,
     dask_client=None,
@@ -164,6 +166,7 @@ def predict_dataset(
     notify: Callable[[str], None] | None = None,
     json_dir: str | Path | None = None,
     pictures_dir: str | Path | None = None,
+    names: Mapping[str, str] | None = None,
 ) -> list[str]:
     """Write ``out_dir/FRAME.txt`` (KITTI labels with scores) for every image.
 
@@ -179,8 +182,10 @@ def predict_dataset(
         Pre-detections; default (None) our own (``"bank"``).
     options : FitOptions, optional
         The fit's options (default: ``FitOptions()``).
-    frames : iterable of str, optional
-        The frames to fit (default: every image of the split).
+    frames : str, int or iterable of them, optional
+        The frames to fit, an int written ``%06d`` as :class:`~wirescene.io.kitti.KittiDataset`
+        reads it (:func:`~wirescene.io.kitti.as_frame_ids`; each frame once); default: every
+        image of the split.
     resume : bool
         Keep the label files of a previous run with the same settings and fit only the
         missing frames; the previous run's frames must be among ``frames`` (a larger selection
@@ -203,6 +208,10 @@ def predict_dataset(
         Also write each frame's ``FRAME_overlay.png`` and ``FRAME_bev.png`` here
         (:func:`wirescene.io.outputs.scene_pictures`; a labelled split's cars drawn beside the
         estimates).
+    names : mapping of str to str, optional
+        How the refusals of a folder name ``out_dir``, ``json_dir`` and ``pictures_dir``
+        (:data:`FOLDERS`), e.g. a command's options ``{"out_dir": "--out", ...}``; default (and
+        for a folder the mapping leaves out): the arguments' own names.
 
     Returns
     -------
@@ -214,7 +223,8 @@ def predict_dataset(
     ArgumentError
         Before any fit: ``out_dir``, ``json_dir`` or ``pictures_dir`` is no path, a file, an
         empty path, or a directory that cannot be written or created
-        (:func:`wirescene.core.validate.output_dir_problem`).
+        (:func:`wirescene.core.validate.output_dir_problem`); a frame id is a bool, a negative
+        int or a float (:func:`~wirescene.io.kitti.as_frame_id`); ``names`` names another folder.
     InputError
         Before any fit: no frame to predict (no image in ``image_2/``, or the folder of frames), a frame
         without its detection file, calibration or image, a malformed detection file, or
@@ -225,23 +235,26 @@ def predict_dataset(
         frames not written by a run resumed; with ``pictures_dir``, a malformed label file of a
         labelled split (a missing one is said, its frame's pictures drawn without labels).
     """
+    unknown = sorted(set(names or {}) - set(FOLDERS))
+    if unknown:
+        raise ArgumentError("names", f"no folder {unknown[0]!r}; the folders: {', '.join(FOLDERS)}")
+    names = {**{name: name for name in FOLDERS}, **(names or {})}
     for name, folder in (("out_dir", out_dir), ("json_dir", json_dir), ("pictures_dir", pictures_dir)):
         if folder is None and name != "out_dir":
             continue
-        problem = (output_dir_problem(folder) if isinstance(folder, (str, os.PathLike))
-                   else f"expected a directory path, got {type(folder).__name__}")
+        problem = output_dir_problem(folder)
         if problem:  # before any fit, as the command's --out, --json-dir and --pictures
-            raise ArgumentError(name, problem)
+            raise ArgumentError(names[name], problem)
     source = DetectionSource("bank") if source is None else source
     options = FitOptions() if options is None else options
     variant = get_variant(variant).name
     out = Path(out_dir)
     # a submission of no file is refused here, not by the server
-    frame_ids = list(frames) if frames is not None else dataset.require_frames(images=True)
+    frame_ids = as_frame_ids(frames) if frames is not None else dataset.require_frames(images=True)
     source.missing_frames(frame_ids)
     extra = {"json_dir": json_dir, "pictures_dir": pictures_dir}
     extra = {name: None if folder is None else Path(folder) for name, folder in extra.items()}
-    _folder_problem(out, extra, dataset, source)
+    _folder_problem(out, extra, dataset, source, names)
     # a resumed run's frames keep their files where the first run wrote them: another folder is another run
     config = _config(dataset, variant, source, options,
                      {name: str(f.resolve()) for name, f in extra.items() if f is not None})

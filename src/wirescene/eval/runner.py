@@ -20,8 +20,9 @@ from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 import numpy as np
 
 from wirescene.core.camera import Camera
-from wirescene.core.errors import InputError
+from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.types import Detections, SceneEstimate, fitted_detections  # not io.outputs: it imports matplotlib
+from wirescene.core.validate import output_dir_problem
 from wirescene.core.workers import end_on_stop_signals, usable_cores
 from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
 from wirescene.eval.records import (
@@ -36,7 +37,7 @@ from wirescene.fitting.pipeline import fit_frame, needs_evidence
 from wirescene.fitting.variants import get_variant
 from wirescene.infer.evidence import oracle_evidence
 from wirescene.infer.torch_backend import TORCH_THREADS_ENV
-from wirescene.io.kitti import FrameLabels, KittiDataset
+from wirescene.io.kitti import FrameLabels, KittiDataset, as_frame_ids
 from wirescene.io.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
 
 if TYPE_CHECKING:  # an optional dependency, imported where dask mode runs
@@ -244,10 +245,10 @@ def evaluate_dataset(
     dataset: KittiDataset,
     variants: Iterable[str],
     *,
-    frames: Iterable[str] | None = None,
+    frames: Iterable[str | int] | str | int | None = None,
     source: DetectionSource | None = None,
     options: FitOptions | None = None,
-    predictions_dir: Path | None = None,
+    predictions_dir: str | Path | None = None,
     resume: bool = False,
     evidence: str = "parts",
     workers: int = 1,
@@ -264,8 +265,9 @@ def evaluate_dataset(
         A split with ``label_2/`` ground truth.
     variants : iterable of str
         Model variants, see :data:`wirescene.fitting.variants.VARIANTS`.
-    frames : iterable of str, optional
-        Frame ids; default all labelled frames.
+    frames : str, int or iterable of them, optional
+        Frame ids, an int written ``%06d`` as :class:`~wirescene.io.kitti.KittiDataset` reads it
+        (:func:`~wirescene.io.kitti.as_frame_ids`; each frame once); default all labelled frames.
     source : DetectionSource
         Where the pre-detections come from.
     options : FitOptions
@@ -312,6 +314,11 @@ def evaluate_dataset(
 
     Raises
     ------
+    ArgumentError
+        Before any fit: ``predictions_dir`` is no path, a file, an empty path, or a directory
+        that cannot be written or created (:func:`wirescene.core.validate.output_dir_problem`,
+        as :func:`wirescene.evaluate` checks ``predictions``), or a frame id is a bool, a
+        negative int or a float (:func:`~wirescene.io.kitti.as_frame_id`).
     InputError
         Before any fit: a frame's missing or malformed file, or ``predictions_dir`` holding
         an earlier run's records (without ``resume``) or, resumed, files of frames outside
@@ -323,12 +330,15 @@ def evaluate_dataset(
         raise ValueError(f"evidence must be 'parts' or 'oracle', got {evidence!r}")
     if resume and predictions_dir is None:
         raise ValueError("resume needs predictions_dir, where finished frames are recorded")
+    problem = None if predictions_dir is None else output_dir_problem(predictions_dir)
+    if problem:  # before any fit: "" would write into the working directory, a file fail after the first frame
+        raise ArgumentError("predictions_dir", problem)
     if not dataset.has_labels:
         raise InputError("evaluation needs label_2/ ground truth", path=dataset.split_dir)
     if notify is None:
         notify = notify_stderr
     variants = [get_variant(v).name for v in variants]
-    frame_ids = list(frames) if frames is not None else dataset.require_frames()
+    frame_ids = as_frame_ids(frames) if frames is not None else dataset.require_frames()
     missing = source.missing_frames(frame_ids)
     if missing:
         notify(f"{len(missing)} of {len(frame_ids)} frames have no detection file in {source.folder} "

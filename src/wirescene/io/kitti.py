@@ -13,6 +13,7 @@ kept apart from the objects, since every evaluation ignores them.
 
 from __future__ import annotations
 
+import numbers
 import os
 import warnings
 from pathlib import Path
@@ -362,9 +363,81 @@ def given_split_problem(dataset: KittiDataset, split: str, *, root: str | Path |
     return None
 
 
+def as_frame_id(frame_id, *, name: str = "frame_id") -> str:
+    """A frame's id as its files are named: a str as given, an int (or numpy integer) written
+    ``%06d`` (KITTI's frame ``10`` is ``000010``); what :class:`KittiDataset` reads every id
+    with, and the API its ``frames``.
+
+    Parameters
+    ----------
+    frame_id : str or int
+        The id.
+    name : str
+        The argument's name in error messages.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ArgumentError
+        Naming ``name``: a bool, a negative int, or neither a str nor an int (a float, ``10.0`` too).
+
+    Examples
+    --------
+    >>> as_frame_id(10), as_frame_id("000010"), as_frame_id("frame_a")
+    ('000010', '000010', 'frame_a')
+    >>> as_frame_id(-10, name="frames")
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ArgumentError: frames: an int frame id (written %06d) must be non-negative, got -10
+    """
+    if isinstance(frame_id, str):
+        return str(frame_id)  # a numpy str as a str: ids are written to JSON records
+    if isinstance(frame_id, numbers.Integral) and not isinstance(frame_id, bool):  # True is no frame 000001
+        if frame_id < 0:  # -10 would be the file -00010.png
+            raise ArgumentError(name, f"an int frame id (written %06d) must be non-negative, got {frame_id!r}")
+        return f"{int(frame_id):06d}"
+    raise ArgumentError(name, f"expected a frame id (a str, or an int written %06d), got "
+                              f"{type(frame_id).__name__} {frame_id!r}")
+
+
+def as_frame_ids(frames, *, name: str = "frames") -> list[str]:
+    """Frame ids as :func:`as_frame_id` writes each, in the order given, each once (``10`` and
+    ``"000010"`` are one frame): what the functions of a set of frames read their ``frames`` with.
+
+    Parameters
+    ----------
+    frames : str, int or iterable of them
+        One id, or several.
+    name : str
+        The argument's name in error messages.
+
+    Returns
+    -------
+    list of str
+        Empty for an empty iterable (the caller says whether no frame is allowed).
+
+    Raises
+    ------
+    ArgumentError
+        Naming ``name``: an id that :func:`as_frame_id` refuses.
+
+    Examples
+    --------
+    >>> as_frame_ids(10), as_frame_ids([2, "000010", 10])
+    (['000010'], ['000002', '000010'])
+    """
+    one = isinstance(frames, (str, bytes, numbers.Integral)) or not isinstance(frames, Iterable)  # not its characters
+    return list(dict.fromkeys(as_frame_id(f, name=name) for f in ([frames] if one else frames)))
+
+
 class KittiDataset:
     """Frames of a KITTI object split on disk (``image_2``, ``calib``, optional ``label_2``),
-    or of a folder of frames of one camera with one calibration (``calib``).
+    or of a folder of frames of one camera with one calibration (``calib``). Its methods take a
+    frame's id as a str or an int written ``%06d`` (:func:`as_frame_id`: an
+    :class:`~wirescene.core.errors.ArgumentError` naming ``frame_id`` for a bool, a negative int or a float).
 
     Parameters
     ----------
@@ -563,7 +636,7 @@ class KittiDataset:
 
     @staticmethod
     def _id(frame_id: str | int) -> str:
-        return f"{frame_id:06d}" if isinstance(frame_id, (int, np.integer)) else str(frame_id)
+        return as_frame_id(frame_id)
 
     def image_path(self, frame_id: str | int) -> Path:
         """``image_2/FRAME.png`` of the split (an int id written ``%06d``); with one calibration,
