@@ -38,6 +38,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import wirescene  # noqa: E402
+from wirescene.core.atomic import write_text  # noqa: E402
 from wirescene.core.boxes import box_corners, clip_boxes, iou_2d, project_points_to_box  # noqa: E402
 from wirescene.core.camera import Camera  # noqa: E402
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount  # noqa: E402
@@ -149,7 +150,7 @@ def main() -> None:
             out[f"{mode} recall"] = [hits, n]
             print(f"  {mode:8s} pre-detection recall at 0.3: {hits} / {n} ({hits / max(n, 1) * 100:.0f}%)")
     if args.json:
-        args.json.write_text(dumps(out) + "\n")
+        write_text(args.json, dumps(out) + "\n")
 
 
 if __name__ == "__main__":

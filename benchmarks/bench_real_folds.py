@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import VERIFICATION_FILE, read_run, verified_records  # noqa: E402  (benchmarks/ is on the path)
+from wirescene.core.atomic import write_text
 from wirescene.core.jsonio import dumps, write_json
 from wirescene.core.version import environment
 from wirescene.eval.intervals import format_intervals, kitti_variant_intervals, localisation_intervals, margin_intervals
@@ -175,7 +176,7 @@ def main():
     summary["_run"] = {"frames": len(frames), "cars": n_cars, "detections": args.detections, "seed": args.seed,
                        "models": "shipped" if args.shipped else str(args.models), "seconds": elapsed,
                        "settings": args.settings, "environment": environment()}
-    (args.out / "summary.json").write_text(dumps(summary, default=lambda o: None))
+    write_text(args.out / "summary.json", dumps(summary, default=lambda o: None))
     print(f"\nsummary: {args.out / 'summary.json'}")
 
 

@@ -86,6 +86,7 @@ def project(rows: list[dict]) -> dict:
 
 
 def main():
+    from wirescene.core.atomic import write_text
     from wirescene.core.jsonio import dumps
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -105,7 +106,7 @@ def main():
     result = {"root": str(root), "rows": rows, "projection": project(rows)}
     print(dumps(result["projection"]))
     if args.json:
-        args.json.write_text(dumps(result) + "\n")
+        write_text(args.json, dumps(result) + "\n")
 
 
 if __name__ == "__main__":

@@ -147,6 +147,7 @@ def summarise(rows: list[dict], check: list[dict], large: list[dict] = ()) -> di
 
 
 def main():
+    from wirescene.core.atomic import write_text
     from wirescene.core.jsonio import dumps
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -184,7 +185,7 @@ def main():
               "fit": summarise(rows, check, two)}
     print(dumps(result["fit"]))
     if args.json:
-        args.json.write_text(dumps(result) + "\n")
+        write_text(args.json, dumps(result) + "\n")
 
 
 if __name__ == "__main__":

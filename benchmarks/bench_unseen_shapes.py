@@ -39,6 +39,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _common import approximated_wireframes, frame_result_2d  # noqa: E402
+from wirescene.core.atomic import write_text  # noqa: E402
 from wirescene.core.jsonio import dumps  # noqa: E402
 from wirescene.core.shape import fit_shape_model, load_default  # noqa: E402
 from wirescene.eval.metrics import evaluate  # noqa: E402
@@ -152,7 +153,7 @@ def main():
         s = out["seen"]["per_exemplar"][n] if "seen" in out else {"loc_1m": float("nan"), "parts_70": float("nan")}
         print(f"{n:16s} {u['n_tp']:4d} {s['loc_1m']:8.1f} {u['loc_1m']:10.1f} {s['parts_70']:8.1f} {u['parts_70']:10.1f}")
     if args.json:
-        args.json.write_text(dumps(out) + "\n")
+        write_text(args.json, dumps(out) + "\n")
 
 
 if __name__ == "__main__":

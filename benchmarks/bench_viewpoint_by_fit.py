@@ -29,6 +29,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from wirescene.core.atomic import write_text  # noqa: E402
 from wirescene.core.groundplane import wrap_angle  # noqa: E402
 from wirescene.core.types import Detections  # noqa: E402
 from wirescene.core.viewpoints import angle_difference  # noqa: E402
@@ -91,7 +92,7 @@ def main() -> None:
             print(f"frame {f} fold {fold_of(f)}: {len(rows[-1]['label_alpha'])} cars, {time.perf_counter() - t:.1f} s",
                   flush=True)
         if args.json:
-            args.json.write_text(json.dumps(rows))  # plain json: --from reads it back, an infinite cost exact
+            write_text(args.json, json.dumps(rows))  # plain json: --from reads it back, an infinite cost exact
     fold = np.concatenate([[r["fold"]] * len(r["label_alpha"]) for r in rows])
     label = np.concatenate([r["label_alpha"] for r in rows])
     rule = np.concatenate([r["rule_alpha"] for r in rows])

@@ -937,10 +937,20 @@ def _later_frame_bad_dets(tmp):
 # Runs that fail after their fits began: the report's pictures already drawn, the settings' record of
 # `predict`, appear only with the whole (or with a finished frame), so nothing is left behind.
 FAILING_RUNS = {
-    # the coarse fit of label boxes never reads the image; the report's overlay does, after the plots
+    # the coarse fit of label boxes never reads the image, the report's overlay does: each image is decoded before
+    # the first fit (the frames fitted before it and their records were left behind, refused after every fit)
     "eval --report, image truncated": (
         lambda t: ["eval", _truncated_copy(t, [FRAME], FRAME), "--variant", "coarse", "--frames", FRAME, "--workers",
                    "1", "--draws", "0", "--report", t / "report"], rf"image_2/{FRAME}\.png: corrupt or truncated"),
+    "eval --predictions --report, a later image truncated": (
+        lambda t: ["eval", _truncated_copy(t, ["000002", FRAME], FRAME), "--variant", "coarse", "--workers", "1",
+                   "--draws", "0", "--predictions", t / "pred", "--report", t / "report"],
+        rf"image_2/{FRAME}\.png: corrupt or truncated image \(image file is truncated\)$"),
+    # predict decodes each image before the first fit where it reads them (its pictures, our own boxes, part evidence)
+    "predict --pictures, a later image truncated": (
+        lambda t: ["predict", _truncated_copy(t, ["000002", FRAME], FRAME), "--split", "training", "--variant",
+                   "coarse", "--detections", "gt", "--workers", "1", "--out", t / "submission", "--pictures",
+                   t / "pictures"], rf"image_2/{FRAME}\.png: corrupt or truncated image \(image file is truncated\)$"),
     "predict, calibration without P2": (_predict_without_p2_case, "calibration has no P2"),
     # the detection files are read before the first fit, as the calibrations and labels: the first frame's
     # outputs (label files, its record, the settings' record) were left behind
@@ -965,6 +975,38 @@ def test_runs_failing_at_a_frame_leave_no_output(tmp_path, case):
     lines = [ln for ln in r.stderr.splitlines() if ln.strip() and not re.match(r"(eval|predict): ", ln)]
     assert len(lines) == 1 and re.match(rf"wirescene: error: .*{problem}", lines[0]), r.stderr
     assert set(tmp_path.rglob("*")) <= before, f"{case} left {sorted(set(tmp_path.rglob('*')) - before)}"
+
+
+@pytest.mark.parametrize("variant, detections, check_images, refused", [
+    ("coarse", "gt", True, True),  # a report: its gallery draws fitted frames
+    ("fg", "gt", False, True),  # the part detectors read every image
+    ("coarse", "bank", False, True),  # our own pre-detection too
+    ("coarse", "gt", False, False),  # nothing reads the pixels: the image is not decoded, the run as before
+])
+def test_eval_refuses_a_corrupt_image_before_any_fit_where_it_is_read(tmp_path, monkeypatch, variant, detections,
+                                                                      check_images, refused):
+    """A truncated image of a later frame is refused before the first fit where the run reads the images (it was
+    found at its frame's fit, or by the report after every fit, the frames fitted before it kept)."""
+    import wirescene.eval.runner as runner
+    from wirescene.eval.sources import DetectionSource
+
+    fitted = []
+
+    def fit_frames(job, frame_ids, **kwargs):
+        fitted.extend(frame_ids)
+        raise RuntimeError("fitted")
+
+    monkeypatch.setattr(runner, "fit_frames", fit_frames)
+    dataset = KittiDataset(_truncated_copy(tmp_path, ["000002", FRAME], FRAME))
+    run = dict(frames=["000002", FRAME], source=DetectionSource(detections), check_images=check_images)
+    if refused:
+        with pytest.raises(InputError, match=rf"image_2/{FRAME}\.png: corrupt or truncated image"):
+            runner.evaluate_dataset(dataset, [variant], **run)
+        assert fitted == []
+    else:
+        with pytest.raises(RuntimeError, match="fitted"):
+            runner.evaluate_dataset(dataset, [variant], **run)
+        assert fitted == ["000002", FRAME]
 
 
 def test_file_sha256_names_the_file_and_what_it_is(tmp_path):

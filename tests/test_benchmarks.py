@@ -41,14 +41,30 @@ def test_benchmark_imports(script, monkeypatch):
 def test_benchmarks_write_json_through_the_strict_writer():
     """Benchmark JSON goes through :mod:`wirescene.core.jsonio` (NaN as null), not bare ``json.dump`` /
     ``json.dumps``: the calls in each script's code (not the code strings its child processes run) are
-    found, and one that writes no file for people says why on its line (``# plain json: ...``)."""
+    found, and one that writes no file for people says why on its line (``# plain json: ...``). Every JSON
+    file is written atomically (:func:`~wirescene.core.jsonio.write_json`, or
+    :func:`~wirescene.core.atomic.write_text` of its text), plain JSON too: a ``Path.write_text`` /
+    ``write_bytes`` of a ``dumps`` (or of a name holding one) left half a file where a run failed or stopped."""
     import ast
 
-    bare = []
+    def holds_dumps(tree) -> bool:
+        return any(isinstance(n, ast.Call) and (getattr(n.func, "id", None) == "dumps"
+                                                or getattr(n.func, "attr", None) == "dumps") for n in ast.walk(tree))
+
+    bare, unsafe = [], []
     for script in sorted(BENCHMARKS.glob("*.py")):
         source = script.read_text()
         lines = source.splitlines()
-        for node in ast.walk(ast.parse(source)):
+        tree = ast.parse(source)
+        # names given JSON text (text = dumps(...)), written by a later call
+        texts = {t.id for node in ast.walk(tree) if isinstance(node, ast.Assign) and holds_dumps(node.value)
+                 for t in node.targets if isinstance(t, ast.Name)}
+        for node in ast.walk(tree):
+            # a Path's own write (its one argument the text), not core.atomic.write_text(path, text)
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.func.attr in ("write_text", "write_bytes") and node.args
+                    and (holds_dumps(node.args[0]) or getattr(node.args[0], "id", None) in texts)):
+                unsafe.append(f"{script.name}:{node.lineno}")
             if isinstance(node, ast.ImportFrom) and node.module == "json":
                 called = [a.name for a in node.names if a.name in ("dump", "dumps")]
             elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
@@ -59,6 +75,7 @@ def test_benchmarks_write_json_through_the_strict_writer():
             if called and not any("# plain json:" in line for line in lines[node.lineno - 1:node.end_lineno]):
                 bare.append(f"{script.name}:{node.lineno}")
     assert not bare, f"bare json.dump(s) (use wirescene.core.jsonio's write_json / dumps): {bare}"
+    assert not unsafe, f"JSON written in place, not atomically (use write_json, or core.atomic's write_text): {unsafe}"
 
 
 def test_choose_by_fold_never_uses_the_scored_fold(monkeypatch):

@@ -544,6 +544,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
         progress=_progress("eval", len(frame_ids) if frame_ids else len(dataset.frame_ids())),
         notify=notify,
         on_estimate=on_estimate,
+        check_images=report_dir is not None,  # the gallery draws fitted frames: a corrupt image refused before the fits
     )
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())

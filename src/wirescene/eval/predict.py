@@ -22,7 +22,7 @@ from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.validate import output_dir_problem
 from wirescene.core.version import __version__
 from wirescene.eval.records import config_difference, refuse_frames_outside
-from wirescene.eval.runner import fit_frames, notify_stderr, say_off_centre
+from wirescene.eval.runner import fit_frames, fits_read_images, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint, options_read
 from wirescene.fitting.options import FitOptions
@@ -281,7 +281,9 @@ def predict_dataset(
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
     say = notify or notify_stderr
-    say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), say)
+    # a corrupt image refused before the first fit where the run reads the images, not at its frame's
+    images = pictures_dir is not None or fits_read_images(source, [variant], "parts")
+    say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt", images=images), len(todo), say)
     if pictures_dir is not None and source.spec != "gt" and dataset.has_labels:
         # the pictures draw a labelled split's cars: a bad label file refused now, not at its frame
         unlabelled = []

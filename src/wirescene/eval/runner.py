@@ -256,6 +256,7 @@ def evaluate_dataset(
     progress: Callable[[Iterable], Iterable] = lambda it: it,
     on_estimate: Callable[..., None] | None = None,
     notify: Callable[[str], None] | None = None,
+    check_images: bool = False,
 ) -> dict[str, EvaluationReport]:
     """Fit every variant on every frame and evaluate with the paper's protocol.
 
@@ -304,6 +305,10 @@ def evaluate_dataset(
         finish, e.g. to draw it.
     notify : callable, optional
         Receives one-line messages on reused and refitted frames; default: standard error.
+    check_images : bool
+        Decode every frame to fit's image before the first fit, as a caller that reads them
+        after the fits asks (a report's gallery, drawn from the fitted frames); done anyway
+        where the fits read every image (our own pre-detection, part evidence of a fine variant).
 
     Returns
     -------
@@ -320,7 +325,8 @@ def evaluate_dataset(
         as :func:`wirescene.evaluate` checks ``predictions``), or a frame id is a bool, a
         negative int or a float (:func:`~wirescene.io.kitti.as_frame_id`).
     InputError
-        Before any fit: a frame's missing or malformed file, or ``predictions_dir`` holding
+        Before any fit: a frame's missing or malformed file (an image corrupt or truncated, where
+        ``check_images`` or the fits read it), or ``predictions_dir`` holding
         an earlier run's records (without ``resume``) or, resumed, files of frames outside
         ``frames``.
     """
@@ -350,13 +356,21 @@ def evaluate_dataset(
         refuse_predictions_dir(predictions_dir, variants, frame_ids, resume=resume)
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
-    say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
+    # a corrupt image refused now, not at its frame's fit or in the report after every fit
+    images = check_images or fits_read_images(source, variants, evidence)
+    say_off_centre(dataset.check_frames(todo, labels=True, images=images), len(todo), notify)
     source.check_files(dataset, todo)
     with ExitStack() as stack:
         fitted = fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
         by_frame = _collect_frames(fitted, reused, records, progress, on_estimate)
     # Frames finish in any order; the reports list them in the given order.
     return {v: evaluate([by_frame[f][v] for f in frame_ids]) for v in variants}
+
+
+def fits_read_images(source: DetectionSource, variants: list[str], evidence: str) -> bool:
+    """Whether the fits read every frame's image (one with detections, for a fine variant): our
+    own pre-detection reads it, the part detectors of a fine variant (``evidence`` "parts") too."""
+    return source.own or (evidence == "parts" and any(get_variant(v).fine for v in variants))
 
 
 def _reusable_records(records: FrameRecords, frame_ids: list[str], notify) -> dict[str, dict]:
