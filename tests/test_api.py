@@ -85,6 +85,7 @@ def test_fit_on_arrays_gives_the_scene_contract(frame):
     rows = scene.to_kitti().splitlines()
     assert len(rows) == 3 and all(r.split()[0] == "Car" and len(r.split()) == 16 for r in rows)
     assert len(json.loads(json.dumps(scene.to_dict()))["objects"]) == 3
+    assert scene.n_particles == 20  # the search's particles, not the one the polish refined to the end
 
 
 def test_image_encodings_and_calib_forms_agree(frame, tmp_path):

@@ -209,6 +209,7 @@ class RefinedParticles:
     spread: np.ndarray | None = None
     plane_spread: np.ndarray | None = None
     weights: np.ndarray | None = None  # (N,); None: all 1
+    started: int | None = None  # scene particles the search began with (None: those refined to the end)
 
     def scene_score(self) -> np.ndarray:
         """(P,) scene objective of every particle."""
@@ -571,7 +572,7 @@ class SearchState:
     ``(P, N, 1)`` of the current value, its objective ``score`` ``(P, N)`` and occlusion
     (``mask`` ``(P, N)``, ``gamma`` ``(P, N, 36)``, None where unused); ``particles``,
     the coarse particles of the rows still refined; ``history``, the best scene
-    objective after each iteration.
+    objective after each iteration; ``started``, the particles the search began with.
     """
 
     particles: SceneParticles
@@ -586,6 +587,7 @@ class SearchState:
     mask: np.ndarray | None
     gamma: np.ndarray | None
     history: list
+    started: int = 0
 
     @classmethod
     def start(cls, objective: FineObjective, particles: SceneParticles) -> "SearchState":
@@ -609,7 +611,7 @@ class SearchState:
         current = objective.terms(particles, theta[:, :, None], plane)
         score = objective.value(current, mask, None)[..., 0]
         return cls(particles, theta, sigma0.copy(), sigma0, plane, plane_sigma0.copy(), plane_sigma0, current,
-                   score, mask, None, [objective.scene(score).max()])
+                   score, mask, None, [objective.scene(score).max()], P)
 
     def iterate(self, objective: FineObjective, rng: np.random.Generator, block, samples: int) -> None:
         """One iteration of Algorithm 1: sample ``block`` (see :func:`sampling_blocks`)
@@ -717,7 +719,7 @@ class SearchState:
             mask=np.zeros((P, N), dtype=int) if self.mask is None else self.mask,
             gamma=np.zeros((P, N, N_VERTICES), dtype=bool) if self.gamma is None else self.gamma,
             coupled=objective.coupled(p),
-            spread=self.sigma, plane_spread=self.plane_sigma, weights=objective.weights,
+            spread=self.sigma, plane_spread=self.plane_sigma, weights=objective.weights, started=self.started,
         )
 
 
@@ -854,6 +856,8 @@ def estimate_from_refined(
     >>> car = estimate.cars[0]
     >>> len(estimate.cars), car.vertices.shape, car.visibility.shape, car.dims.shape
     (1, (36, 3), (36,), (3,))
+    >>> estimate.n_particles  # the search's, not the one row the polish refined to the end
+    2
     """
 
     p = refined.particles
@@ -893,5 +897,6 @@ def estimate_from_refined(
     ]
     return SceneEstimate(
         variant=variant, objects=objects, camera_height=p.height, shared_plane=p.shared_plane,
-        n_particles=p.n_particles, extras={"objective_history": [float(v) for v in refined.history]},
+        n_particles=refined.started or p.n_particles,
+        extras={"objective_history": [float(v) for v in refined.history]},
     )
