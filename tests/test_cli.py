@@ -726,7 +726,7 @@ def test_predict_refuses_scene_and_picture_folders_that_spoil_another(tmp_path):
     written: the label folder (a submission), the detections' folder (a FRAME.json there replaced the frame's
     detection file), the images' folder (a picture there was a frame of the next run), and a folder holding files
     of another run's frames (written over, not resumed); the same folder for both is fine. --out is refused as the
-    images', the detections', the split's label or calibration folder."""
+    images', the detections', the split's label or calibration folder, and so are --json-dir and --pictures."""
     from conftest import kitti_copy
 
     root = kitti_copy(tmp_path / "kitti", ["000010"])
@@ -752,6 +752,10 @@ def test_predict_refuses_scene_and_picture_folders_that_spoil_another(tmp_path):
                             (split / "calib", "the split's calibration folder")):
         r = run(*common, "--detections", dets, "--out", folder)
         assert r.exit_code == 2 and r.stderr.startswith(f"wirescene: error: {folder}: --out is {problem}"), r.stderr
+        for option in ("--json-dir", "--pictures"):  # nor scenes or pictures among what the run reads
+            r = run(*common, "--detections", dets, "--out", out, option, folder)
+            assert r.exit_code == 2 and r.stderr.startswith(f"wirescene: error: {folder}: {option} is {problem}: "), \
+                (option, r.stderr)
     def files(top):
         return {p.relative_to(top): p.read_bytes() for p in top.rglob("*") if p.is_file()}
 

@@ -105,24 +105,28 @@ def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDa
                     source: DetectionSource, names: Mapping[str, str]) -> None:
     """An :class:`InputError` naming ``out``, ``json_dir`` or ``pictures_dir`` (``folders``) where
     its files would spoil another folder's: the label folder (a submission holds the label files
-    alone), the detections' folder (a frame's ``FRAME.json`` or ``FRAME.txt`` there takes the place
-    of its detection file, or sits beside it as a second one), the images' folder (a picture there
-    is a frame of the next run) or the split's own ``label_2`` / ``calib`` (the next run's ground
-    truth, or calibrations). ``names``: how the message names each folder of :data:`FOLDERS` (the
-    arguments' names, or the command's options)."""
+    alone), or any folder the run reads, the images', the detections' (a frame's ``FRAME.json`` or
+    ``FRAME.txt`` there takes the place of its detection file, or sits beside it as a second one),
+    the split's own ``label_2`` / ``calib`` (the next run's ground truth, or calibrations).
+    ``names``: how the message names each folder of :data:`FOLDERS` (the arguments' names, or the
+    command's options)."""
     submission = f"{names['out_dir']}, the label folder: a submission holds the label files alone"
-    detections = ("the detections' folder: each frame's {} written there would replace its detection file or be "
-                  "a second one")
-    taken = [("json_dir", out, submission), ("pictures_dir", out, submission),
-             ("pictures_dir", dataset.image_dir, "the folder of the images: each picture written there would be a "
-                                                 "frame of the next run"),
-             ("json_dir", source.folder, detections.format("FRAME.json")),
-             ("out", source.folder, detections.format("label file")),
-             ("out", dataset.image_dir, "the folder of the images: a submission holds the label files alone"),
-             ("out", dataset.split_dir / "label_2", "the split's label folder: the next run would read the label "
-                                                    "files as the frames' ground truth"),
-             ("out", dataset.split_dir / "calib", "the split's calibration folder: each FRAME.txt there is a frame's "
-                                                  "calibration")]
+    inputs = [(dataset.image_dir, "the folder of the images"), (source.folder, "the detections' folder"),
+              (dataset.split_dir / "label_2", "the split's label folder"),
+              (dataset.split_dir / "calib", "the split's calibration folder")]
+    # what each output's files would do there; the rest of a run's inputs are no place for its outputs either
+    why = {("out", "the folder of the images"): "a submission holds the label files alone",
+           ("out", "the detections' folder"): "each frame's label file written there would replace its detection "
+                                              "file or be a second one",
+           ("json_dir", "the detections' folder"): "each frame's FRAME.json written there would replace its "
+                                                   "detection file or be a second one",
+           ("out", "the split's label folder"): "the next run would read the label files as the frames' ground truth",
+           ("out", "the split's calibration folder"): "each FRAME.txt there is a frame's calibration",
+           ("pictures_dir", "the folder of the images"): "each picture written there would be a frame of the next "
+                                                         "run"}
+    taken = [("json_dir", out, submission), ("pictures_dir", out, submission)]
+    taken += [(name, folder, f"{what}: {why.get((name, what), 'a run writes nothing among what it reads')}")
+              for name in ("out", "json_dir", "pictures_dir") for folder, what in inputs]
     folders = {"out": out, **folders}
     for name, other, what in taken:
         folder = folders[name]
