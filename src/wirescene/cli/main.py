@@ -784,7 +784,8 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 @min_score_option
 @click.option("--gt", type=NonEmptyPath(path_type=Path), default=None,
               help="KITTI label file drawn in cyan for comparison.")
-@click.option("--variant", type=click.Choice(_variants()), default="coarse+gp", show_default=True)
+@click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True,
+              help="Model variant (`full`, the default, as `predict` and `wirescene.fit`).")
 @particles_option
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), required=True, help="Output directory.")
