@@ -1589,3 +1589,18 @@ def test_pitch_of_frames_whose_boxes_are_all_cut_by_the_bottom_edge_is_refused(t
                         "frame read (1 box found, cut by the image's bottom edge): give frames of cars "
                         "(--frames, --max-frames)\n")
     assert not (tmp_path / "pitch.json").exists()
+
+
+def test_fit_predict_and_the_api_default_to_one_variant():
+    """`wirescene fit` fits the variant `wirescene predict` and `wirescene.fit` fit without --variant (it was
+    coarse+gp, the others full)."""
+    import inspect
+
+    import wirescene
+    from wirescene.cli import main as cli_main
+
+    def default(command):
+        return next(p.default for p in command.params if p.name == "variant")
+
+    api = inspect.signature(wirescene.fit).parameters["variant"].default
+    assert default(cli_main.fit_cmd) == default(cli_main.predict_cmd) == api == "full"
