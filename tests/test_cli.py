@@ -1604,3 +1604,16 @@ def test_fit_predict_and_the_api_default_to_one_variant():
 
     api = inspect.signature(wirescene.fit).parameters["variant"].default
     assert default(cli_main.fit_cmd) == default(cli_main.predict_cmd) == api == "full"
+
+
+def test_python_m_wirescene_runs_the_command():
+    """`python -m wirescene` is the `wirescene` command where its console script is not on the PATH."""
+    import subprocess
+    import sys
+
+    import wirescene
+
+    r = subprocess.run([sys.executable, "-m", "wirescene", "--version"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == f"wirescene, version {wirescene.__version__}", r.stderr
+    r = subprocess.run([sys.executable, "-m", "wirescene", "fit"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.strip() == "wirescene: error: IMAGE: missing (required)", r.stderr
