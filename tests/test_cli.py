@@ -1617,3 +1617,35 @@ def test_python_m_wirescene_runs_the_command():
     assert r.returncode == 0 and r.stdout.strip() == f"wirescene, version {wirescene.__version__}", r.stderr
     r = subprocess.run([sys.executable, "-m", "wirescene", "fit"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and r.stderr.strip() == "wirescene: error: IMAGE: missing (required)", r.stderr
+
+
+def test_eval_says_where_the_shipped_models_were_trained_on_the_frames_evaluated(tmp_path, capsys):
+    """The shipped models were trained on the 72 shared frames, which a user's KITTI root holds under the same ids:
+    `eval` says how many of its frames they are, told by the images' content (a frame of another image under one of
+    those ids is not one), naming the shipped files the run reads."""
+    from PIL import Image
+
+    from conftest import kitti_copy
+    from wirescene.cli.main import _say_if_trained_on
+    from wirescene.io.kitti import KittiDataset
+
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--particles", 5, "--workers", 1,
+              "--draws", 0]
+    r = run(*common)
+    assert r.exit_code == 0 and ("wirescene: 1 of the 1 frames evaluated are among the 72 the shipped score "
+                                 "calibration was trained on (e.g. 000010): their figures are not held out") in r.stderr
+    r = run(*common, "--raw-scores")  # coarse with label boxes and raw scores reads no frame-trained model
+    assert r.exit_code == 0 and "trained on" not in r.stderr
+    root = kitti_copy(tmp_path / "kitti", ["000010"])
+    image = root / "training" / "image_2" / "000010.png"
+    Image.open(image).transpose(Image.FLIP_LEFT_RIGHT).save(image)  # another image under the id
+    r = run("eval", root, *common[2:])
+    assert r.exit_code == 0 and "trained on" not in r.stderr
+    dataset = KittiDataset(KITTI_ROOT)
+    _say_if_trained_on(None, dataset, ["000010", "000002"], variants=["coarse", "full"], detections="bank")
+    assert capsys.readouterr().err == (
+        "wirescene: 2 of the 2 frames evaluated are among the 72 the shipped part model, detector bank, viewpoint "
+        "classifier and score calibration were trained on (e.g. 000010): their figures are not held out\n")
+    _say_if_trained_on(None, dataset, ["000010"], variants=["full"], detections="gt",
+                       replaced=["parts_model", "score_calibration"])  # files of the user's in their place
+    assert capsys.readouterr().err == ""

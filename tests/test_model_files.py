@@ -264,7 +264,7 @@ def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(
     assert f"1 of the 1 frames evaluated are among those {models} was trained on" in r.stderr
     # label boxes carry their viewpoints: no classifier is read
     r = cli(*common, "--detections", "gt")
-    assert r.exit_code == 0 and "trained on" not in r.stderr, r.output + r.stderr
+    assert r.exit_code == 0 and f"{models} was trained on" not in r.stderr, r.output + r.stderr
 
 
 def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):
@@ -319,3 +319,21 @@ def test_a_broken_part_model_or_bank_is_refused_before_any_frame(tmp_path):
         wirescene.api._options(None, 5, 0, models=broken, casts_rays=False)
     with pytest.raises(InputError, match="shape model of 41 components, the fine stage searches 50"):
         wirescene.api._options(None, 5, 0, settings={"inference.n_shape": 50}, casts_rays=True)
+
+
+def test_the_record_of_the_shipped_models_frames_is_theirs_and_knows_the_real_frames_by_content():
+    """`training_frames.json` lists the frames every shipped frame-trained model records (the part model's
+    real_frames, the bank's and the classifier's frames), and the real frames the tests copy have its digests."""
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.io.shipped_frames import among_shipped_training_frames, shipped_training_frames
+    from wirescene.parts.detector import PartDetector
+    from wirescene.predetect.bank import DetectorBank
+    from wirescene.predetect.viewpoint_classifier import load_default_classifier
+
+    record = set(shipped_training_frames())
+    assert record == set(PartDetector.load().meta["real_frames"].split(","))
+    assert record == set(DetectorBank.load(shipped_path("detector_bank")).meta["frames"])
+    assert record == set(load_default_classifier().meta["frames"])
+    dataset = KittiDataset(KITTI_ROOT)
+    frames = dataset.frame_ids()
+    assert among_shipped_training_frames(dataset.image_path, frames) == frames == ["000002", "000010", "001545"]

@@ -404,8 +404,8 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     # read before any fit (a bad devkit mapping is an error now); a plain folder's frames are no KITTI drive's
     drives = {} if dataset.image_dir == dataset.split_dir else interval_drives(dataset.split_dir)
     _say_if_trained_on(inference.get("models"), dataset, frame_ids, variants=variants, detections=detections,
-                       replaced=[k for k in ("parts_model", "detector_bank", "viewpoint_classifier")
-                                 if inference.get(k) is not None])
+                       replaced=[k for k in ("parts_model", "detector_bank", "viewpoint_classifier", "score_calibration")
+                                 if inference.get(k) is not None], calibrated=not raw_scores)
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
@@ -467,25 +467,41 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
 
 
 def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str], *, variants, detections: str,
-                       replaced=()) -> None:
-    """A line on standard error where the run reads a model of ``--models`` that was trained on
-    some of the frames evaluated: their figures are not held out. The frame-trained models are
-    the part model (read by the fine variants), the detector bank and the crop viewpoint
-    classifier (read for our own detections and for boxes given without a viewpoint), unless
-    ``replaced`` (``--parts-model``, ``--bank``, ``--viewpoint-classifier``) by another file."""
+                       replaced=(), calibrated: bool = True) -> None:
+    """A line on standard error where the run reads a model that was trained on some of the
+    frames evaluated: their figures are not held out. The frame-trained models are the part
+    model (read by the fine variants), the detector bank and the crop viewpoint classifier
+    (read for our own detections and for boxes given without a viewpoint), unless ``replaced``
+    (``--parts-model``, ``--bank``, ``--viewpoint-classifier``) by another file, and the score
+    calibration (``calibrated``: the confidences ranked by the APs). A model of ``--models`` is
+    told by its manifest's frames, a shipped one by the images' content
+    (:mod:`wirescene.io.shipped_frames`)."""
     from wirescene.core.resources import resolve_models, trained_on
     from wirescene.fitting.variants import get_variant
+    from wirescene.io.shipped_frames import among_shipped_training_frames, shipped_training_frames
 
     models = resolve_models(models_dir)
     read = {"parts_model"} if any(get_variant(v).fine for v in variants) else set()
     if detections != "gt":  # label boxes carry their viewpoints: neither the bank nor the classifier is read
         read |= {"detector_bank", "viewpoint_classifier"}
-    if not (read - set(replaced)) & set(models.own):
-        return
-    seen = trained_on(models, dataset.split_dir, frame_ids)
+    read -= set(replaced)
+    if read & set(models.own):
+        seen = trained_on(models, dataset.split_dir, frame_ids)
+        if seen:
+            click.echo(f"wirescene: {len(seen)} of the {len(frame_ids)} frames evaluated are among those {models_dir} "
+                       f"was trained on (e.g. {seen[0]}): their figures are not held out", err=True)
+    names = {"parts_model": "part model", "detector_bank": "detector bank", "viewpoint_classifier": "viewpoint "
+             "classifier", "score_calibration": "score calibration"}
+    if calibrated and "score_calibration" not in replaced:
+        read.add("score_calibration")
+    shipped = [name for name in names if name in read and name not in models.own]
+    seen = among_shipped_training_frames(dataset.image_path, frame_ids) if shipped else []
     if seen:
-        click.echo(f"wirescene: {len(seen)} of the {len(frame_ids)} frames evaluated are among those {models_dir} was "
-                   f"trained on (e.g. {seen[0]}): their figures are not held out", err=True)
+        which = ", ".join(names[n] for n in shipped[:-1]) + (" and " if len(shipped) > 1 else "") + names[shipped[-1]]
+        click.echo(f"wirescene: {len(seen)} of the {len(frame_ids)} frames evaluated are among the "
+                   f"{len(shipped_training_frames())} the shipped "
+                   f"{which} {'were' if len(shipped) > 1 else 'was'} trained on (e.g. {seen[0]}): their figures are "
+                   "not held out", err=True)
 
 
 def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
@@ -880,7 +896,8 @@ def demo_cmd(out, particles, variants, models):
     click.echo(f"raw-pixel mode on {first}: the detector bank proposed {len(raw)} boxes, the fit kept "
                f"{len(estimate.objects)} cars ({len(dataset.labels(first).of_type('Car'))} labelled)\n")
     click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
-               f"(GT boxes as pre-detections, {particles} particles)\n")
+               f"(GT boxes as pre-detections, {particles} particles"
+               f"{'' if models else '; frames the shipped models were trained on, so not held out'})\n")
     click.echo(format_table(reports))
     _write_json_atomic(out / "eval.json", {v: r.to_json_dict(include_records=False) for v, r in reports.items()})
     click.echo("\nwritten:")
