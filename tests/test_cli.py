@@ -1636,6 +1636,8 @@ def test_eval_says_where_the_shipped_models_were_trained_on_the_frames_evaluated
                                  "calibration was trained on (e.g. 000010): their figures are not held out") in r.stderr
     r = run(*common, "--raw-scores")  # coarse with label boxes and raw scores reads no frame-trained model
     assert r.exit_code == 0 and "trained on" not in r.stderr
+    r = run(*common[:4], *common[6:])  # every frame of the split
+    assert r.exit_code == 0 and "wirescene: 3 of the 3 frames evaluated are among the 72 the shipped" in r.stderr
     root = kitti_copy(tmp_path / "kitti", ["000010"])
     image = root / "training" / "image_2" / "000010.png"
     Image.open(image).transpose(Image.FLIP_LEFT_RIGHT).save(image)  # another image under the id

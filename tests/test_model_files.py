@@ -251,7 +251,7 @@ def test_a_coarse_run_s_resume_record_holds_no_option_of_the_fine_stage():
                                                    *model_files_read(base, fine=False)}
 
 
-def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(tmp_path):
+def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(tmp_path, capsys):
     models = models_dir(tmp_path / "models", viewpoint_classifier=shipped_path("viewpoint_classifier"))
     manifest = {"format": "wirescene-models/1", "complete": True, "artefacts": ["viewpoint_classifier"],
                 "data": {"kitti_root": str(SPLIT.resolve()), "frame_ids": ["000010"]}, "steps": {}}
@@ -265,6 +265,12 @@ def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(
     # label boxes carry their viewpoints: no classifier is read
     r = cli(*common, "--detections", "gt")
     assert r.exit_code == 0 and f"{models} was trained on" not in r.stderr, r.output + r.stderr
+    # no --frames: every frame of the split (None was read as a list, a TypeError)
+    from wirescene.cli.main import _say_if_trained_on
+    from wirescene.io.kitti import KittiDataset
+
+    _say_if_trained_on(models, KittiDataset(KITTI_ROOT), None, variants=["coarse"], detections="bank")
+    assert f"1 of the 3 frames evaluated are among those {models} was trained on (e.g. 000010)" in capsys.readouterr().err
 
 
 def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):

@@ -466,7 +466,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         click.echo(f"metrics written to {json_out}")
 
 
-def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str], *, variants, detections: str,
+def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str] | None, *, variants, detections: str,
                        replaced=(), calibrated: bool = True) -> None:
     """A line on standard error where the run reads a model that was trained on some of the
     frames evaluated: their figures are not held out. The frame-trained models are the part
@@ -481,6 +481,7 @@ def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str], *
     from wirescene.io.shipped_frames import among_shipped_training_frames, shipped_training_frames
 
     models = resolve_models(models_dir)
+    frame_ids = dataset.require_frames() if frame_ids is None else frame_ids  # None: every labelled frame
     read = {"parts_model"} if any(get_variant(v).fine for v in variants) else set()
     if detections != "gt":  # label boxes carry their viewpoints: neither the bank nor the classifier is read
         read |= {"detector_bank", "viewpoint_classifier"}
