@@ -797,3 +797,23 @@ def test_estimates_hold_their_own_arrays_and_print_in_a_line_a_car():
     text = repr(SceneEstimate(variant="full", objects=cars, shared_plane=True))
     assert text.count("\n") == 16 and len(text) < 3000 and "array(" not in text
     assert "exemplar='golf'" in text and "rotation_y=0.100" in text
+
+
+def test_evaluate_warns_where_the_shipped_models_were_trained_on_the_frames(tmp_path):
+    """`wirescene.evaluate` says, as `wirescene eval` does, that a frame the shipped models were trained on gives no
+    held-out figure (a HeldOutWarning); a frame of another image under the same id says nothing."""
+    import warnings
+
+    from PIL import Image
+
+    from conftest import kitti_copy
+
+    with pytest.warns(wirescene.HeldOutWarning, match=r"^1 of the 1 frames evaluated are among the 72 the shipped "
+                                                      r"score calibration was trained on \(e\.g\. 000010\)"):
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000010"], particles=5)
+    root = kitti_copy(tmp_path / "kitti", ["000010"])
+    image = root / "training" / "image_2" / "000010.png"
+    Image.open(image).transpose(Image.FLIP_LEFT_RIGHT).save(image)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", wirescene.HeldOutWarning)
+        wirescene.evaluate(root, variants="coarse", frames=["000010"], particles=5)

@@ -15,7 +15,14 @@ Importing the package reads no data file; trained artefacts are loaded on first 
 
 from wirescene.api import detect, draw, evaluate, fit
 from wirescene.core.camera import Camera, read_kitti_calib
-from wirescene.core.errors import ArgumentError, CalibrationWarning, InputError, ShapeError, WiresceneError
+from wirescene.core.errors import (
+    ArgumentError,
+    CalibrationWarning,
+    HeldOutWarning,
+    InputError,
+    ShapeError,
+    WiresceneError,
+)
 from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate
 from wirescene.core.version import __version__
 from wirescene.eval.metrics import EvaluationReport
@@ -27,5 +34,6 @@ from wirescene.lift import LiftingOptions
 __all__ = [
     "fit", "detect", "draw", "evaluate", "Camera", "read_kitti_calib", "Detections", "ObjectEstimate", "SceneEstimate",
     "FitOptions", "InferenceOptions", "LiftingOptions", "EvaluationReport", "VARIANTS",
-    "ArgumentError", "InputError", "ShapeError", "WiresceneError", "CalibrationWarning", "__version__",
+    "ArgumentError", "InputError", "ShapeError", "WiresceneError", "CalibrationWarning", "HeldOutWarning",
+    "__version__",
 ]

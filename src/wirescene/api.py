@@ -17,7 +17,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from wirescene.core.camera import Camera, KittiCalib, read_projection
-from wirescene.core.errors import ArgumentError, CalibrationWarning, InputError, ShapeError
+from wirescene.core.errors import ArgumentError, CalibrationWarning, HeldOutWarning, InputError, ShapeError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.image import integer_range_problem, to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
@@ -746,17 +746,31 @@ def evaluate(
     dict of str to EvaluationReport
         Per variant: ``.metrics`` (localisation within 1 m / 1.5 m, azimuth errors, ...).
 
+    Warns
+    -----
+    HeldOutWarning
+        Some frames evaluated are frames a model the run reads was trained on (the shipped
+        models' 72, told by their images' content, or a models directory's own): their
+        figures are not held out (:func:`wirescene.eval.held_out.trained_on_frames`).
+
     Examples
     --------
+    >>> import warnings
     >>> import wirescene
     >>> from wirescene.core.resources import DATA_DIR
-    >>> reports = wirescene.evaluate(DATA_DIR / "sample" / "kitti", variants="coarse", frames=["000010"], particles=20)
+    >>> with warnings.catch_warnings(record=True) as said:  # the sample's frames: two of the shipped models' 72
+    ...     warnings.simplefilter("always")
+    ...     reports = wirescene.evaluate(DATA_DIR / "sample" / "kitti", variants="coarse", frames=["000010"],
+    ...                                  particles=20)
+    >>> [w.category.__name__ for w in said]
+    ['HeldOutWarning']
     >>> m = reports["coarse"].metrics["all"]
     >>> m["n_gt"], m["n_tp"]  # the label boxes are the pre-detections: every car is a true positive
     (8, 8)
     >>> bool(0 <= m["loc_1m"] <= 100)
     True
     """
+    from wirescene.eval.held_out import trained_on_frames
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource, min_score_problem
     from wirescene.io.kitti import KittiDataset, as_frame_ids
@@ -808,6 +822,9 @@ def evaluate(
         raise ArgumentError("resume", "needs predictions, the directory where finished frames are recorded")
     options = _options(None, particles, seed, models, settings, parallel=several and _workers(workers) > 1,
                        casts_rays=casts_rays(names))
+    for message in trained_on_frames(models, dataset, frame_ids, variants=names, detections=str(detections),
+                                     calibrated=options.calibrate_scores):
+        warnings.warn(message, HeldOutWarning, stacklevel=2)
     return evaluate_dataset(dataset, names, frames=frame_ids,
                             source=DetectionSource(str(detections), min_score=min_score, bank=options.detector_bank,
                                                    classifier=options.viewpoint_classifier),

@@ -468,41 +468,13 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
 
 def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str] | None, *, variants, detections: str,
                        replaced=(), calibrated: bool = True) -> None:
-    """A line on standard error where the run reads a model that was trained on some of the
-    frames evaluated: their figures are not held out. The frame-trained models are the part
-    model (read by the fine variants), the detector bank and the crop viewpoint classifier
-    (read for our own detections and for boxes given without a viewpoint), unless ``replaced``
-    (``--parts-model``, ``--bank``, ``--viewpoint-classifier``) by another file, and the score
-    calibration (``calibrated``: the confidences ranked by the APs). A model of ``--models`` is
-    told by its manifest's frames, a shipped one by the images' content
-    (:mod:`wirescene.io.shipped_frames`)."""
-    from wirescene.core.resources import resolve_models, trained_on
-    from wirescene.fitting.variants import get_variant
-    from wirescene.io.shipped_frames import among_shipped_training_frames, shipped_training_frames
+    """A line on standard error for each model the run reads that was trained on some of the
+    frames evaluated (:func:`wirescene.eval.held_out.trained_on_frames`)."""
+    from wirescene.eval.held_out import trained_on_frames
 
-    models = resolve_models(models_dir)
-    frame_ids = dataset.require_frames() if frame_ids is None else frame_ids  # None: every labelled frame
-    read = {"parts_model"} if any(get_variant(v).fine for v in variants) else set()
-    if detections != "gt":  # label boxes carry their viewpoints: neither the bank nor the classifier is read
-        read |= {"detector_bank", "viewpoint_classifier"}
-    read -= set(replaced)
-    if read & set(models.own):
-        seen = trained_on(models, dataset.split_dir, frame_ids)
-        if seen:
-            click.echo(f"wirescene: {len(seen)} of the {len(frame_ids)} frames evaluated are among those {models_dir} "
-                       f"was trained on (e.g. {seen[0]}): their figures are not held out", err=True)
-    names = {"parts_model": "part model", "detector_bank": "detector bank", "viewpoint_classifier": "viewpoint "
-             "classifier", "score_calibration": "score calibration"}
-    if calibrated and "score_calibration" not in replaced:
-        read.add("score_calibration")
-    shipped = [name for name in names if name in read and name not in models.own]
-    seen = among_shipped_training_frames(dataset.image_path, frame_ids) if shipped else []
-    if seen:
-        which = ", ".join(names[n] for n in shipped[:-1]) + (" and " if len(shipped) > 1 else "") + names[shipped[-1]]
-        click.echo(f"wirescene: {len(seen)} of the {len(frame_ids)} frames evaluated are among the "
-                   f"{len(shipped_training_frames())} the shipped "
-                   f"{which} {'were' if len(shipped) > 1 else 'was'} trained on (e.g. {seen[0]}): their figures are "
-                   "not held out", err=True)
+    for message in trained_on_frames(models_dir, dataset, frame_ids, variants=variants, detections=detections,
+                                     replaced=replaced, calibrated=calibrated):
+        click.echo(f"wirescene: {message}", err=True)
 
 
 def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:

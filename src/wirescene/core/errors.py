@@ -62,6 +62,13 @@ class CalibrationWarning(UserWarning):
     ``warnings.simplefilter("error", CalibrationWarning)`` to refuse such a calibration."""
 
 
+class HeldOutWarning(UserWarning):
+    """Some frames :func:`wirescene.evaluate` evaluates are frames a model it reads was
+    trained on (the shipped models' 72, or a models directory's own): their figures are not
+    held out (:func:`wirescene.eval.held_out.trained_on_frames`; ``wirescene eval`` says it
+    on standard error)."""
+
+
 def check_shape(name: str, array, shape: tuple) -> None:
     """Check ``array.shape`` against ``shape``; ``None`` entries match any size.
 
