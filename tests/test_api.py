@@ -808,7 +808,7 @@ def test_evaluate_warns_where_the_shipped_models_were_trained_on_the_frames(tmp_
 
     from conftest import kitti_copy
 
-    with pytest.warns(wirescene.HeldOutWarning, match=r"^1 of the 1 frames evaluated are among the 72 the shipped "
+    with pytest.warns(wirescene.HeldOutWarning, match=r"^1 of the 1 frames evaluated is among the 72 the shipped "
                                                       r"score calibration was trained on \(e\.g\. 000010\)"):
         wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000010"], particles=5)
     root = kitti_copy(tmp_path / "kitti", ["000010"])
@@ -817,3 +817,32 @@ def test_evaluate_warns_where_the_shipped_models_were_trained_on_the_frames(tmp_
     with warnings.catch_warnings():
         warnings.simplefilter("error", wirescene.HeldOutWarning)
         wirescene.evaluate(root, variants="coarse", frames=["000010"], particles=5)
+
+
+def test_evaluate_warns_of_held_out_frames_at_the_caller_s_line_and_not_for_a_call_refused(tmp_path):
+    """The HeldOutWarning points at the caller's line; a call refused before any fit (its predictions directory
+    holding an earlier run's records) warns of nothing."""
+    import warnings
+
+    pred = tmp_path / "pred"
+    with pytest.warns(wirescene.HeldOutWarning) as said:
+        wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000010"], particles=5, predictions=pred)
+    assert [Path(w.filename).name for w in said] == [Path(__file__).name]
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        with pytest.raises(wirescene.InputError, match="earlier run"):
+            wirescene.evaluate(KITTI_ROOT, variants="coarse", frames=["000010"], particles=5, predictions=pred)
+    assert not [w for w in said if issubclass(w.category, wirescene.HeldOutWarning)]
+
+
+def test_the_shipped_frames_are_told_by_the_one_file_hash():
+    """The images' SHA-256 is core.resources.file_sha256's (one implementation, cached by file version)."""
+    from wirescene.core import resources
+    from wirescene.io.shipped_frames import among_shipped_training_frames, shipped_training_frames
+
+    dataset = KittiDataset(KITTI_ROOT)
+    image = dataset.image_path("000010")
+    resources._sha256.cache_clear()
+    assert among_shipped_training_frames(dataset.image_path, ["000010"]) == ["000010"]
+    assert resources._sha256.cache_info().currsize == 1
+    assert resources.file_sha256(image, what="image") == shipped_training_frames()["000010"]

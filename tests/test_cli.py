@@ -1632,8 +1632,8 @@ def test_eval_says_where_the_shipped_models_were_trained_on_the_frames_evaluated
     common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--particles", 5, "--workers", 1,
               "--draws", 0]
     r = run(*common)
-    assert r.exit_code == 0 and ("wirescene: 1 of the 1 frames evaluated are among the 72 the shipped score "
-                                 "calibration was trained on (e.g. 000010): their figures are not held out") in r.stderr
+    assert r.exit_code == 0 and ("wirescene: 1 of the 1 frames evaluated is among the 72 the shipped score "
+                                 "calibration was trained on (e.g. 000010): its figures are not held out") in r.stderr
     r = run(*common, "--raw-scores")  # coarse with label boxes and raw scores reads no frame-trained model
     assert r.exit_code == 0 and "trained on" not in r.stderr
     r = run(*common[:4], *common[6:])  # every frame of the split
@@ -1651,3 +1651,61 @@ def test_eval_says_where_the_shipped_models_were_trained_on_the_frames_evaluated
     _say_if_trained_on(None, dataset, ["000010"], variants=["full"], detections="gt",
                        replaced=["parts_model", "score_calibration"])  # files of the user's in their place
     assert capsys.readouterr().err == ""
+
+
+def test_eval_says_nothing_of_held_out_frames_when_it_refuses_the_run(tmp_path):
+    """The word that some frames are not held out comes once the run's checks have passed, before its first fit: a
+    run refused (a seed given twice, a folder of images without labels) has no figures to say it of."""
+    r = run("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--seed", 1, "--seed", 1)
+    assert r.exit_code == 2 and "--seed: each seed once" in r.stderr and "trained on" not in r.stderr, r.stderr
+    folder = tmp_path / "frames"  # the images alone, read with one calibration: nothing to evaluate against
+    folder.mkdir()
+    shutil.copy(SPLIT / "image_2" / "000010.png", folder)
+    r = run("eval", folder, "--calib", SPLIT / "calib" / "000010.txt", "--variant", "coarse", "--workers", 1)
+    assert r.exit_code != 0 and "needs label_2" in r.stderr and "trained on" not in r.stderr, r.stderr
+
+
+def test_the_held_out_word_agrees_with_its_count_and_reads_what_the_run_reads():
+    """One frame is one frame (`is`, `its`); a fine variant fitted to true vertices (--evidence oracle) reads no part
+    model."""
+    from wirescene.eval.held_out import trained_on_frames
+    from wirescene.io.kitti import KittiDataset
+
+    dataset = KittiDataset(KITTI_ROOT)
+    assert trained_on_frames(None, dataset, ["000010"], variants=["coarse"], detections="gt") == [
+        "1 of the 1 frames evaluated is among the 72 the shipped score calibration was trained on (e.g. 000010): its "
+        "figures are not held out"]
+    assert trained_on_frames(None, dataset, ["000010", "000002"], variants=["fg"], detections="gt",
+                             calibrated=False) == [
+        "2 of the 2 frames evaluated are among the 72 the shipped part model was trained on (e.g. 000010): their "
+        "figures are not held out"]
+    assert trained_on_frames(None, dataset, ["000010"], variants=["fg"], detections="gt", calibrated=False,
+                             evidence="oracle") == []
+
+
+def test_the_demo_says_its_frames_are_not_held_out_with_a_models_directory_too(tmp_path, monkeypatch):
+    """A models directory keeps the shipped files it lacks (every `train all` directory the score calibration,
+    trained on the demo's frames): the demo's header says so with --models as without."""
+    import wirescene.api
+    from wirescene.core.resources import shipped_path
+    from wirescene.core.types import Detections, SceneEstimate
+
+    def no_raw_pixels(image, camera, boxes, *, variant, options):  # the raw-pixel mode is not what is looked at
+        return SceneEstimate(variant=variant, objects=[], detections=Detections.empty("none"))
+
+    monkeypatch.setattr(wirescene.api, "fit", no_raw_pixels)
+    models = tmp_path / "models"  # a directory put together by hand: its own occluded-part score
+    models.mkdir()
+    shutil.copy(shipped_path("occlusion"), models)
+    for extra in ((), ("--models", models)):
+        r = run("demo", "--out", tmp_path / f"demo{len(extra)}", "--particles", 4, "--variant", "coarse", *extra)
+        assert r.exit_code == 0, r.output
+        assert "(GT boxes as pre-detections, 4 particles; " in r.output and "so not held out)" in r.output, r.output
+
+
+def test_fit_s_variant_help_says_its_default_once():
+    """`[default: full]` says the value; the help's own words do not say it again."""
+    from wirescene.cli import main as cli_main
+
+    variant = next(p for p in cli_main.fit_cmd.params if p.name == "variant")
+    assert variant.show_default and variant.default == "full" and "full" not in variant.help, variant.help

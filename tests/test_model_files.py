@@ -261,7 +261,7 @@ def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(
     # our own boxes with the shipped bank: the directory's classifier gives them their viewpoints
     r = cli(*common, "--detections", "bank", "--bank", DATA_DIR / "detector_bank.npz")
     assert r.exit_code == 0, r.output + r.stderr
-    assert f"1 of the 1 frames evaluated are among those {models} was trained on" in r.stderr
+    assert f"1 of the 1 frames evaluated is among those {models} was trained on" in r.stderr
     # label boxes carry their viewpoints: no classifier is read
     r = cli(*common, "--detections", "gt")
     assert r.exit_code == 0 and f"{models} was trained on" not in r.stderr, r.output + r.stderr
@@ -270,7 +270,8 @@ def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(
     from wirescene.io.kitti import KittiDataset
 
     _say_if_trained_on(models, KittiDataset(KITTI_ROOT), None, variants=["coarse"], detections="bank")
-    assert f"1 of the 3 frames evaluated are among those {models} was trained on (e.g. 000010)" in capsys.readouterr().err
+    said = capsys.readouterr().err
+    assert f"1 of the 3 frames evaluated is among those {models} was trained on (e.g. 000010)" in said
 
 
 def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):

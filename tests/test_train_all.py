@@ -524,7 +524,7 @@ def test_models_replace_the_bank_and_the_resume_fingerprint(trained, tmp_path):
               "--detections", "bank", "--predictions", pred]
     r = cli(*common, "--models", out)
     assert r.exit_code == 0
-    assert f"1 of the 1 frames evaluated are among those {out} was trained on (e.g. 000010)" in r.stderr
+    assert f"1 of the 1 frames evaluated is among those {out} was trained on (e.g. 000010)" in r.stderr
     # label boxes fitted by `coarse` read neither the bank nor the part model: nothing to warn of but the shipped
     # score calibration, which the directory lacks
     r = cli("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", 1, "--detections", "gt",

@@ -822,12 +822,15 @@ def evaluate(
         raise ArgumentError("resume", "needs predictions, the directory where finished frames are recorded")
     options = _options(None, particles, seed, models, settings, parallel=several and _workers(workers) > 1,
                        casts_rays=casts_rays(names))
-    for message in trained_on_frames(models, dataset, frame_ids, variants=names, detections=str(detections),
-                                     calibrated=options.calibrate_scores):
-        warnings.warn(message, HeldOutWarning, stacklevel=2)
+
+    def say_held_out():  # once every check has passed, before the first fit: a call refused warns of nothing
+        for message in trained_on_frames(models, dataset, frame_ids, variants=names, detections=str(detections),
+                                         calibrated=options.calibrate_scores):
+            warnings.warn(message, HeldOutWarning, stacklevel=4)  # the caller's line: evaluate_dataset calls this
+
     return evaluate_dataset(dataset, names, frames=frame_ids,
                             source=DetectionSource(str(detections), min_score=min_score, bank=options.detector_bank,
                                                    classifier=options.viewpoint_classifier),
                             options=options, workers=_workers(workers),
                             predictions_dir=None if predictions is None else Path(predictions),
-                            resume=bool(resume))
+                            resume=bool(resume), before_fits=say_held_out)

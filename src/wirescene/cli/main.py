@@ -382,6 +382,9 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
              json_out, predictions, evidence, raw_scores, draws, report_dir, workers, allow_missing_detections,
              min_score, resume, dask_address, **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
+    import functools
+
+    from wirescene.eval.held_out import FRAME_TRAINED
     from wirescene.eval.seeds import format_over_seeds, over_seeds, seed_figures
 
     refuse_min_score(min_score, detections)
@@ -403,9 +406,11 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
     # read before any fit (a bad devkit mapping is an error now); a plain folder's frames are no KITTI drive's
     drives = {} if dataset.image_dir == dataset.split_dir else interval_drives(dataset.split_dir)
-    _say_if_trained_on(inference.get("models"), dataset, frame_ids, variants=variants, detections=detections,
-                       replaced=[k for k in ("parts_model", "detector_bank", "viewpoint_classifier", "score_calibration")
-                                 if inference.get(k) is not None], calibrated=not raw_scores)
+    # said once the run's every check has passed, before its first fit (a run refused has no figures)
+    say_held_out = functools.partial(
+        _say_if_trained_on, inference.get("models"), dataset, frame_ids, variants=variants, detections=detections,
+        replaced=[k for k in FRAME_TRAINED if inference.get(k) is not None], calibrated=not raw_scores,
+        evidence=evidence)
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
@@ -445,7 +450,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
                 particles=particles, predictions=_seed_dir(predictions, seed, several), evidence=evidence, draws=draws,
                 report_dir=_seed_dir(pages, seed, several), workers=workers,
                 allow_missing=allow_missing_detections, min_score=min_score, resume=resume, client=client,
-                dask_address=dask_address,
+                dask_address=dask_address, before_fits=None if k else say_held_out,
                 inference=dict(inference), as_json=json_out is not None, notify=notify)
             figures[seed] = seed_figures({v: r.metrics["all"] for v, r in reports.items()}, kitti)
         summary = over_seeds(figures) if several else None
@@ -467,13 +472,13 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
 
 
 def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str] | None, *, variants, detections: str,
-                       replaced=(), calibrated: bool = True) -> None:
+                       replaced=(), calibrated: bool = True, evidence: str = "parts") -> None:
     """A line on standard error for each model the run reads that was trained on some of the
     frames evaluated (:func:`wirescene.eval.held_out.trained_on_frames`)."""
     from wirescene.eval.held_out import trained_on_frames
 
     for message in trained_on_frames(models_dir, dataset, frame_ids, variants=variants, detections=detections,
-                                     replaced=replaced, calibrated=calibrated):
+                                     replaced=replaced, calibrated=calibrated, evidence=evidence):
         click.echo(f"wirescene: {message}", err=True)
 
 
@@ -487,9 +492,10 @@ def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
 
 def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, viewpoint_noise, particles, predictions,
                    evidence, draws, report_dir, workers, allow_missing, min_score, resume, client, dask_address,
-                   inference, as_json, notify) -> tuple[dict, dict, dict | None]:
+                   inference, as_json, notify, before_fits=None) -> tuple[dict, dict, dict | None]:
     """One seed of ``wirescene eval``: fits, prints its tables and writes its report (its notices
-    to ``notify``);
+    to ``notify``; ``before_fits`` called before its first fit, as :func:`~wirescene.eval.runner.evaluate_dataset`
+    says);
     returns ``(reports, kitti figures, JSON data)`` by variant, the JSON data (every record
     serialised) only ``as_json`` (else None)."""
     from wirescene.eval.intervals import format_intervals, localisation_intervals, margin_intervals
@@ -534,6 +540,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
         notify=notify,
         on_estimate=on_estimate,
         check_images=report_dir is not None,  # the gallery draws fitted frames: a corrupt image refused before the fits
+        before_fits=before_fits,
     )
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())
@@ -774,7 +781,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 @click.option("--gt", type=NonEmptyPath(path_type=Path), default=None,
               help="KITTI label file drawn in cyan for comparison.")
 @click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True,
-              help="Model variant (`full`, the default, as `predict` and `wirescene.fit`).")
+              help="Model variant (the default as `predict`'s and `wirescene.fit`'s).")
 @particles_option
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)
 @click.option("--out", type=NonEmptyPath(directory=True, path_type=Path), required=True, help="Output directory.")
@@ -838,6 +845,7 @@ def demo_cmd(out, particles, variants, models):
     import time
 
     from wirescene.api import fit
+    from wirescene.eval.held_out import trained_on_frames
     from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
@@ -868,9 +876,11 @@ def demo_cmd(out, particles, variants, models):
                                          estimate=estimate, detections=raw, gt=dataset.labels(first).of_type("Car")).values())
     click.echo(f"raw-pixel mode on {first}: the detector bank proposed {len(raw)} boxes, the fit kept "
                f"{len(estimate.objects)} cars ({len(dataset.labels(first).of_type('Car'))} labelled)\n")
+    # a models directory keeps the shipped files it lacks (every `train all` directory the score calibration)
+    trained = trained_on_frames(models, dataset, None, variants=variants, detections="gt")
     click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
                f"(GT boxes as pre-detections, {particles} particles"
-               f"{'' if models else '; frames the shipped models were trained on, so not held out'})\n")
+               f"{'; frames the models it reads were trained on, so not held out' if trained else ''})\n")
     click.echo(format_table(reports))
     _write_json_atomic(out / "eval.json", {v: r.to_json_dict(include_records=False) for v, r in reports.items()})
     click.echo("\nwritten:")

@@ -257,6 +257,7 @@ def evaluate_dataset(
     on_estimate: Callable[..., None] | None = None,
     notify: Callable[[str], None] | None = None,
     check_images: bool = False,
+    before_fits: Callable[[], None] | None = None,
 ) -> dict[str, EvaluationReport]:
     """Fit every variant on every frame and evaluate with the paper's protocol.
 
@@ -309,6 +310,10 @@ def evaluate_dataset(
         Decode every frame to fit's image before the first fit, as a caller that reads them
         after the fits asks (a report's gallery, drawn from the fitted frames); done anyway
         where the fits read every image (our own pre-detection, part evidence of a fine variant).
+    before_fits : callable, optional
+        Called once every check above has passed, before the first fit (e.g. to say that
+        some frames are not held out, :func:`wirescene.eval.held_out.trained_on_frames`: a
+        run refused says nothing of its figures).
 
     Returns
     -------
@@ -360,6 +365,8 @@ def evaluate_dataset(
     images = check_images or fits_read_images(source, variants, evidence)
     say_off_centre(dataset.check_frames(todo, labels=True, images=images), len(todo), notify)
     source.check_files(dataset, todo)
+    if before_fits is not None:
+        before_fits()
     with ExitStack() as stack:
         fitted = fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
         by_frame = _collect_frames(fitted, reused, records, progress, on_estimate)
