@@ -787,12 +787,13 @@ def test_predict_says_whose_files_a_scene_folder_holds(tmp_path):
 
     (tmp_path / "000010.json").write_text("{}")
     folders = {"json_dir": tmp_path, "pictures_dir": None}
-    _others_files(["000002"], folders)  # another frame's file: nothing
+    names = {"out_dir": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures"}  # the command's
+    _others_files(["000002"], folders, names)  # another frame's file: nothing
     for resumed, advice in ((None, "use --resume to continue that run"),
                             ({}, ".predict.json in --out records no run: resume that run"),
                             ({"variant": "full"}, ".predict.json in --out records other settings: resume that run")):
         with pytest.raises(InputError) as caught:
-            _others_files(["000002", "000010"], folders, resumed=resumed)
+            _others_files(["000002", "000010"], folders, names, resumed=resumed)
         assert str(caught.value) == (f"{tmp_path}: already holds 1 of the files this run writes (e.g. 000010.json), "
                                      f"another run's: {advice} or choose an empty directory")
 
@@ -898,6 +899,23 @@ def test_predict_dataset_writes_an_int_frame_id_as_kitti_dataset_reads_it(tmp_pa
     assert fitted == ["000010"] * 4 and not (tmp_path / "refused").exists()
 
 
+def test_predict_dataset_refuses_a_selection_of_no_frame(tmp_path):
+    """frames=[] or an exhausted generator is refused naming frames, as wirescene.evaluate refuses it: it wrote a
+    submission of no label file (.predict.json alone), which only the server refused."""
+    from wirescene.core.errors import ArgumentError
+    from wirescene.eval.predict import predict_dataset
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
+
+    used = (f for f in ["000010"])
+    list(used)
+    for frames in ([], (), used):
+        with pytest.raises(ArgumentError, match="^frames: no frame given$"):
+            predict_dataset(KittiDataset(KITTI_ROOT), tmp_path / "out", variant="coarse", source=DetectionSource("gt"),
+                            frames=frames)
+    assert not (tmp_path / "out").exists()
+
+
 def test_predict_dataset_names_its_arguments_where_a_folder_would_spoil_another(tmp_path, monkeypatch):
     """Called from Python, the refusals of one folder for another name predict_dataset's arguments (out_dir,
     json_dir, pictures_dir; they named the command's --out, --json-dir and --pictures), the command its options."""
@@ -928,6 +946,38 @@ def test_predict_dataset_names_its_arguments_where_a_folder_would_spoil_another(
                                     frames=["000010"], **folders)
         assert exc.value.problem.startswith(f"{problem}"), (folders, str(exc.value))
     assert not out.exists()
+
+
+def test_predict_dataset_names_its_arguments_where_a_run_cannot_resume(tmp_path, monkeypatch):
+    """From Python, a resumed run's refusals name predict_dataset's arguments as its folder refusals do: another
+    json_dir or pictures_dir than the run resumed, a scene folder of another run's files beside out_dir's record
+    (they named --json-dir, --pictures and --out); given the command's names, its options."""
+    import wirescene.eval.predict as predict
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
+
+    monkeypatch.setattr(predict, "fit_frames", lambda job, frame_ids, **kw: [(f, "", {}) for f in frame_ids])
+    options = {"out_dir": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures"}
+
+    def resumed(out, **kwargs):
+        with pytest.raises(InputError) as caught:
+            predict.predict_dataset(KittiDataset(KITTI_ROOT), out, variant="coarse", source=DetectionSource("gt"),
+                                    frames=["000010"], resume=True, **kwargs)
+        return caught.value.problem
+
+    out, scenes = tmp_path / "out", tmp_path / "scenes"
+    predict.predict_dataset(KittiDataset(KITTI_ROOT), out, variant="coarse", source=DetectionSource("gt"),
+                            frames=["000010"], json_dir=scenes)
+    for names, said in ((None, "json_dir"), (options, "--json-dir")):
+        assert resumed(out, json_dir=tmp_path / "elsewhere", names=names) == (
+            f"label files were written with other settings ({said}): cannot resume into this directory")
+    for names, said in ((None, "json_dir / pictures_dir"), (options, "--json-dir / --pictures")):
+        assert resumed(out, names=names).startswith(f"label files were written with other settings ({said})")
+    scenes.mkdir(exist_ok=True)
+    (scenes / "000010.json").write_text("{}")  # another run's scene, beside a label folder of no run
+    for names, said in ((None, "out_dir"), (options, "--out")):
+        assert resumed(tmp_path / "new", json_dir=scenes, names=names).endswith(
+            f"another run's: .predict.json in {said} records no run: resume that run or choose an empty directory")
 
 
 def test_predict_resumed_with_fewer_frames_is_refused_and_with_more_continues(tmp_path):
@@ -1372,9 +1422,10 @@ def _group_left(proc) -> list[str]:
 
 
 def _said(stderr: bytes) -> list[str]:
-    """The lines of a run's standard error, its progress bars left out."""
+    """The lines of a run's standard error, its progress bars and its word on frames not held out left out."""
     lines = stderr.decode().replace("\r", "\n").splitlines()
-    return [ln for ln in lines if ln.strip() and not re.match(r"(eval|predict|synth): ", ln)]
+    return [ln for ln in lines if ln.strip() and not re.match(r"(eval|predict|synth): ", ln)
+            and not ln.endswith("not held out")]
 
 
 def test_main_called_from_python_gives_back_the_callers_signal_handlers(monkeypatch):

@@ -272,6 +272,28 @@ def test_a_set_replaced_through_a_link_stays_where_the_link_points(tmp_path):
     assert [p.name for p in (tmp_path / "big_disk").iterdir()] == ["set"]
 
 
+def test_a_set_replaced_through_a_relative_link_or_a_link_to_nothing(tmp_path):
+    """A relative link is followed from its own folder; a link to nothing (a disk not mounted) or a loop of links is
+    refused naming it before the block's work (it failed after it: "Not a directory: set -> set"), nothing made."""
+    from wirescene.core.atomic import replaced_dir
+    from wirescene.core.errors import InputError
+
+    (tmp_path / "disk" / "set").mkdir(parents=True)
+    (tmp_path / "links").mkdir()
+    (tmp_path / "links" / "set").symlink_to(os.path.join("..", "disk", "set"), target_is_directory=True)
+    with replaced_dir(tmp_path / "links" / "set") as staging:
+        (staging / "new.txt").write_text("new")
+    assert [p.name for p in (tmp_path / "disk" / "set").iterdir()] == ["new.txt"]
+    (tmp_path / "links" / "gone").symlink_to(tmp_path / "unmounted" / "set", target_is_directory=True)
+    (tmp_path / "links" / "loop").symlink_to("loop")
+    before = set(tmp_path.rglob("*"))
+    for name, target in (("gone", tmp_path / "unmounted" / "set"), ("loop", "loop")):
+        with pytest.raises(InputError, match=f"a symbolic link to {target}, which leads to no folder"):
+            with replaced_dir(tmp_path / "links" / name):
+                raise AssertionError("the block ran")
+    assert set(tmp_path.rglob("*")) == before and (tmp_path / "links" / "gone").is_symlink()
+
+
 @pytest.mark.skipif(os.name != "posix", reason="file modes and the umask are POSIX's")
 def test_written_files_get_the_permissions_of_any_new_file(tmp_path):
     from wirescene.core.atomic import atomic_dir, write_text
@@ -361,6 +383,27 @@ def test_an_int_frame_id_is_written_06d_and_a_bool_or_a_negative_one_refused(kit
         for read in (ds.image_path, ds.label_path, ds.calib_path):
             with pytest.raises(ArgumentError, match=f"^frame_id: .*{says}"):
                 read(bad)
+
+
+def test_frame_ids_are_read_from_any_iterable_or_one_id():
+    """as_frame_ids, the API's reading of ``frames``: a numpy array of str or of ints, a generator or a tuple give
+    their ids in order, once each; one id alone (a numpy scalar, or a 0-d array: iterating that was a TypeError)
+    is one frame, not its characters; what is no id is an ArgumentError naming frames."""
+    from wirescene.core.errors import ArgumentError
+    from wirescene.io.kitti import as_frame_ids
+
+    for frames in (np.array(["000010", "000002"]), np.array([10, 2]), (f for f in ("000010", 2, 10)),
+                   ("000010", "000002")):
+        assert as_frame_ids(frames) == ["000010", "000002"], frames
+    for one in ("000010", 10, np.int64(10), np.str_("000010"), np.array(10), np.array("000010")):
+        assert as_frame_ids(one) == ["000010"], repr(one)
+    assert sorted(as_frame_ids({"000010", 2})) == ["000002", "000010"]
+    for bad in (b"000010", [None], [np.array([10, 2])], 10.0):
+        with pytest.raises(ArgumentError, match="^frames: expected a frame id"):
+            as_frame_ids(bad)
+    assert as_frame_ids([]) == []  # the caller's to allow (an evaluation of no frame), or refuse:
+    with pytest.raises(ArgumentError, match="^frames: no frame given$"):
+        as_frame_ids(iter([]), some=True)
 
 
 def test_dataset_without_labels_and_bad_roots(kitti_root, tmp_path):

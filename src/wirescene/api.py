@@ -804,9 +804,7 @@ def evaluate(
         raise ArgumentError("split_file", "frames and split_file both choose the frames: give one")
     frame_ids = None
     if frames is not None:
-        frame_ids = as_frame_ids(frames, name="frames")
-        if not frame_ids:
-            raise ArgumentError("frames", "no frame given")
+        frame_ids = as_frame_ids(frames, name="frames", some=True)
         missing = sorted(set(frame_ids) - set(dataset.frame_ids()))
         if missing:
             raise ArgumentError("frames", f"not in {dataset.split_dir}: {', '.join(missing[:5])}")

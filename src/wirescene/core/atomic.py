@@ -247,7 +247,8 @@ def replaced_dir(path: str | Path):
     when the block succeeds (a directory there before is removed only then); when the
     block raises the staging directory goes, ``path`` is left as it was, and so are the
     directories above it (those made for it are removed). A symbolic link to a directory
-    stays: the directory it points to is the one replaced.
+    stays: the directory it points to is the one replaced; a link to nothing (or a loop of
+    links) is an :class:`InputError` before the block runs (the set could not take its place).
 
     Examples
     --------
@@ -264,6 +265,9 @@ def replaced_dir(path: str | Path):
     path = Path(path)
     if path.is_symlink() and path.is_dir():  # a set kept on another disk through a link stays there
         path = path.resolve()
+    elif path.is_symlink() and not path.exists():  # found after the block's work, as "Not a directory"
+        raise InputError(f"a symbolic link to {os.readlink(path)}, which leads to no folder (a disk not mounted, "
+                         "a folder not made yet, or a loop of links): make the folder or remove the link", path=path)
     with _staged(path) as staging:
         yield staging
         with _named_as(path):

@@ -22,11 +22,11 @@ from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.validate import output_dir_problem
 from wirescene.core.version import __version__
 from wirescene.eval.records import config_difference, refuse_frames_outside
-from wirescene.eval.runner import fit_frames, fits_read_images, notify_stderr, say_off_centre
+from wirescene.eval.runner import check_images_read, fit_frames, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint, options_read
 from wirescene.fitting.options import FitOptions
-from wirescene.fitting.pipeline import fit_frame
+from wirescene.fitting.pipeline import fit_frame, needs_evidence
 from wirescene.fitting.variants import get_variant
 from wirescene.io.kitti import KittiDataset, as_frame_ids
 from wirescene.io.outputs import fit_output_paths, scene_json, scene_pictures
@@ -51,7 +51,9 @@ class _PredictJob:
         camera = self.dataset.camera(frame_id)
         detections = self.source.for_frame(self.dataset, frame_id, frame_seed(self.options.seed, frame_id),
                                            predetect=self.options.predetect, lifting=self.options.lifting)
-        image = self.dataset.image(frame_id)
+        # the image where the fit or the pictures read it (check_images_read decodes these before the first fit)
+        reads = self.pictures_dir is not None or needs_evidence(detections, [self.variant])
+        image = self.dataset.image(frame_id) if reads else None
         fitted = fit_frame(camera, detections, [self.variant], image=image, options=self.options,
                            own=self.source.own)
         estimate = fitted.estimates[self.variant]
@@ -135,16 +137,19 @@ def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDa
             raise InputError(f"{said} is {what}; give it a folder of its own", path=folder)
 
 
-def _others_files(frame_ids: list[str], folders: dict[str, Path | None], resumed: dict | None = None) -> None:
+def _others_files(frame_ids: list[str], folders: dict[str, Path | None], names: Mapping[str, str],
+                  resumed: dict | None = None) -> None:
     """An :class:`InputError` naming ``json_dir`` or ``pictures_dir`` (``folders``) where it
     already holds a file this run would write (another run's, not resumed: it would be written
     over, the folder a mix of two runs' frames); ``resumed``: the settings' record a run asked to
-    resume found (``{}``: none), which is not this run's."""
+    resume found (``{}``: none), which is not this run's. ``names``: how the message names the
+    label folder (:func:`_folder_problem`'s)."""
     kinds = {"json_dir": ("json",), "pictures_dir": ("overlay", "bev")}  # of fit_output_paths
     if resumed is None:
         advice = "use --resume to continue that run"
     else:  # --resume given: the label folder's record is none, or another run's
-        advice = f"{CONFIG_FILE} in --out records {'other settings' if resumed else 'no run'}: resume that run"
+        records = "other settings" if resumed else "no run"
+        advice = f"{CONFIG_FILE} in {names['out_dir']} records {records}: resume that run"
     for name, folder in folders.items():
         if folder is None or not folder.is_dir():
             continue
@@ -228,10 +233,12 @@ def predict_dataset(
         Before any fit: ``out_dir``, ``json_dir`` or ``pictures_dir`` is no path, a file, an
         empty path, or a directory that cannot be written or created
         (:func:`wirescene.core.validate.output_dir_problem`); a frame id is a bool, a negative
-        int or a float (:func:`~wirescene.io.kitti.as_frame_id`); ``names`` names another folder.
+        int or a float (:func:`~wirescene.io.kitti.as_frame_id`), or ``frames`` holds none (an
+        empty submission); ``names`` names another folder.
     InputError
         Before any fit: no frame to predict (no image in ``image_2/``, or the folder of frames), a frame
-        without its detection file, calibration or image, a malformed detection file, or
+        without its detection file, calibration or image, a malformed detection file, a corrupt or
+        truncated image that the frame's fit or pictures read (:func:`~wirescene.eval.runner.check_images_read`), or
         ``out_dir`` holding another run's label files (or, resumed, label files of frames
         outside ``frames``, or a settings' record that cannot be read), or a folder in place of
         that record; ``json_dir`` or ``pictures_dir`` where its files would spoil another folder
@@ -254,7 +261,7 @@ def predict_dataset(
     variant = get_variant(variant).name
     out = Path(out_dir)
     # a submission of no file is refused here, not by the server
-    frame_ids = as_frame_ids(frames) if frames is not None else dataset.require_frames(images=True)
+    frame_ids = as_frame_ids(frames, some=True) if frames is not None else dataset.require_frames(images=True)
     source.missing_frames(frame_ids)
     extra = {"json_dir": json_dir, "pictures_dir": pictures_dir}
     extra = {name: None if folder is None else Path(folder) for name, folder in extra.items()}
@@ -272,8 +279,8 @@ def predict_dataset(
     stored = _stored_config(config_path) if resume else None
     if existing:
         if stored != config:
-            said = {"folders": "--json-dir / --pictures", "folders.json_dir": "--json-dir",
-                    "folders.pictures_dir": "--pictures"}
+            said = {"folders": f"{names['json_dir']} / {names['pictures_dir']}",
+                    "folders.json_dir": names["json_dir"], "folders.pictures_dir": names["pictures_dir"]}
             changed = (", ".join(said.get(name, name) for name in config_difference(stored, config))
                        if stored is not None else f"{CONFIG_FILE} missing")
             raise InputError(f"label files were written with other settings ({changed}): "
@@ -281,13 +288,11 @@ def predict_dataset(
         # A submission is the folder's *.txt: frames outside this selection would go to the server too.
         refuse_frames_outside(out, existing, frame_ids, would="which a submission zipped from it would include")
     if stored != config:  # not a run of these settings resumed (that one's files are its own)
-        _others_files(frame_ids, extra, resumed=(stored or {}) if resume else None)
+        _others_files(frame_ids, extra, names, resumed=(stored or {}) if resume else None)
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
     say = notify or notify_stderr
-    # a corrupt image refused before the first fit where the run reads the images, not at its frame's
-    images = pictures_dir is not None or fits_read_images(source, [variant], "parts")
-    say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt", images=images), len(todo), say)
+    say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), say)
     if pictures_dir is not None and source.spec != "gt" and dataset.has_labels:
         # the pictures draw a labelled split's cars: a bad label file refused now, not at its frame
         unlabelled = []
@@ -300,6 +305,8 @@ def predict_dataset(
             say(f"warning: {len(unlabelled)} of {len(todo)} frames have no label file in "
                 f"{dataset.split_dir / 'label_2'} (e.g. {unlabelled[0]}.txt): their pictures draw the estimates alone")
     source.check_files(dataset, todo)
+    # a corrupt image refused before the first fit where the run reads it, not at its frame's
+    check_images_read(dataset, source, [variant], todo, every=pictures_dir is not None)
     job = _PredictJob(dataset, variant, source, options, **extra)
     with ExitStack() as stack:
         for k, (frame_id, text, files) in enumerate(progress(fit_frames(job, todo, workers=workers,

@@ -308,8 +308,8 @@ def evaluate_dataset(
         Receives one-line messages on reused and refitted frames; default: standard error.
     check_images : bool
         Decode every frame to fit's image before the first fit, as a caller that reads them
-        after the fits asks (a report's gallery, drawn from the fitted frames); done anyway
-        where the fits read every image (our own pre-detection, part evidence of a fine variant).
+        after the fits asks (a report's gallery, drawn from the fitted frames); the images the
+        fits read are decoded anyway (:func:`check_images_read`).
     before_fits : callable, optional
         Called once every check above has passed, before the first fit (e.g. to say that
         some frames are not held out, :func:`wirescene.eval.held_out.trained_on_frames`: a
@@ -361,10 +361,10 @@ def evaluate_dataset(
         refuse_predictions_dir(predictions_dir, variants, frame_ids, resume=resume)
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
-    # a corrupt image refused now, not at its frame's fit or in the report after every fit
-    images = check_images or fits_read_images(source, variants, evidence)
-    say_off_centre(dataset.check_frames(todo, labels=True, images=images), len(todo), notify)
+    say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
     source.check_files(dataset, todo)
+    # a corrupt image refused now, not at its frame's fit or in the report after every fit
+    check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images)
     if before_fits is not None:
         before_fits()
     with ExitStack() as stack:
@@ -374,10 +374,24 @@ def evaluate_dataset(
     return {v: evaluate([by_frame[f][v] for f in frame_ids]) for v in variants}
 
 
-def fits_read_images(source: DetectionSource, variants: list[str], evidence: str) -> bool:
-    """Whether the fits read every frame's image (one with detections, for a fine variant): our
-    own pre-detection reads it, the part detectors of a fine variant (``evidence`` "parts") too."""
-    return source.own or (evidence == "parts" and any(get_variant(v).fine for v in variants))
+def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: Iterable[str],
+                      frame_ids: list[str], *, evidence: str = "parts", every: bool = False) -> None:
+    """Decode, before the first fit, the image of each frame of ``frame_ids`` whose fit reads it
+    (:meth:`~wirescene.io.kitti.KittiDataset.check_frames` with ``images``): a corrupt or
+    truncated one is an :class:`InputError` then, not at its frame's fit (the frames fitted
+    before it left behind). Every frame's for our own pre-detection; else, with ``evidence``
+    "parts", those whose detections :func:`~wirescene.fitting.pipeline.needs_evidence` (a fine
+    variant, or a box without a viewpoint, as detection files give them), as the fits decide;
+    ``every``: each frame's, for a caller that reads them after the fits (a report, pictures).
+    Call it after :meth:`~wirescene.eval.sources.DetectionSource.check_files`."""
+    if every or source.own:
+        read = list(frame_ids)
+    elif evidence != "parts":  # the oracle's evidence (and the viewpoints told by it): no image
+        read = []
+    else:  # a label's viewpoint noise moves a viewpoint, never makes one unknown: any generator tells
+        rng = np.random.default_rng(0)
+        read = [f for f in frame_ids if needs_evidence(source.for_frame(dataset, f, rng), variants)]
+    dataset.check_frames(read, images=True)
 
 
 def _reusable_records(records: FrameRecords, frame_ids: list[str], notify) -> dict[str, dict]:

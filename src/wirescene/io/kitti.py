@@ -403,34 +403,42 @@ def as_frame_id(frame_id, *, name: str = "frame_id") -> str:
                               f"{type(frame_id).__name__} {frame_id!r}")
 
 
-def as_frame_ids(frames, *, name: str = "frames") -> list[str]:
+def as_frame_ids(frames, *, name: str = "frames", some: bool = False) -> list[str]:
     """Frame ids as :func:`as_frame_id` writes each, in the order given, each once (``10`` and
     ``"000010"`` are one frame): what the functions of a set of frames read their ``frames`` with.
 
     Parameters
     ----------
     frames : str, int or iterable of them
-        One id, or several.
+        One id (a numpy scalar or 0-d array too), or several (a list, a numpy array, a
+        generator; a set's order is its own).
     name : str
         The argument's name in error messages.
+    some : bool
+        Refuse an empty selection (an empty list, an exhausted generator): for a caller whose
+        run of no frame would be no run (a submission of no file); else an empty list is returned.
 
     Returns
     -------
     list of str
-        Empty for an empty iterable (the caller says whether no frame is allowed).
 
     Raises
     ------
     ArgumentError
-        Naming ``name``: an id that :func:`as_frame_id` refuses.
+        Naming ``name``: an id that :func:`as_frame_id` refuses, or (``some``) no id at all.
 
     Examples
     --------
     >>> as_frame_ids(10), as_frame_ids([2, "000010", 10])
     (['000010'], ['000002', '000010'])
     """
+    if isinstance(frames, np.ndarray) and frames.ndim == 0:  # np.array(10): one id (iterating it is a TypeError)
+        frames = frames.item()
     one = isinstance(frames, (str, bytes, numbers.Integral)) or not isinstance(frames, Iterable)  # not its characters
-    return list(dict.fromkeys(as_frame_id(f, name=name) for f in ([frames] if one else frames)))
+    ids = list(dict.fromkeys(as_frame_id(f, name=name) for f in ([frames] if one else frames)))
+    if some and not ids:
+        raise ArgumentError(name, "no frame given")
+    return ids
 
 
 class KittiDataset:
