@@ -441,6 +441,18 @@ def test_demo_runs_end_to_end(tmp_path):
     js = json.loads((tmp_path / "demo" / "full" / "000010.json").read_text())
     assert all(len(o["vertices"]) == 36 and "exemplar" in o for o in js["objects"])
     assert (tmp_path / "demo" / "eval.json").is_file()
+    # another run of fewer variants: its files are the set, no earlier variant's folder beside its eval.json (a file of
+    # the user's, in the folder or in a variant's, stays)
+    (tmp_path / "demo" / "notes.txt").write_text("mine")
+    (tmp_path / "demo" / "coarse+gp" / "mine.txt").write_text("mine")
+    r = run("demo", "--out", tmp_path / "demo", "--particles", 4, "--variant", "full")
+    assert r.exit_code == 0, r.output
+    assert sorted(p.relative_to(tmp_path / "demo").as_posix() for p in (tmp_path / "demo").rglob("*")) == [
+        "coarse+gp", "coarse+gp/mine.txt", "eval.json", "full", "full/000010.json", "full/000010.txt",
+        "full/000010_bev.png", "full/000010_overlay.png", "notes.txt", "raw-pixels", "raw-pixels/000010.json",
+        "raw-pixels/000010.txt", "raw-pixels/000010_bev.png", "raw-pixels/000010_overlay.png"]
+    assert list(json.loads((tmp_path / "demo" / "eval.json").read_text())) == ["full"]
+    assert f"  {tmp_path / 'demo' / 'full' / '000010.txt'}" in r.output
 
 
 def test_eval_with_external_boxes_without_viewpoint(tmp_path):

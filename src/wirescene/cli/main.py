@@ -845,12 +845,13 @@ def demo_cmd(out, particles, variants, models):
     import time
 
     from wirescene.api import fit
+    from wirescene.core.atomic import atomic_dir
     from wirescene.eval.held_out import trained_on_frames
     from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
     from wirescene.io.kitti import KittiDataset
-    from wirescene.io.outputs import write_fit_outputs
+    from wirescene.io.outputs import fit_output_paths, write_fit_outputs
 
     check_output_dir(out, "--out")
     options = _fit_options(particles, 0, models=models, device="numpy")  # the README's demo figures, to the bit
@@ -858,34 +859,39 @@ def demo_cmd(out, particles, variants, models):
     dataset = KittiDataset(sample_root())
     first = dataset.frame_ids()[0]
     written = []
+    # the demo's files as one set: a run of other variants leaves no earlier run's folder beside its eval.json
+    stale = tuple(str(p) for folder in (*_variants(), "raw-pixels") for p in fit_output_paths(Path(folder), first).values())
+    with atomic_dir(out, stale=stale) as staging:
 
-    def draw(frame_id, variant, estimate, camera, detections, gt):
-        if frame_id == first:
-            paths = write_fit_outputs(out / variant, frame_id, image=dataset.image(frame_id), camera=camera,
-                                      estimate=estimate, detections=detections, gt=gt.of_type("Car"))
-            written.extend(paths.values())
+        def draw(frame_id, variant, estimate, camera, detections, gt):
+            if frame_id == first:
+                paths = write_fit_outputs(staging / variant, frame_id, image=dataset.image(frame_id), camera=camera,
+                                          estimate=estimate, detections=detections, gt=gt.of_type("Car"))
+                written.extend(paths.values())
 
-    reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=options,
-                               progress=_progress("demo"), on_estimate=draw)
-    # Raw-pixel mode: our own pre-detection instead of label boxes, then the full model.
-    image = dataset.image(first)
-    estimate = fit(image, dataset.camera(first), None, variant="full", options=options)
-    raw = estimate.detections
-    if len(raw):
-        written.extend(write_fit_outputs(out / "raw-pixels", first, image=image, camera=dataset.camera(first),
-                                         estimate=estimate, detections=raw, gt=dataset.labels(first).of_type("Car")).values())
-    click.echo(f"raw-pixel mode on {first}: the detector bank proposed {len(raw)} boxes, the fit kept "
-               f"{len(estimate.objects)} cars ({len(dataset.labels(first).of_type('Car'))} labelled)\n")
-    # a models directory keeps the shipped files it lacks (every `train all` directory the score calibration)
-    trained = trained_on_frames(models, dataset, None, variants=variants, detections="gt")
-    click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
-               f"(GT boxes as pre-detections, {particles} particles"
-               f"{'; frames the models it reads were trained on, so not held out' if trained else ''})\n")
-    click.echo(format_table(reports))
-    _write_json_atomic(out / "eval.json", {v: r.to_json_dict(include_records=False) for v, r in reports.items()})
+        reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=options,
+                                   progress=_progress("demo"), on_estimate=draw)
+        # Raw-pixel mode: our own pre-detection instead of label boxes, then the full model.
+        image = dataset.image(first)
+        estimate = fit(image, dataset.camera(first), None, variant="full", options=options)
+        raw = estimate.detections
+        gt = dataset.labels(first).of_type("Car")
+        if len(raw):
+            written.extend(write_fit_outputs(staging / "raw-pixels", first, image=image, camera=dataset.camera(first),
+                                             estimate=estimate, detections=raw, gt=gt).values())
+        click.echo(f"raw-pixel mode on {first}: the detector bank proposed {len(raw)} boxes, the fit kept "
+                   f"{len(estimate.objects)} cars ({len(gt)} labelled)\n")
+        # a models directory keeps the shipped files it lacks (every `train all` directory the score calibration)
+        trained = trained_on_frames(models, dataset, None, variants=variants, detections="gt")
+        click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
+                   f"(GT boxes as pre-detections, {particles} particles"
+                   f"{'; frames the models it reads were trained on, so not held out' if trained else ''})\n")
+        click.echo(format_table(reports))
+        _write_json_atomic(staging / "eval.json", {v: r.to_json_dict(include_records=False) for v, r in reports.items()})
+        written.append(staging / "eval.json")
     click.echo("\nwritten:")
-    for p in written + [out / "eval.json"]:
-        click.echo(f"  {p}")
+    for p in written:
+        click.echo(f"  {out / p.relative_to(staging)}")
     click.echo(f"\ndone in {time.perf_counter() - t0:.1f} s")
 
 
