@@ -536,3 +536,20 @@ def test_a_bank_without_ground_prior_spends_no_detection_on_the_pitch(monkeypatc
     told = Mount(1.3, 2.0)
     assert image_mount(ds.camera("000010"), ds.image("000010"), bank=SimpleNamespace(meta={}), told=told) == told
     assert not calls
+
+
+def test_decoding_many_images_before_the_first_fit_is_said(monkeypatch):
+    """A split's images decoded before the first fit take half a minute or more: said once, from SAY_DECODING
+    images, so that the pause before the progress bar is no mystery."""
+    import wirescene.eval.runner as runner
+    from wirescene.eval.sources import DetectionSource
+    from wirescene.io.kitti import KittiDataset
+
+    dataset, said = KittiDataset(KITTI_ROOT), []
+    frames = dataset.frame_ids()
+    runner.check_images_read(dataset, DetectionSource("gt"), ["full"], frames, notify=said.append)
+    assert said == []  # three images
+    monkeypatch.setattr(runner, "SAY_DECODING", 3)
+    runner.check_images_read(dataset, DetectionSource("gt"), ["full"], frames, notify=said.append)
+    runner.check_images_read(dataset, DetectionSource("gt"), ["coarse"], frames, notify=said.append)  # none read
+    assert said == ["decoding the 3 images the fits read before the first fit (a corrupt one refused now)"]

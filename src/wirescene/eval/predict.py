@@ -306,7 +306,7 @@ def predict_dataset(
                 f"{dataset.split_dir / 'label_2'} (e.g. {unlabelled[0]}.txt): their pictures draw the estimates alone")
     source.check_files(dataset, todo)
     # a corrupt image refused before the first fit where the run reads it, not at its frame's
-    check_images_read(dataset, source, [variant], todo, every=pictures_dir is not None)
+    check_images_read(dataset, source, [variant], todo, every=pictures_dir is not None, notify=say)
     job = _PredictJob(dataset, variant, source, options, **extra)
     with ExitStack() as stack:
         for k, (frame_id, text, files) in enumerate(progress(fit_frames(job, todo, workers=workers,

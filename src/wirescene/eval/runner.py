@@ -364,7 +364,7 @@ def evaluate_dataset(
     say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
     source.check_files(dataset, todo)
     # a corrupt image refused now, not at its frame's fit or in the report after every fit
-    check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images)
+    check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images, notify=notify)
     if before_fits is not None:
         before_fits()
     with ExitStack() as stack:
@@ -374,8 +374,13 @@ def evaluate_dataset(
     return {v: evaluate([by_frame[f][v] for f in frame_ids]) for v in variants}
 
 
+#: From how many images :func:`check_images_read` says that it decodes them (some 12 ms each: a pause).
+SAY_DECODING = 200
+
+
 def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: Iterable[str],
-                      frame_ids: list[str], *, evidence: str = "parts", every: bool = False) -> None:
+                      frame_ids: list[str], *, evidence: str = "parts", every: bool = False,
+                      notify: Callable[[str], None] | None = None) -> None:
     """Decode, before the first fit, the image of each frame of ``frame_ids`` whose fit reads it
     (:meth:`~wirescene.io.kitti.KittiDataset.check_frames` with ``images``): a corrupt or
     truncated one is an :class:`InputError` then, not at its frame's fit (the frames fitted
@@ -383,7 +388,8 @@ def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: 
     "parts", those whose detections :func:`~wirescene.fitting.pipeline.needs_evidence` (a fine
     variant, or a box without a viewpoint, as detection files give them), as the fits decide;
     ``every``: each frame's, for a caller that reads them after the fits (a report, pictures).
-    Call it after :meth:`~wirescene.eval.sources.DetectionSource.check_files`."""
+    Call it after :meth:`~wirescene.eval.sources.DetectionSource.check_files`; ``notify`` is told
+    of :data:`SAY_DECODING` images or more (a KITTI split's take half a minute or more)."""
     if every or source.own:
         read = list(frame_ids)
     elif evidence != "parts":  # the oracle's evidence (and the viewpoints told by it): no image
@@ -391,6 +397,8 @@ def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: 
     else:  # a label's viewpoint noise moves a viewpoint, never makes one unknown: any generator tells
         rng = np.random.default_rng(0)
         read = [f for f in frame_ids if needs_evidence(source.for_frame(dataset, f, rng), variants)]
+    if notify is not None and len(read) >= SAY_DECODING:
+        notify(f"decoding the {len(read)} images the fits read before the first fit (a corrupt one refused now)")
     dataset.check_frames(read, images=True)
 
 
