@@ -860,7 +860,8 @@ def demo_cmd(out, particles, variants, models):
     first = dataset.frame_ids()[0]
     written = []
     # the demo's files as one set: a run of other variants leaves no earlier run's folder beside its eval.json
-    stale = tuple(str(p) for folder in (*_variants(), "raw-pixels") for p in fit_output_paths(Path(folder), first).values())
+    stale = tuple(str(p) for folder in (*_variants(), "raw-pixels")
+                  for p in fit_output_paths(Path(folder), first).values())
     with atomic_dir(out, stale=stale) as staging:
 
         def draw(frame_id, variant, estimate, camera, detections, gt):
@@ -887,7 +888,8 @@ def demo_cmd(out, particles, variants, models):
                    f"(GT boxes as pre-detections, {particles} particles"
                    f"{'; frames the models it reads were trained on, so not held out' if trained else ''})\n")
         click.echo(format_table(reports))
-        _write_json_atomic(staging / "eval.json", {v: r.to_json_dict(include_records=False) for v, r in reports.items()})
+        figures = {v: r.to_json_dict(include_records=False) for v, r in reports.items()}
+        _write_json_atomic(staging / "eval.json", figures)
         written.append(staging / "eval.json")
     click.echo("\nwritten:")
     for p in written:
