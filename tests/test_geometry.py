@@ -46,6 +46,54 @@ def test_projection_roundtrip(camera):
     assert_close(np.cross(d, v / np.linalg.norm(v, axis=1, keepdims=True)), np.zeros_like(X), atol=1e-9)
 
 
+def test_projection_and_placement_add_like_whole_rows_to_the_bit(camera):
+    """project_with_depth and transform add the translation (and divide the pixels) a
+    component at a time, in place: the same values, to the bit, as on whole rows."""
+    from wirescene.core.groundplane import transform
+
+    rng = np.random.default_rng(4)
+    X = rng.uniform([-10, -2, -1], [10, 3, 60], size=(50, 7, 36, 3))
+    X[0, 0, 0] = camera.center  # depth 0: the clamped divisor
+    uvw = X @ camera.P[:, :3].T + camera.P[:, 3]
+    w = uvw[..., 2]
+    want = uvw[..., :2] / np.where(np.abs(w) < 1e-9, 1e-9, w)[..., None]
+    uv, depth = camera.project_with_depth(X)
+    assert uv.tobytes() == want.tobytes() and depth.tobytes() == w.tobytes()
+    one = camera.project_with_depth(X[1, 1, 1])
+    assert one[0].tobytes() == want[1, 1, 1].tobytes() and one[1].shape == ()
+    location, R = rng.normal(size=(50, 7, 3)), rng.normal(size=(50, 7, 3, 3))
+    placed = transform(X, location, R)
+    assert placed.tobytes() == (np.matmul(X, np.swapaxes(R, -1, -2)) + location[..., None, :]).tobytes()
+    # a location that widens the batch, and integer points: the plain sum
+    wide = transform(X[0, 0], location, rotation_y(0.3))
+    assert wide.shape == (50, 7, 36, 3)
+    assert wide.tobytes() == (X[0, 0] @ rotation_y(0.3).T + location[..., None, :]).tobytes()
+    assert transform(np.ones((2, 3), int), np.array([0.5, 0, 0]), np.eye(3, dtype=int)).tolist() == [[1.5, 1, 1]] * 2
+
+
+def test_point_bounds_are_the_pointwise_minima_in_order_to_the_bit():
+    """point_bounds reads blocks of point sets component-major: the same minima and maxima,
+    in the same order (signed zeros and NaN included), as the loop over whole points."""
+    from wirescene.core import arrays
+
+    def loop(points):
+        lo = points[..., 0, :].copy()
+        hi = lo.copy()
+        for k in range(1, points.shape[-2]):
+            np.minimum(lo, points[..., k, :], out=lo)
+            np.maximum(hi, points[..., k, :], out=hi)
+        return lo, hi
+
+    rng = np.random.default_rng(2)
+    for shape in ((arrays.BOUNDS_BLOCK + 5, 36, 3), (3, 4, 8, 2), (36, 3), (0, 5, 3), (6, 1, 3)):
+        points = rng.normal(size=shape)
+        points[..., ::3, :], points[..., 1::4, :] = 0.0, -0.0
+        points[..., 2:5, 0] = np.where(rng.random(points[..., 2:5, 0].shape) < 0.1, np.nan, points[..., 2:5, 0])
+        for got, want in zip(arrays.point_bounds(points), loop(points)):
+            assert got.shape == want.shape and got.tobytes() == want.tobytes()
+    assert arrays.point_bounds(np.arange(12).reshape(4, 3))[1].tolist() == [9, 10, 11]
+
+
 def test_kitti_label_projects_into_its_box(camera):
     # First car of 000010: its 3D box projected must match the labelled 2D box where untruncated.
     line = "Car 0.00 0 1.95 354.43 185.52 549.52 294.49 1.43 1.70 3.95 -2.39 1.66 11.80 1.76"

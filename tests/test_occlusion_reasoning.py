@@ -154,6 +154,40 @@ def test_mask_weight_sums_equal_the_explicit_sums_over_all_masks():
     assert_close(mask_weight_sums(uv, w), explicit, atol=1e-9)
 
 
+def test_mask_weight_sums_by_blocks_are_the_whole_batch_product_to_the_bit():
+    """mask_weight_sums builds its interval flags for MASK_BLOCK point sets at a time: the
+    same sums, to the bit, as the one product over the whole batch it replaced (each point
+    set's matrix product is the same BLAS call), with ties on the intervals' ends, signed
+    zero weights and a batch that is not a multiple of the block."""
+    from wirescene.infer import masks
+
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(0, 300, size=(3 * masks.MASK_BLOCK + 7, 2, 36, 2))
+    uv[::3, :, ::4] = uv[::3, :, :1]  # vertices on their box's edge
+    uv[::5] = np.round(uv[::5] / 30) * 30  # on the masks' 0.05 steps
+    w = rng.normal(size=uv.shape[:-1])
+    w[::2, :, ::3], w[1::2, :, ::5] = 0.0, -0.0
+    xs, ys, i, j, nonempty = masks._factorised_masks()
+    q = normalised_coordinates(uv)
+    qx, qy = q[..., None, :, 0], q[..., None, :, 1]
+    X = ((qx >= xs[:, :1]) & (qx <= xs[:, 1:])) * w[..., None, :]
+    Y = ((qy >= ys[:, :1]) & (qy <= ys[:, 1:])).astype(float)
+    whole = np.where(nonempty, np.matmul(X, np.swapaxes(Y, -1, -2))[..., i, j], 0.0)
+    got = mask_weight_sums(uv, w)
+    assert got.shape == whole.shape and got.tobytes() == whole.tobytes()
+    assert mask_weight_sums(uv[0, 0], w[0, 0]).tobytes() == whole[0, 0].tobytes()  # one point set, no batch
+
+
+def test_normalised_coordinates_are_the_whole_rows_to_the_bit():
+    """normalised_coordinates works a coordinate at a time: the same values as on whole rows."""
+    rng = np.random.default_rng(6)
+    uv = rng.uniform(-50, 300, size=(40, 3, 36, 2))
+    uv[::4, :, :, 1] = 7.0  # a flat point set: the extent's floor
+    lo, hi = uv.min(axis=-2), uv.max(axis=-2)
+    want = (uv - lo[..., None, :]) / np.maximum(hi - lo, 1e-9)[..., None, :]
+    assert normalised_coordinates(uv).tobytes() == want.tobytes()
+
+
 def test_occlusion_reasoning_changes_the_estimate_where_a_car_hides_another():
     """A scene built to need it: the far car's rear-left is hidden by the near car, and
     perfect evidence is missing exactly there. Without occlusion reasoning (fg) the fit

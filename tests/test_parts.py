@@ -325,6 +325,8 @@ def test_log_ratio_reads_each_corner_like_a_four_index_gather():
     uv = origin + stride * cell
     uv[::17, :, 4] = np.nan
     uv[::13, :, 5] = -1e9
+    uv[::11, :, 6] = 1e9
+    uv[::19, :, 7] = np.inf
 
     def reference(bilinear, outside=None):  # the former lookup
         lr, shape, org, st = R._stacked()

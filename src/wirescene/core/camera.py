@@ -99,10 +99,17 @@ class Camera:
         """
         X = np.asarray(X, dtype=float)
         check_shape("X", X, (..., 3))
-        uvw = X @ self.P[:, :3].T + self.P[:, 3]
+        uvw = X @ self.P[:, :3].T
+        # The translation added and the pixels divided a component at a time: the same
+        # operations as on whole (..., 3) rows, in long loops rather than short ones of 2 or 3.
+        for k in range(3):
+            uvw[..., k] += self.P[k, 3]
         w = uvw[..., 2]
         safe = np.where(np.abs(w) < 1e-9, 1e-9, w)
-        return uvw[..., :2] / safe[..., None], w
+        uv = np.empty(uvw.shape[:-1] + (2,))
+        np.divide(uvw[..., 0], safe, out=uv[..., 0])
+        np.divide(uvw[..., 1], safe, out=uv[..., 1])
+        return uv, w
 
     def rays(self, uv: np.ndarray) -> np.ndarray:
         """Unit viewing directions ``(..., 3)`` through pixels ``uv`` ``(..., 2)``."""

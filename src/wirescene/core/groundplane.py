@@ -177,7 +177,15 @@ def transform(points_obj: np.ndarray, location: np.ndarray, R: np.ndarray) -> np
            [ 0.  ,  0.15, 10.  ]])
     """
     # matmul, not einsum: 2.5x faster on large batches of small matrices
-    return np.matmul(points_obj, np.swapaxes(R, -1, -2)) + location[..., None, :]
+    X = np.matmul(points_obj, np.swapaxes(R, -1, -2))
+    offset = np.asarray(location)[..., None, :]
+    if np.broadcast_shapes(X.shape, offset.shape) != X.shape or np.result_type(X, offset) != X.dtype:
+        return X + offset
+    # In place, a component at a time where the product has the sum's shape and type: the same
+    # sums, in long loops over the points rather than short ones of 3.
+    for k in range(X.shape[-1]):
+        X[..., k] += offset[..., k]
+    return X
 
 
 def rotation_y_of(R: np.ndarray) -> np.ndarray:

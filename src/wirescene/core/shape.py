@@ -85,7 +85,9 @@ class ShapeModel:
             raise ValueError(f"s has {k} coefficients but the model has {self.n_components} components")
         weighted = (self.components[:k] * self.stds[:k, None, None]).reshape(k, -1)
         # one matrix product over the flattened batch (einsum was 3x slower here)
-        return self.mean + (s.reshape(-1, k) @ weighted).reshape(s.shape[:-1] + self.mean.shape)
+        X = (s.reshape(-1, k) @ weighted).reshape(s.shape[:-1] + self.mean.shape)
+        X += self.mean  # in place: the same sums as mean + X
+        return X
 
     def project_coefficients(self, X, n_components: int | None = None) -> np.ndarray:
         """Least-squares coefficients ``(..., k)`` of wireframes ``X`` ``(..., 36, 3)``

@@ -66,7 +66,12 @@ def normalised_coordinates(uv: np.ndarray) -> np.ndarray:
     uv = np.asarray(uv, dtype=float)
     check_shape("uv", uv, (..., None, 2))
     lo, hi = point_bounds(uv)
-    return (uv - lo[..., None, :]) / np.maximum(hi - lo, 1e-9)[..., None, :]
+    extent = np.maximum(hi - lo, 1e-9)
+    q = np.empty_like(uv)
+    for d in range(uv.shape[-1]):  # a coordinate at a time: the same operations in long loops
+        np.subtract(uv[..., d], lo[..., None, d], out=q[..., d])
+        q[..., d] /= extent[..., None, d]
+    return q
 
 
 def mask_hidden(uv: np.ndarray, mask_index, *, masks: np.ndarray | None = None) -> np.ndarray:
@@ -107,6 +112,10 @@ def all_mask_hidden(uv: np.ndarray, *, masks: np.ndarray | None = None) -> np.nd
     )
 
 
+#: Point sets :func:`mask_weight_sums` reads at a time.
+MASK_BLOCK = 32
+
+
 @lru_cache(maxsize=1)
 def _factorised_masks():
     """The mask set as products of x- and y-intervals: ``(x_intervals (I, 2),
@@ -145,11 +154,24 @@ def mask_weight_sums(uv: np.ndarray, weights: np.ndarray) -> np.ndarray:
     q = normalised_coordinates(uv)
     w = np.asarray(weights, dtype=float)
     check_shape("weights", w, q.shape[:-1])
-    qx, qy = q[..., None, :, 0], q[..., None, :, 1]
-    X = ((qx >= xs[:, :1]) & (qx <= xs[:, 1:])) * w[..., None, :]  # (..., I, V)
-    Y = ((qy >= ys[:, :1]) & (qy <= ys[:, 1:])).astype(float)  # (..., J, V)
-    sums = np.matmul(X, np.swapaxes(Y, -1, -2))  # (..., I, J)
-    return np.where(nonempty, sums[..., i, j], 0.0)
+    V = q.shape[-2]
+    q, w = q.reshape(-1, V, 2), w.reshape(-1, V)
+    sums = np.empty((len(q), len(i)))
+    x_lo, x_hi = xs[:, :1, None], xs[:, 1:, None]  # (I, 1, 1)
+    # MASK_BLOCK point sets at a time, their (I, rows, V) flags in cache, long rows for the comparisons;
+    # each point set's matrix product is the one of the whole batch (the same BLAS call, the rows
+    # of X further apart).
+    for start in range(0, len(q), MASK_BLOCK):
+        rows = slice(start, start + MASK_BLOCK)
+        qx = np.ascontiguousarray(q[rows, :, 0])  # (r, V)
+        inside = qx >= x_lo
+        inside &= qx <= x_hi
+        X = np.multiply(inside, w[rows])  # (I, r, V)
+        qy = q[rows, None, :, 1]
+        Y = ((qy >= ys[:, :1]) & (qy <= ys[:, 1:])).astype(float)  # (r, J, V)
+        block = np.matmul(X.transpose(1, 0, 2), np.swapaxes(Y, -1, -2))  # (r, I, J)
+        sums[rows] = np.where(nonempty, block[:, i, j], 0.0)
+    return sums.reshape(uv.shape[:-2] + (len(i),))
 
 
 def best_mask(uv: np.ndarray, evidence: np.ndarray, self_hidden: np.ndarray, *, c: float, hidden=None) -> np.ndarray:

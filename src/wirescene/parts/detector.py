@@ -397,6 +397,7 @@ class PartResponses:
     boxes: list
     eps: float
     _stack: tuple | None = None
+    _padded: np.ndarray | None = None
 
     def __len__(self):
         return len(self.boxes)
@@ -407,10 +408,15 @@ class PartResponses:
         return float(np.log(self.eps))
 
     def _stacked(self):
+        """``(lr, shape, origin, stride)``: the boxes' maps stacked ``(n, gh, gw, 36)`` (the
+        floor past each box's grid), their grid sizes, origins and strides. ``lr`` is the
+        inside of :attr:`_padded`, the stack with two more grid lines of the floor before and
+        after each axis, ``(n, gh + 4, gw + 4, 36)``, which the lookups read."""
         if self._stack is None:
             gh = max((b.log_ratio.shape[0] for b in self.boxes), default=1)
             gw = max((b.log_ratio.shape[1] for b in self.boxes), default=1)
-            lr = np.full((max(len(self.boxes), 1), gh, gw, N_PARTS), self.floor, dtype=np.float32)
+            padded = np.full((max(len(self.boxes), 1), gh + 4, gw + 4, N_PARTS), self.floor, dtype=np.float32)
+            lr = padded[:, 2:gh + 2, 2:gw + 2]
             shape = np.zeros((max(len(self.boxes), 1), 2), dtype=np.int64)
             origin = np.zeros((max(len(self.boxes), 1), 2))
             stride = np.ones(max(len(self.boxes), 1))
@@ -420,7 +426,7 @@ class PartResponses:
                 shape[i] = (h, w)
                 origin[i] = b.origin
                 stride[i] = b.stride
-            self._stack = (lr, shape, origin, stride)
+            self._stack, self._padded = (lr, shape, origin, stride), padded
         return self._stack
 
     def log_ratio(self, uv, box_index, *, outside: float | None = None, bilinear: bool = False) -> np.ndarray:
@@ -450,17 +456,22 @@ class PartResponses:
         if b.size and (b.min() < 0 or b.max() >= len(self.boxes)):
             raise ShapeError(f"box_index out of range [0, {len(self.boxes)})")
         s = stride[b]
-        fj = (uv[..., 0] - origin[b, 0]) / s
-        fi = (uv[..., 1] - origin[b, 1]) / s
+        fj = uv[..., 0] - origin[b, 0]
+        fj /= s
+        fi = uv[..., 1] - origin[b, 1]
+        fi /= s
         out_value = np.float32(self.floor if outside is None else outside)
         h, w = shape[b, 0], shape[b, 1]
+        if bilinear and outside is None:
+            return self._bilinear_floor(fi, fj, b, h, w)
         # Entry (b, i, j, part) of the stacked maps read by its flat index: the row's and the
         # column's offsets are computed once for each grid line a corner lies on (shared by
         # two of the four corners) and the values gathered with one take, the same values as
-        # indexing lr[b, i, j, part] (1.5x faster, benchmarks/RESULTS.md).
-        gw = lr.shape[2]
-        flat = lr.reshape(-1)
-        base = b * (lr.shape[1] * gw * N_PARTS) + np.arange(N_PARTS)
+        # indexing lr[b, i, j, part] (1.5x faster, benchmarks/RESULTS.md); lr lies inside the
+        # padded stack, two grid lines from each edge.
+        n_rows, gw = self._padded.shape[1:3]
+        flat = self._padded.reshape(-1)
+        base = (b * n_rows + 2) * (gw * N_PARTS) + 2 * N_PARTS + np.arange(N_PARTS)
 
         def line(k, n, step):
             """Whether grid lines ``k`` lie in ``[0, n)``, and their flat offsets (0 where not)."""
@@ -480,6 +491,45 @@ class PartResponses:
         top = (1 - tj) * at(r0, c0) + tj * at(r0, c1)
         bottom = (1 - tj) * at(r1, c0) + tj * at(r1, c1)
         return ((1 - ti) * top + ti * bottom).astype(np.float32)
+
+    def _bilinear_floor(self, fi, fj, b, h, w) -> np.ndarray:
+        """:meth:`log_ratio`'s bilinear lookup with the floor outside the grids, from the
+        grid coordinates ``fi``, ``fj`` ``(..., 36)`` of boxes ``b`` ``(..., 1)`` with grids of
+        ``h`` x ``w`` points: the same values, to the bit, by the same operations, read without
+        bounds tests. Each corner's grid line is clipped to ``[-2, h]`` (``[-2, w]``) and read
+        off the padded stack (:meth:`_stacked`), where every line before a grid or past it holds the floor, as
+        the bounds tests give; ``fmax``/``fmin`` map NaN to the floor's line, as the tests do.
+        The four corners' flat indices differ by constants: one index array moved in place."""
+        padded = self._padded
+        n_rows, n_cols = padded.shape[1:3]
+        i0, j0 = np.floor(fi), np.floor(fj)
+        ti, tj = np.subtract(fi, i0, out=fi), np.subtract(fj, j0, out=fj)
+        i = np.fmin(np.fmax(i0, -2.0, out=i0), h, out=i0).astype(np.int64)
+        j = np.fmin(np.fmax(j0, -2.0, out=j0), w, out=j0).astype(np.int64)
+        row = n_cols * N_PARTS
+        index = np.multiply(i, row, out=i)
+        index += np.multiply(j, N_PARTS, out=j)
+        index += ((b * n_rows + 2) * n_cols + 2) * N_PARTS
+        index += np.arange(N_PARTS)
+        flat = padded.reshape(-1)
+        v00 = flat.take(index)
+        index += N_PARTS
+        v01 = flat.take(index)
+        index += row
+        v11 = flat.take(index)
+        index -= N_PARTS
+        v10 = flat.take(index)
+        # (1 - tj) v00 + tj v01, (1 - tj) v10 + tj v11, then (1 - ti) top + ti bottom, in place
+        sj = np.subtract(1, tj, out=i0)
+        top = np.multiply(sj, v00)
+        product = np.multiply(tj, v01, out=j0)
+        top += product
+        bottom = np.multiply(sj, v10, out=sj)
+        bottom += np.multiply(tj, v11, out=product)
+        top *= np.subtract(1, ti, out=product)
+        bottom *= ti
+        top += bottom
+        return top.astype(np.float32)
 
 
 def log_ratio(responses: PartResponses, uv, box_index, **kwargs) -> np.ndarray:
