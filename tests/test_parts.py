@@ -308,15 +308,19 @@ def test_log_ratio_reads_each_corner_like_a_four_index_gather():
     """The lookup gathers by flat index (the rows' and columns' offsets shared by the corners
     on one grid line): the same values, to the bit, as indexing the stacked maps
     ``lr[b, i, j, part]`` at each corner, inside the grids, on their last lines, just past
-    them, far away and at NaN, nearest and bilinear."""
+    them (past the largest grid, in the last box of the stack, too), far away and at NaN,
+    nearest and bilinear."""
     from wirescene.parts.detector import BoxResponses, PartResponses
 
     rng = np.random.default_rng(3)
     boxes = [BoxResponses(np.zeros(4), np.zeros(4), np.array(origin), stride, (1.0,), np.zeros(0),
                           rng.normal(size=(gh, gw, N_PARTS)).astype(np.float32))
-             for origin, stride, gh, gw in (((10.0, 20.0), 2.5, 7, 11), ((-30.0, 5.0), 4.0, 12, 5), ((300.0, 40.0), 1.0, 3, 3))]
+             for origin, stride, gh, gw in (((10.0, 20.0), 2.5, 7, 11), ((-30.0, 5.0), 4.0, 12, 5),
+                                            ((300.0, 40.0), 1.0, 3, 3),
+                                            ((50.0, -10.0), 2.0, 14, 13))]  # the last box: the stack's largest grid
     R = PartResponses(boxes, eps=1e-3)
     b = rng.integers(0, len(boxes), (200, 3))
+    b[-20:] = len(boxes) - 1  # the lines past the last grid of the stack: the padding's end, not the next box's start
     origin = np.array([boxes[k].origin for k in b.ravel()]).reshape(200, 3, 1, 2)
     stride = np.array([boxes[k].stride for k in b.ravel()]).reshape(200, 3, 1, 1)
     size = np.array([boxes[k].log_ratio.shape[1::-1] for k in b.ravel()]).reshape(200, 3, 1, 2)
@@ -327,6 +331,7 @@ def test_log_ratio_reads_each_corner_like_a_four_index_gather():
     uv[::13, :, 5] = -1e9
     uv[::11, :, 6] = 1e9
     uv[::19, :, 7] = np.inf
+    uv[::23, :, 8] = -np.inf
 
     def reference(bilinear, outside=None):  # the former lookup
         lr, shape, org, st = R._stacked()

@@ -496,9 +496,10 @@ class PartResponses:
         """:meth:`log_ratio`'s bilinear lookup with the floor outside the grids, from the
         grid coordinates ``fi``, ``fj`` ``(..., 36)`` of boxes ``b`` ``(..., 1)`` with grids of
         ``h`` x ``w`` points: the same values, to the bit, by the same operations, read without
-        bounds tests. Each corner's grid line is clipped to ``[-2, h]`` (``[-2, w]``) and read
-        off the padded stack (:meth:`_stacked`), where every line before a grid or past it holds the floor, as
-        the bounds tests give; ``fmax``/``fmin`` map NaN to the floor's line, as the tests do.
+        bounds tests. The lower corners' grid line ``floor(fi)`` is clipped to ``[-2, h]`` (``floor(fj)``
+        to ``[-2, w]``), the upper corners' one past it, and both read off the padded stack
+        (:meth:`_stacked`), where every line before a grid or past it holds the floor, as the bounds
+        tests give; ``fmax``/``fmin`` map NaN to the floor's line, as the tests do.
         The four corners' flat indices differ by constants: one index array moved in place."""
         padded = self._padded
         n_rows, n_cols = padded.shape[1:3]
