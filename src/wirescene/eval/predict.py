@@ -113,28 +113,25 @@ def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDa
     ``names``: how the message names each folder of :data:`FOLDERS` (the arguments' names, or the
     command's options)."""
     submission = f"{names['out_dir']}, the label folder: a submission holds the label files alone"
-    inputs = [(dataset.image_dir, "the folder of the images"), (source.folder, "the detections' folder"),
-              (dataset.split_dir / "label_2", "the split's label folder"),
-              (dataset.split_dir / "calib", "the split's calibration folder")]
-    # what each output's files would do there; the rest of a run's inputs are no place for its outputs either
-    why = {("out", "the folder of the images"): "a submission holds the label files alone",
-           ("out", "the detections' folder"): "each frame's label file written there would replace its detection "
-                                              "file or be a second one",
-           ("json_dir", "the detections' folder"): "each frame's FRAME.json written there would replace its "
-                                                   "detection file or be a second one",
-           ("out", "the split's label folder"): "the next run would read the label files as the frames' ground truth",
-           ("out", "the split's calibration folder"): "each FRAME.txt there is a frame's calibration",
-           ("pictures_dir", "the folder of the images"): "each picture written there would be a frame of the next "
-                                                         "run"}
+    replaces = "each frame's {} written there would replace its detection file or be a second one"
+    # each folder the run reads, with what an output's files would do there (any other: nothing belongs there)
+    inputs = [(dataset.image_dir, "the folder of the images",
+               {"out_dir": "a submission holds the label files alone",
+                "pictures_dir": "each picture written there would be a frame of the next run"}),
+              (source.folder, "the detections' folder",
+               {"out_dir": replaces.format("label file"), "json_dir": replaces.format("FRAME.json")}),
+              (dataset.split_dir / "label_2", "the split's label folder",
+               {"out_dir": "the next run would read the label files as the frames' ground truth"}),
+              (dataset.split_dir / "calib", "the split's calibration folder",
+               {"out_dir": "each FRAME.txt there is a frame's calibration"})]
     taken = [("json_dir", out, submission), ("pictures_dir", out, submission)]
-    taken += [(name, folder, f"{what}: {why.get((name, what), 'a run writes nothing among what it reads')}")
-              for name in ("out", "json_dir", "pictures_dir") for folder, what in inputs]
-    folders = {"out": out, **folders}
+    taken += [(name, folder, f"{what}: {why.get(name, 'a run writes nothing among what it reads')}")
+              for name in FOLDERS for folder, what, why in inputs]
+    folders = {"out_dir": out, **folders}
     for name, other, what in taken:
         folder = folders[name]
         if folder is not None and other is not None and folder.resolve() == Path(other).resolve():
-            said = names["out_dir" if name == "out" else name]
-            raise InputError(f"{said} is {what}; give it a folder of its own", path=folder)
+            raise InputError(f"{names[name]} is {what}; give it a folder of its own", path=folder)
 
 
 def _others_files(frame_ids: list[str], folders: dict[str, Path | None], names: Mapping[str, str],
