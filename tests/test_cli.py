@@ -145,7 +145,7 @@ def test_the_resume_hint_of_a_full_disk_is_the_running_commands(tmp_path, monkey
     none, and `eval` without --predictions (nothing kept) was told its frames stay."""
     import errno
 
-    import wirescene.cli.main
+    import wirescene.eval.runner
     import wirescene.training.pipeline
 
     def disk_full(*a, **kw):
@@ -156,7 +156,7 @@ def test_the_resume_hint_of_a_full_disk_is_the_running_commands(tmp_path, monkey
     assert r.exit_code == 1 and r.stderr.strip().splitlines() == [
         f"wirescene: error: {tmp_path / 'm' / 'parts_model.npz'}: {os.strerror(errno.ENOSPC)}; the steps --out holds "
         "stay (--resume goes on from them)"], r.stderr
-    monkeypatch.setattr(wirescene.cli.main, "_say_if_trained_on", disk_full)  # after the output folders' checks
+    monkeypatch.setattr(wirescene.eval.runner, "trained_on_frames", disk_full)  # after the output folders' checks
     r = run("eval", KITTI_ROOT, "--variant", "coarse", "--detections", "gt", "--frames", "000010")
     assert r.exit_code == 1 and r.stderr.strip().splitlines() == [
         f"wirescene: error: {tmp_path / 'm' / 'parts_model.npz'}: {os.strerror(errno.ENOSPC)}"], r.stderr
@@ -1682,14 +1682,17 @@ def test_python_m_wirescene_runs_the_command():
     assert r.returncode == 2 and r.stderr.strip() == "wirescene: error: IMAGE: missing (required)", r.stderr
 
 
-def test_eval_says_where_the_shipped_models_were_trained_on_the_frames_evaluated(tmp_path, capsys):
+def test_eval_says_where_the_shipped_models_were_trained_on_the_frames_evaluated(tmp_path):
     """The shipped models were trained on the 72 shared frames, which a user's KITTI root holds under the same ids:
     `eval` says how many of its frames they are, told by the images' content (a frame of another image under one of
     those ids is not one), naming the shipped files the run reads."""
     from PIL import Image
 
     from conftest import kitti_copy
-    from wirescene.cli.main import _say_if_trained_on
+    from wirescene.core.resources import DATA_DIR
+    from wirescene.eval.held_out import trained_on_frames
+    from wirescene.fitting.models import model_files_read
+    from wirescene.fitting.options import FitOptions
     from wirescene.io.kitti import KittiDataset
 
     common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--particles", 5, "--workers", 1,
@@ -1707,13 +1710,38 @@ def test_eval_says_where_the_shipped_models_were_trained_on_the_frames_evaluated
     r = run("eval", root, *common[2:])
     assert r.exit_code == 0 and "trained on" not in r.stderr
     dataset = KittiDataset(KITTI_ROOT)
-    _say_if_trained_on(None, dataset, ["000010", "000002"], variants=["coarse", "full"], detections="bank")
-    assert capsys.readouterr().err == (
-        "wirescene: 2 of the 2 frames evaluated are among the 72 the shipped part model, detector bank, viewpoint "
-        "classifier and score calibration were trained on (e.g. 000010): their figures are not held out\n")
-    _say_if_trained_on(None, dataset, ["000010"], variants=["full"], detections="gt",
-                       replaced=["parts_model", "score_calibration"])  # files of the user's in their place
-    assert capsys.readouterr().err == ""
+    read = model_files_read(FitOptions(), fine=True, own=True)  # full on our own boxes
+    assert trained_on_frames(dataset, ["000010", "000002"], options=FitOptions(), read=read) == [
+        "2 of the 2 frames evaluated are among the 72 the shipped part model, detector bank, viewpoint classifier and "
+        "score calibration were trained on (e.g. 000010): their figures are not held out"]
+    mine = FitOptions(parts_model=str(tmp_path / "parts.npz"), score_calibration=str(tmp_path / "scores.json"))
+    shutil.copy(DATA_DIR / "parts_model.npz", tmp_path / "parts.npz")  # a copy of the shipped file is the shipped model
+    (tmp_path / "scores.json").write_text("{}")  # a file of the user's in its place: nothing known of it
+    assert trained_on_frames(dataset, ["000010"], options=mine, read=["parts_model", "score_calibration"]) == [
+        "1 of the 1 frames evaluated is among the 72 the shipped part model was trained on (e.g. 000010): its figures "
+        "are not held out"]
+
+
+def test_eval_names_the_frame_trained_models_its_fits_read(tmp_path):
+    """The held-out line names what the fits read (`model_files_read`): boxes of files that all carry a viewpoint read
+    neither the bank nor the viewpoint classifier, one without does; the pitch read off the boxes reads the bank."""
+    from wirescene.io.kitti import KittiDataset
+
+    boxes = [o.box.tolist() for o in KittiDataset(KITTI_ROOT).labels("000010").of_type("Car")]
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--particles", 5, "--workers", 1,
+              "--draws", 0, "--raw-scores"]
+    posed, unposed = tmp_path / "posed", tmp_path / "unposed"
+    for folder, bins in ((posed, [2] * len(boxes)), (unposed, [2] * (len(boxes) - 1) + [None])):
+        folder.mkdir()
+        (folder / "000010.json").write_text(json.dumps({"detections": [
+            {"box": box, "score": 0.9, "viewpoint_bin": b} for box, b in zip(boxes, bins)]}))
+    r = run(*common, "--detections", posed)
+    assert r.exit_code == 0 and "trained on" not in r.stderr, r.stderr
+    r = run(*common, "--detections", unposed)
+    assert r.exit_code == 0 and ("1 of the 1 frames evaluated is among the 72 the shipped detector bank and viewpoint "
+                                 "classifier were trained on") in r.stderr, r.stderr
+    r = run(*common, "--detections", "gt", "--estimate-pitch")
+    assert r.exit_code == 0 and "the shipped detector bank was trained on" in r.stderr, r.stderr
 
 
 def test_eval_says_nothing_of_held_out_frames_when_it_refuses_the_run(tmp_path):
@@ -1732,18 +1760,21 @@ def test_the_held_out_word_agrees_with_its_count_and_reads_what_the_run_reads():
     """One frame is one frame (`is`, `its`); a fine variant fitted to true vertices (--evidence oracle) reads no part
     model."""
     from wirescene.eval.held_out import trained_on_frames
+    from wirescene.fitting.models import model_files_read
+    from wirescene.fitting.options import FitOptions
     from wirescene.io.kitti import KittiDataset
 
     dataset = KittiDataset(KITTI_ROOT)
-    assert trained_on_frames(None, dataset, ["000010"], variants=["coarse"], detections="gt") == [
+    raw = FitOptions(calibrate_scores=False)
+    assert trained_on_frames(dataset, ["000010"], options=FitOptions(), read=["score_calibration"]) == [
         "1 of the 1 frames evaluated is among the 72 the shipped score calibration was trained on (e.g. 000010): its "
         "figures are not held out"]
-    assert trained_on_frames(None, dataset, ["000010", "000002"], variants=["fg"], detections="gt",
-                             calibrated=False) == [
+    read = model_files_read(raw, own=False, viewpoints_given=True)
+    assert trained_on_frames(dataset, ["000010", "000002"], options=raw, read=read) == [
         "2 of the 2 frames evaluated are among the 72 the shipped part model was trained on (e.g. 000010): their "
         "figures are not held out"]
-    assert trained_on_frames(None, dataset, ["000010"], variants=["fg"], detections="gt", calibrated=False,
-                             evidence="oracle") == []
+    read = model_files_read(raw, own=False, evidence="oracle")
+    assert trained_on_frames(dataset, ["000010"], options=raw, read=read) == []
 
 
 def test_the_demo_says_its_frames_are_not_held_out_with_a_models_directory_too(tmp_path, monkeypatch):

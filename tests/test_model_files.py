@@ -14,7 +14,7 @@ import wirescene
 from conftest import KITTI_ROOT
 from wirescene.cli.main import main
 from wirescene.core.errors import InputError
-from wirescene.core.resources import DATA_DIR, MANIFEST_FILE, shipped_path
+from wirescene.core.resources import MANIFEST_FILE, shipped_path
 from wirescene.core.shape import ShapeModel, load_default
 from wirescene.core.viewpoints import viewpoint_bin
 from wirescene.fitting.models import model_files_read, models_fingerprint, options_read
@@ -251,27 +251,40 @@ def test_a_coarse_run_s_resume_record_holds_no_option_of_the_fine_stage():
                                                    *model_files_read(base, fine=False)}
 
 
-def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(tmp_path, capsys):
-    models = models_dir(tmp_path / "models", viewpoint_classifier=shipped_path("viewpoint_classifier"))
-    manifest = {"format": "wirescene-models/1", "complete": True, "artefacts": ["viewpoint_classifier"],
-                "data": {"kitti_root": str(SPLIT.resolve()), "frame_ids": ["000010"]}, "steps": {}}
-    (models / MANIFEST_FILE).write_text(json.dumps(manifest))
-    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", 1, "--particles", 5,
-              "--models", models]
-    # our own boxes with the shipped bank: the directory's classifier gives them their viewpoints
-    r = cli(*common, "--detections", "bank", "--bank", DATA_DIR / "detector_bank.npz")
-    assert r.exit_code == 0, r.output + r.stderr
-    assert f"1 of the 1 frames evaluated is among those {models} was trained on" in r.stderr
-    # label boxes carry their viewpoints: no classifier is read
-    r = cli(*common, "--detections", "gt")
-    assert r.exit_code == 0 and f"{models} was trained on" not in r.stderr, r.output + r.stderr
-    # no --frames: every frame of the split (None was read as a list, a TypeError)
-    from wirescene.cli.main import _say_if_trained_on
+def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(tmp_path):
+    """A file of a `train all` directory is told by its manifest (the file its training wrote, by SHA-256), a copy
+    of a shipped file by the shipped models' frames, and a file of the user's own says nothing."""
+    from wirescene.core.resources import file_sha256
+    from wirescene.eval.held_out import trained_on_frames
     from wirescene.io.kitti import KittiDataset
 
-    _say_if_trained_on(models, KittiDataset(KITTI_ROOT), None, variants=["coarse"], detections="bank")
-    said = capsys.readouterr().err
-    assert f"1 of the 3 frames evaluated is among those {models} was trained on (e.g. 000010)" in said
+    models = models_dir(tmp_path / "models", viewpoint_classifier=forced_classifier(tmp_path / "forced.npz", 5))
+    step = {"done": True, "artefact": "viewpoint_classifier.npz",
+            "sha256": file_sha256(models / "viewpoint_classifier.npz")}
+    manifest = {"format": "wirescene-models/1", "complete": True, "artefacts": ["viewpoint_classifier"],
+                "data": {"kitti_root": str(SPLIT.resolve()), "frame_ids": ["000010"]}, "steps": {"viewpoints": step}}
+    (models / MANIFEST_FILE).write_text(json.dumps(manifest))
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", 1, "--particles", 5,
+              "--raw-scores"]
+    # our own boxes with the shipped bank (the directory holds none): the directory's classifier gives their viewpoints
+    r = cli(*common, "--models", models, "--detections", "bank")
+    assert r.exit_code == 0, r.output + r.stderr
+    assert r.stderr.count("trained on") == 2, r.stderr
+    assert f"1 of the 1 frames evaluated is among those {models} was trained on" in r.stderr
+    assert "the 72 the shipped detector bank was trained on" in r.stderr
+    # label boxes carry their viewpoints: no classifier is read
+    r = cli(*common, "--models", models, "--detections", "gt")
+    assert r.exit_code == 0 and "trained on" not in r.stderr, r.output + r.stderr
+    # the same file outside its directory: nothing known of it
+    r = cli(*common, "--viewpoint-classifier", tmp_path / "forced.npz", "--detections", "bank")
+    assert r.exit_code == 0 and f"{models}" not in r.stderr, r.output + r.stderr
+    # no frames given: every frame of the split
+    options = FitOptions(viewpoint_classifier=str(models / "viewpoint_classifier.npz"))
+    assert trained_on_frames(KittiDataset(KITTI_ROOT), None, options=options, read=["viewpoint_classifier"]) == [
+        f"1 of the 3 frames evaluated is among those {models} was trained on (e.g. 000010): its figures are not held "
+        "out"]
+    (models / "viewpoint_classifier.npz").write_bytes(b"x" + (models / "viewpoint_classifier.npz").read_bytes())
+    assert trained_on_frames(KittiDataset(KITTI_ROOT), None, options=options, read=["viewpoint_classifier"]) == []
 
 
 def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):

@@ -770,7 +770,6 @@ def evaluate(
     >>> bool(0 <= m["loc_1m"] <= 100)
     True
     """
-    from wirescene.eval.held_out import trained_on_frames
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource, min_score_problem
     from wirescene.io.kitti import KittiDataset, as_frame_ids
@@ -821,14 +820,12 @@ def evaluate(
     options = _options(None, particles, seed, models, settings, parallel=several and _workers(workers) > 1,
                        casts_rays=casts_rays(names))
 
-    def say_held_out():  # once every check has passed, before the first fit: a call refused warns of nothing
-        for message in trained_on_frames(models, dataset, frame_ids, variants=names, detections=str(detections),
-                                         calibrated=options.calibrate_scores):
-            warnings.warn(message, HeldOutWarning, stacklevel=4)  # the caller's line: evaluate_dataset calls this
+    def say_held_out(message: str) -> None:  # once every check has passed, before the first fit
+        warnings.warn(message, HeldOutWarning, stacklevel=4)  # the caller's line: evaluate_dataset calls this
 
     return evaluate_dataset(dataset, names, frames=frame_ids,
                             source=DetectionSource(str(detections), min_score=min_score, bank=options.detector_bank,
                                                    classifier=options.viewpoint_classifier),
                             options=options, workers=_workers(workers),
                             predictions_dir=None if predictions is None else Path(predictions),
-                            resume=bool(resume), before_fits=say_held_out)
+                            resume=bool(resume), held_out=say_held_out)

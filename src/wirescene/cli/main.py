@@ -382,9 +382,6 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
              json_out, predictions, evidence, raw_scores, draws, report_dir, workers, allow_missing_detections,
              min_score, resume, dask_address, **inference):
     """Evaluate model variants on a KITTI directory with the paper's protocol."""
-    import functools
-
-    from wirescene.eval.held_out import FRAME_TRAINED
     from wirescene.eval.seeds import format_over_seeds, over_seeds, seed_figures
 
     refuse_min_score(min_score, detections)
@@ -406,11 +403,6 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
     # read before any fit (a bad devkit mapping is an error now); a plain folder's frames are no KITTI drive's
     drives = {} if dataset.image_dir == dataset.split_dir else interval_drives(dataset.split_dir)
-    # said once the run's every check has passed, before its first fit (a run refused has no figures)
-    say_held_out = functools.partial(
-        _say_if_trained_on, inference.get("models"), dataset, frame_ids, variants=variants, detections=detections,
-        replaced=[k for k in FRAME_TRAINED if inference.get(k) is not None], calibrated=not raw_scores,
-        evidence=evidence)
     if raw_scores:
         inference["calibrate_scores"] = False
         # The car model of `train scores` learns from the boxes the verification would drop.
@@ -450,7 +442,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
                 particles=particles, predictions=_seed_dir(predictions, seed, several), evidence=evidence, draws=draws,
                 report_dir=_seed_dir(pages, seed, several), workers=workers,
                 allow_missing=allow_missing_detections, min_score=min_score, resume=resume, client=client,
-                dask_address=dask_address, before_fits=None if k else say_held_out,
+                dask_address=dask_address, say_held_out=not k,
                 inference=dict(inference), as_json=json_out is not None, notify=notify)
             figures[seed] = seed_figures({v: r.metrics["all"] for v, r in reports.items()}, kitti)
         summary = over_seeds(figures) if several else None
@@ -471,17 +463,6 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         click.echo(f"metrics written to {json_out}")
 
 
-def _say_if_trained_on(models_dir: Path | None, dataset, frame_ids: list[str] | None, *, variants, detections: str,
-                       replaced=(), calibrated: bool = True, evidence: str = "parts") -> None:
-    """A line on standard error for each model the run reads that was trained on some of the
-    frames evaluated (:func:`wirescene.eval.held_out.trained_on_frames`)."""
-    from wirescene.eval.held_out import trained_on_frames
-
-    for message in trained_on_frames(models_dir, dataset, frame_ids, variants=variants, detections=detections,
-                                     replaced=replaced, calibrated=calibrated, evidence=evidence):
-        click.echo(f"wirescene: {message}", err=True)
-
-
 def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
     """Where one seed of ``wirescene eval`` writes under an output folder: ``PATH/seed-S`` when
     several seeds are evaluated, else ``PATH`` itself."""
@@ -492,12 +473,11 @@ def _seed_dir(path: Path | None, seed: int, several: bool) -> Path | None:
 
 def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, viewpoint_noise, particles, predictions,
                    evidence, draws, report_dir, workers, allow_missing, min_score, resume, client, dask_address,
-                   inference, as_json, notify, before_fits=None) -> tuple[dict, dict, dict | None]:
+                   inference, as_json, notify, say_held_out=False) -> tuple[dict, dict, dict | None]:
     """One seed of ``wirescene eval``: fits, prints its tables and writes its report (its notices
-    to ``notify``; ``before_fits`` called before its first fit, as :func:`~wirescene.eval.runner.evaluate_dataset`
-    says);
-    returns ``(reports, kitti figures, JSON data)`` by variant, the JSON data (every record
-    serialised) only ``as_json`` (else None)."""
+    to ``notify``, with, ``say_held_out``, the frames evaluated that a model read was trained on,
+    :func:`~wirescene.eval.held_out.trained_on_frames`); returns ``(reports, kitti figures, JSON
+    data)`` by variant, the JSON data (every record serialised) only ``as_json`` (else None)."""
     from wirescene.eval.intervals import format_intervals, localisation_intervals, margin_intervals
     from wirescene.eval.kitti_metrics import format_kitti_summary
     from wirescene.eval.metrics import format_table
@@ -540,7 +520,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
         notify=notify,
         on_estimate=on_estimate,
         check_images=report_dir is not None,  # the gallery draws fitted frames: a corrupt image refused before the fits
-        before_fits=before_fits,
+        held_out=notify if say_held_out else None,
     )
     # Table 3 needs per-vertex ground truth (synthetic scenes); KITTI has none.
     has_parts = any(np.isfinite(r.metrics["all"].get("occ_pred_acc", np.nan)) for r in reports.values())
@@ -846,7 +826,6 @@ def demo_cmd(out, particles, variants, models):
 
     from wirescene.api import fit
     from wirescene.core.atomic import atomic_dir
-    from wirescene.eval.held_out import trained_on_frames
     from wirescene.eval.metrics import format_table
     from wirescene.eval.runner import evaluate_dataset
     from wirescene.eval.sources import DetectionSource
@@ -870,8 +849,9 @@ def demo_cmd(out, particles, variants, models):
                                           estimate=estimate, detections=detections, gt=gt.of_type("Car"))
                 written.extend(paths.values())
 
+        trained: list[str] = []  # a models directory keeps the shipped files it lacks (the score calibration)
         reports = evaluate_dataset(dataset, list(variants), source=DetectionSource("gt"), options=options,
-                                   progress=_progress("demo"), on_estimate=draw)
+                                   progress=_progress("demo"), on_estimate=draw, held_out=trained.append)
         # Raw-pixel mode: our own pre-detection instead of label boxes, then the full model.
         image = dataset.image(first)
         estimate = fit(image, dataset.camera(first), None, variant="full", options=options)
@@ -882,8 +862,6 @@ def demo_cmd(out, particles, variants, models):
                                              estimate=estimate, detections=raw, gt=gt).values())
         click.echo(f"raw-pixel mode on {first}: the detector bank proposed {len(raw)} boxes, the fit kept "
                    f"{len(estimate.objects)} cars ({len(gt)} labelled)\n")
-        # a models directory keeps the shipped files it lacks (every `train all` directory the score calibration)
-        trained = trained_on_frames(models, dataset, None, variants=variants, detections="gt")
         click.echo(f"wirescene {__version__} demo on bundled KITTI frames {', '.join(dataset.frame_ids())} "
                    f"(GT boxes as pre-detections, {particles} particles"
                    f"{'; frames the models it reads were trained on, so not held out' if trained else ''})\n")

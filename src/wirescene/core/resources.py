@@ -194,15 +194,31 @@ def resolve_models(models_dir: str | Path | None) -> Models:
     return Models(root.resolve(), tuple(n for n in ARTEFACTS if n in listed))
 
 
-def trained_on(models: Models, split_dir: str | Path, frame_ids) -> list[str]:
-    """The frames of ``frame_ids`` (of the KITTI split directory ``split_dir``) that the
-    models directory's own artefacts were trained on, as its manifest records them (none
-    for the shipped models or a directory without a manifest)."""
-    manifest = None if models.root is None else models.root / MANIFEST_FILE
-    if manifest is None or not manifest.is_file() or not models.own:
+def trained_on(path: str | Path, split_dir: str | Path, frame_ids) -> list[str]:
+    """The frames of ``frame_ids`` (of the KITTI split directory ``split_dir``) that the artefact
+    file at ``path`` was trained on, as the manifest beside it records them: a file of
+    ``wirescene train all``, the very one its training wrote (its SHA-256 the manifest's). None
+    for a file no readable manifest beside it lists (a shipped file, a file put there by hand).
+
+    Examples
+    --------
+    >>> trained_on(shipped_path("parts_model"), "kitti/training", ["000010"])  # no manifest beside it
+    []
+    """
+    path = Path(path)
+    manifest = path.parent / MANIFEST_FILE
+    if not manifest.is_file():
         return []
-    data = load_json(manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("data") or {}
-    if not isinstance(data.get("frame_ids"), list) or data.get("kitti_root") != str(Path(split_dir).resolve()):
+    try:
+        record = load_json(manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION)
+    except InputError:  # a broken manifest is refused where the directory is read as --models
+        return []
+    steps = record.get("steps") if isinstance(record.get("steps"), dict) else {}
+    written = {s.get("artefact"): s.get("sha256") for s in steps.values() if isinstance(s, dict)}
+    data = record.get("data") if isinstance(record.get("data"), dict) else {}
+    if (path.name not in written or not isinstance(data.get("frame_ids"), list)
+            or data.get("kitti_root") != str(Path(split_dir).resolve())
+            or file_sha256(path) != written[path.name]):
         return []
     trained = set(map(str, data["frame_ids"]))
     return [f for f in frame_ids if str(f) in trained]

@@ -24,6 +24,7 @@ from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.types import Detections, SceneEstimate, fitted_detections  # not io.outputs: it imports matplotlib
 from wirescene.core.validate import output_dir_problem
 from wirescene.core.workers import end_on_stop_signals, usable_cores
+from wirescene.eval.held_out import trained_on_frames
 from wirescene.eval.metrics import EvaluationReport, FrameResult, evaluate
 from wirescene.eval.records import (
     FrameRecords,
@@ -32,6 +33,7 @@ from wirescene.eval.records import (
     run_config,
 )
 from wirescene.eval.sources import DetectionSource, frame_seed
+from wirescene.fitting.models import model_files_read
 from wirescene.fitting.options import FitOptions
 from wirescene.fitting.pipeline import fit_frame, needs_evidence
 from wirescene.fitting.variants import get_variant
@@ -257,7 +259,7 @@ def evaluate_dataset(
     on_estimate: Callable[..., None] | None = None,
     notify: Callable[[str], None] | None = None,
     check_images: bool = False,
-    before_fits: Callable[[], None] | None = None,
+    held_out: Callable[[str], None] | None = None,
 ) -> dict[str, EvaluationReport]:
     """Fit every variant on every frame and evaluate with the paper's protocol.
 
@@ -310,10 +312,12 @@ def evaluate_dataset(
         Decode every frame to fit's image before the first fit, as a caller that reads them
         after the fits asks (a report's gallery, drawn from the fitted frames); the images the
         fits read are decoded anyway (:func:`check_images_read`).
-    before_fits : callable, optional
-        Called once every check above has passed, before the first fit (e.g. to say that
-        some frames are not held out, :func:`wirescene.eval.held_out.trained_on_frames`: a
-        run refused says nothing of its figures).
+    held_out : callable, optional
+        Told, once every check above has passed and before the first fit (a run refused says
+        nothing of its figures), each sentence of
+        :func:`~wirescene.eval.held_out.trained_on_frames`: the frames evaluated that a model
+        the fits read was trained on, so that their figures are not held out. None: not looked
+        up.
 
     Returns
     -------
@@ -364,9 +368,13 @@ def evaluate_dataset(
     say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
     source.check_files(dataset, todo)
     # a corrupt image refused now, not at its frame's fit or in the report after every fit
-    check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images, notify=notify)
-    if before_fits is not None:
-        before_fits()
+    finds_viewpoints = check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images,
+                                         notify=notify)
+    if held_out is not None:
+        read = model_files_read(options, fine=any(get_variant(v).fine for v in variants), own=source.own,
+                                evidence=evidence, viewpoints_given=not finds_viewpoints)
+        for sentence in trained_on_frames(dataset, frame_ids, options=options, read=read):
+            held_out(sentence)
     with ExitStack() as stack:
         fitted = fit_frames(job, todo, workers=workers, dask_client=dask_client, stack=stack)
         by_frame = _collect_frames(fitted, reused, records, progress, on_estimate)
@@ -380,7 +388,7 @@ SAY_DECODING = 200
 
 def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: Iterable[str],
                       frame_ids: list[str], *, evidence: str = "parts", every: bool = False,
-                      notify: Callable[[str], None] | None = None) -> None:
+                      notify: Callable[[str], None] | None = None) -> bool:
     """Decode, before the first fit, the image of each frame of ``frame_ids`` whose fit reads it
     (:meth:`~wirescene.io.kitti.KittiDataset.check_frames` with ``images``): a corrupt or
     truncated one is an :class:`InputError` then, not at its frame's fit (the frames fitted
@@ -389,17 +397,31 @@ def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: 
     variant, or a box without a viewpoint, as detection files give them), as the fits decide;
     ``every``: each frame's, for a caller that reads them after the fits (a report, pictures).
     Call it after :meth:`~wirescene.eval.sources.DetectionSource.check_files`; ``notify`` is told
-    of :data:`SAY_DECODING` images or more (a KITTI split's take half a minute or more)."""
-    if every or source.own:
-        read = list(frame_ids)
-    elif evidence != "parts":  # the oracle's evidence (and the viewpoints told by it): no image
-        read = []
+    of :data:`SAY_DECODING` images or more (a KITTI split's take half a minute or more).
+
+    Returns
+    -------
+    bool
+        Whether the bank and the crop classifier find viewpoints on these images: our own
+        pre-detection, or label or file boxes of which one comes without a viewpoint
+        (``evidence`` "parts"; :func:`~wirescene.fitting.models.model_files_read`'s
+        ``viewpoints_given`` is its negation for them).
+    """
+    finds_viewpoints = source.own
+    if source.own or evidence != "parts":  # the oracle's evidence (and the viewpoints told by it): no image
+        read = list(frame_ids) if every or source.own else []
     else:  # a label's viewpoint noise moves a viewpoint, never makes one unknown: any generator tells
         rng = np.random.default_rng(0)
-        read = [f for f in frame_ids if needs_evidence(source.for_frame(dataset, f, rng), variants)]
+        read = []
+        for frame_id in frame_ids:
+            boxes = source.for_frame(dataset, frame_id, rng)
+            finds_viewpoints |= not np.all(np.isfinite(boxes.alpha))
+            if every or needs_evidence(boxes, variants):
+                read.append(frame_id)
     if notify is not None and len(read) >= SAY_DECODING:
         notify(f"decoding the {len(read)} images the fits read before the first fit (a corrupt one refused now)")
     dataset.check_frames(read, images=True)
+    return finds_viewpoints
 
 
 def _reusable_records(records: FrameRecords, frame_ids: list[str], notify) -> dict[str, dict]:

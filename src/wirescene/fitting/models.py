@@ -142,7 +142,7 @@ def with_models(options: FitOptions, models: Models) -> FitOptions:
 
 
 def model_files_read(options: FitOptions, *, fine: bool = True, own: bool = True,
-                     evidence: str = "parts") -> tuple[str, ...]:
+                     evidence: str = "parts", viewpoints_given: bool = False) -> tuple[str, ...]:
     """The artefacts of :data:`MODEL_FILES` that fitting with ``options`` reads, in that
     order: the files :func:`check_model_files` loads and :func:`models_fingerprint` hashes.
 
@@ -161,10 +161,14 @@ def model_files_read(options: FitOptions, *, fine: bool = True, own: bool = True
         detection files, the API's) may come without a viewpoint (no ``alpha``, or KITTI's
         ``-10``), which the fit then finds with the bank and the classifier on the image
         (``evidence="parts"``) or from the given evidence with the shape model (``"oracle"``):
-        those files count as read, as the boxes are not read before a run.
+        those files count as read, unless ``viewpoints_given``.
     evidence : {"parts", "oracle"}
         What the fine variants fit to (``wirescene eval --evidence``): the part detectors on
         the image, or given per-vertex evidence (synthetic scenes), which reads no part model.
+    viewpoints_given : bool
+        Of boxes not our own (``own`` False), every one is known to come with its viewpoint
+        (the run's boxes read): neither the classifier nor, unless it reads the pitch off the
+        boxes, the bank is read. A fingerprint, made before the boxes are read, counts them.
 
     Returns
     -------
@@ -179,18 +183,21 @@ def model_files_read(options: FitOptions, *, fine: bool = True, own: bool = True
     ('detector_bank', 'viewpoint_classifier', 'score_calibration')
     >>> model_files_read(FitOptions(calibrate_scores=False), fine=False, own=False, evidence="oracle")
     ('shape_model',)
+    >>> model_files_read(FitOptions(), own=False, viewpoints_given=True)  # a fine variant on label boxes
+    ('parts_model', 'score_calibration', 'shape_model')
     """
     if evidence not in ("parts", "oracle"):
         raise ValueError(f"evidence must be 'parts' or 'oracle', got {evidence!r}")
-    # boxes without a viewpoint: scored on the image by the bank and the classifier, or read off the given evidence
-    on_image = own or evidence == "parts"
+    unposed = not own and not viewpoints_given  # boxes that may come without a viewpoint
+    # their viewpoints scored on the image by the bank and the classifier, or read off the given evidence
+    on_image = own or (unposed and evidence == "parts")
     read = {
         "parts_model": fine and evidence == "parts",
         # the pitch read off each frame's boxes (lifting.estimate_pitch) takes the bank's ground prior
         "detector_bank": on_image or options.lifting.estimate_pitch,
         "viewpoint_classifier": on_image,
         "score_calibration": reads_score_calibration(options, own=own),
-        "shape_model": fine or not on_image,
+        "shape_model": fine or (unposed and evidence == "oracle"),
     }
     return tuple(name for name in MODEL_FILES if read[name])
 
