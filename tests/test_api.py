@@ -619,7 +619,7 @@ def test_overlay_cuts_what_reaches_behind_the_camera_and_keys_its_colours(frame)
     segments = np.concatenate([c.get_segments() for c in ax.collections if isinstance(c, LineCollection)])
     assert len(segments) > 0 and np.isfinite(segments).all()  # was: the whole box left out
     assert segments[..., 0].max() > image.shape[1] * 0.8 and np.abs(segments).max() < 1e5  # no flipped projection
-    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["ground truth"]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["ground truth (a cross marks the front)"]
     scene = wirescene.fit(image, camera, [[354, 185, 549, 294]], variant="full", particles=20)
     legend = overlay(image, camera, scene, detections=scene.detections, edges=EDGES).axes[0].get_legend()
     key = [t.get_text() for t in legend.get_texts()]

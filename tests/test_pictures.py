@@ -195,6 +195,63 @@ def test_overlay_draws_the_pre_detections_the_fit_dropped_apart(camera):
                                                                        "pre-detection the fit dropped"]
 
 
+def test_the_dropped_pre_detections_and_their_key_stand_out_on_a_bright_picture(camera):
+    """The light grey of a dropped pre-detection, drawn on a white image (a bright sky, a
+    white wall) and shown in the key's light box, keeps a dark rim: the box and its key's
+    sample are seen (they were grey on white, 1.4:1, the key's sample all but blank)."""
+    from wirescene.io.pictures import overlay
+
+    fig = overlay(np.full((375, 1242, 3), 255, np.uint8), camera,
+                  dropped=Detections([[600.0, 150.0, 640.0, 180.0]], 1.0, np.nan))
+    renderer = _drawn(fig)
+    pixels = np.asarray(fig.canvas.buffer_rgba())[..., :3].mean(axis=-1)  # rows from the top, as the image's
+
+    def darkest(bbox) -> float:
+        rows = slice(int(pixels.shape[0] - bbox.y1) - 1, int(pixels.shape[0] - bbox.y0) + 2)
+        return float(pixels[rows, int(bbox.x0) - 1:int(bbox.x1) + 2].min())
+
+    box = fig.axes[0].patches[0].get_window_extent(renderer)
+    assert darkest(box) < 110  # the box's line, on white
+    sample = fig.axes[0].get_legend().legend_handles[0].get_window_extent(renderer)
+    assert darkest(sample) < 110  # its sample in the key
+
+
+def test_a_nearer_cars_wireframe_covers_a_farther_cars_dots(camera):
+    """Cars are drawn far to near, each in a layer of its own: a far car's vertices are not
+    drawn over a nearer car's edges (they were: every dot above every edge, so that a car
+    behind seemed to have its vertices on the car in front)."""
+    from matplotlib.collections import LineCollection, PathCollection
+
+    from wirescene.io.pictures import overlay
+
+    scene = _scene(camera, [(2.0, 12.0), (2.6, 20.0)], wireframes=True)
+    ax = overlay(np.zeros((375, 1242, 3), np.uint8), camera, scene, edges=EDGES).axes[0]
+    far, near = ax.collections[:4], ax.collections[4:]  # drawn far to near: edges (solid, dashed), dots
+    assert [type(c) for c in far] == [type(c) for c in near] == [LineCollection] * 2 + [PathCollection] * 2
+    assert max(c.get_zorder() for c in far) < min(c.get_zorder() for c in near)
+    assert all(c.get_zorder() > e.get_zorder() for c in near[2:] for e in near[:2])  # a car's dots on its edges
+    assert max(c.get_zorder() for c in ax.collections) < min(t.get_zorder() for t in ax.texts)  # the numbers on top
+
+
+def test_the_key_says_which_face_the_cross_of_a_box_marks(camera):
+    """Every 3D box carries a cross on its front face; the key says so by the boxes drawn (a
+    crossed box is read as an ignored one elsewhere), also where the estimates are wireframes."""
+    from wirescene.io.pictures import overlay
+
+    image = np.zeros((375, 1242, 3), np.uint8)
+    gt = [Label("Car", 0, 0, 0.0, [0, 0, 10, 10], [1.5, 1.6, 3.9], [3.0, 1.65, 28.0], 0.0)]
+
+    def key(scene):
+        return [t.get_text() for t in overlay(image, camera, scene, gt=gt, edges=EDGES).axes[0]
+                .get_legend().get_texts()]
+
+    assert key(None) == ["ground truth (a cross marks the front)"]
+    wireframes = key(_scene(camera, [(2.0, 12.0)], wireframes=True))
+    assert wireframes[0] == "estimate" and "ground truth (a cross marks the front)" in wireframes
+    boxes = key(_scene(camera, [(2.0, 12.0)]))
+    assert boxes[0] == "estimate (a cross marks the front)" and "ground truth" in boxes
+
+
 def _rectangles(ax) -> dict:
     """``{(x, y): (line style, edge colour)}`` of the boxes drawn on ``ax``."""
     from matplotlib.patches import Rectangle

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-from matplotlib import rc_context, transforms
+from matplotlib import patheffects, rc_context, transforms
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
@@ -34,10 +34,15 @@ GT_COLOR = "#33bbee"
 DET_COLOR = "#f5d90a"
 #: Pre-detections the fit's verification dropped (not cars, by the fit).
 DROPPED_COLOR = "#d9d9d9"
+#: Dark rim of each dot of a dropped pre-detection's light grey line: it stays visible on a bright
+#: sky or wall, and on the key's light background (a grey of 1.4:1 contrast there alone).
+DROPPED_RIM = "#404040"
 #: Face of a hidden vertex's dot (an open dot, edged in the estimate's colour).
 HIDDEN_FACE = "white"
 #: Font size (points) of the cars' numbers.
 NUMBER_FONTSIZE = 7
+# A dropped pre-detection's line on its dark rim (each dot of the dotted line rimmed, the dots kept).
+_DROPPED_EFFECTS = [patheffects.Stroke(linewidth=2.5, foreground=DROPPED_RIM), patheffects.Normal()]
 # Box edges as corner index pairs for the corner order of boxes.box_corners_object.
 _BOX_EDGES = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)]
 _FRONT_FACE = [(0, 3), (1, 2)]  # cross on the front face marks the heading
@@ -72,7 +77,8 @@ def drawn_image(image: np.ndarray) -> np.ndarray:
     return np.asarray(Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8)).reduce(k))
 
 
-def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: float, ls="-") -> None:
+def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: float, ls="-",
+                zorder: float = 2.0) -> None:
     """The segments ``edges`` ``(E, 2)`` between 3D ``points`` ``(P, 3)``, each cut at the
     camera's near plane (a car next to or beside the camera keeps the part in front of it)."""
     from matplotlib.collections import LineCollection
@@ -89,7 +95,7 @@ def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: f
     a, b = np.where((da <= NEAR_PLANE)[:, None], cut, a), np.where((db <= NEAR_PLANE)[:, None], cut, b)
     uv = camera.project(np.concatenate([a, b]))
     ax.add_collection(LineCollection(np.stack([uv[:len(a)], uv[len(a):]], axis=1), colors=color, linewidths=lw,
-                                     linestyles=ls))
+                                     linestyles=ls, zorder=zorder))
 
 
 def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float = 1.5):
@@ -97,11 +103,14 @@ def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float =
     _draw_edges(ax, camera, corners, _FRONT_FACE, color, lw * 0.6)
 
 
-def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR):
+def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR,
+                   zorder: float = 2.0, dot_zorder: float | None = None):
     """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``: visible vertices as dots of
     ``color``, hidden ones as open dots and the edges between two hidden vertices dashed;
     dots sized by the car's height in the image (a far car's dots would hide it).
     ``visible`` ``(V,)`` bool defaults to all visible; edges are cut at the camera's near plane.
+    The edges are drawn at ``zorder``, the dots at ``dot_zorder`` (default ``zorder + 1``):
+    :func:`overlay` stacks its cars so that a nearer car's edges cover a farther car's dots.
 
     Examples
     --------
@@ -120,17 +129,18 @@ def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, 
     edges = np.asarray(edges, int).reshape(-1, 2)
     vis = np.ones(len(vertices), bool) if visible is None else np.asarray(visible, bool)
     behind = ~vis[edges[:, 0]] & ~vis[edges[:, 1]]
-    _draw_edges(ax, camera, vertices, edges[~behind], color, 1.0)
+    dot_zorder = zorder + 1 if dot_zorder is None else dot_zorder
+    _draw_edges(ax, camera, vertices, edges[~behind], color, 1.0, zorder=zorder)
     if behind.any():
-        _draw_edges(ax, camera, vertices, edges[behind], color, 0.8, ls=(0, (3, 2)))
+        _draw_edges(ax, camera, vertices, edges[behind], color, 0.8, ls=(0, (3, 2)), zorder=zorder)
     uv, depth = camera.project_with_depth(vertices)
     front = depth > NEAR_PLANE
     if not front.any():
         return
     size = float(np.clip(np.ptp(uv[front, 1]) / 8.0, 1.0, 10.0))
-    ax.scatter(uv[vis & front, 0], uv[vis & front, 1], s=size, c=color, zorder=3)
+    ax.scatter(uv[vis & front, 0], uv[vis & front, 1], s=size, c=color, zorder=dot_zorder)
     ax.scatter(uv[~vis & front, 0], uv[~vis & front, 1], s=size * 1.5, facecolors=HIDDEN_FACE, edgecolors=color,
-               linewidths=0.6, zorder=3)
+               linewidths=0.6, zorder=dot_zorder)
 
 
 def car_numbers(estimate) -> dict[int, int]:
@@ -280,7 +290,7 @@ def overlay(
     if dropped is not None:
         for b in dropped.boxes:
             ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DROPPED_COLOR, lw=1,
-                                   ls=":"))
+                                   ls=":", path_effects=_DROPPED_EFFECTS))
     if detections is not None:
         for b in detections.boxes:
             ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
@@ -288,9 +298,13 @@ def overlay(
         _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0)
     objects = [] if estimate is None else sorted(estimate.objects, key=lambda o: -o.location[2])
     wireframes = edges is not None and any(o.vertices is not None for o in objects)
-    for o in objects:
+    step = 1.0 / max(len(objects), 1)
+    for k, o in enumerate(objects):
         if o.vertices is not None and edges is not None:
-            draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility)
+            # far to near, each car in a layer of its own below the numbers (4): its dots over its own edges,
+            # under a nearer car's, as the nearer car hides the farther one
+            draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility, zorder=2 + k * step,
+                           dot_zorder=2 + (k + 0.5) * step)
         else:
             _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), EST_COLOR)
     reserved = []
@@ -302,14 +316,15 @@ def overlay(
     key = []  # what each colour means, for the parts drawn
     if estimate is not None and not objects:
         key.append(("none", "none", f"no car {'estimated' if estimate_name == 'estimate' else 'drawn'}"))
+    est_boxes = bool(objects) and not wireframes  # the estimates' boxes carry the front's cross: their key says so
     if objects:
-        key.append(("-", EST_COLOR, estimate_name + (" (a cross marks the front)" if not wireframes else "")))
+        key.append(("-", EST_COLOR, estimate_name + (" (a cross marks the front)" if est_boxes else "")))
         if wireframes and any(o.visibility is not None and not np.all(o.visibility) for o in objects):
             key.append(("hidden", EST_COLOR, "hidden part"))
         key.append(("tag", EST_COLOR, f"#n c: car n (line n of the label file), {score_name} c" if scores
                     else "#n: the label file's n-th car"))
     if len(gt):
-        key.append(("-", GT_COLOR, "ground truth"))
+        key.append(("-", GT_COLOR, "ground truth" + ("" if est_boxes else " (a cross marks the front)")))
     if detections is not None and len(detections.boxes):
         key.append(("--", DET_COLOR, "pre-detection"))
     if dropped is not None and len(dropped.boxes):
@@ -317,7 +332,8 @@ def overlay(
     if key:
         handles = [Patch(facecolor=c, alpha=0.85, lw=0) if s == "tag" else
                    Line2D([], [], color=c, ls="--" if s == "hidden" else s, marker="o" if s == "hidden" else None,
-                          mfc=HIDDEN_FACE, ms=4) for s, c, _ in key]
+                          mfc=HIDDEN_FACE, ms=4, path_effects=_DROPPED_EFFECTS if c == DROPPED_COLOR else None)
+                   for s, c, _ in key]
         legend = ax.legend(handles, [k[2] for k in key], loc="upper right", fontsize=7, framealpha=0.6,
                            borderpad=0.4)
         # the key's corner, estimated from its rows and longest entry (no renderer needed): no number under it
