@@ -128,6 +128,32 @@ def test_integer_images_beyond_8_bit_values_but_uint16_are_refused_not_read_blac
         assert (wirescene.api.as_image(values) == image).all()
 
 
+def test_float_images_fitting_neither_0_1_nor_0_255_are_refused_not_clipped(frame):
+    """A float image of values outside both [0, 1] and [0, 255] (a normalised network input, a sum of images) was
+    clipped without a word: refused naming the argument and the range found; NaN pixels say how many. Floats that
+    fit are read as before: [0, 1] when the maximum is at most 1, else [0, 255], a rounding's undershoot clipped."""
+    image = frame[0]
+    unit = image / 255.0
+    for values, found in ((unit * 403 - 3, r"float64, -3\.\.400"), (unit - 0.5, r"float64, -0\.5\.\.0\.5"),
+                          ((image * 1.5).astype(np.float32), r"float32, 0\.\.382\.5")):
+        says = ("^image: float values outside both 0..1 and 0..255 "
+                f".dtype {found}. would be clipped: scale to 0..1 or 0..255$")
+        with pytest.raises(wirescene.ArgumentError, match=says):
+            wirescene.api.as_image(values)
+        with pytest.raises(wirescene.ArgumentError, match="^image: float values outside both"):
+            wirescene.detect(values, P2)
+    nan = unit.copy()
+    nan[0, :3, 0] = np.nan
+    with pytest.raises(wirescene.ArgumentError, match=r"^image: image has non-finite values \(3 NaN, 0 infinite of "):
+        wirescene.fit(nan, P2, [[300, 180, 520, 300]], variant="coarse", particles=5)
+    # accepted floats: read exactly as before, a -1e-4 (rounding to level 0) and 255.4 (to 255) included
+    assert_close(wirescene.api.as_image(unit), image, atol=0, rtol=0)
+    assert_close(wirescene.api.as_image(image.astype(np.float32)), image, atol=0, rtol=0)
+    edges = np.array([[-1e-4, 0.5, 1.0]]), np.array([[-0.1, 128.0, 255.4]])
+    for values in edges:
+        assert_close(wirescene.api.as_image(np.tile(values, (16, 6)))[0, :3, 0], [0, 128, 255], atol=0, rtol=0)
+
+
 def test_detect_returns_the_fits_own_boxes_and_viewpoints_above_its_threshold(frame):
     from wirescene.fitting.options import PredetectOptions
     from wirescene.fitting.own_boxes import own_detections
@@ -322,6 +348,26 @@ def test_estimates_check_their_shapes_where_they_are_made():
                               ("vertices", np.zeros((10, 3)), r"vertices must have shape \(36, 3\), got \(10, 3\)"),
                               ("visibility", np.ones(10, bool), r"visibility must have shape \(36,\)")):
         with pytest.raises(wirescene.ShapeError, match=f"^{says}"):
+            ObjectEstimate(**{**car, name: value})
+
+
+def test_estimates_refuse_non_finite_numbers_where_they_are_made():
+    """An ObjectEstimate of a NaN location, an infinite size or a NaN azimuth was accepted, to reach the JSON of `fit`
+    (as null), metrics and label files: refused naming the argument; a fit's unknown detection score and infinite
+    cost (not in a label line) stay accepted."""
+    from wirescene.core.groundplane import rotation_y
+    from wirescene.core.types import ObjectEstimate
+
+    car = dict(detection_index=0, box2d=[300.0, 180.0, 520.0, 300.0], score=0.8, location=[-2.0, 1.65, 12.0],
+               R=rotation_y(0.3), dims=[1.5, 1.6, 3.9], cost=0.0)
+    ObjectEstimate(**{**car, "cost": np.inf}, detection_score=np.nan)
+    for name, value, says in (("location", [np.nan, 1.65, 12.0], r"location: must be finite, got \[nan, 1\.65, 12\.0]"),
+                              ("dims", [1.5, np.inf, 3.9], r"dims: must be finite, got \[1\.5, inf, 3\.9]"),
+                              ("R", rotation_y(np.nan), r"R: must be finite, got \[\[nan, 0\.0, nan\]"),
+                              ("box2d", [300.0, 180.0, np.inf, 300.0], r"box2d: must be finite"),
+                              ("score", np.nan, r"score: must be a finite number, got nan"),
+                              ("location", ["a", "b", "c"], r"location: text .dtype <U1., expected real numbers")):
+        with pytest.raises(wirescene.ArgumentError, match=f"^{says}"):
             ObjectEstimate(**{**car, name: value})
 
 

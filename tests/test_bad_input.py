@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import wirescene.io.kitti
-from conftest import KITTI_ROOT, kitti_copy
+from conftest import KITTI_ROOT, assert_close, kitti_copy
 from wirescene.cli.main import main
 from wirescene.core.camera import read_kitti_calib
 from wirescene.core.errors import InputError
@@ -465,6 +465,10 @@ CASES = {
         lambda t: _eval_case(t, "--detections", _dets_dir(t, {f"{FRAME}.json": '{"detections": []}',
                                                               f"{FRAME}.txt": ""})),
         rf"dets: frame {FRAME} has 2 detection files \({FRAME}\.json, {FRAME}\.txt\): keep one"),
+    "eval detections: one frame's file in two cases": (
+        lambda t: _eval_case(t, "--detections", _dets_dir(t, {f"{FRAME}.json": '{"detections": []}',
+                                                              f"{FRAME}.JSON": '{"detections": []}'})),
+        rf"dets: frame {FRAME} has 2 detection files \({FRAME}\.json, {FRAME}\.JSON\): keep one"),
     # training inputs
     "train parts --label-shapes not an artefact": (
         lambda t: ["train", "parts", "--kitti-root", KITTI_ROOT, "--out", t / "p.npz", "--label-shapes",
@@ -1173,6 +1177,24 @@ def test_missing_detection_files_are_allowed_only_when_asked(tmp_path):
     r = CliRunner().invoke(main, args + ["--allow-missing-detections"])
     assert r.exit_code == 0, r.output
     assert "1 of 2 frames have no detection file" in r.stderr
+
+
+def test_detection_files_with_an_upper_case_extension_are_read(tmp_path):
+    """A detections directory of ``000010.JSON`` (as Windows tools write it) said the frame had no detection file:
+    the extension is matched in any case, as ``read_detections`` reads it."""
+    from wirescene.eval.sources import DetectionSource
+
+    d = _dets_dir(tmp_path, {f"{FRAME}.JSON": json.dumps([{"box": [354.4, 185.5, 549.5, 294.5], "score": 0.9}]),
+                             "000002.Csv": "x1,y1,x2,y2\n600,170,680,230\n"})
+    source = DetectionSource(str(d))
+    assert source.missing_frames(["000002", FRAME]) == []
+    assert [source.detection_file(f).name for f in ("000002", FRAME)] == ["000002.Csv", f"{FRAME}.JSON"]
+    dataset = KittiDataset(KITTI_ROOT)
+    assert_close(source.for_frame(dataset, FRAME, None).boxes, [[354.4, 185.5, 549.5, 294.5]], atol=0, rtol=0)
+    assert_close(source.for_frame(dataset, "000002", None).boxes, [[600, 170, 680, 230]], atol=0, rtol=0)
+    r = CliRunner().invoke(main, ["eval", str(KITTI_ROOT), "--variant", "coarse", "--frames", FRAME, "--workers", "1",
+                                  "--detections", str(d)])
+    assert r.exit_code == 0, r.output
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process tree inspection via /proc")

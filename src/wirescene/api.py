@@ -19,7 +19,7 @@ import numpy as np
 from wirescene.core.camera import Camera, KittiCalib, read_projection
 from wirescene.core.errors import ArgumentError, CalibrationWarning, HeldOutWarning, InputError, ShapeError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
-from wirescene.core.image import integer_range_problem, to_rgb_uint8
+from wirescene.core.image import float_range_problem, integer_range_problem, to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate, car_fitted
 from wirescene.core.validate import (
@@ -58,7 +58,8 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
         An image file, a PIL image (read as its file would be), or an ``(H, W)`` /
         ``(H, W, 1|3|4)`` array: uint8, uint16 (a 16-bit PNG's range), other integers
         holding 8-bit values (others refused: :func:`wirescene.core.image.integer_range_problem`),
-        bool, or float in [0, 1] (or [0, 255] when larger); an alpha channel is dropped.
+        bool, or float in [0, 1] (or [0, 255] when larger; others refused:
+        :func:`wirescene.core.image.float_range_problem`); an alpha channel is dropped.
     name : str
         The argument's name in error messages.
 
@@ -70,7 +71,7 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     ------
     ArgumentError
         Not an image array (shape, dtype, non-finite values, integers beyond 8-bit values but
-        uint16's, under 16 px a side).
+        uint16's, floats outside both [0, 1] and [0, 255], under 16 px a side).
     InputError
         An image file that is missing, unreadable or under 16 px a side.
 
@@ -100,7 +101,8 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     except (OSError, ValueError) as exc:  # a PIL image that cannot be converted
         raise ArgumentError(name, f"unreadable PIL image ({' '.join(str(exc).split())})") from None
     # after the shape's check: an int32 array of 16-bit values read black
-    problem = (None if pil else integer_range_problem(image)) or image_size_problem((rgb.shape[1], rgb.shape[0]))
+    problem = ((None if pil else integer_range_problem(image) or float_range_problem(image))
+               or image_size_problem((rgb.shape[1], rgb.shape[0])))
     if problem:
         raise ArgumentError(name, problem)
     return rgb

@@ -2,7 +2,8 @@
 
 Integer images are scaled by their type's range (uint8 /255, uint16 /65535: a 16-bit
 PNG is not all white), signed and 32/64-bit ones holding values up to 255 by 255; float
-images are taken as [0, 1] when their maximum is at most 1, else as [0, 255].
+images are taken as [0, 1] when their maximum is at most 1, else as [0, 255] (where images
+enter, values fitting neither are refused: :func:`float_range_problem`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ def _values_and_range(img: np.ndarray) -> tuple[np.ndarray, float]:
         raise ShapeError(f"image must have a numeric dtype, got {img.dtype}")
     img = img.astype(np.float32)
     if img.size and not np.all(np.isfinite(img)):
-        raise ShapeError("image has non-finite values")
+        nan = int(np.isnan(img).sum())
+        raise ShapeError(f"image has non-finite values ({nan} NaN, {int(np.isinf(img).sum())} infinite of {img.size})")
     return img, (255.0 if img.size and img.max() > 1.0 + 1e-6 else 1.0)
 
 
@@ -60,6 +62,37 @@ def integer_range_problem(image) -> str | None:
                 f"as 0: clip or scale the image to 0..255 (cast a 16-bit image to uint16)")
     return (f"integer values outside 0..255 (dtype {img.dtype}, {lo}..{hi}) would be read by the range of "
             f"{img.dtype}: cast a 16-bit image to uint16, scale others to 0..255")
+
+
+def float_range_problem(image) -> str | None:
+    """Why a float image array would be read as another image than it holds, as a phrase, or None:
+    one whose values fit neither [0, 1] nor [0, 255] (a negative value, or one above 255: a
+    normalised network input, a sum of images), so that :func:`to_rgb_uint8` would clip some
+    pixel. A value that rounds into the range (a resampling's -1e-4) is no clipped pixel. Read
+    where images enter (:func:`wirescene.api.as_image`), as :func:`integer_range_problem`;
+    non-finite values are refused by the conversion itself.
+
+    Examples
+    --------
+    >>> float_range_problem(np.array([[0.0, 0.5, 1.0]])) is None  # [0, 1]
+    True
+    >>> float_range_problem(np.array([[0.0, 128.0, 255.0]], np.float32)) is None  # [0, 255]
+    True
+    >>> float_range_problem(np.array([[-3.0, 400.0]]))
+    'float values outside both 0..1 and 0..255 (dtype float64, -3..400) would be clipped: scale to 0..1 or 0..255'
+    """
+    img = np.asarray(image)
+    if img.dtype.kind != "f" or img.size == 0:
+        return None
+    ends = np.array([img.min(), img.max()])
+    if not np.all(np.isfinite(ends)):  # refused by _values_and_range, saying how many
+        return None
+    values, top = _values_and_range(ends)  # the top the whole image is read by: its maximum's
+    levels = np.rint(values / np.float32(top) * 255.0)  # to_rgb_uint8's arithmetic, before its clip
+    if levels[0] >= 0 and levels[1] <= 255:
+        return None
+    return (f"float values outside both 0..1 and 0..255 (dtype {img.dtype}, {ends[0]:g}..{ends[1]:g}) would be "
+            "clipped: scale to 0..1 or 0..255")
 
 
 def _channels(img: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from wirescene.core.groundplane import (
     rotation_y_of,
 )
 from wirescene.core.labels import MAX_ALPHA, Label, format_labels
-from wirescene.core.validate import real_dtype_problem
+from wirescene.core.validate import finite_real, real_dtype_problem
 from wirescene.core.wireframe import N_VERTICES
 
 
@@ -217,6 +217,14 @@ class ObjectEstimate:
     detection_score : float or None
         The pre-detection's own score.
 
+    Raises
+    ------
+    ShapeError
+        An array of another shape than above.
+    ArgumentError
+        A non-finite (or non-numeric) number of the label line: ``box2d``, ``score``,
+        ``location``, ``R`` (the azimuth) or ``dims``.
+
     Examples
     --------
     >>> import numpy as np
@@ -236,6 +244,11 @@ class ObjectEstimate:
     Traceback (most recent call last):
     ...
     wirescene.core.errors.ShapeError: location must have shape (3,), got (2,)
+    >>> ObjectEstimate(detection_index=0, box2d=car.box2d, score=0.8, location=[np.nan, 1.65, 12.0], R=car.R,
+    ...                dims=car.dims, cost=0.0)
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ArgumentError: location: must be finite, got [nan, 1.65, 12.0]
     """
 
     detection_index: int
@@ -265,6 +278,13 @@ class ObjectEstimate:
                 value = np.array(value)
                 check_shape(name, value, shape)  # a wrong one fails where it is made, not in a label line or a picture
                 setattr(self, name, value)
+        # the label line's numbers (R holds rotation_y): a NaN car would reach label files and metrics
+        for name in ("box2d", "location", "R", "dims"):
+            values = _numbers(name, getattr(self, name))
+            if not np.all(np.isfinite(values)):
+                raise ArgumentError(name, f"must be finite, got {np.round(values, 6).tolist()}")
+        if not finite_real(self.score):
+            raise ArgumentError("score", f"must be a finite number, got {self.score!r}")
 
     def __repr__(self) -> str:
         extra = "" if self.exemplar is None else f", exemplar={self.exemplar!r}"

@@ -3,6 +3,9 @@ random stream that makes runs independent of scheduling."""
 
 from __future__ import annotations
 
+import itertools
+import os
+import stat
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,11 +24,30 @@ if TYPE_CHECKING:  # imported where the bank runs
     from wirescene.lift import LiftingOptions
 
 
+#: The extensions of a detections directory's files.
+DETECTION_SUFFIXES = (".json", ".csv", ".txt")
+
+
+def _spellings(suffix: str) -> list[str]:
+    """Every spelling of ``suffix`` in upper and lower case, the lower-case one first.
+
+    Examples
+    --------
+    >>> _spellings(".csv")
+    ['.csv', '.csV', '.cSv', '.cSV', '.Csv', '.CsV', '.CSv', '.CSV']
+    """
+    return list(dict.fromkeys("".join(chars) for chars in itertools.product(*((c, c.upper()) for c in suffix))))
+
+
+# probed by name (32 a frame), not by listing the directory: a look-up costs the same in KITTI's 7481 files
+_SPELLINGS = [spelling for suffix in DETECTION_SUFFIXES for spelling in _spellings(suffix)]
+
+
 @dataclass(frozen=True)
 class DetectionSource:
     """Where pre-detections come from: ``"gt"`` (label boxes, noisy viewpoint bins),
     ``"bank"`` (our part-configuration detector bank on the raw image) or a directory of
-    per-frame detection files (``FRAME.json``, ``.csv`` or ``.txt``).
+    per-frame detection files (``FRAME.json``, ``.csv`` or ``.txt``, the extension in any case).
 
     A frame without a detection file in the directory is an error, unless
     ``allow_missing`` (then it has no detections, and :meth:`missing_frames` counts it).
@@ -66,9 +88,22 @@ class DetectionSource:
         return folder
 
     def detection_file(self, frame_id: str) -> Path | None:
-        """The frame's file in the detections directory (None if it has none); an
-        :class:`InputError` if it has two (which one holds the detections meant is unknown)."""
-        found = [p for p in (self.folder / f"{frame_id}{ext}" for ext in (".json", ".csv", ".txt")) if p.is_file()]
+        """The frame's file in the detections directory (None if it has none), its extension in
+        any case (``000010.JSON``, as Windows tools write it); an :class:`InputError` if it has two
+        (which one holds the detections meant is unknown)."""
+        stem = os.path.join(self.folder, frame_id)
+        found, seen = [], set()
+        for ext in _SPELLINGS:
+            path = stem + ext
+            try:  # os.access first: a miss (31 of the 32 spellings) without the cost of an exception
+                st = os.stat(path) if os.access(path, os.F_OK) else None
+            except (OSError, ValueError):  # gone since, unreadable, or a frame id no path can hold
+                st = None
+            # a case-insensitive file system finds one file under every spelling: counted once
+            key = None if st is None else (ext.lower(), st.st_dev, st.st_ino)
+            if key is not None and stat.S_ISREG(st.st_mode) and key not in seen:
+                seen.add(key)
+                found.append(Path(path))
         if len(found) > 1:
             raise InputError(f"frame {frame_id} has {len(found)} detection files ({', '.join(p.name for p in found)}): "
                              "keep one", path=self.folder)
