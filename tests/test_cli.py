@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from conftest import KITTI_ROOT, assert_close
 from wirescene.cli.main import main
-from wirescene.core.errors import InputError
+from wirescene.core.errors import ArgumentError, InputError
 from wirescene.io.detections import read_detections
 
 SPLIT = KITTI_ROOT / "training"
@@ -799,7 +799,7 @@ def test_predict_says_whose_files_a_scene_folder_holds(tmp_path):
 
     (tmp_path / "000010.json").write_text("{}")
     folders = {"json_dir": tmp_path, "pictures_dir": None}
-    names = {"out_dir": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures"}  # the command's
+    names = {"out_dir": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures", "resume": "--resume"}
     _others_files(["000002"], folders, names)  # another frame's file: nothing
     for resumed, advice in ((None, "use --resume to continue that run"),
                             ({}, ".predict.json in --out records no run: resume that run"),
@@ -990,6 +990,20 @@ def test_predict_dataset_names_its_arguments_where_a_run_cannot_resume(tmp_path,
     for names, said in ((None, "out_dir"), (options, "--out")):
         assert resumed(tmp_path / "new", json_dir=scenes, names=names).endswith(
             f"another run's: .predict.json in {said} records no run: resume that run or choose an empty directory")
+    # not resumed: told how to resume, from Python as from the command (it said --resume to both)
+    for names, said in ((None, "resume=True"), ({**options, "resume": "--resume"}, "--resume")):
+        with pytest.raises(InputError) as caught:
+            predict.predict_dataset(KittiDataset(KITTI_ROOT), out, variant="coarse", source=DetectionSource("gt"),
+                                    frames=["000010"], json_dir=scenes, names=names)
+        assert caught.value.problem == f"already holds 1 label files; use {said} to continue that run or choose an " \
+                                       "empty directory"
+    for names, problem in (({"out": "--out"}, "no argument 'out'; those named: out_dir, json_dir, pictures_dir, "
+                                              "resume"),
+                           ({"resume": None}, "'resume': expected a non-empty name, got None")):
+        with pytest.raises(ArgumentError) as caught:
+            predict.predict_dataset(KittiDataset(KITTI_ROOT), out, variant="coarse", source=DetectionSource("gt"),
+                                    frames=["000010"], names=names)
+        assert str(caught.value) == f"names: {problem}"
 
 
 def test_predict_resumed_with_fewer_frames_is_refused_and_with_more_continues(tmp_path):

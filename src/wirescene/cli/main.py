@@ -593,10 +593,10 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
 
     refuse_min_score(min_score, detections)
     # predict_dataset's refusals of a folder name its option, as these checks do
-    folders = {"out_dir": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures"}
-    check_output_dir(out, folders["out_dir"])
-    check_output_dir(json_dir, folders["json_dir"])
-    check_output_dir(pictures_dir, folders["pictures_dir"])
+    options_named = {"out_dir": "--out", "json_dir": "--json-dir", "pictures_dir": "--pictures", "resume": "--resume"}
+    check_output_dir(out, options_named["out_dir"])
+    check_output_dir(json_dir, options_named["json_dir"])
+    check_output_dir(pictures_dir, options_named["pictures_dir"])
     keeps_on_resume("the frames --out holds")
     if dask_address is not None:  # Dask workers may run elsewhere (another working directory): absolute paths
         if detections not in ("gt", "bank"):
@@ -615,7 +615,8 @@ def predict_cmd(kitti_root, split, calib, out, json_dir, pictures_dir, variant, 
                                                         classifier=options.viewpoint_classifier),
                                  workers=_frame_workers(workers, options.inference.device), dask_client=client,
                                  progress=_progress("predict", total), json_dir=json_dir, pictures_dir=pictures_dir,
-                                 names=folders, notify=lambda message: click.echo(f"wirescene: {message}", err=True))
+                                 names=options_named,
+                                 notify=lambda message: click.echo(f"wirescene: {message}", err=True))
     finally:
         if client is not None:
             client.close()

@@ -34,6 +34,8 @@ from wirescene.io.outputs import fit_output_paths, scene_json, scene_pictures
 CONFIG_FILE = ".predict.json"
 #: The folders :func:`predict_dataset` writes, by its arguments' names: how its refusals name them by default.
 FOLDERS = ("out_dir", "json_dir", "pictures_dir")
+#: How :func:`predict_dataset`'s refusals name its arguments by default (a command names its options).
+ARGUMENT_NAMES = {**{name: name for name in FOLDERS}, "resume": "resume=True"}
 
 
 @dataclass(frozen=True)
@@ -143,7 +145,7 @@ def _others_files(frame_ids: list[str], folders: dict[str, Path | None], names: 
     label folder (:func:`_folder_problem`'s)."""
     kinds = {"json_dir": ("json",), "pictures_dir": ("overlay", "bev")}  # of fit_output_paths
     if resumed is None:
-        advice = "use --resume to continue that run"
+        advice = f"use {names['resume']} to continue that run"
     else:  # --resume given: the label folder's record is none, or another run's
         records = "other settings" if resumed else "no run"
         advice = f"{CONFIG_FILE} in {names['out_dir']} records {records}: resume that run"
@@ -215,9 +217,10 @@ def predict_dataset(
         (:func:`wirescene.io.outputs.scene_pictures`; a labelled split's cars drawn beside the
         estimates).
     names : mapping of str to str, optional
-        How the refusals of a folder name ``out_dir``, ``json_dir`` and ``pictures_dir``
-        (:data:`FOLDERS`), e.g. a command's options ``{"out_dir": "--out", ...}``; default (and
-        for a folder the mapping leaves out): the arguments' own names.
+        How the refusals name ``out_dir``, ``json_dir``, ``pictures_dir`` and ``resume`` (the
+        keys of :data:`ARGUMENT_NAMES`), e.g. a command's options ``{"out_dir": "--out", ...,
+        "resume": "--resume"}``; default (and for a key the mapping leaves out):
+        :data:`ARGUMENT_NAMES`.
 
     Returns
     -------
@@ -231,7 +234,7 @@ def predict_dataset(
         empty path, or a directory that cannot be written or created
         (:func:`wirescene.core.validate.output_dir_problem`); a frame id is a bool, a negative
         int or a float (:func:`~wirescene.io.kitti.as_frame_id`), or ``frames`` holds none (an
-        empty submission); ``names`` names another folder.
+        empty submission); ``names`` holds another key, or a value that is no text.
     InputError
         Before any fit: no frame to predict (no image in ``image_2/``, or the folder of frames), a frame
         without its detection file, calibration or image, a malformed detection file, a corrupt or
@@ -243,10 +246,13 @@ def predict_dataset(
         frames not written by a run resumed; with ``pictures_dir``, a malformed label file of a
         labelled split (a missing one is said, its frame's pictures drawn without labels).
     """
-    unknown = sorted(set(names or {}) - set(FOLDERS))
+    unknown = sorted(map(str, set(names or {}) - set(ARGUMENT_NAMES)))
     if unknown:
-        raise ArgumentError("names", f"no folder {unknown[0]!r}; the folders: {', '.join(FOLDERS)}")
-    names = {**{name: name for name in FOLDERS}, **(names or {})}
+        raise ArgumentError("names", f"no argument {unknown[0]!r}; those named: {', '.join(ARGUMENT_NAMES)}")
+    odd = [key for key, value in (names or {}).items() if not isinstance(value, str) or not value]
+    if odd:
+        raise ArgumentError("names", f"{odd[0]!r}: expected a non-empty name, got {names[odd[0]]!r}")
+    names = {**ARGUMENT_NAMES, **(names or {})}
     for name, folder in (("out_dir", out_dir), ("json_dir", json_dir), ("pictures_dir", pictures_dir)):
         if folder is None and name != "out_dir":
             continue
@@ -271,7 +277,7 @@ def predict_dataset(
         raise InputError("a folder where predict writes its settings' record", path=config_path)
     existing = sorted(out.glob("*.txt")) if out.is_dir() else []
     if existing and not resume:
-        raise InputError(f"already holds {len(existing)} label files; use --resume to continue that run "
+        raise InputError(f"already holds {len(existing)} label files; use {names['resume']} to continue that run "
                          "or choose an empty directory", path=out)
     stored = _stored_config(config_path) if resume else None
     if existing:
