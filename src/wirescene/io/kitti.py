@@ -411,7 +411,8 @@ def as_frame_ids(frames, *, name: str = "frames", some: bool = False) -> list[st
     ----------
     frames : str, int or iterable of them
         One id (a numpy scalar or 0-d array too), or several (a list, a numpy array, a
-        generator; a set's order is its own).
+        generator; a set's or a frozenset's in sorted order: theirs changes from one Python
+        process to the next, and the reports list the frames in this order).
     name : str
         The argument's name in error messages.
     some : bool
@@ -429,13 +430,15 @@ def as_frame_ids(frames, *, name: str = "frames", some: bool = False) -> list[st
 
     Examples
     --------
-    >>> as_frame_ids(10), as_frame_ids([2, "000010", 10])
-    (['000010'], ['000002', '000010'])
+    >>> as_frame_ids(10), as_frame_ids([2, "000010", 10]), as_frame_ids({"000010", "000002"})
+    (['000010'], ['000002', '000010'], ['000002', '000010'])
     """
     if isinstance(frames, np.ndarray) and frames.ndim == 0:  # np.array(10): one id (iterating it is a TypeError)
         frames = frames.item()
     one = isinstance(frames, (str, bytes, numbers.Integral)) or not isinstance(frames, Iterable)  # not its characters
     ids = list(dict.fromkeys(as_frame_id(f, name=name) for f in ([frames] if one else frames)))
+    if isinstance(frames, (set, frozenset)):
+        ids.sort()
     if some and not ids:
         raise ArgumentError(name, "no frame given")
     return ids
