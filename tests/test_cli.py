@@ -1670,17 +1670,19 @@ def test_pitch_of_frames_whose_boxes_are_all_cut_by_the_bottom_edge_is_refused(t
 
 def test_fit_predict_and_the_api_default_to_one_variant():
     """`wirescene fit` fits the variant `wirescene predict` and `wirescene.fit` fit without --variant (it was
-    coarse+gp, the others full)."""
+    coarse+gp, the others full), as do predict_dataset and fit_scene (coarse+gp) from Python."""
     import inspect
 
     import wirescene
     from wirescene.cli import main as cli_main
+    from wirescene.eval.predict import predict_dataset
+    from wirescene.fitting.pipeline import fit_scene
 
     def default(command):
         return next(p.default for p in command.params if p.name == "variant")
 
-    api = inspect.signature(wirescene.fit).parameters["variant"].default
-    assert default(cli_main.fit_cmd) == default(cli_main.predict_cmd) == api == "full"
+    api = {inspect.signature(f).parameters["variant"].default for f in (wirescene.fit, predict_dataset, fit_scene)}
+    assert default(cli_main.fit_cmd) == default(cli_main.predict_cmd) == "full" and api == {"full"}
 
 
 def test_python_m_wirescene_runs_the_command():

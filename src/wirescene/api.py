@@ -36,7 +36,7 @@ from wirescene.core.validate import (
 )
 from wirescene.fitting.options import FitOptions
 from wirescene.fitting.pipeline import fit_frame
-from wirescene.fitting.variants import VARIANTS, casts_rays
+from wirescene.fitting.variants import DEFAULT_VARIANT, VARIANTS, casts_rays
 from wirescene.infer.inference import InferenceOptions
 from wirescene.lift import MAX_PARTICLES, LiftingOptions
 
@@ -355,7 +355,7 @@ def fit(
     calib,
     boxes=None,
     *,
-    variant: str = "full",
+    variant: str = DEFAULT_VARIANT,
     particles: int = 250,
     seed: int = 0,
     options: FitOptions | None = None,

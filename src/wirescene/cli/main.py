@@ -49,6 +49,7 @@ from wirescene.cli.options import (
 from wirescene.core.errors import InputError, WiresceneError
 from wirescene.core.version import __version__
 from wirescene.eval.seeds import MAX_SEEDS
+from wirescene.fitting.variants import DEFAULT_VARIANT
 from wirescene.lift import MAX_PARTICLES
 
 
@@ -564,7 +565,7 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
 @click.option("--pictures", "pictures_dir", type=NonEmptyPath(directory=True, path_type=Path), default=None,
               help="Also draw each frame's FRAME_overlay.png and FRAME_bev.png here (the cars of a labelled "
                    "split's label files drawn beside the estimates; some 0.3 s a frame more).")
-@click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True)
+@click.option("--variant", type=click.Choice(_variants()), default=DEFAULT_VARIANT, show_default=True)
 @click.option("--detections", default="bank", show_default=True, callback=detections_spec,
               help="'bank' (our pre-detection), 'gt' (label boxes; labelled splits only) or a directory of "
                    "per-frame detection files.")
@@ -761,7 +762,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
 @min_score_option
 @click.option("--gt", type=NonEmptyPath(path_type=Path), default=None,
               help="KITTI label file drawn in cyan for comparison.")
-@click.option("--variant", type=click.Choice(_variants()), default="full", show_default=True,
+@click.option("--variant", type=click.Choice(_variants()), default=DEFAULT_VARIANT, show_default=True,
               help="Model variant (the default as `predict`'s and `wirescene.fit`'s).")
 @particles_option
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True)

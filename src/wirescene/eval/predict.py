@@ -27,7 +27,7 @@ from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint, options_read
 from wirescene.fitting.options import FitOptions
 from wirescene.fitting.pipeline import fit_frame, needs_evidence
-from wirescene.fitting.variants import get_variant
+from wirescene.fitting.variants import DEFAULT_VARIANT, get_variant
 from wirescene.io.kitti import KittiDataset, as_frame_ids
 from wirescene.io.outputs import fit_output_paths, scene_json, scene_pictures
 
@@ -163,7 +163,7 @@ def predict_dataset(
     dataset: KittiDataset,
     out_dir,
     *,
-    variant: str = "full",
+    variant: str = DEFAULT_VARIANT,
     source: DetectionSource | None = None,
     options: FitOptions | None = None,
     frames: Iterable[str | int] | str | int | None = None,

@@ -30,7 +30,7 @@ from wirescene.fitting.models import (
 from wirescene.fitting.mount import frame_pitch
 from wirescene.fitting.options import FitOptions
 from wirescene.fitting.own_boxes import complete_viewpoints, own_detections
-from wirescene.fitting.variants import Variant, get_variant
+from wirescene.fitting.variants import DEFAULT_VARIANT, Variant, get_variant
 from wirescene.infer.evidence import part_evidence, viewpoint_from_evidence
 from wirescene.infer.inference import estimate_from_refined, refine_particles
 from wirescene.infer.likelihood import PartEvidence
@@ -288,7 +288,7 @@ def fit_scene(
     camera: Camera,
     detections: Detections,
     *,
-    variant: str | Variant = "coarse+gp",
+    variant: str | Variant = DEFAULT_VARIANT,
     options: FitOptions | None = None,
     image: np.ndarray | None = None,
     evidence: PartEvidence | None = None,

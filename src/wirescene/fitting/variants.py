@@ -53,6 +53,8 @@ VARIANTS: dict[str, Variant] = {
         Variant("full", shared_plane=True, fine=True, searched_occluder=True, deterministic_occlusion=True),
     )
 }
+#: What a fit of one variant fits unless told (`wirescene fit` / `predict`, :func:`wirescene.fit`): the whole model.
+DEFAULT_VARIANT = "full"
 
 
 def get_variant(name: str) -> Variant:
