@@ -10,7 +10,9 @@ Three checks on the true positives of one or more runs of ``bench_real_folds.py`
    box. Each car is moved along its ray by ``(h_mean / h) ** k`` (its dimensions scaled alike, so
    its image stays), ``h`` the fitted height and ``h_mean`` KITTI's mean car height: ``k = 0`` is
    the fit, ``k = 1`` trusts the mean height alone. If size told the range better than the plane,
-   some ``k > 0`` would gain in both fold groups.
+   some ``k > 0`` would gain in both fold groups. The row ``k(z)`` weighs the two cues by their
+   variances at each car's range (:func:`error_model_power`, no parameter chosen on the figures):
+   the size prior's strength against distance (issue 29).
 2. **Two fits of the same boxes** (``--pair RUN_B``, another seed of the same detections): each
    alone, their average (positions and sizes; azimuths within 90 deg averaged) and the one of
    lower objective. How much of the error is the sampler's, not the model's?
@@ -37,6 +39,13 @@ from wirescene.io.kitti import KittiDataset
 
 #: KITTI's mean car height (m), the size prior's.
 MEAN_HEIGHT = 1.526
+#: KITTI's spread of car heights (m, sd: ``core.boxes.KITTI_CAR_SIZE``), the size cue's own error.
+HEIGHT_SD = 0.14
+#: Spread (m, sd) of the labelled cars' bottoms about their frame's least-squares plane (RESULTS.md, "Fine stage:
+#: other cues to a car's range": 283 cars): each car's own ground, which no plane tells.
+GROUND_SD = 0.056
+#: The camera's height above the road (m, KITTI's mount).
+CAMERA_HEIGHT = 1.65
 SIZE_POWERS = (0.0, 0.25, 0.5, 0.75, 1.0)
 VARIANTS = ("coarse+gp", "fg+gp", "full")
 
@@ -60,6 +69,7 @@ def scores(location, dims, rotation_y, labels) -> tuple[np.ndarray, np.ndarray]:
 def _arrays(tps, cameras) -> dict:
     return {"group": np.array([next(i for i, g in enumerate(FOLD_GROUPS) if fold_of(f) in g) for f, *_ in tps]),
             "centre": np.array([cameras[f].center for f, *_ in tps], float).reshape(-1, 3),
+            "focal": np.array([cameras[f].P[0, 0] for f, *_ in tps], float),
             "location": np.array([r.est_location[d] for _, r, d, _ in tps], float).reshape(-1, 3),
             "dims": np.array([r.est_dims[d] for _, r, d, _ in tps], float).reshape(-1, 3),
             "rotation_y": np.array([r.est_rotation_y[d] for _, r, d, _ in tps], float),
@@ -73,13 +83,32 @@ def _row(name: str, group: np.ndarray, near: np.ndarray, iou: np.ndarray) -> str
     return f"| {name} | " + " | ".join(cells) + f" | {int(near.sum())} / {int(iou.sum())} |"
 
 
+def error_model_power(z: np.ndarray, focal: np.ndarray) -> np.ndarray:
+    """The weight ``k`` ``(N,)`` of the size cue against the plane at ranges ``z`` ``(N,)`` (m) of
+    cameras of ``focal`` lengths (px): the plane's relative range error (each car's own ground,
+    :data:`GROUND_SD`, and one pixel at the ground contact) over the sum of its variance and the
+    size cue's (:data:`HEIGHT_SD`, and one pixel of the box's height). About 0.12 at 10 m and
+    0.24 at 60 m for KITTI.
+
+    Examples
+    --------
+    >>> np.round(error_model_power(np.array([10.0, 60.0]), np.array([721.5, 721.5])), 2)
+    array([0.13, 0.24])
+    """
+    plane = (GROUND_SD / CAMERA_HEIGHT) ** 2 + (z / (focal * CAMERA_HEIGHT)) ** 2
+    size = (HEIGHT_SD / MEAN_HEIGHT) ** 2 + (z / (focal * MEAN_HEIGHT)) ** 2
+    return plane / (plane + size)
+
+
 def size_against_plane(cars: dict) -> list[str]:
+    powers = {f"k = {k:g}": k for k in SIZE_POWERS}
+    powers["k(z), error model"] = error_model_power(cars["location"][:, 2], cars["focal"])
     rows = []
-    for k in SIZE_POWERS:
+    for name, k in powers.items():
         f = (MEAN_HEIGHT / cars["dims"][:, 0]) ** k
         loc = cars["centre"] + (cars["location"] - cars["centre"]) * f[:, None]
         near, iou = scores(loc, cars["dims"] * f[:, None], cars["rotation_y"], cars["labels"])
-        rows.append(_row(f"k = {k:g}", cars["group"], near, iou))
+        rows.append(_row(name, cars["group"], near, iou))
     return rows
 
 

@@ -292,10 +292,12 @@ def test_range_cues_size_move_keeps_the_image_and_k0_is_the_fit(monkeypatch):
     label = Label("Car", 0.0, 0, 0.0, [0, 0, 10, 10], [MEAN_HEIGHT, 1.6, 4.0], [1.0, 1.6, 20.0], 0.3)
     # fitted 10% too tall and 10% too far along the ray from the camera centre (0, 0, 0)
     cars = {"group": np.array([0]), "centre": np.zeros((1, 3)), "location": np.array([[1.1, 1.76, 22.0]]),
-            "dims": np.array([[1.1 * MEAN_HEIGHT, 1.76, 4.4]]), "rotation_y": np.array([0.3]), "labels": [label]}
+            "dims": np.array([[1.1 * MEAN_HEIGHT, 1.76, 4.4]]), "rotation_y": np.array([0.3]), "labels": [label],
+            "focal": np.array([721.5])}
     rows = size_against_plane(cars)
     assert rows[0].startswith("| k = 0 | 0 / 0 of 1 |")  # the fit: 2 m off
-    assert rows[-1].startswith("| k = 1 | 1 / 1 of 1 |")  # the mean height puts it back on the label
+    assert rows[-2].startswith("| k = 1 | 1 / 1 of 1 |")  # the mean height puts it back on the label
+    assert rows[-1].startswith("| k(z), error model | 0 / 0 of 1 |")  # a sixth of the way back: 1.7 m off
 
 
 def test_box_files_are_the_label_boxes_and_their_jitter_is_seeded(monkeypatch):
