@@ -456,6 +456,9 @@ CASES = {
         lambda t: _fit_case(t)[:4] + ["--min-score", "0.5", "--out", t / "out"],
         "--min-score needs --detections FILE: our own pre-detection's floor is its detection threshold "
         r"\(--detection-threshold\)$"),
+    # refused before any fit (and before the word that the frames are not held out), not at the first fit
+    "eval --evidence oracle on KITTI": (lambda t: _eval_case(t, "--variant", "fg", "--evidence", "oracle"),
+                                        r"wireframes/.*: oracle evidence needs wireframes/ ground truth"),
     "eval --min-score with label boxes": (lambda t: _eval_case(t, "--detections", "gt", "--min-score", "0.5"),
                                           r"--min-score needs --detections DIR: label boxes \('gt'\) are all fitted"),
     "predict --min-score with our own boxes": (

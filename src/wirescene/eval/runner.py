@@ -97,6 +97,10 @@ def frame_result(
     )
 
 
+#: Why a frame without per-vertex ground truth cannot be fitted to the oracle's evidence.
+ORACLE_NEEDS = "oracle evidence needs wireframes/ ground truth (synthetic scenes)"
+
+
 @dataclass(frozen=True)
 class _FrameJob:
     """Everything a (possibly separate) process needs to fit all variants on one frame."""
@@ -119,7 +123,7 @@ class _FrameJob:
         if needs_evidence(detections, self.variants):
             if self.evidence == "oracle":
                 if vertex_gt is None:
-                    raise InputError("oracle evidence needs wireframes/ ground truth (synthetic scenes)", path=gt_path)
+                    raise InputError(ORACLE_NEEDS, path=gt_path)
                 evidence = oracle_evidence(detections, np.array([o.box for o in gt.objects]).reshape(-1, 4), vertex_gt)
             else:
                 image = dataset.image(frame_id)
@@ -367,6 +371,10 @@ def evaluate_dataset(
     todo = [f for f in frame_ids if f not in reused]
     say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
     source.check_files(dataset, todo)
+    if evidence == "oracle" and any(get_variant(v).fine for v in variants):  # refused now, not at the first fit
+        lacking = next((f for f in todo if not wireframe_gt_path(dataset.split_dir, f).is_file()), None)
+        if lacking is not None:
+            raise InputError(ORACLE_NEEDS, path=wireframe_gt_path(dataset.split_dir, lacking))
     # a corrupt image refused now, not at its frame's fit or in the report after every fit
     finds_viewpoints = check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images,
                                          notify=notify)
