@@ -10,8 +10,9 @@ import pytest
 
 from conftest import KITTI_ROOT, assert_close
 from wirescene.core.errors import ShapeError
+from wirescene.core.matching import match_detections
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
-from wirescene.eval.metrics import FrameResult, evaluate, format_table, match_detections
+from wirescene.eval.metrics import FrameResult, evaluate, format_table
 from wirescene.eval.report import write_report
 from wirescene.io import KittiDataset, Label
 

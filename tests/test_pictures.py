@@ -10,7 +10,7 @@ import pytest
 from conftest import KITTI_ROOT
 from wirescene.core.boxes import box_corners
 from wirescene.core.groundplane import rotation_y
-from wirescene.core.labels import Label
+from wirescene.core.labels import FrameLabels, Label
 from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate
 from wirescene.core.wireframe import EDGES
 from wirescene.io import KittiDataset
@@ -80,11 +80,11 @@ def _tags(fig, renderer):
 
 
 def test_picture_colours_stay_apart_for_colour_blind_readers():
-    """Estimate, ground truth and pre-detections differ for readers with any of the three
-    dichromacies (the paper's red and green were 12 CIELAB units apart with deuteranopia)."""
-    from wirescene.io.pictures import DET_COLOR, EST_COLOR, GT_COLOR
+    """Estimate, false car, ground truth and pre-detections differ for readers with any of the
+    three dichromacies (the paper's red and green were 12 CIELAB units apart with deuteranopia)."""
+    from wirescene.io.pictures import DET_COLOR, EST_COLOR, FALSE_COLOR, GT_COLOR
 
-    for a, b in itertools.combinations((EST_COLOR, GT_COLOR, DET_COLOR), 2):
+    for a, b in itertools.combinations((EST_COLOR, FALSE_COLOR, GT_COLOR, DET_COLOR), 2):
         for deficiency in (None, *_DEFICIENCIES):
             distance = np.linalg.norm(_seen(a, deficiency) - _seen(b, deficiency))
             assert distance > 40, (a, b, deficiency, distance)
@@ -341,3 +341,118 @@ def test_pr_curve_counts_the_cars_of_its_ap(tmp_path, monkeypatch):
     result = {"recall": np.linspace(0, 1, 5), "precision": np.ones(5), "ap": 0.992, "n_gt": 11}
     plot_pr({"detector bank": result}, tmp_path / "pr.png", title="IoU 0.5")
     assert [t.get_text() for t in drawn[0].axes[0].get_legend().get_texts()] == ["detector bank (AP 99.2%, 11 cars)"]
+
+
+def _marks(fig) -> dict:
+    """What an overlay or bird's-eye view marks: ``{"tags": car tags, "missed": count, "key": key texts}``."""
+    texts = [t.get_text() for ax in fig.axes for t in ax.texts]
+    legend = fig.axes[0].get_legend() or fig.legends[0]
+    return {"tags": sorted(t for t in texts if t.startswith("#")), "missed": texts.count("missed"),
+            "key": [t.get_text() for t in legend.get_texts()]}
+
+
+def _judged_scene(camera):
+    """Cars #1 on a labelled car, #2 on a DontCare region, #3 on a labelled car but from a viewpoint
+    160 deg off its; a fourth labelled car without an estimate. ``(scene, labels)``."""
+    scene = _scene(camera, [(-3.0, 10.0), (5.0, 25.0), (3.0, 16.0)])
+    boxes = np.array([c.box for c in scene.cars])
+    alpha = np.array([c.alpha for c in scene.cars])
+    scene.detections = Detections(boxes, [0.9, 0.8, 0.7], alpha + np.array([0.0, 0.0, np.deg2rad(160)]), "bank")
+
+    def label(type_, box, car):
+        return Label(type_, 0.0, 0, car.alpha, box, car.dims, car.location, car.rotation_y)
+
+    far = _scene(camera, [(-6.0, 40.0)]).cars[0]
+    labels = [label("Car", boxes[0], scene.cars[0]), label("DontCare", boxes[1], scene.cars[1]),
+              label("Car", boxes[2], scene.cars[2]), label("Car", _image_box(camera, far.dims, far.location, 0.4), far)]
+    return scene, labels
+
+
+def test_the_pictures_mark_the_false_cars_and_the_missed_labelled_cars_as_the_evaluation_counts_them(camera):
+    """Where labels are drawn beside a fit, a car on no labelled car (a DontCare region is none)
+    or on one from a viewpoint over 45 deg off is violet and tagged ``false`` (``false view``), a
+    labelled car of no true positive dashed and tagged ``missed``, in both views, each mark in
+    the key only where drawn; they are :func:`evaluate`'s false positives and missed cars."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import to_rgba
+
+    from wirescene.eval.metrics import evaluate
+    from wirescene.eval.runner import frame_result
+    from wirescene.io.pictures import FALSE_COLOR, GT_COLOR, birds_eye, overlay
+
+    scene, labels = _judged_scene(camera)
+    image = np.zeros((375, 1242, 3), np.uint8)
+    gt = [g for g in labels if g.type == "Car"]  # as the pictures' callers draw them
+    fig = overlay(image, camera, scene, gt=gt, detections=scene.detections)
+    marks = _marks(fig)
+    assert marks["tags"] == ["#1 0.05", "#2 0.10 false", "#3 0.15 false view"]
+    assert marks["missed"] == 2  # the car of the wrong viewpoint is no true positive either
+    assert {"#n c false: no labelled car of its own (IoU > 0.5)", "#n c false view: viewpoint > 45° off its car",
+            "missed: a labelled car no estimate found"} <= set(marks["key"])
+    lines = [c for c in fig.axes[0].collections if isinstance(c, LineCollection)]
+    violet = [c for c in lines if np.allclose(c.get_color()[0], to_rgba(FALSE_COLOR))]
+    assert len(violet) == 4  # the boxes (edges and cross) of cars #2 and #3
+    dashed = [c for c in lines if np.allclose(c.get_color()[0], to_rgba(GT_COLOR)) and c.get_linestyle()[0][1]]
+    assert len(dashed) == 4  # the boxes of the two missed cars
+    # the evaluation, of the record it makes of the same fit and the frame's every label line
+    record = frame_result("f", FrameLabels(labels), scene.detections, scene)
+    report = evaluate([record])
+    found = {r.det_index for r in report.records}
+    assert {f"#{d + 1}" for d in range(record.n_detections) if d not in found} == {"#2", "#3"}
+    assert {id(labels[r.gt_index]) for r in report.records} == {id(gt[0])}  # the other two cars missed
+    bev = birds_eye(scene, gt=gt, camera=camera)
+    marks = _marks(bev)
+    assert marks["tags"] == ["#1", "#2 false", "#3 false view"] and marks["missed"] == 2
+    assert {"#n false: no labelled car of its own (IoU > 0.5)", "missed labelled car", "found: estimate to its car",
+            "view off: estimate to its car"} <= set(marks["key"])
+    links = [line for line in bev.axes[0].lines if line.get_color() == "#404040"]
+    assert sorted(line.get_linestyle() for line in links) == ["-", "-."]  # #1 to its car; #3, its view off
+    renderer = _drawn(bev)
+    assert bev.bbox.x0 <= bev.legends[0].get_window_extent(renderer).x0  # the longer key stays inside
+    assert bev.legends[0].get_window_extent(renderer).x1 <= bev.bbox.x1
+
+
+def test_without_labels_or_without_a_fault_the_pictures_mark_nothing(camera):
+    """No labels drawn, or an estimate that says not which pre-detections it was fitted to: the
+    pictures are as before; every car found and none missed: no mark, no key entry of one."""
+    from wirescene.io.pictures import birds_eye, overlay
+
+    scene, labels = _judged_scene(camera)
+    image = np.zeros((375, 1242, 3), np.uint8)
+    gt = [g for g in labels if g.type == "Car"]
+    bare = SceneEstimate("coarse", scene.objects)  # no detections: not judged
+    for estimate, drawn in ((scene, []), (bare, gt)):
+        for fig in (overlay(image, camera, estimate, gt=drawn), birds_eye(estimate, gt=drawn, camera=camera)):
+            marks = _marks(fig)
+            assert not any("false" in t for t in marks["tags"] + marks["key"]) and marks["missed"] == 0
+            assert not any("missed" in k or "found" in k for k in marks["key"])
+    right = SceneEstimate("coarse", scene.cars[:1], detections=scene.detections)
+    for fig in (overlay(image, camera, right, gt=gt[:1]), birds_eye(right, gt=gt[:1], camera=camera)):
+        marks = _marks(fig)
+        assert marks["missed"] == 0 and not any("false" in t or "missed" in t for t in marks["tags"] + marks["key"])
+
+
+def test_the_false_and_missed_cars_of_a_real_fit_are_those_the_evaluation_counts():
+    """A real frame fitted from our own pre-detection (the detector bank's boxes): the cars the
+    overlay tags ``false`` are the evaluation's outputs that are no true positive, its ``missed``
+    labelled cars those of no true positive (the record indexes every label line, the picture
+    the cars it draws), and the frame has some of each."""
+    import wirescene
+    from wirescene.core.matching import match_estimate
+    from wirescene.eval.metrics import evaluate
+    from wirescene.eval.runner import frame_result
+    from wirescene.io.pictures import overlay
+
+    dataset = KittiDataset(KITTI_ROOT)
+    image, camera, labels = dataset.image("000010"), dataset.camera("000010"), dataset.labels("000010")
+    scene = wirescene.fit(image, camera, None, variant="coarse", particles=20)  # None: the bank's boxes
+    report = evaluate([frame_result("000010", labels, scene.detections, scene, camera=camera)])
+    true = {r.det_index for r in report.records}
+    false = {f"#{d + 1}" for d in range(len(scene.cars)) if d not in true}
+    cars = labels.of_type("Car")
+    missed = {id(g) for g in cars} - {id(labels.objects[r.gt_index]) for r in report.records}
+    assert false and missed and len(cars) < len(labels.objects)  # something to mark; DontCare lines besides the cars
+    marks = _marks(overlay(image, camera, scene, gt=cars, detections=scene.detections, edges=EDGES))
+    assert {t.split()[0] for t in marks["tags"] if "false" in t} == false
+    assert marks["missed"] == len(missed) == len(cars) - report["all"]["n_tp"]
+    assert {id(cars[g]) for g in match_estimate(scene, cars).missed} == missed

@@ -586,7 +586,10 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
         reduced by a whole factor, :func:`wirescene.io.pictures.drawn_image`) or ``"bev"``
         (bird's-eye view, x right, z up the page, the camera's field of view dotted).
     gt : path or sequence of Label, optional
-        A KITTI label file (or its labels): its cars' 3D boxes are drawn cyan.
+        A KITTI label file (or its labels): its cars' 3D boxes are drawn cyan; beside a
+        fitted ``scene``, the cars the evaluation counts false are violet and tagged
+        ``false``, the labelled cars it counts missed dashed and tagged ``missed``
+        (:func:`wirescene.core.matching.match_estimate`).
     boxes : (N, 4) array or Detections, optional
         2D boxes drawn dashed yellow in the ``overlay`` (e.g. :func:`detect`'s, or
         ``scene.detections``, the boxes the fit started from); checked but not drawn in the

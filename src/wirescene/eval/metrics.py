@@ -10,7 +10,8 @@ Protocol
    of the ground-truth ``alpha``; a match that fails this test still consumes its car.
    Where ``det_alpha`` is NaN the viewpoint test is skipped (reported in
    ``viewpoint_check``). DontCare regions and other classes are ignored: a detection on
-   them is simply unmatched.
+   them is simply unmatched. :func:`wirescene.core.matching.match_frame` is this matching,
+   for :func:`evaluate` and for the pictures' marks of false and missed cars.
 2. **Per TP errors.** 3D localisation error: distance between the estimated and the
    ground-truth 3D box centroids (bottom centre raised by ``h/2``), metres. 3D azimuth
    error: ``|est rotation_y - gt rotation_y|`` wrapped to ``[0, 180]`` deg. 2D azimuth
@@ -48,9 +49,9 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import ShapeError, check_shape
 from wirescene.core.jsonio import strict_values
+from wirescene.core.matching import match_frame
 from wirescene.core.viewpoints import angle_difference
 from wirescene.io.kitti import CAR_TYPES, Label
 
@@ -360,58 +361,6 @@ class EvaluationReport:
         return out
 
 
-def match_detections(
-    det_boxes: np.ndarray, det_scores: np.ndarray, gt_boxes: np.ndarray, *, iou_threshold: float = 0.5
-) -> tuple[np.ndarray, np.ndarray]:
-    """Greedy one-to-one matching of detections to ground-truth boxes.
-
-    Detections are visited by descending score (ties: input order); each takes the
-    unmatched ground-truth box of highest IoU if that IoU is ``> iou_threshold``.
-
-    Parameters
-    ----------
-    det_boxes : (D, 4) array
-    det_scores : (D,) array
-    gt_boxes : (G, 4) array
-    iou_threshold : float, optional
-        A match needs an IoU above it (the paper's 0.5).
-
-    Returns
-    -------
-    match : (D,) int array
-        Index of the matched ground-truth box, -1 for none.
-    iou : (D,) array
-        IoU with the matched box (0 where unmatched).
-
-    Examples
-    --------
-    >>> gt = np.array([[0, 0, 10, 10], [20, 0, 30, 10]])
-    >>> det = np.array([[1, 0, 11, 10], [0, 0, 10, 10], [50, 50, 60, 60]])
-    >>> match, iou = match_detections(det, [0.9, 0.5, 0.8], gt)
-    >>> match  # the best-scored box takes car 0 first; the exact box then finds it taken
-    array([ 0, -1, -1])
-    >>> iou.round(3)  # 90 / 110
-    array([0.818, 0.   , 0.   ])
-    """
-    det_boxes = _array("det_boxes", det_boxes, (0, 4) if np.size(det_boxes) == 0 else (None, 4))
-    gt_boxes = _array("gt_boxes", gt_boxes, (0, 4) if np.size(gt_boxes) == 0 else (None, 4))
-    D, G = len(det_boxes), len(gt_boxes)
-    det_scores = _array("det_scores", det_scores, (D,))
-    match = np.full(D, -1, dtype=int)
-    best = np.zeros(D)
-    if D == 0 or G == 0:
-        return match, best
-    ious = iou_2d(det_boxes[:, None, :], gt_boxes[None, :, :])
-    taken = np.zeros(G, dtype=bool)
-    for d in np.argsort(-det_scores, kind="stable"):
-        cand = np.where(taken, -np.inf, ious[d])
-        g = int(np.argmax(cand))
-        if cand[g] > iou_threshold:
-            match[d], best[d] = g, ious[d, g]
-            taken[g] = True
-    return match, best
-
-
 def _centroid(location: np.ndarray, dims: np.ndarray) -> np.ndarray:
     # Level box (the same as boxes.box_centers with R = rotation_y(ry)): y points down.
     return np.asarray(location, float) - np.array([0.0, 0.5 * float(dims[0]), 0.0])
@@ -552,7 +501,6 @@ def evaluate(
     >>> evaluate([replace(frame, det_alpha=np.array([np.pi]))]).counts["viewpoint_rejected"]  # 163 deg off
     1
     """
-    tol = np.deg2rad(viewpoint_tolerance_deg) + 1e-9
     records: list[TPRecord] = []
     n_gt = dict.fromkeys(SUBSETS, 0)
     sources: set[str] = set()
@@ -568,16 +516,17 @@ def evaluate(
             car_subsets[g] = (parts, _subsets_of(parts, frame.gt[g].occluded))
             for s in car_subsets[g][1]:
                 n_gt[s] += 1
-        gt_boxes = np.array([frame.gt[g].box for g in cars]).reshape(-1, 4)
-        match, ious = match_detections(frame.det_boxes, frame.det_scores, gt_boxes, iou_threshold=iou_threshold)
-        for d in np.flatnonzero(match >= 0):
-            g = cars[match[d]]
+        matches = match_frame(frame.det_boxes, frame.det_scores, frame.det_alpha, frame.gt,
+                              iou_threshold=iou_threshold, viewpoint_tolerance_deg=viewpoint_tolerance_deg,
+                              car_types=car_types)
+        for d in np.flatnonzero(matches.match >= 0):
+            g = int(matches.match[d])
             gt = frame.gt[g]
             counts["matched"] += 1
-            checked = bool(np.isfinite(frame.det_alpha[d]))
+            checked = bool(matches.viewpoint_checked[d])
             if not checked:
                 counts["viewpoint_unknown"] += 1
-            elif angle_difference(frame.det_alpha[d], gt.alpha) > tol:
+            elif not matches.true_positive[d]:
                 counts["viewpoint_rejected"] += 1
                 continue
             est_c = _centroid(frame.est_location[d], frame.est_dims[d])
@@ -587,7 +536,7 @@ def evaluate(
                     frame_id=frame.frame_id,
                     gt_index=int(g),
                     det_index=int(d),
-                    iou=float(ious[d]),
+                    iou=float(matches.iou[d]),
                     loc_error=float(np.linalg.norm(est_c - gt_c)),
                     az3d_error=float(np.rad2deg(angle_difference(frame.est_rotation_y[d], gt.rotation_y))),
                     az2d_error=float(np.rad2deg(angle_difference(frame.est_alpha[d], gt.alpha))),

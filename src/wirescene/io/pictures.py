@@ -4,7 +4,11 @@ Estimates are drawn in red, ground truth in cyan (not the paper's green: red and
 look alike to one reader in twelve, red and cyan differ for every common colour-vision
 deficiency), pre-detections dashed yellow; hidden parts of a wireframe are open dots on
 dashed edges, so that they differ by shape as well as colour. Each estimated car carries
-its number (its line in the KITTI label file) and its confidence, in both views. All
+its number (its line in the KITTI label file) and its confidence, in both views. Where
+ground truth is drawn beside a fitted estimate, the evaluation's own matching
+(:func:`wirescene.core.matching.match_estimate`) marks the false cars (violet, tagged
+``false``) and the labelled cars missed (dashed, tagged ``missed``); the bird's-eye view
+joins each true positive to its labelled car. All
 functions draw into a new :class:`matplotlib.figure.Figure` (:func:`new_figure`) and
 return it; :func:`save_figure` writes it atomically. No pyplot: the figures belong to
 no window manager, need no display, and the caller's matplotlib backend (a notebook's,
@@ -28,6 +32,7 @@ from wirescene.core.atomic import write_bytes
 from wirescene.core.boxes import box_corners
 from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.groundplane import rotation_y
+from wirescene.core.matching import FrameMatches, match_estimate
 
 EST_COLOR = "#e8302a"
 GT_COLOR = "#33bbee"
@@ -37,6 +42,14 @@ DROPPED_COLOR = "#d9d9d9"
 #: Dark rim of each dot of a dropped pre-detection's light grey line: it stays visible on a bright
 #: sky or wall, and on the key's light background (a grey of 1.4:1 contrast there alone).
 DROPPED_RIM = "#404040"
+#: A false car (no true positive: on no labelled car, or of a wrong viewpoint): violet, over 40 CIELAB
+#: units from the estimates' red, the ground truth's cyan and the pre-detections' yellow for every
+#: common colour-vision deficiency, as bright as the red (seen on a dark road and a bright sky alike).
+FALSE_COLOR = "#9933ff"
+#: The line joining a true positive to its labelled car in the bird's-eye view.
+LINK_COLOR = "#404040"
+#: Dashes of a missed labelled car's box (the hidden edges' are (3, 2), of the estimates' colour only).
+MISSED_DASHES = (0, (5, 3))
 #: Face of a hidden vertex's dot (an open dot, edged in the estimate's colour).
 HIDDEN_FACE = "white"
 #: Font size (points) of the cars' numbers.
@@ -98,9 +111,48 @@ def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: f
                                      linestyles=ls, zorder=zorder))
 
 
-def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float = 1.5):
-    _draw_edges(ax, camera, corners, _BOX_EDGES, color, lw)
-    _draw_edges(ax, camera, corners, _FRONT_FACE, color, lw * 0.6)
+def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float = 1.5, ls="-"):
+    _draw_edges(ax, camera, corners, _BOX_EDGES, color, lw, ls=ls)
+    _draw_edges(ax, camera, corners, _FRONT_FACE, color, lw * 0.6, ls=ls)
+
+
+def judged(estimate, gt: Sequence) -> FrameMatches | None:
+    """The evaluation's verdict on ``estimate`` against the drawn labels ``gt``
+    (:func:`wirescene.core.matching.match_estimate`: indices into ``gt``, cars in
+    :attr:`SceneEstimate.cars` order), or None where nothing is judged: no estimate, no label
+    drawn, or an estimate that carries no pre-detections (one put together by hand, or
+    ``wirescene gt``'s mean wireframes) or not one car per pre-detection.
+
+    Examples
+    --------
+    >>> from wirescene.core.types import Detections, ObjectEstimate, SceneEstimate
+    >>> from wirescene.core.labels import Label
+    >>> dets = Detections([[100, 100, 200, 160]], scores=0.9, alpha=np.nan)
+    >>> car = ObjectEstimate(detection_index=0, box2d=dets.boxes[0], score=0.5, location=np.array([2.0, 1.6, 20.0]),
+    ...                      R=np.eye(3), dims=np.array([1.5, 1.6, 4.0]), cost=0.0)
+    >>> far = Label("Car", 0.0, 0, 0.3, [900, 110, 1000, 170], [1.5, 1.6, 4.0], [12.0, 1.6, 20.0], 0.9)
+    >>> m = judged(SceneEstimate("coarse", [car], detections=dets), [far])
+    >>> m.false.tolist(), m.missed.tolist()  # car #1 on no labelled car, the label missed
+    ([0], [0])
+    >>> judged(SceneEstimate("coarse", [car]), [far]) is None  # no pre-detections: not judged
+    True
+    """
+    if estimate is None or not len(gt) or estimate.detections is None:
+        return None
+    try:
+        return match_estimate(estimate, list(gt))
+    except ValueError:  # cars not one per pre-detection (a scene made by hand): drawn as before, unjudged
+        return None
+
+
+def _verdicts(estimate, gt: Sequence, matches: FrameMatches | None) -> tuple[dict[int, str], set[int]]:
+    """``({id(car): "false" | "false view"}, {id(label) missed})`` of :func:`judged`'s ``matches``."""
+    if matches is None:
+        return {}, set()
+    cars, gt = estimate.cars, list(gt)
+    false = {id(cars[d]): "false" for d in matches.false}
+    false.update({id(cars[d]): "false view" for d in matches.wrong_viewpoint})
+    return false, {id(gt[g]) for g in matches.missed}
 
 
 def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR,
@@ -258,6 +310,10 @@ def overlay(
         Its cars, numbered ``#n`` as :func:`car_numbers` (the label file's order); an
         estimate without cars says so in the key.
     gt : sequence of kitti ``Label``
+        Drawn cyan. Beside an estimate that carries its pre-detections (``estimate.detections``,
+        as fitted), the evaluation's matching (:func:`judged`) marks its false cars violet,
+        tagged ``false`` (on no labelled car) or ``false view`` (on one, from a viewpoint over
+        45 deg off), and the labels it counts missed dashed, tagged ``missed``.
     detections : Detections, optional
         The pre-detections of the cars drawn.
     dropped : Detections, optional
@@ -294,8 +350,10 @@ def overlay(
     if detections is not None:
         for b in detections.boxes:
             ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
+    false, missed = _verdicts(estimate, gt, judged(estimate, gt))
     for g in sorted(gt, key=lambda g: -g.location[2]):  # far to near: a near car is drawn over a far one
-        _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0)
+        _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0,
+                    ls=MISSED_DASHES if id(g) in missed else "-")
     objects = [] if estimate is None else sorted(estimate.objects, key=lambda o: -o.location[2])
     wireframes = edges is not None and any(o.vertices is not None for o in objects)
     step = 1.0 / max(len(objects), 1)
@@ -304,9 +362,9 @@ def overlay(
             # far to near, each car in a layer of its own below the numbers (4): its dots over its own edges,
             # under a nearer car's, as the nearer car hides the farther one
             draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility, zorder=2 + k * step,
-                           dot_zorder=2 + (k + 0.5) * step)
+                           dot_zorder=2 + (k + 0.5) * step, color=FALSE_COLOR if id(o) in false else EST_COLOR)
         else:
-            _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), EST_COLOR)
+            _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), FALSE_COLOR if id(o) in false else EST_COLOR)
     reserved = []
     if title:
         ax.text(4 * scale, 4 * scale, title, color="white", fontsize=10, va="top",
@@ -323,15 +381,18 @@ def overlay(
             key.append(("hidden", EST_COLOR, "hidden part"))
         key.append(("tag", EST_COLOR, f"#n c: car n (line n of the label file), {score_name} c" if scores
                     else "#n: the label file's n-th car"))
+        key.extend(_false_key(false, "#n c" if scores else "#n"))
     if len(gt):
         key.append(("-", GT_COLOR, "ground truth" + ("" if est_boxes else " (a cross marks the front)")))
+    if missed:
+        key.append(("missed", GT_COLOR, "missed: a labelled car no estimate found"))
     if detections is not None and len(detections.boxes):
         key.append(("--", DET_COLOR, "pre-detection"))
     if dropped is not None and len(dropped.boxes):
         key.append((":", DROPPED_COLOR, "pre-detection the fit dropped"))
     if key:
         handles = [Patch(facecolor=c, alpha=0.85, lw=0) if s == "tag" else
-                   Line2D([], [], color=c, ls="--" if s == "hidden" else s, marker="o" if s == "hidden" else None,
+                   Line2D([], [], color=c, ls=_KEY_STYLES.get(s, s), marker="o" if s == "hidden" else None,
                           mfc=HIDDEN_FACE, ms=4, path_effects=_DROPPED_EFFECTS if c == DROPPED_COLOR else None)
                    for s, c, _ in key]
         legend = ax.legend(handles, [k[2] for k in key], loc="upper right", fontsize=7, framealpha=0.6,
@@ -340,24 +401,43 @@ def overlay(
         longest = max(text_size(k[2], 7, scale, 0)[0] for k in key)
         reserved.append((w - longest - 40 * scale, 0, w, (len(key) * 1.5 * 7 + 12) * scale))
         legend.set_zorder(5)
-    _number_cars(ax, estimate, objects, camera, edges, w, h, scale, reserved, scores)
+    missed_gt = sorted((g for g in gt if id(g) in missed), key=lambda g: g.location[2])  # near cars choose first
+    _number_cars(ax, estimate, objects, camera, edges, w, h, scale, reserved, scores, false, missed_gt)
     return fig
 
 
-def _number_cars(ax, estimate, objects, camera, edges, w, h, scale, reserved, scores) -> None:
-    """Write each car's number (and confidence) by its box, inside the picture, clear of the
-    other numbers, the title and the key where there is room."""
+# The key's line style of each kind of entry that is no plain line style.
+_KEY_STYLES = {"hidden": "--", "missed": MISSED_DASHES, "false": "-"}
+#: What the key says a false car's tag means, by the tag's word (the evaluation's rule).
+FALSE_KEY = {"false": "no labelled car of its own (IoU > 0.5)", "false view": "viewpoint > 45° off its car"}
+
+
+def _false_key(false: dict[int, str], tag: str) -> list[tuple[str, str, str]]:
+    """The key's entries of the false cars drawn, one a kind, each its ``tag`` (``#n c``) and word."""
+    return [("false", FALSE_COLOR, f"{tag} {word}: {text}") for word, text in FALSE_KEY.items()
+            if word in false.values()]
+
+
+def _number_cars(ax, estimate, objects, camera, edges, w, h, scale, reserved, scores, false, missed_gt) -> None:
+    """Write each car's number (and confidence, and ``false`` where it is) by its box, then
+    ``missed`` by each of ``missed_gt``'s, inside the picture, clear of the other tags, the
+    title and the key where there is room."""
     numbers = car_numbers(estimate)
     placed = [(o, _image_box(camera, o, edges)) for o in reversed(objects)]  # near cars choose first
     placed = [(o, box) for o, box in placed if box is not None]
-    texts = [_car_label(numbers[id(o)], o.score if scores else None) for o, _ in placed]
+    texts = [_car_label(numbers[id(o)], o.score if scores else None) + (f" {false[id(o)]}" if id(o) in false else "")
+             for o, _ in placed]
+    faces = [FALSE_COLOR if id(o) in false else EST_COLOR for o, _ in placed]
+    boxes = [box for _, box in placed] + [np.asarray(g.box, float) for g in missed_gt]
+    texts += ["missed"] * len(missed_gt)
+    faces += [GT_COLOR] * len(missed_gt)
     pad = 0.2
     sizes = [text_size(t, NUMBER_FONTSIZE, scale, pad) for t in texts]
-    corners = place_labels([box for _, box in placed], sizes, w, h, reserved=reserved)
-    for text, (x, y) in zip(texts, corners):
+    corners = place_labels(boxes, sizes, w, h, reserved=reserved)
+    for text, face, (x, y) in zip(texts, faces, corners):
         ax.text(x + (pad * NUMBER_FONTSIZE + 1) * scale, y + (pad * NUMBER_FONTSIZE + 1) * scale, text,
-                fontsize=NUMBER_FONTSIZE, color="white", va="top", ha="left", zorder=4,
-                bbox=dict(facecolor=EST_COLOR, alpha=0.85, lw=0, boxstyle=f"square,pad={pad}"))
+                fontsize=NUMBER_FONTSIZE, color="black" if face == GT_COLOR else "white", va="top", ha="left",
+                zorder=4, bbox=dict(facecolor=face, alpha=0.85, lw=0, boxstyle=f"square,pad={pad}"))
 
 
 def _footprint(dims, location, R):
@@ -376,26 +456,38 @@ def birds_eye(
     """Top-down view in KITTI's camera frame (x to the camera's right, z ahead of it,
     metres; the camera a triangle at the origin) of estimated (red, numbered as in the
     overlay and the label file) and ground-truth (cyan) cars, with the camera's field of
-    view (dotted)."""
+    view (dotted). Where labels are drawn beside a fitted estimate, its false cars are
+    violet and tagged ``false``, the labelled cars missed dashed and tagged ``missed``, and
+    a thin dark line joins each true positive to its labelled car (dash-dotted where the
+    match failed the viewpoint test), as :func:`wirescene.core.matching.match_estimate` judges."""
     fig = new_figure(figsize=(5, 6), dpi=100)
     ax = fig.subplots()
     pts = [np.zeros(2)]
     numbers = car_numbers(estimate)
+    matches = judged(estimate, gt)
+    false, missed = _verdicts(estimate, gt, matches)
 
-    def draw(dims, location, R, color):
+    def draw(dims, location, R, color, ls="-"):
         fp = _footprint(dims, location, R)
-        ax.plot(fp[:, 0], fp[:, 1], color=color, lw=1.5)
+        ax.plot(fp[:, 0], fp[:, 1], color=color, lw=1.5, ls=ls)
         front = fp[[0, 1]].mean(axis=0)  # corners 0 and 1 are the front face
-        ax.plot([location[0], front[0]], [location[2], front[1]], color=color, lw=1.0)
+        ax.plot([location[0], front[0]], [location[2], front[1]], color=color, lw=1.0, ls=ls)
         pts.append(fp)
         return fp
 
+    missed_fps = []
     for g in gt:
-        draw(g.dims, g.location, rotation_y(g.rotation_y), GT_COLOR)
+        fp = draw(g.dims, g.location, rotation_y(g.rotation_y), GT_COLOR, MISSED_DASHES if id(g) in missed else "-")
+        if id(g) in missed:
+            missed_fps.append(fp)
     labels = []
     if estimate is not None:
         for o in estimate.objects:
-            labels.append((draw(o.dims, o.location, o.R, EST_COLOR), numbers[id(o)]))
+            labels.append((draw(o.dims, o.location, o.R, FALSE_COLOR if id(o) in false else EST_COLOR),
+                           f"#{numbers[id(o)]}" + (f" {false[id(o)]}" if id(o) in false else ""), id(o) in false))
+    links = _links(estimate, gt, matches)
+    for (x0, z0, x1, z1), ok in links:  # over the footprints: a short link lies inside them
+        ax.plot([x0, x1], [z0, z1], color=LINK_COLOR, lw=0.9, ls="-" if ok else "-.", zorder=2.5)  # not the view's :
     allp = np.vstack([np.atleast_2d(p) for p in pts])
     if extent is None:
         xmin, zmax = allp[:, 0].min() - 3, max(allp[:, 1].max() + 3, 10)
@@ -405,8 +497,15 @@ def birds_eye(
     key = []
     if estimate is not None:
         key.append((Line2D([], [], color=EST_COLOR), "estimate (#n: car n; a line marks the front)"))
+    key.extend((Line2D([], [], color=FALSE_COLOR), text) for *_, text in _false_key(false, "#n"))
     if len(gt):
         key.append((Line2D([], [], color=GT_COLOR), "ground truth"))
+    if missed:
+        key.append((Line2D([], [], color=GT_COLOR, ls=MISSED_DASHES), "missed labelled car"))
+    if any(ok for _, ok in links):
+        key.append((Line2D([], [], color=LINK_COLOR, lw=0.9), "found: estimate to its car"))
+    if any(not ok for _, ok in links):
+        key.append((Line2D([], [], color=LINK_COLOR, lw=0.9, ls="-."), "view off: estimate to its car"))
     if camera is not None and camera.image_size is not None:
         w = camera.image_size[0]
         for u in (0, w - 1):
@@ -419,10 +518,11 @@ def birds_eye(
     room = extent[1] - 0.12 * (extent[1] - extent[0])  # right of it a number would leave the axes
     # the number beside the footprint (its four corners once: the outline closes on the first), on its right unless at
     # the right edge
-    for fp, n in labels:
+    for fp, text, is_false in labels:
         on_right = fp[:, 0].max() < room
-        ax.text(fp[:, 0].max() + 0.3 if on_right else fp[:, 0].min() - 0.3, fp[:4, 1].mean(), f"#{n}", color=EST_COLOR,
-                fontsize=7, va="center", ha="left" if on_right else "right", clip_on=True)
+        ax.text(fp[:, 0].max() + 0.3 if on_right else fp[:, 0].min() - 0.3, fp[:4, 1].mean(), text,
+                color=FALSE_COLOR if is_false else EST_COLOR, fontsize=7, va="center",
+                ha="left" if on_right else "right", clip_on=True)
     if estimate is not None and not estimate.objects:
         ax.text(0.5, 0.5, "no car estimated", transform=ax.transAxes, ha="center", va="center", color="0.3")
     ax.set_xlim(extent[0], extent[1])
@@ -437,9 +537,62 @@ def birds_eye(
     fig.tight_layout(rect=(0, (rows * 12 + 8) / (72 * fig.get_figheight()), 1, 1))  # room for the key's rows
     # the key right under the x axis's label, however short the equal-aspect axes are: off the cars and the label
     below = transforms.offset_copy(ax.transAxes, fig=fig, y=-34, units="points")
-    fig.legend([k[0] for k in key], [k[1] for k in key], loc="upper center", bbox_to_anchor=(0.5, 0.0),
-               bbox_transform=below, ncol=2, fontsize=8, frameon=False)
+    # centred on the figure, not on the axes the y label pushes right: the key of every mark drawn fits its width
+    below = transforms.blended_transform_factory(fig.transFigure, below)
+
+    def legend(fontsize):
+        return fig.legend([k[0] for k in key], [k[1] for k in key], loc="upper center", bbox_to_anchor=(0.5, 0.0),
+                          bbox_transform=below, ncol=2, fontsize=fontsize, frameon=False)
+
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    renderer = RendererAgg(*fig.canvas.get_width_height(), fig.dpi)
+    for size in (8.0, 7.5, 7.0, 6.5):  # a key of many marks a size smaller where it would be cut
+        key_box = legend(size)
+        if size == 6.5 or key_box.get_window_extent(renderer).width <= fig.bbox.width:
+            break
+        key_box.remove()
+    _tag_missed(ax, missed_fps, [(fp, text) for fp, text, _ in labels], extent, room)
     return fig
+
+
+def _tag_missed(ax, footprints, numbers, extent, room: float) -> None:
+    """Tag ``missed`` by each of ``footprints`` ``(5, 2)`` (x, z) of a bird's-eye view laid out over
+    ``extent``, clear of each other and of the cars' ``numbers`` ``[(footprint, text)]`` (placed
+    as :func:`birds_eye` places them, right of the footprint where x is below ``room``)."""
+    if not footprints:
+        return
+    ax.apply_aspect()  # the equal-aspect axes' drawn size: metres a point
+    scale = (extent[1] - extent[0]) / (ax.get_position().width * ax.figure.get_figwidth() * 72)
+    width, height = extent[1] - extent[0], extent[3] - extent[2]
+
+    def down(x0, z0, x1, z1):  # a rectangle in place_labels' frame: from the top left, y down
+        return (x0 - extent[0], extent[3] - z1, x1 - extent[0], extent[3] - z0)
+
+    reserved = []
+    for fp, text in numbers:
+        tw, th = text_size(text, 7, scale, 0)
+        x0 = fp[:, 0].max() + 0.3 if fp[:, 0].max() < room else fp[:, 0].min() - 0.3 - tw
+        z = fp[:4, 1].mean()
+        reserved.append(down(x0, z - th / 2, x0 + tw, z + th / 2))
+    pad, size = 0.2, 6
+    boxes = [down(fp[:, 0].min(), fp[:, 1].min(), fp[:, 0].max(), fp[:, 1].max()) for fp in footprints]
+    sizes = [text_size("missed", size, scale, pad)] * len(footprints)
+    inset = (pad * size + 1) * scale  # from the tag's box to its text
+    for x, y in place_labels(boxes, sizes, width, height, reserved=reserved):
+        ax.text(extent[0] + x + inset, extent[3] - y - inset, "missed", color="black", fontsize=size, va="top",
+                ha="left", clip_on=True, bbox=dict(facecolor=GT_COLOR, alpha=0.85, lw=0, boxstyle=f"square,pad={pad}"))
+
+
+def _links(estimate, gt: Sequence, matches: FrameMatches | None) -> list[tuple[tuple[float, ...], bool]]:
+    """``[((x_est, z_est, x_gt, z_gt), true positive), ...]``: each car of ``estimate`` matched
+    to a label of ``gt`` (:func:`judged`'s ``matches``), bottom centre to bottom centre."""
+    if matches is None:
+        return []
+    cars, gt = estimate.cars, list(gt)
+    return [((float(cars[d].location[0]), float(cars[d].location[2]), float(gt[g].location[0]),
+              float(gt[g].location[2])), bool(matches.true_positive[d]))
+            for d, g in enumerate(matches.match) if g >= 0]
 
 
 def new_figure(**kwargs) -> Figure:

@@ -14,8 +14,9 @@ from wirescene.core.boxes import box_centers
 from wirescene.core.errors import InputError
 from wirescene.core.groundplane import rotation_y
 from wirescene.core.labels import CAR_TYPES
+from wirescene.core.matching import match_detections
 from wirescene.eval.kitti_metrics import iou_3d
-from wirescene.eval.metrics import FrameResult, match_detections
+from wirescene.eval.metrics import FrameResult
 from wirescene.eval.records import RECORDS_DIR
 from wirescene.fitting.confidence import (
     FEATURES,
