@@ -1760,6 +1760,25 @@ def test_eval_names_the_frame_trained_models_its_fits_read(tmp_path):
     assert r.exit_code == 0 and "the shipped detector bank was trained on" in r.stderr, r.stderr
 
 
+def test_a_resumed_eval_names_the_models_its_reused_frames_were_fitted_with(tmp_path):
+    """A run resumed with every frame reused fits none: its held-out line read the boxes of no frame, took them all to
+    carry viewpoints and left out the bank and the classifier that the reused frames' fits read."""
+    from wirescene.io.kitti import KittiDataset
+
+    boxes = [o.box.tolist() for o in KittiDataset(KITTI_ROOT).labels("000010").of_type("Car")]
+    unposed = tmp_path / "unposed"
+    unposed.mkdir()
+    (unposed / "000010.json").write_text(json.dumps({"detections": [{"box": box, "score": 0.9} for box in boxes]}))
+    common = ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--particles", 5, "--workers", 1,
+              "--draws", 0, "--raw-scores", "--detections", unposed, "--predictions", tmp_path / "run"]
+    said = ("1 of the 1 frames evaluated is among the 72 the shipped detector bank and viewpoint classifier were "
+            "trained on")
+    r = run(*common)
+    assert r.exit_code == 0 and said in r.stderr, r.stderr
+    r = run(*common, "--resume")
+    assert r.exit_code == 0 and "resuming: 1 of 1 frames" in r.stderr and said in r.stderr, r.stderr
+
+
 def test_eval_says_nothing_of_held_out_frames_when_it_refuses_the_run(tmp_path):
     """The word that some frames are not held out comes once the run's checks have passed, before its first fit: a
     run refused (a seed given twice, a folder of images without labels) has no figures to say it of."""

@@ -287,6 +287,22 @@ def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(
     assert trained_on_frames(KittiDataset(KITTI_ROOT), None, options=options, read=["viewpoint_classifier"]) == []
 
 
+def test_a_manifest_step_naming_no_file_by_a_string_is_left_out_as_resolve_models_leaves_it(tmp_path):
+    """A step whose "artefact" is a list or an object: `--models` read the directory (resolve_models skips the step),
+    then the held-out line failed with a TypeError (unhashable type) after every check had passed."""
+    from wirescene.core.resources import file_sha256, resolve_models, trained_on
+
+    models = models_dir(tmp_path / "models", viewpoint_classifier=forced_classifier(tmp_path / "forced.npz", 5))
+    file = models / "viewpoint_classifier.npz"
+    steps = {"viewpoints": {"done": True, "artefact": file.name, "sha256": file_sha256(file)},
+             "notes": {"artefact": ["a"]}, "more": {"artefact": {"b": 1}}}
+    manifest = {"format": "wirescene-models/1", "complete": True, "artefacts": ["viewpoint_classifier"],
+                "data": {"kitti_root": str(SPLIT.resolve()), "frame_ids": ["000010"]}, "steps": steps}
+    (models / MANIFEST_FILE).write_text(json.dumps(manifest))
+    assert resolve_models(models).own == ("viewpoint_classifier",)
+    assert trained_on(file, SPLIT, ["000002", "000010"]) == ["000010"]
+
+
 def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):
     broken = tmp_path / "parts.npz"
     broken.write_text("x")

@@ -182,9 +182,7 @@ def resolve_models(models_dir: str | Path | None) -> Models:
     if extra:
         raise InputError(f"{extra[0]} is not listed in {MANIFEST_FILE} (add it to 'artefacts' or remove the file)",
                          path=root)
-    steps = record.get("steps") if isinstance(record.get("steps"), dict) else {}
-    written = {s["artefact"]: s.get("sha256") for s in steps.values() if isinstance(s, dict)
-               and isinstance(s.get("artefact"), str)}
+    written = _written(record)
     for name in listed:  # a file replaced after the training would make the manifest describe another model
         expected = written.get(ARTEFACTS[name])
         if expected and file_sha256(root / ARTEFACTS[name]) != expected:
@@ -197,8 +195,9 @@ def resolve_models(models_dir: str | Path | None) -> Models:
 def trained_on(path: str | Path, split_dir: str | Path, frame_ids) -> list[str]:
     """The frames of ``frame_ids`` (of the KITTI split directory ``split_dir``) that the artefact
     file at ``path`` was trained on, as the manifest beside it records them: a file of
-    ``wirescene train all``, the very one its training wrote (its SHA-256 the manifest's). None
-    for a file no readable manifest beside it lists (a shipped file, a file put there by hand).
+    ``wirescene train all``, the very one its training wrote (its SHA-256 the manifest's). No
+    frame (``[]``) for a file no readable manifest beside it lists (a shipped file, a file put
+    there by hand), or of a training on another split directory.
 
     Examples
     --------
@@ -213,8 +212,7 @@ def trained_on(path: str | Path, split_dir: str | Path, frame_ids) -> list[str]:
         record = load_json(manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION)
     except InputError:  # a broken manifest is refused where the directory is read as --models
         return []
-    steps = record.get("steps") if isinstance(record.get("steps"), dict) else {}
-    written = {s.get("artefact"): s.get("sha256") for s in steps.values() if isinstance(s, dict)}
+    written = _written(record)
     data = record.get("data") if isinstance(record.get("data"), dict) else {}
     if (path.name not in written or not isinstance(data.get("frame_ids"), list)
             or data.get("kitti_root") != str(Path(split_dir).resolve())
@@ -222,6 +220,20 @@ def trained_on(path: str | Path, split_dir: str | Path, frame_ids) -> list[str]:
         return []
     trained = set(map(str, data["frame_ids"]))
     return [f for f in frame_ids if str(f) in trained]
+
+
+def _written(record: dict) -> dict[str, object]:
+    """``{file name: SHA-256}`` of the artefacts a models manifest's steps say they wrote (a step
+    naming no file by a string, as ``train all``'s shipped score calibration, is left out).
+
+    Examples
+    --------
+    >>> _written({"steps": {"parts": {"artefact": "parts_model.npz", "sha256": "ab"}, "odd": {"artefact": ["x"]}}})
+    {'parts_model.npz': 'ab'}
+    """
+    steps = record.get("steps") if isinstance(record.get("steps"), dict) else {}
+    return {s["artefact"]: s.get("sha256") for s in steps.values() if isinstance(s, dict)
+            and isinstance(s.get("artefact"), str)}
 
 
 def file_version(path: str | Path) -> tuple[int, int, int] | None:

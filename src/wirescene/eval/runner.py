@@ -320,8 +320,8 @@ def evaluate_dataset(
         Told, once every check above has passed and before the first fit (a run refused says
         nothing of its figures), each sentence of
         :func:`~wirescene.eval.held_out.trained_on_frames`: the frames evaluated that a model
-        the fits read was trained on, so that their figures are not held out. None: not looked
-        up.
+        the fits read was trained on (of the frames reused too), so that their figures are not
+        held out. None: not looked up.
 
     Returns
     -------
@@ -376,9 +376,11 @@ def evaluate_dataset(
         if lacking is not None:
             raise InputError(ORACLE_NEEDS, path=wireframe_gt_path(dataset.split_dir, lacking))
     # a corrupt image refused now, not at its frame's fit or in the report after every fit
-    finds_viewpoints = check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images,
-                                         notify=notify)
+    check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images, notify=notify)
     if held_out is not None:
+        # the bank and the classifier give our own boxes their viewpoints, and label or file boxes theirs where one
+        # lacks it (of every frame evaluated: a reused frame's figures are its earlier fit's of the same boxes)
+        finds_viewpoints = source.own or (evidence == "parts" and boxes_lack_viewpoints(dataset, source, frame_ids))
         read = model_files_read(options, fine=any(get_variant(v).fine for v in variants), own=source.own,
                                 evidence=evidence, viewpoints_given=not finds_viewpoints)
         for sentence in trained_on_frames(dataset, frame_ids, options=options, read=read):
@@ -396,7 +398,7 @@ SAY_DECODING = 200
 
 def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: Iterable[str],
                       frame_ids: list[str], *, evidence: str = "parts", every: bool = False,
-                      notify: Callable[[str], None] | None = None) -> bool:
+                      notify: Callable[[str], None] | None = None) -> None:
     """Decode, before the first fit, the image of each frame of ``frame_ids`` whose fit reads it
     (:meth:`~wirescene.io.kitti.KittiDataset.check_frames` with ``images``): a corrupt or
     truncated one is an :class:`InputError` then, not at its frame's fit (the frames fitted
@@ -405,31 +407,44 @@ def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: 
     variant, or a box without a viewpoint, as detection files give them), as the fits decide;
     ``every``: each frame's, for a caller that reads them after the fits (a report, pictures).
     Call it after :meth:`~wirescene.eval.sources.DetectionSource.check_files`; ``notify`` is told
-    of :data:`SAY_DECODING` images or more (a KITTI split's take half a minute or more).
-
-    Returns
-    -------
-    bool
-        Whether the bank and the crop classifier find viewpoints on these images: our own
-        pre-detection, or label or file boxes of which one comes without a viewpoint
-        (``evidence`` "parts"; :func:`~wirescene.fitting.models.model_files_read`'s
-        ``viewpoints_given`` is its negation for them).
-    """
-    finds_viewpoints = source.own
-    if source.own or evidence != "parts":  # the oracle's evidence (and the viewpoints told by it): no image
-        read = list(frame_ids) if every or source.own else []
+    of :data:`SAY_DECODING` images or more (a KITTI split's take half a minute or more)."""
+    if every or source.own:
+        read = list(frame_ids)
+    elif evidence != "parts":  # the oracle's evidence (and the viewpoints told by it): no image
+        read = []
     else:  # a label's viewpoint noise moves a viewpoint, never makes one unknown: any generator tells
         rng = np.random.default_rng(0)
-        read = []
-        for frame_id in frame_ids:
-            boxes = source.for_frame(dataset, frame_id, rng)
-            finds_viewpoints |= not np.all(np.isfinite(boxes.alpha))
-            if every or needs_evidence(boxes, variants):
-                read.append(frame_id)
+        read = [f for f in frame_ids if needs_evidence(source.for_frame(dataset, f, rng), variants)]
     if notify is not None and len(read) >= SAY_DECODING:
         notify(f"decoding the {len(read)} images the fits read before the first fit (a corrupt one refused now)")
     dataset.check_frames(read, images=True)
-    return finds_viewpoints
+
+
+def boxes_lack_viewpoints(dataset: KittiDataset, source: DetectionSource, frame_ids: Iterable[str]) -> bool:
+    """Whether a box of ``source`` (label boxes or files, not our own: a ``ValueError``) in the
+    frames ``frame_ids`` comes without a viewpoint, which a fit on the image finds with the
+    detector bank and the crop classifier (:func:`~wirescene.fitting.models.model_files_read`'s
+    ``viewpoints_given`` is its negation). A frame whose boxes no longer read (a reused frame's
+    file changed since its fit) counts: what it held is unknown.
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> sample = KittiDataset(DATA_DIR / "sample" / "kitti")
+    >>> boxes_lack_viewpoints(sample, DetectionSource("gt"), sample.frame_ids())  # label boxes carry theirs
+    False
+    """
+    if source.own:
+        raise ValueError("our own pre-detection's boxes are found with their viewpoints")
+    rng = np.random.default_rng(0)  # a label's viewpoint noise moves a viewpoint, never makes one unknown
+    for frame_id in frame_ids:
+        try:
+            boxes = source.for_frame(dataset, frame_id, rng)
+        except InputError:
+            return True
+        if not np.all(np.isfinite(boxes.alpha)):
+            return True
+    return False
 
 
 def _reusable_records(records: FrameRecords, frame_ids: list[str], notify) -> dict[str, dict]:
