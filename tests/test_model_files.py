@@ -14,7 +14,7 @@ import wirescene
 from conftest import KITTI_ROOT
 from wirescene.cli.main import main
 from wirescene.core.errors import InputError
-from wirescene.core.resources import MANIFEST_FILE, shipped_path
+from wirescene.core.resources import ARTEFACTS, MANIFEST_FILE, shipped_path
 from wirescene.core.shape import ShapeModel, load_default
 from wirescene.core.viewpoints import viewpoint_bin
 from wirescene.fitting.models import model_files_read, models_fingerprint, options_read
@@ -270,7 +270,8 @@ def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(
     r = cli(*common, "--models", models, "--detections", "bank")
     assert r.exit_code == 0, r.output + r.stderr
     assert r.stderr.count("trained on") == 2, r.stderr
-    assert f"1 of the 1 frames evaluated is among those {models} was trained on" in r.stderr
+    assert f"1 of the 1 frames evaluated is among those the viewpoint classifier of {models} was trained on" in \
+        r.stderr
     assert "the 72 the shipped detector bank was trained on" in r.stderr
     # label boxes carry their viewpoints: no classifier is read
     r = cli(*common, "--models", models, "--detections", "gt")
@@ -281,8 +282,8 @@ def test_eval_says_when_the_viewpoint_classifier_read_was_trained_on_the_frames(
     # no frames given: every frame of the split
     options = FitOptions(viewpoint_classifier=str(models / "viewpoint_classifier.npz"))
     assert trained_on_frames(KittiDataset(KITTI_ROOT), None, options=options, read=["viewpoint_classifier"]) == [
-        f"1 of the 3 frames evaluated is among those {models} was trained on (e.g. 000010): its figures are not held "
-        "out"]
+        f"1 of the 3 frames evaluated is among those the viewpoint classifier of {models} was trained on "
+        "(e.g. 000010): its figures are not held out"]
     (models / "viewpoint_classifier.npz").write_bytes(b"x" + (models / "viewpoint_classifier.npz").read_bytes())
     assert trained_on_frames(KittiDataset(KITTI_ROOT), None, options=options, read=["viewpoint_classifier"]) == []
 
@@ -301,6 +302,39 @@ def test_a_manifest_step_naming_no_file_by_a_string_is_left_out_as_resolve_model
     (models / MANIFEST_FILE).write_text(json.dumps(manifest))
     assert resolve_models(models).own == ("viewpoint_classifier",)
     assert trained_on(file, SPLIT, ["000002", "000010"]) == ["000010"]
+
+
+def test_the_notice_of_a_models_directory_names_the_files_read_that_were_trained_on_the_frames(tmp_path):
+    """The line of a `train all` directory names the files of it that the run reads, as the shipped models' line does:
+    the part model alone for a fine variant on label boxes, the bank and classifier for our own boxes."""
+    from wirescene.core.resources import file_sha256
+    from wirescene.eval.held_out import trained_on_frames
+    from wirescene.io.kitti import KittiDataset
+
+    models = tmp_path / "models"
+    models.mkdir()
+    steps = {}
+    for step, name in (("parts", "parts_model"), ("detector", "detector_bank"), ("viewpoints", "viewpoint_classifier")):
+        (models / ARTEFACTS[name]).write_bytes(name.encode())  # the notice reads the manifest and the hashes alone
+        steps[step] = {"done": True, "artefact": ARTEFACTS[name], "sha256": file_sha256(models / ARTEFACTS[name])}
+    manifest = {"format": "wirescene-models/1", "complete": True, "data": {"kitti_root": str(SPLIT.resolve()),
+                "frame_ids": ["000010", "001545"]}, "steps": steps}
+    (models / MANIFEST_FILE).write_text(json.dumps(manifest))
+    options = FitOptions(**{name: str(models / ARTEFACTS[name])
+                            for name in ("parts_model", "detector_bank", "viewpoint_classifier")})
+    dataset = KittiDataset(KITTI_ROOT)
+
+    def said(read):
+        return trained_on_frames(dataset, ["000002", "000010"], options=options, read=read)
+
+    assert said(["parts_model", "shape_model"]) == [
+        f"1 of the 2 frames evaluated is among those the part model of {models} was trained on (e.g. 000010): its "
+        "figures are not held out"]
+    assert said(["detector_bank", "viewpoint_classifier"])[0].startswith(
+        f"1 of the 2 frames evaluated is among those the detector bank and viewpoint classifier of {models} were "
+        "trained on (e.g. 000010)")
+    assert f"part model, detector bank and viewpoint classifier of {models} were" in said(
+        ["parts_model", "detector_bank", "viewpoint_classifier"])[0]
 
 
 def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):

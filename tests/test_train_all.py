@@ -121,6 +121,24 @@ def test_training_without_out_is_refused_and_leaves_the_package_alone(command):
     assert _package_state() == before
 
 
+@pytest.mark.parametrize("command", ["all", "viewpoints", "parts", "detector"])
+def test_train_commands_take_the_kitti_root_in_either_form(tmp_path, command):
+    """`train all ROOT` and `train parts --kitti-root ROOT` are the README's spellings: each command takes both (the
+    split file's unknown id, an error naming the root, shows that the root was read), and refuses two roots."""
+    split = tmp_path / "split.txt"
+    split.write_text("999999\n")
+    out = tmp_path / ("models" if command == "all" else "out.npz")
+    for form in ([KITTI_ROOT], ["--kitti-root", KITTI_ROOT], [KITTI_ROOT, "--kitti-root", KITTI_ROOT]):
+        line = one_line_error(cli("train", command, *form, "--split-file", split, "--out", out))
+        assert f"{split}: line 1: no" in line and "999999" in line, (form, line)
+    line = one_line_error(cli("train", command, KITTI_ROOT, "--kitti-root", tmp_path, "--out", out))
+    assert "KITTI_ROOT" in line and "--kitti-root" in line and "two roots" in line, line
+    if command in ("all", "viewpoints"):  # a root they cannot train without
+        line = one_line_error(cli("train", command, "--out", out))
+        assert "KITTI_ROOT or --kitti-root" in line, line
+    assert not out.exists()
+
+
 # -- models directories -------------------------------------------------------------------
 
 
@@ -311,6 +329,7 @@ def test_train_all_resume_skips_finished_steps(trained):
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--resume")
     assert r.exit_code == 0, r.output + r.stderr
     assert r.stderr.count("done in an earlier run, kept") == 4
+    assert r.stdout.count("(kept from an earlier run)") == 4, r.stdout  # the summary's costs are an earlier run's
     assert _mtimes(out) == before
     # options set to their defaults train the same: every step is kept
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "parts.n_jobs=1",
@@ -322,6 +341,8 @@ def test_train_all_resume_skips_finished_steps(trained):
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "occlusion.n_scenes=1",
             "--resume")
     assert r.exit_code == 0, r.output + r.stderr
+    summary = [line for line in r.stdout.splitlines() if "kept from an earlier run" in line]
+    assert [line.split()[0] for line in summary] == ["parts", "detector", "viewpoints"], r.stdout
     after = _mtimes(out)
     assert after["occlusion.json"] != before["occlusion.json"]
     assert {f: t for f, t in after.items() if f != "occlusion.json"} == \
@@ -524,12 +545,13 @@ def test_models_replace_the_bank_and_the_resume_fingerprint(trained, tmp_path):
               "--detections", "bank", "--predictions", pred]
     r = cli(*common, "--models", out)
     assert r.exit_code == 0
-    assert f"1 of the 1 frames evaluated is among those {out} was trained on (e.g. 000010)" in r.stderr
+    assert (f"1 of the 1 frames evaluated is among those the detector bank and viewpoint classifier of {out} were "
+            "trained on (e.g. 000010)") in r.stderr
     # label boxes fitted by `coarse` read neither the bank nor the part model: nothing to warn of but the shipped
     # score calibration, which the directory lacks
     r = cli("eval", KITTI_ROOT, "--variant", "coarse", "--frames", "000010", "--workers", 1, "--detections", "gt",
             "--models", out)
-    assert r.exit_code == 0 and f"{out} was trained on" not in r.stderr
+    assert r.exit_code == 0 and f"of {out} w" not in r.stderr
     assert "among the 72 the shipped score calibration was trained on (e.g. 000010)" in r.stderr
     record = json.loads((pred / ".frames" / "000010.json").read_text())
     from wirescene.eval.metrics import FrameResult

@@ -19,6 +19,7 @@ from wirescene.cli.options import (
     drive_map_option,
     field_type,
     kitti_dataset,
+    kitti_root_params,
     models_option,
     read_drive_map,
     refuse_given,
@@ -56,9 +57,9 @@ from wirescene.training.scale import (
 @click.command("detector")
 @click.option("--out", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
               help="Detector bank .npz to write (the shipped one is src/wirescene/data/detector_bank.npz).")
-@click.option("--kitti-root", type=NonEmptyPath(file_okay=False, path_type=Path), default=None,
-              help="Train on the labelled real frames of this KITTI root (the shipped bank: all 72 frames of "
-                   "shared/data/kitti). Without it: synthetic scenes.")
+@kitti_root_params("Train on the labelled real frames of this KITTI root (the shipped bank: all 72 frames of "
+                   "shared/data/kitti). Without it: synthetic scenes.",
+                   type=NonEmptyPath(file_okay=False, path_type=Path))
 @click.option("--frames", default=None, help="With --kitti-root: comma-separated training frame ids (default all).")
 @split_file_option
 @click.option("--folds", default=None,
@@ -178,7 +179,8 @@ def _fold_list(text: str | None) -> list[int] | None:
 
 
 @click.command("viewpoints")
-@click.argument("kitti_root", type=NonEmptyPath(file_okay=False, exists=True, path_type=Path))
+@kitti_root_params("Labelled KITTI root whose Car labels are cropped.",
+                   type=NonEmptyPath(file_okay=False, exists=True, path_type=Path), required=True)
 @click.option("--out", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
               help="Classifier to write (the shipped one is src/wirescene/data/viewpoint_classifier.npz).")
 @click.option("--frames", default=None, help="Comma-separated training frame ids (default: all).")

@@ -4,6 +4,7 @@ starts, so that a long run never fails at its end on a bad path."""
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from pathlib import Path
@@ -208,6 +209,45 @@ def parse_frames(value: str | None, known: list[str], option: str = "--frames") 
         more = f" (and {len(unknown) - 1} more)" if len(unknown) > 1 else ""
         raise click.BadParameter(f"no frame {unknown[0]} in the dataset{more}", param_hint=option)
     return frames
+
+
+def kitti_root_params(help: str, *, type: click.ParamType, required: bool = False):
+    """The labelled KITTI root of a ``train`` command, taken in either form: the ``KITTI_ROOT``
+    argument (``train all ROOT``) or ``--kitti-root DIR`` (``train parts --kitti-root ROOT``), so
+    that no command refuses the other's spelling. The command receives it as ``kitti_root``.
+
+    Parameters
+    ----------
+    help : str
+        The help of ``--kitti-root``.
+    type : click.ParamType
+        The type of both forms (the command's checks of the root).
+    required : bool
+        The command needs a root: neither form given is a usage error naming both.
+
+    Returns
+    -------
+    callable
+        A decorator of a click command function taking ``kitti_root``; both forms naming two
+        different roots is a usage error.
+    """
+    def decorate(f):
+        @functools.wraps(f)
+        def command(*args, kitti_root=None, kitti_root_option=None, **kwargs):
+            if kitti_root is not None and kitti_root_option is not None and \
+                    os.path.abspath(kitti_root) != os.path.abspath(kitti_root_option):
+                raise click.UsageError(f"KITTI_ROOT ({kitti_root}) and --kitti-root ({kitti_root_option}) name two "
+                                       "roots: give one")
+            root = kitti_root if kitti_root is not None else kitti_root_option
+            if root is None and required:
+                raise click.UsageError("the KITTI root is missing: give it as KITTI_ROOT or --kitti-root DIR")
+            return f(*args, kitti_root=root, **kwargs)
+
+        command = click.option("--kitti-root", "kitti_root_option", type=type, default=None,
+                               help=f"{help} The KITTI_ROOT argument gives it too.")(command)
+        return click.argument("kitti_root", type=type, required=False)(command)
+
+    return decorate
 
 
 def split_file_option(f):

@@ -13,6 +13,7 @@ from wirescene.cli.options import (
     check_output_dir,
     check_output_file,
     drive_map_option,
+    kitti_root_params,
     read_drive_map,
     refuse_given,
     say_off_centre_frames,
@@ -44,9 +45,8 @@ _RECIPE = RECIPE["parts"]
               show_default=True,
               help="Descriptor (ghog: gradient-orientation histograms of the grey image; ghog_ms: two cell sizes; "
                    "ghog_msc: ghog_ms plus colour).")
-@click.option("--kitti-root", type=NonEmptyPath(file_okay=False, exists=True), default=None,
-              help="Labelled KITTI root whose frames add real part and background patches "
-                   "(the shipped model: ../shared/data/kitti, all 72 frames).")
+@kitti_root_params("Labelled KITTI root whose frames add real part and background patches (the shipped model: "
+                   "../shared/data/kitti, all 72 frames).", type=NonEmptyPath(file_okay=False, exists=True))
 @click.option("--frames", default=None, help="Real training frames: comma-separated ids (default: all).")
 @split_file_option
 @click.option("--position/--no-position", default=_RECIPE["position"], show_default=True,

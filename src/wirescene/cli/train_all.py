@@ -13,6 +13,7 @@ from wirescene.cli.options import (
     check_output_dir,
     drive_map_option,
     keeps_on_resume,
+    kitti_root_params,
     split_file_option,
     workers_count,
     workers_option,
@@ -40,8 +41,35 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
     return out
 
 
+def _earlier_steps(out: Path) -> dict:
+    """The step records of the manifest in ``out`` before a resumed run (empty where there is
+    none or it cannot be read: the run says why), so that the summary tells the steps it kept
+    from those it trained.
+
+    Parameters
+    ----------
+    out : Path
+        The models directory.
+
+    Returns
+    -------
+    dict
+        ``{step: record}``.
+    """
+    from wirescene.core.artefacts import load_json
+    from wirescene.core.errors import InputError
+    from wirescene.core.resources import MANIFEST_FILE, MANIFEST_KIND, MANIFEST_VERSION
+
+    try:
+        steps = load_json(out / MANIFEST_FILE, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("steps")
+    except (InputError, OSError):
+        return {}
+    return steps if isinstance(steps, dict) else {}
+
+
 @click.command("all")
-@click.argument("kitti_root", type=NonEmptyPath(directory=True, path_type=Path))
+@kitti_root_params("Labelled KITTI root to train on.", type=NonEmptyPath(directory=True, path_type=Path),
+                   required=True)
 @click.option("--out", type=NonEmptyPath(file_okay=False, path_type=Path), required=True,
               help="Models directory to write (parts_model.npz, detector_bank.npz, viewpoint_classifier.npz, "
                    "occlusion.json, models.json); use it with --models of fit, eval, predict and detect.")
@@ -78,6 +106,7 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
     if frames is not None:
         dataset = KittiDataset(kitti_root)
         ids = parse_frames(frames, dataset.frame_ids())
+    earlier = _earlier_steps(out) if resume else {}
     bars = []
 
     def iterate(items, name):
@@ -93,7 +122,8 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
         if record.get("source") == "shipped":
             click.echo(f"{step:18s} shipped ({record['why']})")
         else:
-            click.echo(f"{step:18s} {record['artefact']}: {step_cost(record)}")
+            kept = " (kept from an earlier run)" if record == earlier.get(step) else ""
+            click.echo(f"{step:18s} {record['artefact']}: {step_cost(record)}{kept}")
     folds = manifest["calibration_folds"]
     click.echo(f"models written to {out} ({manifest['data']['frames']} frames, {manifest['data']['cars']} cars; "
                f"{folds['frames_with_known_drive']} frames of known drive"

@@ -71,18 +71,29 @@ def trained_on_frames(dataset: KittiDataset, frame_ids: list[str] | None, *, opt
             continue
         seen = trained_on(file, dataset.split_dir, frame_ids)
         if seen:
-            by_manifest.setdefault(os.path.dirname(os.path.abspath(file)), []).extend(seen)
-    for folder, seen in by_manifest.items():
-        seen = [f for f in frame_ids if f in set(seen)]
-        said.append(f"{_share(seen, frame_ids)} those {folder} was trained on (e.g. {seen[0]}): "
-                    f"{_figures(seen)} not held out")
+            names, frames = by_manifest.setdefault(os.path.dirname(os.path.abspath(file)), ([], set()))
+            names.append(name)
+            frames.update(seen)
+    for folder, (names, frames) in by_manifest.items():
+        seen = [f for f in frame_ids if f in frames]
+        said.append(f"{_share(seen, frame_ids)} those the {_which(names)} of {folder} {_were(names)} trained on "
+                    f"(e.g. {seen[0]}): {_figures(seen)} not held out")
     seen = among_shipped_training_frames(dataset.image_path, frame_ids) if shipped else []
     if seen:
-        names = [FRAME_TRAINED[n] for n in shipped]
-        which = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
-        said.append(f"{_share(seen, frame_ids)} the {len(shipped_training_frames())} the shipped {which} "
-                    f"{'were' if len(names) > 1 else 'was'} trained on (e.g. {seen[0]}): {_figures(seen)} not held out")
+        said.append(f"{_share(seen, frame_ids)} the {len(shipped_training_frames())} the shipped {_which(shipped)} "
+                    f"{_were(shipped)} trained on (e.g. {seen[0]}): {_figures(seen)} not held out")
     return said
+
+
+def _which(names: list[str]) -> str:
+    """The artefacts ``names`` as a message names them: ``"part model and detector bank"``."""
+    words = [FRAME_TRAINED[n] for n in names]
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} and {words[-1]}"
+
+
+def _were(names: list[str]) -> str:
+    """``"was"``, or ``"were"`` of several artefacts."""
+    return "were" if len(names) > 1 else "was"
 
 
 def _same_bytes(file, shipped) -> bool:
