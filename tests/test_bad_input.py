@@ -986,6 +986,11 @@ FAILING_RUNS = {
                    "coarse", "--detections", _boxes_without_viewpoint(t), "--workers", "1", "--out", t / "submission"],
         rf"image_2/{FRAME}\.png: corrupt or truncated image \(image file is truncated\)$"),
     "predict, calibration without P2": (_predict_without_p2_case, "calibration has no P2"),
+    # the training commands decode every training image before any step (train all failed in its parts step)
+    "train all, a later training image truncated": (
+        lambda t: ["train", "all", _truncated_copy(t, ["000002", FRAME], FRAME), "--out", t / "models"],
+        rf"image_2/{FRAME}\.png: corrupt or truncated image \(image file is truncated\)$"),
+
     # the detection files are read before the first fit, as the calibrations and labels: the first frame's
     # outputs (label files, its record, the settings' record) were left behind
     "eval --predictions, a later frame's detection file malformed": (
@@ -1011,6 +1016,24 @@ def test_runs_failing_at_a_frame_leave_no_output(tmp_path, case):
              and not re.match(r"wirescene: \d+ of the \d+ frames evaluated are among ", ln)]
     assert len(lines) == 1 and re.match(rf"wirescene: error: .*{problem}", lines[0]), r.stderr
     assert set(tmp_path.rglob("*")) <= before, f"{case} left {sorted(set(tmp_path.rglob('*')) - before)}"
+
+
+@pytest.mark.parametrize("command", ["parts", "detector"])
+def test_train_parts_and_detector_refuse_a_truncated_image_before_training(tmp_path, monkeypatch, command):
+    """They read every training image: a truncated one is refused before the training starts (it was found when the
+    training reached it, up to half an hour into the part step on a whole KITTI)."""
+    import wirescene.training.kitti_detector
+    import wirescene.training.parts
+
+    def trained(*args, **kwargs):
+        raise AssertionError("the training started")
+
+    monkeypatch.setattr(wirescene.training.parts, "train_part_detector", trained)
+    monkeypatch.setattr(wirescene.training.kitti_detector, "train_detector_bank_kitti", trained)
+    root = _truncated_copy(tmp_path, ["000002", FRAME], FRAME)
+    r = CliRunner().invoke(main, ["train", command, "--kitti-root", str(root), "--out", str(tmp_path / "m.npz")])
+    assert r.exit_code == 2 and r.stderr.strip() == (f"wirescene: error: {root / 'training' / 'image_2'}/{FRAME}.png: "
+                                                     "corrupt or truncated image (image file is truncated)"), r.stderr
 
 
 @pytest.mark.parametrize("variant, detections, check_images, refused", [

@@ -142,7 +142,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         ids = ds.frame_ids() if ids is None else ids
         if fl is not None:  # narrowed here, so that the warning below is of the frames trained on
             ids = frames_in_folds(ids, fl)
-        say_off_centre_frames(ds, ids)
+        say_off_centre_frames(ds, ids, images=True)  # a truncated image refused before the training reads it
         drives = read_drive_map(ds, drive_mapping)[0] if not no_calibration and given is None else None
         _, rep = train_detector_bank_kitti(out, kitti_root, frames=ids, seed=seed, C=C,
                                            n_partial=n_partial, calibration_folds=not no_calibration,

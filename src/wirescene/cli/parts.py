@@ -124,7 +124,8 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
         ds = KittiDataset(kitti_root)
         if frames is not None or split_file is not None:
             frames = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
-        say_off_centre_frames(ds, ds.frame_ids() if frames is None else frames)  # the real frames' calibrations
+        # the real frames' calibrations and images, a truncated one refused before the training reads it
+        say_off_centre_frames(ds, ds.frame_ids() if frames is None else frames, images=True)
         if calibrate:
             from wirescene.training.kitti_detector import calibration_folds
 
