@@ -252,6 +252,39 @@ def test_the_key_says_which_face_the_cross_of_a_box_marks(camera):
     assert boxes[0] == "estimate (a cross marks the front)" and "ground truth" in boxes
 
 
+def test_the_overlay_draws_the_shared_ground_plane_under_the_cars(camera):
+    """A `+gp` estimate's one ground plane (every car stands on it) is drawn as a grid under the cars, its key
+    saying the grid's spacing; an estimate whose cars stand on planes of their own draws none."""
+    from dataclasses import replace
+
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import to_rgba
+
+    from wirescene.core.groundplane import point_on_plane
+    from wirescene.io.pictures import GROUND_COLOR, overlay
+
+    image = np.zeros((375, 1242, 3), np.uint8)
+    own = _scene(camera, [(2.0, 12.0), (-3.0, 20.0)])
+    pitched = [replace(o, pitch=0.02) for o in own.objects]
+    shared = replace(own, variant="coarse+gp", shared_plane=True, objects=pitched)
+
+    def grid_and_key(scene):
+        ax = overlay(image, camera, scene).axes[0]
+        grid = [c for c in ax.collections if isinstance(c, LineCollection)
+                and np.allclose(c.get_colors()[0], to_rgba(GROUND_COLOR))]
+        return grid, [t.get_text() for t in ax.get_legend().get_texts()], ax
+
+    grid, key, ax = grid_and_key(shared)
+    assert len(grid) == 1 and "ground plane: a line every 10 m ahead, 5 m aside" in key
+    cars = [c for c in ax.collections if isinstance(c, LineCollection) and c is not grid[0]]
+    assert grid[0].get_zorder() < min(c.get_zorder() for c in cars)  # under the cars
+    # the line across the road 10 m ahead lies where the pitched plane projects, not on the level road
+    ahead = camera.project(point_on_plane(np.array([-10.0, 10.0]), np.array([10.0, 10.0]), 0.02, 0.0))
+    assert any(np.allclose(segment, ahead, atol=1e-6) for segment in grid[0].get_segments())
+    grid, key, _ = grid_and_key(own)
+    assert grid == [] and not any(k.startswith("ground plane") for k in key)
+
+
 def _rectangles(ax) -> dict:
     """``{(x, y): (line style, edge colour)}`` of the boxes drawn on ``ax``."""
     from matplotlib.patches import Rectangle

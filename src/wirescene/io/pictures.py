@@ -31,7 +31,7 @@ from matplotlib.patches import Patch, Rectangle
 from wirescene.core.atomic import write_bytes
 from wirescene.core.boxes import box_corners
 from wirescene.core.camera import NEAR_PLANE, Camera
-from wirescene.core.groundplane import rotation_y
+from wirescene.core.groundplane import point_on_plane, rotation_y
 from wirescene.core.matching import FrameMatches, match_estimate
 
 EST_COLOR = "#e8302a"
@@ -50,6 +50,11 @@ FALSE_COLOR = "#9933ff"
 LINK_COLOR = "#404040"
 #: Dashes of a missed labelled car's box (the hidden edges' are (3, 2), of the estimates' colour only).
 MISSED_DASHES = (0, (5, 3))
+#: The shared ground plane's grid (``+gp`` variants, ``full``): thin white lines, half transparent, under the cars.
+GROUND_COLOR = "#ffffff8c"
+#: Where the grid's lines lie on the plane (m): across the road every 10 m ahead, along it every 5 m aside.
+GROUND_AHEAD = np.arange(10.0, 81.0, 10.0)
+GROUND_ASIDE = np.arange(-10.0, 10.1, 5.0)
 #: Face of a hidden vertex's dot (an open dot, edged in the estimate's colour).
 HIDDEN_FACE = "white"
 #: Font size (points) of the cars' numbers.
@@ -114,6 +119,27 @@ def _draw_edges(ax, camera: Camera, points: np.ndarray, edges, color: str, lw: f
 def _draw_box3d(ax, camera: Camera, corners: np.ndarray, color: str, lw: float = 1.5, ls="-"):
     _draw_edges(ax, camera, corners, _BOX_EDGES, color, lw, ls=ls)
     _draw_edges(ax, camera, corners, _FRONT_FACE, color, lw * 0.6, ls=ls)
+
+
+def ground_grid(plane) -> tuple[np.ndarray, np.ndarray]:
+    """The grid drawn on a ground ``plane`` (a :class:`~wirescene.core.groundplane.GroundPlane`):
+    ``(points (P, 3), edges (E, 2))`` in the camera frame, lines across the road at
+    :data:`GROUND_AHEAD` and along it at :data:`GROUND_ASIDE`, each lying on the plane.
+
+    Examples
+    --------
+    >>> from wirescene.core.groundplane import GroundPlane
+    >>> points, edges = ground_grid(GroundPlane())  # KITTI's level road, 1.65 m below the camera
+    >>> points.shape, edges.shape, bool(np.allclose(points[:, 1], 1.65))
+    ((26, 3), (13, 2), True)
+    """
+    near, far = 5.0, float(GROUND_AHEAD[-1])
+    ends = [(GROUND_ASIDE[0], z, GROUND_ASIDE[-1], z) for z in GROUND_AHEAD]
+    ends += [(x, near, x, far) for x in GROUND_ASIDE]
+    x0, z0, x1, z1 = np.array(ends, float).T
+    points = point_on_plane(np.concatenate([x0, x1]), np.concatenate([z0, z1]), plane.pitch, plane.roll,
+                            plane.height)
+    return points, np.stack([np.arange(len(ends)), np.arange(len(ends)) + len(ends)], axis=1)
 
 
 def judged(estimate, gt: Sequence) -> FrameMatches | None:
@@ -350,6 +376,9 @@ def overlay(
     if detections is not None:
         for b in detections.boxes:
             ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
+    plane = None if estimate is None else estimate.ground_plane
+    if plane is not None:  # the plane every car stands on, under the boxes and the cars
+        _draw_edges(ax, camera, *ground_grid(plane), GROUND_COLOR, 0.6, zorder=1.5)
     false, missed = _verdicts(estimate, gt, judged(estimate, gt))
     for g in sorted(gt, key=lambda g: -g.location[2]):  # far to near: a near car is drawn over a far one
         _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0,
@@ -382,6 +411,8 @@ def overlay(
         key.append(("tag", EST_COLOR, f"#n c: car n (line n of the label file), {score_name} c" if scores
                     else "#n: the label file's n-th car"))
         key.extend(_false_key(false, "#n c" if scores else "#n"))
+    if plane is not None:
+        key.append(("ground", GROUND_COLOR, "ground plane: a line every 10 m ahead, 5 m aside"))
     if len(gt):
         key.append(("-", GT_COLOR, "ground truth" + ("" if est_boxes else " (a cross marks the front)")))
     if missed:
@@ -390,10 +421,12 @@ def overlay(
         key.append(("--", DET_COLOR, "pre-detection"))
     if dropped is not None and len(dropped.boxes):
         key.append((":", DROPPED_COLOR, "pre-detection the fit dropped"))
+
     if key:
         handles = [Patch(facecolor=c, alpha=0.85, lw=0) if s == "tag" else
                    Line2D([], [], color=c, ls=_KEY_STYLES.get(s, s), marker="o" if s == "hidden" else None,
-                          mfc=HIDDEN_FACE, ms=4, path_effects=_DROPPED_EFFECTS if c == DROPPED_COLOR else None)
+                          mfc=HIDDEN_FACE, ms=4,
+                          path_effects=_DROPPED_EFFECTS if c in (DROPPED_COLOR, GROUND_COLOR) else None)
                    for s, c, _ in key]
         legend = ax.legend(handles, [k[2] for k in key], loc="upper right", fontsize=7, framealpha=0.6,
                            borderpad=0.4)
@@ -407,7 +440,7 @@ def overlay(
 
 
 # The key's line style of each kind of entry that is no plain line style.
-_KEY_STYLES = {"hidden": "--", "missed": MISSED_DASHES, "false": "-"}
+_KEY_STYLES = {"hidden": "--", "missed": MISSED_DASHES, "false": "-", "ground": "-"}
 #: What the key says a false car's tag means, by the tag's word (the evaluation's rule).
 FALSE_KEY = {"false": "no labelled car of its own (IoU > 0.5)", "false view": "viewpoint > 45° off its car"}
 
