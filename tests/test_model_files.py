@@ -292,6 +292,7 @@ def test_a_manifest_step_naming_no_file_by_a_string_is_left_out_as_resolve_model
     """A step whose "artefact" is a list or an object: `--models` read the directory (resolve_models skips the step),
     then the held-out line failed with a TypeError (unhashable type) after every check had passed."""
     from wirescene.core.resources import file_sha256, resolve_models, trained_on
+    from wirescene.io.kitti import KittiDataset
 
     models = models_dir(tmp_path / "models", viewpoint_classifier=forced_classifier(tmp_path / "forced.npz", 5))
     file = models / "viewpoint_classifier.npz"
@@ -301,7 +302,35 @@ def test_a_manifest_step_naming_no_file_by_a_string_is_left_out_as_resolve_model
                 "data": {"kitti_root": str(SPLIT.resolve()), "frame_ids": ["000010"]}, "steps": steps}
     (models / MANIFEST_FILE).write_text(json.dumps(manifest))
     assert resolve_models(models).own == ("viewpoint_classifier",)
-    assert trained_on(file, SPLIT, ["000002", "000010"]) == ["000010"]
+    image_path = KittiDataset(KITTI_ROOT).image_path
+    assert trained_on(file, image_path, ["000002", "000010"], split_dir=SPLIT) == ["000010"]
+
+
+def test_a_train_all_file_tells_its_frames_by_their_images_in_a_copy_of_the_root_too(tmp_path):
+    """The manifest records each training image's SHA-256: the same frames evaluated from a copy of the KITTI root
+    elsewhere (they were told by the root's path alone, and said nothing) are told; another image under a training
+    frame's id is not; a manifest of an earlier version, without them, is read by the root's path as before."""
+    from PIL import Image
+
+    from conftest import kitti_copy
+    from wirescene.core.resources import file_sha256, trained_on
+    from wirescene.io.kitti import KittiDataset
+
+    models = models_dir(tmp_path / "models", viewpoint_classifier=forced_classifier(tmp_path / "forced.npz", 5))
+    file = models / "viewpoint_classifier.npz"
+    images = {f: file_sha256(SPLIT / "image_2" / f"{f}.png") for f in ("000010", "001545")}
+    manifest = {"format": "wirescene-models/1", "complete": True, "artefacts": ["viewpoint_classifier"],
+                "data": {"kitti_root": str(SPLIT.resolve()), "frame_ids": sorted(images), "images_sha256": images},
+                "steps": {"viewpoints": {"done": True, "artefact": file.name, "sha256": file_sha256(file)}}}
+    (models / MANIFEST_FILE).write_text(json.dumps(manifest))
+    copy = KittiDataset(kitti_copy(tmp_path / "copy", ["000002", "000010", "001545"]))
+    flipped = copy.image_path("001545")
+    Image.open(flipped).transpose(Image.FLIP_LEFT_RIGHT).save(flipped)  # another image under a training frame's id
+    assert trained_on(file, copy.image_path, copy.frame_ids(), split_dir=copy.split_dir) == ["000010"]
+    del manifest["data"]["images_sha256"]  # an earlier manifest: the root's path and the ids
+    (models / MANIFEST_FILE).write_text(json.dumps(manifest))
+    assert trained_on(file, copy.image_path, copy.frame_ids(), split_dir=copy.split_dir) == []
+    assert trained_on(file, copy.image_path, ["000002", "001545"], split_dir=SPLIT) == ["001545"]
 
 
 def test_the_notice_of_a_models_directory_names_the_files_read_that_were_trained_on_the_frames(tmp_path):

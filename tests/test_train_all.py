@@ -18,7 +18,7 @@ import wirescene
 from conftest import KITTI_ROOT, assert_close, kitti_copy
 from wirescene.cli.main import main
 from wirescene.core.errors import InputError
-from wirescene.core.resources import ARTEFACTS, DATA_DIR, MANIFEST_FILE, resolve_models, shipped_path
+from wirescene.core.resources import ARTEFACTS, DATA_DIR, MANIFEST_FILE, file_sha256, resolve_models, shipped_path
 from wirescene.io.splits import read_split_file
 from wirescene.predetect.bank import SUPPORT_WEIGHT
 
@@ -294,6 +294,9 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert manifest["shipped"] == ["score_calibration"]
     data = manifest["data"]
     assert data["frames"] == 2 and data["frame_ids"] == ["000010", "001545"] and data["cars"] == 14
+    # each image's content, by which an evaluation of a copy of the root elsewhere tells the frames trained on
+    assert data["images_sha256"] == {f: file_sha256(KITTI_ROOT / "training" / "image_2" / f"{f}.png")
+                                     for f in ("000010", "001545")}
     assert data["split_file"] == str(split.resolve())
     assert manifest["calibration_folds"]["fold_of"] == {"000010": 0, "001545": 1}
     assert manifest["calibration_folds"]["frames_with_known_drive"] == 2  # the shared frames' drives

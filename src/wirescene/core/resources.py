@@ -192,16 +192,19 @@ def resolve_models(models_dir: str | Path | None) -> Models:
     return Models(root.resolve(), tuple(n for n in ARTEFACTS if n in listed))
 
 
-def trained_on(path: str | Path, split_dir: str | Path, frame_ids) -> list[str]:
-    """The frames of ``frame_ids`` (of the KITTI split directory ``split_dir``) that the artefact
-    file at ``path`` was trained on, as the manifest beside it records them: a file of
-    ``wirescene train all``, the very one its training wrote (its SHA-256 the manifest's). No
+def trained_on(path: str | Path, image_path, frame_ids, *, split_dir: str | Path) -> list[str]:
+    """The frames of ``frame_ids`` that the artefact file at ``path`` was trained on, as the
+    manifest beside it records them: a file of ``wirescene train all``, the very one its
+    training wrote (its SHA-256 the manifest's). A frame is told by its image's content
+    (``image_path(frame id)``, :func:`frames_of_content`), as the manifest records each training
+    image's SHA-256 (a copy of the KITTI root elsewhere is the same frames); a manifest of an
+    earlier version, without them, by the KITTI split directory ``split_dir`` and the ids. No
     frame (``[]``) for a file no readable manifest beside it lists (a shipped file, a file put
-    there by hand), or of a training on another split directory.
+    there by hand).
 
     Examples
     --------
-    >>> trained_on(shipped_path("parts_model"), "kitti/training", ["000010"])  # no manifest beside it
+    >>> trained_on(shipped_path("parts_model"), Path, ["000010"], split_dir="kitti/training")  # no manifest
     []
     """
     path = Path(path)
@@ -214,12 +217,42 @@ def trained_on(path: str | Path, split_dir: str | Path, frame_ids) -> list[str]:
         return []
     written = _written(record)
     data = record.get("data") if isinstance(record.get("data"), dict) else {}
-    if (path.name not in written or not isinstance(data.get("frame_ids"), list)
-            or data.get("kitti_root") != str(Path(split_dir).resolve())
-            or file_sha256(path) != written[path.name]):
+    if path.name not in written or file_sha256(path) != written[path.name]:
+        return []
+    images = data.get("images_sha256")
+    if isinstance(images, dict):
+        return frames_of_content(image_path, frame_ids, {str(f): h for f, h in images.items() if isinstance(h, str)})
+    if not isinstance(data.get("frame_ids"), list) or data.get("kitti_root") != str(Path(split_dir).resolve()):
         return []
     trained = set(map(str, data["frame_ids"]))
     return [f for f in frame_ids if str(f) in trained]
+
+
+def frames_of_content(image_path, frame_ids, known: dict[str, str]) -> list[str]:
+    """The frames of ``frame_ids`` whose image (``image_path(frame id)``) has the content
+    ``known`` records for its id (``{frame id: SHA-256}``): only those ids are read; an image
+    that cannot be read is not told (the fits that read it refuse it, naming it).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "000010.png").write_bytes(b"pixels")
+    ...     known = {"000010": file_sha256(Path(d) / "000010.png"), "000002": "0" * 64}
+    ...     frames_of_content(lambda f: Path(d) / f"{f}.png", ["000002", "000010", "000011"], known)
+    ['000010']
+    """
+    seen = []
+    for frame in frame_ids:
+        if frame not in known:
+            continue
+        path = Path(image_path(frame))
+        try:
+            if path.is_file() and file_sha256(path, what="image") == known[frame]:
+                seen.append(frame)
+        except InputError:
+            continue
+    return seen
 
 
 def _written(record: dict) -> dict[str, object]:

@@ -69,7 +69,7 @@ def trained_on_frames(dataset: KittiDataset, frame_ids: list[str] | None, *, opt
         if file is None or _same_bytes(file, shipped_path(name)):
             shipped.append(name)
             continue
-        seen = trained_on(file, dataset.split_dir, frame_ids)
+        seen = trained_on(file, dataset.image_path, frame_ids, split_dir=dataset.split_dir)
         if seen:
             names, frames = by_manifest.setdefault(os.path.dirname(os.path.abspath(file)), ([], set()))
             names.append(name)

@@ -19,8 +19,7 @@ from pathlib import Path
 from typing import Iterable
 
 from wirescene.core.artefacts import load_json, save_json
-from wirescene.core.errors import InputError
-from wirescene.core.resources import DATA_DIR, file_sha256
+from wirescene.core.resources import DATA_DIR, file_sha256, frames_of_content
 
 __all__ = ["RECORD", "training_frames_record", "write_training_frames", "shipped_training_frames",
            "among_shipped_training_frames"]
@@ -79,15 +78,4 @@ def among_shipped_training_frames(image_path, frame_ids: Iterable[str], *, recor
     >>> among_shipped_training_frames(lambda f: Path("elsewhere") / f"{f}.png", ["000010"])  # no such image
     []
     """
-    known = shipped_training_frames(Path(record))
-    seen = []
-    for frame in frame_ids:
-        if frame not in known:
-            continue
-        path = Path(image_path(frame))
-        try:
-            if path.is_file() and file_sha256(path, what="image") == known[frame]:
-                seen.append(frame)
-        except InputError:  # unreadable: the fits that read it refuse it, naming it
-            continue
-    return seen
+    return frames_of_content(image_path, frame_ids, shipped_training_frames(Path(record)))

@@ -337,14 +337,15 @@ def train_all(
     if not dataset.has_labels:
         raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
     ids = _training_frames(dataset, frames, split_file)
-    data_sha256, cars = _check_frames(dataset, ids, notify=notify)  # before anything is trained or written
+    data_sha256, cars, images = _check_frames(dataset, ids, notify=notify)  # before anything is trained or written
     check_trainable(dataset, ids)  # the viewpoint step's bins, before the steps ahead of it train
     drives, mapping_dir = drive_map(dataset.base_dir, mapping=drive_mapping)
     # held-out folds serve the part calibration and the bank's, unless both are off or given (one drive is then enough)
     held_out = bool(opts["parts"].get("calibrate_real")) or opts["detector"].get("calibration") is None
     folds = calibration_folds(dataset, ids, n_folds=n_folds, drives=drives) if held_out else {}
     previous = _previous_steps(out, resume)
-    manifest = _new_manifest(dataset, ids, cars, folds, split_file, drives=drives, mapping_dir=mapping_dir)
+    manifest = _new_manifest(dataset, ids, cars, folds, split_file, drives=drives, mapping_dir=mapping_dir,
+                             images=images)
     # what a step learns from: the frames' labels, calibrations and images, and the folds they are dealt to
     key_data = {"kitti_root": manifest["data"]["kitti_root"], "frames_sha256": manifest["data"]["frames_sha256"],
                 "n_folds": n_folds, "files_sha256": data_sha256,
@@ -381,7 +382,8 @@ def train_all(
     return manifest
 
 
-def _check_frames(dataset, ids: list[str], *, notify: Callable[[str], None] | None = None) -> tuple[str, int]:
+def _check_frames(dataset, ids: list[str], *,
+                  notify: Callable[[str], None] | None = None) -> tuple[str, int, dict[str, str]]:
     """Check the training frames' calibrations, images (decoded, some 12 ms a KITTI frame: a
     truncated one found here, not in a step hours on) and labels (read to count the cars)
     (:meth:`~wirescene.io.kitti.KittiDataset.check_frames`): an :class:`InputError` naming the
@@ -390,7 +392,8 @@ def _check_frames(dataset, ids: list[str], *, notify: Callable[[str], None] | No
     line of those whose calibration looks made for another image size
     (:func:`wirescene.eval.runner.say_off_centre`); return a SHA-256 of their label, calibration
     and image files (a resumed step whose frames changed is trained again; an image replaced by
-    another of the same size too), and their number of cars."""
+    another of the same size too), their number of cars and ``{frame: its image's SHA-256}`` (the
+    manifest's, by which an evaluation tells its frames, :func:`wirescene.core.resources.trained_on`)."""
     from wirescene.eval.runner import SAY_DECODING, notify_stderr, say_off_centre
 
     notify = notify or notify_stderr
@@ -401,12 +404,13 @@ def _check_frames(dataset, ids: list[str], *, notify: Callable[[str], None] | No
     if not any(counts.values()):
         raise InputError(f"none of the {len(ids)} training frames has a labelled Car", path=dataset.split_dir)
     digest = hashlib.sha256()
+    images = {f: file_sha256(dataset.image_path(f), what="image") for f in ids}  # some 6 s for KITTI's 7,481 images
     for f in ids:
         digest.update(f"{f}\n".encode())
         digest.update(dataset.label_path(f).read_bytes())
         digest.update(dataset.calib_path(f).read_bytes())
-        digest.update(file_sha256(dataset.image_path(f), what="image").encode())  # some 6 s for KITTI's 7,481 images
-    return digest.hexdigest(), sum(counts.values())
+        digest.update(images[f].encode())
+    return digest.hexdigest(), sum(counts.values()), images
 
 
 #: Steps whose artefacts another step trains from (part of the resume key).
@@ -451,11 +455,11 @@ def _previous_steps(out: Path, resume: bool) -> dict:
 
 
 def _new_manifest(dataset, ids: list[str], cars: int, folds: dict[str, int], split_file, *,
-                  drives: Mapping[str, str], mapping_dir: Path | None) -> dict:
-    """The manifest of a run before its steps: data (``cars``: their labelled cars), split file
-    and folds (grouped by ``drives``)."""
+                  drives: Mapping[str, str], mapping_dir: Path | None, images: dict[str, str]) -> dict:
+    """The manifest of a run before its steps: data (``cars``: their labelled cars; ``images``:
+    each frame's image SHA-256), split file and folds (grouped by ``drives``)."""
     data = {"kitti_root": str(Path(dataset.split_dir).resolve()), "frames": len(ids), "cars": cars,
-            "frames_sha256": _frames_sha256(ids), "frame_ids": ids}
+            "frames_sha256": _frames_sha256(ids), "frame_ids": ids, "images_sha256": images}
     if split_file is not None:
         data["split_file"] = str(Path(split_file).resolve())
         data["split_file_sha256"] = file_sha256(split_file, what="split")
