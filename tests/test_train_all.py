@@ -344,6 +344,8 @@ def test_train_all_resume_skips_finished_steps(trained):
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--set", "occlusion.n_scenes=1",
             "--resume")
     assert r.exit_code == 0, r.output + r.stderr
+    # what changed is said (hours of training again on a whole KITTI)
+    assert "occlusion: the earlier run's record does not match (option n_scenes): training again" in r.stderr
     summary = [line for line in r.stdout.splitlines() if "kept from an earlier run" in line]
     assert [line.split()[0] for line in summary] == ["parts", "detector", "viewpoints"], r.stdout
     after = _mtimes(out)
@@ -405,6 +407,7 @@ def test_resume_sees_changed_frames_and_a_failed_one_leaves_the_directory_as_it_
     r = cli(*args, "--resume")
     assert r.exit_code == 0, r.output + r.stderr
     assert "done in an earlier run, kept" not in r.stderr and r.stderr.count("does not match") == 4
+    assert "parts: the earlier run's record does not match (the frames' label, calibration or image files)" in r.stderr
     assert json.loads((out / MANIFEST_FILE).read_text())["data"]["cars"] == 13
 
 

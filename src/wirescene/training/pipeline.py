@@ -495,12 +495,12 @@ class _Run:
     def step(self, step: str, key: dict, old: dict | None) -> dict:
         """The record of ``step``: the earlier run's where its key and file match, else trained now."""
         path = self.path_of(step)
-        if (old and old.get("done") and _same_key(step, old.get("key"), key) and path.is_file()
-                and file_sha256(path) == old.get("sha256")):
+        why = _why_not_kept(step, old, key, path) if old else None
+        if old and not why:
             self.say(f"{step}: done in an earlier run, kept ({path.name})")
             return old
-        if old:
-            self.say(f"{step}: the earlier run's record does not match (data, options, inputs or file): training again")
+        if old:  # hours on a whole KITTI: say what changed
+            self.say(f"{step}: the earlier run's record does not match ({why}): training again")
         self.say(f"{step}: training -> {path}")
         exact = _reset_peak_memory()
         t0 = time.perf_counter()
@@ -561,18 +561,48 @@ class _Run:
         self.say(f"occlusion: c = {result['c']} ({result['n_cars']} cars)")
 
 
-def _same_key(step: str, old, new: dict) -> bool:
-    """Resume keys equal but for options that one sets to their default and the other
-    leaves out: both train the same."""
-    if not isinstance(old, dict):
-        return False
+#: How :func:`_why_not_kept` names the parts of a step's resume key that changed.
+_KEY_WORDS = {"data.kitti_root": "the KITTI root", "data.frames_sha256": "the frames",
+              "data.files_sha256": "the frames' label, calibration or image files", "data.n_folds": "the folds",
+              "data.folds_sha256": "the folds", "wirescene": "the wirescene version"}
+
+
+def _why_not_kept(step: str, old: dict, key: dict, path: Path) -> str | None:
+    """Why the earlier run's record ``old`` of ``step`` cannot be kept, in words (None: it can):
+    unfinished, its file missing or changed, or its resume key other than ``key``, naming what
+    changed. Keys equal but for options that one sets to their default and the other leaves out
+    train the same.
+
+    Examples
+    --------
+    >>> key = {"data": {"frames_sha256": "a"}, "options": {}, "wirescene": "1", "inputs": {}}
+    >>> old = {"done": True, "key": {**key, "data": {"frames_sha256": "b"}, "wirescene": "0"}}
+    >>> _why_not_kept("viewpoints", old, key, Path("missing.npz"))
+    'the frames, the wirescene version'
+    """
+    from wirescene.eval.records import config_difference
+
+    if not old.get("done"):
+        return "unfinished"
+    if not isinstance(old.get("key"), dict):
+        return "no key"
     defaults = _normalised(step_options()[step])
 
-    def chosen(key: dict) -> dict:
-        options = key.get("options") if isinstance(key.get("options"), dict) else {}
-        return {**key, "options": {k: v for k, v in options.items() if k not in defaults or v != defaults[k]}}
+    def chosen(k: dict) -> dict:
+        options = k.get("options") if isinstance(k.get("options"), dict) else {}
+        return {**k, "options": {n: v for n, v in options.items() if n not in defaults or v != defaults[n]}}
 
-    return chosen(old) == chosen(new)
+    changed = config_difference(chosen(old["key"]), chosen(key))
+    if changed:
+        words = [_KEY_WORDS.get(c) or (f"option {c.split('.', 1)[1]}" if c.startswith("options.")
+                                       else f"the {c.split('.', 1)[1]} step's file it trains from"
+                                       if c.startswith("inputs.") else c) for c in changed]
+        return ", ".join(dict.fromkeys(words))
+    if not path.is_file():
+        return f"{path.name} missing"
+    if file_sha256(path) != old.get("sha256"):
+        return f"{path.name} changed since"
+    return None
 
 
 def _normalised(value):
