@@ -227,6 +227,45 @@ def test_hog_cells_match_the_definition():
     assert_close(flat, np.zeros((2, 3, N_FEAT)))
 
 
+def test_cell_histograms_share_each_pixel_between_two_bins_added_in_pixel_order():
+    """The orientation histograms to the bit: each pixel's direction from the polynomial
+    written out (Horner from an array of the last coefficient), its magnitude shared between
+    the floor's bin and the next (18 wrapped to 0 by a modulo), added in float64 in the
+    pixels' order, the lower bins' sums then the upper's (what one ``np.bincount`` each
+    does); a stack of two images, with flat patches (no gradient) and directions of exactly
+    180 degrees (bin 18, wrapped)."""
+    from wirescene.predetect.hog import _ATAN_BINS, _cell_histograms, _edge_pad
+
+    rng = np.random.default_rng(7)
+    g = rng.random((2, 26, 35)).astype(np.float32)
+    g[0, 4:20, 3:12] = 0.5  # flat
+    g[1, 2:22, 5:30] = -np.arange(25, dtype=np.float32) / 25  # falling to the right: gx < 0, gy = 0, bin 18
+    p = _edge_pad(g[..., :24, :32])
+    gx = p[..., 1:-1, 2:] - p[..., 1:-1, :-2]
+    gy = p[..., 2:, 1:-1] - p[..., :-2, 1:-1]
+    ax, ay = np.abs(gx), np.abs(gy)
+    t = np.minimum(ax, ay) / np.maximum(np.maximum(ax, ay), np.float32(1e-30))
+    q = np.full_like(t, _ATAN_BINS[-1])
+    for c in _ATAN_BINS[-2::-1]:
+        q = q * (t * t) + c
+    q = q * t
+    for half, sign in ((np.float32(2.25), ax - ay), (np.float32(4.5), gx)):
+        q = half - np.copysign(half - q, sign)
+    pos = np.copysign(q, gy) + np.float32(9)
+    assert (pos == 18).sum() > 100
+    mag = np.sqrt(gx * gx + gy * gy)
+    lower = np.floor(pos)
+    f = pos - lower
+    b0 = lower.astype(int) % 18
+    b1 = (b0 + 1) % 18
+    image, y, x = np.indices(b0.shape)
+    cell = ((image * 3 + y // 8) * 4 + x // 8) * 18
+    low, high = np.zeros(2 * 3 * 4 * 18), np.zeros(2 * 3 * 4 * 18)
+    np.add.at(low, (cell + b0).ravel(), (mag * (1 - f)).astype(float).ravel())  # in the pixels' order, as bincount
+    np.add.at(high, (cell + b1).ravel(), (mag * f).astype(float).ravel())
+    assert _cell_histograms(p, 3, 4, 8).tobytes() == (low + high).reshape(2, 3, 4, 18).tobytes()
+
+
 def test_hog_cells_normalise_block_by_block_like_the_four_blocks_stacked():
     """The four blocks' normalisations, taken one at a time, give the numbers of the four
     stacked at once to the bit: clipped, summed in the blocks' order, the texture sums per
@@ -402,8 +441,9 @@ def test_each_template_keeps_the_banks_number_of_windows():
 def test_template_responses_add_the_cells_in_order_like_a_loop():
     """Each response map is the bias plus its template's cells' products added one after the
     other in float32 (one reduction over the shifted products): equal to the bit to a loop of
-    in-place adds of the same products, also for float64 weights (a bank not yet stored,
-    rounded to float32 after every add). Fails if the sum is taken in another order."""
+    in-place adds of the same products, also on maps of one row or one column and for float64
+    weights (a bank not yet stored, rounded to float32 after every add). Fails if the sum is
+    taken in another order."""
     from dataclasses import replace
 
     from wirescene.predetect.bank import template_responses
@@ -411,7 +451,8 @@ def test_template_responses_add_the_cells_in_order_like_a_loop():
     bank = load_default_bank()
     rng = np.random.default_rng(5)
     pyramid = [(1.0, rng.normal(size=(14, 30, N_FEAT)).astype(np.float32)),
-               (0.5, rng.normal(size=(9, 13, N_FEAT)).astype(np.float32))]
+               (0.5, rng.normal(size=(9, 13, N_FEAT)).astype(np.float32)),
+               (0.25, rng.normal(size=(8, 12, N_FEAT)).astype(np.float32))]  # maps of one row or one column
 
     def loop(b):
         out = {}

@@ -70,10 +70,12 @@ def orientation_bins(gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     """
     ax, ay = np.abs(gx), np.abs(gy)
     t = np.minimum(ax, ay)
-    t /= np.maximum(np.maximum(ax, ay), np.float32(1e-30))
-    t2 = t * t
-    p = np.full_like(t, _ATAN_BINS[-1])
-    for c in _ATAN_BINS[-2::-1]:  # Horner in t^2
+    m = np.maximum(ax, ay)
+    t /= np.maximum(m, np.float32(1e-30), out=m)
+    t2 = np.multiply(t, t, out=m)  # (m's buffer, no longer read)
+    p = np.multiply(t2, _ATAN_BINS[-1])  # the first Horner step: (c * 1) * t^2, without an array of c
+    p += _ATAN_BINS[-2]
+    for c in _ATAN_BINS[-3::-1]:  # Horner in t^2
         p *= t2
         p += c
     p *= t  # atan(min / max) in bins: [0, 2.25]
@@ -87,31 +89,47 @@ def orientation_bins(gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     return p
 
 
-def _cell_histograms(p: np.ndarray, hc: int, wc: int, cell: int) -> np.ndarray:
+# each pixel's two bins from the floor of its direction in [0, 18]: the floor and the next, 18 wrapped to 0
+_BIN0 = np.array([*range(_N_ORIENT), 0], np.intp)
+_BIN1 = np.array([*range(1, _N_ORIENT), 0, 1], np.intp)
+
+
+def _cell_offsets(lead: tuple, hc: int, wc: int, cell: int) -> np.ndarray:
+    """(..., hc * cell, wc * cell) index of each pixel's histogram in :func:`_cell_histograms`:
+    ``((image * hc + cell row) * wc + cell column) * 18``."""
+    offset = (np.arange(hc * cell) // cell * (wc * _N_ORIENT))[:, None] + np.arange(wc * cell) // cell * _N_ORIENT
+    if lead:
+        offset = offset + (np.arange(int(np.prod(lead))) * (hc * wc * _N_ORIENT)).reshape(lead + (1, 1))
+    return offset
+
+
+def _cell_histograms(p: np.ndarray, hc: int, wc: int, cell: int, offset: np.ndarray | None = None) -> np.ndarray:
     """(..., hc, wc, 18) float64 orientation histograms of the cells of edge-padded grey
     images ``p`` ``(..., hc * cell + 2, wc * cell + 2)``: each pixel's gradient magnitude shared
-    linearly between its two nearest of 18 orientation bins, summed over its cell."""
+    linearly between its two nearest of 18 orientation bins, summed over its cell. ``offset``:
+    :func:`_cell_offsets` of these images and cells, if already computed."""
     lead = p.shape[:-2]
     gx = p[..., 1:-1, 2:] - p[..., 1:-1, :-2]
     gy = p[..., 2:, 1:-1] - p[..., :-2, 1:-1]
-    mag = np.sqrt(gx * gx + gy * gy)
-    pos = orientation_bins(gx, gy)  # [0, 18]
-    lower = np.floor(pos)
-    f = pos - lower  # exact in float32: a fractional part
-    b0 = lower.astype(np.intp)
-    b0[b0 >= _N_ORIENT] -= _N_ORIENT  # (a modulo costs more than the whole histogram)
-    b1 = b0 + 1
-    b1[b1 == _N_ORIENT] = 0
+    mag = np.multiply(gx, gx)
+    mag += np.multiply(gy, gy)
+    np.sqrt(mag, out=mag)
+    f = orientation_bins(gx, gy)  # [0, 18]
+    lower = np.floor(f)
+    b = lower.astype(np.intp)
+    f -= lower  # exact in float32: a fractional part
+    offset = _cell_offsets(lead, hc, wc, cell) if offset is None else offset
     # histogram index of each pixel's bins: ((image * hc + cell row) * wc + cell column) * 18 + bin
-    per_image = hc * wc * _N_ORIENT
-    offset = (np.arange(hc * cell) // cell * (wc * _N_ORIENT))[:, None] + np.arange(wc * cell) // cell * _N_ORIENT
-    if lead:
-        offset = offset + (np.arange(int(np.prod(lead))) * per_image).reshape(lead + (1, 1))
+    b0 = _BIN0.take(b)  # (tables: a modulo costs more than the whole histogram)
     b0 += offset
+    b1 = _BIN1.take(b)
     b1 += offset
-    n = per_image * int(np.prod(lead))
-    h = np.bincount(b0.ravel(), weights=(mag * (1 - f)).ravel(), minlength=n)
-    h += np.bincount(b1.ravel(), weights=(mag * f).ravel(), minlength=n)
+    n = hc * wc * _N_ORIENT * int(np.prod(lead))
+    np.subtract(1, f, out=lower)
+    lower *= mag  # mag * (1 - f)
+    h = np.bincount(b0.ravel(), weights=lower.ravel(), minlength=n)
+    f *= mag
+    h += np.bincount(b1.ravel(), weights=f.ravel(), minlength=n)
     return h.reshape(lead + (hc, wc, _N_ORIENT))
 
 
@@ -143,32 +161,32 @@ def hog_cells(gray: np.ndarray, cell: int = CELL, *, strip_pixels: int = 1 << 16
         return np.zeros(lead + (max(hc, 0), max(wc, 0), N_FEAT), np.float32)
     p = _edge_pad(g[..., : hc * cell, : wc * cell])
     rows = max(1, strip_pixels // (int(np.prod(lead)) * wc * cell * cell))  # cell rows a strip
-    h18 = np.empty(lead + (hc, wc, _N_ORIENT), np.float32)
+    # the 18 contrast-sensitive bins, then the 9 insensitive ones, side by side: each block's normalisation in one pass
+    h27 = np.empty(lead + (hc, wc, 27), np.float32)
+    offsets = {}  # {cell rows: their pixels' histogram indices}: the strips of one height share them
     for r in range(0, hc, rows):
         k = min(rows, hc - r)
-        h18[..., r:r + k, :, :] = _cell_histograms(p[..., r * cell:(r + k) * cell + 2, :], k, wc, cell)
-    h9 = h18[..., :9] + h18[..., 9:]
+        if k not in offsets:
+            offsets[k] = _cell_offsets(lead, k, wc, cell)
+        h27[..., r:r + k, :, :_N_ORIENT] = _cell_histograms(p[..., r * cell:(r + k) * cell + 2, :], k, wc, cell,
+                                                              offsets[k])
+    h9 = np.add(h27[..., :9], h27[..., 9:_N_ORIENT], out=h27[..., _N_ORIENT:])
     energy = _edge_pad((h9 * h9).sum(-1))
     # block energies: block (i, j) covers cells (i..i+1, j..j+1) of the padded grid
     blk = energy[..., :-1, :-1] + energy[..., 1:, :-1] + energy[..., :-1, 1:] + energy[..., 1:, 1:]  # (hc+1, wc+1)
     inv = 1.0 / np.sqrt(blk + 1e-4)
     out = np.empty(lead + (hc, wc, N_FEAT), np.float32)
     # one block's normalisation at a time, added to the first in the order of the four blocks (no stack of four)
-    s18 = s9 = None
+    s27 = None
     for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
-        norm = inv[..., dy:dy + hc, dx:dx + wc, None]
-        a = np.multiply(h18, norm)
+        a = np.multiply(h27, inv[..., dy:dy + hc, dx:dx + wc, None])
         np.minimum(a, 0.2, out=a)
-        a9 = np.multiply(h9, norm)
-        np.minimum(a9, 0.2, out=a9)
-        np.multiply(a.sum(-1), 0.2357, out=out[..., 27 + k])
-        if s18 is None:
-            s18, s9 = a, a9
+        np.multiply(a[..., :_N_ORIENT].sum(-1), 0.2357, out=out[..., 27 + k])
+        if s27 is None:
+            s27 = a
         else:
-            s18 += a
-            s9 += a9
-    np.multiply(s18, 0.5, out=out[..., :18])
-    np.multiply(s9, 0.5, out=out[..., 18:27])
+            s27 += a
+    np.multiply(s27, 0.5, out=out[..., :27])
     return out
 
 
