@@ -421,7 +421,7 @@ def test_the_pictures_mark_the_false_cars_and_the_missed_labelled_cars_as_the_ev
     assert marks["tags"] == ["#1 0.05", "#2 0.10 false", "#3 0.15 false view"]
     assert marks["missed"] == 2  # the car of the wrong viewpoint is no true positive either
     assert {"#n c false: no labelled car of its own (IoU > 0.5)", "#n c false view: viewpoint > 45° off its car",
-            "missed: a labelled car no estimate found"} <= set(marks["key"])
+            "missed: a labelled car without a true positive"} <= set(marks["key"])
     lines = [c for c in fig.axes[0].collections if isinstance(c, LineCollection)]
     violet = [c for c in lines if np.allclose(c.get_color()[0], to_rgba(FALSE_COLOR))]
     assert len(violet) == 4  # the boxes (edges and cross) of cars #2 and #3

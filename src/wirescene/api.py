@@ -368,7 +368,8 @@ def fit(
     ----------
     image : path, ndarray or PIL image
         An image file, a PIL image, or an ``(H, W, 3)`` / ``(H, W)`` array (uint8, uint16
-        or float in [0, 1]); see :func:`as_image`.
+        or float in [0, 1] or [0, 255]; a float image fitting neither is refused); see
+        :func:`as_image`.
     calib : path, (3, 4) array, (3, 3) array, KittiCalib or Camera
         A KITTI calibration file (``P2`` is used) or a text file of the 12 numbers of a
         projection matrix or the 9 of the intrinsics ``K``; a projection matrix ``P`` in
@@ -578,9 +579,11 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
         As in :func:`fit`.
     scene : SceneEstimate, optional
         What :func:`fit` returned: its cars are drawn red, each numbered as in
-        :attr:`SceneEstimate.cars` (``#1`` the first) with its confidence (the fitted
-        wireframes, hidden vertices as open dots on dashed edges, in the ``overlay``;
-        footprints and headings in the ``bev``).
+        :attr:`SceneEstimate.cars` (``#1`` the first), in the ``overlay`` with its confidence
+        (the fitted wireframes, hidden vertices as open dots on dashed edges), in the ``bev``
+        as footprints and headings; the ``overlay`` draws the
+        shared ground plane of a ``+gp`` variant or ``full`` as a grid of thin white lines,
+        every 10 m ahead and 5 m aside (:func:`wirescene.io.pictures.ground_grid`).
     view : str
         ``"overlay"`` (the image, full size; one of more pixels than a 3840 x 2160 frame
         reduced by a whole factor, :func:`wirescene.io.pictures.drawn_image`) or ``"bev"``
@@ -588,8 +591,10 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
     gt : path or sequence of Label, optional
         A KITTI label file (or its labels): its cars' 3D boxes are drawn cyan; beside a
         fitted ``scene``, the cars the evaluation counts false are violet and tagged
-        ``false``, the labelled cars it counts missed dashed and tagged ``missed``
-        (:func:`wirescene.core.matching.match_estimate`).
+        ``false`` (``false view``: on a labelled car, its pre-detection's viewpoint over 45
+        deg off the car's), the labelled cars it counts missed dashed and tagged ``missed``
+        (:func:`wirescene.core.matching.match_estimate`), and the ``bev`` joins each car
+        matched to a labelled car to it with a thin dark line (dash-dotted for a ``false view``).
     boxes : (N, 4) array or Detections, optional
         2D boxes drawn dashed yellow in the ``overlay`` (e.g. :func:`detect`'s, or
         ``scene.detections``, the boxes the fit started from); checked but not drawn in the

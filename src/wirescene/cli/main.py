@@ -761,7 +761,8 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
                    "default: our own pre-detection from raw pixels.")
 @min_score_option
 @click.option("--gt", type=NonEmptyPath(path_type=Path), default=None,
-              help="KITTI label file drawn in cyan for comparison.")
+              help="KITTI label file drawn in cyan for comparison; the cars the evaluation counts false are "
+                   "marked violet, the labelled cars it counts missed dashed.")
 @click.option("--variant", type=click.Choice(_variants()), default=DEFAULT_VARIANT, show_default=True,
               help="Model variant (the default as `predict`'s and `wirescene.fit`'s).")
 @particles_option

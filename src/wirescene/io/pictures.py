@@ -4,12 +4,14 @@ Estimates are drawn in red, ground truth in cyan (not the paper's green: red and
 look alike to one reader in twelve, red and cyan differ for every common colour-vision
 deficiency), pre-detections dashed yellow; hidden parts of a wireframe are open dots on
 dashed edges, so that they differ by shape as well as colour. Each estimated car carries
-its number (its line in the KITTI label file) and its confidence, in both views. Where
-ground truth is drawn beside a fitted estimate, the evaluation's own matching
-(:func:`wirescene.core.matching.match_estimate`) marks the false cars (violet, tagged
-``false``) and the labelled cars missed (dashed, tagged ``missed``); the bird's-eye view
-joins each true positive to its labelled car. All
-functions draw into a new :class:`matplotlib.figure.Figure` (:func:`new_figure`) and
+its number (its line in the KITTI label file) in both views, and its confidence in the
+overlay. Where ground truth is drawn beside a fitted estimate, the evaluation's own
+matching (:func:`wirescene.core.matching.match_estimate`) marks the false cars (violet,
+tagged ``false``, or ``false view`` on a labelled car whose viewpoint its pre-detection's
+is over 45 deg off) and the labelled cars missed (dashed, tagged ``missed``: of no true
+positive); the bird's-eye view joins each car matched to a labelled car to it (dash-dotted
+for a ``false view``). The overlay draws the shared ground plane of the ``+gp`` variants
+and ``full`` as a grid (:func:`ground_grid`). All functions draw into a new :class:`matplotlib.figure.Figure` (:func:`new_figure`) and
 return it; :func:`save_figure` writes it atomically. No pyplot: the figures belong to
 no window manager, need no display, and the caller's matplotlib backend (a notebook's,
 say) is left as it was.
@@ -416,7 +418,7 @@ def overlay(
     if len(gt):
         key.append(("-", GT_COLOR, "ground truth" + ("" if est_boxes else " (a cross marks the front)")))
     if missed:
-        key.append(("missed", GT_COLOR, "missed: a labelled car no estimate found"))
+        key.append(("missed", GT_COLOR, "missed: a labelled car without a true positive"))
     if detections is not None and len(detections.boxes):
         key.append(("--", DET_COLOR, "pre-detection"))
     if dropped is not None and len(dropped.boxes):
@@ -490,9 +492,11 @@ def birds_eye(
     metres; the camera a triangle at the origin) of estimated (red, numbered as in the
     overlay and the label file) and ground-truth (cyan) cars, with the camera's field of
     view (dotted). Where labels are drawn beside a fitted estimate, its false cars are
-    violet and tagged ``false``, the labelled cars missed dashed and tagged ``missed``, and
-    a thin dark line joins each true positive to its labelled car (dash-dotted where the
-    match failed the viewpoint test), as :func:`wirescene.core.matching.match_estimate` judges."""
+    violet and tagged ``false`` (``false view``: on a labelled car, its pre-detection's
+    viewpoint over 45 deg off the car's), the labelled cars missed dashed and tagged
+    ``missed``, and a thin dark line joins each car matched to a labelled car (2D IoU >
+    0.5) to it: solid for a true positive, dash-dotted for a ``false view``, as
+    :func:`wirescene.core.matching.match_estimate` judges."""
     fig = new_figure(figsize=(5, 6), dpi=100)
     ax = fig.subplots()
     pts = [np.zeros(2)]
