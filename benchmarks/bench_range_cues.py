@@ -85,9 +85,9 @@ def _row(name: str, group: np.ndarray, near: np.ndarray, iou: np.ndarray) -> str
 
 def error_model_power(z: np.ndarray, focal: np.ndarray) -> np.ndarray:
     """The weight ``k`` ``(N,)`` of the size cue against the plane at ranges ``z`` ``(N,)`` (m) of
-    cameras of ``focal`` lengths (px): the plane's relative range error (each car's own ground,
-    :data:`GROUND_SD`, and one pixel at the ground contact) over the sum of its variance and the
-    size cue's (:data:`HEIGHT_SD`, and one pixel of the box's height). About 0.12 at 10 m and
+    cameras of ``focal`` lengths (px): the variance of the plane's relative range error (each car's
+    own ground, :data:`GROUND_SD`, and one pixel at the ground contact) over the sum of it and the
+    size cue's (:data:`HEIGHT_SD`, and one pixel of the box's height). About 0.13 at 10 m and
     0.24 at 60 m for KITTI.
 
     Examples

@@ -154,6 +154,20 @@ def test_float_images_fitting_neither_0_1_nor_0_255_are_refused_not_clipped(fram
         assert_close(wirescene.api.as_image(np.tile(values, (16, 6)))[0, :3, 0], [0, 128, 255], atol=0, rtol=0)
 
 
+def test_an_image_s_range_is_read_off_its_colours_not_its_alpha_channel(frame):
+    """The conversion drops an alpha channel before it reads the range: so do the checks of the range. Colours in
+    [-0.2, 1] beside an alpha of 255 were read by 0..255 (no pixel clipped: accepted) and then clipped by 0..1; an
+    alpha the conversion drops refused an image it reads whole."""
+    unit = frame[0] / 255.0
+    alpha = np.full(unit.shape[:2] + (1,), 255.0)
+    with pytest.raises(wirescene.ArgumentError, match=r"^image: float values outside both .* -0\.2\.\.1\)"):
+        wirescene.api.as_image(np.concatenate([unit * 1.2 - 0.2, alpha], axis=2))
+    for odd in (-1.0, 300.0):  # an alpha channel's values, dropped
+        assert_close(wirescene.api.as_image(np.concatenate([unit, np.full_like(alpha, odd)], axis=2)), frame[0],
+                     atol=0, rtol=0)
+    assert (wirescene.api.as_image(np.concatenate([frame[0], np.full(alpha.shape, 300)], axis=2)) == frame[0]).all()
+
+
 def test_detect_returns_the_fits_own_boxes_and_viewpoints_above_its_threshold(frame):
     from wirescene.fitting.options import PredetectOptions
     from wirescene.fitting.own_boxes import own_detections

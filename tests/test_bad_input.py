@@ -459,6 +459,11 @@ CASES = {
     # refused before any fit (and before the word that the frames are not held out), not at the first fit
     "eval --evidence oracle on KITTI": (lambda t: _eval_case(t, "--variant", "fg", "--evidence", "oracle"),
                                         r"wireframes/.*: oracle evidence needs wireframes/ ground truth"),
+    # a coarse variant takes a viewpoint-less box's viewpoint from the evidence: refused at the first fit, after the
+    # word that the frames are not held out
+    "eval --evidence oracle on KITTI, boxes without a viewpoint": (
+        lambda t: _eval_case(t, "--evidence", "oracle", "--detections", _boxes_without_viewpoint(t)),
+        r"wireframes/.*: oracle evidence needs wireframes/ ground truth"),
     "eval --min-score with label boxes": (lambda t: _eval_case(t, "--detections", "gt", "--min-score", "0.5"),
                                           r"--min-score needs --detections DIR: label boxes \('gt'\) are all fitted"),
     "predict --min-score with our own boxes": (

@@ -333,6 +333,23 @@ def test_a_train_all_file_tells_its_frames_by_their_images_in_a_copy_of_the_root
     assert trained_on(file, copy.image_path, ["000002", "001545"], split_dir=SPLIT) == ["001545"]
 
 
+def test_an_image_is_hashed_once_however_many_files_of_a_models_directory_ask(tmp_path):
+    """The held-out line tells a `train all` directory's frames once for each of its files the run reads (the part
+    model, the bank and the classifier: three), by the images' SHA-256: a split's images stay in file_sha256's cache
+    (it held 64, so that each of 3,712 images was read and hashed three times)."""
+    from wirescene.core import resources
+
+    images = []
+    for i in range(200):
+        images.append(tmp_path / f"{i:06d}.png")
+        images[-1].write_bytes(i.to_bytes(2, "little"))
+    resources._sha256.cache_clear()
+    for _ in range(3):
+        hashes = [resources.file_sha256(path, what="image") for path in images]
+    assert len(set(hashes)) == 200
+    assert resources._sha256.cache_info().misses == 200
+
+
 def test_the_notice_of_a_models_directory_names_the_files_read_that_were_trained_on_the_frames(tmp_path):
     """The line of a `train all` directory names the files of it that the run reads, as the shipped models' line does:
     the part model alone for a fine variant on label boxes, the bank and classifier for our own boxes."""

@@ -51,7 +51,7 @@ def integer_range_problem(image) -> str | None:
     >>> integer_range_problem(np.array([[-1, 254]], np.int16))  # 8-bit values but one: not the range of int16
     'integer values outside 0..255 (dtype int16, -1..254): the negative ones would be read as 0: clip or scale the image to 0..255 (cast a 16-bit image to uint16)'
     """
-    img = np.asarray(image)
+    img = _colour(np.asarray(image))
     if img.dtype.kind not in "iu" or img.dtype in (np.uint8, np.uint16) or img.size == 0:
         return None
     lo, hi = img.min(), img.max()
@@ -81,7 +81,7 @@ def float_range_problem(image) -> str | None:
     >>> float_range_problem(np.array([[-3.0, 400.0]]))
     'float values outside both 0..1 and 0..255 (dtype float64, -3..400) would be clipped: scale to 0..1 or 0..255'
     """
-    img = np.asarray(image)
+    img = _colour(np.asarray(image))
     if img.dtype.kind != "f" or img.size == 0:
         return None
     ends = np.array([img.min(), img.max()])
@@ -95,11 +95,23 @@ def float_range_problem(image) -> str | None:
             "clipped: scale to 0..1 or 0..255")
 
 
+def _colour(img: np.ndarray) -> np.ndarray:
+    """The colour channels of an image array: an ``(H, W, 4)`` array's alpha left out, as
+    :func:`to_rgb_uint8` leaves it out before it reads the values' range.
+
+    Examples
+    --------
+    >>> _colour(np.zeros((2, 3, 4))).shape, _colour(np.zeros((2, 3))).shape
+    ((2, 3, 3), (2, 3))
+    """
+    return img[..., :3] if img.ndim == 3 and img.shape[-1] == 4 else img
+
+
 def _channels(img: np.ndarray) -> np.ndarray:
     if img.ndim == 2:
         return img[..., None]
     if img.ndim == 3 and img.shape[-1] in (1, 3, 4):
-        return img if img.shape[-1] != 4 else img[..., :3]  # alpha dropped
+        return _colour(img)  # alpha dropped
     raise ShapeError(f"image must be (H, W), (H, W, 1), (H, W, 3) or (H, W, 4), got {img.shape}")
 
 

@@ -369,7 +369,8 @@ def file_sha256(path: str | Path, *, what: str = "artefact") -> str:
         raise InputError(f"cannot read {what} file ({exc.strerror or exc.__class__.__name__})", path=path) from None
 
 
-@lru_cache(maxsize=64)
+# room for KITTI's 7,481 training images: the held-out line hashes a frame's image once, not once per file it reads
+@lru_cache(maxsize=8192)
 def _sha256(path: Path, version: tuple[int, int, int]) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as f:

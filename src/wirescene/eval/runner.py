@@ -341,7 +341,8 @@ def evaluate_dataset(
         Before any fit: a frame's missing or malformed file (an image corrupt or truncated, where
         ``check_images`` or the fits read it), or ``predictions_dir`` holding
         an earlier run's records (without ``resume``) or, resumed, files of frames outside
-        ``frames``.
+        ``frames``; with ``evidence="oracle"``, a frame without ``wireframes/`` ground truth
+        whose fit needs the evidence (a fine variant, or a box without a viewpoint).
     """
     source = DetectionSource() if source is None else source
     options = FitOptions() if options is None else options
@@ -371,8 +372,10 @@ def evaluate_dataset(
     todo = [f for f in frame_ids if f not in reused]
     say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
     source.check_files(dataset, todo)
-    if evidence == "oracle" and any(get_variant(v).fine for v in variants):  # refused now, not at the first fit
-        lacking = next((f for f in todo if not wireframe_gt_path(dataset.split_dir, f).is_file()), None)
+    if evidence == "oracle":  # refused now, not at the first fit: a fine variant's, or a box's viewpoint's evidence
+        fine = any(get_variant(v).fine for v in variants)
+        lacking = next((f for f in todo if not wireframe_gt_path(dataset.split_dir, f).is_file()
+                        and (fine or not source.own and boxes_lack_viewpoints(dataset, source, [f]))), None)
         if lacking is not None:
             raise InputError(ORACLE_NEEDS, path=wireframe_gt_path(dataset.split_dir, lacking))
     # a corrupt image refused now, not at its frame's fit or in the report after every fit
