@@ -108,6 +108,19 @@ def test_unknown_viewpoint_skips_check_and_says_so():
     assert "skipped" in format_table({"v": rep})
 
 
+def test_a_label_of_unknown_viewpoint_fails_no_viewpoint_test():
+    """A hand-made label whose alpha is NaN (no file holds one) rejects no detection, as before the
+    matching moved to core.matching (it was rejected there: NaN is not within 45 deg), and the
+    pictures' verdict (match_frame) is the evaluation's."""
+    from wirescene.core.matching import match_frame
+
+    record = frame([car(B1, alpha=0.1, ry=0.1)], [dict(det_alpha=0.1)])
+    record.gt = gt = [car(B1, alpha=np.nan, ry=0.1)]
+    rep = evaluate([record])
+    assert rep["all"]["n_tp"] == 1 and rep.counts["viewpoint_rejected"] == 0
+    assert match_frame([B1], [1.0], [0.1], gt).true_positive.tolist() == [True]
+
+
 def test_iou_threshold():
     gt = [car([0.0, 0.0, 100.0, 100.0])]
     # shifted box: overlap w*100 / (2*100*100 - w*100) = 0.49 -> w = 65.77...

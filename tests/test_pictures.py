@@ -454,7 +454,7 @@ def test_without_labels_or_without_a_fault_the_pictures_mark_nothing(camera):
     image = np.zeros((375, 1242, 3), np.uint8)
     gt = [g for g in labels if g.type == "Car"]
     bare = SceneEstimate("coarse", scene.objects)  # no detections: not judged
-    for estimate, drawn in ((scene, []), (bare, gt)):
+    for estimate, drawn in ((scene, None), (bare, gt)):  # None: no labels ([]: labelled without cars)
         for fig in (overlay(image, camera, estimate, gt=drawn), birds_eye(estimate, gt=drawn, camera=camera)):
             marks = _marks(fig)
             assert not any("false" in t for t in marks["tags"] + marks["key"]) and marks["missed"] == 0
@@ -489,3 +489,36 @@ def test_the_false_and_missed_cars_of_a_real_fit_are_those_the_evaluation_counts
     assert {t.split()[0] for t in marks["tags"] if "false" in t} == false
     assert marks["missed"] == len(missed) == len(cars) - report["all"]["n_tp"]
     assert {id(cars[g]) for g in match_estimate(scene, cars).missed} == missed
+
+
+def test_a_frame_labelled_without_cars_marks_every_car_false_and_no_labels_mark_nothing(camera):
+    """Labels of no car (a frame of DontCare regions only: the report's gallery shows such a frame
+    as its worst, 'n of the n cars output false') make every car false in the pictures as in the
+    evaluation; no labels at all (``gt=None``) judge nothing (an empty list judged nothing either)."""
+    from wirescene.eval.metrics import evaluate
+    from wirescene.eval.runner import frame_result
+    from wirescene.io.pictures import birds_eye, overlay
+
+    scene, labels = _judged_scene(camera)
+    image = np.zeros((375, 1242, 3), np.uint8)
+    dontcare = [g for g in labels if g.type == "DontCare"]
+    assert evaluate([frame_result("f", FrameLabels(dontcare), scene.detections, scene)]).records == []
+    for fig in (overlay(image, camera, scene, gt=[]), birds_eye(scene, gt=[], camera=camera)):
+        assert [t.split()[-1] for t in _marks(fig)["tags"]] == ["false"] * 3
+    for fig in (overlay(image, camera, scene), birds_eye(scene, gt=None, camera=camera)):
+        assert not any("false" in t for t in _marks(fig)["tags"] + _marks(fig)["key"])
+
+
+def test_a_text_is_measured_once_in_each_font():
+    """The tags' and the key's texts are measured once (a picture measured its key's every entry and
+    each 'missed' tag again: overlay and bird's-eye view 1.5x slower on a crowded frame), but again
+    in another font."""
+    from matplotlib import rc_context
+
+    from wirescene.io.pictures import _text_width, text_size
+
+    _text_width.cache_clear()
+    first = text_size("missed", 7, 1.0, 0.2)
+    assert text_size("missed", 7, 1.0, 0.2) == first and _text_width.cache_info().hits == 1
+    with rc_context({"font.family": "monospace"}):
+        assert text_size("missed", 7, 1.0, 0.2) != first

@@ -671,14 +671,14 @@ def _dropped_boxes(dets: Detections, scene: SceneEstimate | None, image_size: tu
     return same.any(axis=1) & ~(same & car_fitted(fitted, scene)).any(axis=1)
 
 
-def _gt_cars(gt, image_size: tuple[int, int]) -> list:
+def _gt_cars(gt, image_size: tuple[int, int]) -> list | None:
     """The ``Car`` labels of a KITTI label file (every row's box checked against the
     ``image_size`` ``(width, height)`` image, as a frame's labels are), or of a sequence of
-    labels (None: none)."""
+    labels (None: no labels, as the pictures take it; a file without cars gives ``[]``)."""
     from wirescene.core.labels import FrameLabels, Label
 
     if gt is None:
-        return []
+        return None
     if isinstance(gt, (str, Path)):
         from wirescene.io.kitti import read_labels
 

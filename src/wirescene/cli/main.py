@@ -800,7 +800,7 @@ def fit_cmd(image, calib, detections, min_score, gt, variant, particles, seed, o
                 raise
             dets = Detections.empty(str(detections))
             others = exc.problem[len(NO_CARS):]  # the classes of the file's boxes, where it has some
-    gt_objs = read_labels(gt, image_size=(img.shape[1], img.shape[0])).of_type("Car") if gt is not None else []
+    gt_objs = read_labels(gt, image_size=(img.shape[1], img.shape[0])).of_type("Car") if gt is not None else None
     with warnings.catch_warnings():  # said above, in the command's one line, not again by the API
         warnings.simplefilter("ignore", CalibrationWarning)
         estimate = fit(img, camera, dets, variant=variant, options=options)

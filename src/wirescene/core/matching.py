@@ -189,7 +189,8 @@ def match_frame(
     match = np.append(cars, -1)[match]  # indices into the labels (-1, unmatched, picks the -1 appended)
     checked = np.isfinite(det_alpha)
     tol = np.deg2rad(viewpoint_tolerance_deg) + 1e-9
-    positive = np.array([g >= 0 and (not checked[d] or angle_difference(det_alpha[d], labels[g].alpha) <= tol)
+    # rejected only where the difference exceeds the tolerance: a label's NaN alpha fails no test, as in evaluate
+    positive = np.array([g >= 0 and not (checked[d] and angle_difference(det_alpha[d], labels[g].alpha) > tol)
                          for d, g in enumerate(match)], dtype=bool).reshape(D)
     return FrameMatches(cars, match, iou, checked, positive)
 

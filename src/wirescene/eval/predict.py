@@ -65,7 +65,7 @@ class _PredictJob:
             files[path] = scene_json(frame_id, estimate, fitted.detections).encode()
         if self.pictures_dir is not None:
             label_file = self.dataset.label_path(frame_id)  # a labelled split's cars drawn beside the estimate
-            gt = self.dataset.labels(frame_id).of_type("Car") if label_file.is_file() else []
+            gt = self.dataset.labels(frame_id).of_type("Car") if label_file.is_file() else None
             pictures = scene_pictures(frame_id, image=image, camera=camera, estimate=estimate,
                                       detections=fitted.detections, gt=gt)
             paths = fit_output_paths(self.pictures_dir, frame_id)

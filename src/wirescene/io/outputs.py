@@ -60,7 +60,7 @@ def write_fit_outputs(
     camera: Camera,
     estimate: SceneEstimate,
     detections: Detections,
-    gt: list[Label] = (),
+    gt: list[Label] | None = None,
 ) -> dict[str, Path]:
     """Write ``STEM.txt`` (KITTI labels), ``STEM.json`` (:func:`scene_json`), ``STEM_overlay.png``
     and ``STEM_bev.png`` (:func:`scene_pictures`). The four files are made in memory, written to
@@ -133,11 +133,11 @@ def scene_json(stem: str, estimate: SceneEstimate, detections: Detections) -> st
 
 
 def scene_figures(stem: str, *, image: np.ndarray, camera: Camera, estimate: SceneEstimate, detections: Detections,
-                  gt: list[Label] = ()):
+                  gt: list[Label] | None = None):
     """``(overlay, bird's-eye view)``: the two pictures of a fitted image, as matplotlib figures
     (:func:`wirescene.io.pictures.overlay`, :func:`~wirescene.io.pictures.birds_eye`). The overlay
     draws the pre-detections of the fitted cars dashed and those the fit's verification dropped
-    dotted grey; ``gt``: label cars drawn beside the estimate."""
+    dotted grey; ``gt``: label cars drawn beside the estimate (None: no labels; empty: none a car)."""
     from wirescene.io.pictures import birds_eye, overlay
 
     title = f"{stem}  {estimate.variant}, {boxes_in_words(detections.source)}"
@@ -147,7 +147,7 @@ def scene_figures(stem: str, *, image: np.ndarray, camera: Camera, estimate: Sce
 
 
 def scene_pictures(stem: str, *, image: np.ndarray, camera: Camera, estimate: SceneEstimate, detections: Detections,
-                   gt: list[Label] = ()) -> dict[str, bytes]:
+                   gt: list[Label] | None = None) -> dict[str, bytes]:
     """``{"overlay", "bev": PNG bytes}``: :func:`scene_figures` as the files ``fit`` and ``predict
     --pictures`` write (:func:`wirescene.io.pictures.figure_bytes`; keys those of
     :func:`fit_output_paths`)."""

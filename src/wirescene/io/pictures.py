@@ -19,6 +19,7 @@ say) is left as it was.
 
 from __future__ import annotations
 
+import functools
 import io
 import sys
 from pathlib import Path
@@ -27,6 +28,7 @@ from typing import Sequence
 import numpy as np
 from matplotlib import patheffects, rc_context, transforms
 from matplotlib.figure import Figure
+from matplotlib.font_manager import FontProperties
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
@@ -144,11 +146,12 @@ def ground_grid(plane) -> tuple[np.ndarray, np.ndarray]:
     return points, np.stack([np.arange(len(ends)), np.arange(len(ends)) + len(ends)], axis=1)
 
 
-def judged(estimate, gt: Sequence) -> FrameMatches | None:
+def judged(estimate, gt: Sequence | None) -> FrameMatches | None:
     """The evaluation's verdict on ``estimate`` against the drawn labels ``gt``
     (:func:`wirescene.core.matching.match_estimate`: indices into ``gt``, cars in
-    :attr:`SceneEstimate.cars` order), or None where nothing is judged: no estimate, no label
-    drawn, or an estimate that carries no pre-detections (one put together by hand, or
+    :attr:`SceneEstimate.cars` order), or None where nothing is judged: no estimate, no labels
+    (``gt`` None; an empty ``gt`` is a frame labelled without cars, where every car is false),
+    or an estimate that carries no pre-detections (one put together by hand, or
     ``wirescene gt``'s mean wireframes) or not one car per pre-detection.
 
     Examples
@@ -164,8 +167,12 @@ def judged(estimate, gt: Sequence) -> FrameMatches | None:
     ([0], [0])
     >>> judged(SceneEstimate("coarse", [car]), [far]) is None  # no pre-detections: not judged
     True
+    >>> judged(SceneEstimate("coarse", [car], detections=dets), []).false.tolist()  # labelled: no car
+    [0]
+    >>> judged(SceneEstimate("coarse", [car], detections=dets), None) is None  # no labels
+    True
     """
-    if estimate is None or not len(gt) or estimate.detections is None:
+    if estimate is None or gt is None or estimate.detections is None:
         return None
     try:
         return match_estimate(estimate, list(gt))
@@ -254,10 +261,17 @@ def text_size(text: str, fontsize: float, scale: float, pad: float) -> tuple[flo
     >>> bool(w2 > w1), h1 == h2  # longer text, wider box; the height is the font's
     (True, True)
     """
+    width = _text_width(text, float(fontsize), FontProperties())  # the font of the rcParams in force
+    return (width + 2 * pad * fontsize + 2) * scale, (1.25 * fontsize + 2 * pad * fontsize + 2) * scale
+
+
+@functools.lru_cache(maxsize=4096)
+def _text_width(text: str, fontsize: float, prop: FontProperties) -> float:
+    """Points wide of ``text``'s outlines in font ``prop``, remembered: a picture's key and its tags
+    (``missed`` on each missed car) are measured again at every picture, at 5-15 ms a text."""
     from matplotlib.textpath import TextPath
 
-    width = TextPath((0, 0), text, size=fontsize).get_extents().width
-    return (width + 2 * pad * fontsize + 2) * scale, (1.25 * fontsize + 2 * pad * fontsize + 2) * scale
+    return float(TextPath((0, 0), text, size=fontsize, prop=prop).get_extents().width)
 
 
 def _overlap(a, b) -> float:
@@ -315,7 +329,7 @@ def overlay(
     camera: Camera,
     estimate=None,
     *,
-    gt: Sequence = (),
+    gt: Sequence | None = None,
     detections=None,
     dropped=None,
     title: str | None = None,
@@ -337,11 +351,12 @@ def overlay(
     estimate : SceneEstimate, optional
         Its cars, numbered ``#n`` as :func:`car_numbers` (the label file's order); an
         estimate without cars says so in the key.
-    gt : sequence of kitti ``Label``
+    gt : sequence of kitti ``Label``, optional
         Drawn cyan. Beside an estimate that carries its pre-detections (``estimate.detections``,
         as fitted), the evaluation's matching (:func:`judged`) marks its false cars violet,
         tagged ``false`` (on no labelled car) or ``false view`` (on one, from a viewpoint over
-        45 deg off), and the labels it counts missed dashed, tagged ``missed``.
+        45 deg off), and the labels it counts missed dashed, tagged ``missed``. None: no
+        labels, nothing judged; an empty sequence: a frame labelled without cars (every car false).
     detections : Detections, optional
         The pre-detections of the cars drawn.
     dropped : Detections, optional
@@ -379,9 +394,11 @@ def overlay(
         for b in detections.boxes:
             ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, ec=DET_COLOR, lw=1, ls="--"))
     plane = None if estimate is None else estimate.ground_plane
-    if plane is not None:  # the plane every car stands on, under the boxes and the cars
-        _draw_edges(ax, camera, *ground_grid(plane), GROUND_COLOR, 0.6, zorder=1.5)
-    false, missed = _verdicts(estimate, gt, judged(estimate, gt))
+    if plane is not None:  # the plane every car stands on, under the boxes and the cars, over the image
+        _draw_edges(ax, camera, *ground_grid(plane), GROUND_COLOR, 0.6, zorder=0.9)
+    matches = judged(estimate, gt)
+    gt = () if gt is None else gt
+    false, missed = _verdicts(estimate, gt, matches)
     for g in sorted(gt, key=lambda g: -g.location[2]):  # far to near: a near car is drawn over a far one
         _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0,
                     ls=MISSED_DASHES if id(g) in missed else "-")
@@ -483,7 +500,7 @@ def _footprint(dims, location, R):
 def birds_eye(
     estimate=None,
     *,
-    gt: Sequence = (),
+    gt: Sequence | None = None,
     camera: Camera | None = None,
     extent: tuple[float, float, float, float] | None = None,
     title: str | None = None,
@@ -496,12 +513,14 @@ def birds_eye(
     viewpoint over 45 deg off the car's), the labelled cars missed dashed and tagged
     ``missed``, and a thin dark line joins each car matched to a labelled car (2D IoU >
     0.5) to it: solid for a true positive, dash-dotted for a ``false view``, as
-    :func:`wirescene.core.matching.match_estimate` judges."""
+    :func:`wirescene.core.matching.match_estimate` judges (``gt`` None: no labels, nothing
+    judged; empty: labelled without cars, as :func:`overlay`'s)."""
     fig = new_figure(figsize=(5, 6), dpi=100)
     ax = fig.subplots()
     pts = [np.zeros(2)]
     numbers = car_numbers(estimate)
     matches = judged(estimate, gt)
+    gt = () if gt is None else gt
     false, missed = _verdicts(estimate, gt, matches)
 
     def draw(dims, location, R, color, ls="-"):
