@@ -279,12 +279,15 @@ def _overlap(a, b) -> float:
     return max(0.0, min(a[2], b[2]) - max(a[0], b[0])) * max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
 
 
-def place_labels(boxes, sizes, width: float, height: float, *, reserved=()) -> list[tuple[float, float]]:
+def place_labels(boxes, sizes, width: float, height: float, *, reserved=(),
+                 stacked: bool = True) -> list[tuple[float, float]]:
     """Top-left corners (``x``, ``y`` down) of labels of ``sizes`` ``(w, h)``, one by each of
     ``boxes`` ``(x1, y1, x2, y2)``: above the box's top-left corner where there is room,
-    else inside its top, below it or stacked above, always inside the ``width`` x
-    ``height`` picture, clear of each other and of the ``reserved`` rectangles where
+    else inside its top, below it or (``stacked``) stacked above, always inside the ``width``
+    x ``height`` picture, clear of each other and of the ``reserved`` rectangles where
     any candidate place is (else the least covered one). Labels are placed in order.
+    ``stacked`` False keeps each label next to its box (a tag that names no car, read by
+    where it lies).
 
     Examples
     --------
@@ -292,12 +295,17 @@ def place_labels(boxes, sizes, width: float, height: float, *, reserved=()) -> l
     [(10.0, 39.0), (12.0, 53.0)]
     >>> place_labels([[-5, 2, 20, 30]], [(30, 10)], 100, 100)  # cut by the image's corner: kept inside
     [(0.0, 0.0)]
+    >>> crowded = [(0, 30, 100, 100)]  # every place next to the box taken
+    >>> place_labels([[10, 50, 60, 90]], [(30, 10)], 100, 100, reserved=crowded)  # stacked far above it
+    [(10.0, 17.0)]
+    >>> place_labels([[10, 50, 60, 90]], [(30, 10)], 100, 100, reserved=crowded, stacked=False)  # by it, covered
+    [(10.0, 39.0)]
     """
     taken = [tuple(map(float, r)) for r in reserved]
     out = []
     for (x1, y1, x2, y2), (tw, th) in zip(np.asarray(boxes, float), sizes):
         above = [(x1, y1 - th - 1 - k * (th + 1)) for k in range(4)]
-        candidates = above[:1] + [(x1, y1 + 1), (x2 - tw, y1 - th - 1), (x1, y2 + 1)] + above[1:]
+        candidates = above[:1] + [(x1, y1 + 1), (x2 - tw, y1 - th - 1), (x1, y2 + 1)] + (above[1:] if stacked else [])
         best = None
         for cx, cy in candidates:
             cx = float(min(max(cx, 0.0), max(width - tw, 0.0)))
@@ -635,7 +643,7 @@ def _tag_missed(ax, footprints, numbers, extent, room: float) -> None:
     boxes = [down(fp[:, 0].min(), fp[:, 1].min(), fp[:, 0].max(), fp[:, 1].max()) for fp in footprints]
     sizes = [text_size("missed", size, scale, pad)] * len(footprints)
     inset = (pad * size + 1) * scale  # from the tag's box to its text
-    for x, y in place_labels(boxes, sizes, width, height, reserved=reserved):
+    for x, y in place_labels(boxes, sizes, width, height, reserved=reserved, stacked=False):  # by its own car
         ax.text(extent[0] + x + inset, extent[3] - y - inset, "missed", color="black", fontsize=size, va="top",
                 ha="left", clip_on=True, bbox=dict(facecolor=GT_COLOR, alpha=0.85, lw=0, boxstyle=f"square,pad={pad}"))
 
