@@ -11,8 +11,9 @@ tagged ``false``, or ``false view`` on a labelled car whose viewpoint its pre-de
 is over 45 deg off) and the labelled cars missed (dashed, tagged ``missed``: of no true
 positive); the bird's-eye view joins each car matched to a labelled car to it (dash-dotted
 for a ``false view``). The overlay draws the shared ground plane of the ``+gp`` variants
-and ``full`` as a grid (:func:`ground_grid`). All functions draw into a new :class:`matplotlib.figure.Figure` (:func:`new_figure`) and
-return it; :func:`save_figure` writes it atomically. No pyplot: the figures belong to
+and ``full`` as a grid (:func:`ground_grid`). All functions draw into a new
+:class:`matplotlib.figure.Figure` (:func:`new_figure`) and return it; :func:`save_figure`
+writes it atomically. No pyplot: the figures belong to
 no window manager, need no display, and the caller's matplotlib backend (a notebook's,
 say) is left as it was.
 """
