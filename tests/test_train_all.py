@@ -324,6 +324,16 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert "shipped" in r.output and "models written to" in r.output and "2 frames of known drive)" in r.output
 
 
+def test_a_copy_of_the_root_elsewhere_resumes_the_same_training(trained, tmp_path):
+    """The resume key holds the frames' files' content, not the root's path: the same frames in a copy of the root
+    (another disk, a bind mount) keep every step, where they retrained all four."""
+    out, split, _ = trained
+    copy = kitti_copy(tmp_path / "kitti", ["000010", "001545"])
+    models = shutil.copytree(out, tmp_path / "models")
+    r = cli("train", "all", copy, "--split-file", split, "--out", models, *TINY, "--resume")
+    assert r.exit_code == 0 and r.stderr.count("done in an earlier run, kept") == 4, r.output + r.stderr
+
+
 def test_train_all_resume_skips_finished_steps(trained):
     out, split, _ = trained
     before = _mtimes(out)

@@ -347,7 +347,8 @@ def train_all(
     manifest = _new_manifest(dataset, ids, cars, folds, split_file, drives=drives, mapping_dir=mapping_dir,
                              images=images)
     # what a step learns from: the frames' labels, calibrations and images, and the folds they are dealt to
-    key_data = {"kitti_root": manifest["data"]["kitti_root"], "frames_sha256": manifest["data"]["frames_sha256"],
+    # (not the root's path: the same files under another, a copy of the root, train the same)
+    key_data = {"frames_sha256": manifest["data"]["frames_sha256"],
                 "n_folds": n_folds, "files_sha256": data_sha256,
                 "folds_sha256": hashlib.sha256(str(sorted(folds.items())).encode()).hexdigest()}
     run = _Run(out, kitti_root, ids, folds, opts, workers, progress or (lambda message: None),
