@@ -106,3 +106,24 @@ def check_shape(name: str, array, shape: tuple) -> None:
         pretty = ", ".join("..." if w is Ellipsis else ("*" if w is None else str(w)) for w in want)
         pretty = f"({pretty},)" if len(want) == 1 else f"({pretty})"  # (3,) as Python writes the shape it got
         raise ShapeError(f"{name} must have shape {pretty}, got {actual}")
+
+
+def shaped_array(name: str, value, shape: tuple, dtype=float):
+    """``value`` as an array of ``dtype``, checked against ``shape`` (:func:`check_shape`); an
+    empty ``value`` (``[]``: no detections) is taken as an array of that shape where its first
+    size is 0 and the others are fixed.
+
+    Examples
+    --------
+    >>> shaped_array("det_boxes", [], (0, 4)).shape
+    (0, 4)
+    >>> shaped_array("det_scores", [0.9, 0.5], (2,)).tolist()
+    [0.9, 0.5]
+    """
+    import numpy as np
+
+    arr = np.asarray(value, dtype=dtype)
+    if arr.size == 0 and shape[0] == 0 and None not in shape:  # allow [] for empty detections
+        arr = arr.reshape(shape)
+    check_shape(name, arr, shape)
+    return arr

@@ -13,20 +13,12 @@ from typing import Sequence
 import numpy as np
 
 from wirescene.core.boxes import iou_2d
-from wirescene.core.errors import check_shape
+from wirescene.core.errors import shaped_array
 from wirescene.core.labels import CAR_TYPES, Label
 from wirescene.core.types import Detections, SceneEstimate, fitted_detections
 from wirescene.core.viewpoints import angle_difference
 
 __all__ = ["FrameMatches", "match_detections", "match_frame", "match_estimate"]
-
-
-def _array(name, value, shape):
-    arr = np.asarray(value, dtype=float)
-    if arr.size == 0 and shape[0] == 0 and None not in shape:  # allow [] for empty detections
-        arr = arr.reshape(shape)
-    check_shape(name, arr, shape)
-    return arr
 
 
 def match_detections(
@@ -62,10 +54,10 @@ def match_detections(
     >>> iou.round(3)  # 90 / 110
     array([0.818, 0.   , 0.   ])
     """
-    det_boxes = _array("det_boxes", det_boxes, (0, 4) if np.size(det_boxes) == 0 else (None, 4))
-    gt_boxes = _array("gt_boxes", gt_boxes, (0, 4) if np.size(gt_boxes) == 0 else (None, 4))
+    det_boxes = shaped_array("det_boxes", det_boxes, (0, 4) if np.size(det_boxes) == 0 else (None, 4))
+    gt_boxes = shaped_array("gt_boxes", gt_boxes, (0, 4) if np.size(gt_boxes) == 0 else (None, 4))
     D, G = len(det_boxes), len(gt_boxes)
-    det_scores = _array("det_scores", det_scores, (D,))
+    det_scores = shaped_array("det_scores", det_scores, (D,))
     match = np.full(D, -1, dtype=int)
     best = np.zeros(D)
     if D == 0 or G == 0:
@@ -179,9 +171,9 @@ def match_frame(
     >>> m.false.tolist(), m.wrong_viewpoint.tolist(), m.missed.tolist()
     ([1, 2], [2], [2])
     """
-    det_boxes = _array("det_boxes", det_boxes, (0, 4) if np.size(det_boxes) == 0 else (None, 4))
+    det_boxes = shaped_array("det_boxes", det_boxes, (0, 4) if np.size(det_boxes) == 0 else (None, 4))
     D = len(det_boxes)
-    det_alpha = _array("det_alpha", det_alpha, (D,))
+    det_alpha = shaped_array("det_alpha", det_alpha, (D,))
     labels = list(labels)
     cars = np.array([i for i, o in enumerate(labels) if o.type in car_types], dtype=int)
     gt_boxes = np.array([labels[g].box for g in cars]).reshape(-1, 4)

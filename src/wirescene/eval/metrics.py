@@ -49,7 +49,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from wirescene.core.errors import ShapeError, check_shape
+from wirescene.core.errors import ShapeError, check_shape, shaped_array
 from wirescene.core.jsonio import strict_values
 from wirescene.core.matching import match_frame
 from wirescene.core.viewpoints import angle_difference
@@ -61,14 +61,6 @@ METRICS = (
     "n_tp", "n_gt", "median_loc", "occ_pred_acc", "parts_70", "n_parts_70_eligible",
 )
 SUBSET_TITLES = {"all": "full dataset", "occ>0": "occ > 0 parts", "occ>3": "occ > 3 parts"}
-
-
-def _array(name, value, shape, dtype=float):
-    arr = np.asarray(value, dtype=dtype)
-    if arr.size == 0 and shape[0] == 0 and None not in shape:  # allow [] for empty detections
-        arr = arr.reshape(shape)
-    check_shape(name, arr, shape)
-    return arr
 
 
 @dataclass
@@ -153,21 +145,22 @@ class FrameResult:
     def __post_init__(self):
         self.frame_id = str(self.frame_id)
         self.gt = list(self.gt)
-        self.det_boxes = _array("det_boxes", self.det_boxes, (0, 4) if np.size(self.det_boxes) == 0 else (None, 4))
+        boxes_shape = (0, 4) if np.size(self.det_boxes) == 0 else (None, 4)
+        self.det_boxes = shaped_array("det_boxes", self.det_boxes, boxes_shape)
         D = len(self.det_boxes)
-        self.det_alpha = _array("det_alpha", self.det_alpha, (D,))
-        self.det_scores = _array("det_scores", self.det_scores, (D,))
-        self.est_location = _array("est_location", self.est_location, (D, 3))
-        self.est_dims = _array("est_dims", self.est_dims, (D, 3))
-        self.est_rotation_y = _array("est_rotation_y", self.est_rotation_y, (D,))
-        self.est_alpha = _array("est_alpha", self.est_alpha, (D,))
+        self.det_alpha = shaped_array("det_alpha", self.det_alpha, (D,))
+        self.det_scores = shaped_array("det_scores", self.det_scores, (D,))
+        self.est_location = shaped_array("est_location", self.est_location, (D, 3))
+        self.est_dims = shaped_array("est_dims", self.est_dims, (D, 3))
+        self.est_rotation_y = shaped_array("est_rotation_y", self.est_rotation_y, (D,))
+        self.est_alpha = shaped_array("est_alpha", self.est_alpha, (D,))
         if self.est_occluded is not None:
-            self.est_occluded = _array("est_occluded", self.est_occluded, (D, None), dtype=bool)
+            self.est_occluded = shaped_array("est_occluded", self.est_occluded, (D, None), dtype=bool)
         if self.est_vertices_2d is not None:
-            self.est_vertices_2d = _array("est_vertices_2d", self.est_vertices_2d, (D, None, 2))
+            self.est_vertices_2d = shaped_array("est_vertices_2d", self.est_vertices_2d, (D, None, 2))
         for name in ("est_cost", "est_score"):
             if getattr(self, name) is not None:
-                setattr(self, name, _array(name, getattr(self, name), (D,)))
+                setattr(self, name, shaped_array(name, getattr(self, name), (D,)))
         if self.image_size is not None:
             size = np.asarray(self.image_size).reshape(-1)
             if size.shape != (2,) or not np.all(size > 0):
