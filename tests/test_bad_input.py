@@ -790,7 +790,7 @@ CASES = {
     "fit --detections of a COCO result file of two images": (
         lambda t: _fit_case(t, dets=(".json", json.dumps(COCO_TWO_IMAGES))),
         r"dets\.json: detection 1 is of image_id 8, detection 0 of 7: a detections file holds one image's boxes "
-        r"\(split a COCO result file by image_id\)$"),
+        r"\(split a COCO result file by image_id: wirescene split-coco\)$"),
     # its first box was taken for the header and no box was read: an empty scene, exit 0
     "fit --detections of a CSV without its header": (
         lambda t: _fit_case(t, dets=(".csv", "300,180,520,300\n")),

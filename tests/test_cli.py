@@ -324,6 +324,30 @@ def test_detection_formats(tmp_path):
         read_detections(c)
 
 
+def test_a_run_whose_detection_files_hold_no_car_but_boxes_of_other_classes_says_so(tmp_path):
+    """A detector that numbers its classes otherwise (its cars category_id 1): every box was skipped as another class
+    and eval / predict fitted streets without cars without a word (fit alone names the classes). Now one line says it;
+    a run with a car in some file says nothing (a frame of pedestrians alone is a street without cars)."""
+    dets = tmp_path / "dets"
+    dets.mkdir()
+    (dets / "000010.json").write_text(json.dumps([{"image_id": 10, "category_id": 1, "bbox": [354, 185, 195, 109],
+                                                   "score": 0.9}]))
+    args = ["predict", KITTI_ROOT, "--split", "training", "--frames", "000010", "--variant", "coarse",
+            "--detections", dets, "--workers", "1"]
+    r = CliRunner().invoke(main, [str(a) for a in args + ["--out", tmp_path / "out"]])
+    assert r.exit_code == 0, r.output
+    said = [ln for ln in r.stderr.splitlines() if "holds a car" in ln]
+    assert said == [f"wirescene: warning: no detection file in {dets} holds a car: 1 of the 1 frames' files hold "
+                    "boxes of other classes alone (000010.json: its 1 box is of other classes: '1'), fitted as frames "
+                    "without cars; a car is 'car' (category, category_name, label, class or type) or COCO's "
+                    "category_id 3"]
+    assert (tmp_path / "out" / "000010.txt").read_text() == ""
+    (dets / "000010.json").write_text(json.dumps([{"category_id": 1, "bbox": [354, 185, 195, 109]},
+                                                  {"category_id": 3, "bbox": [600, 170, 80, 60]}]))
+    r = CliRunner().invoke(main, [str(a) for a in args + ["--out", tmp_path / "out2"]])
+    assert r.exit_code == 0 and "holds a car" not in r.stderr, r.output
+
+
 def test_detection_files_of_other_tools_keep_only_their_cars(tmp_path):
     coco = tmp_path / "coco.json"  # COCO's result format: category_id 3 is a car, 1 a person
     coco.write_text(json.dumps([{"image_id": 10, "category_id": 3, "bbox": [354, 185, 195, 109], "score": 0.9},
@@ -1838,3 +1862,41 @@ def test_fit_s_variant_help_says_its_default_once():
 
     variant = next(p for p in cli_main.fit_cmd.params if p.name == "variant")
     assert variant.show_default and variant.default == "full" and "full" not in variant.help, variant.help
+
+
+def test_split_coco_writes_each_images_detections_as_the_readers_read_them(tmp_path):
+    """A COCO result file of a whole data set (mmdetection's, detectron2's) was refused with "split it by image_id",
+    which took code; `wirescene split-coco` writes one FRAME.json a frame of the annotations' images (an image without
+    a box: [], a frame without cars), every file read back as the entries of its image_id, and refuses a bad entry,
+    an unknown image_id or a folder of earlier files, leaving no file."""
+    ann = tmp_path / "ann.json"
+    ann.write_text(json.dumps({"images": [{"id": 10, "file_name": "training/image_2/000010.png"},
+                                          {"id": 2, "file_name": "000002.png"}, {"id": 5, "file_name": "000005.png"}],
+                               "categories": [{"id": 3, "name": "car"}]}))
+    res = tmp_path / "res.json"
+    entries = [{"image_id": 10, "category_id": 3, "bbox": [354.4, 185.5, 195.1, 109.0], "score": 0.9},
+               {"image_id": 2, "category_id": 3, "bbox": [600, 170, 80, 60], "score": 0.3},
+               {"image_id": 10, "category_id": 1, "bbox": [859, 160, 20, 61], "score": 0.95},
+               {"image_id": 10, "category_id": 3, "bbox": [100, 170, 80, 60], "score": 0.5, "alpha": 1.9}]
+    res.write_text(json.dumps(entries))
+    out = tmp_path / "dets"
+    r = CliRunner().invoke(main, ["split-coco", str(res), "--images", str(ann), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert r.stdout.strip() == f"4 detections of 3 frames written to {out} (1 frames without one)"
+    assert sorted(p.name for p in out.iterdir()) == ["000002.json", "000005.json", "000010.json"]
+    d = read_detections(out / "000010.json")
+    assert_close(d.boxes, [[354.4, 185.5, 549.5, 294.5], [100, 170, 180, 230]])
+    assert d.scores.tolist() == [0.9, 0.5] and np.isnan(d.alpha[0]) and np.isclose(d.alpha[1], np.pi / 2)
+    assert read_detections(out / "000002.json").scores.tolist() == [0.3]
+    assert json.loads((out / "000005.json").read_text()) == []
+    r = CliRunner().invoke(main, ["split-coco", str(res), "--images", str(ann), "--out", str(out)])
+    assert r.exit_code == 2 and "already holds 3 detection files (e.g. 000002.json)" in r.stderr, r.output
+    for bad, problem in (([*entries, {"image_id": 7, "category_id": 3, "bbox": [1, 2, 30, 40]}],
+                          "res.json: detection 4: image_id 7 is not an image of "),
+                         ([*entries, {"category_id": 3, "bbox": [1, 2, 30, 40]}], "res.json: detection 4: no image_id"),
+                         ([*entries[:1], {"image_id": 2, "bbox": [1, 2, -3, 40]}],
+                          "res.json: detection 1: box has x2 <= x1")):
+        res.write_text(json.dumps(bad))
+        r = CliRunner().invoke(main, ["split-coco", str(res), "--images", str(ann), "--out", str(tmp_path / "new")])
+        assert r.exit_code == 2 and problem in r.stderr and len(r.stderr.splitlines()) == 1, r.output
+        assert not (tmp_path / "new").exists()

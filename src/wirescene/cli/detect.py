@@ -310,3 +310,35 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
     click.echo(f"{result['seconds_per_frame']:.2f} s per frame")
     if json_out is not None:
         write_json(json_out, result)
+
+
+@click.command("split-coco")
+@click.argument("results", type=NonEmptyPath(dir_okay=False, path_type=Path))
+@click.option("--images", type=NonEmptyPath(dir_okay=False, path_type=Path), required=True,
+              help="The COCO annotation file the detector ran on: its images' id and file_name, whose stem is the "
+                   "frame id (training/image_2/000010.png: 000010).")
+@click.option("--out", "out_dir", type=NonEmptyPath(file_okay=False, path_type=Path), required=True,
+              help="An empty (or new) directory for the FRAME.json files.")
+def split_coco(results, images, out_dir):
+    """Split a COCO result file of a whole data set (mmdetection's or detectron2's bbox results: one list, each box
+    naming its image_id) into one FRAME.json a frame, for --detections DIR of eval, predict and fit. Every image of
+    --images gets its file (an image without a box: [], a frame without cars); the entries are kept as they are
+    (their class, score and any alpha), checked as --detections reads them."""
+    from wirescene.eval.sources import DETECTION_SUFFIXES
+    from wirescene.io.detections import split_coco_results
+
+    check_output_dir(out_dir, "--out")
+    held = sorted(p.name for p in (out_dir.iterdir() if out_dir.is_dir() else ())
+                  if p.suffix.lower() in DETECTION_SUFFIXES)
+    if held:  # an earlier split's frames would stay beside this one's
+        raise click.BadParameter(f"{out_dir} already holds {len(held)} detection files (e.g. {held[0]}): choose an "
+                                 "empty directory", param_hint="--out")
+    from wirescene.core.atomic import atomic_dir
+
+    by_frame = split_coco_results(results, images)  # every entry checked before any file is written
+    with atomic_dir(out_dir) as staging:  # the frames' files appear as one set or not at all (a full disk)
+        for frame, entries in by_frame.items():
+            (staging / f"{frame}.json").write_text(dumps(entries))
+    boxes = sum(len(entries) for entries in by_frame.values())
+    empty = sum(not entries for entries in by_frame.values())
+    click.echo(f"{boxes} detections of {len(by_frame)} frames written to {out_dir} ({empty} frames without one)")

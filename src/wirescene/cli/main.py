@@ -921,7 +921,7 @@ def _register_commands():
     plain: a broken module fails ``wirescene --help`` (and the CLI tests) loudly instead
     of silently dropping commands."""
     from wirescene.cli.cad import cad, shape
-    from wirescene.cli.detect import detect, detector, viewpoints
+    from wirescene.cli.detect import detect, detector, split_coco, viewpoints
     from wirescene.cli.info import info
     from wirescene.cli.occlusion import occlusion
     from wirescene.cli.parts import parts
@@ -933,6 +933,7 @@ def _register_commands():
     main.add_command(synth)
     main.add_command(cad)
     main.add_command(detect)
+    main.add_command(split_coco)
     main.add_command(pitch)
     main.add_command(info)
     train = click.Group("train", help="Train the model's artefacts from documented data.")

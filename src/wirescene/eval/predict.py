@@ -307,7 +307,7 @@ def predict_dataset(
         if unlabelled:
             say(f"warning: {len(unlabelled)} of {len(todo)} frames have no label file in "
                 f"{dataset.split_dir / 'label_2'} (e.g. {unlabelled[0]}.txt): their pictures draw the estimates alone")
-    source.check_files(dataset, todo)
+    source.check_files(dataset, todo, say)
     # a corrupt image refused before the first fit where the run reads it, not at its frame's
     check_images_read(dataset, source, [variant], todo, every=pictures_dir is not None, notify=say)
     job = _PredictJob(dataset, variant, source, options, **extra)

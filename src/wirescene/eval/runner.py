@@ -371,7 +371,7 @@ def evaluate_dataset(
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
     say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
-    source.check_files(dataset, todo)
+    source.check_files(dataset, todo, notify)
     if evidence == "oracle":  # refused now, not at the first fit: a fine variant's, or a box's viewpoint's evidence
         fine = any(get_variant(v).fine for v in variants)
         lacking = next((f for f in todo if not wireframe_gt_path(dataset.split_dir, f).is_file()

@@ -7,6 +7,7 @@ import itertools
 import os
 import stat
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -133,15 +134,32 @@ class DetectionSource:
         """
         return {} if self.min_score is None else {"min_score": float(self.min_score)}
 
-    def check_files(self, dataset: KittiDataset, frame_ids: list[str]) -> None:
+    def check_files(self, dataset: KittiDataset, frame_ids: list[str],
+                    notify: Callable[[str], None] | None = None) -> None:
         """Read every frame's file of the detections directory (nothing for ``gt`` / ``bank``):
         an :class:`InputError` naming the first malformed one before a run fits any frame, as
         :meth:`~wirescene.io.kitti.KittiDataset.check_frames` for the calibrations and labels (a
-        bad file found at frame N would leave the N - 1 frames fitted before it)."""
+        bad file found at frame N would leave the N - 1 frames fitted before it).
+
+        ``notify`` is told, in one line, when no file holds a car and some hold boxes of other
+        classes alone (a detector that numbers its classes otherwise than COCO, whose every box
+        would be skipped: a run without a car, read as streets without cars)."""
         if self.folder is None:
             return
+        others = []  # the files of boxes of other classes alone, while no file holds a car
         for frame_id in frame_ids:
-            self.for_frame(dataset, frame_id, None)
+            if len(self.for_frame(dataset, frame_id, None)):
+                others = None
+            elif notify is not None and others is not None and (path := self.detection_file(frame_id)) is not None:
+                try:
+                    read_detections(path)  # without the floor: a file of cars all under it holds cars
+                except InputError as exc:
+                    if exc.problem.startswith(NO_CARS) and exc.problem != NO_CARS:
+                        others.append(f"{path.name}: {exc.problem[len(NO_CARS):].strip(' ()')}")
+        if notify is not None and others:
+            notify(f"warning: no detection file in {self.folder} holds a car: {len(others)} of the {len(frame_ids)} "
+                   f"frames' files hold boxes of other classes alone ({others[0]}), fitted as frames without cars; "
+                   "a car is 'car' (category, category_name, label, class or type) or COCO's category_id 3")
 
     @property
     def own(self) -> bool:

@@ -178,31 +178,46 @@ def _one_image(entries: list, path: Path) -> None:
         elif str(image) != str(first[1]):
             raise InputError(f"detection {i} is of image_id {str(image)[:20]}, detection {first[0]} of "
                              f"{str(first[1])[:20]}: a detections file holds one image's boxes (split a COCO result "
-                             "file by image_id)", path=path)
+                             "file by image_id: wirescene split-coco)", path=path)
+
+
+def _car_of(entry, path: Path, where: str) -> tuple[list[float], float, float] | None:
+    """The box, score and viewpoint (:func:`_viewpoint_of`) of a JSON / CSV entry, or None where
+    it is of another class than a car; an :class:`InputError` naming ``where`` if malformed."""
+    if not isinstance(entry, dict):
+        raise InputError(f"{where}: expected an object with a box", path=path)
+    if not _is_car(entry):
+        return None
+    box = _box_of(entry, path, where)
+    try:
+        score = entry.get("score", 1.0)
+        if isinstance(score, bool):  # float(True) is 1.0: a flag, not a score
+            raise TypeError
+        score = 1.0 if score in (None, "") else float(score)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{where}: score must be a number", path=path) from None
+    if not np.isfinite(score):
+        raise InputError(f"{where}: score must be finite, got {score}", path=path)
+    return box, score, _viewpoint_of(entry, path, where)
 
 
 def _from_entries(entries: list, path: Path) -> Detections:
     _one_image(entries, path)
-    boxes, scores, alpha = [], [], []
-    for i, entry in enumerate(entries):
-        where = f"detection {i}"
-        if not isinstance(entry, dict):
-            raise InputError(f"{where}: expected an object with a box", path=path)
-        if not _is_car(entry):
-            continue
-        boxes.append(_box_of(entry, path, where))
-        try:
-            score = entry.get("score", 1.0)
-            if isinstance(score, bool):  # float(True) is 1.0: a flag, not a score
-                raise TypeError
-            score = 1.0 if score in (None, "") else float(score)
-        except (TypeError, ValueError, OverflowError):
-            raise InputError(f"{where}: score must be a number", path=path) from None
-        if not np.isfinite(score):
-            raise InputError(f"{where}: score must be finite, got {score}", path=path)
-        scores.append(score)
-        alpha.append(_viewpoint_of(entry, path, where))
+    cars = [car for i, entry in enumerate(entries) if (car := _car_of(entry, path, f"detection {i}")) is not None]
+    boxes, scores, alpha = ([c[k] for c in cars] for k in range(3))
     return Detections(np.array(boxes).reshape(-1, 4), np.array(scores), np.array(alpha), str(path))
+
+
+def _read_json(path: Path):
+    """The JSON document of the file ``path``; an :class:`InputError` naming it where it is none."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8-sig"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid JSON ({exc.__class__.__name__}: {exc})".splitlines()[0], path=path) from None
+    except RecursionError:
+        raise InputError("not a detections file (JSON nested too deeply)", path=path) from None
+    except ValueError as exc:  # e.g. an integer of thousands of digits
+        raise InputError(f"not a usable JSON file ({' '.join(str(exc).split())[:80]})", path=path) from None
 
 
 def read_detections(path: str | Path, *, min_score: float | None = None,
@@ -271,14 +286,7 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
         cars = {id(o) for o in of_types(labels, CAR_TYPES)}
         others = [o.type for o in labels.objects if id(o) not in cars]
     elif suffix == ".json":
-        try:
-            data = json.loads(path.read_text(encoding="utf-8-sig"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(f"not valid JSON ({exc.__class__.__name__}: {exc})".splitlines()[0], path=path) from None
-        except RecursionError:
-            raise InputError("not a detections file (JSON nested too deeply)", path=path) from None
-        except ValueError as exc:  # e.g. an integer of thousands of digits
-            raise InputError(f"not a usable JSON file ({' '.join(str(exc).split())[:80]})", path=path) from None
+        data = _read_json(path)
         entries = data.get("detections") if isinstance(data, dict) else data
         if not isinstance(entries, list):
             raise InputError("expected a list of detections or {'detections': [...]}", path=path)
@@ -315,3 +323,83 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
     if len(dets) == 0:
         raise InputError(NO_CARS, path=path)
     return dets
+
+
+def split_coco_results(results: str | Path, images: str | Path) -> dict[str, list]:
+    """Each image's detections of a COCO result file of a whole data set (mmdetection's or
+    detectron2's ``bbox`` results: one list of entries, each naming its ``image_id``), for
+    one detection file a frame that :func:`read_detections` reads.
+
+    ``images`` is the COCO annotation file the detector ran on: its ``images`` name each
+    ``id``'s ``file_name``, whose stem is the frame id (``training/image_2/000010.png``:
+    ``000010``). Every entry is checked as :func:`read_detections` checks a file's, naming its
+    place in ``results``; entries of another class than a car are kept (the reader skips them).
+
+    Returns
+    -------
+    dict
+        Frame id to its entries, in their order in ``results``, for every image of ``images``
+        (an image without an entry: ``[]``, a frame without cars), in the order of ``images``.
+
+    Raises
+    ------
+    InputError
+        Either file missing or malformed, an entry without an ``image_id`` or of one that
+        ``images`` lacks, two images of one ``id`` or one frame id, a malformed entry, or boxes
+        all under a pixel (normalised coordinates).
+
+    Examples
+    --------
+    >>> import json, tempfile
+    >>> ann = {"images": [{"id": 7, "file_name": "training/image_2/000010.png"}, {"id": 8, "file_name": "000011.png"}]}
+    >>> res = [{"image_id": 7, "category_id": 3, "bbox": [300, 180, 220, 120], "score": 0.9},
+    ...        {"image_id": 7, "category_id": 1, "bbox": [10, 10, 40, 80], "score": 0.8}]
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "ann.json").write_text(json.dumps(ann))
+    ...     _ = (Path(d) / "res.json").write_text(json.dumps(res))
+    ...     by_frame = split_coco_results(Path(d) / "res.json", Path(d) / "ann.json")
+    >>> {frame: len(entries) for frame, entries in by_frame.items()}
+    {'000010': 2, '000011': 0}
+    """
+    results, images = Path(results), Path(images)
+    for path, what in ((results, "COCO results"), (images, "COCO annotations")):
+        problem = path_problem(path, what)
+        if problem:
+            raise InputError(problem, path=path)
+    listed = _read_json(images)
+    listed = listed.get("images") if isinstance(listed, dict) else None
+    if not isinstance(listed, list):
+        raise InputError("expected COCO annotations: {'images': [{'id': ..., 'file_name': ...}, ...]}", path=images)
+    frame_of, seen = {}, {}
+    for i, image in enumerate(listed):
+        if not isinstance(image, dict) or image.get("id") in (None, "") or not isinstance(image.get("file_name"), str):
+            raise InputError(f"image {i}: expected an object with an id and a file_name", path=images)
+        key, frame = str(image["id"]), Path(image["file_name"].replace("\\", "/")).stem
+        if not frame:
+            raise InputError(f"image {i}: its file_name {image['file_name'][:60]!r} names no frame", path=images)
+        if key in frame_of:
+            raise InputError(f"image {i}: the id {key[:20]} of an image before it", path=images)
+        if frame in seen:
+            raise InputError(f"image {i}: the frame {frame[:40]} of image {seen[frame]} (two images of one file "
+                             "name)", path=images)
+        frame_of[key], seen[frame] = frame, i
+    entries = _read_json(results)
+    entries = entries.get("detections") if isinstance(entries, dict) else entries
+    if not isinstance(entries, list):
+        raise InputError("expected a COCO result file: a list of detections, each with an image_id", path=results)
+    by_frame = {frame: [] for frame in frame_of.values()}
+    boxes = []
+    for i, entry in enumerate(entries):
+        car = _car_of(entry, results, f"detection {i}")
+        image = entry.get("image_id")
+        if image in (None, ""):
+            raise InputError(f"detection {i}: no image_id", path=results)
+        if str(image) not in frame_of:
+            raise InputError(f"detection {i}: image_id {str(image)[:20]} is not an image of {images}", path=results)
+        by_frame[frame_of[str(image)]].append(entry)
+        if car is not None:
+            boxes.append(car[0])
+    problem = normalised_boxes_problem(boxes)
+    if problem:
+        raise InputError(problem, path=results)
+    return by_frame
