@@ -1900,3 +1900,30 @@ def test_split_coco_writes_each_images_detections_as_the_readers_read_them(tmp_p
         r = CliRunner().invoke(main, ["split-coco", str(res), "--images", str(ann), "--out", str(tmp_path / "new")])
         assert r.exit_code == 2 and problem in r.stderr and len(r.stderr.splitlines()) == 1, r.output
         assert not (tmp_path / "new").exists()
+
+
+def test_split_coco_reads_the_classes_by_the_annotations_names(tmp_path):
+    """A detector trained on KITTI (Car 1, Pedestrian 2, Cyclist 3, as its annotation file's categories say) was split
+    with its numbers alone: its cars skipped as another class and its cyclists, 3, fitted as COCO's cars, with no
+    warning (some file held a "car"). An entry of a category_id alone now gets the annotations' name."""
+    ann = tmp_path / "ann.json"
+    ann.write_text(json.dumps({"images": [{"id": 0, "file_name": "000010.png"}],
+                               "categories": [{"id": 1, "name": "Car"}, {"id": 2, "name": "Pedestrian"},
+                                              {"id": 3, "name": "Cyclist"}]}))
+    res = tmp_path / "res.json"
+    res.write_text(json.dumps([{"image_id": 0, "category_id": 1, "bbox": [354, 185, 195, 109], "score": 0.9},
+                               {"image_id": 0, "category_id": 3, "bbox": [600, 170, 80, 60], "score": 0.8},
+                               {"image_id": 0, "category_id": 3, "label": "car", "bbox": [100, 170, 80, 60]}]))
+    out = tmp_path / "dets"
+    r = CliRunner().invoke(main, ["split-coco", str(res), "--images", str(ann), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    d = read_detections(out / "000010.json")  # the Car and the entry naming its class; not the Cyclist
+    assert_close(d.boxes, [[354, 185, 549, 294], [100, 170, 180, 230]])
+    ann.write_text(json.dumps({"images": [{"id": 0, "file_name": "000010.png"}], "categories": [{"id": 1}]}))
+    r = CliRunner().invoke(main, ["split-coco", str(res), "--images", str(ann), "--out", str(tmp_path / "new")])
+    assert r.exit_code == 2 and "ann.json: category 0: expected an object with an id and a name" in r.stderr, r.output
+    assert not (tmp_path / "new").exists()
+    ann.write_text(json.dumps({"images": []}))  # was "0 detections of 0 frames written", an empty folder left
+    r = CliRunner().invoke(main, ["split-coco", str(res), "--images", str(ann), "--out", str(tmp_path / "new")])
+    assert r.exit_code == 2 and "ann.json: no images: the COCO annotations list none" in r.stderr, r.output
+    assert not (tmp_path / "new").exists()

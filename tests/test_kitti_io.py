@@ -173,6 +173,22 @@ def test_an_oserror_in_a_set_of_files_names_the_file_of_the_set_not_of_its_stagi
         assert list(tmp_path.iterdir()) == []
 
 
+def test_a_full_disk_met_by_a_write_in_a_set_names_the_set(tmp_path):
+    """A full disk met by write() (not open()) names no file: `split-coco` onto a full disk said "wirescene: error: No
+    space left on device", naming nothing; the set asked for is named, as atomic_path names its file."""
+    import errno
+
+    from wirescene.core.atomic import atomic_dir, replaced_dir
+
+    for staged in (atomic_dir, replaced_dir):
+        with pytest.raises(OSError) as exc:
+            with staged(tmp_path / "set") as staging:
+                (staging / "000001.json").write_text("[]")
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        assert (exc.value.errno, exc.value.filename) == (errno.ENOSPC, str(tmp_path / "set"))
+        assert list(tmp_path.iterdir()) == []
+
+
 def test_an_oserror_making_a_temporary_names_the_file_asked_for_and_any_name_is_kept(tmp_path, monkeypatch):
     """A full disk or a refused place when the temporary file (or a set's staging folder) is made was told of
     `.NAME.<hex>.tmp` (in a set: `SET/DIR/.NAME.<hex>.tmp`, a name no set holds); an OSError naming bytes or a file

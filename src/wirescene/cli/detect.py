@@ -323,7 +323,8 @@ def split_coco(results, images, out_dir):
     """Split a COCO result file of a whole data set (mmdetection's or detectron2's bbox results: one list, each box
     naming its image_id) into one FRAME.json a frame, for --detections DIR of eval, predict and fit. Every image of
     --images gets its file (an image without a box: [], a frame without cars); the entries are kept as they are
-    (their class, score and any alpha), checked as --detections reads them."""
+    (their class, score and any alpha; a category_id alone also gets its name from the categories of --images, where
+    they list it: a detector trained on KITTI numbers its cars 1), checked as --detections reads them."""
     from wirescene.eval.sources import DETECTION_SUFFIXES
     from wirescene.io.detections import split_coco_results
 

@@ -162,6 +162,9 @@ def _staged(path: Path):
                 return str(path / Path(name).relative_to(staging))
             return name  # another place's, or no path (bytes, a file descriptor, None)
 
+        if isinstance(exc, OSError) and exc.errno is not None and exc.filename is None:
+            # a full disk met by a write() names no file (open() does): told of the set asked for
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
         if isinstance(exc, OSError) and exc.errno is not None and (in_set(exc.filename), in_set(exc.filename2)) != (
                 exc.filename, exc.filename2):
             # a full disk told of the file in the set asked for, not in its staging folder

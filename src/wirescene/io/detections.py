@@ -39,10 +39,14 @@ NO_CARS = "no car detections in file"
 COCO_CAR_ID = 3
 
 
+#: The keys of an entry's class, in the order read: its name's, then COCO's number.
+_CLASS_KEYS = ("category", "category_name", "label", "class", "type", "category_id")
+
+
 def _class_of(entry: dict):
     """The class a JSON / CSV entry names under ``category``, ``category_name``, ``label``,
     ``class``, ``type`` or COCO's ``category_id`` (the first given), or None."""
-    for key in ("category", "category_name", "label", "class", "type", "category_id"):
+    for key in _CLASS_KEYS:
         value = entry.get(key)
         if value not in (None, ""):
             return value
@@ -332,8 +336,11 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
 
     ``images`` is the COCO annotation file the detector ran on: its ``images`` name each
     ``id``'s ``file_name``, whose stem is the frame id (``training/image_2/000010.png``:
-    ``000010``). Every entry is checked as :func:`read_detections` checks a file's, naming its
-    place in ``results``; entries of another class than a car are kept (the reader skips them).
+    ``000010``). Where ``images`` names its ``categories``, an entry of a ``category_id`` alone
+    gets its name as ``category`` (a detector trained on KITTI numbers its cars 1, not COCO's 3:
+    its ``Car`` is then read as a car, and its ``Cyclist`` 3 not). Every entry is checked as
+    :func:`read_detections` checks a file's, naming its place in ``results``; entries of another
+    class than a car are kept (the reader skips them).
 
     Returns
     -------
@@ -344,9 +351,9 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
     Raises
     ------
     InputError
-        Either file missing or malformed, an entry without an ``image_id`` or of one that
-        ``images`` lacks, two images of one ``id`` or one frame id, a malformed entry, or boxes
-        all under a pixel (normalised coordinates).
+        Either file missing or malformed, annotations without images, an entry without an
+        ``image_id`` or of one that ``images`` lacks, two images of one ``id`` or one frame id,
+        a malformed entry, or boxes all under a pixel (normalised coordinates).
 
     Examples
     --------
@@ -360,16 +367,25 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
     ...     by_frame = split_coco_results(Path(d) / "res.json", Path(d) / "ann.json")
     >>> {frame: len(entries) for frame, entries in by_frame.items()}
     {'000010': 2, '000011': 0}
+    >>> ann["categories"] = [{"id": 1, "name": "Car"}, {"id": 3, "name": "Cyclist"}]  # a detector trained on KITTI
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "ann.json").write_text(json.dumps(ann))
+    ...     _ = (Path(d) / "res.json").write_text(json.dumps(res))
+    ...     by_frame = split_coco_results(Path(d) / "res.json", Path(d) / "ann.json")
+    >>> [(e["category_id"], e["category"]) for e in by_frame["000010"]]  # its car is 1, its 3 a cyclist
+    [(3, 'Cyclist'), (1, 'Car')]
     """
     results, images = Path(results), Path(images)
     for path, what in ((results, "COCO results"), (images, "COCO annotations")):
         problem = path_problem(path, what)
         if problem:
             raise InputError(problem, path=path)
-    listed = _read_json(images)
-    listed = listed.get("images") if isinstance(listed, dict) else None
+    document = _read_json(images)
+    listed = document.get("images") if isinstance(document, dict) else None
     if not isinstance(listed, list):
         raise InputError("expected COCO annotations: {'images': [{'id': ..., 'file_name': ...}, ...]}", path=images)
+    if not listed:  # no frame to write: an empty --out and a run of nothing
+        raise InputError("no images: the COCO annotations list none", path=images)
     frame_of, seen = {}, {}
     for i, image in enumerate(listed):
         if not isinstance(image, dict) or image.get("id") in (None, "") or not isinstance(image.get("file_name"), str):
@@ -383,6 +399,7 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
             raise InputError(f"image {i}: the frame {frame[:40]} of image {seen[frame]} (two images of one file "
                              "name)", path=images)
         frame_of[key], seen[frame] = frame, i
+    names = _category_names(document.get("categories"), images)
     entries = _read_json(results)
     entries = entries.get("detections") if isinstance(entries, dict) else entries
     if not isinstance(entries, list):
@@ -390,6 +407,9 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
     by_frame = {frame: [] for frame in frame_of.values()}
     boxes = []
     for i, entry in enumerate(entries):
+        name = names.get(str(entry.get("category_id"))) if isinstance(entry, dict) else None
+        if name is not None and all(entry.get(key) in (None, "") for key in _CLASS_KEYS[:-1]):  # a number alone
+            entry = {**entry, "category": name}  # read by its name: the annotations' numbers are not COCO's
         car = _car_of(entry, results, f"detection {i}")
         image = entry.get("image_id")
         if image in (None, ""):
@@ -403,3 +423,22 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
     if problem:
         raise InputError(problem, path=results)
     return by_frame
+
+
+def _category_names(categories, path: Path) -> dict[str, str]:
+    """``{str(id): name}`` of a COCO annotation file's ``categories`` (None: it has none, ``{}``);
+    an :class:`InputError` naming ``path`` where they are malformed."""
+    if categories is None:
+        return {}
+    if not isinstance(categories, list):
+        raise InputError("categories: expected a list of {'id': ..., 'name': ...}", path=path)
+    names = {}
+    for i, category in enumerate(categories):
+        if (not isinstance(category, dict) or category.get("id") in (None, "")
+                or not isinstance(category.get("name"), str) or not category["name"].strip()):
+            raise InputError(f"category {i}: expected an object with an id and a name", path=path)
+        key = str(category["id"])
+        if key in names:
+            raise InputError(f"category {i}: the id {key[:20]} of a category before it", path=path)
+        names[key] = category["name"]
+    return names
