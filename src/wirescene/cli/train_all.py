@@ -41,32 +41,6 @@ def parse_settings(values: tuple[str, ...]) -> dict[str, dict]:
     return out
 
 
-def _earlier_steps(out: Path) -> dict:
-    """The step records of the manifest in ``out`` before a resumed run (empty where there is
-    none or it cannot be read: the run says why), so that the summary tells the steps it kept
-    from those it trained.
-
-    Parameters
-    ----------
-    out : Path
-        The models directory.
-
-    Returns
-    -------
-    dict
-        ``{step: record}``.
-    """
-    from wirescene.core.artefacts import load_json
-    from wirescene.core.errors import InputError
-    from wirescene.core.resources import MANIFEST_FILE, MANIFEST_KIND, MANIFEST_VERSION
-
-    try:
-        steps = load_json(out / MANIFEST_FILE, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("steps")
-    except (InputError, OSError):
-        return {}
-    return steps if isinstance(steps, dict) else {}
-
-
 @click.command("all")
 @kitti_root_params("Labelled KITTI root to train on.", type=NonEmptyPath(directory=True, path_type=Path),
                    required=True)
@@ -92,8 +66,9 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
     from tqdm import tqdm
 
     from wirescene.cli.options import parse_frames
+    from wirescene.core.errors import InputError
     from wirescene.io.kitti import KittiDataset
-    from wirescene.training.pipeline import step_cost, train_all
+    from wirescene.training.pipeline import manifest_steps, step_cost, train_all
 
     check_output_dir(out, "--out")
     keeps_on_resume("the steps --out holds")
@@ -106,7 +81,10 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
     if frames is not None:
         dataset = KittiDataset(kitti_root)
         ids = parse_frames(frames, dataset.frame_ids())
-    earlier = _earlier_steps(out) if resume else {}
+    try:  # the steps an earlier run left, to tell those this run keeps (a manifest unread: train_all says why)
+        earlier = manifest_steps(out) if resume else {}
+    except InputError:
+        earlier = {}
     bars = []
 
     def iterate(items, name):

@@ -450,9 +450,17 @@ def _previous_steps(out: Path, resume: bool) -> dict:
     if resume and held and not manifest_path.is_file():
         raise InputError(f"holds {held[0]} but no {MANIFEST_FILE}: not a directory of `train all`, nothing to resume",
                          path=out)
-    if resume and manifest_path.is_file():
-        return load_json(manifest_path, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("steps") or {}
-    return {}
+    return manifest_steps(out) if resume else {}
+
+
+def manifest_steps(out: str | Path) -> dict:
+    """``{step: record}`` of the manifest of the models directory ``out`` (``{}`` where it has
+    none); an :class:`InputError` naming a manifest that cannot be read."""
+    path = Path(out) / MANIFEST_FILE
+    if not path.is_file():
+        return {}
+    steps = load_json(path, kind=MANIFEST_KIND, version=MANIFEST_VERSION).get("steps")
+    return steps if isinstance(steps, dict) else {}
 
 
 def _new_manifest(dataset, ids: list[str], cars: int, folds: dict[str, int], split_file, *,
