@@ -181,14 +181,17 @@ def judged(estimate, gt: Sequence | None) -> FrameMatches | None:
         return None
 
 
-def _verdicts(estimate, gt: Sequence, matches: FrameMatches | None) -> tuple[dict[int, str], set[int]]:
-    """``({id(car): "false" | "false view"}, {id(label) missed})`` of :func:`judged`'s ``matches``."""
+def _verdicts(estimate, gt: Sequence | None) -> tuple[list, FrameMatches | None, dict[int, str], set[int]]:
+    """``(labels drawn, matches, {id(car): "false" | "false view"}, {id(label) missed})``:
+    :func:`judged`'s verdict on ``estimate`` against ``gt`` (None: no labels, none drawn)."""
+    matches = judged(estimate, gt)
+    gt = [] if gt is None else list(gt)
     if matches is None:
-        return {}, set()
-    cars, gt = estimate.cars, list(gt)
+        return gt, None, {}, set()
+    cars = estimate.cars
     false = {id(cars[d]): "false" for d in matches.false}
     false.update({id(cars[d]): "false view" for d in matches.wrong_viewpoint})
-    return false, {id(gt[g]) for g in matches.missed}
+    return gt, matches, false, {id(gt[g]) for g in matches.missed}
 
 
 def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR,
@@ -405,9 +408,7 @@ def overlay(
     plane = None if estimate is None else estimate.ground_plane
     if plane is not None:  # the plane every car stands on, under the boxes and the cars, over the image
         _draw_edges(ax, camera, *ground_grid(plane), GROUND_COLOR, 0.6, zorder=0.9)
-    matches = judged(estimate, gt)
-    gt = () if gt is None else gt
-    false, missed = _verdicts(estimate, gt, matches)
+    gt, _, false, missed = _verdicts(estimate, gt)
     for g in sorted(gt, key=lambda g: -g.location[2]):  # far to near: a near car is drawn over a far one
         _draw_box3d(ax, camera, box_corners(g.dims, g.location, rotation_y(g.rotation_y)), GT_COLOR, 1.0,
                     ls=MISSED_DASHES if id(g) in missed else "-")
@@ -528,9 +529,7 @@ def birds_eye(
     ax = fig.subplots()
     pts = [np.zeros(2)]
     numbers = car_numbers(estimate)
-    matches = judged(estimate, gt)
-    gt = () if gt is None else gt
-    false, missed = _verdicts(estimate, gt, matches)
+    gt, matches, false, missed = _verdicts(estimate, gt)
 
     def draw(dims, location, R, color, ls="-"):
         fp = _footprint(dims, location, R)
