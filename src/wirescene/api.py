@@ -581,9 +581,9 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
         What :func:`fit` returned: its cars are drawn red, each numbered as in
         :attr:`SceneEstimate.cars` (``#1`` the first), in the ``overlay`` with its confidence
         (the fitted wireframes, hidden vertices as open dots on dashed edges), in the ``bev``
-        as footprints and headings; the ``overlay`` draws the
-        shared ground plane of a ``+gp`` variant or ``full`` as a grid of thin white lines,
-        every 10 m ahead and 5 m aside (:func:`wirescene.io.pictures.ground_grid`).
+        as footprints and headings; the ``overlay`` draws the shared ground plane of a ``+gp``
+        variant or ``full`` as a grid of thin white lines, every 10 m ahead and 5 m aside
+        (:func:`wirescene.io.pictures.ground_grid`).
     view : str
         ``"overlay"`` (the image, full size; one of more pixels than a 3840 x 2160 frame
         reduced by a whole factor, :func:`wirescene.io.pictures.drawn_image`) or ``"bev"``

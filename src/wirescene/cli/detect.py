@@ -325,6 +325,7 @@ def split_coco(results, images, out_dir):
     --images gets its file (an image without a box: [], a frame without cars); the entries are kept as they are
     (their class, score and any alpha; a category_id alone also gets its name from the categories of --images, where
     they list it: a detector trained on KITTI numbers its cars 1), checked as --detections reads them."""
+    from wirescene.core.atomic import atomic_dir
     from wirescene.eval.sources import DETECTION_SUFFIXES
     from wirescene.io.detections import split_coco_results
 
@@ -334,8 +335,6 @@ def split_coco(results, images, out_dir):
     if held:  # an earlier split's frames would stay beside this one's
         raise click.BadParameter(f"{out_dir} already holds {len(held)} detection files (e.g. {held[0]}): choose an "
                                  "empty directory", param_hint="--out")
-    from wirescene.core.atomic import atomic_dir
-
     by_frame = split_coco_results(results, images)  # every entry checked before any file is written
     with atomic_dir(out_dir) as staging:  # the frames' files appear as one set or not at all (a full disk)
         for frame, entries in by_frame.items():
