@@ -22,7 +22,7 @@ from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.validate import output_dir_problem
 from wirescene.core.version import __version__
 from wirescene.eval.records import config_difference, refuse_frames_outside
-from wirescene.eval.runner import check_images_read, fit_frames, notify_stderr, say_off_centre
+from wirescene.eval.runner import check_frames_boxes, check_images_read, fit_frames, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint, options_read
 from wirescene.fitting.options import FitOptions
@@ -295,7 +295,8 @@ def predict_dataset(
     done = {p.stem for p in existing}
     todo = [f for f in frame_ids if f not in done]
     say = notify or notify_stderr
-    say_off_centre(dataset.check_frames(todo, labels=source.spec == "gt"), len(todo), say)
+    odd, boxes = check_frames_boxes(dataset, source, todo, labels=source.spec == "gt")
+    say_off_centre(odd, len(todo), say)
     if pictures_dir is not None and source.spec != "gt" and dataset.has_labels:
         # the pictures draw a labelled split's cars: a bad label file refused now, not at its frame
         unlabelled = []
@@ -307,9 +308,9 @@ def predict_dataset(
         if unlabelled:
             say(f"warning: {len(unlabelled)} of {len(todo)} frames have no label file in "
                 f"{dataset.split_dir / 'label_2'} (e.g. {unlabelled[0]}.txt): their pictures draw the estimates alone")
-    source.check_files(dataset, todo, say)
+    boxes.update(source.check_files(dataset, todo, say))  # each frame's boxes, read once
     # a corrupt image refused before the first fit where the run reads it, not at its frame's
-    check_images_read(dataset, source, [variant], todo, every=pictures_dir is not None, notify=say)
+    check_images_read(dataset, source, [variant], todo, every=pictures_dir is not None, notify=say, boxes=boxes)
     job = _PredictJob(dataset, variant, source, options, **extra)
     with ExitStack() as stack:
         for k, (frame_id, text, files) in enumerate(progress(fit_frames(job, todo, workers=workers,

@@ -15,7 +15,7 @@ import uuid
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -39,6 +39,7 @@ from wirescene.fitting.pipeline import fit_frame, needs_evidence
 from wirescene.fitting.variants import get_variant
 from wirescene.infer.evidence import oracle_evidence
 from wirescene.infer.torch_backend import TORCH_THREADS_ENV
+from wirescene.io.detections import detections_from_labels
 from wirescene.io.kitti import FrameLabels, KittiDataset, as_frame_ids
 from wirescene.io.wireframes import WireframeGT, read_wireframe_gt, wireframe_gt_path
 
@@ -370,20 +371,24 @@ def evaluate_dataset(
         refuse_predictions_dir(predictions_dir, variants, frame_ids, resume=resume)
     reused = _reusable_records(records, frame_ids, notify) if resume else {}
     todo = [f for f in frame_ids if f not in reused]
-    say_off_centre(dataset.check_frames(todo, labels=True), len(todo), notify)
-    source.check_files(dataset, todo, notify)
+    odd, boxes = check_frames_boxes(dataset, source, todo, labels=True)
+    say_off_centre(odd, len(todo), notify)
+    boxes.update(source.check_files(dataset, todo, notify))  # each frame's boxes, read once for every check below
     if evidence == "oracle":  # refused now, not at the first fit: a fine variant's, or a box's viewpoint's evidence
         fine = any(get_variant(v).fine for v in variants)
         lacking = next((f for f in todo if not wireframe_gt_path(dataset.split_dir, f).is_file()
-                        and (fine or not source.own and boxes_lack_viewpoints(dataset, source, [f]))), None)
+                        and (fine or not source.own and boxes_lack_viewpoints(dataset, source, [f], boxes=boxes))),
+                       None)
         if lacking is not None:
             raise InputError(ORACLE_NEEDS, path=wireframe_gt_path(dataset.split_dir, lacking))
     # a corrupt image refused now, not at its frame's fit or in the report after every fit
-    check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images, notify=notify)
+    check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images, notify=notify,
+                      boxes=boxes)
     if held_out is not None:
         # the bank and the classifier give our own boxes their viewpoints, and label or file boxes theirs where one
         # lacks it (of every frame evaluated: a reused frame's figures are its earlier fit's of the same boxes)
-        finds_viewpoints = source.own or (evidence == "parts" and boxes_lack_viewpoints(dataset, source, frame_ids))
+        finds_viewpoints = source.own or (evidence == "parts"
+                                          and boxes_lack_viewpoints(dataset, source, frame_ids, boxes=boxes))
         read = model_files_read(options, fine=any(get_variant(v).fine for v in variants), own=source.own,
                                 evidence=evidence, viewpoints_given=not finds_viewpoints)
         for sentence in trained_on_frames(dataset, frame_ids, options=options, read=read):
@@ -399,9 +404,37 @@ def evaluate_dataset(
 SAY_DECODING = 200
 
 
+def check_frames_boxes(dataset: KittiDataset, source: DetectionSource, frame_ids: list[str], *,
+                       labels: bool = False) -> tuple[list[tuple[str, str]], dict[str, Detections]]:
+    """:meth:`~wirescene.io.kitti.KittiDataset.check_frames` of ``frame_ids`` (with ``labels``: their
+    label files read too), and of label boxes (``source`` "gt", with ``labels``) each frame's boxes from
+    the labels read then (their viewpoints without noise, which moves a viewpoint, never makes one
+    unknown), for the checks before the first fit that look at the boxes (:func:`check_images_read`,
+    :func:`boxes_lack_viewpoints`), which so read no label file again: ``(odd, {frame: boxes})``, ``odd``
+    as ``check_frames`` returns it; ``{}`` of any other source (its files read by
+    :meth:`~wirescene.eval.sources.DetectionSource.check_files`).
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> sample = KittiDataset(DATA_DIR / "sample" / "kitti")
+    >>> odd, boxes = check_frames_boxes(sample, DetectionSource("gt"), ["000010"], labels=True)
+    >>> odd, len(boxes["000010"])  # the 8 cars
+    ([], 8)
+    """
+    if not labels or source.spec != "gt":
+        return dataset.check_frames(frame_ids, labels=labels), {}
+    odd, boxes = [], {}
+    for f in frame_ids:  # frame by frame, as check_frames checks them: the same first error
+        odd += dataset.check_frames([f])
+        boxes[f] = detections_from_labels(dataset.labels(f))
+    return odd, boxes
+
+
 def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: Iterable[str],
                       frame_ids: list[str], *, evidence: str = "parts", every: bool = False,
-                      notify: Callable[[str], None] | None = None) -> None:
+                      notify: Callable[[str], None] | None = None,
+                      boxes: Mapping[str, Detections] | None = None) -> None:
     """Decode, before the first fit, the image of each frame of ``frame_ids`` whose fit reads it
     (:meth:`~wirescene.io.kitti.KittiDataset.check_frames` with ``images``): a corrupt or
     truncated one is an :class:`InputError` then, not at its frame's fit (the frames fitted
@@ -410,25 +443,28 @@ def check_images_read(dataset: KittiDataset, source: DetectionSource, variants: 
     variant, or a box without a viewpoint, as detection files give them), as the fits decide;
     ``every``: each frame's, for a caller that reads them after the fits (a report, pictures).
     Call it after :meth:`~wirescene.eval.sources.DetectionSource.check_files`; ``notify`` is told
-    of :data:`SAY_DECODING` images or more (a KITTI split's take half a minute or more)."""
+    of :data:`SAY_DECODING` images or more (a KITTI split's take half a minute or more); ``boxes``:
+    the frames' detections already read (:func:`check_frames_boxes`, ``check_files``), a frame
+    missing from it read here."""
     if every or source.own:
         read = list(frame_ids)
     elif evidence != "parts":  # the oracle's evidence (and the viewpoints told by it): no image
         read = []
     else:  # a label's viewpoint noise moves a viewpoint, never makes one unknown: any generator tells
-        rng = np.random.default_rng(0)
-        read = [f for f in frame_ids if needs_evidence(source.for_frame(dataset, f, rng), variants)]
+        read = [f for f in frame_ids if needs_evidence(_boxes(dataset, source, f, boxes), variants)]
     if notify is not None and len(read) >= SAY_DECODING:
         notify(f"decoding the {len(read)} images the fits read before the first fit (a corrupt one refused now)")
     dataset.check_frames(read, images=True)
 
 
-def boxes_lack_viewpoints(dataset: KittiDataset, source: DetectionSource, frame_ids: Iterable[str]) -> bool:
+def boxes_lack_viewpoints(dataset: KittiDataset, source: DetectionSource, frame_ids: Iterable[str], *,
+                          boxes: Mapping[str, Detections] | None = None) -> bool:
     """Whether a box of ``source`` (label boxes or files, not our own: a ``ValueError``) in the
     frames ``frame_ids`` comes without a viewpoint, which a fit on the image finds with the
     detector bank and the crop classifier (:func:`~wirescene.fitting.models.model_files_read`'s
     ``viewpoints_given`` is its negation). A frame whose boxes no longer read (a reused frame's
-    file changed since its fit) counts: what it held is unknown.
+    file changed since its fit) counts: what it held is unknown. ``boxes``: the frames' detections
+    already read (:func:`check_images_read`'s), a frame missing from it read here.
 
     Examples
     --------
@@ -439,15 +475,23 @@ def boxes_lack_viewpoints(dataset: KittiDataset, source: DetectionSource, frame_
     """
     if source.own:
         raise ValueError("our own pre-detection's boxes are found with their viewpoints")
-    rng = np.random.default_rng(0)  # a label's viewpoint noise moves a viewpoint, never makes one unknown
     for frame_id in frame_ids:
         try:
-            boxes = source.for_frame(dataset, frame_id, rng)
+            dets = _boxes(dataset, source, frame_id, boxes)
         except InputError:
             return True
-        if not np.all(np.isfinite(boxes.alpha)):
+        if not np.all(np.isfinite(dets.alpha)):
             return True
     return False
+
+
+def _boxes(dataset: KittiDataset, source: DetectionSource, frame_id: str,
+           boxes: Mapping[str, Detections] | None) -> Detections:
+    """The frame's detections of ``boxes``, or read where it has none (label boxes' viewpoint noise
+    moves a viewpoint, never makes one unknown: any generator tells what the checks ask)."""
+    if boxes is not None and frame_id in boxes:
+        return boxes[frame_id]
+    return source.for_frame(dataset, frame_id, np.random.default_rng(0))
 
 
 def _reusable_records(records: FrameRecords, frame_ids: list[str], notify) -> dict[str, dict]:

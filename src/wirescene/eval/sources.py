@@ -135,31 +135,34 @@ class DetectionSource:
         return {} if self.min_score is None else {"min_score": float(self.min_score)}
 
     def check_files(self, dataset: KittiDataset, frame_ids: list[str],
-                    notify: Callable[[str], None] | None = None) -> None:
-        """Read every frame's file of the detections directory (nothing for ``gt`` / ``bank``):
+                    notify: Callable[[str], None] | None = None) -> dict[str, Detections]:
+        """Read every frame's file of the detections directory once (nothing for ``gt`` / ``bank``):
         an :class:`InputError` naming the first malformed one before a run fits any frame, as
         :meth:`~wirescene.io.kitti.KittiDataset.check_frames` for the calibrations and labels (a
         bad file found at frame N would leave the N - 1 frames fitted before it).
 
         ``notify`` is told, in one line, when no file holds a car and some hold boxes of other
         classes alone (a detector that numbers its classes otherwise than COCO, whose every box
-        would be skipped: a run without a car, read as streets without cars)."""
+        would be skipped: a run without a car, read as streets without cars).
+
+        Returns ``{frame: its detections}`` as :meth:`for_frame` gives them (``{}`` for ``gt`` /
+        ``bank``), for the checks before the first fit that look at the boxes
+        (:func:`~wirescene.eval.runner.check_images_read`, :func:`~wirescene.eval.runner.boxes_lack_viewpoints`):
+        each file read once a run, not once a check."""
         if self.folder is None:
-            return
-        others = []  # the files of boxes of other classes alone, while no file holds a car
+            return {}
+        boxes, others = {}, []  # others: the files of boxes of other classes alone, while no file holds a car
         for frame_id in frame_ids:
-            if len(self.for_frame(dataset, frame_id, None)):
+            boxes[frame_id], no_car = self._file_boxes(dataset, frame_id)
+            if len(boxes[frame_id]):
                 others = None
-            elif notify is not None and others is not None and (path := self.detection_file(frame_id)) is not None:
-                try:
-                    read_detections(path)  # without the floor: a file of cars all under it holds cars
-                except InputError as exc:
-                    if exc.problem.startswith(NO_CARS) and exc.problem != NO_CARS:
-                        others.append(f"{path.name}: {exc.problem[len(NO_CARS):].strip(' ()')}")
+            elif others is not None and no_car not in (None, NO_CARS):  # a file of boxes of other classes alone
+                others.append(f"{Path(boxes[frame_id].source).name}: {no_car[len(NO_CARS):].strip(' ()')}")
         if notify is not None and others:
             notify(f"warning: no detection file in {self.folder} holds a car: {len(others)} of the {len(frame_ids)} "
                    f"frames' files hold boxes of other classes alone ({others[0]}), fitted as frames without cars; "
                    "a car is 'car' (category, category_name, label, class or type) or COCO's category_id 3")
+        return boxes
 
     @property
     def own(self) -> bool:
@@ -186,17 +189,26 @@ class DetectionSource:
                                   smallest_car=None if predetect is None else predetect.smallest_car,
                                   upsample=1.0 if predetect is None else predetect.upsample,
                                   mount=rig.mount, estimate_pitch=rig.estimate_pitch)
+        return self._file_boxes(dataset, frame_id)[0]
+
+    def _file_boxes(self, dataset: KittiDataset, frame_id: str) -> tuple[Detections, str | None]:
+        """The detections of the frame's file, its boxes scoring ``min_score`` or more, and where
+        the file holds no car (before the floor: a file of cars all under it holds cars) why
+        (:func:`~wirescene.io.detections.read_detections`'s problem, naming the other classes), else None."""
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:
                 raise InputError(f"no detection file for frame {frame_id}", path=self.folder)
-            return Detections.empty(str(self.folder))
-        try:
-            return read_detections(path, image_size=dataset.image_size(frame_id), min_score=self.min_score)
+            return Detections.empty(str(self.folder)), None
+        try:  # the floor applied here, as read_detections applies it: the file read once for both answers
+            dets = read_detections(path, image_size=dataset.image_size(frame_id))
         except InputError as exc:
-            if exc.problem.startswith(NO_CARS):  # no car in the file, or none scoring at least min_score
-                return Detections.empty(str(path))
+            if exc.problem.startswith(NO_CARS):
+                return Detections.empty(str(path)), exc.problem
             raise
+        if self.min_score is not None:
+            dets = dets.subset(dets.scores >= self.min_score)
+        return (dets if len(dets) else Detections.empty(str(path))), None
 
 
 def min_score_problem(min_score, spec) -> str | None:
