@@ -678,6 +678,9 @@ def test_eval_report_is_one_page_with_its_pictures(tmp_path):
     # and what made it: the seed, the particles, the device and the model files' hashes
     assert "<h2>How this run was made</h2>" in page and "<tr><td>scene particles</td><td>20</td></tr>" in page
     assert "<tr><td>device</td><td>numpy</td></tr>" in page and "parts model</td><td>shipped (SHA-256 " in page
+    made = page.split("<h2>How this run was made</h2>")[1].split("</table>")[0]
+    # the files the fits read: label boxes carry their viewpoints, so neither the bank nor the classifier
+    assert "score calibration</td>" in made and "detector bank" not in made and "viewpoint classifier" not in made
     images = re.findall(r'src="([^"]+\.png)"', page)
     assert {"error_vs_depth.png", "error_cdf.png", "azimuth_hist.png"} <= set(images)
     assert any(i.startswith("best_") for i in images) and any(i.startswith("worst_") for i in images)

@@ -543,11 +543,15 @@ def _evaluate_seed(dataset, variants, frame_ids, drives, *, seed, detections, vi
         for v, r in reports.items()}
     if report_dir is not None:
         from wirescene.eval.report import run_settings, write_report
+        from wirescene.eval.runner import model_files_of_run
 
+        # the files the fits read, as the held-out line names them (label boxes read no bank nor classifier)
+        evaluated = dataset.require_frames() if frame_ids is None else frame_ids
+        read = model_files_of_run(dataset, source, variants, evaluated, options=options, evidence=evidence)
         write_report(report_dir, reports, gallery=gallery, image_of=dataset.image, intervals=intervals,
                      kitti=kitti, kitti_intervals=kitti_spread, title=f"{dataset.split_dir} ({detections} pre-detections, seed {seed})",
                      run=run_settings(options, detections=detections, evidence=evidence, fine=casts_rays(variants),
-                                      min_score=min_score),
+                                      min_score=min_score, read=read),
                      raw_scores=not options.calibrate_scores)
     return reports, kitti, data
 

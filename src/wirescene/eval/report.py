@@ -26,6 +26,7 @@ import urllib.parse
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterable
 
 import numpy as np
 
@@ -262,7 +263,7 @@ def _href(name: str) -> str:
 
 
 def run_settings(options, *, detections: str, evidence: str = "parts", fine: bool = True,
-                 min_score: float | None = None) -> dict[str, str]:
+                 min_score: float | None = None, read: Iterable[str] | None = None) -> dict[str, str]:
     """What made an evaluation run, for its report page: the package, the pre-detections, the
     seed, the scene particles, the device, the trained models the fit reads (file, or
     ``shipped``, and the start of its SHA-256; :func:`~wirescene.fitting.models.model_files_read`)
@@ -280,6 +281,10 @@ def run_settings(options, *, detections: str, evidence: str = "parts", fine: boo
         A fine variant was fitted (the part and shape models are read).
     min_score : float, optional
         The score floor of the boxes of detection files (``--min-score``; None: every box).
+    read : iterable of str, optional
+        The model files the fits read, their boxes read
+        (:func:`~wirescene.eval.runner.model_files_of_run`); None: those of ``fine``,
+        ``detections`` and ``evidence`` (the bank and classifier of boxes not our own counted).
 
     Returns
     -------
@@ -297,7 +302,8 @@ def run_settings(options, *, detections: str, evidence: str = "parts", fine: boo
     out = {"wirescene": __version__, "pre-detections": named.get(detections, files),
            "evidence of the fine variants": evidence, "seed": str(options.seed),
            "scene particles": str(options.lifting.n_particles), "device": str(options.inference.device)}
-    for name, digest in models_fingerprint(options, fine=fine, own=detections == "bank", evidence=evidence).items():
+    for name, digest in models_fingerprint(options, fine=fine, own=detections == "bank", evidence=evidence,
+                                           read=read).items():
         out[name.replace("_", " ")] = f"{getattr(options, name) or 'shipped'} (SHA-256 {digest[:12]}…)"
     shown = {"seed", "lifting.n_particles", "inference.device", *MODEL_FILES}
     default = asdict(FitOptions())

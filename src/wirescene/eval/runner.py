@@ -384,13 +384,8 @@ def evaluate_dataset(
     # a corrupt image refused now, not at its frame's fit or in the report after every fit
     check_images_read(dataset, source, variants, todo, evidence=evidence, every=check_images, notify=notify,
                       boxes=boxes)
-    if held_out is not None:
-        # the bank and the classifier give our own boxes their viewpoints, and label or file boxes theirs where one
-        # lacks it (of every frame evaluated: a reused frame's figures are its earlier fit's of the same boxes)
-        finds_viewpoints = source.own or (evidence == "parts"
-                                          and boxes_lack_viewpoints(dataset, source, frame_ids, boxes=boxes))
-        read = model_files_read(options, fine=any(get_variant(v).fine for v in variants), own=source.own,
-                                evidence=evidence, viewpoints_given=not finds_viewpoints)
+    if held_out is not None:  # of every frame evaluated: a reused frame's figures are its earlier fit's
+        read = model_files_of_run(dataset, source, variants, frame_ids, options=options, evidence=evidence, boxes=boxes)
         for sentence in trained_on_frames(dataset, frame_ids, options=options, read=read):
             held_out(sentence)
     with ExitStack() as stack:
@@ -483,6 +478,28 @@ def boxes_lack_viewpoints(dataset: KittiDataset, source: DetectionSource, frame_
         if not np.all(np.isfinite(dets.alpha)):
             return True
     return False
+
+
+def model_files_of_run(dataset: KittiDataset, source: DetectionSource, variants: Iterable[str],
+                       frame_ids: Iterable[str], *, options: FitOptions, evidence: str = "parts",
+                       boxes: Mapping[str, Detections] | None = None) -> tuple[str, ...]:
+    """The trained files the fits of ``variants`` on ``frame_ids`` read
+    (:func:`~wirescene.fitting.models.model_files_read`), their boxes read (``boxes``: those
+    already read, :func:`check_frames_boxes`): the bank and the classifier give our own boxes
+    their viewpoints, and label or file boxes theirs only where one lacks it. What the
+    held-out line and a report's "How this run was made" name (a resume record counts them
+    before the boxes are read: :func:`~wirescene.fitting.models.models_fingerprint`).
+
+    Examples
+    --------
+    >>> from wirescene.core.resources import DATA_DIR
+    >>> sample = KittiDataset(DATA_DIR / "sample" / "kitti")
+    >>> model_files_of_run(sample, DetectionSource("gt"), ["full"], ["000010"], options=FitOptions())
+    ('parts_model', 'score_calibration', 'shape_model')
+    """
+    given = not source.own and not boxes_lack_viewpoints(dataset, source, frame_ids, boxes=boxes)
+    return model_files_read(options, fine=any(get_variant(v).fine for v in variants), own=source.own,
+                            evidence=evidence, viewpoints_given=given)
 
 
 def _boxes(dataset: KittiDataset, source: DetectionSource, frame_id: str,

@@ -10,6 +10,7 @@ a file the run does not read changes nothing)."""
 from __future__ import annotations
 
 import dataclasses
+from typing import Iterable
 
 from wirescene.core.errors import InputError
 from wirescene.core.resources import Models, cached_by_file, file_sha256, shipped_path
@@ -256,11 +257,11 @@ def reads_score_calibration(options: FitOptions, *, own: bool = True) -> bool:
 
 
 def models_fingerprint(options: FitOptions, *, fine: bool = True, own: bool = True,
-                       evidence: str = "parts") -> dict[str, str]:
+                       evidence: str = "parts", read: Iterable[str] | None = None) -> dict[str, str]:
     """``{artefact: SHA-256}`` of the files a fit with ``options`` reads
-    (:func:`model_files_read`, of ``fine``, ``own`` and ``evidence``): a file it does not read
-    is left out, so that replacing it changes nothing. The occluded-part score is a number
-    in the options themselves.
+    (:func:`model_files_read`, of ``fine``, ``own`` and ``evidence``; ``read``: those names,
+    where the run's boxes told them): a file it does not read is left out, so that replacing
+    it changes nothing. The occluded-part score is a number in the options themselves.
 
     Examples
     --------
@@ -269,8 +270,8 @@ def models_fingerprint(options: FitOptions, *, fine: bool = True, own: bool = Tr
     >>> sorted(models_fingerprint(FitOptions(), fine=False, own=False))  # coarse variants on label boxes
     ['detector_bank', 'score_calibration', 'viewpoint_classifier']
     """
-    return {name: file_sha256(getattr(options, name) or shipped_path(name))
-            for name in model_files_read(options, fine=fine, own=own, evidence=evidence)}
+    read = model_files_read(options, fine=fine, own=own, evidence=evidence) if read is None else read
+    return {name: file_sha256(getattr(options, name) or shipped_path(name)) for name in read}
 
 
 def options_read(options: FitOptions, *, fine: bool = True, own: bool = True, evidence: str = "parts") -> dict:
