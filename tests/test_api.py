@@ -124,8 +124,8 @@ def test_integer_images_beyond_8_bit_values_but_uint16_are_refused_not_read_blac
             wirescene.api.as_image(values)
         with pytest.raises(wirescene.ArgumentError, match="^image: integer values"):
             wirescene.fit(values, P2, [[300, 180, 520, 300]], variant="coarse", particles=5)
-    for values in (image.astype(np.int64), image.astype(np.uint16) * 257):
-        assert (wirescene.api.as_image(values) == image).all()
+    for values in (image.astype(np.int64), image.astype(np.uint16) * 257, (image.astype(np.uint16) * 257).astype(">u2")):
+        assert (wirescene.api.as_image(values) == image).all()  # big-endian uint16 was refused as beyond 8 bits
 
 
 def test_float_images_fitting_neither_0_1_nor_0_255_are_refused_not_clipped(frame):
@@ -152,6 +152,18 @@ def test_float_images_fitting_neither_0_1_nor_0_255_are_refused_not_clipped(fram
     edges = np.array([[-1e-4, 0.5, 1.0]]), np.array([[-0.1, 128.0, 255.4]])
     for values in edges:
         assert_close(wirescene.api.as_image(np.tile(values, (16, 6)))[0, :3, 0], [0, 128, 255], atol=0, rtol=0)
+
+
+def test_a_float_image_s_overshoot_of_1_is_read_as_0_1_not_as_0_255(frame):
+    """A float image of [0, 1.001] (a resampling's overshoot) was read as [0, 255]: nearly black. A maximum that rounds
+    to level 255 is read as [0, 1], as an undershoot that rounds to 0 is; one past half a level stays [0, 255]."""
+    unit = frame[0] / 255.0
+    for top in (1.001, np.float32(1.0019)):
+        assert_close(wirescene.api.as_image(unit * top), frame[0], atol=1, rtol=0)
+    assert int(wirescene.api.as_image(unit * 1.0021).max()) == 1  # 255 levels of 1.0021: [0, 255]
+    from wirescene.core.image import to_grey
+
+    assert_close(to_grey(unit * 1.001), to_grey(frame[0]) * 1.001, atol=1e-5, rtol=0)
 
 
 def test_an_image_s_range_is_read_off_its_colours_not_its_alpha_channel(frame):
@@ -271,6 +283,14 @@ def test_pil_images_are_read_as_their_files_are(frame, tmp_path):
         converted = Image.fromarray(image).convert(mode)
         converted.save(tmp_path / f"{mode}.png")
         assert (as_image(converted) == as_image(tmp_path / f"{mode}.png")).all(), mode
+    # a float image's range checked as an array's: one fitting neither 0..1 nor 0..255 was clipped without a word
+    unit = (image[..., 1] / 255).astype(np.float32)
+    assert (as_image(Image.fromarray(unit))[..., 0] == image[..., 1]).all()
+    with pytest.raises(wirescene.ArgumentError, match=r"^image: float values outside both 0\.\.1 and 0\.\.255 "
+                                                      r"\(dtype float32, [-\d.]+\.\.[\d.]+\) would be clipped"):
+        as_image(Image.fromarray(unit * 403 - 3))
+    with pytest.raises(wirescene.ArgumentError, match=r"^image: integer values outside 0\.\.255 \(dtype int32, -\d+\.\."):
+        as_image(Image.fromarray(image[..., 1].astype(np.int32) - 1000))  # mode I, negative: was clipped to 0
 
 
 @pytest.mark.parametrize(
@@ -383,6 +403,31 @@ def test_estimates_refuse_non_finite_numbers_where_they_are_made():
                               ("location", ["a", "b", "c"], r"location: text .dtype <U1., expected real numbers")):
         with pytest.raises(wirescene.ArgumentError, match=f"^{says}"):
             ObjectEstimate(**{**car, name: value})
+
+
+def test_estimates_check_a_field_set_later_and_refuse_a_size_not_positive():
+    """A confidence set after the estimate was made (as fitting.confidence sets ``score``) was not checked: a NaN
+    reached the label line; a size of zero or below was accepted. Both refused as at construction."""
+    from wirescene.core.groundplane import rotation_y
+    from wirescene.core.types import ObjectEstimate
+
+    car = dict(detection_index=0, box2d=[300.0, 180.0, 520.0, 300.0], score=0.8, location=[-2.0, 1.65, 12.0],
+               R=rotation_y(0.3), dims=[1.5, 1.6, 3.9], cost=0.0)
+    for dims, says in (([1.5, 0.0, 3.9], r"\[1\.5, 0\.0, 3\.9]"), ([-1.0, -1.0, -1.0], r"\[-1\.0, -1\.0, -1\.0]")):
+        with pytest.raises(wirescene.ArgumentError, match=rf"^dims: must be positive \(h w l, metres\), got {says}$"):
+            ObjectEstimate(**{**car, "dims": dims})
+    made = ObjectEstimate(**car)
+    for name, value, says in (("score", np.nan, r"score: must be a finite number, got nan"),
+                              ("score", "0.9", r"score: must be a finite number, got '0\.9'"),
+                              ("location", [np.inf, 1.65, 12.0], r"location: must be finite, got \[inf, 1\.65, 12\.0]"),
+                              ("dims", [1.5, 1.6, 0.0], r"dims: must be positive"),
+                              ("box2d", [300.0, 180.0, 520.0], r"box2d must have shape \(4,\)")):
+        with pytest.raises((wirescene.ArgumentError, wirescene.ShapeError), match=f"^{says}"):
+            setattr(made, name, value)
+    assert made.score == 0.8 and made.dims.tolist() == [1.5, 1.6, 3.9]  # left as they were
+    made.score = np.float32(0.25)  # a confidence, as apply_confidence sets it
+    made.location = (1.0, 1.65, 20.0)
+    assert made.score == np.float32(0.25) and isinstance(made.location, np.ndarray)
 
 
 def test_scene_json_names_an_argument_of_the_wrong_type():

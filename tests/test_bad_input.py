@@ -104,6 +104,17 @@ def _write_16bit(path):
     Image.fromarray((np.arange(375 * 1242).reshape(375, 1242) % 65536).astype(np.uint16)).save(path)
 
 
+def _float_tiff_case(tmp):
+    """``fit`` of the test frame as a float TIFF (PIL mode F) of values fitting neither 0..1 nor 0..255 (the sum of
+    two images): it was clipped without a word."""
+    from PIL import Image
+
+    args = _fit_case(tmp)
+    args[1] = tmp / f"{FRAME}.tif"
+    Image.fromarray(np.asarray(Image.open(args[1].with_suffix(".png")).convert("L"), np.float32) * 2).save(args[1])
+    return args
+
+
 def _file(tmp, name, text="x"):
     path = tmp / name
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -300,6 +311,8 @@ CASES = {
     "10 x 10 image, boxes to x = 1241": (
         lambda t: _fit_case(t, image=lambda p: __import__("PIL.Image").Image.new("RGB", (10, 10)).save(p)),
         "principal point|entirely outside|absurdly far|too small"),
+    "float TIFF image of 0..510": (_float_tiff_case, rf"^wirescene: error: \S+/{FRAME}\.tif: float values outside both "
+                                                     r"0\.\.1 and 0\.\.255 \(dtype float32, \d+\.\.510\) would be clipped"),
     # was "image: image of 8x8 px is too small": the API's argument named, not the file
     "8 x 8 image with its own calibration": (
         lambda t: _fit_case(t, calib="20 0 4 0 20 4 0 0 1\n", dets=(".json", '[{"box": [1, 1, 6, 6]}]'),

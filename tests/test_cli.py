@@ -379,6 +379,18 @@ def test_gt_command_draws_frame(tmp_path):
     assert Image.open(out).size == (1242, 375)
 
 
+def test_gt_command_draws_a_2d_only_car_row_without_a_wireframe(tmp_path):
+    """A Car row without a 3D box (a 2D detector's -1 -1 -1 sizes, which label files may hold) was made an estimate of
+    size -1 at -1000 m; estimates refuse a size not positive (the command failed so): no wireframe, its box drawn."""
+    from conftest import kitti_copy
+
+    root = kitti_copy(tmp_path / "kitti", ["000010"])
+    label = root / "training" / "label_2" / "000010.txt"
+    label.write_text(label.read_text() + "Car -1 -1 -10 600.00 170.00 680.00 230.00 -1 -1 -1 -1000 -1000 -1000 -10\n")
+    r = run("gt", root, "000010", "--out", tmp_path / "gt.png")
+    assert r.exit_code == 0, r.output
+
+
 def test_train_and_cad_commands_are_registered():
     r = run("--help")
     assert "train" in r.output and "cad" in r.output

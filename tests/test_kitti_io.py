@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import stat
 
@@ -368,6 +369,41 @@ def test_read_image(kitti_root, tmp_path):
     assert one_line(exc).startswith(str(text))
     with pytest.raises(InputError, match="image file not found"):
         read_image(tmp_path / "missing.png")
+
+
+def test_float_and_32_bit_integer_image_files_are_checked_as_arrays_are(kitti_root, tmp_path):
+    """A float TIFF (PIL mode F) of values fitting neither 0..1 nor 0..255 was clipped without a word, a 32-bit
+    integer one (mode I) of negative values or values beyond 16 bits likewise: refused as the same array is
+    (core.image.range_problem), naming the file. Those that fit are read as the arrays are; mode I within 0..65535
+    as the 16-bit image it is (Pillow before 10.3 opens a 16-bit PNG as mode I)."""
+    from PIL import Image
+
+    grey = read_image(kitti_root / "training" / "image_2" / "000010.png")[:64, 300:428, 1].copy()  # (64, 128) uint8
+    grey[0, :2] = 0, 255  # the whole range
+
+    def tiff(name, values):
+        Image.fromarray(values).save(tmp_path / f"{name}.tif")
+        return tmp_path / f"{name}.tif"
+
+    unit = grey.astype(np.float32) / 255
+    for name, values in (("unit", unit), ("levels", grey.astype(np.float32)), ("overshoot", unit * np.float32(1.001)),
+                         ("int16bit", grey.astype(np.int32) * 257)):
+        assert (read_image(tiff(name, values))[..., 0] == grey).all(), name
+    sixteen = Image.fromarray(grey.astype(np.uint16) * 257)  # I;16, as Pillow 10.3 and later open a 16-bit PNG
+    assert (read_image(tiff("int16bit_old", np.asarray(sixteen.convert("I")))) == read_image(tiff("u16", np.asarray(
+        sixteen)))).all()
+    for name, values, says in (
+            ("normalised", unit * 403 - 3, r"float values outside both 0\.\.1 and 0\.\.255 \(dtype float32, -3\.\.400\) "
+                                           r"would be clipped: scale to 0\.\.1 or 0\.\.255"),
+            ("negative", grey.astype(np.int32) - 1, r"integer values outside 0\.\.255 \(dtype int32, -1\.\.254\): "
+                                                    r"the negative ones would be read as 0"),
+            ("wide", grey.astype(np.int32) * 65793, r"integer values outside 0\.\.255 \(dtype int32, 0\.\.16777215\) "
+                                                    r"would be read by the range of int32"),
+            ("nan", np.where(unit > 0.5, np.nan, unit).astype(np.float32), r"image has non-finite values \(\d+ NaN")):
+        path = tiff(name, values)
+        with pytest.raises(InputError, match=f"^{re.escape(str(path))}: {says}") as exc:
+            read_image(path)
+        one_line(exc)
 
 
 def test_dataset_from_root_and_split_dir(kitti_root):

@@ -19,7 +19,7 @@ import numpy as np
 from wirescene.core.camera import Camera, KittiCalib, read_projection
 from wirescene.core.errors import ArgumentError, CalibrationWarning, HeldOutWarning, InputError, ShapeError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
-from wirescene.core.image import float_range_problem, integer_range_problem, to_rgb_uint8
+from wirescene.core.image import range_problem, to_rgb_uint8
 from wirescene.core.settings import check_value, stage_field
 from wirescene.core.types import Detections, SceneEstimate, car_fitted
 from wirescene.core.validate import (
@@ -70,10 +70,10 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
     Raises
     ------
     ArgumentError
-        Not an image array (shape, dtype, non-finite values, integers beyond 8-bit values but
-        uint16's, floats outside both [0, 1] and [0, 255], under 16 px a side).
+        Not an image array or PIL image (shape, dtype, non-finite values, integers beyond 8-bit
+        values but uint16's, floats outside both [0, 1] and [0, 255], under 16 px a side).
     InputError
-        An image file that is missing, unreadable or under 16 px a side.
+        An image file that is missing, unreadable, under 16 px a side or of such values.
 
     Examples
     --------
@@ -100,9 +100,8 @@ def as_image(image, *, name: str = "image") -> np.ndarray:
         raise ArgumentError(name, exc.problem) from None
     except (OSError, ValueError) as exc:  # a PIL image that cannot be converted
         raise ArgumentError(name, f"unreadable PIL image ({' '.join(str(exc).split())})") from None
-    # after the shape's check: an int32 array of 16-bit values read black
-    problem = ((None if pil else integer_range_problem(image) or float_range_problem(image))
-               or image_size_problem((rgb.shape[1], rgb.shape[0])))
+    # after the shape's check: an int32 array of 16-bit values read black (a PIL image's checked by rgb_of_pil)
+    problem = (None if pil else range_problem(image)) or image_size_problem((rgb.shape[1], rgb.shape[0]))
     if problem:
         raise ArgumentError(name, problem)
     return rgb

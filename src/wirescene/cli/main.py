@@ -892,6 +892,7 @@ def gt_cmd(kitti_root, frame, out, split):
     """Draw a frame's ground truth with the mean wireframe at every GT car pose
     (self-occluded vertices as open dots): a check of geometry, shape model and labels."""
     from wirescene.core.groundplane import rotation_y, transform
+    from wirescene.core.labels import no_3d_box
     from wirescene.core.shape import load_default
     from wirescene.core.types import ObjectEstimate, SceneEstimate
     from wirescene.core.wireframe import EDGES, FACES
@@ -910,6 +911,8 @@ def gt_cmd(kitti_root, frame, out, split):
     mean = load_default().mean
     objects = []
     for i, g in enumerate(cars):
+        if no_3d_box(g.dims):  # a 2D detector's row (-1 -1 -1): no pose to draw a wireframe at, its box drawn
+            continue
         R = rotation_y(g.rotation_y)
         vertices = transform(mean, g.location, R)
         hidden = self_occlusion(vertices, FACES, camera.center)

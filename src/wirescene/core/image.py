@@ -2,8 +2,9 @@
 
 Integer images are scaled by their type's range (uint8 /255, uint16 /65535: a 16-bit
 PNG is not all white), signed and 32/64-bit ones holding values up to 255 by 255; float
-images are taken as [0, 1] when their maximum is at most 1, else as [0, 255] (where images
-enter, values fitting neither are refused: :func:`float_range_problem`).
+images are taken as [0, 1] when their maximum is at most 1 (give or take half a level: a
+resampling's 1.001), else as [0, 255] (where images enter, values fitting neither are refused:
+:func:`range_problem`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ def _values_and_range(img: np.ndarray) -> tuple[np.ndarray, float]:
     if img.size and not np.all(np.isfinite(img)):
         nan = int(np.isnan(img).sum())
         raise ShapeError(f"image has non-finite values ({nan} NaN, {int(np.isinf(img).sum())} infinite of {img.size})")
-    return img, (255.0 if img.size and img.max() > 1.0 + 1e-6 else 1.0)
+    # [0, 1] while the maximum rounds to level 255 (a resampling's 1.001, as its -1e-4 rounds to 0)
+    return img, (255.0 if img.size and np.rint(img.max() * np.float32(255.0)) > 255 else 1.0)
 
 
 def integer_range_problem(image) -> str | None:
@@ -46,13 +48,15 @@ def integer_range_problem(image) -> str | None:
     True
     >>> integer_range_problem(np.array([[0, 65535]], np.uint16)) is None  # a 16-bit PNG's range
     True
+    >>> integer_range_problem(np.array([[0, 65535]], ">u2")) is None  # big-endian (a raw PGM's bytes) alike
+    True
     >>> integer_range_problem(np.array([[0, 4095]], np.int32))
     'integer values outside 0..255 (dtype int32, 0..4095) would be read by the range of int32: cast a 16-bit image to uint16, scale others to 0..255'
     >>> integer_range_problem(np.array([[-1, 254]], np.int16))  # 8-bit values but one: not the range of int16
     'integer values outside 0..255 (dtype int16, -1..254): the negative ones would be read as 0: clip or scale the image to 0..255 (cast a 16-bit image to uint16)'
     """
     img = _colour(np.asarray(image))
-    if img.dtype.kind not in "iu" or img.dtype in (np.uint8, np.uint16) or img.size == 0:
+    if img.dtype.kind not in "iu" or (img.dtype.kind == "u" and img.dtype.itemsize <= 2) or img.size == 0:
         return None
     lo, hi = img.min(), img.max()
     if lo >= 0 and hi <= 255:
@@ -68,7 +72,7 @@ def float_range_problem(image) -> str | None:
     """Why a float image array would be read as another image than it holds, as a phrase, or None:
     one whose values fit neither [0, 1] nor [0, 255] (a negative value, or one above 255: a
     normalised network input, a sum of images), so that :func:`to_rgb_uint8` would clip some
-    pixel. A value that rounds into the range (a resampling's -1e-4) is no clipped pixel. Read
+    pixel. A value that rounds into the range (a resampling's -1e-4 or 1.001) is no clipped pixel. Read
     where images enter (:func:`wirescene.api.as_image`), as :func:`integer_range_problem`;
     non-finite values are refused by the conversion itself.
 
@@ -77,6 +81,8 @@ def float_range_problem(image) -> str | None:
     >>> float_range_problem(np.array([[0.0, 0.5, 1.0]])) is None  # [0, 1]
     True
     >>> float_range_problem(np.array([[0.0, 128.0, 255.0]], np.float32)) is None  # [0, 255]
+    True
+    >>> float_range_problem(np.array([[-1e-4, 0.5, 1.001]])) is None  # [0, 1], a resampling's overshoot
     True
     >>> float_range_problem(np.array([[-3.0, 400.0]]))
     'float values outside both 0..1 and 0..255 (dtype float64, -3..400) would be clipped: scale to 0..1 or 0..255'
@@ -93,6 +99,21 @@ def float_range_problem(image) -> str | None:
         return None
     return (f"float values outside both 0..1 and 0..255 (dtype {img.dtype}, {ends[0]:g}..{ends[1]:g}) would be "
             "clipped: scale to 0..1 or 0..255")
+
+
+def range_problem(image) -> str | None:
+    """Why an image array would be read as another image than it holds, as a phrase, or None:
+    :func:`integer_range_problem` or :func:`float_range_problem`, the one check of an image's
+    values where images enter (arrays, PIL images and image files alike).
+
+    Examples
+    --------
+    >>> range_problem(np.array([[0, 200]], np.int32)) is None, range_problem(np.array([[0.0, 1.0]])) is None
+    (True, True)
+    >>> range_problem(np.array([[-3.0, 400.0]]))
+    'float values outside both 0..1 and 0..255 (dtype float64, -3..400) would be clipped: scale to 0..1 or 0..255'
+    """
+    return integer_range_problem(image) or float_range_problem(image)
 
 
 def _colour(img: np.ndarray) -> np.ndarray:

@@ -188,6 +188,29 @@ class SceneParticles:
         )
 
 
+_ESTIMATE_SHAPES = {"box2d": (4,), "location": (3,), "R": (3, 3), "dims": (3,), "shape": (None,),
+                    "vertices": (N_VERTICES, 3), "visibility": (N_VERTICES,)}
+
+
+def _estimate_field(name: str, value):
+    """``value`` as :class:`ObjectEstimate` holds its field ``name`` (arrays as own copies: a view
+    into the search's arrays would keep them all alive), checked: shapes (a wrong one fails where
+    it is made, not in a label line or a picture), the label line's numbers finite (``R`` holds
+    rotation_y: a NaN car would reach label files and metrics) and the size positive."""
+    if name in _ESTIMATE_SHAPES and value is not None:
+        value = np.array(value)
+        check_shape(name, value, _ESTIMATE_SHAPES[name])
+    if name in ("box2d", "location", "R", "dims"):
+        values = _numbers(name, value)
+        if not np.all(np.isfinite(values)):
+            raise ArgumentError(name, f"must be finite, got {np.round(values, 6).tolist()}")
+        if name == "dims" and not np.all(values > 0):
+            raise ArgumentError(name, f"must be positive (h w l, metres), got {np.round(values, 6).tolist()}")
+    elif name == "score" and not finite_real(value):
+        raise ArgumentError("score", f"must be a finite number, got {value!r}")
+    return value
+
+
 @dataclass
 class ObjectEstimate:
     """One car of a scene estimate (camera frame, metres, radians).
@@ -223,7 +246,8 @@ class ObjectEstimate:
         An array of another shape than above.
     ArgumentError
         A non-finite (or non-numeric) number of the label line: ``box2d``, ``score``,
-        ``location``, ``R`` (the azimuth) or ``dims``.
+        ``location``, ``R`` (the azimuth) or ``dims``, or a size ``dims`` not positive; where
+        the estimate is made and where a field is set later (``car.score = nan``).
 
     Examples
     --------
@@ -249,6 +273,10 @@ class ObjectEstimate:
     Traceback (most recent call last):
     ...
     wirescene.core.errors.ArgumentError: location: must be finite, got [nan, 1.65, 12.0]
+    >>> car.score = float("nan")  # a confidence set later: checked too
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ArgumentError: score: must be a finite number, got nan
     """
 
     detection_index: int
@@ -269,22 +297,9 @@ class ObjectEstimate:
     # estimate (wirescene.fitting.confidence), written as KITTI's 16th column.
     detection_score: float | None = None
 
-    def __post_init__(self):
-        # own copies: a view into the search's (particles, cars, ...) arrays would keep them all alive
-        for name, shape in (("box2d", (4,)), ("location", (3,)), ("R", (3, 3)), ("dims", (3,)), ("shape", (None,)),
-                            ("vertices", (N_VERTICES, 3)), ("visibility", (N_VERTICES,))):
-            value = getattr(self, name)
-            if value is not None:
-                value = np.array(value)
-                check_shape(name, value, shape)  # a wrong one fails where it is made, not in a label line or a picture
-                setattr(self, name, value)
-        # the label line's numbers (R holds rotation_y): a NaN car would reach label files and metrics
-        for name in ("box2d", "location", "R", "dims"):
-            values = _numbers(name, getattr(self, name))
-            if not np.all(np.isfinite(values)):
-                raise ArgumentError(name, f"must be finite, got {np.round(values, 6).tolist()}")
-        if not finite_real(self.score):
-            raise ArgumentError("score", f"must be a finite number, got {self.score!r}")
+    def __setattr__(self, name, value):
+        # every assignment checked, the dataclass's own and later ones (apply_confidence sets the score after the fit)
+        super().__setattr__(name, _estimate_field(name, value))
 
     def __repr__(self) -> str:
         extra = "" if self.exemplar is None else f", exemplar={self.exemplar!r}"

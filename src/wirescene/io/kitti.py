@@ -25,7 +25,7 @@ from PIL import Image, UnidentifiedImageError
 from wirescene.core.atomic import write_text
 from wirescene.core.camera import Camera, KittiCalib, read_calibration, read_kitti_calib
 from wirescene.core.errors import ArgumentError, InputError, ShapeError
-from wirescene.core.image import to_rgb_uint8
+from wirescene.core.image import range_problem, to_rgb_uint8
 from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label types live in core)
     ALPHA_NOT_ESTIMATED,
     CAR_TYPES,
@@ -225,13 +225,15 @@ def read_image(path: str | Path) -> np.ndarray:
     """Read an image as an ``(H, W, 3)`` uint8 RGB array.
 
     16-bit and float images are scaled by their range (:func:`wirescene.core.image.to_rgb_uint8`),
-    not clipped; palette, grey and alpha images are converted to RGB.
+    not clipped; palette, grey and alpha images are converted to RGB (:func:`rgb_of_pil`).
 
     Raises
     ------
     InputError
         If the file is missing, not an image, too large or too small (under
-        :data:`~wirescene.core.validate.MIN_IMAGE_SIDE` px a side), or corrupt / truncated.
+        :data:`~wirescene.core.validate.MIN_IMAGE_SIDE` px a side), corrupt / truncated, or of
+        values its conversion would misread (a float image outside both 0..1 and 0..255, a 32-bit
+        integer one outside 0..65535: :func:`rgb_of_pil`).
 
     Examples
     --------
@@ -246,14 +248,24 @@ def read_image(path: str | Path) -> np.ndarray:
         with img:
             img.load()
             return rgb_of_pil(img)
-    except (OSError, ValueError, SyntaxError, ShapeError) as exc:
+    except ShapeError as exc:  # values read, but not as an image (a float TIFF of -3..400, NaN pixels)
+        raise InputError(exc.problem, path=path) from None
+    except (OSError, ValueError, SyntaxError) as exc:
         raise InputError(f"corrupt or truncated image ({' '.join(str(exc).split())})", path=path) from None
 
 
 def rgb_of_pil(img) -> np.ndarray:
     """A loaded PIL image as an ``(H, W, 3)`` uint8 RGB array: 16-bit and float images
     scaled by their range (:func:`wirescene.core.image.to_rgb_uint8`), palette, grey and
-    alpha images converted to RGB.
+    alpha images converted to RGB. Its values are checked as an array's are where images
+    enter (:func:`wirescene.core.image.range_problem`); a 32-bit integer image (mode ``I``)
+    of values in 0..65535 is read as a 16-bit one (Pillow before 10.3 opens a 16-bit PNG so).
+
+    Raises
+    ------
+    ShapeError
+        Values it would misread (a float image outside both 0..1 and 0..255, a 32-bit integer
+        one outside 0..65535), or non-finite ones.
 
     Examples
     --------
@@ -261,11 +273,30 @@ def rgb_of_pil(img) -> np.ndarray:
     >>> rgb = rgb_of_pil(white16)
     >>> rgb.shape, rgb[0, 0].tolist()  # white, not clipped to 255 of 65535
     ((2, 3, 3), [255, 255, 255])
+    >>> rgb_of_pil(Image.fromarray(np.array([[-3.0, 400.0]], np.float32)))  # mode F
+    Traceback (most recent call last):
+    ...
+    wirescene.core.errors.ShapeError: float values outside both 0..1 and 0..255 (dtype float32, -3..400) would be ...
     """
-    if img.mode.startswith("I"):  # 16-bit (or 32-bit integer) grey
-        return to_rgb_uint8(np.clip(np.asarray(img), 0, 65535).astype(np.uint16))
+    values = _pil_values(img)
+    rgb = to_rgb_uint8(values)  # first: non-finite values said as such, with their count
+    problem = range_problem(values)
+    if problem:
+        raise ShapeError(problem)
+    return rgb
+
+
+def _pil_values(img) -> np.ndarray:
+    """The values of a loaded PIL image as the array :func:`rgb_of_pil` reads: uint16 (modes
+    ``I;16*``, and ``I`` within 0..65535), int32 (``I`` beyond), float32 (``F``) or RGB uint8."""
+    if img.mode.startswith("I;16"):  # I;16B is big-endian: read in the machine's order
+        return np.asarray(img).astype(np.uint16)
+    if img.mode == "I":
+        values = np.asarray(img)
+        fits = values.size == 0 or (values.min() >= 0 and values.max() <= 65535)
+        return values.astype(np.uint16) if fits else values  # beyond: an int32 array's check refuses it
     if img.mode == "F":
-        return to_rgb_uint8(np.asarray(img, dtype=np.float32))
+        return np.asarray(img, dtype=np.float32)
     return np.asarray(img.convert("RGB"), dtype=np.uint8)
 
 
