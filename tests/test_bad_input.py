@@ -672,10 +672,11 @@ CASES = {
     # options of the real frames' training given to the synthetic one, and the other way round: refused, not ignored
     "train detector --calibration without --kitti-root": (
         lambda t: ["train", "detector", "--out", t / "b.npz", "--calibration", "4,-2,0.6", "--scenes", "2",
-                   "--val-scenes", "0", "--mining-rounds", "0", "--partial", "0"], "--calibration needs --kitti-root"),
+                   "--val-scenes", "0", "--mining-rounds", "0", "--partial", "0"],
+        r"--calibration needs a KITTI root \(KITTI_ROOT or --kitti-root\)$"),
     "train detector --scenes with --kitti-root": (
         lambda t: ["train", "detector", "--out", t / "b.npz", "--kitti-root", KITTI_ROOT, "--frames", FRAME,
-                   "--scenes", "3"], "--scenes: synthetic training only, not with --kitti-root"),
+                   "--scenes", "3"], "--scenes: synthetic training only, not with a KITTI root"),
     # synthetic scenes
     "synth into an empty path": (lambda t: ["synth", "", "--scenes", "1"], "OUT_DIR: empty path"),
     "synth of 10^20 scenes": (lambda t: ["synth", t / "s", "--scenes", "99999999999999999999"], "--scenes"),

@@ -1113,7 +1113,8 @@ ONE_FRAME = r"1 of 1 frames: {problem} \(e\.g\. frame 000010\)"
     (lambda root, out: ["train", "detector", "--kitti-root", root, "--out", out / "b.npz"], ["000010"], ONE_FRAME),
     (lambda root, out: ["train", "parts", "--kitti-root", root, "--synth-scenes", 0, "--out", out / "p.npz"],
      ["000010"], ONE_FRAME),
-], ids=["detect", "gt", "train all", "train detector", "train parts"])
+    (lambda root, out: ["train", "viewpoints", root, "--out", out / "v.npz"], ["000010"], ONE_FRAME),
+], ids=["detect", "gt", "train all", "train detector", "train parts", "train viewpoints"])
 def test_the_commands_of_kitti_frames_warn_of_a_calibration_made_for_another_image_size(tmp_path, command, frames,
                                                                                         said):
     """Every command that reads KITTI frames with their calibrations says as `fit`, `eval` and
@@ -1942,3 +1943,20 @@ def test_split_coco_reads_the_classes_by_the_annotations_names(tmp_path):
     r = CliRunner().invoke(main, ["split-coco", str(res), "--images", str(ann), "--out", str(tmp_path / "new")])
     assert r.exit_code == 2 and "ann.json: no images: the COCO annotations list none" in r.stderr, r.output
     assert not (tmp_path / "new").exists()
+
+
+def test_progress_bars_are_drawn_on_a_terminal_only(monkeypatch):
+    """A bar on a standard error that is no terminal (`2> log`) filled the file with its redrawn lines."""
+    import io
+    import sys
+
+    from wirescene.cli.options import progress_bar
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    for stream, drawn in ((io.StringIO(), False), (Terminal(), True)):
+        monkeypatch.setattr(sys, "stderr", stream)
+        assert list(progress_bar(range(3), "frames", unit="frame")) == [0, 1, 2]
+        assert ("\r" in stream.getvalue()) is drawn, stream.getvalue()

@@ -721,4 +721,4 @@ def test_train_parts_cli_trains_on_the_label_shapes_given(tmp_path):
     assert report["n_patches"] == report["n_part"] + report["n_background"] > 0 and 0 <= report["train_acc"] <= 1
     r = CliRunner().invoke(main, ["train", "parts", "--out", str(tmp_path / "q.npz"), "--label-shapes",
                                   str(tmp_path / "s.npz")])
-    assert r.exit_code == 2 and "--label-shapes needs --kitti-root" in r.output
+    assert r.exit_code == 2 and "--label-shapes needs a KITTI root (KITTI_ROOT or --kitti-root)" in r.output

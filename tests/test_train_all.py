@@ -130,13 +130,68 @@ def test_train_commands_take_the_kitti_root_in_either_form(tmp_path, command):
     out = tmp_path / ("models" if command == "all" else "out.npz")
     for form in ([KITTI_ROOT], ["--kitti-root", KITTI_ROOT], [KITTI_ROOT, "--kitti-root", KITTI_ROOT]):
         line = one_line_error(cli("train", command, *form, "--split-file", split, "--out", out))
-        assert f"{split}: line 1: no" in line and "999999" in line, (form, line)
+        assert f"{split}: line 1: no labelled frame 999999" in line, (form, line)  # train viewpoints said "no frame"
     line = one_line_error(cli("train", command, KITTI_ROOT, "--kitti-root", tmp_path, "--out", out))
     assert "KITTI_ROOT" in line and "--kitti-root" in line and "two roots" in line, line
     if command in ("all", "viewpoints"):  # a root they cannot train without
         line = one_line_error(cli("train", command, "--out", out))
         assert "KITTI_ROOT or --kitti-root" in line, line
     assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["all", "viewpoints", "parts", "detector"])
+def test_one_root_named_through_a_link_is_one_root(tmp_path, command):
+    """KITTI_ROOT and --kitti-root naming one folder, one of them through a symbolic link, are one root (they were
+    refused as two): the split file's unknown id, an error naming the root, shows that it was read."""
+    link = tmp_path / "link"
+    link.symlink_to(KITTI_ROOT, target_is_directory=True)
+    split = tmp_path / "split.txt"
+    split.write_text("999999\n")
+    out = tmp_path / ("models" if command == "all" else "out.npz")
+    for form in ([KITTI_ROOT, "--kitti-root", link], [link, "--kitti-root", f"{KITTI_ROOT}/"]):
+        line = one_line_error(cli("train", command, *form, "--split-file", split, "--out", out))
+        assert f"{split}: line 1: no labelled frame 999999" in line, (form, line)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command, usage", [("all", " KITTI_ROOT"), ("viewpoints", " KITTI_ROOT"),
+                                            ("parts", " [KITTI_ROOT]"), ("detector", " [KITTI_ROOT]")])
+def test_the_usage_line_shows_the_root_required_where_it_is(command, usage):
+    """`train all|viewpoints` cannot go without a root (in either form): their usage line showed it optional."""
+    r = cli("train", command, "--help")
+    assert r.exit_code == 0 and r.output.splitlines()[0].endswith(f"[OPTIONS]{usage}"), r.output.splitlines()[0]
+
+
+def test_train_parts_and_detector_name_both_forms_of_the_root(tmp_path):
+    """Their options of real frames said `needs --kitti-root` / `With --kitti-root` where KITTI_ROOT serves too."""
+    forms = "a KITTI root (KITTI_ROOT or --kitti-root)"
+    for command, given in (("parts", ["--label-shapes", tmp_path / "s.npz"]), ("parts", ["--frames", "000010"]),
+                           ("detector", ["--frames", "000010"]), ("detector", ["--per-octave", "3"])):
+        line = one_line_error(cli("train", command, *given, "--out", tmp_path / "o.npz"))
+        assert forms in line, line
+    for command in ("parts", "detector"):
+        text = " ".join(cli("train", command, "--help").output.split())
+        assert "With --kitti-root" not in text and "needs --kitti-root" not in text and "With a KITTI root" in text
+        assert "The KITTI_ROOT argument gives it too." in text
+    assert not (tmp_path / "o.npz").exists()
+
+
+def test_train_viewpoints_decodes_every_image_before_training(tmp_path, monkeypatch):
+    """As the other train commands: a truncated image is refused in one line before any crop is made (it was found
+    where the training read it, after the frames before it)."""
+    from wirescene.predetect import viewpoint_classifier
+
+    root = kitti_copy(tmp_path / "kitti", ["000002", "000010"])
+    image = root / "training" / "image_2" / "000010.png"  # the last frame read
+    image.write_bytes(image.read_bytes()[:-2000])
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("the training started")
+
+    monkeypatch.setattr(viewpoint_classifier, "kitti_examples", no_training)
+    line = one_line_error(cli("train", "viewpoints", root, "--out", tmp_path / "v.npz"))
+    assert f"{image}: corrupt or truncated image" in line, line
+    assert not (tmp_path / "v.npz").exists()
 
 
 # -- models directories -------------------------------------------------------------------
@@ -249,12 +304,12 @@ def test_a_bad_drive_map_is_refused_before_training(tmp_path):
     assert "no train_rand.txt here" in line and str(tmp_path) in line
     assert not (tmp_path / "m").exists()
     r = cli("train", "detector", "--out", tmp_path / "b.npz", "--drive-map", tmp_path)
-    assert r.exit_code == 2 and "--drive-map needs --kitti-root" in r.output + r.stderr
+    assert r.exit_code == 2 and "--drive-map needs a KITTI root (KITTI_ROOT or --kitti-root)" in r.stderr
     r = cli("train", "parts", "--out", tmp_path / "p.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path)
     assert "no train_rand.txt here" in one_line_error(r)  # the calibration is on by default: its folds read the map
     r = cli("train", "parts", "--out", tmp_path / "p.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path,
             "--no-calibrate")
-    assert r.exit_code == 2 and "--drive-map needs --kitti-root and --calibrate" in r.output + r.stderr
+    assert r.exit_code == 2 and "--drive-map needs a KITTI root (KITTI_ROOT or --kitti-root) and --calibrate" in r.stderr
     for without in (["--no-calibration"], ["--calibration", "9,1,0.4"]):  # no held-out calibration to group
         r = cli("train", "detector", "--out", tmp_path / "b.npz", "--kitti-root", KITTI_ROOT, "--drive-map", tmp_path,
                 *without)
@@ -322,6 +377,11 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert alone.read_bytes() == (out / "viewpoint_classifier.npz").read_bytes()
     assert resolve_models(out).own == ("parts_model", "detector_bank", "viewpoint_classifier", "occlusion")
     assert "shipped" in r.output and "models written to" in r.output and "2 frames of known drive)" in r.output
+    # the run's peak, kept across the resets that measure each step's (which /usr/bin/time sees the last of alone)
+    assert manifest["peak_rss_mb"] >= max(record["peak_rss_mb"] for record in manifest["steps"].values()
+                                          if "peak_rss_mb" in record)
+    assert r.stdout.rstrip().endswith(f"; peak memory {manifest['peak_rss_mb']:.0f} MB"), r.stdout
+    assert "\r" not in r.stderr and "\x1b" not in r.stderr  # no progress bar drawn where stderr is no terminal
 
 
 def test_a_copy_of_the_root_elsewhere_resumes_the_same_training(trained, tmp_path):
@@ -525,7 +585,8 @@ def test_train_parts_defaults_are_the_shipped_recipe(tmp_path):
     line = one_line_error(cli("train", "parts", "--kitti-root", KITTI_ROOT, "--frames", "000010", "--synth-scenes",
                               "0", "--out", out))
     assert line.startswith("wirescene: error: calibrate_real: ") and "--no-calibrate" in line, line
-    assert "--calibrate needs --kitti-root" in one_line_error(cli("train", "parts", "--calibrate", "--out", out))
+    line = one_line_error(cli("train", "parts", "--calibrate", "--out", out))
+    assert "--calibrate needs a KITTI root (KITTI_ROOT or --kitti-root)" in line, line
     assert not out.exists()
 
 
@@ -656,3 +717,18 @@ def test_peak_memory_is_unknown_not_an_import_error_where_the_os_has_no_resource
     assert pipeline._peak_memory_mb() > 10
     monkeypatch.setitem(sys.modules, "resource", None)  # as on Windows
     assert pipeline._peak_memory_mb() is None
+
+
+def test_a_runs_peak_memory_outlives_the_resets_that_measure_each_step():
+    """Each step resets the process's peak to measure its own, so that the process's (what /usr/bin/time reports) is
+    the last step's alone: the run keeps the peak before every reset."""
+    from wirescene.training import pipeline
+
+    peak = pipeline._RunPeak()
+    big = np.ones(300 << 17)  # 300 MB, every page written
+    del big
+    before = pipeline._peak_memory_mb()
+    if not peak.reset():
+        pytest.skip("no resettable peak here (Linux's /proc/self/clear_refs)")
+    assert pipeline._peak_memory_mb() < before - 100  # the process's peak is reset ...
+    assert peak.mb >= before and peak.total() >= before  # ... the run's is kept

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from wirescene.cli.options import (
+    KITTI_ROOT_FORMS,
     NON_NEGATIVE,
     NON_NEGATIVE_FLOAT,
     POSITIVE_FLOAT,
@@ -60,21 +61,21 @@ from wirescene.training.scale import (
 @kitti_root_params("Train on the labelled real frames of this KITTI root (the shipped bank: all 72 frames of "
                    "shared/data/kitti). Without it: synthetic scenes.",
                    type=NonEmptyPath(file_okay=False, path_type=Path))
-@click.option("--frames", default=None, help="With --kitti-root: comma-separated training frame ids (default all).")
+@click.option("--frames", default=None, help="With a KITTI root: comma-separated training frame ids (default all).")
 @split_file_option
 @click.option("--folds", default=None,
-              help="With --kitti-root: train only on the frames of these cross-validation folds (e.g. 0,1,3).")
+              help="With a KITTI root: train only on the frames of these cross-validation folds (e.g. 0,1,3).")
 @click.option("--no-calibration", is_flag=True,
-              help="With --kitti-root: skip the held-out (leave-one-fold-out) Platt calibration; scores stay margins.")
+              help="With a KITTI root: skip the held-out (leave-one-fold-out) Platt calibration; scores stay margins.")
 @click.option("--calibration", default=None,
-              help="With --kitti-root: Platt 'a,b,c' mapping margins and the verifier's logits to confidences, from "
+              help="With a KITTI root: Platt 'a,b,c' mapping margins and the verifier's logits to confidences, from "
                    "held-out detections of the same recipe (printed by benchmarks/bench_predetect.py); default: "
                    "leave-one-fold-out training.")
 @click.option("--threshold", type=FiniteFloat(min=0.0, max=1.0), default=0.5, show_default=True,
-              help="With --kitti-root and a calibration: default detection threshold (confidence, 0 to 1).")
+              help="With a KITTI root and a calibration: default detection threshold (confidence, 0 to 1).")
 @drive_map_option()
 @click.option("--support-weight", type=NON_NEGATIVE_FLOAT, default=SUPPORT_WEIGHT, show_default=True,
-              help="With --kitti-root: margin a cluster of detections gains per e-fold of its votes (0: its best vote "
+              help="With a KITTI root: margin a cluster of detections gains per e-fold of its votes (0: its best vote "
                    "alone).")
 @click.option("--seed", type=NON_NEGATIVE, default=0, show_default=True, help="Random stream (synthetic: scenes; validation: seed+1).")
 @click.option("--scenes", "n_scenes", type=click.IntRange(min=1, max=MAX_DETECTOR_SCENES), default=200, show_default=True,
@@ -83,10 +84,10 @@ from wirescene.training.scale import (
               help=f"Partial configurations per viewpoint (plus one full-car configuration; at most {MAX_PARTIAL}, "
                    "as many as the cars' visible vertex sets allow: some 7).")
 @click.option("--per-octave", type=click.IntRange(min=1, max=MAX_PER_OCTAVE), default=6, show_default=True,
-              help="With --kitti-root: HOG pyramid levels per octave (stored with the bank for detection, whose "
+              help="With a KITTI root: HOG pyramid levels per octave (stored with the bank for detection, whose "
                    "time, like the training's, grows in proportion).")
 @click.option("--cut-paste", type=click.IntRange(min=0, max=MAX_CUT_PASTE), default=0, show_default=True,
-              help="With --kitti-root: cars of other frames pasted into a composite copy of every training frame.")
+              help="With a KITTI root: cars of other frames pasted into a composite copy of every training frame.")
 @click.option("--mining-rounds", type=click.IntRange(min=0, max=MAX_MINING_ROUNDS), default=None,
               help="Hard-negative mining rounds [synthetic 2, real 3], each describing every mined image again.")
 @click.option("--mining-images", type=click.IntRange(min=1, max=MAX_MINING_IMAGES), default=None,
@@ -98,13 +99,13 @@ from wirescene.training.scale import (
 @click.option("--report", type=NonEmptyPath(dir_okay=False), default=None, help="Write a JSON report here.")
 @click.option("--max-negatives", type=click.IntRange(min=1, max=MAX_NEGATIVES), default=DEFAULT_MAX_NEGATIVES,
               show_default=True,
-              help=f"With --kitti-root: cap of each configuration's negatives (reservoir, then the hardest; at most "
+              help=f"With a KITTI root: cap of each configuration's negatives (reservoir, then the hardest; at most "
                    f"{MAX_NEGATIVES:,}: some 4.8 kB each).")
 @click.option("--pyramid-cache-mb", type=FiniteFloat(min=0, max=MAX_CACHE_MB), default=DEFAULT_CACHE_MB,
               show_default=True,
-              help=f"With --kitti-root: memory for cached grey images and HOG pyramids (beyond it they are recomputed; "
+              help=f"With a KITTI root: memory for cached grey images and HOG pyramids (beyond it they are recomputed; "
                    f"at most {MAX_CACHE_MB:,}, the step needing some 6 GB besides).")
-@workers_option("of the per-image passes (mining, detections; --kitti-root only)")
+@workers_option("of the per-image passes (mining, detections; with a KITTI root only)")
 def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibration, threshold, drive_mapping,
              support_weight, seed, n_scenes, n_partial, per_octave, cut_paste, mining_rounds, mining_images, n_val, C,
              report, max_negatives, pyramid_cache_mb, workers):
@@ -125,9 +126,9 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
               max_negatives != DEFAULT_MAX_NEGATIVES, "--pyramid-cache-mb": pyramid_cache_mb != DEFAULT_CACHE_MB,
               "--workers": workers is not None})
     if kitti_root is not None:
-        refuse_given(other, why="synthetic training only, not with --kitti-root")
+        refuse_given(other, why="synthetic training only, not with a KITTI root")
     else:
-        refuse_given(other, needs="--kitti-root")
+        refuse_given(other, needs=KITTI_ROOT_FORMS)
     if kitti_root is not None:
         from wirescene.io.kitti import KittiDataset
         from wirescene.training.kitti_detector import check_calibration, frames_in_folds, train_detector_bank_kitti
@@ -193,7 +194,8 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 
     check_output_file(out, "--out")
     ds = KittiDataset(kitti_root)
-    ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
+    ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir) or ds.frame_ids()
+    say_off_centre_frames(ds, ids, images=True)  # as the other train commands: a truncated image refused now
     clf = train_on_kitti(ds, ids, seed=seed)
     clf.save(out)
     click.echo(f"viewpoint classifier: {clf.meta['n']} crops of {len(ids)} frames -> {out}")

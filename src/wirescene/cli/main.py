@@ -34,6 +34,7 @@ from wirescene.cli.options import (
     min_score_option,
     models_option,
     particles_option,
+    progress_bar,
     refuse_min_score,
     say_models,
     say_off_centre_image,
@@ -222,9 +223,7 @@ def _parallel(workers: int | None, frame_ids: list[str] | None, dask_address: st
 
 
 def _progress(desc: str, total: int | None = None):
-    from tqdm import tqdm
-
-    return lambda it: tqdm(it, desc=desc, unit="frame", total=total, leave=False, file=sys.stderr)
+    return lambda it: progress_bar(it, desc, unit="frame", total=total)
 
 
 def _fit_options(particles: int, seed: int, *, parallel: bool = False, casts_rays: bool = True, **inference):

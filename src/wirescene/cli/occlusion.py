@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
 
-from wirescene.cli.options import NON_NEGATIVE, NonEmptyPath, check_output_file, models_option, say_models
+from wirescene.cli.options import (
+    NON_NEGATIVE,
+    NonEmptyPath,
+    check_output_file,
+    models_option,
+    progress_bar,
+    say_models,
+)
 from wirescene.training.scale import MAX_OCCLUSION_SCENES
 
 
@@ -27,8 +33,6 @@ from wirescene.training.scale import MAX_OCCLUSION_SCENES
 def occlusion(seed, scenes, out, flip_evidence, models, parts_model):
     """Choose the likelihood's occluded-part score c on held-out synthetic scenes, with
     the part detectors of --parts-model or --models (default: the shipped ones)."""
-    from tqdm import tqdm
-
     from wirescene.core.resources import resolve_models
     from wirescene.infer.occluded_score import save_occluded_score
     from wirescene.parts.detector import PartDetector
@@ -40,7 +44,7 @@ def occlusion(seed, scenes, out, flip_evidence, models, parts_model):
     # once its part model is read (a broken one: the error line alone)
     say_models(found, replaced=["parts_model"] if parts_model is not None else [])
     result = calibrate_occluded_score(seed=seed, n_scenes=scenes, detector=detector, flip=flip_evidence,
-                                      progress=lambda it: tqdm(it, desc="scenes", leave=False, file=sys.stderr))
+                                      progress=lambda it: progress_bar(it, "scenes"))
     save_occluded_score(out, result)
     for c, a in zip(result["grid"], result["accuracy"]):
         click.echo(f"c = {c:+.2f}  occlusion accuracy {100 * a:.1f}%")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import sys
 from pathlib import Path
 from typing import Mapping
 
@@ -211,6 +212,25 @@ def parse_frames(value: str | None, known: list[str], option: str = "--frames") 
     return frames
 
 
+#: How a message names the KITTI root of a ``train`` command, which takes it in either form (:func:`kitti_root_params`).
+KITTI_ROOT_FORMS = "a KITTI root (KITTI_ROOT or --kitti-root)"
+
+
+def same_path(a, b) -> bool:
+    """Whether paths ``a`` and ``b`` name one file or folder: through a symbolic link or ``./``
+    too (``os.path.samefile``), else (one missing) by their resolved paths.
+
+    Examples
+    --------
+    >>> same_path("./x", "x"), same_path("x", "y")
+    (True, False)
+    """
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one missing (or unreadable): its own check names it
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
 def kitti_root_params(help: str, *, type: click.ParamType, required: bool = False):
     """The labelled KITTI root of a ``train`` command, taken in either form: the ``KITTI_ROOT``
     argument (``train all ROOT``) or ``--kitti-root DIR`` (``train parts --kitti-root ROOT``), so
@@ -223,19 +243,20 @@ def kitti_root_params(help: str, *, type: click.ParamType, required: bool = Fals
     type : click.ParamType
         The type of both forms (the command's checks of the root).
     required : bool
-        The command needs a root: neither form given is a usage error naming both.
+        The command needs a root: neither form given is a usage error naming both, and the usage
+        line shows ``KITTI_ROOT`` without the brackets of an optional argument.
 
     Returns
     -------
     callable
         A decorator of a click command function taking ``kitti_root``; both forms naming two
-        different roots is a usage error.
+        different roots (not one through a link, :func:`same_path`) is a usage error.
     """
     def decorate(f):
         @functools.wraps(f)
         def command(*args, kitti_root=None, kitti_root_option=None, **kwargs):
-            if kitti_root is not None and kitti_root_option is not None and \
-                    os.path.abspath(kitti_root) != os.path.abspath(kitti_root_option):
+            if kitti_root is not None and kitti_root_option is not None and not same_path(kitti_root,
+                                                                                            kitti_root_option):
                 raise click.UsageError(f"KITTI_ROOT ({kitti_root}) and --kitti-root ({kitti_root_option}) name two "
                                        "roots: give one")
             root = kitti_root if kitti_root is not None else kitti_root_option
@@ -245,7 +266,9 @@ def kitti_root_params(help: str, *, type: click.ParamType, required: bool = Fals
 
         command = click.option("--kitti-root", "kitti_root_option", type=type, default=None,
                                help=f"{help} The KITTI_ROOT argument gives it too.")(command)
-        return click.argument("kitti_root", type=type, required=False)(command)
+        # click brackets an argument it may go without; one of the two forms is needed (checked above)
+        return click.argument("kitti_root", type=type, required=False,
+                              metavar="KITTI_ROOT" if required else None)(command)
 
     return decorate
 
@@ -425,6 +448,14 @@ def say_models(models, *, replaced=()):
     if models.root is not None:
         click.echo(f"wirescene: {models.describe(replaced=replaced)}", err=True)
     return models
+
+
+def progress_bar(items, desc: str, *, unit: str = "it", total: int | None = None):
+    """``items`` under a tqdm bar on standard error, gone once done; none where standard error is
+    no terminal (``2> log``: its redrawn lines would fill the file with carriage returns)."""
+    from tqdm import tqdm
+
+    return tqdm(items, desc=desc, unit=unit, total=total, leave=False, file=sys.stderr, disable=None)
 
 
 def say_off_centre_image(image, camera) -> None:

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from wirescene.cli.options import (
+    KITTI_ROOT_FORMS,
     NON_NEGATIVE,
     FiniteFloat,
     NonEmptyPath,
@@ -54,11 +55,11 @@ _RECIPE = RECIPE["parts"]
 @click.option("--smooth", type=FiniteFloat(min=0.0, max=MAX_SMOOTH), default=_RECIPE["smooth"], show_default=True,
               help="Default Gaussian smoothing of the response maps (sigma in box heights, at most 1).")
 @click.option("--calibrate/--no-calibrate", default=None,
-              help="Calibrate log(S_j/S_b) per part on held-out real patches (needs --kitti-root; default: on with "
-                   "--kitti-root, as the shipped model).")
+              help="Calibrate log(S_j/S_b) per part on held-out real patches (needs a KITTI root; default: on with "
+                   "one, as the shipped model).")
 @drive_map_option()
 @click.option("--label-shapes", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
-              help="With --kitti-root: .npz of the labelled cars' own wireframes (frame id -> (N, 36, 3), object "
+              help="With a KITTI root: .npz of the labelled cars' own wireframes (frame id -> (N, 36, 3), object "
                    "frame) in place of the mean shape scaled into each label's box.")
 @click.option("--synth-scenes", type=click.IntRange(min=0, max=MAX_PART_SCENES), default=_RECIPE["synth_scenes"],
               show_default=True,
@@ -90,13 +91,13 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
     if calibrate is None:
         calibrate = bool(_RECIPE["calibrate_real"]) and kitti_root is not None
     elif calibrate and kitti_root is None:
-        raise click.UsageError("--calibrate needs --kitti-root (held-out real patches)")
+        raise click.UsageError(f"--calibrate needs {KITTI_ROOT_FORMS}: its held-out real patches")
 
     check_output_file(out, "--out")
     check_output_file(report, "--report")
     check_output_dir(synth_cache, "--synth-cache")
     if kitti_root is None and (frames is not None or split_file is not None):
-        raise click.UsageError("--frames / --split-file need --kitti-root")
+        raise click.UsageError(f"--frames / --split-file need {KITTI_ROOT_FORMS}")
     if not n_views:  # options of the CAD renderings, else ignored
         refuse_given({"--n-aug": n_aug != 2, "--heldout": heldout, "--compare-hog": compare_hog,
                       "--kitti-background": kitti_background is not None}, needs="--n-views (CAD edge renderings)")
@@ -111,12 +112,12 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
         background.require_frames()
     if label_shapes is not None:
         if kitti_root is None:
-            raise click.UsageError("--label-shapes needs --kitti-root")
+            raise click.UsageError(f"--label-shapes needs {KITTI_ROOT_FORMS}")
         from wirescene.training.parts_real import load_label_shapes
 
         label_shapes = load_label_shapes(label_shapes)
     if drive_mapping is not None and not (calibrate and kitti_root is not None):
-        raise click.UsageError("--drive-map needs --kitti-root and --calibrate")
+        raise click.UsageError(f"--drive-map needs {KITTI_ROOT_FORMS} and --calibrate")
     folds = None
     if kitti_root is not None:
         from wirescene.io.kitti import KittiDataset

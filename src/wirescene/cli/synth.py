@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import re
-import sys
 from pathlib import Path
 
 import click
 
-from wirescene.cli.options import NonEmptyPath, check_output_dir
+from wirescene.cli.options import NonEmptyPath, check_output_dir, progress_bar
 from wirescene.core.atomic import replaced_dir
 from wirescene.core.errors import WiresceneError
 
@@ -47,8 +46,6 @@ def synth(out_dir, scenes, seed, cars, occluders, overwrite):
     calib, edges_2 (edge renderings) and wireframes (per-car 36-vertex ground truth with
     per-vertex visibility). The set appears whole or not at all: an interrupted or failed
     run leaves OUT_DIR as it was."""
-    from tqdm import tqdm
-
     from wirescene.synth.generate import generate_dataset
 
     rng_cars = _parse_range(cars)
@@ -65,7 +62,7 @@ def synth(out_dir, scenes, seed, cars, occluders, overwrite):
         with replaced_dir(split) as staging:
             ids = generate_dataset(
                 staging.parent, scenes, seed, cars=rng_cars, occluders=occluders, split=staging.name,
-                progress=lambda it: tqdm(it, desc="synth", unit="scene", file=sys.stderr, leave=False),
+                progress=lambda it: progress_bar(it, "synth", unit="scene"),
             )
     except WiresceneError as exc:
         raise click.ClickException(str(exc)) from None

@@ -14,6 +14,7 @@ from wirescene.cli.options import (
     drive_map_option,
     keeps_on_resume,
     kitti_root_params,
+    progress_bar,
     split_file_option,
     workers_count,
     workers_option,
@@ -85,12 +86,8 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
         earlier = manifest_steps(out) if resume else {}
     except InputError:
         earlier = {}
-    bars = []
-
     def iterate(items, name):
-        bar = tqdm(items, desc=name, unit="step" if name == "train all" else "it", leave=False, file=sys.stderr)
-        bars.append(bar)
-        return bar
+        return progress_bar(items, name, unit="step" if name == "train all" else "it")
 
     manifest = train_all(out, kitti_root, frames=ids, split_file=split_file, options=options, n_folds=n_folds,
                          drive_mapping=drive_mapping, resume=resume, workers=workers_count(workers), iterate=iterate,
@@ -105,4 +102,5 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
     folds = manifest["calibration_folds"]
     click.echo(f"models written to {out} ({manifest['data']['frames']} frames, {manifest['data']['cars']} cars; "
                f"{folds['frames_with_known_drive']} frames of known drive"
-               + (f" from {folds['devkit_mapping']})" if folds["devkit_mapping"] else ")"))
+               + (f" from {folds['devkit_mapping']})" if folds["devkit_mapping"] else ")")
+               + ("" if manifest["peak_rss_mb"] is None else f"; peak memory {manifest['peak_rss_mb']:.0f} MB"))

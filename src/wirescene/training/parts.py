@@ -782,9 +782,9 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
                                        "them with position=False (--no-position) and context=False")
     if not n_az and not synth_scenes and kitti_root is None:
         raise ArgumentError("synth_scenes", "no training data: n_views and synth_scenes (--n-views, --synth-scenes) "
-                                            "are both 0 and no kitti_root (--kitti-root) is given")
+                                            "are both 0 and no kitti_root (KITTI_ROOT or --kitti-root) is given")
     if calibrate_real and kitti_root is None:
-        raise ArgumentError("calibrate_real", "needs kitti_root (--kitti-root), the real labelled frames")
+        raise ArgumentError("calibrate_real", "needs kitti_root (KITTI_ROOT or --kitti-root), the real labelled frames")
     if heldout and n_az:  # the held-out evaluation trains on the other cars: one at least
         from wirescene.cad.training import load_cad_meshes
 

@@ -29,9 +29,10 @@ frame is a group of its own, and the groups are dealt to folds balanced by cars
 ``MODELS_DIR/models.json`` (format ``wirescene-models/1``) records the data (root, split
 file, frames), the folds, the packages and BLAS kernels it ran with
 (:func:`wirescene.core.version.environment`), and per step its options, inputs, artefact
-hash, wall time and peak resident memory. It is rewritten after every step from the first
-one trained on, ``"complete": false`` until the last;
-:func:`wirescene.core.resources.resolve_models` refuses an unfinished directory.
+hash, wall time and peak resident memory, and the run's peak (``peak_rss_mb``: each step's is
+measured by resetting the process's, which ``/usr/bin/time`` then reports of the last step
+alone). It is rewritten after every step from the first one trained on, ``"complete": false``
+until the last; :func:`wirescene.core.resources.resolve_models` refuses an unfinished directory.
 With ``resume``, a step whose record matches the current data (the frames, their label,
 calibration and image files and their folds), options, inputs and package
 version, and whose file is unchanged, is not run again; the earlier run's records stand
@@ -47,7 +48,7 @@ import inspect
 import numbers
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Iterable, Mapping
@@ -140,6 +141,25 @@ def _reset_peak_memory() -> bool:
         return True
     except OSError:
         return False
+
+
+@dataclass
+class _RunPeak:
+    """The process's peak resident memory over a run whose steps each reset it to measure their
+    own (:func:`_reset_peak_memory`): the peak before every reset is kept (``mb``), so that the
+    run's is not lost with it."""
+
+    mb: float | None = None
+
+    def reset(self) -> bool:
+        """Keep the peak so far, then reset the process's (:func:`_reset_peak_memory`)."""
+        self.mb = self.total()
+        return _reset_peak_memory()
+
+    def total(self) -> float | None:
+        """The run's peak resident memory so far in MB (None where the OS does not say)."""
+        now = _peak_memory_mb()
+        return now if self.mb is None else self.mb if now is None else max(self.mb, now)
 
 
 def step_cost(record: dict) -> str:
@@ -494,8 +514,10 @@ class _Run:
     workers: int
     say: Callable[[str], None]
     wrap: Callable
+    peak: _RunPeak = field(default_factory=_RunPeak)
 
     def write(self, manifest: dict) -> None:
+        manifest["peak_rss_mb"] = self.peak.total()  # this process's, over the steps it trained (MB)
         save_json(self.out / MANIFEST_FILE, manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION)
 
     def path_of(self, step: str) -> Path:
@@ -511,7 +533,7 @@ class _Run:
         if old:  # hours on a whole KITTI: say what changed
             self.say(f"{step}: the earlier run's record does not match ({why}): training again")
         self.say(f"{step}: training -> {path}")
-        exact = _reset_peak_memory()
+        exact = self.peak.reset()
         t0 = time.perf_counter()
         record = {"done": False, "key": key, "artefact": path.name}
         getattr(self, f"run_{step}")(record)
