@@ -181,6 +181,14 @@ def test_corrections_applied_with_mirror(tmp_path, cars):
     path.write_text('{"acura-nsx-sz": {"no_such_vertex": [0, 0, 0]}}')
     with pytest.raises(InputError, match="no_such_vertex"):
         load_corrections(path)
+    # a car's corrections not an object, a vertex's not three finite numbers: one line naming the file, no traceback
+    for text, match in (('{"acura-nsx-sz": [2.0, -0.5, -0.4]}', "must be a JSON object"),
+                        ('{"acura-nsx-sz": {"headlight_right": [2.0, NaN, -0.4]}}', "finite numbers, got"),
+                        ('{"acura-nsx-sz": {"headlight_right": 2.0}}', "finite numbers, got 2.0")):
+        path.write_text(text)
+        with pytest.raises(InputError, match=match) as err:
+            load_corrections(path)
+        assert "corr.json" in str(err.value) and "\n" not in str(err.value)
 
 
 def test_cad_picture_has_a_key_to_its_colours():

@@ -48,6 +48,7 @@ from wirescene.cad.sideview import SideView, find_arches, side_view
 from wirescene.core.errors import InputError
 from wirescene.core.raycast import require_ray_tracer
 from wirescene.core.resources import DATA_DIR
+from wirescene.core.validate import finite_real
 from wirescene.core.wireframe import MIRROR, N_PER_SIDE, PART_NAMES, VERTEX_INDEX, VERTEX_NAMES
 
 __all__ = ["annotate", "auto_landmarks", "load_corrections", "apply_corrections",
@@ -192,11 +193,13 @@ def load_corrections(path=None) -> dict:
     for car, fixes in data.items():
         if car.startswith("_"):
             continue  # comments
+        if not isinstance(fixes, dict):
+            raise InputError(f"corrections of car {car!r} must be a JSON object {{vertex: [x, y, z]}}", path=p)
         for name, xyz in fixes.items():
             if name not in VERTEX_INDEX:
                 raise InputError(f"unknown vertex name {name!r} for car {car!r}", path=p)
-            if len(xyz) != 3:
-                raise InputError(f"correction of {car}/{name} must be [x, y, z]", path=p)
+            if not (isinstance(xyz, list) and len(xyz) == 3 and all(finite_real(v) for v in xyz)):
+                raise InputError(f"correction of {car}/{name} must be [x, y, z] of finite numbers, got {xyz!r}", path=p)
     return data
 
 
