@@ -476,6 +476,8 @@ def test_dataset_without_labels_and_bad_roots(kitti_root, tmp_path):
     with pytest.raises(InputError, match="not a KITTI object directory") as exc:
         KittiDataset(tmp_path)  # no training/ here
     assert one_line(exc).startswith(str(tmp_path))
+    # the other split's folder named (predict's default split, testing, of a root of training frames alone)
+    assert one_line(exc).endswith("; it holds testing/image_2: --split testing")
     shutil.rmtree(split / "calib")
     with pytest.raises(InputError, match="no calib/ directory"):
         KittiDataset(split)

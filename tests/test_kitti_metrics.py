@@ -557,7 +557,10 @@ def test_cli_kitti_eval_table_json_and_missing_predictions(tmp_path):
     r = _cli("kitti-eval", gt_dir, pred, "--json", out)
     assert r.exit_code == 0, r.output
     assert "KITTI Car AP" in r.output and "moderate" in r.output
-    assert f"{pred}: 1 of 3 frames have no prediction file (no detections)" in r.output
+    # what the score of a folder lacking a frame means, and that KITTI's server would refuse it (was "(no detections)")
+    assert (f"wirescene: {pred}: 1 of 3 frames have no prediction file (e.g. 001545.txt): scored as frames without "
+            "detections, their cars missed; KITTI's server refuses a submission lacking a frame (an empty FRAME.txt "
+            "is a frame without cars; --frames or --split-file scores a selection)") in r.stderr.splitlines()
     n = kitti_metrics([read_labels(gt_dir / f"{f}.txt") for f in ("000002", "000010", "001545")],
                       [FrameLabels()] * 3)["n_gt"]["car"]  # fewer than 40 cars: the devkit's ceiling is said
     assert (f"at most (N - 1) / 40: easy {100 * (n['easy'] - 1) / 40:.1f}, moderate {100 * (n['moderate'] - 1) / 40:.1f}"

@@ -582,7 +582,7 @@ def test_each_label_or_detection_file_is_read_once_before_the_first_fit(tmp_path
         return reader
 
     monkeypatch.setattr(kitti, "read_labels", counted(kitti.read_labels))
-    monkeypatch.setattr(sources, "read_detections", counted(sources.read_detections))
+    monkeypatch.setattr(sources, "read_boxes_and_classes", counted(sources.read_boxes_and_classes))
     monkeypatch.setattr(runner, "fit_frames", first_fit)
     monkeypatch.setattr(predict, "fit_frames", first_fit)
     dataset = KittiDataset(KITTI_ROOT)

@@ -696,7 +696,8 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
     """KITTI object-benchmark AP of Car (2D, AOS, BEV, 3D; easy / moderate / hard; R40 and
     R11; IoU 0.7 and 0.5) of the label files in PRED_DIR against GT_DIR, by the devkit's
     rules, and the moderate APs' bootstrap interval over drives. A frame without a
-    prediction file has no detections; a prediction file of a frame GT_DIR lacks is not
+    prediction file is scored as a frame without detections, its cars missed (said: KITTI's
+    server refuses such a submission); a prediction file of a frame GT_DIR lacks is not
     scored (said). Several PRED_DIRs are runs of one method (other
     seeds, say): each run's moderate APs, their mean, and an interval whose every draw
     resamples the drives and takes one of the runs."""
@@ -724,10 +725,12 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
     runs = [read_label_dirs(gt_dir, d, frames=frame_ids) for d in pred_dirs]
     ids, gts = runs[0][0], runs[0][1]
     for d, (_, _, preds) in zip(pred_dirs, runs):
-        missing = sum(not (d / f"{f}.txt").exists() for f in ids)
-        if missing:
-            click.echo(f"wirescene: {d}: {missing} of {len(ids)} frames have no prediction file (no detections)",
-                       err=True)
+        missing = [f for f in ids if not (d / f"{f}.txt").exists()]
+        if missing:  # scored (an interrupted run's frames so far, say), said in full: the server refuses it
+            click.echo(f"wirescene: {d}: {len(missing)} of {len(ids)} frames have no prediction file (e.g. "
+                       f"{missing[0]}.txt): scored as frames without detections, their cars missed; KITTI's server "
+                       "refuses a submission lacking a frame (an empty FRAME.txt is a frame without cars; --frames or "
+                       "--split-file scores a selection)", err=True)
         cars = [o for frame in preds for o in of_types(frame, CAR_TYPES)]
         flat = sum(no_3d_box(o.dims) for o in cars)  # a 2D detector's rows: scored as 3D boxes of size -1
         if flat:

@@ -71,6 +71,10 @@ def dumps(value, *, indent: int | None = 1, **kwargs) -> str:
     >>> json.loads(text, parse_constant=lambda c: 1 / 0)  # no NaN / Infinity token for a strict parser to refuse
     {'ap': None, 'recall': 0.5}
     """
+    try:  # plain values as they are, by json's C encoder (without indent: split-coco's 377k boxes 2x faster)
+        return json.dumps(value, indent=indent, allow_nan=False, **kwargs)
+    except (TypeError, ValueError):  # a NaN, an infinity or a numpy value: converted
+        pass
     return json.dumps(strict_values(value), indent=indent, allow_nan=False, **kwargs)
 
 

@@ -7,6 +7,7 @@ import itertools
 import os
 import stat
 import zlib
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +18,7 @@ import numpy as np
 from wirescene.core.errors import InputError
 from wirescene.core.types import Detections
 from wirescene.core.validate import finite_real
-from wirescene.io.detections import NO_CARS, detections_from_labels, read_detections
+from wirescene.io.detections import detections_from_labels, format_classes, read_boxes_and_classes
 from wirescene.io.kitti import KittiDataset
 
 if TYPE_CHECKING:  # imported where the bank runs
@@ -141,9 +142,10 @@ class DetectionSource:
         :meth:`~wirescene.io.kitti.KittiDataset.check_frames` for the calibrations and labels (a
         bad file found at frame N would leave the N - 1 frames fitted before it).
 
-        ``notify`` is told, in one line, when no file holds a car and some hold boxes of other
-        classes alone (a detector that numbers its classes otherwise than COCO, whose every box
-        would be skipped: a run without a car, read as streets without cars).
+        ``notify`` is told, in one line, when no file holds a car (of any score) and some hold boxes
+        of other classes alone (a detector that numbers its classes otherwise than COCO, whose every
+        box would be skipped: a run without a car, read as streets without cars), naming the most
+        common of those classes over all the files, with their counts.
 
         Returns ``{frame: its detections}`` as :meth:`for_frame` gives them (``{}`` for ``gt`` /
         ``bank``), for the checks before the first fit that look at the boxes
@@ -151,17 +153,20 @@ class DetectionSource:
         each file read once a run, not once a check."""
         if self.folder is None:
             return {}
-        boxes, others = {}, []  # others: the files of boxes of other classes alone, while no file holds a car
+        boxes, others, files = {}, Counter(), 0  # others: the boxes of files of other classes alone, while no car
         for frame_id in frame_ids:
-            boxes[frame_id], no_car = self._file_boxes(dataset, frame_id)
-            if len(boxes[frame_id]):
+            boxes[frame_id], classes = self._file_boxes(dataset, frame_id)
+            if classes is None:  # cars (all under the floor, maybe): the classes are read as they should be
                 others = None
-            elif others is not None and no_car not in (None, NO_CARS):  # a file of boxes of other classes alone
-                others.append(f"{Path(boxes[frame_id].source).name}: {no_car[len(NO_CARS):].strip(' ()')}")
+            elif others is not None and classes:  # a file of boxes of other classes alone
+                others.update(classes)
+                files += 1
         if notify is not None and others:
-            notify(f"warning: no detection file in {self.folder} holds a car: {len(others)} of the {len(frame_ids)} "
-                   f"frames' files hold boxes of other classes alone ({others[0]}), fitted as frames without cars; "
-                   "a car is 'car' (category, category_name, label, class or type) or COCO's category_id 3")
+            n = others.total()
+            notify(f"warning: no detection file in {self.folder} holds a car: {files} of the {len(frame_ids)} "
+                   f"frames' files hold boxes of other classes alone ({n:,} {'box' if n == 1 else 'boxes'}: "
+                   f"{format_classes(others)}), fitted as frames without cars; a car is 'car' (category, "
+                   "category_name, label, class or type) or COCO's category_id 3")
         return boxes
 
     @property
@@ -191,22 +196,19 @@ class DetectionSource:
                                   mount=rig.mount, estimate_pitch=rig.estimate_pitch)
         return self._file_boxes(dataset, frame_id)[0]
 
-    def _file_boxes(self, dataset: KittiDataset, frame_id: str) -> tuple[Detections, str | None]:
-        """The detections of the frame's file, its boxes scoring ``min_score`` or more, and where
-        the file holds no car (before the floor: a file of cars all under it holds cars) why
-        (:func:`~wirescene.io.detections.read_detections`'s problem, naming the other classes), else None."""
+    def _file_boxes(self, dataset: KittiDataset, frame_id: str) -> tuple[Detections, Counter | None]:
+        """The detections of the frame's file, its boxes scoring ``min_score`` or more, and, where
+        the file holds no car (before the floor: a file of cars all under it holds cars), how many
+        boxes of each other class it holds (none where it is missing), else None."""
         path = self.detection_file(frame_id)
         if path is None:
             if not self.allow_missing:
                 raise InputError(f"no detection file for frame {frame_id}", path=self.folder)
-            return Detections.empty(str(self.folder)), None
-        try:  # the floor applied here, as read_detections applies it: the file read once for both answers
-            dets = read_detections(path, image_size=dataset.image_size(frame_id))
-        except InputError as exc:
-            if exc.problem.startswith(NO_CARS):
-                return Detections.empty(str(path)), exc.problem
-            raise
-        if self.min_score is not None:
+            return Detections.empty(str(self.folder)), Counter()
+        dets, classes = read_boxes_and_classes(path, image_size=dataset.image_size(frame_id))
+        if len(dets) == 0:
+            return Detections.empty(str(path)), classes
+        if self.min_score is not None:  # the floor, as read_detections applies it
             dets = dets.subset(dets.scores >= self.min_score)
         return (dets if len(dets) else Detections.empty(str(path))), None
 

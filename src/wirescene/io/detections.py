@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import json
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -53,9 +54,15 @@ def _class_of(entry: dict):
     return None
 
 
-def _is_car(entry: dict) -> bool:
+def is_car(entry: dict) -> bool:
     """Whether a JSON / CSV entry is a car: its class (:func:`_class_of`) ``car`` in any case,
-    or the number 3 (COCO's id of a car); an entry naming no class is one."""
+    or the number 3 (COCO's id of a car); an entry naming no class is one.
+
+    Examples
+    --------
+    >>> is_car({"label": "Car"}), is_car({"category_id": 3}), is_car({"category_id": 1}), is_car({})
+    (True, True, False, True)
+    """
     value = _class_of(entry)
     if value is None:
         return True
@@ -65,14 +72,31 @@ def _is_car(entry: dict) -> bool:
         return str(value).strip().lower() == "car"
 
 
-def _no_cars(others: list) -> str:
-    """:data:`NO_CARS`, naming the classes of a file's ``others`` boxes where it holds some (a
-    detector whose cars are "vehicle" or "Automobile" would otherwise read as an empty street)."""
+def _no_cars(others: Counter) -> str:
+    """:data:`NO_CARS`, naming the classes of a file's ``others`` boxes (class to boxes) where it
+    holds some (a detector whose cars are "vehicle" or "Automobile" would otherwise read as an
+    empty street)."""
     if not others:
         return NO_CARS
-    named = sorted({str(c) for c in others})
-    shown = ", ".join(repr(c) for c in named[:3]) + (", ..." if len(named) > 3 else "")
-    return f"{NO_CARS} (its {len(others)} {'box is' if len(others) == 1 else 'boxes are'} of other classes: {shown})"
+    n = others.total()
+    return f"{NO_CARS} (its {n} {'box is' if n == 1 else 'boxes are'} of other classes: {format_classes(others)})"
+
+
+def format_classes(counts: Counter, *, shown: int = 3) -> str:
+    """The ``shown`` most common classes of ``counts`` (class to boxes) with their counts, in one
+    line of bounded length: each name cut at 20 characters, the others counted.
+
+    Examples
+    --------
+    >>> format_classes(Counter({"truck": 1, "vehicle": 2}))
+    "'vehicle' x2, 'truck' x1"
+    >>> format_classes(Counter({"1": 3000, "2": 40, "4": 40, "8": 2, "a" * 30: 1}))  # ties by name
+    "'1' x3,000, '2' x40, '4' x40 and 2 more classes"
+    """
+    ranked = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+    said = ", ".join(f"{name[:20] + ('...' if len(name) > 20 else '')!r} x{n:,}" for name, n in ranked[:shown])
+    more = len(ranked) - shown
+    return said + (f" and {more} more {'class' if more == 1 else 'classes'}" if more > 0 else "")
 
 
 def detections_from_labels(
@@ -169,6 +193,21 @@ def _box_of(entry: dict, path: Path, where: str) -> list[float]:
     return box
 
 
+def _image_key(value) -> str | None:
+    """The key of a COCO image id (an image's ``id``, an entry's ``image_id``) by which the two are
+    matched: its text, a whole float's that of its integer (``10.0`` as ``10``: JSON writers that
+    write every number as a float); None for a float that is no whole number.
+
+    Examples
+    --------
+    >>> _image_key(10), _image_key(10.0), _image_key("000010"), _image_key(10.5)
+    ('10', '10', '000010', None)
+    """
+    if isinstance(value, float):
+        return str(int(value)) if value.is_integer() else None
+    return str(value)
+
+
 def _one_image(entries: list, path: Path) -> None:
     """Refuse ``entries`` naming more than one ``image_id`` (a COCO result file holds every image's
     boxes): the boxes of other images would be fitted to this one's."""
@@ -179,7 +218,7 @@ def _one_image(entries: list, path: Path) -> None:
             continue
         if first is None:
             first = (i, image)
-        elif str(image) != str(first[1]):
+        elif (_image_key(image) or str(image)) != (_image_key(first[1]) or str(first[1])):
             raise InputError(f"detection {i} is of image_id {str(image)[:20]}, detection {first[0]} of "
                              f"{str(first[1])[:20]}: a detections file holds one image's boxes (split a COCO result "
                              "file by image_id: wirescene split-coco)", path=path)
@@ -190,7 +229,7 @@ def _car_of(entry, path: Path, where: str) -> tuple[list[float], float, float] |
     it is of another class than a car; an :class:`InputError` naming ``where`` if malformed."""
     if not isinstance(entry, dict):
         raise InputError(f"{where}: expected an object with a box", path=path)
-    if not _is_car(entry):
+    if not is_car(entry):
         return None
     box = _box_of(entry, path, where)
     try:
@@ -224,6 +263,81 @@ def _read_json(path: Path):
         raise InputError(f"not a usable JSON file ({' '.join(str(exc).split())[:80]})", path=path) from None
 
 
+def _parsed(path: Path, image_size: tuple[int, int] | None) -> tuple[Detections, list]:
+    """The car boxes of the detection file ``path`` (every one, whatever its score) and the class of
+    each of its other boxes; an :class:`InputError` where it is missing or malformed."""
+    problem = path_problem(path, "detections")
+    if problem:
+        raise InputError(problem, path=path)
+    suffix = path.suffix.lower()
+    if suffix == ".txt":
+        labels = read_labels(path, image_size=image_size)  # an angle in degrees refused there, naming its line
+        dets = detections_from_labels(labels, source=str(path))
+        cars = {id(o) for o in of_types(labels, CAR_TYPES)}
+        others = [o.type for o in labels.objects if id(o) not in cars]
+    elif suffix == ".json":
+        data = _read_json(path)
+        entries = data.get("detections") if isinstance(data, dict) else data
+        if not isinstance(entries, list):
+            raise InputError("expected a list of detections or {'detections': [...]}", path=path)
+        dets = _from_entries(entries, path)
+        others = [_class_of(e) for e in entries if isinstance(e, dict) and not is_car(e)]
+    elif suffix == ".csv":
+        try:
+            # utf-8-sig: spreadsheets write a byte-order mark before the header.
+            with path.open(newline="", encoding="utf-8-sig") as fh:
+                reader = csv.DictReader(fh)
+                rows = list(reader)
+                fieldnames = reader.fieldnames  # read here: an empty file's are looked for in the closed file later
+        except (csv.Error, UnicodeDecodeError, OSError) as exc:
+            raise InputError(f"not a readable CSV file ({exc})", path=path) from None
+        # the header itself, rows or not: a file without one takes its first box for it (and reads no box)
+        if fieldnames is not None and not {"x1", "y1", "x2", "y2"} <= set(fieldnames):
+            header = ",".join(fieldnames)
+            raise InputError(f"CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha), got "
+                             f"{header if len(header) <= 40 else header[:37] + '...'!r}", path=path)
+        twice = sorted({name for name in fieldnames or () if name and fieldnames.count(name) > 1})
+        if twice:  # a row keeps a name's last column: another column's numbers (an unnamed one is never read)
+            raise InputError(f"CSV header names the column {twice[0]!r} twice", path=path)
+        dets = _from_entries(rows, path)
+        others = [_class_of(e) for e in rows if not is_car(e)]
+    else:
+        raise InputError(f"unknown detections format {suffix!r} (use .json, .csv or a KITTI .txt)", path=path)
+    return dets, others
+
+
+def read_boxes_and_classes(path: str | Path, *,
+                           image_size: tuple[int, int] | None = None) -> tuple[Detections, Counter]:
+    """Every car box of the detection file ``path``, whatever its score, and how many boxes of
+    each other class it holds (those :func:`read_detections` skips): one read for a run that keeps
+    a file's boxes and says what its files hold where none holds a car (:func:`format_classes`).
+
+    Raises
+    ------
+    InputError
+        A missing or malformed file, or boxes outside ``image_size``, as :func:`read_detections`
+        refuses them; a file without a car is no error here.
+
+    Examples
+    --------
+    >>> import json, tempfile
+    >>> entries = [{"bbox": [10, 10, 40, 80], "category_id": 1}, {"bbox": [600, 170, 80, 60], "category_id": 1},
+    ...            {"bbox": [700, 170, 80, 60], "category_id": 2}]
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "000010.json").write_text(json.dumps(entries))
+    ...     dets, classes = read_boxes_and_classes(Path(d) / "000010.json")
+    >>> len(dets), classes
+    (0, Counter({'1': 2, '2': 1}))
+    """
+    path = Path(path)
+    dets, others = _parsed(path, image_size)
+    # every box, before the floor: a file of another image is one
+    problem = boxes_problem(dets.boxes, image_size) or normalised_boxes_problem(dets.boxes)
+    if problem:
+        raise InputError(problem, path=path)
+    return dets, Counter(str(c) for c in others)
+
+
 def read_detections(path: str | Path, *, min_score: float | None = None,
                     image_size: tuple[int, int] | None = None) -> Detections:
     """Read 2D car detections of one image.
@@ -237,7 +351,8 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
       ``label``, ``class``, ``type`` or COCO's ``category_id``, ``car`` in any case or the
       number 3 (COCO's id of a car; a detector numbering its classes otherwise must name
       them); entries of another class are skipped. Entries naming an ``image_id`` (COCO)
-      must all name the same one: a COCO result file of several images is refused.
+      must all name the same one (``10`` and ``10.0`` are one): a COCO result file of several
+      images is refused.
     * ``.csv``: a header with ``x1,y1,x2,y2`` and optional ``score``, ``viewpoint_bin``,
       ``alpha``, ``image_id`` and class columns as in JSON (a file without the header is refused;
       an empty one holds no box).
@@ -280,47 +395,7 @@ def read_detections(path: str | Path, *, min_score: float | None = None,
     1
     """
     path = Path(path)
-    problem = path_problem(path, "detections")
-    if problem:
-        raise InputError(problem, path=path)
-    suffix = path.suffix.lower()
-    if suffix == ".txt":
-        labels = read_labels(path, image_size=image_size)  # an angle in degrees refused there, naming its line
-        dets = detections_from_labels(labels, source=str(path))
-        cars = {id(o) for o in of_types(labels, CAR_TYPES)}
-        others = [o.type for o in labels.objects if id(o) not in cars]
-    elif suffix == ".json":
-        data = _read_json(path)
-        entries = data.get("detections") if isinstance(data, dict) else data
-        if not isinstance(entries, list):
-            raise InputError("expected a list of detections or {'detections': [...]}", path=path)
-        dets = _from_entries(entries, path)
-        others = [_class_of(e) for e in entries if isinstance(e, dict) and not _is_car(e)]
-    elif suffix == ".csv":
-        try:
-            # utf-8-sig: spreadsheets write a byte-order mark before the header.
-            with path.open(newline="", encoding="utf-8-sig") as fh:
-                reader = csv.DictReader(fh)
-                rows = list(reader)
-                fieldnames = reader.fieldnames  # read here: an empty file's are looked for in the closed file later
-        except (csv.Error, UnicodeDecodeError, OSError) as exc:
-            raise InputError(f"not a readable CSV file ({exc})", path=path) from None
-        # the header itself, rows or not: a file without one takes its first box for it (and reads no box)
-        if fieldnames is not None and not {"x1", "y1", "x2", "y2"} <= set(fieldnames):
-            header = ",".join(fieldnames)
-            raise InputError(f"CSV header must name x1,y1,x2,y2 (optional score, viewpoint_bin, alpha), got "
-                             f"{header if len(header) <= 40 else header[:37] + '...'!r}", path=path)
-        twice = sorted({name for name in fieldnames or () if name and fieldnames.count(name) > 1})
-        if twice:  # a row keeps a name's last column: another column's numbers (an unnamed one is never read)
-            raise InputError(f"CSV header names the column {twice[0]!r} twice", path=path)
-        dets = _from_entries(rows, path)
-        others = [_class_of(e) for e in rows if not _is_car(e)]
-    else:
-        raise InputError(f"unknown detections format {suffix!r} (use .json, .csv or a KITTI .txt)", path=path)
-    # every box, before the floor: a file of another image is one
-    problem = boxes_problem(dets.boxes, image_size) or normalised_boxes_problem(dets.boxes)
-    if problem:
-        raise InputError(problem, path=path)
+    dets, others = read_boxes_and_classes(path, image_size=image_size)
     if len(dets) == 0:
         raise InputError(_no_cars(others), path=path)
     dets = dets if min_score is None else dets.subset(dets.scores >= min_score)
@@ -336,9 +411,11 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
 
     ``images`` is the COCO annotation file the detector ran on: its ``images`` name each
     ``id``'s ``file_name``, whose stem is the frame id (``training/image_2/000010.png``:
-    ``000010``). Where ``images`` names its ``categories``, an entry of a ``category_id`` alone
-    gets its name as ``category`` (a detector trained on KITTI numbers its cars 1, not COCO's 3:
-    its ``Car`` is then read as a car, and its ``Cyclist`` 3 not). Every entry is checked as
+    ``000010``); an entry's ``image_id`` matches the image of its ``id``, a whole float (``10.0``,
+    as some JSON writers write every number) that of its integer. Where ``images`` names its
+    ``categories``, an entry of a ``category_id`` alone gets its name as ``category`` (a detector
+    trained on KITTI numbers its cars 1, not COCO's 3: its ``Car`` is then read as a car, and its
+    ``Cyclist`` 3 not). Every entry is checked as
     :func:`read_detections` checks a file's, naming its place in ``results``; entries of another
     class than a car are kept (the reader skips them).
 
@@ -352,7 +429,8 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
     ------
     InputError
         Either file missing or malformed, annotations without images, an entry without an
-        ``image_id`` or of one that ``images`` lacks, two images of one ``id`` or one frame id,
+        ``image_id`` or of one that ``images`` lacks, an ``id`` or ``image_id`` that is a float
+        but no whole number, two images of one ``id`` or one frame id (naming both file names),
         a malformed entry, or boxes all under a pixel (normalised coordinates).
 
     Examples
@@ -390,15 +468,20 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
     for i, image in enumerate(listed):
         if not isinstance(image, dict) or image.get("id") in (None, "") or not isinstance(image.get("file_name"), str):
             raise InputError(f"image {i}: expected an object with an id and a file_name", path=images)
-        key, frame = str(image["id"]), Path(image["file_name"].replace("\\", "/")).stem
+        key, name = _image_key(image["id"]), image["file_name"]
+        frame = Path(name.replace("\\", "/")).stem
+        if key is None:
+            raise InputError(f"image {i}: its id {image['id']!r} is no whole number", path=images)
         if not frame:
-            raise InputError(f"image {i}: its file_name {image['file_name'][:60]!r} names no frame", path=images)
+            raise InputError(f"image {i}: its file_name {name[:60]!r} names no frame", path=images)
         if key in frame_of:
             raise InputError(f"image {i}: the id {key[:20]} of an image before it", path=images)
-        if frame in seen:
-            raise InputError(f"image {i}: the frame {frame[:40]} of image {seen[frame]} (two images of one file "
-                             "name)", path=images)
-        frame_of[key], seen[frame] = frame, i
+        if frame in seen:  # image_2/000010.png and image_3/000010.png: one FRAME.json for two images
+            j, other = seen[frame]
+            raise InputError(f"image {i} ({name[:60]!r}) and image {j} ({other[:60]!r}) are both frame "
+                             f"{frame[:40]}: one FRAME.json holds one image's boxes (list one camera's images)",
+                             path=images)
+        frame_of[key], seen[frame] = frame, (i, name)
     names = _category_names(document.get("categories"), images)
     entries = _read_json(results)
     entries = entries.get("detections") if isinstance(entries, dict) else entries
@@ -414,9 +497,12 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
         image = entry.get("image_id")
         if image in (None, ""):
             raise InputError(f"detection {i}: no image_id", path=results)
-        if str(image) not in frame_of:
+        key = _image_key(image)
+        if key is None:
+            raise InputError(f"detection {i}: its image_id {image!r} is no whole number (an image's id)", path=results)
+        if key not in frame_of:
             raise InputError(f"detection {i}: image_id {str(image)[:20]} is not an image of {images}", path=results)
-        by_frame[frame_of[str(image)]].append(entry)
+        by_frame[frame_of[key]].append(entry)
         if car is not None:
             boxes.append(car[0])
     problem = normalised_boxes_problem(boxes)

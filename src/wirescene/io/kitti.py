@@ -580,9 +580,12 @@ class KittiDataset:
             split_dir = root
         else:
             images = any(_frame_image(p) for p in root.iterdir())
+            # predict's split is testing: a root of the training split alone (the shared frames) said as such
+            other = next((s for s in ("training", "testing") if s != split and (root / s / "image_2").is_dir()), None)
             raise InputError(
                 f"not a KITTI object directory: expected {split}/image_2 and {split}/calib (or image_2 and calib)"
-                + (f"{ONE_CALIB_HINT} for a folder of one camera's frames" if images else ""),
+                + (f"{ONE_CALIB_HINT} for a folder of one camera's frames" if images else "")
+                + (f"; it holds {other}/image_2: --split {other}" if other else ""),
                 path=root,
             )
         if self._calib is None:
