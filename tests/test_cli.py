@@ -1965,7 +1965,8 @@ def test_split_coco_matches_an_image_id_written_as_a_whole_float(tmp_path):
     """A result file whose every number is a float (image_id 10.0) was refused: "image_id 10.0 is not an image of
     ann.json", whose image is 10. A whole float is its integer's id now, on either side; a fraction is refused."""
     ann = tmp_path / "ann.json"
-    ann.write_text(json.dumps({"images": [{"id": 10, "file_name": "000010.png"}, {"id": 2.0, "file_name": "000002.png"}]}))
+    images = [{"id": 10, "file_name": "000010.png"}, {"id": 2.0, "file_name": "000002.png"}]
+    ann.write_text(json.dumps({"images": images}))
     res = tmp_path / "res.json"
     res.write_text(json.dumps([{"image_id": 10.0, "category_id": 3.0, "bbox": [354.0, 185.0, 195.0, 109.0]},
                                {"image_id": 2, "category_id": 3, "bbox": [600, 170, 80, 60]}]))
@@ -1975,7 +1976,8 @@ def test_split_coco_matches_an_image_id_written_as_a_whole_float(tmp_path):
     assert_close(read_detections(out / "000010.json").boxes, [[354, 185, 549, 294]])
     assert_close(read_detections(out / "000002.json").boxes, [[600, 170, 680, 230]])
     one = tmp_path / "one.json"  # one image's boxes, its id written both ways: not refused as two images'
-    one.write_text(json.dumps([{"image_id": 10, "bbox": [354, 185, 195, 109]}, {"image_id": 10.0, "bbox": [1, 2, 3, 4]}]))
+    one.write_text(json.dumps([{"image_id": 10, "bbox": [354, 185, 195, 109]},
+                               {"image_id": 10.0, "bbox": [1, 2, 3, 4]}]))
     assert len(read_detections(one)) == 2
     for name, text, problem in (
             ("res.json", [{"image_id": 10.5, "category_id": 3, "bbox": [354, 185, 195, 109]}],
