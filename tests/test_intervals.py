@@ -188,3 +188,14 @@ def test_margin_intervals_over_a_reference_and_formatted():
     assert "Margins over coarse+gp" in text and "+25.0 [+0.0, +50.0]" in text
     with pytest.raises(ValueError, match="reference"):
         margin_intervals({"full": good}, {}, reference="coarse+gp")
+
+
+def test_the_true_positives_of_one_drive_get_no_interval_over_drives():
+    """Every draw of one drive is that drive: its [x, x] read as a share known exactly, and "1 drives"."""
+    good = _report({"a1": [0.2, 0.3], "a2": [0.4, 2.0]})
+    base = _report({"a1": [0.2, 3.0], "a2": [0.4, 2.0]})
+    reports, drives = {"coarse+gp": base, "full": good}, {"a1": "A", "a2": "A"}
+    text = format_intervals(localisation_intervals(reports, drives, n_boot=100),
+                            margins=margin_intervals(reports, drives, reference="coarse+gp", n_boot=100))
+    assert "75.0% (no interval: one drive) of 4 true positives, 1 drive\n" in text
+    assert "  full       +25.0" in text and "[+" not in text and "1 drives" not in text

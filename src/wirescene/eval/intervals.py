@@ -292,15 +292,20 @@ def format_intervals(intervals: Mapping[str, dict], *, threshold: float = 1.0,
         if f["interval"] is None:
             lines.append(f"  {variant.ljust(width)}  -")
             continue
-        n_alone = f["frames_alone"]
+        n_alone, n_drives = f["frames_alone"], f["drives"]
         alone = f" and {n_alone} frame{'s' * (n_alone != 1)} of no known drive" if n_alone else ""
-        lines.append(f"  {variant.ljust(width)}  {f['share']:.1f}% [{f['interval'][0]:.1f}, {f['interval'][1]:.1f}] "
-                     f"of {f['true_positives']} true positives, {f['drives']} drives{alone}")
+        # one cluster drawn again and again: [x, x] would read as no spread, not as no measure of it
+        span = (f"[{f['interval'][0]:.1f}, {f['interval'][1]:.1f}]" if n_drives + n_alone > 1
+                else "(no interval: one drive)")
+        lines.append(f"  {variant.ljust(width)}  {f['share']:.1f}% {span} of {f['true_positives']} true positives, "
+                     f"{n_drives} drive{'s' * (n_drives != 1)}{alone}")
     if margins:
         reference = next(iter(margins.values()))["reference"]
         lines.append(f"Margins over {reference} in points within {threshold:g} m, the same drives drawn for both:")
         for variant, f in margins.items():
-            span = "" if f["interval"] is None else " [{:+.1f}, {:+.1f}]".format(*f["interval"])
+            spread = intervals.get(variant) or {}
+            one = spread.get("drives", 2) + spread.get("frames_alone", 0) < 2  # no interval, as said above
+            span = "" if f["interval"] is None or one else " [{:+.1f}, {:+.1f}]".format(*f["interval"])
             lines.append(f"  {variant.ljust(width)}  " + ("-" if f["margin"] is None else f"{f['margin']:+.1f}{span}"))
     return "\n".join(lines)
 
