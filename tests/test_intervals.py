@@ -199,3 +199,20 @@ def test_the_true_positives_of_one_drive_get_no_interval_over_drives():
                             margins=margin_intervals(reports, drives, reference="coarse+gp", n_boot=100))
     assert "75.0% (no interval: one drive) of 4 true positives, 1 drive\n" in text
     assert "  full       +25.0" in text and "[+" not in text and "1 drives" not in text
+
+
+def test_kitti_intervals_of_one_drive_are_said_to_be_none():
+    """The KITTI APs' interval over one drive was printed [x, x] "over 1 drives": it says there is none."""
+    from wirescene.eval.kitti_metrics import ONE_DRIVE, format_kitti_intervals, format_kitti_summary
+
+    car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 20.0], 0.0, 0.9)
+    ids = [f"{i:06d}" for i in range(10)]
+    spread = kitti_intervals([[car]] * 10, [[car]] * 10, ids, dict.fromkeys(ids, "drive_1"), n_boot=20)
+    assert format_kitti_intervals({"full": spread}) == ONE_DRIVE
+    point = {"full": kitti_metrics([[car]] * 10, [[car]] * 10), "base": kitti_metrics([[car]] * 10, [[]] * 10)}
+    spreads, margins = kitti_variant_intervals([[car]] * 10, {"full": [[car]] * 10, "base": [[]] * 10}, ids,
+                                               dict.fromkeys(ids, "drive_1"), reference="base", n_boot=20)
+    summary = format_kitti_summary(point, intervals=spreads, margins=margins)
+    assert summary.count(ONE_DRIVE) == 1 and "in 10 frames" in summary  # once for the APs and their margins
+    two = kitti_intervals([[car]] * 10, [[car]] * 10, ids, {f: f"drive_{f < '000005'}" for f in ids}, n_boot=20)
+    assert "over 2 drives" in format_kitti_intervals({"full": two})

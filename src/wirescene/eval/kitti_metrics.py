@@ -1069,7 +1069,8 @@ def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict]
     first = next(iter(results.values()))
     n = first["n_gt"]["car"]
     name_w = max(len("variant"), *(len(v) for v in results))
-    lines = [f"KITTI Car AP R40 (%), moderate ({n['moderate']} cars in {first['n_frames']} frames; "
+    frames = first["n_frames"]
+    lines = [f"KITTI Car AP R40 (%), moderate ({n['moderate']} cars in {frames} frame{'s' * (frames != 1)}; "
              f"easy {n['easy']}, hard {n['hard']} cars)",
              f"{'variant':<{name_w}} " + " ".join(f"{c[0]:>7}" for c in _SUMMARY_COLUMNS)]
     for v, r in results.items():
@@ -1077,9 +1078,14 @@ def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict]
     note = _ceiling_note(n)
     lines += [note] if note else []
     for table in (intervals, margins):
-        if table:
-            lines += ["", format_kitti_intervals(table)]
+        text = format_kitti_intervals(table) if table else ""
+        if text and text not in lines:  # one drive: said once for the APs and their margins
+            lines += ["", text]
     return "\n".join(lines)
+
+
+#: What :func:`format_kitti_intervals` says of the figures of one drive: every draw is that drive.
+ONE_DRIVE = "No interval over drives of the APs or their margins: the frames are of one drive"
 
 
 def format_kitti_intervals(intervals: dict[str, dict]) -> str:
@@ -1104,9 +1110,11 @@ def format_kitti_intervals(intervals: dict[str, dict]) -> str:
     some = next(iter(intervals.values()))
     alone = some["frames_alone"]
     margin = some.get("margin_over")
+    if some["drives"] + alone < 2:  # every draw that one drive: [x, x] would read as an AP known exactly
+        return ONE_DRIVE
     name_w = max(len("variant"), *(len(v) for v in intervals))
     lines = [(f"AP margins over {margin} in points, " if margin else "")
-             + f"{some['level']:g}% bootstrap interval over {some['drives']} drives"
+             + f"{some['level']:g}% bootstrap interval over {some['drives']} drive{'s' * (some['drives'] != 1)}"
              + (f" and {alone} frame{'s' * (alone != 1)} of no known drive" if alone else "")
              + f", {some['difficulty']} ({some['draws']} draws; every draw ranks the estimates again"
              + ("; the same drives for both" if margin else "") + "):",
