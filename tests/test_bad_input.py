@@ -331,7 +331,8 @@ CASES = {
     "fit without --calib": (lambda t: ["fit", _fit_case(t)[1], "--out", t / "o"], r"--calib: missing \(required\)$"),
     "fit without an image": (lambda t: ["fit", "--calib", "c.txt", "--out", t / "o"], r"IMAGE: missing \(required\)$"),
     "--frames twice": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", f"{FRAME},{FRAME}"], "listed twice"),
-    "--frames unknown": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "424242"], "no frame 424242"),
+    "--frames unknown": (lambda t: ["eval", KITTI_ROOT, "--variant", "coarse", "--frames", "424242"],
+                        r"--frames: no labelled frame 424242 in .*kitti/training$"),  # was "in the dataset"
     "predict of a split without .png images": (
         lambda t: ["predict", _jpeg_split(t), "--out", t / "submission", "--workers", "1"],
         r"testing/image_2: no \.png file \(it holds \.jpg files; KITTI's images are \.png\)$"),

@@ -604,6 +604,25 @@ def test_train_parts_of_two_drives_with_a_bad_label_file_says_so_not_one_drive(t
                                   kitti_root=root, frames=["000002", "000010"], calibrate_real=True)
 
 
+def test_train_part_detector_refuses_a_split_without_labels_first(tmp_path, monkeypatch):
+    """A root without label_2/ was refused for its frames' one fold (the held-out calibration's reason, not the real
+    one) or, without the calibration, after its synthetic scenes (some 1.3 s each) were made."""
+    import wirescene.training.parts as parts
+    from conftest import kitti_copy
+    from wirescene.core.errors import InputError
+
+    def no_scenes(*a, **kw):
+        raise AssertionError("synthetic scenes made")
+
+    monkeypatch.setattr(parts, "make_synth_patch_data", no_scenes)
+    split = kitti_copy(tmp_path, ["000010"], subdirs=("image_2", "calib"), split="testing") / "testing"
+    for calibrate, scenes in ((True, 0), (True, 1), (False, 1)):
+        with pytest.raises(InputError) as info:
+            parts.train_part_detector(None, n_trees=2, max_depth=4, kind="ghog_ms", synth_scenes=scenes,
+                                      kitti_root=split, calibrate_real=calibrate)
+        assert str(info.value) == f"{split}: training needs label_2/ ground truth", (calibrate, scenes)
+
+
 def test_kitti_eval_frames_reads_the_frames_asked_for():
     from wirescene.training.parts import kitti_eval_frames
 

@@ -194,6 +194,75 @@ def test_train_viewpoints_decodes_every_image_before_training(tmp_path, monkeypa
     assert not (tmp_path / "v.npz").exists()
 
 
+# the train commands of real frames
+TRAIN_ON_ROOT = ["all", "detector", "viewpoints", "parts", "parts --no-calibrate"]
+
+
+def _train(command, root, tmp_path, *more):
+    """`wirescene train COMMAND ROOT --out` a path under ``tmp_path``, and ``more``."""
+    name, *options = command.split()
+    out = tmp_path / ("models" if name == "all" else f"{name}.npz")
+    return cli("train", name, root, "--out", out, *options, *more)
+
+
+def _no_image_read(monkeypatch):
+    """Make any read of an image (its pixels or its header) fail the test."""
+    from wirescene.io.kitti import KittiDataset
+
+    def read(self, frame_id):
+        raise AssertionError(f"image of {frame_id} read")
+
+    monkeypatch.setattr(KittiDataset, "image", read)
+    monkeypatch.setattr(KittiDataset, "image_size", read)
+
+
+@pytest.mark.parametrize("command", TRAIN_ON_ROOT)
+def test_train_commands_refuse_a_split_without_labels_before_reading_an_image(tmp_path, monkeypatch, command):
+    """A split without label_2/ (KITTI's testing/ given as the root, or a root whose training/ has none) is refused at
+    once in one line naming it: train detector and viewpoints decoded every image first (some 90 s of KITTI's 7,518),
+    train parts of one drive said its held-out calibration needed frames of 2 or more folds (with --no-calibrate it
+    said the reason after its synthetic scenes, minutes in)."""
+    _no_image_read(monkeypatch)
+    testing = kitti_copy(tmp_path / "k", ["000010"], subdirs=("image_2", "calib"), split="testing") / "testing"
+    unlabelled = kitti_copy(tmp_path / "u", LABELLED, subdirs=("image_2", "calib"))
+    for root, split in ((testing, testing), (unlabelled, unlabelled / "training")):
+        for frames in ([], ["--frames", "000010"], ["--frames", "424242"]):  # the labels before any frame
+            line = one_line_error(_train(command, root, tmp_path, *frames))
+            assert line == f"wirescene: error: {split}: training needs label_2/ ground truth", (root, frames, line)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["k", "u"]  # nothing written
+
+
+@pytest.mark.parametrize("command", TRAIN_ON_ROOT)
+def test_train_frames_unknown_names_the_labelled_frames_and_their_folder(tmp_path, command):
+    """--frames said "no frame X in the dataset" where --split-file says "no labelled frame X in DIR": a frame with an
+    image but no label file was "not in the dataset"; now both say which frames count and where they were looked for."""
+    root = kitti_copy(tmp_path / "kitti", LABELLED)
+    (root / "training" / "label_2" / "000010.txt").unlink()  # its image stays
+    for frames, unknown in (("000010", "000010"), ("000002,424242,999999", "424242 (and 1 more)")):
+        line = one_line_error(_train(command, root, tmp_path, "--frames", frames))
+        assert line == f"wirescene: error: --frames: no labelled frame {unknown} in {root / 'training'}", line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kitti"]
+
+
+@pytest.mark.parametrize("command", TRAIN_ON_ROOT)
+def test_train_commands_refuse_a_label_without_its_image_before_training(tmp_path, monkeypatch, command):
+    """A label file whose frame has no image is refused in one line naming the image, before any step trains (the
+    frames of a training are its label files: an image without one is not trained on, as --frames says above)."""
+    def no_training(*a, **kw):
+        raise AssertionError("the training started")
+
+    for target in ("wirescene.training.pipeline._Run", "wirescene.training.parts.train_part_detector",
+                   "wirescene.training.kitti_detector.train_detector_bank_kitti",
+                   "wirescene.predetect.viewpoint_classifier.kitti_examples"):
+        monkeypatch.setattr(target, no_training)
+    root = kitti_copy(tmp_path / "kitti", LABELLED)
+    image = root / "training" / "image_2" / "000010.png"
+    image.unlink()
+    line = one_line_error(_train(command, root, tmp_path))
+    assert line == f"wirescene: error: {image}: image file not found", line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kitti"]
+
+
 # -- models directories -------------------------------------------------------------------
 
 

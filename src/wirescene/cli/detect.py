@@ -138,6 +138,7 @@ def detector(out, kitti_root, frames, split_file, folds, no_calibration, calibra
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--calibration") from None
         ds = KittiDataset(kitti_root)
+        ds.require_labels("training")  # before any frame is chosen or image decoded
         ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir)
         fl = _fold_list(folds)
         ids = ds.frame_ids() if ids is None else ids
@@ -194,6 +195,7 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
 
     check_output_file(out, "--out")
     ds = KittiDataset(kitti_root)
+    ds.require_labels("training")  # before any frame is chosen or image decoded
     ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir) or ds.frame_ids()
     say_off_centre_frames(ds, ids, images=True)  # as the other train commands: a truncated image refused now
     clf = train_on_kitti(ds, ids, seed=seed)

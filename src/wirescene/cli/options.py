@@ -193,8 +193,22 @@ def check_output_dir(path: Path | str | None, option: str) -> None:
         raise click.BadParameter(problem, param_hint=option)
 
 
-def parse_frames(value: str | None, known: list[str], option: str = "--frames") -> list[str] | None:
-    """Comma-separated frame ids, each known and listed once; None keeps all frames."""
+def parse_frames(value: str | None, known: list[str], option: str = "--frames", *, where,
+                 what: str = "frame") -> list[str] | None:
+    """Comma-separated frame ids, each known and listed once; None keeps all frames. An unknown
+    id is ``no {what} ID in {where}``, the words of ``--split-file``'s
+    (:func:`wirescene.io.splits.read_split_file`): which frames count (labelled ones, images,
+    records) and the folder they were looked for in.
+
+    Examples
+    --------
+    >>> parse_frames("000010, 000002", ["000002", "000010"], where="kitti/training")
+    ['000010', '000002']
+    >>> parse_frames("000099", ["000002", "000010"], where="kitti/training", what="labelled frame")
+    Traceback (most recent call last):
+    ...
+    click.exceptions.BadParameter: no labelled frame 000099 in kitti/training
+    """
     if value is None:
         return None
     frames = [f.strip() for f in value.split(",") if f.strip()]
@@ -208,7 +222,7 @@ def parse_frames(value: str | None, known: list[str], option: str = "--frames") 
     unknown = [f for f in frames if f not in set(known)]
     if unknown:
         more = f" (and {len(unknown) - 1} more)" if len(unknown) > 1 else ""
-        raise click.BadParameter(f"no frame {unknown[0]} in the dataset{more}", param_hint=option)
+        raise click.BadParameter(f"no {what} {unknown[0]}{more} in {where}", param_hint=option)
     return frames
 
 
@@ -372,14 +386,15 @@ def read_drive_map(dataset, mapping: Path | None) -> tuple[dict[str, str], Path 
 def select_frames(frames: str | None, split_file: Path | None, known: list[str], *, where, what: str = "labelled frame",
                   option: str = "--frames") -> list[str] | None:
     """The frames chosen by ``--frames`` (comma-separated) or ``--split-file`` (not both),
-    each one of ``known``; None: neither was given (all frames)."""
+    each one of ``known``, an unknown one refused in the same words by either (``no {what}
+    ID in {where}``); None: neither was given (all frames)."""
     if frames is not None and split_file is not None:
         raise click.UsageError(f"{option} and --split-file both choose the frames: give one")
     if split_file is not None:
         from wirescene.io.splits import read_split_file
 
         return read_split_file(split_file, known=known, what=what, where=where)
-    return parse_frames(frames, known, option)
+    return parse_frames(frames, known, option, where=where, what=what)
 
 
 def refuse_given(options: Mapping[str, object], *, needs: str | None = None, why: str | None = None) -> None:

@@ -123,6 +123,7 @@ def parts(out, seed, n_views, n_trees, max_depth, kind, kitti_root, frames, spli
         from wirescene.io.kitti import KittiDataset
 
         ds = KittiDataset(kitti_root)
+        ds.require_labels("training")  # the real reason, before any frame, image or calibration fold is looked at
         if frames is not None or split_file is not None:
             frames = select_frames(frames, split_file, ds.frame_ids(), where=ds.split_dir)
         # the real frames' calibrations and images, a truncated one refused before the training reads it

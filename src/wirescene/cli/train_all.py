@@ -78,10 +78,9 @@ def train_all_cmd(kitti_root, out, frames, split_file, n_folds, drive_mapping, s
         check_output_dir(options["parts"]["synth_cache"], "--set parts.synth_cache")
     if frames is not None and split_file is not None:
         raise click.UsageError("--frames and --split-file both choose the frames: give one")
-    ids = None
-    if frames is not None:
-        dataset = KittiDataset(kitti_root)
-        ids = parse_frames(frames, dataset.frame_ids())
+    dataset = KittiDataset(kitti_root)
+    dataset.require_labels("training")  # before --frames is looked for among its labels
+    ids = parse_frames(frames, dataset.frame_ids(), where=dataset.split_dir, what="labelled frame")
     try:  # the steps an earlier run left, to tell those this run keeps (a manifest unread: train_all says why)
         earlier = manifest_steps(out) if resume else {}
     except InputError:

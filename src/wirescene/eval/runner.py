@@ -354,8 +354,7 @@ def evaluate_dataset(
     problem = None if predictions_dir is None else output_dir_problem(predictions_dir)
     if problem:  # before any fit: "" would write into the working directory, a file fail after the first frame
         raise ArgumentError("predictions_dir", problem)
-    if not dataset.has_labels:
-        raise InputError("evaluation needs label_2/ ground truth", path=dataset.split_dir)
+    dataset.require_labels("evaluation")
     if notify is None:
         notify = notify_stderr
     variants = [get_variant(v).name for v in variants]

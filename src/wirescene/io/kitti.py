@@ -613,6 +613,24 @@ class KittiDataset:
         """Whether the split has a ``label_2/`` directory (training split)."""
         return (self.split_dir / "label_2").is_dir()
 
+    def require_labels(self, use: str) -> None:
+        """Refuse a split without ``label_2/`` (KITTI's ``testing/``) for ``use`` (``"training"``,
+        ``"evaluation"``), checked before any frame is chosen or image read (a refusal after
+        decoding thousands of images would cost minutes).
+
+        Raises
+        ------
+        InputError
+            Naming the split folder: ``"{use} needs label_2/ ground truth"``.
+
+        Examples
+        --------
+        >>> from wirescene.core.resources import DATA_DIR
+        >>> KittiDataset(DATA_DIR / "sample" / "kitti").require_labels("training")  # labelled: nothing
+        """
+        if not self.has_labels:
+            raise InputError(f"{use} needs label_2/ ground truth", path=self.split_dir)
+
     def frame_ids(self) -> list[str]:
         """Sorted frame ids (file stems), from ``label_2`` if present, else the images'."""
         if self._ids is None:

@@ -269,6 +269,7 @@ def train_on_kitti(dataset, frames, *, C: float = C, seed: int = 0) -> Viewpoint
     """:func:`fit_viewpoint_classifier` of :func:`kitti_examples` of ``frames`` (refused by
     :func:`check_trainable` first)."""
     frames = list(frames)
+    dataset.require_labels("training")
     check_trainable(dataset, frames)
     x, y = kitti_examples(dataset, frames, seed=seed)
     return fit_viewpoint_classifier(x, y, C=C, meta={"frames": [str(f) for f in frames], "seed": seed})

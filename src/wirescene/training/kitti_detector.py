@@ -1104,6 +1104,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     say = progress or (lambda msg: None)
     t0 = time.time()
     ds = KittiDataset(kitti_root, split=split)
+    ds.require_labels("training")
     ids = list(frames) if frames else ds.frame_ids()
     if folds is not None:
         ids = frames_in_folds(ids, folds)

@@ -792,12 +792,15 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
         if int(heldout) >= n_cars:
             raise ArgumentError("heldout", f"holds out {int(heldout):,} of the {n_cars} CAD cars: at most "
                                            f"{n_cars - 1}, so that the evaluation's forest has a car to learn from")
-    real_only = kitti_root is not None and not n_az and not synth_scenes
-    if real_only or calibrate_real:  # checked before any patch is made
+    if kitti_root is not None:  # the real reason, before the folds' checks below and any patch made
         from wirescene.io.kitti import KittiDataset
-        from wirescene.training.parts_real import REAL_MAX_OCCLUDED, REAL_MIN_BOX_H, trainable_car_counts
 
         ds = KittiDataset(kitti_root)
+        ds.require_labels("training")
+    real_only = kitti_root is not None and not n_az and not synth_scenes
+    if real_only or calibrate_real:  # checked before any patch is made
+        from wirescene.training.parts_real import REAL_MAX_OCCLUDED, REAL_MIN_BOX_H, trainable_car_counts
+
         frames = ds.frame_ids() if frames is None else list(frames)
         car_counts = ds.car_counts(frames) if real_only else {}
         if real_only and not any(car_counts.values()):
@@ -838,10 +841,9 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
         data = sd if data is None else _merge(data, sd)
     real = None
     if kitti_root is not None:
-        from wirescene.io.kitti import KittiDataset
         from wirescene.training.parts_real import make_real_patch_data
 
-        frames = KittiDataset(kitti_root).frame_ids() if frames is None else list(frames)
+        frames = ds.frame_ids() if frames is None else list(frames)
         real = make_real_patch_data(kitti_root, frames, kinds=kinds, seed=seed, max_patches=max_real_patches,
                                     label_shapes=label_shapes, progress=progress)
         report["frames"] = frames

@@ -354,8 +354,7 @@ def train_all(
         raise ValueError(f"n_folds must be an integer from 2 to {MAX_FOLDS}, got {n_folds!r}")
     opts = check_options(options or {})
     dataset = KittiDataset(kitti_root)
-    if not dataset.has_labels:
-        raise InputError("training needs label_2/ ground truth", path=dataset.split_dir)
+    dataset.require_labels("training")
     ids = _training_frames(dataset, frames, split_file)
     data_sha256, cars, images = _check_frames(dataset, ids, notify=notify)  # before anything is trained or written
     check_trainable(dataset, ids)  # the viewpoint step's bins, before the steps ahead of it train
