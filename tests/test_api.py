@@ -380,9 +380,26 @@ def test_estimates_check_their_shapes_where_they_are_made():
                               ("dims", [1.5, 1.6], r"dims must have shape \(3,\)"),
                               ("shape", np.zeros((1, 5)), r"shape must have shape \(\*,\)"),
                               ("vertices", np.zeros((10, 3)), r"vertices must have shape \(36, 3\), got \(10, 3\)"),
-                              ("visibility", np.ones(10, bool), r"visibility must have shape \(36,\)")):
+                              ("visibility", np.ones(10, bool), r"visibility must have shape \(36,\)"),
+                              ("hidden_by", ["self"] * 10, r"hidden_by must have shape \(36,\)")):
         with pytest.raises(wirescene.ShapeError, match=f"^{says}"):
             ObjectEstimate(**{**car, name: value})
+
+
+def test_what_hides_a_cars_vertices_is_said_in_known_words_and_agrees_with_its_visibility():
+    """``hidden_by`` names what hides each vertex in the words of ``HIDDEN_BY`` and makes the car's
+    visibility (given, it must agree): a picture would draw one and a metric count the other."""
+    from wirescene.core.types import ObjectEstimate
+
+    car = dict(detection_index=0, box2d=[300.0, 180.0, 520.0, 300.0], score=0.8, location=[-2.0, 1.65, 12.0],
+               R=np.eye(3), dims=[1.5, 1.6, 3.9], cost=0.0, vertices=np.zeros((36, 3)))
+    reasons = ["visible"] * 30 + ["self", "truncated", "other-car", "occluder", "self", "self"]
+    made = ObjectEstimate(**car, hidden_by=reasons)
+    assert made.visibility.tolist() == [True] * 30 + [False] * 6 and made.to_dict()["hidden_by"] == reasons
+    with pytest.raises(wirescene.ArgumentError, match="^hidden_by: unknown reason 'mask' "):
+        ObjectEstimate(**car, hidden_by=reasons[:-1] + ["mask"])
+    with pytest.raises(wirescene.ArgumentError, match="^hidden_by: vertex 30 is 'self', but visibility says it is vis"):
+        ObjectEstimate(**car, hidden_by=reasons, visibility=np.ones(36, bool))
 
 
 def test_estimates_refuse_non_finite_numbers_where_they_are_made():

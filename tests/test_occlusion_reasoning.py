@@ -188,11 +188,11 @@ def test_normalised_coordinates_are_the_whole_rows_to_the_bit():
     assert normalised_coordinates(uv).tobytes() == want.tobytes()
 
 
-def test_occlusion_reasoning_changes_the_estimate_where_a_car_hides_another():
-    """A scene built to need it: the far car's rear-left is hidden by the near car, and
-    perfect evidence is missing exactly there. Without occlusion reasoning (fg) the fit
-    calls those vertices visible; the searched occluder (fg+so), deterministic occlusion
-    (fg+do) and both (full) recover them."""
+@pytest.fixture(scope="module")
+def near_and_far():
+    """A scene built to need occlusion reasoning: the far car's rear-left is hidden by the near
+    car, and perfect evidence is missing exactly there; fitted with fg, fg+so, fg+do and full.
+    ``(fit, self_hidden (2, 36), gamma (2, 36))``."""
     from wirescene.core.groundplane import alpha_from_rotation_y, object_pose, transform
     from wirescene.core.types import Detections
     from wirescene.core.wireframe import FACES
@@ -211,14 +211,22 @@ def test_occlusion_reasoning_changes_the_estimate_where_a_car_hides_another():
     uv = camera.project(V)
     self_hidden = self_occlusion(V, FACES, camera.center)
     gamma = inter_object_occlusion(V, FACES, camera.center) & ~self_hidden
-    assert gamma[1].sum() >= 8 and not gamma[0].any()
-    visible = ~self_hidden & ~gamma
     dets = Detections(np.concatenate([uv.min(1), uv.max(1)], 1), np.ones(2), alpha_from_rotation_y(az, x, z))
     # c for this evidence's own scale (floor -0.55, peak 1.75), not the shipped calibration,
     # which belongs to the part detectors: the test is about the mechanism.
     options = FitOptions(lifting=LiftingOptions(n_particles=10), inference=InferenceOptions(occluded_score=0.25))
-    fit = fit_frame(camera, dets, ["fg", "fg+so", "fg+do", "full"], evidence=GaussianVertexEvidence(uv, visible),
-                    options=options)
+    fit = fit_frame(camera, dets, ["fg", "fg+so", "fg+do", "full"],
+                    evidence=GaussianVertexEvidence(uv, ~self_hidden & ~gamma), options=options)
+    return fit, self_hidden, gamma
+
+
+def test_occlusion_reasoning_changes_the_estimate_where_a_car_hides_another(near_and_far):
+    """Without occlusion reasoning (fg) the fit calls the far car's vertices the near car hides
+    visible; the searched occluder (fg+so), deterministic occlusion (fg+do) and both (full)
+    recover them."""
+    fit, self_hidden, gamma = near_and_far
+    assert gamma[1].sum() >= 8 and not gamma[0].any()
+    visible = ~self_hidden & ~gamma
     candidates = ~self_hidden[1]
 
     def occlusion_accuracy(variant):
@@ -228,6 +236,31 @@ def test_occlusion_reasoning_changes_the_estimate_where_a_car_hides_another():
     assert occlusion_accuracy("fg") < 0.75
     for variant in ("fg+so", "fg+do", "full"):
         assert occlusion_accuracy(variant) >= 0.85, variant
+
+
+def test_the_fit_says_what_hides_each_vertex(near_and_far):
+    """Each fitted car names what hides each vertex, as the variant's model does: the near car
+    (``other-car``) where the variant casts rays between cars and searches a mask too (full),
+    the occluder mask it chose (``occluder``) where a mask alone stands for the occlusion (fg+so,
+    fg+do), nothing but the car itself without occlusion reasoning (fg); ``visibility`` is where
+    it says ``visible``, and the JSON carries it."""
+    from wirescene.core.wireframe import HIDDEN_BY
+
+    fit, self_hidden, gamma = near_and_far
+    kinds = {}
+    for variant, estimate in fit.estimates.items():
+        near, far = estimate.cars
+        for car in (near, far):
+            assert car.hidden_by.shape == (36,) and set(car.hidden_by) <= set(HIDDEN_BY)
+            assert np.array_equal(car.visibility, car.hidden_by == "visible"), variant
+            assert car.to_dict()["hidden_by"] == car.hidden_by.tolist()
+        assert not {"other-car", "occluder"} & set(near.hidden_by), variant  # nothing before the near car
+        kinds[variant] = {str(r) for r in far.hidden_by if r in ("other-car", "occluder")}
+        assert ("occluder" in kinds[variant]) == (far.occluder_mask != 0), variant
+    assert kinds["fg"] == set() and kinds["fg+so"] == kinds["fg+do"] == {"occluder"}
+    assert "other-car" in kinds["full"]
+    far = fit.estimates["full"].cars[1]
+    assert (far.hidden_by == "self").sum() >= 8  # its far side
 
 
 def test_c_calibration_round_trip_and_loud_failures(tmp_path):

@@ -166,7 +166,8 @@ def test_birds_eye_view_names_kitti_axes_numbers_the_overlays_cars_and_keeps_its
         assert not key.get_window_extent(renderer).overlaps(ax.get_window_extent(renderer))
         assert fig.bbox.y0 <= key.get_window_extent(renderer).y0  # not cut off by the figure's edge
         labels = [t.get_text() for t in key.get_texts()]
-        assert labels[:2] == ["estimate (#n: car n; a line marks the front)", "ground truth"]
+        drawn = ["estimate (#n: car n; a line marks the front)"] if scene.objects else []  # no car, no red entry
+        assert labels[:len(drawn) + 1] == [*drawn, "ground truth"]
         assert {"camera", "field of view"} <= set(labels)
     tags = _tags(fig, renderer)
     assert sorted(tags) == ["#1", "#2"]
@@ -522,3 +523,147 @@ def test_a_text_is_measured_once_in_each_font():
     assert text_size("missed", 7, 1.0, 0.2) == first and _text_width.cache_info().hits == 1
     with rc_context({"font.family": "monospace"}):
         assert text_size("missed", 7, 1.0, 0.2) != first
+
+
+def _occluded_car(camera, *, mask: int | None | str = "band"):
+    """A car cut by the image's right side whose vertices are hidden by each thing that can hide one:
+    the car itself, the border, another car (three vertices said so) and the occluder mask of the
+    bottom 40%, the car's ``occluder_mask`` (``mask``: another index or None). ``(car, uv (36, 2))``."""
+    from wirescene.core.groundplane import transform
+    from wirescene.core.shape import load_default
+    from wirescene.core.wireframe import FACES
+    from wirescene.infer.likelihood import outside_image
+    from wirescene.infer.masks import mask_hidden, occluder_masks
+    from wirescene.infer.occlusion import hidden_reasons, self_occlusion
+
+    band = int(np.flatnonzero((occluder_masks() == [0.0, 0.6, 1.0, 1.0]).all(1))[0])
+    mask = band if mask == "band" else mask
+    dims, location = np.array([1.5, 1.6, 3.9]), np.array([6.5, 1.65, 9.0])
+    vertices = transform(load_default().mean, location, rotation_y(0.3))
+    uv = camera.project(vertices)
+    own, border = self_occlusion(vertices, FACES, camera.center), outside_image(camera, uv)
+    other = np.zeros(36, bool)
+    other[np.flatnonzero(~own & ~border & ~mask_hidden(uv, band))[:3]] = True
+    reasons = hidden_reasons(own, truncated=border, other_car=other, occluder=mask_hidden(uv, band))
+    car = ObjectEstimate(0, _image_box(camera, dims, location, 0.3), 0.5, location, rotation_y(0.3), dims, 0.0,
+                         vertices=vertices, hidden_by=reasons, occluder_mask=mask)
+    return car, uv
+
+
+def _marker(collection) -> str:
+    """The marker of a scatter's ``collection`` (of those the overlay draws)."""
+    from matplotlib.markers import MarkerStyle
+
+    path = collection.get_paths()[0]
+    for m in ("o", "x", "s", "<", ">", "^", "v"):
+        style = MarkerStyle(m)
+        own = style.get_path().transformed(style.get_transform())
+        if own.vertices.shape == path.vertices.shape and np.allclose(own.vertices, path.vertices):
+            return m
+    raise AssertionError("an unknown marker")
+
+
+def test_the_overlay_marks_each_hidden_vertex_by_what_hides_it(camera):
+    """A fitted car's hidden vertex is marked by what hides it, by shape (colour is the car's
+    verdict): a faint ring the car itself, an x another car, an open square the occluder mask, a
+    triangle pointing out at the image's edge the border (off the picture, it was not drawn at
+    all); the key lists the marks drawn, no others (all hidden vertices were one open dot)."""
+    from matplotlib.collections import PathCollection
+    from matplotlib.colors import to_rgba
+
+    from wirescene.io.pictures import EST_COLOR, HIDDEN_MARKS, overlay
+
+    car, uv = _occluded_car(camera)
+    reasons = car.hidden_by
+    assert {"self", "truncated", "other-car", "occluder", "visible"} == set(reasons)
+    ax = overlay(np.zeros((375, 1242, 3), np.uint8), camera, SceneEstimate("full", [car]), edges=EDGES).axes[0]
+    drawn = {}
+    for c in ax.collections:
+        if isinstance(c, PathCollection) and len(c.get_offsets()):
+            drawn.setdefault(_marker(c), []).append(c)
+    dots = drawn.pop("o")
+    filled = [c for c in dots if len(c.get_facecolor()) and np.allclose(c.get_facecolor()[0], to_rgba(EST_COLOR))]
+    ring = [c for c in dots if c not in filled]
+    assert len(filled) == len(ring) == 1 and np.allclose(filled[0].get_offsets(), uv[reasons == "visible"])
+    assert np.allclose(ring[0].get_offsets(), uv[reasons == "self"])
+    assert not np.any(ring[0].get_facecolor()[:, 3])  # no face: faint
+    assert np.allclose(drawn["x"][0].get_offsets(), uv[reasons == "other-car"])
+    assert np.allclose(drawn["s"][0].get_offsets(), uv[reasons == "occluder"])
+    assert np.allclose(drawn["s"][0].get_facecolor()[0], to_rgba("white"))
+    # off the right side: at the edge, inside the picture, at the height it left at, pointing right
+    edge = drawn.pop(">")[0].get_offsets()
+    assert set(drawn) == {"x", "s"} and len(edge) == (reasons == "truncated").sum() > 0
+    assert np.all((edge[:, 0] > 1230) & (edge[:, 0] < 1242))
+    assert np.allclose(np.sort(edge[:, 1]), np.sort(uv[reasons == "truncated", 1]))
+    key = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert [k for k in key if k.startswith(("hidden", "outside"))] == [m[3] for m in HIDDEN_MARKS.values()]
+    alone = ObjectEstimate(0, car.box, 0.5, car.location, car.R, car.dims, 0.0, vertices=car.vertices,
+                           hidden_by=np.where(reasons == "visible", "visible", "self"))  # only the car itself hides
+    key = [t.get_text() for t in overlay(np.zeros((375, 1242, 3), np.uint8), camera, SceneEstimate("full", [alone]),
+                                         edges=EDGES).axes[0].get_legend().get_texts()]
+    assert [k for k in key if k.startswith(("hidden", "outside"))] == ["hidden by the car itself"]
+
+
+def test_the_overlay_hatches_the_occluder_mask_the_fit_chose(camera):
+    """The region of the car's projected box that the occluder mask the fit chose covers (the
+    vertices in it are those the mask hides) is drawn lighter and hatched, nothing else changes;
+    a car without a mask (0, or a variant without one: None) gets none."""
+    from wirescene.core.occluders import mask_box
+    from wirescene.infer.masks import mask_hidden
+    from wirescene.io.pictures import overlay
+
+    def pixels(mask):
+        car = _occluded_car(camera, mask=mask)[0]
+        fig = overlay(np.zeros((375, 1242, 3), np.uint8), camera, SceneEstimate("full", [car]), edges=EDGES)
+        hatched = [p for p in fig.axes[0].patches if p.get_hatch()]
+        _drawn(fig)
+        return np.asarray(fig.canvas.buffer_rgba())[..., :3].astype(int), hatched
+
+    car, uv = _occluded_car(camera)
+    u0, v0, u1, v1 = mask_box(uv, car.occluder_mask)
+    inside = (uv[:, 0] >= u0) & (uv[:, 0] <= u1) & (uv[:, 1] >= v0) & (uv[:, 1] <= v1)
+    assert np.array_equal(inside, mask_hidden(uv, car.occluder_mask)) and inside.any() and not inside.all()
+    with_mask, hatched = pixels(car.occluder_mask)
+    assert len(hatched) == 1 and np.allclose(hatched[0].get_bbox().bounds, (u0, v0, u1 - u0, v1 - v0))
+    for none in (0, None):
+        without, hatched = pixels(none)
+        assert not hatched
+        changed = np.any(with_mask != without, axis=2)
+        rows, cols = np.nonzero(changed)
+        assert rows.min() >= v0 - 1 and rows.max() <= v1 + 1 and cols.min() >= u0 - 1  # only in the region
+        region = changed[int(np.ceil(v0)):int(v1), int(np.ceil(u0)):1242]
+        assert region.mean() > 0.5  # lighter all over, but where the car's lines lie on it
+        assert np.all(with_mask[changed] >= without[changed])
+
+
+def test_the_key_lists_the_estimates_red_only_where_a_red_car_is_drawn(camera):
+    """Every car counted false (a frame labelled without cars): violet, and neither view's key
+    lists the red estimate; the front's mark is still said, by the first car entry."""
+    from wirescene.io.pictures import birds_eye, overlay
+
+    scene, _ = _judged_scene(camera)
+    image = np.zeros((375, 1242, 3), np.uint8)
+    overlay_key = _marks(overlay(image, camera, scene, gt=[]))["key"]
+    assert not any(k.startswith("estimate") for k in overlay_key)
+    assert overlay_key[1] == "#n c false: no labelled car of its own (IoU > 0.5) (a cross marks the front)"
+    bev_key = _marks(birds_eye(scene, gt=[], camera=camera))["key"]
+    assert not any(k.startswith("estimate") for k in bev_key)
+    assert bev_key[0] == "#n false: no labelled car of its own (IoU > 0.5) (#n: car n; a line marks the front)"
+    assert _marks(overlay(image, camera, scene))["key"][0] == "estimate (a cross marks the front)"  # not judged: red
+
+
+def test_the_pictures_draw_the_labels_the_evaluation_counts_as_cars():
+    """The labels drawn beside a fit are the evaluation's cars (``CAR_TYPES``, its matching's
+    one definition), not a type spelt again where the pictures are made."""
+    import re
+    from pathlib import Path
+
+    import wirescene
+
+    root = Path(wirescene.__file__).parent
+    spelt = []
+    for name in ("api.py", "cli/main.py", "eval/predict.py", "eval/report.py", "io/outputs.py", "io/pictures.py"):
+        for n, line in enumerate((root / name).read_text().splitlines(), 1):
+            if re.search(r'of_type\("Car"|type\s*==\s*"Car"', line):
+                spelt.append(f"{name}:{n}")
+    assert not spelt

@@ -579,7 +579,8 @@ def draw(image, calib, scene: SceneEstimate | None = None, *, view: str = "overl
     scene : SceneEstimate, optional
         What :func:`fit` returned: its cars are drawn red, each numbered as in
         :attr:`SceneEstimate.cars` (``#1`` the first), in the ``overlay`` with its confidence
-        (the fitted wireframes, hidden vertices as open dots on dashed edges), in the ``bev``
+        (the fitted wireframes, each hidden vertex marked by what hides it: the car itself, another
+        car, the occluder mask the fit chose, hatched, or the image's border), in the ``bev``
         as footprints and headings; the ``overlay`` draws the shared ground plane of a ``+gp``
         variant or ``full`` as a grid of thin white lines, every 10 m ahead and 5 m aside
         (:func:`wirescene.io.pictures.ground_grid`).
@@ -674,20 +675,20 @@ def _gt_cars(gt, image_size: tuple[int, int]) -> list | None:
     """The ``Car`` labels of a KITTI label file (every row's box checked against the
     ``image_size`` ``(width, height)`` image, as a frame's labels are), or of a sequence of
     labels (None: no labels, as the pictures take it; a file without cars gives ``[]``)."""
-    from wirescene.core.labels import FrameLabels, Label
+    from wirescene.core.labels import CAR_TYPES, FrameLabels, Label
 
     if gt is None:
         return None
     if isinstance(gt, (str, Path)):
         from wirescene.io.kitti import read_labels
 
-        return read_labels(gt, image_size=image_size).of_type("Car")  # InputError naming the file
+        return read_labels(gt, image_size=image_size).of_type(*CAR_TYPES)  # InputError naming the file
     if isinstance(gt, FrameLabels):
-        return gt.of_type("Car")
+        return gt.of_type(*CAR_TYPES)
     labels = list(gt) if isinstance(gt, Iterable) else [gt]
     if not all(isinstance(g, Label) for g in labels):
         raise ArgumentError("gt", "expected a KITTI label file or a sequence of wirescene.core.labels.Label")
-    return [g for g in labels if g.type == "Car"]
+    return [g for g in labels if g.type in CAR_TYPES]  # the cars the evaluation's matching judges
 
 
 def evaluate(

@@ -48,6 +48,7 @@ from wirescene.cli.options import (
     workers_option,
 )
 from wirescene.core.errors import InputError, WiresceneError
+from wirescene.core.labels import CAR_TYPES
 from wirescene.core.version import __version__
 from wirescene.eval.seeds import MAX_SEEDS
 from wirescene.fitting.variants import DEFAULT_VARIANT
@@ -701,7 +702,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
     scored (said). Several PRED_DIRs are runs of one method (other
     seeds, say): each run's moderate APs, their mean, and an interval whose every draw
     resamples the drives and takes one of the runs."""
-    from wirescene.core.labels import CAR_TYPES, no_3d_box, of_types
+    from wirescene.core.labels import no_3d_box, of_types
     from wirescene.eval.intervals import kitti_intervals, kitti_run_intervals
     from wirescene.eval.kitti_metrics import (
         format_kitti_intervals,
@@ -806,7 +807,7 @@ def fit_cmd(image, calib, detections, min_score, gt, variant, particles, seed, o
                 raise
             dets = Detections.empty(str(detections))
             others = exc.problem[len(NO_CARS):]  # the classes of the file's boxes, where it has some
-    gt_objs = read_labels(gt, image_size=(img.shape[1], img.shape[0])).of_type("Car") if gt is not None else None
+    gt_objs = read_labels(gt, image_size=(img.shape[1], img.shape[0])).of_type(*CAR_TYPES) if gt is not None else None
     with warnings.catch_warnings():  # said above, in the command's one line, not again by the API
         warnings.simplefilter("ignore", CalibrationWarning)
         estimate = fit(img, camera, dets, variant=variant, options=options)
@@ -855,7 +856,7 @@ def demo_cmd(out, particles, variants, models):
         def draw(frame_id, variant, estimate, camera, detections, gt):
             if frame_id == first:
                 paths = write_fit_outputs(staging / variant, frame_id, image=dataset.image(frame_id), camera=camera,
-                                          estimate=estimate, detections=detections, gt=gt.of_type("Car"))
+                                          estimate=estimate, detections=detections, gt=gt.of_type(*CAR_TYPES))
                 written.extend(paths.values())
 
         trained: list[str] = []  # a models directory keeps the shipped files it lacks (the score calibration)
@@ -865,7 +866,7 @@ def demo_cmd(out, particles, variants, models):
         image = dataset.image(first)
         estimate = fit(image, dataset.camera(first), None, variant="full", options=options)
         raw = estimate.detections
-        gt = dataset.labels(first).of_type("Car")
+        gt = dataset.labels(first).of_type(*CAR_TYPES)
         if len(raw):
             written.extend(write_fit_outputs(staging / "raw-pixels", first, image=image, camera=dataset.camera(first),
                                              estimate=estimate, detections=raw, gt=gt).values())
@@ -892,7 +893,7 @@ def demo_cmd(out, particles, variants, models):
 @split_option(calib=False)
 def gt_cmd(kitti_root, frame, out, split):
     """Draw a frame's ground truth with the mean wireframe at every GT car pose
-    (self-occluded vertices as open dots): a check of geometry, shape model and labels."""
+    (the vertices the car itself hides as rings): a check of geometry, shape model and labels."""
     from wirescene.core.groundplane import rotation_y, transform
     from wirescene.core.labels import no_3d_box
     from wirescene.core.shape import load_default
@@ -909,7 +910,7 @@ def gt_cmd(kitti_root, frame, out, split):
         raise click.BadParameter(f"no frame {frame} in {dataset.split_dir} ({held})", param_hint="FRAME")
     camera = dataset.camera(frame)
     say_off_centre_image(dataset.image_path(frame), camera)
-    cars = dataset.labels(frame).of_type("Car")
+    cars = dataset.labels(frame).of_type(*CAR_TYPES)
     mean = load_default().mean
     objects = []
     for i, g in enumerate(cars):
@@ -918,7 +919,8 @@ def gt_cmd(kitti_root, frame, out, split):
         R = rotation_y(g.rotation_y)
         vertices = transform(mean, g.location, R)
         hidden = self_occlusion(vertices, FACES, camera.center)
-        objects.append(ObjectEstimate(i, g.box, 1.0, g.location, R, g.dims, 0.0, vertices=vertices, visibility=~hidden))
+        objects.append(ObjectEstimate(i, g.box, 1.0, g.location, R, g.dims, 0.0, vertices=vertices,
+                                      hidden_by=np.where(hidden, "self", "visible")))
     fig = overlay(dataset.image(frame), camera, SceneEstimate("gt", objects), gt=cars, edges=EDGES,
                   title=f"{frame}: mean wireframe at GT poses", estimate_name="mean wireframe at the label's pose",
                   scores=False)

@@ -23,7 +23,7 @@ from wirescene.core.groundplane import (
 )
 from wirescene.core.labels import MAX_ALPHA, Label, format_labels
 from wirescene.core.validate import finite_real, real_dtype_problem
-from wirescene.core.wireframe import N_VERTICES
+from wirescene.core.wireframe import HIDDEN_BY, N_VERTICES
 
 
 def _numbers(name: str, values) -> np.ndarray:
@@ -239,6 +239,10 @@ class ObjectEstimate:
         (also :attr:`cad_model`) and the occluder mask's index; ``None`` otherwise.
     detection_score : float or None
         The pre-detection's own score.
+    hidden_by : (36,) str array or None
+        Fine variants only: what hides each vertex (:data:`wirescene.core.wireframe.HIDDEN_BY`:
+        ``"visible"``, ``"self"``, ``"truncated"``, ``"other-car"``, ``"occluder"``); where
+        given, :attr:`visibility` is where it says ``"visible"`` (derived when not given).
 
     Raises
     ------
@@ -292,14 +296,35 @@ class ObjectEstimate:
     vertices: np.ndarray | None = None  # (36, 3) camera frame
     visibility: np.ndarray | None = None  # (36,) bool
     exemplar: str | None = None
-    occluder_mask: int | None = None  # index into wirescene.infer.masks.occluder_masks()
+    occluder_mask: int | None = None  # index into wirescene.core.occluders.occluder_masks()
     # The pre-detection's own score; ``score`` is then the calibrated confidence of the
     # estimate (wirescene.fitting.confidence), written as KITTI's 16th column.
     detection_score: float | None = None
+    hidden_by: np.ndarray | None = None  # (36,) str, wirescene.core.wireframe.HIDDEN_BY
 
     def __setattr__(self, name, value):
         # every assignment checked, the dataclass's own and later ones (apply_confidence sets the score after the fit)
         super().__setattr__(name, _estimate_field(name, value))
+
+    def __post_init__(self):
+        if self.hidden_by is not None:  # against the visibility: a check of two fields, once both are set
+            self._check_hidden_by()
+
+    def _check_hidden_by(self) -> None:
+        """:attr:`hidden_by` as a (36,) str array of known words, and :attr:`visibility` the same."""
+        reasons = np.array(self.hidden_by, dtype=str)
+        check_shape("hidden_by", reasons, (N_VERTICES,))
+        unknown = sorted(set(reasons.tolist()) - set(HIDDEN_BY))
+        if unknown:
+            raise ArgumentError("hidden_by", f"unknown reason {unknown[0]!r} (one of {', '.join(HIDDEN_BY)})")
+        visible = reasons == "visible"
+        if self.visibility is None:
+            self.visibility = visible
+        elif not np.array_equal(np.asarray(self.visibility, bool), visible):
+            v = int(np.flatnonzero(np.asarray(self.visibility, bool) != visible)[0])
+            raise ArgumentError("hidden_by", f"vertex {v} is {str(reasons[v])!r}, but visibility says it is "
+                                             f"{'visible' if self.visibility[v] else 'hidden'}")
+        self.hidden_by = reasons
 
     def __repr__(self) -> str:
         extra = "" if self.exemplar is None else f", exemplar={self.exemplar!r}"
@@ -374,6 +399,8 @@ class ObjectEstimate:
             d["exemplar"] = self.exemplar
         if self.occluder_mask is not None:
             d["occluder_mask"] = int(self.occluder_mask)
+        if self.hidden_by is not None:
+            d["hidden_by"] = [str(r) for r in self.hidden_by]
         return d
 
 

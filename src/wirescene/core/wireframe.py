@@ -79,6 +79,13 @@ SIDE = np.concatenate([np.ones(N_PER_SIDE, dtype=np.int8), -np.ones(N_PER_SIDE, 
 """+1 for vertices on the left (z > 0), -1 on the right."""
 SIDE.setflags(write=False)
 
+HIDDEN_BY = ("visible", "self", "truncated", "other-car", "occluder")
+"""Why a vertex of a fitted car is hidden (:attr:`wirescene.core.types.ObjectEstimate.hidden_by`), the
+words of ``wirescene synth``'s per-vertex ground truth: not (``visible``), by its own car (``self``),
+by the image's border (``truncated``: projected outside the image), by another car of the scene
+(``other-car``) or by the occluder mask the fit chose (``occluder``); a vertex hidden twice takes
+the first of these."""
+
 PART = np.concatenate([np.arange(N_PER_SIDE), np.arange(N_PER_SIDE)])
 """Index into ``PART_NAMES`` of every vertex (the same for a symmetric pair)."""
 PART.setflags(write=False)

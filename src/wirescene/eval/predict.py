@@ -19,6 +19,7 @@ from typing import Callable, Iterable, Mapping
 from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_bytes, write_text
 from wirescene.core.errors import ArgumentError, InputError
+from wirescene.core.labels import CAR_TYPES
 from wirescene.core.validate import output_dir_problem
 from wirescene.core.version import __version__
 from wirescene.eval.records import config_difference, refuse_frames_outside
@@ -65,7 +66,7 @@ class _PredictJob:
             files[path] = scene_json(frame_id, estimate, fitted.detections).encode()
         if self.pictures_dir is not None:
             label_file = self.dataset.label_path(frame_id)  # a labelled split's cars drawn beside the estimate
-            gt = self.dataset.labels(frame_id).of_type("Car") if label_file.is_file() else None
+            gt = self.dataset.labels(frame_id).of_type(*CAR_TYPES) if label_file.is_file() else None
             pictures = scene_pictures(frame_id, image=image, camera=camera, estimate=estimate,
                                       detections=fitted.detections, gt=gt)
             paths = fit_output_paths(self.pictures_dir, frame_id)

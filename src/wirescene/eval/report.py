@@ -33,7 +33,7 @@ import numpy as np
 from wirescene.core.atomic import atomic_dir, write_text
 from wirescene.core.camera import Camera
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
-from wirescene.core.labels import Label
+from wirescene.core.labels import CAR_TYPES, Label
 from wirescene.core.types import Detections, SceneEstimate, dropped_detections, fitted_detections
 from wirescene.core.wireframe import EDGES
 from wirescene.eval.kitti_metrics import kitti_figure
@@ -81,7 +81,7 @@ class Gallery:
 
     def add(self, frame_id, variant, estimate, camera, detections, gt) -> None:
         """An ``on_estimate`` callback of :func:`wirescene.eval.runner.evaluate_dataset`."""
-        entry = self.frames.setdefault(frame_id, (camera, gt.of_type("Car"), detections, {}))
+        entry = self.frames.setdefault(frame_id, (camera, gt.of_type(*CAR_TYPES), detections, {}))
         entry[3][variant] = estimate
 
 
@@ -545,7 +545,8 @@ every labelled car (a missed car is never within d), so its value at 1 m is the 
 {_kitti_table(kitti, kitti_intervals) if kitti else ""}
 <div class="plots">{''.join(f'<img src="{_href(name)}" alt="{html.escape(name)}">' for name in plots)}</div>
 <h2>Gallery ({html.escape(lead)}): {shown}</h2>
-<p>Red: estimate ({"wireframe, hidden parts as open dots on dashed edges" if get_variant(lead).fine
+<p>Red: estimate ({"wireframe, each hidden vertex marked by what hides it (the key says how), the occluder mask "
+                    "the fit chose hatched" if get_variant(lead).fine
 else "3D box, a cross on its front"}), each numbered #n in detection order (the order of the label files
 <code>--predictions</code> writes) with its {score_name}{" (--raw-scores)" if raw_scores else ""} (the same number
 in the bird's-eye view); cyan: ground truth;

@@ -60,7 +60,7 @@ from wirescene.core.wireframe import FACES, N_VERTICES
 from wirescene.infer.likelihood import PartEvidence, instantiate_wireframes, object_likelihood, outside_image
 from wirescene.infer.masks import best_mask, fit_mask, mask_hidden
 from wirescene.infer.occluded_score import load_occluded_score
-from wirescene.infer.occlusion import inter_object_occlusion
+from wirescene.infer.occlusion import hidden_reasons, inter_object_occlusion
 from wirescene.lift import ROAD_PRIOR_WIDTH, box_residual, project_boxes, road_alignment_cost, road_angle
 
 _SIZE_MEAN, _SIZE_STD = np.array(KITTI_CAR_SIZE["mean"]), np.array(KITTI_CAR_SIZE["std"])  # l, w, h
@@ -833,8 +833,10 @@ def estimate_from_refined(
     best particle (independent objects: the per-object maxima form the joint maximum).
 
     Each object's box size and bottom centre are those of its fitted wireframe's
-    axis-aligned extent in the object frame; visibility is the complement of
-    self-occlusion; ``exemplar`` is the nearest CAD exemplar (paper Sec. 5.4).
+    axis-aligned extent in the object frame; ``hidden_by`` says what hides each vertex
+    (:func:`~wirescene.infer.occlusion.hidden_reasons`: the car itself, the image's border,
+    another car, the occluder mask), ``visibility`` where nothing does; ``exemplar`` is the
+    nearest CAD exemplar (paper Sec. 5.4).
 
     Examples
     --------
@@ -856,6 +858,8 @@ def estimate_from_refined(
     >>> car = estimate.cars[0]
     >>> len(estimate.cars), car.vertices.shape, car.visibility.shape, car.dims.shape
     (1, (36, 3), (36,), (3,))
+    >>> bool(np.array_equal(car.visibility, car.hidden_by == "visible")), "self" in car.hidden_by  # its far side
+    (True, True)
     >>> estimate.n_particles  # the search's, not the one row the polish refined to the end
     2
     """
@@ -875,7 +879,9 @@ def estimate_from_refined(
     bottom_centre = np.stack([(lo[:, 0] + hi[:, 0]) / 2, np.zeros(N), (lo[:, 2] + hi[:, 2]) / 2], axis=1)
     location = batch.location + np.einsum("nij,nj->ni", batch.R, bottom_centre)
     _, names, _ = shape_model.nearest_exemplar(X_obj)
-    occluded = refined.gamma[rows, cols] | mask_hidden(batch.uv, refined.mask[rows, cols]) | outside_image(camera, batch.uv)
+    hidden_by = hidden_reasons(batch.self_hidden, truncated=outside_image(camera, batch.uv),
+                               other_car=refined.gamma[rows, cols],
+                               occluder=mask_hidden(batch.uv, refined.mask[rows, cols]))
     objects = [
         ObjectEstimate(
             detection_index=j,
@@ -889,9 +895,9 @@ def estimate_from_refined(
             roll=float(p.roll[rows[j], j]),
             shape=shape[j],
             vertices=batch.vertices[j],
-            visibility=~(batch.self_hidden[j] | occluded[j]),
             exemplar=str(names[j]),
             occluder_mask=int(refined.mask[rows[j], j]),
+            hidden_by=hidden_by[j],  # visibility: where it says visible
         )
         for j in range(N)
     ]

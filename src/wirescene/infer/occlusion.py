@@ -8,6 +8,8 @@ wireframe vertex:
 * :func:`inter_object_occlusion` -- hidden by a face of another modelled object of the
   same scene hypothesis (the paper's ``Gamma`` operator, before occluder-mask fitting).
 
+:func:`hidden_reasons` names what hides each vertex of a fitted car (the pictures draw it).
+
 Both are vectorised over any leading batch (samples x objects), with no Python loop
 over hypotheses or vertices; see ``benchmarks/bench_occlusion.py``.
 
@@ -30,8 +32,9 @@ from wirescene.core.raycast import (
     mesh_vertices_blocked,
     segment_blocked,
 )
+from wirescene.core.wireframe import HIDDEN_BY
 
-__all__ = ["self_occlusion", "inter_object_occlusion", "incidence", "interaction_candidates"]
+__all__ = ["self_occlusion", "inter_object_occlusion", "hidden_reasons", "incidence", "interaction_candidates"]
 
 
 def self_occlusion(vertices, faces, camera_center, *, eps: float = DEFAULT_EPS, device: str = "numpy") -> np.ndarray:
@@ -132,3 +135,30 @@ def inter_object_occlusion(vertices, faces, camera_center, *, eps: float = DEFAU
         # A target may be hidden by several occluders: accumulate with logical or.
         np.logical_or.at(hidden, (s_idx, i_idx), blocked)
     return hidden.reshape(batch + (N, V))
+
+
+def hidden_reasons(self_hidden, *, truncated, other_car, occluder) -> np.ndarray:
+    """What hides each vertex, in the words of :data:`wirescene.core.wireframe.HIDDEN_BY`:
+    ``"visible"`` where nothing does, else the first of its own car (``self_hidden``), the image's
+    border (``truncated``), another car (``other_car``, ``Gamma``) and the occluder mask
+    (``occluder``): the order in which the likelihood counts them (a mask is charged only for
+    the vertices nothing else hides, :func:`wirescene.infer.masks.best_mask`).
+
+    Parameters
+    ----------
+    self_hidden, truncated, other_car, occluder : (..., V) bool arrays
+
+    Returns
+    -------
+    (..., V) str array
+
+    Examples
+    --------
+    >>> own, border = np.array([0, 1, 1, 0, 0], bool), np.array([0, 0, 1, 1, 0], bool)
+    >>> masked = np.array([0, 1, 0, 1, 1], bool)
+    >>> hidden_reasons(own, truncated=border, other_car=np.zeros(5, bool), occluder=masked).tolist()
+    ['visible', 'self', 'self', 'truncated', 'occluder']
+    """
+    flags = np.broadcast_arrays(*(np.asarray(f, bool) for f in (self_hidden, truncated, other_car, occluder)))
+    first = np.argmax(np.stack([*flags, np.ones_like(flags[0])]), axis=0)  # the first reason that holds
+    return np.asarray(HIDDEN_BY[1:] + HIDDEN_BY[:1])[first]

@@ -2,8 +2,11 @@
 
 Estimates are drawn in red, ground truth in cyan (not the paper's green: red and green
 look alike to one reader in twelve, red and cyan differ for every common colour-vision
-deficiency), pre-detections dashed yellow; hidden parts of a wireframe are open dots on
-dashed edges, so that they differ by shape as well as colour. Each estimated car carries
+deficiency), pre-detections dashed yellow; the edges between two hidden vertices of a wireframe
+are dashed, and each hidden vertex is marked, by shape rather than colour, by what hides it
+(:data:`HIDDEN_MARKS`: a faint ring the car itself, an x another car, an open square the
+occluder mask the fit chose, whose region is hatched, a triangle at the image's edge the
+border). Each estimated car carries
 its number (its line in the KITTI label file) in both views, and its confidence in the
 overlay. Where ground truth is drawn beside a fitted estimate, the evaluation's own
 matching (:func:`wirescene.core.matching.match_estimate`) marks the false cars (violet,
@@ -38,6 +41,7 @@ from wirescene.core.boxes import box_corners
 from wirescene.core.camera import NEAR_PLANE, Camera
 from wirescene.core.groundplane import point_on_plane, rotation_y
 from wirescene.core.matching import FrameMatches, match_estimate
+from wirescene.core.occluders import mask_box
 
 EST_COLOR = "#e8302a"
 GT_COLOR = "#33bbee"
@@ -62,6 +66,20 @@ GROUND_AHEAD = np.arange(10.0, 81.0, 10.0)
 GROUND_ASIDE = np.arange(-10.0, 10.1, 5.0)
 #: Face of a hidden vertex's dot (an open dot, edged in the estimate's colour).
 HIDDEN_FACE = "white"
+#: How the overlay marks a fitted car's hidden vertex, by what hides it (``ObjectEstimate.hidden_by``):
+#: ``(marker, face (None: the car's colour), area (the visible dot's times), key text)``, told apart by
+#: shape; a vertex outside the image is drawn at the edge it left by, a triangle pointing out.
+HIDDEN_MARKS = {
+    "self": ("o", "none", 1.5, "hidden by the car itself"),  # a ring: the far side, the most, drawn faint
+    "other-car": ("x", None, 2.5, "hidden by another car"),
+    "occluder": ("s", HIDDEN_FACE, 1.5, "hidden by the occluder mask (hatched)"),
+    "truncated": (">", None, 2.5, "outside the image (at its edge)"),
+}
+#: The occluder mask the fit chose for a car: the region it covers hatched in the car's colour, half
+#: transparent (``OCCLUDER_HATCH_ALPHA``), over a light veil (``OCCLUDER_VEIL``), under the cars.
+OCCLUDER_HATCH = "//"
+OCCLUDER_HATCH_ALPHA = 0.6
+OCCLUDER_VEIL = "#ffffff26"
 #: Font size (points) of the cars' numbers.
 NUMBER_FONTSIZE = 7
 # A dropped pre-detection's line on its dark rim (each dot of the dotted line rimmed, the dots kept).
@@ -194,14 +212,17 @@ def _verdicts(estimate, gt: Sequence | None) -> tuple[list, FrameMatches | None,
     return gt, matches, false, {id(gt[g]) for g in matches.missed}
 
 
-def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, color=EST_COLOR,
-                   zorder: float = 2.0, dot_zorder: float | None = None):
+def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, hidden_by=None,
+                   color=EST_COLOR, zorder: float = 2.0, dot_zorder: float | None = None) -> set[str]:
     """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``: visible vertices as dots of
     ``color``, hidden ones as open dots and the edges between two hidden vertices dashed;
     dots sized by the car's height in the image (a far car's dots would hide it).
-    ``visible`` ``(V,)`` bool defaults to all visible; edges are cut at the camera's near plane.
-    The edges are drawn at ``zorder``, the dots at ``dot_zorder`` (default ``zorder + 1``):
+    ``visible`` ``(V,)`` bool defaults to all visible; ``hidden_by`` ``(V,)`` (what hides each
+    vertex, :data:`~wirescene.core.wireframe.HIDDEN_BY`; it says which are visible) marks each
+    hidden vertex by what hides it, as :data:`HIDDEN_MARKS`. Edges are cut at the camera's near
+    plane. The edges are drawn at ``zorder``, the dots at ``dot_zorder`` (default ``zorder + 1``):
     :func:`overlay` stacks its cars so that a nearer car's edges cover a farther car's dots.
+    Returns the kinds of hidden vertices drawn (``"hidden"``: without ``hidden_by``).
 
     Examples
     --------
@@ -213,12 +234,20 @@ def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, 
     >>> vertices = transform(load_default().mean, np.array([-2.0, 1.65, 12.0]), rotation_y(0.3))  # (36, 3)
     >>> ax = new_figure().subplots()
     >>> draw_wireframe(ax, camera, vertices, EDGES, visible=np.arange(36) >= 18)  # the left side hidden
+    {'hidden'}
     >>> [type(c).__name__ for c in ax.collections]  # solid and dashed edges, filled and open dots
     ['LineCollection', 'LineCollection', 'PathCollection', 'PathCollection']
+    >>> reasons = ["self"] * 6 + ["other-car"] * 12 + ["visible"] * 18  # what hides each vertex
+    >>> sorted(draw_wireframe(ax, camera, vertices, EDGES, hidden_by=reasons))
+    ['other-car', 'self']
     """
     vertices = np.asarray(vertices, float)
     edges = np.asarray(edges, int).reshape(-1, 2)
-    vis = np.ones(len(vertices), bool) if visible is None else np.asarray(visible, bool)
+    reasons = None if hidden_by is None else np.asarray(hidden_by, str)
+    if reasons is not None:
+        vis = reasons == "visible"
+    else:
+        vis = np.ones(len(vertices), bool) if visible is None else np.asarray(visible, bool)
     behind = ~vis[edges[:, 0]] & ~vis[edges[:, 1]]
     dot_zorder = zorder + 1 if dot_zorder is None else dot_zorder
     _draw_edges(ax, camera, vertices, edges[~behind], color, 1.0, zorder=zorder)
@@ -227,11 +256,61 @@ def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, 
     uv, depth = camera.project_with_depth(vertices)
     front = depth > NEAR_PLANE
     if not front.any():
-        return
+        return set()
     size = float(np.clip(np.ptp(uv[front, 1]) / 8.0, 1.0, 10.0))
-    ax.scatter(uv[vis & front, 0], uv[vis & front, 1], s=size, c=color, zorder=dot_zorder)
-    ax.scatter(uv[~vis & front, 0], uv[~vis & front, 1], s=size * 1.5, facecolors=HIDDEN_FACE, edgecolors=color,
-               linewidths=0.6, zorder=dot_zorder)
+    _dots(ax, uv[vis & front], "o", size, color, "face", None, dot_zorder)  # as scatter's c=color
+    if reasons is None:
+        _dots(ax, uv[~vis & front], "o", size * 1.5, HIDDEN_FACE, color, 0.6, dot_zorder)
+        return {"hidden"} if (~vis & front).any() else set()
+    drawn = set()
+    for reason, (marker, face, grow, _) in HIDDEN_MARKS.items():
+        at = (reasons == reason) & front
+        if not at.any():
+            continue
+        drawn.add(reason)
+        points = uv[at]
+        if reason == "truncated":  # off the picture: at the image's edge it left by, pointing out
+            points, markers = _at_image_edge(ax, camera, points, np.sqrt(size * grow) / 2)
+        else:
+            markers = np.full(len(points), marker)
+        for m in dict.fromkeys(markers):
+            if m == "x":  # all edge
+                _dots(ax, points[markers == m], m, size * grow, "none", color, 1.0, dot_zorder)
+            else:
+                _dots(ax, points[markers == m], m, size * grow, color if face is None else face, color, 0.6, dot_zorder)
+    return drawn
+
+
+def _dots(ax, uv: np.ndarray, marker: str, size: float, face, edge, lw: float | None, zorder: float):
+    """Markers at ``uv`` ``(n, 2)``, of area ``size`` (points squared): what :meth:`~matplotlib.axes.Axes.scatter`
+    draws (``lw`` None: its default), without its 0.5 ms of parsing a call (a picture of ten cars makes some 40)."""
+    from matplotlib.collections import PathCollection
+
+    style = _marker_path(marker)
+    dots = PathCollection((style,), [size], facecolors=face, edgecolors=edge, linewidths=lw, offsets=uv,
+                          offset_transform=ax.transData, zorder=zorder)
+    dots.set_transform(transforms.IdentityTransform())
+    ax.add_collection(dots, autolim=False)
+
+
+@functools.lru_cache(maxsize=None)
+def _marker_path(marker: str):
+    from matplotlib.markers import MarkerStyle
+
+    style = MarkerStyle(marker)
+    return style.get_path().transformed(style.get_transform())
+
+
+def _at_image_edge(ax, camera: Camera, uv: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``uv`` ``(n, 2)`` outside the camera's image moved onto its edge, a marker of
+    ``radius`` points inside it, and each one's triangle marker pointing to where it lies."""
+    w, h = camera.image_size
+    xlim = ax.get_xlim()
+    inset = radius * abs(xlim[1] - xlim[0]) / (ax.get_position().width * ax.figure.get_figwidth() * 72)  # pixels
+    over = np.stack([-uv[:, 0], uv[:, 0] - (w - 1), -uv[:, 1], uv[:, 1] - (h - 1)], axis=1)
+    markers = np.array(["<", ">", "^", "v"])[np.argmax(over, axis=1)]  # "^": up in the picture (v grows down)
+    inside = np.clip(uv, inset, [w - inset, h - inset])
+    return inside, markers
 
 
 def car_numbers(estimate) -> dict[int, int]:
@@ -352,6 +431,9 @@ def overlay(
 ):
     """Image with detections (dashed yellow), estimated 3D boxes or wireframes (red, each
     numbered as in the label file, with its confidence) and ground-truth 3D boxes (cyan).
+    A fitted wireframe marks each hidden vertex by what hides it (:data:`HIDDEN_MARKS`, from
+    ``ObjectEstimate.hidden_by``) and hatches the region of the occluder mask the fit chose
+    for the car, where it chose one; the key lists the marks and colours drawn, no others.
 
     Parameters
     ----------
@@ -415,35 +497,48 @@ def overlay(
     objects = [] if estimate is None else sorted(estimate.objects, key=lambda o: -o.location[2])
     wireframes = edges is not None and any(o.vertices is not None for o in objects)
     step = 1.0 / max(len(objects), 1)
+    hidden_kinds = set()
+    masked = False
     for k, o in enumerate(objects):
+        color = FALSE_COLOR if id(o) in false else EST_COLOR
         if o.vertices is not None and edges is not None:
+            masked |= _draw_occluder(ax, camera, o, color)
             # far to near, each car in a layer of its own below the numbers (4): its dots over its own edges,
             # under a nearer car's, as the nearer car hides the farther one
-            draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility, zorder=2 + k * step,
-                           dot_zorder=2 + (k + 0.5) * step, color=FALSE_COLOR if id(o) in false else EST_COLOR)
+            hidden_kinds |= draw_wireframe(ax, camera, o.vertices, edges, visible=o.visibility, hidden_by=o.hidden_by,
+                                           zorder=2 + k * step, dot_zorder=2 + (k + 0.5) * step, color=color)
         else:
-            _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), FALSE_COLOR if id(o) in false else EST_COLOR)
+            _draw_box3d(ax, camera, box_corners(o.dims, o.location, o.R), color)
     reserved = []
     if title:
         ax.text(4 * scale, 4 * scale, title, color="white", fontsize=10, va="top",
                 bbox=dict(facecolor="black", alpha=0.5, lw=0, boxstyle="square,pad=0.25"))
         tw, th = text_size(title, 10, scale, 0.25)
         reserved.append((0, 0, tw + 4 * scale, th + 4 * scale))
-    key = []  # what each colour means, for the parts drawn
+    key = []  # what each colour and mark means, for those drawn
     if estimate is not None and not objects:
         key.append(("none", "none", f"no car {'estimated' if estimate_name == 'estimate' else 'drawn'}"))
-    est_boxes = bool(objects) and not wireframes  # the estimates' boxes carry the front's cross: their key says so
+    est_boxes = bool(objects) and not wireframes  # the estimates' boxes carry the front's cross: the key says so once
+    cross = " (a cross marks the front)"
+    red = any(id(o) not in false for o in objects)  # the key's red entries only where a red car is drawn
+    car_color = EST_COLOR if red else FALSE_COLOR
+    if red:
+        key.append(("-", EST_COLOR, estimate_name + (cross if est_boxes else "")))
+    if "hidden" in hidden_kinds:  # cars that say not what hides them
+        key.append(("hidden", car_color, "hidden part"))
+    key.extend((kind, car_color, HIDDEN_MARKS[kind][3]) for kind in HIDDEN_MARKS
+               if kind in hidden_kinds or (kind == "occluder" and masked))
     if objects:
-        key.append(("-", EST_COLOR, estimate_name + (" (a cross marks the front)" if est_boxes else "")))
-        if wireframes and any(o.visibility is not None and not np.all(o.visibility) for o in objects):
-            key.append(("hidden", EST_COLOR, "hidden part"))
-        key.append(("tag", EST_COLOR, f"#n c: car n (line n of the label file), {score_name} c" if scores
+        key.append(("tag", car_color, f"#n c: car n (line n of the label file), {score_name} c" if scores
                     else "#n: the label file's n-th car"))
-        key.extend(_false_key(false, "#n c" if scores else "#n"))
+        false_key = _false_key(false, "#n c" if scores else "#n")
+        if false_key and est_boxes and not red:  # no red entry said it
+            false_key[0] = (*false_key[0][:2], false_key[0][2] + cross)
+        key.extend(false_key)
     if plane is not None:
         key.append(("ground", GROUND_COLOR, "ground plane: a line every 10 m ahead, 5 m aside"))
     if len(gt):
-        key.append(("-", GT_COLOR, "ground truth" + ("" if est_boxes else " (a cross marks the front)")))
+        key.append(("-", GT_COLOR, "ground truth" + ("" if est_boxes else cross)))
     if missed:
         key.append(("missed", GT_COLOR, "missed: a labelled car without a true positive"))
     if detections is not None and len(detections.boxes):
@@ -452,13 +547,8 @@ def overlay(
         key.append((":", DROPPED_COLOR, "pre-detection the fit dropped"))
 
     if key:
-        handles = [Patch(facecolor=c, alpha=0.85, lw=0) if s == "tag" else
-                   Line2D([], [], color=c, ls=_KEY_STYLES.get(s, s), marker="o" if s == "hidden" else None,
-                          mfc=HIDDEN_FACE, ms=4,
-                          path_effects=_DROPPED_EFFECTS if c in (DROPPED_COLOR, GROUND_COLOR) else None)
-                   for s, c, _ in key]
-        legend = ax.legend(handles, [k[2] for k in key], loc="upper right", fontsize=7, framealpha=0.6,
-                           borderpad=0.4)
+        legend = ax.legend([_key_handle(s, c) for s, c, _ in key], [k[2] for k in key], loc="upper right",
+                           fontsize=7, framealpha=0.6, borderpad=0.4)
         # the key's corner, estimated from its rows and longest entry (no renderer needed): no number under it
         longest = max(text_size(k[2], 7, scale, 0)[0] for k in key)
         reserved.append((w - longest - 40 * scale, 0, w, (len(key) * 1.5 * 7 + 12) * scale))
@@ -478,6 +568,45 @@ def _false_key(false: dict[int, str], tag: str) -> list[tuple[str, str, str]]:
     """The key's entries of the false cars drawn, one a kind, each its ``tag`` (``#n c``) and word."""
     return [("false", FALSE_COLOR, f"{tag} {word}: {text}") for word, text in FALSE_KEY.items()
             if word in false.values()]
+
+
+def _key_handle(style: str, color: str):
+    """The overlay key's sample of an entry of ``style`` (a line style, or a kind of mark) in ``color``."""
+    if style == "tag":
+        return Patch(facecolor=color, alpha=0.85, lw=0)
+    if style == "hidden":  # a hidden vertex of a car that says not what hides it: an open dot on a dashed edge
+        return Line2D([], [], color=color, ls="--", marker="o", mfc=HIDDEN_FACE, ms=4)
+    if style in HIDDEN_MARKS:
+        marker, face, grow, _ = HIDDEN_MARKS[style]
+        mark = Line2D([], [], color=color, ls="--" if style == "self" else "none", marker=marker, ms=3 * np.sqrt(grow),
+                      mfc=color if face is None else face, mec=color, mew=1.0 if marker == "x" else 0.6)
+        if style == "occluder":  # the mask's region behind its vertex
+            return (_occluder_patch((0, 0), 1, 1, color, hatch=OCCLUDER_HATCH * 2), mark)  # denser: a few lines in it
+        return mark
+    return Line2D([], [], color=color, ls=_KEY_STYLES.get(style, style),
+                  path_effects=_DROPPED_EFFECTS if color in (DROPPED_COLOR, GROUND_COLOR) else None)
+
+
+def _draw_occluder(ax, camera: Camera, o, color: str) -> bool:
+    """Hatch the image region the occluder mask the fit chose for car ``o`` covers (the rectangle
+    of its wireframe's projected box that hides the vertices in it); whether there was one."""
+    if not o.occluder_mask or o.vertices is None:  # None or 0: the empty mask, none chosen
+        return False
+    u0, v0, u1, v1 = mask_box(camera.project(np.asarray(o.vertices, float)), o.occluder_mask)
+    ax.add_patch(_occluder_patch((u0, v0), u1 - u0, v1 - v0, color))
+    return True
+
+
+def _occluder_patch(corner, width: float, height: float, color: str, *, hatch: str = OCCLUDER_HATCH) -> Rectangle:
+    """An occluder mask's region, hatched in ``color`` (its car's); over the ground's grid, under boxes and cars."""
+    from matplotlib.colors import to_rgba
+
+    # the hatch takes the edge's colour (matplotlib < 3.10 has no hatchcolor); no edge is drawn (lw 0)
+    patch = Rectangle(corner, width, height, facecolor=OCCLUDER_VEIL, edgecolor=to_rgba(color, OCCLUDER_HATCH_ALPHA),
+                      hatch=hatch, lw=0, zorder=1.8)
+    if hasattr(patch, "set_hatch_linewidth"):  # matplotlib >= 3.10; before, rcParams["hatch.linewidth"] (1)
+        patch.set_hatch_linewidth(0.8)
+    return patch
 
 
 def _number_cars(ax, estimate, objects, camera, edges, w, h, scale, reserved, scores, false, missed_gt) -> None:
@@ -559,9 +688,14 @@ def birds_eye(
         half = max(abs(xmin), abs(xmax), 8, 0.4 * (zmax + 2))  # a deep scene widens x rather than becoming a strip
         extent = (-half, half, -2, zmax)
     key = []
-    if estimate is not None:
-        key.append((Line2D([], [], color=EST_COLOR), "estimate (#n: car n; a line marks the front)"))
-    key.extend((Line2D([], [], color=FALSE_COLOR), text) for *_, text in _false_key(false, "#n"))
+    front = " (#n: car n; a line marks the front)"  # said by the first entry of a car
+    red = estimate is not None and any(id(o) not in false for o in estimate.objects)  # the red entry only if drawn
+    if red:
+        key.append((Line2D([], [], color=EST_COLOR), "estimate" + front))
+    false_key = [text for *_, text in _false_key(false, "#n")]
+    if false_key and not red:  # no red entry said it
+        false_key[0] += front
+    key.extend((Line2D([], [], color=FALSE_COLOR), text) for text in false_key)
     if len(gt):
         key.append((Line2D([], [], color=GT_COLOR), "ground truth"))
     if missed:
