@@ -2004,6 +2004,105 @@ def test_detect_out_refuses_a_folder_of_an_earlier_runs_files(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["000002.json"] and "000010:" not in r.output
 
 
+def _quick_detector(monkeypatch, fails=()):
+    """``detect``'s detector replaced by one box a frame, at once; a frame of ``fails`` raises as a corrupt image
+    would. Returns the frames it was asked for, in order."""
+    from wirescene.core.types import Detections
+
+    asked = []
+
+    def detections(camera, image, *, source, seconds, **options):
+        asked.append(source)
+        if source in fails:
+            raise InputError("image file is truncated", path=f"{source}.png")
+        seconds.append(0.01)
+        found = Detections([[380, 180, 560, 290]], scores=[0.9], alpha=[0.5])
+        return found, found
+
+    monkeypatch.setattr("wirescene.fitting.own_boxes.own_detections", detections)
+    return asked
+
+
+def test_detect_out_writes_each_frame_as_it_is_done_and_resume_detects_only_the_missing_ones(tmp_path, monkeypatch):
+    """`detect --out` wrote its files once every frame was done: an error at the last of KITTI's 7,518 frames (5 hours)
+    lost them all. Each frame's file is written as it is done, with the run's settings (.detect.json), and --resume
+    detects the frames without one; its AP is of those alone (a kept file holds no score under the threshold), said."""
+    import errno
+
+    import wirescene.cli.detect as detect_module
+
+    out = tmp_path / "dets"
+    asked = _quick_detector(monkeypatch, fails=("000010",))
+    args = ["detect", KITTI_ROOT, "--frames", "000002,000010", "--out", out]
+    r = run(*args)
+    assert r.exit_code == 2 and "000010.png: image file is truncated" in r.stderr, r.output
+    assert sorted(p.name for p in out.iterdir()) == [".detect.json", "000002.json"] and asked == ["000002", "000010"]
+    first = (out / "000002.json").read_text()
+    assert json.loads(first)["detections"][0]["box"] == [380, 180, 560, 290]
+
+    def full(path, text):  # the disk full when the next file is written
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    asked = _quick_detector(monkeypatch)
+    written = detect_module.write_text
+    monkeypatch.setattr(detect_module, "write_text", full)
+    r = run(*args, "--resume")
+    assert r.exit_code == 1 and r.stderr.endswith("No space left on device; the frames --out holds stay (--resume goes "
+                                                  "on from them)\n"), r.output
+    assert sorted(p.name for p in out.iterdir()) == [".detect.json", "000002.json"]
+    monkeypatch.setattr(detect_module, "write_text", written)
+    asked[:] = []
+    r = run(*args, "--resume", "--json", tmp_path / "ap.json")
+    assert r.exit_code == 0 and asked == ["000010"], r.output
+    assert (f"resuming {out}: 1 of 2 frames kept from an earlier run, 1 to detect; the AP is of the 1 detected now "
+            "(a kept file holds no score under the threshold)") in r.output
+    assert sorted(p.name for p in out.iterdir()) == [".detect.json", "000002.json", "000010.json"]
+    assert (out / "000002.json").read_text() == first
+    summary = json.loads((tmp_path / "ap.json").read_text())
+    assert (summary["frames"], summary["frames_kept"]) == (1, 1)
+    r = run(*args, "--resume")  # every frame done: nothing detected again
+    assert r.exit_code == 0 and asked == ["000010"] and "2 of 2 frames kept from an earlier run, 0 to detect" in r.output
+    assert_close(read_detections(out / "000010.json").boxes, [[380, 180, 560, 290]])  # --detections reads them
+
+
+def test_detect_resume_refuses_other_settings_and_another_runs_files(tmp_path, monkeypatch):
+    """--out of `detect` as predict's: a folder of a run of the same settings is refused without --resume with the
+    advice to resume; a run resumed with other settings (by content: the shipped bank named as a file is the same
+    bank), over a folder without the record (another tool's files) or with fewer frames is refused, naming why."""
+    out = tmp_path / "dets"
+    asked = _quick_detector(monkeypatch)
+    args = ["detect", KITTI_ROOT, "--frames", "000010", "--out", out]
+    assert run(*args).exit_code == 0 and asked == ["000010"]
+    record = (out / ".detect.json").read_text()
+    r = run(*args)
+    assert r.exit_code == 2 and len(r.stderr.splitlines()) == 1, r.output
+    assert (f"--out: {out} already holds 1 detection files (e.g. 000010.json) of a run of these settings: use --resume "
+            "to continue it, or choose an empty directory") in r.stderr
+    r = run(*args, "--threshold", 0.6, "--upsample", 1)
+    assert r.exit_code == 2 and ("already holds 1 detection files (e.g. 000010.json) of a run with other settings "
+                                 "(--threshold, --upsample): choose an empty directory") in r.stderr, r.output
+    r = run(*args, "--resume", "--threshold", 0.6)
+    assert r.exit_code == 2 and (f"{out}: detection files were written with other settings (--threshold): cannot "
+                                 "resume into this directory") in r.stderr, r.output
+    r = run("detect", KITTI_ROOT, "--frames", "000002", "--out", out, "--resume")
+    assert r.exit_code == 2 and "holds the detection files of 1 frame outside this run's selection" in r.stderr
+    assert asked == ["000010"] and (out / ".detect.json").read_text() == record
+    from wirescene.core.resources import shipped_path
+
+    r = run(*args, "--resume", "--bank", shipped_path("detector_bank"))
+    assert r.exit_code == 0 and "1 of 1 frames kept" in r.output, r.output
+    (out / ".detect.json").unlink()  # another tool's files (split-coco's)
+    r = run(*args, "--resume")
+    assert r.exit_code == 2 and ("detection files were written with other settings (.detect.json missing): cannot "
+                                 "resume") in r.stderr, r.output
+    (out / ".detect.json").mkdir()
+    r = run(*args, "--resume")
+    assert r.exit_code == 2 and f"{out / '.detect.json'}: a folder where detect writes its settings' record" in r.stderr
+    r = run("detect", KITTI_ROOT, "--frames", "000010", "--resume")
+    assert r.exit_code == 2 and "--resume continues the files of --out: it needs --out" in r.stderr, r.output
+    assert asked == ["000010"]
+
+
 def test_split_coco_reads_the_classes_by_the_annotations_names(tmp_path):
     """A detector trained on KITTI (Car 1, Pedestrian 2, Cyclist 3, as its annotation file's categories say) was split
     with its numbers alone: its cars skipped as another class and its cyclists, 3, fitted as COCO's cars, with no

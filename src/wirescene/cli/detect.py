@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
@@ -19,6 +20,7 @@ from wirescene.cli.options import (
     check_picture_file,
     drive_map_option,
     field_type,
+    keeps_on_resume,
     kitti_dataset,
     kitti_root_params,
     models_option,
@@ -32,10 +34,13 @@ from wirescene.cli.options import (
     workers_count,
     workers_option,
 )
-from wirescene.core.atomic import atomic_dir
+from wirescene.core.artefacts import format_tag
+from wirescene.core.atomic import atomic_dir, write_text
+from wirescene.core.errors import InputError
 from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT, Mount
 from wirescene.core.jsonio import dumps, write_json
 from wirescene.core.settings import stage_field
+from wirescene.core.version import __version__
 from wirescene.fitting.options import PredetectOptions
 from wirescene.lift import LiftingOptions
 from wirescene.predetect.bank import SUPPORT_WEIGHT
@@ -219,8 +224,11 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
               help="Score threshold (default: the bank's, 0.5 for the shipped one; the fit's own pre-detection keeps "
                    "the boxes above 0.3, and --out writes the fit's viewpoints at any threshold).")
 @click.option("--out", "out_dir", type=NonEmptyPath(file_okay=False, path_type=Path), default=None,
-              help="Write FRAME.json detection files here (readable by --detections of `eval`): an empty (or new) "
-                   "directory, written once every frame is done.")
+              help="Write FRAME.json detection files here (readable by --detections of `eval`), each as its frame is "
+                   "done, and the run's settings (.detect.json): an empty (or new) directory, or --resume.")
+@click.option("--resume/--no-resume", default=False, show_default=True,
+              help="Continue an interrupted run in --out (same settings): detect only the frames without a file. "
+                   "Its frames must be among those chosen now; the AP is of the frames detected in this run.")
 @click.option("--pr-curve", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
               help="PR curve picture, in the format its suffix names (.png, .pdf, .svg; PNG without a suffix).")
 @click.option("--json", "json_out", type=NonEmptyPath(dir_okay=False, path_type=Path), default=None,
@@ -244,27 +252,33 @@ def viewpoints(kitti_root, out, frames, split_file, seed):
                    "than the image's, adding the cars it finds above the fit's threshold 0.3 that the image's boxes "
                    "above it miss: small, far cars (1: the image alone, 2.3x faster; the fit's --upsample).")
 def detect(kitti_root, frames, split_file, split, calib, models, bank_path, classifier_path, threshold, out_dir,
-           pr_curve, json_out, camera_height, camera_pitch, estimate_pitch, smallest_car, upsample):
+           resume, pr_curve, json_out, camera_height, camera_pitch, estimate_pitch, smallest_car, upsample):
     """Run the configuration detector bank on a KITTI-layout directory and report AP.
 
     The files of --out hold the detections above the threshold with the viewpoints the
     pipeline gives them (the box rule of `fit`); AP and AOS score the bank's own (with
-    --upsample, the image's and those the enlarged image adds, each with its bank viewpoint)."""
+    --upsample, the image's and those the enlarged image adds, each with its bank viewpoint).
+    Each frame's file is written as the frame is done: an interrupted run goes on with --resume."""
     import numpy as np
 
     from wirescene.core.resources import resolve_models
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
+    from wirescene.eval.runner import check_images_read
+    from wirescene.eval.sources import DetectionSource
     from wirescene.fitting.models import detector_bank, viewpoint_classifier
     from wirescene.fitting.own_boxes import own_detections
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
 
     check_output_dir(out_dir, "--out")
-    _refuse_held_detections(out_dir)  # before the first frame's detection
     check_picture_file(pr_curve, "--pr-curve")
     check_output_file(json_out, "--json")
     if classifier_path is not None and out_dir is None:  # refused, not ignored
         raise click.UsageError("--viewpoint-classifier gives the boxes --out writes their viewpoints: it needs --out")
+    if resume and out_dir is None:
+        raise click.UsageError("--resume continues the files of --out: it needs --out")
+    if out_dir is not None:
+        keeps_on_resume("the frames --out holds")  # a full disk at frame N: frames 1..N-1 stay
     ds = kitti_dataset(kitti_root, split, calib)
     found = resolve_models(models)
     bank = detector_bank(found.file("detector_bank", given=bank_path))
@@ -275,31 +289,45 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
     say_models(found, replaced=[name for name, given in (("detector_bank", bank_path),
                                                          ("viewpoint_classifier", classifier_path)) if given])
     ids = select_frames(frames, split_file, ds.require_frames(), where=ds.split_dir, what="frame") or ds.frame_ids()
-    say_off_centre_frames(ds, ids)  # before the first frame: a missing calibration is refused here
     thr = bank.threshold if threshold is None else threshold
+    record, config, kept = None, None, set()
+    if out_dir is not None:  # before the first frame's detection
+        config = _detect_config(ds, found, bank_path, classifier_path, threshold=float(thr), smallest_car=smallest_car,
+                                upsample=upsample, camera_height=camera_height, camera_pitch=camera_pitch,
+                                estimate_pitch=estimate_pitch)
+        record, kept = _resumable_out(out_dir, config, ids, resume=resume)
+    todo = [f for f in ids if f not in kept]
+    say_off_centre_frames(ds, todo)  # before the first frame: a missing calibration is refused here
+    # a corrupt image refused before the first frame too (12 ms each), not at its frame with the frames before written
+    check_images_read(ds, DetectionSource("bank"), [], todo, notify=lambda m: click.echo(f"wirescene: {m}", err=True))
+    if kept:  # the AP needs every score of a frame; a kept file holds the boxes above the threshold alone
+        ap = (f"; the AP is of the {len(todo)} detected now (a kept file holds no score under the threshold)"
+              if ds.has_labels and todo else "")
+        click.echo(f"resuming {out_dir}: {len(kept)} of {len(ids)} frames kept from an earlier run, {len(todo)} to "
+                   f"detect{ap}")
     told = Mount(camera_height, camera_pitch)
     dets_all, gts, times = [], [], []
-    files: dict[str, str] = {}  # FRAME.json of --out, written once every frame is done (no partial output)
     with single_thread():
-        for fid in ids:
+        for k, fid in enumerate(todo):
             # every score of the image's own and added detections for AP; --out's boxes with the fit's viewpoints
-            d, kept = own_detections(ds.camera(fid), ds.image(fid), bank=bank, classifier=classifier,
-                                     threshold=threshold, fit_viewpoints=True, return_all=True,
-                                     viewpoints=out_dir is not None, upsample=upsample, smallest_car=smallest_car,
-                                     mount=told, estimate_pitch=estimate_pitch, source=fid, seconds=times)
+            d, above = own_detections(ds.camera(fid), ds.image(fid), bank=bank, classifier=classifier,
+                                      threshold=threshold, fit_viewpoints=True, return_all=True,
+                                      viewpoints=out_dir is not None, upsample=upsample, smallest_car=smallest_car,
+                                      mount=told, estimate_pitch=estimate_pitch, source=fid, seconds=times)
             if out_dir is not None:
                 entries = [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 4),
-                            "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(kept.boxes, kept.scores, kept.alpha)]
-                files[f"{fid}.json"] = dumps({"detections": entries})
+                            "viewpoint_bin": int(viewpoint_bin(a))} for b, s, a in zip(above.boxes, above.scores,
+                                                                                       above.alpha)]
+                if k == 0:  # the settings' record with the first frame's file: a run failing before leaves nothing
+                    write_text(record, json.dumps(config, indent=1))
+                write_text(out_dir / f"{fid}.json", dumps({"detections": entries}))  # whole or not at all
             dets_all.append(d)
             if ds.has_labels:
                 gts.append((load_frame_gt(ds.split_dir, fid), ds.labels(fid)))
-            click.echo(f"{fid}: {len(kept)} detections above {thr:.3f} ({times[-1]:.2f}s)")
-    if out_dir is not None:
-        with atomic_dir(out_dir) as staging:  # the frames' files appear as one set or not at all (a full disk)
-            for name, text in files.items():
-                (staging / name).write_text(text)
-    result = {"frames": len(ids), "threshold": thr, "seconds_per_frame": float(np.mean(times)) if times else 0.0}
+            click.echo(f"{fid}: {len(above)} detections above {thr:.3f} ({times[-1]:.2f}s)")
+    result = {"frames": len(todo), "threshold": thr, "seconds_per_frame": float(np.mean(times)) if times else 0.0}
+    if resume:  # "frames": those detected and scored now
+        result["frames_kept"] = len(kept)
     if gts:
         res = evaluate_detections(dets_all, [g[0] for g in gts])
         kept_res = evaluate_detections([d.subset(d.scores > thr) for d in dets_all], [g[0] for g in gts])
@@ -320,17 +348,79 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
         write_json(json_out, result)
 
 
-def _refuse_held_detections(out_dir: Path | None) -> None:
-    """A usage error of ``--out`` where ``out_dir`` already holds detection files (``FRAME.json``,
-    ``.csv``, ``.txt``): an earlier run's frames would stay beside this run's, to be read by
-    ``--detections`` as one run's."""
+#: Where ``detect --out`` keeps its run's settings, beside the frames' files (hidden: no frame's file).
+DETECT_RECORD = ".detect.json"
+#: The settings of :data:`DETECT_RECORD` a refusal names by their options.
+_SAID = {name: "--" + name.replace("_", "-") for name in ("threshold", "smallest_car", "upsample", "camera_height",
+                                                         "camera_pitch", "estimate_pitch")}
+
+
+def _held_detections(out_dir: Path | None) -> list[Path]:
+    """The detection files (``FRAME.json``, ``.csv``, ``.txt``) ``out_dir`` holds, by name; a
+    hidden file (a settings' record) is no frame's."""
     from wirescene.eval.sources import DETECTION_SUFFIXES
 
-    held = sorted(p.name for p in (out_dir.iterdir() if out_dir is not None and out_dir.is_dir() else ())
-                  if p.suffix.lower() in DETECTION_SUFFIXES)
+    return sorted(p for p in (out_dir.iterdir() if out_dir is not None and out_dir.is_dir() else ())
+                  if p.suffix.lower() in DETECTION_SUFFIXES and not p.name.startswith("."))
+
+
+def _refuse_held_detections(out_dir: Path | None, *, whose: str = "",
+                            advice: str = "choose an empty directory") -> None:
+    """A usage error of ``--out`` where ``out_dir`` already holds detection files: an earlier
+    run's frames would stay beside this run's, to be read by ``--detections`` as one run's;
+    ``whose`` (" of a run ...") and ``advice`` complete the message."""
+    held = _held_detections(out_dir)
     if held:
-        raise click.BadParameter(f"{out_dir} already holds {len(held)} detection files (e.g. {held[0]}): choose an "
-                                 "empty directory", param_hint="--out")
+        raise click.BadParameter(f"{out_dir} already holds {len(held)} detection files (e.g. {held[0].name}){whose}: "
+                                 f"{advice}", param_hint="--out")
+
+
+def _detect_config(ds, found, bank_path, classifier_path, **settings) -> dict:
+    """What decides the boxes of ``detect --out``'s files, as its settings' record holds them:
+    the package version, the split (and its one calibration), the detector bank's and crop
+    classifier's content (as ``predict`` records them) and ``settings`` (the threshold, the
+    search's and the camera's), normalised through JSON to compare equal to a stored one."""
+    from wirescene.fitting.models import models_fingerprint
+    from wirescene.fitting.options import FitOptions
+
+    files = FitOptions(detector_bank=found.file("detector_bank", given=bank_path),
+                       viewpoint_classifier=found.file("viewpoint_classifier", given=classifier_path))
+    config = {"format": format_tag("detect-config", 1), "wirescene": __version__, **ds.record(),
+              "models": models_fingerprint(files, read=("detector_bank", "viewpoint_classifier")), **settings}
+    return json.loads(json.dumps(config, default=str))
+
+
+def _resumable_out(out_dir: Path, config: dict, ids: list[str], *, resume: bool) -> tuple[Path, set[str]]:
+    """``(settings' record, frames kept)`` of ``detect --out out_dir``, refused before any frame:
+    without ``resume``, a folder holding detection files (the advice to resume where its record is
+    of ``config``); resumed, one holding files of other settings (:data:`DETECT_RECORD` names
+    them), of frames outside ``ids``, or no ``FRAME.json`` (another tool's, which ``--detections``
+    would read as this run's)."""
+    from wirescene.eval.records import resumed_settings, settings_changed, settings_record, stored_config
+
+    record = settings_record(out_dir, DETECT_RECORD, command="detect")
+    held = _held_detections(out_dir)
+    would = "which --detections would read as this run's"
+    if not resume:
+        if held:
+            try:
+                stored = stored_config(record)
+            except InputError:  # unreadable: no run to continue, the folder refused all the same
+                stored = None
+            changed = settings_changed(stored, config, record=DETECT_RECORD, said=_SAID)
+            if stored is None:  # another tool's files, or a run's record lost: nothing to continue
+                _refuse_held_detections(out_dir)
+            elif changed is None:
+                _refuse_held_detections(out_dir, whose=" of a run of these settings",
+                                        advice="use --resume to continue it, or choose an empty directory")
+            _refuse_held_detections(out_dir, whose=f" of a run with other settings ({changed})")
+        return record, set()
+    foreign = [p.name for p in held if p.suffix != ".json"]
+    if foreign:
+        raise InputError(f"holds detection files detect does not write (e.g. {foreign[0]}), {would}: choose an empty "
+                         "directory", path=out_dir)
+    resumed_settings(out_dir, held, config, record, ids, what="detection files", would=would, said=_SAID)
+    return record, {p.stem for p in held}
 
 
 @click.command("split-coco")

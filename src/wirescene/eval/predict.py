@@ -22,7 +22,7 @@ from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.labels import CAR_TYPES
 from wirescene.core.validate import output_dir_problem
 from wirescene.core.version import __version__
-from wirescene.eval.records import config_difference, refuse_frames_outside
+from wirescene.eval.records import resumed_settings, settings_record
 from wirescene.eval.runner import check_frames_boxes, check_images_read, fit_frames, notify_stderr, say_off_centre
 from wirescene.eval.sources import DetectionSource, frame_seed
 from wirescene.fitting.models import models_fingerprint, options_read
@@ -85,25 +85,6 @@ def _config(dataset: KittiDataset, variant: str, source: DetectionSource, option
               "options": options_read(options, **read), "models": models_fingerprint(options, **read),
               **({"folders": folders} if folders else {})}  # none given: the record of a run begun before them
     return json.loads(json.dumps(config, default=str))
-
-
-def _stored_config(path: Path) -> dict | None:
-    """The settings' record of an earlier run at ``path`` (None where there is none), for a
-    resumed run to compare with its own; an :class:`InputError` naming it where it cannot be
-    read as one, not taken for no record and written over: a resumed run refuses it, with or
-    without the label files it describes (as ``eval --resume`` names a frame's unreadable
-    record)."""
-    if not path.exists():
-        return None
-    try:
-        stored = json.loads(path.read_text())
-        if not isinstance(stored, dict):
-            raise TypeError(f"a JSON {type(stored).__name__}, not an object")
-    except (OSError, ValueError, TypeError) as exc:  # ValueError: UnicodeDecodeError and JSONDecodeError too
-        why = exc if isinstance(exc, TypeError) else exc.__class__.__name__
-        raise InputError(f"unreadable settings record ({why}): cannot resume from it (remove it to start afresh, "
-                         "or choose another directory)", path=path) from None
-    return stored
 
 
 def _folder_problem(out: Path, folders: dict[str, Path | None], dataset: KittiDataset,
@@ -273,24 +254,17 @@ def predict_dataset(
     # a resumed run's frames keep their files where the first run wrote them: another folder is another run
     config = _config(dataset, variant, source, options,
                      {name: str(f.resolve()) for name, f in extra.items() if f is not None})
-    config_path = out / CONFIG_FILE
-    if config_path.is_dir():  # else found where the first frame's labels are written, after its fit
-        raise InputError("a folder where predict writes its settings' record", path=config_path)
+    # found now, not where the first frame's labels are written, after its fit
+    config_path = settings_record(out, CONFIG_FILE, command="predict")
     existing = sorted(out.glob("*.txt")) if out.is_dir() else []
     if existing and not resume:
         raise InputError(f"already holds {len(existing)} label files; use {names['resume']} to continue that run "
                          "or choose an empty directory", path=out)
-    stored = _stored_config(config_path) if resume else None
-    if existing:
-        if stored != config:
-            said = {"folders": f"{names['json_dir']} / {names['pictures_dir']}",
-                    "folders.json_dir": names["json_dir"], "folders.pictures_dir": names["pictures_dir"]}
-            changed = (", ".join(said.get(name, name) for name in config_difference(stored, config))
-                       if stored is not None else f"{CONFIG_FILE} missing")
-            raise InputError(f"label files were written with other settings ({changed}): "
-                             "cannot resume into this directory", path=out)
-        # A submission is the folder's *.txt: frames outside this selection would go to the server too.
-        refuse_frames_outside(out, existing, frame_ids, would="which a submission zipped from it would include")
+    said = {"folders": f"{names['json_dir']} / {names['pictures_dir']}",
+            "folders.json_dir": names["json_dir"], "folders.pictures_dir": names["pictures_dir"]}
+    # A submission is the folder's *.txt: frames outside this selection would go to the server too.
+    stored = (resumed_settings(out, existing, config, config_path, frame_ids, said=said,
+                               would="which a submission zipped from it would include") if resume else None)
     if stored != config:  # not a run of these settings resumed (that one's files are its own)
         _others_files(frame_ids, extra, names, resumed=(stored or {}) if resume else None)
     done = {p.stem for p in existing}

@@ -1,11 +1,13 @@
 """Resume records of an evaluation run: one JSON file per finished frame under the
-predictions directory, holding the run's configuration and each variant's result."""
+predictions directory, holding the run's configuration and each variant's result; and the
+settings' record of a run writing one file a frame (``predict``'s ``.predict.json``,
+``detect --out``'s ``.detect.json``), which a resumed run compares with its own."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING, Iterable, Mapping
 
 from wirescene.core.artefacts import format_tag
 from wirescene.core.atomic import write_text
@@ -85,6 +87,76 @@ def config_difference(stored, current, prefix: str = "") -> list[str]:
             out += config_difference(stored.get(key), current.get(key), f"{prefix}{key}.")
         return out
     return [] if stored == current else [prefix.rstrip(".")]
+
+
+def settings_record(folder: Path, name: str, *, command: str) -> Path:
+    """``folder / name``, where ``command`` keeps its run's settings' record; an
+    :class:`InputError` naming it where a folder is in its place (found before any frame, not
+    when the first frame's file is written)."""
+    path = Path(folder) / name
+    if path.is_dir():
+        raise InputError(f"a folder where {command} writes its settings' record", path=path)
+    return path
+
+
+def stored_config(path: Path) -> dict | None:
+    """The settings' record of an earlier run at ``path`` (None where there is none), for a
+    resumed run to compare with its own; an :class:`InputError` naming it where it cannot be
+    read as one, not taken for no record and written over: a resumed run refuses it, with or
+    without the files it describes (as ``eval --resume`` names a frame's unreadable record)."""
+    if not path.exists():
+        return None
+    try:
+        stored = json.loads(path.read_text())
+        if not isinstance(stored, dict):
+            raise TypeError(f"a JSON {type(stored).__name__}, not an object")
+    except (OSError, ValueError, TypeError) as exc:  # ValueError: UnicodeDecodeError and JSONDecodeError too
+        why = exc if isinstance(exc, TypeError) else exc.__class__.__name__
+        raise InputError(f"unreadable settings record ({why}): cannot resume from it (remove it to start afresh, "
+                         "or choose another directory)", path=path) from None
+    return stored
+
+
+def settings_changed(stored: dict | None, config: dict, *, record: str,
+                     said: Mapping[str, str] | None = None) -> str | None:
+    """The settings in which an earlier run's record ``stored`` differs from ``config``, as a
+    refusal names them (``said``: a setting's name in the command's words, e.g. its option);
+    ``"RECORD missing"`` where there is no record; None where they are the same.
+
+    Examples
+    --------
+    >>> settings_changed({"threshold": 0.5, "upsample": 1.5}, {"threshold": 0.3, "upsample": 1.5}, record=".r.json")
+    'threshold'
+    >>> settings_changed(None, {"threshold": 0.3}, record=".r.json"), settings_changed({}, {}, record=".r.json")
+    ('.r.json missing', None)
+    """
+    if stored == config:
+        return None
+    if stored is None:
+        return f"{record} missing"
+    return ", ".join((said or {}).get(name, name) for name in config_difference(stored, config))
+
+
+def resumed_settings(folder: Path, files: list[Path], config: dict, record: Path, frame_ids, *, would: str,
+                     what: str = "label files", said: Mapping[str, str] | None = None) -> dict | None:
+    """The refusals of a run resumed in ``folder``, before any frame: where it holds ``files``
+    (one a frame, ``FRAME.*``) written with settings other than ``config`` (or without the
+    record ``record``), or of frames outside ``frame_ids`` (:func:`refuse_frames_outside`,
+    ``would`` and ``what`` its words); returns the earlier run's record (None: none).
+
+    Raises
+    ------
+    InputError
+        Naming ``folder``, or ``record`` where it cannot be read (:func:`stored_config`).
+    """
+    stored = stored_config(record)
+    if files:
+        changed = settings_changed(stored, config, record=record.name, said=said)
+        if changed is not None:
+            raise InputError(f"{what} were written with other settings ({changed}): cannot resume into this "
+                             "directory", path=folder)
+        refuse_frames_outside(folder, files, frame_ids, would=would, what=what)
+    return stored
 
 
 class StaleRecord(Exception):
