@@ -2061,7 +2061,8 @@ def test_detect_out_writes_each_frame_as_it_is_done_and_resume_detects_only_the_
     summary = json.loads((tmp_path / "ap.json").read_text())
     assert (summary["frames"], summary["frames_kept"]) == (1, 1)
     r = run(*args, "--resume")  # every frame done: nothing detected again
-    assert r.exit_code == 0 and asked == ["000010"] and "2 of 2 frames kept from an earlier run, 0 to detect" in r.output
+    assert r.exit_code == 0 and asked == ["000010"], r.output
+    assert "2 of 2 frames kept from an earlier run, 0 to detect" in r.output
     assert_close(read_detections(out / "000010.json").boxes, [[380, 180, 560, 290]])  # --detections reads them
 
 
