@@ -289,7 +289,7 @@ def test_pil_images_are_read_as_their_files_are(frame, tmp_path):
     with pytest.raises(wirescene.ArgumentError, match=r"^image: float values outside both 0\.\.1 and 0\.\.255 "
                                                       r"\(dtype float32, [-\d.]+\.\.[\d.]+\) would be clipped"):
         as_image(Image.fromarray(unit * 403 - 3))
-    with pytest.raises(wirescene.ArgumentError, match=r"^image: integer values outside 0\.\.255 \(dtype int32, -\d+\.\."):
+    with pytest.raises(wirescene.ArgumentError, match=r"^image: integer values outside 0\.\.65535 \(mode I, -\d+\.\."):
         as_image(Image.fromarray(image[..., 1].astype(np.int32) - 1000))  # mode I, negative: was clipped to 0
 
 

@@ -372,6 +372,10 @@ CASES = {
         r"frames: not a KITTI object directory: expected testing/image_2 and testing/calib \(or image_2 and calib\); "
         r"predict, detect, pitch and eval take one calibration for every frame \(--calib FILE\) for a folder of one "
         r"camera's frames$"),
+    # the reason first: --frames said "no labelled frame 424242 in .../testing" of a split of images alone
+    "eval --frames of a split without label_2": (
+        lambda t: ["eval", kitti_copy(t / "kitti", [FRAME], subdirs=("image_2", "calib"), split="testing") / "testing",
+                   "--variant", "coarse", "--frames", "424242"], r"testing: evaluation needs label_2/ ground truth$"),
     "eval of a split without label files": (
         lambda t: ["eval", _unlabelled_split(t), "--variant", "coarse"], r"training/label_2: no \.txt file \(it is empty\)$"),
     # outputs, refused before any fitting

@@ -2146,3 +2146,20 @@ def test_progress_bars_are_drawn_on_a_terminal_only(monkeypatch):
         monkeypatch.setattr(sys, "stderr", stream)
         assert list(progress_bar(range(3), "frames", unit="frame")) == [0, 1, 2]
         assert ("\r" in stream.getvalue()) is drawn, stream.getvalue()
+
+
+def test_tqdm_disable_silences_the_progress_bars_on_a_terminal_too(monkeypatch):
+    """TQDM_DISABLE=1 (tqdm's own switch, read as a default) silenced the bars; the bar's disable=None overrode it."""
+    import io
+    import sys
+
+    from wirescene.cli.options import progress_bar
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    monkeypatch.setenv("TQDM_DISABLE", "1")
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    assert list(progress_bar(range(3), "frames", unit="frame")) == [0, 1, 2]
+    assert sys.stderr.getvalue() == ""

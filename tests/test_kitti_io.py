@@ -395,16 +395,32 @@ def test_float_and_32_bit_integer_image_files_are_checked_as_arrays_are(kitti_ro
     for name, values, says in (
             ("normalised", unit * 403 - 3, r"float values outside both 0\.\.1 and 0\.\.255 \(dtype float32, -3\.\.400\) "
                                            r"would be clipped: scale to 0\.\.1 or 0\.\.255"),
-            ("negative", grey.astype(np.int32) - 1, r"integer values outside 0\.\.255 \(dtype int32, -1\.\.254\): "
-                                                    r"the negative ones would be read as 0"),
-            ("wide", grey.astype(np.int32) * 65793, r"integer values outside 0\.\.255 \(dtype int32, 0\.\.16777215\) "
-                                                    r"would be read by the range of int32"),
+            ("negative", grey.astype(np.int32) - 1, r"integer values outside 0\.\.65535 \(mode I, -1\.\.254\) "
+                                                    r"would be clipped: scale to 0\.\.65535"),
+            ("wide", grey.astype(np.int32) * 65793, r"integer values outside 0\.\.65535 \(mode I, 0\.\.16777215\) "
+                                                    r"would be clipped: scale to 0\.\.65535"),
             ("nan", np.where(unit > 0.5, np.nan, unit).astype(np.float32), r"image has non-finite values \(\d+ NaN")):
         path = tiff(name, values)
         with pytest.raises(InputError, match=f"^{re.escape(str(path))}: {says}") as exc:
             read_image(path)
         one_line(exc)
 
+
+def test_a_32_bit_integer_image_file_is_refused_naming_the_range_it_is_read_by(tmp_path):
+    """A mode I file is read by 0..65535 (as a 16-bit image), not by an int32 array's 0..255: its refusal said
+    "outside 0..255 ... scale others to 0..255", and a file so scaled read black. It names 0..65535, and a file
+    scaled so reads."""
+    from PIL import Image
+
+    levels = np.tile(np.arange(0, 256, 5, dtype=np.int32), (16, 1))  # (16, 52), 0..255
+    path = tmp_path / "wide.tif"
+    Image.fromarray(levels * 65793).save(path)  # 0..16777215: 24 bits
+    with pytest.raises(InputError, match=r"integer values outside 0\.\.65535 \(mode I, 0\.\.16777215\) would be "
+                                         r"clipped: scale to 0\.\.65535") as exc:
+        read_image(path)
+    one_line(exc)
+    Image.fromarray(levels * 257).save(path)  # as the message says: the levels read back
+    assert (read_image(path)[..., 0] == levels).all()
 
 def test_dataset_from_root_and_split_dir(kitti_root):
     for root in (kitti_root, kitti_root / "training"):

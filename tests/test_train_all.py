@@ -463,6 +463,22 @@ def test_a_copy_of_the_root_elsewhere_resumes_the_same_training(trained, tmp_pat
     assert r.exit_code == 0 and r.stderr.count("done in an earlier run, kept") == 4, r.output + r.stderr
 
 
+def test_a_resumed_run_s_peak_memory_is_at_least_that_of_the_steps_it_keeps(trained, tmp_path, monkeypatch):
+    """A resumed run that trained no step wrote its own process's peak (reading the frames: some 70 MB) over the
+    earlier run's and said it on its last line, below steps kept at hundreds of MB: the run's peak is at least each
+    step's."""
+    from wirescene.training import pipeline
+
+    out, split, _ = trained
+    models = shutil.copytree(out, tmp_path / "models")
+    monkeypatch.setattr(pipeline, "_peak_memory_mb", lambda: 1.0)  # this process: far below any step's
+    r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", models, *TINY, "--resume")
+    assert r.exit_code == 0 and r.stderr.count("done in an earlier run, kept") == 4, r.output + r.stderr
+    manifest = json.loads((models / MANIFEST_FILE).read_text())
+    steps = max(record["peak_rss_mb"] for record in manifest["steps"].values() if "peak_rss_mb" in record)
+    assert manifest["peak_rss_mb"] == steps > 10, (manifest["peak_rss_mb"], steps)
+    assert r.stdout.rstrip().endswith(f"; peak memory {steps:.0f} MB"), r.stdout
+
 def test_train_all_resume_skips_finished_steps(trained):
     out, split, _ = trained
     before = _mtimes(out)

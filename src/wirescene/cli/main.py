@@ -401,6 +401,7 @@ def eval_cmd(kitti_root, variants, detections, viewpoint_noise, frames, split_fi
         keeps_on_resume("the frames --predictions holds")
     dataset = kitti_dataset(kitti_root, split, calib, absolute=dask_address is not None)
     variants = list(variants) or _variants()
+    dataset.require_labels("evaluation")  # before --frames looks among labelled frames (a testing/ split has none)
     frame_ids = select_frames(frames, split_file, dataset.require_frames(), where=dataset.split_dir)
     # read before any fit (a bad devkit mapping is an error now); a plain folder's frames are no KITTI drive's
     drives = {} if dataset.image_dir == dataset.split_dir else interval_drives(dataset.split_dir)

@@ -467,10 +467,13 @@ def say_models(models, *, replaced=()):
 
 def progress_bar(items, desc: str, *, unit: str = "it", total: int | None = None):
     """``items`` under a tqdm bar on standard error, gone once done; none where standard error is
-    no terminal (``2> log``: its redrawn lines would fill the file with carriage returns)."""
+    no terminal (``2> log``: its redrawn lines would fill the file with carriage returns) or where
+    ``TQDM_DISABLE`` is set (tqdm's own switch)."""
     from tqdm import tqdm
 
-    return tqdm(items, desc=desc, unit=unit, total=total, leave=False, file=sys.stderr, disable=None)
+    # tqdm reads TQDM_DISABLE as a default, which the argument overrides (and before 4.66 not at all): read here
+    disable = True if os.environ.get("TQDM_DISABLE") else None
+    return tqdm(items, desc=desc, unit=unit, total=total, leave=False, file=sys.stderr, disable=disable)
 
 
 def say_off_centre_image(image, camera) -> None:

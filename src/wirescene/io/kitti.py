@@ -259,7 +259,8 @@ def rgb_of_pil(img) -> np.ndarray:
     scaled by their range (:func:`wirescene.core.image.to_rgb_uint8`), palette, grey and
     alpha images converted to RGB. Its values are checked as an array's are where images
     enter (:func:`wirescene.core.image.range_problem`); a 32-bit integer image (mode ``I``)
-    of values in 0..65535 is read as a 16-bit one (Pillow before 10.3 opens a 16-bit PNG so).
+    of values in 0..65535 is read as a 16-bit one (Pillow before 10.3 opens a 16-bit PNG so), one
+    beyond refused in those words.
 
     Raises
     ------
@@ -279,6 +280,9 @@ def rgb_of_pil(img) -> np.ndarray:
     wirescene.core.errors.ShapeError: float values outside both 0..1 and 0..255 (dtype float32, -3..400) would be ...
     """
     values = _pil_values(img)
+    if img.mode == "I" and values.dtype != np.uint16:  # read by 0..65535: an int32 array's words (0..255) would mislead
+        raise ShapeError(f"integer values outside 0..65535 (mode I, {values.min()}..{values.max()}) would be clipped: "
+                         "scale to 0..65535, the range a 32-bit integer image is read by")
     rgb = to_rgb_uint8(values)  # first: non-finite values said as such, with their count
     problem = range_problem(values)
     if problem:
@@ -294,7 +298,7 @@ def _pil_values(img) -> np.ndarray:
     if img.mode == "I":
         values = np.asarray(img)
         fits = values.size == 0 or (values.min() >= 0 and values.max() <= 65535)
-        return values.astype(np.uint16) if fits else values  # beyond: an int32 array's check refuses it
+        return values.astype(np.uint16) if fits else values  # beyond: refused by rgb_of_pil
     if img.mode == "F":
         return np.asarray(img, dtype=np.float32)
     return np.asarray(img.convert("RGB"), dtype=np.uint8)

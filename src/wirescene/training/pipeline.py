@@ -29,10 +29,11 @@ frame is a group of its own, and the groups are dealt to folds balanced by cars
 ``MODELS_DIR/models.json`` (format ``wirescene-models/1``) records the data (root, split
 file, frames), the folds, the packages and BLAS kernels it ran with
 (:func:`wirescene.core.version.environment`), and per step its options, inputs, artefact
-hash, wall time and peak resident memory, and the run's peak (``peak_rss_mb``: each step's is
-measured by resetting the process's, which ``/usr/bin/time`` then reports of the last step
-alone). It is rewritten after every step from the first one trained on, ``"complete": false``
-until the last; :func:`wirescene.core.resources.resolve_models` refuses an unfinished directory.
+hash, wall time and peak resident memory, and the run's peak (``peak_rss_mb``, at least each
+step's, one kept by ``resume`` too: each step's is measured by resetting the process's, which
+``/usr/bin/time`` then reports of the last step alone). It is rewritten after every step from
+the first one trained on, ``"complete": false`` until the last;
+:func:`wirescene.core.resources.resolve_models` refuses an unfinished directory.
 With ``resume``, a step whose record matches the current data (the frames, their label,
 calibration and image files and their folds), options, inputs and package
 version, and whose file is unchanged, is not run again; the earlier run's records stand
@@ -516,7 +517,9 @@ class _Run:
     peak: _RunPeak = field(default_factory=_RunPeak)
 
     def write(self, manifest: dict) -> None:
-        manifest["peak_rss_mb"] = self.peak.total()  # this process's, over the steps it trained (MB)
+        # this process's (MB), and at least each step's: a resumed run's steps kept were an earlier process's
+        peaks = [self.peak.total(), *(record.get("peak_rss_mb") for record in manifest["steps"].values())]
+        manifest["peak_rss_mb"] = max((mb for mb in peaks if mb is not None), default=None)
         save_json(self.out / MANIFEST_FILE, manifest, kind=MANIFEST_KIND, version=MANIFEST_VERSION)
 
     def path_of(self, step: str) -> Path:
