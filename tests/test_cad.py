@@ -191,6 +191,19 @@ def test_corrections_applied_with_mirror(tmp_path, cars):
         assert "corr.json" in str(err.value) and "\n" not in str(err.value)
 
 
+def test_corrections_not_utf8_or_of_a_long_list_are_one_short_line(tmp_path):
+    """A corrections file not of UTF-8 text raised a UnicodeDecodeError (a traceback), and a vertex's list of
+    thousands of numbers was quoted whole in the error line."""
+    path = tmp_path / "corr.json"
+    for data, match in ((b"\xff\xfe{}", "cannot read landmark corrections"),
+                        (b'{"acura-nsx-sz": {"headlight_right": [' + b", ".join([b"1.5"] * 5000) + b"]}}",
+                         r"finite numbers, got \[1\.5, .*\.\.\.$")):
+        path.write_bytes(data)
+        with pytest.raises(InputError, match=match) as err:
+            load_corrections(path)
+        assert "corr.json" in str(err.value) and len(str(err.value)) < 200 + len(str(path))
+
+
 def test_cad_picture_has_a_key_to_its_colours():
     """Red and orange dots are landmarks on the near and the far side of each view, blue lines
     the wireframe, grey the mesh: the picture says so."""

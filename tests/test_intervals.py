@@ -216,3 +216,53 @@ def test_kitti_intervals_of_one_drive_are_said_to_be_none():
     assert summary.count(ONE_DRIVE) == 1 and "in 10 frames" in summary  # once for the APs and their margins
     two = kitti_intervals([[car]] * 10, [[car]] * 10, ids, {f: f"drive_{f < '000005'}" for f in ids}, n_boot=20)
     assert "over 2 drives" in format_kitti_intervals({"full": two})
+
+
+def test_a_margin_over_drives_of_the_reference_keeps_its_interval():
+    """A margin's draws take the drives of either variant's true positives: its interval was hidden where the variant's
+    own were of one drive, though the reference's two drives moved it (+25.0 printed without its [+25.0, +50.0])."""
+    good = _report({"a1": [0.2, 0.3]})
+    base = _report({"a1": [0.2, 3.0], "b1": [0.4, 0.4]})
+    reports, drives = {"coarse+gp": base, "full": good}, {"a1": "A", "b1": "B"}
+    margins = margin_intervals(reports, drives, reference="coarse+gp", n_boot=200)
+    assert margins["full"]["drives"] == 2 and margins["full"]["frames_alone"] == 0
+    text = format_intervals(localisation_intervals(reports, drives, n_boot=200), margins=margins)
+    assert "100.0% (no interval: one drive) of 2 true positives, 1 drive\n" in text
+    assert text.endswith("  full       +25.0 [+25.0, +50.0]")
+    alone = format_intervals(localisation_intervals({"full": _report({"x": [0.2, 3.0]})}, {}, n_boot=50))
+    assert "(no interval: one frame) of 2 true positives, 0 drives and 1 frame of no known drive" in alone
+
+
+def test_kitti_intervals_of_several_runs_on_one_drive_keep_the_runs_spread():
+    """Each draw of several runs takes one at random: on one drive their spread is an interval still, not none."""
+    from wirescene.eval.kitti_metrics import ONE_DRIVE, format_kitti_intervals
+
+    car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 20.0], 0.0, 0.9)
+    miss = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 25.0], 0.0, 0.9)
+    ids = [f"{i:06d}" for i in range(10)]
+    spread = kitti_run_intervals([[car]] * 10, [[[car]] * 10, [[miss]] * 10], ids, dict.fromkeys(ids, "d1"),
+                                 n_boot=40)
+    lo, hi = spread["car"]["3d"]
+    assert lo < hi  # the run that misses every car, or the one that finds them
+    text = format_kitti_intervals({"2 runs": spread})
+    assert text != ONE_DRIVE and "over 1 drive," in text and f"[{lo:.1f}, {hi:.1f}]" in text
+
+
+def test_the_report_gives_no_interval_over_one_drive():
+    """The report's tables gave the [x, x] of one drive that the printed lines say is none."""
+    from wirescene.eval.report import _kitti_table, _metrics_table
+
+    good = _report({"a1": [0.2, 0.3], "a2": [0.4, 2.0]})
+    good = EvaluationReport({"all": {}}, good.records, "kitti_flag", "applied")  # the table's other figures: none
+    one = localisation_intervals({"full": good}, {"a1": "A", "a2": "A"}, n_boot=50)
+    assert "[75, 75]%" not in _metrics_table({"full": good}, one)
+    two = localisation_intervals({"full": good}, {"a1": "A", "a2": "B"}, n_boot=50)
+    assert "[50, 100]%" in _metrics_table({"full": good}, two)
+    car = Label("Car", 0.0, 0, 0.0, [100, 100, 200, 200], [1.5, 1.6, 3.9], [0.0, 1.6, 20.0], 0.0, 0.9)
+    ids = [f"{i:06d}" for i in range(10)]
+    point = {"full": kitti_metrics([[car]] * 10, [[car]] * 10)}
+    spread = {"full": kitti_intervals([[car]] * 10, [[car]] * 10, ids, dict.fromkeys(ids, "d1"), n_boot=20)}
+    table = _kitti_table(point, spread)
+    assert "[22.5, 22.5]" not in table and "bootstrap interval" not in table  # 9 of 10 cars: at most 22.5
+    spread = {"full": kitti_intervals([[car]] * 10, [[car]] * 10, ids, {f: f"d{f < '000005'}" for f in ids}, n_boot=20)}
+    assert "22.5 [22.5, 22.5]" in _kitti_table(point, spread)

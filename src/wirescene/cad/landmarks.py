@@ -186,7 +186,7 @@ def load_corrections(path=None) -> dict:
         raise InputError("landmark corrections file not found", path=p)
     try:
         data = json.loads(p.read_text())
-    except (OSError, json.JSONDecodeError) as e:
+    except (OSError, ValueError) as e:  # ValueError: bad JSON or bytes not UTF-8 (UnicodeDecodeError)
         raise InputError(f"cannot read landmark corrections ({e})", path=p) from None
     if not isinstance(data, dict):
         raise InputError("landmark corrections must be a JSON object {car: {vertex: [x, y, z]}}", path=p)
@@ -199,7 +199,9 @@ def load_corrections(path=None) -> dict:
             if name not in VERTEX_INDEX:
                 raise InputError(f"unknown vertex name {name!r} for car {car!r}", path=p)
             if not (isinstance(xyz, list) and len(xyz) == 3 and all(finite_real(v) for v in xyz)):
-                raise InputError(f"correction of {car}/{name} must be [x, y, z] of finite numbers, got {xyz!r}", path=p)
+                got = repr(xyz)  # cut: a list of thousands of numbers is no line to read
+                raise InputError(f"correction of {car}/{name} must be [x, y, z] of finite numbers, got "
+                                 f"{got if len(got) <= 60 else got[:57] + '...'}", path=p)
     return data
 
 

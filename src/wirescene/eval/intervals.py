@@ -21,7 +21,7 @@ from typing import Iterator, Mapping, Sequence
 
 import numpy as np
 
-from wirescene.eval.kitti_metrics import DIFFICULTIES, MIN_OVERLAP, average_precision, kitti_curves
+from wirescene.eval.kitti_metrics import DIFFICULTIES, MIN_OVERLAP, average_precision, drawn_alike, kitti_curves
 
 #: Bootstrap draws of an interval unless told otherwise.
 N_BOOT = 10000
@@ -231,7 +231,8 @@ def margin_intervals(reports: Mapping, cluster_of: Mapping[str, str], *, referen
     Returns
     -------
     dict
-        ``{variant: {"reference", "margin", "interval"}}``.
+        ``{variant: {"reference", "margin", "interval", "drives", "frames_alone"}}``: ``drives``
+        and ``frames_alone`` those of either variant's true positives, the clusters drawn.
 
     Examples
     --------
@@ -242,7 +243,7 @@ def margin_intervals(reports: Mapping, cluster_of: Mapping[str, str], *, referen
     >>> drives = {"000000": "d1", "000001": "d1", "000002": "d2", "000003": "d2"}
     >>> reports = {"ours": report([0.5, 0.8, 2.0, 3.0]), "base": report([0.5, 2.0, 2.5, 3.0])}
     >>> margin_intervals(reports, drives, reference="base", n_boot=200)  # 50% - 25%
-    {'ours': {'reference': 'base', 'margin': 25.0, 'interval': (0.0, 50.0)}}
+    {'ours': {'reference': 'base', 'margin': 25.0, 'interval': (0.0, 50.0), 'drives': 2, 'frames_alone': 0}}
     """
     if reference not in reports:
         raise ValueError(f"reference variant {reference!r} is not among {sorted(reports)}")
@@ -251,7 +252,7 @@ def margin_intervals(reports: Mapping, cluster_of: Mapping[str, str], *, referen
         if variant == reference:
             continue
         pair = (report.records, reports[reference].records)
-        rows, n_clusters, _ = _clusters([r.frame_id for records in pair for r in records], cluster_of)
+        rows, n_clusters, alone = _clusters([r.frame_id for records in pair for r in records], cluster_of)
         counts = []
         for records, at in zip(pair, (rows[: len(pair[0])], rows[len(pair[0]):])):
             within = np.array([r.loc_error < threshold for r in records], float)
@@ -259,7 +260,7 @@ def margin_intervals(reports: Mapping, cluster_of: Mapping[str, str], *, referen
                        np.bincount(at, minlength=n_clusters).astype(float)]
         margin, interval = clustered_margin(*counts, n_boot=n_boot, seed=seed)
         out[variant] = {"reference": reference, "margin": margin if np.isfinite(margin) else None,
-                        "interval": interval}
+                        "interval": interval, "drives": n_clusters - alone, "frames_alone": alone}
     return out
 
 
@@ -295,17 +296,16 @@ def format_intervals(intervals: Mapping[str, dict], *, threshold: float = 1.0,
         n_alone, n_drives = f["frames_alone"], f["drives"]
         alone = f" and {n_alone} frame{'s' * (n_alone != 1)} of no known drive" if n_alone else ""
         # one cluster drawn again and again: [x, x] would read as no spread, not as no measure of it
-        span = (f"[{f['interval'][0]:.1f}, {f['interval'][1]:.1f}]" if n_drives + n_alone > 1
-                else "(no interval: one drive)")
+        span = (f"[{f['interval'][0]:.1f}, {f['interval'][1]:.1f}]" if not drawn_alike(f)
+                else f"(no interval: one {'drive' if n_drives else 'frame'})")
         lines.append(f"  {variant.ljust(width)}  {f['share']:.1f}% {span} of {f['true_positives']} true positives, "
                      f"{n_drives} drive{'s' * (n_drives != 1)}{alone}")
     if margins:
         reference = next(iter(margins.values()))["reference"]
         lines.append(f"Margins over {reference} in points within {threshold:g} m, the same drives drawn for both:")
         for variant, f in margins.items():
-            spread = intervals.get(variant) or {}
-            one = spread.get("drives", 2) + spread.get("frames_alone", 0) < 2  # no interval, as said above
-            span = "" if f["interval"] is None or one else " [{:+.1f}, {:+.1f}]".format(*f["interval"])
+            # the drives of either variant's true positives drawn: not those of the variant's alone
+            span = "" if f["interval"] is None or drawn_alike(f) else " [{:+.1f}, {:+.1f}]".format(*f["interval"])
             lines.append(f"  {variant.ljust(width)}  " + ("-" if f["margin"] is None else f"{f['margin']:+.1f}{span}"))
     return "\n".join(lines)
 

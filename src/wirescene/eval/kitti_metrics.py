@@ -1088,6 +1088,22 @@ def format_kitti_summary(results: dict[str, dict], *, intervals: dict[str, dict]
 ONE_DRIVE = "No interval over drives of the APs or their margins: the frames are of one drive"
 
 
+def drawn_alike(figures: dict) -> bool:
+    """Whether every bootstrap draw of an interval's ``figures`` (their ``drives`` and
+    ``frames_alone``, and ``runs`` where a draw also takes one of several runs:
+    :mod:`wirescene.eval.intervals`) is the same: one cluster (a drive, or a frame of no known
+    drive) and one run, whose [x, x] would read as a figure known exactly, not as none measured.
+
+    Examples
+    --------
+    >>> drawn_alike({"drives": 1, "frames_alone": 0}), drawn_alike({"drives": 1, "frames_alone": 1})
+    (True, False)
+    >>> drawn_alike({"drives": 1, "frames_alone": 0, "runs": 2})  # each draw takes a run: the runs' spread
+    False
+    """
+    return figures["drives"] + figures["frames_alone"] < 2 and figures.get("runs", 1) < 2
+
+
 def format_kitti_intervals(intervals: dict[str, dict]) -> str:
     """A table of :func:`wirescene.eval.intervals.kitti_intervals` figures ``{name:
     intervals}``, a line per name, in the columns of :func:`format_kitti_summary`.
@@ -1110,7 +1126,7 @@ def format_kitti_intervals(intervals: dict[str, dict]) -> str:
     some = next(iter(intervals.values()))
     alone = some["frames_alone"]
     margin = some.get("margin_over")
-    if some["drives"] + alone < 2:  # every draw that one drive: [x, x] would read as an AP known exactly
+    if drawn_alike(some):  # every draw that one drive: [x, x] would read as an AP known exactly
         return ONE_DRIVE
     name_w = max(len("variant"), *(len(v) for v in intervals))
     lines = [(f"AP margins over {margin} in points, " if margin else "")

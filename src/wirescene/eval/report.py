@@ -36,7 +36,7 @@ from wirescene.core.groundplane import KITTI_CAMERA_HEIGHT
 from wirescene.core.labels import CAR_TYPES, Label
 from wirescene.core.types import Detections, SceneEstimate, dropped_detections, fitted_detections
 from wirescene.core.wireframe import EDGES
-from wirescene.eval.kitti_metrics import kitti_figure
+from wirescene.eval.kitti_metrics import drawn_alike, kitti_figure
 from wirescene.eval.metrics import EvaluationReport
 from wirescene.eval.seeds import mean_and_range, seed_folder
 from wirescene.fitting.variants import get_variant
@@ -335,8 +335,8 @@ def _metrics_table(reports, intervals=None) -> str:
         cells = []
         for key, _, fmt in cols:
             if key == "loc_1m_interval":
-                span = intervals[name]["interval"]
-                cells.append("–" if span is None else fmt.format(*span))
+                span = intervals[name]["interval"]  # of one drive none: [x, x] would read as a share known exactly
+                cells.append("–" if span is None or drawn_alike(intervals[name]) else fmt.format(*span))
                 continue
             v = m.get(key)
             cells.append("–" if v is None or not np.isfinite(v) else fmt.format(v))
@@ -346,6 +346,8 @@ def _metrics_table(reports, intervals=None) -> str:
 
 def _kitti_table(kitti: dict, kitti_intervals: dict | None) -> str:
     """KITTI's moderate APs (R40) of each variant, each with its interval over drives if given."""
+    if kitti_intervals and drawn_alike(next(iter(kitti_intervals.values()))):  # one drive: every draw the same
+        kitti_intervals = None
     cols = [("3D AP@0.7", "car", "3d"), ("BEV AP@0.7", "car", "bev"), ("3D AP@0.5", "iou_0.5", "3d"),
             ("2D AP@0.7", "car", "2d")]
 

@@ -458,7 +458,8 @@ def boxes_lack_viewpoints(dataset: KittiDataset, source: DetectionSource, frame_
     detector bank and the crop classifier (:func:`~wirescene.fitting.models.model_files_read`'s
     ``viewpoints_given`` is its negation). A frame whose boxes no longer read (a reused frame's
     file changed since its fit) counts: what it held is unknown. ``boxes``: the frames' detections
-    already read (:func:`check_images_read`'s), a frame missing from it read here.
+    already read (:func:`check_frames_boxes`', :meth:`~wirescene.eval.sources.DetectionSource.check_files`'), a
+    frame missing from it read here.
 
     Examples
     --------
