@@ -1924,7 +1924,7 @@ def test_split_coco_writes_each_images_detections_as_the_readers_read_them(tmp_p
     assert r.exit_code == 0, r.output
     # the cars counted (a detector numbering its classes otherwise shows here): the person is not one
     assert r.stdout.strip() == (f"4 detections (3 cars: 'car' or COCO's category_id 3) of 3 frames written to {out} "
-                                "(1 frames without one)")
+                                "(1 frame without one)")
     assert sorted(p.name for p in out.iterdir()) == ["000002.json", "000005.json", "000010.json"]
     d = read_detections(out / "000010.json")
     assert_close(d.boxes, [[354.4, 185.5, 549.5, 294.5], [100, 170, 180, 230]])
@@ -2000,7 +2000,7 @@ def test_detect_out_refuses_a_folder_of_an_earlier_runs_files(tmp_path):
     (out / "000002.json").write_text("[]")
     r = CliRunner().invoke(main, ["detect", str(KITTI_ROOT), "--frames", "000010", "--out", str(out)])
     assert r.exit_code == 2 and len(r.stderr.splitlines()) == 1, r.output
-    assert f"--out: {out} already holds 1 detection files (e.g. 000002.json): choose an empty directory" in r.stderr
+    assert f"--out: {out} already holds 1 detection file (e.g. 000002.json): choose an empty directory" in r.stderr
     assert sorted(p.name for p in out.iterdir()) == ["000002.json"] and "000010:" not in r.output
 
 
@@ -2077,10 +2077,10 @@ def test_detect_resume_refuses_other_settings_and_another_runs_files(tmp_path, m
     record = (out / ".detect.json").read_text()
     r = run(*args)
     assert r.exit_code == 2 and len(r.stderr.splitlines()) == 1, r.output
-    assert (f"--out: {out} already holds 1 detection files (e.g. 000010.json) of a run of these settings: use --resume "
+    assert (f"--out: {out} already holds 1 detection file (e.g. 000010.json) of a run of these settings: use --resume "
             "to continue it, or choose an empty directory") in r.stderr
     r = run(*args, "--threshold", 0.6, "--upsample", 1)
-    assert r.exit_code == 2 and ("already holds 1 detection files (e.g. 000010.json) of a run with other settings "
+    assert r.exit_code == 2 and ("already holds 1 detection file (e.g. 000010.json) of a run with other settings "
                                  "(--threshold, --upsample): choose an empty directory") in r.stderr, r.output
     r = run(*args, "--resume", "--threshold", 0.6)
     assert r.exit_code == 2 and (f"{out}: detection files were written with other settings (--threshold): cannot "

@@ -371,7 +371,7 @@ def _refuse_held_detections(out_dir: Path | None, *, whose: str = "",
     ``whose`` (" of a run ...") and ``advice`` complete the message."""
     held = _held_detections(out_dir)
     if held:
-        raise click.BadParameter(f"{out_dir} already holds {len(held)} detection files (e.g. {held[0].name}){whose}: "
+        raise click.BadParameter(f"{out_dir} already holds {len(held)} detection file{'s' * (len(held) != 1)} (e.g. {held[0].name}){whose}: "
                                  f"{advice}", param_hint="--out")
 
 
@@ -449,5 +449,6 @@ def split_coco(results, images, out_dir):
     # the cars said: a detector numbering its classes otherwise (KITTI's Car 1, Cyclist 3) shows here, not in a run
     cars = sum(is_car(entry) for entries in by_frame.values() for entry in entries)
     empty = sum(not entries for entries in by_frame.values())
-    click.echo(f"{boxes} detections ({cars} cars: 'car' or COCO's category_id 3) of {len(by_frame)} frames written to "
-               f"{out_dir} ({empty} frames without one)")
+    click.echo(f"{boxes} detection{'s' * (boxes != 1)} ({cars} car{'s' * (cars != 1)}: 'car' or COCO's category_id 3) "
+               f"of {len(by_frame)} frame{'s' * (len(by_frame) != 1)} written to {out_dir} ({empty} "
+               f"frame{'s' * (empty != 1)} without one)")
