@@ -193,14 +193,14 @@ def _box_of(entry: dict, path: Path, where: str) -> list[float]:
     return box
 
 
-def _image_key(value) -> str | None:
-    """The key of a COCO image id (an image's ``id``, an entry's ``image_id``) by which the two are
-    matched: its text, a whole float's that of its integer (``10.0`` as ``10``: JSON writers that
-    write every number as a float); None for a float that is no whole number.
+def _id_key(value) -> str | None:
+    """The key of a COCO id (an image's ``id`` and an entry's ``image_id``, matched by it; a class
+    number, counted by it): its text, a whole float's that of its integer (``10.0`` as ``10``: JSON
+    writers that write every number as a float); None for a float that is no whole number.
 
     Examples
     --------
-    >>> _image_key(10), _image_key(10.0), _image_key("000010"), _image_key(10.5)
+    >>> _id_key(10), _id_key(10.0), _id_key("000010"), _id_key(10.5)
     ('10', '10', '000010', None)
     """
     if isinstance(value, float):
@@ -218,7 +218,7 @@ def _one_image(entries: list, path: Path) -> None:
             continue
         if first is None:
             first = (i, image)
-        elif (_image_key(image) or str(image)) != (_image_key(first[1]) or str(first[1])):
+        elif (_id_key(image) or str(image)) != (_id_key(first[1]) or str(first[1])):
             raise InputError(f"detection {i} is of image_id {str(image)[:20]}, detection {first[0]} of "
                              f"{str(first[1])[:20]}: a detections file holds one image's boxes (split a COCO result "
                              "file by image_id: wirescene split-coco)", path=path)
@@ -328,6 +328,11 @@ def read_boxes_and_classes(path: str | Path, *,
     ...     dets, classes = read_boxes_and_classes(Path(d) / "000010.json")
     >>> len(dets), classes
     (0, Counter({'1': 2, '2': 1}))
+    >>> entries[1]["category_id"] = 1.0  # the same class, written as a float
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "000010.json").write_text(json.dumps(entries))
+    ...     read_boxes_and_classes(Path(d) / "000010.json")[1]
+    Counter({'1': 2, '2': 1})
     """
     path = Path(path)
     dets, others = _parsed(path, image_size)
@@ -335,7 +340,8 @@ def read_boxes_and_classes(path: str | Path, *,
     problem = boxes_problem(dets.boxes, image_size) or normalised_boxes_problem(dets.boxes)
     if problem:
         raise InputError(problem, path=path)
-    return dets, Counter(str(c) for c in others)
+    # a class numbered 1 and 1.0 (writers that write every number as a float) is one class
+    return dets, Counter(_id_key(c) or str(c) for c in others)
 
 
 def read_detections(path: str | Path, *, min_score: float | None = None,
@@ -468,7 +474,7 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
     for i, image in enumerate(listed):
         if not isinstance(image, dict) or image.get("id") in (None, "") or not isinstance(image.get("file_name"), str):
             raise InputError(f"image {i}: expected an object with an id and a file_name", path=images)
-        key, name = _image_key(image["id"]), image["file_name"]
+        key, name = _id_key(image["id"]), image["file_name"]
         frame = Path(name.replace("\\", "/")).stem
         if key is None:
             raise InputError(f"image {i}: its id {image['id']!r} is no whole number", path=images)
@@ -497,7 +503,7 @@ def split_coco_results(results: str | Path, images: str | Path) -> dict[str, lis
         image = entry.get("image_id")
         if image in (None, ""):
             raise InputError(f"detection {i}: no image_id", path=results)
-        key = _image_key(image)
+        key = _id_key(image)
         if key is None:
             raise InputError(f"detection {i}: its image_id {image!r} is no whole number (an image's id)", path=results)
         if key not in frame_of:
