@@ -402,6 +402,36 @@ def test_what_hides_a_cars_vertices_is_said_in_known_words_and_agrees_with_its_v
         ObjectEstimate(**car, hidden_by=reasons, visibility=np.ones(36, bool))
 
 
+def test_what_hides_a_cars_vertices_stays_checked_and_agreeing_when_set_later():
+    """Every assignment of an estimate is checked, ``hidden_by`` and ``visibility`` too: set after
+    the estimate was made they were taken as they came (a wrong shape, an unknown word, a
+    visibility the reasons contradict, which the pictures and the metrics would then each read
+    their own way)."""
+    from wirescene.core.types import ObjectEstimate
+
+    reasons = ["visible"] * 30 + ["self"] * 6
+    car = ObjectEstimate(detection_index=0, box2d=[300.0, 180.0, 520.0, 300.0], score=0.8,
+                         location=[-2.0, 1.65, 12.0], R=np.eye(3), dims=[1.5, 1.6, 3.9], cost=0.0,
+                         vertices=np.zeros((36, 3)), hidden_by=reasons)
+    with pytest.raises(wirescene.ShapeError, match=r"^hidden_by must have shape \(36,\)"):
+        car.hidden_by = ["self"] * 10
+    with pytest.raises(wirescene.ArgumentError, match="^hidden_by: unknown reason 'mask' "):
+        car.hidden_by = reasons[:-1] + ["mask"]
+    with pytest.raises(wirescene.ArgumentError, match="^hidden_by: vertex 0 is 'occluder', but visibility says it is vis"):
+        car.hidden_by = ["occluder"] + reasons[1:]
+    with pytest.raises(wirescene.ArgumentError, match="^visibility: vertex 30 is 'self', but visibility says it is vis"):
+        car.visibility = np.ones(36, bool)
+    with pytest.raises(wirescene.ArgumentError, match="^visibility: visibility cannot be None where hidden_by says"):
+        car.visibility = None
+    assert car.hidden_by.tolist() == reasons and car.visibility.tolist() == [True] * 30 + [False] * 6
+    car.hidden_by = ["visible"] * 30 + ["truncated"] + ["self"] * 5  # where they agree: taken, as an array
+    assert car.hidden_by.dtype.kind == "U" and car.visibility.tolist() == [True] * 30 + [False] * 6
+    car.hidden_by, car.visibility = None, None  # cleared in that order: a car without them
+    car.visibility = np.ones(36, bool)
+    car.hidden_by = ["visible"] * 36
+    assert car.visibility.all()
+
+
 def test_estimates_refuse_non_finite_numbers_where_they_are_made():
     """An ObjectEstimate of a NaN location, an infinite size or a NaN azimuth was accepted, to reach the JSON of `fit`
     (as null), metrics and label files: refused naming the argument; a fit's unknown detection score and infinite

@@ -667,3 +667,60 @@ def test_the_pictures_draw_the_labels_the_evaluation_counts_as_cars():
             if re.search(r'of_type\("Car"|type\s*==\s*"Car"', line):
                 spelt.append(f"{name}:{n}")
     assert not spelt
+
+
+def test_the_occluder_masks_hatching_lies_under_the_pre_detections_boxes(camera):
+    """The hatched region of a car's occluder mask lies over the ground's grid but under the
+    pre-detections' dashed boxes (which it striped red and veiled where they cross it) and the
+    cars, as its docstring says."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import to_rgb
+
+    from wirescene.io.pictures import GROUND_COLOR, overlay
+
+    car, _ = _occluded_car(camera)
+    scene = SceneEstimate("full", [car], shared_plane=True)
+    detections, dropped = Detections([car.box], 0.9, 0.0), Detections([car.box + [-8, -8, 8, 8]], 0.2, 0.0)
+    ax = overlay(np.zeros((375, 1242, 3), np.uint8), camera, scene, detections=detections, dropped=dropped,
+                 edges=EDGES).axes[0]
+    (hatch,) = [p for p in ax.patches if p.get_hatch()]
+    boxes = [p for p in ax.patches if not p.get_hatch()]
+    grid = [c for c in ax.collections if isinstance(c, LineCollection)
+            and np.allclose(c.get_color()[0][:3], to_rgb(GROUND_COLOR))]
+    assert len(boxes) == 2 and grid
+    assert max(c.get_zorder() for c in grid) < hatch.get_zorder() < min(p.get_zorder() for p in boxes)
+
+
+def test_a_vertex_outside_the_image_points_the_way_the_axes_show_it_and_needs_no_image_size(camera):
+    """The triangles of vertices outside the image point where the vertex lies as the axes show
+    it (an upright axes, as ``draw_wireframe``'s own example, turns ``^`` and ``v``), and a camera
+    without an image size (``Camera(P)``) takes the axes' view as the picture: it raised a
+    TypeError."""
+    from matplotlib.collections import PathCollection
+
+    from wirescene.core.camera import Camera
+    from wirescene.core.groundplane import transform
+    from wirescene.core.shape import load_default
+    from wirescene.core.wireframe import FACES
+    from wirescene.infer.likelihood import outside_image
+    from wirescene.infer.occlusion import hidden_reasons, self_occlusion
+    from wirescene.io.pictures import draw_wireframe, new_figure
+
+    vertices = transform(load_default().mean, np.array([0.0, 3.2, 9.0]), rotation_y(0.3))  # low: cut by the bottom
+    uv = camera.project(vertices)
+    below = outside_image(camera, uv)
+    nothing = np.zeros(36, bool)
+    reasons = hidden_reasons(self_occlusion(vertices, FACES, camera.center), truncated=below, other_car=nothing,
+                             occluder=nothing)
+    shown = reasons == "truncated"
+    assert shown.any() and np.all(uv[below, 1] > 374) and np.all((uv[:, 0] > 0) & (uv[:, 0] < 1241))
+    for size, inverted, want in ((True, True, "v"), (True, False, "^"), (False, True, "v")):
+        ax = new_figure().subplots()
+        ax.set_xlim(0, 1242)
+        ax.set_ylim(*((375, 0) if inverted else (0, 375)))
+        assert "truncated" in draw_wireframe(ax, camera if size else Camera(camera.P), vertices, EDGES,
+                                             hidden_by=reasons)
+        edge = [c for c in ax.collections if isinstance(c, PathCollection) and _marker(c) in "<>^v"]
+        assert [_marker(c) for c in edge] == [want], (size, inverted)
+        assert np.allclose(np.sort(edge[0].get_offsets()[:, 0]), np.sort(uv[shown, 0]))  # where they left
+        assert np.all((edge[0].get_offsets()[:, 1] > 360) & (edge[0].get_offsets()[:, 1] < 375))

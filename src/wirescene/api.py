@@ -410,9 +410,10 @@ def fit(
     -------
     SceneEstimate
         ``.cars`` (each with ``location`` (3,), ``rotation_y``, ``dimensions`` (h, w, l),
-        ``vertices`` (36, 3), ``visible`` (36,), ``box``, ``score``, ``cad_model``; the
-        coarse variants fit no wireframe: their ``vertices``, ``visible`` and
-        ``cad_model`` are None), ``.ground_plane`` (None for a variant without ``+gp``
+        ``vertices`` (36, 3), ``visible`` (36,), ``hidden_by`` (36,) (what hides each vertex),
+        ``box``, ``score``, ``cad_model``; the coarse variants fit no wireframe: their
+        ``vertices``, ``visible``, ``hidden_by`` and ``cad_model`` are None),
+        ``.ground_plane`` (None for a variant without ``+gp``
         or ``full``), ``.to_kitti()`` and ``.to_dict()``.
 
     Raises

@@ -211,6 +211,19 @@ def _estimate_field(name: str, value):
     return value
 
 
+def _disagreement(name: str, visibility, reasons: np.ndarray) -> None:
+    """Refuse, as argument ``name``, a ``visibility`` ``(36,)`` (None included) that is not where
+    ``reasons`` (an :attr:`ObjectEstimate.hidden_by`) says ``visible``."""
+    visible = reasons == "visible"
+    if visibility is None:
+        raise ArgumentError(name, "visibility cannot be None where hidden_by says what hides each vertex")
+    visibility = np.asarray(visibility, bool)
+    if not np.array_equal(visibility, visible):
+        v = int(np.flatnonzero(visibility != visible)[0])
+        raise ArgumentError(name, f"vertex {v} is {str(reasons[v])!r}, but visibility says it is "
+                                  f"{'visible' if visibility[v] else 'hidden'}")
+
+
 @dataclass
 class ObjectEstimate:
     """One car of a scene estimate (camera frame, metres, radians).
@@ -251,7 +264,9 @@ class ObjectEstimate:
     ArgumentError
         A non-finite (or non-numeric) number of the label line: ``box2d``, ``score``,
         ``location``, ``R`` (the azimuth) or ``dims``, or a size ``dims`` not positive; where
-        the estimate is made and where a field is set later (``car.score = nan``).
+        the estimate is made and where a field is set later (``car.score = nan``); a
+        ``hidden_by`` of another word than ``HIDDEN_BY``'s, or one and a ``visibility`` that
+        disagree, whichever is set last.
 
     Examples
     --------
@@ -304,27 +319,27 @@ class ObjectEstimate:
 
     def __setattr__(self, name, value):
         # every assignment checked, the dataclass's own and later ones (apply_confidence sets the score after the fit)
-        super().__setattr__(name, _estimate_field(name, value))
+        value = _estimate_field(name, value)
+        # hidden_by and visibility agree whichever is set, when made (hidden_by comes last) or later
+        if name == "hidden_by" and value is not None:
+            value = self._hidden_by(value)
+        elif name == "visibility" and getattr(self, "hidden_by", None) is not None:
+            _disagreement("visibility", value, self.hidden_by)
+        super().__setattr__(name, value)
 
-    def __post_init__(self):
-        if self.hidden_by is not None:  # against the visibility: a check of two fields, once both are set
-            self._check_hidden_by()
-
-    def _check_hidden_by(self) -> None:
-        """:attr:`hidden_by` as a (36,) str array of known words, and :attr:`visibility` the same."""
-        reasons = np.array(self.hidden_by, dtype=str)
+    def _hidden_by(self, value) -> np.ndarray:
+        """``value`` as :attr:`hidden_by`, a (36,) str array of known words that agrees with
+        :attr:`visibility` (which it makes where there is none)."""
+        reasons = np.array(value, dtype=str)
         check_shape("hidden_by", reasons, (N_VERTICES,))
         unknown = sorted(set(reasons.tolist()) - set(HIDDEN_BY))
         if unknown:
             raise ArgumentError("hidden_by", f"unknown reason {unknown[0]!r} (one of {', '.join(HIDDEN_BY)})")
-        visible = reasons == "visible"
-        if self.visibility is None:
-            self.visibility = visible
-        elif not np.array_equal(np.asarray(self.visibility, bool), visible):
-            v = int(np.flatnonzero(np.asarray(self.visibility, bool) != visible)[0])
-            raise ArgumentError("hidden_by", f"vertex {v} is {str(reasons[v])!r}, but visibility says it is "
-                                             f"{'visible' if self.visibility[v] else 'hidden'}")
-        self.hidden_by = reasons
+        if getattr(self, "visibility", None) is None:
+            super().__setattr__("visibility", reasons == "visible")
+        else:
+            _disagreement("hidden_by", self.visibility, reasons)
+        return reasons
 
     def __repr__(self) -> str:
         extra = "" if self.exemplar is None else f", exemplar={self.exemplar!r}"

@@ -84,7 +84,8 @@ HIDDEN_BY = ("visible", "self", "truncated", "other-car", "occluder")
 words of ``wirescene synth``'s per-vertex ground truth: not (``visible``), by its own car (``self``),
 by the image's border (``truncated``: projected outside the image), by another car of the scene
 (``other-car``) or by the occluder mask the fit chose (``occluder``); a vertex hidden twice takes
-the first of these."""
+the first of these (synth's own takes ``truncated`` before ``self``: a vertex of the far side outside
+the image is ``self`` here, ``truncated`` there)."""
 
 PART = np.concatenate([np.arange(N_PER_SIDE), np.arange(N_PER_SIDE)])
 """Index into ``PART_NAMES`` of every vertex (the same for a symmetric pair)."""

@@ -215,11 +215,13 @@ def _verdicts(estimate, gt: Sequence | None) -> tuple[list, FrameMatches | None,
 def draw_wireframe(ax, camera: Camera, vertices: np.ndarray, edges: np.ndarray, *, visible=None, hidden_by=None,
                    color=EST_COLOR, zorder: float = 2.0, dot_zorder: float | None = None) -> set[str]:
     """Draw a wireframe ``(V, 3)`` with ``edges`` ``(E, 2)``: visible vertices as dots of
-    ``color``, hidden ones as open dots and the edges between two hidden vertices dashed;
-    dots sized by the car's height in the image (a far car's dots would hide it).
+    ``color``, hidden ones as open dots (marked otherwise with ``hidden_by``, below) and the edges
+    between two hidden vertices dashed; dots sized by the car's height in the image (a far car's
+    dots would hide it).
     ``visible`` ``(V,)`` bool defaults to all visible; ``hidden_by`` ``(V,)`` (what hides each
     vertex, :data:`~wirescene.core.wireframe.HIDDEN_BY`; it says which are visible) marks each
-    hidden vertex by what hides it, as :data:`HIDDEN_MARKS`. Edges are cut at the camera's near
+    hidden vertex by what hides it, as :data:`HIDDEN_MARKS` (one outside the image at the edge of
+    the camera's image, or of the axes' view where it has no size). Edges are cut at the camera's near
     plane. The edges are drawn at ``zorder``, the dots at ``dot_zorder`` (default ``zorder + 1``):
     :func:`overlay` stacks its cars so that a nearer car's edges cover a farther car's dots.
     Returns the kinds of hidden vertices drawn (``"hidden"``: without ``hidden_by``).
@@ -303,13 +305,23 @@ def _marker_path(marker: str):
 
 def _at_image_edge(ax, camera: Camera, uv: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Points ``uv`` ``(n, 2)`` outside the camera's image moved onto its edge, a marker of
-    ``radius`` points inside it, and each one's triangle marker pointing to where it lies."""
-    w, h = camera.image_size
-    xlim = ax.get_xlim()
-    inset = radius * abs(xlim[1] - xlim[0]) / (ax.get_position().width * ax.figure.get_figwidth() * 72)  # pixels
-    over = np.stack([-uv[:, 0], uv[:, 0] - (w - 1), -uv[:, 1], uv[:, 1] - (h - 1)], axis=1)
-    markers = np.array(["<", ">", "^", "v"])[np.argmax(over, axis=1)]  # "^": up in the picture (v grows down)
-    inside = np.clip(uv, inset, [w - inset, h - inset])
+    ``radius`` points inside it, and each one's triangle marker pointing to where it lies
+    (a camera without an image size: the edge of the axes' view)."""
+    xlim, ylim = ax.get_xlim(), ax.get_ylim()
+    if camera.image_size is not None:
+        w, h = camera.image_size
+        (x0, x1), (y0, y1), edge = (0, w), (0, h), (w - 1, h - 1)
+    else:
+        (x0, x1), (y0, y1) = sorted(xlim), sorted(ylim)
+        edge = (x1, y1)
+    box = ax.get_position()  # in the figure's fractions: the axes' size in points
+    points = np.array([box.width * ax.figure.get_figwidth(), box.height * ax.figure.get_figheight()]) * 72
+    inset = radius * np.abs([xlim[1] - xlim[0], ylim[1] - ylim[0]]) / points  # pixels
+    over = np.stack([x0 - uv[:, 0], uv[:, 0] - edge[0], y0 - uv[:, 1], uv[:, 1] - edge[1]], axis=1)
+    # each side's triangle as the axes show it ("^": up on the screen; an image's axes grow v down)
+    sides = ["<", ">"][::-1 if ax.xaxis_inverted() else 1] + ["^", "v"][::1 if ax.yaxis_inverted() else -1]
+    markers = np.array(sides)[np.argmax(over, axis=1)]
+    inside = np.clip(uv, [x0, y0] + inset, [x1, y1] - inset)
     return inside, markers
 
 
@@ -598,12 +610,13 @@ def _draw_occluder(ax, camera: Camera, o, color: str) -> bool:
 
 
 def _occluder_patch(corner, width: float, height: float, color: str, *, hatch: str = OCCLUDER_HATCH) -> Rectangle:
-    """An occluder mask's region, hatched in ``color`` (its car's); over the ground's grid, under boxes and cars."""
+    """An occluder mask's region, hatched in ``color`` (its car's); over the ground's grid (0.9), under the
+    pre-detections' boxes (1), the labels' boxes and the cars (2 and over)."""
     from matplotlib.colors import to_rgba
 
     # the hatch takes the edge's colour (matplotlib < 3.10 has no hatchcolor); no edge is drawn (lw 0)
     patch = Rectangle(corner, width, height, facecolor=OCCLUDER_VEIL, edgecolor=to_rgba(color, OCCLUDER_HATCH_ALPHA),
-                      hatch=hatch, lw=0, zorder=1.8)
+                      hatch=hatch, lw=0, zorder=0.95)
     if hasattr(patch, "set_hatch_linewidth"):  # matplotlib >= 3.10; before, rcParams["hatch.linewidth"] (1)
         patch.set_hatch_linewidth(0.8)
     return patch
