@@ -4,7 +4,7 @@ Estimates are drawn in red, ground truth in cyan (not the paper's green: red and
 look alike to one reader in twelve, red and cyan differ for every common colour-vision
 deficiency), pre-detections dashed yellow; the edges between two hidden vertices of a wireframe
 are dashed, and each hidden vertex is marked, by shape rather than colour, by what hides it
-(:data:`HIDDEN_MARKS`: a faint ring the car itself, an x another car, an open square the
+(:data:`HIDDEN_MARKS`: a ring the car itself, an x another car, an open square the
 occluder mask the fit chose, whose region is hatched, a triangle at the image's edge the
 border). Each estimated car carries
 its number (its line in the KITTI label file) in both views, and its confidence in the
@@ -70,7 +70,7 @@ HIDDEN_FACE = "white"
 #: ``(marker, face (None: the car's colour), area (the visible dot's times), key text)``, told apart by
 #: shape; a vertex outside the image is drawn at the edge it left by, a triangle pointing out.
 HIDDEN_MARKS = {
-    "self": ("o", "none", 1.5, "hidden by the car itself"),  # a ring: the far side, the most, drawn faint
+    "self": ("o", "none", 1.5, "hidden by the car itself"),  # a ring: the far side, the most hidden vertices
     "other-car": ("x", None, 2.5, "hidden by another car"),
     "occluder": ("s", HIDDEN_FACE, 1.5, "hidden by the occluder mask (hatched)"),
     "truncated": (">", None, 2.5, "outside the image (at its edge)"),
