@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import KITTI_ROOT, assert_close
+from conftest import KITTI_ROOT, assert_close, kitti_copy
 from wirescene.cli.main import main
 from wirescene.core.errors import ArgumentError, InputError
 from wirescene.io.detections import read_detections
@@ -2090,7 +2090,8 @@ def test_detect_resume_refuses_other_settings_and_another_runs_files(tmp_path, m
     assert asked == ["000010"] and (out / ".detect.json").read_text() == record
     from wirescene.core.resources import shipped_path
 
-    r = run(*args, "--resume", "--bank", shipped_path("detector_bank"))
+    shutil.copy(shipped_path("detector_bank"), tmp_path / "bank.npz")  # another path, the same content
+    r = run(*args, "--resume", "--bank", tmp_path / "bank.npz")
     assert r.exit_code == 0 and "1 of 1 frames kept" in r.output, r.output
     (out / ".detect.json").unlink()  # another tool's files (split-coco's)
     r = run(*args, "--resume")
@@ -2102,6 +2103,62 @@ def test_detect_resume_refuses_other_settings_and_another_runs_files(tmp_path, m
     r = run("detect", KITTI_ROOT, "--frames", "000010", "--resume")
     assert r.exit_code == 2 and "--resume continues the files of --out: it needs --out" in r.stderr, r.output
     assert asked == ["000010"]
+
+
+def test_detect_decodes_every_image_before_the_first_frame_and_says_so_in_its_words(tmp_path, monkeypatch):
+    """A truncated image of a later frame is refused before the first frame's detection, --out left unmade; the line of
+    a long decoding spoke of fits ("the images the fits read before the first fit"), which `detect` has none of."""
+    import wirescene.eval.runner as runner
+
+    root = kitti_copy(tmp_path / "kitti", ["000002", "000010"])
+    image = root / "training" / "image_2" / "000010.png"
+    image.write_bytes(image.read_bytes()[:3000])
+    asked = _quick_detector(monkeypatch)
+    monkeypatch.setattr(runner, "SAY_DECODING", 2)
+    out = tmp_path / "dets"
+    r = CliRunner().invoke(main, [str(a) for a in ("detect", root, "--out", out)])
+    assert r.exit_code == 2 and asked == [] and not out.exists(), r.output
+    assert r.stderr.splitlines() == [
+        "wirescene: decoding the 2 images before the first frame's detection (a corrupt one refused now)",
+        f"wirescene: error: {image}: corrupt or truncated image (image file is truncated)"], r.stderr
+
+
+def test_detect_resume_of_a_finished_run_says_it_has_no_ap_and_refuses_other_tools_files(tmp_path, monkeypatch):
+    """A resumed run with every frame kept printed "0.00 s per frame" and left out the AP and --pr-curve without a word;
+    it says that no AP is drawn. --threshold at the bank's own 0.5 is the run's default setting, and the record vouches
+    for detect's FRAME.json alone: another tool's FRAME.txt beside them is refused, not kept as a frame of the run."""
+    out = tmp_path / "dets"
+    asked = _quick_detector(monkeypatch)
+    args = ["detect", KITTI_ROOT, "--frames", "000010", "--out", out]
+    assert run(*args).exit_code == 0 and asked == ["000010"]
+    r = run(*args, "--resume", "--threshold", 0.5, "--pr-curve", tmp_path / "pr.png")
+    assert r.exit_code == 0 and asked == ["000010"], r.output
+    assert r.output == (f"resuming {out}: 1 of 1 frames kept from an earlier run, 0 to detect; no AP, none detected "
+                        "now (a kept file holds no score under the threshold)\n")
+    assert not (tmp_path / "pr.png").exists()
+    (out / "000002.txt").write_text("Car 0 0 0 100 100 200 200 0.9\n")
+    r = run("detect", KITTI_ROOT, "--frames", "000002,000010", "--out", out, "--resume")
+    assert r.exit_code == 2 and asked == ["000010"], r.output
+    assert (f"{out}: holds detection files detect does not write (e.g. 000002.txt), which --detections would read as "
+            "this run's: choose an empty directory") in r.stderr
+
+
+def test_split_coco_removes_the_record_of_a_detect_run_whose_files_are_gone(tmp_path, monkeypatch):
+    """`rm DIR/*.json` leaves a detect run's hidden .detect.json, which split-coco's check rightly passes over: its
+    files then stood as that run's, kept by `detect --resume` (and `detect --out` advised resuming). The record goes."""
+    out = tmp_path / "dets"
+    _quick_detector(monkeypatch)
+    args = ["detect", KITTI_ROOT, "--frames", "000010", "--out", out]
+    assert run(*args).exit_code == 0
+    (out / "000010.json").unlink()
+    ann, res = tmp_path / "ann.json", tmp_path / "res.json"
+    ann.write_text(json.dumps({"images": [{"id": 10, "file_name": "000010.png"}]}))
+    res.write_text(json.dumps([{"image_id": 10, "category_id": 3, "bbox": [354.4, 185.5, 195.1, 109.0], "score": 0.9}]))
+    assert run("split-coco", res, "--images", ann, "--out", out).exit_code == 0
+    assert sorted(p.name for p in out.iterdir()) == ["000010.json"]
+    r = run(*args, "--resume")
+    assert r.exit_code == 2 and ("detection files were written with other settings (.detect.json missing)"
+                                 in r.stderr), r.output
 
 
 def test_split_coco_reads_the_classes_by_the_annotations_names(tmp_path):

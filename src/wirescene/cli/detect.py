@@ -264,8 +264,6 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
     from wirescene.core.resources import resolve_models
     from wirescene.core.viewpoints import viewpoint_bin
     from wirescene.eval.kitti_metrics import detection_ap_2d
-    from wirescene.eval.runner import check_images_read
-    from wirescene.eval.sources import DetectionSource
     from wirescene.fitting.models import detector_bank, viewpoint_classifier
     from wirescene.fitting.own_boxes import own_detections
     from wirescene.predetect.ap import evaluate_detections, load_frame_gt, plot_pr, summary
@@ -297,12 +295,12 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
                                 estimate_pitch=estimate_pitch)
         record, kept = _resumable_out(out_dir, config, ids, resume=resume)
     todo = [f for f in ids if f not in kept]
-    say_off_centre_frames(ds, todo)  # before the first frame: a missing calibration is refused here
-    # a corrupt image refused before the first frame too (12 ms each), not at its frame with the frames before written
-    check_images_read(ds, DetectionSource("bank"), [], todo, notify=lambda m: click.echo(f"wirescene: {m}", err=True))
+    # a missing calibration or corrupt image (12 ms each) refused before the first frame, not with frames written
+    say_off_centre_frames(ds, todo, images=True, before="the first frame's detection")
     if kept:  # the AP needs every score of a frame; a kept file holds the boxes above the threshold alone
-        ap = (f"; the AP is of the {len(todo)} detected now (a kept file holds no score under the threshold)"
-              if ds.has_labels and todo else "")
+        # every frame kept: no AP (nor --pr-curve) said, not left out unnoticed
+        scored = f"the AP is of the {len(todo)} detected now" if todo else "no AP, none detected now"
+        ap = f"; {scored} (a kept file holds no score under the threshold)" if ds.has_labels else ""
         click.echo(f"resuming {out_dir}: {len(kept)} of {len(ids)} frames kept from an earlier run, {len(todo)} to "
                    f"detect{ap}")
     told = Mount(camera_height, camera_pitch)
@@ -343,7 +341,8 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
         if pr_curve is not None:
             plot_pr({"detector bank": res}, pr_curve,  # the AP printed above, not KITTI's: the title says which
                     title="Car pre-detection: IoU 0.5, cars over 50 px,\nat least 20% visible (not KITTI's AP)")
-    click.echo(f"{result['seconds_per_frame']:.2f} s per frame")
+    if times:  # a resumed run with every frame kept timed none
+        click.echo(f"{result['seconds_per_frame']:.2f} s per frame")
     if json_out is not None:
         write_json(json_out, result)
 
@@ -371,8 +370,8 @@ def _refuse_held_detections(out_dir: Path | None, *, whose: str = "",
     ``whose`` (" of a run ...") and ``advice`` complete the message."""
     held = _held_detections(out_dir)
     if held:
-        raise click.BadParameter(f"{out_dir} already holds {len(held)} detection file{'s' * (len(held) != 1)} (e.g. {held[0].name}){whose}: "
-                                 f"{advice}", param_hint="--out")
+        raise click.BadParameter(f"{out_dir} already holds {len(held)} detection file{'s' * (len(held) != 1)} "
+                                 f"(e.g. {held[0].name}){whose}: {advice}", param_hint="--out")
 
 
 def _detect_config(ds, found, bank_path, classifier_path, **settings) -> dict:
@@ -441,7 +440,9 @@ def split_coco(results, images, out_dir):
     check_output_dir(out_dir, "--out")
     _refuse_held_detections(out_dir)
     by_frame = split_coco_results(results, images)  # every entry checked before any file is written
-    with atomic_dir(out_dir) as staging:  # the frames' files appear as one set or not at all (a full disk)
+    # one set or not at all (a full disk); a detect run's record, left where its files were removed, goes: it would
+    # vouch for these files as that run's to its --resume
+    with atomic_dir(out_dir, stale=(DETECT_RECORD,)) as staging:
         for frame, entries in by_frame.items():
             # compact: no reader needs the indent, which made the files 3x slower to write (json's Python encoder)
             (staging / f"{frame}.json").write_text(dumps(entries, indent=None))

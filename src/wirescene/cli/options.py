@@ -489,17 +489,18 @@ def say_off_centre_image(image, camera) -> None:
         notify_stderr(f"warning: {message}")
 
 
-def say_off_centre_frames(dataset, frame_ids, *, images: bool = False) -> None:
-    """Check the calibrations and image headers (``images``: the images, decoded, as a training
-    command that reads them all asks) of ``frame_ids`` of ``dataset``
+def say_off_centre_frames(dataset, frame_ids, *, images: bool = False, before: str = "any training") -> None:
+    """Check the calibrations and image headers (``images``: the images, decoded, as a command
+    that reads them all asks) of ``frame_ids`` of ``dataset``
     (:meth:`~wirescene.io.kitti.KittiDataset.check_frames`: an ``InputError`` naming the first
     missing or malformed one, before any work) and say in one line on standard error, once for
     the run, those whose calibration looks made for another image size, as ``eval`` and
-    ``predict`` do (:func:`wirescene.eval.runner.say_off_centre`)."""
+    ``predict`` do (:func:`wirescene.eval.runner.say_off_centre`); ``before``: the work the
+    decoding goes before, as a long one says it."""
     from wirescene.eval.runner import SAY_DECODING, notify_stderr, say_off_centre
 
     if images and len(frame_ids) >= SAY_DECODING:
-        notify_stderr(f"decoding the {len(frame_ids)} images before any training (a corrupt one refused now)")
+        notify_stderr(f"decoding the {len(frame_ids)} images before {before} (a corrupt one refused now)")
     say_off_centre(dataset.check_frames(frame_ids, images=images), len(frame_ids), notify_stderr)
 
 
