@@ -376,6 +376,11 @@ CASES = {
     "eval --frames of a split without label_2": (
         lambda t: ["eval", kitti_copy(t / "kitti", [FRAME], subdirs=("image_2", "calib"), split="testing") / "testing",
                    "--variant", "coarse", "--frames", "424242"], r"testing: evaluation needs label_2/ ground truth$"),
+    # the AP's curve needs labels: it was silently not drawn
+    "detect --pr-curve of a split without label_2": (
+        lambda t: ["detect", kitti_copy(t / "kitti", [FRAME], subdirs=("image_2", "calib"), split="testing") / "testing",
+                   "--pr-curve", t / "pr.png"], r"--pr-curve draws the AP's precision and recall against the labels: "
+                                                 r".*testing has no label_2/$"),
     "eval of a split without label files": (
         lambda t: ["eval", _unlabelled_split(t), "--variant", "coarse"], r"training/label_2: no \.txt file \(it is empty\)$"),
     # outputs, refused before any fitting

@@ -278,6 +278,9 @@ def detect(kitti_root, frames, split_file, split, calib, models, bank_path, clas
     if out_dir is not None:
         keeps_on_resume("the frames --out holds")  # a full disk at frame N: frames 1..N-1 stay
     ds = kitti_dataset(kitti_root, split, calib)
+    if pr_curve is not None and not ds.has_labels:  # refused, not left undrawn
+        raise click.UsageError(f"--pr-curve draws the AP's precision and recall against the labels: {ds.split_dir} "
+                               "has no label_2/")
     found = resolve_models(models)
     bank = detector_bank(found.file("detector_bank", given=bank_path))
     # the viewpoints of the boxes --out writes, read before any frame: a bad file is refused
