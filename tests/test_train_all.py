@@ -749,7 +749,8 @@ def test_interrupted_train_all_resumes_to_the_same_artefacts(trained, tmp_path, 
     with monkeypatch.context() as patch:
         patch.setattr(kitti_detector, "train_detector_bank_kitti", interrupted)
         r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--workers", "1")
-    assert r.exit_code == 130 and "wirescene: interrupted" in r.stderr  # Ctrl-C's code in a shell
+    assert r.exit_code == 130  # Ctrl-C's code in a shell, and the steps trained said to stay
+    assert "wirescene: interrupted; the steps --out holds stay (--resume goes on from them)" in r.stderr
     assert (out / "parts_model.npz").is_file() and not (out / "detector_bank.npz").exists()
     assert json.loads((out / MANIFEST_FILE).read_text())["complete"] is False
     r = cli("train", "all", KITTI_ROOT, "--split-file", split, "--out", out, *TINY, "--workers", "2", "--resume")

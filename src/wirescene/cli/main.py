@@ -191,7 +191,8 @@ class _Group(click.Group):
             _Stopping.exiting = True
             signum = exc.signum if isinstance(exc, Terminated) else signal.SIGINT
             said = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated"}.get(signum, "hung up")
-            click.echo(f"wirescene: {said}", err=True)
+            # what a run of hours has written stays for its --resume: said, as after a full disk
+            click.echo(f"wirescene: {said}{ctx.meta.get(KEPT_ON_RESUME, '')}", err=True)
             sys.exit(128 + signum)
 
 
