@@ -383,6 +383,74 @@ def test_the_notice_of_a_models_directory_names_the_files_read_that_were_trained
         ["parts_model", "detector_bank", "viewpoint_classifier"])[0]
 
 
+@pytest.fixture(scope="module")
+def standalone_parts(tmp_path_factory):
+    """A part model of `train parts --kitti-root`, on frame 000010 alone (a tiny recipe: some 2 s)."""
+    path = tmp_path_factory.mktemp("standalone") / "parts.npz"
+    r = cli("train", "parts", "--kitti-root", KITTI_ROOT, "--frames", "000010", "--n-trees", 2, "--max-depth", 4,
+            "--synth-scenes", 0, "--no-calibrate", "--out", path)
+    assert r.exit_code == 0, r.output + r.stderr
+    return path
+
+
+def test_eval_names_the_frames_a_standalone_trained_part_model_was_trained_on(standalone_parts, tmp_path):
+    """A file of `train parts --kitti-root` (or `train detector --kitti-root`, `train viewpoints`) has no manifest:
+    evaluated on its own training frames it said nothing, and their figures passed for held out. It records its
+    frames' images (SHA-256), which the held-out line reads as a manifest's, naming the file; the files trained on the
+    same frames evaluated share a line; a frame they were not trained on says nothing."""
+    from wirescene.core.resources import file_sha256
+    from wirescene.eval.held_out import trained_on_frames
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.parts.detector import PartDetector
+
+    r = cli("eval", KITTI_ROOT, "--variant", "full", "--frames", "000010", "--particles", 5, "--workers", 1, "--draws",
+            0, "--raw-scores", "--parts-model", standalone_parts)
+    assert r.exit_code == 0, r.output + r.stderr
+    assert r.stderr.count("trained on") == 1 and (
+        f"wirescene: 1 of the 1 frames evaluated is among those the part model {standalone_parts} was trained on "
+        "(e.g. 000010): its figures are not held out") in r.stderr, r.stderr
+    assert PartDetector.load(standalone_parts).trained_images == {"000010": file_sha256(IMAGE)}
+    viewpoints = tmp_path / "viewpoints.npz"
+    assert cli("train", "viewpoints", KITTI_ROOT, "--frames", "000002,000010", "--out", viewpoints).exit_code == 0
+    options = FitOptions(parts_model=str(standalone_parts), viewpoint_classifier=str(viewpoints))
+    dataset = KittiDataset(KITTI_ROOT)
+
+    def said(frames):
+        return trained_on_frames(dataset, frames, options=options, read=["parts_model", "viewpoint_classifier"])
+
+    assert said(["000010", "001545"]) == [
+        f"1 of the 2 frames evaluated is among those the part model {standalone_parts} and viewpoint classifier "
+        f"{viewpoints} were trained on (e.g. 000010): its figures are not held out"]
+    assert said(["000002", "001545"]) == [
+        f"1 of the 2 frames evaluated is among those the viewpoint classifier {viewpoints} was trained on (e.g. "
+        "000002): its figures are not held out"]
+    assert said(["001545"]) == []
+
+
+def test_a_frame_trained_file_without_the_record_of_its_frames_loads_and_says_nothing(standalone_parts, tmp_path):
+    """Files written before the record (the shipped ones among them) load as they did, with none, and the held-out
+    line says nothing of them; a record whose digests do not match its ids is refused naming the file."""
+    from wirescene.core.artefacts import TRAINED_FRAMES, TRAINED_IMAGES, load_npz, save_npz
+    from wirescene.eval.held_out import trained_on_frames
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.parts.detector import FORMAT_KIND, FORMAT_VERSION, PartDetector
+    from wirescene.predetect.bank import load_default_bank
+    from wirescene.predetect.viewpoint_classifier import load_default_classifier
+
+    arrays = load_npz(standalone_parts, kind=FORMAT_KIND, version=FORMAT_VERSION)
+    older = {k: v for k, v in arrays.items() if k not in (TRAINED_FRAMES, TRAINED_IMAGES)}
+    old = save_npz(tmp_path / "old.npz", older, kind=FORMAT_KIND, version=FORMAT_VERSION)
+    model = PartDetector.load(old)
+    assert model.trained_images == {} and model.n_trees == PartDetector.load(standalone_parts).n_trees == 2
+    options = FitOptions(parts_model=str(old))
+    assert trained_on_frames(KittiDataset(KITTI_ROOT), ["000010"], options=options, read=["parts_model"]) == []
+    assert load_default_bank().trained_images == {} and load_default_classifier().trained_images == {}
+    bad = save_npz(tmp_path / "bad.npz", {**arrays, TRAINED_IMAGES: arrays[TRAINED_IMAGES][:, :16]}, kind=FORMAT_KIND,
+                   version=FORMAT_VERSION)
+    with pytest.raises(InputError, match=f"^{bad}: malformed record of its training frames"):
+        PartDetector.load(bad)
+
+
 def test_train_occlusion_scores_the_part_model_it_is_given(tmp_path):
     broken = tmp_path / "parts.npz"
     broken.write_text("x")

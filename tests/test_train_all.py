@@ -453,6 +453,33 @@ def test_train_all_writes_a_manifest_and_loadable_models(trained):
     assert "\r" not in r.stderr and "\x1b" not in r.stderr  # no progress bar drawn where stderr is no terminal
 
 
+def test_a_train_all_file_records_its_manifest_s_frames_and_the_held_out_line_says_them_once(trained, tmp_path):
+    """Each frame-trained file of `train all` carries the record of its frames' images that a standalone training's
+    does, the manifest's own (the bank's held-out calibration's frames are its training frames): evaluated in the
+    directory the manifest's line alone says them (not the file's too); the file copied elsewhere, without its
+    manifest, says them by its record."""
+    from wirescene.core.artefacts import read_trained_images
+    from wirescene.eval.held_out import trained_on_frames
+    from wirescene.fitting.options import FitOptions
+    from wirescene.io.kitti import KittiDataset
+
+    out, _, _ = trained
+    images = json.loads((out / MANIFEST_FILE).read_text())["data"]["images_sha256"]
+    names = ("parts_model", "detector_bank", "viewpoint_classifier")
+    assert all(read_trained_images(out / ARTEFACTS[name]) == images for name in names)
+    options = FitOptions(**{name: str(out / ARTEFACTS[name]) for name in names})
+    dataset = KittiDataset(KITTI_ROOT)
+    assert trained_on_frames(dataset, ["000002", "000010"], options=options, read=names) == [
+        f"1 of the 2 frames evaluated is among those the part model, detector bank and viewpoint classifier of {out} "
+        "were trained on (e.g. 000010): its figures are not held out"]
+    assert trained_on_frames(dataset, ["000002"], options=options, read=names) == []
+    alone = shutil.copy(out / "detector_bank.npz", tmp_path / "bank.npz")
+    assert trained_on_frames(dataset, ["000002", "001545"], options=FitOptions(detector_bank=str(alone)),
+                             read=["detector_bank"]) == [
+        f"1 of the 2 frames evaluated is among those the detector bank {alone} was trained on (e.g. 001545): its "
+        "figures are not held out"]
+
+
 def test_a_copy_of_the_root_elsewhere_resumes_the_same_training(trained, tmp_path):
     """The resume key holds the frames' files' content, not the root's path: the same frames in a copy of the root
     (another disk, a bind mount) keep every step, where they retrained all four."""

@@ -761,8 +761,8 @@ def evaluate(
     -----
     HeldOutWarning
         Some frames evaluated are frames a model the run reads was trained on (the shipped
-        models' 72, told by their images' content, or a models directory's own): their
-        figures are not held out (:func:`wirescene.eval.held_out.trained_on_frames`).
+        models' 72, told by their images' content, a models directory's own, or those a
+        trained file records): their figures are not held out (:func:`wirescene.eval.held_out.trained_on_frames`).
 
     Examples
     --------

@@ -86,6 +86,72 @@ def load_npz(path: str | Path, *, kind: str, version: int, older=()) -> dict[str
     return arrays
 
 
+#: The arrays of an artefact's record of the real frames it was trained on (:func:`trained_arrays`).
+TRAINED_FRAMES, TRAINED_IMAGES = "trained_frames", "trained_images_sha256"
+
+
+def trained_arrays(images: dict[str, str]) -> dict[str, np.ndarray]:
+    """The arrays by which an artefact's ``.npz`` records the real frames it was trained on,
+    ``images`` ``{frame id: SHA-256 (hex) of its image}``: the ids (fixed-width strings) and the
+    digests as 32 raw bytes each (240 kB for KITTI's 7,481 training frames, half their hex);
+    none for no frame. Read back by :func:`trained_images`.
+
+    Examples
+    --------
+    >>> arrays = trained_arrays({"000010": "ab" * 32})
+    >>> arrays[TRAINED_FRAMES], arrays[TRAINED_IMAGES].shape, trained_images(arrays, path="m.npz")["000010"][:6]
+    (array(['000010'], dtype='<U6'), (1, 32), 'ababab')
+    >>> trained_arrays({})
+    {}
+    """
+    if not images:
+        return {}
+    digests = bytes.fromhex("".join(images.values()))
+    return {TRAINED_FRAMES: np.array(list(images), dtype=str),
+            TRAINED_IMAGES: np.frombuffer(digests, np.uint8).reshape(len(images), 32)}
+
+
+def trained_images(arrays: dict, *, path) -> dict[str, str]:
+    """``{frame id: image SHA-256}`` of the record :func:`trained_arrays` made among an artefact's
+    ``arrays``; ``{}`` where it has none (a file trained on no real frame, or written before the
+    record was).
+
+    Raises
+    ------
+    InputError
+        Naming ``path``: a record whose ids and digests do not match.
+    """
+    if TRAINED_FRAMES not in arrays and TRAINED_IMAGES not in arrays:
+        return {}
+    frames, digests = np.asarray(arrays.get(TRAINED_FRAMES)), np.asarray(arrays.get(TRAINED_IMAGES))
+    if frames.dtype.kind != "U" or frames.ndim != 1 or digests.dtype != np.uint8 or digests.shape != (len(frames), 32):
+        raise InputError(f"malformed record of its training frames ({TRAINED_FRAMES}, {TRAINED_IMAGES})", path=path)
+    hexes = digests.tobytes().hex()
+    return {f: hexes[64 * i:64 * (i + 1)] for i, f in enumerate(frames.tolist())}
+
+
+def read_trained_images(path: str | Path) -> dict[str, str]:
+    """The record of the real frames the artefact ``.npz`` at ``path`` was trained on
+    (:func:`trained_images`), its two arrays read alone; ``{}`` for a file without one or that
+    cannot be read (its loader names the problem).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = save_npz(Path(d) / "m.npz", {"w": np.zeros(2), **trained_arrays({"000010": "00" * 32})},
+    ...                     kind="demo", version=1)
+    ...     read_trained_images(path) == {"000010": "0" * 64}, read_trained_images(Path(d) / "missing.npz")
+    (True, {})
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in (TRAINED_FRAMES, TRAINED_IMAGES) if k in z.files}
+        return trained_images(arrays, path=path)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, InputError, TypeError):  # TypeError: an .npy array
+        return {}
+
+
 def save_json(path: str | Path, record: dict, *, kind: str, version: int, indent: int | None = 1) -> Path:
     """Write a JSON record (a dict of JSON-ready values) with its format tag first,
     atomically; returns ``path``.

@@ -228,6 +228,29 @@ def trained_on(path: str | Path, image_path, frame_ids, *, split_dir: str | Path
     return [f for f in frame_ids if str(f) in trained]
 
 
+def images_sha256(image_path, frame_ids) -> dict[str, str]:
+    """``{frame id: SHA-256 of its image}`` (``image_path(frame id)``) of ``frame_ids``, in their
+    order: the record of a training's real frames (a ``train all`` manifest's ``images_sha256``,
+    each frame-trained ``.npz``'s :func:`~wirescene.core.artefacts.trained_arrays`), by which
+    :func:`frames_of_content` tells them; about 1 ms a KITTI image, each hashed once per file
+    version (:func:`file_sha256`).
+
+    Raises
+    ------
+    InputError
+        Naming the first image that is missing or cannot be read.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = (Path(d) / "000010.png").write_bytes(b"")
+    ...     {f: h[:6] for f, h in images_sha256(lambda f: Path(d) / f"{f}.png", ["000010"]).items()}
+    {'000010': 'e3b0c4'}
+    """
+    return {str(f): file_sha256(image_path(f), what="image") for f in frame_ids}
+
+
 def frames_of_content(image_path, frame_ids, known: dict[str, str]) -> list[str]:
     """The frames of ``frame_ids`` whose image (``image_path(frame id)``) has the content
     ``known`` records for its id (``{frame id: SHA-256}``): only those ids are read; an image

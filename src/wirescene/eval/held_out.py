@@ -7,8 +7,11 @@ for boxes given without a viewpoint, and the bank for a pitch read off the boxes
 score calibration (the confidences the APs rank, unless the scores are raw): which of them a
 run reads is :func:`wirescene.fitting.models.model_files_read`'s answer. A file of a ``train
 all`` directory is told by its manifest's frames (:func:`wirescene.core.resources.trained_on`),
-a shipped one (or a copy of it) by the images' content (:mod:`wirescene.io.shipped_frames`): a
-user's KITTI root holds 65 of the shipped models' 72 frames under the same ids.
+another trained on real frames (``train parts --kitti-root``, ``train detector --kitti-root``,
+``train viewpoints``) by the record of their images it carries
+(:func:`wirescene.core.artefacts.read_trained_images`), a shipped one (or a copy of it) by the
+images' content (:mod:`wirescene.io.shipped_frames`): a user's KITTI root holds 65 of the
+shipped models' 72 frames under the same ids.
 """
 
 from __future__ import annotations
@@ -16,7 +19,8 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 
-from wirescene.core.resources import file_sha256, shipped_path, trained_on
+from wirescene.core.artefacts import read_trained_images
+from wirescene.core.resources import file_sha256, frames_of_content, shipped_path, trained_on
 from wirescene.fitting.options import FitOptions
 from wirescene.io.kitti import KittiDataset
 from wirescene.io.shipped_frames import among_shipped_training_frames, shipped_training_frames
@@ -31,9 +35,11 @@ FRAME_TRAINED = {"parts_model": "part model", "detector_bank": "detector bank",
 def trained_on_frames(dataset: KittiDataset, frame_ids: list[str] | None, *, options: FitOptions,
                       read: Iterable[str]) -> list[str]:
     """What to say of the frames evaluated that a model the run reads was trained on (their
-    figures are not held out): a sentence for the files of ``train all`` directories (by their
-    manifests) and one for the shipped files (by the images' content); none where no model
-    read was trained on them. A file of the user's own without a manifest says nothing.
+    figures are not held out): a sentence for the files of each ``train all`` directory (by its
+    manifest), one for the other files that record the frames they were trained on (a
+    standalone training's, the files alike trained on the same frames evaluated together) and
+    one for the shipped files (by the images' content); none where no model read was trained
+    on them. A file of the user's own that records no frames says nothing.
 
     Parameters
     ----------
@@ -63,7 +69,7 @@ def trained_on_frames(dataset: KittiDataset, frame_ids: list[str] | None, *, opt
     """
     frame_ids = dataset.require_frames() if frame_ids is None else list(frame_ids)
     read = set(read)
-    said, shipped, by_manifest = [], [], {}
+    said, shipped, by_manifest, by_record = [], [], {}, {}
     for name in (n for n in FRAME_TRAINED if n in read):
         file = getattr(options, name)
         if file is None or _same_bytes(file, shipped_path(name)):
@@ -74,10 +80,20 @@ def trained_on_frames(dataset: KittiDataset, frame_ids: list[str] | None, *, opt
             names, frames = by_manifest.setdefault(os.path.dirname(os.path.abspath(file)), ([], set()))
             names.append(name)
             frames.update(seen)
+            continue
+        # the file's own record (a train all file's agrees with its manifest, which has said it)
+        seen = frames_of_content(dataset.image_path, frame_ids, read_trained_images(file))
+        if seen:
+            by_record.setdefault(tuple(seen), []).append((name, file))
     for folder, (names, frames) in by_manifest.items():
         seen = [f for f in frame_ids if f in frames]
         said.append(f"{_share(seen, frame_ids)} those the {_which(names)} of {folder} {_were(names)} trained on "
                     f"(e.g. {seen[0]}): {_figures(seen)} not held out")
+    for seen, files in by_record.items():
+        names = [name for name, _ in files]
+        which = _which(names, files=[file for _, file in files])
+        said.append(f"{_share(seen, frame_ids)} those the {which} {_were(names)} trained on (e.g. {seen[0]}): "
+                    f"{_figures(seen)} not held out")
     seen = among_shipped_training_frames(dataset.image_path, frame_ids) if shipped else []
     if seen:
         said.append(f"{_share(seen, frame_ids)} the {len(shipped_training_frames())} the shipped {_which(shipped)} "
@@ -85,9 +101,11 @@ def trained_on_frames(dataset: KittiDataset, frame_ids: list[str] | None, *, opt
     return said
 
 
-def _which(names: list[str]) -> str:
-    """The artefacts ``names`` as a message names them: ``"part model and detector bank"``."""
-    words = [FRAME_TRAINED[n] for n in names]
+def _which(names: list[str], *, files=None) -> str:
+    """The artefacts ``names`` as a message names them: ``"part model and detector bank"``, each
+    followed by its file of ``files`` where given (``"part model p.npz and detector bank b.npz"``)."""
+    words = [FRAME_TRAINED[n] for n in names] if files is None else \
+        [f"{FRAME_TRAINED[n]} {f}" for n, f in zip(names, files)]
     return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} and {words[-1]}"
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Iterable
 
 from wirescene.core.artefacts import load_json, save_json
-from wirescene.core.resources import DATA_DIR, file_sha256, frames_of_content
+from wirescene.core.resources import DATA_DIR, frames_of_content, images_sha256
 
 __all__ = ["RECORD", "training_frames_record", "write_training_frames", "shipped_training_frames",
            "among_shipped_training_frames"]
@@ -43,7 +43,7 @@ def training_frames_record(image_paths: dict[str, Path], *, source: str) -> dict
     >>> record["source"], {f: h[:6] for f, h in record["sha256"].items()}
     ('a test', {'000010': 'e3b0c4'})
     """
-    return {"source": source, "sha256": {f: file_sha256(image_paths[f], what="image") for f in sorted(image_paths)}}
+    return {"source": source, "sha256": images_sha256(image_paths.__getitem__, sorted(image_paths))}
 
 
 def write_training_frames(path: str | Path, record: dict) -> Path:

@@ -83,6 +83,9 @@ class PartDetector:
         :func:`response_maps` is ``calib_scale[j] * log(S_j / S_b) + calib_offset[j]``
         (per-class calibration on real data, see
         :func:`wirescene.training.parts.calibrate`); None: identity
+    trained_images : dict of str -- ``{frame id: image SHA-256}`` of the real frames it was
+        trained on (:func:`wirescene.core.resources.images_sha256`; empty: none, or a file written
+        before the record was), saved with it (:func:`wirescene.core.artefacts.trained_arrays`)
 
     Examples
     --------
@@ -113,6 +116,7 @@ class PartDetector:
     smooth: float = 0.0
     calib_scale: np.ndarray | None = None
     calib_offset: np.ndarray | None = None
+    trained_images: dict = field(default_factory=dict)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -162,7 +166,7 @@ class PartDetector:
     # ------------------------------------------------------------------ persistence
     def save(self, path) -> Path:
         """Write a compressed ``.npz`` (no pickled objects; :func:`wirescene.core.artefacts.save_npz`)."""
-        from wirescene.core.artefacts import save_npz
+        from wirescene.core.artefacts import save_npz, trained_arrays
 
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -179,7 +183,7 @@ class PartDetector:
             canonical_height=np.array(feat.CANONICAL_HEIGHT), radius=np.array(feat.RADIUS),
             meta_keys=np.array(list(meta.keys()), dtype=str), meta_values=np.array(list(meta.values()), dtype=str),
             position=np.array(self.position), context=np.array(self.context), smooth=np.array(float(self.smooth)),
-            **calib,
+            **calib, **trained_arrays(self.trained_images),
         )
         return save_npz(path, arrays, kind=FORMAT_KIND, version=FORMAT_VERSION)
 
@@ -187,7 +191,7 @@ class PartDetector:
     def load(cls, path=None) -> "PartDetector":
         """Load a model written by :meth:`save` (default: the package's model); version 1
         files (no position, context or calibration) load too."""
-        from wirescene.core.artefacts import load_npz
+        from wirescene.core.artefacts import load_npz, trained_images
 
         path = DEFAULT_MODEL_PATH if path is None else Path(path)
         z = load_npz(path, kind=FORMAT_KIND, version=FORMAT_VERSION, older=(1,))
@@ -207,7 +211,8 @@ class PartDetector:
                        context=bool(z["context"]) if "context" in z else False,
                        smooth=smooth,
                        calib_scale=z["calib_scale"] if has_cal else None,
-                       calib_offset=z["calib_offset"] if has_cal else None)
+                       calib_offset=z["calib_offset"] if has_cal else None,
+                       trained_images=trained_images(z, path=path))
         except (KeyError, ValueError) as e:
             raise InputError(f"cannot read part model ({e})", path=path) from None
 

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wirescene.core.artefacts import load_npz, save_npz
+from wirescene.core.artefacts import load_npz, save_npz, trained_arrays, trained_images
 from wirescene.core.boxes import clip_boxes
 from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.groundplane import KITTI_MOUNT, Mount
@@ -87,6 +87,9 @@ class DetectorBank:
     refinement, verifier : dict or None
         The box refinement (:mod:`wirescene.predetect.refine`) and the verifier
         (:mod:`wirescene.predetect.verifier`, with its ``gain``).
+    trained_images : dict of str
+        ``{frame id: image SHA-256}`` of the real frames it was trained on (empty: none, or a
+        file written before the record was; :func:`wirescene.core.artefacts.trained_arrays`).
 
     Examples
     --------
@@ -110,6 +113,7 @@ class DetectorBank:
     calibration: np.ndarray | None = None  # (2,) Platt (a, b): confidence = sigmoid(a * margin + b)
     refinement: dict | None = None  # image-based box refinement (wirescene.predetect.refine)
     verifier: dict | None = None  # second look at each box (wirescene.predetect.verifier), with its "gain"
+    trained_images: dict = field(default_factory=dict)  # {frame id: image SHA-256} of its real training frames
 
     def __len__(self) -> int:
         return len(self.configs)
@@ -179,6 +183,7 @@ class DetectorBank:
             **{f"verify_{k}": (np.zeros(0, np.float32) if self.verifier is None
                                else np.asarray(self.verifier[k], np.float32)) for k in VERIFIER_ARRAYS},
             verify_channels=np.array(int(self.needs_channels), np.int8),
+            **trained_arrays(self.trained_images),
         )
         return save_npz(path, arrays, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
@@ -223,7 +228,8 @@ class DetectorBank:
             else:
                 verifier["channels"] = bool(z.get("verify_channels", np.array(0)))
             return cls(configs, weights, z["biases"].astype(np.float32), float(z["threshold"]),
-                       json.loads(str(z["meta_json"])), calib, refinement, verifier)  # older banks: NaN too
+                       json.loads(str(z["meta_json"])), calib, refinement, verifier,  # older banks: NaN too
+                       trained_images(z, path=path))
         except (KeyError, ValueError) as exc:
             raise InputError(f"malformed detector bank ({exc.__class__.__name__}: {exc})", path=path) from None
 

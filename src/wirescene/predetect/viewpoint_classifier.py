@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from wirescene.core.artefacts import load_npz, save_npz
+from wirescene.core.artefacts import load_npz, save_npz, trained_arrays, trained_images
 from wirescene.core.errors import InputError, check_shape
-from wirescene.core.resources import DATA_DIR
+from wirescene.core.resources import DATA_DIR, images_sha256
 from wirescene.core.viewpoints import N_BINS, viewpoint_bin
 from wirescene.predetect.configurations import mirror_bin
 from wirescene.predetect.hog import crops_features, to_gray
@@ -107,6 +107,7 @@ class ViewpointClassifier:
     weights: np.ndarray  # (F, 8)
     bias: np.ndarray  # (8,)
     meta: dict = field(default_factory=dict)
+    trained_images: dict = field(default_factory=dict)  # {frame id: image SHA-256} of its real training frames
 
     def log_probs_of_features(self, features) -> np.ndarray:
         """``(N, 8)`` log P(bin | features) of features ``(N, F)``."""
@@ -133,8 +134,8 @@ class ViewpointClassifier:
         from wirescene.core.jsonio import dumps
 
         arrays = {k: np.asarray(getattr(self, k), np.float32) for k in ("mean", "scale", "weights", "bias")}
-        return save_npz(path, {**arrays, "meta_json": np.array(dumps(self.meta, indent=None, sort_keys=True))},
-                        kind=ARTEFACT_KIND, version=FORMAT_VERSION)
+        return save_npz(path, {**arrays, "meta_json": np.array(dumps(self.meta, indent=None, sort_keys=True)),
+                               **trained_arrays(self.trained_images)}, kind=ARTEFACT_KIND, version=FORMAT_VERSION)
 
     @classmethod
     def load(cls, path) -> "ViewpointClassifier":
@@ -143,7 +144,8 @@ class ViewpointClassifier:
         z = load_npz(path, kind=ARTEFACT_KIND, version=FORMAT_VERSION)  # missing / corrupt / foreign: InputError
         try:
             model = cls(*(z[k].astype(float) for k in ("mean", "scale", "weights", "bias")),
-                        json.loads(str(z["meta_json"])))  # strict JSON, or an older file's NaN
+                        json.loads(str(z["meta_json"])),  # strict JSON, or an older file's NaN
+                        trained_images(z, path=path))
         except KeyError as exc:
             raise InputError(f"malformed viewpoint classifier (missing {exc})", path=path) from None
         F = len(model.mean)
@@ -267,12 +269,16 @@ def check_trainable(dataset, frames) -> None:
 
 def train_on_kitti(dataset, frames, *, C: float = C, seed: int = 0) -> ViewpointClassifier:
     """:func:`fit_viewpoint_classifier` of :func:`kitti_examples` of ``frames`` (refused by
-    :func:`check_trainable` first)."""
+    :func:`check_trainable` first), with the record of their images
+    (:attr:`ViewpointClassifier.trained_images`)."""
     frames = list(frames)
     dataset.require_labels("training")
     check_trainable(dataset, frames)
     x, y = kitti_examples(dataset, frames, seed=seed)
-    return fit_viewpoint_classifier(x, y, C=C, meta={"frames": [str(f) for f in frames], "seed": seed})
+    model = fit_viewpoint_classifier(x, y, C=C, meta={"frames": [str(f) for f in frames], "seed": seed})
+    # by which an evaluation on these frames says that its figures are not held out
+    model.trained_images = images_sha256(dataset.image_path, frames)
+    return model
 
 
 @lru_cache(maxsize=1)

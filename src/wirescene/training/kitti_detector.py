@@ -74,6 +74,7 @@ import numpy as np
 
 from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.groundplane import wrap_angle
+from wirescene.core.resources import images_sha256
 from wirescene.core.viewpoints import BIN_WIDTH, N_BINS, bin_center, viewpoint_bin
 from wirescene.predetect.bank import (
     SUPPORT_WEIGHT,
@@ -1097,6 +1098,8 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     ``drives``: ``{frame: drive}`` grouping the calibration's folds (default
     :func:`wirescene.io.folds.frame_drives`; :func:`wirescene.io.folds.drive_map` adds a
     user's devkit mapping).
+    The bank records the SHA-256 of the images of the frames it learnt from, its held-out
+    calibration's included (:attr:`~wirescene.predetect.bank.DetectorBank.trained_images`).
     Returns ``(bank, report)``.
     """
     from wirescene.io.kitti import KittiDataset
@@ -1113,6 +1116,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
     if not any(ds.car_counts(ids).values()):  # else an empty bank, written without a word
         raise InputError(f"none of the {len(ids)} training frame(s) has a labelled Car to learn from", path=ds.split_dir)
     report = {"frames": ids}
+    learnt = list(ids)  # the frames it learns from, with those of its held-out calibration
     # the recipe trains a verifier (finish_bank), weighted by the calibration's third number
     calib = None if calibration is None else check_calibration(calibration, size=3)
     if calib is not None:
@@ -1128,6 +1132,7 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
                                                              workers=workers, support_weight=support_weight,
                                                              **train_kw)
             calib = np.array([report["calibration"][k] for k in "abc" if k in report["calibration"]])
+            learnt += sorted(set(folds) - set(ids))
     # loaded after the calibration, whose fold banks load their own frames
     images, examples = load_training_frames(ds, ids, progress=say)
     bank = train_bank_on_frames(images, examples, seed=seed, workers=workers, progress=say, **train_kw)
@@ -1143,6 +1148,8 @@ def train_detector_bank_kitti(out_path, kitti_root, *, frames=None, folds=None, 
         set_calibration(bank, calib)
         bank.threshold = float(threshold)  # probability of a true car (IoU >= 0.5)
     bank.meta["calibration"] = report.get("calibration")
+    # by which an evaluation on these frames says that its figures are not held out
+    bank.trained_images = images_sha256(ds.image_path, learnt)
     if out_path is not None:
         bank.save(out_path)
         say(f"saved {len(bank)} detectors to {out_path} ({Path(out_path).stat().st_size / 1e6:.2f} MB)")

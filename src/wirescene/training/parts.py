@@ -734,7 +734,8 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
         plausible, so ``log(S_j / S_b)`` peaks at the part (the background's share of the
         data no longer swamps the parts)
     kitti_root : path, optional -- labelled KITTI frames whose real patches are added
-        (:func:`wirescene.training.parts_real.make_real_patch_data`)
+        (:func:`wirescene.training.parts_real.make_real_patch_data`); the model records their
+        images' SHA-256 (:attr:`~wirescene.parts.detector.PartDetector.trained_images`)
     frames : list of frame ids, optional -- the real training frames (default: all of
         ``kitti_root``)
     position : bool -- append the box-relative position to the descriptor
@@ -884,6 +885,10 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     report["t_fit_s"] = time.time() - t1
     if cal is not None:
         det.calib_scale, det.calib_offset = cal[0], cal[1]
+    if kitti_root is not None:  # by which an evaluation on these frames says its figures are not held out
+        from wirescene.core.resources import images_sha256
+
+        det.trained_images = images_sha256(ds.image_path, frames)
     X = design_matrix(data, kind, position=position, context=context)
     report["train_acc"] = float(np.mean(det.predict(X) == data.y))
     if out_path is not None:

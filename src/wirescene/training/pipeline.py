@@ -63,6 +63,7 @@ from wirescene.core.resources import (
     MANIFEST_KIND,
     MANIFEST_VERSION,
     file_sha256,
+    images_sha256,
     shipped_path,
 )
 from wirescene.core.validate import finite_real
@@ -425,7 +426,7 @@ def _check_frames(dataset, ids: list[str], *,
     if not any(counts.values()):
         raise InputError(f"none of the {len(ids)} training frames has a labelled Car", path=dataset.split_dir)
     digest = hashlib.sha256()
-    images = {f: file_sha256(dataset.image_path(f), what="image") for f in ids}  # some 6 s for KITTI's 7,481 images
+    images = images_sha256(dataset.image_path, ids)  # some 6 s for KITTI's 7,481 images
     for f in ids:
         digest.update(f"{f}\n".encode())
         digest.update(dataset.label_path(f).read_bytes())
