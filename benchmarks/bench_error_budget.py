@@ -46,6 +46,7 @@ import numpy as np
 from _common import read_run  # noqa: E402  (benchmarks/ is on the path of a script run from it)
 from wirescene.core.errors import InputError
 from wirescene.core.jsonio import write_json
+from wirescene.core.labels import is_type
 from wirescene.core.viewpoints import wrap_angle
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.eval.metrics import FrameResult, evaluate
@@ -582,7 +583,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         frames = sorted({r.frame_id for rs in records.values() for r in rs})
         summaries = {v: {g: summarise(t, m) for g, m in group_masks(t).items()} for v, t in tables.items()}
         comparison = versus_reference(tables, args.reference) if args.reference in tables else None
-        n_labels = sum(sum(o.type in CAR_TYPES for o in r.gt) for r in next(iter(records.values())))
+        n_labels = sum(sum(is_type(o.type, CAR_TYPES) for o in r.gt) for r in next(iter(records.values())))
         print(format_report(name, detections, summaries, comparison, args.reference, camera_height=args.camera_height))
         print(f"{len(frames)} frames, {n_labels} labelled cars"
               + ("" if comparison else f"; no {args.reference} in this run, no comparison") + "\n")

@@ -676,7 +676,7 @@ def _gt_cars(gt, image_size: tuple[int, int]) -> list | None:
     """The ``Car`` labels of a KITTI label file (every row's box checked against the
     ``image_size`` ``(width, height)`` image, as a frame's labels are), or of a sequence of
     labels (None: no labels, as the pictures take it; a file without cars gives ``[]``)."""
-    from wirescene.core.labels import CAR_TYPES, FrameLabels, Label
+    from wirescene.core.labels import CAR_TYPES, FrameLabels, Label, is_type
 
     if gt is None:
         return None
@@ -689,7 +689,7 @@ def _gt_cars(gt, image_size: tuple[int, int]) -> list | None:
     labels = list(gt) if isinstance(gt, Iterable) else [gt]
     if not all(isinstance(g, Label) for g in labels):
         raise ArgumentError("gt", "expected a KITTI label file or a sequence of wirescene.core.labels.Label")
-    return [g for g in labels if g.type in CAR_TYPES]  # the cars the evaluation's matching judges
+    return [g for g in labels if is_type(g.type, CAR_TYPES)]  # the cars the evaluation's matching judges
 
 
 def evaluate(

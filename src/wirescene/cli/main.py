@@ -704,7 +704,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
     scored (said). Several PRED_DIRs are runs of one method (other
     seeds, say): each run's moderate APs, their mean, and an interval whose every draw
     resamples the drives and takes one of the runs."""
-    from wirescene.core.labels import no_3d_box, of_types
+    from wirescene.core.labels import no_3d_box
     from wirescene.eval.intervals import kitti_intervals, kitti_run_intervals
     from wirescene.eval.kitti_metrics import (
         format_kitti_intervals,
@@ -734,7 +734,7 @@ def kitti_eval_cmd(gt_dir, pred_dirs, json_out, frames, split_file, draws, drive
                        f"{missing[0]}.txt): scored as frames without detections, their cars missed; KITTI's server "
                        "refuses a submission lacking a frame (an empty FRAME.txt is a frame without cars; --frames or "
                        "--split-file scores a selection)", err=True)
-        cars = [o for frame in preds for o in of_types(frame, CAR_TYPES)]
+        cars = [o for frame in preds for o in frame.of_type(*CAR_TYPES)]
         flat = sum(no_3d_box(o.dims) for o in cars)  # a 2D detector's rows: scored as 3D boxes of size -1
         if flat:
             click.echo(f"wirescene: {d}: {flat} of {len(cars)} Car rows have no 3D box (dimensions -1 -1 -1): "

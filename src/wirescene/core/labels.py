@@ -18,6 +18,7 @@ import numpy as np
 from wirescene.core.boxes import box_centers
 from wirescene.core.groundplane import rotation_y as _rotation_y_matrix
 
+#: The label types that are cars, matched in any case (:func:`is_type`), as every car pick reads them.
 CAR_TYPES = ("Car",)
 DONTCARE = "DontCare"
 #: KITTI's ``alpha`` of a row whose viewpoint is not estimated (DontCare, 2D-only detectors).
@@ -99,8 +100,9 @@ class Label:
 
     @property
     def is_dontcare(self) -> bool:
-        """Whether the row is a ``DontCare`` region (kept apart in :class:`FrameLabels`)."""
-        return self.type == DONTCARE
+        """Whether the row is a ``DontCare`` region (kept apart in :class:`FrameLabels`), in any case
+        (:func:`is_type`)."""
+        return is_type(self.type, DONTCARE)
 
 
 @dataclass
@@ -116,6 +118,8 @@ class FrameLabels:
     (9, 4)
     >>> [o.type for o in labels.of_type("Pedestrian", "Cyclist")]
     ['Pedestrian']
+    >>> len(labels.of_type(*CAR_TYPES)), len(labels.of_type("car"))  # any case, as KITTI's devkit reads types
+    (8, 8)
     """
 
     objects: list[Label] = field(default_factory=list)
@@ -125,8 +129,8 @@ class FrameLabels:
         return len(self.objects)
 
     def of_type(self, *types: str) -> list[Label]:
-        """Objects whose type is one of ``types``."""
-        return [o for o in self.objects if o.type in types]
+        """Objects whose type is one of ``types``, whatever its case (:func:`is_type`)."""
+        return [o for o in self.objects if is_type(o.type, types)]
 
 
 def format_label(label: Label, *, with_score: bool = True) -> str:
@@ -203,10 +207,10 @@ def car_indices(
 ) -> list[int]:
     """Indices (into ``labels.objects`` or the list) of the evaluation cars.
 
-    Defaults select every ``Car`` (the paper annotates all cars of its test frames);
-    ``min_height`` (pixels), ``max_truncated`` and ``max_occluded`` (KITTI flag) give
-    KITTI-style difficulty filters, e.g. the paper's pre-detection protocol uses cars
-    taller than 50 px.
+    Defaults select every ``Car``, in any case (:func:`is_type`; the paper annotates all
+    cars of its test frames); ``min_height`` (pixels), ``max_truncated`` and ``max_occluded``
+    (KITTI flag) give KITTI-style difficulty filters, e.g. the paper's pre-detection protocol
+    uses cars taller than 50 px.
 
     Examples
     --------
@@ -226,7 +230,8 @@ def car_indices(
     return [
         i
         for i, o in enumerate(objects)
-        if o.type in types and o.height_px >= min_height and o.truncated <= max_truncated and o.occluded <= max_occluded
+        if is_type(o.type, types)
+        and o.height_px >= min_height and o.truncated <= max_truncated and o.occluded <= max_occluded
     ]
 
 
@@ -259,19 +264,19 @@ def no_3d_box(dims) -> bool:
     return bool(np.all(np.asarray(dims, dtype=float) == -1.0))
 
 
-def of_types(labels: FrameLabels, types: Iterable[str]) -> list[Label]:
-    """The objects of ``labels`` of one of ``types``, whatever their case (as KITTI's devkit
-    reads types: other detectors write ``car``).
+def is_type(label_type: str, types: str | Iterable[str]) -> bool:
+    """Whether a label row's type is one of ``types``, whatever its case: the one rule by which
+    cars (:data:`CAR_TYPES`), DontCare regions and other classes are picked, as KITTI's devkit
+    compares types (``strcasecmp``), so that a label folder another tool wrote with ``car`` rows
+    reads the same everywhere.
 
     Examples
     --------
-    >>> frame = FrameLabels([Label("car", 0, 0, 0.1, np.array([1, 1, 9, 9]), np.ones(3), np.ones(3), 0.1),
-    ...                      Label("Van", 0, 0, 0.1, np.array([1, 1, 9, 9]), np.ones(3), np.ones(3), 0.1)])
-    >>> [o.type for o in of_types(frame, CAR_TYPES)]
-    ['car']
+    >>> is_type("car", CAR_TYPES), is_type("CAR", "Car"), is_type("Van", CAR_TYPES), is_type("dontcare", DONTCARE)
+    (True, True, False, True)
     """
-    wanted = {t.lower() for t in types}
-    return [o for o in labels.objects if o.type.lower() in wanted]
+    wanted = (types,) if isinstance(types, str) else types
+    return label_type.lower() in {t.lower() for t in wanted}
 
 
 def select_cars(labels: FrameLabels | Sequence[Label], **filters) -> list[Label]:

@@ -14,7 +14,7 @@ import numpy as np
 
 from wirescene.core.boxes import iou_2d
 from wirescene.core.errors import shaped_array
-from wirescene.core.labels import CAR_TYPES, Label
+from wirescene.core.labels import CAR_TYPES, Label, is_type
 from wirescene.core.types import Detections, SceneEstimate, fitted_detections
 from wirescene.core.viewpoints import angle_difference
 
@@ -175,7 +175,7 @@ def match_frame(
     D = len(det_boxes)
     det_alpha = shaped_array("det_alpha", det_alpha, (D,))
     labels = list(labels)
-    cars = np.array([i for i, o in enumerate(labels) if o.type in car_types], dtype=int)
+    cars = np.array([i for i, o in enumerate(labels) if is_type(o.type, car_types)], dtype=int)
     gt_boxes = np.array([labels[g].box for g in cars]).reshape(-1, 4)
     match, iou = match_detections(det_boxes, det_scores, gt_boxes, iou_threshold=iou_threshold)
     match = np.append(cars, -1)[match]  # indices into the labels (-1, unmatched, picks the -1 appended)

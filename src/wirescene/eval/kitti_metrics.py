@@ -81,7 +81,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from wirescene.core.errors import InputError, check_shape
-from wirescene.core.labels import ALPHA_NOT_ESTIMATED, FrameLabels, Label
+from wirescene.core.labels import ALPHA_NOT_ESTIMATED, CAR_TYPES, FrameLabels, Label, is_type
 from wirescene.core.validate import path_problem
 from wirescene.io.kitti import read_labels
 
@@ -345,7 +345,7 @@ class _Rows:
         num = np.concatenate([scalars[:, :3], vectors, scalars[:, 3:]], axis=1)
         return cls(
             frame=np.repeat(np.arange(len(frames)), [len(f) for f in frames]),
-            type=np.array([lab.type.lower() for lab in rows], dtype=object),
+            type=np.array([lab.type.lower() for lab in rows], dtype=object),  # core.labels.is_type's rule
             truncated=num[:, 0],
             occluded=num[:, 1],
             alpha=num[:, 2],
@@ -913,7 +913,7 @@ def _count_gt(gt_frames, difficulty: str) -> int:
         1
         for f in gt_frames
         for lab in _rows_of(f)
-        if lab.type.lower() == "car" and (lv := difficulty_of(lab)) is not None and DIFFICULTIES.index(lv) <= order
+        if is_type(lab.type, CAR_TYPES) and (lv := difficulty_of(lab)) is not None and DIFFICULTIES.index(lv) <= order
     )
 
 

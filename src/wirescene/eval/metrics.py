@@ -51,6 +51,7 @@ import numpy as np
 
 from wirescene.core.errors import ShapeError, check_shape, shaped_array
 from wirescene.core.jsonio import strict_values
+from wirescene.core.labels import is_type
 from wirescene.core.matching import match_frame
 from wirescene.core.viewpoints import angle_difference
 from wirescene.io.kitti import CAR_TYPES, Label
@@ -501,7 +502,7 @@ def evaluate(
     for frame in results:
         counts["frames"] += 1
         counts["detections"] += frame.n_detections
-        cars = [i for i, o in enumerate(frame.gt) if o.type in car_types]
+        cars = [i for i, o in enumerate(frame.gt) if is_type(o.type, car_types)]
         car_subsets = {}
         for g in cars:
             parts = _occluded_parts(frame, g)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.errors import InputError
-from wirescene.core.labels import angle_problem, of_types
+from wirescene.core.labels import angle_problem, is_type
 from wirescene.core.types import Detections
 from wirescene.core.validate import boxes_problem, normalised_boxes_problem, path_problem
 from wirescene.core.viewpoints import bin_center, viewpoint_bin
@@ -69,7 +69,7 @@ def is_car(entry: dict) -> bool:
     try:
         return float(value) == COCO_CAR_ID
     except (TypeError, ValueError):
-        return str(value).strip().lower() == "car"
+        return is_type(str(value).strip(), CAR_TYPES)
 
 
 def _no_cars(others: Counter) -> str:
@@ -125,7 +125,7 @@ def detections_from_labels(
     >>> labels.objects[1].alpha, float(np.rad2deg(dets.alpha[1]))  # 1.95 rad (112 deg): the 90 deg bin
     (1.95, 90.0)
     """
-    objs = of_types(labels, types)
+    objs = labels.of_type(*types)
     if not objs:
         return Detections.empty(source)
     alpha = np.array([o.alpha for o in objs])
@@ -273,7 +273,7 @@ def _parsed(path: Path, image_size: tuple[int, int] | None) -> tuple[Detections,
     if suffix == ".txt":
         labels = read_labels(path, image_size=image_size)  # an angle in degrees refused there, naming its line
         dets = detections_from_labels(labels, source=str(path))
-        cars = {id(o) for o in of_types(labels, CAR_TYPES)}
+        cars = {id(o) for o in labels.of_type(*CAR_TYPES)}
         others = [o.type for o in labels.objects if id(o) not in cars]
     elif suffix == ".json":
         data = _read_json(path)

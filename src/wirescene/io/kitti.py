@@ -37,6 +37,7 @@ from wirescene.core.labels import (  # noqa: F401  (re-exported: the KITTI label
     car_indices,
     format_label,
     format_labels,
+    is_type,
     no_3d_box,
     select_cars,
 )
@@ -105,7 +106,7 @@ def _parse_label_line(tokens: list[str], lineno: int, path: Path,
     occluded = values[1]
     if occluded != int(occluded):
         raise InputError(f"line {lineno}: column 3 (occluded) must be an integer, got {tokens[2]!r}", path=path)
-    problem = _object_problem(values) if tokens[0] != DONTCARE else None
+    problem = _object_problem(values) if not is_type(tokens[0], DONTCARE) else None
     problem = problem or _box_problem(values[3:7], image_size)
     if problem:
         raise InputError(f"line {lineno}: {problem}", path=path)
@@ -800,4 +801,4 @@ class KittiDataset:
     def car_counts(self, frame_ids) -> dict[str | int, int]:
         """``{frame: number of its Car labels}`` for ``frame_ids`` (keyed as given): what the
         training commands check before they learn (a bank or a part model needs labelled cars)."""
-        return {f: len(self.labels(f).of_type("Car")) for f in frame_ids}
+        return {f: len(self.labels(f).of_type(*CAR_TYPES)) for f in frame_ids}

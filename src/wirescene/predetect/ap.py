@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from wirescene.core.boxes import iou_2d
+from wirescene.core.labels import CAR_TYPES, is_type
 from wirescene.core.viewpoints import angle_difference, viewpoint_bin
 from wirescene.io.wireframes import wireframe_gt_path
 
@@ -84,7 +85,7 @@ def frame_gt(labels, *, wireframes: dict | None = None, min_height: float = 50.0
     keep, alpha, ignore = [], [], []
     cars = wireframes.get("cars") if wireframes else None
     for k, o in enumerate(labels.objects):
-        if o.type == "Car":
+        if is_type(o.type, CAR_TYPES):
             if cars is not None and k < len(cars):
                 vis = (1.0 - float(cars[k]["occluded_fraction"])) * (1.0 - float(cars[k]["truncated"]))
                 visible_ok = vis >= min_visible
@@ -95,7 +96,7 @@ def frame_gt(labels, *, wireframes: dict | None = None, min_height: float = 50.0
                 alpha.append(o.alpha)
             else:
                 ignore.append(o.box)
-        elif o.type in NEIGHBOUR_TYPES:
+        elif is_type(o.type, NEIGHBOUR_TYPES):
             ignore.append(o.box)
     return FrameGT(_arr(keep), np.asarray(alpha, float), _arr(ignore), _arr([d.box for d in labels.dontcare]))
 

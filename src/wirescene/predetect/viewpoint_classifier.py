@@ -28,6 +28,7 @@ from PIL import Image
 
 from wirescene.core.artefacts import load_npz, save_npz, trained_arrays, trained_images
 from wirescene.core.errors import InputError, check_shape
+from wirescene.core.labels import CAR_TYPES
 from wirescene.core.resources import DATA_DIR, images_sha256
 from wirescene.core.viewpoints import N_BINS, viewpoint_bin
 from wirescene.predetect.configurations import mirror_bin
@@ -214,7 +215,7 @@ def kitti_examples(dataset, frames, *, jitter: float = JITTER, seed: int = 0, co
     frames = list(frames)
     feats, bins = [], []
     for f in frames:
-        cars = [o for o in dataset.labels(f).objects if o.type == "Car"]
+        cars = dataset.labels(f).of_type(*CAR_TYPES)
         if not cars:
             continue
         image = dataset.image(f)
@@ -257,7 +258,7 @@ def check_trainable(dataset, frames) -> None:
     True
     """
     frames = list(frames)
-    alpha = np.array([o.alpha for f in frames for o in dataset.labels(f).objects if o.type == "Car"], float)
+    alpha = np.array([o.alpha for f in frames for o in dataset.labels(f).of_type(*CAR_TYPES)], float)
     if not len(alpha):
         return
     bins = viewpoint_bin(alpha)

@@ -74,6 +74,7 @@ import numpy as np
 
 from wirescene.core.errors import ArgumentError, InputError
 from wirescene.core.groundplane import wrap_angle
+from wirescene.core.labels import CAR_TYPES
 from wirescene.core.resources import images_sha256
 from wirescene.core.viewpoints import BIN_WIDTH, N_BINS, bin_center, viewpoint_bin
 from wirescene.predetect.bank import (
@@ -202,11 +203,9 @@ def frame_examples(labels, camera, width: int, height: int, image_index: int, me
     from wirescene.core.wireframe import FACES
     from wirescene.infer.occlusion import self_occlusion
 
-    objs = [o for o in labels.objects if o.type != "DontCare"]
+    objs = [o for o in labels.objects if not o.is_dontcare]  # the objects that may hide a car's vertices
     out = []
-    for o in objs:
-        if o.type != "Car":
-            continue
+    for o in labels.of_type(*CAR_TYPES):
         X, uv, depth = car_wireframe(o, camera, mean)
         if depth.min() < 0.5:  # partly behind the camera: no sensible projection
             continue
@@ -274,7 +273,7 @@ def load_training_frames(dataset, frame_ids, *, flips: bool = True, progress=Non
         H, W = gray.shape
         CACHE.put(("gray", where, fid, False), gray)
         labels = dataset.labels(fid)
-        block = np.array([o.box for o in labels.objects if o.type in BLOCKING_TYPES]
+        block = np.array([o.box for o in labels.of_type(*BLOCKING_TYPES)]
                          + [d.box for d in labels.dontcare], float).reshape(-1, 4)
         camera = dataset.camera(fid)
         horizon = horizon_row(camera)
@@ -570,8 +569,8 @@ def fit_platt(scores, labels, *, reg: float = 1.0, offset=None, verifier=None) -
 
 
 def kitti_gt_boxes(labels) -> np.ndarray:
-    """Boxes of a frame's ``Car`` labels."""
-    return np.array([o.box for o in labels.objects if o.type == "Car"], float).reshape(-1, 4)
+    """Boxes of a frame's ``Car`` labels (:data:`~wirescene.core.labels.CAR_TYPES`, any case)."""
+    return np.array([o.box for o in labels.of_type(*CAR_TYPES)], float).reshape(-1, 4)
 
 
 def training_gt_boxes(dataset, images) -> list:
@@ -685,7 +684,7 @@ def fit_box_regression(bank: DetectorBank, images, gt_boxes, *, reg: float = 10.
 def image_cars(dataset, image: TrainImage) -> tuple[np.ndarray, np.ndarray]:
     """``(boxes (K, 4), alpha (K,))`` of the ``Car`` labels of a training image, mirrored
     (:func:`~wirescene.predetect.configurations.mirror_alpha`) for a flipped copy."""
-    cars = [o for o in dataset.labels(image.frame).objects if o.type == "Car"]
+    cars = dataset.labels(image.frame).of_type(*CAR_TYPES)
     boxes = np.array([o.box for o in cars], float).reshape(-1, 4)
     alpha = np.array([o.alpha for o in cars], float)
     if image.flipped:
@@ -889,7 +888,7 @@ def fit_bank_viewpoint_prior(images, dataset) -> dict:
     for im in images:
         if im.flipped or im.composite:
             continue
-        cars = [o for o in dataset.labels(im.frame).objects if o.type == "Car"]
+        cars = dataset.labels(im.frame).of_type(*CAR_TYPES)
         if cars:
             lateral.append(lateral_position(np.array([o.box for o in cars], float), im.horizon, im.center_column))
             bins.append(viewpoint_bin(np.array([o.alpha for o in cars], float)))

@@ -49,6 +49,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from wirescene.core.errors import ArgumentError
+from wirescene.core.labels import CAR_TYPES
 from wirescene.io.wireframes import wireframe_gt_path
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND, N_PARTS, PartDetector
@@ -621,7 +622,7 @@ def kitti_eval_frames(root, *, min_box_h: float = 40.0, clean: bool = True, fram
     for fid in ds.frame_ids() if frames is None else frames:
         cam = ds.camera(fid)
         cars = []
-        for o in ds.labels(fid).of_type("Car"):
+        for o in ds.labels(fid).of_type(*CAR_TYPES):
             box = np.asarray(o.box, float)
             if box[3] - box[1] < min_box_h or (clean and (o.occluded != 0 or o.truncated > 1e-9)):
                 continue

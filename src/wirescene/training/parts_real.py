@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wirescene.core.errors import check_shape
+from wirescene.core.labels import CAR_TYPES
 from wirescene.parts import features as feat
 from wirescene.parts.detector import BACKGROUND
 from wirescene.training.patches import PatchCollector, _rng
@@ -103,7 +104,7 @@ def kitti_car_wireframes(labels, camera, *, image_size=None, scaled: bool = True
         from wirescene.core.shape import load_default
 
         mean = load_default().mean
-    cars = labels.of_type("Car")
+    cars = labels.of_type(*CAR_TYPES)
     if not cars:
         return []
     if shapes is not None:
@@ -189,7 +190,7 @@ def trainable_car_counts(dataset, frame_ids, *, min_box_h: float = REAL_MIN_BOX_
     ``dataset`` (a :class:`~wirescene.io.kitti.KittiDataset`), for the checks made before any
     patch is."""
     return {f: sum(_usable(o, min_box_h=min_box_h, max_occluded=max_occluded, clean=False)
-                   for o in dataset.labels(f).of_type("Car")) for f in frame_ids}
+                   for o in dataset.labels(f).of_type(*CAR_TYPES)) for f in frame_ids}
 
 
 def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mirror: bool = True,
@@ -247,7 +248,7 @@ def make_real_patch_data(root, frame_ids, *, kinds=("ghog",), seed: int = 0, mir
         lab = ds.labels(fid)
         cars = kitti_car_wireframes(lab, ds.camera(fid), image_size=(W, H),
                                     shapes=None if label_shapes is None else label_shapes.get(fid))
-        other = np.array([o.box for o in list(lab.of_type("Car", "Van", "Truck")) + list(lab.dontcare)],
+        other = np.array([o.box for o in list(lab.of_type(*CAR_TYPES, "Van", "Truck")) + list(lab.dontcare)],
                          float).reshape(-1, 4)
         use = [i for i, c in enumerate(cars) if _usable(c, min_box_h=min_box_h, max_occluded=max_occluded,
                                                         clean=False)]
@@ -315,7 +316,7 @@ def hidden_by_other_labels(labels, camera) -> np.ndarray:
     from wirescene.core import wireframe
     from wirescene.infer.occlusion import inter_object_occlusion
 
-    cars = labels.of_type("Car")
+    cars = labels.of_type(*CAR_TYPES)
     if not cars:
         return np.zeros((0, 36), bool)
     X = _placed(cars, [scaled_mean_shape(o.dims) for o in cars])
@@ -349,7 +350,7 @@ def refit_label_shapes(image, labels, camera, detector, *, n_components: int = 1
         from wirescene.core.shape import load_default
 
         shape_model = load_default()
-    cars = labels.of_type("Car")
+    cars = labels.of_type(*CAR_TYPES)
     if not cars:
         return np.zeros((0, 36, 3))
     k = min(int(n_components), shape_model.n_components)

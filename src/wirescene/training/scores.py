@@ -13,7 +13,7 @@ import numpy as np
 from wirescene.core.boxes import box_centers
 from wirescene.core.errors import InputError
 from wirescene.core.groundplane import rotation_y
-from wirescene.core.labels import CAR_TYPES
+from wirescene.core.labels import CAR_TYPES, is_type
 from wirescene.core.matching import match_detections
 from wirescene.eval.kitti_metrics import iou_3d
 from wirescene.eval.metrics import FrameResult
@@ -57,7 +57,7 @@ def labelled_features(result: FrameResult, *, target: str = "right",
     if right not in RIGHT_CRITERIA:
         raise ValueError(f"unknown criterion {right!r}; known: {sorted(RIGHT_CRITERIA)}")
     feats = record_features(result)
-    cars = [g for g in result.gt if g.type in CAR_TYPES]
+    cars = [g for g in result.gt if is_type(g.type, CAR_TYPES)]
     gt_boxes = np.array([g.box for g in cars]).reshape(-1, 4)
     match, _ = match_detections(result.det_boxes, result.det_scores, gt_boxes)
     if target == "car":
