@@ -448,6 +448,10 @@ CASES = {
     "fit --shape-model of another kind": (
         lambda t: _fit_case(t, extra=("--shape-model", DATA_DIR / "viewpoint_classifier.npz")),
         r"viewpoint_classifier\.npz: format 'wirescene-viewpoint-classifier/1', expected 'wirescene-shape-model/1'"),
+    # np.save's single array under an artefact's name: was a TypeError's traceback
+    "fit --shape-model of one array (.npy)": (
+        lambda t: _fit_case(t, extra=("--shape-model", _npy_file(t / "shape.npz"))),
+        r"shape\.npz: a single array \(\.npy\), not an artefact's archive of named arrays \(\.npz\)$"),
     "fit --shape-model of arrays of another shape": (
         lambda t: _fit_case(t, extra=("--shape-model", _shape_model_file(t, mean=np.zeros((30, 3))))),
         r"shape\.npz: malformed shape model \(mean of shape \(30, 3\), expected \(36, 3\)\)$"),
@@ -880,6 +884,13 @@ CASES = {
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.ply", PLY_FACE_PAST_VERTICES).parent],
         r"car\.ply: a face refers to vertex 7, the file has 3 vertices \(0 to 2\)$"),
 }
+
+
+def _npy_file(path):
+    """One array saved by ``np.save`` at ``path``, whatever its suffix."""
+    with open(path, "wb") as fh:
+        np.save(fh, np.zeros(3))
+    return path
 
 
 @pytest.mark.parametrize("case", [c for c, v in CASES.items() if v is not None])

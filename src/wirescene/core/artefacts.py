@@ -77,7 +77,13 @@ def load_npz(path: str | Path, *, kind: str, version: int, older=()) -> dict[str
     if problem:
         raise InputError(problem, path=path)
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"corrupt artefact file ({exc.__class__.__name__})", path=path) from None
+    if not isinstance(z, np.lib.npyio.NpzFile):  # a single array's .npy (np.save's), not an archive of named arrays
+        raise InputError("a single array (.npy), not an artefact's archive of named arrays (.npz)", path=path)
+    try:
+        with z:
             arrays = {k: z[k] for k in z.files}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise InputError(f"corrupt artefact file ({exc.__class__.__name__})", path=path) from None
