@@ -122,6 +122,29 @@ def _file(tmp, name, text="x"):
     return path
 
 
+def _npy_file(path):
+    """An ``.npy`` file (one array, no ``.npz`` archive) at ``path``."""
+    np.save(path, np.zeros(3))
+    return path
+
+
+def _bad_deflate_npz(path):
+    """An artefact ``.npz`` at ``path`` whose first member's deflated data starts with a block of
+    the reserved type (its first byte 0xFF), which zlib refuses to inflate."""
+    import zipfile
+
+    from wirescene.core.artefacts import save_npz
+
+    save_npz(path, {"w": np.zeros(3)}, kind="parts-model", version=2)
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as z:
+        info = z.infolist()[0]
+    name_len, extra_len = struct.unpack("<HH", data[info.header_offset + 26:info.header_offset + 30])
+    data[info.header_offset + 30 + name_len + extra_len] = 0xFF
+    path.write_bytes(bytes(data))
+    return path
+
+
 def _link(path, target):
     """A symbolic link at ``path`` (its folder made) to ``target``, which need not exist."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -448,10 +471,6 @@ CASES = {
     "fit --shape-model of another kind": (
         lambda t: _fit_case(t, extra=("--shape-model", DATA_DIR / "viewpoint_classifier.npz")),
         r"viewpoint_classifier\.npz: format 'wirescene-viewpoint-classifier/1', expected 'wirescene-shape-model/1'"),
-    # np.save's single array under an artefact's name: was a TypeError's traceback
-    "fit --shape-model of one array (.npy)": (
-        lambda t: _fit_case(t, extra=("--shape-model", _npy_file(t / "shape.npz"))),
-        r"shape\.npz: a single array \(\.npy\), not an artefact's archive of named arrays \(\.npz\)$"),
     "fit --shape-model of arrays of another shape": (
         lambda t: _fit_case(t, extra=("--shape-model", _shape_model_file(t, mean=np.zeros((30, 3))))),
         r"shape\.npz: malformed shape model \(mean of shape \(30, 3\), expected \(36, 3\)\)$"),
@@ -460,6 +479,14 @@ CASES = {
         r"shape\.npz: shape model of 3 components, the fine stage searches 5 \(--set inference.n_shape=N"),
     "fit --viewpoint-classifier corrupt": (lambda t: _fit_case(t, extra=("--viewpoint-classifier", _file(t, "v.npz"))),
                                            r"v\.npz: corrupt artefact file"),
+    # np.load gives an .npy file's one array, not an archive: was a TypeError's traceback
+    "fit --parts-model a single .npy array": (
+        lambda t: _fit_case(t, extra=("--parts-model", _npy_file(t / "p.npy"), "--variant", "full")),
+        r"p\.npy: corrupt artefact file \(a single \.npy array, not an \.npz archive\)$"),
+    # a member whose deflated data does not inflate (zlib.error: was a traceback)
+    "fit --parts-model of corrupt compressed data": (
+        lambda t: _fit_case(t, extra=("--parts-model", _bad_deflate_npz(t / "p.npz"), "--variant", "full")),
+        r"p\.npz: corrupt artefact file \(compressed data that does not inflate\)$"),
     "fit --viewpoint-classifier of other features": (
         lambda t: _fit_case(t, extra=("--viewpoint-classifier", _classifier_file(t, 10))),
         r"v\.npz: viewpoint classifier of 10 features, expected 1957$"),
@@ -884,13 +911,6 @@ CASES = {
         lambda t: ["cad", "list", "--cad-dir", _file(t, "cad/car.ply", PLY_FACE_PAST_VERTICES).parent],
         r"car\.ply: a face refers to vertex 7, the file has 3 vertices \(0 to 2\)$"),
 }
-
-
-def _npy_file(path):
-    """One array saved by ``np.save`` at ``path``, whatever its suffix."""
-    with open(path, "wb") as fh:
-        np.save(fh, np.zeros(3))
-    return path
 
 
 @pytest.mark.parametrize("case", [c for c, v in CASES.items() if v is not None])

@@ -427,6 +427,48 @@ def test_eval_names_the_frames_a_standalone_trained_part_model_was_trained_on(st
     assert said(["001545"]) == []
 
 
+def test_a_part_model_records_the_frames_of_its_kitti_background(tmp_path):
+    """`train parts --n-views N --kitti-background ROOT` learns background patches of every frame of ROOT: its file
+    recorded none of them, and an evaluation on them said nothing of it."""
+    from wirescene.eval.held_out import trained_on_frames
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.parts.detector import PartDetector
+
+    path = tmp_path / "parts.npz"
+    r = cli("train", "parts", "--n-views", 2, "--kind", "sc", "--no-position", "--kitti-background", KITTI_ROOT,
+            "--n-trees", 2, "--max-depth", 4, "--synth-scenes", 0, "--out", path)
+    assert r.exit_code == 0, r.output + r.stderr
+    dataset = KittiDataset(KITTI_ROOT)
+    assert sorted(PartDetector.load(path).trained_images) == dataset.frame_ids()
+    assert trained_on_frames(dataset, ["000010"], options=FitOptions(parts_model=str(path)), read=["parts_model"]) == [
+        f"1 of the 1 frames evaluated is among those the part model {path} was trained on (e.g. 000010): its figures "
+        "are not held out"]
+
+
+def test_a_bank_records_the_frames_of_its_held_out_calibration_beyond_its_own(tmp_path, monkeypatch):
+    """A bank trained in Python on frame 000010 with a held-out calibration over folds that hold 001545 too (the
+    calibration's fold banks learn from it and their detections on it set the confidences): its record holds both
+    frames, and survives the file."""
+    import wirescene.training.kitti_detector as kitti_detector
+    from wirescene.core.resources import images_sha256
+    from wirescene.io.kitti import KittiDataset
+    from wirescene.predetect.bank import DetectorBank
+
+    calibrated_on = []
+
+    def calibration(root, folds, **kwargs):  # the leave-one-fold-out trainings (seconds) stood in for
+        calibrated_on.append(sorted(folds))
+        return kitti_detector.calibration_record([1.0, 0.0], source="stub")
+
+    monkeypatch.setattr(kitti_detector, "heldout_bank_calibration", calibration)
+    bank, _ = kitti_detector.train_detector_bank_kitti(
+        tmp_path / "bank.npz", KITTI_ROOT, frames=["000010"], calibration_folds={"000010": 0, "001545": 1},
+        n_partial=0, mining_rounds=1, neg_per_image=10, min_pos=20, min_height=40, max_scale=1.0, per_octave=2)
+    assert calibrated_on == [["000010", "001545"]]
+    assert bank.trained_images == images_sha256(KittiDataset(KITTI_ROOT).image_path, ["000010", "001545"])
+    assert DetectorBank.load(tmp_path / "bank.npz").trained_images == bank.trained_images
+
+
 def test_a_frame_trained_file_without_the_record_of_its_frames_loads_and_says_nothing(standalone_parts, tmp_path):
     """Files written before the record (the shipped ones among them) load as they did, with none, and the held-out
     line says nothing of them; a record whose digests do not match its ids is refused naming the file."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -76,17 +77,7 @@ def load_npz(path: str | Path, *, kind: str, version: int, older=()) -> dict[str
     problem = path_problem(path, "artefact", missing=MISSING_ARTEFACT)
     if problem:
         raise InputError(problem, path=path)
-    try:
-        z = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise InputError(f"corrupt artefact file ({exc.__class__.__name__})", path=path) from None
-    if not isinstance(z, np.lib.npyio.NpzFile):  # a single array's .npy (np.save's), not an archive of named arrays
-        raise InputError("a single array (.npy), not an artefact's archive of named arrays (.npz)", path=path)
-    try:
-        with z:
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise InputError(f"corrupt artefact file ({exc.__class__.__name__})", path=path) from None
+    arrays = _npz_arrays(path)
     found = arrays.pop("format", None)
     _check(None if found is None else str(found), kind, version, path, older)
     return arrays
@@ -151,11 +142,27 @@ def read_trained_images(path: str | Path) -> dict[str, str]:
     (True, {})
     """
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in (TRAINED_FRAMES, TRAINED_IMAGES) if k in z.files}
-        return trained_images(arrays, path=path)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, InputError, TypeError):  # TypeError: an .npy array
+        return trained_images(_npz_arrays(path, (TRAINED_FRAMES, TRAINED_IMAGES)), path=path)
+    except InputError:
         return {}
+
+
+def _npz_arrays(path: Path, names=None) -> dict[str, np.ndarray]:
+    """``{name: array}`` of the ``.npz`` at ``path``, of ``names`` alone where given (those it
+    holds), read without pickle; an :class:`InputError` naming a file that cannot be read as one."""
+    try:
+        loaded = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"corrupt artefact file ({exc.__class__.__name__})", path=path) from None
+    if not isinstance(loaded, np.lib.npyio.NpzFile):  # np.load gives an .npy file's one array, no archive
+        raise InputError("corrupt artefact file (a single .npy array, not an .npz archive)", path=path)
+    try:
+        with loaded as z:
+            return {k: z[k] for k in z.files if names is None or k in names}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"corrupt artefact file ({exc.__class__.__name__})", path=path) from None
+    except zlib.error:  # a member's compressed bytes damaged
+        raise InputError("corrupt artefact file (compressed data that does not inflate)", path=path) from None
 
 
 def save_json(path: str | Path, record: dict, *, kind: str, version: int, indent: int | None = 1) -> Path:

@@ -65,8 +65,8 @@ class CalibrationWarning(UserWarning):
 class HeldOutWarning(UserWarning):
     """Some frames :func:`wirescene.evaluate` evaluates are frames a model it reads was
     trained on (the shipped models' 72, a models directory's own, or those a trained file
-    records): their figures are not held out (:func:`wirescene.eval.held_out.trained_on_frames`; ``wirescene eval`` says it
-    on standard error)."""
+    records): their figures are not held out (:func:`wirescene.eval.held_out.trained_on_frames`;
+    ``wirescene eval`` says it on standard error)."""
 
 
 def check_shape(name: str, array, shape: tuple) -> None:

@@ -700,6 +700,24 @@ def heldout_calibration(real: PatchData, other: PatchData | None, *, kind: str, 
 WITHOUT_CALIBRATION = "calibrate_real=False; train parts --no-calibrate, train all --set parts.calibrate_real=false"
 
 
+def _trained_images(dataset, frames, background) -> dict[str, str]:
+    """The record of the real images a part model learnt from
+    (:attr:`~wirescene.parts.detector.PartDetector.trained_images`), by which an evaluation on
+    them says that its figures are not held out: ``frames`` of the labelled ``dataset`` (None:
+    none) and every frame of the KITTI root ``background`` whose backgrounds it learnt (None:
+    none); an id of both, the labelled frame's image (an evaluation reads labelled frames)."""
+    from wirescene.core.resources import images_sha256
+    from wirescene.io.kitti import KittiDataset
+
+    record = {}
+    if background is not None:
+        other = KittiDataset(background)
+        record.update(images_sha256(other.image_path, other.frame_ids()))
+    if dataset is not None:
+        record.update(images_sha256(dataset.image_path, frames))
+    return record
+
+
 def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: int = 30,
                         max_depth: int = 13, kind: str = "ghog", n_aug: int = 2, cars=None, heldout: int = 0,
                         compare_kinds=(), kitti_background=None, synth_scenes: int = 300,
@@ -725,7 +743,8 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     cars : list of CAD names, optional (default: all road cars)
     heldout : int -- evaluate with the last ``heldout`` cars (sorted) held out first
     compare_kinds : extra descriptor kinds evaluated held-out as well
-    kitti_background : path, optional -- KITTI root for car-free background patches
+    kitti_background : path, optional -- KITTI root for car-free background patches of the CAD
+        renderings (``n_views``; every frame of it, which the model records too)
     synth_scenes : int -- synthetic shaded scenes ``generate_scene(synth_seed, i)`` whose
         patches are added (:func:`make_synth_patch_data`)
     synth_seed : int >= 1000 (training stream)
@@ -886,10 +905,8 @@ def train_part_detector(out_path, *, seed: int = 0, n_views: int = 0, n_trees: i
     report["t_fit_s"] = time.time() - t1
     if cal is not None:
         det.calib_scale, det.calib_offset = cal[0], cal[1]
-    if kitti_root is not None:  # by which an evaluation on these frames says its figures are not held out
-        from wirescene.core.resources import images_sha256
-
-        det.trained_images = images_sha256(ds.image_path, frames)
+    det.trained_images = _trained_images(ds if kitti_root is not None else None, frames,
+                                         kitti_background if n_az else None)
     X = design_matrix(data, kind, position=position, context=context)
     report["train_acc"] = float(np.mean(det.predict(X) == data.y))
     if out_path is not None:
