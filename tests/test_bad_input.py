@@ -122,6 +122,12 @@ def _file(tmp, name, text="x"):
     return path
 
 
+def _made(folder):
+    """``folder``, made."""
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
 def _npy_file(path):
     """An ``.npy`` file (one array, no ``.npz`` archive) at ``path``."""
     np.save(path, np.zeros(3))
@@ -487,6 +493,10 @@ CASES = {
     "fit --parts-model of corrupt compressed data": (
         lambda t: _fit_case(t, extra=("--parts-model", _bad_deflate_npz(t / "p.npz"), "--variant", "full")),
         r"p\.npz: corrupt artefact file \(compressed data that does not inflate\)$"),
+    # info reads each file's format tag: its own read of an npz, a zlib.error's traceback
+    "info --models of a part model of corrupt compressed data": (
+        lambda t: ["info", "--models", _bad_deflate_npz(_made(t / "m") / "parts_model.npz").parent],
+        r"parts_model\.npz: corrupt artefact file \(compressed data that does not inflate\)$"),
     "fit --viewpoint-classifier of other features": (
         lambda t: _fit_case(t, extra=("--viewpoint-classifier", _classifier_file(t, 10))),
         r"v\.npz: viewpoint classifier of 10 features, expected 1957$"),

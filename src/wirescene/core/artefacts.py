@@ -77,7 +77,7 @@ def load_npz(path: str | Path, *, kind: str, version: int, older=()) -> dict[str
     problem = path_problem(path, "artefact", missing=MISSING_ARTEFACT)
     if problem:
         raise InputError(problem, path=path)
-    arrays = _npz_arrays(path)
+    arrays = npz_arrays(path)
     found = arrays.pop("format", None)
     _check(None if found is None else str(found), kind, version, path, older)
     return arrays
@@ -142,12 +142,12 @@ def read_trained_images(path: str | Path) -> dict[str, str]:
     (True, {})
     """
     try:
-        return trained_images(_npz_arrays(path, (TRAINED_FRAMES, TRAINED_IMAGES)), path=path)
+        return trained_images(npz_arrays(path, (TRAINED_FRAMES, TRAINED_IMAGES)), path=path)
     except InputError:
         return {}
 
 
-def _npz_arrays(path: Path, names=None) -> dict[str, np.ndarray]:
+def npz_arrays(path: Path, names=None) -> dict[str, np.ndarray]:
     """``{name: array}`` of the ``.npz`` at ``path``, of ``names`` alone where given (those it
     holds), read without pickle; an :class:`InputError` naming a file that cannot be read as one."""
     try:
