@@ -46,8 +46,9 @@ def _image_box(camera, dims, location, ry):
     return np.clip(np.concatenate([uv.min(axis=0), uv.max(axis=0)]), 0, [1241, 374, 1241, 374])
 
 
-def _scene(camera, places, *, wireframes=False):
-    """An estimate of a car at each ``(x, z)`` of ``places``, in detection order, scored 0.05, 0.1, ..."""
+def _scene(camera, places, *, wireframes=False, heading=0.4):
+    """An estimate of a car at each ``(x, z)`` of ``places`` (``heading``: its ``rotation_y``), in
+    detection order, scored 0.05, 0.1, ..."""
     from wirescene.core.groundplane import transform
     from wirescene.core.shape import load_default
 
@@ -57,10 +58,10 @@ def _scene(camera, places, *, wireframes=False):
         location = np.array([x, 1.65, z])
         vertices = visible = None
         if wireframes:
-            vertices = transform(load_default().mean, location, rotation_y(0.4))
+            vertices = transform(load_default().mean, location, rotation_y(heading))
             visible = np.arange(36) % 3 != 0
-        cars.append(ObjectEstimate(j, _image_box(camera, dims, location, 0.4), round(0.05 * (j + 1), 2), location,
-                                   rotation_y(0.4), dims, 0.0, vertices=vertices, visibility=visible))
+        cars.append(ObjectEstimate(j, _image_box(camera, dims, location, heading), round(0.05 * (j + 1), 2), location,
+                                   rotation_y(heading), dims, 0.0, vertices=vertices, visibility=visible))
     return SceneEstimate("full" if wireframes else "coarse", cars[::-1])  # listed out of order: numbers are not
 
 
@@ -173,6 +174,35 @@ def test_birds_eye_view_names_kitti_axes_numbers_the_overlays_cars_and_keeps_its
     assert sorted(tags) == ["#1", "#2"]
     near = next(t for t in ax.texts if t.get_text() == "#1")
     assert abs(near.get_position()[1] - 10.0) < 1.0  # by car 1, 10 m ahead
+
+
+def test_birds_eye_view_numbers_each_car_of_a_dense_row_by_its_own_clear_of_the_others(camera):
+    """Two staggered rows of parked cars, as in KITTI 000095 (where the numbers were written over each
+    other and over the next row's cars): each number lies by its own car's footprint, inside the
+    axes, on no other number and no footprint."""
+    from matplotlib.transforms import Bbox
+
+    from wirescene.io.pictures import birds_eye
+
+    places = [(-8.0, z) for z in np.arange(10.0, 60.0, 5.0)] + [(-5.5, z) for z in np.arange(11.5, 60.0, 5.0)]
+    scene = _scene(camera, [*places, (4.0, 12.0), (4.0, 20.0)], heading=np.pi / 2)  # along the road
+    fig = birds_eye(scene, camera=camera)
+    ax = fig.axes[0]
+    renderer = _drawn(fig)
+    corners = [ax.transData.transform(box_corners(c.dims, c.location, c.R)[:, [0, 2]]) for c in scene.cars]
+    feet = [Bbox([uv.min(axis=0), uv.max(axis=0)]) for uv in corners]  # pixels
+    tags = _tags(fig, renderer)
+    assert sorted(tags) == sorted(f"#{n}" for n in range(1, len(scene.cars) + 1))
+    inside = ax.get_window_extent(renderer)
+    for text, box in tags.items():
+        assert inside.x0 - 0.5 <= box.x0 and box.x1 <= inside.x1 + 0.5 and inside.y0 - 0.5 <= box.y0, text
+        assert box.y1 <= inside.y1 + 0.5, text
+        assert not any(box.overlaps(foot) for foot in feet), text
+        own = feet[int(text[1:]) - 1]
+        gap = max(own.x0 - box.x1, box.x0 - own.x1, own.y0 - box.y1, box.y0 - own.y1)
+        assert gap < 6, (text, gap)  # pixels: right by its own car
+    for (a, box_a), (b, box_b) in itertools.combinations(tags.items(), 2):
+        assert not box_a.overlaps(box_b), (a, b)
 
 
 def test_overlay_draws_the_pre_detections_the_fit_dropped_apart(camera):

@@ -375,14 +375,15 @@ def _overlap(a, b) -> float:
 
 
 def place_labels(boxes, sizes, width: float, height: float, *, reserved=(),
-                 stacked: bool = True) -> list[tuple[float, float]]:
+                 stacked: bool = True, beside: bool = False) -> list[tuple[float, float]]:
     """Top-left corners (``x``, ``y`` down) of labels of ``sizes`` ``(w, h)``, one by each of
     ``boxes`` ``(x1, y1, x2, y2)``: above the box's top-left corner where there is room,
     else inside its top, below it or (``stacked``) stacked above, always inside the ``width``
     x ``height`` picture, clear of each other and of the ``reserved`` rectangles where
     any candidate place is (else the least covered one). Labels are placed in order.
     ``stacked`` False keeps each label next to its box (a tag that names no car, read by
-    where it lies).
+    where it lies). ``beside`` tries right of the box, then left of it (level with its
+    middle) before all those places.
 
     Examples
     --------
@@ -395,12 +396,17 @@ def place_labels(boxes, sizes, width: float, height: float, *, reserved=(),
     [(10.0, 17.0)]
     >>> place_labels([[10, 50, 60, 90]], [(30, 10)], 100, 100, reserved=crowded, stacked=False)  # by it, covered
     [(10.0, 39.0)]
+    >>> cars = [[10, 50, 25, 90], [70, 10, 85, 40]]  # right of each, but left of the second: on it by the edge
+    >>> place_labels(cars, [(30, 10)] * 2, 100, 100, reserved=cars, beside=True)
+    [(26.0, 65.0), (39.0, 20.0)]
     """
     taken = [tuple(map(float, r)) for r in reserved]
     out = []
     for (x1, y1, x2, y2), (tw, th) in zip(np.asarray(boxes, float), sizes):
         above = [(x1, y1 - th - 1 - k * (th + 1)) for k in range(4)]
         candidates = above[:1] + [(x1, y1 + 1), (x2 - tw, y1 - th - 1), (x1, y2 + 1)] + (above[1:] if stacked else [])
+        if beside:
+            candidates = [(x2 + 1, (y1 + y2 - th) / 2), (x1 - tw - 1, (y1 + y2 - th) / 2)] + candidates
         best = None
         for cx, cy in candidates:
             cx = float(min(max(cx, 0.0), max(width - tw, 0.0)))
@@ -666,7 +672,8 @@ def birds_eye(
     ``missed``, and a thin dark line joins each car matched to a labelled car (2D IoU >
     0.5) to it: solid for a true positive, dash-dotted for a ``false view``, as
     :func:`wirescene.core.matching.match_estimate` judges (``gt`` None: no labels, nothing
-    judged; empty: labelled without cars, as :func:`overlay`'s)."""
+    judged; empty: labelled without cars, as :func:`overlay`'s). Each number and tag lies
+    beside its own car, clear of the others and of every footprint where there is room."""
     fig = new_figure(figsize=(5, 6), dpi=100)
     ax = fig.subplots()
     pts = [np.zeros(2)]
@@ -689,8 +696,9 @@ def birds_eye(
     labels = []
     if estimate is not None:
         for o in estimate.objects:
-            labels.append((draw(o.dims, o.location, o.R, FALSE_COLOR if id(o) in false else EST_COLOR),
-                           f"#{numbers[id(o)]}" + (f" {false[id(o)]}" if id(o) in false else ""), id(o) in false))
+            color = FALSE_COLOR if id(o) in false else EST_COLOR
+            labels.append((draw(o.dims, o.location, o.R, color),
+                           f"#{numbers[id(o)]}" + (f" {false[id(o)]}" if id(o) in false else ""), color))
     links = _links(estimate, gt, matches)
     for (x0, z0, x1, z1), ok in links:  # over the footprints: a short link lies inside them
         ax.plot([x0, x1], [z0, z1], color=LINK_COLOR, lw=0.9, ls="-" if ok else "-.", zorder=2.5)  # not the view's :
@@ -726,14 +734,6 @@ def birds_eye(
         key.append((Line2D([], [], color="0.6", lw=0.8, ls=":"), "field of view"))
     ax.plot([0], [0], marker="^", color="black", ls="none")
     key.append((Line2D([], [], marker="^", color="black", ls="none"), "camera"))
-    room = extent[1] - 0.12 * (extent[1] - extent[0])  # right of it a number would leave the axes
-    # the number beside the footprint (its four corners once: the outline closes on the first), on its right unless at
-    # the right edge
-    for fp, text, is_false in labels:
-        on_right = fp[:, 0].max() < room
-        ax.text(fp[:, 0].max() + 0.3 if on_right else fp[:, 0].min() - 0.3, fp[:4, 1].mean(), text,
-                color=FALSE_COLOR if is_false else EST_COLOR, fontsize=7, va="center",
-                ha="left" if on_right else "right", clip_on=True)
     if estimate is not None and not estimate.objects:
         ax.text(0.5, 0.5, "no car estimated", transform=ax.transAxes, ha="center", va="center", color="0.3")
     ax.set_xlim(extent[0], extent[1])
@@ -763,36 +763,38 @@ def birds_eye(
         if size == 6.5 or key_box.get_window_extent(renderer).width <= fig.bbox.width:
             break
         key_box.remove()
-    _tag_missed(ax, missed_fps, [(fp, text) for fp, text, _ in labels], extent, room)
+    _tag_cars(ax, labels, missed_fps, pts[1:], extent)  # every footprint drawn (pts[0]: the camera)
     return fig
 
 
-def _tag_missed(ax, footprints, numbers, extent, room: float) -> None:
-    """Tag ``missed`` by each of ``footprints`` ``(5, 2)`` (x, z) of a bird's-eye view laid out over
-    ``extent``, clear of each other and of the cars' ``numbers`` ``[(footprint, text)]`` (placed
-    as :func:`birds_eye` places them, right of the footprint where x is below ``room``)."""
-    if not footprints:
+def _tag_cars(ax, numbers, missed, footprints, extent) -> None:
+    """Write the cars' ``numbers`` ``[(footprint, text, colour)]``, then ``missed`` by each of the
+    ``missed`` footprints, in a bird's-eye view laid out over ``extent``: each beside its own car
+    (footprints ``(5, 2)`` x, z), inside the axes, clear of each other, of every car's
+    ``footprints`` and of the camera where there is room (:func:`place_labels`, in points)."""
+    if not numbers and not missed:
         return
     ax.apply_aspect()  # the equal-aspect axes' drawn size: metres a point
     scale = (extent[1] - extent[0]) / (ax.get_position().width * ax.figure.get_figwidth() * 72)
-    width, height = extent[1] - extent[0], extent[3] - extent[2]
 
-    def down(x0, z0, x1, z1):  # a rectangle in place_labels' frame: from the top left, y down
-        return (x0 - extent[0], extent[3] - z1, x1 - extent[0], extent[3] - z0)
+    def down(fp):  # the footprint's bounds in place_labels' frame: points from the axes' top left, y down
+        x, z = fp[:, 0], fp[:, 1]
+        return ((x.min() - extent[0]) / scale, (extent[3] - z.max()) / scale, (x.max() - extent[0]) / scale,
+                (extent[3] - z.min()) / scale)
 
-    reserved = []
-    for fp, text in numbers:
-        tw, th = text_size(text, 7, scale, 0)
-        x0 = fp[:, 0].max() + 0.3 if fp[:, 0].max() < room else fp[:, 0].min() - 0.3 - tw
-        z = fp[:4, 1].mean()
-        reserved.append(down(x0, z - th / 2, x0 + tw, z + th / 2))
-    pad, size = 0.2, 6
-    boxes = [down(fp[:, 0].min(), fp[:, 1].min(), fp[:, 0].max(), fp[:, 1].max()) for fp in footprints]
-    sizes = [text_size("missed", size, scale, pad)] * len(footprints)
-    inset = (pad * size + 1) * scale  # from the tag's box to its text
-    for x, y in place_labels(boxes, sizes, width, height, reserved=reserved, stacked=False):  # by its own car
-        ax.text(extent[0] + x + inset, extent[3] - y - inset, "missed", color="black", fontsize=size, va="top",
-                ha="left", clip_on=True, bbox=dict(facecolor=GT_COLOR, alpha=0.85, lw=0, boxstyle=f"square,pad={pad}"))
+    u, v = -extent[0] / scale, extent[3] / scale
+    camera = (u - 5, v - 5, u + 5, v + 5)  # its triangle (6 points) at the origin
+    # (footprint, text, colour, font size, pad, box face): near cars choose first, as in the overlay
+    tags = [(*n, NUMBER_FONTSIZE, 0.0, None) for n in sorted(numbers, key=lambda n: n[0][:, 1].mean())]
+    tags += [(fp, "missed", "black", 6, 0.2, GT_COLOR) for fp in sorted(missed, key=lambda fp: fp[:, 1].mean())]
+    sizes = [text_size(text, size, 1.0, pad) for _, text, _, size, pad, _ in tags]
+    corners = place_labels([down(t[0]) for t in tags], sizes, (extent[1] - extent[0]) / scale,
+                           (extent[3] - extent[2]) / scale, reserved=[*map(down, footprints), camera], stacked=False,
+                           beside=True)
+    for (_, text, color, size, pad, face), (_, th), (x, y) in zip(tags, sizes, corners):
+        ax.text(extent[0] + (x + pad * size + 1) * scale, extent[3] - (y + th / 2) * scale, text, color=color,
+                fontsize=size, va="center", ha="left", clip_on=True,
+                bbox=None if face is None else dict(facecolor=face, alpha=0.85, lw=0, boxstyle=f"square,pad={pad}"))
 
 
 def _links(estimate, gt: Sequence, matches: FrameMatches | None) -> list[tuple[tuple[float, ...], bool]]:
