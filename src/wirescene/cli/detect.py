@@ -409,10 +409,10 @@ def _resumable_out(out_dir: Path, config: dict, ids: list[str], *, resume: bool)
                 stored = stored_config(record)
             except InputError:  # unreadable: no run to continue, the folder refused all the same
                 stored = None
-            changed = settings_changed(stored, config, record=DETECT_RECORD, said=_SAID)
             if stored is None:  # another tool's files, or a run's record lost: nothing to continue
                 _refuse_held_detections(out_dir)
-            elif changed is None:
+            changed = settings_changed(stored, config, record=DETECT_RECORD, said=_SAID)
+            if changed is None:
                 _refuse_held_detections(out_dir, whose=" of a run of these settings",
                                         advice="use --resume to continue it, or choose an empty directory")
             _refuse_held_detections(out_dir, whose=f" of a run with other settings ({changed})")
